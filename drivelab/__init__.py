@@ -1,0 +1,17 @@
+"""drivelab: train, compare and dissect reinforcement-learning driving agents."""
+
+from __future__ import annotations
+
+__version__ = "0.1.0"
+
+import drivelab.envs  # noqa: F401  (registers the gymnasium ids)
+
+
+def make(scenario: str, **kwargs):
+    """Build a DriveEnv: ``drivelab.make("highway", obs=["lidar", "topdown"], seed=0)``.
+
+    Same keyword arguments as ``gymnasium.make("drivelab/Highway-v0", ...)``; see DriveEnv.
+    """
+    from drivelab.envs.core import DriveEnv
+
+    return DriveEnv(scenario=scenario, **kwargs)

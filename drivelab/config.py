@@ -1,0 +1,145 @@
+"""RunConfig: everything that defines a training run, validated once at the boundary."""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+from drivelab.errors import UsageError
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """A training run. Loaded from YAML and CLI options; written resolved into the run directory.
+
+    :param algo: registered algorithm name (``drivelab envs`` lists them).
+    :param env: scenario name.
+    :param obs: sensor specs, e.g. ``["lidar:beams=120", "topdown"]``.
+    :param action: action kind ("meta", "grid", "continuous").
+    :param reward: reward preset or ``term=weight`` list.
+    :param traffic: "empty", "regular" or "dense".
+    :param steps: total environment steps to train for.
+    :param seed: seeds the agent, the environments and evaluation.
+    :param eval_every: environment steps between periodic evaluations (0: five over the run).
+    :param eval_episodes: episodes per periodic evaluation.
+    :param eval_video: record one episode of each periodic evaluation.
+    :param checkpoint_every: environment steps between checkpoints (0: ten over the run).
+    :param hyperparams: algorithm keyword overrides (e.g. ``{"learning_rate": 1e-3}``).
+    :param env_options: extra DriveEnv keywords (``duration_s``, ``action_options``, ...).
+    """
+
+    algo: str
+    env: str = "highway"
+    obs: tuple[str, ...] = ("kinematics",)
+    action: str = "meta"
+    reward: str = "highway"
+    traffic: str = "regular"
+    steps: int = 10_000
+    seed: int = 0
+    name: str | None = None
+    eval_every: int = 0
+    eval_episodes: int = 5
+    eval_video: bool = False
+    checkpoint_every: int = 0
+    hyperparams: dict = field(default_factory=dict)
+    env_options: dict = field(default_factory=dict)
+
+    def env_kwargs(self) -> dict:
+        """Keyword arguments of DriveEnv for this run."""
+        return {
+            "scenario": self.env,
+            "obs": list(self.obs),
+            "action": self.action,
+            "reward": self.reward,
+            "traffic": self.traffic,
+            **self.env_options,
+        }
+
+    def to_dict(self) -> dict:
+        data = dataclasses.asdict(self)
+        data["obs"] = list(self.obs)
+        return data
+
+    def identity(self) -> str:
+        """Hash of everything but the step budget and name: what a checkpoint must match."""
+        data = {k: v for k, v in self.to_dict().items() if k not in ("steps", "name")}
+        return hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+    @property
+    def resolved_eval_every(self) -> int:
+        return self.eval_every or max(self.steps // 5, 1)
+
+    @property
+    def resolved_checkpoint_every(self) -> int:
+        return self.checkpoint_every or max(self.steps // 10, 1)
+
+
+FIELDS = {f.name: f for f in dataclasses.fields(RunConfig)}
+_TYPES = {"int": int, "str": str, "bool": bool, "dict": dict}
+
+
+def _check_type(name: str, value):
+    """Coerce/validate one field; the error names the field."""
+    if value is None and name == "name":
+        return None
+    if name == "obs":
+        if isinstance(value, str):
+            value = [v.strip() for v in value.split(",") if v.strip()]
+        if not isinstance(value, (list, tuple)) or not value:
+            raise UsageError("config field 'obs' must be a sensor name or a non-empty list of them")
+        return tuple(v if isinstance(v, str) else _sensor_dict_to_spec(v) for v in value)
+    kind = str(FIELDS[name].type).split(" ")[0]
+    expected = _TYPES.get(kind, str)
+    if expected is int and isinstance(value, bool) or not isinstance(value, expected):
+        if expected is str and isinstance(value, (int, float)) and name == "reward":
+            return str(value)
+        raise UsageError(f"config field {name!r} must be {expected.__name__}, got {value!r}")
+    if name in ("steps", "eval_episodes") and value < 1:
+        raise UsageError(f"config field {name!r} must be >= 1, got {value}")
+    if name in ("eval_every", "checkpoint_every") and value < 0:
+        raise UsageError(f"config field {name!r} must be >= 0, got {value}")
+    return value
+
+
+def _sensor_dict_to_spec(entry) -> str:
+    if not isinstance(entry, dict) or "name" not in entry:
+        raise UsageError(f"config field 'obs' has an entry that is not a sensor: {entry!r}")
+    options = ":".join(f"{k}={v}" for k, v in entry.items() if k != "name")
+    return f"{entry['name']}:{options}" if options else str(entry["name"])
+
+
+def build_config(values: dict) -> RunConfig:
+    """A RunConfig from a dict, rejecting unknown fields and wrong types with a one-line error."""
+    unknown = sorted(set(values) - set(FIELDS))
+    if unknown:
+        raise UsageError(f"unknown config field {unknown[0]!r} (known: {', '.join(FIELDS)})")
+    if "algo" not in values:
+        raise UsageError("config has no 'algo' (give --algo or algo: in the YAML)")
+    return RunConfig(**{k: _check_type(k, v) for k, v in values.items()})
+
+
+def load_yaml(path: str | Path) -> dict:
+    """Read a YAML mapping, with a one-line error for a missing or malformed file."""
+    path = Path(path)
+    if not path.is_file():
+        raise UsageError(f"config file {str(path)!r} does not exist")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark else ""
+        raise UsageError(f"malformed YAML in {str(path)!r}{where}: {getattr(exc, 'problem', exc)}") from None
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise UsageError(f"{str(path)!r} must hold a mapping of config fields, not {type(data).__name__}")
+    return data
+
+
+def save_yaml(config: RunConfig, path: Path) -> None:
+    path.write_text(yaml.safe_dump(config.to_dict(), sort_keys=False))

@@ -1,0 +1,19 @@
+"""Driving environments: every scenario is registered as ``drivelab/<Scenario>-v0``."""
+
+from __future__ import annotations
+
+import gymnasium
+
+from drivelab.envs.scenarios import SCENARIOS
+
+
+def gym_id(scenario: str) -> str:
+    """``"highway"`` → ``"drivelab/Highway-v0"``."""
+    return f"drivelab/{scenario.capitalize()}-v0"
+
+
+for _name in SCENARIOS:
+    if gym_id(_name) not in gymnasium.registry:
+        gymnasium.register(
+            gym_id(_name), entry_point="drivelab.envs.core:DriveEnv", kwargs={"scenario": _name}
+        )

@@ -1,0 +1,114 @@
+"""Action adapters: the agent's action space → the backend's controls.
+
+Backends take either a meta-action index (highway-env's 5 meta-actions, executed by its
+lane-keeping and speed controllers) or a normalised continuous control ``[acceleration,
+steering]`` in [-1, 1] (highway-env maps it to ±5 m/s² and ±45°).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from gymnasium import spaces
+
+from drivelab.errors import UsageError
+
+META_ACTIONS = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")
+
+
+def _index(action, size: int) -> int:
+    index = int(np.asarray(action).reshape(-1)[0])
+    if not 0 <= index < size:
+        raise ValueError(f"action {index} is outside Discrete({size})")
+    return index
+
+
+class ActionAdapter:
+    """Maps an agent action to a backend control. ``control`` says which kind the backend runs."""
+
+    name: str = "adapter"
+    control: str = "continuous"
+    space: spaces.Space
+
+    def to_control(self, action) -> int | np.ndarray:
+        raise NotImplementedError
+
+    def describe(self) -> str:
+        raise NotImplementedError
+
+
+class MetaAction(ActionAdapter):
+    """highway-env's 5 meta-actions: change lane left/right, idle, faster, slower."""
+
+    name, control = "meta", "meta"
+
+    def __init__(self) -> None:
+        self.space = spaces.Discrete(len(META_ACTIONS))
+
+    def to_control(self, action) -> int:
+        return _index(action, len(META_ACTIONS))
+
+    def describe(self) -> str:
+        return "5 highway-env meta-actions (lane left, idle, lane right, faster, slower)"
+
+
+@dataclass(frozen=True)
+class GridAction(ActionAdapter):
+    """A discretised (steering × acceleration) grid, 6 × 3 = 18 actions by default (seed 003).
+
+    Steering levels are ``sign(u)·u²`` for ``u`` evenly spaced in [-1, 1] so that the grid holds
+    fine near-straight corrections (±1.8° at the default) and full lock (±45°) alike; the seed
+    does not state its levels, this choice is ours. Action ``i`` is steering level ``i // accel``
+    and acceleration level ``i % accel``.
+    """
+
+    steer_levels: int = 6
+    accel_levels: int = 3
+    name: str = "grid"
+    control: str = "continuous"
+
+    def __post_init__(self) -> None:
+        if self.steer_levels < 2 or self.accel_levels < 1:
+            raise UsageError("grid action needs steer_levels >= 2 and accel_levels >= 1")
+        u = np.linspace(-1.0, 1.0, self.steer_levels)
+        steer = np.sign(u) * u**2
+        accel = np.linspace(-1.0, 1.0, self.accel_levels) if self.accel_levels > 1 else np.zeros(1)
+        grid = np.array([[a, s] for s in steer for a in accel], dtype=np.float32)
+        object.__setattr__(self, "table", grid)  # rows: [acceleration, steering]
+        object.__setattr__(self, "space", spaces.Discrete(len(grid)))
+
+    def to_control(self, action) -> np.ndarray:
+        return self.table[_index(action, len(self.table))]
+
+    def describe(self) -> str:
+        return f"{len(self.table)} (steering x acceleration) pairs, {self.steer_levels} x {self.accel_levels}"
+
+
+class ContinuousAction(ActionAdapter):
+    """Continuous ``[steering, acceleration]`` in [-1, 1] (the order the seeds use)."""
+
+    name, control = "continuous", "continuous"
+
+    def __init__(self) -> None:
+        self.space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+
+    def to_control(self, action) -> np.ndarray:
+        steer, accel = np.clip(np.asarray(action, dtype=np.float32).reshape(2), -1.0, 1.0)
+        return np.array([accel, steer], dtype=np.float32)  # highway-env's order
+
+    def describe(self) -> str:
+        return "continuous [steering, acceleration] in [-1, 1] (±45°, ±5 m/s²)"
+
+
+ACTIONS = {"meta": MetaAction, "grid": GridAction, "continuous": ContinuousAction}
+
+
+def make_action(name: str, **options) -> ActionAdapter:
+    """Build the adapter called ``name`` with keyword ``options``."""
+    if name not in ACTIONS:
+        raise UsageError(f"unknown action kind {name!r} (choose from {', '.join(ACTIONS)})")
+    try:
+        return ACTIONS[name](**options)
+    except TypeError as exc:
+        raise UsageError(f"bad option for action {name!r}: {exc}") from None

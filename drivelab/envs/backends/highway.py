@@ -1,0 +1,285 @@
+"""The reference backend: highway-env simulates, drivelab reads its state into a WorldState.
+
+Only this module imports highway-env objects. It drives highway-env's own simulation loop
+(``_simulate``) and never asks highway-env for an observation or a reward, so sensors and reward
+terms are drivelab's alone (and highway-env's pandas-based observation is not paid per step).
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from drivelab.envs.scenarios import Scenario
+from drivelab.envs.world import Ego, Events, RoadMap, Route, WorldState
+
+os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
+
+from highway_env import utils as hw_utils  # noqa: E402
+from highway_env.road.lane import LineType, StraightLane  # noqa: E402
+from highway_env.vehicle.behavior import IDMVehicle  # noqa: E402
+
+SAMPLE_SPACING_M = 2.0  # curved lanes are turned into polylines with points this far apart
+ROUTE_LOOKAHEAD_M = 1000.0  # a route that never ends (highway, racetrack) is cut here
+
+
+def _lane_stations(lane) -> np.ndarray:
+    """Arc-length stations at which to sample a lane: its ends, plus every 2 m if curved."""
+    if isinstance(lane, StraightLane) and type(lane) is StraightLane:
+        return np.array([0.0, lane.length])
+    count = max(int(np.ceil(lane.length / SAMPLE_SPACING_M)), 1)
+    return np.linspace(0.0, lane.length, count + 1)
+
+
+def _lane_points(lane, stations: np.ndarray, lateral: float | np.ndarray) -> np.ndarray:
+    lateral = np.broadcast_to(lateral, stations.shape)
+    return np.array([lane.position(s, r) for s, r in zip(stations, lateral, strict=True)])
+
+
+def _segments(polyline: np.ndarray) -> np.ndarray:
+    return np.stack([polyline[:-1], polyline[1:]], axis=1)
+
+
+def build_road_map(network) -> RoadMap:
+    """Convert highway-env's road network to arrays (once per reset)."""
+    polygons, centerlines, widths, markings, kinds, edges = [], [], [], [], [], []
+    for lane in network.lanes_list():
+        stations = _lane_stations(lane)
+        half_width = np.array([lane.width_at(s) for s in stations]) / 2
+        left = _lane_points(lane, stations, -half_width)
+        right = _lane_points(lane, stations, half_width)
+        polygons.append(np.concatenate([left, right[::-1]]))
+        centerlines.append(_lane_points(lane, stations, 0.0))
+        widths.append(lane.width_at(0.0))
+        for side, boundary in ((0, left), (1, right)):
+            line_type = lane.line_types[side]
+            if line_type == LineType.NONE:
+                continue
+            segments = _segments(boundary)
+            solid = line_type in (LineType.CONTINUOUS, LineType.CONTINUOUS_LINE)
+            markings.append(segments)
+            kinds.append(np.full(len(segments), 2 if solid else 1))
+            if solid:
+                edges.append(segments)
+    stack = lambda parts: np.concatenate(parts) if parts else np.zeros((0, 2, 2))  # noqa: E731
+    return RoadMap(
+        lane_polygons=tuple(polygons),
+        lane_centerlines=tuple(centerlines),
+        lane_widths_m=np.asarray(widths, dtype=float),
+        markings=stack(markings),
+        marking_kinds=np.concatenate(kinds) if kinds else np.zeros(0, dtype=int),
+        edges=stack(edges),
+    )
+
+
+class HighwayBackend:
+    """highway-env as a drivelab backend.
+
+    :param scenario: which road and traffic model to build.
+    :param traffic: "empty", "regular" or "dense".
+    :param control: "meta" (the ego takes highway-env's 5 meta-actions) or "continuous"
+        (normalised [acceleration, steering] in [-1, 1], highway-env's ContinuousAction ranges).
+    :param overrides: extra highway-env config keys (e.g. ``{"duration": 10}``).
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        traffic: str = "regular",
+        control: str = "meta",
+        overrides: dict | None = None,
+    ) -> None:
+        self.scenario = scenario
+        self.control = control
+        config = {**scenario.config, **scenario.traffic.get(traffic, {})}
+        self.keep_npcs = config.pop("keep_npcs", True)
+        self.extra_vehicles = config.pop("extra_vehicles", 0)
+        if control == "meta":
+            config["action"] = {"type": "DiscreteMetaAction"}
+            if scenario.name == "roundabout":  # highway-env's roundabout speeds
+                config["action"]["target_speeds"] = [0, 8, 16]
+        else:
+            config["action"] = {"type": "ContinuousAction", "longitudinal": True, "lateral": True}
+            config["policy_frequency"] = scenario.continuous_policy_frequency_hz
+        if scenario.name == "racetrack":  # off-road is judged by drivelab, not highway-env
+            config["observation"] = {"type": "Kinematics"}
+        config.update(overrides or {})
+        env_class = hw_utils.class_from_path(scenario.env_class)
+        # highway-env's _info evaluates its own reward with a sampled action (which fails for
+        # continuous actions on some scenarios); drivelab never reads it, so skip it.
+        quiet = type(env_class.__name__, (env_class,), {"_info": lambda self, obs, action=None: {}})
+        self.env = quiet(config=config)
+        self.world: WorldState | None = None
+
+    # --- timing -------------------------------------------------------------------------------
+    @property
+    def policy_frequency_hz(self) -> float:
+        return float(self.env.config["policy_frequency"])
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.env.config["duration"])
+
+    # --- episode ------------------------------------------------------------------------------
+    def reset(self, seed: int) -> WorldState:
+        """Build a new episode from ``seed`` and return its first WorldState."""
+        self.env.reset(seed=int(seed))
+        self._arrange_traffic()
+        road = self.env.road
+        self.road_map = build_road_map(road.network)
+        self.route_lanes = self._plan_route()
+        self.route_polyline, self.route_stations = self._route_polyline(self.route_lanes)
+        self.route_closed = bool(np.linalg.norm(self.route_polyline[-1] - self.route_polyline[0]) < 1.0)
+        self.progress_m = self._project_on_route(self.env.vehicle.position, None)
+        self.world = self._export(Events())
+        return self.world
+
+    def step(self, control: int | np.ndarray) -> WorldState:
+        """Apply one policy-step's control and advance the simulation."""
+        env = self.env
+        env.time += 1 / env.config["policy_frequency"]
+        env._simulate(control)
+        if self.scenario.name == "intersection":  # highway-env does this in its own step()
+            env._clear_vehicles()
+            env._spawn_vehicle(spawn_probability=env.config["spawn_probability"])
+        ego = env.vehicle
+        self.progress_m = self._project_on_route(ego.position, self.progress_m)
+        events = Events(
+            collided=bool(ego.crashed),
+            collision_with="vehicle" if ego.crashed else "",
+            off_road=not ego.on_road,
+            arrived=self._arrived(),
+        )
+        self.world = self._export(events)
+        return self.world
+
+    # --- traffic ------------------------------------------------------------------------------
+    def _arrange_traffic(self) -> None:
+        road, ego = self.env.road, self.env.vehicle
+        if not self.keep_npcs:
+            road.vehicles = [v for v in road.vehicles if v is ego]
+        rng = self.env.np_random
+        wanted = len(road.vehicles) + self.extra_vehicles
+        for _ in range(self.extra_vehicles * 10):  # bounded retries to find free spots
+            if len(road.vehicles) >= wanted:
+                break
+            lane_index = road.network.random_lane_index(rng)
+            lane = road.network.get_lane(lane_index)
+            vehicle = IDMVehicle.make_on_lane(
+                road,
+                lane_index,
+                longitudinal=float(rng.uniform(0, lane.length)),
+                speed=float(lane.speed_limit or 20.0) * 0.8,
+            )
+            if min(np.linalg.norm(v.position - vehicle.position) for v in road.vehicles) < 15:
+                continue
+            if self.scenario.destination:
+                vehicle.plan_route_to(self.scenario.destination)
+            road.vehicles.append(vehicle)
+
+    # --- route --------------------------------------------------------------------------------
+    def _plan_route(self) -> list[tuple]:
+        """Lane indices the ego is meant to follow, from its spawn lane."""
+        network = self.env.road.network
+        start = self.env.vehicle.lane_index
+        lane_id = start[2]
+        if self.scenario.destination:
+            path = network.shortest_path(start[1], self.scenario.destination)
+            nodes = [start[0]] + path
+        else:
+            nodes, length = [start[0], start[1]], network.get_lane(start).length
+            while length < ROUTE_LOOKAHEAD_M:
+                successors = list(network.graph.get(nodes[-1], {}))
+                if not successors or nodes[-1] == nodes[0]:
+                    break
+                nodes.append(successors[0])
+                length += network.get_lane((nodes[-2], nodes[-1], 0)).length
+        lanes = []
+        for _from, _to in zip(nodes[:-1], nodes[1:], strict=True):
+            count = len(network.graph[_from][_to])
+            lanes.append((_from, _to, min(lane_id, count - 1)))
+        return lanes
+
+    def _route_polyline(self, lanes: list[tuple]) -> tuple[np.ndarray, np.ndarray]:
+        network = self.env.road.network
+        points = [_lane_points(network.get_lane(i), _lane_stations(network.get_lane(i)), 0.0) for i in lanes]
+        polyline = np.concatenate(points)
+        keep = np.r_[True, np.linalg.norm(np.diff(polyline, axis=0), axis=1) > 1e-6]
+        polyline = polyline[keep]
+        stations = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(polyline, axis=0), axis=1))]
+        return polyline, stations
+
+    def _project_on_route(self, position: np.ndarray, previous_m: float | None) -> float:
+        """Arc length of the route point nearest ``position``, searched near the last value."""
+        starts, ends = self.route_polyline[:-1], self.route_polyline[1:]
+        seg = ends - starts
+        seg_len2 = np.maximum((seg**2).sum(axis=1), 1e-12)
+        t = np.clip(((position - starts) * seg).sum(axis=1) / seg_len2, 0.0, 1.0)
+        distance = np.linalg.norm(starts + t[:, None] * seg - position, axis=1)
+        station = self.route_stations[:-1] + t * np.sqrt(seg_len2)
+        if previous_m is not None:  # a closed circuit passes near itself: stay local
+            distance = distance + 1e3 * (np.abs(station - previous_m) > 60.0)
+        best = int(np.argmin(distance))
+        return float(station[best])
+
+    def _arrived(self) -> bool:
+        ego = self.env.vehicle
+        if self.scenario.arrival == "merge_end":
+            return bool(ego.position[0] > 370)
+        if self.scenario.arrival == "exit":
+            return bool(self.env.has_arrived(ego))
+        return False
+
+    # --- export -------------------------------------------------------------------------------
+    def _export(self, events: Events) -> WorldState:
+        env = self.env
+        ego = env.vehicle
+        lane_index = ego.lane_index
+        lane = ego.lane
+        s, lateral = lane.local_coordinates(ego.position)
+        heading_back, heading_ahead = lane.heading_at(s - 1.0), lane.heading_at(s + 1.0)
+        curvature = float(np.angle(np.exp(1j * (heading_ahead - heading_back)))) / 2.0
+        target = getattr(ego, "target_lane_index", lane_index)
+        others = [v for v in env.road.vehicles if v is not ego]
+        vehicles = np.array(
+            [[*v.position, v.heading, v.speed, v.LENGTH, v.WIDTH] for v in others], dtype=float
+        ).reshape(-1, 6)
+        route_length = float(self.route_stations[-1])
+        if not self.scenario.destination:
+            route_length = float("inf")
+        ego_state = Ego(
+            position=np.array(ego.position, dtype=float),
+            heading=float(ego.heading),
+            speed_mps=float(ego.speed),
+            steering=float(ego.action.get("steering", 0.0)),
+            acceleration_mps2=float(ego.action.get("acceleration", 0.0)),
+            length_m=float(ego.LENGTH),
+            width_m=float(ego.WIDTH),
+            lane_id=int(lane_index[2]),
+            lane_count=len(env.road.network.all_side_lanes(lane_index)),
+            target_lane_id=int(target[2]),
+            lane_width_m=float(lane.width_at(s)),
+            lateral_offset_m=float(lateral),
+            lane_heading=float(lane.heading_at(s)),
+            lane_curvature=curvature,
+            on_road=bool(ego.on_road),
+            in_intersection=lane_index[0] in self.scenario.intersection_nodes
+            and (self.scenario.name != "roundabout" or lane_index[1] in self.scenario.intersection_nodes),
+        )
+        return WorldState(
+            time_s=float(env.time),
+            dt_s=1.0 / self.policy_frequency_hz,
+            ego=ego_state,
+            vehicles=vehicles,
+            road=self.road_map,
+            route=Route(self.route_polyline, self.progress_m, route_length),
+            events=events,
+            max_speed_mps=float(ego.MAX_SPEED),
+            speed_limit_mps=float(lane.speed_limit or 30.0),
+        )
+
+    def render_native(self) -> np.ndarray:
+        """highway-env's own pygame rendering (for comparison; drivelab videos use BirdEye)."""
+        self.env.render_mode = "rgb_array"
+        return self.env.render()

@@ -1,0 +1,132 @@
+"""DriveEnv: the gymnasium environment that assembles backend, sensors, actions and rewards."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from drivelab.envs.actions import ActionAdapter, make_action
+from drivelab.envs.metrics import EpisodeMetrics
+from drivelab.envs.scenarios import check_traffic, get_scenario
+from drivelab.envs.world import WorldState
+from drivelab.errors import UsageError
+from drivelab.perception.birdeye import render_birdeye
+from drivelab.perception.sensors import make_sensor, split_sensor_list
+from drivelab.rewards.shapers import RewardShaper
+
+BACKENDS = ("highway",)
+
+
+class DriveEnv(gym.Env):
+    """One driving scenario seen through drivelab's sensors and rewarded by its shapers.
+
+    :param scenario: "highway", "merge", "roundabout", "intersection" or "racetrack".
+    :param obs: a sensor spec (``"lidar"``, ``"lidar:beams=120:stack=3"``), a comma list, or a
+        list of specs. One sensor gives its Box; several give a Dict keyed by sensor name.
+    :param action: "meta", "grid" or "continuous" (or an ActionAdapter).
+    :param reward: a preset, ``"term=w,…"``, ``"preset,term=w"`` or a dict of weights.
+    :param traffic: "empty", "regular" or "dense".
+    :param backend: simulation backend ("highway": highway-env itself).
+    :param duration_s: episode time limit; default the scenario's.
+    :param offroad_terminal: end the episode when the ego leaves the road.
+    :param action_options: keyword options of the action adapter (e.g. ``steer_levels``).
+    :param backend_options: extra highway-env config keys.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 5}
+
+    def __init__(
+        self,
+        scenario: str = "highway",
+        obs: str | list = "kinematics",
+        action: str | ActionAdapter = "meta",
+        reward: str | dict = "highway",
+        traffic: str = "regular",
+        backend: str = "highway",
+        duration_s: float | None = None,
+        offroad_terminal: bool = True,
+        action_options: dict | None = None,
+        backend_options: dict | None = None,
+        render_mode: str | None = None,
+        seed: int | None = None,
+    ) -> None:
+        super().__init__()
+        self.scenario = get_scenario(scenario)
+        check_traffic(traffic)
+        self.adapter = (
+            action if isinstance(action, ActionAdapter) else make_action(action, **(action_options or {}))
+        )
+        if self.adapter.name not in self.scenario.action_kinds:
+            raise UsageError(
+                f"scenario {scenario!r} cannot take action {self.adapter.name!r} "
+                f"(it takes {', '.join(self.scenario.action_kinds)})"
+            )
+        self.sensors = [make_sensor(spec) for spec in split_sensor_list(obs)]
+        names = [s.name for s in self.sensors]
+        if len(set(names)) != len(names):
+            raise UsageError(f"sensor listed twice in {names}")
+        self.reward_shaper = RewardShaper(reward)
+        if backend not in BACKENDS:
+            raise UsageError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")
+        from drivelab.envs.backends.highway import HighwayBackend
+
+        self.backend = HighwayBackend(self.scenario, traffic, self.adapter.control, backend_options)
+        self.duration_s = float(duration_s or self.backend.duration_s)
+        self.offroad_terminal = offroad_terminal
+        self.render_mode = render_mode
+        self.metadata = {**self.metadata, "render_fps": self.backend.policy_frequency_hz}
+        self.action_space = self.adapter.space
+        if len(self.sensors) == 1:
+            self.observation_space = self.sensors[0].space
+        else:
+            self.observation_space = spaces.Dict({s.name: s.space for s in self.sensors})
+        self.world: WorldState | None = None
+        if seed is not None:
+            self.reset(seed=seed)
+
+    def _observe(self) -> np.ndarray | dict[str, np.ndarray]:
+        if len(self.sensors) == 1:
+            return self.sensors[0].observe(self.world)
+        return {s.name: s.observe(self.world) for s in self.sensors}
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        episode_seed = int(self.np_random.integers(2**31 - 1))
+        self.world = self.backend.reset(episode_seed)
+        for index, sensor in enumerate(self.sensors):
+            sensor.reset(self.world, np.random.default_rng([episode_seed, index]))
+        self.metrics = EpisodeMetrics(self.world)
+        return self._observe(), {"episode_seed": episode_seed}
+
+    def step(self, action: Any):
+        if self.world is None:
+            raise RuntimeError("call reset() before step()")
+        control = self.adapter.to_control(action)
+        prev = self.world
+        self.world = self.backend.step(control)
+        reward, terms = self.reward_shaper(prev, self.world, control)
+        events = self.world.events
+        terminated = bool(events.collided or events.arrived or (self.offroad_terminal and events.off_road))
+        truncated = bool(not terminated and self.world.time_s >= self.duration_s - 1e-9)
+        self.metrics.update(self.world, reward)
+        info = {
+            "reward_terms": terms,
+            "speed_mps": self.world.ego.speed_mps,
+            "crashed": events.collided,
+            "off_road": events.off_road,
+            "arrived": events.arrived,
+        }
+        if terminated or truncated:
+            info["episode_metrics"] = self.metrics.summary(
+                has_goal=self.scenario.arrival != "none", timed_out=truncated
+            )
+        return self._observe(), reward, terminated, truncated, info
+
+    def render(self) -> np.ndarray | None:
+        """A 256×512 bird's-eye RGB frame of the current world (drivelab's own renderer)."""
+        if self.world is None:
+            return None
+        return render_birdeye(self.world, size_hw=(256, 512), pixels_per_meter=4.0)

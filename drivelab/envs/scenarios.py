@@ -1,0 +1,119 @@
+"""Scenario presets: which highway-env road to build, and how much traffic to put on it."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from drivelab.errors import UsageError
+
+TRAFFIC_LEVELS = ("empty", "regular", "dense")
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A named driving task.
+
+    :param env_class: dotted path of the highway-env environment class that builds the road.
+    :param config: highway-env config shared by every traffic level.
+    :param traffic: per traffic level, highway-env config overrides plus the drivelab-only key
+        ``extra_vehicles`` (NPCs added on random lanes after highway-env populated the road) and
+        ``keep_npcs`` (False removes every NPC highway-env created).
+    :param destination: road-network node the ego is routed to (None: follow the road).
+    :param arrival: how the backend decides the goal is reached: "none", "merge_end", "exit".
+    :param intersection_nodes: road-network nodes whose lanes count as junction area.
+    """
+
+    name: str
+    env_class: str
+    description: str
+    config: dict = field(default_factory=dict)
+    traffic: dict = field(default_factory=dict)
+    destination: str | None = None
+    arrival: str = "none"
+    intersection_nodes: tuple[str, ...] = ()
+    continuous_policy_frequency_hz: int = 5
+    action_kinds: tuple[str, ...] = ("meta", "grid", "continuous")
+
+
+_RING = ("se", "ex", "ee", "nx", "ne", "wx", "we", "sx")
+
+SCENARIOS: dict[str, Scenario] = {
+    s.name: s
+    for s in [
+        Scenario(
+            "highway",
+            "highway_env.envs.highway_env.HighwayEnvFast",
+            "3-lane straight highway, 30 s (highway-env's highway-fast settings)",
+            config={"lanes_count": 3, "duration": 30},
+            traffic={
+                "empty": {"vehicles_count": 0},
+                "regular": {"vehicles_count": 20},
+                "dense": {"vehicles_count": 35, "vehicles_density": 1.5},
+            },
+        ),
+        Scenario(
+            "merge",
+            "highway_env.envs.merge_env.MergeEnv",
+            "highway with an on-ramp merging in; ends after the merge (x > 370 m)",
+            config={"duration": 40},
+            traffic={
+                "empty": {"keep_npcs": False},
+                "regular": {},
+                "dense": {"extra_vehicles": 6},
+            },
+            arrival="merge_end",
+        ),
+        Scenario(
+            "roundabout",
+            "highway_env.envs.roundabout_env.RoundaboutEnv",
+            "two-lane roundabout, enter from the south and leave to the north",
+            config={"duration": 11},
+            traffic={
+                "empty": {"keep_npcs": False},
+                "regular": {},
+                "dense": {"extra_vehicles": 5},
+            },
+            destination="nxs",
+            intersection_nodes=_RING,
+        ),
+        Scenario(
+            "intersection",
+            "highway_env.envs.intersection_env.IntersectionEnv",
+            "unsignalised 4-way crossing, turn left to exit o1",
+            config={"duration": 13, "destination": "o1"},
+            traffic={
+                "empty": {"keep_npcs": False, "initial_vehicle_count": 0, "spawn_probability": 0.0},
+                "regular": {"initial_vehicle_count": 10, "spawn_probability": 0.6},
+                "dense": {"initial_vehicle_count": 15, "spawn_probability": 0.9},
+            },
+            destination="o1",
+            arrival="exit",
+            intersection_nodes=("ir0", "ir1", "ir2", "ir3"),
+        ),
+        Scenario(
+            "racetrack",
+            "highway_env.envs.racetrack_env.RacetrackEnv",
+            "two-lane closed circuit with tight curves",
+            config={"duration": 60},
+            traffic={
+                "empty": {"other_vehicles": 0},
+                "regular": {"other_vehicles": 1},
+                "dense": {"other_vehicles": 5},
+            },
+            action_kinds=("grid", "continuous"),  # highway-env's racetrack has no meta-actions
+        ),
+    ]
+}
+
+
+def get_scenario(name: str) -> Scenario:
+    """The scenario called ``name``, or a UsageError listing the known ones."""
+    if name not in SCENARIOS:
+        raise UsageError(f"unknown scenario {name!r} (choose from {', '.join(SCENARIOS)})")
+    return SCENARIOS[name]
+
+
+def check_traffic(level: str) -> str:
+    if level not in TRAFFIC_LEVELS:
+        raise UsageError(f"unknown traffic level {level!r} (choose from {', '.join(TRAFFIC_LEVELS)})")
+    return level

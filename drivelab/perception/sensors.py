@@ -1,0 +1,100 @@
+"""Sensor registry, the ``name:key=value`` spec syntax, and frame stacking."""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+import yaml
+from gymnasium import spaces
+
+from drivelab.envs.world import WorldState
+from drivelab.errors import UsageError
+from drivelab.perception.base import Sensor
+from drivelab.perception.birdeye import BirdEye
+from drivelab.perception.kinematics import Kinematics
+from drivelab.perception.lidar import Lidar
+from drivelab.perception.topdown import TopDown
+
+SENSORS: dict[str, type[Sensor]] = {cls.name: cls for cls in (Kinematics, Lidar, TopDown, BirdEye)}
+SENSOR_HELP = {
+    "kinematics": "nearest vehicles' presence, position, velocity, heading in the ego frame",
+    "lidar": "240 beams (configurable) hitting vehicles and road edges, distance / range",
+    "topdown": "5x84x84 semantic image: road, route, past ego positions, traffic now / one step earlier",
+    "birdeye": "128x128 RGB bird's-eye view, ego-centred and heading-aligned",
+}
+
+
+class FrameStack(Sensor):
+    """The last ``frames`` observations of ``sensor`` concatenated along its channel axis."""
+
+    def __init__(self, sensor: Sensor, frames: int) -> None:
+        if frames < 1:
+            raise UsageError(f"stack must be >= 1 for sensor {sensor.name!r}")
+        self.sensor, self.frames, self.name = sensor, frames, sensor.name
+        # images stack along their channel axis: first for (C, H, W), last for RGB (H, W, 3)
+        rgb = len(sensor.space.shape) == 3 and sensor.space.shape[-1] == 3
+        self.axis = -1 if rgb else 0
+        inner = sensor.space
+        repeat = lambda a: np.concatenate([a] * frames, axis=self.axis)  # noqa: E731
+        self._space = spaces.Box(repeat(inner.low), repeat(inner.high), dtype=inner.dtype)
+        self.history: deque[np.ndarray] = deque(maxlen=frames)
+
+    @property
+    def space(self) -> spaces.Box:
+        return self._space
+
+    def reset(self, world: WorldState, rng: np.random.Generator) -> None:
+        super().reset(world, rng)
+        self.sensor.reset(world, rng)
+        self.history.clear()
+
+    def observe(self, world: WorldState) -> np.ndarray:
+        frame = self.sensor.observe(world)
+        if not self.history:  # the first frame of an episode fills the whole stack
+            self.history.extend([frame] * self.frames)
+        else:
+            self.history.append(frame)
+        return np.concatenate(list(self.history), axis=self.axis)
+
+
+def parse_sensor_spec(spec: str | dict) -> tuple[str, dict]:
+    """``"lidar:beams=120:stack=3"`` or ``{"name": "lidar", "beams": 120}`` → (name, options)."""
+    if isinstance(spec, dict):
+        options = dict(spec)
+        name = options.pop("name", None)
+        if name is None:
+            raise UsageError(f"sensor entry {spec!r} has no 'name'")
+        return str(name), options
+    name, *pairs = str(spec).strip().split(":")
+    options = {}
+    for pair in pairs:
+        key, sep, value = pair.partition("=")
+        if not sep:
+            raise UsageError(f"sensor option {pair!r} of {name!r} must look like key=value")
+        options[key.strip()] = yaml.safe_load(value)
+    return name.strip(), options
+
+
+def make_sensor(spec: str | dict) -> Sensor:
+    """Build one sensor (frame-stacked when ``stack`` > 1) from a spec."""
+    name, options = parse_sensor_spec(spec)
+    if name not in SENSORS:
+        raise UsageError(f"unknown sensor {name!r} (choose from {', '.join(SENSORS)})")
+    stack = int(options.pop("stack", 1))
+    try:
+        sensor = SENSORS[name](**options)
+    except TypeError as exc:
+        raise UsageError(f"bad option for sensor {name!r}: {exc}") from None
+    return FrameStack(sensor, stack) if stack > 1 else sensor
+
+
+def split_sensor_list(obs: str | list | tuple) -> list:
+    """``"lidar,topdown"`` → ["lidar", "topdown"]; lists pass through."""
+    if isinstance(obs, str):
+        items = [s.strip() for s in obs.split(",") if s.strip()]
+    else:
+        items = list(obs)
+    if not items:
+        raise UsageError("no sensor given (--obs)")
+    return items

@@ -1,0 +1,111 @@
+"""RewardShaper: a weighted sum of reward terms, and the presets that reproduce each source."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from drivelab.envs.world import WorldState
+from drivelab.errors import UsageError
+from drivelab.rewards.terms import TERMS
+
+
+@dataclass(frozen=True)
+class RewardSpec:
+    """What a reward is: term weights, an optional affine normalisation and an optional gate.
+
+    :param weights: term name → weight; the reward is Σ weight · term.
+    :param normalize: (low, high): the sum is mapped linearly so that low → 0 and high → 1.
+    :param gate: a term whose value multiplies the final reward (highway-env's on_road factor).
+    """
+
+    weights: dict[str, float]
+    normalize: tuple[float, float] | None = None
+    gate: str | None = None
+    description: str = field(default="", compare=False)
+
+
+SAFETY_TERMS = (
+    "centered",
+    "overspeed",
+    "curve_control",
+    "intersection_heading",
+    "destination_proximity",
+    "steering_smoothness",
+    "overtaking",
+    "sidewalk_crash",
+)
+
+PRESETS: dict[str, RewardSpec] = {
+    "highway": RewardSpec(
+        {"collision": -1.0, "right_lane": 0.1, "high_speed": 0.4},
+        normalize=(-1.0, 0.5),
+        gate="on_road",
+        description="highway-env's own: collision -1, right lane 0.1, high speed 0.4, normalised, x on_road",
+    ),
+    "metadrive_course": RewardSpec(
+        {"progress_lateral": 2.5, "speed": 0.5, "crash": -5.0, "off_road": -5.0, "arrival": 10.0},
+        description="seed 003: 2.5*progress*(1-|lat|^3) + 0.5*speed (halved in junctions), "
+        "crash/off-road -5, arrival +10",
+    ),
+    "safety_dqn": RewardSpec(
+        {name: 1.0 for name in SAFETY_TERMS},
+        description="seed 003's eight-term safety table (centre, overspeed, curves, junction heading, ...)",
+    ),
+}
+
+
+def parse_reward(spec: str | dict | RewardSpec) -> RewardSpec:
+    """Resolve a preset name, ``"term=w,term=w"``, ``"preset,term=w"`` (override) or a dict.
+
+    A weight of 0 drops a term. Unknown presets or terms raise UsageError.
+    """
+    if isinstance(spec, RewardSpec):
+        return spec
+    if isinstance(spec, dict):
+        items = [f"{k}={v}" for k, v in spec.items()]
+    else:
+        items = [item.strip() for item in str(spec).split(",") if item.strip()]
+    if not items:
+        raise UsageError("empty reward specification")
+    base = RewardSpec({})
+    if "=" not in items[0]:
+        name = items.pop(0)
+        if name not in PRESETS:
+            raise UsageError(f"unknown reward preset {name!r} (choose from {', '.join(PRESETS)})")
+        base = PRESETS[name]
+    weights = dict(base.weights)
+    for item in items:
+        name, _, value = item.partition("=")
+        name = name.strip()
+        if name not in TERMS:
+            raise UsageError(f"unknown reward term {name!r} (known: {', '.join(sorted(TERMS))})")
+        try:
+            weight = float(value)
+        except ValueError:
+            raise UsageError(f"reward term {name!r} needs a numeric weight, got {value!r}") from None
+        weights[name] = weight
+    weights = {k: w for k, w in weights.items() if w != 0.0}
+    if not weights:
+        raise UsageError("the reward has no term left with a non-zero weight")
+    return RewardSpec(weights, base.normalize, base.gate, base.description)
+
+
+class RewardShaper:
+    """Computes the reward of a step and every term's weighted contribution."""
+
+    def __init__(self, spec: str | dict | RewardSpec) -> None:
+        self.spec = parse_reward(spec)
+        self.terms = {name: TERMS[name] for name in self.spec.weights}
+
+    def __call__(self, prev: WorldState, world: WorldState, control) -> tuple[float, dict[str, float]]:
+        """(reward, {term: weight · value}) for the step prev → world."""
+        contributions = {
+            name: self.spec.weights[name] * float(fn(prev, world, control)) for name, fn in self.terms.items()
+        }
+        reward = sum(contributions.values())
+        if self.spec.normalize is not None:
+            low, high = self.spec.normalize
+            reward = (reward - low) / (high - low)
+        if self.spec.gate is not None:
+            reward *= float(TERMS[self.spec.gate](prev, world, control))
+        return float(reward), contributions

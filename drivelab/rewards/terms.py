@@ -1,0 +1,172 @@
+"""Reward terms: small pure functions ``term(prev, world, control) -> float``.
+
+Each reads only WorldStates (the one before the step and the one after) and returns an
+unweighted value; presets and users weight them (see ``drivelab.rewards.shapers``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from drivelab.envs.world import WorldState
+
+Term = Callable[[WorldState, WorldState, object], float]
+TERMS: dict[str, Term] = {}
+
+
+def term(function: Term) -> Term:
+    """Register ``function`` under its own name."""
+    TERMS[function.__name__] = function
+    return function
+
+
+def _lateral_fraction(world: WorldState) -> float:
+    """|lateral offset| as a fraction of half the lane width, in [0, 1]."""
+    half_width = max(world.ego.lane_width_m / 2, 1e-6)
+    return float(min(abs(world.ego.lateral_offset_m) / half_width, 1.0))
+
+
+# --- highway-env's own reward (HighwayEnv._rewards) -------------------------------------------
+@term
+def collision(prev: WorldState, world: WorldState, control) -> float:
+    """1 when the ego collided during the step."""
+    return float(world.events.collided)
+
+
+@term
+def right_lane(prev: WorldState, world: WorldState, control) -> float:
+    """Target lane index over the rightmost index: 1 on the rightmost lane, 0 on the leftmost."""
+    return world.ego.target_lane_id / max(world.ego.lane_count - 1, 1)
+
+
+@term
+def high_speed(prev: WorldState, world: WorldState, control) -> float:
+    """Forward speed mapped linearly from [2/3, 1]·speed limit to [0, 1], clipped.
+
+    On highway (limit 30 m/s) this is highway-env's ``reward_speed_range`` [20, 30].
+    """
+    low, high = world.speed_limit_mps * 2 / 3, world.speed_limit_mps
+    return float(np.clip((world.ego.forward_speed_mps - low) / (high - low), 0.0, 1.0))
+
+
+@term
+def on_road(prev: WorldState, world: WorldState, control) -> float:
+    """1 while the ego is on a lane."""
+    return float(world.ego.on_road)
+
+
+# --- seed 003, the MetaDrive course reward ----------------------------------------------------
+@term
+def progress_lateral(prev: WorldState, world: WorldState, control) -> float:
+    """Metres of route progress weighted by lane centring: progress · (1 − |lateral|³) (seed 003)."""
+    progress_m = world.route.progress_m - prev.route.progress_m
+    return progress_m * (1.0 - _lateral_fraction(world) ** 3)
+
+
+@term
+def speed(prev: WorldState, world: WorldState, control) -> float:
+    """Speed over 70 % of the top speed, clipped to 1, halved inside junctions (seed 003)."""
+    value = min(world.ego.speed_mps / (0.7 * world.max_speed_mps), 1.0)
+    return value / 2 if world.ego.in_intersection else value
+
+
+@term
+def crash(prev: WorldState, world: WorldState, control) -> float:
+    """1 on a collision with anything (MetaDrive's crash penalty is weighted −5)."""
+    return float(world.events.collided)
+
+
+@term
+def off_road(prev: WorldState, world: WorldState, control) -> float:
+    """1 when the ego has left the road."""
+    return float(world.events.off_road)
+
+
+@term
+def arrival(prev: WorldState, world: WorldState, control) -> float:
+    """1 when the scenario's goal is reached."""
+    return float(world.events.arrived)
+
+
+# --- seed 003, the safety-focused table used with SB3 DQN (values are the table's) ------------
+@term
+def centered(prev: WorldState, world: WorldState, control) -> float:
+    """+0.3 while within 0.5 m of the lane centre."""
+    return 0.3 if abs(world.ego.lateral_offset_m) < 0.5 else 0.0
+
+
+OVERSPEED_MPS = 20 / 3.6  # the seed capped its agent at 20 km/h
+
+
+@term
+def overspeed(prev: WorldState, world: WorldState, control) -> float:
+    """−1.0 above 20 km/h (the seed's cap; re-weight or drop it on fast roads)."""
+    return -1.0 if world.ego.speed_mps > OVERSPEED_MPS else 0.0
+
+
+CURVE_CURVATURE = 0.01  # 1/m: radius under 100 m counts as a curve
+CURVE_LATERAL_ACCEL_MPS2 = 3.0  # comfortable lateral acceleration that sets the safe curve speed
+
+
+@term
+def curve_control(prev: WorldState, world: WorldState, control) -> float:
+    """In curves: +0.2 below the safe speed sqrt(a_lat/|κ|) or while slowing down, else −0.5."""
+    curvature = abs(world.ego.lane_curvature)
+    if curvature < CURVE_CURVATURE:
+        return 0.0
+    safe_speed = np.sqrt(CURVE_LATERAL_ACCEL_MPS2 / curvature)
+    slowing = world.ego.speed_mps < prev.ego.speed_mps
+    return 0.2 if world.ego.speed_mps <= safe_speed or slowing else -0.5
+
+
+@term
+def intersection_heading(prev: WorldState, world: WorldState, control) -> float:
+    """In junctions: +0.3 when heading within 15° of the lane direction, else −0.5."""
+    if not world.ego.in_intersection:
+        return 0.0
+    error = abs(np.angle(np.exp(1j * (world.ego.heading - world.ego.lane_heading))))
+    return 0.3 if error < np.radians(15) else -0.5
+
+
+@term
+def destination_proximity(prev: WorldState, world: WorldState, control) -> float:
+    """+0.4 within 50 m of the route's end (routes that never end give 0)."""
+    return 0.4 if np.isfinite(world.route.length_m) and world.route.remaining_m < 50 else 0.0
+
+
+@term
+def steering_smoothness(prev: WorldState, world: WorldState, control) -> float:
+    """+0.1 for a steering change under 0.05 rad in a step, −0.2 over 0.2 rad."""
+    change = abs(world.ego.steering - prev.ego.steering)
+    return 0.1 if change < 0.05 else (-0.2 if change > 0.2 else 0.0)
+
+
+def _vehicles_alongside_ahead(world: WorldState) -> tuple[int, float]:
+    """Vehicles in the next lanes within 30 m ahead, and the nearest vehicle's distance."""
+    if len(world.vehicles) == 0:
+        return 0, np.inf
+    delta = world.vehicles[:, :2] - world.ego.position
+    cos_h, sin_h = np.cos(world.ego.heading), np.sin(world.ego.heading)
+    ahead = delta[:, 0] * cos_h + delta[:, 1] * sin_h
+    beside = np.abs(-delta[:, 0] * sin_h + delta[:, 1] * cos_h)
+    count = int(np.sum((ahead > 0) & (ahead < 30) & (beside > 1.5) & (beside < 8)))
+    return count, float(np.min(np.hypot(delta[:, 0], delta[:, 1])))
+
+
+@term
+def overtaking(prev: WorldState, world: WorldState, control) -> float:
+    """When a vehicle in a next lane goes from ahead to behind: +0.2 if passed with > 3 m
+    clearance, −0.5 if closer (the seed's LiDAR-based rule, read from the WorldState)."""
+    before, _ = _vehicles_alongside_ahead(prev)
+    after, nearest_m = _vehicles_alongside_ahead(world)
+    if after >= before:
+        return 0.0
+    return 0.2 if nearest_m > 3.0 else -0.5
+
+
+@term
+def sidewalk_crash(prev: WorldState, world: WorldState, control) -> float:
+    """−4.0 when the ego leaves the road."""
+    return -4.0 if world.events.off_road else 0.0

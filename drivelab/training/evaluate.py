@@ -1,0 +1,134 @@
+"""Evaluation: run a policy for N episodes and report driving metrics."""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from drivelab.config import RunConfig, build_config, load_yaml
+from drivelab.errors import UsageError
+
+EVAL_SEED_OFFSET = 10_000  # evaluation episodes never reuse training seeds
+
+
+def run_episodes(
+    policy: Callable,
+    env,
+    episodes: int,
+    seed: int,
+    record_first: bool = False,
+) -> tuple[list[dict], list[np.ndarray]]:
+    """Play ``episodes`` episodes; return each one's ``episode_metrics`` and, optionally, the
+    RGB frames of the first episode."""
+    results, frames = [], []
+    for episode in range(episodes):
+        obs, _ = env.reset(seed=seed + episode)
+        record = record_first and episode == 0
+        if record:
+            frames.append(env.render())
+        while True:
+            obs, _, terminated, truncated, info = env.step(policy(obs))
+            if record:
+                frames.append(env.render())
+            if terminated or truncated:
+                results.append(info["episode_metrics"])
+                break
+    return results, frames
+
+
+def aggregate(results: list[dict]) -> dict[str, float]:
+    """Mean return ± std, success / crash rates, distance, speed, events per km (summed counts
+    over summed distance)."""
+    returns = np.array([r["return"] for r in results], dtype=float)
+    km = sum(r["distance_km"] for r in results)
+    per_km = lambda key: sum(r[key] for r in results) / km if km > 0 else float("nan")  # noqa: E731
+    completion = [r["route_completion"] for r in results if not math.isnan(r["route_completion"])]
+    return {
+        "episodes": len(results),
+        "mean_return": float(returns.mean()),
+        "std_return": float(returns.std()),
+        "success_rate": float(np.mean([r["success"] for r in results])),
+        "crash_rate": float(np.mean([r["crashed"] for r in results])),
+        "mean_distance_km": km / len(results),
+        "mean_speed_mps": float(np.mean([r["mean_speed_mps"] for r in results])),
+        "mean_length": float(np.mean([r["length"] for r in results])),
+        "collisions_per_km": per_km("collisions"),
+        "off_road_per_km": per_km("off_road_events"),
+        "route_completion": float(np.mean(completion)) if completion else float("nan"),
+    }
+
+
+def write_video(frames: list[np.ndarray], path: Path, fps: float) -> Path:
+    """Write frames as mp4 (imageio-ffmpeg), falling back to a gif."""
+    import imageio.v2 as imageio
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        imageio.mimwrite(path.with_suffix(".mp4"), frames, fps=max(fps, 1), macro_block_size=1)
+        return path.with_suffix(".mp4")
+    except Exception:  # no ffmpeg backend: gif needs nothing beyond Pillow
+        imageio.mimwrite(path.with_suffix(".gif"), frames, duration=1000 / max(fps, 1))
+        return path.with_suffix(".gif")
+
+
+def load_run_config(run_dir: Path) -> RunConfig:
+    """The resolved config of an existing run directory."""
+    if not run_dir.is_dir():
+        raise UsageError(f"run directory {str(run_dir)!r} does not exist")
+    config_path = run_dir / "config.yaml"
+    if not config_path.is_file():
+        raise UsageError(f"{str(run_dir)!r} is not a drivelab run directory (no config.yaml)")
+    return build_config(load_yaml(config_path))
+
+
+def evaluate_run(
+    run_dir: str | Path,
+    episodes: int = 10,
+    video: bool = False,
+    deterministic: bool = True,
+) -> dict:
+    """Evaluate the final model of ``run_dir`` (or its latest checkpoint); write eval.json."""
+    from drivelab.envs.core import DriveEnv
+    from drivelab.training.run import load_agent
+
+    run_dir = Path(run_dir)
+    config = load_run_config(run_dir)
+    if episodes < 1:
+        raise UsageError("--episodes must be >= 1")
+    agent = load_agent(run_dir, config)
+    env = DriveEnv(**config.env_kwargs())
+    policy = lambda obs: agent.predict(obs, deterministic=deterministic)[0]  # noqa: E731
+    results, frames = run_episodes(policy, env, episodes, config.seed + EVAL_SEED_OFFSET, video)
+    report = {"run": str(run_dir), "algo": config.algo, "env": config.env, **aggregate(results)}
+    if video:
+        report["video"] = str(
+            write_video(frames, run_dir / "videos" / "evaluate", env.metadata["render_fps"])
+        )
+    (run_dir / "eval.json").write_text(json.dumps({**report, "per_episode": results}, indent=2))
+    return report
+
+
+METRIC_LABELS = {
+    "mean_return": "return (mean ± std)",
+    "success_rate": "success rate",
+    "crash_rate": "crash rate",
+    "mean_distance_km": "distance per episode (km)",
+    "mean_speed_mps": "mean speed (m/s)",
+    "collisions_per_km": "collisions per km",
+    "off_road_per_km": "off-road per km",
+    "route_completion": "route completion",
+}
+
+
+def metrics_rows(report: dict) -> list[tuple[str, str]]:
+    """(label, formatted value) rows for printing."""
+    rows = []
+    for key, label in METRIC_LABELS.items():
+        value = report[key]
+        text = f"{value:.3f} ± {report['std_return']:.3f}" if key == "mean_return" else f"{value:.3f}"
+        rows.append((label, text))
+    return rows

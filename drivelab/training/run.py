@@ -1,0 +1,264 @@
+"""Training runs: a run directory, checkpoints that resume, periodic evaluation, plots.
+
+Run directory layout::
+
+    config.yaml            resolved RunConfig
+    progress.csv, events.* SB3 logger (CSV + TensorBoard); a resume starts a new progress-N.csv
+    monitor.csv            one row per training episode (return, length, time)
+    evaluations.csv        one row per periodic evaluation
+    checkpoints/latest.zip + latest.json (manifest: steps, sha256, config identity)
+    model.zip              final model
+    learning_curve.png     training returns and evaluation returns against steps
+    videos/                periodic-evaluation videos (when asked)
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import os
+import shutil
+import time
+import zipfile
+from pathlib import Path
+
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.logger import configure
+from stable_baselines3.common.monitor import Monitor
+from tqdm import tqdm
+
+from drivelab.agents.registry import check_combination, get_algo
+from drivelab.config import RunConfig, build_config, save_yaml
+from drivelab.errors import UsageError
+from drivelab.training.evaluate import (
+    EVAL_SEED_OFFSET,
+    aggregate,
+    load_run_config,
+    run_episodes,
+    write_video,
+)
+
+REPLAY_LIMIT_BYTES = 512 * 2**20  # larger replay buffers are not checkpointed (resume refills)
+
+
+# --- checkpoints -----------------------------------------------------------------------------
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def save_checkpoint(model, run_dir: Path, config: RunConfig, save_replay: bool) -> Path:
+    """Write checkpoints/latest.zip atomically, with a manifest that lets resume verify it."""
+    folder = run_dir / "checkpoints"
+    folder.mkdir(exist_ok=True)
+    tmp = folder / "latest.tmp.zip"
+    model.save(tmp)
+    os.replace(tmp, folder / "latest.zip")
+    replay = False
+    if save_replay and getattr(model, "replay_buffer", None) is not None:
+        if model.replay_buffer.observations.nbytes * 2 < REPLAY_LIMIT_BYTES:
+            model.save_replay_buffer(folder / "replay.tmp.pkl")
+            os.replace(folder / "replay.tmp.pkl", folder / "replay.pkl")
+            replay = True
+    manifest = {
+        "steps": int(model.num_timesteps),
+        "sha256": _sha256(folder / "latest.zip"),
+        "config_identity": config.identity(),
+        "replay_buffer": replay,
+        "saved_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
+    }
+    (folder / "latest.tmp.json").write_text(json.dumps(manifest, indent=2))
+    os.replace(folder / "latest.tmp.json", folder / "latest.json")
+    return folder / "latest.zip"
+
+
+def verify_checkpoint(run_dir: Path, config: RunConfig) -> dict:
+    """The checkpoint manifest, after checking the file is whole and belongs to ``config``."""
+    folder = run_dir / "checkpoints"
+    manifest_path, model_path = folder / "latest.json", folder / "latest.zip"
+    if not manifest_path.is_file() or not model_path.is_file():
+        raise UsageError(f"no checkpoint in {str(run_dir)!r} (nothing to resume)")
+    try:
+        manifest = json.loads(manifest_path.read_text())
+        expected = manifest["sha256"]
+    except (json.JSONDecodeError, KeyError, TypeError):
+        raise UsageError(f"checkpoint manifest {str(manifest_path)!r} is corrupted") from None
+    if _sha256(model_path) != expected or not zipfile.is_zipfile(model_path):
+        raise UsageError(f"checkpoint {str(model_path)!r} is truncated or corrupted (checksum mismatch)")
+    if manifest.get("config_identity") != config.identity():
+        raise UsageError(f"checkpoint in {str(run_dir)!r} was made with a different config")
+    return manifest
+
+
+def load_agent(run_dir: Path, config: RunConfig, env=None):
+    """The run's final model, else its latest verified checkpoint."""
+    spec = get_algo(config.algo)
+    final = run_dir / "model.zip"
+    path = final if final.is_file() else None
+    if path is None:
+        verify_checkpoint(run_dir, config)
+        path = run_dir / "checkpoints" / "latest.zip"
+    try:
+        return spec.load(config.algo, path, env)
+    except Exception as exc:  # a broken zip or a model of another algorithm
+        raise UsageError(f"cannot load model {str(path)!r}: {type(exc).__name__}: {exc}") from None
+
+
+# --- callbacks -------------------------------------------------------------------------------
+class RunCallback(BaseCallback):
+    """Progress bar, periodic evaluation (CSV + logger + optional video) and checkpoints."""
+
+    def __init__(self, run_dir: Path, config: RunConfig, eval_env) -> None:
+        super().__init__()
+        self.run_dir, self.config, self.eval_env = run_dir, config, eval_env
+        self.save_replay = get_algo(config.algo).sb3_replay
+        self.bar: tqdm | None = None
+
+    def _on_training_start(self) -> None:
+        self.next_eval = _next_multiple(self.num_timesteps, self.config.resolved_eval_every)
+        self.next_checkpoint = _next_multiple(self.num_timesteps, self.config.resolved_checkpoint_every)
+        self.bar = tqdm(
+            total=self.config.steps,
+            initial=self.num_timesteps,
+            desc=f"{self.config.algo} on {self.config.env}",
+            unit="step",
+            mininterval=2.0,
+            dynamic_ncols=True,
+        )
+
+    def _on_step(self) -> bool:
+        self.bar.update(self.model.num_timesteps - self.bar.n)
+        if self.num_timesteps >= self.next_eval:
+            self.evaluate()
+            self.next_eval += self.config.resolved_eval_every
+        if self.num_timesteps >= self.next_checkpoint:
+            save_checkpoint(self.model, self.run_dir, self.config, self.save_replay)
+            self.next_checkpoint += self.config.resolved_checkpoint_every
+        return True
+
+    def _on_training_end(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+    def evaluate(self) -> dict:
+        policy = lambda obs: self.model.predict(obs, deterministic=True)[0]  # noqa: E731
+        results, frames = run_episodes(
+            policy,
+            self.eval_env,
+            self.config.eval_episodes,
+            self.config.seed + EVAL_SEED_OFFSET,
+            record_first=self.config.eval_video,
+        )
+        summary = aggregate(results)
+        row = {"step": self.num_timesteps, **summary}
+        path = self.run_dir / "evaluations.csv"
+        new = not path.exists()
+        with path.open("a", newline="") as handle:
+            writer = csv.DictWriter(handle, fieldnames=list(row))
+            if new:
+                writer.writeheader()
+            writer.writerow(row)
+        for key in ("mean_return", "success_rate", "crash_rate"):
+            self.logger.record(f"eval/{key}", summary[key])
+        if frames:
+            write_video(
+                frames,
+                self.run_dir / "videos" / f"eval-{self.num_timesteps}",
+                self.eval_env.metadata["render_fps"],
+            )
+        return summary
+
+
+def _next_multiple(value: int, every: int) -> int:
+    return (value // every + 1) * every
+
+
+# --- the run ---------------------------------------------------------------------------------
+def new_run_dir(config: RunConfig, runs_root: Path) -> Path:
+    name = config.name or f"{config.algo}-{config.env}-s{config.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
+    run_dir = runs_root / name
+    if run_dir.exists():
+        raise UsageError(
+            f"run directory {str(run_dir)!r} already exists (choose another --name, or --resume it)"
+        )
+    return run_dir
+
+
+def _make_envs(config: RunConfig, run_dir: Path, resume: bool):
+    from drivelab.envs.core import DriveEnv
+
+    train_env = Monitor(
+        DriveEnv(**config.env_kwargs()), filename=str(run_dir / "monitor.csv"), override_existing=not resume
+    )
+    train_env.reset(seed=config.seed)
+    return train_env, DriveEnv(**config.env_kwargs())
+
+
+def train(config: RunConfig, runs_root: str | Path = "runs") -> Path:
+    """Train a new run; every input is validated before anything is written."""
+    from drivelab.envs.core import DriveEnv
+
+    spec = check_combination(config.algo, config.action)
+    DriveEnv(**config.env_kwargs()).close()  # validates scenario, sensors, reward, action
+    run_dir = new_run_dir(config, Path(runs_root))
+    run_dir.mkdir(parents=True)
+    try:
+        save_yaml(config, run_dir / "config.yaml")
+        train_env, eval_env = _make_envs(config, run_dir, resume=False)
+        model = spec.build(config.algo, train_env, config.seed, dict(config.hyperparams), run_dir)
+    except Exception as exc:
+        shutil.rmtree(run_dir, ignore_errors=True)  # bad hyperparameters: leave nothing behind
+        if isinstance(exc, (TypeError, ValueError)):
+            raise UsageError(f"bad hyperparameters for {config.algo!r}: {exc}") from None
+        raise
+    _learn(model, run_dir, config, eval_env)
+    return run_dir
+
+
+def resume(run_dir: str | Path, steps: int | None = None) -> Path:
+    """Continue a run from its latest checkpoint up to ``steps`` (default: its configured total)."""
+    run_dir = Path(run_dir)
+    config = load_run_config(run_dir)
+    manifest = verify_checkpoint(run_dir, config)
+    if steps is not None:
+        config = build_config({**config.to_dict(), "steps": steps})
+    if manifest["steps"] >= config.steps:
+        raise UsageError(
+            f"run already has {manifest['steps']} steps (>= {config.steps}); pass a larger --steps"
+        )
+    spec = get_algo(config.algo)
+    save_yaml(config, run_dir / "config.yaml")
+    train_env, eval_env = _make_envs(config, run_dir, resume=True)
+    model = spec.load(config.algo, run_dir / "checkpoints" / "latest.zip", train_env)
+    if manifest.get("replay_buffer"):
+        model.load_replay_buffer(run_dir / "checkpoints" / "replay.pkl")
+    progress = run_dir / "progress.csv"
+    if progress.exists():
+        os.replace(progress, run_dir / f"progress-{manifest['steps']}.csv")
+    _learn(model, run_dir, config, eval_env)
+    return run_dir
+
+
+def _learn(model, run_dir: Path, config: RunConfig, eval_env) -> None:
+    model.set_logger(configure(str(run_dir), ["csv", "tensorboard"]))
+    callback = RunCallback(run_dir, config, eval_env)
+    try:
+        model.learn(
+            total_timesteps=config.steps - model.num_timesteps,
+            callback=callback,
+            reset_num_timesteps=False,
+        )
+    except KeyboardInterrupt:
+        callback._on_training_end()
+        save_checkpoint(model, run_dir, config, callback.save_replay)
+        raise
+    save_checkpoint(model, run_dir, config, callback.save_replay)
+    model.save(run_dir / "model.tmp.zip")
+    os.replace(run_dir / "model.tmp.zip", run_dir / "model.zip")
+    from drivelab.training.plots import plot_learning_curve
+
+    plot_learning_curve(run_dir)

@@ -1,0 +1,31 @@
+"""Every scenario × sensor passes gymnasium's and stable-baselines3's environment checkers."""
+
+import warnings
+
+import pytest
+from gymnasium.utils.env_checker import check_env as gym_check_env
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+from drivelab.envs.core import DriveEnv
+from drivelab.envs.scenarios import SCENARIOS
+from drivelab.perception.sensors import SENSORS
+
+
+@pytest.mark.parametrize("sensor", sorted(SENSORS))
+@pytest.mark.parametrize("scenario", sorted(SCENARIOS))
+def test_scenario_sensor_passes_checkers(scenario, sensor):
+    action = SCENARIOS[scenario].action_kinds[0]
+    env = DriveEnv(scenario, obs=sensor, action=action, traffic="regular", duration_s=4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        gym_check_env(env, skip_render_check=True)
+        sb3_check_env(env, warn=False)
+
+
+def test_dict_observation_passes_checkers():
+    env = DriveEnv("highway", obs="lidar,topdown,kinematics", action="continuous", duration_s=3)
+    assert set(env.observation_space.spaces) == {"lidar", "topdown", "kinematics"}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        gym_check_env(env, skip_render_check=True)
+        sb3_check_env(env, warn=False)

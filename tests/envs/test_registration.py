@@ -1,0 +1,43 @@
+import gymnasium
+import numpy as np
+import pytest
+
+import drivelab
+from drivelab.errors import UsageError
+
+
+def test_make_and_gymnasium_make_give_the_same_env():
+    kwargs = dict(obs=["lidar", "topdown"], reward="metadrive_course", traffic="regular", duration_s=5)
+    ours = drivelab.make("highway", seed=0, **kwargs)
+    theirs = gymnasium.make("drivelab/Highway-v0", seed=0, **kwargs)
+    obs_a, _ = ours.reset(seed=0)
+    obs_b, _ = theirs.reset(seed=0)
+    for key in ("lidar", "topdown"):
+        np.testing.assert_array_equal(obs_a[key], obs_b[key])
+    for _ in range(3):
+        step_a, step_b = ours.step(1), theirs.step(1)
+        np.testing.assert_array_equal(step_a[0]["lidar"], step_b[0]["lidar"])
+        assert step_a[1] == step_b[1]
+
+
+@pytest.mark.parametrize("scenario", ["Highway", "Merge", "Roundabout", "Intersection", "Racetrack"])
+def test_every_scenario_is_registered(scenario):
+    assert f"drivelab/{scenario}-v0" in gymnasium.registry
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"scenario": "moon"}, "unknown scenario 'moon'"),
+        ({"obs": "sonar"}, "unknown sensor 'sonar'"),
+        ({"reward": "nice"}, "unknown reward preset 'nice'"),
+        ({"action": "teleport"}, "unknown action kind 'teleport'"),
+        ({"traffic": "jammed"}, "unknown traffic level 'jammed'"),
+        ({"scenario": "racetrack", "action": "meta"}, "cannot take action 'meta'"),
+        ({"obs": "lidar:beams"}, "must look like key=value"),
+        ({"obs": "lidar:colour=3"}, "bad option for sensor 'lidar'"),
+    ],
+)
+def test_bad_arguments_name_the_problem(kwargs, message):
+    with pytest.raises(UsageError, match=message):
+        drivelab.make(**{"scenario": "highway", **kwargs})

@@ -1,0 +1,90 @@
+"""The CLI: bad input gives a one-line error, exit code 2, and writes nothing."""
+
+import subprocess
+import sys
+
+import pytest
+from typer.testing import CliRunner
+
+from drivelab.cli import app
+
+runner = CliRunner()
+
+
+def _run(args, tmp_path):
+    return runner.invoke(app, args, catch_exceptions=False)
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--algo", "magic"], "unknown algorithm 'magic'"),
+        (["--algo", "ppo", "--env", "moon"], "unknown scenario 'moon'"),
+        (["--algo", "ppo", "--obs", "sonar"], "unknown sensor 'sonar'"),
+        (["--algo", "ppo", "--reward", "nice"], "unknown reward preset 'nice'"),
+        (["--algo", "dqn", "--action", "continuous"], "algorithm 'dqn' cannot take 'continuous' actions"),
+        (["--algo", "sac", "--action", "meta"], "algorithm 'sac' cannot take 'meta' actions"),
+        (["--algo", "ppo", "-H", "learning_rate"], "must look like key=value"),
+    ],
+)
+def test_train_bad_input(tmp_path, args, message):
+    runs = tmp_path / "runs"
+    result = runner.invoke(app, ["train", *args, "--runs-dir", str(runs), "--steps", "10"])
+    assert result.exit_code == 2
+    assert message in result.output
+    assert len(result.output.strip().splitlines()) == 1
+    assert not runs.exists()
+
+
+def test_train_malformed_yaml(tmp_path):
+    config = tmp_path / "run.yaml"
+    config.write_text("algo: ppo\nobs: [lidar\n")
+    runs = tmp_path / "runs"
+    result = runner.invoke(app, ["train", "--config", str(config), "--runs-dir", str(runs)])
+    assert result.exit_code == 2
+    assert "malformed YAML" in result.output
+    assert not runs.exists()
+
+
+def test_bad_hyperparameter_leaves_nothing(tmp_path):
+    runs = tmp_path / "runs"
+    result = runner.invoke(
+        app, ["train", "--algo", "ppo", "-H", "bogus_option=1", "--runs-dir", str(runs), "--steps", "10"]
+    )
+    assert result.exit_code == 2
+    assert "bogus_option" in result.output
+    assert not any(runs.glob("*")) if runs.exists() else True
+
+
+@pytest.mark.parametrize("command", [["evaluate", "nowhere"], ["train", "--resume", "nowhere"]])
+def test_missing_run_directory(tmp_path, command):
+    result = runner.invoke(app, [*command[:-1], str(tmp_path / command[-1])])
+    assert result.exit_code == 2
+    assert "does not exist" in result.output
+
+
+def test_envs_lists_one_line_each():
+    result = runner.invoke(app, ["envs"])
+    assert result.exit_code == 0
+    lines = result.output.strip().splitlines()
+    kinds = {line.split()[0] for line in lines}
+    assert kinds == {"scenario", "sensor", "action", "reward", "algo"}
+    names = {line.split()[1] for line in lines}
+    assert {
+        "highway",
+        "racetrack",
+        "lidar",
+        "topdown",
+        "grid",
+        "metadrive_course",
+        "safety_dqn",
+        "sac",
+    } <= names
+
+
+def test_console_script_exit_code():
+    result = subprocess.run(
+        [sys.executable, "-m", "drivelab.cli", "train", "--algo", "nope"], capture_output=True, text=True
+    )
+    assert result.returncode == 2
+    assert result.stderr.strip() == "error: unknown algorithm 'nope' (choose from dqn, ppo, a2c, sac)"

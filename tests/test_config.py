@@ -1,0 +1,52 @@
+import pytest
+
+from drivelab.config import RunConfig, build_config, load_yaml
+from drivelab.errors import UsageError
+
+
+def test_build_config_coerces_obs_list():
+    config = build_config({"algo": "ppo", "obs": "lidar, topdown", "steps": 100})
+    assert config.obs == ("lidar", "topdown")
+    assert config.resolved_eval_every == 20 and config.resolved_checkpoint_every == 10
+
+
+def test_sensor_dicts_in_yaml_become_specs():
+    config = build_config({"algo": "ppo", "obs": [{"name": "lidar", "beams": 120}, "topdown"]})
+    assert config.obs == ("lidar:beams=120", "topdown")
+
+
+@pytest.mark.parametrize(
+    "values, message",
+    [
+        ({"algo": "ppo", "stepz": 3}, "unknown config field 'stepz'"),
+        ({"algo": "ppo", "steps": "many"}, "'steps' must be int"),
+        ({"algo": "ppo", "steps": 0}, "'steps' must be >= 1"),
+        ({"algo": "ppo", "seed": True}, "'seed' must be int"),
+        ({"algo": "ppo", "hyperparams": [1]}, "'hyperparams' must be dict"),
+        ({"env": "highway"}, "no 'algo'"),
+    ],
+)
+def test_bad_config_values_name_the_field(values, message):
+    with pytest.raises(UsageError, match=message):
+        build_config(values)
+
+
+def test_malformed_yaml_is_one_line(tmp_path):
+    path = tmp_path / "bad.yaml"
+    path.write_text("algo: ppo\nsteps: [1, 2\n")
+    with pytest.raises(UsageError, match=r"malformed YAML .* at line \d+") as info:
+        load_yaml(path)
+    assert "\n" not in str(info.value)
+
+
+def test_yaml_must_be_a_mapping(tmp_path):
+    path = tmp_path / "list.yaml"
+    path.write_text("- ppo\n")
+    with pytest.raises(UsageError, match="mapping"):
+        load_yaml(path)
+
+
+def test_identity_ignores_steps_and_name():
+    a = RunConfig(algo="ppo", steps=10, name="a")
+    assert a.identity() == RunConfig(algo="ppo", steps=99, name="b").identity()
+    assert a.identity() != RunConfig(algo="ppo", seed=1).identity()

@@ -1,0 +1,126 @@
+"""Run directories: train, evaluate, checkpoints, Ctrl-C and resume (tiny step counts)."""
+
+import json
+
+import pytest
+
+from drivelab.config import build_config
+from drivelab.errors import UsageError
+from drivelab.training import run as run_module
+from drivelab.training.evaluate import evaluate_run
+
+FAST_ENV = {"duration_s": 8}
+
+
+def _config(**overrides):
+    values = {
+        "algo": "ppo",
+        "env": "highway",
+        "obs": "kinematics",
+        "traffic": "empty",
+        "steps": 64,
+        "seed": 1,
+        "name": "tiny",
+        "eval_every": 32,
+        "eval_episodes": 1,
+        "hyperparams": {"n_steps": 32, "batch_size": 16, "n_epochs": 1},
+        "env_options": FAST_ENV,
+    }
+    values.update(overrides)
+    return build_config(values)
+
+
+def test_train_writes_a_complete_run_directory(tmp_path):
+    run_dir = run_module.train(_config(), tmp_path)
+    for name in (
+        "config.yaml",
+        "progress.csv",
+        "monitor.csv",
+        "evaluations.csv",
+        "model.zip",
+        "learning_curve.png",
+        "checkpoints/latest.zip",
+        "checkpoints/latest.json",
+    ):
+        assert (run_dir / name).is_file(), name
+    assert any(run_dir.glob("events.out.tfevents.*"))
+    manifest = json.loads((run_dir / "checkpoints/latest.json").read_text())
+    assert manifest["steps"] == 64
+    evaluations = (run_dir / "evaluations.csv").read_text().strip().splitlines()
+    assert len(evaluations) == 3  # header + evaluations at 32 and 64 steps
+
+    report = evaluate_run(run_dir, episodes=2, video=True)
+    assert report["episodes"] == 2
+    assert 0.0 <= report["success_rate"] <= 1.0 and 0.0 <= report["crash_rate"] <= 1.0
+    saved = json.loads((run_dir / "eval.json").read_text())
+    assert {
+        "mean_return",
+        "std_return",
+        "collisions_per_km",
+        "off_road_per_km",
+        "mean_speed_mps",
+    } <= saved.keys()
+    assert len(saved["per_episode"]) == 2
+    assert (run_dir / "videos").is_dir() and any((run_dir / "videos").iterdir())
+
+
+def test_existing_run_name_is_refused(tmp_path):
+    (tmp_path / "tiny").mkdir()
+    with pytest.raises(UsageError, match="already exists"):
+        run_module.train(_config(), tmp_path)
+
+
+def test_interrupt_saves_checkpoint_and_resume_continues(tmp_path, monkeypatch):
+    original = run_module.RunCallback._on_step
+
+    def interrupt_after_48(self):
+        original(self)
+        if self.num_timesteps >= 48:
+            raise KeyboardInterrupt
+        return True
+
+    monkeypatch.setattr(run_module.RunCallback, "_on_step", interrupt_after_48)
+    with pytest.raises(KeyboardInterrupt):
+        run_module.train(
+            _config(
+                steps=96, algo="dqn", action="meta", hyperparams={"learning_starts": 8, "buffer_size": 500}
+            ),
+            tmp_path,
+        )
+    run_dir = tmp_path / "tiny"
+    manifest = json.loads((run_dir / "checkpoints/latest.json").read_text())
+    assert manifest["steps"] == 48 and manifest["replay_buffer"] is True
+    assert not (run_dir / "model.zip").exists()
+
+    monkeypatch.setattr(run_module.RunCallback, "_on_step", original)
+    run_module.resume(run_dir)
+    manifest = json.loads((run_dir / "checkpoints/latest.json").read_text())
+    assert manifest["steps"] == 96
+    assert (run_dir / "model.zip").is_file()
+
+    with pytest.raises(UsageError, match="already has 96 steps"):
+        run_module.resume(run_dir)
+    run_module.resume(run_dir, steps=112)
+    assert json.loads((run_dir / "checkpoints/latest.json").read_text())["steps"] == 112
+
+
+def test_corrupted_or_foreign_checkpoint_is_refused(tmp_path):
+    run_dir = run_module.train(_config(steps=32, eval_every=64), tmp_path)
+    checkpoint = run_dir / "checkpoints/latest.zip"
+    data = checkpoint.read_bytes()
+    checkpoint.write_bytes(data[: len(data) // 2])
+    with pytest.raises(UsageError, match="truncated or corrupted"):
+        run_module.resume(run_dir, steps=64)
+    checkpoint.write_bytes(data)
+
+    (run_dir / "checkpoints/latest.json").write_text("{not json")
+    with pytest.raises(UsageError, match="manifest .* is corrupted"):
+        run_module.resume(run_dir, steps=64)
+
+    config_text = (run_dir / "config.yaml").read_text()
+    (run_dir / "checkpoints/latest.json").write_text(
+        json.dumps({"sha256": run_module._sha256(checkpoint), "config_identity": "other", "steps": 32})
+    )
+    with pytest.raises(UsageError, match="different config"):
+        run_module.resume(run_dir, steps=64)
+    assert (run_dir / "config.yaml").read_text() == config_text  # nothing rewritten on refusal
