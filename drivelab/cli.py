@@ -79,6 +79,7 @@ def train(
 ) -> None:
     """Train an agent and write a run directory."""
     from drivelab.config import build_config, load_yaml
+    from drivelab.training.run import TrainingInterrupted
     from drivelab.training.run import resume as resume_run
     from drivelab.training.run import train as train_run
 
@@ -109,9 +110,11 @@ def train(
             run_dir = train_run(build_config(values), runs_dir)
     except UsageError as exc:
         _fail(str(exc))
-    except KeyboardInterrupt:
+    except TrainingInterrupted as stop:
         typer.echo(
-            "\ninterrupted: checkpoint saved; continue with `drivelab train --resume RUN_DIR`", err=True
+            f"\ninterrupted at step {stop.steps}: checkpoint saved; "
+            f"continue with `drivelab train --resume {stop.run_dir}`",
+            err=True,
         )
         raise typer.Exit(130) from None
     typer.echo(f"run directory: {run_dir}")

@@ -88,3 +88,26 @@ def test_console_script_exit_code():
     )
     assert result.returncode == 2
     assert result.stderr.strip() == "error: unknown algorithm 'nope' (choose from dqn, ppo, a2c, sac)"
+
+
+def test_ctrl_c_saves_a_checkpoint_and_says_how_to_resume(tmp_path):
+    import json
+    import signal
+    import time
+
+    run_dir = tmp_path / "runs" / "interrupted"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "drivelab.cli", "train", "--algo", "ppo", "--traffic", "empty",
+         "--steps", "1000000", "--checkpoint-every", "1000000", "--eval-every", "1000000",
+         "--runs-dir", str(tmp_path / "runs"), "--name", "interrupted"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    deadline = time.monotonic() + 60
+    while not (run_dir / "progress.csv").exists() and time.monotonic() < deadline:
+        time.sleep(0.2)  # the logger has started: training is under way
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=60)
+    assert process.returncode == 130
+    manifest = json.loads((run_dir / "checkpoints" / "latest.json").read_text())
+    assert 0 < manifest["steps"] < 1_000_000
+    assert f"drivelab train --resume {run_dir}" in stderr.strip().splitlines()[-1]

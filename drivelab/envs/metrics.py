@@ -36,8 +36,9 @@ class EpisodeMetrics:
         self.arrived |= world.events.arrived
         self.last = world
 
-    def summary(self, has_goal: bool, timed_out: bool) -> dict[str, float]:
-        """Final numbers. Success: the goal reached, or (no goal) the time limit reached cleanly."""
+    def summary(self, has_goal: bool, timed_out: bool) -> dict[str, float | None]:
+        """Final numbers. Success: the goal reached, or (no goal) the time limit reached cleanly.
+        Route completion is None for scenarios without a goal."""
         crashed = self.collisions > 0
         clean = not crashed and self.off_road_events == 0
         success = self.arrived if has_goal else (timed_out and clean)
@@ -56,5 +57,5 @@ class EpisodeMetrics:
             "crashed": float(crashed),
             "collisions": self.collisions,
             "off_road_events": self.off_road_events,
-            "route_completion": float(np.clip(completion, 0.0, 1.0)) if has_goal else float("nan"),
+            "route_completion": float(np.clip(completion, 0.0, 1.0)) if has_goal else None,
         }

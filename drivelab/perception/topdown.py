@@ -13,6 +13,7 @@ from drivelab.perception.base import Sensor, box_corners, ego_frame
 
 SHIFT = 4  # OpenCV sub-pixel bits: coordinates are drawn to 1/16 pixel
 SCALE = 1 << SHIFT
+PAST_DOT_M = 1.0  # side of the square marking a past ego position
 CHANNELS = ("road", "route", "past_ego", "traffic", "traffic_previous")
 
 
@@ -76,7 +77,7 @@ class TopDown(Sensor):
     """Five uint8 channels (0 or 255), channels first, ``(5, size, size)``.
 
     0 road layout (lanes filled), 1 planned route (a 2 m wide band along the route polyline),
-    2 past ego positions (dots at the last ``history`` positions, not the current one),
+    2 past ego positions (1 m squares at the last ``history`` positions, not the current one),
     3 other vehicles now, 4 other vehicles one step earlier (the same as now on an episode's
     first frame). The view is ego-centred and heading-aligned (see ``to_pixels``).
 
@@ -113,9 +114,11 @@ class TopDown(Sensor):
             width_px = max(int(round(2.0 * self.ppm)), 1)
             cv2.polylines(image[1], [project(world.route.polyline)], False, 255, width_px, cv2.LINE_8, SHIFT)
         if self.history:
-            radius = max(int(round(0.5 * self.ppm * SCALE)), SCALE)
-            for point in project(np.array(self.past_positions).reshape(-1, 2)):
-                cv2.circle(image[2], tuple(int(v) for v in point), radius, 255, -1, cv2.LINE_8, SHIFT)
+            # each past position as a 1 m square, drawn like a vehicle (x, y, heading, _, length, width)
+            past = np.zeros((len(self.past_positions), 6))
+            past[:, :2] = np.array(self.past_positions).reshape(-1, 2)
+            past[:, 2], past[:, 4:] = world.ego.heading, PAST_DOT_M
+            cv2.fillPoly(image[2], project.vehicles(past), 255, cv2.LINE_8, SHIFT)
             self.past_positions.append(np.array(world.ego.position, dtype=float))
         cv2.fillPoly(image[3], project.vehicles(world.vehicles), 255, cv2.LINE_8, SHIFT)
         previous = world.vehicles if self.previous_vehicles is None else self.previous_vehicles

@@ -45,8 +45,8 @@ def aggregate(results: list[dict]) -> dict[str, float]:
     over summed distance)."""
     returns = np.array([r["return"] for r in results], dtype=float)
     km = sum(r["distance_km"] for r in results)
-    per_km = lambda key: sum(r[key] for r in results) / km if km > 0 else float("nan")  # noqa: E731
-    completion = [r["route_completion"] for r in results if not math.isnan(r["route_completion"])]
+    per_km = lambda key: sum(r[key] for r in results) / km if km > 0 else None  # noqa: E731
+    completion = [r["route_completion"] for r in results if r["route_completion"] is not None]
     return {
         "episodes": len(results),
         "mean_return": float(returns.mean()),
@@ -58,7 +58,7 @@ def aggregate(results: list[dict]) -> dict[str, float]:
         "mean_length": float(np.mean([r["length"] for r in results])),
         "collisions_per_km": per_km("collisions"),
         "off_road_per_km": per_km("off_road_events"),
-        "route_completion": float(np.mean(completion)) if completion else float("nan"),
+        "route_completion": float(np.mean(completion)) if completion else None,
     }
 
 
@@ -129,6 +129,11 @@ def metrics_rows(report: dict) -> list[tuple[str, str]]:
     rows = []
     for key, label in METRIC_LABELS.items():
         value = report[key]
-        text = f"{value:.3f} ± {report['std_return']:.3f}" if key == "mean_return" else f"{value:.3f}"
+        if value is None or (isinstance(value, float) and math.isnan(value)):
+            text = "n/a"
+        elif key == "mean_return":
+            text = f"{value:.3f} ± {report['std_return']:.3f}"
+        else:
+            text = f"{value:.3f}"
         rows.append((label, text))
     return rows

@@ -42,6 +42,14 @@ from drivelab.training.evaluate import (
 REPLAY_LIMIT_BYTES = 512 * 2**20  # larger replay buffers are not checkpointed (resume refills)
 
 
+class TrainingInterrupted(KeyboardInterrupt):
+    """Ctrl-C during training, after the checkpoint was saved."""
+
+    def __init__(self, run_dir: Path, steps: int) -> None:
+        super().__init__(f"interrupted at step {steps}")
+        self.run_dir, self.steps = run_dir, steps
+
+
 # --- checkpoints -----------------------------------------------------------------------------
 def _sha256(path: Path) -> str:
     digest = hashlib.sha256()
@@ -255,7 +263,7 @@ def _learn(model, run_dir: Path, config: RunConfig, eval_env) -> None:
     except KeyboardInterrupt:
         callback._on_training_end()
         save_checkpoint(model, run_dir, config, callback.save_replay)
-        raise
+        raise TrainingInterrupted(run_dir, model.num_timesteps) from None
     save_checkpoint(model, run_dir, config, callback.save_replay)
     model.save(run_dir / "model.tmp.zip")
     os.replace(run_dir / "model.tmp.zip", run_dir / "model.zip")

@@ -80,7 +80,7 @@ def test_interrupt_saves_checkpoint_and_resume_continues(tmp_path, monkeypatch):
         return True
 
     monkeypatch.setattr(run_module.RunCallback, "_on_step", interrupt_after_48)
-    with pytest.raises(KeyboardInterrupt):
+    with pytest.raises(run_module.TrainingInterrupted, match="interrupted at step 48"):
         run_module.train(
             _config(
                 steps=96, algo="dqn", action="meta", hyperparams={"learning_starts": 8, "buffer_size": 500}
