@@ -103,11 +103,14 @@ def test_ctrl_c_saves_a_checkpoint_and_says_how_to_resume(tmp_path):
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )  # fmt: skip
     deadline = time.monotonic() + 60
-    while not (run_dir / "progress.csv").exists() and time.monotonic() < deadline:
-        time.sleep(0.2)  # the logger has started: training is under way
+    monitor = run_dir / "monitor.csv"  # two header lines, then one line per finished episode
+    while time.monotonic() < deadline and not (
+        monitor.exists() and len(monitor.read_text().splitlines()) > 2
+    ):
+        time.sleep(0.2)
     process.send_signal(signal.SIGINT)
     _, stderr = process.communicate(timeout=60)
     assert process.returncode == 130
     manifest = json.loads((run_dir / "checkpoints" / "latest.json").read_text())
-    assert 0 < manifest["steps"] < 1_000_000
+    assert 30 <= manifest["steps"] < 1_000_000  # at least the finished 30-step episode
     assert f"drivelab train --resume {run_dir}" in stderr.strip().splitlines()[-1]
