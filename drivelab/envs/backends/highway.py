@@ -130,7 +130,8 @@ class HighwayBackend:
         self.road_map = build_road_map(road.network)
         self.route_lanes = self._plan_route()
         self.route_polyline, self.route_stations = self._route_polyline(self.route_lanes)
-        self.route_closed = bool(np.linalg.norm(self.route_polyline[-1] - self.route_polyline[0]) < 1.0)
+        # a circuit (racetrack): progress keeps counting over laps
+        self.route_closed = bool(np.linalg.norm(self.route_polyline[-1] - self.route_polyline[0]) < 5.0)
         self.progress_m = self._project_on_route(self.env.vehicle.position, None)
         self.world = self._export(Events())
         return self.world
@@ -211,17 +212,25 @@ class HighwayBackend:
         return polyline, stations
 
     def _project_on_route(self, position: np.ndarray, previous_m: float | None) -> float:
-        """Arc length of the route point nearest ``position``, searched near the last value."""
+        """Arc length along the route of the point nearest ``position``.
+
+        After the first step the search stays within 60 m of the previous value (a circuit passes
+        near itself), and on a closed route the result is unwrapped so that it grows lap after lap.
+        """
         starts, ends = self.route_polyline[:-1], self.route_polyline[1:]
         seg = ends - starts
         seg_len2 = np.maximum((seg**2).sum(axis=1), 1e-12)
         t = np.clip(((position - starts) * seg).sum(axis=1) / seg_len2, 0.0, 1.0)
         distance = np.linalg.norm(starts + t[:, None] * seg - position, axis=1)
         station = self.route_stations[:-1] + t * np.sqrt(seg_len2)
-        if previous_m is not None:  # a closed circuit passes near itself: stay local
-            distance = distance + 1e3 * (np.abs(station - previous_m) > 60.0)
-        best = int(np.argmin(distance))
-        return float(station[best])
+        if previous_m is None:
+            return float(station[int(np.argmin(distance))])
+        gap = station - previous_m
+        if self.route_closed:
+            lap_m = self.route_stations[-1]
+            gap = (gap + lap_m / 2) % lap_m - lap_m / 2
+        distance = distance + 1e3 * (np.abs(gap) > 60.0)
+        return float(previous_m + gap[int(np.argmin(distance))])
 
     def _arrived(self) -> bool:
         ego = self.env.vehicle
