@@ -67,6 +67,9 @@ def train(
     steps: int | None = typer.Option(None, help="total environment steps"),
     seed: int | None = typer.Option(None),
     traffic: str | None = typer.Option(None, help="empty, regular or dense"),
+    backend: str | None = typer.Option(
+        None, help="highway (highway-env) or fast (compiled; highway scenario)"
+    ),
     config: Path | None = typer.Option(None, help="YAML file of run fields (CLI options win)"),
     name: str | None = typer.Option(None, help="run directory name"),
     runs_dir: Path = typer.Option(Path("runs"), help="where run directories are created"),
@@ -86,7 +89,9 @@ def train(
     try:
         if resume is not None:
             given = [
-                o for o in (algo, env, obs, action, reward, seed, traffic, config, name) if o is not None
+                o
+                for o in (algo, env, obs, action, reward, seed, traffic, backend, config, name)
+                if o is not None
             ]
             if given or hyperparams:
                 raise UsageError("--resume takes the run's own config; only --steps may be given with it")
@@ -95,7 +100,7 @@ def train(
             values = load_yaml(config) if config is not None else {}
             cli = {
                 "algo": algo, "env": env, "obs": obs, "action": action, "reward": reward,
-                "steps": steps, "seed": seed, "traffic": traffic, "name": name,
+                "steps": steps, "seed": seed, "traffic": traffic, "backend": backend, "name": name,
                 "eval_every": eval_every, "eval_episodes": eval_episodes,
                 "checkpoint_every": checkpoint_every,
             }  # fmt: skip

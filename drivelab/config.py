@@ -23,6 +23,7 @@ class RunConfig:
     :param action: action kind ("meta", "grid", "continuous").
     :param reward: reward preset or ``term=weight`` list.
     :param traffic: "empty", "regular" or "dense".
+    :param backend: "highway" (highway-env, the reference) or "fast" (compiled, highway scenario so far).
     :param steps: total environment steps to train for.
     :param seed: seeds the agent, the environments and evaluation.
     :param eval_every: environment steps between periodic evaluations (0: five over the run).
@@ -39,6 +40,7 @@ class RunConfig:
     action: str = "meta"
     reward: str = "highway"
     traffic: str = "regular"
+    backend: str = "highway"
     steps: int = 10_000
     seed: int = 0
     name: str | None = None
@@ -57,6 +59,7 @@ class RunConfig:
             "action": self.action,
             "reward": self.reward,
             "traffic": self.traffic,
+            "backend": self.backend,
             **self.env_options,
         }
 

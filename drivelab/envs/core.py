@@ -17,7 +17,7 @@ from drivelab.perception.birdeye import render_birdeye
 from drivelab.perception.sensors import make_sensor, split_sensor_list
 from drivelab.rewards.shapers import RewardShaper
 
-BACKENDS = ("highway",)
+BACKENDS = ("highway", "fast")
 
 
 class DriveEnv(gym.Env):
@@ -29,7 +29,8 @@ class DriveEnv(gym.Env):
     :param action: "meta", "grid" or "continuous" (or an ActionAdapter).
     :param reward: a preset, ``"term=w,…"``, ``"preset,term=w"`` or a dict of weights.
     :param traffic: "empty", "regular" or "dense".
-    :param backend: simulation backend ("highway": highway-env itself).
+    :param backend: "highway" (highway-env itself, the reference) or "fast" (drivelab's compiled
+        traffic model on highway-env's roads; highway scenario only so far).
     :param duration_s: episode time limit; default the scenario's.
     :param offroad_terminal: end the episode when the ego leaves the road.
     :param action_options: keyword options of the action adapter (e.g. ``steer_levels``).
@@ -71,9 +72,12 @@ class DriveEnv(gym.Env):
         self.reward_shaper = RewardShaper(reward)
         if backend not in BACKENDS:
             raise UsageError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")
-        from drivelab.envs.backends.highway import HighwayBackend
+        if backend == "fast":
+            from drivelab.envs.backends.fast.backend import FastBackend as backend_class
+        else:
+            from drivelab.envs.backends.highway import HighwayBackend as backend_class
 
-        self.backend = HighwayBackend(self.scenario, traffic, self.adapter.control, backend_options)
+        self.backend = backend_class(self.scenario, traffic, self.adapter.control, backend_options)
         self.duration_s = float(duration_s or self.backend.duration_s)
         self.offroad_terminal = offroad_terminal
         self.render_mode = render_mode

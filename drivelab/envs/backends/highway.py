@@ -11,8 +11,9 @@ import os
 
 import numpy as np
 
+from drivelab.envs.route import RouteTracker
 from drivelab.envs.scenarios import Scenario
-from drivelab.envs.world import Ego, Events, RoadMap, Route, WorldState
+from drivelab.envs.world import Ego, Events, RoadMap, WorldState
 
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 
@@ -73,6 +74,35 @@ def build_road_map(network) -> RoadMap:
     )
 
 
+class _NoObservation:
+    """Stands in for highway-env's observation type: drivelab's sensors read the WorldState."""
+
+    def __init__(self, space) -> None:
+        self._space = space
+
+    def space(self):
+        return self._space
+
+    def observe(self) -> None:
+        return None
+
+
+def _without_observation_and_info(env_class: type) -> type:
+    """A subclass of ``env_class`` that skips the work drivelab never reads: highway-env's
+    observation at reset (pandas-based, most of a reset's cost) and its ``_info``, which evaluates
+    its own reward with a sampled action (and fails for continuous actions on some scenarios)."""
+
+    def define_spaces(self) -> None:
+        env_class.define_spaces(self)
+        self.observation_type = _NoObservation(self.observation_space)
+
+    return type(
+        env_class.__name__,
+        (env_class,),
+        {"define_spaces": define_spaces, "_info": lambda self, obs, action=None: {}},
+    )
+
+
 class HighwayBackend:
     """highway-env as a drivelab backend.
 
@@ -106,10 +136,7 @@ class HighwayBackend:
             config["observation"] = {"type": "Kinematics"}
         config.update(overrides or {})
         env_class = hw_utils.class_from_path(scenario.env_class)
-        # highway-env's _info evaluates its own reward with a sampled action (which fails for
-        # continuous actions on some scenarios); drivelab never reads it, so skip it.
-        quiet = type(env_class.__name__, (env_class,), {"_info": lambda self, obs, action=None: {}})
-        self.env = quiet(config=config)
+        self.env = _without_observation_and_info(env_class)(config=config)
         self.world: WorldState | None = None
 
     # --- timing -------------------------------------------------------------------------------
@@ -128,11 +155,8 @@ class HighwayBackend:
         self._arrange_traffic()
         road = self.env.road
         self.road_map = build_road_map(road.network)
-        self.route_lanes = self._plan_route()
-        self.route_polyline, self.route_stations = self._route_polyline(self.route_lanes)
-        # a circuit (racetrack): progress keeps counting over laps
-        self.route_closed = bool(np.linalg.norm(self.route_polyline[-1] - self.route_polyline[0]) < 5.0)
-        self.progress_m = self._project_on_route(self.env.vehicle.position, None)
+        self.route = self.route_for(self._plan_route())
+        self.progress_m = self.route.project(self.env.vehicle.position)
         self.world = self._export(Events())
         return self.world
 
@@ -145,7 +169,7 @@ class HighwayBackend:
             env._clear_vehicles()
             env._spawn_vehicle(spawn_probability=env.config["spawn_probability"])
         ego = env.vehicle
-        self.progress_m = self._project_on_route(ego.position, self.progress_m)
+        self.progress_m = self.route.project(ego.position, self.progress_m)
         events = Events(
             collided=bool(ego.crashed),
             collision_with="vehicle" if ego.crashed else "",
@@ -180,10 +204,10 @@ class HighwayBackend:
             road.vehicles.append(vehicle)
 
     # --- route --------------------------------------------------------------------------------
-    def _plan_route(self) -> list[tuple]:
-        """Lane indices the ego is meant to follow, from its spawn lane."""
+    def _plan_route(self, start: tuple | None = None) -> list[tuple]:
+        """Lane indices the ego is meant to follow, from ``start`` (default: the ego's lane)."""
         network = self.env.road.network
-        start = self.env.vehicle.lane_index
+        start = start or self.env.vehicle.lane_index
         lane_id = start[2]
         if self.scenario.destination:
             path = network.shortest_path(start[1], self.scenario.destination)
@@ -202,35 +226,11 @@ class HighwayBackend:
             lanes.append((_from, _to, min(lane_id, count - 1)))
         return lanes
 
-    def _route_polyline(self, lanes: list[tuple]) -> tuple[np.ndarray, np.ndarray]:
+    def route_for(self, lanes: list[tuple]) -> RouteTracker:
+        """A RouteTracker along the centre lines of ``lanes``."""
         network = self.env.road.network
         points = [_lane_points(network.get_lane(i), _lane_stations(network.get_lane(i)), 0.0) for i in lanes]
-        polyline = np.concatenate(points)
-        keep = np.r_[True, np.linalg.norm(np.diff(polyline, axis=0), axis=1) > 1e-6]
-        polyline = polyline[keep]
-        stations = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(polyline, axis=0), axis=1))]
-        return polyline, stations
-
-    def _project_on_route(self, position: np.ndarray, previous_m: float | None) -> float:
-        """Arc length along the route of the point nearest ``position``.
-
-        After the first step the search stays within 60 m of the previous value (a circuit passes
-        near itself), and on a closed route the result is unwrapped so that it grows lap after lap.
-        """
-        starts, ends = self.route_polyline[:-1], self.route_polyline[1:]
-        seg = ends - starts
-        seg_len2 = np.maximum((seg**2).sum(axis=1), 1e-12)
-        t = np.clip(((position - starts) * seg).sum(axis=1) / seg_len2, 0.0, 1.0)
-        distance = np.linalg.norm(starts + t[:, None] * seg - position, axis=1)
-        station = self.route_stations[:-1] + t * np.sqrt(seg_len2)
-        if previous_m is None:
-            return float(station[int(np.argmin(distance))])
-        gap = station - previous_m
-        if self.route_closed:
-            lap_m = self.route_stations[-1]
-            gap = (gap + lap_m / 2) % lap_m - lap_m / 2
-        distance = distance + 1e3 * (np.abs(gap) > 60.0)
-        return float(previous_m + gap[int(np.argmin(distance))])
+        return RouteTracker(np.concatenate(points), has_goal=bool(self.scenario.destination))
 
     def _arrived(self) -> bool:
         ego = self.env.vehicle
@@ -254,9 +254,6 @@ class HighwayBackend:
         vehicles = np.array(
             [[*v.position, v.heading, v.speed, v.LENGTH, v.WIDTH] for v in others], dtype=float
         ).reshape(-1, 6)
-        route_length = float(self.route_stations[-1])
-        if not self.scenario.destination:
-            route_length = float("inf")
         ego_state = Ego(
             position=np.array(ego.position, dtype=float),
             heading=float(ego.heading),
@@ -282,7 +279,7 @@ class HighwayBackend:
             ego=ego_state,
             vehicles=vehicles,
             road=self.road_map,
-            route=Route(self.route_polyline, self.progress_m, route_length),
+            route=self.route.at(self.progress_m),
             events=events,
             max_speed_mps=float(ego.MAX_SPEED),
             speed_limit_mps=float(lane.speed_limit or 30.0),

@@ -30,13 +30,14 @@ def test_route_progress_follows_the_ego():
 def test_progress_counts_laps_on_the_racetrack():
     backend = HighwayBackend(SCENARIOS["racetrack"], "empty", "continuous")
     backend.reset(seed=0)
-    assert backend.route_closed
-    lap_m = backend.route_stations[-1]
-    points = backend.route_polyline
-    progress = backend._project_on_route(points[0], None)
+    route = backend.route
+    assert route.closed
+    lap_m = route.stations[-1]
+    points = route.polyline
+    progress = route.project(points[0])
     trace = []
     for point in np.concatenate([points[1:], points[1:], points[1:5]]):  # two laps and a bit
-        progress = backend._project_on_route(point, progress)
+        progress = route.project(point, progress)
         trace.append(progress)
     assert np.all(np.diff(trace) >= -1e-6)
     assert trace[-1] > 2 * lap_m

@@ -1,0 +1,167 @@
+"""Road geometry as one array: highway-env's straight, sine and circular lanes, once per reset.
+
+Every lane is a row of ``LANE_COLUMNS``; the compiled kernels read the row they need. The
+formulas are highway-env's own (``highway_env/road/lane.py``), kept in the same floating-point
+order so that coordinates agree to the last bits.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from highway_env.road.lane import CircularLane, SineLane, StraightLane
+from numba import njit
+
+STRAIGHT, SINE, CIRCLE = 0, 1, 2
+(
+    KIND, START_X, START_Y, DIR_X, DIR_Y, HEADING, LENGTH, WIDTH, AMPLITUDE, PULSATION, PHASE,
+    CENTER_X, CENTER_Y, RADIUS, START_PHASE, SENSE, SPEED_LIMIT, FORBIDDEN, LANE_ID, LANE_COUNT,
+    FIRST_OF_ROAD, NEXT_LANE,
+) = range(22)  # fmt: skip
+LANE_COLUMNS = 22
+VEHICLE_LENGTH = 5.0  # AbstractLane.VEHICLE_LENGTH
+
+
+@dataclass(frozen=True)
+class LaneTable:
+    """Lanes of a highway-env road network as arrays.
+
+    :param rows: (L, LANE_COLUMNS) float array, one lane per row, in ``network.lanes_list()`` order
+        (the order highway-env breaks ties in when it looks for the closest lane).
+    :param indices: highway-env lane index (from, to, id) of each row.
+    """
+
+    rows: np.ndarray
+    indices: tuple[tuple, ...]
+
+    @property
+    def row_of(self) -> dict[tuple, int]:
+        return {index: row for row, index in enumerate(self.indices)}
+
+    @staticmethod
+    def from_network(network) -> LaneTable:
+        indices = [
+            (f, t, i) for f, to in network.graph.items() for t, lanes in to.items() for i in range(len(lanes))
+        ]
+        first = {}
+        rows = np.zeros((len(indices), LANE_COLUMNS))
+        for row, (f, t, i) in enumerate(indices):
+            lane = network.get_lane((f, t, i))
+            first.setdefault((f, t), row)
+            values = rows[row]
+            values[LENGTH], values[WIDTH] = lane.length, lane.width_at(0.0)
+            values[SPEED_LIMIT] = np.nan if lane.speed_limit is None else lane.speed_limit
+            values[FORBIDDEN] = float(lane.forbidden)
+            values[LANE_ID], values[LANE_COUNT] = i, len(network.graph[f][t])
+            values[FIRST_OF_ROAD] = first[(f, t)]
+            values[NEXT_LANE] = -1
+            if isinstance(lane, CircularLane):
+                values[KIND] = CIRCLE
+                values[CENTER_X], values[CENTER_Y] = lane.center
+                values[RADIUS], values[START_PHASE], values[SENSE] = (
+                    lane.radius,
+                    lane.start_phase,
+                    lane.direction,
+                )
+            elif isinstance(lane, StraightLane):
+                values[KIND] = SINE if isinstance(lane, SineLane) else STRAIGHT
+                values[START_X], values[START_Y] = lane.start
+                values[DIR_X], values[DIR_Y] = lane.direction
+                values[HEADING] = lane.heading
+                if isinstance(lane, SineLane):
+                    values[AMPLITUDE], values[PULSATION], values[PHASE] = (
+                        lane.amplitude,
+                        lane.pulsation,
+                        lane.phase,
+                    )
+            else:
+                raise NotImplementedError(f"the fast backend has no {type(lane).__name__} yet")
+        return LaneTable(rows, tuple(indices))
+
+
+@njit(cache=True)
+def wrap_to_pi(angle: float) -> float:
+    return ((angle + np.pi) % (2 * np.pi)) - np.pi
+
+
+@njit(cache=True)
+def local_coordinates(lanes: np.ndarray, lane: int, x: float, y: float) -> tuple[float, float]:
+    """(longitudinal, lateral) of the world point (x, y) in ``lane``."""
+    row = lanes[lane]
+    if row[KIND] == CIRCLE:
+        dx, dy = x - row[CENTER_X], y - row[CENTER_Y]
+        phi = np.arctan2(dy, dx)
+        phi = row[START_PHASE] + wrap_to_pi(phi - row[START_PHASE])
+        r = np.sqrt(dx * dx + dy * dy)
+        return row[SENSE] * (phi - row[START_PHASE]) * row[RADIUS], row[SENSE] * (row[RADIUS] - r)
+    dx, dy = x - row[START_X], y - row[START_Y]
+    longitudinal = dx * row[DIR_X] + dy * row[DIR_Y]
+    lateral = dx * -row[DIR_Y] + dy * row[DIR_X]
+    if row[KIND] == SINE:
+        lateral = lateral - row[AMPLITUDE] * np.sin(row[PULSATION] * longitudinal + row[PHASE])
+    return longitudinal, lateral
+
+
+@njit(cache=True)
+def heading_at(lanes: np.ndarray, lane: int, longitudinal: float) -> float:
+    row = lanes[lane]
+    if row[KIND] == CIRCLE:
+        phi = row[SENSE] * longitudinal / row[RADIUS] + row[START_PHASE]
+        return phi + np.pi / 2 * row[SENSE]
+    if row[KIND] == SINE:
+        slope = row[AMPLITUDE] * row[PULSATION] * np.cos(row[PULSATION] * longitudinal + row[PHASE])
+        return row[HEADING] + np.arctan(slope)
+    return row[HEADING]
+
+
+@njit(cache=True)
+def on_lane(lanes: np.ndarray, lane: int, longitudinal: float, lateral: float, margin: float) -> bool:
+    row = lanes[lane]
+    return (
+        np.abs(lateral) <= row[WIDTH] / 2 + margin
+        and -VEHICLE_LENGTH <= longitudinal
+        and longitudinal < row[LENGTH] + VEHICLE_LENGTH
+    )
+
+
+@njit(cache=True)
+def is_reachable_from(lanes: np.ndarray, lane: int, x: float, y: float) -> bool:
+    row = lanes[lane]
+    if row[FORBIDDEN] > 0:
+        return False
+    longitudinal, lateral = local_coordinates(lanes, lane, x, y)
+    return (
+        np.abs(lateral) <= 2 * row[WIDTH]
+        and 0 <= longitudinal
+        and longitudinal < row[LENGTH] + VEHICLE_LENGTH
+    )
+
+
+@njit(cache=True)
+def closest_lane(lanes: np.ndarray, x: float, y: float, heading: float) -> int:
+    """highway-env's get_closest_lane_index: L1 distance plus heading misalignment, first minimum."""
+    best, best_distance = 0, np.inf
+    for lane in range(lanes.shape[0]):
+        s, r = local_coordinates(lanes, lane, x, y)
+        angle = np.abs(wrap_to_pi(heading - heading_at(lanes, lane, s)))
+        distance = np.abs(r) + max(s - lanes[lane, LENGTH], 0.0) + max(0.0 - s, 0.0) + angle
+        if distance < best_distance:
+            best, best_distance = lane, distance
+    return best
+
+
+@njit(cache=True)
+def position(lanes: np.ndarray, lane: int, longitudinal: float, lateral: float) -> tuple[float, float]:
+    """World point at (longitudinal, lateral) of ``lane``."""
+    row = lanes[lane]
+    if row[KIND] == CIRCLE:
+        phi = row[SENSE] * longitudinal / row[RADIUS] + row[START_PHASE]
+        radius = row[RADIUS] - lateral * row[SENSE]
+        return row[CENTER_X] + radius * np.cos(phi), row[CENTER_Y] + radius * np.sin(phi)
+    if row[KIND] == SINE:
+        lateral = lateral + row[AMPLITUDE] * np.sin(row[PULSATION] * longitudinal + row[PHASE])
+    return (
+        row[START_X] + longitudinal * row[DIR_X] + lateral * -row[DIR_Y],
+        row[START_Y] + longitudinal * row[DIR_Y] + lateral * row[DIR_X],
+    )

@@ -1,0 +1,347 @@
+"""highway-env's traffic model as compiled loops over a vehicle array.
+
+One row per vehicle (columns below), in highway-env's ``road.vehicles`` order, so that the
+sequential decisions (who sees whose new target lane) and the pairwise collision order are the
+same as highway-env's. Each function names the highway-env method it reproduces:
+
+- kinematic bicycle model, ``Vehicle.step`` / ``clip_actions``;
+- lane-following steering and speed control, ``ControlledVehicle.steering_control`` / ``speed_control``;
+- IDM, ``IDMVehicle.acceleration`` / ``desired_gap``; MOBIL, ``IDMVehicle.change_lane_policy`` / ``mobil``;
+- neighbour search, ``Road.neighbour_vehicles``; collisions, ``RoadObject.handle_collisions`` with
+  ``utils.are_polygons_intersecting`` (separating axes, with the "will intersect" impact push).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from drivelab.envs.backends.fast.lanes import (
+    FIRST_OF_ROAD,
+    LANE_COUNT,
+    LANE_ID,
+    LENGTH,
+    NEXT_LANE,
+    SPEED_LIMIT,
+    VEHICLE_LENGTH,
+    closest_lane,
+    heading_at,
+    is_reachable_from,
+    local_coordinates,
+    on_lane,
+    wrap_to_pi,
+)
+
+# vehicle columns
+(
+    X, Y, HEADING, SPEED, STEER, ACCEL, LANE, TARGET_LANE, TARGET_SPEED, DELTA, TIMER, CRASHED,
+    IMPACT_X, IMPACT_Y, HAS_IMPACT, CHECK_COLLISIONS, KIND,
+) = range(17)  # fmt: skip
+VEHICLE_COLUMNS = 17
+# KIND: a plain kinematic vehicle (continuous-control ego), a lane-following controlled vehicle
+# (meta-action ego), an IDM/MOBIL vehicle (traffic)
+PLAIN, CONTROLLED, IDM = 0, 1, 2
+
+# IDM / MOBIL parameters, read from highway-env's IDMVehicle class at reset (IDM_PARAMETERS order)
+IDM_PARAMETERS = (
+    "ACC_MAX", "COMFORT_ACC_MAX", "COMFORT_ACC_MIN", "DISTANCE_WANTED", "TIME_WANTED", "POLITENESS",
+    "LANE_CHANGE_MIN_ACC_GAIN", "LANE_CHANGE_MAX_BRAKING_IMPOSED", "LANE_CHANGE_DELAY",
+)  # fmt: skip
+ACC_MAX, COMFORT_ACC_MAX, COMFORT_ACC_MIN, DISTANCE_WANTED, TIME_WANTED, POLITENESS = range(6)
+MIN_ACC_GAIN, MAX_BRAKING_IMPOSED, LANE_CHANGE_DELAY = 6, 7, 8
+
+# ControlledVehicle and Vehicle constants
+TAU_ACC, TAU_HEADING, TAU_LATERAL = 0.6, 0.2, 0.6
+TAU_PURSUIT = 0.5 * TAU_HEADING
+KP_A, KP_HEADING, KP_LATERAL = 1 / TAU_ACC, 1 / TAU_HEADING, 1 / TAU_LATERAL
+MAX_STEERING_ANGLE = np.pi / 3
+CAR_LENGTH, CAR_WIDTH = 5.0, 2.0
+MAX_SPEED, MIN_SPEED = 40.0, -40.0
+DIAGONAL = np.sqrt(CAR_LENGTH**2 + CAR_WIDTH**2)
+
+
+@njit(cache=True)
+def not_zero(value: float) -> float:
+    if np.abs(value) > 1e-2:
+        return value
+    return 1e-2 if value >= 0 else -1e-2
+
+
+@njit(cache=True)
+def _clip(value: float, low: float, high: float) -> float:
+    return min(max(value, low), high)
+
+
+@njit(cache=True)
+def steering_control(v: np.ndarray, lanes: np.ndarray, i: int, target: int) -> float:
+    """ControlledVehicle.steering_control: lateral P → heading reference → heading P → steering."""
+    s, r = local_coordinates(lanes, target, v[i, X], v[i, Y])
+    future_heading = heading_at(lanes, target, s + v[i, SPEED] * TAU_PURSUIT)
+    lateral_speed_command = -KP_LATERAL * r
+    heading_command = np.arcsin(_clip(lateral_speed_command / not_zero(v[i, SPEED]), -1.0, 1.0))
+    heading_ref = future_heading + _clip(heading_command, -np.pi / 4, np.pi / 4)
+    heading_rate_command = KP_HEADING * wrap_to_pi(heading_ref - v[i, HEADING])
+    slip_angle = np.arcsin(_clip(CAR_LENGTH / 2 / not_zero(v[i, SPEED]) * heading_rate_command, -1.0, 1.0))
+    steering = np.arctan(2 * np.tan(slip_angle))
+    return _clip(steering, -MAX_STEERING_ANGLE, MAX_STEERING_ANGLE)
+
+
+@njit(cache=True)
+def neighbours(v: np.ndarray, lanes: np.ndarray, i: int, lane: int) -> tuple[int, int]:
+    """Road.neighbour_vehicles: the vehicles just ahead of and behind vehicle i along ``lane``."""
+    s_i, _ = local_coordinates(lanes, lane, v[i, X], v[i, Y])
+    front, rear = -1, -1
+    s_front, s_rear = 0.0, 0.0
+    for j in range(v.shape[0]):
+        if j == i:
+            continue
+        s_j, r_j = local_coordinates(lanes, lane, v[j, X], v[j, Y])
+        if not on_lane(lanes, lane, s_j, r_j, 1.0):
+            continue
+        if s_i <= s_j and (front < 0 or s_j <= s_front):
+            front, s_front = j, s_j
+        if s_j < s_i and (rear < 0 or s_j > s_rear):
+            rear, s_rear = j, s_j
+    return front, rear
+
+
+@njit(cache=True)
+def desired_gap(v: np.ndarray, p: np.ndarray, ego: int, front: int) -> float:
+    """IDMVehicle.desired_gap, projected on the ego's direction."""
+    ab = -p[COMFORT_ACC_MAX] * p[COMFORT_ACC_MIN]
+    cos_e, sin_e = np.cos(v[ego, HEADING]), np.sin(v[ego, HEADING])
+    dvx = v[ego, SPEED] * cos_e - v[front, SPEED] * np.cos(v[front, HEADING])
+    dvy = v[ego, SPEED] * sin_e - v[front, SPEED] * np.sin(v[front, HEADING])
+    dv = dvx * cos_e + dvy * sin_e
+    return p[DISTANCE_WANTED] + v[ego, SPEED] * p[TIME_WANTED] + v[ego, SPEED] * dv / (2 * np.sqrt(ab))
+
+
+@njit(cache=True)
+def idm_acceleration(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, me: int, ego: int, front: int) -> float:
+    """IDMVehicle.acceleration as computed by vehicle ``me`` (its DELTA) for ``ego`` behind ``front``."""
+    if ego < 0:
+        return 0.0
+    target_speed = v[ego, TARGET_SPEED] if v[ego, KIND] != PLAIN else 0.0
+    lane = int(v[ego, LANE])
+    limit = lanes[lane, SPEED_LIMIT]
+    if not np.isnan(limit):
+        target_speed = _clip(target_speed, 0.0, limit)
+    ratio = max(v[ego, SPEED], 0.0) / np.abs(not_zero(target_speed))
+    acceleration = p[COMFORT_ACC_MAX] * (1 - ratio ** v[me, DELTA])
+    if front >= 0:
+        s_front, _ = local_coordinates(lanes, lane, v[front, X], v[front, Y])
+        s_ego, _ = local_coordinates(lanes, lane, v[ego, X], v[ego, Y])
+        gap = desired_gap(v, p, ego, front) / not_zero(s_front - s_ego)
+        acceleration -= p[COMFORT_ACC_MAX] * gap**2
+    return acceleration
+
+
+@njit(cache=True)
+def mobil(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, i: int, lane: int) -> bool:
+    """IDMVehicle.mobil for a vehicle without a planned lane (highway-env's route is None)."""
+    new_preceding, new_following = neighbours(v, lanes, i, lane)
+    new_following_a = idm_acceleration(v, lanes, p, i, new_following, new_preceding)
+    new_following_pred_a = idm_acceleration(v, lanes, p, i, new_following, i)
+    if new_following_pred_a < -p[MAX_BRAKING_IMPOSED]:
+        return False
+    old_preceding, old_following = neighbours(v, lanes, i, int(v[i, LANE]))
+    self_pred_a = idm_acceleration(v, lanes, p, i, i, new_preceding)
+    self_a = idm_acceleration(v, lanes, p, i, i, old_preceding)
+    old_following_a = idm_acceleration(v, lanes, p, i, old_following, i)
+    old_following_pred_a = idm_acceleration(v, lanes, p, i, old_following, old_preceding)
+    jerk = (
+        self_pred_a
+        - self_a
+        + p[POLITENESS] * (new_following_pred_a - new_following_a + old_following_pred_a - old_following_a)
+    )
+    return jerk >= p[MIN_ACC_GAIN]
+
+
+@njit(cache=True)
+def change_lane_policy(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, i: int) -> None:
+    """IDMVehicle.change_lane_policy: abort a change into a lane someone else is entering; else,
+    every LANE_CHANGE_DELAY seconds, ask MOBIL about each side lane (the right one last)."""
+    lane, target = int(v[i, LANE]), int(v[i, TARGET_LANE])
+    if lane != target:
+        same_road = lanes[lane, FIRST_OF_ROAD] == lanes[target, FIRST_OF_ROAD]
+        if same_road:
+            for j in range(v.shape[0]):
+                if (
+                    j != i
+                    and int(v[j, LANE]) != target
+                    and v[j, KIND] != PLAIN
+                    and int(v[j, TARGET_LANE]) == target
+                ):
+                    s_j, _ = local_coordinates(lanes, lane, v[j, X], v[j, Y])
+                    s_i, _ = local_coordinates(lanes, lane, v[i, X], v[i, Y])
+                    if 0 < s_j - s_i < desired_gap(v, p, i, j):
+                        v[i, TARGET_LANE] = lane
+                        break
+        return
+    if not p[LANE_CHANGE_DELAY] < v[i, TIMER]:
+        return
+    v[i, TIMER] = 0.0
+    lane_id, count = lanes[lane, LANE_ID], lanes[lane, LANE_COUNT]
+    for side in (-1, 1):
+        if not (0 <= lane_id + side < count):
+            continue
+        candidate = lane + side
+        if not is_reachable_from(lanes, candidate, v[i, X], v[i, Y]):
+            continue
+        if np.abs(v[i, SPEED]) < 1:
+            continue
+        if mobil(v, lanes, p, i, candidate):
+            v[i, TARGET_LANE] = candidate
+
+
+@njit(cache=True)
+def follow_road(v: np.ndarray, lanes: np.ndarray, i: int) -> None:
+    """ControlledVehicle.follow_road for roads with a single successor lane."""
+    target = int(v[i, TARGET_LANE])
+    s, _ = local_coordinates(lanes, target, v[i, X], v[i, Y])
+    if s > lanes[target, LENGTH] - VEHICLE_LENGTH / 2 and lanes[target, NEXT_LANE] >= 0:
+        v[i, TARGET_LANE] = lanes[target, NEXT_LANE]
+
+
+@njit(cache=True)
+def act(v: np.ndarray, lanes: np.ndarray, p: np.ndarray) -> None:
+    """Road.act: every vehicle decides its controls, in list order."""
+    for i in range(v.shape[0]):
+        kind = v[i, KIND]
+        if kind == PLAIN:
+            continue  # keeps the last continuous action
+        if kind == IDM and v[i, CRASHED] > 0:
+            continue
+        follow_road(v, lanes, i)
+        if kind == CONTROLLED:
+            v[i, STEER] = steering_control(v, lanes, i, int(v[i, TARGET_LANE]))
+            v[i, ACCEL] = KP_A * (v[i, TARGET_SPEED] - v[i, SPEED])
+            continue
+        change_lane_policy(v, lanes, p, i)
+        v[i, STEER] = steering_control(v, lanes, i, int(v[i, TARGET_LANE]))
+        front, _ = neighbours(v, lanes, i, int(v[i, LANE]))
+        acceleration = idm_acceleration(v, lanes, p, i, i, front)
+        if int(v[i, LANE]) != int(v[i, TARGET_LANE]):
+            front, _ = neighbours(v, lanes, i, int(v[i, TARGET_LANE]))
+            acceleration = min(acceleration, idm_acceleration(v, lanes, p, i, i, front))
+        v[i, ACCEL] = _clip(acceleration, -p[ACC_MAX], p[ACC_MAX])
+
+
+@njit(cache=True)
+def step_vehicle(v: np.ndarray, lanes: np.ndarray, i: int, dt: float) -> None:
+    """Vehicle.step: clip the actions, integrate the kinematic bicycle, find the lane."""
+    if v[i, KIND] == IDM:
+        v[i, TIMER] += dt
+    if v[i, CRASHED] > 0:
+        v[i, STEER] = 0.0
+        v[i, ACCEL] = -1.0 * v[i, SPEED]
+    if v[i, SPEED] > MAX_SPEED:
+        v[i, ACCEL] = min(v[i, ACCEL], 1.0 * (MAX_SPEED - v[i, SPEED]))
+    elif v[i, SPEED] < MIN_SPEED:
+        v[i, ACCEL] = max(v[i, ACCEL], 1.0 * (MIN_SPEED - v[i, SPEED]))
+    beta = np.arctan(1 / 2 * np.tan(v[i, STEER]))
+    v[i, X] += v[i, SPEED] * np.cos(v[i, HEADING] + beta) * dt
+    v[i, Y] += v[i, SPEED] * np.sin(v[i, HEADING] + beta) * dt
+    if v[i, HAS_IMPACT] > 0:
+        v[i, X] += v[i, IMPACT_X]
+        v[i, Y] += v[i, IMPACT_Y]
+        v[i, CRASHED] = 1.0
+        v[i, HAS_IMPACT] = 0.0
+    v[i, HEADING] += v[i, SPEED] * np.sin(beta) / (CAR_LENGTH / 2) * dt
+    v[i, SPEED] += v[i, ACCEL] * dt
+    v[i, LANE] = closest_lane(lanes, v[i, X], v[i, Y], v[i, HEADING])
+
+
+@njit(cache=True)
+def _polygon(v: np.ndarray, i: int) -> np.ndarray:
+    c, s = np.cos(v[i, HEADING]), np.sin(v[i, HEADING])
+    corners = np.empty((5, 2))
+    half_l, half_w = CAR_LENGTH / 2, CAR_WIDTH / 2
+    local = ((-half_l, -half_w), (-half_l, half_w), (half_l, half_w), (half_l, -half_w))
+    for k in range(4):
+        px, py = local[k]
+        corners[k, 0] = c * px + -s * py + v[i, X]
+        corners[k, 1] = s * px + c * py + v[i, Y]
+    corners[4] = corners[0]
+    return corners
+
+
+@njit(cache=True)
+def _project(polygon: np.ndarray, nx: float, ny: float) -> tuple[float, float]:
+    low, high = np.inf, -np.inf
+    for k in range(polygon.shape[0]):
+        value = polygon[k, 0] * nx + polygon[k, 1] * ny
+        low, high = min(low, value), max(high, value)
+    return low, high
+
+
+@njit(cache=True)
+def _interval_distance(min_a: float, max_a: float, min_b: float, max_b: float) -> float:
+    return min_b - max_a if min_a < min_b else min_a - max_b
+
+
+@njit(cache=True)
+def polygons_intersecting(a, b, dax, day, dbx, dby):
+    """utils.are_polygons_intersecting: (intersecting, will intersect, translation x, y)."""
+    intersecting, will_intersect = True, True
+    min_distance, axis_x, axis_y = np.inf, 0.0, 0.0
+    center_dx = (a[0, 0] + a[1, 0] + a[2, 0] + a[3, 0]) / 4 - (b[0, 0] + b[1, 0] + b[2, 0] + b[3, 0]) / 4
+    center_dy = (a[0, 1] + a[1, 1] + a[2, 1] + a[3, 1]) / 4 - (b[0, 1] + b[1, 1] + b[2, 1] + b[3, 1]) / 4
+    for polygon in (a, b):
+        for k in range(4):
+            nx, ny = -polygon[k + 1, 1] + polygon[k, 1], polygon[k + 1, 0] - polygon[k, 0]
+            norm = np.sqrt(nx * nx + ny * ny)
+            nx, ny = nx / norm, ny / norm
+            min_a, max_a = _project(a, nx, ny)
+            min_b, max_b = _project(b, nx, ny)
+            if _interval_distance(min_a, max_a, min_b, max_b) > 0:
+                intersecting = False
+            velocity_projection = nx * (dax - dbx) + ny * (day - dby)
+            if velocity_projection < 0:
+                min_a += velocity_projection
+            else:
+                max_a += velocity_projection
+            distance = _interval_distance(min_a, max_a, min_b, max_b)
+            if distance > 0:
+                will_intersect = False
+            if not intersecting and not will_intersect:
+                break
+            if np.abs(distance) < min_distance:
+                min_distance = np.abs(distance)
+                sign = 1.0 if center_dx * nx + center_dy * ny > 0 else -1.0
+                axis_x, axis_y = sign * nx, sign * ny
+    return intersecting, will_intersect, min_distance * axis_x, min_distance * axis_y
+
+
+@njit(cache=True)
+def handle_collisions(v: np.ndarray, dt: float) -> None:
+    """Road.step's pairwise collision pass, in list order."""
+    n = v.shape[0]
+    for i in range(n):
+        for j in range(i + 1, n):
+            if not (v[i, CHECK_COLLISIONS] > 0 or v[j, CHECK_COLLISIONS] > 0):
+                continue
+            dx, dy = v[j, X] - v[i, X], v[j, Y] - v[i, Y]
+            if np.sqrt(dx * dx + dy * dy) > DIAGONAL + v[i, SPEED] * dt:
+                continue
+            ci, si = np.cos(v[i, HEADING]), np.sin(v[i, HEADING])
+            cj, sj = np.cos(v[j, HEADING]), np.sin(v[j, HEADING])
+            intersecting, will_intersect, tx, ty = polygons_intersecting(
+                _polygon(v, i), _polygon(v, j),
+                v[i, SPEED] * ci * dt, v[i, SPEED] * si * dt, v[j, SPEED] * cj * dt, v[j, SPEED] * sj * dt,
+            )  # fmt: skip
+            if will_intersect:
+                v[i, IMPACT_X], v[i, IMPACT_Y], v[i, HAS_IMPACT] = tx / 2, ty / 2, 1.0
+                v[j, IMPACT_X], v[j, IMPACT_Y], v[j, HAS_IMPACT] = -tx / 2, -ty / 2, 1.0
+            if intersecting:
+                v[i, CRASHED], v[j, CRASHED] = 1.0, 1.0
+
+
+@njit(cache=True)
+def simulate(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, frames: int, dt: float) -> None:
+    """AbstractEnv._simulate for ``frames`` simulation steps of ``dt`` seconds."""
+    for _ in range(frames):
+        act(v, lanes, p)
+        for i in range(v.shape[0]):
+            step_vehicle(v, lanes, i, dt)
+        handle_collisions(v, dt)

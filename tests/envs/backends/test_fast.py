@@ -1,0 +1,191 @@
+"""Fidelity of the fast backend against highway-env, with known answers from highway-env itself."""
+
+import numpy as np
+import pytest
+from highway_env.road.road import Road, RoadNetwork
+from highway_env.vehicle.behavior import IDMVehicle
+from highway_env.vehicle.controller import ControlledVehicle
+from highway_env.vehicle.kinematics import Vehicle
+
+from drivelab.envs.backends.fast import lanes as L
+from drivelab.envs.backends.fast import traffic as T
+from drivelab.envs.backends.fast.backend import (
+    FastBackend,
+    idm_parameters,
+    link_successors,
+    vehicles_to_array,
+)
+from drivelab.envs.backends.highway import HighwayBackend
+from drivelab.envs.core import DriveEnv
+from drivelab.envs.scenarios import SCENARIOS
+from drivelab.errors import UsageError
+
+
+@pytest.mark.parametrize("scenario", sorted(SCENARIOS))
+def test_lane_geometry_matches_highway_env(scenario):
+    control = SCENARIOS[scenario].action_kinds[-1]
+    builder = HighwayBackend(SCENARIOS[scenario], "empty", control)
+    builder.reset(seed=0)
+    network = builder.env.road.network
+    table = L.LaneTable.from_network(network)
+    rng = np.random.default_rng(0)
+    points = builder.road_map.lane_centerlines
+    for _ in range(40):
+        centre = points[rng.integers(len(points))]
+        x, y = centre[rng.integers(len(centre))] + rng.normal(0, 3, 2)
+        heading = rng.uniform(-np.pi, np.pi)
+        assert table.indices[L.closest_lane(table.rows, x, y, heading)] == network.get_closest_lane_index(
+            np.array([x, y]), heading
+        )
+        for row, index in enumerate(table.indices):
+            lane = network.get_lane(index)
+            s, r = L.local_coordinates(table.rows, row, x, y)
+            np.testing.assert_allclose((s, r), lane.local_coordinates(np.array([x, y])), atol=1e-9)
+            assert L.heading_at(table.rows, row, s) == pytest.approx(lane.heading_at(s), abs=1e-12)
+            np.testing.assert_allclose(L.position(table.rows, row, s, 1.0), lane.position(s, 1.0), atol=1e-9)
+
+
+@pytest.mark.parametrize("control", ["meta", "continuous"])
+@pytest.mark.parametrize("traffic", ["empty", "regular", "dense"])
+def test_spawn_reproduces_highway_env_episodes(control, traffic):
+    reference = HighwayBackend(SCENARIOS["highway"], traffic, control)
+    fast = FastBackend(SCENARIOS["highway"], traffic, control)
+    for seed in (0, 1, 7):
+        a, b = reference.reset(seed), fast.reset(seed)
+        np.testing.assert_array_equal(a.vehicles, b.vehicles)
+        np.testing.assert_array_equal(a.ego.position, b.ego.position)
+        assert a.ego.speed_mps == b.ego.speed_mps and a.route.progress_m == b.route.progress_m
+        expected = vehicles_to_array(reference.env.road.vehicles, fast.table)
+        np.testing.assert_array_equal(fast.vehicles, expected)  # targets, DELTA, timers, kinds too
+
+
+@pytest.mark.parametrize("control", ["meta", "continuous"])
+def test_single_vehicle_trajectory_on_straight_lanes(control):
+    reference = HighwayBackend(SCENARIOS["highway"], "empty", control)
+    fast = FastBackend(SCENARIOS["highway"], "empty", control)
+    reference.reset(seed=3), fast.reset(seed=3)
+    rng = np.random.default_rng(0)
+    for _ in range(100):
+        if control == "meta":
+            action = int(rng.integers(5))
+        else:
+            action = (rng.uniform(-1, 1, 2) * [1.0, 0.02]).astype(np.float32)
+        a, b = reference.step(action), fast.step(action)
+        assert np.abs(a.ego.position - b.ego.position).max() < 1e-6
+        assert abs(a.ego.heading - b.ego.heading) < 1e-9 and abs(a.ego.speed_mps - b.ego.speed_mps) < 1e-9
+        assert a.ego.lane_id == b.ego.lane_id and a.events.off_road == b.events.off_road
+        if a.events.off_road:
+            break
+
+
+def _racetrack_table():
+    builder = HighwayBackend(SCENARIOS["racetrack"], "empty", "continuous")
+    builder.reset(seed=0)
+    network = builder.env.road.network
+    table = L.LaneTable.from_network(network)
+    link_successors(table, network)
+    return network, table
+
+
+def test_lane_following_vehicle_on_circular_lanes():
+    """A lane-keeping vehicle drives 100 steps round the racetrack's curves and lane joints."""
+    network, table = _racetrack_table()
+    road = Road(network=network, np_random=np.random.RandomState(0))
+    start = network.get_lane(("a", "b", 0))
+    vehicle = ControlledVehicle(road, start.position(30.0, 0.5), start.heading_at(30.0), speed=10.0)
+    road.vehicles.append(vehicle)
+    state = vehicles_to_array(road.vehicles, table)
+    dt = 1 / 15
+    visited = set()
+    for step in range(100):
+        vehicle.target_speed = 8.0 + 4.0 * np.sin(step / 10)
+        state[0, T.TARGET_SPEED] = vehicle.target_speed
+        for _ in range(3):
+            road.act()
+            road.step(dt)
+        T.simulate(state, table.rows, idm_parameters(), 3, dt)
+        assert np.abs(state[0, [T.X, T.Y]] - vehicle.position).max() < 1e-6
+        assert table.indices[int(state[0, T.TARGET_LANE])] == vehicle.target_lane_index
+        visited.add(int(state[0, T.LANE]))
+    kinds = {table.rows[lane, L.KIND] for lane in visited}
+    assert L.CIRCLE in kinds and L.STRAIGHT in kinds and len(visited) >= 4  # curves and lane joints
+
+
+def _straight_road(lanes: int):
+    network = RoadNetwork.straight_road_network(lanes, speed_limit=30)
+    table = L.LaneTable.from_network(network)
+    return Road(network=network, np_random=np.random.RandomState(0)), table
+
+
+def test_idm_follower_behind_a_braking_leader():
+    road, table = _straight_road(1)
+    leader = Vehicle(road, np.array([60.0, 0.0]), 0.0, 25.0)
+    follower = IDMVehicle(road, np.array([20.0, 0.0]), 0.0, 25.0, target_speed=28.0)
+    road.vehicles += [follower, leader]
+    state = vehicles_to_array(road.vehicles, table)
+    dt = 1 / 15
+    speeds = []
+    for frame in range(150):
+        braking = -4.0 if frame < 60 else 0.0
+        leader.act({"acceleration": braking, "steering": 0.0})
+        state[1, T.ACCEL], state[1, T.STEER] = braking, 0.0
+        road.act()
+        road.step(dt)
+        T.simulate(state, table.rows, idm_parameters(), 1, dt)
+        assert state[0, T.SPEED] == pytest.approx(follower.speed, abs=1e-9)
+        speeds.append(follower.speed)
+    assert min(speeds) < 12.0  # the follower did brake hard behind the leader
+    assert not follower.crashed and state[0, T.CRASHED] == 0
+
+
+@pytest.mark.parametrize(
+    "others, expected",
+    [
+        ([([40.0, 4.0], 15.0)], True),  # slow leader ahead, free lane to the left: change
+        ([([40.0, 4.0], 15.0), ([22.0, 0.0], 30.0)], False),  # a car just behind in the left lane
+        ([([200.0, 4.0], 25.0)], True),  # a leader 175 m ahead still costs more than the 0.2 m/s² gain
+        ([([400.0, 4.0], 25.0)], False),  # one 375 m ahead does not
+        ([([40.0, 4.0], 15.0), ([32.0, 0.0], 14.0)], False),  # the left lane is slower and closer
+    ],
+)
+def test_mobil_decisions_match(others, expected):
+    road, table = _straight_road(2)
+    me = IDMVehicle(road, np.array([25.0, 4.0]), 0.0, 25.0, target_speed=30.0)
+    road.vehicles.append(me)
+    for position, speed in others:
+        road.vehicles.append(IDMVehicle(road, np.array(position), 0.0, speed, target_speed=speed))
+    state = vehicles_to_array(road.vehicles, table)
+    candidate = table.row_of[("0", "1", 0)]
+    ours = T.mobil(state, table.rows, idm_parameters(), 0, candidate)
+    assert me.mobil(("0", "1", 0)) == ours == expected
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_whole_traffic_matches_highway_env(seed):
+    reference = HighwayBackend(SCENARIOS["highway"], "regular", "meta")
+    fast = FastBackend(SCENARIOS["highway"], "regular", "meta")
+    reference.reset(seed), fast.reset(seed)
+    rng = np.random.default_rng(seed)
+    for _ in range(30):
+        action = int(rng.integers(5))
+        a, b = reference.step(action), fast.step(action)
+        assert np.abs(a.vehicles - b.vehicles).max() < 1e-6
+        assert a.events == b.events
+        if a.events.collided:
+            break
+
+
+def test_drive_env_on_the_fast_backend():
+    env = DriveEnv("highway", obs="kinematics,lidar", backend="fast", duration_s=5)
+    obs, _ = env.reset(seed=0)
+    assert env.observation_space.contains(obs)
+    for _ in range(5):
+        obs, reward, terminated, truncated, info = env.step(1)
+        if terminated or truncated:
+            break
+    assert "episode_metrics" in info
+
+
+def test_unsupported_scenario_is_refused():
+    with pytest.raises(UsageError, match="backend 'fast' does not run scenario 'merge' yet"):
+        DriveEnv("merge", backend="fast")
