@@ -1,4 +1,8 @@
-"""Bird's-eye RGB view, ego-centred and heading-aligned: for videos and RGB-input agents."""
+"""Bird's-eye RGB view, ego-centred and heading-aligned: for videos and RGB-input agents.
+
+Same view as ``topdown`` (its ``to_pixels`` mapping: ego at the centre, heading up, the ego's
+right on the image's right), drawn in colour with anti-aliasing.
+"""
 
 from __future__ import annotations
 
@@ -6,52 +10,105 @@ import cv2
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.envs.world import MARKING_SOLID, WorldState
-from drivelab.perception.base import Sensor, box_corners
-from drivelab.perception.topdown import SHIFT, Projector
+from drivelab.envs.world import MARKING_DASHED, MARKING_SOLID, RoadMap, WorldState
+from drivelab.perception.base import Sensor
+from drivelab.perception.topdown import SHIFT, View, fill_boxes, fill_each, per_road, segments_near
 
 GRASS = (96, 140, 84)
 ROAD = (70, 70, 74)
-ROUTE = (86, 86, 120)
+ROUTE = (86, 86, 120)  # a faint blue band on the road
 SOLID_LINE = (235, 235, 235)
-DASHED_LINE = (170, 170, 170)
+DASHED_LINE = (200, 200, 200)
 VEHICLE = (60, 110, 220)
 EGO = (60, 200, 70)
 EGO_CRASHED = (230, 40, 40)
+ROUTE_WIDTH_M = 1.0
+DASH_LENGTH_M, DASH_PERIOD_M = 3.0, 8.0  # painted 3 m, then a 5 m gap
+
+
+class DashedMarkings:
+    """A road's dashed markings with the arc length at which each segment starts along its line.
+
+    Dashes are laid along the arc length of chains of touching segments (curved lines come as
+    2 m pieces), so they keep their rhythm around bends and stay put in the world as the ego
+    moves. Only the dashes in sight are cut each frame, so a 10 km line costs what a short one does.
+    """
+
+    def __init__(self, road: RoadMap) -> None:
+        segments = np.asarray(road.markings, dtype=float)[road.marking_kinds == MARKING_DASHED]
+        length = np.hypot(*(segments[:, 1] - segments[:, 0]).T)
+        self.segments, self.length = segments[length > 1e-9], length[length > 1e-9]
+        start, end = self.segments[:, 0], self.segments[:, 1]
+        count = len(self.length)
+        joined = np.zeros(count, dtype=bool)
+        joined[1:] = np.all(np.isclose(start[1:], end[:-1]), axis=1)
+        cumulative = np.cumsum(self.length) - self.length
+        chain_head = np.maximum.accumulate(np.where(joined, 0, np.arange(count)))
+        self.arc = cumulative - cumulative[chain_head]
+
+    def dashes(self, centre: np.ndarray, radius: float) -> np.ndarray:
+        """The dashes (K, 2, 2) within ``radius`` of ``centre``, world coordinates."""
+        seen = segments_near(self.segments, centre, radius)
+        segments, length, arc = self.segments[seen], self.length[seen], self.arc[seen]
+        # the stretch of each segment inside the circle, as arc lengths [low, high] along it
+        direction = (segments[:, 1] - segments[:, 0]) / length[:, None]
+        nearest = np.einsum("ij,ij->i", centre - segments[:, 0], direction)
+        offset = segments[:, 0] + nearest[:, None] * direction - centre
+        half_chord = np.sqrt(np.maximum(radius * radius - np.einsum("ij,ij->i", offset, offset), 0.0))
+        low = np.clip(nearest - half_chord, 0.0, length)
+        high = np.clip(nearest + half_chord, 0.0, length)
+        # dash k covers arc [k·P, k·P + D] of its line; it overlaps [arc + low, arc + high] for
+        # first <= k <= last
+        first = np.floor((arc + low - DASH_LENGTH_M) / DASH_PERIOD_M).astype(int) + 1
+        last = np.ceil((arc + high) / DASH_PERIOD_M).astype(int) - 1
+        counts = np.maximum(last - first + 1, 0)
+        owner = np.repeat(np.arange(len(counts)), counts)
+        k = first[owner] + np.arange(len(owner)) - np.repeat(np.cumsum(counts) - counts, counts)
+        begin = np.clip(k * DASH_PERIOD_M - arc[owner], 0.0, length[owner])
+        finish = np.clip(k * DASH_PERIOD_M + DASH_LENGTH_M - arc[owner], 0.0, length[owner])
+        origin, unit = segments[owner, 0], direction[owner]
+        return np.stack([origin + begin[:, None] * unit, origin + finish[:, None] * unit], axis=1)
 
 
 def render_birdeye(
     world: WorldState, size_hw: tuple[int, int] = (128, 128), pixels_per_meter: float = 3.0
 ) -> np.ndarray:
-    """An RGB uint8 image (H, W, 3) of the road, route, markings, traffic and ego."""
+    """An RGB uint8 image (H, W, 3) of the road, route, markings, traffic and ego.
+
+    Grass background, dark road (lane polygons), the route as a faint band, white solid and
+    light-grey dashed markings, other vehicles blue, the ego green (red after a collision).
+
+    :param size_hw: image height and width in pixels (videos use larger ones, e.g. (256, 512)).
+    :param pixels_per_meter: resolution.
+    """
     height, width = size_hw
     image = np.empty((height, width, 3), dtype=np.uint8)
     image[:] = GRASS
-    project = Projector(world, size_hw, pixels_per_meter)
-    cv2.fillPoly(image, project.polygons(world.road.lane_polygons), ROAD, cv2.LINE_AA, SHIFT)
+    view = View(world, size_hw, pixels_per_meter)
+    road = world.road
+    fill_each(image, view.lanes(road), ROAD, cv2.LINE_AA)
     if len(world.route.polyline) > 1:
-        width_px = max(int(round(1.0 * pixels_per_meter)), 1)
-        cv2.polylines(image, [project(world.route.polyline)], False, ROUTE, width_px, cv2.LINE_AA, SHIFT)
-    markings = world.road.markings
-    if len(markings):
-        for kind, colour in ((MARKING_SOLID, SOLID_LINE), (1, DASHED_LINE)):
-            chosen = markings[world.road.marking_kinds == kind]
-            if len(chosen):
-                lines = list(project(chosen))
-                cv2.polylines(image, lines, False, colour, 1, cv2.LINE_AA, SHIFT)
-    cv2.fillPoly(image, project.vehicles(world.vehicles), VEHICLE, cv2.LINE_AA, SHIFT)
+        width_px = max(int(round(ROUTE_WIDTH_M * pixels_per_meter)), 1)
+        route = view.polyline(world.route.polyline, width_px)
+        cv2.polylines(image, route, False, ROUTE, width_px, cv2.LINE_AA, SHIFT)
+    solid = np.asarray(road.markings)[road.marking_kinds == MARKING_SOLID]
+    solid = solid[segments_near(solid, view.position, view.radius_m)]
+    dashed = per_road(road, DashedMarkings).dashes(view.position, view.radius_m)
+    for lines, colour in ((solid, SOLID_LINE), (dashed, DASHED_LINE)):
+        if len(lines):
+            cv2.polylines(image, list(view(lines)), False, colour, 1, cv2.LINE_AA, SHIFT)
+    fill_boxes(image, view.vehicles(world.vehicles), VEHICLE, cv2.LINE_AA)
     ego = world.ego
     ego_box = np.array([[*ego.position, ego.heading, ego.length_m, ego.width_m]])
-    colour = EGO_CRASHED if world.events.collided else EGO
-    cv2.fillPoly(image, list(project(box_corners(ego_box))), colour, cv2.LINE_AA, SHIFT)
+    fill_boxes(image, view.boxes(ego_box), EGO_CRASHED if world.events.collided else EGO, cv2.LINE_AA)
     return image
 
 
 class BirdEye(Sensor):
-    """RGB bird's-eye image, channels last ``(size, size, 3)``.
+    """RGB bird's-eye image, channels last ``(size, size, 3)`` uint8 (see ``render_birdeye``).
 
     :param size: image height and width in pixels.
-    :param pixels_per_meter: resolution.
+    :param pixels_per_meter: resolution; 3 px/m shows about 21 m on each side at 128 px.
     """
 
     name = "birdeye"

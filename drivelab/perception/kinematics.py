@@ -14,22 +14,26 @@ FEATURES = ("presence", "x", "y", "vx", "vy", "cos_h", "sin_h")
 class Kinematics(Sensor):
     """A flat vector of ``vehicles_count`` rows × 7 features, all in [-1, 1].
 
-    Row 0 is the ego: presence 1, position 0, its velocity (speed, 0) in its own frame, and its
-    heading relative to the lane. Rows 1… are the nearest other vehicles within
-    ``perception_distance_m``, sorted by distance: position and velocity relative to the ego in
-    the ego frame, heading relative to the ego. Positions are divided by the perception
-    distance, velocities by ``speed_scale_mps``; absent rows are zero.
+    Features per row: ``presence, x, y, vx, vy, cos_h, sin_h`` (``FEATURES``). Row 0 is the
+    ego: presence 1, position (0, 0), its velocity (speed, 0) in its own frame, and its heading
+    relative to its lane (so a drifting ego sees sin_h ≠ 0). Rows 1… are the nearest other
+    vehicles within ``perception_distance_m`` (centre to centre), nearest first: position and
+    velocity relative to the ego, in the ego frame (x forward, y right), and heading relative
+    to the ego. Positions are divided by the perception distance, velocities by
+    ``speed_scale_mps``, then everything is clipped to [-1, 1]; absent rows are all zero.
 
     :param vehicles_count: rows, the ego included.
     :param perception_distance_m: vehicles farther than this are not seen.
-    :param speed_scale_mps: velocity normalisation (highway-env uses 2 × 20 m/s for relative speeds).
+    :param speed_scale_mps: velocity normalisation; highway-env's 2 × its 40 m/s maximum speed.
     """
 
     name = "kinematics"
 
     def __init__(
-        self, *, vehicles_count: int = 5, perception_distance_m: float = 100.0, speed_scale_mps: float = 40.0
+        self, *, vehicles_count: int = 5, perception_distance_m: float = 100.0, speed_scale_mps: float = 80.0
     ) -> None:
+        if vehicles_count < 1 or perception_distance_m <= 0 or speed_scale_mps <= 0:
+            raise ValueError("kinematics needs vehicles_count >= 1 and positive distance and speed scales")
         self.vehicles_count = int(vehicles_count)
         self.perception_distance_m = float(perception_distance_m)
         self.speed_scale_mps = float(speed_scale_mps)
