@@ -4,7 +4,9 @@
 
 DQN: MLP [256, 256], lr 5e-4, buffer 15k, batch 32, gamma 0.8, target update every 50 steps
 (drivelab's SB3 defaults, taken from highway-env's example). Each backend trains with the same
-seed, then its final model is evaluated on 50 episodes of the same backend.
+seed, then its final model is evaluated on 50 episodes of the same backend. Wall time and the
+process's CPU time are both reported: on a shared machine the CPU time is the steadier figure
+(torch runs one thread: OMP_NUM_THREADS=1).
 """
 
 from __future__ import annotations
@@ -46,13 +48,15 @@ def main() -> None:
                 "seed": args.seed, "name": name, "eval_every": args.steps, "eval_episodes": 1,
             }
         )  # fmt: skip
-        start = time.perf_counter()
+        start, cpu_start = time.perf_counter(), time.process_time()
         run_dir = train(config, RUNS)
-        train_s = time.perf_counter() - start
+        train_s, train_cpu_s = time.perf_counter() - start, time.process_time() - cpu_start
         report = evaluate_run(run_dir, episodes=args.episodes)
         row = {
             "backend": backend,
             "train_wall_s": train_s,
+            "train_cpu_s": train_cpu_s,
+            "load_average_1min": os.getloadavg()[0],
             "eval_episodes": args.episodes,
             "crash_rate": report["crash_rate"],
             "mean_return": report["mean_return"],
@@ -78,10 +82,12 @@ def main() -> None:
         f"Machine: {result['machine']}; date {result['date']}; seed {args.seed}, "
         f"{args.steps} training steps.",
         "",
-        "| backend | training wall time | crash rate | mean return ± std | mean speed (m/s) |",
-        "|---|---|---|---|---|",
+        "| backend | training wall time | training CPU time | crash rate | mean return ± std "
+        "| mean speed (m/s) |",
+        "|---|---|---|---|---|---|",
         *[
-            f"| {r['backend']} | {r['train_wall_s'] / 60:.1f} min | {r['crash_rate']:.2f} "
+            f"| {r['backend']} | {r['train_wall_s'] / 60:.1f} min | {r['train_cpu_s'] / 60:.1f} min | "
+            f"{r['crash_rate']:.2f} "
             f"({r['eval_episodes']} episodes) | {r['mean_return']:.2f} ± {r['std_return']:.2f} | "
             f"{r['mean_speed_mps']:.1f} |"
             for r in rows

@@ -109,8 +109,12 @@ class DriveEnv(gym.Env):
         if self.world is None:
             raise RuntimeError("call reset() before step()")
         control = self.adapter.to_control(action)
-        prev = self.world
-        self.world = self.backend.step(control)
+        return self.finish_step(self.backend.step(control), control)
+
+    def finish_step(self, world: WorldState, control: Any):
+        """Observation, reward, episode end and info once the backend has produced ``world``
+        from ``control`` (``step`` without the simulation; batched vector envs simulate apart)."""
+        prev, self.world = self.world, world
         reward, terms = self.reward_shaper(prev, self.world, control)
         events = self.world.events
         terminated = bool(events.collided or events.arrived or (self.offroad_terminal and events.off_road))

@@ -34,6 +34,13 @@ class Scenario:
     continuous_policy_frequency_hz: int = 5
     action_kinds: tuple[str, ...] = ("meta", "grid", "continuous")
 
+    def in_junction(self, lane_index: tuple) -> bool:
+        """Whether highway-env lane (from, to, id) is junction area: it leaves a junction node
+        (on the roundabout, it must also end at one: the exits leave the ring too)."""
+        if lane_index[0] not in self.intersection_nodes:
+            return False
+        return self.name != "roundabout" or lane_index[1] in self.intersection_nodes
+
 
 _RING = ("se", "ex", "ee", "nx", "ne", "wx", "we", "sx")
 

@@ -152,7 +152,7 @@ class HighwayBackend:
     def reset(self, seed: int) -> WorldState:
         """Build a new episode from ``seed`` and return its first WorldState."""
         self.env.reset(seed=int(seed))
-        self._arrange_traffic()
+        self.arrange_traffic()
         road = self.env.road
         self.road_map = build_road_map(road.network)
         self.route = self.route_for(self._plan_route())
@@ -180,7 +180,8 @@ class HighwayBackend:
         return self.world
 
     # --- traffic ------------------------------------------------------------------------------
-    def _arrange_traffic(self) -> None:
+    def arrange_traffic(self) -> None:
+        """Apply the traffic level to the vehicles highway-env placed (remove them, or add more)."""
         road, ego = self.env.road, self.env.vehicle
         if not self.keep_npcs:
             road.vehicles = [v for v in road.vehicles if v is ego]
@@ -270,8 +271,7 @@ class HighwayBackend:
             lane_heading=float(lane.heading_at(s)),
             lane_curvature=curvature,
             on_road=bool(ego.on_road),
-            in_intersection=lane_index[0] in self.scenario.intersection_nodes
-            and (self.scenario.name != "roundabout" or lane_index[1] in self.scenario.intersection_nodes),
+            in_intersection=self.scenario.in_junction(lane_index),
         )
         return WorldState(
             time_s=float(env.time),

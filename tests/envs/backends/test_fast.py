@@ -12,7 +12,6 @@ from drivelab.envs.backends.fast import traffic as T
 from drivelab.envs.backends.fast.backend import (
     FastBackend,
     idm_parameters,
-    link_successors,
     vehicles_to_array,
 )
 from drivelab.envs.backends.highway import HighwayBackend
@@ -82,9 +81,7 @@ def _racetrack_table():
     builder = HighwayBackend(SCENARIOS["racetrack"], "empty", "continuous")
     builder.reset(seed=0)
     network = builder.env.road.network
-    table = L.LaneTable.from_network(network)
-    link_successors(table, network)
-    return network, table
+    return network, L.LaneTable.from_network(network)
 
 
 def test_lane_following_vehicle_on_circular_lanes():
@@ -160,19 +157,39 @@ def test_mobil_decisions_match(others, expected):
     assert me.mobil(("0", "1", 0)) == ours == expected
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2, 3])
-def test_whole_traffic_matches_highway_env(seed):
-    reference = HighwayBackend(SCENARIOS["highway"], "regular", "meta")
-    fast = FastBackend(SCENARIOS["highway"], "regular", "meta")
-    reference.reset(seed), fast.reset(seed)
-    rng = np.random.default_rng(seed)
-    for _ in range(30):
-        action = int(rng.integers(5))
-        a, b = reference.step(action), fast.step(action)
-        assert np.abs(a.vehicles - b.vehicles).max() < 1e-6
-        assert a.events == b.events
-        if a.events.collided:
-            break
+def _random_actions(control: str, rng: np.random.Generator, count: int) -> list:
+    if control == "meta":
+        return [int(a) for a in rng.integers(5, size=count)]
+    return [(rng.uniform(-1, 1, 2) * [1.0, 0.1]).astype(np.float32) for _ in range(count)]
+
+
+@pytest.mark.parametrize(
+    "scenario, traffic, seeds",
+    [
+        ("highway", "regular", (0, 1, 2, 3)),
+        ("merge", "regular", (0, 1, 2)),
+        ("merge", "dense", (0,)),
+        ("roundabout", "regular", (0, 1, 2, 3)),
+        ("roundabout", "dense", (0, 1)),
+        ("racetrack", "dense", (0, 1)),
+    ],
+)
+def test_whole_traffic_matches_highway_env(scenario, traffic, seeds):
+    """Every vehicle of every step agrees with highway-env's, routes, obstacles and crashes included."""
+    control = SCENARIOS[scenario].action_kinds[0 if scenario != "racetrack" else -1]
+    reference = HighwayBackend(SCENARIOS[scenario], traffic, control)
+    fast = FastBackend(SCENARIOS[scenario], traffic, control)
+    for seed in seeds:
+        a, b = reference.reset(seed), fast.reset(seed)
+        np.testing.assert_array_equal(a.vehicles, b.vehicles)
+        for action in _random_actions(control, np.random.default_rng(seed), 30):
+            a, b = reference.step(action), fast.step(action)
+            assert np.abs(a.vehicles - b.vehicles).max(initial=0.0) < 1e-6
+            assert np.abs(a.ego.position - b.ego.position).max() < 1e-6
+            assert a.events == b.events and a.ego.in_intersection == b.ego.in_intersection
+            assert a.route.progress_m == pytest.approx(b.route.progress_m, abs=1e-6)
+            if a.events.collided or a.events.arrived or a.events.off_road:
+                break
 
 
 def test_drive_env_on_the_fast_backend():
@@ -187,5 +204,29 @@ def test_drive_env_on_the_fast_backend():
 
 
 def test_unsupported_scenario_is_refused():
-    with pytest.raises(UsageError, match="backend 'fast' does not run scenario 'merge' yet"):
-        DriveEnv("merge", backend="fast")
+    with pytest.raises(UsageError, match="backend 'fast' does not run scenario 'intersection' yet"):
+        DriveEnv("intersection", backend="fast")
+
+
+def test_vehicle_hitting_the_merge_obstacle():
+    """A vehicle driving into the obstacle at the end of the merge lane takes the whole impact
+    push and crashes, at the same frame and place as in highway-env."""
+    builder = HighwayBackend(SCENARIOS["merge"], "empty", "continuous")
+    builder.reset(seed=0)
+    network = builder.env.road.network
+    table = L.LaneTable.from_network(network)
+    road = Road(network=network, np_random=np.random.RandomState(0))
+    road.objects = list(builder.env.road.objects)
+    ramp = network.get_lane(("b", "c", 2))
+    vehicle = Vehicle(road, ramp.position(ramp.length - 30.0, 0.3), ramp.heading_at(0.0), speed=15.0)
+    road.vehicles.append(vehicle)
+    state = vehicles_to_array(road.vehicles, table, road.objects)
+    assert state[1, T.KIND] == T.OBSTACLE and (state[1, T.LEN], state[1, T.WID]) == (2.0, 2.0)
+    dt = 1 / 15
+    for _ in range(45):
+        road.act()
+        road.step(dt)
+        T.simulate(state, table.rows, idm_parameters(), 1, dt)
+        np.testing.assert_allclose(state[0, [T.X, T.Y]], vehicle.position, atol=1e-9)
+        assert bool(state[0, T.CRASHED]) == vehicle.crashed
+    assert vehicle.crashed

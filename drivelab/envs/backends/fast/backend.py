@@ -1,9 +1,10 @@
 """The fast backend: highway-env builds each episode, drivelab's compiled traffic model runs it.
 
 At reset highway-env lays out the road and places the vehicles exactly as it would itself (same
-seed, same scenario code); from then on every step is ``traffic.simulate`` over a vehicle array,
-and the WorldState is read from that array. Scenarios whose roads branch (merge, roundabout,
-intersection) need route following that is not ported yet: they are refused with a clear error.
+seed, same scenario code), or, for the highway, drivelab's own spawner draws the same numbers
+without building any highway-env object; from then on every step is ``traffic.simulate`` over a
+vehicle array (routes and obstacles included), and the WorldState is read from that array. The
+intersection (priority rules, vehicles spawned while driving) is not ported yet and is refused.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ from highway_env import utils as hw_utils
 from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.controller import ControlledVehicle
 from highway_env.vehicle.kinematics import Vehicle
+from highway_env.vehicle.objects import Obstacle
 
 from drivelab.envs.backends.fast import lanes as L
 from drivelab.envs.backends.fast import traffic as T
@@ -23,30 +25,19 @@ from drivelab.envs.scenarios import Scenario
 from drivelab.envs.world import Ego, Events, WorldState
 from drivelab.errors import UsageError
 
-SUPPORTED = ("highway",)
+SUPPORTED = ("highway", "merge", "roundabout", "racetrack")
 SPAWNERS = {"highway": spawn_highway}
 META = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")
 ACCELERATION_RANGE, STEERING_RANGE = (-5.0, 5.0), (-np.pi / 4, np.pi / 4)  # ContinuousAction's
 
 
-def link_successors(table: L.LaneTable, network) -> None:
-    """Fill NEXT_LANE where a road has exactly one successor with as many lanes (else -1)."""
+def vehicles_to_array(vehicles: list, table: L.LaneTable, objects: list = ()) -> np.ndarray:
+    """highway-env vehicles, then its obstacles → rows of ``traffic.VEHICLE_COLUMNS``, in order."""
     row_of = table.row_of
-    for row, (_from, _to, lane_id) in enumerate(table.indices):
-        successors = list(network.graph.get(_to, {}).items())
-        if len(successors) == 1 and len(successors[0][1]) == len(network.graph[_from][_to]):
-            table.rows[row, L.NEXT_LANE] = row_of[(_to, successors[0][0], lane_id)]
-
-
-def vehicles_to_array(vehicles: list, table: L.LaneTable) -> np.ndarray:
-    """highway-env vehicles → rows of ``traffic.VEHICLE_COLUMNS``, in the same order."""
-    row_of = table.row_of
-    array = np.zeros((len(vehicles), T.VEHICLE_COLUMNS))
+    array = np.zeros((len(vehicles) + len(objects), T.VEHICLE_COLUMNS))
     for i, vehicle in enumerate(vehicles):
         if type(vehicle) is not IDMVehicle and isinstance(vehicle, IDMVehicle):
             raise NotImplementedError(f"the fast backend has no {type(vehicle).__name__}")
-        if isinstance(vehicle, IDMVehicle) and vehicle.route:
-            raise NotImplementedError("the fast backend does not follow planned routes yet")
         row = array[i]
         row[T.X], row[T.Y] = vehicle.position
         row[T.HEADING], row[T.SPEED] = vehicle.heading, vehicle.speed
@@ -59,14 +50,29 @@ def vehicles_to_array(vehicles: list, table: L.LaneTable) -> np.ndarray:
         row[T.TIMER] = getattr(vehicle, "timer", 0.0)
         row[T.CRASHED] = float(vehicle.crashed)
         row[T.CHECK_COLLISIONS] = float(vehicle.check_collisions)
+        row[T.LEN], row[T.WID] = vehicle.LENGTH, vehicle.WIDTH
         if isinstance(vehicle, IDMVehicle):
             row[T.KIND] = T.IDM
         elif isinstance(vehicle, ControlledVehicle):
             row[T.KIND] = T.CONTROLLED
         elif isinstance(vehicle, Vehicle):
             row[T.KIND] = T.PLAIN
-        if vehicle.LENGTH != T.CAR_LENGTH or vehicle.WIDTH != T.CAR_WIDTH:
-            raise NotImplementedError("the fast backend assumes 5 m x 2 m vehicles")
+        route = getattr(vehicle, "route", None) or []
+        if len(route) > T.MAX_ROUTE:
+            raise NotImplementedError(f"the fast backend keeps routes of at most {T.MAX_ROUTE} roads")
+        row[T.ROUTE_END] = len(route)
+        for k, (_from, _to, lane_id) in enumerate(route):
+            row[T.ROUTE + 2 * k] = table.road_of(_from, _to)
+            row[T.ROUTE + 2 * k + 1] = -1 if lane_id is None else lane_id
+    for k, obstacle in enumerate(objects, start=len(vehicles)):
+        if type(obstacle) is not Obstacle:
+            raise NotImplementedError(f"the fast backend has no {type(obstacle).__name__}")
+        row = array[k]
+        row[T.X], row[T.Y] = obstacle.position
+        row[T.HEADING], row[T.SPEED] = obstacle.heading, obstacle.speed
+        row[T.LANE] = row[T.TARGET_LANE] = row_of[obstacle.lane_index]
+        row[T.CHECK_COLLISIONS] = float(obstacle.check_collisions)
+        row[T.LEN], row[T.WID], row[T.KIND] = obstacle.LENGTH, obstacle.WIDTH, T.OBSTACLE
     return array
 
 
@@ -107,10 +113,10 @@ class FastBackend:
         return self.builder.duration_s
 
     def _take_road(self) -> None:
-        """Convert the road highway-env just built (lanes, drawing, routes) to arrays."""
+        """Convert the road highway-env just built (lanes, drawing) to arrays. Every scenario's
+        road is the same in every episode, so this runs once."""
         network = self.builder.env.road.network
         self.table = L.LaneTable.from_network(network)
-        link_successors(self.table, network)
         self.lanes = self.table.rows
         self.road_map = build_road_map(network)
         self.graph_keys = {f: list(to) for f, to in network.graph.items()}
@@ -122,7 +128,7 @@ class FastBackend:
         env = self.builder.env
         if self.scenario.name in SPAWNERS:
             if not hasattr(self, "table"):
-                self.builder.reset(0)  # the road never changes: build it once
+                self.builder.reset(0)
                 self._take_road()
             speeds = getattr(env.action_type, "target_speeds", None)
             self.vehicles = SPAWNERS[self.scenario.name](
@@ -130,9 +136,11 @@ class FastBackend:
             )
             self.ego = 0
         else:
-            self.builder.reset(seed)
-            self._take_road()
-            self.vehicles = vehicles_to_array(env.road.vehicles, self.table)
+            env.reset(seed=int(seed))
+            self.builder.arrange_traffic()
+            if not hasattr(self, "table"):
+                self._take_road()
+            self.vehicles = vehicles_to_array(env.road.vehicles, self.table, env.road.objects)
             self.ego = env.road.vehicles.index(env.vehicle)
         ego_lane = int(self.vehicles[self.ego, T.LANE])
         if ego_lane not in self.routes:
@@ -168,6 +176,12 @@ class FastBackend:
 
     def step(self, control: int | np.ndarray) -> WorldState:
         """One policy step: the ego's control, then ``frames`` simulation steps."""
+        self.apply_control(control)
+        T.simulate(self.vehicles, self.lanes, self.idm, self.frames, self.dt_s)
+        return self.after_simulation()
+
+    def apply_control(self, control: int | np.ndarray) -> None:
+        """Set the ego's meta-action targets or continuous controls (before simulating)."""
         v, e = self.vehicles, self.ego
         if self.control == "meta":
             self._apply_meta(control)
@@ -176,12 +190,18 @@ class FastBackend:
             accel, steer = np.clip(control, -1, 1)
             v[e, T.ACCEL] = hw_utils.lmap(accel, [-1, 1], ACCELERATION_RANGE)
             v[e, T.STEER] = hw_utils.lmap(steer, [-1, 1], STEERING_RANGE)
-        T.simulate(v, self.lanes, self.idm, self.frames, self.dt_s)
+
+    def after_simulation(self) -> WorldState:
+        """Advance the clock and the route, and export the new WorldState (after simulating)."""
         self.time_s += 1 / self.policy_frequency_hz
-        position = v[e, [T.X, T.Y]]
-        self.progress_m = self.route.project(position, self.progress_m)
+        self.progress_m = self.route.project(self.vehicles[self.ego, [T.X, T.Y]], self.progress_m)
         self.world = self._export()
         return self.world
+
+    def _arrived(self) -> bool:
+        if self.scenario.arrival == "merge_end":
+            return bool(self.vehicles[self.ego, T.X] > 370)
+        return False
 
     def _export(self) -> WorldState:
         v, e, lanes = self.vehicles, self.ego, self.lanes
@@ -193,22 +213,16 @@ class FastBackend:
         target = int(v[e, T.TARGET_LANE]) if v[e, T.KIND] != T.PLAIN else lane
         lane_index = self.table.indices[lane]
         limit = lanes[lane, L.SPEED_LIMIT]
-        others = np.delete(v, e, axis=0)
-        vehicles = np.column_stack(
-            [
-                others[:, [T.X, T.Y, T.HEADING, T.SPEED]],
-                np.full(len(others), T.CAR_LENGTH),
-                np.full(len(others), T.CAR_WIDTH),
-            ]
-        )
+        others = v[v[:, T.KIND] != T.OBSTACLE]  # highway-env exports vehicles, not obstacles
+        vehicles = np.delete(others, e, axis=0)[:, [T.X, T.Y, T.HEADING, T.SPEED, T.LEN, T.WID]]
         ego = Ego(
             position=np.array([x, y]),
             heading=float(v[e, T.HEADING]),
             speed_mps=float(v[e, T.SPEED]),
             steering=float(v[e, T.STEER]),
             acceleration_mps2=float(v[e, T.ACCEL]),
-            length_m=T.CAR_LENGTH,
-            width_m=T.CAR_WIDTH,
+            length_m=float(v[e, T.LEN]),
+            width_m=float(v[e, T.WID]),
             lane_id=int(lanes[lane, L.LANE_ID]),
             lane_count=int(lanes[lane, L.LANE_COUNT]),
             target_lane_id=int(lanes[target, L.LANE_ID]),
@@ -217,7 +231,7 @@ class FastBackend:
             lane_heading=float(L.heading_at(lanes, lane, s)),
             lane_curvature=float(np.angle(np.exp(1j * (heading_ahead - heading_back)))) / 2.0,
             on_road=bool(on_road),
-            in_intersection=lane_index[0] in self.scenario.intersection_nodes,
+            in_intersection=self.scenario.in_junction(lane_index),
         )
         return WorldState(
             time_s=self.time_s,
@@ -230,6 +244,7 @@ class FastBackend:
                 collided=bool(v[e, T.CRASHED] > 0),
                 collision_with="vehicle" if v[e, T.CRASHED] > 0 else "",
                 off_road=not on_road,
+                arrived=self._arrived(),
             ),
             max_speed_mps=T.MAX_SPEED,
             speed_limit_mps=30.0 if np.isnan(limit) else float(limit),

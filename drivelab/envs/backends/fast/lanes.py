@@ -17,9 +17,9 @@ STRAIGHT, SINE, CIRCLE = 0, 1, 2
 (
     KIND, START_X, START_Y, DIR_X, DIR_Y, HEADING, LENGTH, WIDTH, AMPLITUDE, PULSATION, PHASE,
     CENTER_X, CENTER_Y, RADIUS, START_PHASE, SENSE, SPEED_LIMIT, FORBIDDEN, LANE_ID, LANE_COUNT,
-    FIRST_OF_ROAD, NEXT_LANE,
-) = range(22)  # fmt: skip
-LANE_COLUMNS = 22
+    FIRST_OF_ROAD, FROM_NODE, TO_NODE,
+) = range(23)  # fmt: skip
+LANE_COLUMNS = 23
 VEHICLE_LENGTH = 5.0  # AbstractLane.VEHICLE_LENGTH
 
 
@@ -30,10 +30,12 @@ class LaneTable:
     :param rows: (L, LANE_COLUMNS) float array, one lane per row, in ``network.lanes_list()`` order
         (the order highway-env breaks ties in when it looks for the closest lane).
     :param indices: highway-env lane index (from, to, id) of each row.
+    :param nodes: road-network node names; ``FROM_NODE`` / ``TO_NODE`` hold positions in it.
     """
 
     rows: np.ndarray
     indices: tuple[tuple, ...]
+    nodes: tuple[str, ...] = ()
 
     @property
     def row_of(self) -> dict[tuple, int]:
@@ -44,6 +46,8 @@ class LaneTable:
         indices = [
             (f, t, i) for f, to in network.graph.items() for t, lanes in to.items() for i in range(len(lanes))
         ]
+        nodes = list(dict.fromkeys([node for f, t, _ in indices for node in (f, t)]))
+        node_of = {node: k for k, node in enumerate(nodes)}
         first = {}
         rows = np.zeros((len(indices), LANE_COLUMNS))
         for row, (f, t, i) in enumerate(indices):
@@ -55,7 +59,7 @@ class LaneTable:
             values[FORBIDDEN] = float(lane.forbidden)
             values[LANE_ID], values[LANE_COUNT] = i, len(network.graph[f][t])
             values[FIRST_OF_ROAD] = first[(f, t)]
-            values[NEXT_LANE] = -1
+            values[FROM_NODE], values[TO_NODE] = node_of[f], node_of[t]
             if isinstance(lane, CircularLane):
                 values[KIND] = CIRCLE
                 values[CENTER_X], values[CENTER_Y] = lane.center
@@ -77,7 +81,11 @@ class LaneTable:
                     )
             else:
                 raise NotImplementedError(f"the fast backend has no {type(lane).__name__} yet")
-        return LaneTable(rows, tuple(indices))
+        return LaneTable(rows, tuple(indices), tuple(nodes))
+
+    def road_of(self, _from: str, _to: str) -> int:
+        """The row of lane 0 of road (_from, _to): how routes name a road."""
+        return self.row_of[(_from, _to, 0)]
 
 
 @njit(cache=True)
@@ -123,6 +131,13 @@ def on_lane(lanes: np.ndarray, lane: int, longitudinal: float, lateral: float, m
         and -VEHICLE_LENGTH <= longitudinal
         and longitudinal < row[LENGTH] + VEHICLE_LENGTH
     )
+
+
+@njit(cache=True)
+def distance(lanes: np.ndarray, lane: int, x: float, y: float) -> float:
+    """AbstractLane.distance: lateral offset plus how far the point lies beyond either end."""
+    s, r = local_coordinates(lanes, lane, x, y)
+    return np.abs(r) + max(s - lanes[lane, LENGTH], 0.0) + max(0.0 - s, 0.0)
 
 
 @njit(cache=True)

@@ -46,6 +46,7 @@ def spawn_highway(seed: int, table: L.LaneTable, graph_keys: dict, config: dict,
         row[T.LANE] = row[T.TARGET_LANE] = L.closest_lane(lanes, x, y, row[T.HEADING])
         row[T.TARGET_SPEED] = speed
         row[T.DELTA] = 4.0
+        row[T.LEN], row[T.WID] = T.CAR_LENGTH, T.CAR_WIDTH
         return row
 
     ego = create_random(25.0, config["initial_lane_id"], config["ego_spacing"])

@@ -18,29 +18,36 @@ from numba import njit
 
 from drivelab.envs.backends.fast.lanes import (
     FIRST_OF_ROAD,
+    FROM_NODE,
     LANE_COUNT,
     LANE_ID,
     LENGTH,
-    NEXT_LANE,
     SPEED_LIMIT,
+    TO_NODE,
     VEHICLE_LENGTH,
     closest_lane,
+    distance,
     heading_at,
     is_reachable_from,
     local_coordinates,
     on_lane,
+    position,
     wrap_to_pi,
 )
 
 # vehicle columns
 (
     X, Y, HEADING, SPEED, STEER, ACCEL, LANE, TARGET_LANE, TARGET_SPEED, DELTA, TIMER, CRASHED,
-    IMPACT_X, IMPACT_Y, HAS_IMPACT, CHECK_COLLISIONS, KIND,
-) = range(17)  # fmt: skip
-VEHICLE_COLUMNS = 17
+    IMPACT_X, IMPACT_Y, HAS_IMPACT, CHECK_COLLISIONS, KIND, LEN, WID, ROUTE_START, ROUTE_END,
+) = range(21)  # fmt: skip
+# A planned route (highway-env's ``vehicle.route``) is stored in the row itself: MAX_ROUTE entries
+# of (road, lane id) from column ROUTE, a road named by the row of its lane 0, lane id -1 for None;
+# entries ROUTE_START..ROUTE_END-1 are still to be driven (highway-env pops them from the front).
+ROUTE, MAX_ROUTE = 21, 12
+VEHICLE_COLUMNS = ROUTE + 2 * MAX_ROUTE
 # KIND: a plain kinematic vehicle (continuous-control ego), a lane-following controlled vehicle
-# (meta-action ego), an IDM/MOBIL vehicle (traffic)
-PLAIN, CONTROLLED, IDM = 0, 1, 2
+# (meta-action ego), an IDM/MOBIL vehicle (traffic), a static obstacle (after every vehicle)
+PLAIN, CONTROLLED, IDM, OBSTACLE = 0, 1, 2, 3
 
 # IDM / MOBIL parameters, read from highway-env's IDMVehicle class at reset (IDM_PARAMETERS order)
 IDM_PARAMETERS = (
@@ -57,7 +64,6 @@ KP_A, KP_HEADING, KP_LATERAL = 1 / TAU_ACC, 1 / TAU_HEADING, 1 / TAU_LATERAL
 MAX_STEERING_ANGLE = np.pi / 3
 CAR_LENGTH, CAR_WIDTH = 5.0, 2.0
 MAX_SPEED, MIN_SPEED = 40.0, -40.0
-DIAGONAL = np.sqrt(CAR_LENGTH**2 + CAR_WIDTH**2)
 
 
 @njit(cache=True)
@@ -81,7 +87,7 @@ def steering_control(v: np.ndarray, lanes: np.ndarray, i: int, target: int) -> f
     heading_command = np.arcsin(_clip(lateral_speed_command / not_zero(v[i, SPEED]), -1.0, 1.0))
     heading_ref = future_heading + _clip(heading_command, -np.pi / 4, np.pi / 4)
     heading_rate_command = KP_HEADING * wrap_to_pi(heading_ref - v[i, HEADING])
-    slip_angle = np.arcsin(_clip(CAR_LENGTH / 2 / not_zero(v[i, SPEED]) * heading_rate_command, -1.0, 1.0))
+    slip_angle = np.arcsin(_clip(v[i, LEN] / 2 / not_zero(v[i, SPEED]) * heading_rate_command, -1.0, 1.0))
     steering = np.arctan(2 * np.tan(slip_angle))
     return _clip(steering, -MAX_STEERING_ANGLE, MAX_STEERING_ANGLE)
 
@@ -119,7 +125,7 @@ def desired_gap(v: np.ndarray, p: np.ndarray, ego: int, front: int) -> float:
 @njit(cache=True)
 def idm_acceleration(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, me: int, ego: int, front: int) -> float:
     """IDMVehicle.acceleration as computed by vehicle ``me`` (its DELTA) for ``ego`` behind ``front``."""
-    if ego < 0:
+    if ego < 0 or v[ego, KIND] == OBSTACLE:  # highway-env: only a Vehicle accelerates
         return 0.0
     target_speed = v[ego, TARGET_SPEED] if v[ego, KIND] != PLAIN else 0.0
     lane = int(v[ego, LANE])
@@ -138,7 +144,7 @@ def idm_acceleration(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, me: int, e
 
 @njit(cache=True)
 def mobil(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, i: int, lane: int) -> bool:
-    """IDMVehicle.mobil for a vehicle without a planned lane (highway-env's route is None)."""
+    """IDMVehicle.mobil: is a change to ``lane`` safe for the new follower, and worth it?"""
     new_preceding, new_following = neighbours(v, lanes, i, lane)
     new_following_a = idm_acceleration(v, lanes, p, i, new_following, new_preceding)
     new_following_pred_a = idm_acceleration(v, lanes, p, i, new_following, i)
@@ -146,6 +152,14 @@ def mobil(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, i: int, lane: int) ->
         return False
     old_preceding, old_following = neighbours(v, lanes, i, int(v[i, LANE]))
     self_pred_a = idm_acceleration(v, lanes, p, i, i, new_preceding)
+    start = int(v[i, ROUTE_START])
+    if start < v[i, ROUTE_END] and v[i, ROUTE + 2 * start + 1] >= 0:
+        # the next route step names a lane: only move towards it, and only without hard braking
+        target_id = lanes[int(v[i, TARGET_LANE]), LANE_ID]
+        wanted_id = v[i, ROUTE + 2 * start + 1]
+        if np.sign(lanes[lane, LANE_ID] - target_id) != np.sign(wanted_id - target_id):
+            return False
+        return not self_pred_a < -p[MAX_BRAKING_IMPOSED]
     self_a = idm_acceleration(v, lanes, p, i, i, old_preceding)
     old_following_a = idm_acceleration(v, lanes, p, i, old_following, i)
     old_following_pred_a = idm_acceleration(v, lanes, p, i, old_following, old_preceding)
@@ -169,7 +183,7 @@ def change_lane_policy(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, i: int) 
                 if (
                     j != i
                     and int(v[j, LANE]) != target
-                    and v[j, KIND] != PLAIN
+                    and (v[j, KIND] == CONTROLLED or v[j, KIND] == IDM)
                     and int(v[j, TARGET_LANE]) == target
                 ):
                     s_j, _ = local_coordinates(lanes, lane, v[j, X], v[j, Y])
@@ -195,12 +209,60 @@ def change_lane_policy(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, i: int) 
 
 
 @njit(cache=True)
+def lane_on_next_road(
+    lanes: np.ndarray, lane: int, next_road: int, next_id: int, x: float, y: float
+) -> tuple[int, float]:
+    """RoadNetwork.next_lane_given_next_road: keep the lane id where the lane counts agree,
+    else take the next road's lane closest to (x, y). Returns (lane row, its distance)."""
+    count = int(lanes[next_road, LANE_COUNT])
+    if lanes[lane, LANE_COUNT] == count:
+        if next_id < 0:
+            next_id = int(lanes[lane, LANE_ID])
+    else:
+        best = np.inf
+        for k in range(count):
+            d = distance(lanes, next_road + k, x, y)
+            if d < best:
+                next_id, best = k, d
+    return next_road + next_id, distance(lanes, next_road + next_id, x, y)
+
+
+@njit(cache=True)
+def next_lane(v: np.ndarray, lanes: np.ndarray, i: int) -> int:
+    """RoadNetwork.next_lane for vehicle i's target lane: the route's next road when it starts
+    where this one ends (dropping a finished route step), else the successor road whose lane is
+    closest; the same lane when the road leads nowhere."""
+    lane = int(v[i, TARGET_LANE])
+    road, end_node = int(lanes[lane, FIRST_OF_ROAD]), lanes[lane, TO_NODE]
+    next_road, next_id = -1, -1
+    start, stop = int(v[i, ROUTE_START]), int(v[i, ROUTE_END])
+    if start < stop:
+        if int(v[i, ROUTE + 2 * start]) == road:
+            start += 1
+            v[i, ROUTE_START] = start
+        if start < stop and lanes[int(v[i, ROUTE + 2 * start]), FROM_NODE] == end_node:
+            next_road, next_id = int(v[i, ROUTE + 2 * start]), int(v[i, ROUTE + 2 * start + 1])
+    s, _ = local_coordinates(lanes, lane, v[i, X], v[i, Y])
+    x, y = position(lanes, lane, s, 0.0)
+    if next_road >= 0:
+        return lane_on_next_road(lanes, lane, next_road, next_id, x, y)[0]
+    best_lane, best = lane, np.inf
+    for candidate in range(lanes.shape[0]):  # roads leaving the end node, in the network's order
+        if lanes[candidate, FIRST_OF_ROAD] != candidate or lanes[candidate, FROM_NODE] != end_node:
+            continue
+        row, d = lane_on_next_road(lanes, lane, candidate, -1, x, y)
+        if d < best:
+            best_lane, best = row, d
+    return best_lane
+
+
+@njit(cache=True)
 def follow_road(v: np.ndarray, lanes: np.ndarray, i: int) -> None:
-    """ControlledVehicle.follow_road for roads with a single successor lane."""
+    """ControlledVehicle.follow_road: at the end of the target lane, target the next one."""
     target = int(v[i, TARGET_LANE])
     s, _ = local_coordinates(lanes, target, v[i, X], v[i, Y])
-    if s > lanes[target, LENGTH] - VEHICLE_LENGTH / 2 and lanes[target, NEXT_LANE] >= 0:
-        v[i, TARGET_LANE] = lanes[target, NEXT_LANE]
+    if s > lanes[target, LENGTH] - VEHICLE_LENGTH / 2:
+        v[i, TARGET_LANE] = next_lane(v, lanes, i)
 
 
 @njit(cache=True)
@@ -208,8 +270,8 @@ def act(v: np.ndarray, lanes: np.ndarray, p: np.ndarray) -> None:
     """Road.act: every vehicle decides its controls, in list order."""
     for i in range(v.shape[0]):
         kind = v[i, KIND]
-        if kind == PLAIN:
-            continue  # keeps the last continuous action
+        if kind == PLAIN or kind == OBSTACLE:
+            continue  # a plain vehicle keeps the last continuous action; obstacles never act
         if kind == IDM and v[i, CRASHED] > 0:
             continue
         follow_road(v, lanes, i)
@@ -247,7 +309,7 @@ def step_vehicle(v: np.ndarray, lanes: np.ndarray, i: int, dt: float) -> None:
         v[i, Y] += v[i, IMPACT_Y]
         v[i, CRASHED] = 1.0
         v[i, HAS_IMPACT] = 0.0
-    v[i, HEADING] += v[i, SPEED] * np.sin(beta) / (CAR_LENGTH / 2) * dt
+    v[i, HEADING] += v[i, SPEED] * np.sin(beta) / (v[i, LEN] / 2) * dt
     v[i, SPEED] += v[i, ACCEL] * dt
     v[i, LANE] = closest_lane(lanes, v[i, X], v[i, Y], v[i, HEADING])
 
@@ -256,7 +318,7 @@ def step_vehicle(v: np.ndarray, lanes: np.ndarray, i: int, dt: float) -> None:
 def _polygon(v: np.ndarray, i: int) -> np.ndarray:
     c, s = np.cos(v[i, HEADING]), np.sin(v[i, HEADING])
     corners = np.empty((5, 2))
-    half_l, half_w = CAR_LENGTH / 2, CAR_WIDTH / 2
+    half_l, half_w = v[i, LEN] / 2, v[i, WID] / 2
     local = ((-half_l, -half_w), (-half_l, half_w), (half_l, half_w), (half_l, -half_w))
     for k in range(4):
         px, py = local[k]
@@ -315,14 +377,18 @@ def polygons_intersecting(a, b, dax, day, dbx, dby):
 
 @njit(cache=True)
 def handle_collisions(v: np.ndarray, dt: float) -> None:
-    """Road.step's pairwise collision pass, in list order."""
+    """Road.step's collision pass: each vehicle against the vehicles after it, then the obstacles
+    (which sit after every vehicle), as RoadObject.handle_collisions."""
     n = v.shape[0]
     for i in range(n):
+        if v[i, KIND] == OBSTACLE:
+            break
         for j in range(i + 1, n):
             if not (v[i, CHECK_COLLISIONS] > 0 or v[j, CHECK_COLLISIONS] > 0):
                 continue
             dx, dy = v[j, X] - v[i, X], v[j, Y] - v[i, Y]
-            if np.sqrt(dx * dx + dy * dy) > DIAGONAL + v[i, SPEED] * dt:
+            diagonals = np.sqrt(v[i, LEN] ** 2 + v[i, WID] ** 2) + np.sqrt(v[j, LEN] ** 2 + v[j, WID] ** 2)
+            if np.sqrt(dx * dx + dy * dy) > diagonals / 2 + v[i, SPEED] * dt:
                 continue
             ci, si = np.cos(v[i, HEADING]), np.sin(v[i, HEADING])
             cj, sj = np.cos(v[j, HEADING]), np.sin(v[j, HEADING])
@@ -331,8 +397,11 @@ def handle_collisions(v: np.ndarray, dt: float) -> None:
                 v[i, SPEED] * ci * dt, v[i, SPEED] * si * dt, v[j, SPEED] * cj * dt, v[j, SPEED] * sj * dt,
             )  # fmt: skip
             if will_intersect:
-                v[i, IMPACT_X], v[i, IMPACT_Y], v[i, HAS_IMPACT] = tx / 2, ty / 2, 1.0
-                v[j, IMPACT_X], v[j, IMPACT_Y], v[j, HAS_IMPACT] = -tx / 2, -ty / 2, 1.0
+                if v[j, KIND] == OBSTACLE:  # the obstacle does not move: the vehicle takes it all
+                    v[i, IMPACT_X], v[i, IMPACT_Y], v[i, HAS_IMPACT] = tx, ty, 1.0
+                else:
+                    v[i, IMPACT_X], v[i, IMPACT_Y], v[i, HAS_IMPACT] = tx / 2, ty / 2, 1.0
+                    v[j, IMPACT_X], v[j, IMPACT_Y], v[j, HAS_IMPACT] = -tx / 2, -ty / 2, 1.0
             if intersecting:
                 v[i, CRASHED], v[j, CRASHED] = 1.0, 1.0
 
@@ -343,5 +412,16 @@ def simulate(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, frames: int, dt: f
     for _ in range(frames):
         act(v, lanes, p)
         for i in range(v.shape[0]):
-            step_vehicle(v, lanes, i, dt)
+            if v[i, KIND] != OBSTACLE:
+                step_vehicle(v, lanes, i, dt)
         handle_collisions(v, dt)
+
+
+@njit(cache=True)
+def simulate_batch(
+    v: np.ndarray, offsets: np.ndarray, lanes: np.ndarray, p: np.ndarray, frames: int, dt: float
+) -> None:
+    """``simulate`` for K worlds stacked in one array, world k in rows offsets[k]:offsets[k+1]
+    (the worlds share the road and the IDM parameters; they never see each other)."""
+    for k in range(offsets.size - 1):
+        simulate(v[offsets[k] : offsets[k + 1]], lanes, p, frames, dt)
