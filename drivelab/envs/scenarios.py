@@ -21,6 +21,8 @@ class Scenario:
     :param destination: road-network node the ego is routed to (None: follow the road).
     :param arrival: how the backend decides the goal is reached: "none", "merge_end", "exit".
     :param intersection_nodes: road-network nodes whose lanes count as junction area.
+    :param meta_target_speeds: the speeds FASTER / SLOWER step through (None: highway-env's
+        default 20, 25, 30 m/s), as in highway-env's own config of the scenario.
     """
 
     name: str
@@ -32,6 +34,7 @@ class Scenario:
     arrival: str = "none"
     intersection_nodes: tuple[str, ...] = ()
     continuous_policy_frequency_hz: int = 5
+    meta_target_speeds: tuple[float, ...] | None = None
     action_kinds: tuple[str, ...] = ("meta", "grid", "continuous")
 
     def in_junction(self, lane_index: tuple) -> bool:
@@ -82,6 +85,7 @@ SCENARIOS: dict[str, Scenario] = {
             },
             destination="nxs",
             intersection_nodes=_RING,
+            meta_target_speeds=(0, 8, 16),
         ),
         Scenario(
             "intersection",
@@ -96,6 +100,7 @@ SCENARIOS: dict[str, Scenario] = {
             destination="o1",
             arrival="exit",
             intersection_nodes=("ir0", "ir1", "ir2", "ir3"),
+            meta_target_speeds=(0, 4.5, 9),
         ),
         Scenario(
             "racetrack",

@@ -42,8 +42,10 @@ class FastBatch:
         arrays = [backend.vehicles for backend in self.backends]
         self.offsets = np.cumsum([0] + [len(a) for a in arrays])
         self.buffer = np.concatenate(arrays)
+        self.regulation = np.stack([backend.regulation for backend in self.backends])
         for k, backend in enumerate(self.backends):
             backend.vehicles = self.views[k] = self.buffer[self.offsets[k] : self.offsets[k + 1]]
+            backend.regulation = self.regulation[k]
 
     def step(self, controls: list) -> list[WorldState]:
         if any(b.vehicles is not view for b, view in zip(self.backends, self.views, strict=True)):
@@ -52,7 +54,7 @@ class FastBatch:
             backend.apply_control(control)
         first = self.backends[0]
         self.traffic.simulate_batch(
-            self.buffer, self.offsets, first.lanes, first.idm, first.frames, first.dt_s
+            self.buffer, self.offsets, first.lanes, first.idm, first.frames, first.dt_s, self.regulation
         )
         return [backend.after_simulation() for backend in self.backends]
 

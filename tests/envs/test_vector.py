@@ -12,7 +12,7 @@ from drivelab.errors import UsageError
 KWARGS = {"obs": "kinematics", "traffic": "regular", "duration_s": 6}
 
 
-@pytest.mark.parametrize("scenario", ["highway", "roundabout"])
+@pytest.mark.parametrize("scenario", ["highway", "roundabout", "intersection"])
 def test_batched_worlds_match_separate_envs(scenario):
     """The one-kernel batch gives every sub-env the same transitions as its own DriveEnv,
     across autoresets (episodes of 6 s end inside the 15 steps)."""

@@ -127,8 +127,8 @@ class HighwayBackend:
         self.extra_vehicles = config.pop("extra_vehicles", 0)
         if control == "meta":
             config["action"] = {"type": "DiscreteMetaAction"}
-            if scenario.name == "roundabout":  # highway-env's roundabout speeds
-                config["action"]["target_speeds"] = [0, 8, 16]
+            if scenario.meta_target_speeds:
+                config["action"]["target_speeds"] = list(scenario.meta_target_speeds)
         else:
             config["action"] = {"type": "ContinuousAction", "longitudinal": True, "lateral": True}
             config["policy_frequency"] = scenario.continuous_policy_frequency_hz

@@ -3,14 +3,16 @@
 At reset highway-env lays out the road and places the vehicles exactly as it would itself (same
 seed, same scenario code), or, for the highway, drivelab's own spawner draws the same numbers
 without building any highway-env object; from then on every step is ``traffic.simulate`` over a
-vehicle array (routes and obstacles included), and the WorldState is read from that array. The
-intersection (priority rules, vehicles spawned while driving) is not ported yet and is refused.
+vehicle array (routes, obstacles and the intersection's right-of-way rules included), and the
+WorldState is read from that array. The intersection's arrivals and departures between steps are
+drawn here from highway-env's own random generator, in highway-env's order.
 """
 
 from __future__ import annotations
 
 import numpy as np
 from highway_env import utils as hw_utils
+from highway_env.road.regulation import RegulatedRoad
 from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.controller import ControlledVehicle
 from highway_env.vehicle.kinematics import Vehicle
@@ -18,14 +20,14 @@ from highway_env.vehicle.objects import Obstacle
 
 from drivelab.envs.backends.fast import lanes as L
 from drivelab.envs.backends.fast import traffic as T
-from drivelab.envs.backends.fast.spawn import spawn_highway
+from drivelab.envs.backends.fast.spawn import IntersectionTraffic, spawn_highway
 from drivelab.envs.backends.highway import HighwayBackend, build_road_map
 from drivelab.envs.route import RouteTracker
 from drivelab.envs.scenarios import Scenario
 from drivelab.envs.world import Ego, Events, WorldState
 from drivelab.errors import UsageError
 
-SUPPORTED = ("highway", "merge", "roundabout", "racetrack")
+SUPPORTED = ("highway", "merge", "roundabout", "intersection", "racetrack")
 SPAWNERS = {"highway": spawn_highway}
 META = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")
 ACCELERATION_RANGE, STEERING_RANGE = (-5.0, 5.0), (-np.pi / 4, np.pi / 4)  # ContinuousAction's
@@ -57,7 +59,10 @@ def vehicles_to_array(vehicles: list, table: L.LaneTable, objects: list = ()) ->
             row[T.KIND] = T.CONTROLLED
         elif isinstance(vehicle, Vehicle):
             row[T.KIND] = T.PLAIN
-        route = getattr(vehicle, "route", None) or []
+        route = getattr(vehicle, "route", None)
+        row[T.ROUTED] = float(route is not None)
+        row[T.YIELDING] = float(getattr(vehicle, "is_yielding", False))
+        route = route or []
         if len(route) > T.MAX_ROUTE:
             raise NotImplementedError(f"the fast backend keeps routes of at most {T.MAX_ROUTE} roads")
         row[T.ROUTE_END] = len(route)
@@ -135,13 +140,24 @@ class FastBackend:
                 seed, self.table, self.graph_keys, env.config, self.control, speeds
             )
             self.ego = 0
+            self.regulation = np.zeros(2)
         else:
             env.reset(seed=int(seed))
             self.builder.arrange_traffic()
             if not hasattr(self, "table"):
                 self._take_road()
-            self.vehicles = vehicles_to_array(env.road.vehicles, self.table, env.road.objects)
-            self.ego = env.road.vehicles.index(env.vehicle)
+            road = env.road
+            self.vehicles = vehicles_to_array(road.vehicles, self.table, road.objects)
+            self.ego = road.vehicles.index(env.vehicle)
+            if isinstance(road, RegulatedRoad):
+                if RegulatedRoad.YIELD_DURATION != 0:
+                    raise NotImplementedError("the fast backend assumes RegulatedRoad.YIELD_DURATION = 0")
+                period = int(1 / self.dt_s / RegulatedRoad.REGULATION_FREQUENCY)
+                self.regulation = np.array([period, road.steps], dtype=float)
+            else:
+                self.regulation = np.zeros(2)
+        if self.scenario.name == "intersection":
+            self.arrivals = IntersectionTraffic(env, self.table)
         ego_lane = int(self.vehicles[self.ego, T.LANE])
         if ego_lane not in self.routes:
             self.routes[ego_lane] = self.builder.route_for(
@@ -177,7 +193,7 @@ class FastBackend:
     def step(self, control: int | np.ndarray) -> WorldState:
         """One policy step: the ego's control, then ``frames`` simulation steps."""
         self.apply_control(control)
-        T.simulate(self.vehicles, self.lanes, self.idm, self.frames, self.dt_s)
+        T.simulate(self.vehicles, self.lanes, self.idm, self.frames, self.dt_s, self.regulation)
         return self.after_simulation()
 
     def apply_control(self, control: int | np.ndarray) -> None:
@@ -192,8 +208,12 @@ class FastBackend:
             v[e, T.STEER] = hw_utils.lmap(steer, [-1, 1], STEERING_RANGE)
 
     def after_simulation(self) -> WorldState:
-        """Advance the clock and the route, and export the new WorldState (after simulating)."""
+        """Advance the clock, the traffic's arrivals and departures, the route, and export the new
+        WorldState (after simulating)."""
         self.time_s += 1 / self.policy_frequency_hz
+        if self.scenario.name == "intersection":  # IntersectionEnv.step: clear, then spawn
+            self.vehicles, self.ego = self.arrivals.clear(self.vehicles, self.ego)
+            self.vehicles = self.arrivals.spawn(self.vehicles, self.builder.env.config["spawn_probability"])
         self.progress_m = self.route.project(self.vehicles[self.ego, [T.X, T.Y]], self.progress_m)
         self.world = self._export()
         return self.world
@@ -201,6 +221,8 @@ class FastBackend:
     def _arrived(self) -> bool:
         if self.scenario.arrival == "merge_end":
             return bool(self.vehicles[self.ego, T.X] > 370)
+        if self.scenario.arrival == "exit":
+            return self.arrivals.has_exited(self.vehicles[self.ego], exit_distance_m=25.0)
         return False
 
     def _export(self) -> WorldState:

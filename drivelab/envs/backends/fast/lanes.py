@@ -17,9 +17,9 @@ STRAIGHT, SINE, CIRCLE = 0, 1, 2
 (
     KIND, START_X, START_Y, DIR_X, DIR_Y, HEADING, LENGTH, WIDTH, AMPLITUDE, PULSATION, PHASE,
     CENTER_X, CENTER_Y, RADIUS, START_PHASE, SENSE, SPEED_LIMIT, FORBIDDEN, LANE_ID, LANE_COUNT,
-    FIRST_OF_ROAD, FROM_NODE, TO_NODE,
-) = range(23)  # fmt: skip
-LANE_COLUMNS = 23
+    FIRST_OF_ROAD, FROM_NODE, TO_NODE, PRIORITY,
+) = range(24)  # fmt: skip
+LANE_COLUMNS = 24
 VEHICLE_LENGTH = 5.0  # AbstractLane.VEHICLE_LENGTH
 
 
@@ -56,7 +56,7 @@ class LaneTable:
             values = rows[row]
             values[LENGTH], values[WIDTH] = lane.length, lane.width_at(0.0)
             values[SPEED_LIMIT] = np.nan if lane.speed_limit is None else lane.speed_limit
-            values[FORBIDDEN] = float(lane.forbidden)
+            values[FORBIDDEN], values[PRIORITY] = float(lane.forbidden), lane.priority
             values[LANE_ID], values[LANE_COUNT] = i, len(network.graph[f][t])
             values[FIRST_OF_ROAD] = first[(f, t)]
             values[FROM_NODE], values[TO_NODE] = node_of[f], node_of[t]

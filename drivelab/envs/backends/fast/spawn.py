@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 from gymnasium.utils import seeding
+from highway_env import utils as hw_utils
 
 from drivelab.envs.backends.fast import lanes as L
 from drivelab.envs.backends.fast import traffic as T
@@ -66,3 +67,77 @@ def spawn_highway(seed: int, table: L.LaneTable, graph_keys: dict, config: dict,
         row[T.DELTA] = rng.uniform(low=DELTA_RANGE[0], high=DELTA_RANGE[1])
         rows.append(row)
     return np.array(rows)
+
+
+class IntersectionTraffic:
+    """IntersectionEnv's traffic between steps on vehicle rows: vehicles that reached the end of
+    their exit leave (``_clear_vehicles``), and a new one may arrive (``_spawn_vehicle``), drawing
+    from highway-env's own generator in highway-env's order so that episodes stay identical.
+
+    :param env: the highway-env IntersectionEnv that built the episode (its generator, network,
+        vehicle class).
+    :param table: the road's LaneTable.
+    """
+
+    def __init__(self, env, table: L.LaneTable) -> None:
+        self.rng, self.network, self.table = env.np_random, env.road.network, table
+        self.vehicle_class = hw_utils.class_from_path(env.config["other_vehicles_type"])
+        self.paths: dict[tuple[str, str], list[str]] = {}
+
+    def _lane_names(self, row: np.ndarray) -> tuple:
+        return self.table.indices[int(row[T.LANE])]
+
+    def has_exited(self, row: np.ndarray, exit_distance_m: float) -> bool:
+        """IntersectionEnv.has_arrived: on an exit lane, at least ``exit_distance_m`` along it."""
+        _from, _to, _ = self._lane_names(row)
+        s, _ = L.local_coordinates(self.table.rows, int(row[T.LANE]), row[T.X], row[T.Y])
+        return "il" in _from and "o" in _to and s >= exit_distance_m
+
+    def clear(self, vehicles: np.ndarray, ego: int) -> tuple[np.ndarray, int]:
+        """Drop the vehicles leaving the scene (and any without a route); the ego stays."""
+        keep = []
+        for k, row in enumerate(vehicles):
+            lane = int(row[T.LANE])
+            leaving = self.has_exited(row, self.table.rows[lane, L.LENGTH] - 4 * row[T.LEN])
+            keep.append(k == ego or not (leaving or row[T.ROUTED] == 0))
+        keep = np.array(keep, dtype=bool)
+        return vehicles[keep], int(np.count_nonzero(keep[:ego]))
+
+    def spawn(
+        self,
+        vehicles: np.ndarray,
+        spawn_probability: float,
+        longitudinal: float = 0.0,
+        position_deviation: float = 1.0,
+        speed_deviation: float = 1.0,
+    ) -> np.ndarray:
+        """Maybe add one vehicle at an entry, routed to another exit (IntersectionEnv._spawn_vehicle)."""
+        rng, lanes = self.rng, self.table.rows
+        if rng.uniform() > spawn_probability:
+            return vehicles
+        entry, exit_ = rng.choice(range(4), size=2, replace=False)
+        lane = self.table.row_of[(f"o{entry}", f"ir{entry}", 0)]
+        s = longitudinal + 5.0 + rng.normal() * position_deviation
+        speed = 8.0 + rng.normal() * speed_deviation
+        x, y = L.position(lanes, lane, s, 0.0)
+        if len(vehicles) and np.min(np.linalg.norm(vehicles[:, [T.X, T.Y]] - [x, y], axis=1)) < 15:
+            return vehicles
+        row = np.zeros(T.VEHICLE_COLUMNS)
+        row[T.X], row[T.Y], row[T.HEADING], row[T.SPEED] = x, y, L.heading_at(lanes, lane, s), speed
+        row[T.LANE] = row[T.TARGET_LANE] = L.closest_lane(lanes, x, y, row[T.HEADING])
+        row[T.TARGET_SPEED] = speed
+        row[T.TIMER] = (np.sum(np.array([x, y])) * np.pi) % self.vehicle_class.LANE_CHANGE_DELAY
+        row[T.CHECK_COLLISIONS], row[T.KIND] = 1.0, T.IDM
+        row[T.LEN], row[T.WID] = self.vehicle_class.LENGTH, self.vehicle_class.WIDTH
+        start = self.table.indices[int(row[T.LANE])]
+        key = (start[1], f"o{exit_}")
+        if key not in self.paths:
+            self.paths[key] = self.network.shortest_path(*key)
+        path = self.paths[key]
+        route = [start] + [(path[k], path[k + 1], None) for k in range(len(path) - 1)]
+        row[T.ROUTED], row[T.ROUTE_END] = 1.0, len(route)
+        for k, (_from, _to, lane_id) in enumerate(route):
+            row[T.ROUTE + 2 * k] = self.table.road_of(_from, _to)
+            row[T.ROUTE + 2 * k + 1] = -1 if lane_id is None else lane_id
+        row[T.DELTA] = rng.uniform(low=DELTA_RANGE[0], high=DELTA_RANGE[1])  # randomize_behavior
+        return np.vstack([vehicles, row])

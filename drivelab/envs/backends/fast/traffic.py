@@ -22,6 +22,7 @@ from drivelab.envs.backends.fast.lanes import (
     LANE_COUNT,
     LANE_ID,
     LENGTH,
+    PRIORITY,
     SPEED_LIMIT,
     TO_NODE,
     VEHICLE_LENGTH,
@@ -38,12 +39,14 @@ from drivelab.envs.backends.fast.lanes import (
 # vehicle columns
 (
     X, Y, HEADING, SPEED, STEER, ACCEL, LANE, TARGET_LANE, TARGET_SPEED, DELTA, TIMER, CRASHED,
-    IMPACT_X, IMPACT_Y, HAS_IMPACT, CHECK_COLLISIONS, KIND, LEN, WID, ROUTE_START, ROUTE_END,
-) = range(21)  # fmt: skip
+    IMPACT_X, IMPACT_Y, HAS_IMPACT, CHECK_COLLISIONS, KIND, LEN, WID, ROUTE_START, ROUTE_END, ROUTED,
+    YIELDING,
+) = range(23)  # fmt: skip
 # A planned route (highway-env's ``vehicle.route``) is stored in the row itself: MAX_ROUTE entries
 # of (road, lane id) from column ROUTE, a road named by the row of its lane 0, lane id -1 for None;
-# entries ROUTE_START..ROUTE_END-1 are still to be driven (highway-env pops them from the front).
-ROUTE, MAX_ROUTE = 21, 12
+# entries ROUTE_START..ROUTE_END-1 are still to be driven (highway-env pops them from the front);
+# ROUTED is 0 where highway-env's route is None. YIELDING: stopped by RegulatedRoad's right of way.
+ROUTE, MAX_ROUTE = 23, 12
 VEHICLE_COLUMNS = ROUTE + 2 * MAX_ROUTE
 # KIND: a plain kinematic vehicle (continuous-control ego), a lane-following controlled vehicle
 # (meta-action ego), an IDM/MOBIL vehicle (traffic), a static obstacle (after every vehicle)
@@ -407,10 +410,111 @@ def handle_collisions(v: np.ndarray, dt: float) -> None:
 
 
 @njit(cache=True)
-def simulate(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, frames: int, dt: float) -> None:
-    """AbstractEnv._simulate for ``frames`` simulation steps of ``dt`` seconds."""
+def predicted_pose(v: np.ndarray, lanes: np.ndarray, i: int, t: float) -> tuple[float, float, float]:
+    """ControlledVehicle.predict_trajectory_constant_speed at time t: (x, y, heading) along its
+    route (RoadNetwork.position_heading_along_route; a route step without a lane id keeps the
+    current lane id)."""
+    lane = int(v[i, LANE])
+    s, _ = local_coordinates(lanes, lane, v[i, X], v[i, Y])
+    s += v[i, SPEED] * t
+    start, stop = int(v[i, ROUTE_START]), int(v[i, ROUTE_END])
+    if start >= stop:  # highway-env: route or [lane_index]
+        return position(lanes, lane, s, 0.0) + (heading_at(lanes, lane, s),)
+    k = start
+    while True:
+        lane_id = int(v[i, ROUTE + 2 * k + 1])
+        row = int(v[i, ROUTE + 2 * k]) + (lane_id if lane_id >= 0 else int(lanes[lane, LANE_ID]))
+        if k + 1 < stop and s > lanes[row, LENGTH]:
+            s -= lanes[row, LENGTH]
+            k += 1
+            continue
+        return position(lanes, row, s, 0.0) + (heading_at(lanes, row, s),)
+
+
+@njit(cache=True)
+def _corner_inside(x1, y1, length1, width1, angle1, x2, y2, length2, width2, angle2) -> bool:
+    """utils.has_corner_inside: a corner, edge midpoint or the centre of rectangle 1 in rectangle 2."""
+    c1, s1 = np.cos(angle1), np.sin(angle1)
+    c2, s2 = np.cos(angle2), np.sin(angle2)
+    hl, hw = length1 / 2, width1 / 2
+    local = (
+        (-hl, -hw), (-hl, hw), (hl, hw), (hl, -hw), (0.0, 0.0), (-hl, 0.0), (hl, 0.0), (0.0, -hw), (0.0, hw)
+    )  # fmt: skip
+    for k in range(9):
+        px, py = local[k]
+        dx = c1 * px + -s1 * py + x1 - x2
+        dy = s1 * px + c1 * py + y1 - y2
+        u, w = c2 * dx + -s2 * dy, s2 * dx + c2 * dy  # highway-env rotates by +angle here
+        if -length2 / 2 <= u <= length2 / 2 and -width2 / 2 <= w <= width2 / 2:
+            return True
+    return False
+
+
+@njit(cache=True)
+def conflict_possible(v: np.ndarray, lanes: np.ndarray, i: int, j: int) -> bool:
+    """RegulatedRoad.is_conflict_possible: do i and j, driving on at constant speed along their
+    routes, come within a (1.5 length x 0.9 width) box of each other in the next 3 s?"""
+    for step in range(1, 12):  # np.arange(0.25, 3, 0.25)
+        t = 0.25 * step
+        x1, y1, h1 = predicted_pose(v, lanes, i, t)
+        x2, y2, h2 = predicted_pose(v, lanes, j, t)
+        if np.sqrt((x2 - x1) ** 2 + (y2 - y1) ** 2) > v[i, LEN]:
+            continue
+        l1, w1, l2, w2 = 1.5 * v[i, LEN], 0.9 * v[i, WID], 1.5 * v[j, LEN], 0.9 * v[j, WID]
+        if _corner_inside(x1, y1, l1, w1, h1, x2, y2, l2, w2, h2) or _corner_inside(
+            x2, y2, l2, w2, h2, x1, y1, l1, w1, h1
+        ):
+            return True
+    return False
+
+
+@njit(cache=True)
+def front_distance(v: np.ndarray, i: int, j: int) -> float:
+    """RoadObject.front_distance_to: how far j is ahead of i along i's heading."""
+    return np.cos(v[i, HEADING]) * (v[j, X] - v[i, X]) + np.sin(v[i, HEADING]) * (v[j, Y] - v[i, Y])
+
+
+@njit(cache=True)
+def enforce_road_rules(v: np.ndarray, lanes: np.ndarray) -> None:
+    """RegulatedRoad.enforce_road_rules: release the vehicles that yielded (highway-env's
+    YIELD_DURATION is 0: they yield until the next regulation step), then, for each pair that may
+    conflict, the one on the lower-priority lane (or behind) stops."""
+    n = v.shape[0]
+    for i in range(n):
+        if v[i, YIELDING] > 0:
+            v[i, TARGET_SPEED] = lanes[int(v[i, LANE]), SPEED_LIMIT]
+            v[i, YIELDING] = 0.0
+    for i in range(n - 1):
+        if v[i, KIND] == OBSTACLE:
+            break
+        for j in range(i + 1, n):
+            if v[j, KIND] == OBSTACLE or not conflict_possible(v, lanes, i, j):
+                continue
+            priority_i, priority_j = lanes[int(v[i, LANE]), PRIORITY], lanes[int(v[j, LANE]), PRIORITY]
+            if priority_i != priority_j:
+                yielding = j if priority_i > priority_j else i
+            else:  # the one behind yields
+                yielding = i if front_distance(v, i, j) > front_distance(v, j, i) else j
+            if v[yielding, KIND] == IDM:  # the meta-action ego (an MDPVehicle) never yields
+                v[yielding, TARGET_SPEED] = 0.0
+                v[yielding, YIELDING] = 1.0
+
+
+@njit(cache=True)
+def simulate(
+    v: np.ndarray, lanes: np.ndarray, p: np.ndarray, frames: int, dt: float, regulation: np.ndarray
+) -> None:
+    """AbstractEnv._simulate for ``frames`` simulation steps of ``dt`` seconds.
+
+    :param regulation: [period, road steps so far]: a RegulatedRoad enforces its rules every
+        ``period`` road steps (0: a plain Road); the step count is updated in place.
+    """
     for _ in range(frames):
         act(v, lanes, p)
+        if regulation[0] > 0:
+            regulation[1] += 1
+            if regulation[1] % regulation[0] == 0:
+                enforce_road_rules(v, lanes)
         for i in range(v.shape[0]):
             if v[i, KIND] != OBSTACLE:
                 step_vehicle(v, lanes, i, dt)
@@ -419,9 +523,16 @@ def simulate(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, frames: int, dt: f
 
 @njit(cache=True)
 def simulate_batch(
-    v: np.ndarray, offsets: np.ndarray, lanes: np.ndarray, p: np.ndarray, frames: int, dt: float
+    v: np.ndarray,
+    offsets: np.ndarray,
+    lanes: np.ndarray,
+    p: np.ndarray,
+    frames: int,
+    dt: float,
+    regulation: np.ndarray,
 ) -> None:
     """``simulate`` for K worlds stacked in one array, world k in rows offsets[k]:offsets[k+1]
-    (the worlds share the road and the IDM parameters; they never see each other)."""
+    with its regulation state in regulation[k] (the worlds share the road and the IDM
+    parameters; they never see each other)."""
     for k in range(offsets.size - 1):
-        simulate(v[offsets[k] : offsets[k + 1]], lanes, p, frames, dt)
+        simulate(v[offsets[k] : offsets[k + 1]], lanes, p, frames, dt, regulation[k])
