@@ -67,7 +67,9 @@ def main() -> None:
     actions = np.random.default_rng(0).integers(0, 5, size=args.steps)
 
     raw = gymnasium.make("highway-fast-v0")  # Kinematics observation, 20 vehicles, 3 lanes
-    ours = DriveEnv("highway", obs="kinematics", action="meta", reward="highway", traffic="regular")
+    ours = DriveEnv(
+        "highway", obs="kinematics", action="meta", reward="highway", traffic="regular", backend="highway"
+    )
     raw_rates, our_rates, ratios = [], [], []
     for repeat in range(args.repeats):
         raw_rate = steps_per_second(raw, actions, seed=repeat)

@@ -29,8 +29,9 @@ class DriveEnv(gym.Env):
     :param action: "meta", "grid" or "continuous" (or an ActionAdapter).
     :param reward: a preset, ``"term=w,…"``, ``"preset,term=w"`` or a dict of weights.
     :param traffic: "empty", "regular" or "dense".
-    :param backend: "highway" (highway-env itself, the reference) or "fast" (drivelab's compiled
-        traffic model on highway-env's roads; highway scenario only so far).
+    :param backend: "fast" (drivelab's compiled port of highway-env's traffic model on highway-env's
+        roads: step for step the same episodes, many times faster, see
+        benchmarks/results/backend_speed.md) or "highway" (highway-env itself, the reference).
     :param duration_s: episode time limit; default the scenario's.
     :param offroad_terminal: end the episode when the ego leaves the road.
     :param action_options: keyword options of the action adapter (e.g. ``steer_levels``).
@@ -46,7 +47,7 @@ class DriveEnv(gym.Env):
         action: str | ActionAdapter = "meta",
         reward: str | dict = "highway",
         traffic: str = "regular",
-        backend: str = "highway",
+        backend: str = "fast",
         duration_s: float | None = None,
         offroad_terminal: bool = True,
         action_options: dict | None = None,
