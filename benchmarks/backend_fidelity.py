@@ -91,7 +91,7 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--scenarios", default=",".join(SUPPORTED))
     args = parser.parse_args()
-    rows = []
+    rows, timings = [], {}
     for name in args.scenarios.split(","):
         scenario = SCENARIOS[name]
         control = "meta" if "meta" in scenario.action_kinds else "continuous"
@@ -101,6 +101,7 @@ def main() -> None:
             start = time.perf_counter()
             stats = [episode_statistics(backend, seed) for seed in range(args.episodes)]
             results[label] = (stats, time.perf_counter() - start)
+        timings[name] = {label: seconds for label, (_, seconds) in results.items()}
         for metric in ("npc_speed_mps", "lane_changes_per_vehicle_km", "crashed"):
             binary = metric == "crashed"
             reference = interval(np.array([s[metric] for s in results["highway"][0]]), binary)
@@ -123,6 +124,7 @@ def main() -> None:
         "date": time.strftime("%Y-%m-%d"),
         "episodes": args.episodes,
         "rows": rows,
+        "wall_s": timings,
     }
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "backend_fidelity.json").write_text(json.dumps(result, indent=2))
@@ -143,7 +145,12 @@ def main() -> None:
             for r in rows
         ],
         "",
-        "The intersection is not run by the fast backend yet (priority rules and spawning while driving).",
+        "Wall time per backend and scenario (all episodes, scripted ego, no learning):",
+        "",
+        *[
+            f"- {name}: highway-env {t['highway']:.0f} s, fast {t['fast']:.0f} s"
+            for name, t in timings.items()
+        ],
         "",
     ]
     (RESULTS / "backend_fidelity.md").write_text("\n".join(lines))
