@@ -25,19 +25,21 @@ def spawn_highway(seed: int, table: L.LaneTable, graph_keys: dict, config: dict,
     """
     rng, _ = seeding.np_random(int(seed))
     rows, row_of, lanes = [], table.row_of, table.rows
+    froms = list(graph_keys)
     longitudinals: list[float] = []
 
+    # Generator.choice(sequence) draws integers(0, len): the same numbers, without its overhead
     def create_random(speed, lane_id, spacing):
-        _from = rng.choice(list(graph_keys))
-        _to = rng.choice(list(graph_keys[_from]))
+        _from = froms[rng.integers(len(froms))]
+        _to = graph_keys[_from][rng.integers(len(graph_keys[_from]))]
         count = int(lanes[row_of[(_from, _to, 0)], L.LANE_COUNT])
-        _id = lane_id if lane_id is not None else rng.choice(count)
+        _id = lane_id if lane_id is not None else rng.integers(count)
         lane = row_of[(_from, _to, int(_id))]
         if speed is None:
             limit = lanes[lane, L.SPEED_LIMIT]
             speed = rng.uniform(0.7 * limit, 0.8 * limit)
         offset = spacing * (12 + 1.0 * speed) * np.exp(-5 / 40 * count)
-        x0 = np.max(longitudinals) if longitudinals else 3 * offset
+        x0 = max(longitudinals) if longitudinals else 3 * offset
         x0 += offset * rng.uniform(0.9, 1.1)
         x, y = L.position(lanes, lane, x0, 0.0)
         # every highway lane starts at x = 0 along +x: a vehicle's longitudinal coordinate is its x
@@ -63,7 +65,7 @@ def spawn_highway(seed: int, table: L.LaneTable, graph_keys: dict, config: dict,
     for _ in range(config["vehicles_count"]):
         row = create_random(None, None, 1 / config["vehicles_density"])
         row[T.KIND] = T.IDM
-        row[T.TIMER] = (np.sum(row[[T.X, T.Y]]) * np.pi) % 1.0  # IDMVehicle's initial timer
+        row[T.TIMER] = ((row[T.X] + row[T.Y]) * np.pi) % 1.0  # IDMVehicle's initial timer
         row[T.DELTA] = rng.uniform(low=DELTA_RANGE[0], high=DELTA_RANGE[1])
         rows.append(row)
     return np.array(rows)
