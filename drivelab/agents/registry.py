@@ -29,14 +29,13 @@ class AlgoSpec:
 def _registry() -> dict[str, AlgoSpec]:
     from drivelab.agents.sb3 import build_sb3, load_sb3
 
-    discrete, everything = ("meta", "grid"), ("meta", "grid", "continuous")
+    discrete, continuous = ("meta", "grid"), ("continuous", "target_speed")
+    everything = discrete + continuous
     return {
         "dqn": AlgoSpec("dqn", "stable-baselines3 DQN", discrete, build_sb3, load_sb3, sb3_replay=True),
         "ppo": AlgoSpec("ppo", "stable-baselines3 PPO", everything, build_sb3, load_sb3),
         "a2c": AlgoSpec("a2c", "stable-baselines3 A2C", everything, build_sb3, load_sb3),
-        "sac": AlgoSpec(
-            "sac", "stable-baselines3 SAC", ("continuous",), build_sb3, load_sb3, sb3_replay=True
-        ),
+        "sac": AlgoSpec("sac", "stable-baselines3 SAC", continuous, build_sb3, load_sb3, sb3_replay=True),
     }
 
 

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from gymnasium import spaces
 
+from drivelab.envs.world import WorldState
 from drivelab.errors import UsageError
 
 META_ACTIONS = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")
@@ -33,6 +34,14 @@ class ActionAdapter:
 
     def to_control(self, action) -> int | np.ndarray:
         raise NotImplementedError
+
+    def control_for(self, action, world: WorldState) -> int | np.ndarray:
+        """The control for ``action`` in ``world`` (the state before the step). Adapters with a
+        feedback loop read the world; the others only map the action."""
+        return self.to_control(action)
+
+    def reset(self) -> None:
+        """Forget any controller state at the start of an episode."""
 
     def describe(self) -> str:
         raise NotImplementedError
@@ -101,7 +110,56 @@ class ContinuousAction(ActionAdapter):
         return "continuous [steering, acceleration] in [-1, 1] (±45°, ±5 m/s²)"
 
 
-ACTIONS = {"meta": MetaAction, "grid": GridAction, "continuous": ContinuousAction}
+class TargetSpeedAction(ActionAdapter):
+    """``[target speed, steering]`` in [0, 1] × [-1, 1]: the agent picks a speed (a fraction of
+    ``max_speed_mps``) and a steering command; a longitudinal PID turns the speed error into the
+    acceleration command, as RLAD does for throttle and brake (seed 000; gains kp 1.0, ki 0.2,
+    kd 0.001 per the paper's code). The PID output is the normalised acceleration in [-1, 1]
+    (highway-env's ±5 m/s²) where CARLA has throttle (> 0) and brake (< 0).
+
+    :param max_speed_mps: the target speed at action 1 (RLAD / Roach: 6 m/s).
+    """
+
+    name, control = "target_speed", "continuous"
+
+    def __init__(
+        self, max_speed_mps: float = 6.0, kp: float = 1.0, ki: float = 0.2, kd: float = 0.001
+    ) -> None:
+        if max_speed_mps <= 0:
+            raise UsageError("target_speed needs max_speed_mps > 0")
+        self.max_speed_mps, self.kp, self.ki, self.kd = float(max_speed_mps), kp, ki, kd
+        self.space = spaces.Box(np.array([0.0, -1.0], np.float32), np.array([1.0, 1.0], np.float32))
+        self.reset()
+
+    def reset(self) -> None:
+        self.integral, self.previous_error = 0.0, None
+
+    def pid(self, target_mps: float, speed_mps: float, dt_s: float) -> float:
+        """One PID update: the normalised acceleration that drives ``speed_mps`` to ``target_mps``."""
+        error = target_mps - speed_mps
+        self.integral += error * dt_s
+        derivative = 0.0 if self.previous_error is None else (error - self.previous_error) / dt_s
+        self.previous_error = error
+        return float(np.clip(self.kp * error + self.ki * self.integral + self.kd * derivative, -1.0, 1.0))
+
+    def control_for(self, action, world: WorldState) -> np.ndarray:
+        speed_fraction, steer = np.clip(np.asarray(action, dtype=np.float32).reshape(2), [0.0, -1.0], 1.0)
+        accel = self.pid(float(speed_fraction) * self.max_speed_mps, world.ego.speed_mps, world.dt_s)
+        return np.array([accel, steer], dtype=np.float32)  # highway-env's order
+
+    def to_control(self, action) -> np.ndarray:
+        raise UsageError("target_speed actions need the world's speed: call control_for(action, world)")
+
+    def describe(self) -> str:
+        return f"[target speed 0..{self.max_speed_mps:g} m/s through a PID, steering] in [0, 1] x [-1, 1]"
+
+
+ACTIONS = {
+    "meta": MetaAction,
+    "grid": GridAction,
+    "continuous": ContinuousAction,
+    "target_speed": TargetSpeedAction,
+}
 
 
 def make_action(name: str, **options) -> ActionAdapter:

@@ -101,6 +101,7 @@ class DriveEnv(gym.Env):
         super().reset(seed=seed)
         episode_seed = int(self.np_random.integers(2**31 - 1))
         self.world = self.backend.reset(episode_seed)
+        self.adapter.reset()
         for index, sensor in enumerate(self.sensors):
             sensor.reset(self.world, np.random.default_rng([episode_seed, index]))
         self.metrics = EpisodeMetrics(self.world)
@@ -109,7 +110,7 @@ class DriveEnv(gym.Env):
     def step(self, action: Any):
         if self.world is None:
             raise RuntimeError("call reset() before step()")
-        control = self.adapter.to_control(action)
+        control = self.adapter.control_for(action, self.world)
         return self.finish_step(self.backend.step(control), control)
 
     def finish_step(self, world: WorldState, control: Any):

@@ -47,4 +47,4 @@ class RouteTracker:
 
     def at(self, progress_m: float) -> Route:
         """The WorldState's Route at ``progress_m``."""
-        return Route(self.polyline, progress_m, self.length_m)
+        return Route(self.polyline, progress_m, self.length_m, self.stations, self.closed)

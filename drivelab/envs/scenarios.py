@@ -35,7 +35,7 @@ class Scenario:
     intersection_nodes: tuple[str, ...] = ()
     continuous_policy_frequency_hz: int = 5
     meta_target_speeds: tuple[float, ...] | None = None
-    action_kinds: tuple[str, ...] = ("meta", "grid", "continuous")
+    action_kinds: tuple[str, ...] = ("meta", "grid", "continuous", "target_speed")
 
     def in_junction(self, lane_index: tuple) -> bool:
         """Whether highway-env lane (from, to, id) is junction area: it leaves a junction node
@@ -112,7 +112,7 @@ SCENARIOS: dict[str, Scenario] = {
                 "regular": {"other_vehicles": 1},
                 "dense": {"other_vehicles": 5},
             },
-            action_kinds=("grid", "continuous"),  # highway-env's racetrack has no meta-actions
+            action_kinds=("grid", "continuous", "target_speed"),  # highway-env's racetrack: no meta-actions
         ),
     ]
 }

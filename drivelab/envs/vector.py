@@ -104,7 +104,7 @@ class DriveVectorEnv(VectorEnv):
     def step(self, actions: Any):
         """One step of every sub-env (same-step autoreset)."""
         actions = list(iterate(self.action_space, actions))
-        controls = [env.adapter.to_control(a) for env, a in zip(self.envs, actions, strict=True)]
+        controls = [env.adapter.control_for(a, env.world) for env, a in zip(self.envs, actions, strict=True)]
         if self.batch is not None:
             worlds = self.batch.step(controls)
         else:

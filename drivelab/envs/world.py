@@ -14,6 +14,9 @@ import numpy as np
 # Columns of ``WorldState.vehicles``.
 VEHICLE_COLUMNS = ("x", "y", "heading", "speed", "length", "width")
 
+# Traffic-light states of ``WorldState.traffic_lights[:, 3]``.
+LIGHT_GREEN, LIGHT_YELLOW, LIGHT_RED = 0, 1, 2
+
 # Marking kinds of ``RoadMap.marking_kinds`` (same numbering as highway-env's LineType).
 MARKING_NONE, MARKING_DASHED, MARKING_SOLID = 0, 1, 2
 
@@ -78,10 +81,30 @@ class Route:
     polyline: np.ndarray  # (K, 2) from the ego's lane start to the destination (or look-ahead)
     progress_m: float = 0.0  # arc length travelled along the polyline
     length_m: float = 0.0  # total arc length; ``inf`` where the road does not end
+    stations_m: np.ndarray | None = None  # (K,) arc length of each polyline point (computed if None)
+    closed: bool = False  # a circuit: arc lengths wrap round the lap
 
     @property
     def remaining_m(self) -> float:
         return max(self.length_m - self.progress_m, 0.0)
+
+    def poses_at(self, distances_m: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+        """Points (..., 2) and headings (...) at arc lengths along the polyline: clamped to its
+        ends (so a finished route repeats its last point), wrapped round the lap on a circuit."""
+        stations = self.stations_m
+        if stations is None:
+            steps = np.linalg.norm(np.diff(self.polyline, axis=0), axis=1)
+            stations = np.r_[0.0, np.cumsum(steps)]
+        distances = np.asarray(distances_m, dtype=float)
+        if self.closed and stations[-1] > 0:
+            distances = np.mod(distances, stations[-1])
+        distances = np.clip(distances, 0.0, stations[-1])
+        segment = np.clip(np.searchsorted(stations, distances, side="right") - 1, 0, len(stations) - 2)
+        start, end = self.polyline[segment], self.polyline[segment + 1]
+        span = np.maximum(stations[segment + 1] - stations[segment], 1e-12)
+        fraction = ((distances - stations[segment]) / span)[..., None]
+        delta = end - start
+        return start + fraction * delta, np.arctan2(delta[..., 1], delta[..., 0])
 
 
 @dataclass(frozen=True)
@@ -106,6 +129,7 @@ class WorldState:
     road: RoadMap
     route: Route
     events: Events = field(default_factory=Events)
-    traffic_lights: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))  # x, y, heading, state
+    # one row per controlled approach: stop-line centre x, y, the approach's heading, LIGHT_* state
+    traffic_lights: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     max_speed_mps: float = 40.0
     speed_limit_mps: float = 30.0

@@ -14,14 +14,20 @@ from drivelab.perception.base import Sensor
 from drivelab.perception.birdeye import BirdEye
 from drivelab.perception.kinematics import Kinematics
 from drivelab.perception.lidar import Lidar
+from drivelab.perception.measurements import Measurements
 from drivelab.perception.topdown import TopDown
+from drivelab.perception.waypoints import Waypoints
 
-SENSORS: dict[str, type[Sensor]] = {cls.name: cls for cls in (Kinematics, Lidar, TopDown, BirdEye)}
+SENSORS: dict[str, type[Sensor]] = {
+    cls.name: cls for cls in (Kinematics, Lidar, TopDown, BirdEye, Waypoints, Measurements)
+}
 SENSOR_HELP = {
     "kinematics": "nearest vehicles' presence, position, velocity, heading in the ego frame",
     "lidar": "240 beams (configurable) hitting vehicles and road edges, distance / range",
     "topdown": "5x84x84 semantic image: road, route, past ego positions, traffic now / one step earlier",
     "birdeye": "128x128 RGB bird's-eye view, ego-centred and heading-aligned",
+    "waypoints": "next 10 route points, 2 m apart, in the ego frame (m), the last repeated past the end",
+    "measurements": "[speed / max speed, steering / 60 deg]; stack=3 for RLAD's three frames",
 }
 
 

@@ -35,6 +35,8 @@ SAFETY_TERMS = (
     "sidewalk_crash",
 )
 
+ROACH_TERMS = ("roach_speed", "roach_position", "roach_rotation", "roach_action", "roach_terminal")
+
 PRESETS: dict[str, RewardSpec] = {
     "highway": RewardSpec(
         {"collision": -1.0, "right_lane": 0.1, "high_speed": 0.4},
@@ -46,6 +48,11 @@ PRESETS: dict[str, RewardSpec] = {
         {"progress_lateral": 2.5, "speed": 0.5, "crash": -5.0, "off_road": -5.0, "arrival": 10.0},
         description="seed 003: 2.5*progress*(1-|lat|^3) + 0.5*speed (halved in junctions), "
         "crash/off-road -5, arrival +10",
+    ),
+    "roach": RewardSpec(
+        {name: 1.0 for name in ROACH_TERMS},
+        description="CARLA-Roach's (RLAD, seed 000): speed to a hazard-aware target, route position "
+        "and heading, steering changes, terminal penalties",
     ),
     "safety_dqn": RewardSpec(
         {name: 1.0 for name in SAFETY_TERMS},

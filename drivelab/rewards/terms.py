@@ -10,7 +10,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from drivelab.envs.world import WorldState
+from drivelab.envs.world import LIGHT_GREEN, WorldState
+from drivelab.perception.base import ego_frame
 
 Term = Callable[[WorldState, WorldState, object], float]
 TERMS: dict[str, Term] = {}
@@ -170,3 +171,79 @@ def overtaking(prev: WorldState, world: WorldState, control) -> float:
 def sidewalk_crash(prev: WorldState, world: WorldState, control) -> float:
     """−4.0 when the ego leaves the road."""
     return -4.0 if world.events.off_road else 0.0
+
+
+# --- seed 000 (RLAD) trains with CARLA-Roach's reward (shared/notes/RLAD-NOTES.md) -----------
+ROACH_MAX_SPEED_MPS = 6.0
+ROACH_STEER_RAD = np.pi / 4  # steering is compared as the normalised command (highway-env: ±45°)
+
+
+def _hazard_speed(distance_m: float, stop_distance_m: float) -> float:
+    """Roach: v_max · clip(d − d0, 0, 5) / 5, a speed that falls to 0 at d0 from the hazard."""
+    return ROACH_MAX_SPEED_MPS * float(np.clip(distance_m - stop_distance_m, 0.0, 5.0)) / 5.0
+
+
+def roach_desired_speed(world: WorldState) -> float:
+    """v* = min(v_max, v_vehicle, v_light): slow for a vehicle within 9.5 m and ±45° ahead (d0 = 8 m)
+    and for a red or yellow light whose stop line is ahead in the ego's lane (d0 = 5 m).
+    Pedestrians (d0 = 6 m) join when a scenario has them."""
+    desired = ROACH_MAX_SPEED_MPS
+    ego = world.ego
+    if len(world.vehicles):
+        local = ego_frame(world.vehicles[:, :2], ego.position, ego.heading)
+        distance = np.hypot(local[:, 0], local[:, 1])
+        ahead = (distance < 9.5) & (np.abs(np.arctan2(local[:, 1], local[:, 0])) <= np.pi / 4)
+        if ahead.any():
+            desired = min(desired, _hazard_speed(float(distance[ahead].min()), 8.0))
+    lights = world.traffic_lights
+    if len(lights):
+        local = ego_frame(lights[:, :2], ego.position, ego.heading)
+        aligned = np.abs(np.angle(np.exp(1j * (lights[:, 2] - ego.heading)))) < np.pi / 4
+        stopping = (lights[:, 3] != LIGHT_GREEN) & aligned & (local[:, 0] > 0)
+        stopping &= np.abs(local[:, 1]) < ego.lane_width_m / 2
+        if stopping.any():
+            desired = min(desired, _hazard_speed(float(local[stopping, 0].min()), 5.0))
+    return desired
+
+
+def _route_pose(world: WorldState) -> tuple[np.ndarray, float]:
+    point, heading = world.route.poses_at(world.route.progress_m)
+    return point, float(heading)
+
+
+@term
+def roach_speed(prev: WorldState, world: WorldState, control) -> float:
+    """1 − |v − v*| / v_max: drive at the hazard-aware desired speed."""
+    return 1.0 - abs(world.ego.speed_mps - roach_desired_speed(world)) / ROACH_MAX_SPEED_MPS
+
+
+@term
+def roach_position(prev: WorldState, world: WorldState, control) -> float:
+    """−(distance from the route, m) / 2."""
+    point, _ = _route_pose(world)
+    return -float(np.linalg.norm(world.ego.position - point)) / 2.0
+
+
+@term
+def roach_rotation(prev: WorldState, world: WorldState, control) -> float:
+    """−|heading error against the route| (rad)."""
+    _, heading = _route_pose(world)
+    return -abs(float(np.angle(np.exp(1j * (world.ego.heading - heading)))))
+
+
+@term
+def roach_action(prev: WorldState, world: WorldState, control) -> float:
+    """−0.1 when the normalised steering changed by more than 0.01 in the step."""
+    change = abs(world.ego.steering - prev.ego.steering) / ROACH_STEER_RAD
+    return -0.1 if change > 0.01 else 0.0
+
+
+@term
+def roach_terminal(prev: WorldState, world: WorldState, control) -> float:
+    """−1 when the episode fails (collision, red light run, off-road), and a further −speed (m/s)
+    for a collision or a red light run."""
+    events = world.events
+    value = -1.0 if (events.collided or events.red_light_crossed or events.off_road) else 0.0
+    if events.collided or events.red_light_crossed:
+        value -= world.ego.speed_mps
+    return value

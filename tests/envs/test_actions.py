@@ -32,3 +32,30 @@ def test_out_of_range_discrete_action_raises():
         MetaAction().to_control(5)
     with pytest.raises(ValueError):
         GridAction().to_control(18)
+
+
+def test_target_speed_pid_matches_a_hand_computation():
+    from drivelab.envs.actions import TargetSpeedAction
+    from tests.worlds import world
+
+    adapter = TargetSpeedAction(max_speed_mps=6.0)
+    state = world(speed_mps=4.0)  # dt 1 s
+    # error 0.5 * 6 - 4 = -1: P -1, I 0.2 * -1, no derivative on the first update
+    np.testing.assert_allclose(adapter.control_for([0.5, 0.25], state), [-1.0, 0.25], atol=1e-6)
+    # error 6 - 4 = 2: P 2 + I 0.2 * (-1 + 2) + D 0.001 * 3 = 2.203 -> clipped to 1
+    np.testing.assert_allclose(adapter.control_for([1.0, -2.0], state), [1.0, -1.0], atol=1e-6)
+    adapter.pid(3.9, 4.0, 1.0)
+    assert adapter.integral == pytest.approx(-1 + 2 - 0.1)
+    adapter.reset()
+    # small error: P 0.1 + I 0.2 * 0.1 = 0.12 (inside the range, not clipped)
+    assert adapter.pid(4.1, 4.0, 1.0) == pytest.approx(0.12)
+
+
+def test_target_speed_needs_the_world():
+    from drivelab.envs.actions import TargetSpeedAction
+    from drivelab.errors import UsageError
+
+    with pytest.raises(UsageError, match="control_for"):
+        TargetSpeedAction().to_control([0.5, 0.0])
+    with pytest.raises(UsageError, match="max_speed_mps > 0"):
+        TargetSpeedAction(max_speed_mps=0)

@@ -29,3 +29,20 @@ def test_dict_observation_passes_checkers():
         warnings.simplefilter("ignore")
         gym_check_env(env, skip_render_check=True)
         sb3_check_env(env, warn=False)
+
+
+@pytest.mark.parametrize("backend", ["fast", "highway"])
+def test_every_action_kind_passes_checkers(backend):
+    for action in SCENARIOS["roundabout"].action_kinds:
+        env = DriveEnv(
+            "roundabout",
+            obs="waypoints,measurements",
+            action=action,
+            reward="roach",
+            backend=backend,
+            duration_s=3,
+        )
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            gym_check_env(env, skip_render_check=True)
+            sb3_check_env(env, warn=False)

@@ -1,9 +1,11 @@
 """Reward terms on hand-built WorldStates with known answers."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
-from drivelab.envs.world import Events
+from drivelab.envs.world import LIGHT_GREEN, LIGHT_RED, Events
 from drivelab.rewards import terms
 from tests.worlds import world
 
@@ -83,3 +85,40 @@ def test_every_registered_term_returns_a_float():
     now = world()
     for name, fn in terms.TERMS.items():
         assert np.isfinite(fn(now, now, None)), name
+
+
+def test_roach_desired_speed_hazards():
+    free = world(speed_mps=6.0)
+    assert terms.roach_desired_speed(free) == 6.0
+    assert terms.roach_speed(free, free, None) == pytest.approx(1.0)
+    # a vehicle 9 m straight ahead: 6 * clip(9 - 8, 0, 5) / 5 = 1.2 m/s
+    car = world(speed_mps=3.6, vehicles=[[9.0, 0.0, 0.0, 0.0, 5.0, 2.0]])
+    assert terms.roach_desired_speed(car) == pytest.approx(1.2)
+    assert terms.roach_speed(car, car, None) == pytest.approx(1 - 2.4 / 6)
+    # one 9 m away but 60° to the side is no hazard
+    side = world(vehicles=[[4.5, 9.0 * np.sin(np.pi / 3), 0.0, 0.0, 5.0, 2.0]])
+    assert terms.roach_desired_speed(side) == 6.0
+    # a red light 7 m ahead on the ego's approach: 6 * (7 - 5) / 5 = 2.4; green or opposite: none
+    red = dataclasses.replace(world(), traffic_lights=np.array([[7.0, 0.5, 0.0, LIGHT_RED]]))
+    assert terms.roach_desired_speed(red) == pytest.approx(2.4)
+    green = dataclasses.replace(world(), traffic_lights=np.array([[7.0, 0.5, 0.0, LIGHT_GREEN]]))
+    opposite = dataclasses.replace(world(), traffic_lights=np.array([[7.0, 0.5, np.pi, LIGHT_RED]]))
+    assert terms.roach_desired_speed(green) == terms.roach_desired_speed(opposite) == 6.0
+
+
+def test_roach_route_and_action_terms():
+    state = world(progress_m=10.0, position=np.array([10.0, 1.0]), heading=0.3)
+    assert terms.roach_position(state, state, None) == pytest.approx(-0.5)
+    assert terms.roach_rotation(state, state, None) == pytest.approx(-0.3)
+    steady, turned = world(steering=0.1), world(steering=0.1 + 0.02)  # 0.02 rad = 0.025 of ±45°
+    assert terms.roach_action(steady, turned, None) == -0.1
+    assert terms.roach_action(steady, world(steering=0.105), None) == 0.0
+
+
+def test_roach_terminal():
+    crash = world(speed_mps=5.0, events=Events(collided=True, collision_with="vehicle"))
+    assert terms.roach_terminal(world(), crash, None) == pytest.approx(-6.0)
+    red = world(speed_mps=3.0, events=Events(red_light_crossed=True))
+    assert terms.roach_terminal(world(), red, None) == pytest.approx(-4.0)
+    assert terms.roach_terminal(world(), world(events=Events(off_road=True)), None) == -1.0
+    assert terms.roach_terminal(world(), world(), None) == 0.0

@@ -24,7 +24,7 @@ from drivelab.errors import UsageError
 
 @pytest.mark.parametrize("scenario", sorted(SCENARIOS))
 def test_lane_geometry_matches_highway_env(scenario):
-    control = SCENARIOS[scenario].action_kinds[-1]
+    control = "continuous"
     builder = HighwayBackend(SCENARIOS[scenario], "empty", control)
     builder.reset(seed=0)
     network = builder.env.road.network
@@ -180,7 +180,7 @@ def _random_actions(control: str, rng: np.random.Generator, count: int) -> list:
 )
 def test_whole_traffic_matches_highway_env(scenario, traffic, seeds):
     """Every vehicle of every step agrees with highway-env's, routes, obstacles and crashes included."""
-    control = SCENARIOS[scenario].action_kinds[0 if scenario != "racetrack" else -1]
+    control = "continuous" if scenario == "racetrack" else "meta"
     reference = HighwayBackend(SCENARIOS[scenario], traffic, control)
     fast = FastBackend(SCENARIOS[scenario], traffic, control)
     for seed in seeds:

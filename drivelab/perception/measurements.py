@@ -1,0 +1,29 @@
+"""Measurements: the ego's own speed and steering (RLAD's V, seed 000)."""
+
+from __future__ import annotations
+
+import numpy as np
+from gymnasium import spaces
+
+from drivelab.envs.world import WorldState
+from drivelab.perception.base import Sensor
+
+MAX_STEERING_RAD = np.pi / 3  # highway-env's largest steering angle (ControlledVehicle)
+
+
+class Measurements(Sensor):
+    """``[speed / max speed, steering / 60°]``, both clipped to [-1, 1]; ``stack=3`` gives RLAD's
+    three frames (6 numbers)."""
+
+    name = "measurements"
+
+    def __init__(self) -> None:
+        self._space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+
+    @property
+    def space(self) -> spaces.Box:
+        return self._space
+
+    def observe(self, world: WorldState) -> np.ndarray:
+        values = [world.ego.speed_mps / world.max_speed_mps, world.ego.steering / MAX_STEERING_RAD]
+        return np.clip(np.array(values, dtype=np.float32), -1.0, 1.0)

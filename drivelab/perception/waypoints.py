@@ -1,0 +1,41 @@
+"""Waypoints: the next points of the planned route, in the ego frame (RLAD's W, seed 000)."""
+
+from __future__ import annotations
+
+import numpy as np
+from gymnasium import spaces
+
+from drivelab.envs.world import WorldState
+from drivelab.perception.base import Sensor, ego_frame
+
+
+class Waypoints(Sensor):
+    """The route ``count`` points ahead, ``spacing_m`` apart from the ego's projection on it, as
+    (x forward, y right) metres in the ego frame; past the route's end the last point repeats.
+
+    RLAD feeds N = 10 planner waypoints; CARLA's planner spacing is not stated in the paper, so
+    2 m (about one car length apart, 20 m of look-ahead) is our choice.
+
+    :param count: number of waypoints N.
+    :param spacing_m: arc length between consecutive waypoints along the route.
+    """
+
+    name = "waypoints"
+
+    def __init__(self, *, count: int = 10, spacing_m: float = 2.0) -> None:
+        if count < 1 or spacing_m <= 0:
+            raise ValueError("waypoints needs count >= 1 and spacing_m > 0")
+        self.count, self.spacing_m = int(count), float(spacing_m)
+        self.range_m = self.count * self.spacing_m + 20.0  # a far-off ego still fits the space
+        self._space = spaces.Box(-self.range_m, self.range_m, shape=(self.count, 2), dtype=np.float32)
+
+    @property
+    def space(self) -> spaces.Box:
+        return self._space
+
+    def observe(self, world: WorldState) -> np.ndarray:
+        route = world.route
+        distances = route.progress_m + self.spacing_m * np.arange(1, self.count + 1)
+        points, _ = route.poses_at(distances)
+        local = ego_frame(points, world.ego.position, world.ego.heading)
+        return np.clip(local, -self.range_m, self.range_m).astype(np.float32)
