@@ -68,7 +68,7 @@ def train(
     seed: int | None = typer.Option(None),
     traffic: str | None = typer.Option(None, help="empty, regular or dense"),
     backend: str | None = typer.Option(
-        None, help="fast (default: compiled port of highway-env) or highway (highway-env itself)"
+        None, help="auto (default: fast where it runs the scenario), fast (compiled port) or highway"
     ),
     config: Path | None = typer.Option(None, help="YAML file of run fields (CLI options win)"),
     name: str | None = typer.Option(None, help="run directory name"),

@@ -23,8 +23,8 @@ class RunConfig:
     :param action: action kind ("meta", "grid", "continuous").
     :param reward: reward preset or ``term=weight`` list.
     :param traffic: "empty", "regular" or "dense".
-    :param backend: "fast" (drivelab's compiled port of highway-env's traffic model, the default) or
-        "highway" (highway-env itself, the reference).
+    :param backend: "auto" (the default: fast where it runs the scenario, else highway), "fast"
+        (drivelab's compiled port of highway-env's traffic model) or "highway" (highway-env itself).
     :param steps: total environment steps to train for.
     :param seed: seeds the agent, the environments and evaluation.
     :param eval_every: environment steps between periodic evaluations (0: five over the run).
@@ -41,7 +41,7 @@ class RunConfig:
     action: str = "meta"
     reward: str = "highway"
     traffic: str = "regular"
-    backend: str = "fast"
+    backend: str = "auto"
     steps: int = 10_000
     seed: int = 0
     name: str | None = None

@@ -17,7 +17,7 @@ from drivelab.perception.birdeye import render_birdeye
 from drivelab.perception.sensors import make_sensor, split_sensor_list
 from drivelab.rewards.shapers import RewardShaper
 
-BACKENDS = ("highway", "fast")
+BACKENDS = ("auto", "fast", "highway")
 
 
 class DriveEnv(gym.Env):
@@ -29,9 +29,10 @@ class DriveEnv(gym.Env):
     :param action: "meta", "grid" or "continuous" (or an ActionAdapter).
     :param reward: a preset, ``"term=w,…"``, ``"preset,term=w"`` or a dict of weights.
     :param traffic: "empty", "regular" or "dense".
-    :param backend: "fast" (drivelab's compiled port of highway-env's traffic model on highway-env's
-        roads: step for step the same episodes, many times faster, see
-        benchmarks/results/backend_speed.md) or "highway" (highway-env itself, the reference).
+    :param backend: "auto" (fast where it runs the scenario, else highway), "fast" (drivelab's
+        compiled port of highway-env's traffic model on highway-env's roads: step for step the
+        same episodes, many times faster, see benchmarks/results/backend_speed.md) or "highway"
+        (highway-env itself, the reference).
     :param duration_s: episode time limit; default the scenario's.
     :param offroad_terminal: end the episode when the ego leaves the road.
     :param action_options: keyword options of the action adapter (e.g. ``steer_levels``).
@@ -47,7 +48,7 @@ class DriveEnv(gym.Env):
         action: str | ActionAdapter = "meta",
         reward: str | dict = "highway",
         traffic: str = "regular",
-        backend: str = "fast",
+        backend: str = "auto",
         duration_s: float | None = None,
         offroad_terminal: bool = True,
         action_options: dict | None = None,
@@ -73,6 +74,8 @@ class DriveEnv(gym.Env):
         self.reward_shaper = RewardShaper(reward)
         if backend not in BACKENDS:
             raise UsageError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")
+        if backend == "auto":
+            backend = "fast" if self.scenario.fast_backend else "highway"
         if backend == "fast":
             from drivelab.envs.backends.fast.backend import FastBackend as backend_class
         else:
@@ -119,7 +122,12 @@ class DriveEnv(gym.Env):
         prev, self.world = self.world, world
         reward, terms = self.reward_shaper(prev, self.world, control)
         events = self.world.events
-        terminated = bool(events.collided or events.arrived or (self.offroad_terminal and events.off_road))
+        terminated = bool(
+            events.collided
+            or events.arrived
+            or events.red_light_crossed
+            or (self.offroad_terminal and events.off_road)
+        )
         truncated = bool(not terminated and self.world.time_s >= self.duration_s - 1e-9)
         self.metrics.update(self.world, reward)
         info = {

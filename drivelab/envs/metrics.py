@@ -21,6 +21,7 @@ class EpisodeMetrics:
         self.speed_sum_mps = 0.0
         self.collisions = 0
         self.off_road_events = 0
+        self.red_lights = 0
         self.arrived = False
         self.start_progress_m = first.route.progress_m
         self.last = first
@@ -33,6 +34,7 @@ class EpisodeMetrics:
         self.speed_sum_mps += world.ego.speed_mps
         self.collisions += int(world.events.collided and not self.last.events.collided)
         self.off_road_events += int(world.events.off_road and not self.last.events.off_road)
+        self.red_lights += int(world.events.red_light_crossed)
         self.arrived |= world.events.arrived
         self.last = world
 
@@ -57,5 +59,6 @@ class EpisodeMetrics:
             "crashed": float(crashed),
             "collisions": self.collisions,
             "off_road_events": self.off_road_events,
+            "red_lights": self.red_lights,
             "route_completion": float(np.clip(completion, 0.0, 1.0)) if has_goal else None,
         }

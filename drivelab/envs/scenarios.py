@@ -23,6 +23,7 @@ class Scenario:
     :param intersection_nodes: road-network nodes whose lanes count as junction area.
     :param meta_target_speeds: the speeds FASTER / SLOWER step through (None: highway-env's
         default 20, 25, 30 m/s), as in highway-env's own config of the scenario.
+    :param fast_backend: drivelab's fast backend runs it (the "auto" backend then picks it).
     """
 
     name: str
@@ -35,6 +36,7 @@ class Scenario:
     intersection_nodes: tuple[str, ...] = ()
     continuous_policy_frequency_hz: int = 5
     meta_target_speeds: tuple[float, ...] | None = None
+    fast_backend: bool = True
     action_kinds: tuple[str, ...] = ("meta", "grid", "continuous", "target_speed")
 
     def in_junction(self, lane_index: tuple) -> bool:
@@ -113,6 +115,21 @@ SCENARIOS: dict[str, Scenario] = {
                 "dense": {"other_vehicles": 5},
             },
             action_kinds=("grid", "continuous", "target_speed"),  # highway-env's racetrack: no meta-actions
+        ),
+        Scenario(
+            "town",
+            "drivelab.envs.town_env.TownEnv",
+            "signalised town (train layout; layout=test for the test town): lights, routes to random targets",
+            config={"duration": 60},
+            traffic={
+                "empty": {"vehicles_count": 0},
+                "regular": {"vehicles_count": 15},
+                "dense": {"vehicles_count": 30},
+            },
+            arrival="route_end",
+            intersection_nodes=tuple(f"J{j}:ir{k}" for j in range(9) for k in range(4)),
+            meta_target_speeds=(0, 4.5, 9),
+            fast_backend=False,  # its vehicles stop for lights: not in the compiled kernels yet
         ),
     ]
 }

@@ -58,6 +58,7 @@ def aggregate(results: list[dict]) -> dict[str, float]:
         "mean_length": float(np.mean([r["length"] for r in results])),
         "collisions_per_km": per_km("collisions"),
         "off_road_per_km": per_km("off_road_events"),
+        "red_lights_per_km": per_km("red_lights"),
         "route_completion": float(np.mean(completion)) if completion else None,
     }
 
@@ -120,6 +121,7 @@ METRIC_LABELS = {
     "mean_speed_mps": "mean speed (m/s)",
     "collisions_per_km": "collisions per km",
     "off_road_per_km": "off-road per km",
+    "red_lights_per_km": "red lights run per km",
     "route_completion": "route completion",
 }
 

@@ -13,7 +13,7 @@ import numpy as np
 
 from drivelab.envs.route import RouteTracker
 from drivelab.envs.scenarios import Scenario
-from drivelab.envs.world import Ego, Events, RoadMap, WorldState
+from drivelab.envs.world import LIGHT_RED, Ego, Events, RoadMap, WorldState
 
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 
@@ -156,6 +156,7 @@ class HighwayBackend:
         road = self.env.road
         self.road_map = build_road_map(road.network)
         self.route = self.route_for(self._plan_route())
+        self.lights = getattr(road, "lights", None)  # a signalised scenario's TownLights
         self.progress_m = self.route.project(self.env.vehicle.position)
         self.world = self._export(Events())
         return self.world
@@ -163,6 +164,7 @@ class HighwayBackend:
     def step(self, control: int | np.ndarray) -> WorldState:
         """Apply one policy-step's control and advance the simulation."""
         env = self.env
+        previous_lane = env.vehicle.lane_index
         env.time += 1 / env.config["policy_frequency"]
         env._simulate(control)
         if self.scenario.name == "intersection":  # highway-env does this in its own step()
@@ -175,6 +177,7 @@ class HighwayBackend:
             collision_with="vehicle" if ego.crashed else "",
             off_road=not ego.on_road,
             arrived=self._arrived(),
+            red_light_crossed=self._ran_red_light(previous_lane),
         )
         self.world = self._export(events)
         return self.world
@@ -210,6 +213,8 @@ class HighwayBackend:
         network = self.env.road.network
         start = start or self.env.vehicle.lane_index
         lane_id = start[2]
+        if hasattr(self.env, "ego_route"):  # the scenario planned the ego's route itself
+            return list(self.env.ego_route)
         if self.scenario.destination:
             path = network.shortest_path(start[1], self.scenario.destination)
             nodes = [start[0]] + path
@@ -231,10 +236,24 @@ class HighwayBackend:
         """A RouteTracker along the centre lines of ``lanes``."""
         network = self.env.road.network
         points = [_lane_points(network.get_lane(i), _lane_stations(network.get_lane(i)), 0.0) for i in lanes]
-        return RouteTracker(np.concatenate(points), has_goal=bool(self.scenario.destination))
+        has_goal = bool(self.scenario.destination) or self.scenario.arrival == "route_end"
+        return RouteTracker(np.concatenate(points), has_goal=has_goal)
+
+    def _ran_red_light(self, previous_lane: tuple) -> bool:
+        """The ego crossed a stop line (left a street for the junction lanes behind it) on red."""
+        if self.lights is None:
+            return False
+        from drivelab.envs.town import approach_of
+
+        approach = approach_of(previous_lane)
+        if approach is None or self.env.vehicle.lane_index[0] != previous_lane[1]:
+            return False
+        return self.lights.state(*approach, self.env.time) == LIGHT_RED
 
     def _arrived(self) -> bool:
         ego = self.env.vehicle
+        if self.scenario.arrival == "route_end":
+            return self.route.length_m - self.progress_m < 2.0
         if self.scenario.arrival == "merge_end":
             return bool(ego.position[0] > 370)
         if self.scenario.arrival == "exit":
@@ -281,6 +300,7 @@ class HighwayBackend:
             road=self.road_map,
             route=self.route.at(self.progress_m),
             events=events,
+            traffic_lights=self.lights.table(env.time) if self.lights is not None else np.zeros((0, 4)),
             max_speed_mps=float(ego.MAX_SPEED),
             speed_limit_mps=float(lane.speed_limit or 30.0),
         )

@@ -23,11 +23,11 @@ from drivelab.envs.backends.fast import traffic as T
 from drivelab.envs.backends.fast.spawn import IntersectionTraffic, spawn_highway
 from drivelab.envs.backends.highway import HighwayBackend, build_road_map
 from drivelab.envs.route import RouteTracker
-from drivelab.envs.scenarios import Scenario
+from drivelab.envs.scenarios import SCENARIOS, Scenario
 from drivelab.envs.world import Ego, Events, WorldState
 from drivelab.errors import UsageError
 
-SUPPORTED = ("highway", "merge", "roundabout", "intersection", "racetrack")
+SUPPORTED = tuple(name for name, scenario in SCENARIOS.items() if scenario.fast_backend)
 SPAWNERS = {"highway": spawn_highway}
 META = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")
 ACCELERATION_RANGE, STEERING_RANGE = (-5.0, 5.0), (-np.pi / 4, np.pi / 4)  # ContinuousAction's
