@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any
 
 import gymnasium as gym
@@ -11,13 +12,16 @@ from gymnasium import spaces
 from drivelab.envs.actions import ActionAdapter, make_action
 from drivelab.envs.metrics import EpisodeMetrics
 from drivelab.envs.scenarios import check_traffic, get_scenario
-from drivelab.envs.world import WorldState
+from drivelab.envs.world import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW, WorldState
 from drivelab.errors import UsageError
 from drivelab.perception.birdeye import render_birdeye
 from drivelab.perception.sensors import make_sensor, split_sensor_list
 from drivelab.rewards.shapers import RewardShaper
 
 BACKENDS = ("auto", "fast", "highway")
+LIGHT_LABEL_DISTANCE_M = 18.0  # RLAD's auxiliary label: a light within this distance ahead
+LIGHT_LABELS = {LIGHT_GREEN: "green", LIGHT_YELLOW: "red_or_yellow", LIGHT_RED: "red_or_yellow"}
+BLOCKED_SPEED_MPS = 0.1
 
 
 class DriveEnv(gym.Env):
@@ -108,6 +112,7 @@ class DriveEnv(gym.Env):
         for index, sensor in enumerate(self.sensors):
             sensor.reset(self.world, np.random.default_rng([episode_seed, index]))
         self.metrics = EpisodeMetrics(self.world)
+        self.stopped_s = 0.0
         return self._observe(), {"episode_seed": episode_seed}
 
     def step(self, action: Any):
@@ -119,13 +124,15 @@ class DriveEnv(gym.Env):
     def finish_step(self, world: WorldState, control: Any):
         """Observation, reward, episode end and info once the backend has produced ``world``
         from ``control`` (``step`` without the simulation; batched vector envs simulate apart)."""
-        prev, self.world = self.world, world
+        prev, self.world = self.world, self._apply_episode_rules(world)
         reward, terms = self.reward_shaper(prev, self.world, control)
         events = self.world.events
         terminated = bool(
             events.collided
             or events.arrived
             or events.red_light_crossed
+            or events.blocked
+            or events.off_route
             or (self.offroad_terminal and events.off_road)
         )
         truncated = bool(not terminated and self.world.time_s >= self.duration_s - 1e-9)
@@ -136,12 +143,36 @@ class DriveEnv(gym.Env):
             "crashed": events.collided,
             "off_road": events.off_road,
             "arrived": events.arrived,
+            "traffic_light": self.traffic_light_label(),
         }
         if terminated or truncated:
             info["episode_metrics"] = self.metrics.summary(
                 has_goal=self.scenario.arrival != "none", timed_out=truncated
             )
         return self._observe(), reward, terminated, truncated, info
+
+    def _apply_episode_rules(self, world: WorldState) -> WorldState:
+        """The scenario's blocked and route-deviation rules, as events of ``world``."""
+        scenario = self.scenario
+        if scenario.blocked_after_s is None and scenario.route_deviation_m is None:
+            return world
+        moving = world.ego.speed_mps >= BLOCKED_SPEED_MPS
+        self.stopped_s = 0.0 if moving else self.stopped_s + world.dt_s
+        blocked = scenario.blocked_after_s is not None and self.stopped_s > scenario.blocked_after_s
+        off_route = False
+        if scenario.route_deviation_m is not None:
+            point, _ = world.route.poses_at(world.route.progress_m)
+            off_route = float(np.linalg.norm(world.ego.position - point)) > scenario.route_deviation_m
+        if not (blocked or off_route):
+            return world
+        return dataclasses.replace(
+            world, events=dataclasses.replace(world.events, blocked=blocked, off_route=off_route)
+        )
+
+    def traffic_light_label(self) -> str:
+        """ "none", "green" or "red_or_yellow": the light ahead within 18 m (RLAD's auxiliary label)."""
+        light = self.world.light_ahead(LIGHT_LABEL_DISTANCE_M)
+        return "none" if light is None else LIGHT_LABELS[light[0]]
 
     def render(self) -> np.ndarray | None:
         """A 256×512 bird's-eye RGB frame of the current world (drivelab's own renderer)."""

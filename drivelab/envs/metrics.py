@@ -22,6 +22,7 @@ class EpisodeMetrics:
         self.collisions = 0
         self.off_road_events = 0
         self.red_lights = 0
+        self.blocked = 0
         self.arrived = False
         self.start_progress_m = first.route.progress_m
         self.last = first
@@ -35,6 +36,7 @@ class EpisodeMetrics:
         self.collisions += int(world.events.collided and not self.last.events.collided)
         self.off_road_events += int(world.events.off_road and not self.last.events.off_road)
         self.red_lights += int(world.events.red_light_crossed)
+        self.blocked += int(world.events.blocked)
         self.arrived |= world.events.arrived
         self.last = world
 
@@ -60,5 +62,6 @@ class EpisodeMetrics:
             "collisions": self.collisions,
             "off_road_events": self.off_road_events,
             "red_lights": self.red_lights,
+            "blocked": self.blocked,
             "route_completion": float(np.clip(completion, 0.0, 1.0)) if has_goal else None,
         }

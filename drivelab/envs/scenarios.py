@@ -24,6 +24,8 @@ class Scenario:
     :param meta_target_speeds: the speeds FASTER / SLOWER step through (None: highway-env's
         default 20, 25, 30 m/s), as in highway-env's own config of the scenario.
     :param fast_backend: drivelab's fast backend runs it (the "auto" backend then picks it).
+    :param route_deviation_m: the episode fails when the ego is farther than this from its route.
+    :param blocked_after_s: the episode fails when the ego stays below 0.1 m/s this long.
     """
 
     name: str
@@ -37,6 +39,8 @@ class Scenario:
     continuous_policy_frequency_hz: int = 5
     meta_target_speeds: tuple[float, ...] | None = None
     fast_backend: bool = True
+    route_deviation_m: float | None = None
+    blocked_after_s: float | None = None
     action_kinds: tuple[str, ...] = ("meta", "grid", "continuous", "target_speed")
 
     def in_junction(self, lane_index: tuple) -> bool:
@@ -130,6 +134,8 @@ SCENARIOS: dict[str, Scenario] = {
             intersection_nodes=tuple(f"J{j}:ir{k}" for j in range(9) for k in range(4)),
             meta_target_speeds=(0, 4.5, 9),
             fast_backend=False,  # its vehicles stop for lights: not in the compiled kernels yet
+            route_deviation_m=3.5,  # NoCrash / Roach episode rules
+            blocked_after_s=90.0,
         ),
     ]
 }

@@ -116,6 +116,8 @@ class Events:
     off_road: bool = False
     arrived: bool = False  # the scenario's goal was reached (intersection crossed, merge done, ...)
     red_light_crossed: bool = False
+    blocked: bool = False  # stopped for longer than the scenario allows
+    off_route: bool = False  # farther from the planned route than the scenario allows
 
 
 @dataclass(frozen=True)
@@ -133,3 +135,21 @@ class WorldState:
     traffic_lights: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     max_speed_mps: float = 40.0
     speed_limit_mps: float = 30.0
+
+    def light_ahead(self, max_distance_m: float) -> tuple[int, float] | None:
+        """(LIGHT_* state, metres) of the nearest traffic light whose stop line is ahead of the ego
+        within ``max_distance_m``, in its lane and facing its way (approach heading within 45°)."""
+        lights = self.traffic_lights
+        if len(lights) == 0:
+            return None
+        ego = self.ego
+        cos_h, sin_h = np.cos(ego.heading), np.sin(ego.heading)
+        delta = lights[:, :2] - ego.position
+        ahead = delta[:, 0] * cos_h + delta[:, 1] * sin_h
+        beside = -delta[:, 0] * sin_h + delta[:, 1] * cos_h
+        aligned = np.abs(np.angle(np.exp(1j * (lights[:, 2] - ego.heading)))) < np.pi / 4
+        mine = aligned & (ahead > 0) & (ahead <= max_distance_m) & (np.abs(beside) < ego.lane_width_m / 2)
+        if not mine.any():
+            return None
+        nearest = int(np.flatnonzero(mine)[np.argmin(ahead[mine])])
+        return int(lights[nearest, 3]), float(ahead[nearest])

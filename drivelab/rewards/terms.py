@@ -195,14 +195,9 @@ def roach_desired_speed(world: WorldState) -> float:
         ahead = (distance < 9.5) & (np.abs(np.arctan2(local[:, 1], local[:, 0])) <= np.pi / 4)
         if ahead.any():
             desired = min(desired, _hazard_speed(float(distance[ahead].min()), 8.0))
-    lights = world.traffic_lights
-    if len(lights):
-        local = ego_frame(lights[:, :2], ego.position, ego.heading)
-        aligned = np.abs(np.angle(np.exp(1j * (lights[:, 2] - ego.heading)))) < np.pi / 4
-        stopping = (lights[:, 3] != LIGHT_GREEN) & aligned & (local[:, 0] > 0)
-        stopping &= np.abs(local[:, 1]) < ego.lane_width_m / 2
-        if stopping.any():
-            desired = min(desired, _hazard_speed(float(local[stopping, 0].min()), 5.0))
+    light = world.light_ahead(max_distance_m=np.inf)
+    if light is not None and light[0] != LIGHT_GREEN:
+        desired = min(desired, _hazard_speed(light[1], 5.0))
     return desired
 
 
@@ -240,10 +235,13 @@ def roach_action(prev: WorldState, world: WorldState, control) -> float:
 
 @term
 def roach_terminal(prev: WorldState, world: WorldState, control) -> float:
-    """−1 when the episode fails (collision, red light run, off-road), and a further −speed (m/s)
-    for a collision or a red light run."""
+    """−1 when the episode fails (collision, red light run, off-road, blocked, off the route), and
+    a further −speed (m/s) for a collision or a red light run."""
     events = world.events
-    value = -1.0 if (events.collided or events.red_light_crossed or events.off_road) else 0.0
+    failed = (
+        events.collided or events.red_light_crossed or events.off_road or events.blocked or events.off_route
+    )
+    value = -1.0 if failed else 0.0
     if events.collided or events.red_light_crossed:
         value -= world.ego.speed_mps
     return value

@@ -59,6 +59,7 @@ def aggregate(results: list[dict]) -> dict[str, float]:
         "collisions_per_km": per_km("collisions"),
         "off_road_per_km": per_km("off_road_events"),
         "red_lights_per_km": per_km("red_lights"),
+        "blocked_per_km": per_km("blocked"),
         "route_completion": float(np.mean(completion)) if completion else None,
     }
 
@@ -122,6 +123,7 @@ METRIC_LABELS = {
     "collisions_per_km": "collisions per km",
     "off_road_per_km": "off-road per km",
     "red_lights_per_km": "red lights run per km",
+    "blocked_per_km": "blocked per km",
     "route_completion": "route completion",
 }
 

@@ -1,5 +1,7 @@
 """The signalised town: road network, light phases, NPCs stopping at red, red-light runs, routes."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from highway_env.road.road import Road
@@ -88,6 +90,7 @@ def test_running_a_red_light_is_detected_exactly_once():
         "town", obs="kinematics", action="continuous", traffic="empty", backend="highway", duration_s=30
     )
     env.reset(seed=0)
+    env.scenario = dataclasses.replace(env.scenario, route_deviation_m=None)  # the ego is moved off its route
     backend = env.backend
     hw = backend.env
     lights = backend.lights
@@ -138,3 +141,43 @@ def test_town_episode_exports_lights_and_route():
     test_town = DriveEnv("town", obs="kinematics", traffic="empty", backend_options={"layout": "test"})
     test_town.reset(seed=0)
     assert test_town.world.traffic_lights.shape == (6, 4)
+
+
+def test_light_ahead_and_its_label():
+    from tests.worlds import world
+
+    lights = np.array(
+        [[10.0, 0.5, 0.0, LIGHT_RED], [30.0, 0.0, 0.0, LIGHT_GREEN], [5.0, 0.0, np.pi, LIGHT_GREEN]]
+    )
+    state = dataclasses.replace(world(), traffic_lights=lights)
+    assert state.light_ahead(18.0) == (LIGHT_RED, 10.0)  # the opposite approach's light is not ours
+    behind = dataclasses.replace(world(position=np.array([12.0, 0.0])), traffic_lights=lights)
+    assert behind.light_ahead(18.0) == (LIGHT_GREEN, 18.0)
+    assert behind.light_ahead(10.0) is None and world().light_ahead(18.0) is None
+    env = DriveEnv("town", obs="kinematics", action="target_speed", traffic="empty")
+    env.reset(seed=0)
+    env.world = state
+    assert env.traffic_light_label() == "red_or_yellow"
+
+
+def test_leaving_the_route_and_being_blocked_end_the_episode():
+    env = DriveEnv("town", obs="kinematics", action="target_speed", reward="roach", traffic="empty")
+    env.reset(seed=1)
+    _, _, terminated, _, info = env.step(np.array([0.0, 0.0]))  # standing still
+    assert not terminated and info["traffic_light"] in ("none", "green", "red_or_yellow")
+    env.scenario = dataclasses.replace(env.scenario, blocked_after_s=0.5)
+    steps = 0
+    while not terminated and steps < 10:
+        _, reward, terminated, _, info = env.step(np.array([0.0, 0.0]))
+        steps += 1
+    assert steps == 2  # stopped 0.2 s before, 0.6 s > 0.5 s after two more steps of 0.2 s
+    assert terminated and env.world.events.blocked and info["episode_metrics"]["blocked"] == 1
+    assert info["reward_terms"]["roach_terminal"] == -1.0
+    env.reset(seed=1)
+    hw = env.backend.env
+    hw.vehicle.position = hw.vehicle.position + 5.0 * np.array(
+        [-np.sin(hw.vehicle.heading), np.cos(hw.vehicle.heading)]
+    )
+    hw.vehicle.on_state_update()
+    _, _, terminated, _, _ = env.step(np.array([0.0, 0.0]))
+    assert terminated and env.world.events.off_route and not env.world.events.blocked
