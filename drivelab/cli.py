@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shlex
 import sys
 from pathlib import Path
 
@@ -31,6 +32,13 @@ def _parse_pairs(pairs: list[str], what: str) -> dict:
         except yaml.YAMLError:
             raise UsageError(f"{what} {pair!r} has a value that is not valid YAML") from None
     return values
+
+
+def _command_line() -> str | None:
+    """The command as typed, for reports (None when not called as the ``drivelab`` script)."""
+    if Path(sys.argv[0]).name != "drivelab":
+        return None
+    return shlex.join(["drivelab", *sys.argv[1:]])
 
 
 @app.command()
@@ -153,6 +161,26 @@ def evaluate(
     if "video" in report:
         typer.echo(f"video: {report['video']}")
     typer.echo(f"run directory: {run_dir}  (eval.json written)")
+
+
+@app.command()
+def compare(
+    run_dirs: list[Path] = typer.Argument(None, help="run directories written by drivelab train"),
+    runs: list[str] = typer.Option([], "--runs", help="glob of run directories, e.g. 'runs/*' (repeatable)"),
+    out: Path = typer.Option(Path("reports/comparison"), "--out", "-o", help="report directory to write"),
+    title: str = typer.Option("drivelab comparison", help="heading of report.md"),
+    confidence: float = typer.Option(0.9, help="coverage of the bootstrap intervals"),
+) -> None:
+    """Group runs over seeds; write tables (Markdown, CSV), learning curves and bar charts."""
+    from drivelab.training.compare import compare as compare_runs
+
+    try:
+        report = compare_runs(
+            [*(run_dirs or []), *runs], out, title=title, command=_command_line(), confidence=confidence
+        )
+    except UsageError as exc:
+        _fail(str(exc))
+    typer.echo(f"report: {report / 'report.md'}")
 
 
 def main() -> None:
