@@ -90,6 +90,7 @@ def train(
 ) -> None:
     """Train an agent and write a run directory."""
     from drivelab.config import build_config, load_yaml
+    from drivelab.hyperparams import with_shipped_hyperparams
     from drivelab.training.run import TrainingInterrupted
     from drivelab.training.run import resume as resume_run
     from drivelab.training.run import train as train_run
@@ -120,7 +121,7 @@ def train(
                     **values.get("hyperparams", {}),
                     **_parse_pairs(hyperparams, "--hyperparams"),
                 }
-            run_dir = train_run(build_config(values), runs_dir)
+            run_dir = train_run(build_config(with_shipped_hyperparams(values)), runs_dir)
     except UsageError as exc:
         _fail(str(exc))
     except TrainingInterrupted as stop:
