@@ -140,3 +140,26 @@ def test_two_run_grid_through_ray_matches_the_pool(tmp_path):
         pool_eval = json.loads((pool_dir / "eval.json").read_text())
         assert ray_eval["per_episode"] == pool_eval["per_episode"]
     assert [o["action"] for o in run_sweep(expand_sweep(spec, ray_runs), executor="ray")] == ["skip", "skip"]
+
+
+def test_cli_sweep_bad_file_and_dry_run(tmp_path):
+    from typer.testing import CliRunner
+
+    from drivelab.cli import app
+
+    runner = CliRunner()
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("grid: {algo: [ppo], colour: [red]}\n")
+    result = runner.invoke(app, ["sweep", str(bad), "--runs-dir", str(tmp_path / "runs")])
+    assert (
+        result.exit_code == 2 and result.output.strip() == "error: sweep grid has unknown run field 'colour'"
+    )
+    good = tmp_path / "good.yaml"
+    good.write_text(yaml.safe_dump(tiny_spec()))
+    result = runner.invoke(app, ["sweep", str(good), "--runs-dir", str(tmp_path / "runs"), "--dry-run"])
+    assert result.exit_code == 0
+    assert result.output.split() == ["train", str(tmp_path / "runs" / "ppo-highway-s0"),
+                                     "train", str(tmp_path / "runs" / "ppo-highway-s1")]  # fmt: skip
+    result = runner.invoke(app, ["sweep", str(good), "--executor", "dask"])
+    assert result.exit_code == 2 and "unknown executor 'dask'" in result.output
+    assert not (tmp_path / "runs").exists()
