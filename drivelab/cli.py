@@ -206,6 +206,11 @@ def _print_outcomes(outcomes: list[dict], runs_dir: Path) -> None:
         raise typer.Exit(1)
 
 
+def _interrupted() -> None:
+    typer.echo("\ninterrupted: checkpoints saved; run the same command again to resume", err=True)
+    raise typer.Exit(130)
+
+
 EXECUTOR_HELP = "pool (local processes, default) or ray (Ray tasks); not the simulation --backend"
 
 
@@ -234,6 +239,8 @@ def sweep(
         outcomes = run_sweep(spec, executor=executor, workers=workers, address=address)
     except UsageError as exc:
         _fail(str(exc))
+    except KeyboardInterrupt:
+        _interrupted()
     _print_outcomes(outcomes, spec.runs_dir)
     if report is not None:
         try:
@@ -313,6 +320,8 @@ def ablate(
         )  # fmt: skip
     except UsageError as exc:
         _fail(str(exc))
+    except KeyboardInterrupt:
+        _interrupted()
     _print_outcomes(outcomes, runs_dir)
     typer.echo(f"report: {report / 'report.md'}")
 

@@ -19,6 +19,7 @@ import glob
 import json
 import math
 import os
+import platform
 import shutil
 import tempfile
 import time
@@ -150,6 +151,19 @@ def summarize_groups(
 
 
 # --- writing ---------------------------------------------------------------------------------
+def machine_description() -> str:
+    """CPU model, core count, OS and Python version of this machine, for reports."""
+    cpu = platform.processor() or platform.machine()
+    cpuinfo = Path("/proc/cpuinfo")
+    if cpuinfo.is_file():
+        for line in cpuinfo.read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    system = f"{platform.system()} {platform.release()}"
+    return f"{cpu}, {os.cpu_count()} cores, {system}, Python {platform.python_version()}"
+
+
 def _fmt(value: float, digits: int = 3) -> str:
     return "n/a" if value is None or math.isnan(value) else f"{value:.{digits}f}"
 
@@ -162,7 +176,11 @@ def _markdown(
     command: str | None,
 ) -> str:
     percent = round(confidence * 100)
-    lines = [f"# {title}", "", f"Written {time.strftime('%Y-%m-%d %H:%M:%S %Z')} by `drivelab compare`."]
+    lines = [
+        f"# {title}",
+        "",
+        f"Written {time.strftime('%Y-%m-%d %H:%M:%S %Z')} by drivelab on {machine_description()}.",
+    ]
     if command:
         lines += ["", "Made with:", "", "```bash", command, "```"]
     lines += [
