@@ -86,9 +86,8 @@ def plot_metric_bars(groups: dict, summaries: dict, path: Path, confidence: floa
             color = f"C{i % 10}"
             ax.bar(i, s.mean, color=color, alpha=0.6)
             if not math.isnan(s.ci_low):
-                ax.errorbar(
-                    i, s.mean, yerr=[[s.mean - s.ci_low], [s.ci_high - s.mean]], color="black", capsize=4
-                )
+                below, above = max(s.mean - s.ci_low, 0.0), max(s.ci_high - s.mean, 0.0)  # float rounding
+                ax.errorbar(i, s.mean, yerr=[[below], [above]], color="black", capsize=4)
             ax.plot(i, s.iqm, "D", color="black", ms=4)
             seeds = [r.final[metric] for r in groups[key] if r.final[metric] is not None]
             ax.plot(np.full(len(seeds), i) + 0.15, seeds, ".", color="dimgray", ms=5)

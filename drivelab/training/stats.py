@@ -87,5 +87,8 @@ def summarize(values: Sequence[float | None], confidence: float = CONFIDENCE, se
     kept = [float(v) for v in values if v is not None and not math.isnan(float(v))]
     if not kept:
         return Summary(0, math.nan, math.nan, math.nan, math.nan)
+    if all(v == kept[0] for v in kept):  # exact, without the rounding of a float mean
+        low, high = bootstrap_ci(kept, confidence=confidence, seed=seed)
+        return Summary(len(kept), kept[0], low, high, kept[0])
     low, high = bootstrap_ci(kept, confidence=confidence, seed=seed)
     return Summary(len(kept), float(np.mean(kept)), low, high, interquartile_mean(kept))

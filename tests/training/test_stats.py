@@ -55,3 +55,8 @@ def test_summarize_skips_missing_values():
     assert (s.ci_low, s.ci_high) == (0.0, pytest.approx(2 / 3))
     assert s.iqm == pytest.approx(1 / 3)
     assert summarize([None]).n == 0
+
+
+def test_equal_values_summarize_exactly():
+    s = summarize([0.95, 0.95, 0.95])  # np.mean gives 0.9499999999999998
+    assert (s.mean, s.ci_low, s.ci_high, s.iqm) == (0.95, 0.95, 0.95, 0.95)
