@@ -277,7 +277,10 @@ def _ray(jobs: list[dict], workers: int, address: str | None) -> Iterator[dict]:
     started = not ray.is_initialized()
     if started:
         if address:
-            ray.init(address=address, include_dashboard=False, log_to_driver=False)
+            try:
+                ray.init(address=address, include_dashboard=False, log_to_driver=False)
+            except (ConnectionError, ValueError, RuntimeError) as exc:
+                raise UsageError(f"cannot join the Ray cluster at {address!r}: {exc}") from None
         else:
             # "local": always a fresh cluster of our own, never someone else's running one
             ray.init(address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False)
