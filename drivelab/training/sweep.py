@@ -257,6 +257,11 @@ def run_cell(config_values: dict, runs_dir: str, action: str, eval_episodes: int
 
 
 # --- executing -------------------------------------------------------------------------------
+def _in_process(jobs: list[dict]) -> Iterator[dict]:
+    for job in jobs:
+        yield run_cell(**job)
+
+
 def _pool(jobs: list[dict], workers: int) -> Iterator[dict]:
     context = multiprocessing.get_context("spawn")  # fresh interpreters: no forked torch/numba state
     with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
@@ -305,8 +310,8 @@ def run_sweep(
 
     :param sweep: from ``load_sweep`` / ``expand_sweep``.
     :param executor: "pool" (local processes) or "ray" (Ray tasks).
-    :param workers: parallel runs; default one per core. With Ray and no ``address``, the CPUs
-        of the local cluster it starts.
+    :param workers: parallel runs; default one per core. One worker runs the cells in this
+        process. With Ray and no ``address``, the CPUs of the local cluster it starts.
     :param address: an existing Ray cluster (``ray://host:10001`` or ``auto``); it needs drivelab
         installed on its nodes and ``runs_dir`` on storage they share.
     """
@@ -333,7 +338,12 @@ def run_sweep(
     ]  # fmt: skip
     if not jobs:
         return outcomes
-    results = _pool(jobs, workers) if executor == "pool" else _ray(jobs, workers, address)
+    if executor == "ray":
+        results = _ray(jobs, workers, address)
+    elif workers == 1:  # one worker: run here, one after another (no process start-up)
+        results = _in_process(jobs)
+    else:
+        results = _pool(jobs, workers)
     with tqdm(total=len(jobs), desc=f"sweep ({executor}, {workers} workers)", unit="run") as bar:
         for outcome in results:
             outcomes.append(outcome)
