@@ -189,6 +189,15 @@ def _markdown(
         f" the mean, a {percent} % percentile-bootstrap confidence interval of the mean"
         f" (scipy.stats.bootstrap, 10,000 resamples) and the interquartile mean (IQM, rliable's"
         f" trimmed mean; with fewer than 4 seeds it equals the mean).",
+    ]
+    if len({key[3] for key in groups}) > 1:
+        lines += [
+            "",
+            "The groups differ in reward, and each run's return is measured with its own reward:"
+            " compare returns across rewards with care; the driving metrics (success, crashes, speed,"
+            " distance) do not depend on the reward.",
+        ]
+    lines += [
         "",
         "## Groups",
         "",

@@ -79,6 +79,7 @@ def test_report_numbers_and_files(runs, tmp_path):
     assert int(rows[("ppo", "highway", "route_completion")]["n"]) == 0  # None everywhere
     text = (out / "report.md").read_text()
     assert "drivelab compare --runs 'runs/*'" in text
+    assert "The groups differ in reward" in text
     assert "| ppo · highway · kinematics · highway · meta | 3 | 0.333 | [0.000, 0.667] | 0.333 |" in text
     with (out / "runs.csv").open() as handle:
         assert len(list(csv.DictReader(handle))) == 6
