@@ -93,8 +93,11 @@ def test_rerun_skips_finished_resumes_interrupted_restarts_unstarted(tmp_path):
     longer = expand_sweep(tiny_spec(steps=48), runs)  # a larger budget: same config identity
     (s1 / "checkpoints" / "latest.json").unlink()  # as if s1 stopped before its first checkpoint
     assert [action for _, action in plan(longer)] == ["resume", "restart"]
+    before = json.loads((s0 / "eval.json").read_text())["run"]
+    (s0 / "eval.json").write_text(json.dumps({"run": before, "stale": True}))
     outcomes = run_sweep(longer, workers=1)
     assert all(o["ok"] for o in outcomes), outcomes
+    assert "stale" not in json.loads((s0 / "eval.json").read_text())  # re-evaluated after the resume
     assert _manifest_steps(s0) == 48 and (s0 / "progress-32.csv").is_file()  # continued from 32
     assert _manifest_steps(s1) == 48 and not (s1 / "progress-32.csv").exists()  # trained afresh
     assert [action for _, action in plan(longer)] == ["skip", "skip"]
