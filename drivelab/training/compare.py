@@ -197,6 +197,13 @@ def _markdown(
             " compare returns across rewards with care; the driving metrics (success, crashes, speed,"
             " distance) do not depend on the reward.",
         ]
+    repeated = [key for key, runs in groups.items() if len({r.config.seed for r in runs}) < len(runs)]
+    for key in repeated:
+        lines += [
+            "",
+            f"**Warning:** group {' · '.join(key)} has several runs with the same seed; each counts as"
+            " a separate sample, which narrows its interval.",
+        ]
     lines += [
         "",
         "## Groups",

@@ -148,3 +148,16 @@ def test_cli_compare(runs, tmp_path):
     assert result.exit_code == 2
     assert result.output.strip() == f"error: no run directory matches {str(tmp_path / 'none-*')!r}"
     assert not (tmp_path / "r2").exists()
+
+
+def test_repeated_seed_is_flagged(runs, tmp_path):
+    fake_run(runs, "ppo-s0-again", seed=0, final_return=0.0)
+    text = (compare([str(runs / "ppo-s*")], tmp_path / "report") / "report.md").read_text()
+    assert (
+        "**Warning:** group ppo · highway · kinematics · highway · meta has several runs with the same seed"
+        in text
+    )
+    text = (
+        compare([str(runs / "ppo-s0"), str(runs / "ppo-s1")], tmp_path / "report") / "report.md"
+    ).read_text()
+    assert "Warning" not in text
