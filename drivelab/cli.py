@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shlex
 import sys
 from pathlib import Path
 
@@ -31,6 +32,13 @@ def _parse_pairs(pairs: list[str], what: str) -> dict:
         except yaml.YAMLError:
             raise UsageError(f"{what} {pair!r} has a value that is not valid YAML") from None
     return values
+
+
+def _command_line() -> str | None:
+    """The command as typed, for reports (None when not called as the ``drivelab`` script)."""
+    if Path(sys.argv[0]).name != "drivelab":
+        return None
+    return shlex.join(["drivelab", *sys.argv[1:]])
 
 
 @app.command()
@@ -82,6 +90,7 @@ def train(
 ) -> None:
     """Train an agent and write a run directory."""
     from drivelab.config import build_config, load_yaml
+    from drivelab.hyperparams import with_shipped_hyperparams
     from drivelab.training.run import TrainingInterrupted
     from drivelab.training.run import resume as resume_run
     from drivelab.training.run import train as train_run
@@ -112,7 +121,7 @@ def train(
                     **values.get("hyperparams", {}),
                     **_parse_pairs(hyperparams, "--hyperparams"),
                 }
-            run_dir = train_run(build_config(values), runs_dir)
+            run_dir = train_run(build_config(with_shipped_hyperparams(values)), runs_dir)
     except UsageError as exc:
         _fail(str(exc))
     except TrainingInterrupted as stop:
@@ -153,6 +162,168 @@ def evaluate(
     if "video" in report:
         typer.echo(f"video: {report['video']}")
     typer.echo(f"run directory: {run_dir}  (eval.json written)")
+
+
+@app.command()
+def compare(
+    run_dirs: list[Path] = typer.Argument(None, help="run directories written by drivelab train"),
+    runs: list[str] = typer.Option([], "--runs", help="glob of run directories, e.g. 'runs/*' (repeatable)"),
+    out: Path = typer.Option(Path("reports/comparison"), "--out", "-o", help="report directory to write"),
+    title: str = typer.Option("drivelab comparison", help="heading of report.md"),
+    confidence: float = typer.Option(0.9, help="coverage of the bootstrap intervals"),
+) -> None:
+    """Group runs over seeds; write tables (Markdown, CSV), learning curves and bar charts."""
+    from drivelab.training.compare import compare as compare_runs
+
+    try:
+        report = compare_runs(
+            [*(run_dirs or []), *runs], out, title=title, command=_command_line(), confidence=confidence
+        )
+    except UsageError as exc:
+        _fail(str(exc))
+    typer.echo(f"report: {report / 'report.md'}")
+
+
+def _print_outcomes(outcomes: list[dict], runs_dir: Path) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=f"runs in {runs_dir}")
+    for column in ("run", "did", "result", "seconds"):
+        table.add_column(column, justify="right" if column == "seconds" else "left")
+    for o in outcomes:
+        table.add_row(
+            o["name"], o["action"], "ok" if o["ok"] else f"FAILED: {o['error']}", f"{o['seconds']:.1f}"
+        )
+    Console().print(table)
+    failed = [o["name"] for o in outcomes if not o["ok"]]
+    if failed:
+        typer.echo(
+            f"error: {len(failed)} run(s) failed; see {runs_dir / '.sweep-logs'}/<run>.log, "
+            "then re-run the same command to finish them",
+            err=True,
+        )
+        raise typer.Exit(1)
+
+
+def _interrupted() -> None:
+    typer.echo("\ninterrupted: checkpoints saved; run the same command again to resume", err=True)
+    raise typer.Exit(130)
+
+
+EXECUTOR_HELP = "pool (local processes, default) or ray (Ray tasks); not the simulation --backend"
+
+
+@app.command()
+def sweep(
+    sweep_file: Path = typer.Argument(..., help="sweep YAML: base, grid, overrides (see README)"),
+    runs_dir: Path | None = typer.Option(
+        None, help="where run directories go (default: the file's runs_dir)"
+    ),
+    executor: str = typer.Option("pool", help=EXECUTOR_HELP),
+    workers: int | None = typer.Option(None, help="parallel runs (default: one per core)"),
+    address: str | None = typer.Option(None, help="existing Ray cluster address (with --executor ray)"),
+    report: Path | None = typer.Option(None, help="also write a comparison report of the sweep's runs here"),
+    dry_run: bool = typer.Option(False, "--dry-run", help="print what each run needs and stop"),
+) -> None:
+    """Run a grid of runs; a re-run skips finished runs and resumes interrupted ones."""
+    from drivelab.training.compare import load_run, write_report
+    from drivelab.training.sweep import load_sweep, plan, run_dirs, run_sweep
+
+    try:
+        spec = load_sweep(sweep_file, runs_dir)
+        if dry_run:
+            for cell, action in plan(spec):
+                typer.echo(f"{action:<8} {spec.runs_dir / cell.config.name}")
+            return
+        outcomes = run_sweep(spec, executor=executor, workers=workers, address=address)
+    except UsageError as exc:
+        _fail(str(exc))
+    except KeyboardInterrupt:
+        _interrupted()
+    _print_outcomes(outcomes, spec.runs_dir)
+    if report is not None:
+        try:
+            records = [load_run(d) for d in run_dirs(spec)]
+            written = write_report(records, report, title=f"sweep {sweep_file.name}", command=_command_line())
+        except UsageError as exc:
+            _fail(str(exc))
+        typer.echo(f"report: {written / 'report.md'}")
+
+
+def _split_rewards(values: list[str]) -> list[str]:
+    """``--rewards`` values → reward specs. ``;`` separates specs; with commas, a piece without
+    ``=`` starts a new spec and ``term=weight`` pieces join the spec before them."""
+    specs: list[str] = []
+    for value in values:
+        for chunk in value.split(";"):
+            current: list[str] = []
+            for piece in (p.strip() for p in chunk.split(",") if p.strip()):
+                if "=" not in piece and current:
+                    specs.append(",".join(current))
+                    current = []
+                current.append(piece)
+            if current:
+                specs.append(",".join(current))
+    return specs
+
+
+@app.command()
+def ablate(
+    env: str = typer.Option("highway", help="scenario"),
+    algo: str = typer.Option(..., help="algorithm"),
+    rewards: list[str] = typer.Option(
+        [],
+        help="rewards to compare: presets p1,p2 (a term=w piece joins the preset before it; ';' separates)",
+    ),
+    drop_terms: str | None = typer.Option(None, help="terms of --reward to drop one at a time: t1,t2"),
+    reward: str = typer.Option("highway", help="the reward that --drop-terms ablates"),
+    seeds: int = typer.Option(3, help="seeds per reward (0..N-1)"),
+    steps: int = typer.Option(10_000, help="training steps per run"),
+    obs: str | None = typer.Option(None, help="sensors"),
+    action: str | None = typer.Option(None, help="meta, grid or continuous"),
+    traffic: str | None = typer.Option(None, help="empty, regular or dense"),
+    backend: str | None = typer.Option(None, help="simulation backend: highway or fast"),
+    config: Path | None = typer.Option(None, help="YAML of further run fields shared by every run"),
+    hyperparams: list[str] = typer.Option([], "--hyperparams", "-H", help="algorithm override key=value"),
+    eval_episodes: int = typer.Option(10, help="final evaluation episodes per run"),
+    runs_dir: Path = typer.Option(Path("runs"), help="where run directories go"),
+    out: Path | None = typer.Option(
+        None, "--out", "-o", help="report directory (default reports/ablate-ALGO-ENV)"
+    ),
+    executor: str = typer.Option("pool", help=EXECUTOR_HELP),
+    workers: int | None = typer.Option(None, help="parallel runs (default: one per core)"),
+    address: str | None = typer.Option(None, help="existing Ray cluster address (with --executor ray)"),
+) -> None:
+    """Train one agent under several rewards (or a reward minus one term at a time) and compare."""
+    from drivelab.config import load_yaml
+    from drivelab.training.ablate import ablate as run_ablation
+
+    try:
+        base = load_yaml(config) if config is not None else {}
+        given = {"obs": obs, "action": action, "traffic": traffic, "backend": backend}
+        base.update({k: v for k, v in given.items() if v is not None})
+        if hyperparams:
+            base["hyperparams"] = {
+                **base.get("hyperparams", {}),
+                **_parse_pairs(hyperparams, "--hyperparams"),
+            }
+        for key in ("algo", "env", "steps", "seed", "reward", "name"):
+            if key in base:
+                raise UsageError(f"--config may not set {key!r} for an ablation (use the options)")
+        drops = [t.strip() for t in drop_terms.split(",") if t.strip()] if drop_terms else None
+        report, outcomes = run_ablation(
+            env, algo, rewards=_split_rewards(rewards) or None, drop_terms=drops, base_reward=reward,
+            seeds=seeds, steps=steps, base=base, runs_dir=runs_dir, out_dir=out,
+            eval_episodes=eval_episodes, executor=executor, workers=workers, address=address,
+            command=_command_line(),
+        )  # fmt: skip
+    except UsageError as exc:
+        _fail(str(exc))
+    except KeyboardInterrupt:
+        _interrupted()
+    _print_outcomes(outcomes, runs_dir)
+    typer.echo(f"report: {report / 'report.md'}")
 
 
 def main() -> None:

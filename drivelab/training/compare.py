@@ -1,0 +1,322 @@
+"""Comparisons: read run directories (never re-train), group them over seeds, write a report.
+
+A report directory holds::
+
+    report.md            per-metric tables: mean, 90 % bootstrap interval, IQM over seeds
+    summary.csv          the same numbers, one row per (group, metric)
+    runs.csv             every run's own final metrics, with where they came from
+    learning_curves.png  periodic-evaluation return against steps, mean over seeds with a 90 % band
+    metrics.png          bar charts of the main metrics (mean, interval, IQM, each seed)
+
+A run's final metrics come from its ``eval.json`` (``drivelab evaluate``) when it has one, else
+from the last row of its ``evaluations.csv``.
+"""
+
+from __future__ import annotations
+
+import csv
+import glob
+import json
+import math
+import os
+import platform
+import shutil
+import tempfile
+import time
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from drivelab.config import RunConfig
+from drivelab.errors import UsageError
+from drivelab.training.evaluate import load_run_config
+from drivelab.training.stats import CONFIDENCE, Summary, summarize
+
+GROUP_FIELDS = ("algo", "env", "obs", "reward", "action")
+
+METRICS: dict[str, str] = {
+    "mean_return": "episode return",
+    "success_rate": "success rate",
+    "crash_rate": "crash rate",
+    "mean_distance_km": "distance per episode (km)",
+    "mean_speed_mps": "mean speed (m/s)",
+    "mean_length": "episode length (steps)",
+    "collisions_per_km": "collisions per km",
+    "off_road_per_km": "off-road events per km",
+    "route_completion": "route completion",
+}
+
+
+@dataclass(frozen=True)
+class RunRecord:
+    """What a comparison needs from one run directory.
+
+    :param run_dir: the run directory.
+    :param config: its resolved config.
+    :param final: final metrics (keys of ``METRICS``; a value may be None).
+    :param source: "eval.json" or "evaluations.csv", where ``final`` came from.
+    :param curve: (step, mean evaluation return) of every periodic evaluation.
+    """
+
+    run_dir: Path
+    config: RunConfig
+    final: dict
+    source: str
+    curve: tuple[tuple[int, float], ...]
+
+    @property
+    def group(self) -> tuple[str, ...]:
+        return group_key(self.config)
+
+
+def group_key(config: RunConfig) -> tuple[str, ...]:
+    """(algorithm, scenario, sensors, reward, action): runs that differ only in seed share it."""
+    return (config.algo, config.env, ",".join(config.obs), config.reward, config.action)
+
+
+def group_label(key: tuple[str, ...]) -> str:
+    """A short readable name of a group, e.g. ``ppo | highway | kinematics | highway | meta``."""
+    return " | ".join(key)
+
+
+def find_runs(patterns: Iterable[str | Path]) -> list[Path]:
+    """Run directories named by paths or glob patterns (``runs/*``), in order, without repeats.
+
+    A pattern that matches no run directory, or a path that is not one, raises UsageError.
+    """
+    found: list[Path] = []
+    for pattern in patterns:
+        text = str(pattern)
+        if glob.has_magic(text):
+            matches = [Path(p) for p in sorted(glob.glob(text)) if (Path(p) / "config.yaml").is_file()]
+            if not matches:
+                raise UsageError(f"no run directory matches {text!r}")
+        else:
+            load_run_config(Path(text))  # one-line error for a missing or foreign directory
+            matches = [Path(text)]
+        found.extend(m for m in matches if m not in found)
+    if not found:
+        raise UsageError("no run directories given (pass RUN_DIR... or --runs 'runs/*')")
+    return found
+
+
+def _float_or_none(value) -> float | None:
+    if value is None or value == "":
+        return None
+    return float(value)
+
+
+def load_run(run_dir: str | Path) -> RunRecord:
+    """Read a run's config, final metrics and evaluation curve."""
+    run_dir = Path(run_dir)
+    config = load_run_config(run_dir)
+    curve: list[tuple[int, float]] = []
+    last_row: dict = {}
+    evaluations = run_dir / "evaluations.csv"
+    if evaluations.is_file():
+        with evaluations.open(newline="") as handle:
+            for row in csv.DictReader(handle):
+                curve.append((int(row["step"]), float(row["mean_return"])))
+                last_row = row
+    eval_json = run_dir / "eval.json"
+    if eval_json.is_file():
+        try:
+            report = json.loads(eval_json.read_text())
+        except json.JSONDecodeError:
+            raise UsageError(f"{str(eval_json)!r} is not valid JSON") from None
+        final, source = {key: _float_or_none(report.get(key)) for key in METRICS}, "eval.json"
+    elif last_row:
+        final, source = {key: _float_or_none(last_row.get(key)) for key in METRICS}, "evaluations.csv"
+    else:
+        raise UsageError(f"run {str(run_dir)!r} has no evaluation yet (no eval.json, no evaluations.csv)")
+    return RunRecord(run_dir, config, final, source, tuple(curve))
+
+
+def group_runs(records: Sequence[RunRecord]) -> dict[tuple[str, ...], list[RunRecord]]:
+    """Runs grouped by ``group_key``, groups in order of first appearance, runs sorted by seed."""
+    groups: dict[tuple[str, ...], list[RunRecord]] = {}
+    for record in records:
+        groups.setdefault(record.group, []).append(record)
+    return {key: sorted(runs, key=lambda r: (r.config.seed, str(r.run_dir))) for key, runs in groups.items()}
+
+
+def summarize_groups(
+    groups: dict[tuple[str, ...], list[RunRecord]], confidence: float = CONFIDENCE
+) -> dict[tuple[str, ...], dict[str, Summary]]:
+    """{group: {metric: Summary over the group's runs}}."""
+    return {
+        key: {metric: summarize([r.final[metric] for r in runs], confidence) for metric in METRICS}
+        for key, runs in groups.items()
+    }
+
+
+# --- writing ---------------------------------------------------------------------------------
+def machine_description() -> str:
+    """CPU model, core count, OS and Python version of this machine, for reports."""
+    cpu = platform.processor() or platform.machine()
+    cpuinfo = Path("/proc/cpuinfo")
+    if cpuinfo.is_file():
+        for line in cpuinfo.read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    system = f"{platform.system()} {platform.release()}"
+    return f"{cpu}, {os.cpu_count()} cores, {system}, Python {platform.python_version()}"
+
+
+def _fmt(value: float, digits: int = 3) -> str:
+    return "n/a" if value is None or math.isnan(value) else f"{value:.{digits}f}"
+
+
+def _markdown(
+    groups: dict[tuple[str, ...], list[RunRecord]],
+    summaries: dict[tuple[str, ...], dict[str, Summary]],
+    confidence: float,
+    title: str,
+    command: str | None,
+) -> str:
+    percent = round(confidence * 100)
+    lines = [
+        f"# {title}",
+        "",
+        f"Written {time.strftime('%Y-%m-%d %H:%M:%S %Z')} by drivelab on {machine_description()}.",
+    ]
+    if command:
+        lines += ["", "Made with:", "", "```bash", command, "```"]
+    lines += [
+        "",
+        f"Each run contributes one value per metric (its final evaluation). Over the seeds of a group:"
+        f" the mean, a {percent} % percentile-bootstrap confidence interval of the mean"
+        f" (scipy.stats.bootstrap, 10,000 resamples) and the interquartile mean (IQM, rliable's"
+        f" trimmed mean; with fewer than 4 seeds it equals the mean).",
+    ]
+    if len({key[3] for key in groups}) > 1:
+        lines += [
+            "",
+            "The groups differ in reward, and each run's return is measured with its own reward:"
+            " compare returns across rewards with care; the driving metrics (success, crashes, speed,"
+            " distance) do not depend on the reward.",
+        ]
+    repeated = [key for key, runs in groups.items() if len({r.config.seed for r in runs}) < len(runs)]
+    for key in repeated:
+        lines += [
+            "",
+            f"**Warning:** group {' · '.join(key)} has several runs with the same seed; each counts as"
+            " a separate sample, which narrows its interval.",
+        ]
+    lines += [
+        "",
+        "## Groups",
+        "",
+        "| group (algo · env · obs · reward · action) | seeds | steps | runs |",
+        "|---|---|---|---|",
+    ]
+    for key, runs in groups.items():
+        seeds = ", ".join(str(r.config.seed) for r in runs)
+        steps = ", ".join(sorted({str(r.config.steps) for r in runs}))
+        names = ", ".join(f"`{r.run_dir.name}` ({r.source})" for r in runs)
+        lines.append(f"| {' · '.join(key)} | {seeds} | {steps} | {names} |")
+    for metric, label in METRICS.items():
+        if all(summaries[key][metric].n == 0 for key in groups):
+            continue
+        lines += [
+            "",
+            f"## {label}",
+            "",
+            f"| group | n | mean | {percent} % CI | IQM |",
+            "|---|---|---|---|---|",
+        ]
+        for key in groups:
+            s = summaries[key][metric]
+            lines.append(
+                f"| {' · '.join(key)} | {s.n} | {_fmt(s.mean)} | [{_fmt(s.ci_low)}, {_fmt(s.ci_high)}]"
+                f" | {_fmt(s.iqm)} |"
+            )
+    lines += ["", "![learning curves](learning_curves.png)", "", "![metrics](metrics.png)", ""]
+    return "\n".join(lines)
+
+
+def _write_csvs(folder: Path, groups, summaries) -> None:
+    with (folder / "summary.csv").open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow([*GROUP_FIELDS, "metric", "n", "mean", "ci_low", "ci_high", "iqm"])
+        for key in groups:
+            for metric in METRICS:
+                s = summaries[key][metric]
+                writer.writerow([*key, metric, s.n, s.mean, s.ci_low, s.ci_high, s.iqm])
+    with (folder / "runs.csv").open("w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["run_dir", *GROUP_FIELDS, "seed", "steps", "source", *METRICS])
+        for key, runs in groups.items():
+            for r in runs:
+                values = ["" if r.final[m] is None else r.final[m] for m in METRICS]
+                writer.writerow([str(r.run_dir), *key, r.config.seed, r.config.steps, r.source, *values])
+
+
+def publish_dir(out_dir: Path, fill) -> Path:
+    """Write a report into a temporary sibling folder with ``fill(folder)``, then rename it to
+    ``out_dir``: a failure leaves nothing half-written, and a previous report is replaced whole.
+
+    An existing ``out_dir`` that is not a drivelab report is refused rather than overwritten.
+    """
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not (out_dir / "report.md").is_file():
+        if not out_dir.is_dir() or any(out_dir.iterdir()):
+            raise UsageError(f"{str(out_dir)!r} exists and is not a drivelab report; choose another --out")
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-", dir=out_dir.parent))
+    try:
+        fill(tmp)
+        if out_dir.exists():
+            old = out_dir.with_name(f".{out_dir.name}.old-{os.getpid()}")
+            os.replace(out_dir, old)
+            os.replace(tmp, out_dir)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            os.replace(tmp, out_dir)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return out_dir
+
+
+def write_report(
+    records: Sequence[RunRecord],
+    out_dir: str | Path,
+    title: str = "drivelab comparison",
+    command: str | None = None,
+    confidence: float = CONFIDENCE,
+) -> Path:
+    """Group ``records`` over seeds and write the report directory ``out_dir`` atomically."""
+    from drivelab.training.compare_plots import plot_learning_curves, plot_metric_bars
+
+    groups = group_runs(records)
+    summaries = summarize_groups(groups, confidence)
+
+    def fill(folder: Path) -> None:
+        (folder / "report.md").write_text(_markdown(groups, summaries, confidence, title, command))
+        _write_csvs(folder, groups, summaries)
+        plot_learning_curves(groups, folder / "learning_curves.png", confidence)
+        plot_metric_bars(groups, summaries, folder / "metrics.png", confidence)
+
+    return publish_dir(Path(out_dir), fill)
+
+
+def compare(
+    runs: Iterable[str | Path],
+    out_dir: str | Path,
+    title: str = "drivelab comparison",
+    command: str | None = None,
+    confidence: float = CONFIDENCE,
+) -> Path:
+    """Read the run directories named by ``runs`` (paths or globs) and write a comparison report.
+
+    :param runs: run directories or glob patterns such as ``runs/*``.
+    :param out_dir: report directory to (re)write.
+    :param title: heading of report.md.
+    :param command: the command line that made the report, quoted in report.md.
+    :param confidence: coverage of the bootstrap intervals (0.9: 90 %).
+    """
+    if not 0.0 < confidence < 1.0:
+        raise UsageError(f"--confidence must be between 0 and 1, got {confidence}")
+    records = [load_run(path) for path in find_runs(runs)]
+    return write_report(records, out_dir, title=title, command=command, confidence=confidence)

@@ -1,0 +1,94 @@
+"""Statistics over seeds: mean, percentile-bootstrap confidence interval, interquartile mean.
+
+Following Agarwal et al. (2021), "Deep RL at the Edge of the Statistical Precipice" (rliable):
+with a handful of seeds report an interval, not only a mean, and the interquartile mean (IQM),
+which discards the lowest and highest 25 % of runs and so is robust to one outlying seed.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+CONFIDENCE = 0.90
+RESAMPLES = 10_000
+
+
+@dataclass(frozen=True)
+class Summary:
+    """One metric of one group of runs.
+
+    :param n: number of runs with a value (runs that report None for the metric are left out).
+    :param mean: mean over runs.
+    :param ci_low: lower end of the bootstrap confidence interval of the mean (nan when n < 2).
+    :param ci_high: upper end (nan when n < 2).
+    :param iqm: interquartile mean over runs.
+    """
+
+    n: int
+    mean: float
+    ci_low: float
+    ci_high: float
+    iqm: float
+
+
+def interquartile_mean(values: Sequence[float]) -> float:
+    """Mean of the values left after cutting ``floor(n / 4)`` from each end of the sorted list.
+
+    This is rliable's IQM (``scipy.stats.trim_mean(x, 0.25)``); with fewer than 4 values nothing
+    is cut and it equals the mean.
+    """
+    values = np.asarray(values, dtype=float)
+    if values.size == 0:
+        return math.nan
+    return float(stats.trim_mean(values, proportiontocut=0.25))
+
+
+def bootstrap_ci(
+    values: Sequence[float],
+    confidence: float = CONFIDENCE,
+    resamples: int = RESAMPLES,
+    seed: int = 0,
+) -> tuple[float, float]:
+    """Percentile-bootstrap confidence interval of the mean (``scipy.stats.bootstrap``).
+
+    Resamples the values with replacement ``resamples`` times and returns the
+    ``(1 - confidence) / 2`` and ``(1 + confidence) / 2`` quantiles of the resampled means.
+    The same ``seed`` gives the same interval. Fewer than two values give ``(nan, nan)``.
+
+    :param values: one value per run (seed).
+    :param confidence: coverage of the interval, 0.90 for a 90 % interval.
+    :param resamples: number of bootstrap resamples.
+    :param seed: seed of the resampling generator.
+    """
+    values = np.asarray(values, dtype=float)
+    if values.size < 2:
+        return math.nan, math.nan
+    if np.all(values == values[0]):  # every resample has the same mean
+        return float(values[0]), float(values[0])
+    result = stats.bootstrap(
+        (values,),
+        np.mean,
+        confidence_level=confidence,
+        n_resamples=resamples,
+        method="percentile",
+        vectorized=True,
+        rng=np.random.default_rng(seed),
+    )
+    return float(result.confidence_interval.low), float(result.confidence_interval.high)
+
+
+def summarize(values: Sequence[float | None], confidence: float = CONFIDENCE, seed: int = 0) -> Summary:
+    """Mean, bootstrap interval and IQM of one metric over runs, skipping missing (None/nan) values."""
+    kept = [float(v) for v in values if v is not None and not math.isnan(float(v))]
+    if not kept:
+        return Summary(0, math.nan, math.nan, math.nan, math.nan)
+    if all(v == kept[0] for v in kept):  # exact, without the rounding of a float mean
+        low, high = bootstrap_ci(kept, confidence=confidence, seed=seed)
+        return Summary(len(kept), kept[0], low, high, kept[0])
+    low, high = bootstrap_ci(kept, confidence=confidence, seed=seed)
+    return Summary(len(kept), float(np.mean(kept)), low, high, interquartile_mean(kept))

@@ -1,0 +1,359 @@
+"""Sweeps: a grid of runs (algorithms × scenarios × sensors × rewards × seeds …) with per-cell
+overrides, executed in a local process pool or as Ray tasks, with the same run directories.
+
+A sweep file::
+
+    name: cmp                     # optional prefix of run names
+    runs_dir: runs/cmp            # optional; --runs-dir wins
+    eval_episodes: 20             # final evaluation of each run (eval.json); 0: none
+    base: {steps: 20000, backend: fast, traffic: regular}
+    grid:                         # any RunConfig field but name; seed may be a count
+      algo: [dqn, ppo]
+      reward: [highway, "highway,right_lane=0"]
+      seed: 3
+    overrides:                    # applied in order to the cells that match
+      - match: {algo: dqn}
+        set: {hyperparams: {learning_rate: 1.0e-3}}
+
+Each cell's run directory is named from its grid values, so a re-run finds it: a finished run is
+skipped, an interrupted one resumes from its checkpoint, and one that never reached a checkpoint
+starts again. A run directory made with a different config is refused before anything runs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import json
+import multiprocessing
+import os
+import re
+import shutil
+import time
+import traceback
+from collections.abc import Iterator
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from pathlib import Path
+
+from tqdm import tqdm
+
+from drivelab.config import FIELDS, RunConfig, build_config, load_yaml
+from drivelab.errors import UsageError
+from drivelab.hyperparams import with_shipped_hyperparams
+
+SWEEP_KEYS = ("name", "runs_dir", "eval_episodes", "base", "grid", "overrides")
+MERGED_FIELDS = ("hyperparams", "env_options")  # dict fields merged key by key, not replaced
+EXECUTORS = ("pool", "ray")
+LOG_FOLDER = ".sweep-logs"  # per-run stdout/stderr of the workers, beside the run directories
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One run of a sweep.
+
+    :param config: the run's validated config (its ``name`` is the run directory's name).
+    :param grid_values: the grid value of each axis that made this cell.
+    """
+
+    config: RunConfig
+    grid_values: dict
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """An expanded sweep: its cells and where and how to run them."""
+
+    cells: tuple[Cell, ...]
+    runs_dir: Path
+    eval_episodes: int
+
+
+# --- reading and expanding -------------------------------------------------------------------
+def _slug(value) -> str:
+    text = ",".join(map(str, value)) if isinstance(value, (list, tuple)) else str(value)
+    return re.sub(r"[^A-Za-z0-9.+]+", "_", text).strip("_") or "x"
+
+
+def _axis_values(axis: str, values) -> list:
+    if axis == "seed" and isinstance(values, int) and not isinstance(values, bool):
+        if values < 1:
+            raise UsageError("sweep grid 'seed' as a count must be >= 1")
+        return list(range(values))
+    if not isinstance(values, list) or not values:
+        raise UsageError(f"sweep grid axis {axis!r} must be a non-empty list")
+    return values
+
+
+def _merge(values: dict, update: dict, where: str) -> dict:
+    merged = dict(values)
+    for key, value in update.items():
+        if key not in FIELDS or key == "name":
+            raise UsageError(f"{where} has unknown run field {key!r}")
+        if key in MERGED_FIELDS:
+            if not isinstance(value, dict):
+                raise UsageError(f"{where} field {key!r} must be a mapping")
+            merged[key] = {**merged.get(key, {}), **value}
+        else:
+            merged[key] = value
+    return merged
+
+
+def _matches(match: dict, grid_values: dict) -> bool:
+    return all(_slug(grid_values.get(axis)) == _slug(value) for axis, value in match.items())
+
+
+def expand_sweep(spec: dict, runs_dir: str | Path | None = None) -> Sweep:
+    """Validate a sweep mapping and expand its grid into cells (configs checked, nothing run).
+
+    :param spec: the parsed sweep file (see the module docstring).
+    :param runs_dir: where the run directories go; overrides the file's ``runs_dir``.
+    """
+    if not isinstance(spec, dict):
+        raise UsageError("a sweep file must be a mapping with a 'grid'")
+    unknown = sorted(set(spec) - set(SWEEP_KEYS))
+    if unknown:
+        raise UsageError(f"unknown sweep key {unknown[0]!r} (known: {', '.join(SWEEP_KEYS)})")
+    base, grid, overrides = spec.get("base") or {}, spec.get("grid"), spec.get("overrides") or []
+    if not isinstance(base, dict):
+        raise UsageError("sweep 'base' must be a mapping of run fields")
+    if not isinstance(grid, dict) or not grid:
+        raise UsageError("sweep needs a non-empty 'grid' mapping of run fields to lists")
+    if not isinstance(overrides, list) or not all(isinstance(o, dict) for o in overrides):
+        raise UsageError("sweep 'overrides' must be a list of {match: ..., set: ...}")
+    for axis in grid:
+        if axis not in FIELDS or axis == "name":
+            raise UsageError(f"sweep grid has unknown run field {axis!r}")
+    axes = {axis: _axis_values(axis, values) for axis, values in grid.items()}
+    for i, override in enumerate(overrides):
+        if set(override) - {"match", "set"} or not isinstance(override.get("set"), dict):
+            raise UsageError(f"sweep override {i + 1} must have 'set' (a mapping) and optional 'match'")
+        stray = sorted(set(override.get("match") or {}) - set(axes))
+        if stray:
+            raise UsageError(f"sweep override {i + 1} matches {stray[0]!r}, which is not a grid axis")
+    eval_episodes = spec.get("eval_episodes", 10)
+    if not isinstance(eval_episodes, int) or isinstance(eval_episodes, bool) or eval_episodes < 0:
+        raise UsageError(f"sweep 'eval_episodes' must be an integer >= 0, got {eval_episodes!r}")
+    prefix = str(spec["name"]) + "-" if spec.get("name") else ""
+    cells, names = [], {}
+    for combination in itertools.product(*axes.values()):
+        grid_values = dict(zip(axes, combination, strict=True))
+        values = _merge(base, grid_values, "sweep base/grid")
+        for i, override in enumerate(overrides):
+            if _matches(override.get("match") or {}, grid_values):
+                values = _merge(values, override["set"], f"sweep override {i + 1}")
+        if "algo" not in values:
+            raise UsageError("sweep cells need an 'algo' (in base or grid)")
+        # algo and scenario always, then the other grid axes in order, then the seed
+        parts = [values["algo"], values.get("env", "highway")]
+        parts += [v for axis, v in grid_values.items() if axis not in ("algo", "env", "seed")]
+        name = prefix + "-".join(_slug(p) for p in parts) + f"-s{values.get('seed', 0)}"
+        if name in names:
+            raise UsageError(f"sweep cells {names[name]} and {grid_values} both map to run {name!r}")
+        names[name] = grid_values
+        config = build_config(with_shipped_hyperparams({**values, "name": name}))
+        cells.append(Cell(config, grid_values))
+    where = runs_dir if runs_dir is not None else spec.get("runs_dir", "runs")
+    sweep = Sweep(tuple(cells), Path(where), eval_episodes)
+    _check_cells(sweep)
+    return sweep
+
+
+def load_sweep(path: str | Path, runs_dir: str | Path | None = None) -> Sweep:
+    """Read and expand a sweep YAML file (one-line UsageError for anything malformed)."""
+    return expand_sweep(load_yaml(path), runs_dir)
+
+
+def _check_cells(sweep: Sweep) -> None:
+    """Fail before any run starts: impossible algorithm/action pairs, bad env options."""
+    from drivelab.agents.registry import check_combination
+    from drivelab.envs.core import DriveEnv
+
+    checked: set[str] = set()
+    for cell in sweep.cells:
+        check_combination(cell.config.algo, cell.config.action)
+        key = json.dumps(cell.config.env_kwargs(), sort_keys=True, default=str)
+        if key not in checked:
+            DriveEnv(**cell.config.env_kwargs()).close()
+            checked.add(key)
+
+
+# --- what each cell needs --------------------------------------------------------------------
+def cell_action(run_dir: Path, config: RunConfig, eval_episodes: int) -> str:
+    """What a re-run must do for this cell: "train", "restart", "resume", "evaluate" or "skip".
+
+    Raises UsageError when ``run_dir`` holds a run with a different config.
+    """
+    from drivelab.training.evaluate import load_run_config
+
+    if not run_dir.exists():
+        return "train"
+    existing = load_run_config(run_dir)
+    if existing.identity() != config.identity():
+        raise UsageError(
+            f"run directory {str(run_dir)!r} holds a run with a different config; "
+            "remove it or rename the sweep"
+        )
+    manifest_path = run_dir / "checkpoints" / "latest.json"
+    if not manifest_path.is_file():
+        return "restart"  # stopped before its first checkpoint
+    try:
+        steps = int(json.loads(manifest_path.read_text())["steps"])
+    except (json.JSONDecodeError, KeyError, TypeError, ValueError):
+        return "restart"
+    if steps < config.steps or not (run_dir / "model.zip").is_file():
+        return "resume"
+    if eval_episodes and not (run_dir / "eval.json").is_file():
+        return "evaluate"
+    return "skip"
+
+
+def plan(sweep: Sweep) -> list[tuple[Cell, str]]:
+    """Each cell with what it needs (see ``cell_action``), checked before anything runs."""
+    return [
+        (cell, cell_action(sweep.runs_dir / cell.config.name, cell.config, sweep.eval_episodes))
+        for cell in sweep.cells
+    ]
+
+
+def run_cell(config_values: dict, runs_dir: str, action: str, eval_episodes: int) -> dict:
+    """Do one cell's work in a worker (process-pool worker or Ray task); never raises.
+
+    Output (progress bars, warnings) goes to ``runs_dir/.sweep-logs/<name>.log``.
+
+    :returns: ``{"name", "action", "ok", "seconds", "error"}``.
+    """
+    import torch
+
+    torch.set_num_threads(1)  # one run per core: no oversubscription
+    from drivelab.training import run
+    from drivelab.training.evaluate import evaluate_run
+
+    config = build_config(config_values)
+    root = Path(runs_dir)
+    run_dir = root / config.name
+    (root / LOG_FOLDER).mkdir(parents=True, exist_ok=True)
+    start = time.perf_counter()
+    outcome = {"name": config.name, "action": action, "ok": True, "error": None}
+    with (
+        (root / LOG_FOLDER / f"{config.name}.log").open("a") as log,
+        contextlib.redirect_stderr(log),
+        contextlib.redirect_stdout(log),
+    ):
+        try:
+            if action == "restart":
+                shutil.rmtree(run_dir)
+            if action in ("train", "restart"):
+                run.train(config, root)
+            elif action == "resume":
+                (run_dir / "eval.json").unlink(missing_ok=True)  # it describes the shorter run
+                run.resume(run_dir, config.steps)
+            if eval_episodes and action != "skip":
+                evaluate_run(run_dir, episodes=eval_episodes)
+        except BaseException as exc:  # noqa: BLE001 - reported to the driver, which goes on
+            traceback.print_exc(file=log)
+            outcome.update(ok=False, error=f"{type(exc).__name__}: {exc}")
+    outcome["seconds"] = round(time.perf_counter() - start, 1)
+    return outcome
+
+
+# --- executing -------------------------------------------------------------------------------
+def _in_process(jobs: list[dict]) -> Iterator[dict]:
+    for job in jobs:
+        yield run_cell(**job)
+
+
+def _pool(jobs: list[dict], workers: int) -> Iterator[dict]:
+    context = multiprocessing.get_context("spawn")  # fresh interpreters: no forked torch/numba state
+    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+        futures = [pool.submit(run_cell, **job) for job in jobs]
+        try:
+            for future in as_completed(futures):
+                yield future.result()
+        except KeyboardInterrupt:
+            pool.shutdown(wait=True, cancel_futures=True)
+            raise
+
+
+def _ray(jobs: list[dict], workers: int, address: str | None) -> Iterator[dict]:
+    try:
+        import ray
+    except ImportError:
+        raise UsageError("--executor ray needs Ray: pip install 'drivelab[ray]'") from None
+    started = not ray.is_initialized()
+    if started:
+        if address:
+            try:
+                ray.init(address=address, include_dashboard=False, log_to_driver=False)
+            except (ConnectionError, ValueError, RuntimeError) as exc:
+                raise UsageError(f"cannot join the Ray cluster at {address!r}: {exc}") from None
+        else:
+            # "local": always a fresh cluster of our own, never someone else's running one
+            ray.init(address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False)
+    try:
+        remote = ray.remote(num_cpus=1, max_retries=0)(run_cell)
+        pending = [remote.remote(**job) for job in jobs]
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1)
+            yield ray.get(done[0])
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def run_sweep(
+    sweep: Sweep,
+    executor: str = "pool",
+    workers: int | None = None,
+    address: str | None = None,
+) -> list[dict]:
+    """Run every cell that is not finished; return one outcome per cell (skipped ones included).
+
+    :param sweep: from ``load_sweep`` / ``expand_sweep``.
+    :param executor: "pool" (local processes) or "ray" (Ray tasks).
+    :param workers: parallel runs; default one per core. One worker runs the cells in this
+        process. With Ray and no ``address``, the CPUs of the local cluster it starts.
+    :param address: an existing Ray cluster (``ray://host:10001`` or ``auto``); it needs drivelab
+        installed on its nodes and ``runs_dir`` on storage they share.
+    """
+    if executor not in EXECUTORS:
+        raise UsageError(f"unknown executor {executor!r} (choose from {', '.join(EXECUTORS)})")
+    if address and executor != "ray":
+        raise UsageError("--address is for --executor ray")
+    workers = workers or os.cpu_count() or 1
+    if workers < 1:
+        raise UsageError(f"--workers must be >= 1, got {workers}")
+    steps = plan(sweep)
+    runs_dir = sweep.runs_dir.resolve()
+    runs_dir.mkdir(parents=True, exist_ok=True)
+    outcomes = [
+        {"name": c.config.name, "action": "skip", "ok": True, "error": None, "seconds": 0.0}
+        for c, action in steps
+        if action == "skip"
+    ]
+    jobs = [
+        {"config_values": c.config.to_dict(), "runs_dir": str(runs_dir), "action": action,
+         "eval_episodes": sweep.eval_episodes}
+        for c, action in steps
+        if action != "skip"
+    ]  # fmt: skip
+    if not jobs:
+        return outcomes
+    if executor == "ray":
+        results = _ray(jobs, workers, address)
+    elif workers == 1:  # one worker: run here, one after another (no process start-up)
+        results = _in_process(jobs)
+    else:
+        results = _pool(jobs, workers)
+    with tqdm(total=len(jobs), desc=f"sweep ({executor}, {workers} workers)", unit="run") as bar:
+        for outcome in results:
+            outcomes.append(outcome)
+            bar.set_postfix_str(f"{outcome['name']}: {'ok' if outcome['ok'] else 'FAILED'}")
+            bar.update(1)
+    order = {c.config.name: i for i, c in enumerate(sweep.cells)}
+    return sorted(outcomes, key=lambda o: order[o["name"]])
+
+
+def run_dirs(sweep: Sweep) -> list[Path]:
+    """The run directories of a sweep's cells, in grid order."""
+    return [sweep.runs_dir / cell.config.name for cell in sweep.cells]

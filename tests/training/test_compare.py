@@ -1,0 +1,163 @@
+"""Comparisons: grouping over seeds, the numbers in the report, and refusing bad input."""
+
+import csv
+import json
+
+import pytest
+
+from drivelab.config import build_config, save_yaml
+from drivelab.errors import UsageError
+from drivelab.training import compare as compare_module
+from drivelab.training.compare import compare, find_runs, group_runs, load_run
+
+METRIC_ROW = {
+    "episodes": 2, "std_return": 0.0, "success_rate": 1.0, "crash_rate": 0.0, "mean_distance_km": 0.5,
+    "mean_speed_mps": 20.0, "mean_length": 30.0, "collisions_per_km": 0.0, "off_road_per_km": 0.0,
+    "route_completion": None,
+}  # fmt: skip
+
+
+def fake_run(
+    root, name, algo="ppo", seed=0, reward="highway", final_return=None, curve=((10, 0.0), (20, 1.0))
+):
+    """A run directory as drivelab train writes it, with chosen evaluation returns."""
+    run_dir = root / name
+    run_dir.mkdir(parents=True)
+    config = build_config({"algo": algo, "seed": seed, "reward": reward, "steps": 20, "name": name})
+    save_yaml(config, run_dir / "config.yaml")
+    with (run_dir / "evaluations.csv").open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=["step", "mean_return", *METRIC_ROW])
+        writer.writeheader()
+        for step, value in curve:
+            writer.writerow({"step": step, "mean_return": value, **METRIC_ROW, "route_completion": ""})
+    if final_return is not None:
+        (run_dir / "eval.json").write_text(json.dumps({**METRIC_ROW, "mean_return": final_return}))
+    return run_dir
+
+
+@pytest.fixture
+def runs(tmp_path):
+    root = tmp_path / "runs"
+    fake_run(root, "ppo-s0", seed=0, final_return=0.0)
+    fake_run(root, "ppo-s1", seed=1, final_return=0.0)
+    fake_run(root, "ppo-s2", seed=2, final_return=1.0)
+    fake_run(root, "dqn-s0", algo="dqn", seed=0, curve=((10, 2.0), (20, 4.0)))  # no eval.json
+    fake_run(root, "dqn-s1", algo="dqn", seed=1, curve=((10, 2.0), (20, 6.0)))
+    fake_run(root, "ppo-nocrash-s0", seed=0, reward="highway,collision=0", final_return=7.0)
+    return root
+
+
+def test_grouping_over_seeds(runs):
+    records = [load_run(p) for p in find_runs([str(runs / "*")])]
+    groups = group_runs(records)
+    assert {key: [r.config.seed for r in rs] for key, rs in groups.items()} == {
+        ("dqn", "highway", "kinematics", "highway", "meta"): [0, 1],
+        ("ppo", "highway", "kinematics", "highway,collision=0", "meta"): [0],
+        ("ppo", "highway", "kinematics", "highway", "meta"): [0, 1, 2],
+    }
+    sources = {r.run_dir.name: r.source for r in records}
+    assert sources["dqn-s0"] == "evaluations.csv" and sources["ppo-s0"] == "eval.json"
+
+
+def test_report_numbers_and_files(runs, tmp_path):
+    out = compare([str(runs / "*")], tmp_path / "report", command="drivelab compare --runs 'runs/*'")
+    for name in ("report.md", "summary.csv", "runs.csv", "learning_curves.png", "metrics.png"):
+        assert (out / name).is_file() and (out / name).stat().st_size > 0, name
+    with (out / "summary.csv").open() as handle:
+        rows = {(r["algo"], r["reward"], r["metric"]): r for r in csv.DictReader(handle)}
+    ppo = rows[("ppo", "highway", "mean_return")]
+    # final returns 0, 0, 1: mean 1/3, 90 % percentile bootstrap (0, 2/3) (see test_stats), IQM = mean
+    assert int(ppo["n"]) == 3
+    assert float(ppo["mean"]) == pytest.approx(1 / 3)
+    assert float(ppo["ci_low"]) == 0.0 and float(ppo["ci_high"]) == pytest.approx(2 / 3)
+    assert float(ppo["iqm"]) == pytest.approx(1 / 3)
+    dqn = rows[("dqn", "highway", "mean_return")]  # last evaluations.csv rows: 4 and 6
+    assert float(dqn["mean"]) == pytest.approx(5.0)
+    assert (float(dqn["ci_low"]), float(dqn["ci_high"])) == (4.0, 6.0)
+    single = rows[("ppo", "highway,collision=0", "mean_return")]
+    assert float(single["mean"]) == 7.0 and single["ci_low"] == "nan"
+    assert int(rows[("ppo", "highway", "route_completion")]["n"]) == 0  # None everywhere
+    text = (out / "report.md").read_text()
+    assert "drivelab compare --runs 'runs/*'" in text
+    assert "The groups differ in reward" in text
+    assert "| ppo · highway · kinematics · highway · meta | 3 | 0.333 | [0.000, 0.667] | 0.333 |" in text
+    with (out / "runs.csv").open() as handle:
+        assert len(list(csv.DictReader(handle))) == 6
+
+
+def test_rewrite_replaces_previous_report(runs, tmp_path):
+    out = compare([str(runs / "ppo-s*")], tmp_path / "report")
+    (out / "stale.txt").write_text("old")
+    compare([str(runs / "dqn-s0"), str(runs / "dqn-s1")], out)
+    assert not (out / "stale.txt").exists()
+    assert "dqn" in (out / "summary.csv").read_text() and "ppo" not in (out / "summary.csv").read_text()
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["nowhere"], "does not exist"),
+        (["empty/*"], "no run directory matches"),
+        ([], "no run directories given"),
+    ],
+)
+def test_bad_input_is_one_line_and_writes_nothing(runs, tmp_path, args, message):
+    with pytest.raises(UsageError, match=message):
+        compare([str(tmp_path / a) if a else a for a in args], tmp_path / "report")
+    assert not (tmp_path / "report").exists()
+
+
+def test_failure_midway_leaves_nothing(runs, tmp_path, monkeypatch):
+    def broken(*args, **kwargs):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr("drivelab.training.compare_plots.plot_metric_bars", broken)
+    with pytest.raises(RuntimeError):
+        compare([str(runs / "*")], tmp_path / "report")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["runs"]
+
+
+def test_foreign_output_folder_is_refused(runs, tmp_path):
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("keep")
+    with pytest.raises(UsageError, match="not a drivelab report"):
+        compare([str(runs / "*")], tmp_path / "mine")
+    assert (tmp_path / "mine" / "notes.txt").read_text() == "keep"
+
+
+def test_run_without_evaluation_is_named(tmp_path):
+    run_dir = fake_run(tmp_path, "bare")
+    (run_dir / "evaluations.csv").unlink()
+    with pytest.raises(UsageError, match="has no evaluation yet"):
+        compare_module.load_run(run_dir)
+
+
+def test_cli_compare(runs, tmp_path):
+    from typer.testing import CliRunner
+
+    from drivelab.cli import app
+
+    runner = CliRunner()
+    result = runner.invoke(
+        app, ["compare", str(runs / "ppo-s0"), "--runs", str(runs / "dqn-*"), "-o", str(tmp_path / "r")]
+    )
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "r" / "report.md").is_file()
+    result = runner.invoke(app, ["compare", "--runs", str(tmp_path / "none-*"), "-o", str(tmp_path / "r2")])
+    assert result.exit_code == 2
+    assert result.output.strip() == f"error: no run directory matches {str(tmp_path / 'none-*')!r}"
+    assert not (tmp_path / "r2").exists()
+
+
+def test_repeated_seed_is_flagged(runs, tmp_path):
+    fake_run(runs, "ppo-s0-again", seed=0, final_return=0.0)
+    text = (compare([str(runs / "ppo-s*")], tmp_path / "report") / "report.md").read_text()
+    assert (
+        "**Warning:** group ppo · highway · kinematics · highway · meta has several runs with the same seed"
+        in text
+    )
+    text = (
+        compare([str(runs / "ppo-s0"), str(runs / "ppo-s1")], tmp_path / "report") / "report.md"
+    ).read_text()
+    assert "Warning" not in text

@@ -1,0 +1,168 @@
+"""Sweeps: grid expansion, per-cell overrides, skip/resume/restart on re-run, pool and Ray."""
+
+import json
+
+import pytest
+import yaml
+
+from drivelab.errors import UsageError
+from drivelab.training.sweep import expand_sweep, load_sweep, plan, run_sweep
+
+TINY_PPO = {"n_steps": 16, "batch_size": 16, "n_epochs": 1}
+
+
+def tiny_spec(steps=32, seeds=2, **grid):
+    return {
+        "base": {
+            "algo": "ppo", "env": "highway", "obs": "kinematics", "traffic": "empty", "steps": steps,
+            "eval_every": 32, "eval_episodes": 1, "env_options": {"duration_s": 8}, "hyperparams": TINY_PPO,
+        },
+        "grid": {**grid, "seed": seeds},
+        "eval_episodes": 1,
+    }  # fmt: skip
+
+
+def test_grid_expands_with_overrides_and_shipped_hyperparams(tmp_path):
+    spec = tiny_spec(algo=["ppo", "a2c"], reward=["highway", "highway,right_lane=0"])
+    spec["name"] = "abl"
+    spec["overrides"] = [
+        {"match": {"algo": "a2c"}, "set": {"hyperparams": {"n_steps": 8}}},
+        {"match": {"algo": "a2c", "reward": "highway"}, "set": {"steps": 64}},
+    ]
+    spec["base"]["hyperparams"] = {"learning_rate": 1e-3}
+    sweep = expand_sweep(spec, tmp_path)
+    configs = {c.config.name: c.config for c in sweep.cells}
+    assert list(configs) == [
+        "abl-ppo-highway-highway-s0", "abl-ppo-highway-highway-s1",
+        "abl-ppo-highway-highway_right_lane_0-s0", "abl-ppo-highway-highway_right_lane_0-s1",
+        "abl-a2c-highway-highway-s0", "abl-a2c-highway-highway-s1",
+        "abl-a2c-highway-highway_right_lane_0-s0", "abl-a2c-highway-highway_right_lane_0-s1",
+    ]  # fmt: skip
+    ppo, a2c = configs["abl-ppo-highway-highway-s1"], configs["abl-a2c-highway-highway-s0"]
+    assert ppo.seed == 1 and ppo.reward == "highway" and ppo.steps == 32
+    # shipped ppo.yaml (gamma 0.8, n_steps 256) under the base's learning_rate
+    assert ppo.hyperparams["gamma"] == 0.8 and ppo.hyperparams["n_steps"] == 256
+    assert ppo.hyperparams["learning_rate"] == 1e-3
+    assert a2c.hyperparams == {"n_steps": 8, "learning_rate": 1e-3, "gamma": 0.8} and a2c.steps == 64
+    assert configs["abl-a2c-highway-highway_right_lane_0-s0"].steps == 32
+    assert configs["abl-a2c-highway-highway_right_lane_0-s0"].env_options == {"duration_s": 8}
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("grid: [ppo\n", "malformed YAML"),
+        ("- 1\n- 2\n", "must hold a mapping"),
+        ("base: {algo: ppo}\n", "non-empty 'grid'"),
+        ("grid: {algo: ppo}\n", "axis 'algo' must be a non-empty list"),
+        ("grid: {algo: [ppo], colour: [red]}\n", "unknown run field 'colour'"),
+        ("grid: {algo: [ppo]}\nrepeat: 2\n", "unknown sweep key 'repeat'"),
+        ("grid: {algo: [dqn]}\nbase: {action: continuous}\n", "cannot take 'continuous'"),
+        ("grid: {algo: [ppo]}\noverrides: [{match: {env: merge}, set: {steps: 5}}]\n", "not a grid axis"),
+        ("grid: {algo: [ppo], reward: [nice]}\n", "unknown reward preset 'nice'"),
+        ("grid: {env: [highway]}\n", "need an 'algo'"),
+    ],
+)
+def test_malformed_sweep_files(tmp_path, text, message):
+    path = tmp_path / "sweep.yaml"
+    path.write_text(text)
+    with pytest.raises(UsageError, match=message):
+        load_sweep(path, tmp_path / "runs")
+    assert not (tmp_path / "runs").exists()
+
+
+def _manifest_steps(run_dir):
+    return json.loads((run_dir / "checkpoints" / "latest.json").read_text())["steps"]
+
+
+def test_rerun_skips_finished_resumes_interrupted_restarts_unstarted(tmp_path):
+    runs = tmp_path / "runs"
+    sweep = expand_sweep(tiny_spec(steps=32), runs)
+    outcomes = run_sweep(sweep, workers=1)  # in this process: the pool is tested below
+    assert [(o["name"], o["action"], o["ok"]) for o in outcomes] == [
+        ("ppo-highway-s0", "train", True),
+        ("ppo-highway-s1", "train", True),
+    ]
+    s0, s1 = runs / "ppo-highway-s0", runs / "ppo-highway-s1"
+    assert _manifest_steps(s0) == 32 and (s0 / "eval.json").is_file() and (s1 / "model.zip").is_file()
+    stamp = (s0 / "model.zip").stat().st_mtime_ns
+
+    assert [o["action"] for o in run_sweep(sweep)] == ["skip", "skip"]  # nothing to do: no pool
+    assert (s0 / "model.zip").stat().st_mtime_ns == stamp
+
+    longer = expand_sweep(tiny_spec(steps=48), runs)  # a larger budget: same config identity
+    (s1 / "checkpoints" / "latest.json").unlink()  # as if s1 stopped before its first checkpoint
+    assert [action for _, action in plan(longer)] == ["resume", "restart"]
+    before = json.loads((s0 / "eval.json").read_text())["run"]
+    (s0 / "eval.json").write_text(json.dumps({"run": before, "stale": True}))
+    outcomes = run_sweep(longer, workers=1)
+    assert all(o["ok"] for o in outcomes), outcomes
+    assert "stale" not in json.loads((s0 / "eval.json").read_text())  # re-evaluated after the resume
+    assert _manifest_steps(s0) == 48 and (s0 / "progress-32.csv").is_file()  # continued from 32
+    assert _manifest_steps(s1) == 48 and not (s1 / "progress-32.csv").exists()  # trained afresh
+    assert [action for _, action in plan(longer)] == ["skip", "skip"]
+
+    (s0 / "eval.json").unlink()
+    assert [action for _, action in plan(longer)] == ["evaluate", "skip"]
+
+    other = tiny_spec(steps=48)
+    other["base"]["traffic"] = "dense"
+    with pytest.raises(UsageError, match="different config"):
+        plan(expand_sweep(other, runs))
+
+
+def test_failed_cell_is_reported_and_others_finish(tmp_path):
+    spec = tiny_spec(seeds=1, algo=["ppo", "a2c"])  # A2C has no batch_size: its cell fails
+    outcomes = run_sweep(expand_sweep(spec, tmp_path), workers=2)
+    by_name = {o["name"]: o for o in outcomes}
+    assert by_name["ppo-highway-s0"]["ok"] and (tmp_path / "ppo-highway-s0" / "model.zip").is_file()
+    failed = by_name["a2c-highway-s0"]
+    assert not failed["ok"] and "bad hyperparameters for 'a2c'" in failed["error"]
+    assert "batch_size" in (tmp_path / ".sweep-logs" / "a2c-highway-s0.log").read_text()
+    assert not (tmp_path / "a2c-highway-s0").exists()
+
+
+def test_two_run_grid_through_ray_matches_local_runs(tmp_path):
+    pytest.importorskip("ray")
+    spec = tiny_spec(steps=32)
+    ray_runs, pool_runs = tmp_path / "ray", tmp_path / "pool"
+    outcomes = run_sweep(expand_sweep(spec, ray_runs), executor="ray", workers=2)
+    assert [(o["name"], o["ok"]) for o in outcomes] == [("ppo-highway-s0", True), ("ppo-highway-s1", True)]
+    run_sweep(expand_sweep(spec, pool_runs), executor="pool", workers=1)  # in-process reference
+    for name in ("ppo-highway-s0", "ppo-highway-s1"):
+        ray_dir, pool_dir = ray_runs / name, pool_runs / name
+        assert sorted(p.name for p in ray_dir.iterdir() if "tfevents" not in p.name) == sorted(
+            p.name for p in pool_dir.iterdir() if "tfevents" not in p.name
+        )
+        assert yaml.safe_load((ray_dir / "config.yaml").read_text()) == yaml.safe_load(
+            (pool_dir / "config.yaml").read_text()
+        )
+        # same seed, one thread: the same training and evaluation either way
+        assert (ray_dir / "evaluations.csv").read_text() == (pool_dir / "evaluations.csv").read_text()
+        ray_eval = json.loads((ray_dir / "eval.json").read_text())
+        pool_eval = json.loads((pool_dir / "eval.json").read_text())
+        assert ray_eval["per_episode"] == pool_eval["per_episode"]
+    assert [o["action"] for o in run_sweep(expand_sweep(spec, ray_runs), executor="ray")] == ["skip", "skip"]
+
+
+def test_cli_sweep_bad_file_and_dry_run(tmp_path):
+    from typer.testing import CliRunner
+
+    from drivelab.cli import app
+
+    runner = CliRunner()
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("grid: {algo: [ppo], colour: [red]}\n")
+    result = runner.invoke(app, ["sweep", str(bad), "--runs-dir", str(tmp_path / "runs")])
+    assert (
+        result.exit_code == 2 and result.output.strip() == "error: sweep grid has unknown run field 'colour'"
+    )
+    good = tmp_path / "good.yaml"
+    good.write_text(yaml.safe_dump(tiny_spec()))
+    result = runner.invoke(app, ["sweep", str(good), "--runs-dir", str(tmp_path / "runs"), "--dry-run"])
+    assert result.exit_code == 0
+    assert result.output.split() == ["train", str(tmp_path / "runs" / "ppo-highway-s0"),
+                                     "train", str(tmp_path / "runs" / "ppo-highway-s1")]  # fmt: skip
+    result = runner.invoke(app, ["sweep", str(good), "--executor", "dask"])
+    assert result.exit_code == 2 and "unknown executor 'dask'" in result.output
+    assert not (tmp_path / "runs").exists()
