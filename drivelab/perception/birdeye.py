@@ -12,7 +12,15 @@ from gymnasium import spaces
 
 from drivelab.envs.world import MARKING_DASHED, MARKING_SOLID, RoadMap, WorldState
 from drivelab.perception.base import Sensor
-from drivelab.perception.topdown import SHIFT, View, fill_boxes, fill_each, per_road, segments_near
+from drivelab.perception.topdown import (
+    SHIFT,
+    View,
+    fill_boxes,
+    fill_each,
+    per_road,
+    segments_near,
+    stop_bars,
+)
 
 GRASS = (96, 140, 84)
 ROAD = (70, 70, 74)
@@ -22,6 +30,7 @@ DASHED_LINE = (200, 200, 200)
 VEHICLE = (60, 110, 220)
 EGO = (60, 200, 70)
 EGO_CRASHED = (230, 40, 40)
+LIGHT_COLOURS = ((40, 200, 60), (240, 200, 30), (230, 30, 30))  # green, yellow, red stop bars
 ROUTE_WIDTH_M = 1.0
 DASH_LENGTH_M, DASH_PERIOD_M = 3.0, 8.0  # painted 3 m, then a 5 m gap
 
@@ -76,7 +85,8 @@ def render_birdeye(
     """An RGB uint8 image (H, W, 3) of the road, route, markings, traffic and ego.
 
     Grass background, dark road (lane polygons), the route as a faint band, white solid and
-    light-grey dashed markings, other vehicles blue, the ego green (red after a collision).
+    light-grey dashed markings, traffic lights as stop bars in their colour, other vehicles blue,
+    the ego green (red after a collision).
 
     :param size_hw: image height and width in pixels (videos use larger ones, e.g. (256, 512)).
     :param pixels_per_meter: resolution.
@@ -97,6 +107,8 @@ def render_birdeye(
     for lines, colour in ((solid, SOLID_LINE), (dashed, DASHED_LINE)):
         if len(lines):
             cv2.polylines(image, list(view(lines)), False, colour, 1, cv2.LINE_AA, SHIFT)
+    for bar, state in zip(stop_bars(world.traffic_lights), world.traffic_lights[:, 3], strict=True):
+        fill_boxes(image, view.boxes(bar[None]), LIGHT_COLOURS[int(state)], cv2.LINE_AA)
     fill_boxes(image, view.vehicles(world.vehicles), VEHICLE, cv2.LINE_AA)
     ego = world.ego
     ego_box = np.array([[*ego.position, ego.heading, ego.length_m, ego.width_m]])

@@ -31,6 +31,14 @@ ROUTE_WIDTH_M = 2.0  # the route is drawn as a band this wide (about half a lane
 EXACT_INSET_PX = 0.5
 PAST_DOT_M = 1.0  # a past ego position is an image-aligned square dot this wide
 CHANNELS = ("road", "route", "past_ego", "traffic", "traffic_previous")
+STOP_BAR_M = (1.0, 4.0)  # a traffic light is drawn as a bar across its lane at the stop line
+LIGHT_LEVELS = np.array([85, 170, 255])  # green, yellow, red in the optional lights channel
+
+
+def stop_bars(lights: np.ndarray) -> np.ndarray:
+    """Rectangles (N, 5) ``x, y, heading, length, width`` of the lights' stop bars."""
+    return np.column_stack([lights[:, :3], np.tile(STOP_BAR_M, (len(lights), 1))]).reshape(-1, 5)
+
 
 T = TypeVar("T")
 
@@ -247,15 +255,21 @@ class TopDown(Sensor):
     :param size: image height and width in pixels (seed 003: 84).
     :param pixels_per_meter: resolution; 2 px/m shows 21 m on each side of the ego at 84 px.
     :param history: number of past ego positions drawn.
+    :param lights: add a sixth channel with the traffic lights' stop bars (1 m x 4 m across the
+        lane), 85 for green, 170 for yellow, 255 for red.
     """
 
     name = "topdown"
 
-    def __init__(self, *, size: int = 84, pixels_per_meter: float = 2.0, history: int = 10) -> None:
+    def __init__(
+        self, *, size: int = 84, pixels_per_meter: float = 2.0, history: int = 10, lights: bool = False
+    ) -> None:
         if size < 8 or pixels_per_meter <= 0 or history < 0:
             raise ValueError("topdown needs size >= 8, pixels_per_meter > 0, history >= 0")
         self.size, self.ppm, self.history = int(size), float(pixels_per_meter), int(history)
-        self._space = spaces.Box(0, 255, shape=(len(CHANNELS), self.size, self.size), dtype=np.uint8)
+        self.lights = bool(lights)
+        channels = len(CHANNELS) + int(self.lights)
+        self._space = spaces.Box(0, 255, shape=(channels, self.size, self.size), dtype=np.uint8)
         self.past_positions: deque[np.ndarray] = deque(maxlen=self.history)
         self.previous_vehicles: np.ndarray | None = None
 
@@ -288,4 +302,7 @@ class TopDown(Sensor):
         previous = world.vehicles if self.previous_vehicles is None else self.previous_vehicles
         fill_boxes(image[4], view.vehicles(previous, EXACT_INSET_PX), 255)
         self.previous_vehicles = np.array(world.vehicles, dtype=float)
+        if self.lights:
+            for bar, state in zip(stop_bars(world.traffic_lights), world.traffic_lights[:, 3], strict=True):
+                fill_boxes(image[5], view.boxes(bar[None], EXACT_INSET_PX), int(LIGHT_LEVELS[int(state)]))
         return image

@@ -168,3 +168,25 @@ def test_route_channel():
     assert np.all(image[ROUTE, 30, 40:44] == 255) and np.all(image[ROUTE, 0, 40:44] == 255)
     assert image[ROUTE, 30, 38] == 0 and image[ROUTE, 30, 46] == 0
     assert image[ROUTE, 60, 41] == 0  # the route starts at the ego
+
+
+def test_lights_channel_draws_stop_bars_by_state():
+    import dataclasses
+
+    from drivelab.envs.world import LIGHT_GREEN, LIGHT_RED
+    from drivelab.perception.topdown import TopDown
+    from tests.worlds import world
+
+    # a red light 10 m ahead in the ego's lane, a green one 10 m behind (heading the other way)
+    lights = np.array([[10.0, 0.0, 0.0, LIGHT_RED], [-10.0, 0.0, np.pi, LIGHT_GREEN]])
+    state = dataclasses.replace(world(), traffic_lights=lights)
+    sensor = TopDown(lights=True)
+    assert sensor.space.shape == (6, 84, 84)
+    sensor.reset(state, np.random.default_rng(0))
+    image = sensor.observe(state)[5]
+    # 2 px/m, ego at the centre (42, 42): the red bar, 1 m deep and 4 m wide, centred 20 px above
+    # covers continuous rows 21..23 and columns 38..46, i.e. pixel rows 21-22, columns 38-45
+    assert image[21:23, 38:46].min() == 255 and image[20, 42] == image[23, 42] == image[21, 37] == 0
+    assert image[62, 38:46].tolist() == [85] * 8
+    assert set(np.unique(image)) == {0, 85, 255}
+    assert TopDown().space.shape == (5, 84, 84)
