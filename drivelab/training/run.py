@@ -210,8 +210,10 @@ def train(config: RunConfig, runs_root: str | Path = "runs") -> Path:
     """Train a new run; every input is validated before anything is written."""
     from drivelab.envs.core import DriveEnv
 
-    spec = check_combination(config.algo, config.action)
-    DriveEnv(**config.env_kwargs()).close()  # validates scenario, sensors, reward, action
+    check_combination(config.algo, config.action)
+    probe = DriveEnv(**config.env_kwargs())  # validates scenario, sensors, reward, action
+    spec = check_combination(config.algo, config.action, probe.observation_space)
+    probe.close()
     run_dir = new_run_dir(config, Path(runs_root))
     run_dir.mkdir(parents=True)
     try:
