@@ -127,7 +127,8 @@ class OwnAgent:
         self.env = env
         self.num_timesteps = 0
         self.rng = np.random.default_rng(self.seed)
-        torch.manual_seed(self.seed)
+        torch.manual_seed(self.seed)  # network initialisation
+        self.generator = torch.Generator().manual_seed(self.seed)  # every torch draw while training
         self.logger: Logger = configure(None, [])  # replaced by run.py through set_logger
         self._build()
 
@@ -159,9 +160,10 @@ class OwnAgent:
         return callback
 
     def save(self, path: str | Path) -> None:
-        """One zip: ``agent.json`` (algo, hyperparams, steps, generator), ``spaces.pkl``, ``state.pt``."""
+        """One zip: ``agent.json`` (algo, hyperparams, steps, numpy generator), ``spaces.pkl``,
+        ``state.pt`` (networks, optimizers, torch generator)."""
         tensors = io.BytesIO()
-        torch.save(self._state(), tensors)
+        torch.save({**self._state(), "generator": self.generator.get_state()}, tensors)
         meta = {
             "algo": self.algo,
             "seed": self.seed,
@@ -190,5 +192,6 @@ class OwnAgent:
         agent = cls(observation_space, action_space, meta["seed"], meta["hyperparams"], env)
         agent.num_timesteps = int(meta["num_timesteps"])
         agent.rng.bit_generator.state = meta["rng"]
+        agent.generator.set_state(state.pop("generator"))
         agent._set_state(state)
         return agent

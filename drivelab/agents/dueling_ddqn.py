@@ -341,7 +341,7 @@ class DuelingDoubleDQN(OwnAgent):
         nn.utils.clip_grad_norm_(self.q_network.parameters(), config.max_grad_norm)
         self.optimizer.step()
         self.replay_buffer.update_priorities(indices, td_errors.detach().numpy())
-        return {"loss": loss.item(), "td_error": float(td_errors.abs().mean()), "beta": beta,
+        return {"loss": loss.item(), "td_error": td_errors.abs().mean().item(), "beta": beta,
                 "q_mean": q_taken.mean().item()}  # fmt: skip
 
     def update_target(self) -> None:

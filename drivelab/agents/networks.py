@@ -163,11 +163,15 @@ class TanhGaussianActorCritic(nn.Module):
     def distribution(self, mean: torch.Tensor) -> torch.distributions.Normal:
         return torch.distributions.Normal(mean, self.log_std.exp().expand_as(mean))
 
-    def sample(self, obs, deterministic: bool = False) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """(pre-tanh u, log π(tanh u), V): log π is corrected for the squashing."""
+    def sample(
+        self, obs, deterministic: bool = False, generator: torch.Generator | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(pre-tanh u, log π(tanh u), V): u = μ + σ·ε, ε ~ N(0, 1) drawn from ``generator``;
+        log π is corrected for the squashing."""
         mean, value = self(obs)
         distribution = self.distribution(mean)
-        unsquashed = mean if deterministic else distribution.sample()
+        noise = torch.randn(mean.shape, generator=generator)
+        unsquashed = mean if deterministic else mean + distribution.stddev * noise
         return unsquashed, squashed_log_prob(distribution, unsquashed), value
 
     def evaluate(self, obs, unsquashed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:

@@ -108,13 +108,12 @@ class OwnPPO(OnPolicyAgent):
     def update(self, rollout: Rollout) -> dict[str, float]:
         config = self.config
         size = len(rollout.returns)
-        generator = torch.Generator().manual_seed(int(self.rng.integers(2**31)))
         history: dict[str, list[float]] = {
             "policy_loss": [], "value_loss": [], "entropy": [], "clip_fraction": [], "approx_kl": []
         }  # fmt: skip
         for _ in range(config.n_epochs):
             stop = False
-            for indices in torch.randperm(size, generator=generator).split(config.batch_size):
+            for indices in torch.randperm(size, generator=self.generator).split(config.batch_size):
                 advantages = rollout.advantages[indices]
                 if len(indices) > 1:  # per-minibatch standardisation, as SB3
                     advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)

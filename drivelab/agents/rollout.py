@@ -97,7 +97,7 @@ class OnPolicyAgent(OwnAgent):
         """tanh(μ) when deterministic, else tanh of a sample."""
         with torch.no_grad():
             tensor = observation_to_tensor(batch_of_one(obs), self.observation_space)
-            unsquashed, _, _ = self.policy.sample(tensor, deterministic)
+            unsquashed, _, _ = self.policy.sample(tensor, deterministic, self.generator)
         return torch.tanh(unsquashed)[0].numpy(), None
 
     def _value(self, obs: Any) -> float:
@@ -112,7 +112,7 @@ class OnPolicyAgent(OwnAgent):
         for _ in range(steps):
             with torch.no_grad():
                 tensor = observation_to_tensor(batch_of_one(self._last_obs), self.observation_space)
-                action, log_prob, value = self.policy.sample(tensor)
+                action, log_prob, value = self.policy.sample(tensor, generator=self.generator)
             new_obs, reward, terminated, truncated, info = env.step(torch.tanh(action)[0].numpy())
             self.num_timesteps += 1
             if truncated and not terminated:  # time limit: bootstrap from the state it stopped in
@@ -183,7 +183,7 @@ class OnPolicyAgent(OwnAgent):
             for key, value in metrics.items():
                 self.logger.record(f"train/{key}", value)
             self.logger.record("train/learning_rate", learning_rate)
-            self.logger.record("train/std", float(self.policy.log_std.exp().mean()))
+            self.logger.record("train/std", self.policy.log_std.exp().mean().item())
             if self.episode_returns:
                 self.logger.record("rollout/ep_rew_mean", float(np.mean(self.episode_returns)))
             elapsed = max(time.perf_counter() - start_time, 1e-9)

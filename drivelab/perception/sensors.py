@@ -86,7 +86,7 @@ def make_sensor(spec: str | dict) -> Sensor:
     stack = int(options.pop("stack", 1))
     try:
         sensor = SENSORS[name](**options)
-    except TypeError as exc:
+    except (TypeError, ValueError) as exc:
         raise UsageError(f"bad option for sensor {name!r}: {exc}") from None
     return FrameStack(sensor, stack) if stack > 1 else sensor
 
