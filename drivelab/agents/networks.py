@@ -156,9 +156,10 @@ class TanhGaussianActorCritic(nn.Module):
 
     def forward(self, obs) -> tuple[torch.Tensor, torch.Tensor]:
         """(μ, V) for a batch."""
-        mean = self.mean(self.actor_encoder(obs))
-        value = self.value(self.critic_encoder(obs)).squeeze(-1)
-        return mean, value
+        features = self.actor_encoder(obs)
+        shared = self.critic_encoder is self.actor_encoder
+        value = self.value(features if shared else self.critic_encoder(obs)).squeeze(-1)
+        return self.mean(features), value
 
     def distribution(self, mean: torch.Tensor) -> torch.distributions.Normal:
         return torch.distributions.Normal(mean, self.log_std.exp().expand_as(mean))

@@ -68,7 +68,9 @@ def save_checkpoint(model, run_dir: Path, config: RunConfig, save_replay: bool) 
     os.replace(tmp, folder / "latest.zip")
     replay = False
     if save_replay and getattr(model, "replay_buffer", None) is not None:
-        if model.replay_buffer.observations.nbytes * 2 < REPLAY_LIMIT_BYTES:
+        observations = model.replay_buffer.observations  # a dict of arrays for Dict observations
+        arrays = observations.values() if isinstance(observations, dict) else [observations]
+        if sum(array.nbytes for array in arrays) * 2 < REPLAY_LIMIT_BYTES:
             model.save_replay_buffer(folder / "replay.tmp.pkl")
             os.replace(folder / "replay.tmp.pkl", folder / "replay.pkl")
             replay = True

@@ -96,11 +96,11 @@ def test_actions_are_in_range_and_greedy_is_deterministic():
     np.testing.assert_array_equal(agent.predict(obs)[0], agent.predict(obs)[0])
 
 
-def _config(algo, **overrides):
-    obs, action, hyperparams = CASES[algo]
+def _config(case, **overrides):
+    obs, action, hyperparams = CASES[case]
     values = {
-        "algo": algo, "env": "highway", "obs": obs, "action": action, "steps": 60, "seed": 2,
-        "name": algo, "eval_every": 30, "eval_episodes": 1, "hyperparams": hyperparams,
+        "algo": case, "env": "highway", "obs": obs, "action": action, "steps": 60, "seed": 2,
+        "name": case, "eval_every": 30, "eval_episodes": 1, "hyperparams": hyperparams,
         "checkpoint_every": 30, "env_options": {"duration_s": 6}, "backend": "fast",
     }  # fmt: skip
     values.update(overrides)
@@ -161,3 +161,10 @@ def test_sb3_runs_the_seed_networks():
         )
     with pytest.raises(UsageError):
         check_combination("dueling_ddqn", "continuous")
+
+
+def test_sb3_dqn_on_a_dict_observation_checkpoints_its_replay(tmp_path):
+    # the seed's DDQN input given to SB3's DQN (a DictReplayBuffer) must checkpoint like ours
+    config = _config("dueling_ddqn", algo="dqn", name="dqn", hyperparams={"learning_starts": 20})
+    run_dir = run_module.train(config, tmp_path)
+    assert json.loads((run_dir / "checkpoints/latest.json").read_text())["replay_buffer"] is True
