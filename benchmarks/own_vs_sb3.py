@@ -155,10 +155,7 @@ def summary_rows(rows: list[dict]) -> list[dict]:
                     "algo": algo,
                     "seeds": [r["seed"] for r in mine],
                     "steps": mine[0]["steps"],
-                    **{
-                        f"median_{key}": float(np.median([r[key] for r in mine]))
-                        for key in METRICS
-                    },
+                    **{f"median_{key}": float(np.median([r[key] for r in mine])) for key in METRICS},
                 }
             )
         if len(algos) == 2:
@@ -194,11 +191,23 @@ def write_markdown(result: dict, path: Path) -> None:
             f"| {row['median_mean_return']:.2f} | {row['median_crash_rate']:.2f} "
             f"| {row['median_mean_speed_mps']:.1f} | {row['median_mean_length']:.1f} |"
         )
-    lines += ["", "Per run:", "", "| pair | algorithm | seed | steps/s | eval return ± std | crash rate |"]
-    lines += ["|---|---|---|---|---|---|"]
+    lines += [
+        "",
+        "Steps/s is the whole run's wall clock (environment, agent, checkpoints, one evaluation episode)",
+        "over its steps. Resets cost more than steps, so a policy with shorter training episodes runs",
+        "slower on the same code: compare it with the training episode length below.",
+        "",
+        "Per run:",
+        "",
+        "| pair | algorithm | seed | steps/s | training episodes | mean training episode length "
+        "| eval return ± std | crash rate |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for r in result["runs"]:
+        lengths = r["training_lengths"]
         lines.append(
-            f"| {r['pair']} | {r['algo']} | {r['seed']} | {r['steps_per_s']:.1f} "
+            f"| {r['pair']} | {r['algo']} | {r['seed']} | {r['steps_per_s']:.1f} | {len(lengths)} "
+            f"| {np.mean(lengths) if lengths else float('nan'):.1f} "
             f"| {r['mean_return']:.2f} ± {r['std_return']:.2f} | {r['crash_rate']:.2f} |"
         )
     lines += ["", "Learning curves: " + ", ".join(f"`own_vs_sb3_{p}.png`" for p in result["pairs"]), ""]
@@ -212,7 +221,15 @@ def main() -> None:
     parser.add_argument("--steps", default="", help="pair=steps overrides, comma separated")
     parser.add_argument("--episodes", type=int, default=10)
     parser.add_argument("--tag", default="own_vs_sb3", help="results file name")
+    parser.add_argument("--report", action="store_true", help="only rewrite Markdown and plots from the JSON")
     args = parser.parse_args()
+    if args.report:
+        result = json.loads((RESULTS / f"{args.tag}.json").read_text())
+        write_markdown(result, RESULTS / f"{args.tag}.md")
+        for pair in dict.fromkeys(r["pair"] for r in result["runs"]):
+            rows = [r for r in result["runs"] if r["pair"] == pair]
+            plot_pair(pair, rows, RESULTS / f"{args.tag}_{pair}.png")
+        return
     torch.set_num_threads(1)
     steps = dict(DEFAULT_STEPS)
     for item in filter(None, args.steps.split(",")):

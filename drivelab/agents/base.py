@@ -16,7 +16,7 @@ derive from ``OwnAgent``, which implements everything but the learning loop):
 - ``predict(obs, deterministic=True)`` → ``(action, None)`` for one unbatched observation.
 - ``save(path)`` writes one zip file (checkpoint verification uses ``zipfile.is_zipfile``);
   the registry's ``load(algo, path, env or None)`` reads it back.
-- Off-policy agents whose ``AlgoSpec.replay`` is set also offer ``replay_buffer.observations``
+- Off-policy agents whose ``AlgoSpec.sb3_replay`` is set also offer ``replay_buffer.observations``
   (a numpy array, for the size check), ``save_replay_buffer(path)`` and ``load_replay_buffer(path)``.
 """
 

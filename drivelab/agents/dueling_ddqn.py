@@ -175,6 +175,7 @@ class PrioritizedReplayBuffer:
         of the total priority (stratified), weights w_i = (N·P(i))^−β / max_j w_j."""
         segment = self.tree.total / batch_size
         indices = self.tree.find((np.arange(batch_size) + rng.random(batch_size)) * segment)
+        indices = np.minimum(indices, self.size - 1)  # round-off past the last stored transition
         probabilities = self.tree.priorities(indices) / self.tree.total
         weights = (self.size * probabilities) ** (-beta)
         weights = weights / weights.max()
