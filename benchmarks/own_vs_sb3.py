@@ -164,7 +164,7 @@ def summary_rows(rows: list[dict]) -> list[dict]:
                 if r["pair"] == pair:
                     by_seed.setdefault(r["seed"], {})[r["algo"]] = r["steps_per_s"]
             ratios = [v[algos[0]] / v[algos[1]] for v in by_seed.values() if len(v) == 2]
-            table[-1]["median_speed_ratio_own_over_sb3"] = float(np.median(ratios)) if ratios else None
+            table[-2]["median_speed_ratio_own_over_sb3"] = float(np.median(ratios)) if ratios else None
     return table
 
 
@@ -179,7 +179,8 @@ def write_markdown(result: dict, path: Path) -> None:
         "Budgets are tiny (a few thousand steps on a shared 2-core machine): these numbers compare",
         "speed and early learning, not final competence.",
         "",
-        "| pair | algorithm | seeds | steps | steps/s (median) | ours/SB3 speed (median) | eval return "
+        "| pair | algorithm | seeds | steps | steps/s (median) | ours/SB3 steps/s (median per-seed ratio) "
+        "| eval return "
         "(median) | crash rate (median) | speed m/s (median) | episode length (median) |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
@@ -225,6 +226,8 @@ def main() -> None:
     args = parser.parse_args()
     if args.report:
         result = json.loads((RESULTS / f"{args.tag}.json").read_text())
+        result["summary"] = summary_rows(result["runs"])
+        (RESULTS / f"{args.tag}.json").write_text(json.dumps(result, indent=1))
         write_markdown(result, RESULTS / f"{args.tag}.md")
         for pair in dict.fromkeys(r["pair"] for r in result["runs"]):
             rows = [r for r in result["runs"] if r["pair"] == pair]
