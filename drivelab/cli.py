@@ -65,7 +65,7 @@ def envs() -> None:
 
 @app.command()
 def train(
-    algo: str | None = typer.Option(None, help="dqn, ppo, a2c or sac"),
+    algo: str | None = typer.Option(None, help="dqn, ppo, a2c, sac, dueling_ddqn, a2c_own, ppo_own"),
     env: str | None = typer.Option(
         None, help="scenario: highway, merge, roundabout, intersection, racetrack"
     ),

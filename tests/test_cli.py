@@ -87,7 +87,9 @@ def test_console_script_exit_code():
         [sys.executable, "-m", "drivelab.cli", "train", "--algo", "nope"], capture_output=True, text=True
     )
     assert result.returncode == 2
-    assert result.stderr.strip() == "error: unknown algorithm 'nope' (choose from dqn, ppo, a2c, sac)"
+    assert result.stderr.strip() == (
+        "error: unknown algorithm 'nope' (choose from dqn, ppo, a2c, sac, dueling_ddqn, a2c_own, ppo_own)"
+    )
 
 
 def test_ctrl_c_saves_a_checkpoint_and_says_how_to_resume(tmp_path):

@@ -1,11 +1,43 @@
-"""The Agent protocol every algorithm satisfies, SB3 adapters and drivelab's own agents alike."""
+"""The Agent protocol every algorithm satisfies, and the shared surface of drivelab's own agents.
+
+The contract with ``drivelab.training.run`` (SB3 models satisfy it as they are; our own agents
+derive from ``OwnAgent``, which implements everything but the learning loop):
+
+- ``set_logger(logger)``: an SB3 ``Logger`` (CSV + TensorBoard); the agent records its own metrics
+  into it (``train/epsilon``, ``train/loss``, ...) and calls ``logger.dump(num_timesteps)`` now
+  and then.
+- ``learn(total_timesteps, callback, reset_num_timesteps=False)``: trains for ``total_timesteps``
+  more environment steps. It calls ``callback.init_callback(self)`` and
+  ``callback.on_training_start(locals(), globals())``; after every environment step
+  ``callback.update_locals(locals())`` then ``callback.on_step()``, stopping when that returns
+  False; finally ``callback.on_training_end()``.
+- ``num_timesteps``: environment steps taken so far, exact, so that a resume continues to the
+  requested total.
+- ``predict(obs, deterministic=True)`` → ``(action, None)`` for one unbatched observation.
+- ``save(path)`` writes one zip file (checkpoint verification uses ``zipfile.is_zipfile``);
+  the registry's ``load(algo, path, env or None)`` reads it back.
+- Off-policy agents whose ``AlgoSpec.sb3_replay`` is set also offer ``replay_buffer.observations``
+  (a numpy array, for the size check), ``save_replay_buffer(path)`` and ``load_replay_buffer(path)``.
+"""
 
 from __future__ import annotations
 
+import dataclasses
+import io
+import json
+import pickle
+import zipfile
 from pathlib import Path
 from typing import Any, Protocol
 
+import gymnasium as gym
 import numpy as np
+import torch
+from gymnasium import spaces
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
+from stable_baselines3.common.logger import Logger, configure
+
+from drivelab.errors import UsageError
 
 
 class Agent(Protocol):
@@ -13,11 +45,153 @@ class Agent(Protocol):
 
     num_timesteps: int
 
-    def learn(self, total_steps: int, callback: Any = None) -> Any:
-        """Train until ``num_timesteps`` reaches ``total_steps`` (continues after a resume)."""
+    def set_logger(self, logger: Logger) -> None:
+        """Use ``logger`` for every metric from now on."""
+
+    def learn(self, total_timesteps: int, callback: Any = None, reset_num_timesteps: bool = True) -> Any:
+        """Train ``total_timesteps`` more steps (all of them again when ``reset_num_timesteps``)."""
 
     def predict(self, obs: Any, deterministic: bool = True) -> tuple[np.ndarray, Any]:
         """(action, state) for one observation."""
 
     def save(self, path: str | Path) -> None:
-        """Write everything needed to continue training or to act."""
+        """Write everything needed to continue training or to act, as one zip file."""
+
+
+def parse_hyperparams(config_class: type, algo: str, hyperparams: dict) -> Any:
+    """A frozen config dataclass from ``-H`` overrides; an unknown key or a wrong type is a UsageError."""
+    fields = {f.name: f for f in dataclasses.fields(config_class)}
+    values = {}
+    for key, value in hyperparams.items():
+        if key not in fields:
+            raise UsageError(f"unknown hyperparameter {key!r} for {algo!r} (known: {', '.join(fields)})")
+        default = fields[key].default
+        if isinstance(default, bool) and not isinstance(value, bool):
+            raise UsageError(f"hyperparameter {key!r} of {algo!r} must be true or false, got {value!r}")
+        if isinstance(default, (int, float)) and not isinstance(default, bool):
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise UsageError(f"hyperparameter {key!r} of {algo!r} must be a number, got {value!r}")
+            if isinstance(default, int) and not float(value).is_integer():
+                raise UsageError(f"hyperparameter {key!r} of {algo!r} must be an integer, got {value!r}")
+            value = type(default)(value)
+        if isinstance(default, str) and not isinstance(value, str):
+            raise UsageError(f"hyperparameter {key!r} of {algo!r} must be a string, got {value!r}")
+        values[key] = value
+    config = config_class(**values)
+    config.check(algo)
+    return config
+
+
+def observation_to_tensor(obs: Any, space: spaces.Space) -> torch.Tensor | dict[str, torch.Tensor]:
+    """A batch of observations (leading batch axis) → float tensors; uint8 images are scaled to [0, 1]."""
+    if isinstance(space, spaces.Dict):
+        return {key: observation_to_tensor(obs[key], sub) for key, sub in space.spaces.items()}
+    tensor = torch.as_tensor(np.asarray(obs), dtype=torch.float32)
+    return tensor / 255.0 if space.dtype == np.uint8 else tensor
+
+
+def batch_of_one(obs: Any) -> Any:
+    """One observation → a batch of one (dicts key by key)."""
+    if isinstance(obs, dict):
+        return {key: np.asarray(value)[None] for key, value in obs.items()}
+    return np.asarray(obs)[None]
+
+
+class OwnAgent:
+    """Everything run.py needs from an agent, except the learning loop (``learn``) and networks.
+
+    Subclasses set ``algo`` and ``config_class``, build their networks in ``_build`` and list what
+    ``save`` must keep in ``_state`` / ``_set_state``.
+
+    :param observation_space: the environment's observation space.
+    :param action_space: the environment's action space.
+    :param seed: seeds torch and the agent's numpy generator.
+    :param hyperparams: overrides of ``config_class``'s defaults.
+    :param env: the training environment (not needed to act).
+    """
+
+    algo = "own"
+    config_class: type
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_space: spaces.Space,
+        seed: int = 0,
+        hyperparams: dict | None = None,
+        env: gym.Env | None = None,
+    ) -> None:
+        self.observation_space, self.action_space = observation_space, action_space
+        self.seed, self.hyperparams = int(seed), dict(hyperparams or {})
+        self.config = parse_hyperparams(self.config_class, self.algo, self.hyperparams)
+        self.env = env
+        self.num_timesteps = 0
+        self.rng = np.random.default_rng(self.seed)
+        torch.manual_seed(self.seed)  # network initialisation
+        self.generator = torch.Generator().manual_seed(self.seed)  # every torch draw while training
+        self.logger: Logger = configure(None, [])  # replaced by run.py through set_logger
+        self._build()
+
+    # --- what subclasses provide ------------------------------------------------------------
+    def _build(self) -> None:
+        raise NotImplementedError
+
+    def _state(self) -> dict[str, Any]:
+        """Tensors and state dicts to save (networks, optimizers)."""
+        raise NotImplementedError
+
+    def _set_state(self, state: dict[str, Any]) -> None:
+        raise NotImplementedError
+
+    # --- the SB3-compatible surface ---------------------------------------------------------
+    def set_logger(self, logger: Logger) -> None:
+        self.logger = logger
+
+    def get_env(self) -> gym.Env | None:
+        """The training environment (SB3 callbacks read it in ``init_callback``)."""
+        return self.env
+
+    def set_env(self, env: gym.Env) -> None:
+        self.env = env
+
+    def _start_callback(self, callback: BaseCallback | None) -> BaseCallback:
+        callback = callback if callback is not None else CallbackList([])
+        callback.init_callback(self)
+        return callback
+
+    def save(self, path: str | Path) -> None:
+        """One zip: ``agent.json`` (algo, hyperparams, steps, numpy generator), ``spaces.pkl``,
+        ``state.pt`` (networks, optimizers, torch generator)."""
+        tensors = io.BytesIO()
+        torch.save({**self._state(), "generator": self.generator.get_state()}, tensors)
+        meta = {
+            "algo": self.algo,
+            "seed": self.seed,
+            "hyperparams": self.hyperparams,
+            "num_timesteps": self.num_timesteps,
+            "rng": self.rng.bit_generator.state,
+        }
+        with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as archive:
+            archive.writestr("agent.json", json.dumps(meta, default=int))
+            archive.writestr("spaces.pkl", pickle.dumps((self.observation_space, self.action_space)))
+            archive.writestr("state.pt", tensors.getvalue())
+
+    @classmethod
+    def load(cls, path: str | Path, env: gym.Env | None = None) -> OwnAgent:
+        """An agent saved by ``save``; ``env`` (optional) must have the saved spaces."""
+        with zipfile.ZipFile(path) as archive:
+            meta = json.loads(archive.read("agent.json"))
+            observation_space, action_space = pickle.loads(archive.read("spaces.pkl"))
+            state = torch.load(io.BytesIO(archive.read("state.pt")), weights_only=False)
+        if meta["algo"] != cls.algo:
+            raise ValueError(f"the file holds a {meta['algo']!r} agent, not {cls.algo!r}")
+        if env is not None and (
+            env.observation_space != observation_space or env.action_space != action_space
+        ):
+            raise ValueError("the environment's spaces differ from the saved agent's")
+        agent = cls(observation_space, action_space, meta["seed"], meta["hyperparams"], env)
+        agent.num_timesteps = int(meta["num_timesteps"])
+        agent.rng.bit_generator.state = meta["rng"]
+        agent.generator.set_state(state.pop("generator"))
+        agent._set_state(state)
+        return agent

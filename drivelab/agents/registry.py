@@ -15,7 +15,10 @@ class AlgoSpec:
     :param build: (algo, env, seed, hyperparams, log_dir) → a new agent.
     :param load: (algo, path, env or None) → a saved agent.
     :param action_kinds: action adapters it accepts.
-    :param sb3_replay: the agent has an SB3 replay buffer worth checkpointing.
+    :param sb3_replay: the agent has a replay buffer worth checkpointing (``replay_buffer.observations``,
+        ``save_replay_buffer``, ``load_replay_buffer``, as SB3's off-policy models).
+    :param observation_kinds: observation kinds it can read (``networks.observation_kind``):
+        "vector", "image" (channels-first uint8), "image+vector" (a Dict of both), "other".
     """
 
     name: str
@@ -24,6 +27,25 @@ class AlgoSpec:
     build: Callable
     load: Callable
     sb3_replay: bool = False
+    observation_kinds: tuple[str, ...] = ("vector", "image", "image+vector", "other")
+
+
+def build_own(algo: str, env, seed: int, hyperparams: dict, log_dir) -> object:
+    """A fresh agent of drivelab's own (``dueling_ddqn``, ``a2c_own``, ``ppo_own``)."""
+    return own_classes()[algo](env.observation_space, env.action_space, seed, hyperparams, env)
+
+
+def load_own(algo: str, path, env) -> object:
+    """A saved agent of drivelab's own (``env`` may be None for acting only)."""
+    return own_classes()[algo].load(path, env)
+
+
+def own_classes() -> dict[str, type]:
+    from drivelab.agents.a2c import OwnA2C
+    from drivelab.agents.dueling_ddqn import DuelingDoubleDQN
+    from drivelab.agents.ppo import OwnPPO
+
+    return {"dueling_ddqn": DuelingDoubleDQN, "a2c_own": OwnA2C, "ppo_own": OwnPPO}
 
 
 def _registry() -> dict[str, AlgoSpec]:
@@ -31,15 +53,41 @@ def _registry() -> dict[str, AlgoSpec]:
 
     discrete, continuous = ("meta", "grid"), ("continuous", "target_speed")
     everything = discrete + continuous
+    readable = ("vector", "image", "image+vector")
     return {
         "dqn": AlgoSpec("dqn", "stable-baselines3 DQN", discrete, build_sb3, load_sb3, sb3_replay=True),
         "ppo": AlgoSpec("ppo", "stable-baselines3 PPO", everything, build_sb3, load_sb3),
         "a2c": AlgoSpec("a2c", "stable-baselines3 A2C", everything, build_sb3, load_sb3),
         "sac": AlgoSpec("sac", "stable-baselines3 SAC", continuous, build_sb3, load_sb3, sb3_replay=True),
+        "dueling_ddqn": AlgoSpec(
+            "dueling_ddqn",
+            "drivelab's Dueling Double DQN, prioritised replay (seed 003)",
+            discrete,
+            build_own,
+            load_own,
+            sb3_replay=True,
+            observation_kinds=("vector",),
+        ),
+        "a2c_own": AlgoSpec(
+            "a2c_own",
+            "drivelab's A2C, tanh-Gaussian, seed 003's CNN / fusion network",
+            ("continuous",),
+            build_own,
+            load_own,
+            observation_kinds=readable,
+        ),
+        "ppo_own": AlgoSpec(
+            "ppo_own",
+            "drivelab's PPO, tanh-Gaussian, seed 003's CNN / fusion network",
+            ("continuous",),
+            build_own,
+            load_own,
+            observation_kinds=readable,
+        ),
     }
 
 
-ALGO_NAMES = ("dqn", "ppo", "a2c", "sac")
+ALGO_NAMES = ("dqn", "ppo", "a2c", "sac", "dueling_ddqn", "a2c_own", "ppo_own")
 
 
 def get_algo(name: str) -> AlgoSpec:
@@ -50,11 +98,20 @@ def get_algo(name: str) -> AlgoSpec:
     return registry[name]
 
 
-def check_combination(algo: str, action: str) -> AlgoSpec:
-    """Fail before training when ``algo`` cannot take ``action``."""
+def check_combination(algo: str, action: str, observation_space=None) -> AlgoSpec:
+    """Fail before training when ``algo`` cannot take ``action`` or read ``observation_space``."""
     spec = get_algo(algo)
     if action not in spec.action_kinds:
         raise UsageError(
             f"algorithm {algo!r} cannot take {action!r} actions (it takes {', '.join(spec.action_kinds)})"
         )
+    if observation_space is not None:
+        from drivelab.agents.networks import observation_kind
+
+        kind = observation_kind(observation_space)
+        if kind not in spec.observation_kinds:
+            raise UsageError(
+                f"algorithm {algo!r} cannot read {kind!r} observations "
+                f"(it reads {', '.join(spec.observation_kinds)})"
+            )
     return spec

@@ -9,6 +9,8 @@ from gymnasium import spaces
 from stable_baselines3 import A2C, DQN, PPO, SAC
 from stable_baselines3.common.base_class import BaseAlgorithm
 
+from drivelab.errors import UsageError
+
 SB3_CLASSES: dict[str, type[BaseAlgorithm]] = {"dqn": DQN, "ppo": PPO, "a2c": A2C, "sac": SAC}
 
 # Defaults follow highway-env's documented SB3 examples (scripts/sb3_highway_*.py) where they
@@ -48,9 +50,37 @@ def policy_for(space: spaces.Space) -> str:
     return "MlpPolicy"
 
 
+def seed_network_kwargs(algo: str, space: spaces.Space) -> dict:
+    """policy_kwargs that give SB3 PPO/A2C seed 003's network: its CNN on an image, its fusion
+    network on image + vectors, linear heads on the 256 features (as our own agents), actor and
+    critic encoders shared for PPO and separate for A2C (as the seed)."""
+    from drivelab.agents.networks import FusionExtractor, SeedCnnExtractor, observation_kind
+
+    kind = observation_kind(space)
+    if algo not in ("ppo", "a2c") or kind not in ("image", "image+vector"):
+        raise UsageError(
+            f"features_extractor=seed needs ppo or a2c on an image or image+vector observation, "
+            f"got {algo!r} on {kind!r}"
+        )
+    extractor = SeedCnnExtractor if kind == "image" else FusionExtractor
+    return {
+        "features_extractor_class": extractor,
+        "net_arch": [],
+        "share_features_extractor": algo == "ppo",
+        "normalize_images": True,
+    }
+
+
 def build_sb3(algo: str, env: gym.Env, seed: int, hyperparams: dict, log_dir: Path | None) -> BaseAlgorithm:
-    """A fresh SB3 model for ``env``."""
+    """A fresh SB3 model for ``env``. ``features_extractor``: "sb3" (SB3's own networks, default)
+    or "seed" (seed 003's CNN / fusion network, ``seed_network_kwargs``)."""
     kwargs = {**DEFAULT_HYPERPARAMS[algo], **hyperparams}
+    extractor = kwargs.pop("features_extractor", "sb3")
+    if extractor == "seed":
+        kwargs["policy_kwargs"] = {**seed_network_kwargs(algo, env.observation_space),
+                                   **hyperparams.get("policy_kwargs", {})}  # fmt: skip
+    elif extractor != "sb3":
+        raise UsageError(f"features_extractor must be 'sb3' or 'seed', got {extractor!r}")
     return SB3_CLASSES[algo](
         policy_for(env.observation_space), env, seed=seed, verbose=0, device="cpu", **kwargs
     )

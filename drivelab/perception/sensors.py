@@ -12,6 +12,7 @@ from drivelab.envs.world import WorldState
 from drivelab.errors import UsageError
 from drivelab.perception.base import Sensor
 from drivelab.perception.birdeye import BirdEye
+from drivelab.perception.ego_state import EgoState
 from drivelab.perception.kinematics import Kinematics
 from drivelab.perception.lidar import Lidar
 from drivelab.perception.measurements import Measurements
@@ -19,13 +20,14 @@ from drivelab.perception.topdown import TopDown
 from drivelab.perception.waypoints import Waypoints
 
 SENSORS: dict[str, type[Sensor]] = {
-    cls.name: cls for cls in (Kinematics, Lidar, TopDown, BirdEye, Waypoints, Measurements)
+    cls.name: cls for cls in (Kinematics, Lidar, TopDown, BirdEye, EgoState, Waypoints, Measurements)
 }
 SENSOR_HELP = {
     "kinematics": "nearest vehicles' presence, position, velocity, heading in the ego frame",
     "lidar": "240 beams (configurable) hitting vehicles and road edges, distance / range",
     "topdown": "5x84x84 semantic image: road, route, past ego positions, traffic now / one step earlier",
     "birdeye": "128x128 RGB bird's-eye view, ego-centred and heading-aligned",
+    "ego_state": "speed, lane offset, front gap, front relative speed, heading alignment (features=10: +5)",
     "waypoints": "next 10 route points, 2 m apart, in the ego frame (m), the last repeated past the end",
     "measurements": "[speed / max speed, steering / 60 deg]; stack=3 for RLAD's three frames",
 }
@@ -90,7 +92,7 @@ def make_sensor(spec: str | dict) -> Sensor:
     stack = int(options.pop("stack", 1))
     try:
         sensor = SENSORS[name](**options)
-    except TypeError as exc:
+    except (TypeError, ValueError) as exc:
         raise UsageError(f"bad option for sensor {name!r}: {exc}") from None
     return FrameStack(sensor, stack) if stack > 1 else sensor
 

@@ -68,7 +68,9 @@ def save_checkpoint(model, run_dir: Path, config: RunConfig, save_replay: bool) 
     os.replace(tmp, folder / "latest.zip")
     replay = False
     if save_replay and getattr(model, "replay_buffer", None) is not None:
-        if model.replay_buffer.observations.nbytes * 2 < REPLAY_LIMIT_BYTES:
+        observations = model.replay_buffer.observations  # a dict of arrays for Dict observations
+        arrays = observations.values() if isinstance(observations, dict) else [observations]
+        if sum(array.nbytes for array in arrays) * 2 < REPLAY_LIMIT_BYTES:
             model.save_replay_buffer(folder / "replay.tmp.pkl")
             os.replace(folder / "replay.tmp.pkl", folder / "replay.pkl")
             replay = True
@@ -210,8 +212,10 @@ def train(config: RunConfig, runs_root: str | Path = "runs") -> Path:
     """Train a new run; every input is validated before anything is written."""
     from drivelab.envs.core import DriveEnv
 
-    spec = check_combination(config.algo, config.action)
-    DriveEnv(**config.env_kwargs()).close()  # validates scenario, sensors, reward, action
+    check_combination(config.algo, config.action)
+    probe = DriveEnv(**config.env_kwargs())  # validates scenario, sensors, reward, action
+    spec = check_combination(config.algo, config.action, probe.observation_space)
+    probe.close()
     run_dir = new_run_dir(config, Path(runs_root))
     run_dir.mkdir(parents=True)
     try:

@@ -1,0 +1,425 @@
+"""Dueling Double DQN with prioritised replay (seed 003), one file, top to bottom:
+
+1. ``SumTree``: priorities in a binary tree, so sampling proportional to priority is O(log N);
+2. ``PrioritizedReplayBuffer``: P(i) = p_i^α / Σ p^α, importance weights (N·P(i))^−β (Schaul et
+   al. 2016), β annealed to 1;
+3. ``DuelingQNetwork``: features 750 → 512 → 512 → 256 (LayerNorm + ReLU), value and advantage
+   streams 256 → 256 → 128 → 1 / |A| (BatchNorm + ReLU, as the seed), Q = V + (A − mean A)
+   (Wang et al. 2016, eq. 9);
+4. ``double_dqn_targets``: y = r + γ·Q_target(s', argmax_a Q_online(s', a)) (van Hasselt et al. 2016);
+5. ``DuelingDoubleDQN``: ε-greedy acting, a linear learning-rate schedule, hard or Polyak target
+   updates, logging of ε, loss, TD error and learning rate.
+
+The seed's input: ``--obs lidar:stack=3,ego_state:features=10:stack=3`` (240 beams + 10 features,
+3 frames = 750 numbers) with the 18-action ``grid`` and its ``safety_dqn`` reward. Any vector
+observation works: a Dict of vectors is concatenated in key order.
+"""
+
+from __future__ import annotations
+
+import pickle
+import time
+from collections import deque
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from gymnasium import spaces
+from stable_baselines3.common.callbacks import BaseCallback
+from torch import nn
+
+from drivelab.agents.base import OwnAgent
+from drivelab.errors import UsageError
+
+
+@dataclass(frozen=True)
+class DuelingDDQNConfig:
+    """Hyper-parameters (``-H key=value``); replay and exploration defaults mirror drivelab's SB3 DQN.
+
+    :param learning_rate: initial Adam step size, decayed linearly to ``final_learning_rate``.
+    :param final_learning_rate: step size at the end of the budget (the seed's linear scheduler).
+    :param buffer_size: replay capacity (transitions).
+    :param learning_starts: steps of experience before the first update.
+    :param batch_size: transitions per update.
+    :param gamma: discount.
+    :param train_freq: environment steps between updates.
+    :param gradient_steps: updates each time.
+    :param target_update_interval: steps between hard target copies (used when ``tau`` is 1).
+    :param tau: Polyak factor: θ' ← τθ + (1 − τ)θ' every update; 1 means hard copies.
+    :param exploration_initial_eps: ε at the start.
+    :param exploration_final_eps: ε after ``exploration_fraction`` of the budget.
+    :param exploration_fraction: fraction of the budget over which ε decays linearly.
+    :param alpha: prioritisation exponent (0 gives uniform replay).
+    :param beta_start: importance-sampling exponent at the start, annealed linearly to 1.
+    :param priority_eps: added to |δ| so that no transition has zero priority.
+    :param max_grad_norm: gradient clipping by global norm.
+    :param stream_norm: "batch" (the seed's BatchNorm in the streams) or "layer".
+    :param log_interval: environment steps between logger dumps.
+    """
+
+    learning_rate: float = 5e-4
+    final_learning_rate: float = 5e-5
+    buffer_size: int = 15_000
+    learning_starts: int = 200
+    batch_size: int = 32
+    gamma: float = 0.8
+    train_freq: int = 1
+    gradient_steps: int = 1
+    target_update_interval: int = 50
+    tau: float = 1.0
+    exploration_initial_eps: float = 1.0
+    exploration_final_eps: float = 0.05
+    exploration_fraction: float = 0.7
+    alpha: float = 0.6
+    beta_start: float = 0.4
+    priority_eps: float = 1e-6
+    max_grad_norm: float = 10.0
+    stream_norm: str = "batch"
+    log_interval: int = 250
+
+    def check(self, algo: str) -> None:
+        if min(self.buffer_size, self.train_freq, self.gradient_steps, self.target_update_interval) < 1:
+            raise UsageError(
+                f"{algo!r} needs buffer_size, train_freq, gradient_steps, target_update_interval >= 1"
+            )
+        if self.batch_size < 2 or self.learning_starts < 0 or self.log_interval < 1:
+            raise UsageError(f"{algo!r} needs batch_size >= 2, learning_starts >= 0 and log_interval >= 1")
+        if not 0 < self.tau <= 1 or not 0 < self.gamma <= 1 or not 0 <= self.beta_start <= 1:
+            raise UsageError(f"{algo!r} needs 0 < tau <= 1, 0 < gamma <= 1 and 0 <= beta_start <= 1")
+        if self.alpha < 0 or self.learning_rate <= 0 or self.final_learning_rate < 0:
+            raise UsageError(f"{algo!r} needs alpha >= 0 and non-negative learning rates")
+        if self.stream_norm not in ("batch", "layer"):
+            raise UsageError(f"{algo!r}: stream_norm must be 'batch' or 'layer', got {self.stream_norm!r}")
+
+
+# --- 1. sum tree -----------------------------------------------------------------------------
+class SumTree:
+    """Leaf priorities under a complete binary tree whose nodes hold the sum of their children.
+
+    Node 1 is the root; node k has children 2k and 2k+1; leaf i is node ``leaves + i``.
+
+    :param capacity: number of leaves used (the tree rounds up to a power of two; the extra
+        leaves keep priority 0 and are never drawn).
+    """
+
+    def __init__(self, capacity: int) -> None:
+        self.capacity = int(capacity)
+        self.leaves = 1 << max(self.capacity - 1, 1).bit_length()
+        self.nodes = np.zeros(2 * self.leaves, dtype=np.float64)
+
+    @property
+    def total(self) -> float:
+        return float(self.nodes[1])
+
+    def priorities(self, indices: np.ndarray) -> np.ndarray:
+        return self.nodes[self.leaves + np.asarray(indices)]
+
+    def update(self, indices: np.ndarray, priorities: np.ndarray) -> None:
+        """Set leaf priorities, then recompute the sums on each leaf's path to the root."""
+        for index, priority in zip(np.atleast_1d(indices), np.atleast_1d(priorities), strict=True):
+            node = self.leaves + int(index)
+            self.nodes[node] = float(priority)
+            node //= 2
+            while node >= 1:
+                self.nodes[node] = self.nodes[2 * node] + self.nodes[2 * node + 1]
+                node //= 2
+
+    def find(self, values: np.ndarray) -> np.ndarray:
+        """Leaf index holding each cumulative value in [0, total): all values descend together."""
+        values = np.array(values, dtype=np.float64)
+        node = np.ones(len(values), dtype=np.int64)
+        while node[0] < self.leaves:
+            left = 2 * node
+            go_right = values >= self.nodes[left]
+            values = np.where(go_right, values - self.nodes[left], values)
+            node = left + go_right
+        leaf = node - self.leaves
+        # float round-off can land on an empty leaf past the end: fall back to the last used one
+        return np.minimum(leaf, self.capacity - 1)
+
+
+# --- 2. prioritised replay ---------------------------------------------------------------------
+class PrioritizedReplayBuffer:
+    """A ring buffer of transitions sampled with probability p_i^α / Σ_j p_j^α.
+
+    :param capacity: transitions kept.
+    :param observation_size: length of a (flattened) observation.
+    :param alpha: prioritisation exponent.
+    :param priority_eps: added to |δ| in ``update_priorities``.
+    """
+
+    def __init__(self, capacity: int, observation_size: int, alpha: float, priority_eps: float) -> None:
+        self.capacity, self.alpha, self.priority_eps = int(capacity), float(alpha), float(priority_eps)
+        self.observations = np.zeros((self.capacity, observation_size), dtype=np.float32)
+        self.next_observations = np.zeros((self.capacity, observation_size), dtype=np.float32)
+        self.actions = np.zeros(self.capacity, dtype=np.int64)
+        self.rewards = np.zeros(self.capacity, dtype=np.float32)
+        self.terminals = np.zeros(self.capacity, dtype=np.float32)
+        self.tree = SumTree(self.capacity)
+        self.max_priority = 1.0  # stored as p^α; new transitions get the largest seen
+        self.position, self.size = 0, 0
+
+    def add(self, observation, action: int, reward: float, next_observation, terminal: bool) -> None:
+        i = self.position
+        self.observations[i], self.next_observations[i] = observation, next_observation
+        self.actions[i], self.rewards[i], self.terminals[i] = action, reward, float(terminal)
+        self.tree.update(np.array([i]), np.array([self.max_priority]))
+        self.position, self.size = (i + 1) % self.capacity, min(self.size + 1, self.capacity)
+
+    def sample(
+        self, batch_size: int, beta: float, rng: np.random.Generator
+    ) -> tuple[np.ndarray, dict[str, np.ndarray], np.ndarray]:
+        """(indices, batch, importance weights): one draw in each of ``batch_size`` equal slices
+        of the total priority (stratified), weights w_i = (N·P(i))^−β / max_j w_j."""
+        segment = self.tree.total / batch_size
+        indices = self.tree.find((np.arange(batch_size) + rng.random(batch_size)) * segment)
+        indices = np.minimum(indices, self.size - 1)  # round-off past the last stored transition
+        probabilities = self.tree.priorities(indices) / self.tree.total
+        weights = (self.size * probabilities) ** (-beta)
+        weights = weights / weights.max()
+        batch = {
+            "observations": self.observations[indices],
+            "actions": self.actions[indices],
+            "rewards": self.rewards[indices],
+            "next_observations": self.next_observations[indices],
+            "terminals": self.terminals[indices],
+        }
+        return indices, batch, weights.astype(np.float32)
+
+    def update_priorities(self, indices: np.ndarray, td_errors: np.ndarray) -> None:
+        """p_i = (|δ_i| + ε)^α."""
+        priorities = (np.abs(td_errors) + self.priority_eps) ** self.alpha
+        self.tree.update(indices, priorities)
+        self.max_priority = max(self.max_priority, float(priorities.max()))
+
+
+# --- 3. dueling network ------------------------------------------------------------------------
+def _stream(inputs: int, outputs: int, norm: str) -> nn.Sequential:
+    """256 → 256 → 128 → outputs with a normalisation + ReLU after each hidden layer."""
+    normalisation = nn.BatchNorm1d if norm == "batch" else nn.LayerNorm
+    return nn.Sequential(
+        nn.Linear(inputs, 256), normalisation(256), nn.ReLU(),
+        nn.Linear(256, 128), normalisation(128), nn.ReLU(),
+        nn.Linear(128, outputs),
+    )  # fmt: skip
+
+
+class DuelingQNetwork(nn.Module):
+    """Q(s, ·) from a shared feature trunk and separate value and advantage streams.
+
+    :param observation_size: input length (750 for the seed's stacked LiDAR + features).
+    :param actions: number of discrete actions (18 for the seed's grid).
+    :param stream_norm: "batch" or "layer" normalisation in the streams.
+    """
+
+    def __init__(self, observation_size: int, actions: int, stream_norm: str = "batch") -> None:
+        super().__init__()
+        self.features = nn.Sequential(
+            nn.Linear(observation_size, 512), nn.LayerNorm(512), nn.ReLU(),
+            nn.Linear(512, 512), nn.LayerNorm(512), nn.ReLU(),
+            nn.Linear(512, 256), nn.LayerNorm(256), nn.ReLU(),
+        )  # fmt: skip
+        self.value = _stream(256, 1, stream_norm)
+        self.advantage = _stream(256, actions, stream_norm)
+
+    def forward(self, observations: torch.Tensor) -> torch.Tensor:
+        features = self.features(observations)
+        return dueling_q_values(self.value(features), self.advantage(features))
+
+
+def dueling_q_values(value: torch.Tensor, advantage: torch.Tensor) -> torch.Tensor:
+    """Q(s, a) = V(s) + (A(s, a) − mean_a' A(s, a')) (Wang et al. 2016, eq. 9)."""
+    return value + advantage - advantage.mean(dim=1, keepdim=True)
+
+
+# --- 4. double-DQN target ----------------------------------------------------------------------
+def double_dqn_targets(
+    rewards: torch.Tensor,
+    terminals: torch.Tensor,
+    next_q_online: torch.Tensor,
+    next_q_target: torch.Tensor,
+    gamma: float,
+) -> torch.Tensor:
+    """y = r + γ·(1 − terminal)·Q_target(s', argmax_a Q_online(s', a)): the online network picks,
+    the target network evaluates (van Hasselt et al. 2016, eq. 4)."""
+    best = next_q_online.argmax(dim=1, keepdim=True)
+    return rewards + gamma * (1.0 - terminals) * next_q_target.gather(1, best).squeeze(1)
+
+
+# --- 5. the agent ------------------------------------------------------------------------------
+def flatten_observation(obs: Any, space: spaces.Space) -> np.ndarray:
+    """A vector observation (or a Dict of them, in key order) as one float32 vector."""
+    if isinstance(space, spaces.Dict):
+        return np.concatenate([np.asarray(obs[key], dtype=np.float32).ravel() for key in space.spaces])
+    return np.asarray(obs, dtype=np.float32).ravel()
+
+
+def linear(start: float, end: float, progress: float) -> float:
+    """start → end as progress goes 0 → 1, constant after."""
+    return start + (end - start) * min(max(progress, 0.0), 1.0)
+
+
+class DuelingDoubleDQN(OwnAgent):
+    """Seed 003's Dueling Double DQN agent with prioritised replay."""
+
+    algo = "dueling_ddqn"
+    config_class = DuelingDDQNConfig
+
+    def _build(self) -> None:
+        if not isinstance(self.action_space, spaces.Discrete):
+            raise ValueError("dueling_ddqn needs discrete actions")
+        config = self.config
+        self.observation_size = spaces.flatdim(self.observation_space)
+        self.q_network = DuelingQNetwork(self.observation_size, int(self.action_space.n), config.stream_norm)
+        self.target_network = DuelingQNetwork(
+            self.observation_size, int(self.action_space.n), config.stream_norm
+        )
+        self.target_network.load_state_dict(self.q_network.state_dict())
+        self.target_network.eval()
+        self.optimizer = torch.optim.Adam(self.q_network.parameters(), lr=config.learning_rate, foreach=True)
+        self.replay_buffer = PrioritizedReplayBuffer(
+            config.buffer_size, self.observation_size, config.alpha, config.priority_eps
+        )
+        self._last_obs = None
+        self.episode_returns: deque[float] = deque(maxlen=100)
+
+    def _state(self) -> dict[str, Any]:
+        return {
+            "q_network": self.q_network.state_dict(),
+            "target_network": self.target_network.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+        }
+
+    def _set_state(self, state: dict[str, Any]) -> None:
+        self.q_network.load_state_dict(state["q_network"])
+        self.target_network.load_state_dict(state["target_network"])
+        self.optimizer.load_state_dict(state["optimizer"])
+
+    def save_replay_buffer(self, path: str | Path) -> None:
+        with open(path, "wb") as handle:
+            pickle.dump(self.replay_buffer, handle, protocol=pickle.HIGHEST_PROTOCOL)
+
+    def load_replay_buffer(self, path: str | Path) -> None:
+        with open(path, "rb") as handle:
+            self.replay_buffer = pickle.load(handle)
+
+    def q_values(self, observations: np.ndarray) -> torch.Tensor:
+        """Q(s, ·) for a batch of flat observations, BatchNorm on its running statistics."""
+        self.q_network.eval()
+        with torch.no_grad():
+            return self.q_network(torch.as_tensor(observations, dtype=torch.float32))
+
+    def predict(self, obs: Any, deterministic: bool = True) -> tuple[np.ndarray, None]:
+        """argmax_a Q(s, a) (ε-greedy with the final ε when not deterministic)."""
+        if not deterministic and self.rng.random() < self.config.exploration_final_eps:
+            return np.array(self.rng.integers(self.action_space.n)), None
+        flat = flatten_observation(obs, self.observation_space)[None]
+        return np.array(int(self.q_values(flat).argmax(dim=1)[0])), None
+
+    def train_step(self, progress: float) -> dict[str, float]:
+        """One gradient step on a prioritised batch; refreshes the batch's priorities."""
+        config = self.config
+        beta = linear(config.beta_start, 1.0, progress)
+        indices, batch, weights = self.replay_buffer.sample(config.batch_size, beta, self.rng)
+        tensors = {key: torch.as_tensor(value) for key, value in batch.items()}
+        with torch.no_grad():
+            next_q_online = self.q_values(batch["next_observations"])
+            next_q_target = self.target_network(tensors["next_observations"])
+            targets = double_dqn_targets(
+                tensors["rewards"], tensors["terminals"], next_q_online, next_q_target, config.gamma
+            )
+        self.q_network.train()
+        q_taken = self.q_network(tensors["observations"]).gather(1, tensors["actions"][:, None]).squeeze(1)
+        td_errors = targets - q_taken
+        # importance-weighted Huber loss: the weights undo the bias of prioritised sampling
+        loss = (
+            torch.as_tensor(weights) * nn.functional.smooth_l1_loss(q_taken, targets, reduction="none")
+        ).mean()
+        self.optimizer.zero_grad()
+        loss.backward()
+        nn.utils.clip_grad_norm_(self.q_network.parameters(), config.max_grad_norm)
+        self.optimizer.step()
+        self.replay_buffer.update_priorities(indices, td_errors.detach().numpy())
+        return {"loss": loss.item(), "td_error": td_errors.abs().mean().item(), "beta": beta,
+                "q_mean": q_taken.mean().item()}  # fmt: skip
+
+    def update_target(self) -> None:
+        """θ' ← τθ + (1 − τ)θ' (τ = 1: a hard copy), buffers (BatchNorm statistics) copied."""
+        with torch.no_grad():
+            for target, online in zip(
+                self.target_network.parameters(), self.q_network.parameters(), strict=True
+            ):
+                target.mul_(1.0 - self.config.tau).add_(online, alpha=self.config.tau)
+            for target, online in zip(self.target_network.buffers(), self.q_network.buffers(), strict=True):
+                target.copy_(online)
+
+    def learn(
+        self,
+        total_timesteps: int,
+        callback: BaseCallback | None = None,
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> DuelingDoubleDQN:
+        """Act ε-greedily, store, learn, until ``total_timesteps`` more steps (contract in base.py)."""
+        config, env = self.config, self.env
+        if reset_num_timesteps:
+            self.num_timesteps = 0
+        target_steps = self.num_timesteps + int(total_timesteps)
+        start_steps, start_time = self.num_timesteps, time.perf_counter()
+        if self._last_obs is None:
+            self._last_obs, _ = env.reset()
+        callback = self._start_callback(callback)
+        callback.on_training_start(locals(), globals())
+        metrics: dict[str, float] = {}
+        while self.num_timesteps < target_steps:
+            progress = self.num_timesteps / max(target_steps, 1)
+            explored = progress / config.exploration_fraction if config.exploration_fraction else 1.0
+            epsilon = linear(config.exploration_initial_eps, config.exploration_final_eps, explored)
+            observation = flatten_observation(self._last_obs, self.observation_space)
+            if self.rng.random() < epsilon:
+                action = int(self.rng.integers(self.action_space.n))
+            else:
+                action = int(self.q_values(observation[None]).argmax(dim=1)[0])
+            new_obs, reward, terminated, truncated, info = env.step(action)
+            self.num_timesteps += 1
+            # a time-limit end is not terminal: its target still bootstraps from the next state
+            next_observation = flatten_observation(new_obs, self.observation_space)
+            self.replay_buffer.add(observation, action, float(reward), next_observation, terminated)
+            if "episode" in info:
+                self.episode_returns.append(float(info["episode"]["r"]))
+            self._last_obs = env.reset()[0] if terminated or truncated else new_obs
+            learning_rate = linear(config.learning_rate, config.final_learning_rate, progress)
+            ready = (
+                self.num_timesteps > config.learning_starts and self.replay_buffer.size >= config.batch_size
+            )
+            if ready and self.num_timesteps % config.train_freq == 0:
+                for group in self.optimizer.param_groups:
+                    group["lr"] = learning_rate
+                for _ in range(config.gradient_steps):
+                    metrics = self.train_step(progress)
+                if config.tau < 1.0:
+                    self.update_target()
+            if config.tau == 1.0 and self.num_timesteps % config.target_update_interval == 0:
+                self.update_target()
+            if self.num_timesteps % config.log_interval == 0:
+                self._log(metrics, epsilon, learning_rate, start_steps, start_time)
+            callback.update_locals(locals())
+            if not callback.on_step():
+                break
+        callback.on_training_end()
+        return self
+
+    def _log(
+        self, metrics: dict, epsilon: float, learning_rate: float, start_steps: int, start_time: float
+    ) -> None:
+        for key, value in metrics.items():
+            self.logger.record(f"train/{key}", value)
+        self.logger.record("train/epsilon", epsilon)
+        self.logger.record("train/learning_rate", learning_rate)
+        if self.episode_returns:
+            self.logger.record("rollout/ep_rew_mean", float(np.mean(self.episode_returns)))
+        elapsed = max(time.perf_counter() - start_time, 1e-9)
+        self.logger.record("time/fps", int((self.num_timesteps - start_steps) / elapsed))
+        self.logger.dump(self.num_timesteps)

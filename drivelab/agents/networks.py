@@ -1,0 +1,211 @@
+"""Seed 003's encoders (CNN and fusion), the tanh-Gaussian actor-critic, and SB3 extractors of both.
+
+- ``SeedCnn``: Conv 5→16 8×8/4 → ReLU → Conv 16→32 4×4/2 → ReLU → FC 2592→256 → ReLU (84×84 input).
+- ``FusionEncoder``: image FC 256 + vector FC 64 (the 5 ego-state numbers) + LiDAR-120 FC 128,
+  concatenated (448) → FC 256 → ReLU.
+- ``TanhGaussianActorCritic``: an encoder, a mean head, a trainable log-std, a value head;
+  action = tanh(μ + σ·ε) (seed 003's "final action").
+- ``SeedCnnExtractor`` / ``FusionExtractor``: the same encoders as stable-baselines3 features
+  extractors, so SB3 PPO/A2C run the same networks on the same input
+  (``-H features_extractor=seed``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from gymnasium import spaces
+from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+from torch import nn
+
+
+def is_image(space: spaces.Space) -> bool:
+    """A channels-first uint8 image Box (``topdown``; the RGB ``birdeye`` is channels-last)."""
+    if not (isinstance(space, spaces.Box) and len(space.shape) == 3 and space.dtype.name == "uint8"):
+        return False
+    channels, height, width = space.shape
+    return channels < min(height, width)
+
+
+def is_vector(space: spaces.Space) -> bool:
+    """A 1-D Box, or a Dict of them."""
+    if isinstance(space, spaces.Dict):
+        return all(is_vector(sub) for sub in space.spaces.values())
+    return isinstance(space, spaces.Box) and len(space.shape) == 1
+
+
+def observation_kind(space: spaces.Space) -> str:
+    """ "image", "vector", "image+vector" (a Dict with one image and 1-D vectors) or "other"."""
+    if is_image(space):
+        return "image"
+    if is_vector(space):
+        return "vector"
+    if isinstance(space, spaces.Dict):
+        subs = list(space.spaces.values())
+        if sum(is_image(s) for s in subs) == 1 and all(is_image(s) or is_vector(s) for s in subs):
+            return "image+vector"
+    return "other"
+
+
+class SeedCnn(nn.Module):
+    """Seed 003's image encoder; the FC input size follows the image size (2592 for 84×84)."""
+
+    def __init__(self, image_space: spaces.Box, features: int = 256) -> None:
+        super().__init__()
+        channels = image_space.shape[0]
+        self.conv = nn.Sequential(
+            nn.Conv2d(channels, 16, kernel_size=8, stride=4),
+            nn.ReLU(),
+            nn.Conv2d(16, 32, kernel_size=4, stride=2),
+            nn.ReLU(),
+            nn.Flatten(),
+        )
+        with torch.no_grad():
+            flat = self.conv(torch.zeros(1, *image_space.shape)).shape[1]
+        self.fc = nn.Sequential(nn.Linear(flat, features), nn.ReLU())
+        self.features = features
+
+    def forward(self, image: torch.Tensor) -> torch.Tensor:
+        return self.fc(self.conv(image))
+
+
+class FusionEncoder(nn.Module):
+    """Image (SeedCnn, 256) + LiDAR FC 128 (key ``lidar``, if present) + every other vector FC 64 → 256.
+
+    Vectors other than ``lidar`` are concatenated in key order before their FC layer.
+    """
+
+    def __init__(self, space: spaces.Dict, features: int = 256) -> None:
+        super().__init__()
+        self.image_key = next(key for key, sub in space.spaces.items() if is_image(sub))
+        self.lidar_key = "lidar" if "lidar" in space.spaces else None
+        self.vector_keys = [k for k in space.spaces if k not in (self.image_key, self.lidar_key)]
+        self.image = SeedCnn(space[self.image_key])
+        width = self.image.features
+        if self.lidar_key:
+            self.lidar = nn.Sequential(nn.Linear(space[self.lidar_key].shape[0], 128), nn.ReLU())
+            width += 128
+        if self.vector_keys:
+            size = sum(space[k].shape[0] for k in self.vector_keys)
+            self.vector = nn.Sequential(nn.Linear(size, 64), nn.ReLU())
+            width += 64
+        self.fusion = nn.Sequential(nn.Linear(width, features), nn.ReLU())  # 256 + 128 + 64 = 448 → 256
+        self.features = features
+
+    def forward(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        parts = [self.image(obs[self.image_key])]
+        if self.lidar_key:
+            parts.append(self.lidar(obs[self.lidar_key]))
+        if self.vector_keys:
+            parts.append(self.vector(torch.cat([obs[k] for k in self.vector_keys], dim=1)))
+        return self.fusion(torch.cat(parts, dim=1))
+
+
+class MlpEncoder(nn.Module):
+    """Two tanh layers of 64 for vector observations (SB3's default MLP), Dicts concatenated."""
+
+    def __init__(self, space: spaces.Space, features: int = 64) -> None:
+        super().__init__()
+        self.keys = list(space.spaces) if isinstance(space, spaces.Dict) else None
+        size = spaces.flatdim(space)
+        self.net = nn.Sequential(
+            nn.Linear(size, features), nn.Tanh(), nn.Linear(features, features), nn.Tanh()
+        )
+        self.features = features
+
+    def forward(self, obs) -> torch.Tensor:
+        if self.keys is not None:
+            obs = torch.cat([obs[k].flatten(1) for k in self.keys], dim=1)
+        return self.net(obs)
+
+
+def make_encoder(space: spaces.Space) -> nn.Module:
+    """SeedCnn for an image, FusionEncoder for image + vectors, MlpEncoder for vectors."""
+    kind = observation_kind(space)
+    if kind == "image":
+        return SeedCnn(space)
+    if kind == "image+vector":
+        return FusionEncoder(space)
+    if kind == "vector":
+        return MlpEncoder(space)
+    raise ValueError(f"no encoder for observation space {space}")
+
+
+class TanhGaussianActorCritic(nn.Module):
+    """π(a|s): a = tanh(u), u ~ N(μ(s), σ²) with a trainable state-independent log σ; V(s).
+
+    :param space: observation space.
+    :param action_size: number of action dimensions (2: steering, throttle).
+    :param shared_encoder: actor and critic share the encoder (seed's PPO) or own one each
+        (seed's A2C: "convolutional layers in both the actor and critic networks").
+    :param log_std_init: initial log σ.
+    """
+
+    def __init__(
+        self, space: spaces.Space, action_size: int, shared_encoder: bool = True, log_std_init: float = 0.0
+    ) -> None:
+        super().__init__()
+        self.actor_encoder = make_encoder(space)
+        self.critic_encoder = self.actor_encoder if shared_encoder else make_encoder(space)
+        self.mean = nn.Linear(self.actor_encoder.features, action_size)
+        self.log_std = nn.Parameter(torch.full((action_size,), float(log_std_init)))
+        self.value = nn.Linear(self.critic_encoder.features, 1)
+        nn.init.orthogonal_(self.mean.weight, gain=0.01)  # start near the zero action
+        nn.init.zeros_(self.mean.bias)
+
+    def forward(self, obs) -> tuple[torch.Tensor, torch.Tensor]:
+        """(μ, V) for a batch."""
+        features = self.actor_encoder(obs)
+        shared = self.critic_encoder is self.actor_encoder
+        value = self.value(features if shared else self.critic_encoder(obs)).squeeze(-1)
+        return self.mean(features), value
+
+    def distribution(self, mean: torch.Tensor) -> torch.distributions.Normal:
+        return torch.distributions.Normal(mean, self.log_std.exp().expand_as(mean))
+
+    def sample(
+        self, obs, deterministic: bool = False, generator: torch.Generator | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(pre-tanh u, log π(tanh u), V): u = μ + σ·ε, ε ~ N(0, 1) drawn from ``generator``;
+        log π is corrected for the squashing."""
+        mean, value = self(obs)
+        distribution = self.distribution(mean)
+        noise = torch.randn(mean.shape, generator=generator)
+        unsquashed = mean if deterministic else mean + distribution.stddev * noise
+        return unsquashed, squashed_log_prob(distribution, unsquashed), value
+
+    def evaluate(self, obs, unsquashed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(log π of stored pre-tanh actions, entropy of the Gaussian before squashing, V)."""
+        mean, value = self(obs)
+        distribution = self.distribution(mean)
+        return squashed_log_prob(distribution, unsquashed), distribution.entropy().sum(-1), value
+
+
+def squashed_log_prob(distribution: torch.distributions.Normal, unsquashed: torch.Tensor) -> torch.Tensor:
+    """log π(a) for a = tanh(u): log N(u) − Σ log(1 − tanh²u), the change of variables, computed
+    stably as 2·(log 2 − u − softplus(−2u))."""
+    correction = 2.0 * (math.log(2.0) - unsquashed - nn.functional.softplus(-2.0 * unsquashed))
+    return (distribution.log_prob(unsquashed) - correction).sum(-1)
+
+
+class SeedCnnExtractor(BaseFeaturesExtractor):
+    """Seed 003's CNN as an SB3 features extractor (image observations)."""
+
+    def __init__(self, observation_space: spaces.Box) -> None:
+        super().__init__(observation_space, features_dim=256)
+        self.encoder = SeedCnn(observation_space)
+
+    def forward(self, observations: torch.Tensor) -> torch.Tensor:
+        return self.encoder(observations)
+
+
+class FusionExtractor(BaseFeaturesExtractor):
+    """Seed 003's fusion network as an SB3 features extractor (Dict: image + ego state + LiDAR)."""
+
+    def __init__(self, observation_space: spaces.Dict) -> None:
+        super().__init__(observation_space, features_dim=256)
+        self.encoder = FusionEncoder(observation_space)
+
+    def forward(self, observations: dict[str, torch.Tensor]) -> torch.Tensor:
+        return self.encoder(observations)

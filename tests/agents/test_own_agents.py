@@ -1,0 +1,170 @@
+"""Our own agents behind the run machinery: save/load, determinism, callbacks, resume, bad input."""
+
+import csv
+import json
+
+import numpy as np
+import pytest
+import torch
+from stable_baselines3.common.callbacks import BaseCallback
+
+from drivelab.agents.registry import check_combination, get_algo
+from drivelab.agents.sb3 import build_sb3
+from drivelab.config import build_config
+from drivelab.envs.core import DriveEnv
+from drivelab.errors import UsageError
+from drivelab.training import run as run_module
+from drivelab.training.evaluate import evaluate_run
+
+ENV = {"backend": "fast", "traffic": "regular", "duration_s": 6}
+CASES = {
+    "dueling_ddqn": ("lidar:beams=24:stack=3,ego_state:features=10:stack=3", "grid",
+                     {"learning_starts": 20, "batch_size": 8, "target_update_interval": 10,
+                      "log_interval": 20}),
+    "a2c_own": ("topdown:size=36", "continuous", {"n_steps": 8}),
+    "ppo_own": ("topdown:size=36,ego_state,lidar:beams=24", "continuous",
+                {"n_steps": 16, "batch_size": 8, "n_epochs": 2, "clip_range_value": 0.2}),
+}  # fmt: skip
+
+
+def _env(algo, seed=0):
+    obs, action, _ = CASES[algo]
+    return DriveEnv("highway", obs=obs, action=action, seed=seed, **ENV)
+
+
+def _agent(algo, seed=0, **extra):
+    env = _env(algo, seed)
+    hyperparams = {**CASES[algo][2], **extra}
+    return get_algo(algo).build(algo, env, seed, hyperparams, None), env
+
+
+@pytest.mark.parametrize("algo", sorted(CASES))
+def test_save_load_round_trip_gives_identical_actions(algo, tmp_path):
+    agent, env = _agent(algo)
+    agent.learn(40)
+    assert agent.num_timesteps == 40
+    agent.save(tmp_path / "agent.zip")
+    loaded = get_algo(algo).load(algo, tmp_path / "agent.zip", None)
+    assert loaded.num_timesteps == 40
+    obs, _ = env.reset(seed=3)
+    for _ in range(5):
+        action, _ = agent.predict(obs, deterministic=True)
+        np.testing.assert_array_equal(action, loaded.predict(obs, deterministic=True)[0])
+        obs, *_ = env.step(action)
+
+
+@pytest.mark.parametrize("algo", ["dueling_ddqn", "ppo_own"])
+def test_same_seed_same_training(algo):
+    first, _ = _agent(algo, seed=4)
+    second, _ = _agent(algo, seed=4)
+    first.learn(40)
+    second.learn(40)
+    for a, b in zip(first._state().values(), second._state().values(), strict=True):
+        if isinstance(a, dict) and "state" not in a:  # network state dicts (optimizers differ in layout)
+            for key in a:
+                torch.testing.assert_close(a[key], b[key])
+
+
+class StopAt(BaseCallback):
+    def __init__(self, steps):
+        super().__init__()
+        self.steps, self.calls, self.ended = steps, 0, False
+
+    def _on_step(self):
+        self.calls += 1
+        return self.num_timesteps < self.steps
+
+    def _on_training_end(self):
+        self.ended = True
+
+
+@pytest.mark.parametrize("algo", ["dueling_ddqn", "a2c_own"])
+def test_callback_is_called_every_step_and_can_stop(algo):
+    agent, _ = _agent(algo)
+    callback = StopAt(13)
+    agent.learn(100, callback=callback)
+    assert agent.num_timesteps == 13 and callback.calls == 13 and callback.ended
+    agent.learn(7, reset_num_timesteps=False)  # continues: 7 more steps
+    assert agent.num_timesteps == 20
+
+
+def test_actions_are_in_range_and_greedy_is_deterministic():
+    agent, env = _agent("ppo_own")
+    obs, _ = env.reset(seed=0)
+    sampled = np.array([agent.predict(obs, deterministic=False)[0] for _ in range(20)])
+    assert sampled.shape == (20, 2) and np.all(np.abs(sampled) <= 1.0) and sampled.std(axis=0).min() > 0
+    np.testing.assert_array_equal(agent.predict(obs)[0], agent.predict(obs)[0])
+
+
+def _config(case, **overrides):
+    obs, action, hyperparams = CASES[case]
+    values = {
+        "algo": case, "env": "highway", "obs": obs, "action": action, "steps": 60, "seed": 2,
+        "name": case, "eval_every": 30, "eval_episodes": 1, "hyperparams": hyperparams,
+        "checkpoint_every": 30, "env_options": {"duration_s": 6}, "backend": "fast",
+    }  # fmt: skip
+    values.update(overrides)
+    return build_config(values)
+
+
+@pytest.mark.parametrize("algo", ["dueling_ddqn", "ppo_own"])
+def test_run_directory_resume_and_evaluation(algo, tmp_path):
+    run_dir = run_module.train(_config(algo), tmp_path)
+    manifest = json.loads((run_dir / "checkpoints/latest.json").read_text())
+    assert manifest["steps"] == 60
+    assert manifest["replay_buffer"] is (algo == "dueling_ddqn")
+    with (run_dir / "progress.csv").open() as handle:
+        columns = set(next(csv.reader(handle)))
+    expected = (
+        {"train/epsilon", "train/td_error", "train/loss"}
+        if algo == "dueling_ddqn"
+        else {"train/clip_fraction"}
+    )
+    assert expected | {"train/learning_rate"} <= columns
+    run_module.resume(run_dir, steps=90)
+    assert json.loads((run_dir / "checkpoints/latest.json").read_text())["steps"] == 90
+    report = evaluate_run(run_dir, episodes=1)
+    assert report["algo"] == algo and report["episodes"] == 1
+
+
+@pytest.mark.parametrize(
+    "algo, obs, action, hyperparams, message",
+    [
+        ("dueling_ddqn", "topdown", "grid", {}, "cannot read 'image'"),
+        ("ppo_own", "birdeye", "continuous", {}, "cannot read 'other'"),
+        ("a2c_own", "topdown", "meta", {}, "cannot take 'meta'"),
+        ("ppo_own", "kinematics", "continuous", {"clip_range": -1}, "clip_range > 0"),
+        ("ppo_own", "kinematics", "continuous", {"n_epoch": 3}, "unknown hyperparameter 'n_epoch'"),
+        ("dueling_ddqn", "kinematics", "meta", {"batch_size": "big"}, "must be a number"),
+        ("dueling_ddqn", "kinematics", "meta", {"stream_norm": "group"}, "stream_norm"),
+    ],
+)
+def test_impossible_combinations_fail_before_training(tmp_path, algo, obs, action, hyperparams, message):
+    config = _config(algo, obs=obs, action=action, hyperparams=hyperparams)
+    with pytest.raises(UsageError, match=message):
+        run_module.train(config, tmp_path)
+    assert not any(tmp_path.iterdir())
+
+
+def test_sb3_runs_the_seed_networks():
+    env = _env("ppo_own")
+    model = build_sb3("ppo", env, 0, {"features_extractor": "seed", "n_steps": 16, "batch_size": 8}, None)
+    assert type(model.policy.features_extractor).__name__ == "FusionExtractor"
+    model.learn(16)
+    with pytest.raises(UsageError, match="features_extractor=seed"):
+        build_sb3(
+            "ppo",
+            DriveEnv("highway", obs="kinematics", backend="fast"),
+            0,
+            {"features_extractor": "seed"},
+            None,
+        )
+    with pytest.raises(UsageError):
+        check_combination("dueling_ddqn", "continuous")
+
+
+def test_sb3_dqn_on_a_dict_observation_checkpoints_its_replay(tmp_path):
+    # the seed's DDQN input given to SB3's DQN (a DictReplayBuffer) must checkpoint like ours
+    config = _config("dueling_ddqn", algo="dqn", name="dqn", hyperparams={"learning_starts": 20})
+    run_dir = run_module.train(config, tmp_path)
+    assert json.loads((run_dir / "checkpoints/latest.json").read_text())["replay_buffer"] is True
