@@ -67,10 +67,10 @@ def envs() -> None:
 def train(
     algo: str | None = typer.Option(None, help="dqn, ppo, a2c, sac, dueling_ddqn, a2c_own, ppo_own"),
     env: str | None = typer.Option(
-        None, help="scenario: highway, merge, roundabout, intersection, racetrack"
+        None, help="scenario: highway, merge, roundabout, intersection, racetrack, town"
     ),
     obs: str | None = typer.Option(None, help="sensor or comma list, e.g. lidar,topdown or lidar:beams=120"),
-    action: str | None = typer.Option(None, help="meta, grid or continuous"),
+    action: str | None = typer.Option(None, help="meta, grid, continuous or target_speed"),
     reward: str | None = typer.Option(None, help="preset, term=weight list, or preset,term=weight"),
     steps: int | None = typer.Option(None, help="total environment steps"),
     seed: int | None = typer.Option(None),
@@ -85,6 +85,7 @@ def train(
     eval_episodes: int | None = typer.Option(None),
     video: bool = typer.Option(False, "--video", help="record a video at each periodic evaluation"),
     checkpoint_every: int | None = typer.Option(None, help="steps between checkpoints (0: 10 per run)"),
+    n_envs: int | None = typer.Option(None, help="worlds stepped together (SB3 algorithms; default 1)"),
     hyperparams: list[str] = typer.Option([], "--hyperparams", "-H", help="algorithm override key=value"),
     resume: Path | None = typer.Option(None, help="continue this run directory from its checkpoint"),
 ) -> None:
@@ -99,7 +100,7 @@ def train(
         if resume is not None:
             given = [
                 o
-                for o in (algo, env, obs, action, reward, seed, traffic, backend, config, name)
+                for o in (algo, env, obs, action, reward, seed, traffic, backend, config, name, n_envs)
                 if o is not None
             ]
             if given or hyperparams:
@@ -111,7 +112,7 @@ def train(
                 "algo": algo, "env": env, "obs": obs, "action": action, "reward": reward,
                 "steps": steps, "seed": seed, "traffic": traffic, "backend": backend, "name": name,
                 "eval_every": eval_every, "eval_episodes": eval_episodes,
-                "checkpoint_every": checkpoint_every,
+                "checkpoint_every": checkpoint_every, "n_envs": n_envs,
             }  # fmt: skip
             values.update({k: v for k, v in cli.items() if v is not None})
             if video:

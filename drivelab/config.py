@@ -51,6 +51,7 @@ class RunConfig:
     checkpoint_every: int = 0
     hyperparams: dict = field(default_factory=dict)
     env_options: dict = field(default_factory=dict)
+    n_envs: int = 1
 
     def env_kwargs(self) -> dict:
         """Keyword arguments of DriveEnv for this run."""
@@ -72,6 +73,8 @@ class RunConfig:
     def identity(self) -> str:
         """Hash of everything but the step budget and name: what a checkpoint must match."""
         data = {k: v for k, v in self.to_dict().items() if k not in ("steps", "name")}
+        if data["n_envs"] == 1:  # runs made before the field existed keep their identity
+            del data["n_envs"]
         return hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
     @property
@@ -103,7 +106,7 @@ def _check_type(name: str, value):
         if expected is str and isinstance(value, (int, float)) and name == "reward":
             return str(value)
         raise UsageError(f"config field {name!r} must be {expected.__name__}, got {value!r}")
-    if name in ("steps", "eval_episodes") and value < 1:
+    if name in ("steps", "eval_episodes", "n_envs") and value < 1:
         raise UsageError(f"config field {name!r} must be >= 1, got {value}")
     if name in ("eval_every", "checkpoint_every") and value < 0:
         raise UsageError(f"config field {name!r} must be >= 0, got {value}")

@@ -19,6 +19,7 @@ class AlgoSpec:
         ``save_replay_buffer``, ``load_replay_buffer``, as SB3's off-policy models).
     :param observation_kinds: observation kinds it can read (``networks.observation_kind``):
         "vector", "image" (channels-first uint8), "image+vector" (a Dict of both), "other".
+    :param multi_env: it trains on a vector env of several worlds (``n_envs`` > 1).
     """
 
     name: str
@@ -28,6 +29,7 @@ class AlgoSpec:
     load: Callable
     sb3_replay: bool = False
     observation_kinds: tuple[str, ...] = ("vector", "image", "image+vector", "other")
+    multi_env: bool = False
 
 
 def build_own(algo: str, env, seed: int, hyperparams: dict, log_dir) -> object:
@@ -55,10 +57,14 @@ def _registry() -> dict[str, AlgoSpec]:
     everything = discrete + continuous
     readable = ("vector", "image", "image+vector")
     return {
-        "dqn": AlgoSpec("dqn", "stable-baselines3 DQN", discrete, build_sb3, load_sb3, sb3_replay=True),
-        "ppo": AlgoSpec("ppo", "stable-baselines3 PPO", everything, build_sb3, load_sb3),
-        "a2c": AlgoSpec("a2c", "stable-baselines3 A2C", everything, build_sb3, load_sb3),
-        "sac": AlgoSpec("sac", "stable-baselines3 SAC", continuous, build_sb3, load_sb3, sb3_replay=True),
+        "dqn": AlgoSpec(
+            "dqn", "stable-baselines3 DQN", discrete, build_sb3, load_sb3, sb3_replay=True, multi_env=True
+        ),
+        "ppo": AlgoSpec("ppo", "stable-baselines3 PPO", everything, build_sb3, load_sb3, multi_env=True),
+        "a2c": AlgoSpec("a2c", "stable-baselines3 A2C", everything, build_sb3, load_sb3, multi_env=True),
+        "sac": AlgoSpec(
+            "sac", "stable-baselines3 SAC", continuous, build_sb3, load_sb3, sb3_replay=True, multi_env=True
+        ),
         "dueling_ddqn": AlgoSpec(
             "dueling_ddqn",
             "drivelab's Dueling Double DQN, prioritised replay (seed 003)",

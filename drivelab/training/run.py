@@ -25,7 +25,8 @@ from pathlib import Path
 
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import configure
-from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.monitor import Monitor, ResultsWriter
+from stable_baselines3.common.vec_env import VecMonitor
 from tqdm import tqdm
 
 from drivelab.agents.registry import check_combination, get_algo
@@ -199,13 +200,30 @@ def new_run_dir(config: RunConfig, runs_root: Path) -> Path:
 
 
 def _make_envs(config: RunConfig, run_dir: Path, resume: bool):
+    """The training env (``n_envs`` worlds as an SB3 VecEnv when more than one) logging its
+    episodes to monitor.csv, and the evaluation env."""
     from drivelab.envs.core import DriveEnv
 
-    train_env = Monitor(
-        DriveEnv(**config.env_kwargs()), filename=str(run_dir / "monitor.csv"), override_existing=not resume
-    )
-    train_env.reset(seed=config.seed)
+    monitor = str(run_dir / "monitor.csv")
+    if config.n_envs == 1:
+        train_env = Monitor(DriveEnv(**config.env_kwargs()), filename=monitor, override_existing=not resume)
+        train_env.reset(seed=config.seed)
+    else:
+        from drivelab.envs.vector import DriveVectorEnv, SB3VecEnv
+
+        train_env = VecMonitor(SB3VecEnv(DriveVectorEnv(config.n_envs, **config.env_kwargs())))
+        train_env.results_writer = ResultsWriter(
+            monitor, header={"t_start": train_env.t_start, "env_id": config.env}, override_existing=not resume
+        )
+        train_env.seed(config.seed)
     return train_env, DriveEnv(**config.env_kwargs())
+
+
+def _check_n_envs(config: RunConfig) -> None:
+    if config.n_envs > 1 and not get_algo(config.algo).multi_env:
+        raise UsageError(
+            f"algorithm {config.algo!r} trains in one world: n_envs must be 1 (got {config.n_envs})"
+        )
 
 
 def train(config: RunConfig, runs_root: str | Path = "runs") -> Path:
@@ -213,6 +231,7 @@ def train(config: RunConfig, runs_root: str | Path = "runs") -> Path:
     from drivelab.envs.core import DriveEnv
 
     check_combination(config.algo, config.action)
+    _check_n_envs(config)
     probe = DriveEnv(**config.env_kwargs())  # validates scenario, sensors, reward, action
     spec = check_combination(config.algo, config.action, probe.observation_space)
     probe.close()

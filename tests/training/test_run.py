@@ -124,3 +124,30 @@ def test_corrupted_or_foreign_checkpoint_is_refused(tmp_path):
     with pytest.raises(UsageError, match="different config"):
         run_module.resume(run_dir, steps=64)
     assert (run_dir / "config.yaml").read_text() == config_text  # nothing rewritten on refusal
+
+
+def test_on_policy_training_on_several_worlds(tmp_path):
+    """n_envs = 4: PPO collects from 4 batched fast worlds; steps count every world's steps,
+    monitor.csv gets every world's episodes, and resume continues on 4 worlds."""
+    config = _config(
+        n_envs=4, steps=128, eval_every=64, hyperparams={"n_steps": 16, "batch_size": 32, "n_epochs": 1}
+    )
+    run_dir = run_module.train(config, tmp_path)
+    manifest = json.loads((run_dir / "checkpoints/latest.json").read_text())
+    assert manifest["steps"] == 128
+    episodes = (run_dir / "monitor.csv").read_text().strip().splitlines()[2:]
+    assert len(episodes) >= 4  # 8 s episodes of 1 s steps: every world finished some
+    from stable_baselines3 import PPO
+
+    assert PPO.load(run_dir / "model.zip", device="cpu").n_envs == 4
+    run_module.resume(run_dir, steps=192)
+    assert json.loads((run_dir / "checkpoints/latest.json").read_text())["steps"] == 192
+    assert len((run_dir / "monitor.csv").read_text().strip().splitlines()[2:]) > len(episodes)
+
+
+def test_n_envs_is_refused_for_single_world_agents(tmp_path):
+    with pytest.raises(UsageError, match="trains in one world: n_envs must be 1"):
+        run_module.train(_config(algo="ppo_own", action="continuous", obs="topdown", n_envs=2), tmp_path)
+    assert not any(tmp_path.iterdir())
+    with pytest.raises(UsageError, match="'n_envs' must be >= 1"):
+        _config(n_envs=0)
