@@ -12,16 +12,18 @@ from drivelab.envs.world import WorldState
 from drivelab.errors import UsageError
 from drivelab.perception.base import Sensor
 from drivelab.perception.birdeye import BirdEye
+from drivelab.perception.camera import Camera
 from drivelab.perception.kinematics import Kinematics
 from drivelab.perception.lidar import Lidar
 from drivelab.perception.topdown import TopDown
 
-SENSORS: dict[str, type[Sensor]] = {cls.name: cls for cls in (Kinematics, Lidar, TopDown, BirdEye)}
+SENSORS: dict[str, type[Sensor]] = {cls.name: cls for cls in (Kinematics, Lidar, TopDown, BirdEye, Camera)}
 SENSOR_HELP = {
     "kinematics": "nearest vehicles' presence, position, velocity, heading in the ego frame",
     "lidar": "240 beams (configurable) hitting vehicles and road edges, distance / range",
     "topdown": "5x84x84 semantic image: road, route, past ego positions, traffic now / one step earlier",
     "birdeye": "128x128 RGB bird's-eye view, ego-centred and heading-aligned",
+    "camera": "84x84 RGB first-person pinhole camera (fov, height, pitch configurable)",
 }
 
 
