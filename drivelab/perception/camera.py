@@ -29,8 +29,8 @@ from drivelab.envs.world import MARKING_SOLID, RoadMap, WorldState
 from drivelab.perception.base import Sensor, box_corners, ego_frame
 from drivelab.perception.birdeye import DashedMarkings
 from drivelab.perception.topdown import (
-    LanePolygons,
     SHIFT,
+    LanePolygons,
     _clip_half_plane,
     fill_each,
     fixed_point,
@@ -45,7 +45,9 @@ WHITE = (235, 235, 235)
 YELLOW = (235, 200, 30)
 VEHICLE = np.array([60, 110, 220], dtype=float)
 # faces front, right, rear, left (box_corners' order): ends lighter than the long sides
-FACE_COLOURS = tuple(tuple(int(c) for c in np.clip(VEHICLE * shade, 0, 255)) for shade in (0.9, 0.65, 0.9, 0.65))
+FACE_COLOURS = tuple(
+    tuple(int(c) for c in np.clip(VEHICLE * shade, 0, 255)) for shade in (0.9, 0.65, 0.9, 0.65)
+)
 ROOF_COLOUR = tuple(int(c) for c in np.clip(VEHICLE * 1.15, 0, 255))
 LIGHT_COLOURS = {0: (230, 40, 40), 1: (240, 200, 40), 2: (40, 210, 80)}  # traffic-light state → RGB
 LIGHT_HEIGHT_M = 3.0
@@ -174,7 +176,11 @@ def _ground_polygons(
     result, first = [], 0
     for size in sizes:
         result.append(
-            [pixels[a:b] for a, b in zip(starts[first : first + size], ends[first : first + size]) if b - a >= 3]
+            [
+                pixels[a:b]
+                for a, b in zip(starts[first : first + size], ends[first : first + size], strict=True)
+                if b - a >= 3
+            ]
         )
         first += size
     return result
@@ -285,7 +291,9 @@ def _draw_traffic_lights(image: np.ndarray, model: PinholeModel, world: WorldSta
     if len(lights) == 0:
         return
     local = _ego_ground(world, lights[:, :2])
-    seen = (local[:, 0] > model.forward_m + model.near_m) & (local[:, 0] < model.forward_m + model.max_range_m)
+    seen = (local[:, 0] > model.forward_m + model.near_m) & (
+        local[:, 0] < model.forward_m + model.max_range_m
+    )
     for (x, y), state in zip(local[seen], lights[seen, 3], strict=True):
         foot, lamp = model.project(np.array([[x, y, 0.0], [x, y, LIGHT_HEIGHT_M]]))
         radius = max(int(round(0.3 * model.focal_px / max(x - model.forward_m, 1e-3))), 1)
@@ -337,7 +345,9 @@ def render_masks(world: WorldState, model: PinholeModel) -> np.ndarray:
     left, right = ego_lane_lines(world)
     guide = per_road(world.road, GuideSegments).segments
     widths = (MARKING_WIDTH_M, MARKING_WIDTH_M, GUIDE_WIDTH_M)
-    groups = [_strip_quads(_near(world, s, model), w) for s, w in zip((left, right, guide), widths, strict=True)]
+    groups = [
+        _strip_quads(_near(world, s, model), w) for s, w in zip((left, right, guide), widths, strict=True)
+    ]
     for channel, polygons in enumerate(_ground_polygons(model, world, groups)):
         _fill_strips(masks[channel], polygons, 1)
     return masks

@@ -15,9 +15,13 @@ from tests.worlds import world
 STRAIGHT = np.array([[-50.0, 0.0], [500.0, 0.0]])
 
 
-def _three_lane_world(guide=True, kinds=(MARKING_SOLID, MARKING_DASHED, MARKING_DASHED, MARKING_SOLID), **ego):
+def _three_lane_world(
+    guide=True, kinds=(MARKING_SOLID, MARKING_DASHED, MARKING_DASHED, MARKING_SOLID), **ego
+):
     """Three 4 m lanes centred on y = −4, 0, 4; the ego in the middle one, its route along y = 0."""
-    polygons = tuple(np.array([[-50, c - 2], [500, c - 2], [500, c + 2], [-50, c + 2]], float) for c in (-4, 0, 4))
+    polygons = tuple(
+        np.array([[-50, c - 2], [500, c - 2], [500, c + 2], [-50, c + 2]], float) for c in (-4, 0, 4)
+    )
     markings = np.array([[[-50.0, y], [500.0, y]] for y in (-6, -2, 2, 6)])
     road = RoadMap(
         polygons, (), np.full(3, 4.0), markings, np.array(kinds), np.zeros((0, 2, 2)),
