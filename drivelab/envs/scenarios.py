@@ -21,6 +21,9 @@ class Scenario:
     :param destination: road-network node the ego is routed to (None: follow the road).
     :param arrival: how the backend decides the goal is reached: "none", "merge_end", "exit".
     :param intersection_nodes: road-network nodes whose lanes count as junction area.
+    :param circuit: the road is a closed loop: the route is one whole lap (however long).
+    :param guide_line: a yellow line is painted along the route (follow-line).
+    :param keep_lane: leaving the ego's starting lane counts as leaving the road (follow-lane).
     """
 
     name: str
@@ -33,8 +36,12 @@ class Scenario:
     intersection_nodes: tuple[str, ...] = ()
     continuous_policy_frequency_hz: int = 5
     action_kinds: tuple[str, ...] = ("meta", "grid", "continuous")
+    circuit: bool = False
+    guide_line: bool = False
+    keep_lane: bool = False
 
 
+SEED_TABLES = ("seed_line", "seed_lane")  # seed 004's two 5-action (throttle, steering) tables
 _RING = ("se", "ex", "ee", "nx", "ne", "wx", "we", "sx")
 
 SCENARIOS: dict[str, Scenario] = {
@@ -101,6 +108,26 @@ SCENARIOS: dict[str, Scenario] = {
                 "dense": {"other_vehicles": 5},
             },
             action_kinds=("grid", "continuous"),  # highway-env's racetrack has no meta-actions
+        ),
+        Scenario(
+            "follow-line",
+            "drivelab.envs.backends.circuits.FollowLineEnv",
+            "seed 004: 470 m circuit, one 7 m lane with a yellow centre line, curves both ways, no traffic",
+            config={"duration": 60},
+            traffic={"empty": {}, "regular": {}, "dense": {}},  # no traffic on this task
+            action_kinds=SEED_TABLES + ("grid", "continuous"),
+            circuit=True,
+            guide_line=True,
+        ),
+        Scenario(
+            "follow-lane",
+            "drivelab.envs.backends.circuits.FollowLaneEnv",
+            "seed 004: 1.9 km three-lane circuit, curves both ways, no traffic; leaving the lane ends it",
+            config={"duration": 60},
+            traffic={"empty": {}, "regular": {}, "dense": {}},
+            action_kinds=SEED_TABLES + ("grid", "continuous"),
+            circuit=True,
+            keep_lane=True,
         ),
     ]
 }
