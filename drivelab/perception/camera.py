@@ -165,10 +165,19 @@ def _ground_polygons(
     if counts.sum() == 0:
         return [[] for _ in groups]
     points = _ego_ground(world, np.concatenate([p for p, c in groups if len(c)]))
+    near = _near_clip_m(model)
+    # cull polygons wholly outside one side of the view wedge (behind, left or right of it)
+    slope = model.width / 2 / model.focal_px
+    reach = (points[:, 0] - model.forward_m) * slope + 1.0
+    outside = np.stack([points[:, 0] < near, points[:, 1] > reach, -points[:, 1] > reach], axis=1)
+    starts = np.cumsum(counts) - counts
+    culled = np.logical_and.reduceat(outside, starts, axis=0).any(axis=1)
+    if culled.any():
+        points = points[np.repeat(~culled, counts)]
+        counts = np.where(culled, 0, counts)
     # clip on x (forward) with the row clipper: it reads column 1, so hand it (y, x)
     swapped = points[:, ::-1]
-    near = _near_clip_m(model)
-    if swapped[:, 1].min() < near:
+    if len(swapped) and swapped[:, 1].min() < near:
         swapped, counts = _clip_half_plane(swapped, counts, near, keep_below=False)
     pixels = fixed_point(model.project_ground(swapped[:, ::-1])) if len(swapped) else np.zeros((0, 2))
     ends = np.cumsum(counts).tolist()
@@ -196,7 +205,7 @@ def _strip_quads(segments: np.ndarray, width_m: float) -> tuple[np.ndarray, np.n
     return quads.reshape(-1, 2), np.full(len(segments), 4, dtype=int)
 
 
-def _polyline_segments(polyline: np.ndarray) -> np.ndarray:
+def polyline_segments(polyline: np.ndarray) -> np.ndarray:
     return np.stack([polyline[:-1], polyline[1:]], axis=1) if len(polyline) > 1 else np.zeros((0, 2, 2))
 
 
@@ -204,7 +213,7 @@ class GuideSegments:
     """All guide-line polylines of a road as one segment array (computed once per road)."""
 
     def __init__(self, road: RoadMap) -> None:
-        parts = [_polyline_segments(np.asarray(line, dtype=float)) for line in road.guide_lines]
+        parts = [polyline_segments(np.asarray(line, dtype=float)) for line in road.guide_lines]
         self.segments = np.concatenate(parts) if parts else np.zeros((0, 2, 2))
 
 
@@ -217,7 +226,7 @@ def _fill_strips(image: np.ndarray, polygons: list[np.ndarray], colour) -> None:
 
 def _offset_polyline(polyline: np.ndarray, offset_m: float) -> np.ndarray:
     """Segments (M, 2, 2) of ``polyline`` shifted ``offset_m`` to their right (+) or left (−)."""
-    segments = _polyline_segments(polyline)
+    segments = polyline_segments(polyline)
     direction = segments[:, 1] - segments[:, 0]
     length = np.maximum(np.hypot(direction[:, 0], direction[:, 1]), 1e-9)
     right = np.stack([-direction[:, 1], direction[:, 0]], axis=1) / length[:, None]  # y is to the right
@@ -315,7 +324,8 @@ def _ground_layers(world: WorldState, model: PinholeModel) -> tuple[np.ndarray, 
     strips = []
     if len(road.markings):
         solid = np.asarray(road.markings, dtype=float)[road.marking_kinds == MARKING_SOLID]
-        dashed = per_road(road, DashedMarkings).dashes(position, reach)
+        dashed_lines = per_road(road, DashedMarkings)
+        dashed = dashed_lines.dashes(position, reach) if len(dashed_lines.length) else np.zeros((0, 2, 2))
         strips.append((np.concatenate([_near(world, solid, model), dashed]), MARKING_WIDTH_M, WHITE))
     guide = _near(world, per_road(road, GuideSegments).segments, model)
     strips.append((guide, GUIDE_WIDTH_M, YELLOW))

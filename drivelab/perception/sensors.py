@@ -14,16 +14,22 @@ from drivelab.perception.base import Sensor
 from drivelab.perception.birdeye import BirdEye
 from drivelab.perception.camera import Camera
 from drivelab.perception.kinematics import Kinematics
+from drivelab.perception.lane import LaneState
 from drivelab.perception.lidar import Lidar
+from drivelab.perception.line import LineState
 from drivelab.perception.topdown import TopDown
 
-SENSORS: dict[str, type[Sensor]] = {cls.name: cls for cls in (Kinematics, Lidar, TopDown, BirdEye, Camera)}
+SENSORS: dict[str, type[Sensor]] = {
+    cls.name: cls for cls in (Kinematics, Lidar, TopDown, BirdEye, Camera, LineState, LaneState)
+}
 SENSOR_HELP = {
     "kinematics": "nearest vehicles' presence, position, velocity, heading in the ego frame",
     "lidar": "240 beams (configurable) hitting vehicles and road edges, distance / range",
     "topdown": "5x84x84 semantic image: road, route, past ego positions, traffic now / one step earlier",
     "birdeye": "128x128 RGB bird's-eye view, ego-centred and heading-aligned",
     "camera": "84x84 RGB first-person pinhole camera (fov, height, pitch configurable)",
+    "line": "seed 004 follow-line state: yellow line centre at 4 rows, each in one of 5 strips or lost",
+    "lane": "seed 004 follow-lane state: lane centre by the lane CNN (or classical), 5 strips + lost",
 }
 
 
@@ -86,8 +92,10 @@ def make_sensor(spec: str | dict) -> Sensor:
     stack = int(options.pop("stack", 1))
     try:
         sensor = SENSORS[name](**options)
-    except TypeError as exc:
+    except (TypeError, ValueError) as exc:
         raise UsageError(f"bad option for sensor {name!r}: {exc}") from None
+    if stack > 1 and not isinstance(sensor.space, spaces.Box):
+        raise UsageError(f"sensor {name!r} gives a discrete state, which cannot be frame-stacked")
     return FrameStack(sensor, stack) if stack > 1 else sensor
 
 

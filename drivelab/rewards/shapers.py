@@ -47,6 +47,14 @@ PRESETS: dict[str, RewardSpec] = {
         description="seed 003: 2.5*progress*(1-|lat|^3) + 0.5*speed (halved in junctions), "
         "crash/off-road -5, arrival +10",
     ),
+    "line_follow": RewardSpec(
+        {"line_centring": 1.0, "speed_mps": 1.0, "steering_power": -1.0},
+        description="seed 004 eq. 3: sum over 4 rows of f(line centre) + speed - 1.02^|steering deg|",
+    ),
+    "lane_follow": RewardSpec(
+        {"lane_keeping": 1.0},
+        description="seed 004 eq. 4: f*(lane centre), x2 aligned and straight, /2 aligned and steering",
+    ),
     "safety_dqn": RewardSpec(
         {name: 1.0 for name in SAFETY_TERMS},
         description="seed 003's eight-term safety table (centre, overspeed, curves, junction heading, ...)",

@@ -107,7 +107,7 @@ class CircuitEnv(AbstractEnv):
             config,
             {
                 "action": {"type": "ContinuousAction"},
-                "simulation_frequency": 15,
+                "simulation_frequency": 10,  # 2 substeps per 5 Hz step: the ego alone, no collisions to catch
                 "policy_frequency": 5,
                 "duration": 60,
                 "track": FOLLOW_LINE_TRACK,
