@@ -72,11 +72,15 @@ class QLearning:
     :param env: a gymnasium environment with Discrete observation and action spaces.
     :param seed: seeds the exploration generator.
     :param config: hyper-parameters.
+    :param log_dir: a run directory: every ``learn`` ends by writing the three-panel plot and the
+        Q-table there (``write_run_artifacts``).
     """
 
     def __init__(self, env: gym.Env | None, seed: int = 0, config: QLearningConfig | None = None, *,
-                 n_states: int | None = None, n_actions: int | None = None) -> None:  # fmt: skip
+                 n_states: int | None = None, n_actions: int | None = None,
+                 log_dir: str | Path | None = None) -> None:  # fmt: skip
         self.config = config or QLearningConfig()
+        self.log_dir = Path(log_dir) if log_dir is not None else None
         self.env = env
         if env is not None:
             n_states = _discrete_size(env.observation_space, "observation")
@@ -172,6 +176,8 @@ class QLearning:
                     break
         if callback is not None:
             callback.on_training_end()
+        if self.log_dir is not None and self.log_dir.is_dir():
+            write_run_artifacts(self, self.log_dir)
         return self
 
     def _end_episode(self) -> None:
@@ -212,7 +218,9 @@ class QLearning:
             archive.writestr("episodes.npz", episodes.getvalue())
 
     @classmethod
-    def load(cls, path: str | Path, env: gym.Env | None = None) -> QLearning:
+    def load(
+        cls, path: str | Path, env: gym.Env | None = None, log_dir: str | Path | None = None
+    ) -> QLearning:
         """An agent saved by ``save``; training continues exactly (same ε, counters, generator)."""
         with zipfile.ZipFile(path) as archive:
             state = json.loads(archive.read("state.json"))
@@ -222,7 +230,8 @@ class QLearning:
             episodes = np.load(io.BytesIO(archive.read("episodes.npz")))
         known = {f.name for f in fields(QLearningConfig)}
         config = QLearningConfig(**{k: v for k, v in state["config"].items() if k in known})
-        agent = cls(None, state["seed"], config, n_states=q_table.shape[0], n_actions=q_table.shape[1])
+        agent = cls(None, state["seed"], config, n_states=q_table.shape[0], n_actions=q_table.shape[1],
+                    log_dir=log_dir)  # fmt: skip
         if env is not None:
             if (
                 _discrete_size(env.observation_space, "observation"),
@@ -246,12 +255,15 @@ def build_qlearning(algo: str, env: gym.Env, seed: int, hyperparams: dict, log_d
         raise UsageError(
             f"unknown qlearning hyperparameter(s) {', '.join(unknown)} (known: {', '.join(sorted(known))})"
         )
-    return QLearning(env, seed, QLearningConfig(**hyperparams))
+    return QLearning(env, seed, QLearningConfig(**hyperparams), log_dir=log_dir)
 
 
 def load_qlearning(algo: str, path: Path, env: gym.Env | None) -> QLearning:
-    """A saved agent (the registry's loader signature)."""
-    return QLearning.load(path, env)
+    """A saved agent (the registry's loader signature). Loaded from a run's ``checkpoints/`` to go on
+    training, it writes its plot and Q-table into that run directory after each ``learn``."""
+    path = Path(path)
+    run_dir = path.parent.parent if path.parent.name == "checkpoints" else None
+    return QLearning.load(path, env, log_dir=run_dir)
 
 
 def write_run_artifacts(agent: QLearning, run_dir: str | Path) -> list[Path]:

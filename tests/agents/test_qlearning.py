@@ -107,3 +107,26 @@ def test_bad_spaces_and_hyperparameters():
         build_qlearning("qlearning", Corridor(), 0, {"alpha": 0.5}, None)
     with pytest.raises(ValueError):
         QLearningConfig(learning_rate=0.0)
+
+
+def test_trains_through_a_drivelab_run(tmp_path, monkeypatch):
+    """The agent plugs into the training run unchanged once registered (the integrator's job)."""
+    from drivelab.agents import registry
+    from drivelab.agents.qlearning import load_qlearning as load
+    from drivelab.config import build_config
+    from drivelab.training.run import resume, train
+
+    known = registry._registry
+    spec = registry.AlgoSpec("qlearning", "tabular Q-learning", ("seed_line",), build_qlearning, load)
+    monkeypatch.setattr(registry, "_registry", lambda: {**known(), "qlearning": spec})
+    config = build_config(
+        {"algo": "qlearning", "env": "follow-line", "obs": "line", "action": "seed_line",
+         "reward": "line_follow", "traffic": "empty", "steps": 60, "seed": 0, "name": "q",
+         "eval_every": 60, "eval_episodes": 1, "env_options": {"duration_s": 4}}
+    )  # fmt: skip
+    run_dir = train(config, tmp_path)
+    for name in ("model.zip", "q_table.npy", "q_table.csv", "qlearning_curves.png", "evaluations.csv"):
+        assert (run_dir / name).is_file(), name
+    assert load("qlearning", run_dir / "model.zip", None).num_timesteps == 60
+    resume(run_dir, 90)
+    assert load("qlearning", run_dir / "checkpoints" / "latest.zip", None).num_timesteps == 90
