@@ -18,9 +18,10 @@ from drivelab.perception.lane import LaneState
 from drivelab.perception.lidar import Lidar
 from drivelab.perception.line import LineState
 from drivelab.perception.topdown import TopDown
+from drivelab.perception.ttc_grid import TTCGrid
 
 SENSORS: dict[str, type[Sensor]] = {
-    cls.name: cls for cls in (Kinematics, Lidar, TopDown, BirdEye, Camera, LineState, LaneState)
+    cls.name: cls for cls in (Kinematics, Lidar, TopDown, BirdEye, Camera, LineState, LaneState, TTCGrid)
 }
 SENSOR_HELP = {
     "kinematics": "nearest vehicles' presence, position, velocity, heading in the ego frame",
@@ -29,6 +30,7 @@ SENSOR_HELP = {
     "birdeye": "128x128 RGB bird's-eye view, ego-centred and heading-aligned",
     "camera": "84x84 RGB first-person pinhole camera (fov, height, pitch configurable)",
     "line": "seed 004 follow-line state: yellow line centre at 4 rows, each in one of 5 strips or lost",
+    "ttc_grid": "discrete highway state: time-to-collision bins of 3 lanes x speed bin (192 states)",
     "lane": "seed 004 follow-lane state: lane centre by the lane CNN (or classical), 5 strips + lost",
 }
 
