@@ -119,12 +119,14 @@ def train_lane_cnn(
     learning_rate: float = 3e-3,
     width: int = 12,
     log=print,
+    data: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> dict:
-    """Generate ``frames`` training frames, train a LaneNet with Adam on a class-weighted binary
-    cross-entropy, save its weights to ``out`` and return a summary (losses, seconds, size)."""
+    """Generate ``frames`` training frames (or take ``data``: frames and masks), train a LaneNet with
+    Adam on a class-weighted binary cross-entropy, save its weights to ``out`` and return a summary."""
     torch.manual_seed(seed)
     started = time.perf_counter()
-    images, masks = generate_lane_frames(frames, seed)
+    images, masks = data if data is not None else generate_lane_frames(frames, seed)
+    frames = len(images)
     inputs = torch.from_numpy(images.transpose(0, 3, 1, 2).copy()).float() / 255.0
     targets = torch.from_numpy(masks).float()
     network = LaneNet(width)
@@ -144,7 +146,7 @@ def train_lane_cnn(
             optimiser.zero_grad()
             loss.backward()
             optimiser.step()
-            total += float(loss) * len(batch)
+            total += loss.item() * len(batch)
         losses.append(total / frames)
         log(f"epoch {epoch + 1}/{epochs}: loss {losses[-1]:.4f}")
     out = Path(out)

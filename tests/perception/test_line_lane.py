@@ -6,7 +6,7 @@ import pytest
 
 from drivelab.envs.core import DriveEnv
 from drivelab.perception.camera import GuideSegments, render_camera
-from drivelab.perception.lane import LOST_STATE, LaneState, classical_lane_masks, state_of
+from drivelab.perception.lane import LOST_STATE, LaneState, classical_lane_masks, lane_centres, state_of
 from drivelab.perception.line import LINE_CAMERA, LINE_ROWS_M, LineState, encode_state, strip_of
 from drivelab.perception.topdown import per_road
 from drivelab.rewards.terms import _crossing_columns
@@ -78,3 +78,31 @@ def test_lane_classical_detector_on_a_centred_frame():
     left_max = np.array([np.flatnonzero(masks[0][r]).max() for r in rows])
     right_min = np.array([np.flatnonzero(masks[1][r]).min() for r in rows])
     assert np.all(left_max < right_min)
+
+
+def test_shipped_lane_cnn_on_held_out_frames(tmp_path):
+    from drivelab.errors import UsageError
+    from drivelab.perception.lane_cnn import WEIGHTS_PATH, generate_lane_frames, iou, train_lane_cnn
+    from drivelab.perception.sensors import make_sensor
+
+    assert WEIGHTS_PATH.stat().st_size < 2 * 2**20
+    images, truth = generate_lane_frames(8, seed=777)
+    assert images.shape == (8, 120, 160, 3) and truth.shape == (8, 2, 120, 160)
+    cnn, classical = LaneState(detector="cnn"), LaneState(detector="classical")
+    predicted = np.stack([cnn.masks(image) for image in images])
+    assert predicted.shape == truth.shape and predicted.dtype == bool
+    assert iou(predicted[:, 0], truth[:, 0] > 0) > 0.25 and iou(predicted[:, 1], truth[:, 1] > 0) > 0.25
+    for masks, true_masks in zip(predicted, truth, strict=True):
+        states = [
+            state_of(float(np.nanmean(lane_centres(m, cnn.rows, cnn.half_lane_px))), 160)
+            for m in (masks, true_masks)
+        ]
+        assert abs(states[0] - states[1]) <= 1
+    assert classical.masks(images[0]).shape == (2, 120, 160)
+    # retraining writes loadable weights; missing weights are a usage error
+    summary = train_lane_cnn(
+        epochs=1, out=tmp_path / "w.pt", log=lambda _: None, data=(images[:4], truth[:4])
+    )
+    assert len(summary["losses"]) == 1 and LaneState(weights=str(tmp_path / "w.pt")).network is not None
+    with pytest.raises(UsageError, match="lane CNN weights not found"):
+        make_sensor(f"lane:weights={tmp_path / 'missing.pt'}")

@@ -30,7 +30,9 @@ def test_qlearning_runs_on_highway_with_the_grid():
     from drivelab.agents.qlearning import build_qlearning
     from drivelab.envs.core import DriveEnv
 
-    env = DriveEnv("highway", obs="ttc_grid", action="meta", reward="highway", traffic="regular", duration_s=3)
+    env = DriveEnv(
+        "highway", obs="ttc_grid", action="meta", reward="highway", traffic="regular", duration_s=3
+    )
     env.reset(seed=0)
     agent = build_qlearning("qlearning", env, 0, {}, None)
     agent.learn(20)
