@@ -4,7 +4,9 @@
 
 WorldStates are recorded first (random actions on follow-line, follow-lane and highway with regular
 traffic, so the camera draws vehicles too); then each renderer runs over all of them, ``--repeats``
-times; the figure is the median over repeats of the mean time per frame. One thread (torch too).
+times; the figures are the median over repeats of the mean wall time and of the mean process CPU
+time per frame (CPU time is less disturbed by other jobs on a shared machine; the load average is
+recorded). One thread (torch too).
 Targets (issue 4): 84 x 84 ≤ 1 ms, 256 x 256 ≤ 4 ms.
 """
 
@@ -50,15 +52,17 @@ def record(scenario: str, count: int, seed: int = 0) -> list:
     return worlds
 
 
-def per_frame_ms(function, inputs: list, repeats: int) -> float:
+def per_frame_ms(function, inputs: list, repeats: int) -> tuple[float, float]:
+    """(wall, CPU) milliseconds per call: medians over repeats of the mean over ``inputs``."""
     function(inputs[0])  # warm caches (per-road geometry)
-    means = []
+    wall, cpu = [], []
     for _ in range(repeats):
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         for item in inputs:
             function(item)
-        means.append((time.perf_counter() - start) / len(inputs) * 1e3)
-    return float(np.median(means))
+        wall.append((time.perf_counter() - start) / len(inputs) * 1e3)
+        cpu.append((time.process_time() - start_cpu) / len(inputs) * 1e3)
+    return float(np.median(wall)), float(np.median(cpu))
 
 
 def main() -> None:
@@ -68,9 +72,11 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     rows = []
+    load_before = os.getloadavg()
 
     def add(scene: str, what: str, function, inputs: list) -> None:
-        rows.append({"scene": scene, "what": what, "ms": per_frame_ms(function, inputs, args.repeats)})
+        wall, cpu = per_frame_ms(function, inputs, args.repeats)
+        rows.append({"scene": scene, "what": what, "wall_ms": wall, "cpu_ms": cpu})
         print(rows[-1], flush=True)
 
     for scenario in SCENES:
@@ -96,6 +102,7 @@ def main() -> None:
         "machine": f"{platform.machine()}, {os.cpu_count()} cores (shared with other jobs), "
         f"Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+        "load_average_1min_before_after": [load_before[0], os.getloadavg()[0]],
         "states_per_scene": args.states,
         "repeats": args.repeats,
         "rows": rows,
@@ -107,11 +114,13 @@ def main() -> None:
         "",
         f"Command: `{result['command']}`  ",
         f"Machine: {result['machine']}; {result['date']}. {args.states} recorded WorldStates per scene; "
-        f"median over {args.repeats} repeats of the mean time per frame, one thread.",
+        f"median over {args.repeats} repeats of the mean time per frame, one thread. Load average (1 min) "
+        f"{result['load_average_1min_before_after'][0]:.1f} before, "
+        f"{result['load_average_1min_before_after'][1]:.1f} after, on {os.cpu_count()} cores.",
         "",
-        "| scene | what | ms per frame |",
-        "|---|---|---|",
-        *[f"| {r['scene']} | {r['what']} | {r['ms']:.2f} |" for r in rows],
+        "| scene | what | wall ms per frame | CPU ms per frame |",
+        "|---|---|---|---|",
+        *[f"| {r['scene']} | {r['what']} | {r['wall_ms']:.2f} | {r['cpu_ms']:.2f} |" for r in rows],
         "",
     ]
     (RESULTS / "camera_cost.md").write_text("\n".join(lines))

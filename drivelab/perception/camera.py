@@ -217,6 +217,27 @@ class GuideSegments:
         self.segments = np.concatenate(parts) if parts else np.zeros((0, 2, 2))
 
 
+class PaintedSegments:
+    """A road's solid markings and guide lines with bounding circles, for a cheap cull per frame."""
+
+    def __init__(self, road: RoadMap) -> None:
+        markings = np.asarray(road.markings, dtype=float).reshape(-1, 2, 2)
+        self.solid = markings[np.asarray(road.marking_kinds) == MARKING_SOLID]
+        self.guide = GuideSegments(road).segments
+        self.circles = [_circles(segments) for segments in (self.solid, self.guide)]
+
+    def near(self, position: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray]:
+        """(solid, guide) segments whose bounding circle comes within ``reach`` of ``position``."""
+        return tuple(
+            segments[np.hypot(*(centre - position).T) <= reach + radius]
+            for segments, (centre, radius) in zip((self.solid, self.guide), self.circles, strict=True)
+        )
+
+
+def _circles(segments: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return segments.mean(axis=1), np.hypot(*(segments[:, 1] - segments[:, 0]).T) / 2
+
+
 def _fill_strips(image: np.ndarray, polygons: list[np.ndarray], colour) -> None:
     """Fill clipped strip pieces one by one (one ``fillPoly`` call would XOR where lines converge
     towards the horizon); each piece is a clipped rectangle, hence convex: the fast fill."""
@@ -321,14 +342,10 @@ def _ground_layers(world: WorldState, model: PinholeModel) -> tuple[np.ndarray, 
     if len(lanes.counts):
         visible = np.hypot(*(lanes.centres - position).T) <= reach + lanes.radii
         lane_points, lane_counts = lanes.vertices[visible[lanes.owner]], lanes.counts[visible]
-    strips = []
-    if len(road.markings):
-        solid = np.asarray(road.markings, dtype=float)[road.marking_kinds == MARKING_SOLID]
-        dashed_lines = per_road(road, DashedMarkings)
-        dashed = dashed_lines.dashes(position, reach) if len(dashed_lines.length) else np.zeros((0, 2, 2))
-        strips.append((np.concatenate([_near(world, solid, model), dashed]), MARKING_WIDTH_M, WHITE))
-    guide = _near(world, per_road(road, GuideSegments).segments, model)
-    strips.append((guide, GUIDE_WIDTH_M, YELLOW))
+    solid, guide = per_road(road, PaintedSegments).near(position, reach)
+    dashed_lines = per_road(road, DashedMarkings)
+    dashed = dashed_lines.dashes(position, reach) if len(dashed_lines.length) else np.zeros((0, 2, 2))
+    strips = [(np.concatenate([solid, dashed]), MARKING_WIDTH_M, WHITE), (guide, GUIDE_WIDTH_M, YELLOW)]
     return (lane_points, lane_counts), strips
 
 
