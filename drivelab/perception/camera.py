@@ -30,7 +30,6 @@ from drivelab.perception.base import Sensor, box_corners, ego_frame
 from drivelab.perception.birdeye import DashedMarkings
 from drivelab.perception.topdown import (
     SHIFT,
-    LanePolygons,
     _clip_half_plane,
     fill_each,
     fixed_point,
@@ -77,7 +76,7 @@ class PinholeModel:
     height_m: float = 1.5
     pitch_deg: float = 15.0
     forward_m: float = 1.0
-    max_range_m: float = 80.0
+    max_range_m: float = 50.0
     near_m: float = 0.3
 
     def __post_init__(self) -> None:
@@ -234,6 +233,30 @@ class PaintedSegments:
         )
 
 
+class LanePieces:
+    """A road's lane polygons cut into quadrilaterals between consecutive stations (a polygon made of a
+    left edge and its right edge reversed, as ``RoadMap`` stores them), so that only the pieces in
+    the camera's view are clipped and drawn; pieces are stored one after another with counts."""
+
+    def __init__(self, road: RoadMap) -> None:
+        pieces = []
+        for polygon in road.lane_polygons:
+            polygon = np.asarray(polygon, dtype=float).reshape(-1, 2)
+            half = len(polygon) // 2
+            if len(polygon) % 2 or half < 2:
+                pieces.append(polygon)
+                continue
+            left, right = polygon[:half], polygon[half:][::-1]
+            quads = np.stack([left[:-1], left[1:], right[1:], right[:-1]], axis=1)
+            pieces.extend(quads)
+        self.counts = np.array([len(p) for p in pieces], dtype=int)
+        self.vertices = np.concatenate(pieces) if pieces else np.zeros((0, 2))
+        self.owner = np.repeat(np.arange(len(pieces)), self.counts)
+        low = np.array([p.min(axis=0) for p in pieces]).reshape(-1, 2)
+        high = np.array([p.max(axis=0) for p in pieces]).reshape(-1, 2)
+        self.centres, self.radii = (low + high) / 2, np.hypot(*(high - low).T) / 2
+
+
 def _circles(segments: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return segments.mean(axis=1), np.hypot(*(segments[:, 1] - segments[:, 0]).T) / 2
 
@@ -337,7 +360,7 @@ def _ground_layers(world: WorldState, model: PinholeModel) -> tuple[np.ndarray, 
     road = world.road
     position = np.asarray(world.ego.position, dtype=float)
     reach = model.forward_m + model.max_range_m
-    lanes = per_road(road, LanePolygons)
+    lanes = per_road(road, LanePieces)
     lane_points, lane_counts = np.zeros((0, 2)), np.zeros(0, dtype=int)
     if len(lanes.counts):
         visible = np.hypot(*(lanes.centres - position).T) <= reach + lanes.radii
@@ -403,7 +426,7 @@ class Camera(Sensor):
         height_m: float = 1.5,
         pitch_deg: float = 15.0,
         forward_m: float = 1.0,
-        max_range_m: float = 80.0,
+        max_range_m: float = 50.0,
     ) -> None:
         self.model = PinholeModel(
             int(width), int(height), float(fov_deg), float(height_m), float(pitch_deg), float(forward_m),
