@@ -8,9 +8,10 @@ perception.
 
 The projection is ``pinhole.PinholeModel`` (frames and pixel convention documented there).
 
-Ground shapes (lanes, markings) are clipped in the ego frame to ``near_m … max_range_m`` ahead of
-the camera, projected, cut to a band of rows around the image and filled: everything is drawn
-with ``cv2.LINE_8`` so that a marking and its mask cover exactly the same pixels.
+Ground shapes (lanes cut into per-station pieces, markings as thin rectangles) within
+``max_range_m`` are culled to the view wedge, clipped where they would fall more than a few rows
+below the image, projected and filled, all with ``cv2.LINE_8`` so that a marking and its mask
+cover exactly the same pixels.
 """
 
 from __future__ import annotations
