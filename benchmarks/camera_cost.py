@@ -40,7 +40,9 @@ SCENES = {
 
 
 def record(scenario: str, count: int, seed: int = 0) -> list:
-    env = DriveEnv(scenario, obs="kinematics", reward="metadrive_course", **SCENES[scenario])
+    env = DriveEnv(
+        scenario, obs="kinematics", reward="metadrive_course", backend="highway", **SCENES[scenario]
+    )
     rng = np.random.default_rng(seed)
     env.reset(seed=seed)
     worlds = []

@@ -96,7 +96,7 @@ def main() -> None:
     setup = SETUPS[args.scenario]
     rows = []
     for seed in (int(s) for s in args.seeds.split(",")):
-        env = DriveEnv(args.scenario, traffic="empty", **setup)
+        env = DriveEnv(args.scenario, traffic="empty", backend="highway", **setup)
         env.reset(seed=seed)
         agent = QLearning(env, seed)
         started = time.perf_counter()
@@ -108,8 +108,8 @@ def main() -> None:
             RESULTS / f"qlearning_{args.scenario}_s{seed}.png",
             title=f"Q-learning on {args.scenario}, seed {seed}",
         )  # fmt: skip
-        evaluation = evaluate(agent, DriveEnv(args.scenario, traffic="empty", **setup), args.eval_episodes,
-                              seed + EVAL_SEED_OFFSET)  # fmt: skip
+        eval_env = DriveEnv(args.scenario, traffic="empty", backend="highway", **setup)
+        evaluation = evaluate(agent, eval_env, args.eval_episodes, seed + EVAL_SEED_OFFSET)
         row = {
             "seed": seed,
             "train_steps": args.steps,

@@ -121,8 +121,8 @@ def test_trains_through_a_drivelab_run(tmp_path, monkeypatch):
     monkeypatch.setattr(registry, "_registry", lambda: {**known(), "qlearning": spec})
     config = build_config(
         {"algo": "qlearning", "env": "follow-line", "obs": "line", "action": "seed_line",
-         "reward": "line_follow", "traffic": "empty", "steps": 60, "seed": 0, "name": "q",
-         "eval_every": 60, "eval_episodes": 1, "env_options": {"duration_s": 4}}
+         "reward": "line_follow", "traffic": "empty", "backend": "highway", "steps": 60, "seed": 0,
+         "name": "q", "eval_every": 60, "eval_episodes": 1, "env_options": {"duration_s": 4}}
     )  # fmt: skip
     run_dir = train(config, tmp_path)
     for name in ("model.zip", "q_table.npy", "q_table.csv", "qlearning_curves.png", "evaluations.csv"):

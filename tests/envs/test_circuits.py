@@ -16,7 +16,13 @@ def _track_length(track):
 
 def test_follow_line_circuit_is_closed_with_a_guide_line():
     env = DriveEnv(
-        "follow-line", obs="kinematics", action="seed_line", reward="line_follow", traffic="empty", seed=0
+        "follow-line",
+        obs="kinematics",
+        action="seed_line",
+        reward="line_follow",
+        traffic="empty",
+        seed=0,
+        backend="highway",
     )
     world = env.world
     (guide,) = world.road.guide_lines
@@ -29,7 +35,13 @@ def test_follow_line_circuit_is_closed_with_a_guide_line():
 
 def test_follow_lane_leaving_the_lane_ends_the_episode():
     env = DriveEnv(
-        "follow-lane", obs="kinematics", action="seed_lane", reward="lane_follow", traffic="empty", seed=1
+        "follow-lane",
+        obs="kinematics",
+        action="seed_lane",
+        reward="lane_follow",
+        traffic="empty",
+        seed=1,
+        backend="highway",
     )
     assert env.world.ego.lane_count == 3 and not env.world.road.guide_lines
     steps = 0
@@ -64,6 +76,13 @@ def test_pedal_speed_levels_off():
 
 
 def test_qlearning_on_camera_pixels_is_refused():
-    env = DriveEnv("follow-line", obs="camera", action="seed_line", reward="line_follow", traffic="empty")
+    env = DriveEnv(
+        "follow-line",
+        obs="camera",
+        action="seed_line",
+        reward="line_follow",
+        traffic="empty",
+        backend="highway",
+    )
     with pytest.raises(UsageError, match="qlearning needs a discrete observation"):
         build_qlearning("qlearning", env, 0, {}, None)

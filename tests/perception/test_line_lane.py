@@ -30,7 +30,14 @@ def test_lane_state_strips():
 
 @pytest.fixture(scope="module")
 def line_frames():
-    env = DriveEnv("follow-line", obs="line", action="seed_line", reward="line_follow", traffic="empty")
+    env = DriveEnv(
+        "follow-line",
+        obs="line",
+        action="seed_line",
+        reward="line_follow",
+        traffic="empty",
+        backend="highway",
+    )
     rng, worlds = np.random.default_rng(0), []
     for seed in range(3):
         env.reset(seed=seed)
@@ -67,8 +74,8 @@ def test_line_lost_without_a_line():
 
 
 def test_lane_classical_detector_on_a_centred_frame():
-    env = DriveEnv("follow-lane", obs="lane:detector=classical", action="seed_lane", reward="lane_follow",
-                   traffic="empty", seed=0)  # fmt: skip
+    env = DriveEnv("follow-lane", obs="lane:detector=classical", backend="highway", action="seed_lane",
+                   reward="lane_follow", traffic="empty", seed=0)  # fmt: skip
     sensor = env.sensors[0]
     assert isinstance(sensor, LaneState) and sensor.space.n == 6
     masks = classical_lane_masks(render_camera(env.world, sensor.model))
