@@ -112,7 +112,7 @@ SCENARIOS: dict[str, Scenario] = {
         Scenario(
             "follow-line",
             "drivelab.envs.backends.circuits.FollowLineEnv",
-            "seed 004: 470 m circuit, one 7 m lane with a yellow centre line, curves both ways, no traffic",
+            "seed 004: 467 m circuit, one 7 m lane with a yellow centre line, curves both ways, no traffic",
             config={"duration": 60},
             traffic={"empty": {}, "regular": {}, "dense": {}},  # no traffic on this task
             action_kinds=SEED_TABLES + ("grid", "continuous"),
