@@ -42,8 +42,10 @@ class PedalVehicle(Vehicle):
     """A kinematic bicycle whose commanded acceleration is a pedal: drag pulls its speed down."""
 
     def act(self, action: dict | str | None = None) -> None:
+        # highway-env calls act() without an action before every simulation frame: keep the pedal
+        if isinstance(action, dict):
+            self.pedal_mps2 = float(action.get("acceleration", 0.0))
         super().act(action)
-        self.pedal_mps2 = float(self.action.get("acceleration", 0.0))
 
     def step(self, dt: float) -> None:
         # seed 004 speeds: acceleration = pedal − drag · v, so a constant throttle levels off
