@@ -4,7 +4,8 @@ The camera frame is converted to HSV and thresholded around yellow, then eroded 
 opening that removes specks); in each of 4 rows the line's centre is the mean column of the
 pixels kept. Each centre falls in one of ``strips`` equidistant vertical strips of the image, or
 is missing; the state encodes the 4 answers in base ``strips + 1``, so the last state, every row
-missing, is "line lost".
+missing, is "line lost". In sharp bends the line seen obliquely at the farthest row can be
+thinner than the opening's 3 px and be reported missing there.
 """
 
 from __future__ import annotations
