@@ -40,7 +40,11 @@ RESULTS = Path(__file__).parent / "results"
 SETUPS = {
     "follow-line": {"obs": "line", "action": "seed_line", "reward": "line_follow"},
     "follow-lane": {"obs": "lane", "action": "seed_lane", "reward": "lane_follow"},
+    # the tabular baseline on highway: time-to-collision grid, meta-actions, highway-env's reward
+    "highway": {"obs": "ttc_grid", "action": "meta", "reward": "highway"},
 }
+TRAFFIC = {"follow-line": "empty", "follow-lane": "empty", "highway": "regular"}
+BACKEND = {"follow-line": "highway", "follow-lane": "highway", "highway": "fast"}
 WINDOW = 20
 EVAL_SEED_OFFSET = 10_000
 
@@ -59,7 +63,7 @@ def convergence_episode(returns: np.ndarray) -> int | None:
 
 def evaluate(agent: QLearning, env: DriveEnv, episodes: int, seed: int) -> dict:
     """Greedy episodes: mean |lateral error|, distance and laps before leaving the lane, off-lane rate."""
-    lateral, distances, laps, left, lengths = [], [], [], 0, []
+    lateral, distances, laps, left, crashed, lengths = [], [], [], 0, 0, []
     for episode in range(episodes):
         obs, _ = env.reset(seed=seed + episode)
         lap_m = float(np.sum(np.hypot(*np.diff(env.world.route.polyline, axis=0).T)))
@@ -70,6 +74,7 @@ def evaluate(agent: QLearning, env: DriveEnv, episodes: int, seed: int) -> dict:
             lateral.append(abs(env.world.ego.lateral_offset_m))
             done, steps = terminated or truncated, steps + 1
         left += int(info["off_road"])
+        crashed += int(info["crashed"])
         travelled = env.world.route.progress_m - start_m
         distances.append(travelled)
         laps.append(travelled / lap_m)
@@ -80,6 +85,7 @@ def evaluate(agent: QLearning, env: DriveEnv, episodes: int, seed: int) -> dict:
         "mean_distance_m": float(np.mean(distances)),
         "mean_laps": float(np.mean(laps)),
         "left_lane_rate": left / episodes,
+        "crash_rate": crashed / episodes,
         "mean_episode_steps": float(np.mean(lengths)),
         "episode_time_limit_s": env.duration_s,
     }
@@ -96,7 +102,7 @@ def main() -> None:
     setup = SETUPS[args.scenario]
     rows = []
     for seed in (int(s) for s in args.seeds.split(",")):
-        env = DriveEnv(args.scenario, traffic="empty", backend="highway", **setup)
+        env = DriveEnv(args.scenario, traffic=TRAFFIC[args.scenario], backend=BACKEND[args.scenario], **setup)
         env.reset(seed=seed)
         agent = QLearning(env, seed)
         started = time.perf_counter()
@@ -108,7 +114,9 @@ def main() -> None:
             RESULTS / f"qlearning_{args.scenario}_s{seed}.png",
             title=f"Q-learning on {args.scenario}, seed {seed}",
         )  # fmt: skip
-        eval_env = DriveEnv(args.scenario, traffic="empty", backend="highway", **setup)
+        eval_env = DriveEnv(
+            args.scenario, traffic=TRAFFIC[args.scenario], backend=BACKEND[args.scenario], **setup
+        )
         evaluation = evaluate(agent, eval_env, args.eval_episodes, seed + EVAL_SEED_OFFSET)
         row = {
             "seed": seed,
@@ -147,14 +155,15 @@ def main() -> None:
         "first 20 episodes' mean to the final plateau (mean of the last 10 % of episodes).",
         "",
         "| seed | episodes | convergence episode | first-20 mean return | final mean return | greedy: "
-        "mean abs lateral error (m) | distance (m) | laps | left lane | wall time |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "mean abs lateral error (m) | distance (m) | laps | left lane | crashed | wall time |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
         *[
             f"| {r['seed']} | {r['episodes']} | {r['convergence_episode']} | "
             f"{r['first20_mean_return']:.0f} | "
             f"{r['last10pct_mean_return']:.0f} | {r['greedy']['mean_abs_lateral_error_m']:.2f} | "
             f"{r['greedy']['mean_distance_m']:.0f} | {r['greedy']['mean_laps']:.2f} | "
-            f"{r['greedy']['left_lane_rate']:.0%} | {r['train_wall_s'] / 60:.1f} min |"
+            f"{r['greedy']['left_lane_rate']:.0%} | {r['greedy']['crash_rate']:.0%} | "
+            f"{r['train_wall_s'] / 60:.1f} min |"
             for r in rows
         ],
         "",
