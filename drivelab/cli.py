@@ -65,7 +65,9 @@ def envs() -> None:
 
 @app.command()
 def train(
-    algo: str | None = typer.Option(None, help="dqn, ppo, a2c, sac, dueling_ddqn, a2c_own, ppo_own"),
+    algo: str | None = typer.Option(
+        None, help="dqn, ppo, a2c, sac, dueling_ddqn, a2c_own, ppo_own, qlearning"
+    ),
     env: str | None = typer.Option(
         None, help="scenario: highway, merge, roundabout, intersection, racetrack, town"
     ),
@@ -325,6 +327,30 @@ def ablate(
         _interrupted()
     _print_outcomes(outcomes, runs_dir)
     typer.echo(f"report: {report / 'report.md'}")
+
+
+perception_app = typer.Typer(no_args_is_help=True, help="Perception models: train the lane CNN.")
+app.add_typer(perception_app, name="perception")
+
+
+@perception_app.command("train-lane")
+def train_lane(
+    frames: int = typer.Option(1500, help="generated training frames (follow-lane circuit, random poses)"),
+    epochs: int = typer.Option(15),
+    seed: int = typer.Option(0),
+    out: Path | None = typer.Option(None, help="weights file (default: the package's shipped weights)"),
+) -> None:
+    """Train the seed-004 lane segmentation CNN on frames and masks drivelab renders itself."""
+    import torch
+
+    from drivelab.perception.lane_cnn import WEIGHTS_PATH, train_lane_cnn
+
+    if frames < 1 or epochs < 1:
+        _fail("--frames and --epochs must be >= 1")
+    torch.set_num_threads(min(2, torch.get_num_threads()))
+    summary = train_lane_cnn(frames=frames, epochs=epochs, seed=seed, out=out or WEIGHTS_PATH, log=typer.echo)
+    size_kib, seconds = summary["bytes"] / 1024, summary["seconds"]
+    typer.echo(f"weights: {summary['weights']} ({size_kib:.0f} KiB, trained in {seconds:.0f} s)")
 
 
 def main() -> None:

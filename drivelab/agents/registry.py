@@ -51,6 +51,7 @@ def own_classes() -> dict[str, type]:
 
 
 def _registry() -> dict[str, AlgoSpec]:
+    from drivelab.agents.qlearning import build_qlearning, load_qlearning
     from drivelab.agents.sb3 import build_sb3, load_sb3
 
     discrete, continuous = ("meta", "grid"), ("continuous", "target_speed")
@@ -90,10 +91,18 @@ def _registry() -> dict[str, AlgoSpec]:
             load_own,
             observation_kinds=readable,
         ),
+        "qlearning": AlgoSpec(
+            "qlearning",
+            "tabular Q-learning over discrete states (seed 004): line, lane, ttc_grid",
+            ("seed_line", "seed_lane", "meta", "grid"),
+            build_qlearning,
+            load_qlearning,
+            observation_kinds=("other",),  # a Discrete state; the builder checks it is one
+        ),
     }
 
 
-ALGO_NAMES = ("dqn", "ppo", "a2c", "sac", "dueling_ddqn", "a2c_own", "ppo_own")
+ALGO_NAMES = ("dqn", "ppo", "a2c", "sac", "dueling_ddqn", "a2c_own", "ppo_own", "qlearning")
 
 
 def get_algo(name: str) -> AlgoSpec:

@@ -154,11 +154,45 @@ class TargetSpeedAction(ActionAdapter):
         return f"[target speed 0..{self.max_speed_mps:g} m/s through a PID, steering] in [0, 1] x [-1, 1]"
 
 
+# seed 004's action tables, rows (throttle, steering) in CARLA's normalised units
+SEED_LINE_TABLE = ((0.32, -0.2), (0.7, 0.0), (0.32, 0.2), (0.2, -0.4), (0.2, 0.4))
+SEED_LANE_TABLE = ((0.35, -0.04), (0.35, 0.04), (0.3, -0.08), (0.6, 0.0), (0.3, 0.08))
+
+
+class SeedTable(ActionAdapter):
+    """One of seed 004's two 5-action (throttle, steering) tables.
+
+    Throttle ``t`` becomes the normalised acceleration command ``t`` (a 5·t m/s² pedal; the
+    follow-line/lane ego adds a speed drag so that a constant throttle levels off, see
+    ``backends/circuits.py``); steering ``s`` (CARLA's [-1, 1], negative left) becomes the
+    normalised steering ``s``, i.e. ``s``·45° at the front wheels (highway-env's full lock).
+
+    :param table: ``"line"`` (follow-line, section 3.2) or ``"lane"`` (follow-lane, section 4.2).
+    """
+
+    control = "continuous"
+
+    def __init__(self, table: str) -> None:
+        rows = {"line": SEED_LINE_TABLE, "lane": SEED_LANE_TABLE}[table]
+        self.name = f"seed_{table}"
+        self.table = np.array([[throttle, steer] for throttle, steer in rows], dtype=np.float32)
+        self.space = spaces.Discrete(len(rows))
+
+    def to_control(self, action) -> np.ndarray:
+        return self.table[_index(action, len(self.table))]  # [acceleration, steering], highway-env's order
+
+    def describe(self) -> str:
+        rows = ", ".join(f"({t:g}, {s:+g})" for t, s in self.table.tolist())
+        return f"seed 004's {self.name[5:]} table of 5 (throttle, steering): {rows}"
+
+
 ACTIONS = {
     "meta": MetaAction,
     "grid": GridAction,
     "continuous": ContinuousAction,
     "target_speed": TargetSpeedAction,
+    "seed_line": lambda: SeedTable("line"),
+    "seed_lane": lambda: SeedTable("lane"),
 }
 
 

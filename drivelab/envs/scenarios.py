@@ -26,6 +26,9 @@ class Scenario:
     :param fast_backend: drivelab's fast backend runs it (the "auto" backend then picks it).
     :param route_deviation_m: the episode fails when the ego is farther than this from its route.
     :param blocked_after_s: the episode fails when the ego stays below 0.1 m/s this long.
+    :param circuit: the road is a closed loop: the route is one whole lap (however long).
+    :param guide_line: a yellow line is painted along the route (follow-line).
+    :param keep_lane: leaving the ego's starting lane counts as leaving the road (follow-lane).
     """
 
     name: str
@@ -42,6 +45,9 @@ class Scenario:
     route_deviation_m: float | None = None
     blocked_after_s: float | None = None
     action_kinds: tuple[str, ...] = ("meta", "grid", "continuous", "target_speed")
+    circuit: bool = False
+    guide_line: bool = False
+    keep_lane: bool = False
 
     def in_junction(self, lane_index: tuple) -> bool:
         """Whether highway-env lane (from, to, id) is junction area: it leaves a junction node
@@ -51,6 +57,7 @@ class Scenario:
         return self.name != "roundabout" or lane_index[1] in self.intersection_nodes
 
 
+SEED_TABLES = ("seed_line", "seed_lane")  # seed 004's two 5-action (throttle, steering) tables
 _RING = ("se", "ex", "ee", "nx", "ne", "wx", "we", "sx")
 
 SCENARIOS: dict[str, Scenario] = {
@@ -136,6 +143,28 @@ SCENARIOS: dict[str, Scenario] = {
             fast_backend=False,  # its vehicles stop for lights: not in the compiled kernels yet
             route_deviation_m=3.5,  # NoCrash / Roach episode rules
             blocked_after_s=90.0,
+        ),
+        Scenario(
+            "follow-line",
+            "drivelab.envs.backends.circuits.FollowLineEnv",
+            "seed 004: 467 m circuit, one 7 m lane with a yellow centre line, curves both ways, no traffic",
+            config={"duration": 60},
+            traffic={"empty": {}, "regular": {}, "dense": {}},  # no traffic on this task
+            action_kinds=SEED_TABLES + ("grid", "continuous"),
+            circuit=True,
+            guide_line=True,
+            fast_backend=False,  # the guide line and the drag of seed 004's ego are highway-backend only
+        ),
+        Scenario(
+            "follow-lane",
+            "drivelab.envs.backends.circuits.FollowLaneEnv",
+            "seed 004: 1.9 km three-lane circuit, curves both ways, no traffic; leaving the lane ends it",
+            config={"duration": 60},
+            traffic={"empty": {}, "regular": {}, "dense": {}},
+            action_kinds=SEED_TABLES + ("grid", "continuous"),
+            circuit=True,
+            keep_lane=True,
+            fast_backend=False,
         ),
     ]
 }

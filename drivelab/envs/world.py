@@ -31,6 +31,8 @@ class RoadMap:
     :param markings: (M, 2, 2) line segments painted on the road.
     :param marking_kinds: (M,) ``MARKING_DASHED`` or ``MARKING_SOLID``.
     :param edges: (E, 2, 2) segments of the drivable area's border (solid outer lines); LiDAR hits these.
+    :param guide_lines: (K, 2) polylines of painted yellow guide lines (follow-line circuits); the
+        camera draws them yellow, other sensors ignore them.
     """
 
     lane_polygons: tuple[np.ndarray, ...]
@@ -39,6 +41,7 @@ class RoadMap:
     markings: np.ndarray
     marking_kinds: np.ndarray
     edges: np.ndarray
+    guide_lines: tuple[np.ndarray, ...] = ()
 
     @staticmethod
     def empty() -> RoadMap:

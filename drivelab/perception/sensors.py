@@ -12,16 +12,19 @@ from drivelab.envs.world import WorldState
 from drivelab.errors import UsageError
 from drivelab.perception.base import Sensor
 from drivelab.perception.birdeye import BirdEye
+from drivelab.perception.camera import Camera
 from drivelab.perception.ego_state import EgoState
 from drivelab.perception.kinematics import Kinematics
+from drivelab.perception.lane import LaneState
 from drivelab.perception.lidar import Lidar
+from drivelab.perception.line import LineState
 from drivelab.perception.measurements import Measurements
 from drivelab.perception.topdown import TopDown
+from drivelab.perception.ttc_grid import TTCGrid
 from drivelab.perception.waypoints import Waypoints
 
-SENSORS: dict[str, type[Sensor]] = {
-    cls.name: cls for cls in (Kinematics, Lidar, TopDown, BirdEye, EgoState, Waypoints, Measurements)
-}
+_ALL = (Kinematics, Lidar, TopDown, BirdEye, EgoState, Waypoints, Measurements, Camera, LineState, LaneState)
+SENSORS: dict[str, type[Sensor]] = {cls.name: cls for cls in (*_ALL, TTCGrid)}
 SENSOR_HELP = {
     "kinematics": "nearest vehicles' presence, position, velocity, heading in the ego frame",
     "lidar": "240 beams (configurable) hitting vehicles and road edges, distance / range",
@@ -30,6 +33,10 @@ SENSOR_HELP = {
     "ego_state": "speed, lane offset, front gap, front relative speed, heading alignment (features=10: +5)",
     "waypoints": "next 10 route points, 2 m apart, in the ego frame (m), the last repeated past the end",
     "measurements": "[speed / max speed, steering / 60 deg]; stack=3 for RLAD's three frames",
+    "camera": "84x84 RGB first-person pinhole camera (fov, height, pitch configurable)",
+    "line": "seed 004 follow-line state: yellow line centre at 4 rows, each in one of 5 strips or lost",
+    "ttc_grid": "discrete highway state: time-to-collision bins of 3 lanes x speed bin (192 states)",
+    "lane": "seed 004 follow-lane state: lane centre by the lane CNN (or classical), 5 strips + lost",
 }
 
 
@@ -94,6 +101,8 @@ def make_sensor(spec: str | dict) -> Sensor:
         sensor = SENSORS[name](**options)
     except (TypeError, ValueError) as exc:
         raise UsageError(f"bad option for sensor {name!r}: {exc}") from None
+    if stack > 1 and not isinstance(sensor.space, spaces.Box):
+        raise UsageError(f"sensor {name!r} gives a discrete state, which cannot be frame-stacked")
     return FrameStack(sensor, stack) if stack > 1 else sensor
 
 

@@ -54,6 +54,14 @@ PRESETS: dict[str, RewardSpec] = {
         description="CARLA-Roach's (RLAD, seed 000): speed to a hazard-aware target, route position "
         "and heading, steering changes, terminal penalties",
     ),
+    "line_follow": RewardSpec(
+        {"line_centring": 1.0, "speed_mps": 1.0, "steering_power": -1.0},
+        description="seed 004 eq. 3: sum over 4 rows of f(line centre) + speed - 1.02^|steering deg|",
+    ),
+    "lane_follow": RewardSpec(
+        {"lane_keeping": 1.0},
+        description="seed 004 eq. 4: f*(lane centre), x2 aligned and straight, /2 aligned and steering",
+    ),
     "safety_dqn": RewardSpec(
         {name: 1.0 for name in SAFETY_TERMS},
         description="seed 003's eight-term safety table (centre, overspeed, curves, junction heading, ...)",

@@ -245,3 +245,89 @@ def roach_terminal(prev: WorldState, world: WorldState, control) -> float:
     if events.collided or events.red_light_crossed:
         value -= world.ego.speed_mps
     return value
+
+
+# --- seed 004, follow-line (eqs. 2, 3) and follow-lane (eq. 4) ---------------------------------
+# Both read where the painted line / the lane centre crosses the perception rows of the camera,
+# projected from the WorldState's geometry (ground truth), in pixels of the seed's own frame
+# width (640 for the line, 1024 for the lane) so that its pixel bands apply unchanged.
+LINE_BAND_EDGES_PX = np.array([38.0, 2 * 38, 3 * 38, 5 * 38, 6 * 38])
+# the extracted fourth value reads "39"; we take 3 so that the values keep falling (15, 12, 10, 3, 1)
+LINE_BAND_VALUES = np.array([15.0, 12.0, 10.0, 3.0, 1.0, -100.0])
+STEERING_BASE = 1.02  # the seed's λ
+LANE_BAND_EDGES_PX = np.array([15.0, 2 * 15, 3 * 20, 4 * 20])  # as extracted: 15, 30, 60, 80
+LANE_BAND_VALUES = np.array([10.0, 5.0, 2.5, 1.0, -10.0])
+LANE_ALIGNED_DEG = 6.0  # the seed's ζ
+FULL_LOCK_DEG = 45.0  # normalised steering 1 (highway-env's ContinuousAction)
+
+
+def _crossing_columns(world: WorldState, segments: np.ndarray, model, distances_m) -> np.ndarray:
+    """Image columns where ``segments`` cross the ground rows ``distances_m`` ahead (nan: not in view)."""
+    from drivelab.perception.camera import lateral_at_distances
+
+    distances = np.asarray(distances_m, dtype=float)
+    lateral = lateral_at_distances(world, segments, distances)
+    columns = model.project_ground(np.stack([distances, np.nan_to_num(lateral)], axis=1))[:, 0]
+    inside = np.isfinite(lateral) & (columns >= -0.5) & (columns <= model.width - 0.5)
+    return np.where(inside, columns, np.nan)
+
+
+def _steering_deg(control) -> float:
+    values = np.asarray(control, dtype=float).reshape(-1)
+    return float(values[1]) * FULL_LOCK_DEG if values.size == 2 else 0.0
+
+
+@term
+def line_centring(prev: WorldState, world: WorldState, control) -> float:
+    """Σ_j f(C_j) over the 4 line rows: 15 … 1 as the line's centre moves away from the image centre
+    in 38 px bands (of 640), −100 for a row where the line is out of view (seed 004, eq. 2)."""
+    from drivelab.perception.camera import GuideSegments
+    from drivelab.perception.line import LINE_CAMERA, LINE_ROWS_M
+    from drivelab.perception.topdown import per_road
+
+    guide = per_road(world.road, GuideSegments).segments
+    columns = _crossing_columns(world, guide, LINE_CAMERA, LINE_ROWS_M)
+    offset_px = np.abs(columns - LINE_CAMERA.centre[0]) * 640 / LINE_CAMERA.width
+    values = LINE_BAND_VALUES[np.searchsorted(LINE_BAND_EDGES_PX, np.nan_to_num(offset_px, nan=1e9), "right")]
+    return float(values.sum())
+
+
+@term
+def speed_mps(prev: WorldState, world: WorldState, control) -> float:
+    """The ego's speed in m/s (seed 004, eq. 3: ``+ v``)."""
+    return world.ego.speed_mps
+
+
+@term
+def steering_power(prev: WorldState, world: WorldState, control) -> float:
+    """λ^|α| with λ = 1.02 and α the commanded front-wheel angle in degrees (seed 004, eq. 3; the
+    extracted formula is garbled: we read it as a penalty growing with the steering angle)."""
+    return STEERING_BASE ** abs(_steering_deg(control))
+
+
+@term
+def lane_keeping(prev: WorldState, world: WorldState, control) -> float:
+    """Seed 004, eq. 4: f*(C) by the lane centre's offset C from the image centre (10, 5, 2.5, 1, −10 in
+    bands 15/30/60/80 px of 1024), doubled when the lane is within ζ = 6° of the image vertical and
+    the action goes straight, halved when aligned but steering (the extracted text is garbled there;
+    this is our reading of "higher reward when aligned and going straight")."""
+    from drivelab.perception.camera import polyline_segments
+    from drivelab.perception.lane import LANE_CAMERA, LANE_ROWS_M
+
+    centre = polyline_segments(np.asarray(world.route.polyline, dtype=float))
+    columns = _crossing_columns(world, centre, LANE_CAMERA, LANE_ROWS_M)
+    seen = np.isfinite(columns)
+    if not seen.any():
+        return float(LANE_BAND_VALUES[-1])
+    offset_px = abs(np.mean(columns[seen]) - LANE_CAMERA.centre[0]) * 1024 / LANE_CAMERA.width
+    value = float(LANE_BAND_VALUES[np.searchsorted(LANE_BAND_EDGES_PX, offset_px, "right")])
+    if seen.sum() < 2:
+        return value
+    # g*: angle between the image vertical (p1 → p2) and the lane direction (p3 → p4), nearest and
+    # farthest rows where the centre is seen
+    rows = LANE_CAMERA.row_of_distance(np.asarray(LANE_ROWS_M)[seen])
+    near, far = np.array([columns[seen][0], rows[0]]), np.array([columns[seen][-1], rows[-1]])
+    angle_deg = abs(np.degrees(np.arctan2(far[0] - near[0], near[1] - far[1])))
+    if angle_deg > LANE_ALIGNED_DEG:
+        return value
+    return 2.0 * value if abs(_steering_deg(control)) < 1e-6 else value / 2.0

@@ -7,6 +7,7 @@ terms are drivelab's alone (and highway-env's pandas-based observation is not pa
 
 from __future__ import annotations
 
+import dataclasses
 import os
 
 import numpy as np
@@ -155,8 +156,12 @@ class HighwayBackend:
         self.arrange_traffic()
         road = self.env.road
         self.road_map = build_road_map(road.network)
-        self.route = self.route_for(self._plan_route())
         self.lights = getattr(road, "lights", None)  # a signalised scenario's TownLights
+        lanes = self._plan_route()
+        self.route_lane_id = lanes[0][2]
+        self.route = self.route_for(lanes)
+        if self.scenario.guide_line:  # painted along the route: one whole lap of the circuit
+            self.road_map = dataclasses.replace(self.road_map, guide_lines=(self.route.polyline,))
         self.progress_m = self.route.project(self.env.vehicle.position)
         self.world = self._export(Events())
         return self.world
@@ -175,7 +180,7 @@ class HighwayBackend:
         events = Events(
             collided=bool(ego.crashed),
             collision_with="vehicle" if ego.crashed else "",
-            off_road=not ego.on_road,
+            off_road=not ego.on_road or (self.scenario.keep_lane and ego.lane_index[2] != self.route_lane_id),
             arrived=self._arrived(),
             red_light_crossed=self._ran_red_light(previous_lane),
         )
@@ -220,7 +225,7 @@ class HighwayBackend:
             nodes = [start[0]] + path
         else:
             nodes, length = [start[0], start[1]], network.get_lane(start).length
-            while length < ROUTE_LOOKAHEAD_M:
+            while length < ROUTE_LOOKAHEAD_M or self.scenario.circuit:
                 successors = list(network.graph.get(nodes[-1], {}))
                 if not successors or nodes[-1] == nodes[0]:
                     break

@@ -1,0 +1,357 @@
+"""First-person pinhole camera on the ego, drawn with OpenCV from the WorldState (seed 004).
+
+highway-env has only top views; this camera sees the road the way the seed's CARLA camera does:
+sky, grass, the road surface, white lane markings, the yellow guide line of follow-line circuits,
+other vehicles as shaded 3-D boxes and traffic lights. The same projection draws ground-truth
+masks of the ego lane's left and right lines and of the guide line, for training and scoring
+perception.
+
+The projection is ``pinhole.PinholeModel`` (frames and pixel convention documented there).
+
+Ground shapes (lanes cut into per-station pieces, markings as thin rectangles) within
+``max_range_m`` are culled to the view wedge, clipped where they would fall more than a few rows
+below the image, projected and filled, all with ``cv2.LINE_8`` so that a marking and its mask
+cover exactly the same pixels.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from gymnasium import spaces
+
+from drivelab.envs.world import MARKING_SOLID, RoadMap, WorldState
+from drivelab.perception.base import Sensor, box_corners, ego_frame
+from drivelab.perception.birdeye import DashedMarkings
+from drivelab.perception.pinhole import PinholeModel
+from drivelab.perception.topdown import (
+    SHIFT,
+    _clip_half_plane,
+    fill_each,
+    fixed_point,
+    per_road,
+    segments_near,
+)
+
+SKY = (150, 190, 235)
+GRASS = (96, 140, 84)
+ROAD = (80, 80, 84)
+WHITE = (235, 235, 235)
+YELLOW = (235, 200, 30)
+VEHICLE = np.array([60, 110, 220], dtype=float)
+# faces front, right, rear, left (box_corners' order): ends lighter than the long sides
+FACE_COLOURS = tuple(
+    tuple(int(c) for c in np.clip(VEHICLE * shade, 0, 255)) for shade in (0.9, 0.65, 0.9, 0.65)
+)
+ROOF_COLOUR = tuple(int(c) for c in np.clip(VEHICLE * 1.15, 0, 255))
+LIGHT_COLOURS = {0: (230, 40, 40), 1: (240, 200, 40), 2: (40, 210, 80)}  # traffic-light state → RGB
+LIGHT_HEIGHT_M = 3.0
+VEHICLE_HEIGHT_M = 1.5
+MARKING_WIDTH_M = 0.15  # white lane markings
+GUIDE_WIDTH_M = 0.3  # the follow-line circuit's yellow line is painted wider
+MASKS = ("left_line", "right_line", "guide_line")
+
+
+def _ego_ground(world: WorldState, points_world: np.ndarray) -> np.ndarray:
+    return ego_frame(points_world, world.ego.position, world.ego.heading)
+
+
+def _near_clip_m(model: PinholeModel) -> float:
+    """Forward distance below which ground is cut: the camera's near plane, or farther where the
+    ground there would project more than a few rows below the image (a ground point's row depends
+    on its forward distance only, so one cut on x also bounds the rows OpenCV fills)."""
+    below_image = float(model.distance_of_row(model.height - 1 + 4.0))
+    return max(model.forward_m + model.near_m, below_image if np.isfinite(below_image) else 0.0)
+
+
+def _ground_polygons(
+    model: PinholeModel, world: WorldState, groups: list[tuple[np.ndarray, np.ndarray]]
+) -> list[list[np.ndarray]]:
+    """Ground polygons in world coordinates, in groups of (vertices one after another, counts) →
+    per group, the fixed-point pixel polygons in sight. All groups share one clip and projection."""
+    groups = [(p, c) for p, c in groups]
+    sizes = [len(c) for _, c in groups]
+    counts = np.concatenate([c for _, c in groups]) if groups else np.zeros(0, dtype=int)
+    if counts.sum() == 0:
+        return [[] for _ in groups]
+    points = _ego_ground(world, np.concatenate([p for p, c in groups if len(c)]))
+    near = _near_clip_m(model)
+    # cull polygons wholly outside one side of the view wedge (behind, left or right of it)
+    slope = model.width / 2 / model.focal_px
+    reach = (points[:, 0] - model.forward_m) * slope + 1.0
+    outside = np.stack([points[:, 0] < near, points[:, 1] > reach, -points[:, 1] > reach], axis=1)
+    starts = np.cumsum(counts) - counts
+    culled = np.logical_and.reduceat(outside, starts, axis=0).any(axis=1)
+    if culled.any():
+        points = points[np.repeat(~culled, counts)]
+        counts = np.where(culled, 0, counts)
+    # clip on x (forward) with the row clipper: it reads column 1, so hand it (y, x)
+    swapped = points[:, ::-1]
+    if len(swapped) and swapped[:, 1].min() < near:
+        swapped, counts = _clip_half_plane(swapped, counts, near, keep_below=False)
+    pixels = fixed_point(model.project_ground(swapped[:, ::-1])) if len(swapped) else np.zeros((0, 2))
+    ends = np.cumsum(counts).tolist()
+    starts = [0] + ends[:-1]
+    result, first = [], 0
+    for size in sizes:
+        result.append(
+            [
+                pixels[a:b]
+                for a, b in zip(starts[first : first + size], ends[first : first + size], strict=True)
+                if b - a >= 3
+            ]
+        )
+        first += size
+    return result
+
+
+def _strip_quads(segments: np.ndarray, width_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """Segments (M, 2, 2) → rectangles (4·M, 2) ``width_m`` wide around them, and counts (M,)."""
+    start, end = segments[:, 0], segments[:, 1]
+    direction = end - start
+    length = np.maximum(np.hypot(direction[:, 0], direction[:, 1]), 1e-9)
+    normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1) / length[:, None] * (width_m / 2)
+    quads = np.stack([start + normal, end + normal, end - normal, start - normal], axis=1)
+    return quads.reshape(-1, 2), np.full(len(segments), 4, dtype=int)
+
+
+def polyline_segments(polyline: np.ndarray) -> np.ndarray:
+    return np.stack([polyline[:-1], polyline[1:]], axis=1) if len(polyline) > 1 else np.zeros((0, 2, 2))
+
+
+class GuideSegments:
+    """All guide-line polylines of a road as one segment array (computed once per road)."""
+
+    def __init__(self, road: RoadMap) -> None:
+        parts = [polyline_segments(np.asarray(line, dtype=float)) for line in road.guide_lines]
+        self.segments = np.concatenate(parts) if parts else np.zeros((0, 2, 2))
+
+
+class PaintedSegments:
+    """A road's solid markings and guide lines with bounding circles, for a cheap cull per frame."""
+
+    def __init__(self, road: RoadMap) -> None:
+        markings = np.asarray(road.markings, dtype=float).reshape(-1, 2, 2)
+        self.solid = markings[np.asarray(road.marking_kinds) == MARKING_SOLID]
+        self.guide = GuideSegments(road).segments
+        self.circles = [_circles(segments) for segments in (self.solid, self.guide)]
+
+    def near(self, position: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray]:
+        """(solid, guide) segments whose bounding circle comes within ``reach`` of ``position``."""
+        return tuple(
+            segments[np.hypot(*(centre - position).T) <= reach + radius]
+            for segments, (centre, radius) in zip((self.solid, self.guide), self.circles, strict=True)
+        )
+
+
+class LanePieces:
+    """A road's lane polygons cut into quadrilaterals between consecutive stations (a polygon made of a
+    left edge and its right edge reversed, as ``RoadMap`` stores them), so that only the pieces in
+    the camera's view are clipped and drawn; pieces are stored one after another with counts."""
+
+    def __init__(self, road: RoadMap) -> None:
+        pieces = []
+        for polygon in road.lane_polygons:
+            polygon = np.asarray(polygon, dtype=float).reshape(-1, 2)
+            half = len(polygon) // 2
+            if len(polygon) % 2 or half < 2:
+                pieces.append(polygon)
+                continue
+            left, right = polygon[:half], polygon[half:][::-1]
+            quads = np.stack([left[:-1], left[1:], right[1:], right[:-1]], axis=1)
+            pieces.extend(quads)
+        self.counts = np.array([len(p) for p in pieces], dtype=int)
+        self.vertices = np.concatenate(pieces) if pieces else np.zeros((0, 2))
+        self.owner = np.repeat(np.arange(len(pieces)), self.counts)
+        low = np.array([p.min(axis=0) for p in pieces]).reshape(-1, 2)
+        high = np.array([p.max(axis=0) for p in pieces]).reshape(-1, 2)
+        self.centres, self.radii = (low + high) / 2, np.hypot(*(high - low).T) / 2
+
+
+def _circles(segments: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return segments.mean(axis=1), np.hypot(*(segments[:, 1] - segments[:, 0]).T) / 2
+
+
+def _fill_strips(image: np.ndarray, polygons: list[np.ndarray], colour) -> None:
+    """Fill clipped strip pieces one by one (one ``fillPoly`` call would XOR where lines converge
+    towards the horizon); each piece is a clipped rectangle, hence convex: the fast fill."""
+    for polygon in polygons:
+        cv2.fillConvexPoly(image, polygon, colour, cv2.LINE_8, SHIFT)
+
+
+def _offset_polyline(polyline: np.ndarray, offset_m: float) -> np.ndarray:
+    """Segments (M, 2, 2) of ``polyline`` shifted ``offset_m`` to their right (+) or left (−)."""
+    segments = polyline_segments(polyline)
+    direction = segments[:, 1] - segments[:, 0]
+    length = np.maximum(np.hypot(direction[:, 0], direction[:, 1]), 1e-9)
+    right = np.stack([-direction[:, 1], direction[:, 0]], axis=1) / length[:, None]  # y is to the right
+    return segments + (offset_m * right)[:, None, :]
+
+
+def ego_lane_lines(world: WorldState) -> tuple[np.ndarray, np.ndarray]:
+    """The ego lane's left and right boundaries as segments (M, 2, 2): the route's centre line
+    (the ego's planned lane) shifted by half the lane width to each side."""
+    half = world.ego.lane_width_m / 2
+    route = np.asarray(world.route.polyline, dtype=float)
+    return _offset_polyline(route, -half), _offset_polyline(route, half)
+
+
+def lateral_at_distances(world: WorldState, segments: np.ndarray, distances_m: np.ndarray) -> np.ndarray:
+    """Where world ``segments`` (M, 2, 2) cross the ground line ``x = d`` ahead of the ego: the ego-frame
+    y (m) of the crossing nearest the ego's axis, per distance (nan where nothing crosses)."""
+    distances = np.asarray(distances_m, dtype=float)
+    if len(segments) == 0:
+        return np.full(distances.shape, np.nan)
+    local = _ego_ground(world, segments)
+    x0, x1 = local[:, 0, 0][None, :], local[:, 1, 0][None, :]
+    y0, y1 = local[:, 0, 1][None, :], local[:, 1, 1][None, :]
+    d = distances.reshape(-1, 1)
+    span = np.where(np.abs(x1 - x0) < 1e-12, np.nan, x1 - x0)
+    t = (d - x0) / span
+    y = np.where((t >= 0) & (t <= 1), y0 + t * (y1 - y0), np.nan)
+    y = np.where(np.isnan(y), np.inf, y)
+    best = np.take_along_axis(y, np.argmin(np.abs(y), axis=1)[:, None], axis=1)[:, 0]
+    return np.where(np.isfinite(best), best, np.nan).reshape(distances.shape)
+
+
+def _near(world: WorldState, segments: np.ndarray, model: PinholeModel) -> np.ndarray:
+    if len(segments) == 0:
+        return segments
+    reach = model.forward_m + model.max_range_m
+    return segments[segments_near(segments, np.asarray(world.ego.position, float), reach)]
+
+
+def _draw_vehicles(image: np.ndarray, model: PinholeModel, world: WorldState) -> None:
+    """Other vehicles as boxes: visible side faces shaded by orientation, then the roof."""
+    if len(world.vehicles) == 0:
+        return
+    boxes = np.asarray(world.vehicles, dtype=float)[:, [0, 1, 2, 4, 5]]
+    corners = _ego_ground(world, box_corners(boxes))  # (N, 4, 2): front-left, front-right, ...
+    distance = np.hypot(*(corners.mean(axis=1) - [model.forward_m, 0.0]).T)
+    ahead = (corners[..., 0] > model.forward_m + model.near_m).all(axis=1) & (distance < model.max_range_m)
+    order = np.argsort(-distance[ahead])  # painter's order: far to near
+    corners = corners[ahead][order]
+    if len(corners) == 0:
+        return
+    count = len(corners)
+    bottom = np.concatenate([corners, np.zeros((count, 4, 1))], axis=2)
+    top = np.concatenate([corners, np.full((count, 4, 1), VEHICLE_HEIGHT_M)], axis=2)
+    pixels = fixed_point(model.project(np.concatenate([bottom, top], axis=1)))  # (N, 8, 2)
+    following = np.array([1, 2, 3, 0])
+    middle = (corners + corners[:, following]) / 2
+    outward = middle - corners.mean(axis=1, keepdims=True)
+    camera = np.array([model.forward_m, 0.0])
+    facing = np.einsum("nki,nki->nk", outward, camera - middle) > 0  # (N, 4) faces seen
+    for vehicle in range(count):
+        for face in np.flatnonzero(facing[vehicle]):
+            quad = pixels[vehicle, [face, following[face], following[face] + 4, face + 4]]
+            cv2.fillConvexPoly(image, quad, FACE_COLOURS[face], cv2.LINE_8, SHIFT)
+        cv2.fillConvexPoly(image, pixels[vehicle, 4:], ROOF_COLOUR, cv2.LINE_8, SHIFT)
+
+
+def _draw_traffic_lights(image: np.ndarray, model: PinholeModel, world: WorldState) -> None:
+    """Traffic lights (rows x, y, heading, state 0 red / 1 yellow / 2 green) as a pole and a lamp."""
+    lights = np.asarray(world.traffic_lights, dtype=float).reshape(-1, 4)
+    if len(lights) == 0:
+        return
+    local = _ego_ground(world, lights[:, :2])
+    seen = (local[:, 0] > model.forward_m + model.near_m) & (
+        local[:, 0] < model.forward_m + model.max_range_m
+    )
+    for (x, y), state in zip(local[seen], lights[seen, 3], strict=True):
+        foot, lamp = model.project(np.array([[x, y, 0.0], [x, y, LIGHT_HEIGHT_M]]))
+        radius = max(int(round(0.3 * model.focal_px / max(x - model.forward_m, 1e-3))), 1)
+        cv2.line(image, tuple(np.round(foot).astype(int)), tuple(np.round(lamp).astype(int)), (40, 40, 40), 1)
+        colour = LIGHT_COLOURS.get(int(state), (200, 200, 200))
+        cv2.circle(image, tuple(np.round(lamp).astype(int)), radius, colour, -1, cv2.LINE_8)
+
+
+def _ground_layers(world: WorldState, model: PinholeModel) -> tuple[np.ndarray, list, list]:
+    """(lane polygons (P, 2) with counts) and the painted strips as [(quads, counts, colour)]."""
+    road = world.road
+    position = np.asarray(world.ego.position, dtype=float)
+    reach = model.forward_m + model.max_range_m
+    lanes = per_road(road, LanePieces)
+    lane_points, lane_counts = np.zeros((0, 2)), np.zeros(0, dtype=int)
+    if len(lanes.counts):
+        visible = np.hypot(*(lanes.centres - position).T) <= reach + lanes.radii
+        lane_points, lane_counts = lanes.vertices[visible[lanes.owner]], lanes.counts[visible]
+    solid, guide = per_road(road, PaintedSegments).near(position, reach)
+    dashed_lines = per_road(road, DashedMarkings)
+    dashed = dashed_lines.dashes(position, reach) if len(dashed_lines.length) else np.zeros((0, 2, 2))
+    strips = [(np.concatenate([solid, dashed]), MARKING_WIDTH_M, WHITE), (guide, GUIDE_WIDTH_M, YELLOW)]
+    return (lane_points, lane_counts), strips
+
+
+def render_camera(world: WorldState, model: PinholeModel) -> np.ndarray:
+    """The camera's RGB uint8 image (H, W, 3) of ``world``."""
+    image = np.empty((model.height, model.width, 3), dtype=np.uint8)
+    image[:] = GRASS
+    image[: int(np.clip(np.ceil(model.horizon_row), 0, model.height))] = SKY
+    lanes, strips = _ground_layers(world, model)
+    groups = [lanes] + [_strip_quads(segments, width) for segments, width, _ in strips]
+    projected = _ground_polygons(model, world, groups)
+    fill_each(image, projected[0], ROAD)
+    for polygons, (_, _, colour) in zip(projected[1:], strips, strict=True):
+        _fill_strips(image, polygons, colour)
+    _draw_vehicles(image, model, world)
+    _draw_traffic_lights(image, model, world)
+    return image
+
+
+def render_masks(world: WorldState, model: PinholeModel) -> np.ndarray:
+    """Ground-truth masks (3, H, W) uint8 in {0, 1}: the ego lane's left line, its right line (both
+    continuous, as wide as a painted marking) and the guide line, in the camera's projection."""
+    masks = np.zeros((len(MASKS), model.height, model.width), dtype=np.uint8)
+    left, right = ego_lane_lines(world)
+    guide = per_road(world.road, GuideSegments).segments
+    widths = (MARKING_WIDTH_M, MARKING_WIDTH_M, GUIDE_WIDTH_M)
+    groups = [
+        _strip_quads(_near(world, s, model), w) for s, w in zip((left, right, guide), widths, strict=True)
+    ]
+    for channel, polygons in enumerate(_ground_polygons(model, world, groups)):
+        _fill_strips(masks[channel], polygons, 1)
+    return masks
+
+
+class Camera(Sensor):
+    """On-board RGB camera, channels last ``(height, width, 3)`` uint8 (see ``render_camera``).
+
+    :param width: image width in pixels.
+    :param height: image height in pixels.
+    :param fov_deg: horizontal field of view.
+    :param height_m: mounting height.
+    :param pitch_deg: downward pitch.
+    :param forward_m: mounting point ahead of the ego's centre.
+    :param max_range_m: drawing distance.
+    """
+
+    name = "camera"
+
+    def __init__(
+        self,
+        *,
+        width: int = 84,
+        height: int = 84,
+        fov_deg: float = 90.0,
+        height_m: float = 1.5,
+        pitch_deg: float = 15.0,
+        forward_m: float = 1.0,
+        max_range_m: float = 50.0,
+    ) -> None:
+        self.model = PinholeModel(
+            int(width), int(height), float(fov_deg), float(height_m), float(pitch_deg), float(forward_m),
+            float(max_range_m),
+        )  # fmt: skip
+        self._space = spaces.Box(0, 255, shape=(self.model.height, self.model.width, 3), dtype=np.uint8)
+
+    @property
+    def space(self) -> spaces.Box:
+        return self._space
+
+    def observe(self, world: WorldState) -> np.ndarray:
+        return render_camera(world, self.model)
+
+    def masks(self, world: WorldState) -> np.ndarray:
+        """Ground-truth line masks (3, H, W) for ``world`` (see ``render_masks``)."""
+        return render_masks(world, self.model)

@@ -1,0 +1,116 @@
+"""Follow-lane perception (seed 004, section 4): lane lines → lane centre at 4 rows → 5 states.
+
+A detector turns the camera frame into two masks, the ego lane's left and right lines: the seed's
+small segmentation CNN (``detector="cnn"``, weights shipped in the package, see ``lane_cnn.py``)
+or a classical one (``detector="classical"``: white pixels, the nearest run on each side of the
+image centre, row by row). In each of 4 rows the lane centre is the middle of the two lines (or,
+where one is missing, the other shifted by half the lane's expected width in pixels); ``C`` is the
+mean of the centres found, and its offset from the image centre falls in one of 5 strips, or the
+lane is lost (state 5).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from gymnasium import spaces
+
+from drivelab.envs.world import WorldState
+from drivelab.perception.base import Sensor
+from drivelab.perception.camera import PinholeModel, render_camera
+from drivelab.perception.line import row_centres
+
+LANE_CAMERA = PinholeModel(width=160, height=120, fov_deg=90, height_m=1.5, pitch_deg=15, max_range_m=80)
+LANE_ROWS_M = (4.0, 6.0, 9.0, 13.0)  # nearest row first; the seed does not give its rows
+LANE_WIDTH_M = 3.5
+SEED_IMAGE_WIDTH = 1024  # the seed's f* bands are in pixels of a 1024-wide frame
+# State strips: the offset of C from the image centre against the seed's own f* band edges 30 and
+# 80 px (of 1024), so that state 2 is "centred", 1/3 "off to one side", 0/4 "far off". Our choice.
+STATE_EDGES_SEED_PX = np.array([-80.0, -30.0, 30.0, 80.0])
+LOST_STATE = len(STATE_EDGES_SEED_PX) + 1
+DETECTORS = ("cnn", "classical")
+
+
+def white_mask(image_rgb: np.ndarray, horizon_row: float) -> np.ndarray:
+    """Bright, unsaturated pixels below the horizon (bool (H, W)): painted lines."""
+    hsv = cv2.cvtColor(image_rgb, cv2.COLOR_RGB2HSV)
+    white = (hsv[..., 1] < 60) & (hsv[..., 2] > 180)
+    white[: int(np.clip(np.ceil(horizon_row), 0, len(white)))] = False
+    return white
+
+
+def classical_lane_masks(image_rgb: np.ndarray, model: PinholeModel = LANE_CAMERA) -> np.ndarray:
+    """Left and right line masks (2, H, W) bool: per row, the run of white pixels nearest to the image
+    centre on each side. No learning, no memory: a dash gap lets the next line over stand in."""
+    white = white_mask(image_rgb, model.horizon_row)
+    height, width = white.shape
+    columns = np.arange(width)
+    centre = model.centre[0]
+    starts = white & ~np.pad(white, ((0, 0), (1, 0)))[:, :-1]
+    run_id = np.cumsum(starts, axis=1) * white  # runs numbered 1, 2, … along each row, 0 off-line
+    left_col = np.where(white & (columns < centre), columns, -1).max(axis=1)
+    right_col = np.where(white & (columns > centre), columns, width).min(axis=1)
+    rows = np.arange(height)
+    left_run = np.where(left_col >= 0, run_id[rows, np.clip(left_col, 0, width - 1)], 0)
+    right_run = np.where(right_col < width, run_id[rows, np.clip(right_col, 0, width - 1)], 0)
+    left = (run_id == left_run[:, None]) & (left_run[:, None] > 0)
+    right = (run_id == right_run[:, None]) & (right_run[:, None] > 0) & ~left
+    return np.stack([left, right])
+
+
+def lane_centres(masks: np.ndarray, rows: np.ndarray, half_lane_px: np.ndarray) -> np.ndarray:
+    """Lane-centre columns at ``rows`` from left/right masks (nan where neither line is seen)."""
+    left, right = row_centres(masks[0], rows), row_centres(masks[1], rows)
+    both = (left + right) / 2
+    return np.where(
+        np.isnan(left), right - half_lane_px, np.where(np.isnan(right), left + half_lane_px, both)
+    )
+
+
+def state_of(centre_column: float, width: int) -> int:
+    """5 strips of the lane centre's offset (seed pixels), or ``LOST_STATE`` when it is nan."""
+    if np.isnan(centre_column):
+        return LOST_STATE
+    offset = (centre_column - (width - 1) / 2) * SEED_IMAGE_WIDTH / width
+    return int(np.searchsorted(STATE_EDGES_SEED_PX, offset))
+
+
+class LaneState(Sensor):
+    """Discrete follow-lane state from the camera: ``Discrete(6)`` (5 strips + lost).
+
+    :param detector: ``"cnn"`` (the shipped segmentation network) or ``"classical"``.
+    :param weights: a ``.pt`` file of the CNN's weights (default: the shipped ones).
+    """
+
+    name = "lane"
+
+    def __init__(self, *, detector: str = "cnn", weights: str | None = None) -> None:
+        if detector not in DETECTORS:
+            raise ValueError(f"unknown lane detector {detector!r} (choose from {', '.join(DETECTORS)})")
+        self.detector, self.model = detector, LANE_CAMERA
+        self.rows = np.round(self.model.row_of_distance(np.array(LANE_ROWS_M))).astype(int)
+        depth = self.model.to_camera(np.stack([LANE_ROWS_M, np.zeros(4), np.zeros(4)], axis=1))[:, 2]
+        self.half_lane_px = self.model.focal_px * LANE_WIDTH_M / 2 / depth
+        self.network = None
+        if detector == "cnn":
+            from drivelab.perception.lane_cnn import load_lane_cnn
+
+            self.network = load_lane_cnn(weights)
+        self._space = spaces.Discrete(LOST_STATE + 1)
+        self.centres = np.full(len(LANE_ROWS_M), np.nan)
+
+    @property
+    def space(self) -> spaces.Discrete:
+        return self._space
+
+    def masks(self, image_rgb: np.ndarray) -> np.ndarray:
+        """The detector's left/right line masks (2, H, W) bool for a camera frame."""
+        if self.network is not None:
+            return self.network.segment(image_rgb)
+        return classical_lane_masks(image_rgb, self.model)
+
+    def observe(self, world: WorldState) -> np.int64:
+        masks = self.masks(render_camera(world, self.model))
+        self.centres = lane_centres(masks, self.rows, self.half_lane_px)
+        mean = float(np.nanmean(self.centres)) if np.isfinite(self.centres).any() else np.nan
+        return np.int64(state_of(mean, self.model.width))

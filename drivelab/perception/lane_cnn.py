@@ -1,0 +1,163 @@
+"""The seed's lane-line segmentation CNN (seed 004, section 4.1), its training data and training.
+
+A small encoder-decoder (8 768 weights, 40 KB on disk) maps a 120 x 160 camera frame to two masks, the ego
+lane's left and right lines. It is trained on frames and ground-truth masks that drivelab's own
+camera renders on the follow-lane circuit at random poses (``generate_lane_frames``), so nothing
+is downloaded; the trained weights ship in ``drivelab/perception/weights/lane_cnn.pt``.
+``drivelab perception train-lane`` retrains them.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+from torch.nn import functional
+
+from drivelab.errors import UsageError
+from drivelab.perception.camera import render_camera, render_masks
+
+WEIGHTS_PATH = Path(__file__).parent / "weights" / "lane_cnn.pt"
+MAX_LATERAL_M = 1.2  # training poses: offset from the lane centre, uniform in ±this
+HEADING_STD_DEG = 4.0  # and heading error, normal
+
+
+class LaneNet(nn.Module):
+    """Encoder (two stride-2 convolutions, a dilated block) and decoder with skips, 2 output logits.
+
+    :param width: channels of the first stage (the second has ``width + 4``).
+    """
+
+    def __init__(self, width: int = 12) -> None:
+        super().__init__()
+        deep = width + 4
+        self.down1 = nn.Conv2d(3, width, 3, stride=2, padding=1)
+        self.down2 = nn.Conv2d(width, deep, 3, stride=2, padding=1)
+        self.middle = nn.Sequential(
+            nn.Conv2d(deep, deep, 3, padding=1), nn.ReLU(), nn.Conv2d(deep, deep, 3, padding=2, dilation=2)
+        )
+        self.up1 = nn.Conv2d(deep + width, 8, 3, padding=1)
+        self.head = nn.Conv2d(8 + 3, 2, 1)
+
+    def forward(self, images: torch.Tensor) -> torch.Tensor:
+        """Images (N, 3, H, W) in [0, 1] → logits (N, 2, H, W); H and W divisible by 4."""
+        half = functional.relu(self.down1(images))
+        quarter = functional.relu(self.middle(functional.relu(self.down2(half))))
+        up = functional.interpolate(quarter, size=half.shape[-2:], mode="bilinear", align_corners=False)
+        up = functional.relu(self.up1(torch.cat([up, half], dim=1)))
+        up = functional.interpolate(up, size=images.shape[-2:], mode="bilinear", align_corners=False)
+        return self.head(torch.cat([up, images], dim=1))
+
+    @torch.no_grad()
+    def segment(self, image_rgb: np.ndarray) -> np.ndarray:
+        """One RGB uint8 frame (H, W, 3) → left/right line masks (2, H, W) bool."""
+        batch = torch.from_numpy(np.ascontiguousarray(image_rgb.transpose(2, 0, 1))).float()[None] / 255.0
+        return (self(batch)[0] > 0).numpy()
+
+
+def load_lane_cnn(path: str | Path | None = None) -> LaneNet:
+    """The network with weights from ``path`` (default: the shipped ones), in evaluation mode."""
+    path = Path(path) if path is not None else WEIGHTS_PATH
+    if not path.is_file():
+        raise UsageError(f"lane CNN weights not found: {path} (run `drivelab perception train-lane`)")
+    saved = torch.load(path, map_location="cpu", weights_only=True)
+    network = LaneNet(int(saved["width"]))
+    network.load_state_dict(saved["state_dict"])
+    return network.eval()
+
+
+def generate_lane_frames(count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """``count`` camera frames (N, H, W, 3) uint8 and their left/right masks (N, 2, H, W) uint8 of the
+    follow-lane circuit, at random places, lanes, lateral offsets and heading errors."""
+    from drivelab.envs.backends.highway import HighwayBackend
+    from drivelab.envs.scenarios import get_scenario
+    from drivelab.perception.lane import LANE_CAMERA
+
+    rng = np.random.default_rng(seed)
+    backend = HighwayBackend(get_scenario("follow-lane"), "empty", "continuous")
+    images = np.empty((count, LANE_CAMERA.height, LANE_CAMERA.width, 3), np.uint8)
+    masks = np.empty((count, 2, LANE_CAMERA.height, LANE_CAMERA.width), np.uint8)
+    world = None
+    for index in range(count):
+        if index % 40 == 0:  # a new episode: another lane of the circuit
+            world = backend.reset(int(rng.integers(2**31 - 1)))
+            route = np.asarray(world.route.polyline, dtype=float)
+            stations = np.r_[0.0, np.cumsum(np.hypot(*np.diff(route, axis=0).T))]
+        station = rng.uniform(0.0, stations[-1] - 1.0)
+        segment = int(np.searchsorted(stations, station, side="right")) - 1
+        direction = route[segment + 1] - route[segment]
+        direction /= np.linalg.norm(direction)
+        centre = route[segment] + (station - stations[segment]) * direction
+        lateral = rng.uniform(-MAX_LATERAL_M, MAX_LATERAL_M)
+        heading = np.arctan2(direction[1], direction[0]) + np.radians(rng.normal(0.0, HEADING_STD_DEG))
+        position = centre + lateral * np.array([-direction[1], direction[0]])
+        ego = dataclasses.replace(
+            world.ego, position=position, heading=float(heading), lateral_offset_m=lateral
+        )
+        posed = dataclasses.replace(world, ego=ego)
+        images[index] = render_camera(posed, LANE_CAMERA)
+        masks[index] = render_masks(posed, LANE_CAMERA)[:2]
+    return images, masks
+
+
+def iou(predicted: np.ndarray, truth: np.ndarray) -> float:
+    """Intersection over union of two boolean arrays (1 when both are empty)."""
+    union = np.logical_or(predicted, truth).sum()
+    return float(np.logical_and(predicted, truth).sum() / union) if union else 1.0
+
+
+def train_lane_cnn(
+    frames: int = 1500,
+    epochs: int = 15,
+    seed: int = 0,
+    out: str | Path = WEIGHTS_PATH,
+    batch_size: int = 32,
+    learning_rate: float = 3e-3,
+    width: int = 12,
+    log=print,
+    data: tuple[np.ndarray, np.ndarray] | None = None,
+) -> dict:
+    """Generate ``frames`` training frames (or take ``data``: frames and masks), train a LaneNet with
+    Adam on a class-weighted binary cross-entropy, save its weights to ``out`` and return a summary."""
+    torch.manual_seed(seed)
+    started = time.perf_counter()
+    images, masks = data if data is not None else generate_lane_frames(frames, seed)
+    frames = len(images)
+    inputs = torch.from_numpy(images.transpose(0, 3, 1, 2).copy()).float() / 255.0
+    targets = torch.from_numpy(masks).float()
+    network = LaneNet(width)
+    optimiser = torch.optim.Adam(network.parameters(), lr=learning_rate)
+    # lines cover about 1 % of the pixels: weigh them up so that "no line anywhere" does not win
+    pos_weight = torch.tensor(4.0)
+    generator = torch.Generator().manual_seed(seed)
+    losses = []
+    for epoch in range(epochs):
+        order = torch.randperm(frames, generator=generator)
+        total = 0.0
+        for first in range(0, frames, batch_size):
+            batch = order[first : first + batch_size]
+            loss = functional.binary_cross_entropy_with_logits(
+                network(inputs[batch]), targets[batch], pos_weight=pos_weight
+            )
+            optimiser.zero_grad()
+            loss.backward()
+            optimiser.step()
+            total += loss.item() * len(batch)
+        losses.append(total / frames)
+        log(f"epoch {epoch + 1}/{epochs}: loss {losses[-1]:.4f}")
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    torch.save({"width": width, "state_dict": network.state_dict()}, out)
+    return {
+        "frames": frames,
+        "epochs": epochs,
+        "seed": seed,
+        "losses": losses,
+        "seconds": time.perf_counter() - started,
+        "weights": str(out),
+        "bytes": out.stat().st_size,
+    }

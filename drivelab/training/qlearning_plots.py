@@ -1,0 +1,45 @@
+"""Seed 004's three-panel training plot (its figs. 6 and 8): ε per step, return and length per episode."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+
+def plot_qlearning(
+    epsilons: np.ndarray, returns: Sequence[float], lengths: Sequence[int], path: str | Path, title: str = ""
+) -> Path:
+    """Write the three panels to ``path`` (PNG): ε against steps, the accumulated reward of every
+    episode, and the steps of every episode (each with a moving average where there are many)."""
+    fig, axes = plt.subplots(3, 1, figsize=(7, 8), dpi=100)
+    axes[0].plot(np.arange(len(epsilons)), epsilons, color="tab:purple")
+    axes[0].set_xlabel("step")
+    axes[0].set_ylabel("epsilon")
+    episodes = np.arange(1, len(returns) + 1)
+    for axis, values, label, colour in (
+        (axes[1], np.asarray(returns, float), "accumulated reward", "tab:blue"),
+        (axes[2], np.asarray(lengths, float), "steps per episode", "tab:green"),
+    ):
+        axis.plot(episodes, values, color=colour, alpha=0.35, lw=1)
+        window = max(1, min(25, len(values) // 10))
+        if len(values) >= window > 1:
+            smooth = np.convolve(values, np.ones(window) / window, mode="valid")
+            axis.plot(episodes[window - 1 :], smooth, color=colour, lw=2, label=f"mean of {window}")
+            axis.legend(loc="best", fontsize=8)
+        axis.set_xlabel("episode")
+        axis.set_ylabel(label)
+    for axis in axes:
+        axis.grid(alpha=0.3)
+    if title:
+        axes[0].set_title(title)
+    fig.tight_layout()
+    path = Path(path)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
