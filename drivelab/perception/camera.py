@@ -27,7 +27,6 @@ from drivelab.perception.pinhole import PinholeModel
 from drivelab.perception.topdown import (
     SHIFT,
     _clip_half_plane,
-    fill_each,
     fixed_point,
     per_road,
     segments_near,
@@ -291,7 +290,7 @@ def render_camera(world: WorldState, model: PinholeModel) -> np.ndarray:
     lanes, strips = _ground_layers(world, model)
     groups = [lanes] + [_strip_quads(segments, width) for segments, width, _ in strips]
     projected = _ground_polygons(model, world, groups)
-    fill_each(image, projected[0], ROAD)
+    _fill_strips(image, projected[0], ROAD)  # lane pieces are quads: convex, also once clipped
     for polygons, (_, _, colour) in zip(projected[1:], strips, strict=True):
         _fill_strips(image, polygons, colour)
     _draw_vehicles(image, model, world)
