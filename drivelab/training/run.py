@@ -243,7 +243,7 @@ def train(config: RunConfig, runs_root: str | Path = "runs") -> Path:
         model = spec.build(config.algo, train_env, config.seed, dict(config.hyperparams), run_dir)
     except Exception as exc:
         shutil.rmtree(run_dir, ignore_errors=True)  # bad hyperparameters: leave nothing behind
-        if isinstance(exc, (TypeError, ValueError)):
+        if isinstance(exc, (TypeError, ValueError)) and not isinstance(exc, UsageError):
             raise UsageError(f"bad hyperparameters for {config.algo!r}: {exc}") from None
         raise
     _learn(model, run_dir, config, eval_env)
