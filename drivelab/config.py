@@ -10,6 +10,7 @@ from pathlib import Path
 
 import yaml
 
+from drivelab.envs.scenarios import SCENARIOS
 from drivelab.errors import UsageError
 
 
@@ -127,6 +128,9 @@ def build_config(values: dict) -> RunConfig:
         raise UsageError(f"unknown config field {unknown[0]!r} (known: {', '.join(FIELDS)})")
     if "algo" not in values:
         raise UsageError("config has no 'algo' (give --algo or algo: in the YAML)")
+    scenario = SCENARIOS.get(values.get("env", RunConfig.env))
+    if scenario is not None:  # an unknown one is reported when the env is built
+        values = {"action": scenario.action_kinds[0], "reward": scenario.default_reward, **values}
     return RunConfig(**{k: _check_type(k, v) for k, v in values.items()})
 
 

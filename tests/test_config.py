@@ -50,3 +50,16 @@ def test_identity_ignores_steps_and_name():
     a = RunConfig(algo="ppo", steps=10, name="a")
     assert a.identity() == RunConfig(algo="ppo", steps=99, name="b").identity()
     assert a.identity() != RunConfig(algo="ppo", seed=1).identity()
+
+
+def test_action_and_reward_default_to_the_scenario_s():
+    from drivelab.config import build_config
+
+    assert (build_config({"algo": "ppo"}).action, build_config({"algo": "ppo"}).reward) == ("meta", "highway")
+    line = build_config({"algo": "qlearning", "env": "follow-line", "obs": "line"})
+    lane = build_config({"algo": "qlearning", "env": "follow-lane", "obs": "lane"})
+    assert (line.action, line.reward) == ("seed_line", "line_follow")
+    assert (lane.action, lane.reward) == ("seed_lane", "lane_follow")
+    assert build_config({"algo": "ppo", "env": "town"}).reward == "roach"
+    given = build_config({"algo": "qlearning", "env": "follow-line", "action": "grid", "reward": "highway"})
+    assert (given.action, given.reward) == ("grid", "highway")

@@ -26,6 +26,7 @@ class Scenario:
     :param fast_backend: drivelab's fast backend runs it (the "auto" backend then picks it).
     :param route_deviation_m: the episode fails when the ego is farther than this from its route.
     :param blocked_after_s: the episode fails when the ego stays below 0.1 m/s this long.
+    :param default_reward: the reward preset a run gets when it names none.
     :param circuit: the road is a closed loop: the route is one whole lap (however long).
     :param guide_line: a yellow line is painted along the route (follow-line).
     :param keep_lane: leaving the ego's starting lane counts as leaving the road (follow-lane).
@@ -45,6 +46,7 @@ class Scenario:
     route_deviation_m: float | None = None
     blocked_after_s: float | None = None
     action_kinds: tuple[str, ...] = ("meta", "grid", "continuous", "target_speed")
+    default_reward: str = "highway"
     circuit: bool = False
     guide_line: bool = False
     keep_lane: bool = False
@@ -138,6 +140,7 @@ SCENARIOS: dict[str, Scenario] = {
                 "dense": {"vehicles_count": 30},
             },
             arrival="route_end",
+            default_reward="roach",
             intersection_nodes=tuple(f"J{j}:ir{k}" for j in range(9) for k in range(4)),
             meta_target_speeds=(0, 4.5, 9),
             fast_backend=False,  # its vehicles stop for lights: not in the compiled kernels yet
@@ -151,6 +154,7 @@ SCENARIOS: dict[str, Scenario] = {
             config={"duration": 60},
             traffic={"empty": {}, "regular": {}, "dense": {}},  # no traffic on this task
             action_kinds=SEED_TABLES + ("grid", "continuous"),
+            default_reward="line_follow",
             circuit=True,
             guide_line=True,
             fast_backend=False,  # the guide line and the drag of seed 004's ego are highway-backend only
@@ -161,7 +165,8 @@ SCENARIOS: dict[str, Scenario] = {
             "seed 004: 1.9 km three-lane circuit, curves both ways, no traffic; leaving the lane ends it",
             config={"duration": 60},
             traffic={"empty": {}, "regular": {}, "dense": {}},
-            action_kinds=SEED_TABLES + ("grid", "continuous"),
+            action_kinds=SEED_TABLES[::-1] + ("grid", "continuous"),
+            default_reward="lane_follow",
             circuit=True,
             keep_lane=True,
             fast_backend=False,
