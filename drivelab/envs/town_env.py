@@ -88,6 +88,22 @@ def random_route(road: Road, start: tuple) -> list[tuple]:
     return [start]
 
 
+FIXED_ROUTE_COUNT = 25
+
+
+def fixed_routes(network) -> list[tuple[tuple, str]]:
+    """The town's evaluation routes: 25 (start street, target stop line) pairs drawn once from a
+    generator seeded 0, the same for every agent, run and seed (NoCrash evaluates fixed routes)."""
+    rng = np.random.default_rng(0)
+    streets = street_lanes(network)
+    routes = []
+    while len(routes) < FIXED_ROUTE_COUNT:
+        start, goal = streets[rng.integers(len(streets))], streets[rng.integers(len(streets))][1]
+        if goal != start[1] and shortest_route(network, start[:2], goal):
+            routes.append((start, goal))
+    return routes
+
+
 class TownEnv(AbstractEnv):
     """highway-env environment of the town (drivelab reads it through its highway backend)."""
 
@@ -105,6 +121,10 @@ class TownEnv(AbstractEnv):
                 "policy_frequency": 5,  # and repeats each action twice
                 "duration": 60,
                 "ego_start_speed": 0.0,
+                # training: a new random target each time one is reached (the episode goes on);
+                # evaluation sets it False, and "fixed_routes": True draws from the town's list
+                "retarget": False,
+                "fixed_routes": False,
             }
         )
         return config
@@ -121,7 +141,12 @@ class TownEnv(AbstractEnv):
     def _make_vehicles(self) -> None:
         road, rng = self.road, self.np_random
         streets = street_lanes(road.network)
-        start = streets[rng.integers(len(streets))]
+        if self.config["fixed_routes"]:
+            start, goal = fixed_routes(road.network)[int(rng.integers(FIXED_ROUTE_COUNT))]
+            self.ego_route = shortest_route(road.network, start[:2], goal)
+        else:
+            start = streets[rng.integers(len(streets))]
+            self.ego_route = random_route(road, start)
         lane = road.network.get_lane(start)
         longitudinal = rng.uniform(5.0, max(lane.length - 20.0, 5.0))
         ego = self.action_type.vehicle_class(
@@ -130,7 +155,6 @@ class TownEnv(AbstractEnv):
             lane.heading_at(longitudinal),
             self.config["ego_start_speed"],
         )
-        self.ego_route = random_route(road, start)
         if hasattr(ego, "route"):  # a meta-action ego follows the planned route itself
             ego.route = list(self.ego_route)
         road.vehicles.append(ego)
@@ -151,6 +175,14 @@ class TownEnv(AbstractEnv):
             vehicle.route = random_route(road, index)
             vehicle.randomize_behavior()
             road.vehicles.append(vehicle)
+
+    def extend_route(self) -> list[tuple]:
+        """A new random target from the end of the ego's route: the lanes to append to it."""
+        more = random_route(self.road, self.ego_route[-1])[1:]
+        self.ego_route = self.ego_route + more
+        if hasattr(self.vehicle, "route"):
+            self.vehicle.route = (self.vehicle.route or []) + list(more)
+        return more
 
     def _reward(self, action) -> float:
         return 0.0  # drivelab's reward shapers score the town

@@ -181,3 +181,42 @@ def test_leaving_the_route_and_being_blocked_end_the_episode():
     hw.vehicle.on_state_update()
     _, _, terminated, _, _ = env.step(np.array([0.0, 0.0]))
     assert terminated and env.world.events.off_route and not env.world.events.blocked
+
+
+def test_training_retargets_on_arrival_and_evaluation_uses_fixed_routes():
+    env = DriveEnv(
+        "town", obs="kinematics", action="meta", traffic="empty", backend_options={"retarget": True}
+    )
+    env.reset(seed=2)
+    hw, route = env.backend.env, env.world.route
+    lanes_before = len(env.backend.route_lanes)
+    end = route.polyline[-1] - 0.5 * (route.polyline[-1] - route.polyline[-2]) / np.linalg.norm(
+        route.polyline[-1] - route.polyline[-2]
+    )
+    hw.vehicle.position = end.copy()
+    hw.vehicle.heading = float(np.arctan2(*(route.polyline[-1] - route.polyline[-2])[::-1]))
+    hw.vehicle.on_state_update()
+    env.backend.progress_m = route.length_m - 3.0  # as if it had driven there
+    _, _, terminated, _, _ = env.step(1)
+    assert not terminated and not env.world.events.arrived
+    assert len(env.backend.route_lanes) > lanes_before and env.world.route.length_m > route.length_m
+    assert env.backend.route_lanes[:lanes_before] == env.backend.env.ego_route[:lanes_before]
+    # evaluation: without retarget the same arrival ends the episode
+    plain = DriveEnv("town", obs="kinematics", action="meta", traffic="empty")
+    plain.reset(seed=2)
+    plain.backend.env.vehicle.position = end.copy()
+    plain.backend.env.vehicle.heading = hw.vehicle.heading
+    plain.backend.env.vehicle.on_state_update()
+    plain.backend.progress_m = route.length_m - 3.0
+    _, _, terminated, _, _ = plain.step(1)
+    assert terminated and plain.world.events.arrived
+    # fixed routes: drawn from the town's list of 25, the same list every time
+    from drivelab.envs.town_env import FIXED_ROUTE_COUNT, fixed_routes
+
+    network = plain.backend.env.road.network
+    assert fixed_routes(network) == fixed_routes(network) and len(fixed_routes(network)) == FIXED_ROUTE_COUNT
+    fixed = DriveEnv("town", obs="kinematics", traffic="empty", backend_options={"fixed_routes": True})
+    starts = {tuple(r[0]) for r in fixed_routes(network)}
+    for seed in range(5):
+        fixed.reset(seed=seed)
+        assert fixed.backend.route_lanes[0] in starts

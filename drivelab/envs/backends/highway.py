@@ -157,7 +157,7 @@ class HighwayBackend:
         road = self.env.road
         self.road_map = build_road_map(road.network)
         self.lights = getattr(road, "lights", None)  # a signalised scenario's TownLights
-        lanes = self._plan_route()
+        lanes = self.route_lanes = self._plan_route()
         self.route_lane_id = lanes[0][2]
         self.route = self.route_for(lanes)
         if self.scenario.guide_line:  # painted along the route: one whole lap of the circuit
@@ -177,6 +177,10 @@ class HighwayBackend:
             env._spawn_vehicle(spawn_probability=env.config["spawn_probability"])
         ego = env.vehicle
         self.progress_m = self.route.project(ego.position, self.progress_m)
+        if self._arrived() and env.config.get("retarget"):  # training in town: a new target
+            self.route_lanes = self.route_lanes + env.extend_route()
+            self.route = self.route_for(self.route_lanes)
+            self.progress_m = self.route.project(ego.position, self.progress_m)
         events = Events(
             collided=bool(ego.crashed),
             collision_with="vehicle" if ego.crashed else "",
