@@ -329,6 +329,27 @@ def ablate(
     typer.echo(f"report: {report / 'report.md'}")
 
 
+benchmark_app = typer.Typer(no_args_is_help=True, help="Driving benchmarks of trained runs.")
+app.add_typer(benchmark_app, name="benchmark")
+
+
+@benchmark_app.command("nocrash")
+def benchmark_nocrash(
+    run_dir: Path = typer.Argument(..., help="a run directory trained in the town"),
+    town: str = typer.Option("test", help="layout to drive in: test (unseen) or train"),
+    episodes: int = typer.Option(25, help="episodes per traffic level"),
+    level: str = typer.Option("regular", help="traffic level of the infraction table"),
+) -> None:
+    """NoCrash-style success per traffic level and infractions per km (writes nocrash.json/.md)."""
+    from drivelab.training.nocrash import nocrash, report_markdown
+
+    try:
+        report = nocrash(run_dir, town=town, episodes=episodes, infraction_level=level)
+    except UsageError as exc:
+        _fail(str(exc))
+    typer.echo(report_markdown(report))
+
+
 perception_app = typer.Typer(no_args_is_help=True, help="Perception models: train the lane CNN.")
 app.add_typer(perception_app, name="perception")
 

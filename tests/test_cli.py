@@ -56,7 +56,10 @@ def test_bad_hyperparameter_leaves_nothing(tmp_path):
     assert not any(runs.glob("*")) if runs.exists() else True
 
 
-@pytest.mark.parametrize("command", [["evaluate", "nowhere"], ["train", "--resume", "nowhere"]])
+@pytest.mark.parametrize(
+    "command",
+    [["evaluate", "nowhere"], ["train", "--resume", "nowhere"], ["benchmark", "nocrash", "nowhere"]],
+)
 def test_missing_run_directory(tmp_path, command):
     result = runner.invoke(app, [*command[:-1], str(tmp_path / command[-1])])
     assert result.exit_code == 2

@@ -1,0 +1,116 @@
+"""NoCrash-style evaluation in the town: RLAD's Table III (success per traffic level) and Table IV
+(infraction analysis of one level), seed 000.
+
+A run trained in the town is evaluated on a town layout (the smaller test town by default: NoCrash's
+"new town") at every traffic level, on the town's fixed list of routes, without new targets on
+arrival. Episodes use the same seeds for every run, so every agent drives the same routes in the
+same traffic. Success is reaching the target without a collision, a red light run, being blocked
+or leaving the route; infractions are counted per kilometre driven.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+from drivelab.errors import UsageError
+from drivelab.training.evaluate import aggregate, load_run_config, run_episodes
+
+LEVELS = ("empty", "regular", "dense")
+NOCRASH_SEED = 20_000  # the same episodes for every run
+INFRACTIONS = (  # Table IV's columns: (label, key of ``aggregate``)
+    ("success %", "success_rate"),
+    ("route completion %", "route_completion"),
+    ("collisions with vehicles / km", "collisions_per_km"),
+    ("collisions with the layout (off road) / km", "off_road_per_km"),
+    ("red lights run / km", "red_lights_per_km"),
+    ("blocked / km", "blocked_per_km"),
+)
+
+
+def nocrash(
+    run_dir: str | Path, town: str = "test", episodes: int = 25, infraction_level: str = "regular"
+) -> dict:
+    """Evaluate ``run_dir`` on the NoCrash protocol; write nocrash.json and nocrash.md into it.
+
+    :param town: the layout to drive in: "test" (unseen during training) or "train".
+    :param episodes: episodes per traffic level.
+    :param infraction_level: the traffic level of the infraction table.
+    """
+    from drivelab.envs.core import DriveEnv
+    from drivelab.envs.town import LAYOUTS
+    from drivelab.training.run import load_agent
+
+    run_dir = Path(run_dir)
+    config = load_run_config(run_dir)
+    if config.env != "town":
+        raise UsageError(f"NoCrash evaluates town runs; {str(run_dir)!r} was trained on {config.env!r}")
+    if town not in LAYOUTS:
+        raise UsageError(f"unknown town {town!r} (choose from {', '.join(LAYOUTS)})")
+    if episodes < 1:
+        raise UsageError("--episodes must be >= 1")
+    if infraction_level not in LEVELS:
+        raise UsageError(f"unknown traffic level {infraction_level!r} (choose from {', '.join(LEVELS)})")
+    agent = load_agent(run_dir, config)
+    policy = lambda obs: agent.predict(obs, deterministic=True)[0]  # noqa: E731
+    levels = {}
+    for level in LEVELS:
+        kwargs = {**config.env_kwargs(), "traffic": level}
+        options = {**(kwargs.get("backend_options") or {}), "layout": town, "fixed_routes": True}
+        kwargs["backend_options"] = {**options, "retarget": False}
+        results, _ = run_episodes(policy, DriveEnv(**kwargs), episodes, NOCRASH_SEED)
+        levels[level] = aggregate(results)
+    report = {
+        "run": str(run_dir),
+        "algo": config.algo,
+        "town": town,
+        "episodes_per_level": episodes,
+        "levels": levels,
+        "infraction_level": infraction_level,
+    }
+    _write(run_dir / "nocrash.json", json.dumps(report, indent=2))
+    _write(run_dir / "nocrash.md", report_markdown(report))
+    return report
+
+
+def _percent(value: float | None) -> str:
+    return "n/a" if value is None else f"{100 * value:.1f}"
+
+
+def _number(value: float | None) -> str:
+    return "n/a" if value is None else f"{value:.2f}"
+
+
+def report_markdown(report: dict) -> str:
+    """Both tables as Markdown."""
+    levels = report["levels"]
+    infractions = levels[report["infraction_level"]]
+    lines = [
+        f"# NoCrash: {report['algo']} in the {report['town']} town",
+        "",
+        f"Run `{report['run']}`, {report['episodes_per_level']} episodes per traffic level on the town's "
+        "fixed routes.",
+        "",
+        "| traffic | success % |",
+        "|---|---|",
+        *[f"| {level} | {_percent(levels[level]['success_rate'])} |" for level in LEVELS],
+        "",
+        f"Infractions, {report['infraction_level']} traffic (no pedestrians in the town yet):",
+        "",
+        "| " + " | ".join(label for label, _ in INFRACTIONS) + " |",
+        "|" + "---|" * len(INFRACTIONS),
+        "| "
+        + " | ".join(
+            (_percent if label.endswith("%") else _number)(infractions[key]) for label, key in INFRACTIONS
+        )
+        + " |",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def _write(path: Path, text: str) -> None:
+    temporary = path.with_suffix(path.suffix + ".tmp")
+    temporary.write_text(text)
+    os.replace(temporary, path)
