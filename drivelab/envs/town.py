@@ -204,10 +204,8 @@ class TownLights:
         self.approaches = signalised(layout)
         self.index = {approach: k for k, approach in enumerate(self.approaches)}
         self.positions = np.array([stop_line(layout, j, k) for j, k in self.approaches]).reshape(-1, 2)
-        # an incoming lane along arm k drives towards the centre: heading of -(rotation_k @ (0, 1))
-        self.headings = np.array(
-            [np.arctan2(*(-_rotation(k) @ np.array([0.0, 1.0]))[::-1]) for _, k in self.approaches]
-        )
+        # arm k points along rotation(90°·k) @ (0, 1), at 90°·k + 90°; its incoming lane drives back
+        self.headings = np.radians([90.0 * k - 90.0 for _, k in self.approaches])
 
     def state(self, junction: int, arm: int, time_s: float) -> int | None:
         """The light of one approach, or None where the junction has no lights."""

@@ -22,6 +22,8 @@ from highway_env import utils as hw_utils  # noqa: E402
 from highway_env.road.lane import LineType, StraightLane  # noqa: E402
 from highway_env.vehicle.behavior import IDMVehicle  # noqa: E402
 
+from drivelab.envs.town import approach_of  # noqa: E402
+
 SAMPLE_SPACING_M = 2.0  # curved lanes are turned into polylines with points this far apart
 ROUTE_LOOKAHEAD_M = 1000.0  # a route that never ends (highway, racetrack) is cut here
 
@@ -177,7 +179,7 @@ class HighwayBackend:
             env._spawn_vehicle(spawn_probability=env.config["spawn_probability"])
         ego = env.vehicle
         self.progress_m = self.route.project(ego.position, self.progress_m)
-        if self._arrived() and env.config.get("retarget"):  # training in town: a new target
+        if env.config.get("retarget") and self._arrived():  # training in town: a new target
             self.route_lanes = self.route_lanes + env.extend_route()
             self.route = self.route_for(self.route_lanes)
             self.progress_m = self.route.project(ego.position, self.progress_m)
@@ -252,8 +254,6 @@ class HighwayBackend:
         """The ego crossed a stop line (left a street for the junction lanes behind it) on red."""
         if self.lights is None:
             return False
-        from drivelab.envs.town import approach_of
-
         approach = approach_of(previous_lane)
         if approach is None or self.env.vehicle.lane_index[0] != previous_lane[1]:
             return False
