@@ -45,9 +45,10 @@ def load_own(algo: str, path, env) -> object:
 def own_classes() -> dict[str, type]:
     from drivelab.agents.a2c import OwnA2C
     from drivelab.agents.dueling_ddqn import DuelingDoubleDQN
+    from drivelab.agents.expert import RuleBasedExpert
     from drivelab.agents.ppo import OwnPPO
 
-    return {"dueling_ddqn": DuelingDoubleDQN, "a2c_own": OwnA2C, "ppo_own": OwnPPO}
+    return {"dueling_ddqn": DuelingDoubleDQN, "a2c_own": OwnA2C, "ppo_own": OwnPPO, "expert": RuleBasedExpert}
 
 
 def _registry() -> dict[str, AlgoSpec]:
@@ -99,10 +100,17 @@ def _registry() -> dict[str, AlgoSpec]:
             load_qlearning,
             observation_kinds=("other",),  # a Discrete state; the builder checks it is one
         ),
+        "expert": AlgoSpec(
+            "expert",
+            "rule-based town driver on waypoints + privileged affordances (learns nothing)",
+            ("target_speed",),
+            build_own,
+            load_own,
+        ),
     }
 
 
-ALGO_NAMES = ("dqn", "ppo", "a2c", "sac", "dueling_ddqn", "a2c_own", "ppo_own", "qlearning")
+ALGO_NAMES = ("dqn", "ppo", "a2c", "sac", "dueling_ddqn", "a2c_own", "ppo_own", "qlearning", "expert")
 
 
 def get_algo(name: str) -> AlgoSpec:

@@ -37,7 +37,8 @@ class DriveEnv(gym.Env):
         compiled port of highway-env's traffic model on highway-env's roads: step for step the
         same episodes, many times faster, see benchmarks/results/backend_speed.md) or "highway"
         (highway-env itself, the reference).
-    :param duration_s: episode time limit; default the scenario's.
+    :param duration_s: episode time limit; default the scenario's (in the town with fixed routes,
+        the route's NoCrash limit; a given duration caps it).
     :param offroad_terminal: end the episode when the ego leaves the road.
     :param action_options: keyword options of the action adapter (e.g. ``steer_levels``).
     :param backend_options: extra highway-env config keys.
@@ -87,6 +88,7 @@ class DriveEnv(gym.Env):
 
         self.backend = backend_class(self.scenario, traffic, self.adapter.control, backend_options)
         self.duration_s = float(duration_s or self.backend.duration_s)
+        self.duration_given = duration_s is not None
         self.offroad_terminal = offroad_terminal
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": self.backend.policy_frequency_hz}
@@ -113,6 +115,12 @@ class DriveEnv(gym.Env):
             sensor.reset(self.world, np.random.default_rng([episode_seed, index]))
         self.metrics = EpisodeMetrics(self.world)
         self.stopped_s = 0.0
+        # an evaluation route brings its own time limit (the town's NoCrash protocol); a duration
+        # given to this env still caps it
+        route_limit_s = getattr(self.backend, "route_time_limit_s", None)
+        self.time_limit_s = self.duration_s
+        if route_limit_s is not None:
+            self.time_limit_s = min(route_limit_s, self.duration_s) if self.duration_given else route_limit_s
         return self._observe(), {"episode_seed": episode_seed}
 
     def step(self, action: Any):
@@ -135,7 +143,7 @@ class DriveEnv(gym.Env):
             or events.off_route
             or (self.offroad_terminal and events.off_road)
         )
-        truncated = bool(not terminated and self.world.time_s >= self.duration_s - 1e-9)
+        truncated = bool(not terminated and self.world.time_s >= self.time_limit_s - 1e-9)
         self.metrics.update(self.world, reward)
         info = {
             "reward_terms": terms,

@@ -20,6 +20,7 @@ class EpisodeMetrics:
         self.distance_m = 0.0
         self.speed_sum_mps = 0.0
         self.collisions = 0
+        self.pedestrian_collisions = 0
         self.off_road_events = 0
         self.red_lights = 0
         self.blocked = 0
@@ -33,7 +34,9 @@ class EpisodeMetrics:
         self.length += 1
         self.distance_m += float(np.linalg.norm(world.ego.position - self.last.ego.position))
         self.speed_sum_mps += world.ego.speed_mps
-        self.collisions += int(world.events.collided and not self.last.events.collided)
+        new_collision = world.events.collided and not self.last.events.collided
+        self.collisions += int(new_collision)
+        self.pedestrian_collisions += int(new_collision and world.events.collision_with == "pedestrian")
         self.off_road_events += int(world.events.off_road and not self.last.events.off_road)
         self.red_lights += int(world.events.red_light_crossed)
         self.blocked += int(world.events.blocked)
@@ -60,6 +63,7 @@ class EpisodeMetrics:
             "success": float(success),
             "crashed": float(crashed),
             "collisions": self.collisions,
+            "pedestrian_collisions": self.pedestrian_collisions,
             "off_road_events": self.off_road_events,
             "red_lights": self.red_lights,
             "blocked": self.blocked,

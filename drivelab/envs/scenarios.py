@@ -135,9 +135,9 @@ SCENARIOS: dict[str, Scenario] = {
             "signalised town (train layout; layout=test for the test town): lights, routes to random targets",
             config={"duration": 60},
             traffic={
-                "empty": {"vehicles_count": 0},
-                "regular": {"vehicles_count": 15},
-                "dense": {"vehicles_count": 30},
+                "empty": {"vehicles_count": 0, "pedestrians_count": 0},
+                "regular": {"vehicles_count": 15, "pedestrians_count": 10},
+                "dense": {"vehicles_count": 30, "pedestrians_count": 20},
             },
             arrival="route_end",
             default_reward="roach",

@@ -28,6 +28,7 @@ RIGHT_TURN_RADIUS_M = LANE_WIDTH_M + 5  # highway-env's intersection geometry
 LEFT_TURN_RADIUS_M = RIGHT_TURN_RADIUS_M + LANE_WIDTH_M
 OUTER_M = RIGHT_TURN_RADIUS_M + LANE_WIDTH_M / 2  # junction centre to stop line
 SPEED_LIMIT_MPS = 10.0
+TURN_SPEED_MPS = 5.0  # speed limit of the turning lanes in the junctions
 ARM_DIRECTIONS = ((0, 1), (-1, 0), (0, -1), (1, 0))  # grid steps (column, row) of arms 0..3
 
 
@@ -113,13 +114,13 @@ def build_network(layout: TownLayout) -> RoadNetwork:
                 net.add_lane(f"J{j}:ir{k}", f"J{j}:il{(k - 1) % 4}", CircularLane(
                     centre + rotation @ np.array([OUTER_M, OUTER_M]), RIGHT_TURN_RADIUS_M,
                     angle + np.radians(180), angle + np.radians(270),
-                    line_types=[n, c], speed_limit=SPEED_LIMIT_MPS,
+                    line_types=[n, c], speed_limit=TURN_SPEED_MPS,
                 ))  # fmt: skip
             if (k + 1) % 4 in arms:
                 net.add_lane(f"J{j}:ir{k}", f"J{j}:il{(k + 1) % 4}", CircularLane(
                     centre + rotation @ np.array([-LEFT_TURN_RADIUS_M + w / 2, LEFT_TURN_RADIUS_M - w / 2]),
                     LEFT_TURN_RADIUS_M, angle, angle + np.radians(-90), clockwise=False,
-                    line_types=[n, n], speed_limit=SPEED_LIMIT_MPS,
+                    line_types=[n, n], speed_limit=TURN_SPEED_MPS,
                 ))  # fmt: skip
             if (k + 2) % 4 in arms:
                 net.add_lane(f"J{j}:ir{k}", f"J{j}:il{(k + 2) % 4}", StraightLane(
@@ -140,6 +141,21 @@ def build_network(layout: TownLayout) -> RoadNetwork:
                 ),
             )
     return net
+
+
+CROSSING_WIDTH_M = 3.0  # along the street
+
+
+def street_crossings(layout: TownLayout) -> np.ndarray:
+    """One zebra crossing in the middle of every street: rows (centre x, y, walking heading,
+    length across the road, width along it)."""
+    rows = []
+    for a, b in layout.streets:
+        centre = (layout.centre(a) + layout.centre(b)) / 2
+        along = layout.centre(b) - layout.centre(a)
+        heading = float(np.arctan2(along[1], along[0])) + np.pi / 2
+        rows.append([*centre, heading, 2 * LANE_WIDTH_M, CROSSING_WIDTH_M])
+    return np.array(rows, dtype=float).reshape(-1, 5)
 
 
 @dataclass(frozen=True)

@@ -3,7 +3,10 @@
 ``TownEnv`` builds a ``drivelab.envs.town`` layout, cycles its traffic lights with the episode's
 clock, puts the ego at a random street position with a route to a random stop line elsewhere in
 town, and fills the streets with ``TownVehicle``s: IDM/MOBIL drivers that stop for red lights (and
-for yellow ones when they can stop comfortably) and wander on random routes.
+for yellow ones when they can stop comfortably) and wander on random routes. Pedestrians wait on
+the pavement at a zebra crossing in the middle of each street and walk across when no vehicle is
+about to reach it; vehicles must yield to those on the crossing (IDM sees them as leaders) and a
+vehicle that touches one has collided.
 """
 
 from __future__ import annotations
@@ -13,18 +16,118 @@ from highway_env import utils
 from highway_env.envs.common.abstract import AbstractEnv
 from highway_env.road.road import Road
 from highway_env.vehicle.behavior import IDMVehicle
+from highway_env.vehicle.objects import RoadObject
 
 from drivelab.envs.town import (
+    LANE_WIDTH_M,
     LAYOUTS,
     LightTimings,
     TownLights,
     approach_of,
     build_network,
     shortest_route,
+    street_crossings,
 )
 from drivelab.envs.world import LIGHT_GREEN, LIGHT_YELLOW
 
 STOP_MARGIN_M = 1.0  # front bumper to stop line once stopped
+PAVEMENT_M = LANE_WIDTH_M + 1.5  # a waiting pedestrian stands this far from the street's axis
+CROSSING_GAP_M, CROSSING_GAP_S = 6.0, 2.5  # a pedestrian waits while a vehicle closes in within
+# 6 m + 2.5 s of travel of the crossing
+CROSSING_CLEAR_M = 8.0  # nor while a vehicle stands within this of the crossing's centre
+MEAN_WAIT_S = 20.0  # on the pavement between two crossings (exponential)
+MOVING_MPS = 0.5  # a vehicle slower than this cannot hurt a pedestrian
+WRECK_CLEARED_S = 10.0
+
+
+class Pedestrian(RoadObject):
+    """A pedestrian who walks to and fro across one zebra crossing.
+
+    It waits on the pavement (off the road) for a random time, then for a gap in the traffic, then
+    walks straight across at its own pace. highway-env's IDM sees it as a leader while it is on a
+    lane; collisions with vehicles are checked by ``TownRoad``.
+
+    :param road: the town's road.
+    :param crossing: the crossing's row (centre x, y, walking heading, length, width).
+    :param side: -1 or +1, the pavement it starts on (along the walking heading).
+    :param rng: draws its pace, its place along the crossing and its waits.
+    """
+
+    LENGTH = WIDTH = 0.8
+
+    def __init__(self, road: Road, crossing: np.ndarray, side: int, rng: np.random.Generator) -> None:
+        self.centre, self.rng = np.asarray(crossing[:2], dtype=float), rng
+        self.across = np.array([np.cos(crossing[2]), np.sin(crossing[2])])
+        along = np.array([-self.across[1], self.across[0]]) * rng.uniform(-0.4, 0.4) * crossing[4]
+        self.side, self.pace_mps = int(side), float(rng.uniform(1.0, 1.6))
+        super().__init__(road, self.centre + along + side * PAVEMENT_M * self.across, crossing[2], 0.0)
+        self.collidable = False  # TownRoad checks pedestrian collisions itself, to know who hit whom
+        self.wait_s = float(rng.uniform(0.0, 2 * MEAN_WAIT_S))
+        self.hit_by: RoadObject | None = None
+
+    def walk(self, dt: float, vehicles: list) -> None:
+        """Advance by ``dt``: wait, look, or keep crossing to the other pavement."""
+        if self.crashed:
+            self.speed = 0.0
+            return
+        if self.speed == 0.0:
+            self.wait_s -= dt
+            if self.wait_s <= 0.0 and self._gap_clear(vehicles):
+                self.heading = float(np.arctan2(*(-self.side * self.across)[::-1]))
+                self.speed = self.pace_mps
+            return
+        self.position = self.position + self.speed * dt * self.direction
+        if -self.side * float(np.dot(self.position - self.centre, self.across)) >= PAVEMENT_M:
+            self.side, self.speed = -self.side, 0.0
+            self.wait_s = float(self.rng.exponential(MEAN_WAIT_S))
+
+    def _gap_clear(self, vehicles: list) -> bool:
+        """No vehicle closing in on the crossing within 6 m + 2.5 s of its travel."""
+        for vehicle in vehicles:
+            to_crossing = self.centre - vehicle.position
+            distance = float(np.linalg.norm(to_crossing))
+            if distance < CROSSING_CLEAR_M:  # standing on or next to the crossing
+                return False
+            closing = float(np.dot(vehicle.velocity, to_crossing)) > 0
+            if closing and distance < CROSSING_GAP_M + CROSSING_GAP_S * max(vehicle.speed, 0.0):
+                return False
+        return True
+
+
+class TownRoad(Road):
+    """highway-env's Road plus the town's pedestrians: they walk each frame, and a moving vehicle
+    touching one has crashed (``hit_by`` says which vehicle; the pedestrian then leaves the street
+    but stays listed, crashed). A pedestrian may squeeze past a vehicle standing in a queue on the
+    crossing."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.pedestrians: list[Pedestrian] = []
+        self.ego: RoadObject | None = None
+
+    def step(self, dt: float) -> None:
+        for pedestrian in self.pedestrians:
+            pedestrian.walk(dt, self.vehicles)
+        super().step(dt)
+        for pedestrian in self.pedestrians:
+            for vehicle in self.vehicles:
+                if (
+                    not pedestrian.crashed
+                    and vehicle.speed > MOVING_MPS
+                    and vehicle._is_colliding(pedestrian, 0.0)[0]
+                ):
+                    vehicle.crashed = pedestrian.crashed = True
+                    pedestrian.hit_by = vehicle
+                    self.objects.remove(pedestrian)  # taken off the street: no obstacle to traffic
+        self._clear_wrecks(dt)
+
+    def _clear_wrecks(self, dt: float) -> None:
+        """Crashed NPC vehicles are towed away after ``WRECK_CLEARED_S`` (they would block a
+        street for the rest of the episode); the ego's wreck stays, its episode has ended."""
+        for vehicle in [v for v in self.vehicles if v.crashed and v is not self.ego]:
+            vehicle.wrecked_s = getattr(vehicle, "wrecked_s", 0.0) + dt
+            if vehicle.wrecked_s >= WRECK_CLEARED_S:
+                self.vehicles.remove(vehicle)
 
 
 class TownVehicle(IDMVehicle):
@@ -40,11 +143,14 @@ class TownVehicle(IDMVehicle):
         if approach is None or not hasattr(road, "lights"):
             return None
         state = road.lights.state(*approach, road.clock())
-        if state is None or state == LIGHT_GREEN:
+        if state is None:
             return None
         ahead_m = self.lane.length - self.lane.local_coordinates(self.position)[0] - self.LENGTH / 2
         if ahead_m < 0:
             return None
+        if state == LIGHT_GREEN:  # a left turn waits at the line while oncoming traffic comes
+            turn = next((lane for lane in self.route or [] if lane[0] == self.lane_index[1]), None)
+            return ahead_m if turn and left_turn_must_wait(road, turn, self) else None
         if state == LIGHT_YELLOW and self.speed**2 / (2 * max(ahead_m, 1e-3)) > -self.COMFORT_ACC_MIN:
             return None  # too close to stop: go through on yellow
         return ahead_m
@@ -67,10 +173,52 @@ class TownVehicle(IDMVehicle):
         stop -= self.COMFORT_ACC_MAX * (desired_gap / utils.not_zero(gap_m)) ** 2
         return min(acceleration, stop)
 
+    def act(self, action=None) -> None:
+        """Drive at the current lane's speed limit, and at the next lane's once within the
+        distance a comfortable deceleration needs to reach it (turns are slower)."""
+        limit = self.lane.speed_limit
+        turn = next((lane for lane in self.route or [] if lane[0] == self.lane_index[1]), None)
+        if turn is not None:
+            next_limit = self.road.network.get_lane(turn).speed_limit
+            ahead_m = self.lane.length - self.lane.local_coordinates(self.position)[0]
+            if ahead_m < 5.0 + (self.speed**2 - next_limit**2) / (2 * -self.COMFORT_ACC_MIN):
+                limit = min(limit, next_limit)
+        self.target_speed = limit
+        super().act(action)
+
+    def step(self, dt: float) -> None:
+        super().step(dt)
+        self.speed = max(self.speed, 0.0)  # IDM's hard stop must not turn into reversing
+
     def follow_road(self) -> None:
         if not self.route or len(self.route) <= 1:  # the route (from the lane it steers to) ran out
             self.route = random_route(self.road, self.target_lane_index)
         super().follow_road()
+
+
+ONCOMING_WATCH_M = 30.0  # a left turn yields to oncoming vehicles this close to the junction
+
+
+def left_turn_must_wait(road: Road, turn: tuple, vehicle=None) -> bool:
+    """True when ``turn`` (a junction lane) is a left turn and an oncoming vehicle, one from the
+    opposite arm going straight on or turning right, is moving within 30 m of the junction or in
+    it: it has right of way over the left turn across its path."""
+    junction, arm = turn[0].split(":ir")
+    exit_arm = int(turn[1].split(":il")[1])
+    if exit_arm != (int(arm) + 1) % 4:
+        return False
+    opposite = f"{junction}:ir{(int(arm) + 2) % 4}"
+    for other in road.vehicles:
+        if other is vehicle or other.speed < 0.5:
+            continue
+        index = other.lane_index
+        if index[0] == opposite and index[1] != f"{junction}:il{(int(arm) + 2) % 4}":
+            return True  # in the junction, crossing the turn's path (not U-turning)
+        if index[1] == opposite:
+            remaining_m = other.lane.length - other.lane.local_coordinates(other.position)[0]
+            if remaining_m < ONCOMING_WATCH_M:
+                return True
+    return False
 
 
 def street_lanes(network) -> list[tuple]:
@@ -116,11 +264,14 @@ class TownEnv(AbstractEnv):
                 "action": {"type": "DiscreteMetaAction", "target_speeds": [0, 4.5, 9]},
                 "layout": "train",
                 "vehicles_count": 15,
+                "pedestrians_count": 10,
                 "light_timings": {"green_s": 10.0, "yellow_s": 3.0, "all_red_s": 1.0},
                 "simulation_frequency": 10,  # RLAD runs CARLA at 10 FPS
                 "policy_frequency": 5,  # and repeats each action twice
                 "duration": 60,
                 "ego_start_speed": 0.0,
+                # queues run over lane ends (street → junction → street): find leaders across them
+                "neighbour_vehicles_connected_lanes": True,
                 # training: a new random target each time one is reached (the episode goes on);
                 # evaluation sets it False, and "fixed_routes": True draws from the town's list
                 "retarget": False,
@@ -131,12 +282,22 @@ class TownEnv(AbstractEnv):
 
     def _reset(self) -> None:
         layout = LAYOUTS[self.config["layout"]]
-        self.road = Road(network=build_network(layout), np_random=self.np_random, record_history=False)
+        self.road = TownRoad(network=build_network(layout), np_random=self.np_random, record_history=False)
         timings = LightTimings(**self.config["light_timings"])
         offsets = self.np_random.uniform(0.0, timings.cycle_s, size=len(layout.junctions))
         self.road.lights = TownLights(layout, timings, offsets)
         self.road.clock = lambda: self.time
         self._make_vehicles()
+        self._make_pedestrians(layout)
+
+    def _make_pedestrians(self, layout) -> None:
+        self.crossings = street_crossings(layout)
+        rng, road = self.np_random, self.road
+        for _ in range(self.config["pedestrians_count"]):
+            crossing = self.crossings[rng.integers(len(self.crossings))]
+            pedestrian = Pedestrian(road, crossing, int(rng.choice([-1, 1])), rng)
+            road.pedestrians.append(pedestrian)
+            road.objects.append(pedestrian)
 
     def _make_vehicles(self) -> None:
         road, rng = self.road, self.np_random
@@ -158,7 +319,7 @@ class TownEnv(AbstractEnv):
         if hasattr(ego, "route"):  # a meta-action ego follows the planned route itself
             ego.route = list(self.ego_route)
         road.vehicles.append(ego)
-        self.vehicle = ego
+        road.ego = self.vehicle = ego
         self.controlled_vehicles = [ego]
         for _ in range(self.config["vehicles_count"]):
             for _ in range(10):  # a few tries at a free spot

@@ -42,6 +42,8 @@ class RoadMap:
     marking_kinds: np.ndarray
     edges: np.ndarray
     guide_lines: tuple[np.ndarray, ...] = ()
+    crossings: np.ndarray = field(default_factory=lambda: np.zeros((0, 5)))  # zebra crossings (C, 5):
+    # centre x, y, heading (the direction pedestrians walk), length (across the road), width
 
     @staticmethod
     def empty() -> RoadMap:
@@ -115,7 +117,7 @@ class Events:
     """What happened during the last step."""
 
     collided: bool = False
-    collision_with: str = ""  # "vehicle", "object" or "" when no collision
+    collision_with: str = ""  # "vehicle", "pedestrian", "object" or "" when no collision
     off_road: bool = False
     arrived: bool = False  # the scenario's goal was reached (intersection crossed, merge done, ...)
     red_light_crossed: bool = False
@@ -136,8 +138,16 @@ class WorldState:
     events: Events = field(default_factory=Events)
     # one row per controlled approach: stop-line centre x, y, the approach's heading, LIGHT_* state
     traffic_lights: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    # (P, 6) pedestrians, the same columns as ``vehicles`` (heading = walking direction)
+    pedestrians: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
     max_speed_mps: float = 40.0
     speed_limit_mps: float = 30.0
+
+    def road_users(self) -> np.ndarray:
+        """(N + P, 6) every body on the road besides the ego: vehicles, then pedestrians."""
+        if len(self.pedestrians) == 0:
+            return self.vehicles
+        return np.concatenate([np.asarray(self.vehicles).reshape(-1, 6), self.pedestrians])
 
     def light_ahead(self, max_distance_m: float) -> tuple[int, float] | None:
         """(LIGHT_* state, metres) of the nearest traffic light whose stop line is ahead of the ego

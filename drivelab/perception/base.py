@@ -51,3 +51,21 @@ def box_corners(boxes: np.ndarray) -> np.ndarray:
     corners_x = x[:, None] + half_l * cos_h[:, None] - half_w * sin_h[:, None]
     corners_y = y[:, None] + half_l * sin_h[:, None] + half_w * cos_h[:, None]
     return np.stack([corners_x, corners_y], axis=-1)
+
+
+ZEBRA_STRIPE_M = (0.5, 1.0)  # stripe width, and stripe-to-stripe pitch across the road
+
+
+def zebra_stripes(crossings: np.ndarray) -> np.ndarray:
+    """The painted stripes of zebra crossings (rows x, y, walking heading, length, width) as boxes
+    (K, 5) ``x, y, heading, length, width``: stripes run along the street, as wide as the crossing,
+    one every metre across the road."""
+    boxes = []
+    width_m, pitch_m = ZEBRA_STRIPE_M
+    for x, y, heading, length_m, crossing_width_m in np.asarray(crossings, dtype=float).reshape(-1, 5):
+        across = np.array([np.cos(heading), np.sin(heading)])
+        offsets = np.arange(-length_m / 2 + pitch_m / 2, length_m / 2, pitch_m)
+        centres = np.array([x, y]) + offsets[:, None] * across
+        street_heading = heading + np.pi / 2
+        boxes += [[cx, cy, street_heading, crossing_width_m, width_m] for cx, cy in centres]
+    return np.array(boxes, dtype=float).reshape(-1, 5)

@@ -11,7 +11,7 @@ import numpy as np
 from gymnasium import spaces
 
 from drivelab.envs.world import MARKING_DASHED, MARKING_SOLID, RoadMap, WorldState
-from drivelab.perception.base import Sensor
+from drivelab.perception.base import Sensor, zebra_stripes
 from drivelab.perception.topdown import (
     SHIFT,
     View,
@@ -28,6 +28,8 @@ ROUTE = (86, 86, 120)  # a faint blue band on the road
 SOLID_LINE = (235, 235, 235)
 DASHED_LINE = (200, 200, 200)
 VEHICLE = (60, 110, 220)
+PEDESTRIAN = (200, 60, 160)
+ZEBRA = (225, 225, 225)
 EGO = (60, 200, 70)
 EGO_CRASHED = (230, 40, 40)
 LIGHT_COLOURS = ((40, 200, 60), (240, 200, 30), (230, 30, 30))  # green, yellow, red stop bars
@@ -107,9 +109,13 @@ def render_birdeye(
     for lines, colour in ((solid, SOLID_LINE), (dashed, DASHED_LINE)):
         if len(lines):
             cv2.polylines(image, list(view(lines)), False, colour, 1, cv2.LINE_AA, SHIFT)
+    if len(road.crossings):
+        fill_boxes(image, view.boxes(zebra_stripes(road.crossings)), ZEBRA, cv2.LINE_AA)
     for bar, state in zip(stop_bars(world.traffic_lights), world.traffic_lights[:, 3], strict=True):
         fill_boxes(image, view.boxes(bar[None]), LIGHT_COLOURS[int(state)], cv2.LINE_AA)
     fill_boxes(image, view.vehicles(world.vehicles), VEHICLE, cv2.LINE_AA)
+    if len(world.pedestrians):
+        fill_boxes(image, view.vehicles(world.pedestrians), PEDESTRIAN, cv2.LINE_AA)
     ego = world.ego
     ego_box = np.array([[*ego.position, ego.heading, ego.length_m, ego.width_m]])
     fill_boxes(image, view.boxes(ego_box), EGO_CRASHED if world.events.collided else EGO, cv2.LINE_AA)

@@ -20,8 +20,8 @@ import cv2
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.envs.world import MARKING_SOLID, RoadMap, WorldState
-from drivelab.perception.base import Sensor, box_corners, ego_frame
+from drivelab.envs.world import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW, MARKING_SOLID, RoadMap, WorldState
+from drivelab.perception.base import ZEBRA_STRIPE_M, Sensor, box_corners, ego_frame, zebra_stripes
 from drivelab.perception.birdeye import DashedMarkings
 from drivelab.perception.pinhole import PinholeModel
 from drivelab.perception.topdown import (
@@ -43,9 +43,11 @@ FACE_COLOURS = tuple(
     tuple(int(c) for c in np.clip(VEHICLE * shade, 0, 255)) for shade in (0.9, 0.65, 0.9, 0.65)
 )
 ROOF_COLOUR = tuple(int(c) for c in np.clip(VEHICLE * 1.15, 0, 255))
-LIGHT_COLOURS = {0: (230, 40, 40), 1: (240, 200, 40), 2: (40, 210, 80)}  # traffic-light state → RGB
+LIGHT_COLOURS = {LIGHT_RED: (230, 40, 40), LIGHT_YELLOW: (240, 200, 40), LIGHT_GREEN: (40, 210, 80)}
 LIGHT_HEIGHT_M = 3.0
 VEHICLE_HEIGHT_M = 1.5
+PEDESTRIAN_HEIGHT_M = 1.7
+PEDESTRIAN_COLOURS = ((200, 60, 160), (170, 50, 135), (200, 60, 160), (170, 50, 135))  # magenta
 MARKING_WIDTH_M = 0.15  # white lane markings
 GUIDE_WIDTH_M = 0.3  # the follow-line circuit's yellow line is painted wider
 MASKS = ("left_line", "right_line", "guide_line")
@@ -226,36 +228,42 @@ def _near(world: WorldState, segments: np.ndarray, model: PinholeModel) -> np.nd
     return segments[segments_near(segments, np.asarray(world.ego.position, float), reach)]
 
 
-def _draw_vehicles(image: np.ndarray, model: PinholeModel, world: WorldState) -> None:
-    """Other vehicles as boxes: visible side faces shaded by orientation, then the roof."""
-    if len(world.vehicles) == 0:
+def _draw_road_users(image: np.ndarray, model: PinholeModel, world: WorldState) -> None:
+    """Other vehicles and pedestrians as boxes: visible side faces shaded by orientation, then the
+    top; pedestrians are tall, narrow and coloured apart."""
+    users = world.road_users()
+    if len(users) == 0:
         return
-    boxes = np.asarray(world.vehicles, dtype=float)[:, [0, 1, 2, 4, 5]]
+    boxes = np.asarray(users, dtype=float)[:, [0, 1, 2, 4, 5]]
+    is_pedestrian = np.arange(len(boxes)) >= len(world.vehicles)
     corners = _ego_ground(world, box_corners(boxes))  # (N, 4, 2): front-left, front-right, ...
     distance = np.hypot(*(corners.mean(axis=1) - [model.forward_m, 0.0]).T)
     ahead = (corners[..., 0] > model.forward_m + model.near_m).all(axis=1) & (distance < model.max_range_m)
     order = np.argsort(-distance[ahead])  # painter's order: far to near
-    corners = corners[ahead][order]
+    corners, is_pedestrian = corners[ahead][order], is_pedestrian[ahead][order]
     if len(corners) == 0:
         return
     count = len(corners)
     bottom = np.concatenate([corners, np.zeros((count, 4, 1))], axis=2)
-    top = np.concatenate([corners, np.full((count, 4, 1), VEHICLE_HEIGHT_M)], axis=2)
+    heights = np.where(is_pedestrian, PEDESTRIAN_HEIGHT_M, VEHICLE_HEIGHT_M)
+    top = np.concatenate([corners, np.broadcast_to(heights[:, None, None], (count, 4, 1))], axis=2)
     pixels = fixed_point(model.project(np.concatenate([bottom, top], axis=1)))  # (N, 8, 2)
     following = np.array([1, 2, 3, 0])
     middle = (corners + corners[:, following]) / 2
     outward = middle - corners.mean(axis=1, keepdims=True)
     camera = np.array([model.forward_m, 0.0])
     facing = np.einsum("nki,nki->nk", outward, camera - middle) > 0  # (N, 4) faces seen
-    for vehicle in range(count):
-        for face in np.flatnonzero(facing[vehicle]):
-            quad = pixels[vehicle, [face, following[face], following[face] + 4, face + 4]]
-            cv2.fillConvexPoly(image, quad, FACE_COLOURS[face], cv2.LINE_8, SHIFT)
-        cv2.fillConvexPoly(image, pixels[vehicle, 4:], ROOF_COLOUR, cv2.LINE_8, SHIFT)
+    for user in range(count):
+        faces, roof = (PEDESTRIAN_COLOURS, PEDESTRIAN_COLOURS[0]) if is_pedestrian[user] else (
+            FACE_COLOURS, ROOF_COLOUR)  # fmt: skip
+        for face in np.flatnonzero(facing[user]):
+            quad = pixels[user, [face, following[face], following[face] + 4, face + 4]]
+            cv2.fillConvexPoly(image, quad, faces[face], cv2.LINE_8, SHIFT)
+        cv2.fillConvexPoly(image, pixels[user, 4:], roof, cv2.LINE_8, SHIFT)
 
 
 def _draw_traffic_lights(image: np.ndarray, model: PinholeModel, world: WorldState) -> None:
-    """Traffic lights (rows x, y, heading, state 0 red / 1 yellow / 2 green) as a pole and a lamp."""
+    """Traffic lights (rows x, y, heading, LIGHT_* state) as a pole and a lamp."""
     lights = np.asarray(world.traffic_lights, dtype=float).reshape(-1, 4)
     if len(lights) == 0:
         return
@@ -285,6 +293,11 @@ def _ground_layers(world: WorldState, model: PinholeModel) -> tuple[np.ndarray, 
     dashed_lines = per_road(road, DashedMarkings)
     dashed = dashed_lines.dashes(position, reach) if len(dashed_lines.length) else np.zeros((0, 2, 2))
     strips = [(np.concatenate([solid, dashed]), MARKING_WIDTH_M, WHITE), (guide, GUIDE_WIDTH_M, YELLOW)]
+    if len(road.crossings):
+        stripes = zebra_stripes(road.crossings)
+        along = np.column_stack([np.cos(stripes[:, 2]), np.sin(stripes[:, 2])]) * stripes[:, 3:4] / 2
+        segments = np.stack([stripes[:, :2] - along, stripes[:, :2] + along], axis=1)
+        strips.append((segments[segments_near(segments, position, reach)], ZEBRA_STRIPE_M[0], WHITE))
     return (lane_points, lane_counts), strips
 
 
@@ -299,7 +312,7 @@ def render_camera(world: WorldState, model: PinholeModel) -> np.ndarray:
     _fill_strips(image, projected[0], ROAD)  # lane pieces are quads: convex, also once clipped
     for polygons, (_, _, colour) in zip(projected[1:], strips, strict=True):
         _fill_strips(image, polygons, colour)
-    _draw_vehicles(image, model, world)
+    _draw_road_users(image, model, world)
     _draw_traffic_lights(image, model, world)
     return image
 

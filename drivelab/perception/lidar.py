@@ -146,7 +146,7 @@ class Lidar(Sensor):
         """Everything the beams can hit, as (M, 2, 2) segments in the ego frame."""
         ego = world.ego
         edges = ego_frame(world.road.edges, ego.position, ego.heading)
-        vehicles = world.vehicles
+        vehicles = world.road_users()  # pedestrians reflect beams too
         if len(vehicles) == 0:
             return edges
         # boxes in the ego frame (centre turned, heading made relative), so corners come out there

@@ -10,6 +10,7 @@ from gymnasium import spaces
 
 from drivelab.envs.world import WorldState
 from drivelab.errors import UsageError
+from drivelab.perception.affordances import Affordances
 from drivelab.perception.base import Sensor
 from drivelab.perception.birdeye import BirdEye
 from drivelab.perception.camera import Camera
@@ -24,7 +25,7 @@ from drivelab.perception.ttc_grid import TTCGrid
 from drivelab.perception.waypoints import Waypoints
 
 _ALL = (Kinematics, Lidar, TopDown, BirdEye, EgoState, Waypoints, Measurements, Camera, LineState, LaneState)
-SENSORS: dict[str, type[Sensor]] = {cls.name: cls for cls in (*_ALL, TTCGrid)}
+SENSORS: dict[str, type[Sensor]] = {cls.name: cls for cls in (*_ALL, TTCGrid, Affordances)}
 SENSOR_HELP = {
     "kinematics": "nearest vehicles' presence, position, velocity, heading in the ego frame",
     "lidar": "240 beams (configurable) hitting vehicles and road edges, distance / range",
@@ -36,6 +37,7 @@ SENSOR_HELP = {
     "camera": "84x84 RGB first-person pinhole camera (fov, height, pitch configurable)",
     "line": "seed 004 follow-line state: yellow line centre at 4 rows, each in one of 5 strips or lost",
     "ttc_grid": "discrete highway state: time-to-collision bins of 3 lanes x speed bin (192 states)",
+    "affordances": "privileged: speed, next light and its state, leader, pedestrian, oncoming (m)",
     "lane": "seed 004 follow-lane state: lane centre by the lane CNN (or classical), 5 strips + lost",
 }
 

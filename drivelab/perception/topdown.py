@@ -298,10 +298,11 @@ class TopDown(Sensor):
             fill_boxes(image[2], view.boxes(dots, EXACT_INSET_PX), 255)
         if self.history:
             self.past_positions.append(np.array(world.ego.position, dtype=float))
-        fill_boxes(image[3], view.vehicles(world.vehicles, EXACT_INSET_PX), 255)
-        previous = world.vehicles if self.previous_vehicles is None else self.previous_vehicles
+        traffic = world.road_users()  # vehicles and pedestrians
+        fill_boxes(image[3], view.vehicles(traffic, EXACT_INSET_PX), 255)
+        previous = traffic if self.previous_vehicles is None else self.previous_vehicles
         fill_boxes(image[4], view.vehicles(previous, EXACT_INSET_PX), 255)
-        self.previous_vehicles = np.array(world.vehicles, dtype=float)
+        self.previous_vehicles = np.array(traffic, dtype=float)
         if self.lights:
             for bar, state in zip(stop_bars(world.traffic_lights), world.traffic_lights[:, 3], strict=True):
                 fill_boxes(image[5], view.boxes(bar[None], EXACT_INSET_PX), int(LIGHT_LEVELS[int(state)]))

@@ -184,9 +184,10 @@ def _hazard_speed(distance_m: float, stop_distance_m: float) -> float:
 
 
 def roach_desired_speed(world: WorldState) -> float:
-    """v* = min(v_max, v_vehicle, v_light): slow for a vehicle within 9.5 m and ±45° ahead (d0 = 8 m)
-    and for a red or yellow light whose stop line is ahead in the ego's lane (d0 = 5 m).
-    Pedestrians (d0 = 6 m) join when a scenario has them."""
+    """v* = min(v_max, v_vehicle, v_pedestrian, v_light): slow for a vehicle within 9.5 m and ±45°
+    ahead (d0 = 8 m), for a pedestrian in the ego's path (ahead, within a lane's half width of its
+    axis; d0 = 6 m) and for a red or yellow light whose stop line is ahead in the ego's lane
+    (d0 = 5 m)."""
     desired = ROACH_MAX_SPEED_MPS
     ego = world.ego
     if len(world.vehicles):
@@ -195,6 +196,11 @@ def roach_desired_speed(world: WorldState) -> float:
         ahead = (distance < 9.5) & (np.abs(np.arctan2(local[:, 1], local[:, 0])) <= np.pi / 4)
         if ahead.any():
             desired = min(desired, _hazard_speed(float(distance[ahead].min()), 8.0))
+    if len(world.pedestrians):
+        local = ego_frame(world.pedestrians[:, :2], ego.position, ego.heading)
+        in_path = (local[:, 0] > 0) & (np.abs(local[:, 1]) < ego.lane_width_m / 2)
+        if in_path.any():
+            desired = min(desired, _hazard_speed(float(local[in_path, 0].min()), 6.0))
     light = world.light_ahead(max_distance_m=np.inf)
     if light is not None and light[0] != LIGHT_GREEN:
         desired = min(desired, _hazard_speed(light[1], 5.0))

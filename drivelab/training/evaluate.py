@@ -45,7 +45,9 @@ def aggregate(results: list[dict]) -> dict[str, float]:
     over summed distance)."""
     returns = np.array([r["return"] for r in results], dtype=float)
     km = sum(r["distance_km"] for r in results)
-    per_km = lambda key: sum(r[key] for r in results) / km if km > 0 else None  # noqa: E731
+    per_km = lambda key: sum(r.get(key, 0) for r in results) / km if km > 0 else None  # noqa: E731
+    for r in results:
+        r.setdefault("vehicle_collisions", r["collisions"] - r.get("pedestrian_collisions", 0))
     completion = [r["route_completion"] for r in results if r["route_completion"] is not None]
     return {
         "episodes": len(results),
@@ -57,6 +59,8 @@ def aggregate(results: list[dict]) -> dict[str, float]:
         "mean_speed_mps": float(np.mean([r["mean_speed_mps"] for r in results])),
         "mean_length": float(np.mean([r["length"] for r in results])),
         "collisions_per_km": per_km("collisions"),
+        "pedestrian_collisions_per_km": per_km("pedestrian_collisions"),
+        "vehicle_collisions_per_km": per_km("vehicle_collisions"),
         "off_road_per_km": per_km("off_road_events"),
         "red_lights_per_km": per_km("red_lights"),
         "blocked_per_km": per_km("blocked"),

@@ -22,7 +22,8 @@ NOCRASH_SEED = 20_000  # the same episodes for every run
 INFRACTIONS = (  # Table IV's columns: (label, key of ``aggregate``)
     ("success %", "success_rate"),
     ("route completion %", "route_completion"),
-    ("collisions with vehicles / km", "collisions_per_km"),
+    ("collisions with pedestrians / km", "pedestrian_collisions_per_km"),
+    ("collisions with vehicles / km", "vehicle_collisions_per_km"),
     ("collisions with the layout (off road) / km", "off_road_per_km"),
     ("red lights run / km", "red_lights_per_km"),
     ("blocked / km", "blocked_per_km"),
@@ -96,7 +97,7 @@ def report_markdown(report: dict) -> str:
         "|---|---|",
         *[f"| {level} | {_percent(levels[level]['success_rate'])} |" for level in LEVELS],
         "",
-        f"Infractions, {report['infraction_level']} traffic (no pedestrians in the town yet):",
+        f"Infractions, {report['infraction_level']} traffic:",
         "",
         "| " + " | ".join(label for label, _ in INFRACTIONS) + " |",
         "|" + "---|" * len(INFRACTIONS),

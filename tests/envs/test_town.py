@@ -1,4 +1,5 @@
-"""The signalised town: road network, light phases, NPCs stopping at red, red-light runs, routes."""
+"""The signalised town: road network, light phases, NPCs stopping at red, red-light runs, routes,
+pedestrians at zebra crossings."""
 
 import dataclasses
 
@@ -16,8 +17,16 @@ from drivelab.envs.town import (
     build_network,
     light_state,
     stop_line,
+    street_crossings,
 )
-from drivelab.envs.town_env import TownVehicle, random_route
+from drivelab.envs.town_env import (
+    PAVEMENT_M,
+    Pedestrian,
+    TownRoad,
+    TownVehicle,
+    left_turn_must_wait,
+    random_route,
+)
 from drivelab.envs.world import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW
 
 
@@ -56,7 +65,8 @@ def test_light_phases():
 
 def _town_road(layout="train", red_for_arm=0):
     town = LAYOUTS[layout]
-    road = Road(network=build_network(town), np_random=np.random.default_rng(0))
+    road = TownRoad(network=build_network(town), np_random=np.random.default_rng(0))
+    road.neighbour_vehicles_connected_lanes = True
     timings = LightTimings()
     offsets = np.full(len(town.junctions), 0.0 if red_for_arm % 2 == 1 else timings.cycle_s / 2)
     road.lights = TownLights(town, timings, offsets)
@@ -220,3 +230,120 @@ def test_training_retargets_on_arrival_and_evaluation_uses_fixed_routes():
     for seed in range(5):
         fixed.reset(seed=seed)
         assert fixed.backend.route_lanes[0] in starts
+
+
+def _street_vehicle(road, street, s_m, speed):
+    lane = road.network.get_lane(street)
+    vehicle = TownVehicle(road, lane.position(s_m, 0), lane.heading_at(s_m), speed=speed)
+    vehicle.target_lane_index, vehicle.target_speed = street, 10.0
+    road.vehicles.append(vehicle)
+    return vehicle
+
+
+def _crossing_of(road, town, street):
+    """The crossing on ``street`` and the arc length of its centre along the street's lane."""
+    lane = road.network.get_lane(street)
+    crossings = street_crossings(town)
+    local = np.array([lane.local_coordinates(c[:2]) for c in crossings])
+    distances = np.abs(local[:, 1]) + np.abs(local[:, 0] - lane.length / 2)
+    crossing = crossings[int(np.argmin(distances))]
+    return crossing, lane.local_coordinates(crossing[:2])[0]
+
+
+def _pedestrian(road, crossing, side=-1):
+    walker = Pedestrian(road, crossing, side, np.random.default_rng(0))
+    walker.wait_s = 0.0
+    road.pedestrians.append(walker)
+    road.objects.append(walker)
+    return walker
+
+
+def _run(road, seconds):
+    for _ in range(int(seconds * 10)):
+        road.act()
+        road.step(0.1)
+
+
+def test_crossings_lie_across_the_middle_of_every_street():
+    town = LAYOUTS["train"]
+    crossings = street_crossings(town)
+    assert crossings.shape == (len(town.streets), 5)
+    road = TownRoad(network=build_network(town), np_random=np.random.default_rng(0))
+    for crossing, (a, b) in zip(crossings, town.streets, strict=True):
+        street = next((f, t, 0) for f, to in road.network.graph.items() for t in to
+                      if f.startswith(f"J{a}:il") and t.startswith(f"J{b}:ir"))  # fmt: skip
+        lane = road.network.get_lane(street)
+        s_m, lateral = lane.local_coordinates(crossing[:2])
+        assert s_m == pytest.approx(lane.length / 2) and abs(lateral) == pytest.approx(2.0)  # on the axis
+        assert abs(np.cos(crossing[2] - lane.heading_at(s_m))) < 1e-9  # walked across the street
+
+
+def test_a_pedestrian_waits_for_a_gap_then_crosses_to_the_other_pavement():
+    town, road = _town_road(red_for_arm=1)
+    street = next((f, t, 0) for f, to in road.network.graph.items() for t in to if t == "J4:ir0")
+    crossing, crossing_s = _crossing_of(road, town, street)
+    walker = _pedestrian(road, crossing, side=-1)
+    _street_vehicle(road, street, crossing_s - 20.0, speed=8.0)  # 20 m out at 8 m/s: inside 6 m + 2.5 s
+    road.step(0.1)
+    assert walker.speed == 0.0  # waits
+    _run(road, 6.0)  # the vehicle has passed
+    assert walker.speed > 0.0
+    for _ in range(150):  # 11 m at 1.0-1.6 m/s
+        _run(road, 0.1)
+        if walker.side == 1:
+            break
+    across = np.array([np.cos(crossing[2]), np.sin(crossing[2])])
+    assert walker.side == 1 and walker.speed == 0.0 and not walker.crashed  # arrived, waits again
+    assert np.dot(walker.position - crossing[:2], across) == pytest.approx(PAVEMENT_M, abs=0.2)
+
+
+def test_a_vehicle_stops_for_a_pedestrian_on_the_crossing():
+    town, road = _town_road(red_for_arm=1)
+    street = next((f, t, 0) for f, to in road.network.graph.items() for t in to if t == "J4:ir0")
+    crossing, crossing_s = _crossing_of(road, town, street)
+    walker = _pedestrian(road, crossing, side=-1)
+    walker.pace_mps = 0.3  # slow: it is still on the vehicle's lane when the vehicle arrives
+    road.step(0.1)
+    assert walker.speed > 0.0  # the street is empty: it starts across
+    vehicle = _street_vehicle(road, street, crossing_s - 30.0, speed=8.0)
+    _run(road, 8.0)
+    assert not vehicle.crashed and not walker.crashed and vehicle.speed < 0.5
+    assert vehicle.lane.local_coordinates(vehicle.position)[0] < crossing_s - vehicle.LENGTH / 2
+
+
+def test_a_left_turn_waits_for_oncoming_traffic():
+    town, road = _town_road(red_for_arm=1)  # arms 0 and 2 green
+    into_0 = next((f, t, 0) for f, to in road.network.graph.items() for t in to if t == "J4:ir0")
+    into_2 = next((f, t, 0) for f, to in road.network.graph.items() for t in to if t == "J4:ir2")
+    left_from_0 = ("J4:ir0", "J4:il1", 0)
+    straight_from_0 = ("J4:ir0", "J4:il2", 0)
+    lane_2 = road.network.get_lane(into_2)
+    assert not left_turn_must_wait(road, left_from_0)
+    oncoming = _street_vehicle(road, into_2, lane_2.length - 20.0, speed=8.0)
+    assert left_turn_must_wait(road, left_from_0) and not left_turn_must_wait(road, straight_from_0)
+    turner = _street_vehicle(road, into_0, road.network.get_lane(into_0).length - 25.0, speed=6.0)
+    turner.route = [into_0, left_from_0]
+    road.act()
+    assert turner.stop_line_ahead() is not None  # it plans to stop at the line
+    oncoming.speed = 0.0
+    assert not left_turn_must_wait(road, left_from_0)
+
+
+def test_hitting_a_pedestrian_is_a_pedestrian_collision():
+    env = DriveEnv("town", obs="measurements", action="target_speed", traffic="regular", duration_s=20)
+    env.reset(seed=0)
+    world = env.world
+    assert world.pedestrians.shape == (10, 6) and world.road.crossings.shape == (12, 5)
+    hw = env.backend.env
+    walker = hw.road.pedestrians[0]
+    hw.vehicle.speed = 6.0
+    walker.position = hw.vehicle.position + 4.0 * hw.vehicle.direction
+    walker.wait_s, walker.crashed = 1e9, False
+    for other in hw.road.vehicles[1:]:
+        other.position = other.position + 1000.0  # nobody else nearby
+    for _ in range(5):
+        _, _, terminated, _, info = env.step(np.array([1.0, 0.0], dtype=np.float32))
+        if terminated:
+            break
+    assert terminated and env.world.events.collision_with == "pedestrian"
+    assert info["episode_metrics"]["pedestrian_collisions"] == 1

@@ -78,3 +78,14 @@ def test_custom_size():
     image = render_birdeye(world(), size_hw=(60, 100), pixels_per_meter=2.0)
     assert image.shape == (60, 100, 3)
     assert tuple(image[30, 50]) == birdeye.EGO and tuple(image[30, 90]) == birdeye.GRASS
+
+
+def test_pedestrians_and_zebra_crossings():
+    walker = np.array([[10.0, -6.0, np.pi / 2, 1.2, 0.8, 0.8]])  # 10 m ahead, 6 m to the left
+    crossing = np.array([[15.0, 0.0, np.pi / 2, 8.0, 3.0]])  # stripes at y = ±0.5, ±1.5, ...
+    w = _with_road(world(), polygons=[[[-50, -4], [50, -4], [50, 4], [-50, 4]]])
+    w = dataclasses.replace(w, pedestrians=walker, road=dataclasses.replace(w.road, crossings=crossing))
+    image = render_birdeye(w, (400, 400), 10.0)  # fine enough to resolve 0.5 m stripes; ego at 199.5
+    assert tuple(image[200 - 100, 200 - 60]) == birdeye.PEDESTRIAN
+    assert tuple(image[200 - 150, 200 + 15]) == birdeye.ZEBRA  # a stripe 15 m ahead, 1.5 m right
+    assert tuple(image[200 - 150, 200 + 20]) == birdeye.ROAD  # the road between two stripes (y = 2 m)

@@ -6,7 +6,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from drivelab.envs.world import MARKING_DASHED, MARKING_SOLID, RoadMap, Route
+from drivelab.envs.world import LIGHT_GREEN, LIGHT_RED, MARKING_DASHED, MARKING_SOLID, RoadMap, Route
 from drivelab.perception import camera
 from drivelab.perception.camera import Camera, PinholeModel, lateral_at_distances, render_masks
 from drivelab.perception.sensors import make_sensor
@@ -63,6 +63,26 @@ def test_rendered_colours_at_projected_pixels():
     assert tuple(image[pixel(8.0, -7.0)]) == camera.GRASS
     u, v = np.round(model.project(np.array([15.0 - 2.5, 4.0, 0.75]))).astype(int)  # the car's rear face
     assert tuple(image[v, u]) == camera.FACE_COLOURS[2]
+
+
+def test_pedestrians_zebra_crossings_and_light_colours():
+    sensor = Camera(width=256, height=256)
+    w = _three_lane_world(guide=False)
+    crossing = np.array([[20.0, 0.0, np.pi / 2, 12.0, 3.0]])  # across all three lanes, 20 m ahead
+    walker = np.array([[12.0, -3.0, np.pi / 2, 1.2, 0.8, 0.8]])
+    lights = np.array([[30.0, 3.0, 0.0, LIGHT_GREEN], [30.0, -3.0, 0.0, LIGHT_RED]])
+    w = dataclasses.replace(
+        w, road=dataclasses.replace(w.road, crossings=crossing), pedestrians=walker, traffic_lights=lights
+    )
+    sensor.reset(w, np.random.default_rng(0))
+    image = sensor.observe(w)
+    model = sensor.model
+    pixel = lambda x, y, z=0.0: tuple(np.round(model.project(np.array([x, y, z]))).astype(int)[::-1])  # noqa: E731
+    assert tuple(image[pixel(12.0 - 0.4, -3.0, 0.85)]) in camera.PEDESTRIAN_COLOURS  # its near face
+    assert tuple(image[pixel(20.0, 0.5)]) == camera.WHITE  # a stripe every metre, 0.5 m wide ...
+    assert tuple(image[pixel(20.0, 1.0)]) == camera.ROAD  # ... with road between
+    assert tuple(image[pixel(30.0, 3.0, camera.LIGHT_HEIGHT_M)]) == camera.LIGHT_COLOURS[LIGHT_GREEN]
+    assert camera.LIGHT_COLOURS[LIGHT_GREEN][1] > 200 and camera.LIGHT_COLOURS[LIGHT_RED][0] > 200
 
 
 def test_masks_cover_exactly_the_painted_lines():

@@ -104,6 +104,11 @@ def test_roach_desired_speed_hazards():
     green = dataclasses.replace(world(), traffic_lights=np.array([[7.0, 0.5, 0.0, LIGHT_GREEN]]))
     opposite = dataclasses.replace(world(), traffic_lights=np.array([[7.0, 0.5, np.pi, LIGHT_RED]]))
     assert terms.roach_desired_speed(green) == terms.roach_desired_speed(opposite) == 6.0
+    # a pedestrian 8 m ahead in the path: 6 * (8 - 6) / 5 = 2.4; one 3 m to the side is no hazard
+    walker = dataclasses.replace(world(), pedestrians=np.array([[8.0, 1.0, 1.57, 1.2, 0.8, 0.8]]))
+    assert terms.roach_desired_speed(walker) == pytest.approx(2.4)
+    aside = dataclasses.replace(world(), pedestrians=np.array([[8.0, 3.0, 1.57, 1.2, 0.8, 0.8]]))
+    assert terms.roach_desired_speed(aside) == 6.0
 
 
 def test_roach_route_and_action_terms():

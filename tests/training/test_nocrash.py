@@ -50,3 +50,30 @@ def test_nocrash_bad_input(tmp_path):
     with pytest.raises(UsageError, match="NoCrash evaluates town runs"):
         nocrash(highway)
     assert not (run_dir / "nocrash.json").exists() and not (run_dir / "nocrash.md").exists()
+
+
+def test_the_expert_trains_and_is_evaluated_like_any_algorithm(tmp_path):
+    config = build_config(
+        {"algo": "expert", "env": "town", "obs": "waypoints,affordances", "action": "target_speed",
+         "traffic": "empty", "steps": 20, "seed": 0, "name": "expert", "eval_every": 20, "eval_episodes": 1,
+         "env_options": {"duration_s": 2}}
+    )  # fmt: skip
+    run_dir = run_module.train(config, tmp_path)
+    assert (run_dir / "model.zip").is_file() and (run_dir / "evaluations.csv").is_file()
+    report = nocrash(run_dir, town="test", episodes=1)
+    assert report["algo"] == "expert" and set(report["levels"]) == set(LEVELS)
+    assert "collisions with pedestrians / km" in (run_dir / "nocrash.md").read_text()
+
+
+def test_fixed_routes_get_the_corl2017_time_limit():
+    from drivelab.envs.core import DriveEnv
+
+    options = {"layout": "test", "fixed_routes": True, "retarget": False}
+    env = DriveEnv("town", obs="waypoints", action="target_speed", traffic="empty", backend_options=options)
+    env.reset(seed=3)
+    route = env.world.route
+    assert env.time_limit_s == pytest.approx((route.length_m - route.progress_m) / (10 / 3.6) + 10.0)
+    capped = DriveEnv("town", obs="waypoints", action="target_speed", traffic="empty", duration_s=5,
+                      backend_options=options)  # fmt: skip
+    capped.reset(seed=3)
+    assert capped.time_limit_s == 5.0

@@ -25,6 +25,7 @@ from highway_env.vehicle.behavior import IDMVehicle  # noqa: E402
 from drivelab.envs.town import approach_of  # noqa: E402
 
 SAMPLE_SPACING_M = 2.0  # curved lanes are turned into polylines with points this far apart
+ROUTE_TIMEOUT_MPS = 10 / 3.6  # an evaluation route must be driven at 10 km/h on average
 ROUTE_LOOKAHEAD_M = 1000.0  # a route that never ends (highway, racetrack) is cut here
 
 
@@ -162,9 +163,15 @@ class HighwayBackend:
         lanes = self.route_lanes = self._plan_route()
         self.route_lane_id = lanes[0][2]
         self.route = self.route_for(lanes)
+        crossings = getattr(self.env, "crossings", None)
+        if crossings is not None:
+            self.road_map = dataclasses.replace(self.road_map, crossings=crossings)
         if self.scenario.guide_line:  # painted along the route: one whole lap of the circuit
             self.road_map = dataclasses.replace(self.road_map, guide_lines=(self.route.polyline,))
         self.progress_m = self.route.project(self.env.vehicle.position)
+        self.route_time_limit_s = None
+        if self.env.config.get("fixed_routes"):  # NoCrash: the CoRL 2017 timeout, 10 km/h + 10 s
+            self.route_time_limit_s = (self.route.length_m - self.progress_m) / ROUTE_TIMEOUT_MPS + 10.0
         self.world = self._export(Events())
         return self.world
 
@@ -185,7 +192,7 @@ class HighwayBackend:
             self.progress_m = self.route.project(ego.position, self.progress_m)
         events = Events(
             collided=bool(ego.crashed),
-            collision_with="vehicle" if ego.crashed else "",
+            collision_with=self._collision_kind(),
             off_road=not ego.on_road or (self.scenario.keep_lane and ego.lane_index[2] != self.route_lane_id),
             arrived=self._arrived(),
             red_light_crossed=self._ran_red_light(previous_lane),
@@ -259,6 +266,15 @@ class HighwayBackend:
             return False
         return self.lights.state(*approach, self.env.time) == LIGHT_RED
 
+    def _pedestrians(self) -> list:
+        return getattr(self.env.road, "pedestrians", [])
+
+    def _collision_kind(self) -> str:
+        ego = self.env.vehicle
+        if not ego.crashed:
+            return ""
+        return "pedestrian" if any(p.hit_by is ego for p in self._pedestrians()) else "vehicle"
+
     def _arrived(self) -> bool:
         ego = self.env.vehicle
         if self.scenario.arrival == "route_end":
@@ -283,6 +299,14 @@ class HighwayBackend:
         vehicles = np.array(
             [[*v.position, v.heading, v.speed, v.LENGTH, v.WIDTH] for v in others], dtype=float
         ).reshape(-1, 6)
+        pedestrians = np.array(
+            [
+                [*p.position, p.heading, p.speed, p.LENGTH, p.WIDTH]
+                for p in self._pedestrians()
+                if not p.crashed
+            ],
+            dtype=float,
+        ).reshape(-1, 6)
         ego_state = Ego(
             position=np.array(ego.position, dtype=float),
             heading=float(ego.heading),
@@ -306,6 +330,7 @@ class HighwayBackend:
             dt_s=1.0 / self.policy_frequency_hz,
             ego=ego_state,
             vehicles=vehicles,
+            pedestrians=pedestrians,
             road=self.road_map,
             route=self.route.at(self.progress_m),
             events=events,

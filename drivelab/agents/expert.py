@@ -1,0 +1,191 @@
+"""A rule-based driver for the town (``--algo expert``): it shows the town can be solved and that the
+NoCrash metrics measure what they should.
+
+It reads the ``waypoints`` and ``affordances`` sensors and acts through the ``target_speed``
+adapter (whose PID turns its speed into throttle and brake):
+
+- steering: pure pursuit of the route point a speed-dependent distance ahead, on highway-env's
+  kinematic bicycle (its wheelbase is the vehicle length);
+- speed: cruise at Roach's 6 m/s, slower where the route bends (bounded lateral acceleration), and
+  never faster than lets it stop at a comfortable deceleration before a red light's stop line, a
+  yellow one it can still stop for, the vehicle ahead on its route, a pedestrian on or near the
+  route, or, for a left turn at a light, the line while an oncoming vehicle comes.
+
+It learns nothing: ``learn`` drives the environment for the requested steps (so that a run directory,
+its training curve and its evaluations exist like any other algorithm's).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from gymnasium import spaces
+from stable_baselines3.common.callbacks import BaseCallback
+
+from drivelab.agents.base import OwnAgent
+from drivelab.errors import UsageError
+from drivelab.perception.affordances import FIELDS
+
+STEER_RAD = np.pi / 4  # a steering command of 1 is highway-env's full lock, 45°
+
+
+@dataclass(frozen=True)
+class ExpertConfig:
+    """Rules of the expert (``-H key=value``).
+
+    :param cruise_speed_mps: speed on a free straight route (Roach's v_max).
+    :param max_speed_mps: the target_speed adapter's speed at action 1 (its ``max_speed_mps``).
+    :param brake_mps2: deceleration it plans its stops with.
+    :param hard_brake_mps2: deceleration it can still brake at for a light turning yellow.
+    :param half_length_m: centre to front bumper.
+    :param lateral_accel_mps2: largest lateral acceleration it takes in a bend.
+    :param lookahead_m: shortest pure-pursuit distance; it grows by ``lookahead_s`` of travel.
+    :param lookahead_s: seconds of travel added to the pursuit distance.
+    :param wheelbase_m: of the bicycle model (highway-env: the vehicle's 5 m length).
+    :param light_stop_m: centre of the ego to a stop line when stopped for it.
+    :param vehicle_gap_m: centre to centre behind a stopped vehicle.
+    :param pedestrian_gap_m: centre of the ego to a pedestrian it stops for.
+    :param yield_watch_m: an oncoming vehicle closer than this makes a left turn wait.
+    """
+
+    cruise_speed_mps: float = 6.0
+    max_speed_mps: float = 6.0
+    brake_mps2: float = 2.5
+    hard_brake_mps2: float = 4.0
+    half_length_m: float = 2.5
+    lateral_accel_mps2: float = 2.0
+    lookahead_m: float = 3.0
+    lookahead_s: float = 0.5
+    wheelbase_m: float = 5.0
+    light_stop_m: float = 3.5
+    vehicle_gap_m: float = 8.0
+    pedestrian_gap_m: float = 6.0
+    yield_watch_m: float = 30.0
+
+    def check(self, algo: str) -> None:
+        positive = (self.cruise_speed_mps, self.max_speed_mps, self.brake_mps2, self.lateral_accel_mps2)
+        if min(positive) <= 0 or self.lookahead_m <= 0 or self.wheelbase_m <= 0:
+            raise UsageError(f"{algo!r} needs positive speeds, accelerations, lookahead_m and wheelbase_m")
+
+
+def stopping_speed(distance_m: float, brake_mps2: float) -> float:
+    """The fastest speed from which braking at ``brake_mps2`` stops within ``distance_m``."""
+    return float(np.sqrt(2.0 * brake_mps2 * max(distance_m, 0.0)))
+
+
+class RuleBasedExpert(OwnAgent):
+    """The town's rule-based driver (see the module docstring)."""
+
+    algo = "expert"
+    config_class = ExpertConfig
+
+    def _build(self) -> None:
+        space = self.observation_space
+        if not isinstance(space, spaces.Dict) or not {"waypoints", "affordances"} <= set(space.spaces):
+            raise UsageError("expert needs --obs waypoints,affordances")
+        if space["affordances"].shape != (len(FIELDS),):
+            raise UsageError("expert needs the affordances sensor without stacking")
+        if not isinstance(self.action_space, spaces.Box) or self.action_space.shape != (2,):
+            raise UsageError("expert drives with --action target_speed")
+        self._last_obs = None
+
+    def _state(self) -> dict:
+        return {}
+
+    def _set_state(self, state: dict) -> None:
+        pass
+
+    # --- acting -----------------------------------------------------------------------------------
+    def predict(self, obs, state=None, episode_start=None, deterministic: bool = True):
+        """(``[target speed fraction, steering]``, None) for one observation."""
+        config = self.config
+        waypoints = np.asarray(obs["waypoints"], dtype=float).reshape(-1, 2)
+        facts = dict(zip(FIELDS, np.asarray(obs["affordances"], dtype=float), strict=True))
+        speed = max(facts["speed_mps"], 0.0)
+        steer, curvature = self._pursuit(waypoints, config.lookahead_m + config.lookahead_s * speed)
+        target = min(config.cruise_speed_mps, np.sqrt(config.lateral_accel_mps2 / max(abs(curvature), 1e-6)))
+        target = min(target, self._bend_ahead(waypoints))
+        for limit in self._hazard_limits(facts, speed):
+            target = min(target, limit)
+        action = np.array([np.clip(target / config.max_speed_mps, 0.0, 1.0), steer], dtype=np.float32)
+        return action, None
+
+    def _pursuit(self, waypoints: np.ndarray, lookahead_m: float) -> tuple[float, float]:
+        """(steering command, path curvature) to reach the route point ``lookahead_m`` ahead."""
+        points = np.vstack([[0.0, 0.0], waypoints])
+        arc = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))]
+        target = np.array([np.interp(lookahead_m, arc, points[:, axis]) for axis in (0, 1)])
+        distance_sq = max(float(target @ target), 1e-6)
+        curvature = 2.0 * target[1] / distance_sq  # pure pursuit: κ = 2·y / L²
+        steer = np.arctan(self.config.wheelbase_m * curvature) / STEER_RAD
+        return float(np.clip(steer, -1.0, 1.0)), curvature
+
+    def _bend_ahead(self, waypoints: np.ndarray) -> float:
+        """Speed that lets it slow down in time for the sharpest bend among the waypoints."""
+        config = self.config
+        points = np.vstack([[0.0, 0.0], waypoints])
+        steps = np.diff(points, axis=0)
+        lengths = np.linalg.norm(steps, axis=1)
+        moving = lengths > 1e-6
+        if moving.sum() < 2:
+            return config.cruise_speed_mps
+        headings = np.unwrap(np.arctan2(steps[moving, 1], steps[moving, 0]))
+        curvature = np.abs(np.diff(headings)) / np.maximum(lengths[moving][1:], 1e-6)
+        distance = np.cumsum(lengths[moving])[:-1]
+        bend_speed = np.sqrt(config.lateral_accel_mps2 / np.maximum(curvature, 1e-6))
+        allowed = np.sqrt(bend_speed**2 + 2.0 * config.brake_mps2 * distance)
+        return float(min(allowed.min(), config.cruise_speed_mps))
+
+    def _hazard_limits(self, facts: dict, speed: float) -> list[float]:
+        config = self.config
+        stop_m = facts["stop_line_m"] - config.light_stop_m
+        # a yellow light is crossed only when even hard braking would not stop the front bumper
+        # before the line, as a driver would (once braking for it, it can always stop)
+        bumper_m = facts["stop_line_m"] - config.half_length_m
+        can_stop = speed <= stopping_speed(bumper_m, config.hard_brake_mps2)
+        stop_for_yellow = facts["light_yellow"] > 0.5 and can_stop
+        must_yield = facts["oncoming_m"] < config.yield_watch_m
+        limits = []
+        if facts["light_red"] > 0.5 or stop_for_yellow or must_yield:
+            limits.append(stopping_speed(stop_m, config.brake_mps2))
+        # follow at no less than the gap: match the leader's speed plus what a stop within the room
+        # allows; inside the gap, drop 1 m/s below the leader's speed per metre missing
+        room = facts["leader_m"] - config.vehicle_gap_m
+        leader_speed = max(facts["leader_speed_mps"], 0.0)
+        following = stopping_speed(room, config.brake_mps2) if room >= 0 else room
+        limits.append(leader_speed + following)
+        limits.append(stopping_speed(facts["pedestrian_m"] - config.pedestrian_gap_m, config.brake_mps2))
+        return limits
+
+    # --- "training": driving the environment with the rules ---------------------------------------
+    def learn(
+        self,
+        total_timesteps: int,
+        callback: BaseCallback | None = None,
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> RuleBasedExpert:
+        """Drive ``total_timesteps`` steps with the rules (nothing is learned; contract in base.py)."""
+        env = self.env
+        if reset_num_timesteps:
+            self.num_timesteps = 0
+        target_steps = self.num_timesteps + int(total_timesteps)
+        start_time = time.perf_counter()
+        if self._last_obs is None:
+            self._last_obs, _ = env.reset()
+        callback = self._start_callback(callback)
+        callback.on_training_start(locals(), globals())
+        while self.num_timesteps < target_steps:
+            action, _ = self.predict(self._last_obs)
+            new_obs, reward, terminated, truncated, info = env.step(action)
+            self.num_timesteps += 1
+            self._last_obs = env.reset()[0] if terminated or truncated else new_obs
+            callback.update_locals(locals())
+            if not callback.on_step():
+                break
+        self.logger.record("time/fps", self.num_timesteps / max(time.perf_counter() - start_time, 1e-9))
+        self.logger.dump(self.num_timesteps)
+        callback.on_training_end()
+        return self

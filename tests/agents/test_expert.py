@@ -1,0 +1,90 @@
+"""The rule-based town expert: its decisions on hand-built observations, a whole episode, bad input."""
+
+import numpy as np
+import pytest
+from gymnasium import spaces
+
+from drivelab.agents.expert import RuleBasedExpert
+from drivelab.envs.core import DriveEnv
+from drivelab.errors import UsageError
+from drivelab.perception.affordances import FIELDS
+
+STRAIGHT = np.column_stack([2.0 * np.arange(1, 11), np.zeros(10)]).astype(np.float32)
+SPACE = spaces.Dict(
+    {
+        "waypoints": spaces.Box(-40, 40, (10, 2), np.float32),
+        "affordances": spaces.Box(-50, 50, (len(FIELDS),), np.float32),
+    }
+)
+ACTIONS = spaces.Box(np.array([0.0, -1.0], np.float32), np.array([1.0, 1.0], np.float32))
+
+
+def _act(waypoints=STRAIGHT, **facts):
+    values = {field: 40.0 for field in FIELDS}
+    values.update(speed_mps=6.0, light_red=0.0, light_yellow=0.0, leader_speed_mps=0.0)
+    values.update(facts)
+    expert = RuleBasedExpert(SPACE, ACTIONS, seed=0)
+    obs = {"waypoints": waypoints, "affordances": np.array([values[f] for f in FIELDS], np.float32)}
+    action, _ = expert.predict(obs)
+    assert ACTIONS.contains(action)
+    return action
+
+
+def test_cruises_straight_on_a_free_road():
+    speed, steer = _act()
+    assert speed == pytest.approx(1.0) and steer == pytest.approx(0.0)
+
+
+def test_steers_towards_a_bend_and_slows_for_it():
+    # a 10 m-radius bend to the right (+y): 2 m apart along the arc
+    angles = 2.0 * np.arange(1, 11) / 10.0
+    bend = np.column_stack([10 * np.sin(angles), 10 * (1 - np.cos(angles))]).astype(np.float32)
+    speed, steer = _act(waypoints=bend)
+    assert steer > 0.1  # right
+    assert speed * 6.0 <= np.sqrt(2.0 * 10.0) + 1e-6  # lateral acceleration ≤ 2 m/s² on a 10 m radius
+
+
+def test_stops_for_red_leaders_and_pedestrians():
+    # at its stop point (3.5 m from the line) a red light asks for 0 m/s; far away, full speed
+    assert _act(stop_line_m=3.5, light_red=1.0)[0] == pytest.approx(0.0)
+    assert _act(stop_line_m=30.0, light_red=1.0)[0] == pytest.approx(1.0)
+    assert _act(stop_line_m=3.5)[0] == pytest.approx(1.0)  # green: drive on
+    assert _act(leader_m=8.0, leader_speed_mps=0.0)[0] == pytest.approx(0.0)  # the gap to a stopped car
+    assert _act(leader_m=8.0, leader_speed_mps=3.0)[0] == pytest.approx(0.5)  # match its 3 m/s
+    assert _act(leader_m=6.0, leader_speed_mps=3.0)[0] == pytest.approx(1.0 / 6.0)  # 2 m inside: 1 m/s
+    assert _act(pedestrian_m=6.0)[0] == pytest.approx(0.0)
+
+
+def test_yellow_lights_and_left_turns():
+    # yellow, 10 m from the line at 6 m/s: it can stop (needs 4.5 m at 4 m/s²), so it brakes
+    assert _act(stop_line_m=10.0, light_yellow=1.0)[0] < 1.0
+    # yellow with the bumper 1 m from the line at 6 m/s: too late to stop, it goes on
+    assert _act(stop_line_m=3.5, light_yellow=1.0)[0] == pytest.approx(1.0)
+    # a green light with a left turn behind it: it waits at the line while an oncoming car comes
+    assert _act(stop_line_m=3.5, oncoming_m=20.0)[0] == pytest.approx(0.0)
+    assert _act(stop_line_m=3.5, oncoming_m=40.0)[0] == pytest.approx(1.0)
+
+
+def test_drives_a_fixed_test_town_route_to_its_end():
+    env = DriveEnv(
+        "town",
+        obs="waypoints,affordances",
+        action="target_speed",
+        traffic="empty",
+        backend_options={"layout": "test", "fixed_routes": True, "retarget": False},
+    )
+    expert = RuleBasedExpert(env.observation_space, env.action_space, seed=0)
+    obs, _ = env.reset(seed=20_000)
+    for _ in range(400):
+        obs, _, terminated, truncated, info = env.step(expert.predict(obs)[0])
+        if terminated or truncated:
+            break
+    assert env.world.events.arrived and info["episode_metrics"]["success"] == 1.0
+    assert info["episode_metrics"]["red_lights"] == 0 and info["episode_metrics"]["collisions"] == 0
+
+
+def test_refuses_observations_it_cannot_read():
+    with pytest.raises(UsageError, match="waypoints,affordances"):
+        RuleBasedExpert(spaces.Dict({"waypoints": SPACE["waypoints"]}), ACTIONS)
+    with pytest.raises(UsageError, match="target_speed"):
+        RuleBasedExpert(SPACE, spaces.Discrete(5))
