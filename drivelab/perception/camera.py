@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.envs.world import MARKING_SOLID, RoadMap, WorldState
+from drivelab.envs.world import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW, MARKING_SOLID, RoadMap, WorldState
 from drivelab.perception.base import Sensor, box_corners, ego_frame
 from drivelab.perception.birdeye import DashedMarkings
 from drivelab.perception.pinhole import PinholeModel
@@ -43,7 +43,7 @@ FACE_COLOURS = tuple(
     tuple(int(c) for c in np.clip(VEHICLE * shade, 0, 255)) for shade in (0.9, 0.65, 0.9, 0.65)
 )
 ROOF_COLOUR = tuple(int(c) for c in np.clip(VEHICLE * 1.15, 0, 255))
-LIGHT_COLOURS = {0: (230, 40, 40), 1: (240, 200, 40), 2: (40, 210, 80)}  # traffic-light state → RGB
+LIGHT_COLOURS = {LIGHT_RED: (230, 40, 40), LIGHT_YELLOW: (240, 200, 40), LIGHT_GREEN: (40, 210, 80)}
 LIGHT_HEIGHT_M = 3.0
 VEHICLE_HEIGHT_M = 1.5
 MARKING_WIDTH_M = 0.15  # white lane markings
@@ -255,7 +255,7 @@ def _draw_vehicles(image: np.ndarray, model: PinholeModel, world: WorldState) ->
 
 
 def _draw_traffic_lights(image: np.ndarray, model: PinholeModel, world: WorldState) -> None:
-    """Traffic lights (rows x, y, heading, state 0 red / 1 yellow / 2 green) as a pole and a lamp."""
+    """Traffic lights (rows x, y, heading, LIGHT_* state) as a pole and a lamp in the state's colour."""
     lights = np.asarray(world.traffic_lights, dtype=float).reshape(-1, 4)
     if len(lights) == 0:
         return
