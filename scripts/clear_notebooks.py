@@ -1,6 +1,6 @@
 """Strip outputs and execution counts from the teaching notebooks (they are stored without them).
 
-    .venv/bin/python scripts/clear_notebooks.py [notebooks/*.ipynb]
+Usage: ``.venv/bin/python scripts/clear_notebooks.py [NOTEBOOK ...]`` (default: notebooks/*.ipynb).
 """
 
 from __future__ import annotations
