@@ -263,7 +263,7 @@ def _draw_road_users(image: np.ndarray, model: PinholeModel, world: WorldState) 
 
 
 def _draw_traffic_lights(image: np.ndarray, model: PinholeModel, world: WorldState) -> None:
-    """Traffic lights (rows x, y, heading, LIGHT_* state) as a pole and a lamp."""
+    """Traffic lights (rows x, y, heading, LIGHT_* state) as a pole and a lamp in the state's colour."""
     lights = np.asarray(world.traffic_lights, dtype=float).reshape(-1, 4)
     if len(lights) == 0:
         return

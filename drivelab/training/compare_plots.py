@@ -5,13 +5,10 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import matplotlib
+import numpy as np
+from matplotlib.figure import Figure
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-
-from drivelab.training.stats import bootstrap_ci  # noqa: E402
+from drivelab.training.stats import bootstrap_ci
 
 BAR_METRICS = {
     "mean_return": "episode return",
@@ -47,7 +44,8 @@ def aligned_curves(curves: list[list[tuple[int, float]]]) -> tuple[np.ndarray, n
 
 def plot_learning_curves(groups: dict, path: Path, confidence: float) -> Path:
     """Mean evaluation return over seeds against steps, with a bootstrap band per step."""
-    fig, ax = plt.subplots(figsize=(8, 4.5), dpi=100)
+    fig = Figure(figsize=(8, 4.5), dpi=100)
+    ax = fig.subplots()
     labels = short_labels(list(groups))
     for index, runs in enumerate(groups.values()):
         steps, values = aligned_curves([list(r.curve) for r in runs])
@@ -69,14 +67,14 @@ def plot_learning_curves(groups: dict, path: Path, confidence: float) -> Path:
         ax.legend(loc="best", fontsize=7)
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)
     return path
 
 
 def plot_metric_bars(groups: dict, summaries: dict, path: Path, confidence: float) -> Path:
     """One panel per main metric: bar = mean, whisker = bootstrap interval, diamond = IQM, dots = seeds."""
     keys = list(groups)
-    fig, axes = plt.subplots(2, 3, figsize=(12, 7), dpi=100)
+    fig = Figure(figsize=(12, 7), dpi=100)
+    axes = fig.subplots(2, 3)
     positions = np.arange(len(keys))
     for ax, (metric, label) in zip(axes.flat, BAR_METRICS.items(), strict=True):
         for i, key in enumerate(keys):
@@ -101,5 +99,4 @@ def plot_metric_bars(groups: dict, summaries: dict, path: Path, confidence: floa
     )
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)
     return path

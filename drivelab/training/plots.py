@@ -5,11 +5,8 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import numpy as np
+from matplotlib.figure import Figure
 
 
 def _read_csv(path: Path, skip_comment: bool = False) -> list[dict]:
@@ -25,7 +22,8 @@ def plot_learning_curve(run_dir: str | Path) -> Path:
     run_dir = Path(run_dir)
     episodes = _read_csv(run_dir / "monitor.csv", skip_comment=True)
     evaluations = _read_csv(run_dir / "evaluations.csv")
-    fig, ax = plt.subplots(figsize=(7, 4), dpi=100)
+    fig = Figure(figsize=(7, 4), dpi=100)
+    ax = fig.subplots()
     if episodes:
         returns = np.array([float(row["r"]) for row in episodes])
         steps = np.cumsum([int(row["l"]) for row in episodes])
@@ -48,5 +46,4 @@ def plot_learning_curve(run_dir: str | Path) -> Path:
     path = run_dir / "learning_curve.png"
     fig.tight_layout()
     fig.savefig(path)
-    plt.close(fig)
     return path

@@ -5,11 +5,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import numpy as np
+from matplotlib.figure import Figure
 
 
 def plot_qlearning(
@@ -17,7 +14,8 @@ def plot_qlearning(
 ) -> Path:
     """Write the three panels to ``path`` (PNG): ε against steps, the accumulated reward of every
     episode, and the steps of every episode (each with a moving average where there are many)."""
-    fig, axes = plt.subplots(3, 1, figsize=(7, 8), dpi=100)
+    fig = Figure(figsize=(7, 8), dpi=100)
+    axes = fig.subplots(3, 1)
     axes[0].plot(np.arange(len(epsilons)), epsilons, color="tab:purple")
     axes[0].set_xlabel("step")
     axes[0].set_ylabel("epsilon")
@@ -41,5 +39,4 @@ def plot_qlearning(
     fig.tight_layout()
     path = Path(path)
     fig.savefig(path)
-    plt.close(fig)
     return path

@@ -6,7 +6,15 @@ import dataclasses
 import numpy as np
 import pytest
 
-from drivelab.envs.world import LIGHT_GREEN, LIGHT_RED, MARKING_DASHED, MARKING_SOLID, RoadMap, Route
+from drivelab.envs.world import (
+    LIGHT_GREEN,
+    LIGHT_RED,
+    LIGHT_YELLOW,
+    MARKING_DASHED,
+    MARKING_SOLID,
+    RoadMap,
+    Route,
+)
 from drivelab.perception import camera
 from drivelab.perception.camera import Camera, PinholeModel, lateral_at_distances, render_masks
 from drivelab.perception.sensors import make_sensor
@@ -132,3 +140,13 @@ def test_spec_and_stack():
     assert sensor.observe(w).shape == (24, 32, 6)
     with pytest.raises(ValueError):
         PinholeModel(fov_deg=180.0)
+
+
+@pytest.mark.parametrize("state", [LIGHT_GREEN, LIGHT_YELLOW, LIGHT_RED])
+def test_traffic_light_lamp_has_its_state_colour(state):
+    sensor = Camera(width=160, height=120)
+    w = dataclasses.replace(world(), traffic_lights=np.array([[12.0, 0.0, 0.0, state]]))
+    lamp = np.round(sensor.model.project(np.array([12.0, 0.0, camera.LIGHT_HEIGHT_M]))).astype(int)
+    image = sensor.observe(w)
+    assert tuple(image[lamp[1], lamp[0]]) == camera.LIGHT_COLOURS[state]
+    assert camera.LIGHT_COLOURS[LIGHT_GREEN][1] > 200 and camera.LIGHT_COLOURS[LIGHT_RED][0] > 200
