@@ -113,7 +113,7 @@ class DriveEnv(gym.Env):
             sensor.reset(self.world, np.random.default_rng([episode_seed, index]))
         self.metrics = EpisodeMetrics(self.world)
         self.stopped_s = 0.0
-        return self._observe(), {"episode_seed": episode_seed}
+        return self._observe(), {"episode_seed": episode_seed, "traffic_light": self.traffic_light_label()}
 
     def step(self, action: Any):
         if self.world is None:
