@@ -26,6 +26,7 @@ import dataclasses
 import io
 import json
 import pickle
+import time
 import zipfile
 from pathlib import Path
 from typing import Any, Protocol
@@ -158,6 +159,26 @@ class OwnAgent:
         callback = callback if callback is not None else CallbackList([])
         callback.init_callback(self)
         return callback
+
+    def save_replay_buffer(self, path: str | Path) -> None:
+        """Pickle ``self.replay_buffer`` (off-policy agents; run.py checkpoints it beside the model)."""
+        with open(path, "wb") as handle:
+            pickle.dump(self.replay_buffer, handle, protocol=pickle.HIGHEST_PROTOCOL)
+
+    def load_replay_buffer(self, path: str | Path) -> None:
+        with open(path, "rb") as handle:
+            self.replay_buffer = pickle.load(handle)
+
+    def _log_progress(self, metrics: dict[str, float], start_steps: int, start_time: float) -> None:
+        """Record ``train/<metric>``, the mean return of ``self.episode_returns`` and the steps per
+        second since (``start_steps``, ``start_time``), then dump the logger."""
+        for key, value in metrics.items():
+            self.logger.record(f"train/{key}", value)
+        if getattr(self, "episode_returns", None):
+            self.logger.record("rollout/ep_rew_mean", float(np.mean(self.episode_returns)))
+        elapsed = max(time.perf_counter() - start_time, 1e-9)
+        self.logger.record("time/fps", int((self.num_timesteps - start_steps) / elapsed))
+        self.logger.dump(self.num_timesteps)
 
     def save(self, path: str | Path) -> None:
         """One zip: ``agent.json`` (algo, hyperparams, steps, numpy generator), ``spaces.pkl``,

@@ -18,11 +18,9 @@ two simulation steps, as the paper's CARLA runs; one agent step is one environme
 from __future__ import annotations
 
 import math
-import pickle
 import time
 from collections import deque
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -195,14 +193,6 @@ class RLAD(OwnAgent):
         with torch.no_grad():
             self.log_alpha.copy_(state["log_alpha"])
 
-    def save_replay_buffer(self, path: str | Path) -> None:
-        with open(path, "wb") as handle:
-            pickle.dump(self.replay_buffer, handle, protocol=pickle.HIGHEST_PROTOCOL)
-
-    def load_replay_buffer(self, path: str | Path) -> None:
-        with open(path, "rb") as handle:
-            self.replay_buffer = pickle.load(handle)
-
     @property
     def alpha(self) -> torch.Tensor:
         return self.log_alpha.exp()
@@ -330,21 +320,12 @@ class RLAD(OwnAgent):
             if ready and self.num_timesteps % config.train_freq == 0:
                 metrics = self.train_step()
             if self.num_timesteps % config.log_interval == 0:
-                self._log(metrics, start_steps, start_time)
+                self._log_progress(metrics, start_steps, start_time)
             callback.update_locals(locals())
             if not callback.on_step():
                 break
         callback.on_training_end()
         return self
-
-    def _log(self, metrics: dict, start_steps: int, start_time: float) -> None:
-        for key, value in metrics.items():
-            self.logger.record(f"train/{key}", value)
-        if self.episode_returns:
-            self.logger.record("rollout/ep_rew_mean", float(np.mean(self.episode_returns)))
-        elapsed = max(time.perf_counter() - start_time, 1e-9)
-        self.logger.record("time/fps", (self.num_timesteps - start_steps) / elapsed)
-        self.logger.dump(self.num_timesteps)
 
 
 class DrQ(RLAD):
