@@ -203,7 +203,8 @@ class OwnAgent:
         with zipfile.ZipFile(path) as archive:
             meta = json.loads(archive.read("agent.json"))
             observation_space, action_space = pickle.loads(archive.read("spaces.pkl"))
-            state = torch.load(io.BytesIO(archive.read("state.pt")), weights_only=False)
+            # CPU first: an agent saved on a GPU loads anywhere; ``_set_state`` copies onto its device
+            state = torch.load(io.BytesIO(archive.read("state.pt")), map_location="cpu", weights_only=False)
         if meta["algo"] != cls.algo:
             raise ValueError(f"the file holds a {meta['algo']!r} agent, not {cls.algo!r}")
         if env is not None and (

@@ -177,3 +177,12 @@ def test_bad_combinations_are_one_line_usage_errors(tmp_path, args, message):
     lines = result.output.strip().splitlines()
     assert len(lines) == 1 and message in lines[0], result.output
     assert not (tmp_path / "runs").exists() or not any((tmp_path / "runs").iterdir())
+
+
+def test_device_choice():
+    from drivelab.errors import UsageError
+
+    assert _agent(device="cpu").device == torch.device("cpu")
+    assert _agent().device.type == ("cuda" if torch.cuda.is_available() else "cpu")
+    with pytest.raises(UsageError, match="device must be auto, cpu, cuda or cuda:N"):
+        _agent(device="tpu")

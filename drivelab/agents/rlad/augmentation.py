@@ -26,9 +26,10 @@ def random_shift(images: torch.Tensor, pad: int, generator: torch.Generator) -> 
     if pad <= 0:
         return images
     batch, _, height, width = images.shape
-    offsets = torch.randint(-pad, pad + 1, (batch, 2), generator=generator)
-    rows = (torch.arange(height)[None, :] + offsets[:, :1]).clamp(0, height - 1)  # (B, H)
-    cols = (torch.arange(width)[None, :] + offsets[:, 1:]).clamp(0, width - 1)  # (B, W)
-    samples = torch.arange(batch)[:, None, None]
+    device = images.device
+    offsets = torch.randint(-pad, pad + 1, (batch, 2), generator=generator).to(device)  # seeded on the CPU
+    rows = (torch.arange(height, device=device)[None, :] + offsets[:, :1]).clamp(0, height - 1)  # (B, H)
+    cols = (torch.arange(width, device=device)[None, :] + offsets[:, 1:]).clamp(0, width - 1)  # (B, W)
+    samples = torch.arange(batch, device=device)[:, None, None]
     shifted = images[samples, :, rows[:, :, None], cols[:, None, :]]  # (B, H, W, C)
     return shifted.permute(0, 3, 1, 2).contiguous()

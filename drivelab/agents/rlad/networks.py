@@ -70,7 +70,8 @@ class Actor(nn.Module):
         """(a in [−1, 1], log π(a|h)) by the reparameterisation u = μ + σ·ε."""
         mean, log_std = self(h)
         distribution = torch.distributions.Normal(mean, log_std.exp())
-        unsquashed = mean + log_std.exp() * torch.randn(mean.shape, generator=generator)
+        noise = torch.randn(mean.shape, generator=generator).to(mean.device)  # drawn on the CPU: seeded
+        unsquashed = mean + log_std.exp() * noise
         return torch.tanh(unsquashed), squashed_log_prob(distribution, unsquashed)
 
 

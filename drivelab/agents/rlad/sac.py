@@ -64,6 +64,7 @@ class RLADConfig:
     :param augment_pad: shift in pixels; 0 picks 4 below 192 px (DrQ at 84), 8 above (RLAD at 256).
     :param train_freq: environment steps between updates.
     :param log_interval: environment steps between logger dumps.
+    :param device: "auto" (CUDA when available, else CPU), "cpu", "cuda" or "cuda:N".
     """
 
     buffer_size: int = 100_000
@@ -87,6 +88,7 @@ class RLADConfig:
     augment_pad: int = 0
     train_freq: int = 1
     log_interval: int = 500
+    device: str = "auto"
 
     def check(self, algo: str) -> None:
         if min(self.buffer_size, self.train_freq, self.log_interval) < 1 or self.batch_size < 2:
@@ -99,6 +101,8 @@ class RLADConfig:
             raise UsageError(f"{algo!r} needs positive learning rates and init_temperature")
         if self.log_std_min >= self.log_std_max:
             raise UsageError(f"{algo!r} needs log_std_min < log_std_max")
+        if self.device not in ("auto", "cpu", "cuda") and not self.device.startswith("cuda:"):
+            raise UsageError(f"{algo!r}: device must be auto, cpu, cuda or cuda:N, got {self.device!r}")
         if self.waypoint_encoder not in WAYPOINT_ENCODERS:
             raise UsageError(
                 f"{algo!r}: waypoint_encoder must be one of {', '.join(WAYPOINT_ENCODERS)}, "
@@ -145,6 +149,8 @@ class RLAD(OwnAgent):
             raise UsageError(f"{self.algo} needs a continuous action space")
         config, space = self.config, self.observation_space
         actions = self.action_space.shape[0]
+        automatic = "cuda" if torch.cuda.is_available() else "cpu"
+        self.device = torch.device(automatic if config.device == "auto" else config.device)
         self.encoder = StateEncoder(space, config)
         self.encoder.image.generator = self.generator
         self.actor = Actor(
@@ -154,7 +160,10 @@ class RLAD(OwnAgent):
         self.critic_target = TwinCritic(self.encoder.features, actions, config.hidden_size)
         self.critic_target.load_state_dict(self.critic.state_dict())
         self.traffic_light_head = TrafficLightHead()
-        self.log_alpha = torch.tensor(math.log(config.init_temperature), requires_grad=True)
+        for module in (self.encoder, self.actor, self.critic, self.critic_target, self.traffic_light_head):
+            module.to(self.device)
+        log_alpha = math.log(config.init_temperature)
+        self.log_alpha = torch.tensor(log_alpha, device=self.device, requires_grad=True)
         self.target_entropy = -float(actions)
         strength = [self.encoder.image.strength] if config.alix else []
         learned = [p for p in self.encoder.parameters() if all(p is not s for s in strength)]
@@ -202,7 +211,8 @@ class RLAD(OwnAgent):
         """One environment observation → a batch of one (camera channels first)."""
         images = torch.as_tensor(np.ascontiguousarray(np.moveaxis(obs["camera"], -1, 0)))[None]
         waypoints = torch.as_tensor(obs["waypoints"], dtype=torch.float32)[None]
-        return images, waypoints, torch.as_tensor(obs["measurements"], dtype=torch.float32)[None]
+        measurements = torch.as_tensor(obs["measurements"], dtype=torch.float32)[None]
+        return images.to(self.device), waypoints.to(self.device), measurements.to(self.device)
 
     def act(self, obs: dict, deterministic: bool) -> np.ndarray:
         """The policy's action in [−1, 1]^|A| (A-LIX off: the encoder in evaluation mode)."""
@@ -213,7 +223,7 @@ class RLAD(OwnAgent):
                 action = torch.tanh(self.actor(h)[0])
             else:
                 action, _ = self.actor.sample(h, self.generator)
-        return action[0].numpy()
+        return action[0].cpu().numpy()
 
     def to_env_action(self, action: np.ndarray) -> np.ndarray:
         """[−1, 1] → the action space's box (target speed [0, 1], steer [−1, 1])."""
@@ -224,7 +234,7 @@ class RLAD(OwnAgent):
 
     # --- learning ------------------------------------------------------------------------------
     def _batch_tensors(self, batch: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
-        tensors = {key: torch.as_tensor(value) for key, value in batch.items()}
+        tensors = {key: torch.as_tensor(value).to(self.device) for key, value in batch.items()}
         if self.config.augment:  # DrQ: fresh shifts of obs and next_obs at every update
             tensors["images"] = random_shift(tensors["images"], self.pad, self.generator)
             tensors["next_images"] = random_shift(tensors["next_images"], self.pad, self.generator)
