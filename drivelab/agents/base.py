@@ -169,6 +169,13 @@ class OwnAgent:
         with open(path, "rb") as handle:
             self.replay_buffer = pickle.load(handle)
 
+    def _start_learning(self, total_timesteps: int, reset_num_timesteps: bool) -> tuple[int, int, float]:
+        """(step to stop at, step now, clock now) for ``learn``: ``total_timesteps`` more steps,
+        counted from 0 again when ``reset_num_timesteps``."""
+        if reset_num_timesteps:
+            self.num_timesteps = 0
+        return self.num_timesteps + int(total_timesteps), self.num_timesteps, time.perf_counter()
+
     def _log_progress(self, metrics: dict[str, float], start_steps: int, start_time: float) -> None:
         """Record ``train/<metric>``, the mean return of ``self.episode_returns`` and the steps per
         second since (``start_steps``, ``start_time``), then dump the logger."""

@@ -17,7 +17,6 @@ observation works: a Dict of vectors is concatenated in key order.
 
 from __future__ import annotations
 
-import time
 from collections import deque
 from dataclasses import dataclass
 from typing import Any
@@ -354,10 +353,7 @@ class DuelingDoubleDQN(OwnAgent):
     ) -> DuelingDoubleDQN:
         """Act ε-greedily, store, learn, until ``total_timesteps`` more steps (contract in base.py)."""
         config, env = self.config, self.env
-        if reset_num_timesteps:
-            self.num_timesteps = 0
-        target_steps = self.num_timesteps + int(total_timesteps)
-        start_steps, start_time = self.num_timesteps, time.perf_counter()
+        target_steps, start_steps, start_time = self._start_learning(total_timesteps, reset_num_timesteps)
         if self._last_obs is None:
             self._last_obs, _ = env.reset()
         callback = self._start_callback(callback)

@@ -18,7 +18,6 @@ two simulation steps, as the paper's CARLA runs; one agent step is one environme
 from __future__ import annotations
 
 import math
-import time
 from collections import deque
 from dataclasses import dataclass
 from typing import Any
@@ -302,10 +301,7 @@ class RLAD(OwnAgent):
         """Warm-up with random actions, then act with the policy and update every ``train_freq``
         steps, until ``total_timesteps`` more steps (contract in base.py)."""
         config, env, replay = self.config, self.env, self.replay_buffer
-        if reset_num_timesteps:
-            self.num_timesteps = 0
-        target_steps = self.num_timesteps + int(total_timesteps)
-        start_steps, start_time = self.num_timesteps, time.perf_counter()
+        target_steps, start_steps, start_time = self._start_learning(total_timesteps, reset_num_timesteps)
         if self._last_obs is None:
             self._last_obs, info = env.reset()
             replay.start_episode(*self._record(self._last_obs, info))
