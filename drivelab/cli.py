@@ -63,10 +63,18 @@ def envs() -> None:
         typer.echo(f"algo      {name:<18} {spec.description} (actions: {', '.join(spec.action_kinds)})")
 
 
+def _rlad_switches(no_alix: bool, no_aux: bool, no_augment: bool, waypoint_encoder: str | None) -> dict:
+    """RLAD's ablation flags as the hyper-parameters they stand for (other algorithms reject them
+    as unknown hyper-parameters)."""
+    switches = {"alix": False if no_alix else None, "aux": False if no_aux else None}
+    switches.update(augment=False if no_augment else None, waypoint_encoder=waypoint_encoder)
+    return {key: value for key, value in switches.items() if value is not None}
+
+
 @app.command()
 def train(
     algo: str | None = typer.Option(
-        None, help="dqn, ppo, a2c, sac, dueling_ddqn, a2c_own, ppo_own, qlearning"
+        None, help="dqn, ppo, a2c, sac, dueling_ddqn, a2c_own, ppo_own, rlad, drq, qlearning"
     ),
     env: str | None = typer.Option(
         None, help="scenario: highway, merge, roundabout, intersection, racetrack, town"
@@ -90,6 +98,12 @@ def train(
     n_envs: int | None = typer.Option(None, help="worlds stepped together (SB3 algorithms; default 1)"),
     hyperparams: list[str] = typer.Option([], "--hyperparams", "-H", help="algorithm override key=value"),
     resume: Path | None = typer.Option(None, help="continue this run directory from its checkpoint"),
+    no_alix: bool = typer.Option(False, "--no-alix", help="rlad/drq: no A-LIX (-H alix=false)"),
+    no_aux: bool = typer.Option(False, "--no-aux", help="rlad/drq: no traffic-light loss (-H aux=false)"),
+    no_augment: bool = typer.Option(False, "--no-augment", help="rlad/drq: no DrQ shifts (-H augment=false)"),
+    waypoint_encoder: str | None = typer.Option(
+        None, help="rlad/drq: wayconv1d or mlp (-H waypoint_encoder=...)"
+    ),
 ) -> None:
     """Train an agent and write a run directory."""
     from drivelab.config import build_config, load_yaml
@@ -98,6 +112,7 @@ def train(
     from drivelab.training.run import resume as resume_run
     from drivelab.training.run import train as train_run
 
+    switches = _rlad_switches(no_alix, no_aux, no_augment, waypoint_encoder)
     try:
         if resume is not None:
             given = [
@@ -105,7 +120,7 @@ def train(
                 for o in (algo, env, obs, action, reward, seed, traffic, backend, config, name, n_envs)
                 if o is not None
             ]
-            if given or hyperparams:
+            if given or hyperparams or switches:
                 raise UsageError("--resume takes the run's own config; only --steps may be given with it")
             run_dir = resume_run(resume, steps)
         else:
@@ -119,10 +134,11 @@ def train(
             values.update({k: v for k, v in cli.items() if v is not None})
             if video:
                 values["eval_video"] = True
-            if hyperparams:
+            if hyperparams or switches:
                 values["hyperparams"] = {
                     **values.get("hyperparams", {}),
                     **_parse_pairs(hyperparams, "--hyperparams"),
+                    **switches,
                 }
             run_dir = train_run(build_config(with_shipped_hyperparams(values)), runs_dir)
     except UsageError as exc:

@@ -26,6 +26,7 @@ import dataclasses
 import io
 import json
 import pickle
+import time
 import zipfile
 from pathlib import Path
 from typing import Any, Protocol
@@ -159,6 +160,33 @@ class OwnAgent:
         callback.init_callback(self)
         return callback
 
+    def save_replay_buffer(self, path: str | Path) -> None:
+        """Pickle ``self.replay_buffer`` (off-policy agents; run.py checkpoints it beside the model)."""
+        with open(path, "wb") as handle:
+            pickle.dump(self.replay_buffer, handle, protocol=pickle.HIGHEST_PROTOCOL)
+
+    def load_replay_buffer(self, path: str | Path) -> None:
+        with open(path, "rb") as handle:
+            self.replay_buffer = pickle.load(handle)
+
+    def _start_learning(self, total_timesteps: int, reset_num_timesteps: bool) -> tuple[int, int, float]:
+        """(step to stop at, step now, clock now) for ``learn``: ``total_timesteps`` more steps,
+        counted from 0 again when ``reset_num_timesteps``."""
+        if reset_num_timesteps:
+            self.num_timesteps = 0
+        return self.num_timesteps + int(total_timesteps), self.num_timesteps, time.perf_counter()
+
+    def _log_progress(self, metrics: dict[str, float], start_steps: int, start_time: float) -> None:
+        """Record ``train/<metric>``, the mean return of ``self.episode_returns`` and the steps per
+        second since (``start_steps``, ``start_time``), then dump the logger."""
+        for key, value in metrics.items():
+            self.logger.record(f"train/{key}", value)
+        if getattr(self, "episode_returns", None):
+            self.logger.record("rollout/ep_rew_mean", float(np.mean(self.episode_returns)))
+        elapsed = max(time.perf_counter() - start_time, 1e-9)
+        self.logger.record("time/fps", int((self.num_timesteps - start_steps) / elapsed))
+        self.logger.dump(self.num_timesteps)
+
     def save(self, path: str | Path) -> None:
         """One zip: ``agent.json`` (algo, hyperparams, steps, numpy generator), ``spaces.pkl``,
         ``state.pt`` (networks, optimizers, torch generator)."""
@@ -182,7 +210,8 @@ class OwnAgent:
         with zipfile.ZipFile(path) as archive:
             meta = json.loads(archive.read("agent.json"))
             observation_space, action_space = pickle.loads(archive.read("spaces.pkl"))
-            state = torch.load(io.BytesIO(archive.read("state.pt")), weights_only=False)
+            # CPU first: an agent saved on a GPU loads anywhere; ``_set_state`` copies onto its device
+            state = torch.load(io.BytesIO(archive.read("state.pt")), map_location="cpu", weights_only=False)
         if meta["algo"] != cls.algo:
             raise ValueError(f"the file holds a {meta['algo']!r} agent, not {cls.algo!r}")
         if env is not None and (

@@ -17,11 +17,8 @@ observation works: a Dict of vectors is concatenated in key order.
 
 from __future__ import annotations
 
-import pickle
-import time
 from collections import deque
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -297,14 +294,6 @@ class DuelingDoubleDQN(OwnAgent):
         self.target_network.load_state_dict(state["target_network"])
         self.optimizer.load_state_dict(state["optimizer"])
 
-    def save_replay_buffer(self, path: str | Path) -> None:
-        with open(path, "wb") as handle:
-            pickle.dump(self.replay_buffer, handle, protocol=pickle.HIGHEST_PROTOCOL)
-
-    def load_replay_buffer(self, path: str | Path) -> None:
-        with open(path, "rb") as handle:
-            self.replay_buffer = pickle.load(handle)
-
     def q_values(self, observations: np.ndarray) -> torch.Tensor:
         """Q(s, ·) for a batch of flat observations, BatchNorm on its running statistics."""
         self.q_network.eval()
@@ -364,10 +353,7 @@ class DuelingDoubleDQN(OwnAgent):
     ) -> DuelingDoubleDQN:
         """Act ε-greedily, store, learn, until ``total_timesteps`` more steps (contract in base.py)."""
         config, env = self.config, self.env
-        if reset_num_timesteps:
-            self.num_timesteps = 0
-        target_steps = self.num_timesteps + int(total_timesteps)
-        start_steps, start_time = self.num_timesteps, time.perf_counter()
+        target_steps, start_steps, start_time = self._start_learning(total_timesteps, reset_num_timesteps)
         if self._last_obs is None:
             self._last_obs, _ = env.reset()
         callback = self._start_callback(callback)
@@ -414,12 +400,5 @@ class DuelingDoubleDQN(OwnAgent):
     def _log(
         self, metrics: dict, epsilon: float, learning_rate: float, start_steps: int, start_time: float
     ) -> None:
-        for key, value in metrics.items():
-            self.logger.record(f"train/{key}", value)
-        self.logger.record("train/epsilon", epsilon)
-        self.logger.record("train/learning_rate", learning_rate)
-        if self.episode_returns:
-            self.logger.record("rollout/ep_rew_mean", float(np.mean(self.episode_returns)))
-        elapsed = max(time.perf_counter() - start_time, 1e-9)
-        self.logger.record("time/fps", int((self.num_timesteps - start_steps) / elapsed))
-        self.logger.dump(self.num_timesteps)
+        schedule = {"epsilon": epsilon, "learning_rate": learning_rate}
+        self._log_progress({**metrics, **schedule}, start_steps, start_time)

@@ -20,6 +20,8 @@ class AlgoSpec:
     :param observation_kinds: observation kinds it can read (``networks.observation_kind``):
         "vector", "image" (channels-first uint8), "image+vector" (a Dict of both), "other".
     :param multi_env: it trains on a vector env of several worlds (``n_envs`` > 1).
+    :param observation_check: observation space → why the agent cannot read it (None: it can),
+        for agents that need particular sensors.
     """
 
     name: str
@@ -30,6 +32,7 @@ class AlgoSpec:
     sb3_replay: bool = False
     observation_kinds: tuple[str, ...] = ("vector", "image", "image+vector", "other")
     multi_env: bool = False
+    observation_check: Callable | None = None
 
 
 def build_own(algo: str, env, seed: int, hyperparams: dict, log_dir) -> object:
@@ -47,12 +50,21 @@ def own_classes() -> dict[str, type]:
     from drivelab.agents.dueling_ddqn import DuelingDoubleDQN
     from drivelab.agents.expert import RuleBasedExpert
     from drivelab.agents.ppo import OwnPPO
+    from drivelab.agents.rlad.sac import RLAD, DrQ
 
-    return {"dueling_ddqn": DuelingDoubleDQN, "a2c_own": OwnA2C, "ppo_own": OwnPPO, "expert": RuleBasedExpert}
+    return {
+        "dueling_ddqn": DuelingDoubleDQN,
+        "a2c_own": OwnA2C,
+        "ppo_own": OwnPPO,
+        "rlad": RLAD,
+        "drq": DrQ,
+        "expert": RuleBasedExpert,
+    }
 
 
 def _registry() -> dict[str, AlgoSpec]:
     from drivelab.agents.qlearning import build_qlearning, load_qlearning
+    from drivelab.agents.rlad.sac import observation_error
     from drivelab.agents.sb3 import build_sb3, load_sb3
 
     discrete, continuous = ("meta", "grid"), ("continuous", "target_speed")
@@ -92,6 +104,24 @@ def _registry() -> dict[str, AlgoSpec]:
             load_own,
             observation_kinds=readable,
         ),
+        "rlad": AlgoSpec(
+            "rlad",
+            "drivelab's RLAD: SAC from pixels, A-LIX, DrQ shifts, WayConv1D, traffic-light loss (seed 000)",
+            continuous,
+            build_own,
+            load_own,
+            sb3_replay=True,
+            observation_check=observation_error,
+        ),
+        "drq": AlgoSpec(
+            "drq",
+            "DrQ baseline of seed 000: rlad without A-LIX and the traffic-light loss, MLP waypoints",
+            continuous,
+            build_own,
+            load_own,
+            sb3_replay=True,
+            observation_check=observation_error,
+        ),
         "qlearning": AlgoSpec(
             "qlearning",
             "tabular Q-learning over discrete states (seed 004): line, lane, ttc_grid",
@@ -110,7 +140,9 @@ def _registry() -> dict[str, AlgoSpec]:
     }
 
 
-ALGO_NAMES = ("dqn", "ppo", "a2c", "sac", "dueling_ddqn", "a2c_own", "ppo_own", "qlearning", "expert")
+ALGO_NAMES = (
+    "dqn", "ppo", "a2c", "sac", "dueling_ddqn", "a2c_own", "ppo_own", "rlad", "drq", "qlearning", "expert",
+)  # fmt: skip
 
 
 def get_algo(name: str) -> AlgoSpec:
@@ -137,4 +169,7 @@ def check_combination(algo: str, action: str, observation_space=None) -> AlgoSpe
                 f"algorithm {algo!r} cannot read {kind!r} observations "
                 f"(it reads {', '.join(spec.observation_kinds)})"
             )
+        problem = spec.observation_check(observation_space) if spec.observation_check else None
+        if problem is not None:
+            raise UsageError(f"algorithm {algo!r} {problem}")
     return spec

@@ -160,10 +160,8 @@ class OnPolicyAgent(OwnAgent):
         progress_bar: bool = False,
     ) -> OnPolicyAgent:
         """Collect and update until ``total_timesteps`` more steps were taken (see the contract in base)."""
-        if reset_num_timesteps:
-            self.num_timesteps = 0
-        self._target = self.num_timesteps + int(total_timesteps)
-        self._start_steps, start_time = self.num_timesteps, time.perf_counter()
+        started = self._start_learning(total_timesteps, reset_num_timesteps)
+        self._target, self._start_steps, start_time = started
         if self._last_obs is None:
             self._last_obs, _ = self.env.reset()
         callback = self._start_callback(callback)

@@ -121,7 +121,7 @@ class DriveEnv(gym.Env):
         self.time_limit_s = self.duration_s
         if route_limit_s is not None:
             self.time_limit_s = min(route_limit_s, self.duration_s) if self.duration_given else route_limit_s
-        return self._observe(), {"episode_seed": episode_seed}
+        return self._observe(), {"episode_seed": episode_seed, "traffic_light": self.traffic_light_label()}
 
     def step(self, action: Any):
         if self.world is None:

@@ -272,7 +272,12 @@ def _draw_traffic_lights(image: np.ndarray, model: PinholeModel, world: WorldSta
         local[:, 0] < model.forward_m + model.max_range_m
     )
     for (x, y), state in zip(local[seen], lights[seen, 3], strict=True):
-        foot, lamp = model.project(np.array([[x, y, 0.0], [x, y, LIGHT_HEIGHT_M]]))
+        points = np.array([[x, y, 0.0], [x, y, LIGHT_HEIGHT_M]])
+        # the camera is pitched down: a lamp just past the ground near plane can be behind the
+        # image plane, where the projection flips and overflows OpenCV's int32 pixels
+        if model.to_camera(points)[:, 2].min() <= model.near_m:
+            continue
+        foot, lamp = model.project(points)
         radius = max(int(round(0.3 * model.focal_px / max(x - model.forward_m, 1e-3))), 1)
         cv2.line(image, tuple(np.round(foot).astype(int)), tuple(np.round(lamp).astype(int)), (40, 40, 40), 1)
         colour = LIGHT_COLOURS.get(int(state), (200, 200, 200))

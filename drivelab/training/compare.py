@@ -29,6 +29,7 @@ from pathlib import Path
 
 from drivelab.config import RunConfig
 from drivelab.errors import UsageError
+from drivelab.hyperparams import shipped_hyperparams
 from drivelab.training.evaluate import load_run_config
 from drivelab.training.stats import CONFIDENCE, Summary, summarize
 
@@ -70,8 +71,14 @@ class RunRecord:
 
 
 def group_key(config: RunConfig) -> tuple[str, ...]:
-    """(algorithm, scenario, sensors, reward, action): runs that differ only in seed share it."""
-    return (config.algo, config.env, ",".join(config.obs), config.reward, config.action)
+    """(algorithm, scenario, sensors, reward, action[, hyper-parameter changes]): runs that differ
+    only in seed share it. Hyper-parameters that differ from the algorithm's shipped values for the
+    scenario (``drivelab/hyperparams``) are a sixth part, ``key=value,…`` (ablations such as
+    ``alix=False``); runs on the shipped values have five parts."""
+    key = (config.algo, config.env, ",".join(config.obs), config.reward, config.action)
+    shipped = shipped_hyperparams(config.algo, config.env)
+    changed = {k: v for k, v in sorted(config.hyperparams.items()) if k not in shipped or shipped[k] != v}
+    return key + (",".join(f"{k}={v}" for k, v in changed.items()),) if changed else key
 
 
 def group_label(key: tuple[str, ...]) -> str:
@@ -208,7 +215,7 @@ def _markdown(
         "",
         "## Groups",
         "",
-        "| group (algo · env · obs · reward · action) | seeds | steps | runs |",
+        "| group (algo · env · obs · reward · action [· hyper-parameters]) | seeds | steps | runs |",
         "|---|---|---|---|",
     ]
     for key, runs in groups.items():

@@ -150,3 +150,15 @@ def test_traffic_light_lamp_has_its_state_colour(state):
     image = sensor.observe(w)
     assert tuple(image[lamp[1], lamp[0]]) == camera.LIGHT_COLOURS[state]
     assert camera.LIGHT_COLOURS[LIGHT_GREEN][1] > 200 and camera.LIGHT_COLOURS[LIGHT_RED][0] > 200
+
+
+def test_traffic_light_just_past_the_near_plane_is_skipped_not_overflowing():
+    """A lamp 3 m up and just past the ground near plane is behind the pitched image plane: drawing
+    it used to overflow OpenCV's int32 pixel coordinates (found by RLAD's benchmark in the town)."""
+    model = PinholeModel(width=84, height=84)
+    x = model.forward_m + model.near_m + 0.05
+    lights = np.array([[x, 100.0, 0.0, LIGHT_GREEN], [model.forward_m + 10.0, 0.0, 0.0, LIGHT_RED]])
+    image = camera.render_camera(dataclasses.replace(world(), traffic_lights=lights), model)
+    lamp = model.project(np.array([model.forward_m + 10.0, 0.0, camera.LIGHT_HEIGHT_M]))
+    u, v = np.round(lamp).astype(int)
+    assert tuple(image[v, u]) == camera.LIGHT_COLOURS[LIGHT_RED]  # the far light is still drawn

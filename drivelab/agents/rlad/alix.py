@@ -1,0 +1,109 @@
+"""A-LIX, adaptive local signal mixing (Cetin et al., ICML 2022), as RLAD uses it (seed 000, Table I):
+after every conv + ReLU of the image encoder.
+
+Forward, training only (evaluation is the identity): the feature maps are replicate-padded by
+``PAD`` pixels and resampled bilinearly on a grid displaced by one random 2-D offset, uniform
+within ±``MAX_SHIFT_PX``·S pixels, shared by the batch and all positions. At fractional offsets
+the bilinear weights mix each feature with its neighbours; S = 0 is exactly the identity. The
+resampling at one shared offset is done with four shifted slices, which equals ``grid_sample``'s
+bilinear interpolation at a uniform shift and costs less on a CPU.
+
+The strength S is not trained by the RL loss (the mixing reads it detached). It follows a dual
+objective: on the way back, the last A-LIX layer of the encoder hands S the gradient β − ND, where
+ND is the normalised discontinuity of the feature gradient that reaches that layer's input (the
+gradient after the mixing has smoothed it), so gradient descent raises S while ND > β and lowers
+it otherwise, and ND settles near β. The earlier layers use the same S without producing its
+gradient.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import nn
+
+PAD = 3  # replicate padding; covers the largest displacement
+MAX_SHIFT_PX = 2.5  # displacement at S = 1
+TARGET_DISCONTINUITY = 0.535  # β
+STRENGTH_INIT = 0.5
+
+
+def normalized_discontinuity(gradient: torch.Tensor) -> torch.Tensor:
+    """ND of a feature gradient (B, C, H, W), a scalar.
+
+    ḡ = the gradient averaged over the batch; at each location, over its 3×3 neighbourhood
+    (replicate padding): signal = mean of the 8 neighbours' ḡ², noise = mean of the 8
+    (ḡ_neighbour − ḡ_centre)²; ND = mean over C, H, W of log(1 + noise / (signal + 1e-20)).
+    """
+    mean = gradient.mean(dim=0, keepdim=True)  # (1, C, H, W)
+    height, width = mean.shape[-2:]
+    padded = nn.functional.pad(mean, (1, 1, 1, 1), mode="replicate")
+    neighbours = torch.stack(
+        [
+            padded[..., 1 + dy : 1 + dy + height, 1 + dx : 1 + dx + width]
+            for dy in (-1, 0, 1)
+            for dx in (-1, 0, 1)
+            if (dy, dx) != (0, 0)
+        ]
+    )
+    signal = (neighbours**2).mean(dim=0)
+    noise = ((neighbours - mean) ** 2).mean(dim=0)
+    return torch.log1p(noise / (signal + 1e-20)).mean()
+
+
+class DualStrengthGradient(torch.autograd.Function):
+    """Identity on the features; on the way back the features' gradient passes unchanged and the
+    strength S receives β − ND(gradient) (A-LIX's dual objective)."""
+
+    @staticmethod
+    def forward(ctx, features: torch.Tensor, strength: torch.Tensor, target: float) -> torch.Tensor:
+        ctx.target, ctx.strength_shape = target, strength.shape
+        return features.view_as(features)
+
+    @staticmethod
+    def backward(ctx, gradient: torch.Tensor):
+        dual = ctx.target - normalized_discontinuity(gradient)
+        return gradient, dual.reshape(ctx.strength_shape).to(gradient.dtype), None
+
+
+def shift_bilinear(features: torch.Tensor, shift_px: tuple[float, float]) -> torch.Tensor:
+    """``features`` (B, C, H, W) resampled at (row, column) + ``shift_px`` with bilinear
+    interpolation, replicate padding outside; |shift| ≤ PAD − 1 in each axis."""
+    shift_y, shift_x = shift_px
+    if shift_y == 0.0 and shift_x == 0.0:
+        return features
+    height, width = features.shape[-2:]
+    padded = nn.functional.pad(features, (PAD, PAD, PAD, PAD), mode="replicate")
+    top, left = math.floor(shift_y), math.floor(shift_x)
+    fy, fx = shift_y - top, shift_x - left
+    top, left = PAD + top, PAD + left
+
+    def window(dy: int, dx: int) -> torch.Tensor:
+        return padded[..., top + dy : top + dy + height, left + dx : left + dx + width]
+
+    upper = (1.0 - fx) * window(0, 0) + fx * window(0, 1)
+    lower = (1.0 - fx) * window(1, 0) + fx * window(1, 1)
+    return (1.0 - fy) * upper + fy * lower
+
+
+def adaptive_local_signal_mixing(
+    features: torch.Tensor,
+    strength: torch.Tensor,
+    generator: torch.Generator,
+    learn_strength: bool,
+    target: float = TARGET_DISCONTINUITY,
+) -> torch.Tensor:
+    """One A-LIX layer in training mode (see the module docstring).
+
+    :param features: feature maps (B, C, H, W) after a conv + ReLU.
+    :param strength: the shared strength S (a parameter, clamped to [0, 1] by the caller).
+    :param generator: draws the random offset.
+    :param learn_strength: this layer produces S's dual gradient (the encoder's last layer).
+    :param target: β, the target normalised discontinuity.
+    """
+    if learn_strength:
+        features = DualStrengthGradient.apply(features, strength, target)
+    offset = torch.rand(2, generator=generator) * 2.0 - 1.0
+    scale = MAX_SHIFT_PX * float(strength.detach())
+    return shift_bilinear(features, (float(offset[0]) * scale, float(offset[1]) * scale))

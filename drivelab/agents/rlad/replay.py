@@ -1,0 +1,154 @@
+"""RLAD's replay buffer: every camera frame stored once, stacks rebuilt by index.
+
+The camera sensor stacks frames itself (``camera:stack=3``), so consecutive observations share
+all but their newest frame, and a transition's next observation shares all but one frame with
+its observation. Storing (obs, next_obs) stacks would keep each frame 2·K times; here each
+environment step writes one *observation record* (newest frame, waypoints, measurements and
+traffic-light label) into a ring, and a transition keeps the absolute numbers of the K records of
+its observation's stack (oldest first) and of its next observation's newest record; the next
+stack is the observation's stack shifted by one.
+
+Episode boundaries: ``start_episode`` writes the reset observation and pads the stack with it
+(the camera's own stack does the same at reset), so no stack mixes two episodes. ``terminated``
+is stored for the target; a time-limit end (truncated) is not terminal and its stored next
+observation bootstraps as usual.
+
+The record ring holds ``capacity`` plus 5 % slack records (the reset records of new episodes).
+A transition stays sampleable while all its records are in the ring; with very short episodes
+(under about 20 steps on average) the ring, not ``capacity``, bounds how many transitions are
+sampleable. Memory: ``nbytes`` counts every array; ``unique_frame_bytes`` the distinct frames
+that sampleable transitions reference.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+LIGHT_CLASSES = ("none", "green", "red_or_yellow")  # DriveEnv.traffic_light_label's values
+UNKNOWN_LABEL = -1  # no label given: left out of the auxiliary loss
+RECORD_SLACK = 0.05
+
+
+def label_index(label: str | None) -> int:
+    """Class index of a traffic-light label, ``UNKNOWN_LABEL`` for None."""
+    return UNKNOWN_LABEL if label is None else LIGHT_CLASSES.index(label)
+
+
+class FrameReplayBuffer:
+    """Transitions over a ring of observation records that holds each frame once.
+
+    :param capacity: transitions kept.
+    :param frame_shape: one frame, channels first (3, H, W), uint8.
+    :param stack: frames per observation K.
+    :param waypoints_shape: waypoints of one observation, e.g. (10, 2).
+    :param measurements_size: measurement values of one observation, e.g. 6.
+    :param action_size: action dimensions.
+    """
+
+    def __init__(
+        self,
+        capacity: int,
+        frame_shape: tuple[int, ...],
+        stack: int,
+        waypoints_shape: tuple[int, ...],
+        measurements_size: int,
+        action_size: int,
+    ) -> None:
+        self.capacity, self.stack = int(capacity), int(stack)
+        self.records = self.capacity + max(int(self.capacity * RECORD_SLACK), self.stack + 1)
+        self.frames = np.zeros((self.records, *frame_shape), dtype=np.uint8)
+        self.waypoints = np.zeros((self.records, *waypoints_shape), dtype=np.float32)
+        self.measurements = np.zeros((self.records, measurements_size), dtype=np.float32)
+        self.labels = np.full(self.records, UNKNOWN_LABEL, dtype=np.int8)
+        self.stacks = np.zeros((self.capacity, self.stack), dtype=np.int64)  # absolute record numbers
+        self.next_newest = np.zeros(self.capacity, dtype=np.int64)
+        self.actions = np.zeros((self.capacity, action_size), dtype=np.float32)
+        self.rewards = np.zeros(self.capacity, dtype=np.float32)
+        self.terminated = np.zeros(self.capacity, dtype=np.bool_)
+        self.written = 0  # records written so far
+        self.position, self.stored = 0, 0
+        self.current: np.ndarray | None = None  # record numbers of the current observation's stack
+
+    # --- writing -------------------------------------------------------------------------------
+    def _write(self, frame: np.ndarray, waypoints, measurements, label: int) -> int:
+        number, slot = self.written, self.written % self.records
+        self.frames[slot], self.waypoints[slot] = frame, waypoints
+        self.measurements[slot], self.labels[slot] = measurements, label
+        self.written += 1
+        return number
+
+    def start_episode(self, frame: np.ndarray, waypoints, measurements, label: int) -> None:
+        """The first observation of an episode: its stack is this frame K times."""
+        self.current = np.full(self.stack, self._write(frame, waypoints, measurements, label))
+
+    def add(
+        self, action, reward: float, terminated: bool, frame: np.ndarray, waypoints, measurements, label: int
+    ) -> None:
+        """A transition from the current observation; ``frame`` etc. are the next observation's newest."""
+        if self.current is None:
+            raise RuntimeError("call start_episode before add")
+        number = self._write(frame, waypoints, measurements, label)
+        i = self.position
+        self.stacks[i], self.next_newest[i] = self.current, number
+        self.actions[i], self.rewards[i], self.terminated[i] = action, reward, terminated
+        self.current = np.append(self.current[1:], number)
+        self.position, self.stored = (i + 1) % self.capacity, min(self.stored + 1, self.capacity)
+
+    # --- reading -------------------------------------------------------------------------------
+    def sampleable(self) -> np.ndarray:
+        """Indices of the transitions whose records are all still in the ring."""
+        oldest = self.stacks[: self.stored, 0]
+        return np.flatnonzero(oldest >= self.written - self.records)
+
+    @property
+    def size(self) -> int:
+        return len(self.sampleable())
+
+    def stacked_frames(self, stacks: np.ndarray) -> np.ndarray:
+        """Record numbers (B, K) → frame stacks (B, 3K, H, W), oldest frame first."""
+        frames = self.frames[stacks % self.records]  # (B, K, 3, H, W)
+        return frames.reshape(len(stacks), -1, *frames.shape[-2:])
+
+    def batch(self, indices: np.ndarray) -> dict[str, np.ndarray]:
+        """Transitions ``indices`` with their observation and next-observation stacks rebuilt."""
+        stacks = self.stacks[indices]
+        next_stacks = np.concatenate([stacks[:, 1:], self.next_newest[indices, None]], axis=1)
+        newest, next_newest = stacks[:, -1] % self.records, next_stacks[:, -1] % self.records
+        return {
+            "images": self.stacked_frames(stacks),
+            "waypoints": self.waypoints[newest],
+            "measurements": self.measurements[newest],
+            "labels": self.labels[newest].astype(np.int64),
+            "actions": self.actions[indices],
+            "rewards": self.rewards[indices],
+            "terminated": self.terminated[indices].astype(np.float32),
+            "next_images": self.stacked_frames(next_stacks),
+            "next_waypoints": self.waypoints[next_newest],
+            "next_measurements": self.measurements[next_newest],
+        }
+
+    def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+        """``batch_size`` transitions drawn uniformly (with replacement) from the sampleable ones."""
+        candidates = self.sampleable()
+        return self.batch(candidates[rng.integers(len(candidates), size=batch_size)])
+
+    # --- memory --------------------------------------------------------------------------------
+    @property
+    def observations(self) -> dict[str, np.ndarray]:
+        """The observation arrays (run.py sizes the buffer by them before checkpointing it)."""
+        return {"frames": self.frames, "waypoints": self.waypoints, "measurements": self.measurements}
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of every array the buffer holds."""
+        arrays = (
+            self.frames, self.waypoints, self.measurements, self.labels, self.stacks, self.next_newest,
+            self.actions, self.rewards, self.terminated,
+        )  # fmt: skip
+        return int(sum(array.nbytes for array in arrays))
+
+    def unique_frame_bytes(self) -> int:
+        """Bytes of the distinct frames the sampleable transitions reference."""
+        indices = self.sampleable()
+        numbers = np.unique(np.concatenate([self.stacks[indices].ravel(), self.next_newest[indices]]))
+        return int(len(numbers) * self.frames[0].nbytes)

@@ -1,0 +1,341 @@
+"""RLAD (seed 000): SAC from pixels with A-LIX, DrQ augmentation, WayConv1D and the traffic-light
+auxiliary loss; and the DrQ baseline as a preset of it. Top to bottom:
+
+1. ``RLADConfig``: Table II's hyper-parameters and the ablation switches;
+2. ``observation_error``: what RLAD reads (camera stack, waypoints, measurements);
+3. the networks (``networks.py``): one ``StateEncoder``, ``Actor``, ``TwinCritic``, ``TrafficLightHead``;
+4. ``RLAD.train_step``: critic (eq. 1, 2) + auxiliary cross-entropy (eq. 4) through the encoder,
+   actor (eq. 3) on the detached state, temperature (Haarnoja et al. 2018), EMA target critics;
+5. ``RLAD.learn``: random actions for the warm-up, then the policy; one update per step.
+
+Observation: ``--obs camera:stack=3,waypoints,measurements:stack=3`` (the paper's K = 3 frames
+and 3 measurement frames); any camera size from 21 px, any stack. Action: ``target_speed``
+([target speed, steer] through the town's PID). Action repeat 2 lives in the environment: the
+town simulates at 10 Hz and takes a decision at 5 Hz (town_env.py), so every action is held for
+two simulation steps, as the paper's CARLA runs; one agent step is one environment step.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+from gymnasium import spaces
+from stable_baselines3.common.callbacks import BaseCallback
+from torch import nn
+
+from drivelab.agents.base import OwnAgent
+from drivelab.agents.rlad.augmentation import default_pad, random_shift
+from drivelab.agents.rlad.networks import Actor, StateEncoder, TrafficLightHead, TwinCritic
+from drivelab.agents.rlad.replay import UNKNOWN_LABEL, FrameReplayBuffer, label_index
+from drivelab.agents.rlad.waypoints import WAYPOINT_ENCODERS
+from drivelab.errors import UsageError
+
+OBSERVATION_KEYS = ("camera", "waypoints", "measurements")
+
+
+@dataclass(frozen=True)
+class RLADConfig:
+    """Hyper-parameters (``-H key=value``), Table II's values by default.
+
+    :param buffer_size: replay capacity (transitions).
+    :param batch_size: transitions per update.
+    :param learning_starts: warm-up steps of uniformly random actions before the first update.
+    :param gamma: discount.
+    :param learning_rate: Adam step size of encoder, critics, auxiliary head, actor, temperature.
+    :param tau: EMA rate of the target critics.
+    :param hidden_size: width of the actor's and critics' two hidden layers.
+    :param log_std_min: lower bound of the actor's log σ.
+    :param log_std_max: upper bound of the actor's log σ.
+    :param init_temperature: initial α (the target entropy is −|A|).
+    :param alix: A-LIX after every conv + ReLU (``--no-alix`` turns it off).
+    :param alix_init: initial A-LIX strength S.
+    :param alix_target: β, the target normalised discontinuity.
+    :param alix_learning_rate: Adam step size of S (betas 0.5, 0.999).
+    :param aux: the traffic-light auxiliary loss (``--no-aux``).
+    :param aux_weight: weight of the auxiliary cross-entropy beside the critic loss.
+    :param waypoint_encoder: "wayconv1d" or "mlp" (``--waypoint-encoder``).
+    :param augment: DrQ random shift of obs and next_obs at every update (``--no-augment``).
+    :param augment_pad: shift in pixels; 0 picks 4 below 192 px (DrQ at 84), 8 above (RLAD at 256).
+    :param train_freq: environment steps between updates.
+    :param log_interval: environment steps between logger dumps.
+    :param device: "auto" (CUDA when available, else CPU), "cpu", "cuda" or "cuda:N".
+    """
+
+    buffer_size: int = 100_000
+    batch_size: int = 256
+    learning_starts: int = 1000
+    gamma: float = 0.99
+    learning_rate: float = 1e-3
+    tau: float = 0.01
+    hidden_size: int = 1024
+    log_std_min: float = -10.0
+    log_std_max: float = 2.0
+    init_temperature: float = 0.1
+    alix: bool = True
+    alix_init: float = 0.5
+    alix_target: float = 0.535
+    alix_learning_rate: float = 2e-3
+    aux: bool = True
+    aux_weight: float = 1.0
+    waypoint_encoder: str = "wayconv1d"
+    augment: bool = True
+    augment_pad: int = 0
+    train_freq: int = 1
+    log_interval: int = 500
+    device: str = "auto"
+
+    def check(self, algo: str) -> None:
+        if min(self.buffer_size, self.train_freq, self.log_interval) < 1 or self.batch_size < 2:
+            raise UsageError(f"{algo!r} needs buffer_size, train_freq, log_interval >= 1 and batch_size >= 2")
+        if self.learning_starts < 0 or self.augment_pad < 0 or self.hidden_size < 1:
+            raise UsageError(f"{algo!r} needs learning_starts >= 0, augment_pad >= 0 and hidden_size >= 1")
+        if not 0 < self.gamma <= 1 or not 0 < self.tau <= 1 or not 0 <= self.alix_init <= 1:
+            raise UsageError(f"{algo!r} needs 0 < gamma <= 1, 0 < tau <= 1 and 0 <= alix_init <= 1")
+        if min(self.learning_rate, self.alix_learning_rate, self.init_temperature) <= 0:
+            raise UsageError(f"{algo!r} needs positive learning rates and init_temperature")
+        if self.log_std_min >= self.log_std_max:
+            raise UsageError(f"{algo!r} needs log_std_min < log_std_max")
+        if self.device not in ("auto", "cpu", "cuda") and not self.device.startswith("cuda:"):
+            raise UsageError(f"{algo!r}: device must be auto, cpu, cuda or cuda:N, got {self.device!r}")
+        if self.waypoint_encoder not in WAYPOINT_ENCODERS:
+            raise UsageError(
+                f"{algo!r}: waypoint_encoder must be one of {', '.join(WAYPOINT_ENCODERS)}, "
+                f"got {self.waypoint_encoder!r}"
+            )
+
+
+@dataclass(frozen=True)
+class DrQConfig(RLADConfig):
+    """The DrQ baseline of the paper's comparison: RLAD without A-LIX and the auxiliary loss, with
+    an MLP waypoint encoder (SAC, augmentation and the other encoders as RLAD)."""
+
+    alix: bool = False
+    aux: bool = False
+    waypoint_encoder: str = "mlp"
+
+
+def observation_error(space: spaces.Space) -> str | None:
+    """Why RLAD cannot read ``space`` (None when it can): it needs a Dict of an RGB ``camera``
+    (H, W, 3K) uint8, ``waypoints`` (N, 2) and ``measurements`` (M,)."""
+    needed = "a camera, waypoints and measurements (--obs camera:stack=3,waypoints,measurements:stack=3)"
+    if not isinstance(space, spaces.Dict) or any(key not in space.spaces for key in OBSERVATION_KEYS):
+        return f"needs {needed}"
+    camera, waypoints, measurements = (space[key] for key in OBSERVATION_KEYS)
+    if camera.dtype != np.uint8 or len(camera.shape) != 3 or camera.shape[-1] % 3:
+        return f"needs an RGB camera stack (H, W, 3K) uint8, got {camera.shape}"
+    if len(waypoints.shape) != 2 or waypoints.shape[1] != 2 or len(measurements.shape) != 1:
+        return f"needs waypoints (N, 2) and measurements (M,), got {waypoints.shape} and {measurements.shape}"
+    return None
+
+
+# --- 4., 5. the agent ----------------------------------------------------------------------------
+class RLAD(OwnAgent):
+    """SAC from pixels as RLAD (seed 000); ``config`` switches its parts off for the ablations."""
+
+    algo = "rlad"
+    config_class = RLADConfig
+
+    def _build(self) -> None:
+        error = observation_error(self.observation_space)
+        if error is not None:
+            raise UsageError(f"{self.algo} {error}")
+        if not isinstance(self.action_space, spaces.Box) or len(self.action_space.shape) != 1:
+            raise UsageError(f"{self.algo} needs a continuous action space")
+        config, space = self.config, self.observation_space
+        actions = self.action_space.shape[0]
+        automatic = "cuda" if torch.cuda.is_available() else "cpu"
+        self.device = torch.device(automatic if config.device == "auto" else config.device)
+        self.encoder = StateEncoder(space, config)
+        self.encoder.image.generator = self.generator
+        self.actor = Actor(
+            self.encoder.features, actions, config.hidden_size, config.log_std_min, config.log_std_max
+        )
+        self.critic = TwinCritic(self.encoder.features, actions, config.hidden_size)
+        self.critic_target = TwinCritic(self.encoder.features, actions, config.hidden_size)
+        self.critic_target.load_state_dict(self.critic.state_dict())
+        self.traffic_light_head = TrafficLightHead()
+        for module in (self.encoder, self.actor, self.critic, self.critic_target, self.traffic_light_head):
+            module.to(self.device)
+        log_alpha = math.log(config.init_temperature)
+        self.log_alpha = torch.tensor(log_alpha, device=self.device, requires_grad=True)
+        self.target_entropy = -float(actions)
+        strength = [self.encoder.image.strength] if config.alix else []
+        learned = [p for p in self.encoder.parameters() if all(p is not s for s in strength)]
+        learned += [*self.critic.parameters(), *self.traffic_light_head.parameters()]
+        groups = [{"params": learned}]
+        if strength:  # S: its own Adam group (A-LIX's dual step)
+            groups.append({"params": strength, "lr": config.alix_learning_rate, "betas": (0.5, 0.999)})
+        self.critic_optimizer = torch.optim.Adam(groups, lr=config.learning_rate)
+        self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=config.learning_rate)
+        self.alpha_optimizer = torch.optim.Adam([self.log_alpha], lr=config.learning_rate)
+        height, width, channels = space["camera"].shape
+        self.pad = config.augment_pad or default_pad(min(height, width))
+        self.replay_buffer = FrameReplayBuffer(
+            config.buffer_size, (3, height, width), channels // 3, space["waypoints"].shape,
+            space["measurements"].shape[0], actions,
+        )  # fmt: skip
+        self.low, self.high = self.action_space.low, self.action_space.high
+        self._last_obs = None
+        self.episode_returns: deque[float] = deque(maxlen=100)
+
+    def _modules(self) -> dict[str, nn.Module | torch.optim.Optimizer]:
+        return {
+            "encoder": self.encoder, "actor": self.actor, "critic": self.critic,
+            "critic_target": self.critic_target, "traffic_light_head": self.traffic_light_head,
+            "critic_optimizer": self.critic_optimizer, "actor_optimizer": self.actor_optimizer,
+            "alpha_optimizer": self.alpha_optimizer,
+        }  # fmt: skip
+
+    def _state(self) -> dict[str, Any]:
+        state = {key: module.state_dict() for key, module in self._modules().items()}
+        return {**state, "log_alpha": self.log_alpha.detach()}
+
+    def _set_state(self, state: dict[str, Any]) -> None:
+        for key, module in self._modules().items():
+            module.load_state_dict(state[key])
+        with torch.no_grad():
+            self.log_alpha.copy_(state["log_alpha"])
+
+    @property
+    def alpha(self) -> torch.Tensor:
+        return self.log_alpha.exp()
+
+    # --- acting --------------------------------------------------------------------------------
+    def _tensors(self, obs: dict) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """One environment observation → a batch of one (camera channels first)."""
+        images = torch.as_tensor(np.ascontiguousarray(np.moveaxis(obs["camera"], -1, 0)))[None]
+        waypoints = torch.as_tensor(obs["waypoints"], dtype=torch.float32)[None]
+        measurements = torch.as_tensor(obs["measurements"], dtype=torch.float32)[None]
+        return images.to(self.device), waypoints.to(self.device), measurements.to(self.device)
+
+    def act(self, obs: dict, deterministic: bool) -> np.ndarray:
+        """The policy's action in [−1, 1]^|A| (A-LIX off: the encoder in evaluation mode)."""
+        self.encoder.eval()
+        with torch.no_grad():
+            h, _ = self.encoder(*self._tensors(obs))
+            if deterministic:
+                action = torch.tanh(self.actor(h)[0])
+            else:
+                action, _ = self.actor.sample(h, self.generator)
+        return action[0].cpu().numpy()
+
+    def to_env_action(self, action: np.ndarray) -> np.ndarray:
+        """[−1, 1] → the action space's box (target speed [0, 1], steer [−1, 1])."""
+        return (self.low + (np.asarray(action) + 1.0) * 0.5 * (self.high - self.low)).astype(np.float32)
+
+    def predict(self, obs: Any, deterministic: bool = True) -> tuple[np.ndarray, None]:
+        return self.to_env_action(self.act(obs, deterministic)), None
+
+    # --- learning ------------------------------------------------------------------------------
+    def _batch_tensors(self, batch: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
+        tensors = {key: torch.as_tensor(value).to(self.device) for key, value in batch.items()}
+        if self.config.augment:  # DrQ: fresh shifts of obs and next_obs at every update
+            tensors["images"] = random_shift(tensors["images"], self.pad, self.generator)
+            tensors["next_images"] = random_shift(tensors["next_images"], self.pad, self.generator)
+        return tensors
+
+    def train_step(self, batch: dict[str, np.ndarray] | None = None) -> dict[str, float]:
+        """One update of critics + encoder (+ auxiliary head), actor, temperature and targets."""
+        config = self.config
+        if batch is None:
+            batch = self.replay_buffer.sample(config.batch_size, self.rng)
+        t = self._batch_tensors(batch)
+        self.encoder.train()
+        alpha = self.alpha.detach()
+        with torch.no_grad():  # eq. 2: y = r + γ(min_k Q̄_k(h', a') − α log π(a'|h'))
+            next_h, _ = self.encoder(t["next_images"], t["next_waypoints"], t["next_measurements"])
+            next_action, next_log_prob = self.actor.sample(next_h, self.generator)
+            next_q = torch.min(*self.critic_target(next_h, next_action)) - alpha * next_log_prob
+            target = t["rewards"] + config.gamma * (1.0 - t["terminated"]) * next_q
+        h, image = self.encoder(t["images"], t["waypoints"], t["measurements"])
+        q1, q2 = self.critic(h, t["actions"])
+        critic_loss = nn.functional.mse_loss(q1, target) + nn.functional.mse_loss(q2, target)  # eq. 1
+        loss, metrics = critic_loss, {"critic_loss": critic_loss.item(), "q_mean": q1.mean().item()}
+        labels = t["labels"]
+        if config.aux and bool((labels != UNKNOWN_LABEL).any()):  # eq. 4, through the image encoder
+            logits = self.traffic_light_head(image)
+            aux_loss = nn.functional.cross_entropy(logits, labels, ignore_index=UNKNOWN_LABEL)
+            loss = loss + config.aux_weight * aux_loss
+            known = labels != UNKNOWN_LABEL
+            accuracy = (logits.argmax(dim=1)[known] == labels[known]).float().mean()
+            metrics.update(aux_loss=aux_loss.item(), aux_accuracy=accuracy.item())
+        self.critic_optimizer.zero_grad()
+        loss.backward()
+        self.critic_optimizer.step()
+        # eq. 3 on the detached state: the actor's gradient does not reach the encoder
+        action, log_prob = self.actor.sample(h.detach(), self.generator)
+        actor_loss = (alpha * log_prob - torch.min(*self.critic(h.detach(), action))).mean()
+        self.actor_optimizer.zero_grad()
+        actor_loss.backward()
+        self.actor_optimizer.step()
+        alpha_loss = (self.alpha * (-log_prob.detach() - self.target_entropy)).mean()
+        self.alpha_optimizer.zero_grad()
+        alpha_loss.backward()
+        self.alpha_optimizer.step()
+        with torch.no_grad():  # θ̄ ← τθ + (1 − τ)θ̄
+            for target_p, p in zip(self.critic_target.parameters(), self.critic.parameters(), strict=True):
+                target_p.lerp_(p, config.tau)
+        metrics.update(actor_loss=actor_loss.item(), alpha=self.alpha.item(), entropy=-log_prob.mean().item())
+        if config.alix:
+            metrics["alix_strength"] = self.encoder.image.strength.item()
+        return metrics
+
+    def _record(self, obs: dict, info: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+        """What the replay keeps of an observation: newest frame (3, H, W), waypoints,
+        measurements, and the traffic-light label of ``info``."""
+        frame = np.moveaxis(obs["camera"][..., -3:], -1, 0)
+        return frame, obs["waypoints"], obs["measurements"], label_index(info.get("traffic_light"))
+
+    def learn(
+        self,
+        total_timesteps: int,
+        callback: BaseCallback | None = None,
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> RLAD:
+        """Warm-up with random actions, then act with the policy and update every ``train_freq``
+        steps, until ``total_timesteps`` more steps (contract in base.py)."""
+        config, env, replay = self.config, self.env, self.replay_buffer
+        target_steps, start_steps, start_time = self._start_learning(total_timesteps, reset_num_timesteps)
+        if self._last_obs is None:
+            self._last_obs, info = env.reset()
+            replay.start_episode(*self._record(self._last_obs, info))
+        callback = self._start_callback(callback)
+        callback.on_training_start(locals(), globals())
+        metrics: dict[str, float] = {}
+        while self.num_timesteps < target_steps:
+            if self.num_timesteps < config.learning_starts:
+                action = self.rng.uniform(-1.0, 1.0, size=self.low.shape).astype(np.float32)
+            else:
+                action = self.act(self._last_obs, deterministic=False)
+            new_obs, reward, terminated, truncated, info = env.step(self.to_env_action(action))
+            self.num_timesteps += 1
+            replay.add(action, float(reward), bool(terminated), *self._record(new_obs, info))
+            if "episode" in info:
+                self.episode_returns.append(float(info["episode"]["r"]))
+            if terminated or truncated:
+                new_obs, reset_info = env.reset()
+                replay.start_episode(*self._record(new_obs, reset_info))
+            self._last_obs = new_obs
+            ready = self.num_timesteps >= config.learning_starts and replay.size >= config.batch_size
+            if ready and self.num_timesteps % config.train_freq == 0:
+                metrics = self.train_step()
+            if self.num_timesteps % config.log_interval == 0:
+                self._log_progress(metrics, start_steps, start_time)
+            callback.update_locals(locals())
+            if not callback.on_step():
+                break
+        callback.on_training_end()
+        return self
+
+
+class DrQ(RLAD):
+    """The DrQ baseline (``--algo drq``): ``DrQConfig``'s defaults on RLAD's machinery."""
+
+    algo = "drq"
+    config_class = DrQConfig

@@ -1,0 +1,86 @@
+"""RLAD's replay: each frame stored once, stacks rebuilt across episode boundaries, memory."""
+
+import numpy as np
+
+from drivelab.agents.rlad.replay import UNKNOWN_LABEL, FrameReplayBuffer, label_index
+from drivelab.envs.core import DriveEnv
+
+OBS = "camera:width=24:height=24:stack=3,waypoints,measurements:stack=3"
+
+
+def _record(obs, info):
+    frame = np.moveaxis(obs["camera"][..., -3:], -1, 0)
+    return frame, obs["waypoints"], obs["measurements"], label_index(info.get("traffic_light"))
+
+
+def _channels_first(camera):
+    return np.moveaxis(camera, -1, 0)
+
+
+def test_stacks_are_rebuilt_as_the_camera_made_them_across_episode_ends():
+    env = DriveEnv("town", obs=OBS, action="target_speed", reward="roach", traffic="empty", duration_s=1.6)
+    replay = FrameReplayBuffer(100, (3, 24, 24), 3, (10, 2), 6, 2)
+    rng = np.random.default_rng(0)
+    obs, info = env.reset(seed=0)
+    replay.start_episode(*_record(obs, info))
+    seen, ends = [], []
+    for _ in range(20):  # episodes of 8 steps: two truncations and a new episode each time
+        action = rng.uniform([0.0, -0.2], [1.0, 0.2]).astype(np.float32)
+        next_obs, reward, terminated, truncated, info = env.step(action)
+        replay.add(action, reward, terminated, *_record(next_obs, info))
+        seen.append((obs, next_obs, action, reward, terminated, info["traffic_light"]))
+        ends.append(truncated)
+        if terminated or truncated:
+            next_obs, info = env.reset()
+            replay.start_episode(*_record(next_obs, info))
+        obs = next_obs
+    assert sum(ends) >= 2
+    batch = replay.batch(np.arange(20))
+    for i, (obs, next_obs, action, reward, terminated, _) in enumerate(seen):
+        np.testing.assert_array_equal(batch["images"][i], _channels_first(obs["camera"]))
+        np.testing.assert_array_equal(batch["next_images"][i], _channels_first(next_obs["camera"]))
+        np.testing.assert_array_equal(batch["waypoints"][i], obs["waypoints"])
+        np.testing.assert_array_equal(batch["next_measurements"][i], next_obs["measurements"])
+        np.testing.assert_array_equal(batch["actions"][i], action)
+        assert batch["rewards"][i] == np.float32(reward) and batch["terminated"][i] == float(terminated)
+    # an episode's first stack is its reset frame three times, never the last episode's frames
+    first = ends.index(True) + 1
+    images = batch["images"][first]
+    np.testing.assert_array_equal(images[:3], images[6:])
+    assert not np.array_equal(images, batch["next_images"][first - 1])
+    # labels: the observation's own (the reset's from the reset info, later ones from step info)
+    assert batch["labels"][1] == label_index(seen[0][5])
+    assert UNKNOWN_LABEL not in batch["labels"]
+
+
+def _fill(replay, steps, episode_length, rng, frame_shape):
+    replay.start_episode(rng.integers(0, 256, frame_shape, dtype=np.uint8), np.zeros((10, 2)), np.zeros(6), 0)
+    for step in range(steps):
+        frame = rng.integers(0, 256, frame_shape, dtype=np.uint8)
+        done = (step + 1) % episode_length == 0
+        replay.add(np.zeros(2), 0.0, done, frame, np.zeros((10, 2)), np.zeros(6), 1)
+        if done:
+            replay.start_episode(frame, np.zeros((10, 2)), np.zeros(6), 0)
+
+
+def test_memory_is_within_ten_percent_of_the_unique_frames():
+    rng = np.random.default_rng(1)
+    replay = FrameReplayBuffer(300, (3, 84, 84), 3, (10, 2), 6, 2)
+    _fill(replay, 1000, 40, rng, (3, 84, 84))
+    assert replay.size >= 0.95 * replay.capacity
+    ratio = replay.nbytes / replay.unique_frame_bytes()
+    assert 1.0 <= ratio <= 1.1
+    naive = replay.size * 2 * 3 * replay.frames[0].nbytes  # obs and next_obs stacks of 3 frames
+    assert replay.nbytes < naive / 5
+
+
+def test_transitions_whose_frames_were_overwritten_are_not_sampled():
+    rng = np.random.default_rng(2)
+    replay = FrameReplayBuffer(50, (3, 4, 4), 3, (10, 2), 6, 2)
+    _fill(replay, 400, 2, rng, (3, 4, 4))  # 3 records per 2 transitions: the ring is the limit
+    indices = replay.sampleable()
+    assert 0 < len(indices) < replay.capacity
+    oldest = replay.stacks[indices, 0]
+    assert oldest.min() >= replay.written - replay.records
+    batch = replay.sample(64, rng)
+    assert batch["images"].shape == (64, 9, 4, 4) and set(batch["labels"]) <= {0, 1}
