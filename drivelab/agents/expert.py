@@ -17,7 +17,6 @@ its training curve and its evaluations exist like any other algorithm's).
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -169,10 +168,7 @@ class RuleBasedExpert(OwnAgent):
     ) -> RuleBasedExpert:
         """Drive ``total_timesteps`` steps with the rules (nothing is learned; contract in base.py)."""
         env = self.env
-        if reset_num_timesteps:
-            self.num_timesteps = 0
-        target_steps = self.num_timesteps + int(total_timesteps)
-        start_time = time.perf_counter()
+        target_steps, start_steps, start_time = self._start_learning(total_timesteps, reset_num_timesteps)
         if self._last_obs is None:
             self._last_obs, _ = env.reset()
         callback = self._start_callback(callback)
@@ -185,7 +181,6 @@ class RuleBasedExpert(OwnAgent):
             callback.update_locals(locals())
             if not callback.on_step():
                 break
-        self.logger.record("time/fps", self.num_timesteps / max(time.perf_counter() - start_time, 1e-9))
-        self.logger.dump(self.num_timesteps)
+        self._log_progress({}, start_steps, start_time)
         callback.on_training_end()
         return self

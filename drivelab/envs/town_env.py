@@ -35,6 +35,7 @@ PAVEMENT_M = LANE_WIDTH_M + 1.5  # a waiting pedestrian stands this far from the
 CROSSING_GAP_M, CROSSING_GAP_S = 6.0, 2.5  # a pedestrian waits while a vehicle closes in within
 # 6 m + 2.5 s of travel of the crossing
 CROSSING_CLEAR_M = 8.0  # nor while a vehicle stands within this of the crossing's centre
+COURTESY_M = 15.0  # nor while a vehicle facing the crossing waits this close to it
 MEAN_WAIT_S = 20.0  # on the pavement between two crossings (exponential)
 MOVING_MPS = 0.5  # a vehicle slower than this cannot hurt a pedestrian
 WRECK_CLEARED_S = 10.0
@@ -82,14 +83,17 @@ class Pedestrian(RoadObject):
             self.wait_s = float(self.rng.exponential(MEAN_WAIT_S))
 
     def _gap_clear(self, vehicles: list) -> bool:
-        """No vehicle closing in on the crossing within 6 m + 2.5 s of its travel."""
+        """No vehicle heading for the crossing within 6 m + 2.5 s of its travel, nor one waiting
+        within 15 m of it (so that pedestrians and vehicles take turns), nor one on it."""
         for vehicle in vehicles:
             to_crossing = self.centre - vehicle.position
             distance = float(np.linalg.norm(to_crossing))
             if distance < CROSSING_CLEAR_M:  # standing on or next to the crossing
                 return False
-            closing = float(np.dot(vehicle.velocity, to_crossing)) > 0
-            if closing and distance < CROSSING_GAP_M + CROSSING_GAP_S * max(vehicle.speed, 0.0):
+            facing = float(np.dot(vehicle.direction, to_crossing)) > 0.7 * distance
+            if facing and distance < CROSSING_GAP_M + CROSSING_GAP_S * max(vehicle.speed, 0.0):
+                return False
+            if facing and distance < COURTESY_M:  # a vehicle waiting for the crossing goes first
                 return False
         return True
 
@@ -185,6 +189,13 @@ class TownVehicle(IDMVehicle):
                 limit = min(limit, next_limit)
         self.target_speed = limit
         super().act(action)
+
+    def lane_distance_to(self, other, lane=None) -> float:
+        """Gap to a leader found across lane ends (street → junction → street): the straight-line
+        distance, signed as highway-env's. Its own measure projects onto the current lane, which
+        for a leader already round a corner is far too short (and stays so while it drives off)."""
+        along = super().lane_distance_to(other, lane)
+        return float(np.copysign(np.linalg.norm(other.position - self.position), along))
 
     def step(self, dt: float) -> None:
         super().step(dt)

@@ -20,12 +20,13 @@ FIELDS = (
     "light_yellow",  # 1 when that light is yellow
     "leader_m",  # along the route, to the nearest vehicle on it
     "leader_speed_mps",  # that vehicle's speed along the ego's heading
-    "pedestrian_m",  # along the route, to the nearest pedestrian on or next to it
+    "pedestrian_m",  # along the route, to the nearest pedestrian on, next to or walking onto it
     "oncoming_m",  # a left turn is ahead at that light and an oncoming vehicle comes this close
 )
 ROUTE_STEP_M = 1.0  # the route ahead is sampled this finely
 VEHICLE_CORRIDOR_M = 2.5  # a vehicle whose centre is this close to the route is on it
 PEDESTRIAN_CORRIDOR_M = 3.0  # a pedestrian this close to the route is about to be on it
+PEDESTRIAN_HEADING_M = 9.0  # so is one walking towards it from this close (across the road)
 LEFT_TURN_AHEAD_M, LEFT_TURN_M = 20.0, 6.0  # 20 m past the light the route lies 6 m to the left
 ONCOMING_COS = -0.7  # heading opposite the ego's within about 45°
 
@@ -67,7 +68,9 @@ class Affordances(Sensor):
             values["leader_speed_mps"] = row[3] * float(np.cos(row[2] - ego.heading))
         else:
             values["leader_speed_mps"] = 0.0
-        walker = self._nearest_on_route(world.pedestrians, path, stations, ego, PEDESTRIAN_CORRIDOR_M)
+        walker = self._nearest_on_route(
+            world.pedestrians, path, stations, ego, PEDESTRIAN_CORRIDOR_M, PEDESTRIAN_HEADING_M
+        )
         if walker is not None:
             values["pedestrian_m"] = walker[0]
         if light is not None and self._turns_left_after(world, light[1]):
@@ -75,15 +78,20 @@ class Affordances(Sensor):
         return np.array([values[f] for f in FIELDS], dtype=np.float32)
 
     @staticmethod
-    def _nearest_on_route(bodies, path, stations, ego, corridor_m) -> tuple[float, int] | None:
-        """(distance along the route, row) of the nearest body within ``corridor_m`` of the route
-        ahead of the ego, or None."""
+    def _nearest_on_route(
+        bodies, path, stations, ego, corridor_m, heading_for_m=0.0
+    ) -> tuple[float, int] | None:
+        """(distance along the route, row) of the nearest body ahead of the ego within
+        ``corridor_m`` of the route, or within ``heading_for_m`` and moving towards it; None if none."""
         if len(bodies) == 0:
             return None
         gaps = np.linalg.norm(bodies[:, None, :2] - path[None], axis=2)  # (N, S)
         nearest = gaps.argmin(axis=1)
+        gap = gaps[np.arange(len(bodies)), nearest]
+        velocity = bodies[:, 3:4] * np.column_stack([np.cos(bodies[:, 2]), np.sin(bodies[:, 2])])
+        towards = np.einsum("ij,ij->i", velocity, path[nearest] - bodies[:, :2]) > 0
         ahead = ego_frame(bodies[:, :2], ego.position, ego.heading)[:, 0] > 0
-        on = ahead & (gaps[np.arange(len(bodies)), nearest] < corridor_m)
+        on = ahead & ((gap < corridor_m) | (towards & (gap < heading_for_m)))
         if not on.any():
             return None
         rows = np.flatnonzero(on)

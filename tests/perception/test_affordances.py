@@ -44,6 +44,10 @@ def test_light_leader_and_pedestrian_on_the_route():
     assert facts["stop_line_m"] == pytest.approx(20.0) and facts["light_red"] == 1.0
     assert facts["leader_m"] == pytest.approx(15.0) and facts["leader_speed_mps"] == pytest.approx(3.0)
     assert facts["pedestrian_m"] == pytest.approx(10.0)  # 2.5 m beside the route; the one 6 m off is not
+    # one 6 m to the side counts only while it walks towards the route
+    crossing = dataclasses.replace(state, pedestrians=np.array([[12.0, -6.0, np.pi / 2, 1.2, 0.8, 0.8]]))
+    leaving = dataclasses.replace(state, pedestrians=np.array([[12.0, -6.0, -np.pi / 2, 1.2, 0.8, 0.8]]))
+    assert _facts(crossing)["pedestrian_m"] == pytest.approx(12.0) and _facts(leaving)["pedestrian_m"] == 40.0
     yellow = dataclasses.replace(state, traffic_lights=np.array([[20.0, 0.5, 0.0, LIGHT_YELLOW]]))
     assert _facts(yellow)["light_yellow"] == 1.0 and _facts(yellow)["light_red"] == 0.0
 
