@@ -9,6 +9,8 @@ from pathlib import Path
 import typer
 import yaml
 
+from drivelab.agents.registry import ALGO_NAMES
+from drivelab.envs.scenarios import SCENARIOS
 from drivelab.errors import UsageError
 
 app = typer.Typer(
@@ -73,14 +75,12 @@ def _rlad_switches(no_alix: bool, no_aux: bool, no_augment: bool, waypoint_encod
 
 @app.command()
 def train(
-    algo: str | None = typer.Option(
-        None, help="dqn, ppo, a2c, sac, dueling_ddqn, a2c_own, ppo_own, rlad, drq, qlearning"
-    ),
-    env: str | None = typer.Option(
-        None, help="scenario: highway, merge, roundabout, intersection, racetrack, town"
-    ),
+    algo: str | None = typer.Option(None, help=", ".join(ALGO_NAMES)),
+    env: str | None = typer.Option(None, help="scenario: " + ", ".join(SCENARIOS)),
     obs: str | None = typer.Option(None, help="sensor or comma list, e.g. lidar,topdown or lidar:beams=120"),
-    action: str | None = typer.Option(None, help="meta, grid, continuous or target_speed"),
+    action: str | None = typer.Option(
+        None, help="meta, grid, continuous, target_speed, seed_line or seed_lane"
+    ),
     reward: str | None = typer.Option(None, help="preset, term=weight list, or preset,term=weight"),
     steps: int | None = typer.Option(None, help="total environment steps"),
     seed: int | None = typer.Option(None),

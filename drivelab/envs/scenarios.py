@@ -132,8 +132,8 @@ SCENARIOS: dict[str, Scenario] = {
         Scenario(
             "town",
             "drivelab.envs.town_env.TownEnv",
-            "signalised town (train layout; layout=test for the test town): lights, routes to random targets",
-            config={"duration": 60},
+            "signalised town (train layout; layout=test for the test town): lights, pedestrians, routes",
+            config={"duration": 60, "retarget": True},  # training: a new target on arrival (NoCrash: off)
             traffic={
                 "empty": {"vehicles_count": 0, "pedestrians_count": 0},
                 "regular": {"vehicles_count": 15, "pedestrians_count": 10},

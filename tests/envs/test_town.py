@@ -212,7 +212,9 @@ def test_training_retargets_on_arrival_and_evaluation_uses_fixed_routes():
     assert len(env.backend.route_lanes) > lanes_before and env.world.route.length_m > route.length_m
     assert env.backend.route_lanes[:lanes_before] == env.backend.env.ego_route[:lanes_before]
     # evaluation: without retarget the same arrival ends the episode
-    plain = DriveEnv("town", obs="kinematics", action="meta", traffic="empty")
+    plain = DriveEnv(
+        "town", obs="kinematics", action="meta", traffic="empty", backend_options={"retarget": False}
+    )
     plain.reset(seed=2)
     plain.backend.env.vehicle.position = end.copy()
     plain.backend.env.vehicle.heading = hw.vehicle.heading
