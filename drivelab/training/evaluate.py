@@ -21,9 +21,10 @@ def run_episodes(
     episodes: int,
     seed: int,
     record_first: bool = False,
+    on_episode: Callable[[dict], None] | None = None,
 ) -> tuple[list[dict], list[np.ndarray]]:
     """Play ``episodes`` episodes; return each one's ``episode_metrics`` and, optionally, the
-    RGB frames of the first episode."""
+    RGB frames of the first episode. ``on_episode`` is called with each episode's metrics."""
     results, frames = [], []
     for episode in range(episodes):
         obs, _ = env.reset(seed=seed + episode)
@@ -36,6 +37,8 @@ def run_episodes(
                 frames.append(env.render())
             if terminated or truncated:
                 results.append(info["episode_metrics"])
+                if on_episode is not None:
+                    on_episode(info["episode_metrics"])
                 break
     return results, frames
 

@@ -14,6 +14,8 @@ import json
 import os
 from pathlib import Path
 
+from tqdm import tqdm
+
 from drivelab.errors import UsageError
 from drivelab.training.evaluate import aggregate, load_run_config, run_episodes
 
@@ -56,12 +58,15 @@ def nocrash(
     agent = load_agent(run_dir, config)
     policy = lambda obs: agent.predict(obs, deterministic=True)[0]  # noqa: E731
     levels = {}
-    for level in LEVELS:
-        kwargs = {**config.env_kwargs(), "traffic": level}
-        options = {**(kwargs.get("backend_options") or {}), "layout": town, "fixed_routes": True}
-        kwargs["backend_options"] = {**options, "retarget": False}
-        results, _ = run_episodes(policy, DriveEnv(**kwargs), episodes, NOCRASH_SEED)
-        levels[level] = aggregate(results)
+    with tqdm(total=len(LEVELS) * episodes, desc=f"nocrash {config.algo}", unit="episode") as bar:
+        for level in LEVELS:
+            kwargs = {**config.env_kwargs(), "traffic": level}
+            options = {**(kwargs.get("backend_options") or {}), "layout": town, "fixed_routes": True}
+            kwargs["backend_options"] = {**options, "retarget": False}
+            bar.set_postfix_str(level)
+            env = DriveEnv(**kwargs)
+            results, _ = run_episodes(policy, env, episodes, NOCRASH_SEED, on_episode=lambda _: bar.update())
+            levels[level] = aggregate(results)
     report = {
         "run": str(run_dir),
         "algo": config.algo,
