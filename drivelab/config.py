@@ -66,6 +66,14 @@ class RunConfig:
             **self.env_options,
         }
 
+    def eval_env_kwargs(self) -> dict:
+        """DriveEnv keyword arguments for evaluating this run: as for training, except that a
+        scenario that gives new targets while training (the town) ends its episodes on arrival."""
+        kwargs = self.env_kwargs()
+        if SCENARIOS[self.env].config.get("retarget"):
+            kwargs["backend_options"] = {**(kwargs.get("backend_options") or {}), "retarget": False}
+        return kwargs
+
     def to_dict(self) -> dict:
         data = dataclasses.asdict(self)
         data["obs"] = list(self.obs)

@@ -63,3 +63,11 @@ def test_action_and_reward_default_to_the_scenario_s():
     assert build_config({"algo": "ppo", "env": "town"}).reward == "roach"
     given = build_config({"algo": "qlearning", "env": "follow-line", "action": "grid", "reward": "highway"})
     assert (given.action, given.reward) == ("grid", "highway")
+
+
+def test_town_runs_are_evaluated_without_new_targets():
+    config = build_config({"algo": "ppo", "env": "town", "obs": "waypoints", "action": "target_speed"})
+    assert "retarget" not in (config.env_kwargs().get("backend_options") or {})  # the town's default
+    assert config.eval_env_kwargs()["backend_options"]["retarget"] is False
+    highway = build_config({"algo": "ppo", "env": "highway"})
+    assert highway.eval_env_kwargs() == highway.env_kwargs()

@@ -109,7 +109,7 @@ def evaluate_run(
     if episodes < 1:
         raise UsageError("--episodes must be >= 1")
     agent = load_agent(run_dir, config)
-    env = DriveEnv(**config.env_kwargs())
+    env = DriveEnv(**config.eval_env_kwargs())
     policy = lambda obs: agent.predict(obs, deterministic=deterministic)[0]  # noqa: E731
     results, frames = run_episodes(policy, env, episodes, config.seed + EVAL_SEED_OFFSET, video)
     report = {"run": str(run_dir), "algo": config.algo, "env": config.env, **aggregate(results)}

@@ -60,9 +60,9 @@ def nocrash(
     levels = {}
     with tqdm(total=len(LEVELS) * episodes, desc=f"nocrash {config.algo}", unit="episode") as bar:
         for level in LEVELS:
-            kwargs = {**config.env_kwargs(), "traffic": level}
+            kwargs = {**config.eval_env_kwargs(), "traffic": level}
             options = {**(kwargs.get("backend_options") or {}), "layout": town, "fixed_routes": True}
-            kwargs["backend_options"] = {**options, "retarget": False}
+            kwargs["backend_options"] = options
             bar.set_postfix_str(level)
             env = DriveEnv(**kwargs)
             results, _ = run_episodes(policy, env, episodes, NOCRASH_SEED, on_episode=lambda _: bar.update())

@@ -216,7 +216,7 @@ def _make_envs(config: RunConfig, run_dir: Path, resume: bool):
             monitor, header={"t_start": train_env.t_start, "env_id": config.env}, override_existing=not resume
         )
         train_env.seed(config.seed)
-    return train_env, DriveEnv(**config.env_kwargs())
+    return train_env, DriveEnv(**config.eval_env_kwargs())
 
 
 def _check_n_envs(config: RunConfig) -> None:
