@@ -185,6 +185,7 @@ class OwnAgent:
             self.logger.record("rollout/ep_rew_mean", float(np.mean(self.episode_returns)))
         elapsed = max(time.perf_counter() - start_time, 1e-9)
         self.logger.record("time/fps", int((self.num_timesteps - start_steps) / elapsed))
+        self.logger.record("time/total_timesteps", self.num_timesteps)  # progress.csv's step, as SB3
         self.logger.dump(self.num_timesteps)
 
     def save(self, path: str | Path) -> None:

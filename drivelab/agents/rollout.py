@@ -6,7 +6,6 @@ advantages with GAE, then hands the batch to the algorithm's ``update`` (``a2c.p
 
 from __future__ import annotations
 
-import time
 from collections import deque
 from dataclasses import dataclass
 from typing import Any
@@ -178,14 +177,7 @@ class OnPolicyAgent(OwnAgent):
             for group in self.optimizer.param_groups:
                 group["lr"] = learning_rate
             metrics = self.update(rollout)
-            for key, value in metrics.items():
-                self.logger.record(f"train/{key}", value)
-            self.logger.record("train/learning_rate", learning_rate)
-            self.logger.record("train/std", self.policy.log_std.exp().mean().item())
-            if self.episode_returns:
-                self.logger.record("rollout/ep_rew_mean", float(np.mean(self.episode_returns)))
-            elapsed = max(time.perf_counter() - start_time, 1e-9)
-            self.logger.record("time/fps", int((self.num_timesteps - self._start_steps) / elapsed))
-            self.logger.dump(self.num_timesteps)
+            metrics.update(learning_rate=learning_rate, std=self.policy.log_std.exp().mean().item())
+            self._log_progress(metrics, self._start_steps, start_time)
         callback.on_training_end()
         return self

@@ -120,7 +120,7 @@ def test_run_directory_resume_and_evaluation(algo, tmp_path):
         if algo == "dueling_ddqn"
         else {"train/clip_fraction"}
     )
-    assert expected | {"train/learning_rate"} <= columns
+    assert expected | {"train/learning_rate", "time/total_timesteps"} <= columns
     run_module.resume(run_dir, steps=90)
     assert json.loads((run_dir / "checkpoints/latest.json").read_text())["steps"] == 90
     report = evaluate_run(run_dir, episodes=1)
