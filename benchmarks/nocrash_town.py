@@ -29,7 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 RUNS = ROOT / "benchmarks" / "runs"
 RESULTS = ROOT / "benchmarks" / "results"
 DRIVELAB = [sys.executable, "-m", "drivelab.cli"]
-COMMON = ["--env", "town", "--action", "target_speed", "--seed", "0", "--runs-dir", str(RUNS)]
+COMMON = ["--env", "town", "--action", "target_speed", "--seed", "0", "--runs-dir", "benchmarks/runs"]
 
 
 def agents(ppo_steps: int) -> dict[str, list[str]]:
