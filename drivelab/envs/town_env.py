@@ -113,17 +113,26 @@ class TownRoad(Road):
         for pedestrian in self.pedestrians:
             pedestrian.walk(dt, self.vehicles)
         super().step(dt)
-        for pedestrian in self.pedestrians:
-            for vehicle in self.vehicles:
-                if (
-                    not pedestrian.crashed
-                    and vehicle.speed > MOVING_MPS
-                    and vehicle._is_colliding(pedestrian, 0.0)[0]
-                ):
-                    vehicle.crashed = pedestrian.crashed = True
-                    pedestrian.hit_by = vehicle
-                    self.objects.remove(pedestrian)  # taken off the street: no obstacle to traffic
+        self._hit_pedestrians()
         self._clear_wrecks(dt)
+
+    def _hit_pedestrians(self) -> None:
+        """Exact box checks only for moving vehicles near a pedestrian (one array test first)."""
+        walkers = [p for p in self.pedestrians if not p.crashed]
+        moving = [v for v in self.vehicles if v.speed > MOVING_MPS]
+        if not walkers or not moving:
+            return
+        gaps = np.linalg.norm(
+            np.array([p.position for p in walkers])[:, None] - np.array([v.position for v in moving])[None],
+            axis=2,
+        )
+        reach = (walkers[0].diagonal + max(v.diagonal for v in moving)) / 2
+        for i, j in zip(*np.nonzero(gaps < reach), strict=True):
+            pedestrian, vehicle = walkers[i], moving[j]
+            if not pedestrian.crashed and vehicle._is_colliding(pedestrian, 0.0)[0]:
+                vehicle.crashed = pedestrian.crashed = True
+                pedestrian.hit_by = vehicle
+                self.objects.remove(pedestrian)  # taken off the street: no obstacle to traffic
 
     def _clear_wrecks(self, dt: float) -> None:
         """Crashed NPC vehicles are towed away after ``WRECK_CLEARED_S`` (they would block a
@@ -137,6 +146,10 @@ class TownRoad(Road):
 class TownVehicle(IDMVehicle):
     """An IDM/MOBIL vehicle that obeys the town's lights and picks a new random route at the end
     of the one it has."""
+
+    def next_lane(self) -> tuple | None:
+        """The planned lane that starts where the current one ends (the turn at a junction)."""
+        return next((lane for lane in self.route or [] if lane[0] == self.lane_index[1]), None)
 
     def stop_line_ahead(self) -> float | None:
         """Metres from the front bumper to a stop line this vehicle must stop at, else None:
@@ -153,7 +166,7 @@ class TownVehicle(IDMVehicle):
         if ahead_m < 0:
             return None
         if state == LIGHT_GREEN:  # a left turn waits at the line while oncoming traffic comes
-            turn = next((lane for lane in self.route or [] if lane[0] == self.lane_index[1]), None)
+            turn = self.next_lane()
             return ahead_m if turn and left_turn_must_wait(road, turn, self) else None
         if state == LIGHT_YELLOW and self.speed**2 / (2 * max(ahead_m, 1e-3)) > -self.COMFORT_ACC_MIN:
             return None  # too close to stop: go through on yellow
@@ -181,7 +194,7 @@ class TownVehicle(IDMVehicle):
         """Drive at the current lane's speed limit, and at the next lane's once within the
         distance a comfortable deceleration needs to reach it (turns are slower)."""
         limit = self.lane.speed_limit
-        turn = next((lane for lane in self.route or [] if lane[0] == self.lane_index[1]), None)
+        turn = self.next_lane()
         if turn is not None:
             next_limit = self.road.network.get_lane(turn).speed_limit
             ahead_m = self.lane.length - self.lane.local_coordinates(self.position)[0]

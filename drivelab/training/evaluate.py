@@ -49,8 +49,6 @@ def aggregate(results: list[dict]) -> dict[str, float]:
     returns = np.array([r["return"] for r in results], dtype=float)
     km = sum(r["distance_km"] for r in results)
     per_km = lambda key: sum(r.get(key, 0) for r in results) / km if km > 0 else None  # noqa: E731
-    for r in results:
-        r.setdefault("vehicle_collisions", r["collisions"] - r.get("pedestrian_collisions", 0))
     completion = [r["route_completion"] for r in results if r["route_completion"] is not None]
     return {
         "episodes": len(results),
@@ -63,7 +61,7 @@ def aggregate(results: list[dict]) -> dict[str, float]:
         "mean_length": float(np.mean([r["length"] for r in results])),
         "collisions_per_km": per_km("collisions"),
         "pedestrian_collisions_per_km": per_km("pedestrian_collisions"),
-        "vehicle_collisions_per_km": per_km("vehicle_collisions"),
+        "vehicle_collisions_per_km": per_km("collisions") - per_km("pedestrian_collisions") if km else None,
         "off_road_per_km": per_km("off_road_events"),
         "red_lights_per_km": per_km("red_lights"),
         "blocked_per_km": per_km("blocked"),
