@@ -8,6 +8,9 @@
    ``benchmarks/results/rlad-ablation/`` plus ``nocrash.md``: NoCrash success per variant and level,
    mean and 90 % bootstrap interval over seeds.
 
+``--report-only`` rewrites ``nocrash.md`` from the runs' ``nocrash.json`` files (e.g. after the runs
+were made on another machine and only their small files were brought back).
+
 ``--steps`` (and ``--eval-every``) shrink the budget for a check of the pipeline; such runs go
 to their own runs directory and report directory so they never mix with the real ones.
 """
@@ -16,12 +19,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import multiprocessing
 import sys
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 from drivelab.config import load_yaml
-from drivelab.training.compare import group_label, group_runs, load_run, write_report
-from drivelab.training.nocrash import LEVELS, nocrash
+from drivelab.training.compare import group_runs, load_run, write_report
+from drivelab.training.nocrash import INFRACTIONS, LEVELS, nocrash
 from drivelab.training.stats import summarize
 from drivelab.training.sweep import expand_sweep, run_dirs, run_sweep
 
@@ -29,17 +34,84 @@ HERE = Path(__file__).parent
 SWEEP = HERE / "sweeps" / "rlad-ablation.yaml"
 
 
-def nocrash_table(reports: dict[Path, dict], records: list) -> str:
-    """Markdown: NoCrash success (%) per group and traffic level, mean [90 % CI] over seeds."""
+def variant(record) -> str:
+    """The paper's name of a run's variant, from the switches in its hyper-parameters."""
+    hyperparams = record.config.hyperparams or {}
+    off = [
+        name
+        for name, is_off in (
+            ("no A-LIX", hyperparams.get("alix") is False),
+            ("no traffic-light loss", hyperparams.get("aux") is False),
+            ("MLP waypoints", hyperparams.get("waypoint_encoder") == "mlp"),
+            ("no augmentation", hyperparams.get("augment") is False),
+        )
+        if is_off
+    ]
+    return ", ".join(off) or "RLAD"
+
+
+def interval(values: list[float], digits: int = 0) -> str:
+    """``mean [90 % bootstrap interval]`` over seeds (the mean alone for one seed)."""
+    s = summarize(values)
+    if s.n < 2:
+        return f"{s.mean:.{digits}f}"
+    return f"{s.mean:.{digits}f} [{s.ci_low:.{digits}f}, {s.ci_high:.{digits}f}]"
+
+
+def nocrash_tables(reports: dict[Path, dict], records: list) -> str:
+    """Markdown: NoCrash success (%) per variant and traffic level, then the infractions in regular
+    traffic; each cell the mean [90 % CI] over seeds."""
+    groups = group_runs(records)
     lines = ["| variant | seeds | " + " | ".join(LEVELS) + " |", "|---|---|" + "---|" * len(LEVELS)]
-    for key, runs in group_runs(records).items():
+    for runs in groups.values():
+        cells = [
+            interval([100 * reports[r.run_dir]["levels"][lv]["success_rate"] for r in runs]) for lv in LEVELS
+        ]
+        lines.append(f"| {variant(runs[0])} | {len(runs)} | " + " | ".join(cells) + " |")
+    lines += [
+        "",
+        "Regular traffic:",
+        "",
+        "| variant | " + " | ".join(label for label, _ in INFRACTIONS) + " |",
+    ]
+    lines.append("|---|" + "---|" * len(INFRACTIONS))
+    for runs in groups.values():
         cells = []
-        for level in LEVELS:
-            values = [100 * reports[r.run_dir]["levels"][level]["success_rate"] for r in runs]
-            s = summarize(values)
-            cells.append(f"{s.mean:.0f} [{s.ci_low:.0f}, {s.ci_high:.0f}]" if s.n > 1 else f"{s.mean:.0f}")
-        lines.append(f"| {group_label(key)} | {len(runs)} | " + " | ".join(cells) + " |")
+        for label, key in INFRACTIONS:
+            scale, digits = (100, 0) if label.endswith("%") else (1, 1)
+            values = [reports[r.run_dir]["levels"]["regular"][key] for r in runs]
+            cells.append("n/a" if None in values else interval([scale * v for v in values], digits))
+        lines.append(f"| {variant(runs[0])} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def saved_nocrash(run_dir: Path) -> dict:
+    """The run's nocrash.json (``--report-only``)."""
+    path = run_dir / "nocrash.json"
+    if not path.exists():
+        sys.exit(f"{path} is missing: run without --report-only to evaluate")
+    return json.loads(path.read_text())
+
+
+def nocrash_once(run_dir: Path, episodes: int) -> dict:
+    """NoCrash on the test town, or the run's nocrash.json when it already holds that evaluation of
+    the final model (so a re-run after an interruption only evaluates what is missing)."""
+    saved = run_dir / "nocrash.json"
+    if saved.exists() and saved.stat().st_mtime >= (run_dir / "model.zip").stat().st_mtime:
+        report = json.loads(saved.read_text())
+        if report.get("town") == "test" and report.get("episodes_per_level") == episodes:
+            return report
+    return nocrash(run_dir, town="test", episodes=episodes)
+
+
+def nocrash_all(directories: list[Path], episodes: int, workers: int) -> dict[Path, dict]:
+    """``nocrash_once`` for every run, ``workers`` runs at a time (fresh interpreters)."""
+    if workers <= 1:
+        return {d: nocrash_once(d, episodes) for d in directories}
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+        futures = {d: pool.submit(nocrash_once, d, episodes) for d in directories}
+        return {d: future.result() for d, future in futures.items()}
 
 
 def main() -> None:
@@ -49,12 +121,19 @@ def main() -> None:
     )
     parser.add_argument("--eval-every", type=int, default=None, help="steps between periodic evaluations")
     parser.add_argument("--episodes", type=int, default=25, help="NoCrash episodes per traffic level")
-    parser.add_argument("--workers", type=int, default=1, help="parallel runs (one per core at most)")
+    parser.add_argument(
+        "--workers", type=int, default=1, help="parallel runs and NoCrash evaluations (one per core at most)"
+    )
     parser.add_argument("--hyperparams", default=None, help="JSON of extra hyper-parameters for every run")
     parser.add_argument(
         "--duration-s", type=float, default=None, help="episode time limit (default: the town's)"
     )
     parser.add_argument("--out", type=Path, default=None, help="report directory")
+    parser.add_argument(
+        "--report-only",
+        action="store_true",
+        help="rewrite nocrash.md from the runs' nocrash.json (no training, no evaluation)",
+    )
     args = parser.parse_args()
     spec = load_yaml(SWEEP)
     tiny = args.steps is not None
@@ -67,23 +146,34 @@ def main() -> None:
         spec["base"] = {**spec["base"], "env_options": {"duration_s": args.duration_s}}
     out = args.out or HERE / "results" / ("rlad-ablation" + (f"-{args.steps}steps" if tiny else ""))
     sweep = expand_sweep(spec)
-    outcomes = run_sweep(sweep, workers=args.workers)
-    failed = [o["name"] for o in outcomes if not o["ok"]]
-    if failed:
-        sys.exit(f"runs failed: {', '.join(failed)} (logs in {sweep.runs_dir / '.sweep-logs'})")
     directories = run_dirs(sweep)
-    reports = {d: nocrash(d, town="test", episodes=args.episodes) for d in directories}
-    records = [load_run(d) for d in directories]
     command = "python " + " ".join(sys.argv)
-    report = write_report(records, out, title="RLAD ablation in the town", command=command)
+    if args.report_only:
+        reports = {d: saved_nocrash(d) for d in directories}
+        records = [load_run(d) for d in directories]
+        report = out
+        made = "runs, evaluations and their machine: report.md"
+    else:
+        outcomes = run_sweep(sweep, workers=args.workers)
+        failed = [o["name"] for o in outcomes if not o["ok"]]
+        if failed:
+            sys.exit(f"runs failed: {', '.join(failed)} (logs in {sweep.runs_dir / '.sweep-logs'})")
+        reports = nocrash_all(directories, args.episodes, args.workers)
+        records = [load_run(d) for d in directories]
+        report = write_report(records, out, title="RLAD ablation in the town", command=command)
+        made = "machine: report.md"
+    episodes = {r["episodes_per_level"] for r in reports.values()}
     text = [
-        "# NoCrash (test town): success % per traffic level",
+        "# NoCrash (test town): RLAD and its ablations",
         "",
-        f"Command: `{command}`  ",
-        f"{args.episodes} episodes per level and run; mean [90 % bootstrap interval] over seeds. "
+        f"Command: `{command}` ({made})  ",
+        f"{', '.join(map(str, sorted(episodes)))} episodes per traffic level and run, on the test town's "
+        "fixed routes; mean [90 % bootstrap interval] over seeds. "
         f"Training budget: {sweep.cells[0].config.steps:,} steps per run (the paper trains 10^6).",
         "",
-        nocrash_table(reports, records),
+        "Success %:",
+        "",
+        nocrash_tables(reports, records),
         "",
     ]
     (report / "nocrash.md").write_text("\n".join(text))

@@ -149,12 +149,13 @@ def main() -> None:
     memory = replay_memory(frames_84)
     print(memory, flush=True)
     by = {(r["what"], r["size"]): r for r in rows}
+    where = "GPU" if args.device.startswith("cuda") else "CPU"  # where the networks run
     ratios = {
         "environment step 256 / 84 (CPU)": by[("environment step", 256)]["cpu_ms"]
         / by[("environment step", 84)]["cpu_ms"],
         "environment step 84 / no camera (CPU)": by[("environment step", 84)]["cpu_ms"]
         / by[("environment step, no camera (reference)", None)]["cpu_ms"],
-        f"update 256 / 84 (CPU, batch {args.batch_size})": by[(f"update (batch {args.batch_size})", 256)][
+        f"update 256 / 84 ({where}, batch {args.batch_size})": by[(f"update (batch {args.batch_size})", 256)][
             "cpu_ms"
         ]
         / by[(f"update (batch {args.batch_size})", 84)]["cpu_ms"],
@@ -166,7 +167,7 @@ def main() -> None:
         ratios[f"days for the paper's 10^6 steps at {size} (wall)"] = total * 1e6 / 1e3 / 86400
     result = {
         "command": "OMP_NUM_THREADS=1 python " + " ".join(sys.argv),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores (shared with other jobs), "
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores, "
         f"Python {platform.python_version()}, torch {torch.__version__}, 1 torch thread, "
         + (torch.cuda.get_device_name() if args.device.startswith("cuda") else "networks on the CPU"),
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
@@ -178,7 +179,7 @@ def main() -> None:
     (RESULTS / f"{args.out}.json").write_text(json.dumps(result, indent=2))
     load = result["load_average_1min_before_after"]
     lines = [
-        f"# RLAD cost ({'GPU' if args.device.startswith('cuda') else 'CPU'})",
+        f"# RLAD cost ({where})",
         "",
         f"Command: `{result['command']}`  ",
         f"Machine: {result['machine']}; {result['date']}. Median over {args.repeats} repeats of the mean "
