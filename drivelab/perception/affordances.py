@@ -29,6 +29,7 @@ PEDESTRIAN_CORRIDOR_M = 3.0  # a pedestrian this close to the route is about to 
 PEDESTRIAN_HEADING_M = 9.0  # so is one walking towards it from this close (across the road)
 LEFT_TURN_AHEAD_M, LEFT_TURN_M = 20.0, 6.0  # 20 m past the light the route lies 6 m to the left
 ONCOMING_COS = -0.7  # heading opposite the ego's within about 45°
+ONCOMING_LATERAL_M = 10.0  # the opposite lane (4 m to the left) with room for the ego's heading error
 
 
 class Affordances(Sensor):
@@ -110,12 +111,15 @@ class Affordances(Sensor):
         return bool(lateral < -LEFT_TURN_M)
 
     def _oncoming(self, world: WorldState) -> float:
-        """Distance to the nearest moving vehicle ahead that drives against the ego (left of it)."""
+        """Distance to the nearest moving vehicle ahead that drives against the ego in the opposite
+        lane (left of it, within ``ONCOMING_LATERAL_M``: not on a parallel street), at most ``range_m``."""
         vehicles, ego = world.vehicles, world.ego
         if len(vehicles) == 0:
             return self.range_m
         local = ego_frame(vehicles[:, :2], ego.position, ego.heading)
         against = np.cos(vehicles[:, 2] - ego.heading) < ONCOMING_COS
         moving = vehicles[:, 3] > 0.5
-        found = against & moving & (local[:, 0] > 0) & (local[:, 0] < self.range_m) & (local[:, 1] < 0)
-        return float(np.hypot(*local[found].T).min()) if found.any() else self.range_m
+        ahead = (local[:, 0] > 0) & (local[:, 0] < self.range_m)
+        left = (local[:, 1] < 0) & (local[:, 1] > -ONCOMING_LATERAL_M)
+        found = against & moving & ahead & left
+        return min(float(np.hypot(*local[found].T).min()), self.range_m) if found.any() else self.range_m

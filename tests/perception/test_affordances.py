@@ -5,6 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from drivelab.envs.core import DriveEnv
 from drivelab.envs.world import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW, Route
 from drivelab.perception.affordances import FIELDS, Affordances
 from tests.worlds import world
@@ -63,3 +64,17 @@ def test_an_oncoming_vehicle_matters_only_before_a_left_turn_at_a_light():
     assert _facts(straight)["oncoming_m"] == 40.0
     stopped = dataclasses.replace(state, vehicles=np.array([[30.0, -2.0, np.pi, 0.0, 5.0, 2.0]]))
     assert _facts(stopped)["oncoming_m"] == 40.0
+    # on a parallel street 70 m to the left, heading the other way: not oncoming traffic
+    parallel = dataclasses.replace(state, vehicles=np.array([[30.0, -70.0, np.pi, 5.0, 5.0, 2.0]]))
+    assert _facts(parallel)["oncoming_m"] == 40.0
+    # in the opposite lane, 39.5 m ahead and 9 m left: farther than range_m, read as range_m (in the space)
+    edge = dataclasses.replace(state, vehicles=np.array([[39.5, -9.0, np.pi, 5.0, 5.0, 2.0]]))
+    assert _facts(edge)["oncoming_m"] == 40.0
+
+
+def test_town_affordances_stay_in_their_space():
+    # seed 192 once put a vehicle on a parallel street into oncoming_m (75 m, outside the space)
+    env = DriveEnv("town", obs="affordances", traffic="regular")
+    for seed in (192, 223, 227):
+        obs, _ = env.reset(seed=seed)
+        assert obs in env.observation_space
