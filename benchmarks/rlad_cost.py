@@ -144,7 +144,8 @@ def main() -> None:
         )
         add(f"update (batch {args.batch_size})", size, *timed(agent.train_step, args.updates, args.repeats))
         if size == 84:
-            frames_84 = list(agent.replay_buffer.frames[: min(64, agent.replay_buffer.written)].copy())
+            frames = agent.replay_buffer.frames[: min(64, agent.replay_buffer.written)]
+            frames_84 = list(frames.cpu().numpy() if isinstance(frames, torch.Tensor) else frames.copy())
         del agent
     memory = replay_memory(frames_84)
     print(memory, flush=True)

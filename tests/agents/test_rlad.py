@@ -186,3 +186,33 @@ def test_device_choice():
     assert _agent().device.type == ("cuda" if torch.cuda.is_available() else "cpu")
     with pytest.raises(UsageError, match="device must be auto, cpu, cuda or cuda:N"):
         _agent(device="tpu")
+
+
+def _fill(agent, transitions=40):
+    """The same random transitions into ``agent``'s replay whatever its frame store."""
+    rng = np.random.default_rng(2)
+    replay = agent.replay_buffer
+
+    def record():
+        frame = rng.integers(0, 256, (3, 44, 44), dtype=np.uint8)
+        return frame, rng.normal(size=(10, 2)), rng.uniform(-1, 1, 6), int(rng.integers(0, 3))
+
+    replay.start_episode(*record())
+    for _ in range(transitions):
+        replay.add(rng.uniform(-1, 1, 2), float(rng.normal()), False, *record())
+
+
+def test_replay_frames_on_the_device_train_exactly_as_on_the_host():
+    from drivelab.errors import UsageError
+
+    host, device = _agent(seed=4, replay_frames="host"), _agent(seed=4, replay_frames="device")
+    assert isinstance(host.replay_buffer.frames, np.ndarray)
+    assert isinstance(device.replay_buffer.frames, torch.Tensor)
+    assert device.replay_buffer.frames.device == device.device
+    if not torch.cuda.is_available():  # auto keeps the frames on the host when the networks are on the CPU
+        assert isinstance(_agent().replay_buffer.frames, np.ndarray)
+    for agent in (host, device):
+        _fill(agent)
+    assert [host.train_step() for _ in range(2)] == [device.train_step() for _ in range(2)]
+    with pytest.raises(UsageError, match="replay_frames must be one of auto, host, device"):
+        _agent(replay_frames="disk")

@@ -1,6 +1,9 @@
 """RLAD's replay: each frame stored once, stacks rebuilt across episode boundaries, memory."""
 
+import pickle
+
 import numpy as np
+import torch
 
 from drivelab.agents.rlad.replay import UNKNOWN_LABEL, FrameReplayBuffer, label_index
 from drivelab.envs.core import DriveEnv
@@ -84,3 +87,34 @@ def test_transitions_whose_frames_were_overwritten_are_not_sampled():
     assert oldest.min() >= replay.written - replay.records
     batch = replay.sample(64, rng)
     assert batch["images"].shape == (64, 9, 4, 4) and set(batch["labels"]) <= {0, 1}
+
+
+def _filled(frame_device=None, steps=40, episode=9):
+    """A replay of small random frames, the same for every ``frame_device``."""
+    rng = np.random.default_rng(3)
+    replay = FrameReplayBuffer(30, (3, 6, 6), 3, (10, 2), 6, 2, frame_device=frame_device)
+
+    def record():
+        frame = rng.integers(0, 256, (3, 6, 6), dtype=np.uint8)
+        return frame, rng.normal(size=(10, 2)), rng.normal(size=6), int(rng.integers(-1, 3))
+
+    replay.start_episode(*record())
+    for step in range(steps):
+        replay.add(rng.uniform(-1, 1, 2), float(rng.normal()), False, *record())
+        if step % episode == episode - 1:
+            replay.start_episode(*record())
+    return replay
+
+
+def test_frames_kept_in_a_tensor_give_the_same_batches_and_pickle_as_numpy():
+    host, tensor = _filled(), _filled(frame_device="cpu")
+    assert isinstance(host.frames, np.ndarray) and isinstance(tensor.frames, torch.Tensor)
+    assert host.nbytes == tensor.nbytes and host.unique_frame_bytes() == tensor.unique_frame_bytes()
+    one, two = host.sample(16, np.random.default_rng(1)), tensor.sample(16, np.random.default_rng(1))
+    for key in one:
+        np.testing.assert_array_equal(one[key], np.asarray(two[key]), err_msg=key)
+    assert isinstance(two["images"], torch.Tensor) and two["images"].shape == (16, 9, 6, 6)
+    loaded = pickle.loads(pickle.dumps(tensor))
+    assert isinstance(loaded.frames, torch.Tensor) and torch.equal(loaded.frames, tensor.frames)
+    again = loaded.sample(16, np.random.default_rng(1))
+    np.testing.assert_array_equal(np.asarray(again["next_images"]), one["next_images"])

@@ -18,11 +18,19 @@ A transition stays sampleable while all its records are in the ring; with very s
 (under about 20 steps on average) the ring, not ``capacity``, bounds how many transitions are
 sampleable. Memory: ``nbytes`` counts every array; ``unique_frame_bytes`` the distinct frames
 that sampleable transitions reference.
+
+Frames may live on the networks' device (``frame_device``): a batch's stacks are then gathered
+there, and neither the gather of B·2K frames on the CPU nor their copy to the GPU is paid at every
+update (on an H100 at 256×256 the two took 127 of an update's 191 ms,
+benchmarks/results/rlad_profile_gpu_256.md). The small arrays stay in numpy. A pickled buffer
+holds its frames as numpy and puts them back on that device when it is loaded, or keeps them
+on the host where the device is missing.
 """
 
 from __future__ import annotations
 
 import numpy as np
+import torch
 
 LIGHT_CLASSES = ("none", "green", "red_or_yellow")  # DriveEnv.traffic_light_label's values
 UNKNOWN_LABEL = -1  # no label given: left out of the auxiliary loss
@@ -43,6 +51,7 @@ class FrameReplayBuffer:
     :param waypoints_shape: waypoints of one observation, e.g. (10, 2).
     :param measurements_size: measurement values of one observation, e.g. 6.
     :param action_size: action dimensions.
+    :param frame_device: keep the frames in a torch tensor on this device (None: a numpy array).
     """
 
     def __init__(
@@ -53,10 +62,14 @@ class FrameReplayBuffer:
         waypoints_shape: tuple[int, ...],
         measurements_size: int,
         action_size: int,
+        frame_device: torch.device | str | None = None,
     ) -> None:
         self.capacity, self.stack = int(capacity), int(stack)
         self.records = self.capacity + max(int(self.capacity * RECORD_SLACK), self.stack + 1)
-        self.frames = np.zeros((self.records, *frame_shape), dtype=np.uint8)
+        self.frame_device = None if frame_device is None else torch.device(frame_device)
+        self.frames: np.ndarray | torch.Tensor = np.zeros((self.records, *frame_shape), dtype=np.uint8)
+        if self.frame_device is not None:
+            self.frames = torch.zeros(self.frames.shape, dtype=torch.uint8, device=self.frame_device)
         self.waypoints = np.zeros((self.records, *waypoints_shape), dtype=np.float32)
         self.measurements = np.zeros((self.records, measurements_size), dtype=np.float32)
         self.labels = np.full(self.records, UNKNOWN_LABEL, dtype=np.int8)
@@ -72,7 +85,11 @@ class FrameReplayBuffer:
     # --- writing -------------------------------------------------------------------------------
     def _write(self, frame: np.ndarray, waypoints, measurements, label: int) -> int:
         number, slot = self.written, self.written % self.records
-        self.frames[slot], self.waypoints[slot] = frame, waypoints
+        if self.frame_device is None:
+            self.frames[slot] = frame
+        else:
+            self.frames[slot] = torch.as_tensor(frame)
+        self.waypoints[slot] = waypoints
         self.measurements[slot], self.labels[slot] = measurements, label
         self.written += 1
         return number
@@ -104,12 +121,16 @@ class FrameReplayBuffer:
     def size(self) -> int:
         return len(self.sampleable())
 
-    def stacked_frames(self, stacks: np.ndarray) -> np.ndarray:
-        """Record numbers (B, K) → frame stacks (B, 3K, H, W), oldest frame first."""
-        frames = self.frames[stacks % self.records]  # (B, K, 3, H, W)
+    def stacked_frames(self, stacks: np.ndarray) -> np.ndarray | torch.Tensor:
+        """Record numbers (B, K) → frame stacks (B, 3K, H, W), oldest frame first (a tensor on
+        ``frame_device`` when the frames live there)."""
+        slots = stacks % self.records
+        if self.frame_device is not None:
+            slots = torch.as_tensor(slots, device=self.frame_device)
+        frames = self.frames[slots]  # (B, K, 3, H, W)
         return frames.reshape(len(stacks), -1, *frames.shape[-2:])
 
-    def batch(self, indices: np.ndarray) -> dict[str, np.ndarray]:
+    def batch(self, indices: np.ndarray) -> dict[str, np.ndarray | torch.Tensor]:
         """Transitions ``indices`` with their observation and next-observation stacks rebuilt."""
         stacks = self.stacks[indices]
         next_stacks = np.concatenate([stacks[:, 1:], self.next_newest[indices, None]], axis=1)
@@ -127,10 +148,25 @@ class FrameReplayBuffer:
             "next_measurements": self.measurements[next_newest],
         }
 
-    def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    def sample(self, batch_size: int, rng: np.random.Generator) -> dict[str, np.ndarray | torch.Tensor]:
         """``batch_size`` transitions drawn uniformly (with replacement) from the sampleable ones."""
         candidates = self.sampleable()
         return self.batch(candidates[rng.integers(len(candidates), size=batch_size)])
+
+    # --- pickling -------------------------------------------------------------------------------
+    def __getstate__(self) -> dict:
+        state = dict(self.__dict__)
+        if self.frame_device is not None:
+            state["frames"] = self.frames.cpu().numpy()
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        device = self.frame_device
+        if device is not None and device.type == "cuda" and not torch.cuda.is_available():
+            self.frame_device = None  # saved on a GPU machine, loaded on one without
+        elif device is not None:
+            self.frames = torch.from_numpy(self.frames).to(device)
 
     # --- memory --------------------------------------------------------------------------------
     @property

@@ -31,11 +31,12 @@ from torch import nn
 from drivelab.agents.base import OwnAgent
 from drivelab.agents.rlad.augmentation import default_pad, random_shift
 from drivelab.agents.rlad.networks import Actor, StateEncoder, TrafficLightHead, TwinCritic
-from drivelab.agents.rlad.replay import UNKNOWN_LABEL, FrameReplayBuffer, label_index
+from drivelab.agents.rlad.replay import RECORD_SLACK, UNKNOWN_LABEL, FrameReplayBuffer, label_index
 from drivelab.agents.rlad.waypoints import WAYPOINT_ENCODERS
 from drivelab.errors import UsageError
 
 OBSERVATION_KEYS = ("camera", "waypoints", "measurements")
+REPLAY_FRAMES = ("auto", "host", "device")
 
 
 @dataclass(frozen=True)
@@ -64,6 +65,9 @@ class RLADConfig:
     :param train_freq: environment steps between updates.
     :param log_interval: environment steps between logger dumps.
     :param device: "auto" (CUDA when available, else CPU), "cpu", "cuda" or "cuda:N".
+    :param replay_frames: where the replay keeps its frames: "host" (numpy), "device" (a tensor on
+        ``device``, gathered there) or "auto" (the device when it is a GPU with room for them in
+        half its free memory, else the host).
     """
 
     buffer_size: int = 100_000
@@ -88,6 +92,7 @@ class RLADConfig:
     train_freq: int = 1
     log_interval: int = 500
     device: str = "auto"
+    replay_frames: str = "auto"
 
     def check(self, algo: str) -> None:
         if min(self.buffer_size, self.train_freq, self.log_interval) < 1 or self.batch_size < 2:
@@ -102,6 +107,11 @@ class RLADConfig:
             raise UsageError(f"{algo!r} needs log_std_min < log_std_max")
         if self.device not in ("auto", "cpu", "cuda") and not self.device.startswith("cuda:"):
             raise UsageError(f"{algo!r}: device must be auto, cpu, cuda or cuda:N, got {self.device!r}")
+        if self.replay_frames not in REPLAY_FRAMES:
+            raise UsageError(
+                f"{algo!r}: replay_frames must be one of {', '.join(REPLAY_FRAMES)}, "
+                f"got {self.replay_frames!r}"
+            )
         if self.waypoint_encoder not in WAYPOINT_ENCODERS:
             raise UsageError(
                 f"{algo!r}: waypoint_encoder must be one of {', '.join(WAYPOINT_ENCODERS)}, "
@@ -175,13 +185,25 @@ class RLAD(OwnAgent):
         self.alpha_optimizer = torch.optim.Adam([self.log_alpha], lr=config.learning_rate)
         height, width, channels = space["camera"].shape
         self.pad = config.augment_pad or default_pad(min(height, width))
+        frame_shape = (3, height, width)
         self.replay_buffer = FrameReplayBuffer(
-            config.buffer_size, (3, height, width), channels // 3, space["waypoints"].shape,
-            space["measurements"].shape[0], actions,
+            config.buffer_size, frame_shape, channels // 3, space["waypoints"].shape,
+            space["measurements"].shape[0], actions, self._frame_device(frame_shape),
         )  # fmt: skip
         self.low, self.high = self.action_space.low, self.action_space.high
         self._last_obs = None
         self.episode_returns: deque[float] = deque(maxlen=100)
+
+    def _frame_device(self, frame_shape: tuple[int, ...]) -> torch.device | None:
+        """Where the replay keeps its frames (``replay_frames``); None for the host."""
+        choice = self.config.replay_frames
+        if choice == "device":
+            return self.device
+        if choice == "host" or self.device.type != "cuda":
+            return None
+        records = self.config.buffer_size * (1 + RECORD_SLACK) + 1
+        free, _ = torch.cuda.mem_get_info(self.device)
+        return self.device if records * math.prod(frame_shape) < free / 2 else None
 
     def _modules(self) -> dict[str, nn.Module | torch.optim.Optimizer]:
         return {
