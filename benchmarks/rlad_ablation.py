@@ -24,9 +24,12 @@ import sys
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+import torch
+
 from drivelab.config import load_yaml
 from drivelab.training.compare import group_runs, load_run, write_report
-from drivelab.training.nocrash import INFRACTIONS, LEVELS, nocrash
+from drivelab.training.nocrash import INFRACTIONS, LEVELS, NOCRASH_SEED, nocrash
+from drivelab.training.run import file_sha256
 from drivelab.training.stats import summarize
 from drivelab.training.sweep import expand_sweep, run_dirs, run_sweep
 
@@ -86,22 +89,32 @@ def nocrash_tables(reports: dict[Path, dict], records: list) -> str:
 
 
 def saved_nocrash(run_dir: Path) -> dict:
-    """The run's nocrash.json (``--report-only``)."""
+    """The run's nocrash.json on the test town (``--report-only``)."""
     path = run_dir / "nocrash.json"
     if not path.exists():
         sys.exit(f"{path} is missing: run without --report-only to evaluate")
-    return json.loads(path.read_text())
+    report = json.loads(path.read_text())
+    if report.get("town") != "test":
+        sys.exit(f"{path} evaluated the {report.get('town')!r} town, not the test town")
+    return report
 
 
 def nocrash_once(run_dir: Path, episodes: int) -> dict:
-    """NoCrash on the test town, or the run's nocrash.json when it already holds that evaluation of
-    the final model (so a re-run after an interruption only evaluates what is missing)."""
-    saved = run_dir / "nocrash.json"
-    if saved.exists() and saved.stat().st_mtime >= (run_dir / "model.zip").stat().st_mtime:
+    """NoCrash on the test town, or the run's nocrash.json when it already holds that evaluation
+    (same episodes and seed) of this very final model (its SHA-256), so a re-run after an
+    interruption only evaluates what is missing."""
+    saved, final = run_dir / "nocrash.json", run_dir / "model.zip"
+    if saved.exists() and final.is_file():
         report = json.loads(saved.read_text())
-        if report.get("town") == "test" and report.get("episodes_per_level") == episodes:
+        wanted = {"town": "test", "episodes_per_level": episodes, "seed": NOCRASH_SEED}
+        wanted["model_sha256"] = file_sha256(final)
+        if all(report.get(key) == value for key, value in wanted.items()):
             return report
     return nocrash(run_dir, town="test", episodes=episodes)
+
+
+def _one_thread() -> None:
+    torch.set_num_threads(1)  # one evaluation per core: no oversubscription
 
 
 def nocrash_all(directories: list[Path], episodes: int, workers: int) -> dict[Path, dict]:
@@ -109,7 +122,7 @@ def nocrash_all(directories: list[Path], episodes: int, workers: int) -> dict[Pa
     if workers <= 1:
         return {d: nocrash_once(d, episodes) for d in directories}
     context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+    with ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_one_thread) as pool:
         futures = {d: pool.submit(nocrash_once, d, episodes) for d in directories}
         return {d: future.result() for d, future in futures.items()}
 
@@ -152,6 +165,7 @@ def main() -> None:
         reports = {d: saved_nocrash(d) for d in directories}
         records = [load_run(d) for d in directories]
         report = out
+        report.mkdir(parents=True, exist_ok=True)
         made = "runs, evaluations and their machine: report.md"
     else:
         outcomes = run_sweep(sweep, workers=args.workers)

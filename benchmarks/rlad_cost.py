@@ -151,15 +151,15 @@ def main() -> None:
     print(memory, flush=True)
     by = {(r["what"], r["size"]): r for r in rows}
     where = "GPU" if args.device.startswith("cuda") else "CPU"  # where the networks run
+    update = f"update (batch {args.batch_size})"
+    clock = "wall_ms" if where == "GPU" else "cpu_ms"  # a GPU's work is not the process's CPU time
     ratios = {
         "environment step 256 / 84 (CPU)": by[("environment step", 256)]["cpu_ms"]
         / by[("environment step", 84)]["cpu_ms"],
         "environment step 84 / no camera (CPU)": by[("environment step", 84)]["cpu_ms"]
         / by[("environment step, no camera (reference)", None)]["cpu_ms"],
-        f"update 256 / 84 ({where}, batch {args.batch_size})": by[(f"update (batch {args.batch_size})", 256)][
-            "cpu_ms"
-        ]
-        / by[(f"update (batch {args.batch_size})", 84)]["cpu_ms"],
+        f"update 256 / 84 ({where}, batch {args.batch_size})": by[(update, 256)][clock]
+        / by[(update, 84)][clock],
     }
     parts = ("environment step", "policy action (batch of one)", f"update (batch {args.batch_size})")
     for size in SIZES:  # one training step = env step + policy + one update

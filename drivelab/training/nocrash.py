@@ -43,7 +43,7 @@ def nocrash(
     """
     from drivelab.envs.core import DriveEnv
     from drivelab.envs.town import LAYOUTS
-    from drivelab.training.run import load_agent
+    from drivelab.training.run import file_sha256, load_agent, model_path
 
     run_dir = Path(run_dir)
     config = load_run_config(run_dir)
@@ -55,6 +55,7 @@ def nocrash(
         raise UsageError("--episodes must be >= 1")
     if infraction_level not in LEVELS:
         raise UsageError(f"unknown traffic level {infraction_level!r} (choose from {', '.join(LEVELS)})")
+    evaluated = model_path(run_dir, config)
     agent = load_agent(run_dir, config)
     policy = lambda obs: agent.predict(obs, deterministic=True)[0]  # noqa: E731
     levels = {}
@@ -72,6 +73,9 @@ def nocrash(
         "algo": config.algo,
         "town": town,
         "episodes_per_level": episodes,
+        "seed": NOCRASH_SEED,
+        "model": str(evaluated.relative_to(run_dir)),
+        "model_sha256": file_sha256(evaluated),
         "levels": levels,
         "infraction_level": infraction_level,
     }

@@ -52,7 +52,8 @@ class TrainingInterrupted(KeyboardInterrupt):
 
 
 # --- checkpoints -----------------------------------------------------------------------------
-def _sha256(path: Path) -> str:
+def file_sha256(path: Path) -> str:
+    """Hex SHA-256 of a file's bytes."""
     digest = hashlib.sha256()
     with path.open("rb") as handle:
         for block in iter(lambda: handle.read(1 << 20), b""):
@@ -77,7 +78,7 @@ def save_checkpoint(model, run_dir: Path, config: RunConfig, save_replay: bool) 
             replay = True
     manifest = {
         "steps": int(model.num_timesteps),
-        "sha256": _sha256(folder / "latest.zip"),
+        "sha256": file_sha256(folder / "latest.zip"),
         "config_identity": config.identity(),
         "replay_buffer": replay,
         "saved_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
@@ -98,21 +99,26 @@ def verify_checkpoint(run_dir: Path, config: RunConfig) -> dict:
         expected = manifest["sha256"]
     except (json.JSONDecodeError, KeyError, TypeError):
         raise UsageError(f"checkpoint manifest {str(manifest_path)!r} is corrupted") from None
-    if _sha256(model_path) != expected or not zipfile.is_zipfile(model_path):
+    if file_sha256(model_path) != expected or not zipfile.is_zipfile(model_path):
         raise UsageError(f"checkpoint {str(model_path)!r} is truncated or corrupted (checksum mismatch)")
     if manifest.get("config_identity") != config.identity():
         raise UsageError(f"checkpoint in {str(run_dir)!r} was made with a different config")
     return manifest
 
 
-def load_agent(run_dir: Path, config: RunConfig, env=None):
+def model_path(run_dir: Path, config: RunConfig) -> Path:
     """The run's final model, else its latest verified checkpoint."""
-    spec = get_algo(config.algo)
     final = run_dir / "model.zip"
-    path = final if final.is_file() else None
-    if path is None:
-        verify_checkpoint(run_dir, config)
-        path = run_dir / "checkpoints" / "latest.zip"
+    if final.is_file():
+        return final
+    verify_checkpoint(run_dir, config)
+    return run_dir / "checkpoints" / "latest.zip"
+
+
+def load_agent(run_dir: Path, config: RunConfig, env=None):
+    """The agent of ``model_path``."""
+    spec = get_algo(config.algo)
+    path = model_path(run_dir, config)
     try:
         return spec.load(config.algo, path, env)
     except Exception as exc:  # a broken zip or a model of another algorithm

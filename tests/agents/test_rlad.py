@@ -205,14 +205,29 @@ def _fill(agent, transitions=40):
 def test_replay_frames_on_the_device_train_exactly_as_on_the_host():
     from drivelab.errors import UsageError
 
-    host, device = _agent(seed=4, replay_frames="host"), _agent(seed=4, replay_frames="device")
+    # on the CPU even where a GPU is present: cuDNN's backward passes need not be bit-reproducible
+    host = _agent(seed=4, replay_frames="host", device="cpu")
+    device = _agent(seed=4, replay_frames="device", device="cpu")
+    if not torch.cuda.is_available():  # auto keeps the frames on the host when the networks are on the CPU
+        assert _agent().replay_buffer.frame_device is None
+    assert host.replay_buffer.frame_device is None and device.replay_buffer.frame_device == device.device
+    for agent in (host, device):
+        _fill(agent)
     assert isinstance(host.replay_buffer.frames, np.ndarray)
     assert isinstance(device.replay_buffer.frames, torch.Tensor)
     assert device.replay_buffer.frames.device == device.device
-    if not torch.cuda.is_available():  # auto keeps the frames on the host when the networks are on the CPU
-        assert isinstance(_agent().replay_buffer.frames, np.ndarray)
-    for agent in (host, device):
-        _fill(agent)
     assert [host.train_step() for _ in range(2)] == [device.train_step() for _ in range(2)]
     with pytest.raises(UsageError, match="replay_frames must be one of auto, host, device"):
         _agent(replay_frames="disk")
+
+
+def test_a_checkpointed_replay_loads_where_the_loading_agent_keeps_frames(tmp_path):
+    saved = _agent(replay_frames="device")
+    _fill(saved)
+    saved.save_replay_buffer(tmp_path / "replay.pkl")
+    for choice, kind in (("host", np.ndarray), ("device", torch.Tensor)):
+        agent = _agent(replay_frames=choice)
+        agent.load_replay_buffer(tmp_path / "replay.pkl")
+        assert isinstance(agent.replay_buffer.frames, kind), choice
+        frames = np.asarray(agent.replay_buffer.frames)
+        np.testing.assert_array_equal(frames, saved.replay_buffer.frames.numpy())

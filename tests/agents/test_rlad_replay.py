@@ -114,7 +114,28 @@ def test_frames_kept_in_a_tensor_give_the_same_batches_and_pickle_as_numpy():
     for key in one:
         np.testing.assert_array_equal(one[key], np.asarray(two[key]), err_msg=key)
     assert isinstance(two["images"], torch.Tensor) and two["images"].shape == (16, 9, 6, 6)
-    loaded = pickle.loads(pickle.dumps(tensor))
+    loaded = pickle.loads(pickle.dumps(tensor))  # on the host until placed
+    assert isinstance(loaded.frames, np.ndarray) and loaded.frame_device is None
+    np.testing.assert_array_equal(loaded.frames, tensor.frames.numpy())
+    loaded.move_frames("cpu")
     assert isinstance(loaded.frames, torch.Tensor) and torch.equal(loaded.frames, tensor.frames)
     again = loaded.sample(16, np.random.default_rng(1))
     np.testing.assert_array_equal(np.asarray(again["next_images"]), one["next_images"])
+    loaded.move_frames(None)
+    assert isinstance(loaded.frames, np.ndarray)
+    np.testing.assert_array_equal(loaded.sample(16, np.random.default_rng(1))["images"], one["images"])
+
+
+def test_device_frames_are_allocated_at_the_first_write_and_old_pickles_load():
+    empty = FrameReplayBuffer(30, (3, 6, 6), 3, (10, 2), 6, 2, frame_device="cpu")
+    assert isinstance(empty.frames, np.ndarray)  # an agent loaded only to act reserves nothing
+    empty.start_episode(np.ones((3, 6, 6), np.uint8), np.zeros((10, 2)), np.zeros(6), 0)
+    assert isinstance(empty.frames, torch.Tensor) and int(empty.frames[0].sum()) == 3 * 6 * 6
+    old = _filled()
+    state = dict(old.__dict__)
+    del state["frame_device"]  # a replay.pkl written before frame_device existed
+    revived = FrameReplayBuffer.__new__(FrameReplayBuffer)
+    revived.__setstate__(state)
+    assert revived.frame_device is None
+    np.testing.assert_array_equal(revived.sample(4, np.random.default_rng(0))["images"],
+                                  old.sample(4, np.random.default_rng(0))["images"])  # fmt: skip

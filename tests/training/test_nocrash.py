@@ -1,5 +1,6 @@
 """NoCrash-style evaluation of a town run (tiny budgets)."""
 
+import hashlib
 import json
 
 import pytest
@@ -7,7 +8,7 @@ import pytest
 from drivelab.config import build_config
 from drivelab.errors import UsageError
 from drivelab.training import run as run_module
-from drivelab.training.nocrash import LEVELS, nocrash
+from drivelab.training.nocrash import LEVELS, NOCRASH_SEED, nocrash
 
 
 def _town_run(tmp_path):
@@ -29,6 +30,8 @@ def test_nocrash_tables_for_every_traffic_level(tmp_path):
         assert {"red_lights_per_km", "blocked_per_km", "collisions_per_km", "route_completion"} <= set(row)
     saved = json.loads((run_dir / "nocrash.json").read_text())
     assert saved["town"] == "test" and saved["episodes_per_level"] == 2
+    assert saved["model"] == "model.zip" and saved["seed"] == NOCRASH_SEED
+    assert saved["model_sha256"] == hashlib.sha256((run_dir / "model.zip").read_bytes()).hexdigest()
     table = (run_dir / "nocrash.md").read_text()
     assert "| regular |" in table and "red lights run / km" in table
     # the same seeds and fixed routes: a second evaluation gives the same numbers

@@ -119,7 +119,7 @@ def test_corrupted_or_foreign_checkpoint_is_refused(tmp_path):
 
     config_text = (run_dir / "config.yaml").read_text()
     (run_dir / "checkpoints/latest.json").write_text(
-        json.dumps({"sha256": run_module._sha256(checkpoint), "config_identity": "other", "steps": 32})
+        json.dumps({"sha256": run_module.file_sha256(checkpoint), "config_identity": "other", "steps": 32})
     )
     with pytest.raises(UsageError, match="different config"):
         run_module.resume(run_dir, steps=64)

@@ -22,9 +22,10 @@ that sampleable transitions reference.
 Frames may live on the networks' device (``frame_device``): a batch's stacks are then gathered
 there, and neither the gather of B·2K frames on the CPU nor their copy to the GPU is paid at every
 update (on an H100 at 256×256 the two took 127 of an update's 191 ms,
-benchmarks/results/rlad_profile_gpu_256.md). The small arrays stay in numpy. A pickled buffer
-holds its frames as numpy and puts them back on that device when it is loaded, or keeps them
-on the host where the device is missing.
+benchmarks/results/rlad_profile_gpu_256_host.md). The device tensor is allocated at the first
+write, so an agent loaded only to act reserves no device memory. The small arrays stay in numpy.
+A pickled buffer holds its frames as numpy and loads with them on the host; ``move_frames`` puts
+them where the loading agent wants them.
 """
 
 from __future__ import annotations
@@ -68,8 +69,6 @@ class FrameReplayBuffer:
         self.records = self.capacity + max(int(self.capacity * RECORD_SLACK), self.stack + 1)
         self.frame_device = None if frame_device is None else torch.device(frame_device)
         self.frames: np.ndarray | torch.Tensor = np.zeros((self.records, *frame_shape), dtype=np.uint8)
-        if self.frame_device is not None:
-            self.frames = torch.zeros(self.frames.shape, dtype=torch.uint8, device=self.frame_device)
         self.waypoints = np.zeros((self.records, *waypoints_shape), dtype=np.float32)
         self.measurements = np.zeros((self.records, measurements_size), dtype=np.float32)
         self.labels = np.full(self.records, UNKNOWN_LABEL, dtype=np.int8)
@@ -88,6 +87,8 @@ class FrameReplayBuffer:
         if self.frame_device is None:
             self.frames[slot] = frame
         else:
+            if not isinstance(self.frames, torch.Tensor):  # the first write: allocate on the device
+                self.frames = torch.as_tensor(self.frames, device=self.frame_device)
             self.frames[slot] = torch.as_tensor(frame)
         self.waypoints[slot] = waypoints
         self.measurements[slot], self.labels[slot] = measurements, label
@@ -125,8 +126,8 @@ class FrameReplayBuffer:
         """Record numbers (B, K) → frame stacks (B, 3K, H, W), oldest frame first (a tensor on
         ``frame_device`` when the frames live there)."""
         slots = stacks % self.records
-        if self.frame_device is not None:
-            slots = torch.as_tensor(slots, device=self.frame_device)
+        if isinstance(self.frames, torch.Tensor):
+            slots = torch.as_tensor(slots, device=self.frames.device)
         frames = self.frames[slots]  # (B, K, 3, H, W)
         return frames.reshape(len(stacks), -1, *frames.shape[-2:])
 
@@ -153,20 +154,24 @@ class FrameReplayBuffer:
         candidates = self.sampleable()
         return self.batch(candidates[rng.integers(len(candidates), size=batch_size)])
 
-    # --- pickling -------------------------------------------------------------------------------
+    # --- pickling and placement ---------------------------------------------------------------
     def __getstate__(self) -> dict:
         state = dict(self.__dict__)
-        if self.frame_device is not None:
+        if isinstance(self.frames, torch.Tensor):
             state["frames"] = self.frames.cpu().numpy()
-        return state
+        return {**state, "frame_device": None}  # loads on the host: ``move_frames`` places it
 
     def __setstate__(self, state: dict) -> None:
-        self.__dict__.update(state)
-        device = self.frame_device
-        if device is not None and device.type == "cuda" and not torch.cuda.is_available():
-            self.frame_device = None  # saved on a GPU machine, loaded on one without
-        elif device is not None:
-            self.frames = torch.from_numpy(self.frames).to(device)
+        self.__dict__.update({"frame_device": None, **state})  # pickles from before frame_device
+
+    def move_frames(self, device: torch.device | str | None) -> None:
+        """Keep the frames on ``device`` from now on (None: the host, as numpy)."""
+        self.frame_device = None if device is None else torch.device(device)
+        if self.frame_device is None:
+            if isinstance(self.frames, torch.Tensor):
+                self.frames = self.frames.cpu().numpy()
+        elif self.written > 0 or isinstance(self.frames, torch.Tensor):
+            self.frames = torch.as_tensor(self.frames, device=self.frame_device)
 
     # --- memory --------------------------------------------------------------------------------
     @property

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -204,6 +205,11 @@ class RLAD(OwnAgent):
         records = self.config.buffer_size * (1 + RECORD_SLACK) + 1
         free, _ = torch.cuda.mem_get_info(self.device)
         return self.device if records * math.prod(frame_shape) < free / 2 else None
+
+    def load_replay_buffer(self, path: str | Path) -> None:
+        """A checkpointed replay, its frames placed as this agent's ``replay_frames`` says."""
+        super().load_replay_buffer(path)
+        self.replay_buffer.move_frames(self._frame_device(self.replay_buffer.frames.shape[1:]))
 
     def _modules(self) -> dict[str, nn.Module | torch.optim.Optimizer]:
         return {
