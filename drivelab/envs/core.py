@@ -30,8 +30,11 @@ class DriveEnv(gym.Env):
     :param scenario: "highway", "merge", "roundabout", "intersection" or "racetrack".
     :param obs: a sensor spec (``"lidar"``, ``"lidar:beams=120:stack=3"``), a comma list, or a
         list of specs. One sensor gives its Box; several give a Dict keyed by sensor name.
-    :param action: "meta", "grid" or "continuous" (or an ActionAdapter).
-    :param reward: a preset, ``"term=w,…"``, ``"preset,term=w"`` or a dict of weights.
+    :param action: an action kind (``drivelab.envs.actions.ACTIONS``) or an ActionAdapter; default
+        the scenario's first (``meta`` on the highway scenarios, ``seed_line`` on follow-line, …),
+        as ``drivelab train`` picks it.
+    :param reward: a preset, ``"term=w,…"``, ``"preset,term=w"`` or a dict of weights; default the
+        scenario's preset (``roach`` in the town, ``line_follow`` on follow-line, …).
     :param traffic: "empty", "regular" or "dense".
     :param backend: "auto" (fast where it runs the scenario, else highway), "fast" (drivelab's
         compiled port of highway-env's traffic model on highway-env's roads: step for step the
@@ -50,8 +53,8 @@ class DriveEnv(gym.Env):
         self,
         scenario: str = "highway",
         obs: str | list = "kinematics",
-        action: str | ActionAdapter = "meta",
-        reward: str | dict = "highway",
+        action: str | ActionAdapter | None = None,
+        reward: str | dict | None = None,
         traffic: str = "regular",
         backend: str = "auto",
         duration_s: float | None = None,
@@ -64,6 +67,8 @@ class DriveEnv(gym.Env):
         super().__init__()
         self.scenario = get_scenario(scenario)
         check_traffic(traffic)
+        action = self.scenario.action_kinds[0] if action is None else action
+        reward = self.scenario.default_reward if reward is None else reward
         self.adapter = (
             action if isinstance(action, ActionAdapter) else make_action(action, **(action_options or {}))
         )

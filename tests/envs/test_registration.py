@@ -41,3 +41,16 @@ def test_every_scenario_is_registered(scenario):
 def test_bad_arguments_name_the_problem(kwargs, message):
     with pytest.raises(UsageError, match=message):
         drivelab.make(**{"scenario": "highway", **kwargs})
+
+
+@pytest.mark.parametrize(
+    ("scenario", "action", "reward"),
+    [("highway", "meta", "highway"), ("racetrack", "grid", "highway"), ("town", "meta", "roach"),
+     ("follow-line", "seed_line", "line_follow"), ("follow-lane", "seed_lane", "lane_follow")],
+)  # fmt: skip
+def test_make_takes_the_scenario_default_action_and_reward_as_train_does(scenario, action, reward):
+    from drivelab.rewards.shapers import parse_reward
+
+    env = drivelab.make(scenario, obs="kinematics", duration_s=1)
+    assert env.adapter.name == action
+    assert env.reward_shaper.spec == parse_reward(reward)
