@@ -8,8 +8,8 @@ from drivelab.envs.scenarios import SCENARIOS
 
 
 def gym_id(scenario: str) -> str:
-    """``"highway"`` → ``"drivelab/Highway-v0"``."""
-    return f"drivelab/{scenario.capitalize()}-v0"
+    """``"highway"`` → ``"drivelab/Highway-v0"``, ``"follow-line"`` → ``"drivelab/FollowLine-v0"``."""
+    return f"drivelab/{''.join(part.capitalize() for part in scenario.split('-'))}-v0"
 
 
 for _name in SCENARIOS:

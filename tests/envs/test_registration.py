@@ -20,9 +20,17 @@ def test_make_and_gymnasium_make_give_the_same_env():
         assert step_a[1] == step_b[1]
 
 
-@pytest.mark.parametrize("scenario", ["Highway", "Merge", "Roundabout", "Intersection", "Racetrack"])
+@pytest.mark.parametrize(
+    "scenario",
+    ["Highway", "Merge", "Roundabout", "Intersection", "Racetrack", "Town", "FollowLine", "FollowLane"],
+)
 def test_every_scenario_is_registered(scenario):
     assert f"drivelab/{scenario}-v0" in gymnasium.registry
+
+
+def test_gymnasium_make_of_a_circuit_takes_its_default_action():
+    env = gymnasium.make("drivelab/FollowLine-v0", obs="kinematics", duration_s=1)
+    assert env.unwrapped.adapter.name == "seed_line"
 
 
 @pytest.mark.parametrize(
