@@ -24,13 +24,15 @@ def _fail(message: str) -> None:
 
 
 def _parse_pairs(pairs: list[str], what: str) -> dict:
+    from drivelab.config import parse_yaml
+
     values = {}
     for pair in pairs:
         key, sep, value = pair.partition("=")
         if not sep or not key:
             raise UsageError(f"{what} {pair!r} must look like key=value")
         try:
-            values[key.strip()] = yaml.safe_load(value)
+            values[key.strip()] = parse_yaml(value)
         except yaml.YAMLError:
             raise UsageError(f"{what} {pair!r} has a value that is not valid YAML") from None
     return values

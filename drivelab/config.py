@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -142,13 +143,27 @@ def build_config(values: dict) -> RunConfig:
     return RunConfig(**{k: _check_type(k, v) for k, v in values.items()})
 
 
+class YamlLoader(yaml.SafeLoader):
+    """PyYAML's safe loader, reading ``1e-3`` as the number it is (YAML 1.2) instead of a string."""
+
+
+YamlLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float", re.compile(r"^[-+]?(?:\d+\.?\d*|\.\d+)[eE][-+]?\d+$"), list("-+0123456789.")
+)
+
+
+def parse_yaml(text: str):
+    """``text`` as YAML, with ``YamlLoader``."""
+    return yaml.load(text, Loader=YamlLoader)
+
+
 def load_yaml(path: str | Path) -> dict:
     """Read a YAML mapping, with a one-line error for a missing or malformed file."""
     path = Path(path)
     if not path.is_file():
         raise UsageError(f"config file {str(path)!r} does not exist")
     try:
-        data = yaml.safe_load(path.read_text())
+        data = parse_yaml(path.read_text())
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}" if mark else ""

@@ -71,3 +71,16 @@ def test_town_runs_are_evaluated_without_new_targets():
     assert config.eval_env_kwargs()["backend_options"]["retarget"] is False
     highway = build_config({"algo": "ppo", "env": "highway"})
     assert highway.eval_env_kwargs() == highway.env_kwargs()
+
+
+def test_exponent_numbers_are_numbers_in_yaml_and_on_the_command_line(tmp_path):
+    from drivelab.cli import _parse_pairs
+    from drivelab.config import parse_yaml
+
+    path = tmp_path / "run.yaml"
+    path.write_text("algo: ppo\nhyperparams: {learning_rate: 1e-3, ent_coef: -2.5E-2, tag: e5, n: 7}\n")
+    assert load_yaml(path)["hyperparams"] == {"learning_rate": 1e-3, "ent_coef": -0.025, "tag": "e5", "n": 7}
+    assert _parse_pairs(["learning_rate=1e-3", "gamma=0.99", "name=1e"], "-H") == {
+        "learning_rate": 0.001, "gamma": 0.99, "name": "1e"
+    }  # fmt: skip
+    assert parse_yaml("3e2") == 300.0 and isinstance(parse_yaml("12"), int)
