@@ -27,7 +27,8 @@ BLOCKED_SPEED_MPS = 0.1
 class DriveEnv(gym.Env):
     """One driving scenario seen through drivelab's sensors and rewarded by its shapers.
 
-    :param scenario: "highway", "merge", "roundabout", "intersection" or "racetrack".
+    :param scenario: a name of ``drivelab.envs.scenarios.SCENARIOS`` (highway, merge, roundabout,
+        intersection, racetrack, town, follow-line, follow-lane).
     :param obs: a sensor spec (``"lidar"``, ``"lidar:beams=120:stack=3"``), a comma list, or a
         list of specs. One sensor gives its Box; several give a Dict keyed by sensor name.
     :param action: an action kind (``drivelab.envs.actions.ACTIONS``) or an ActionAdapter; default
