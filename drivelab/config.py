@@ -97,6 +97,7 @@ class RunConfig:
 
 
 FIELDS = {f.name: f for f in dataclasses.fields(RunConfig)}
+MAX_SEED = 2**31 - 1  # plus evaluation offsets and episode numbers, still below numpy's 2**32 limit
 _TYPES = {"int": int, "str": str, "bool": bool, "dict": dict}
 
 
@@ -116,11 +117,28 @@ def _check_type(name: str, value):
         if expected is str and isinstance(value, (int, float)) and name == "reward":
             return str(value)
         raise UsageError(f"config field {name!r} must be {expected.__name__}, got {value!r}")
+    if name == "name":
+        return check_run_name(value)
+    if name == "seed" and not 0 <= value <= MAX_SEED:
+        raise UsageError(f"config field 'seed' must be between 0 and {MAX_SEED}, got {value}")
+    if name == "env_options":
+        from drivelab.envs.core import check_env_options
+
+        check_env_options(value)
     if name in ("steps", "eval_episodes", "n_envs") and value < 1:
         raise UsageError(f"config field {name!r} must be >= 1, got {value}")
     if name in ("eval_every", "checkpoint_every") and value < 0:
         raise UsageError(f"config field {name!r} must be >= 0, got {value}")
     return value
+
+
+def check_run_name(name: str) -> str:
+    """``name`` if it is one path component (the run directory inside ``--runs-dir``): not empty,
+    not ``.`` or ``..``, without ``/``, ``\\`` or NUL, so a run never lands outside ``--runs-dir``
+    or makes ``--runs-dir`` itself the run."""
+    if not name or name in (".", "..") or any(char in name for char in "/\\\0"):
+        raise UsageError(f"run name {name!r} must be a single directory name (no '/', not '.' or '..')")
+    return name
 
 
 def _sensor_dict_to_spec(entry) -> str:
@@ -163,7 +181,9 @@ def load_yaml(path: str | Path) -> dict:
     if not path.is_file():
         raise UsageError(f"config file {str(path)!r} does not exist")
     try:
-        data = parse_yaml(path.read_text())
+        data = parse_yaml(path.read_text(encoding="utf-8"))
+    except UnicodeDecodeError as exc:
+        raise UsageError(f"config file {str(path)!r} is not UTF-8 text (byte {exc.start})") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}" if mark else ""

@@ -54,6 +54,8 @@ class A2CConfig:
             raise UsageError(f"{algo!r} needs n_steps >= 1, 0 < gamma <= 1 and 0 <= gae_lambda <= 1")
         if self.learning_rate <= 0 or self.max_grad_norm <= 0:
             raise UsageError(f"{algo!r} needs a positive learning_rate and max_grad_norm")
+        if self.entropy_coef < 0 or self.value_coef < 0:
+            raise UsageError(f"{algo!r} needs entropy_coef >= 0 and value_coef >= 0")
 
 
 def a2c_loss(

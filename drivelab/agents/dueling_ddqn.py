@@ -87,6 +87,11 @@ class DuelingDDQNConfig:
             raise UsageError(f"{algo!r} needs 0 < tau <= 1, 0 < gamma <= 1 and 0 <= beta_start <= 1")
         if self.alpha < 0 or self.learning_rate <= 0 or self.final_learning_rate < 0:
             raise UsageError(f"{algo!r} needs alpha >= 0 and non-negative learning rates")
+        exploration = (self.exploration_initial_eps, self.exploration_final_eps, self.exploration_fraction)
+        if not all(0 <= value <= 1 for value in exploration):
+            raise UsageError(f"{algo!r} needs exploration_initial_eps, _final_eps and _fraction in [0, 1]")
+        if self.priority_eps <= 0 or self.max_grad_norm <= 0:
+            raise UsageError(f"{algo!r} needs priority_eps > 0 and max_grad_norm > 0")
         if self.stream_norm not in ("batch", "layer"):
             raise UsageError(f"{algo!r}: stream_norm must be 'batch' or 'layer', got {self.stream_norm!r}")
 

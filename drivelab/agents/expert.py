@@ -27,6 +27,7 @@ from drivelab.agents.base import OwnAgent
 from drivelab.errors import UsageError
 from drivelab.perception.affordances import FIELDS
 
+SCENARIOS = ("town",)  # the scenarios its rules were written and tested for
 STEER_RAD = np.pi / 4  # a steering command of 1 is highway-env's full lock, 45°
 
 
@@ -67,6 +68,10 @@ class ExpertConfig:
         positive = (self.cruise_speed_mps, self.max_speed_mps, self.brake_mps2, self.lateral_accel_mps2)
         if min(positive) <= 0 or self.lookahead_m <= 0 or self.wheelbase_m <= 0:
             raise UsageError(f"{algo!r} needs positive speeds, accelerations, lookahead_m and wheelbase_m")
+        distances = (self.half_length_m, self.lookahead_s, self.light_stop_m, self.vehicle_gap_m,
+                     self.pedestrian_gap_m, self.yield_watch_m, self.hard_brake_mps2)  # fmt: skip
+        if min(distances) < 0:
+            raise UsageError(f"{algo!r} needs non-negative lengths, gaps, lookahead_s and hard_brake_mps2")
 
 
 def stopping_speed(distance_m: float, brake_mps2: float) -> float:
@@ -88,6 +93,12 @@ class RuleBasedExpert(OwnAgent):
             raise UsageError("expert needs the affordances sensor without stacking")
         if not isinstance(self.action_space, spaces.Box) or self.action_space.shape != (2,):
             raise UsageError("expert drives with --action target_speed")
+        scenario = getattr(getattr(self.env, "unwrapped", None), "scenario", None)
+        if scenario is not None and scenario.name not in SCENARIOS:
+            raise UsageError(
+                f"expert drives only in the {', '.join(SCENARIOS)} scenario (its rules read the town's "
+                f"lights, junctions and pedestrians), not in {scenario.name!r}"
+            )
         self._last_obs = None
 
     def _state(self) -> dict:

@@ -65,6 +65,8 @@ class PPOConfig:
             raise UsageError(
                 f"{algo!r} needs a positive learning_rate, max_grad_norm and clip_range_value >= 0"
             )
+        if min(self.entropy_coef, self.value_coef, self.target_kl) < 0:
+            raise UsageError(f"{algo!r} needs entropy_coef, value_coef and target_kl >= 0")
 
 
 def clipped_policy_loss(

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import zipfile
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
@@ -22,6 +23,7 @@ import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.logger import Logger
 
+from drivelab.agents.base import parse_hyperparams
 from drivelab.errors import UsageError
 
 FORMAT = "drivelab-qlearning-1"
@@ -49,12 +51,16 @@ class QLearningConfig:
     log_interval: int = 10
 
     def __post_init__(self) -> None:
+        self.check("qlearning")
+
+    def check(self, algo: str) -> None:
+        """Ranges of the values (their types are checked by ``parse_hyperparams``)."""
         if not 0 < self.learning_rate <= 1 or not 0 <= self.gamma <= 1:
-            raise ValueError("qlearning needs 0 < learning_rate <= 1 and 0 <= gamma <= 1")
+            raise UsageError(f"{algo} needs 0 < learning_rate <= 1 and 0 <= gamma <= 1")
         if not 0 <= self.epsilon_min <= self.epsilon <= 1 or not 0 < self.epsilon_decay <= 1:
-            raise ValueError("qlearning needs 0 <= epsilon_min <= epsilon <= 1 and 0 < epsilon_decay <= 1")
-        if self.log_interval < 1:
-            raise ValueError("qlearning needs log_interval >= 1")
+            raise UsageError(f"{algo} needs 0 <= epsilon_min <= epsilon <= 1 and 0 < epsilon_decay <= 1")
+        if self.log_interval < 1 or not math.isfinite(self.initial_q):
+            raise UsageError(f"{algo} needs log_interval >= 1 and a finite initial_q")
 
 
 def _discrete_size(space: spaces.Space, what: str) -> int:
@@ -248,14 +254,15 @@ class QLearning:
 
 
 def build_qlearning(algo: str, env: gym.Env, seed: int, hyperparams: dict, log_dir: Path | None) -> QLearning:
-    """A fresh agent for ``env`` (the registry's builder signature); unknown keys fail."""
+    """A fresh agent for ``env`` (the registry's builder signature); unknown keys, wrong types and
+    values out of range fail."""
     known = {f.name for f in fields(QLearningConfig)}
     unknown = sorted(set(hyperparams) - known)
     if unknown:
         raise UsageError(
             f"unknown qlearning hyperparameter(s) {', '.join(unknown)} (known: {', '.join(sorted(known))})"
         )
-    return QLearning(env, seed, QLearningConfig(**hyperparams), log_dir=log_dir)
+    return QLearning(env, seed, parse_hyperparams(QLearningConfig, algo, hyperparams), log_dir=log_dir)
 
 
 def load_qlearning(algo: str, path: Path, env: gym.Env | None) -> QLearning:

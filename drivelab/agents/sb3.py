@@ -9,6 +9,7 @@ from gymnasium import spaces
 from stable_baselines3 import A2C, DQN, PPO, SAC
 from stable_baselines3.common.base_class import BaseAlgorithm
 
+from drivelab.agents.sb3_params import check_sb3_hyperparams
 from drivelab.errors import UsageError
 
 SB3_CLASSES: dict[str, type[BaseAlgorithm]] = {"dqn": DQN, "ppo": PPO, "a2c": A2C, "sac": SAC}
@@ -73,8 +74,9 @@ def seed_network_kwargs(algo: str, space: spaces.Space) -> dict:
 
 def build_sb3(algo: str, env: gym.Env, seed: int, hyperparams: dict, log_dir: Path | None) -> BaseAlgorithm:
     """A fresh SB3 model for ``env``. ``features_extractor``: "sb3" (SB3's own networks, default)
-    or "seed" (seed 003's CNN / fusion network, ``seed_network_kwargs``)."""
-    kwargs = {**DEFAULT_HYPERPARAMS[algo], **hyperparams}
+    or "seed" (seed 003's CNN / fusion network, ``seed_network_kwargs``). ``device``: "cpu" (the
+    default), "cuda" or "auto". Every value is checked first (``sb3_params``)."""
+    kwargs = check_sb3_hyperparams(algo, {"device": "cpu", **DEFAULT_HYPERPARAMS[algo], **hyperparams})
     extractor = kwargs.pop("features_extractor", "sb3")
     if extractor == "seed":
         kwargs["policy_kwargs"] = {**seed_network_kwargs(algo, env.observation_space),
@@ -82,7 +84,7 @@ def build_sb3(algo: str, env: gym.Env, seed: int, hyperparams: dict, log_dir: Pa
     elif extractor != "sb3":
         raise UsageError(f"features_extractor must be 'sb3' or 'seed', got {extractor!r}")
     return SB3_CLASSES[algo](
-        policy_for(env.observation_space), env, seed=seed, verbose=0, device="cpu", **kwargs
+        policy_for(env.observation_space), env, seed=seed, verbose=0, **kwargs
     )
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import inspect
 from typing import Any
 
 import gymnasium as gym
@@ -22,6 +23,41 @@ BACKENDS = ("auto", "fast", "highway")
 LIGHT_LABEL_DISTANCE_M = 18.0  # RLAD's auxiliary label: a light within this distance ahead
 LIGHT_LABELS = {LIGHT_GREEN: "green", LIGHT_YELLOW: "red_or_yellow", LIGHT_RED: "red_or_yellow"}
 BLOCKED_SPEED_MPS = 0.1
+
+
+RUN_KEYWORDS = ("scenario", "obs", "action", "reward", "traffic", "backend")  # RunConfig fields
+
+
+def env_option_names() -> tuple[str, ...]:
+    """DriveEnv keywords a run's ``env_options`` may set: all but those the run's own fields
+    give (scenario, obs, ...) and those training sets itself (render_mode, seed)."""
+    parameters = inspect.signature(DriveEnv.__init__).parameters
+    taken = (*RUN_KEYWORDS, "self", "render_mode", "seed")
+    return tuple(name for name in parameters if name not in taken)
+
+
+def check_env_options(options: dict) -> None:
+    """An unknown ``env_options`` key is a UsageError naming the known ones (values are checked
+    by DriveEnv itself)."""
+    known = env_option_names()
+    for key in options:
+        if key not in known:
+            raise UsageError(f"unknown env_options key {key!r} (known: {', '.join(known)})")
+
+
+def _check_keywords(duration_s, offroad_terminal, action_options, backend_options) -> None:
+    """The types and ranges of DriveEnv's option keywords, as one-line UsageErrors."""
+    if duration_s is not None and (
+        isinstance(duration_s, bool)
+        or not isinstance(duration_s, (int, float))
+        or not 0 < duration_s < float("inf")
+    ):
+        raise UsageError(f"duration_s must be a number of seconds > 0, got {duration_s!r}")
+    if not isinstance(offroad_terminal, bool):
+        raise UsageError(f"offroad_terminal must be true or false, got {offroad_terminal!r}")
+    for name, value in (("action_options", action_options), ("backend_options", backend_options)):
+        if value is not None and not isinstance(value, dict):
+            raise UsageError(f"{name} must be a mapping of options, got {value!r}")
 
 
 class DriveEnv(gym.Env):
@@ -66,6 +102,7 @@ class DriveEnv(gym.Env):
         seed: int | None = None,
     ) -> None:
         super().__init__()
+        _check_keywords(duration_s, offroad_terminal, action_options, backend_options)
         self.scenario = get_scenario(scenario)
         check_traffic(traffic)
         action = self.scenario.action_kinds[0] if action is None else action

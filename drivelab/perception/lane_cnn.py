@@ -64,9 +64,15 @@ def load_lane_cnn(path: str | Path | None = None) -> LaneNet:
     path = Path(path) if path is not None else WEIGHTS_PATH
     if not path.is_file():
         raise UsageError(f"lane CNN weights not found: {path} (run `drivelab perception train-lane`)")
-    saved = torch.load(path, map_location="cpu", weights_only=True)
-    network = LaneNet(int(saved["width"]))
-    network.load_state_dict(saved["state_dict"])
+    try:
+        saved = torch.load(path, map_location="cpu", weights_only=True)
+        network = LaneNet(int(saved["width"]))
+        network.load_state_dict(saved["state_dict"])
+    except Exception as exc:  # not a torch file, another network's weights, a truncated file
+        raise UsageError(
+            f"{str(path)!r} is not lane CNN weights written by `drivelab perception train-lane` "
+            f"({type(exc).__name__})"
+        ) from None
     return network.eval()
 
 

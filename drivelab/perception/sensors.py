@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import inspect
+import math
 from collections import deque
 
 import numpy as np
 import yaml
 from gymnasium import spaces
 
+from drivelab.config import YamlLoader
 from drivelab.envs.world import WorldState
 from drivelab.errors import UsageError
 from drivelab.perception.affordances import Affordances
@@ -89,8 +92,53 @@ def parse_sensor_spec(spec: str | dict) -> tuple[str, dict]:
         key, sep, value = pair.partition("=")
         if not sep:
             raise UsageError(f"sensor option {pair!r} of {name!r} must look like key=value")
-        options[key.strip()] = yaml.safe_load(value)
+        try:
+            options[key.strip()] = yaml.load(value, Loader=YamlLoader)
+        except yaml.YAMLError:
+            raise UsageError(f"sensor option {pair!r} of {name!r}: the value is not valid YAML") from None
     return name.strip(), options
+
+
+def _typed_option(sensor: str, key: str, value, default):
+    """``value`` in the type of the option's ``default`` (an integral float becomes an int): the
+    sensors check ranges, and would fail on a string with an unreadable comparison error."""
+    wrong = f"sensor option {key!r} of {sensor!r} must be {{}}, got {value!r}"
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise UsageError(wrong.format("true or false"))
+        return value
+    if isinstance(default, (int, float)):
+        noun = "an integer" if isinstance(default, int) else "a finite number"
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise UsageError(wrong.format(noun))
+        if isinstance(default, int):
+            if not float(value).is_integer():
+                raise UsageError(wrong.format(noun))
+            return int(value)
+        return float(value)
+    if not isinstance(value, str):  # string options, and None defaults (a weights path)
+        raise UsageError(wrong.format("a string"))
+    return value
+
+
+def check_sensor_options(name: str, options: dict) -> tuple[int, dict]:
+    """(stack, the sensor's keyword options) with every value of the type the sensor declares;
+    an unknown option, a wrong type or ``stack`` < 1 is a UsageError."""
+    defaults = {
+        key: parameter.default
+        for key, parameter in inspect.signature(SENSORS[name].__init__).parameters.items()
+        if parameter.kind is inspect.Parameter.KEYWORD_ONLY
+    }
+    checked = {}
+    for key, value in options.items():
+        if key not in defaults and key != "stack":
+            known = ", ".join([*defaults, "stack"])
+            raise UsageError(f"unknown option {key!r} for sensor {name!r} (known: {known})")
+        checked[key] = _typed_option(name, key, value, defaults.get(key, 1))
+    stack = checked.pop("stack", 1)
+    if stack < 1:
+        raise UsageError(f"sensor option 'stack' of {name!r} must be >= 1, got {stack}")
+    return stack, checked
 
 
 def make_sensor(spec: str | dict) -> Sensor:
@@ -98,7 +146,7 @@ def make_sensor(spec: str | dict) -> Sensor:
     name, options = parse_sensor_spec(spec)
     if name not in SENSORS:
         raise UsageError(f"unknown sensor {name!r} (choose from {', '.join(SENSORS)})")
-    stack = int(options.pop("stack", 1))
+    stack, options = check_sensor_options(name, options)
     try:
         sensor = SENSORS[name](**options)
     except (TypeError, ValueError) as exc:

@@ -196,13 +196,45 @@ def _next_multiple(value: int, every: int) -> int:
 
 # --- the run ---------------------------------------------------------------------------------
 def new_run_dir(config: RunConfig, runs_root: Path) -> Path:
+    """The path of a new run directory inside ``runs_root`` (not created yet). A UsageError when it
+    exists, or when ``runs_root`` is not a directory that this process can create folders in."""
     name = config.name or f"{config.algo}-{config.env}-s{config.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
     run_dir = runs_root / name
     if run_dir.exists():
         raise UsageError(
             f"run directory {str(run_dir)!r} already exists (choose another --name, or --resume it)"
         )
+    existing = next(p for p in (runs_root, *runs_root.absolute().parents) if p.exists())
+    if not existing.is_dir():
+        raise UsageError(f"--runs-dir {str(runs_root)!r}: {str(existing)!r} is not a directory")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise UsageError(f"--runs-dir {str(runs_root)!r}: no permission to write in {str(existing)!r}")
     return run_dir
+
+
+def _create_run_dir(run_dir: Path) -> None:
+    """Create ``run_dir`` and the missing folders above it; a refused write (read-only file
+    system, permissions) is a one-line UsageError and leaves no folder behind."""
+    missing = [p for p in (run_dir, *run_dir.parents) if not p.exists()]
+    try:
+        run_dir.mkdir(parents=True)
+    except OSError as exc:
+        for folder in missing[1:]:  # innermost first; mkdir failed, so run_dir itself is absent
+            if folder.is_dir():
+                folder.rmdir()
+        raise UsageError(f"cannot create run directory {str(run_dir)!r}: {exc.strerror}") from None
+
+
+def _check_model(spec, config: RunConfig, probe) -> None:
+    """Build the agent once on the probe environment and throw it away, so that a hyper-parameter
+    the algorithm rejects (SB3's or the agent's own checks) fails before any folder exists. The
+    real build that follows re-seeds everything, so this changes no result."""
+    try:
+        spec.build(config.algo, probe, config.seed, dict(config.hyperparams), None)
+    except UsageError:
+        raise
+    except (TypeError, ValueError, AssertionError) as exc:
+        raise UsageError(f"bad hyperparameters for {config.algo!r}: {exc}") from None
 
 
 def _make_envs(config: RunConfig, run_dir: Path, resume: bool):
@@ -233,16 +265,17 @@ def _check_n_envs(config: RunConfig) -> None:
 
 
 def train(config: RunConfig, runs_root: str | Path = "runs") -> Path:
-    """Train a new run; every input is validated before anything is written."""
+    """Train a new run; every input is validated (the agent built once) before anything is written."""
     from drivelab.envs.core import DriveEnv
 
     check_combination(config.algo, config.action)
     _check_n_envs(config)
+    run_dir = new_run_dir(config, Path(runs_root))
     probe = DriveEnv(**config.env_kwargs())  # validates scenario, sensors, reward, action
     spec = check_combination(config.algo, config.action, probe.observation_space)
+    _check_model(spec, config, probe)
     probe.close()
-    run_dir = new_run_dir(config, Path(runs_root))
-    run_dir.mkdir(parents=True)
+    _create_run_dir(run_dir)
     try:
         save_yaml(config, run_dir / "config.yaml")
         train_env, eval_env = _make_envs(config, run_dir, resume=False)

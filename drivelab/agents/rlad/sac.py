@@ -106,6 +106,8 @@ class RLADConfig:
             raise UsageError(f"{algo!r} needs positive learning rates and init_temperature")
         if self.log_std_min >= self.log_std_max:
             raise UsageError(f"{algo!r} needs log_std_min < log_std_max")
+        if self.aux_weight < 0 or self.alix_target <= 0:
+            raise UsageError(f"{algo!r} needs aux_weight >= 0 and alix_target > 0")
         if self.device not in ("auto", "cpu", "cuda") and not self.device.startswith("cuda:"):
             raise UsageError(f"{algo!r}: device must be auto, cpu, cuda or cuda:N, got {self.device!r}")
         if self.replay_frames not in REPLAY_FRAMES:

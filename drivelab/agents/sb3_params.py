@@ -1,0 +1,223 @@
+"""The stable-baselines3 hyper-parameters drivelab accepts, with their types and ranges.
+
+SB3 checks few of its keyword arguments: ``batch_size=0`` trains on empty batches (a nan loss and
+exit code 0), ``gamma="abc"`` fails hundreds of steps into training. ``check_sb3_hyperparams``
+validates every ``-H`` / YAML value before a model is built, so bad input is one line and no run
+directory. Keys of SB3's constructors that take Python objects (``action_noise``,
+``replay_buffer_class``, ...) or that drivelab sets itself (``env``, ``seed``, ``tensorboard_log``,
+...) are refused by name; keys SB3's constructor does not have are unknown.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from drivelab.errors import UsageError
+
+DEVICES = ("cpu", "cuda", "auto")
+
+
+@dataclass(frozen=True)
+class Param:
+    """One hyper-parameter: its kind and the interval its value must lie in.
+
+    :param kind: "int", "float", "bool", "dict" or "str".
+    :param low: smallest allowed value (None: unbounded).
+    :param high: largest allowed value (None: unbounded).
+    :param open_low: ``low`` itself is not allowed (``learning_rate > 0``).
+    :param none: None (YAML ``null``) is allowed and means SB3's "off".
+    """
+
+    kind: str
+    low: float | None = None
+    high: float | None = None
+    open_low: bool = False
+    none: bool = False
+
+    def describe(self) -> str:
+        """The allowed values in words, e.g. ``a number > 0`` or ``an integer in [1, inf)``."""
+        noun = {"int": "an integer", "float": "a number", "bool": "true or false", "dict": "a mapping"}
+        text = noun.get(self.kind, "a string")
+        if self.low is not None and self.high is not None:
+            text += f" in {'(' if self.open_low else '['}{self.low}, {self.high}]"
+        elif self.low is not None:
+            text += f" {'>' if self.open_low else '>='} {self.low}"
+        return text + (" or null" if self.none else "")
+
+
+POSITIVE = Param("float", 0, open_low=True)
+FRACTION = Param("float", 0, 1)
+COUNT = Param("int", 1)
+NON_NEGATIVE_INT = Param("int", 0)
+NON_NEGATIVE = Param("float", 0)
+FLAG = Param("bool")
+MAPPING = Param("dict")
+
+_COMMON = {
+    "learning_rate": POSITIVE,
+    "gamma": FRACTION,
+    "max_grad_norm": POSITIVE,
+    "stats_window_size": COUNT,
+    "policy_kwargs": MAPPING,
+}
+_OFF_POLICY = {
+    "buffer_size": COUNT,
+    "learning_starts": NON_NEGATIVE_INT,
+    "batch_size": COUNT,
+    "tau": Param("float", 0, 1, open_low=True),
+    "gradient_steps": Param("int", -1),  # -1: as many gradient steps as environment steps
+    "optimize_memory_usage": FLAG,
+    "n_steps": COUNT,
+    "target_update_interval": COUNT,
+    "replay_buffer_kwargs": MAPPING,
+}
+_ON_POLICY = {
+    "n_steps": COUNT,
+    "gae_lambda": FRACTION,
+    "ent_coef": NON_NEGATIVE,
+    "vf_coef": NON_NEGATIVE,
+    "normalize_advantage": FLAG,
+    "use_sde": FLAG,
+    "sde_sample_freq": Param("int", -1),
+    "rollout_buffer_kwargs": MAPPING,
+}
+
+PARAMS: dict[str, dict[str, Param]] = {
+    "dqn": {
+        **_COMMON,
+        **_OFF_POLICY,
+        "exploration_fraction": FRACTION,
+        "exploration_initial_eps": FRACTION,
+        "exploration_final_eps": FRACTION,
+    },
+    "ppo": {
+        **_COMMON,
+        **_ON_POLICY,
+        "batch_size": COUNT,
+        "n_epochs": COUNT,
+        "clip_range": POSITIVE,
+        "clip_range_vf": Param("float", 0, open_low=True, none=True),
+        "target_kl": Param("float", 0, open_low=True, none=True),
+    },
+    "a2c": {**_COMMON, **_ON_POLICY, "rms_prop_eps": POSITIVE, "use_rms_prop": FLAG},
+    "sac": {
+        **_COMMON,
+        **_OFF_POLICY,
+        "use_sde": FLAG,
+        "sde_sample_freq": Param("int", -1),
+        "use_sde_at_warmup": FLAG,
+    },
+}
+
+
+def _check_device(algo: str, value) -> str:
+    """cpu, cuda (only where torch sees a GPU) or auto (SB3 picks: cuda when there is one)."""
+    if value not in DEVICES:
+        choices = ", ".join(DEVICES)
+        raise UsageError(f"hyperparameter 'device' of {algo!r} must be one of {choices}, got {value!r}")
+    if value == "cuda":
+        import torch
+
+        if not torch.cuda.is_available():
+            raise UsageError(f"-H device=cuda for {algo!r}, but torch sees no CUDA GPU on this machine")
+    return value
+
+
+def _check_train_freq(algo: str, value):
+    """An integer >= 1 (steps), or ``[n, "step" | "episode"]`` as SB3 takes it."""
+    if isinstance(value, (list, tuple)) and len(value) == 2 and value[1] in ("step", "episode"):
+        return (_check_value(algo, "train_freq", value[0], COUNT), value[1])
+    return _check_value(algo, "train_freq", value, COUNT)
+
+
+def _check_sac_coefficient(algo: str, key: str, value, param: Param):
+    """SAC's ``ent_coef`` / ``target_entropy``: "auto" (``ent_coef`` also "auto_<initial value>")
+    or a number."""
+    if isinstance(value, str):
+        auto, _, initial = value.partition("_")
+        if auto == "auto" and (not initial or key == "ent_coef" and _is_positive_number(initial)):
+            return value
+        forms = "'auto', 'auto_<number>'" if key == "ent_coef" else "'auto'"
+        raise UsageError(f"hyperparameter {key!r} of {algo!r} must be {forms} or a number, got {value!r}")
+    return _check_value(algo, key, value, param)
+
+
+def _is_positive_number(text: str) -> bool:
+    try:
+        return float(text) > 0
+    except ValueError:
+        return False
+
+
+SPECIAL: dict[str, Callable] = {
+    "device": lambda algo, key, value: _check_device(algo, value),
+    "train_freq": lambda algo, key, value: _check_train_freq(algo, value),
+}
+SAC_SPECIAL: dict[str, Callable] = {
+    "ent_coef": lambda algo, key, value: _check_sac_coefficient(algo, key, value, POSITIVE),
+    "target_entropy": lambda algo, key, value: _check_sac_coefficient(algo, key, value, Param("float")),
+}
+
+
+def _check_value(algo: str, key: str, value, param: Param):
+    """``value`` as ``param``'s kind (an integral float becomes an int), or a UsageError."""
+    wrong = UsageError(f"hyperparameter {key!r} of {algo!r} must be {param.describe()}, got {value!r}")
+    if value is None:
+        if param.none:
+            return None
+        raise wrong
+    if param.kind == "bool":
+        if not isinstance(value, bool):
+            raise wrong
+        return value
+    if param.kind in ("dict", "str"):
+        if not isinstance(value, dict if param.kind == "dict" else str):
+            raise wrong
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise wrong
+    if param.kind == "int":
+        if not float(value).is_integer():
+            raise wrong
+        value = int(value)
+    else:
+        value = float(value)
+    too_low = param.low is not None and (value <= param.low if param.open_low else value < param.low)
+    if too_low or (param.high is not None and value > param.high):
+        raise wrong
+    return value
+
+
+def settable(algo: str) -> dict[str, Param]:
+    """The declared hyper-parameters of ``algo`` that the installed SB3's constructor takes."""
+    from drivelab.agents.sb3 import SB3_CLASSES
+
+    accepted = inspect.signature(SB3_CLASSES[algo].__init__).parameters
+    return {key: param for key, param in PARAMS[algo].items() if key in accepted}
+
+
+def check_sb3_hyperparams(algo: str, hyperparams: dict) -> dict:
+    """``hyperparams`` with every value checked against ``algo``'s declared type and range
+    (integral floats as ints); an unknown, unsettable or out-of-range key is a UsageError."""
+    from drivelab.agents.sb3 import SB3_CLASSES
+
+    declared = settable(algo)
+    special = {**SPECIAL, **(SAC_SPECIAL if algo == "sac" else {})}
+    constructor = inspect.signature(SB3_CLASSES[algo].__init__).parameters
+    checked = {}
+    for key, value in hyperparams.items():
+        if key == "features_extractor":
+            checked[key] = value  # build_sb3 checks it against the observation
+        elif key in special:
+            checked[key] = special[key](algo, key, value)
+        elif key in declared:
+            checked[key] = _check_value(algo, key, value, declared[key])
+        elif key in constructor:
+            raise UsageError(f"hyperparameter {key!r} of {algo!r} cannot be set with -H or a config file")
+        else:
+            known = sorted([*declared, *special, "features_extractor"])
+            raise UsageError(f"unknown hyperparameter {key!r} for {algo!r} (known: {', '.join(known)})")
+    return checked
