@@ -7,6 +7,7 @@ A report directory holds::
     runs.csv             every run's own final metrics, with where they came from
     learning_curves.png  periodic-evaluation return against steps, mean over seeds with a 90 % band
     metrics.png          bar charts of the main metrics (mean, interval, IQM, each seed)
+    report-manifest.json the files above: all that a later report in the same place may replace
 
 A run's final metrics come from its ``eval.json`` (``drivelab evaluate``) when it has one, else
 from the last row of its ``evaluations.csv``.
@@ -110,7 +111,36 @@ def find_runs(patterns: Iterable[str | Path]) -> list[Path]:
 def _float_or_none(value) -> float | None:
     if value is None or value == "":
         return None
+    if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+        raise ValueError(f"not a number: {value!r}")
     return float(value)
+
+
+def _final_metrics(values: dict, path: Path) -> dict:
+    """The ``METRICS`` of ``values`` (a row or eval.json) as floats or None, or a UsageError."""
+    try:
+        return {key: _float_or_none(values.get(key)) for key in METRICS}
+    except ValueError as exc:
+        raise UsageError(f"{str(path)!r} holds a metric that is {exc}") from None
+
+
+def read_evaluations(path: Path) -> tuple[list[tuple[int, float]], dict]:
+    """(step, mean return) of every row of an evaluations.csv, and its last row; a file that
+    drivelab did not write (no header, missing fields, text for numbers) is a UsageError."""
+    curve: list[tuple[int, float]] = []
+    last_row: dict = {}
+    try:
+        with path.open(newline="", encoding="utf-8") as handle:
+            for row in csv.DictReader(handle):
+                curve.append((int(row["step"]), float(row["mean_return"])))
+                last_row = row
+    except (KeyError, TypeError, ValueError, csv.Error) as exc:  # UnicodeDecodeError is a ValueError
+        line = f" (row {len(curve) + 1})" if curve or not isinstance(exc, KeyError) else ""
+        raise UsageError(
+            f"{str(path)!r} is not an evaluations.csv written by drivelab train{line}: "
+            f"{type(exc).__name__}"
+        ) from None
+    return curve, last_row
 
 
 def load_run(run_dir: str | Path) -> RunRecord:
@@ -121,19 +151,18 @@ def load_run(run_dir: str | Path) -> RunRecord:
     last_row: dict = {}
     evaluations = run_dir / "evaluations.csv"
     if evaluations.is_file():
-        with evaluations.open(newline="") as handle:
-            for row in csv.DictReader(handle):
-                curve.append((int(row["step"]), float(row["mean_return"])))
-                last_row = row
+        curve, last_row = read_evaluations(evaluations)
     eval_json = run_dir / "eval.json"
     if eval_json.is_file():
         try:
-            report = json.loads(eval_json.read_text())
-        except json.JSONDecodeError:
+            report = json.loads(eval_json.read_text(encoding="utf-8"))
+        except (json.JSONDecodeError, UnicodeDecodeError):
             raise UsageError(f"{str(eval_json)!r} is not valid JSON") from None
-        final, source = {key: _float_or_none(report.get(key)) for key in METRICS}, "eval.json"
+        if not isinstance(report, dict):
+            raise UsageError(f"{str(eval_json)!r} is not an eval.json written by drivelab evaluate")
+        final, source = _final_metrics(report, eval_json), "eval.json"
     elif last_row:
-        final, source = {key: _float_or_none(last_row.get(key)) for key in METRICS}, "evaluations.csv"
+        final, source = _final_metrics(last_row, evaluations), "evaluations.csv"
     else:
         raise UsageError(f"run {str(run_dir)!r} has no evaluation yet (no eval.json, no evaluations.csv)")
     return RunRecord(run_dir, config, final, source, tuple(curve))
@@ -260,30 +289,98 @@ def _write_csvs(folder: Path, groups, summaries) -> None:
                 writer.writerow([str(r.run_dir), *key, r.config.seed, r.config.steps, r.source, *values])
 
 
-def publish_dir(out_dir: Path, fill) -> Path:
-    """Write a report into a temporary sibling folder with ``fill(folder)``, then rename it to
-    ``out_dir``: a failure leaves nothing half-written, and a previous report is replaced whole.
+MANIFEST = "report-manifest.json"  # the files a report directory's drivelab report consists of
+LEGACY_REPORT_FILES = ("report.md", "summary.csv", "runs.csv", "learning_curves.png", "metrics.png")
 
-    An existing ``out_dir`` that is not a drivelab report is refused rather than overwritten.
+
+def previous_report_files(out_dir: Path) -> list[str] | None:
+    """The names of the files a previous drivelab report wrote into ``out_dir`` (its manifest
+    included), None when ``out_dir`` holds no drivelab report. A report from before the manifest
+    existed is recognised by its report.md and owns only the files every report had."""
+    manifest = out_dir / MANIFEST
+    if manifest.is_file():
+        try:
+            files = json.loads(manifest.read_text(encoding="utf-8"))["files"]
+        except (ValueError, KeyError, TypeError):
+            raise UsageError(f"{str(manifest)!r} is corrupted; move the report away by hand") from None
+        if not isinstance(files, list) or not all(_plain_name(name) for name in files):
+            raise UsageError(f"{str(manifest)!r} is corrupted; move the report away by hand")
+        return [*files, MANIFEST]
+    if (out_dir / "report.md").is_file():
+        return [name for name in LEGACY_REPORT_FILES if (out_dir / name).exists()]
+    return None
+
+
+def _plain_name(name) -> bool:
+    """A file name in the report directory itself (no folder part, not . or ..)."""
+    return isinstance(name, str) and name not in ("", ".", "..") and "/" not in name and "\\" not in name
+
+
+def _check_out_dir(out_dir: Path) -> list[str]:
+    """The previous report's files in ``out_dir`` (empty when there is none), or a UsageError when
+    writing there could delete or overwrite a file that drivelab did not write."""
+    if not out_dir.exists():
+        return []
+    if not out_dir.is_dir():
+        raise UsageError(f"--out {str(out_dir)!r} is a file, not a directory")
+    previous = previous_report_files(out_dir)
+    if previous is None and any(out_dir.iterdir()):
+        raise UsageError(
+            f"--out {str(out_dir)!r} is not empty and holds no drivelab report; choose another --out "
+            "(compare never deletes or overwrites files it did not write)"
+        )
+    return previous or []
+
+
+def publish_dir(out_dir: Path, fill) -> Path:
+    """Write a report with ``fill(folder)`` into a temporary folder inside ``out_dir``, then move
+    its files into ``out_dir`` and list them in ``report-manifest.json``.
+
+    A failure while filling leaves ``out_dir`` as it was. Of a previous report only the files its
+    manifest lists are replaced or removed; other files in ``out_dir`` are never touched, and a
+    non-empty ``out_dir`` without a report is refused.
     """
     out_dir = Path(out_dir)
-    if out_dir.exists() and not (out_dir / "report.md").is_file():
-        if not out_dir.is_dir() or any(out_dir.iterdir()):
-            raise UsageError(f"{str(out_dir)!r} exists and is not a drivelab report; choose another --out")
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-", dir=out_dir.parent))
+    previous = _check_out_dir(out_dir)
+    created = [p for p in (out_dir, *out_dir.parents) if not p.exists()]
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=".report.tmp-", dir=out_dir))
+    except OSError as exc:
+        _remove_empty(created)
+        raise UsageError(f"cannot write a report in {str(out_dir)!r}: {exc.strerror}") from None
     try:
         fill(tmp)
-        if out_dir.exists():
-            old = out_dir.with_name(f".{out_dir.name}.old-{os.getpid()}")
-            os.replace(out_dir, old)
-            os.replace(tmp, out_dir)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, out_dir)
-    finally:
+        written = sorted(p.name for p in tmp.iterdir())
+        clashes = [name for name in written if (out_dir / name).exists() and name not in previous]
+        if clashes:
+            raise UsageError(f"{str(out_dir / clashes[0])!r} exists and is not from a drivelab report")
+        for name in previous:
+            _remove(out_dir / name)
+        for name in written:
+            os.replace(tmp / name, out_dir / name)
+        (tmp / MANIFEST).write_text(json.dumps({"files": written}, indent=2) + "\n")
+        os.replace(tmp / MANIFEST, out_dir / MANIFEST)
+    except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
+        _remove_empty(created)
+        raise
+    shutil.rmtree(tmp, ignore_errors=True)
     return out_dir
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path)
+    elif path.exists() or path.is_symlink():
+        path.unlink()
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove the folders this call created (innermost first), if they are still empty."""
+    for folder in folders:
+        if folder.is_dir() and not any(folder.iterdir()):
+            folder.rmdir()
 
 
 def write_report(

@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+from gymnasium import spaces
 
 from drivelab.config import RunConfig, build_config, load_yaml
 from drivelab.errors import UsageError
@@ -106,8 +109,10 @@ def evaluate_run(
     config = load_run_config(run_dir)
     if episodes < 1:
         raise UsageError("--episodes must be >= 1")
-    agent = load_agent(run_dir, config)
+    check_writable(run_dir, "eval.json")
     env = DriveEnv(**config.eval_env_kwargs())
+    agent = load_agent(run_dir, config)
+    check_spaces(agent, env, run_dir)
     policy = lambda obs: agent.predict(obs, deterministic=deterministic)[0]  # noqa: E731
     results, frames = run_episodes(policy, env, episodes, config.seed + EVAL_SEED_OFFSET, video)
     report = {"run": str(run_dir), "algo": config.algo, "env": config.env, **aggregate(results)}
@@ -115,8 +120,66 @@ def evaluate_run(
         report["video"] = str(
             write_video(frames, run_dir / "videos" / "evaluate", env.metadata["render_fps"])
         )
-    (run_dir / "eval.json").write_text(json.dumps({**report, "per_episode": results}, indent=2))
+    tmp = run_dir / "eval.tmp.json"
+    tmp.write_text(json.dumps({**report, "per_episode": results}, indent=2))
+    os.replace(tmp, run_dir / "eval.json")
     return report
+
+
+def check_writable(run_dir: Path, name: str) -> None:
+    """A UsageError unless a file can be created in ``run_dir`` and ``name`` there is not a
+    folder: checked before an evaluation, not after its episodes. The probe is a real file
+    (removed at once), as permission bits say nothing on a read-only mount or for root."""
+    if (run_dir / name).is_dir():
+        raise UsageError(f"cannot write {name} in {str(run_dir)!r}: it is a directory")
+    try:
+        with tempfile.TemporaryFile(dir=run_dir):
+            pass
+    except OSError as exc:
+        raise UsageError(f"cannot write {name} in {str(run_dir)!r}: {exc.strerror}") from None
+
+
+def _shape(space: spaces.Space) -> str:
+    """A one-line description of a space: its shape, or the shape of each part of a Dict."""
+    if isinstance(space, spaces.Dict):
+        return "{" + ", ".join(f"{key}: {_shape(sub)}" for key, sub in space.spaces.items()) + "}"
+    if isinstance(space, spaces.Discrete):
+        return f"Discrete({space.n})"
+    return f"{type(space).__name__}{space.shape}"
+
+
+def _saved_spaces(agent) -> tuple[spaces.Space | None, spaces.Space | None]:
+    """(observation space, action space) the agent was trained on; a Q-table's are its size."""
+    if hasattr(agent, "observation_space"):
+        return agent.observation_space, agent.action_space
+    table = getattr(agent, "q_table", None)
+    if table is None:
+        return None, None
+    return spaces.Discrete(table.shape[0]), spaces.Discrete(table.shape[1])
+
+
+def check_spaces(agent, env, run_dir: Path) -> None:
+    """A UsageError when ``env`` (built from the run's config.yaml) gives observations or takes
+    actions that the saved model does not: config.yaml was edited after training. SB3 stores a
+    channel-last image transposed to channels-first, so that form also matches."""
+    from stable_baselines3.common.base_class import BaseAlgorithm
+
+    saved_obs, saved_action = _saved_spaces(agent)
+    if saved_obs is None:
+        return
+    observation_space = env.observation_space
+    if saved_obs != observation_space and isinstance(agent, BaseAlgorithm):
+        observation_space = BaseAlgorithm._wrap_env(env, verbose=0, monitor_wrapper=False).observation_space
+    if saved_obs != observation_space:
+        raise UsageError(
+            f"the model of {str(run_dir)!r} reads observations {_shape(saved_obs)}, but the obs of its "
+            f"config.yaml give {_shape(env.observation_space)} (was config.yaml edited after training?)"
+        )
+    if saved_action != env.action_space:
+        raise UsageError(
+            f"the model of {str(run_dir)!r} takes actions {_shape(saved_action)}, but the action of its "
+            f"config.yaml gives {_shape(env.action_space)} (was config.yaml edited after training?)"
+        )
 
 
 METRIC_LABELS = {
