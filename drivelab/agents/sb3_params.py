@@ -205,8 +205,12 @@ def check_sb3_hyperparams(algo: str, hyperparams: dict) -> dict:
     from drivelab.agents.sb3 import SB3_CLASSES
 
     declared = settable(algo)
-    special = {**SPECIAL, **(SAC_SPECIAL if algo == "sac" else {})}
     constructor = inspect.signature(SB3_CLASSES[algo].__init__).parameters
+    special = {
+        key: check
+        for key, check in {**SPECIAL, **(SAC_SPECIAL if algo == "sac" else {})}.items()
+        if key == "device" or key in constructor
+    }
     checked = {}
     for key, value in hyperparams.items():
         if key == "features_extractor":

@@ -112,16 +112,19 @@ def _float_or_none(value) -> float | None:
     if value is None or value == "":
         return None
     if isinstance(value, bool) or not isinstance(value, (int, float, str)):
-        raise ValueError(f"not a number: {value!r}")
+        raise ValueError(value)
     return float(value)
 
 
 def _final_metrics(values: dict, path: Path) -> dict:
     """The ``METRICS`` of ``values`` (a row or eval.json) as floats or None, or a UsageError."""
-    try:
-        return {key: _float_or_none(values.get(key)) for key in METRICS}
-    except ValueError as exc:
-        raise UsageError(f"{str(path)!r} holds a metric that is {exc}") from None
+    final = {}
+    for key in METRICS:
+        try:
+            final[key] = _float_or_none(values.get(key))
+        except ValueError:
+            raise UsageError(f"{str(path)!r}: metric {key!r} is not a number: {values.get(key)!r}") from None
+    return final
 
 
 def read_evaluations(path: Path) -> tuple[list[tuple[int, float]], dict]:
@@ -137,8 +140,7 @@ def read_evaluations(path: Path) -> tuple[list[tuple[int, float]], dict]:
     except (KeyError, TypeError, ValueError, csv.Error) as exc:  # UnicodeDecodeError is a ValueError
         line = f" (row {len(curve) + 1})" if curve or not isinstance(exc, KeyError) else ""
         raise UsageError(
-            f"{str(path)!r} is not an evaluations.csv written by drivelab train{line}: "
-            f"{type(exc).__name__}"
+            f"{str(path)!r} is not an evaluations.csv written by drivelab train{line}: {type(exc).__name__}"
         ) from None
     return curve, last_row
 

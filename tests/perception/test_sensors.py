@@ -34,5 +34,5 @@ def test_frame_stack_order_and_fill():
 
 
 def test_unknown_sensor_option():
-    with pytest.raises(UsageError, match="bad option for sensor 'lidar'"):
+    with pytest.raises(UsageError, match=r"unknown option 'colour' for sensor 'lidar' \(known: beams, "):
         make_sensor("lidar:colour=red")

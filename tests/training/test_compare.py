@@ -86,12 +86,14 @@ def test_report_numbers_and_files(runs, tmp_path):
 
 
 def test_rewrite_replaces_previous_report(runs, tmp_path):
+    """A new report replaces the previous one's files; a file drivelab did not write stays."""
     out = compare([str(runs / "ppo-s*")], tmp_path / "report")
-    (out / "stale.txt").write_text("old")
+    (out / "notes.txt").write_text("the user's")
     compare([str(runs / "dqn-s0"), str(runs / "dqn-s1")], out)
-    assert not (out / "stale.txt").exists()
+    assert (out / "notes.txt").read_text() == "the user's"
     assert "dqn" in (out / "summary.csv").read_text() and "ppo" not in (out / "summary.csv").read_text()
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []
 
 
 @pytest.mark.parametrize(
@@ -121,7 +123,7 @@ def test_failure_midway_leaves_nothing(runs, tmp_path, monkeypatch):
 def test_foreign_output_folder_is_refused(runs, tmp_path):
     (tmp_path / "mine").mkdir()
     (tmp_path / "mine" / "notes.txt").write_text("keep")
-    with pytest.raises(UsageError, match="not a drivelab report"):
+    with pytest.raises(UsageError, match="is not empty and holds no drivelab report"):
         compare([str(runs / "*")], tmp_path / "mine")
     assert (tmp_path / "mine" / "notes.txt").read_text() == "keep"
 

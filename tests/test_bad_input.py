@@ -1,0 +1,390 @@
+"""Issue 15, part 3: every bad input is one ``error:`` line, exit code 2, no traceback, and the
+filesystem exactly as it was (no run directory, no empty ``runs/`` root, no report debris).
+
+Each case runs the CLI in-process through typer's CliRunner, inside a temporary folder whose whole
+tree (paths, sizes, bytes) is compared before and after.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+from pathlib import Path
+
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from drivelab.cli import app
+
+runner = CliRunner()
+AS_ROOT = hasattr(os, "geteuid") and os.geteuid() == 0  # root writes through chmod 0o555
+
+
+def snapshot(root: Path) -> dict[str, str]:
+    """Every path under ``root`` → "dir", or its bytes' SHA-256 (and mode, for chmod cases)."""
+    tree = {}
+    for path in sorted(root.rglob("*")):
+        key = str(path.relative_to(root))
+        mode = oct(path.stat().st_mode & 0o777)
+        tree[key] = f"dir {mode}" if path.is_dir() else hashlib.sha256(path.read_bytes()).hexdigest() + mode
+    return tree
+
+
+def assert_refused(root: Path, args: list[str], message: str) -> None:
+    """Run ``drivelab ARGS`` in ``root``: exit 2, one line ``error: ...message...``, no change."""
+    before = snapshot(root)
+    result = runner.invoke(app, args)
+    lines = result.output.strip().splitlines()
+    assert result.exit_code == 2, result.output
+    assert len(lines) == 1 and lines[0].startswith("error: "), result.output
+    assert message in lines[0]
+    assert "Traceback" not in result.output
+    assert snapshot(root) == before
+
+
+@pytest.fixture
+def work(tmp_path, monkeypatch) -> Path:
+    """An empty working folder that is the current directory (``-o .`` and relative paths)."""
+    folder = tmp_path / "work"
+    folder.mkdir()
+    monkeypatch.chdir(folder)
+    return folder
+
+
+def train_args(work: Path, *args: str) -> list[str]:
+    return ["train", *args, "--runs-dir", str(work / "runs"), "--steps", "20"]
+
+
+RANDOM_BYTES = bytes(range(256)) * 8  # neither a torch file nor UTF-8 text
+
+# (CLI options after `train`, files to create in the working folder, expected part of the message)
+TRAIN_CASES = {
+    # tracebacks before
+    "dqn gamma=abc": (
+        ["--algo", "dqn", "-H", "gamma=abc"],
+        {},
+        "'gamma' of 'dqn' must be a number in [0, 1]",
+    ),
+    "topdown stack=abc": (
+        ["--algo", "ppo", "--obs", "topdown:stack=abc"],
+        {},
+        "'stack' of 'topdown' must be an",
+    ),
+    "seed -1": (["--algo", "ppo", "--seed", "-1"], {}, "'seed' must be between 0 and"),
+    "env_options bogus": (
+        ["--config", "run.yaml"],
+        {"run.yaml": b"algo: ppo\nenv_options: {bogus_option: 1}\n"},
+        "unknown env_options key 'bogus_option' (known: duration_s, offroad_terminal",
+    ),
+    "non-UTF-8 config": (
+        ["--config", "run.yaml"],
+        {"run.yaml": b"algo: ppo\n# caf\xe9\n"},
+        "is not UTF-8 text",
+    ),
+    "name ../..": (
+        ["--algo", "ppo", "--name", "../.."],
+        {},
+        "run name '../..' must be a single directory name",
+    ),
+    "name a/b": (["--algo", "ppo", "--name", "a/b"], {}, "run name 'a/b' must be a single"),
+    "name absolute": (
+        ["--algo", "ppo", "--name", "/tmp/escape"],
+        {},
+        "run name '/tmp/escape' must be a single",
+    ),
+    "name .": (["--algo", "ppo", "--name", "."], {}, "run name '.' must be a single"),
+    "name ..": (["--algo", "ppo", "--name", ".."], {}, "run name '..' must be a single"),
+    "name empty": (["--algo", "ppo", "--name", ""], {}, "run name '' must be a single"),
+    "lane weights random": (
+        [
+            "--algo",
+            "qlearning",
+            "--env",
+            "follow-lane",
+            "--obs",
+            "lane:weights=noise.pt",
+            "--action",
+            "seed_lane",
+        ],
+        {"noise.pt": RANDOM_BYTES},
+        "'noise.pt' is not lane CNN weights",
+    ),
+    # an empty runs/ before
+    "ppo learning_rate=-1": (
+        ["--algo", "ppo", "-H", "learning_rate=-1"],
+        {},
+        "'learning_rate' of 'ppo' must be a number > 0",
+    ),
+    "ppo nonexistent=3": (
+        ["--algo", "ppo", "-H", "nonexistent=3"],
+        {},
+        "unknown hyperparameter 'nonexistent' for 'ppo'",
+    ),
+    "ppo --no-alix": (["--algo", "ppo", "--no-alix"], {}, "unknown hyperparameter 'alix' for 'ppo'"),
+    "qlearning camera": (
+        ["--algo", "qlearning", "--env", "follow-line", "--obs", "camera"],
+        {},
+        "qlearning needs a discrete observation",
+    ),
+    "expert without affordances": (
+        ["--algo", "expert", "--env", "town", "--obs", "waypoints", "--action", "target_speed"],
+        {},
+        "expert needs --obs waypoints,affordances",
+    ),
+    "dueling_ddqn alpha=abc": (
+        ["--algo", "dueling_ddqn", "-H", "alpha=abc"],
+        {},
+        "'alpha' of 'dueling_ddqn' must be a finite number",
+    ),
+    "dueling_ddqn exploration 2": (
+        ["--algo", "dueling_ddqn", "-H", "exploration_fraction=2"],
+        {},
+        "_fraction in [0, 1]",
+    ),
+    "qlearning learning_rate=abc": (
+        ["--algo", "qlearning", "--env", "follow-line", "--obs", "line", "-H", "learning_rate=abc"],
+        {},
+        "'learning_rate' of 'qlearning' must be a finite number, got 'abc'",
+    ),
+    "qlearning gamma=2": (
+        ["--algo", "qlearning", "--env", "follow-line", "--obs", "line", "-H", "gamma=2"],
+        {},
+        "0 <= gamma <= 1",
+    ),
+    "lidar beams=abc": (
+        ["--algo", "ppo", "--obs", "lidar:beams=abc"],
+        {},
+        "'beams' of 'lidar' must be an integer, got 'abc'",
+    ),
+    "ppo_own entropy_coef=-1": (
+        ["--algo", "ppo_own", "--action", "continuous", "--obs", "kinematics", "-H", "entropy_coef=-1"],
+        {},
+        "entropy_coef, value_coef and target_kl >= 0",
+    ),
+    "sac ent_coef=fast": (
+        ["--algo", "sac", "--action", "continuous", "-H", "ent_coef=fast"],
+        {},
+        "'ent_coef' of 'sac'",
+    ),
+    "dqn tensorboard_log": (["--algo", "dqn", "-H", "tensorboard_log=tb"], {}, "cannot be set with -H"),
+    "device=tpu": (
+        ["--algo", "ppo", "-H", "device=tpu"],
+        {},
+        "'device' of 'ppo' must be one of cpu, cuda, auto",
+    ),
+    # fake results before
+    "duration_s -5": (
+        ["--config", "run.yaml"],
+        {"run.yaml": b"algo: ppo\nenv_options: {duration_s: -5}\n"},
+        "duration_s must be",
+    ),
+    "ppo batch_size=0": (
+        ["--algo", "ppo", "-H", "batch_size=0"],
+        {},
+        "'batch_size' of 'ppo' must be an integer >= 1, got 0",
+    ),
+    "dqn batch_size=0": (
+        ["--algo", "dqn", "-H", "batch_size=0"],
+        {},
+        "'batch_size' of 'dqn' must be an integer >= 1",
+    ),
+    "dqn gamma=nan": (
+        ["--algo", "dqn", "-H", "gamma=.nan"],
+        {},
+        "'gamma' of 'dqn' must be a number in [0, 1]",
+    ),
+    "topdown stack=0": (
+        ["--algo", "ppo", "--obs", "topdown:stack=0"],
+        {},
+        "'stack' of 'topdown' must be >= 1, got 0",
+    ),
+    "topdown stack=-2": (
+        ["--algo", "ppo", "--obs", "topdown:stack=-2"],
+        {},
+        "'stack' of 'topdown' must be >= 1, got -2",
+    ),
+    "expert on highway": (
+        [
+            "--algo",
+            "expert",
+            "--env",
+            "highway",
+            "--obs",
+            "waypoints,affordances",
+            "--action",
+            "target_speed",
+        ],
+        {},
+        "expert drives only in the town scenario",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(TRAIN_CASES))
+def test_train_refuses(work, case):
+    args, files, message = TRAIN_CASES[case]
+    for name, content in files.items():
+        (work / name).write_bytes(content)
+    assert_refused(work, train_args(work, *args), message)
+    assert not (work / "runs").exists()
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has CUDA: device=cuda is valid here")
+def test_device_cuda_without_gpu(work):
+    assert_refused(work, train_args(work, "--algo", "ppo", "-H", "device=cuda"), "torch sees no CUDA GPU")
+
+
+def test_runs_dir_is_a_file(work):
+    (work / "runs").write_text("not a folder")
+    assert_refused(
+        work, ["train", "--algo", "ppo", "--runs-dir", "runs", "--steps", "20"], "is not a directory"
+    )
+    (work / "below").write_text("not a folder")
+    assert_refused(
+        work, ["train", "--algo", "ppo", "--runs-dir", "below/runs", "--steps", "20"], "is not a directory"
+    )
+
+
+@pytest.mark.skipif(
+    AS_ROOT, reason="root writes into a chmod 0o555 folder; test_runs_dir_denied covers the logic"
+)
+def test_runs_dir_read_only(work):
+    locked = work / "locked"
+    locked.mkdir()
+    locked.chmod(0o555)
+    try:
+        assert_refused(
+            work, train_args(work, "--algo", "ppo") + ["--runs-dir", str(locked / "runs")], "permission"
+        )
+    finally:
+        locked.chmod(0o755)
+
+
+def test_runs_dir_denied(work, monkeypatch):
+    """What a read-only ``--runs-dir`` gives, for any user (root included): the permission check
+    (``os.access`` answering no), and a mkdir that the file system refuses."""
+    real_access = os.access
+    monkeypatch.setattr(
+        os, "access", lambda path, mode, **kw: False if Path(path) == work else real_access(path, mode)
+    )
+    assert_refused(
+        work, ["train", "--algo", "ppo", "--runs-dir", "runs", "--steps", "20"], "no permission to write"
+    )
+    monkeypatch.setattr(os, "access", real_access)
+
+    def refuse(self, *args, **kwargs):
+        raise PermissionError(13, "Permission denied", str(self))
+
+    monkeypatch.setattr(Path, "mkdir", refuse)
+    assert_refused(
+        work, ["train", "--algo", "ppo", "--runs-dir", "runs", "--steps", "20"], "Permission denied"
+    )
+
+
+# --- evaluate and compare: one tiny run, copied into each test ---------------------------------
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory) -> Path:
+    """A 20-step DQN run (no gradient step: learning starts at 200) with one evaluation."""
+    runs = tmp_path_factory.mktemp("trained")
+    args = ["train", "--algo", "dqn", "--traffic", "empty", "--steps", "20", "--eval-every", "20",
+            "--eval-episodes", "1", "--runs-dir", str(runs), "--name", "tiny"]  # fmt: skip
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    return runs / "tiny"
+
+
+@pytest.fixture
+def run_dir(work, trained) -> Path:
+    return Path(shutil.copytree(trained, work / "tiny"))
+
+
+def test_evaluate_after_obs_edited(work, run_dir):
+    config = run_dir / "config.yaml"
+    config.write_text(config.read_text().replace("- kinematics", "- lidar"))
+    assert_refused(
+        work,
+        ["evaluate", str(run_dir), "--episodes", "1"],
+        "reads observations Box(35,), but the obs of its config.yaml give Box(240,)",
+    )
+
+
+def test_evaluate_where_eval_json_cannot_be_written(work, run_dir, monkeypatch):
+    """The check comes before any episode: run_episodes must not be reached."""
+    import drivelab.training.evaluate as evaluate
+
+    monkeypatch.setattr(evaluate, "run_episodes", lambda *a, **k: pytest.fail("episodes ran"))
+    (run_dir / "eval.json").mkdir()
+    assert_refused(work, ["evaluate", str(run_dir), "--episodes", "1"], "cannot write eval.json")
+
+
+def test_evaluate_read_only_run_directory(work, run_dir, monkeypatch):
+    """chmod 0o555 where it binds; as root (which writes through it) the same refusal of the
+    file system is simulated, as a read-only mount gives it."""
+    import tempfile
+
+    import drivelab.training.evaluate as evaluate
+
+    monkeypatch.setattr(evaluate, "run_episodes", lambda *a, **k: pytest.fail("episodes ran"))
+    if AS_ROOT:
+
+        def refuse(*args, **kwargs):
+            raise OSError(30, "Read-only file system")
+
+        monkeypatch.setattr(tempfile, "TemporaryFile", refuse)
+    run_dir.chmod(0o555)
+    try:
+        assert_refused(work, ["evaluate", str(run_dir), "--episodes", "1"], "cannot write eval.json")
+    finally:
+        run_dir.chmod(0o755)
+
+
+@pytest.mark.parametrize(
+    "content",
+    [RANDOM_BYTES, b"step,mean_return\n20,abc\n", b"hello\nworld\n", b"step,mean_return\n20\n"],
+    ids=["binary", "text-number", "no-header", "short-row"],
+)
+def test_compare_garbage_evaluations(work, run_dir, content):
+    (run_dir / "evaluations.csv").write_bytes(content)
+    assert_refused(work, ["compare", str(run_dir), "-o", str(work / "report")], "is not an evaluations.csv")
+
+
+def test_compare_garbage_eval_json(work, run_dir):
+    (run_dir / "eval.json").write_text('{"mean_return": "fast"}')
+    assert_refused(
+        work, ["compare", str(run_dir), "-o", "report"], "metric 'mean_return' is not a number: 'fast'"
+    )
+    (run_dir / "eval.json").write_text("[1, 2]")
+    assert_refused(work, ["compare", str(run_dir), "-o", "report"], "is not an eval.json")
+
+
+def test_compare_into_a_folder_that_is_not_a_report(work, run_dir):
+    """``-o .`` (the working folder holds the run) and a folder of someone's files: refused."""
+    assert_refused(work, ["compare", str(run_dir), "-o", "."], "is not empty and holds no drivelab report")
+    notes = work / "notes"
+    notes.mkdir()
+    (notes / "thesis.tex").write_text("mine")
+    assert_refused(work, ["compare", str(run_dir), "-o", str(notes)], "holds no drivelab report")
+    (work / "file").write_text("x")
+    assert_refused(work, ["compare", str(run_dir), "-o", "file"], "is a file, not a directory")
+
+
+def test_compare_rewrites_only_its_own_files(work, run_dir):
+    """A report folder that also holds the user's files: a new report replaces the files the
+    manifest lists, and leaves the others (even beside a pre-manifest report.md)."""
+    out = work / "report"
+    out.mkdir()
+    (out / "report.md").write_text("an old report, from before the manifest")
+    (out / "mine.txt").write_text("keep me")
+    assert runner.invoke(app, ["compare", str(run_dir), "-o", str(out)]).exit_code == 0
+    assert (out / "mine.txt").read_text() == "keep me"
+    assert (out / "report.md").read_text().startswith("# drivelab comparison")
+    import json
+
+    listed = json.loads((out / "report-manifest.json").read_text())["files"]
+    assert set(listed) == {p.name for p in out.iterdir()} - {"mine.txt", "report-manifest.json"}
+    (out / "summary.csv").unlink()  # the user removed one; a second report writes it again
+    assert runner.invoke(app, ["compare", str(run_dir), "-o", str(out)]).exit_code == 0
+    assert sorted(p.name for p in out.iterdir()) == sorted([*listed, "mine.txt", "report-manifest.json"])
+    assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no temporary folder left
