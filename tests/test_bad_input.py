@@ -136,7 +136,7 @@ TRAIN_CASES = {
     "dueling_ddqn alpha=abc": (
         ["--algo", "dueling_ddqn", "-H", "alpha=abc"],
         {},
-        "'alpha' of 'dueling_ddqn' must be a finite number",
+        "'alpha' of 'dueling_ddqn' must be a number, got 'abc'",
     ),
     "dueling_ddqn exploration 2": (
         ["--algo", "dueling_ddqn", "-H", "exploration_fraction=2"],
@@ -146,7 +146,7 @@ TRAIN_CASES = {
     "qlearning learning_rate=abc": (
         ["--algo", "qlearning", "--env", "follow-line", "--obs", "line", "-H", "learning_rate=abc"],
         {},
-        "'learning_rate' of 'qlearning' must be a finite number, got 'abc'",
+        "'learning_rate' of 'qlearning' must be a number, got 'abc'",
     ),
     "qlearning gamma=2": (
         ["--algo", "qlearning", "--env", "follow-line", "--obs", "line", "-H", "gamma=2"],
@@ -194,6 +194,11 @@ TRAIN_CASES = {
         ["--algo", "dqn", "-H", "gamma=.nan"],
         {},
         "'gamma' of 'dqn' must be a number in [0, 1]",
+    ),
+    "dueling_ddqn gamma=nan": (
+        ["--algo", "dueling_ddqn", "-H", "gamma=.nan"],
+        {},
+        "'gamma' of 'dueling_ddqn' must be a finite number, got nan",
     ),
     "topdown stack=0": (
         ["--algo", "ppo", "--obs", "topdown:stack=0"],
@@ -388,3 +393,52 @@ def test_compare_rewrites_only_its_own_files(work, run_dir):
     assert runner.invoke(app, ["compare", str(run_dir), "-o", str(out)]).exit_code == 0
     assert sorted(p.name for p in out.iterdir()) == sorted([*listed, "mine.txt", "report-manifest.json"])
     assert not [p for p in out.iterdir() if p.name.startswith(".")]  # no temporary folder left
+
+
+# --- the declared SB3 hyper-parameters -----------------------------------------------------------
+def test_sb3_table_matches_installed_sb3():
+    """Every declared key is a keyword of the installed SB3 constructor (a renamed one would be
+    silently unsettable), and the shipped per-scenario values all pass the checks."""
+    import inspect
+
+    import yaml
+
+    from drivelab.agents.sb3 import DEFAULT_HYPERPARAMS, SB3_CLASSES
+    from drivelab.agents.sb3_params import PARAMS, check_sb3_hyperparams
+    from drivelab.hyperparams import shipped_hyperparams
+
+    for algo, params in PARAMS.items():
+        accepted = inspect.signature(SB3_CLASSES[algo].__init__).parameters
+        assert set(params) <= set(accepted), algo
+        assert check_sb3_hyperparams(algo, DEFAULT_HYPERPARAMS[algo]) == DEFAULT_HYPERPARAMS[algo]
+        shipped = Path(__file__).parents[1] / "drivelab" / "hyperparams" / f"{algo}.yaml"
+        for scenario in yaml.safe_load(shipped.read_text()):
+            values = shipped_hyperparams(algo, scenario)
+            assert check_sb3_hyperparams(algo, values) == values
+
+
+def test_sb3_values_are_coerced_and_special_forms_accepted():
+    from drivelab.agents.sb3_params import check_sb3_hyperparams
+
+    checked = check_sb3_hyperparams("dqn", {"batch_size": 32.0, "gamma": 1, "train_freq": [4, "episode"]})
+    assert checked == {"batch_size": 32, "gamma": 1.0, "train_freq": (4, "episode")}
+    assert type(checked["batch_size"]) is int and type(checked["gamma"]) is float
+    sac = {"ent_coef": "auto_0.1", "target_entropy": "auto", "device": "auto"}
+    assert check_sb3_hyperparams("sac", sac) == sac
+    assert check_sb3_hyperparams("ppo", {"target_kl": None, "clip_range_vf": None}) == {
+        "target_kl": None,
+        "clip_range_vf": None,
+    }
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU")
+def test_device_cuda_trains_sb3_on_the_gpu():
+    from drivelab.agents.sb3 import build_sb3
+    from drivelab.envs.core import DriveEnv
+
+    model = build_sb3(
+        "ppo", DriveEnv(traffic="empty"), 0, {"device": "cuda", "n_steps": 16, "batch_size": 8}, None
+    )
+    assert model.device.type == "cuda"
+    model.learn(16)
+    assert model.num_timesteps == 16

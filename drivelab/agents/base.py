@@ -71,7 +71,9 @@ def parse_hyperparams(config_class: type, algo: str, hyperparams: dict) -> Any:
         if isinstance(default, bool) and not isinstance(value, bool):
             raise UsageError(f"hyperparameter {key!r} of {algo!r} must be true or false, got {value!r}")
         if isinstance(default, (int, float)) and not isinstance(default, bool):
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise UsageError(f"hyperparameter {key!r} of {algo!r} must be a number, got {value!r}")
+            if not math.isfinite(value):
                 raise UsageError(f"hyperparameter {key!r} of {algo!r} must be a finite number, got {value!r}")
             if isinstance(default, int) and not float(value).is_integer():
                 raise UsageError(f"hyperparameter {key!r} of {algo!r} must be an integer, got {value!r}")

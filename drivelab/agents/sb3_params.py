@@ -59,7 +59,6 @@ MAPPING = Param("dict")
 _COMMON = {
     "learning_rate": POSITIVE,
     "gamma": FRACTION,
-    "max_grad_norm": POSITIVE,
     "stats_window_size": COUNT,
     "policy_kwargs": MAPPING,
 }
@@ -75,6 +74,7 @@ _OFF_POLICY = {
     "replay_buffer_kwargs": MAPPING,
 }
 _ON_POLICY = {
+    "max_grad_norm": POSITIVE,
     "n_steps": COUNT,
     "gae_lambda": FRACTION,
     "ent_coef": NON_NEGATIVE,
@@ -89,6 +89,7 @@ PARAMS: dict[str, dict[str, Param]] = {
     "dqn": {
         **_COMMON,
         **_OFF_POLICY,
+        "max_grad_norm": POSITIVE,
         "exploration_fraction": FRACTION,
         "exploration_initial_eps": FRACTION,
         "exploration_final_eps": FRACTION,
