@@ -15,6 +15,7 @@ Run directory layout::
 from __future__ import annotations
 
 import csv
+import gc
 import hashlib
 import json
 import os
@@ -235,6 +236,8 @@ def _check_model(spec, config: RunConfig, probe) -> None:
         raise
     except (TypeError, ValueError, AssertionError) as exc:
         raise UsageError(f"bad hyperparameters for {config.algo!r}: {exc}") from None
+    finally:
+        gc.collect()  # the throwaway agent's networks (on a GPU too) go before the real ones come
 
 
 def _make_envs(config: RunConfig, run_dir: Path, resume: bool):

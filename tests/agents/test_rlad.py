@@ -167,7 +167,7 @@ def test_train_and_resume_from_the_command_line(tmp_path):
         (["--algo", "rlad", *TOWN[:4], "--action", "grid"], "cannot take 'grid' actions"),
         (["--algo", "rlad", "--env", "town", "--obs", "waypoints,measurements", "--action", "target_speed"],
          "needs a camera, waypoints and measurements"),
-        (["--algo", "ppo", *TOWN, "--no-alix"], "unexpected keyword argument 'alix'"),
+        (["--algo", "ppo", *TOWN, "--no-alix"], "unknown hyperparameter 'alix' for 'ppo'"),
         (["--algo", "rlad", *TOWN, "--waypoint-encoder", "lstm"], "waypoint_encoder must be one of"),
     ],
 )  # fmt: skip

@@ -43,7 +43,7 @@ def test_gymnasium_make_of_a_circuit_takes_its_default_action():
         ({"traffic": "jammed"}, "unknown traffic level 'jammed'"),
         ({"scenario": "racetrack", "action": "meta"}, "cannot take action 'meta'"),
         ({"obs": "lidar:beams"}, "must look like key=value"),
-        ({"obs": "lidar:colour=3"}, "bad option for sensor 'lidar'"),
+        ({"obs": "lidar:colour=3"}, "unknown option 'colour' for sensor 'lidar'"),
     ],
 )
 def test_bad_arguments_name_the_problem(kwargs, message):
