@@ -310,9 +310,13 @@ class TownEnv(AbstractEnv):
         timings = LightTimings(**self.config["light_timings"])
         offsets = self.np_random.uniform(0.0, timings.cycle_s, size=len(layout.junctions))
         self.road.lights = TownLights(layout, timings, offsets)
-        self.road.clock = lambda: self.time
+        self.road.clock = self._clock  # a bound method, not a lambda: the env pickles
         self._make_vehicles()
         self._make_pedestrians(layout)
+
+    def _clock(self) -> float:
+        """Simulated seconds since reset; the traffic lights' clock."""
+        return self.time
 
     def _make_pedestrians(self, layout) -> None:
         self.crossings = street_crossings(layout)

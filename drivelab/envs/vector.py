@@ -32,11 +32,13 @@ class FastBatch:
     """
 
     def __init__(self, backends: list) -> None:
-        from drivelab.envs.backends.fast import traffic
-
-        self.traffic = traffic
         self.backends = backends
         self.views: list[np.ndarray | None] = [None] * len(backends)
+
+    def __getstate__(self) -> dict:
+        """Pickled without the views: they would come back as copies cut off from the buffer, so an
+        unpickled batch stacks its worlds again on its first step."""
+        return {**self.__dict__, "views": [None] * len(self.backends)}
 
     def _restack(self) -> None:
         arrays = [backend.vehicles for backend in self.backends]
@@ -48,12 +50,14 @@ class FastBatch:
             backend.regulation = self.regulation[k]
 
     def step(self, controls: list) -> list[WorldState]:
+        from drivelab.envs.backends.fast import traffic  # numba compiles on first import; not before
+
         if any(b.vehicles is not view for b, view in zip(self.backends, self.views, strict=True)):
             self._restack()
         for backend, control in zip(self.backends, controls, strict=True):
             backend.apply_control(control)
         first = self.backends[0]
-        self.traffic.simulate_batch(
+        traffic.simulate_batch(
             self.buffer, self.offsets, first.lanes, first.idm, first.frames, first.dt_s, self.regulation
         )
         return [backend.after_simulation() for backend in self.backends]

@@ -16,6 +16,7 @@ from the last row of its ``evaluations.csv``.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import glob
 import json
 import math
@@ -35,6 +36,11 @@ from drivelab.training.evaluate import load_run_config
 from drivelab.training.stats import CONFIDENCE, Summary, summarize
 
 GROUP_FIELDS = ("algo", "env", "obs", "reward", "action")
+HYPERPARAMS_FIELD = "hyperparams"  # CSV column of a group's changed hyper-parameters, ``key=value,…``
+# ... or this word for a group on the shipped values (not empty: pandas would read NaN, and groupby
+# drops NaN keys)
+SHIPPED = "shipped"
+SUMMARY_FIELDS = tuple(f.name for f in dataclasses.fields(Summary))  # summary.csv's numbers
 
 METRICS: dict[str, str] = {
     "mean_return": "episode return",
@@ -274,21 +280,40 @@ def _markdown(
     return "\n".join(lines)
 
 
+def _group_columns(key: tuple[str, ...]) -> dict[str, str]:
+    """A group key as CSV columns: the five ``GROUP_FIELDS`` and ``hyperparams``, the changed
+    hyper-parameters as one field (``key=value,…``, ``SHIPPED`` on the shipped values)."""
+    return {**dict(zip(GROUP_FIELDS, key[:5], strict=True)), HYPERPARAMS_FIELD: ",".join(key[5:]) or SHIPPED}
+
+
 def _write_csvs(folder: Path, groups, summaries) -> None:
-    with (folder / "summary.csv").open("w", newline="") as handle:
-        writer = csv.writer(handle)
-        writer.writerow([*GROUP_FIELDS, "metric", "n", "mean", "ci_low", "ci_high", "iqm"])
-        for key in groups:
-            for metric in METRICS:
-                s = summaries[key][metric]
-                writer.writerow([*key, metric, s.n, s.mean, s.ci_low, s.ci_high, s.iqm])
-    with (folder / "runs.csv").open("w", newline="") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(["run_dir", *GROUP_FIELDS, "seed", "steps", "source", *METRICS])
-        for key, runs in groups.items():
-            for r in runs:
-                values = ["" if r.final[m] is None else r.final[m] for m in METRICS]
-                writer.writerow([str(r.run_dir), *key, r.config.seed, r.config.steps, r.source, *values])
+    """summary.csv (one row per group and metric) and runs.csv (one row per run), written by pandas
+    with their columns named up front, so every row has exactly the header's fields. A metric a run
+    does not report is an empty field in runs.csv."""
+    import pandas as pd
+
+    summary = [
+        {**_group_columns(key), "metric": metric, **dataclasses.asdict(summaries[key][metric])}
+        for key in groups
+        for metric in METRICS
+    ]
+    columns = [*GROUP_FIELDS, HYPERPARAMS_FIELD, "metric", *SUMMARY_FIELDS]
+    # an interval of fewer than 2 runs is "nan" (a number that is not defined), as in report.md
+    pd.DataFrame(summary, columns=columns).to_csv(folder / "summary.csv", index=False, na_rep="nan")
+    runs = [
+        {
+            "run_dir": str(r.run_dir),
+            **_group_columns(key),
+            "seed": r.config.seed,
+            "steps": r.config.steps,
+            "source": r.source,
+            **r.final,
+        }
+        for key, group in groups.items()
+        for r in group
+    ]
+    columns = ["run_dir", *GROUP_FIELDS, HYPERPARAMS_FIELD, "seed", "steps", "source", *METRICS]
+    pd.DataFrame(runs, columns=columns).to_csv(folder / "runs.csv", index=False)
 
 
 MANIFEST = "report-manifest.json"  # the files a report directory's drivelab report consists of

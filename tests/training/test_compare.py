@@ -3,6 +3,8 @@
 import csv
 import json
 
+import numpy as np
+import pandas as pd
 import pytest
 
 from drivelab.config import build_config, save_yaml
@@ -18,12 +20,20 @@ METRIC_ROW = {
 
 
 def fake_run(
-    root, name, algo="ppo", seed=0, reward="highway", final_return=None, curve=((10, 0.0), (20, 1.0))
+    root,
+    name,
+    algo="ppo",
+    seed=0,
+    reward="highway",
+    final_return=None,
+    curve=((10, 0.0), (20, 1.0)),
+    hyperparams=None,
 ):
     """A run directory as drivelab train writes it, with chosen evaluation returns."""
     run_dir = root / name
     run_dir.mkdir(parents=True)
-    config = build_config({"algo": algo, "seed": seed, "reward": reward, "steps": 20, "name": name})
+    values = {"algo": algo, "seed": seed, "reward": reward, "steps": 20, "name": name}
+    config = build_config({**values, "hyperparams": hyperparams or {}})
     save_yaml(config, run_dir / "config.yaml")
     with (run_dir / "evaluations.csv").open("w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=["step", "mean_return", *METRIC_ROW])
@@ -163,3 +173,43 @@ def test_repeated_seed_is_flagged(runs, tmp_path):
         compare([str(runs / "ppo-s0"), str(runs / "ppo-s1")], tmp_path / "report") / "report.md"
     ).read_text()
     assert "Warning" not in text
+
+
+def test_pandas_reads_every_csv_column_for_column(runs, tmp_path):
+    """With a group that changed hyper-parameters (which once added an unnamed field to its rows),
+    every row of both CSVs has the header's fields, pandas reads them under the right names, and
+    each group's per-seed values come back as the (runs x tasks) score arrays rliable takes."""
+    fake_run(runs, "ppo-lr-s0", seed=0, final_return=3.0, hyperparams={"learning_rate": 0.123, "gamma": 0.5})
+    fake_run(runs, "ppo-lr-s1", seed=1, final_return=5.0, hyperparams={"learning_rate": 0.123, "gamma": 0.5})
+    out = compare([str(runs / "*")], tmp_path / "report")
+    group = ["algo", "env", "obs", "reward", "action", "hyperparams"]
+    for name, columns in (
+        ("runs.csv", ["run_dir", *group, "seed", "steps", "source", *compare_module.METRICS]),
+        ("summary.csv", [*group, "metric", "n", "mean", "ci_low", "ci_high", "iqm"]),
+    ):
+        with (out / name).open(newline="") as handle:
+            header, *rows = list(csv.reader(handle))
+        assert header == columns and {len(row) for row in rows} == {len(columns)}, name
+        assert list(pd.read_csv(out / name).columns) == columns
+    runs_table = pd.read_csv(out / "runs.csv")
+    assert runs_table.groupby("algo").size().to_dict() == {"dqn": 2, "ppo": 6}
+    changed = "gamma=0.5,learning_rate=0.123"
+    assert runs_table.groupby("hyperparams").size().to_dict() == {"shipped": 6, changed: 2}
+    assert runs_table["route_completion"].isna().all() and (runs_table["steps"] == 20).all()
+    scores = {
+        label: table.sort_values("seed")["mean_return"].to_numpy()[:, None]  # rliable: (runs, tasks)
+        for label, table in runs_table.groupby(["algo", "reward", "hyperparams"])
+    }
+    expected = {
+        ("dqn", "highway", "shipped"): [4.0, 6.0],
+        ("ppo", "highway", "shipped"): [0.0, 0.0, 1.0],
+        ("ppo", "highway", changed): [3.0, 5.0],
+        ("ppo", "highway,collision=0", "shipped"): [7.0],
+    }
+    assert scores.keys() == expected.keys()
+    for label, values in expected.items():
+        np.testing.assert_array_equal(scores[label], np.array(values)[:, None])
+    summary = pd.read_csv(out / "summary.csv")
+    changed = summary[(summary["hyperparams"] != "shipped") & (summary["metric"] == "mean_return")]
+    assert changed[["algo", "n", "mean"]].values.tolist() == [["ppo", 2, 4.0]]
+    assert summary.groupby("metric").size().nunique() == 1 and len(summary) == 4 * len(compare_module.METRICS)

@@ -8,6 +8,7 @@ terms are drivelab's alone (and highway-env's pandas-based observation is not pa
 from __future__ import annotations
 
 import dataclasses
+import functools
 import os
 
 import numpy as np
@@ -91,20 +92,34 @@ class _NoObservation:
         return None
 
 
-def _without_observation_and_info(env_class: type) -> type:
-    """A subclass of ``env_class`` that skips the work drivelab never reads: highway-env's
+class _SkipObservationAndInfo:
+    """Mixed into a highway-env env class: skips the work drivelab never reads, highway-env's
     observation at reset (pandas-based, most of a reset's cost) and its ``_info``, which evaluates
     its own reward with a sampled action (and fails for continuous actions on some scenarios)."""
 
     def define_spaces(self) -> None:
-        env_class.define_spaces(self)
+        super().define_spaces()
         self.observation_type = _NoObservation(self.observation_space)
 
-    return type(
-        env_class.__name__,
-        (env_class,),
-        {"define_spaces": define_spaces, "_info": lambda self, obs, action=None: {}},
-    )
+    def _info(self, obs, action=None) -> dict:
+        return {}
+
+    def __reduce__(self):
+        """Pickle as (highway-env class, state): the subclass is built at run time, so pickle
+        cannot find it by name; unpickling rebuilds it from the highway-env class it extends."""
+        return _blank_env, (type(self).__bases__[1],), self.__dict__
+
+
+@functools.cache
+def _without_observation_and_info(env_class: type) -> type:
+    """``env_class`` with ``_SkipObservationAndInfo`` mixed in, one class per env class."""
+    return type(env_class.__name__, (_SkipObservationAndInfo, env_class), {"__module__": __name__})
+
+
+def _blank_env(env_class: type):
+    """An uninitialised instance of ``env_class``'s drivelab subclass; pickle fills its state."""
+    cls = _without_observation_and_info(env_class)
+    return cls.__new__(cls)
 
 
 class HighwayBackend:

@@ -1,6 +1,10 @@
 """Fidelity of the fast backend against highway-env, with known answers from highway-env itself."""
 
 import dataclasses
+import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,6 +24,8 @@ from drivelab.envs.backends.highway import HighwayBackend
 from drivelab.envs.core import DriveEnv
 from drivelab.envs.scenarios import SCENARIOS
 from drivelab.errors import UsageError
+
+REPO = Path(__file__).resolve().parents[3]
 
 
 @pytest.mark.parametrize("scenario", sorted(SCENARIOS))
@@ -165,35 +171,111 @@ def _random_actions(control: str, rng: np.random.Generator, count: int) -> list:
     return [(rng.uniform(-1, 1, 2) * [1.0, 0.1]).astype(np.float32) for _ in range(count)]
 
 
-@pytest.mark.parametrize(
-    "scenario, traffic, seeds",
-    [
-        ("highway", "regular", (0, 1, 2, 3)),
-        ("merge", "regular", (0, 1, 2)),
-        ("merge", "dense", (0,)),
-        ("roundabout", "regular", (0, 1, 2, 3)),
-        ("roundabout", "dense", (0, 1)),
-        ("intersection", "regular", (0, 1, 2, 3)),
-        ("intersection", "dense", (0, 1)),
-        ("racetrack", "dense", (0, 1)),
-    ],
-)
-def test_whole_traffic_matches_highway_env(scenario, traffic, seeds):
-    """Every vehicle of every step agrees with highway-env's, routes, obstacles and crashes included."""
+# Positions (m), headings (rad) and speeds (m/s) of the two backends may differ by this much; events,
+# lanes, crashes and vehicle counts must be identical. Why, and why this value: see the docstring of
+# test_whole_traffic_matches_highway_env.
+ROUNDING_ATOL = 1e-3
+
+WHOLE_TRAFFIC_CASES = [
+    ("highway", "regular", (0, 1, 2, 3)),
+    ("merge", "regular", (0, 1, 2)),
+    ("merge", "dense", (0,)),
+    ("roundabout", "regular", (0, 1, 2, 3)),
+    ("roundabout", "dense", (0, 1)),
+    ("intersection", "regular", (0, 1, 2, 3)),
+    ("intersection", "dense", (0, 1)),
+    ("racetrack", "dense", (0, 1)),
+]
+
+
+def _npc_lanes_and_crashes(backend) -> list[tuple]:
+    """(lane index, crashed) of every NPC, in the vehicle order both backends share."""
+    if isinstance(backend, FastBackend):
+        rows = [r for k, r in enumerate(backend.vehicles) if k != backend.ego and r[T.KIND] != T.OBSTACLE]
+        return [(backend.table.indices[int(r[T.LANE])], bool(r[T.CRASHED])) for r in rows]
+    others = [v for v in backend.env.road.vehicles if v is not backend.env.vehicle]
+    return [(v.lane_index, bool(v.crashed)) for v in others]
+
+
+def compare_episodes(scenario: str, traffic: str, seeds, atol: float, steps: int = 30) -> float:
+    """Run both backends through the same seeds and random actions; assert that events, lanes,
+    crashes and vehicle counts are identical and every continuous quantity agrees within ``atol``.
+    Returns the largest continuous difference seen (0.0 when the runs are bit for bit equal)."""
     control = "continuous" if scenario == "racetrack" else "meta"
     reference = HighwayBackend(SCENARIOS[scenario], traffic, control)
     fast = FastBackend(SCENARIOS[scenario], traffic, control)
+    worst = 0.0
     for seed in seeds:
         a, b = reference.reset(seed), fast.reset(seed)
         np.testing.assert_array_equal(a.vehicles, b.vehicles)
-        for action in _random_actions(control, np.random.default_rng(seed), 30):
+        for action in _random_actions(control, np.random.default_rng(seed), steps):
             a, b = reference.step(action), fast.step(action)
-            assert np.abs(a.vehicles - b.vehicles).max(initial=0.0) < 1e-6
-            assert np.abs(a.ego.position - b.ego.position).max() < 1e-6
+            assert a.vehicles.shape == b.vehicles.shape
             assert a.events == b.events and a.ego.in_intersection == b.ego.in_intersection
-            assert a.route.progress_m == pytest.approx(b.route.progress_m, abs=1e-6)
+            assert (a.ego.lane_id, a.ego.target_lane_id) == (b.ego.lane_id, b.ego.target_lane_id)
+            assert _npc_lanes_and_crashes(reference) == _npc_lanes_and_crashes(fast)
+            differences = (
+                np.abs(a.vehicles - b.vehicles).max(initial=0.0),
+                np.abs(a.ego.position - b.ego.position).max(),
+                abs(a.ego.heading - b.ego.heading),
+                abs(a.ego.speed_mps - b.ego.speed_mps),
+                abs(a.route.progress_m - b.route.progress_m),
+            )
+            worst = max(worst, *differences)
+            assert worst <= atol, f"seed {seed}: backends differ by {worst:.2e} > {atol:.0e}"
             if a.events.collided or a.events.arrived or a.events.off_road:
                 break
+    return worst
+
+
+@pytest.mark.parametrize("scenario, traffic, seeds", WHOLE_TRAFFIC_CASES)
+def test_whole_traffic_matches_highway_env(scenario, traffic, seeds):
+    """Every vehicle of every step agrees with highway-env's, routes, obstacles and crashes included.
+
+    Discrete outcomes (events, lanes, crashes, vehicle counts) must be identical; positions,
+    headings and speeds agree within ``ROUNDING_ATOL`` = 1e-3. The fast backend does highway-env's
+    arithmetic in the same order, but the two do not always round alike: highway-env's numpy calls
+    go through numpy's SIMD kernels (sin/cos/arctan dispatched by CPU, AVX-512 on CPUs that have it)
+    and OpenBLAS (np.linalg.norm / dot, whose kernel is also picked by CPU), where numba calls libm
+    and plain multiply-adds. That is an ULP (1e-16) at first, and slow or stopped vehicles at the
+    intersection amplify it. Measured on an AVX-512 Xeon over 6 seeds x 30 steps of each case
+    below (48 episodes): 0.0 everywhere with numpy's AVX-512 dispatch disabled and OpenBLAS pinned
+    to a pre-AVX-512 kernel (see the subprocess test below); 6.8e-4 m at worst (intersection,
+    regular, seed 4) with either left to the CPU; 4.0e-5 at worst on the seeds tested here, and
+    9.4e-6 reported on a Zen 5 CPU. A real modelling error is far larger: raising one IDM parameter
+    that acts in these episodes (ACC_MAX, COMFORT_ACC_MAX/MIN, DISTANCE_WANTED, TIME_WANTED) by 1 %
+    in the fast backend alone moves vehicles by 8e-2 m to 46 m on the highway and intersection
+    cases (80x the tolerance at least), and often changes lanes or events, which must be identical.
+    """
+    compare_episodes(scenario, traffic, seeds, ROUNDING_ATOL)
+
+
+def _dispatch_without_avx512() -> dict[str, str]:
+    """Environment for a Python that rounds like a CPU without AVX-512: numpy's AVX-512 dispatch
+    targets disabled (the names numpy itself lists) and OpenBLAS on its SSE3 kernel (runs on any
+    x86-64 CPU)."""
+    from numpy._core._multiarray_umath import __cpu_dispatch__
+
+    avx512 = [t for t in __cpu_dispatch__ if t.startswith("AVX512") or t == "X86_V4"]
+    return {"NPY_DISABLE_CPU_FEATURES": " ".join(avx512), "OPENBLAS_CORETYPE": "Prescott"}
+
+
+def test_without_avx512_dispatch_the_backends_agree_bit_for_bit():
+    """The same comparison in a fresh interpreter whose numpy and OpenBLAS kernels are held below
+    AVX-512 (numpy reads its switch at import, hence a subprocess): this covers the non-AVX-512
+    path on any machine, and there the intersection episodes that drift most (seeds 1 and 4, up to
+    6.8e-4 m with AVX-512) agree exactly, which shows the drift is rounding, not a modelling
+    difference."""
+    script = (
+        "from tests.envs.backends.test_fast import compare_episodes\n"
+        "print(compare_episodes('intersection', 'regular', (1, 4), atol=0.0))\n"
+    )
+    env = {**os.environ, **_dispatch_without_avx512(), "PYGAME_HIDE_SUPPORT_PROMPT": "1"}
+    result = subprocess.run(
+        [sys.executable, "-c", script], cwd=REPO, env=env, capture_output=True, text=True, timeout=600
+    )
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert float(result.stdout.split()[-1]) == 0.0
 
 
 def test_drive_env_on_the_fast_backend():

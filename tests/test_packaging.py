@@ -1,0 +1,27 @@
+"""pyproject.toml's dependencies install beside other packages: floors, not exact pins."""
+
+import re
+import tomllib
+from pathlib import Path
+
+PYPROJECT = Path(__file__).resolve().parents[1] / "pyproject.toml"
+
+
+def _requirements() -> dict[str, str]:
+    dependencies = tomllib.loads(PYPROJECT.read_text())["project"]["dependencies"]
+    return dict(re.match(r"([A-Za-z0-9_.-]+)\s*(.*)", d).groups() for d in dependencies)
+
+
+def test_torch_is_a_range_not_a_pin():
+    """An exact torch pin would make drivelab uninstallable beside any other torch; scripts/setup.sh
+    pins the CPU build instead."""
+    torch = _requirements()["torch"]
+    assert "==" not in torch and ">=" in torch
+
+
+def test_every_dependency_but_highway_env_has_a_floor():
+    """scripts/check_min_versions.sh installs these floors; highway-env stays pinned because the fast
+    backend reproduces that release's arithmetic."""
+    requirements = _requirements()
+    assert requirements.pop("highway-env") == "==1.12.1"
+    assert {name: spec for name, spec in requirements.items() if ">=" not in spec or "==" in spec} == {}
