@@ -1,7 +1,7 @@
 """stable-baselines3 algorithms behind drivelab's Agent protocol, saved without pickles.
 
-SB3's own ``save`` pickles parts of a model (cloudpickle inside the zip's ``data``) and its ``load``
-unpickles them, so a model file could run code. drivelab's SB3 classes save instead a zip of
+SB3's own ``save`` pickles parts of a model (the ``:serialized:`` entries of the zip's ``data``) and
+its ``load`` unpickles them, so a model file could run code. drivelab's SB3 classes save instead a zip of
 ``sb3.json`` (the counters and statistics that further training reads: steps, updates, episodes,
 exploration rate, progress, episode-info buffers; plus the seed, hyper-parameters and spaces) and
 ``parameters.pt`` (the state dicts of the policy and its optimizers and SB3's torch variables,
