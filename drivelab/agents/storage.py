@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import io
 import json
+import pickle  # only for its exception type: nothing here unpickles
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -41,7 +42,10 @@ def tensors_to_bytes(state: Any) -> bytes:
 
 def tensors_from_bytes(data: bytes) -> Any:
     """The inverse of ``tensors_to_bytes``; refuses anything but tensors and plain containers."""
-    return torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
+    try:
+        return torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError:
+        raise ValueError("the tensor file holds objects other than tensors (refused)") from None
 
 
 # --- arrays ------------------------------------------------------------------------------------
@@ -155,7 +159,7 @@ def read_zip(path: str | Path, meta_name: str) -> tuple[dict, zipfile.ZipFile]:
     ``OldFormatError`` before anything inside it is read."""
     archive = zipfile.ZipFile(path)
     names = set(archive.namelist())
-    if meta_name not in names:
+    if names & set(PICKLED_MEMBERS) or meta_name not in names:
         archive.close()
         if names & set(PICKLED_MEMBERS):
             raise OldFormatError(path)

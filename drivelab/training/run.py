@@ -164,7 +164,8 @@ def load_agent(run_dir: Path, config: RunConfig, env=None, path: Path | None = N
     except UsageError:
         raise
     except Exception as exc:  # a broken zip, a model of another algorithm or config
-        raise UsageError(f"cannot load model {str(path)!r}: {type(exc).__name__}: {exc}") from None
+        message = (str(exc).splitlines() or [""])[0]
+        raise UsageError(f"cannot load model {str(path)!r}: {type(exc).__name__}: {message}") from None
 
 
 def load_replay(model, run_dir: Path, manifest: dict) -> None:
@@ -175,7 +176,8 @@ def load_replay(model, run_dir: Path, manifest: dict) -> None:
     try:
         model.load_replay_buffer(path)
     except Exception as exc:  # object arrays (a pickle) or a replay of another configuration
-        raise UsageError(f"cannot load replay {str(path)!r}: {type(exc).__name__}: {exc}") from None
+        message = (str(exc).splitlines() or [""])[0]
+        raise UsageError(f"cannot load replay {str(path)!r}: {type(exc).__name__}: {message}") from None
 
 
 # --- callbacks -------------------------------------------------------------------------------
