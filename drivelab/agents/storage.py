@@ -168,10 +168,7 @@ def read_zip(path: str | Path, meta_name: str) -> tuple[dict, zipfile.ZipFile]:
 
 
 def is_old_format(path: str | Path) -> bool:
-    """Whether ``path`` is a model zip (or a ``.pkl`` replay) in the old pickle format."""
-    path = Path(path)
-    if path.suffix == ".pkl":
-        return path.is_file()
+    """Whether ``path`` is a model zip in the old pickle format (read without unpickling)."""
     if not zipfile.is_zipfile(path):
         return False
     with zipfile.ZipFile(path) as archive:

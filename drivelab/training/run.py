@@ -19,6 +19,7 @@ checkpoint; stored beside the file, it proves nothing against deliberate tamperi
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import hashlib
 import json
@@ -95,7 +96,8 @@ def save_checkpoint(model, run_dir: Path, config: RunConfig, save_replay: bool) 
             os.replace(tmp, final)
     except OSError as exc:
         for tmp in temporary:
-            tmp.unlink(missing_ok=True)
+            with contextlib.suppress(OSError):  # on a read-only disk there may be nothing to remove
+                tmp.unlink(missing_ok=True)
         raise UsageError(f"cannot write checkpoint in {str(folder)!r}: {exc.strerror or exc}") from None
     return folder / "latest.zip"
 
