@@ -347,6 +347,24 @@ def ablate(
     typer.echo(f"report: {report / 'report.md'}")
 
 
+@app.command("convert-run")
+def convert_run(
+    run_dir: Path = typer.Argument(..., help="a run directory of the old pickle format that you trust"),
+) -> None:
+    """Rewrite a run saved by an earlier drivelab (pickles inside) in the safe format.
+
+    Loading the old files executes whatever they hold: convert only runs you trust."""
+    from drivelab.training.convert import convert_run as convert
+
+    try:
+        written = convert(run_dir)
+    except UsageError as exc:
+        _fail(str(exc))
+    for path in written:
+        typer.echo(f"rewrote {path}")
+    typer.echo(f"run directory: {run_dir}  ({'converted' if written else 'already in the safe format'})")
+
+
 benchmark_app = typer.Typer(no_args_is_help=True, help="Driving benchmarks of trained runs.")
 app.add_typer(benchmark_app, name="benchmark")
 

@@ -14,19 +14,18 @@ derive from ``OwnAgent``, which implements everything but the learning loop):
 - ``num_timesteps``: environment steps taken so far, exact, so that a resume continues to the
   requested total.
 - ``predict(obs, deterministic=True)`` → ``(action, None)`` for one unbatched observation.
-- ``save(path)`` writes one zip file (checkpoint verification uses ``zipfile.is_zipfile``);
-  the registry's ``load(algo, path, env or None)`` reads it back.
+- ``save(path)`` writes one zip file of tensors and JSON (``agents/storage.py``: nothing in it is
+  unpickled); the registry's ``load(algo, path, env or None, hyperparams, seed)`` reads it back.
 - Off-policy agents whose ``AlgoSpec.sb3_replay`` is set also offer ``replay_buffer.observations``
-  (a numpy array, for the size check), ``save_replay_buffer(path)`` and ``load_replay_buffer(path)``.
+  (a numpy array, for the size check), ``save_replay_buffer(path)`` and ``load_replay_buffer(path)``
+  (an ``.npz`` file; own buffers provide ``state_arrays()`` / ``load_state_arrays(arrays)``).
 """
 
 from __future__ import annotations
 
 import dataclasses
-import io
 import json
 import math
-import pickle
 import time
 import zipfile
 from pathlib import Path
@@ -39,7 +38,19 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.logger import Logger, configure
 
+from drivelab.agents.storage import (
+    check_spaces,
+    read_arrays,
+    read_zip,
+    space_from_json,
+    space_to_json,
+    tensors_from_bytes,
+    tensors_to_bytes,
+    write_arrays,
+)
 from drivelab.errors import UsageError
+
+FORMAT = "drivelab-agent-2"
 
 
 class Agent(Protocol):
@@ -164,13 +175,12 @@ class OwnAgent:
         return callback
 
     def save_replay_buffer(self, path: str | Path) -> None:
-        """Pickle ``self.replay_buffer`` (off-policy agents; run.py checkpoints it beside the model)."""
-        with open(path, "wb") as handle:
-            pickle.dump(self.replay_buffer, handle, protocol=pickle.HIGHEST_PROTOCOL)
+        """Write ``self.replay_buffer``'s arrays as an ``.npz`` file (run.py checkpoints it)."""
+        write_arrays(path, self.replay_buffer.state_arrays())
 
     def load_replay_buffer(self, path: str | Path) -> None:
-        with open(path, "rb") as handle:
-            self.replay_buffer = pickle.load(handle)
+        """Fill this agent's (fresh) replay buffer from a ``save_replay_buffer`` file."""
+        self.replay_buffer.load_state_arrays(read_arrays(path))
 
     def _start_learning(self, total_timesteps: int, reset_num_timesteps: bool) -> tuple[int, int, float]:
         """(step to stop at, step now, clock now) for ``learn``: ``total_timesteps`` more steps,
@@ -192,36 +202,44 @@ class OwnAgent:
         self.logger.dump(self.num_timesteps)
 
     def save(self, path: str | Path) -> None:
-        """One zip: ``agent.json`` (algo, hyperparams, steps, numpy generator), ``spaces.pkl``,
-        ``state.pt`` (networks, optimizers, torch generator)."""
-        tensors = io.BytesIO()
-        torch.save({**self._state(), "generator": self.generator.get_state()}, tensors)
+        """One zip: ``agent.json`` (format, algo, seed, hyperparams, steps, numpy generator, spaces)
+        and ``state.pt`` (networks, optimizers, torch generator: tensors only)."""
         meta = {
+            "format": FORMAT,
             "algo": self.algo,
             "seed": self.seed,
             "hyperparams": self.hyperparams,
             "num_timesteps": self.num_timesteps,
             "rng": self.rng.bit_generator.state,
+            "observation_space": space_to_json(self.observation_space),
+            "action_space": space_to_json(self.action_space),
         }
+        state = tensors_to_bytes({**self._state(), "generator": self.generator.get_state()})
         with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as archive:
             archive.writestr("agent.json", json.dumps(meta, default=int))
-            archive.writestr("spaces.pkl", pickle.dumps((self.observation_space, self.action_space)))
-            archive.writestr("state.pt", tensors.getvalue())
+            archive.writestr("state.pt", state)
 
     @classmethod
-    def load(cls, path: str | Path, env: gym.Env | None = None) -> OwnAgent:
-        """An agent saved by ``save``; ``env`` (optional) must have the saved spaces."""
-        with zipfile.ZipFile(path) as archive:
-            meta = json.loads(archive.read("agent.json"))
-            observation_space, action_space = pickle.loads(archive.read("spaces.pkl"))
+    def load(
+        cls, path: str | Path, env: gym.Env | None = None, hyperparams: dict | None = None,
+        seed: int | None = None,
+    ) -> OwnAgent:  # fmt: skip
+        """An agent saved by ``save``. ``env`` (optional) must have the saved spaces; ``hyperparams``
+        and ``seed`` (the run's config, optional) must be those it was saved with."""
+        meta, archive = read_zip(path, "agent.json")
+        with archive:
             # CPU first: an agent saved on a GPU loads anywhere; ``_set_state`` copies onto its device
-            state = torch.load(io.BytesIO(archive.read("state.pt")), map_location="cpu", weights_only=False)
-        if meta["algo"] != cls.algo:
-            raise ValueError(f"the file holds a {meta['algo']!r} agent, not {cls.algo!r}")
-        if env is not None and (
-            env.observation_space != observation_space or env.action_space != action_space
-        ):
-            raise ValueError("the environment's spaces differ from the saved agent's")
+            state = tensors_from_bytes(archive.read("state.pt"))
+        if meta.get("format") != FORMAT or meta.get("algo") != cls.algo:
+            raise ValueError(f"the file holds a {meta.get('algo')!r} agent, not {cls.algo!r}")
+        if hyperparams is not None and json.loads(json.dumps(dict(hyperparams))) != meta["hyperparams"]:
+            raise ValueError("the model was saved with other hyperparameters than the run's config")
+        if seed is not None and int(seed) != meta["seed"]:
+            raise ValueError("the model was saved with another seed than the run's config")
+        if env is not None:
+            check_spaces(meta, env.observation_space, env.action_space)
+        observation_space = space_from_json(meta["observation_space"])
+        action_space = space_from_json(meta["action_space"])
         agent = cls(observation_space, action_space, meta["seed"], meta["hyperparams"], env)
         agent.num_timesteps = int(meta["num_timesteps"])
         agent.rng.bit_generator.state = meta["rng"]

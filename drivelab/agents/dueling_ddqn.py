@@ -28,6 +28,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from torch import nn
 
 from drivelab.agents.base import OwnAgent
+from drivelab.agents.storage import assign_arrays
 from drivelab.errors import UsageError
 
 
@@ -195,6 +196,21 @@ class PrioritizedReplayBuffer:
         priorities = (np.abs(td_errors) + self.priority_eps) ** self.alpha
         self.tree.update(indices, priorities)
         self.max_priority = max(self.max_priority, float(priorities.max()))
+
+    ARRAYS = ("observations", "next_observations", "actions", "rewards", "terminals")
+    SCALARS = ("max_priority", "position", "size")
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        """Everything the buffer holds, sum tree included, as arrays (a checkpoint's ``.npz``)."""
+        arrays = {name: getattr(self, name) for name in self.ARRAYS}
+        scalars = {name: np.asarray(getattr(self, name)) for name in self.SCALARS}
+        return {**arrays, **scalars, "tree_nodes": self.tree.nodes}
+
+    def load_state_arrays(self, arrays: dict[str, np.ndarray]) -> None:
+        """Restore ``state_arrays`` into this buffer (same capacity and observation size)."""
+        assign_arrays(self, arrays, self.ARRAYS + self.SCALARS)
+        nodes = {"nodes": arrays["tree_nodes"]} if "tree_nodes" in arrays else {}
+        assign_arrays(self.tree, nodes, ("nodes",))
 
 
 # --- 3. dueling network ------------------------------------------------------------------------

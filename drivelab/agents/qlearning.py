@@ -24,6 +24,7 @@ from gymnasium import spaces
 from stable_baselines3.common.logger import Logger
 
 from drivelab.agents.base import parse_hyperparams
+from drivelab.agents.storage import read_arrays
 from drivelab.errors import UsageError
 
 FORMAT = "drivelab-qlearning-1"
@@ -227,13 +228,14 @@ class QLearning:
     def load(
         cls, path: str | Path, env: gym.Env | None = None, log_dir: str | Path | None = None
     ) -> QLearning:
-        """An agent saved by ``save``; training continues exactly (same ε, counters, generator)."""
+        """An agent saved by ``save``; training continues exactly (same ε, counters, generator).
+        Only JSON and numeric arrays are read: an object array (a pickle) is refused."""
         with zipfile.ZipFile(path) as archive:
             state = json.loads(archive.read("state.json"))
             if state.get("format") != FORMAT:
                 raise ValueError(f"{path} is not a drivelab Q-learning model")
-            q_table = np.load(io.BytesIO(archive.read("q_table.npy")))
-            episodes = np.load(io.BytesIO(archive.read("episodes.npz")))
+            q_table = np.load(io.BytesIO(archive.read("q_table.npy")), allow_pickle=False)
+            episodes = read_arrays(archive.read("episodes.npz"))
         known = {f.name for f in fields(QLearningConfig)}
         config = QLearningConfig(**{k: v for k, v in state["config"].items() if k in known})
         agent = cls(None, state["seed"], config, n_states=q_table.shape[0], n_actions=q_table.shape[1],
@@ -265,12 +267,19 @@ def build_qlearning(algo: str, env: gym.Env, seed: int, hyperparams: dict, log_d
     return QLearning(env, seed, parse_hyperparams(QLearningConfig, algo, hyperparams), log_dir=log_dir)
 
 
-def load_qlearning(algo: str, path: Path, env: gym.Env | None) -> QLearning:
-    """A saved agent (the registry's loader signature). Loaded from a run's ``checkpoints/`` to go on
+def load_qlearning(algo: str, path: Path, env: gym.Env | None, hyperparams: dict | None = None,
+                   seed: int | None = None) -> QLearning:  # fmt: skip
+    """A saved agent (the registry's loader signature); ``hyperparams`` and ``seed`` (the run's
+    config) must be those it was saved with. Loaded from a run's ``checkpoints/`` to go on
     training, it writes its plot and Q-table into that run directory after each ``learn``."""
     path = Path(path)
     run_dir = path.parent.parent if path.parent.name == "checkpoints" else None
-    return QLearning.load(path, env, log_dir=run_dir)
+    agent = QLearning.load(path, env, log_dir=run_dir)
+    if hyperparams is not None and agent.config != QLearningConfig(**hyperparams):
+        raise ValueError("the model was saved with other hyperparameters than the run's config")
+    if seed is not None and int(seed) != agent.seed:
+        raise ValueError("the model was saved with another seed than the run's config")
+    return agent
 
 
 def write_run_artifacts(agent: QLearning, run_dir: str | Path) -> list[Path]:

@@ -13,7 +13,9 @@ class AlgoSpec:
     """A registered algorithm.
 
     :param build: (algo, env, seed, hyperparams, log_dir) → a new agent.
-    :param load: (algo, path, env or None) → a saved agent.
+    :param load: (algo, path, env or None, hyperparams=None, seed=None) → a saved agent; nothing in
+        the file is unpickled. ``hyperparams`` and ``seed`` are the run config's (the file's own when
+        None, and they must agree); SB3 models are rebuilt from them and need ``env``.
     :param action_kinds: action adapters it accepts.
     :param sb3_replay: the agent has a replay buffer worth checkpointing (``replay_buffer.observations``,
         ``save_replay_buffer``, ``load_replay_buffer``, as SB3's off-policy models).
@@ -40,9 +42,9 @@ def build_own(algo: str, env, seed: int, hyperparams: dict, log_dir) -> object:
     return own_classes()[algo](env.observation_space, env.action_space, seed, hyperparams, env)
 
 
-def load_own(algo: str, path, env) -> object:
+def load_own(algo: str, path, env, hyperparams: dict | None = None, seed: int | None = None) -> object:
     """A saved agent of drivelab's own (``env`` may be None for acting only)."""
-    return own_classes()[algo].load(path, env)
+    return own_classes()[algo].load(path, env, hyperparams, seed)
 
 
 def own_classes() -> dict[str, type]:

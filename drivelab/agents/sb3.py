@@ -1,18 +1,143 @@
-"""stable-baselines3 algorithms behind drivelab's Agent protocol."""
+"""stable-baselines3 algorithms behind drivelab's Agent protocol, saved without pickles.
+
+SB3's own ``save`` pickles parts of a model (the ``:serialized:`` entries of the zip's ``data``) and
+its ``load`` unpickles them, so a model file could run code. drivelab's SB3 classes save instead a zip of
+``sb3.json`` (the counters and statistics that further training reads: steps, updates, episodes,
+exploration rate, progress, episode-info buffers; plus the seed, hyper-parameters and spaces) and
+``parameters.pt`` (the state dicts of the policy and its optimizers and SB3's torch variables,
+read with ``torch.load(weights_only=True)``). ``load_sb3`` rebuilds the model from the run's config
+with ``build_sb3`` and loads the parameters into it (SB3's ``set_parameters``). Replays are
+``.npz`` arrays loaded into the rebuilt model's fresh buffer.
+
+As SB3's ``load`` given an environment, a loaded model has no last observation, so its next
+``learn`` starts by resetting the environment.
+"""
 
 from __future__ import annotations
 
+import json
+import zipfile
+from collections import deque
 from pathlib import Path
 
 import gymnasium as gym
+import numpy as np
 from gymnasium import spaces
 from stable_baselines3 import A2C, DQN, PPO, SAC
 from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.utils import get_device
 
 from drivelab.agents.sb3_params import check_sb3_hyperparams
+from drivelab.agents.storage import (
+    check_spaces,
+    read_arrays,
+    read_zip,
+    space_to_json,
+    split_meta,
+    tensors_from_bytes,
+    tensors_to_bytes,
+    write_arrays,
+)
 from drivelab.errors import UsageError
 
-SB3_CLASSES: dict[str, type[BaseAlgorithm]] = {"dqn": DQN, "ppo": PPO, "a2c": A2C, "sac": SAC}
+FORMAT = "drivelab-sb3-1"
+# model attributes that further training reads, restored after a load (those a model lacks are skipped)
+COUNTERS = ("num_timesteps", "_n_updates", "_episode_num", "_n_calls", "exploration_rate",
+            "_current_progress_remaining", "_total_timesteps", "_num_timesteps_at_start")  # fmt: skip
+REPLAY_ARRAYS = ("observations", "next_observations", "actions", "rewards", "dones", "timeouts")
+
+
+class SafeSave:
+    """Mixin for SB3 algorithms: ``save`` and the replay methods write tensors, arrays and JSON
+    (see the module docstring); the Agent protocol's ``save(path)`` is unchanged."""
+
+    def save(self, path: str | Path) -> None:
+        """One zip: ``sb3.json`` and ``parameters.pt``."""
+        _, variables = self._get_torch_save_params()
+        tensors = {name: _attribute(self, name).detach().cpu() for name in variables}
+        parameters = {"state_dicts": self.get_parameters(), "variables": tensors}
+        meta = {
+            "format": FORMAT,
+            "algo": ALGO_OF[type(self)],
+            "seed": self.seed,
+            "hyperparams": self.drivelab_hyperparams,
+            "n_envs": self.n_envs,
+            "observation_space": space_to_json(self.observation_space),
+            "action_space": space_to_json(self.action_space),
+            "counters": {name: getattr(self, name) for name in COUNTERS if hasattr(self, name)},
+            "ep_info_buffer": list(self.ep_info_buffer or []),
+            "ep_success_buffer": [bool(value) for value in self.ep_success_buffer or []],
+        }
+        with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as archive:
+            archive.writestr("sb3.json", json.dumps(meta, default=_json_number))
+            archive.writestr("parameters.pt", tensors_to_bytes(parameters))
+
+    def save_replay_buffer(self, path: str | Path) -> None:
+        """The replay buffer's arrays (dict observations key by key) and position as ``.npz``."""
+        buffer, arrays = self.replay_buffer, {}
+        for name in REPLAY_ARRAYS:
+            value = getattr(buffer, name, None)
+            if isinstance(value, dict):
+                arrays.update({f"{name}/{key}": array for key, array in value.items()})
+            elif value is not None:
+                arrays[name] = value
+        write_arrays(path, arrays, {"pos": int(buffer.pos), "full": bool(buffer.full)})
+
+    def load_replay_buffer(self, path: str | Path) -> None:
+        """Fill this model's fresh replay buffer from ``save_replay_buffer``'s file; every array
+        must have the shape and dtype of the buffer's own (same buffer size and spaces)."""
+        arrays, meta = split_meta(read_arrays(path))
+        buffer = self.replay_buffer
+        expected = {}
+        for name in REPLAY_ARRAYS:
+            value = getattr(buffer, name, None)
+            if isinstance(value, dict):
+                expected.update({f"{name}/{key}": (value, key) for key in value})
+            elif value is not None:
+                expected[name] = (buffer.__dict__, name)
+        if set(arrays) != set(expected) or not {"pos", "full"} <= set(meta):
+            raise ValueError("the replay's arrays do not match this model's replay buffer")
+        for key, (holder, name) in expected.items():
+            if arrays[key].shape != holder[name].shape or arrays[key].dtype != holder[name].dtype:
+                raise ValueError(f"replay array {key!r} does not fit this model's buffer")
+        for key, (holder, name) in expected.items():
+            holder[name] = arrays[key].copy()
+        buffer.pos, buffer.full = int(meta["pos"]), bool(meta["full"])
+
+
+class DrivelabDQN(SafeSave, DQN):
+    """SB3 DQN saved without pickles."""
+
+
+class DrivelabPPO(SafeSave, PPO):
+    """SB3 PPO saved without pickles."""
+
+
+class DrivelabA2C(SafeSave, A2C):
+    """SB3 A2C saved without pickles."""
+
+
+class DrivelabSAC(SafeSave, SAC):
+    """SB3 SAC saved without pickles."""
+
+
+SB3_CLASSES: dict[str, type[BaseAlgorithm]] = {
+    "dqn": DrivelabDQN, "ppo": DrivelabPPO, "a2c": DrivelabA2C, "sac": DrivelabSAC,
+}  # fmt: skip
+ALGO_OF = {cls: algo for algo, cls in SB3_CLASSES.items()}
+
+
+def _attribute(model: BaseAlgorithm, dotted: str):
+    for part in dotted.split("."):
+        model = getattr(model, part)
+    return model
+
+
+def _json_number(value):
+    """numpy scalars in counters and episode infos → Python numbers for JSON."""
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"cannot store {type(value).__name__} in a model file")
 
 # Defaults follow highway-env's documented SB3 examples (scripts/sb3_highway_*.py) where they
 # exist; the rest are SB3's own. ``--hyperparams`` / YAML ``hyperparams`` override any key.
@@ -83,11 +208,36 @@ def build_sb3(algo: str, env: gym.Env, seed: int, hyperparams: dict, log_dir: Pa
                                    **hyperparams.get("policy_kwargs", {})}  # fmt: skip
     elif extractor != "sb3":
         raise UsageError(f"features_extractor must be 'sb3' or 'seed', got {extractor!r}")
-    return SB3_CLASSES[algo](
+    model = SB3_CLASSES[algo](
         policy_for(env.observation_space), env, seed=seed, verbose=0, **kwargs
     )
+    model.drivelab_hyperparams = json.loads(json.dumps(dict(hyperparams)))  # saved with the model
+    return model
 
 
-def load_sb3(algo: str, path: Path, env: gym.Env | None) -> BaseAlgorithm:
-    """Load a saved SB3 model (``env`` may be None for acting only)."""
-    return SB3_CLASSES[algo].load(path, env=env, device="cpu")
+def load_sb3(algo: str, path: Path, env: gym.Env | None, hyperparams: dict | None = None,
+             seed: int | None = None) -> BaseAlgorithm:  # fmt: skip
+    """A model saved by ``SafeSave.save``, rebuilt by ``build_sb3`` on ``env`` (the run config's
+    environment, needed for its spaces) from ``hyperparams`` and ``seed`` (the run's config; the
+    file's own when None, and they must agree), then its parameters and counters restored."""
+    meta, archive = read_zip(path, "sb3.json")
+    with archive:
+        parameters = tensors_from_bytes(archive.read("parameters.pt"))
+    if meta.get("format") != FORMAT or meta.get("algo") != algo:
+        raise ValueError(f"the file holds a {meta.get('algo')!r} model, not {algo!r}")
+    hyperparams = meta["hyperparams"] if hyperparams is None else json.loads(json.dumps(dict(hyperparams)))
+    seed = meta["seed"] if seed is None else int(seed)
+    if (hyperparams, seed) != (meta["hyperparams"], meta["seed"]):
+        raise ValueError("the model was saved with other hyperparameters or seed than the run's config")
+    if env is None:
+        raise ValueError("an SB3 model is rebuilt on its environment: give one")
+    check_spaces(meta, env.observation_space, env.action_space)
+    model = build_sb3(algo, env, seed, hyperparams, None)
+    model.set_parameters(parameters["state_dicts"], exact_match=True, device=get_device(model.device))
+    for name, value in parameters["variables"].items():
+        _attribute(model, name).data.copy_(value)
+    for name, value in meta["counters"].items():
+        setattr(model, name, value)
+    model.ep_info_buffer = deque(meta["ep_info_buffer"], maxlen=model._stats_window_size)
+    model.ep_success_buffer = deque(meta["ep_success_buffer"], maxlen=model._stats_window_size)
+    return model

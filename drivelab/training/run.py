@@ -7,13 +7,19 @@ Run directory layout::
     monitor.csv            one row per training episode (return, length, time)
     evaluations.csv        one row per periodic evaluation
     checkpoints/latest.zip + latest.json (manifest: steps, sha256, config identity)
-    model.zip              final model
+    checkpoints/replay.npz replay buffer of off-policy agents (arrays)
+    model.zip              final model: tensors (``torch.load(weights_only=True)``) and JSON
+
+Nothing in a run directory is unpickled (``agents/storage.py``): a run from elsewhere cannot run
+code when it is evaluated or resumed. The manifest's sha256 only detects a truncated or corrupted
+checkpoint; stored beside the file, it proves nothing against deliberate tampering.
     learning_curve.png     training returns and evaluation returns against steps
     videos/                periodic-evaluation videos (when asked)
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import gc
 import hashlib
@@ -31,6 +37,7 @@ from stable_baselines3.common.vec_env import VecMonitor
 from tqdm import tqdm
 
 from drivelab.agents.registry import check_combination, get_algo
+from drivelab.agents.storage import OldFormatError, is_old_format
 from drivelab.config import RunConfig, build_config, save_yaml
 from drivelab.errors import UsageError
 from drivelab.training.evaluate import (
@@ -63,34 +70,61 @@ def file_sha256(path: Path) -> str:
 
 
 def save_checkpoint(model, run_dir: Path, config: RunConfig, save_replay: bool) -> Path:
-    """Write checkpoints/latest.zip atomically, with a manifest that lets resume verify it."""
+    """Write checkpoints/latest.zip (and replay.npz) with a manifest that lets resume verify them.
+
+    Every file is written under a temporary name first and renamed only when all are written: a
+    failed write (disk full, read-only) removes the temporary files, keeps the previous checkpoint
+    valid and raises a one-line UsageError."""
     folder = run_dir / "checkpoints"
-    folder.mkdir(exist_ok=True)
-    tmp = folder / "latest.tmp.zip"
-    model.save(tmp)
-    os.replace(tmp, folder / "latest.zip")
-    replay = False
-    if save_replay and getattr(model, "replay_buffer", None) is not None:
-        observations = model.replay_buffer.observations  # a dict of arrays for Dict observations
-        arrays = observations.values() if isinstance(observations, dict) else [observations]
-        if sum(array.nbytes for array in arrays) * 2 < REPLAY_LIMIT_BYTES:
-            model.save_replay_buffer(folder / "replay.tmp.pkl")
-            os.replace(folder / "replay.tmp.pkl", folder / "replay.pkl")
-            replay = True
-    manifest = {
-        "steps": int(model.num_timesteps),
-        "sha256": file_sha256(folder / "latest.zip"),
-        "config_identity": config.identity(),
-        "replay_buffer": replay,
-        "saved_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
-    }
-    (folder / "latest.tmp.json").write_text(json.dumps(manifest, indent=2))
-    os.replace(folder / "latest.tmp.json", folder / "latest.json")
+    temporary = {folder / "latest.tmp.zip": folder / "latest.zip"}
+    try:
+        folder.mkdir(exist_ok=True)
+        model.save(folder / "latest.tmp.zip")
+        manifest = {
+            "steps": int(model.num_timesteps),
+            "sha256": file_sha256(folder / "latest.tmp.zip"),
+            "config_identity": config.identity(),
+            "replay_buffer": False,
+            "saved_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        }
+        if save_replay and _replay_fits(model):
+            temporary[folder / "replay.tmp.npz"] = folder / "replay.npz"
+            model.save_replay_buffer(folder / "replay.tmp.npz")
+            manifest.update(replay_buffer=True, replay_sha256=file_sha256(folder / "replay.tmp.npz"))
+        temporary[folder / "latest.tmp.json"] = folder / "latest.json"  # renamed last: the commit
+        (folder / "latest.tmp.json").write_text(json.dumps(manifest, indent=2))
+        for tmp, final in temporary.items():
+            os.replace(tmp, final)
+    except OSError as exc:
+        for tmp in temporary:
+            with contextlib.suppress(OSError):  # on a read-only disk there may be nothing to remove
+                tmp.unlink(missing_ok=True)
+        raise UsageError(f"cannot write checkpoint in {str(folder)!r}: {exc.strerror or exc}") from None
     return folder / "latest.zip"
 
 
+def _replay_fits(model) -> bool:
+    """Whether the model has a replay buffer small enough to checkpoint (``REPLAY_LIMIT_BYTES``)."""
+    if getattr(model, "replay_buffer", None) is None:
+        return False
+    observations = model.replay_buffer.observations  # a dict of arrays for Dict observations
+    arrays = observations.values() if isinstance(observations, dict) else [observations]
+    return sum(array.nbytes for array in arrays) * 2 < REPLAY_LIMIT_BYTES
+
+
+def old_format_error(run_dir: Path) -> UsageError:
+    """The one line for a run directory saved in the pickle format of earlier drivelab versions."""
+    return UsageError(
+        f"run {str(run_dir)!r} is in the old pickle format; if you trust it, convert it with "
+        f"`drivelab convert-run {run_dir}`"
+    )
+
+
 def verify_checkpoint(run_dir: Path, config: RunConfig) -> dict:
-    """The checkpoint manifest, after checking the file is whole and belongs to ``config``."""
+    """The checkpoint manifest, after checking the file is whole and belongs to ``config``.
+
+    The sha256 detects a truncated or corrupted file only: it is stored beside the file, so it
+    proves nothing against tampering (loading never executes code, whatever the file holds)."""
     folder = run_dir / "checkpoints"
     manifest_path, model_path = folder / "latest.json", folder / "latest.zip"
     if not manifest_path.is_file() or not model_path.is_file():
@@ -102,6 +136,8 @@ def verify_checkpoint(run_dir: Path, config: RunConfig) -> dict:
         raise UsageError(f"checkpoint manifest {str(manifest_path)!r} is corrupted") from None
     if file_sha256(model_path) != expected or not zipfile.is_zipfile(model_path):
         raise UsageError(f"checkpoint {str(model_path)!r} is truncated or corrupted (checksum mismatch)")
+    if is_old_format(model_path) or (manifest.get("replay_buffer") and (folder / "replay.pkl").is_file()):
+        raise old_format_error(run_dir)
     if manifest.get("config_identity") != config.identity():
         raise UsageError(f"checkpoint in {str(run_dir)!r} was made with a different config")
     return manifest
@@ -116,14 +152,35 @@ def model_path(run_dir: Path, config: RunConfig) -> Path:
     return run_dir / "checkpoints" / "latest.zip"
 
 
-def load_agent(run_dir: Path, config: RunConfig, env=None):
-    """The agent of ``model_path``."""
+def load_agent(run_dir: Path, config: RunConfig, env=None, path: Path | None = None):
+    """The agent of ``path`` (default ``model_path``), rebuilt from the run's config on ``env``
+    (default: the config's evaluation environment, whose spaces must be the saved ones)."""
+    from drivelab.envs.core import DriveEnv
+
     spec = get_algo(config.algo)
-    path = model_path(run_dir, config)
+    path = model_path(run_dir, config) if path is None else path
     try:
-        return spec.load(config.algo, path, env)
-    except Exception as exc:  # a broken zip or a model of another algorithm
-        raise UsageError(f"cannot load model {str(path)!r}: {type(exc).__name__}: {exc}") from None
+        env = DriveEnv(**config.eval_env_kwargs()) if env is None else env
+        return spec.load(config.algo, path, env, dict(config.hyperparams), config.seed)
+    except OldFormatError:
+        raise old_format_error(run_dir) from None
+    except UsageError:
+        raise
+    except Exception as exc:  # a broken zip, a model of another algorithm or config
+        message = (str(exc).splitlines() or [""])[0]
+        raise UsageError(f"cannot load model {str(path)!r}: {type(exc).__name__}: {message}") from None
+
+
+def load_replay(model, run_dir: Path, manifest: dict) -> None:
+    """Fill ``model``'s replay buffer from the checkpoint's replay.npz, after checking its sha256."""
+    path = run_dir / "checkpoints" / "replay.npz"
+    if not path.is_file() or file_sha256(path) != manifest.get("replay_sha256"):
+        raise UsageError(f"checkpoint replay {str(path)!r} is missing, truncated or corrupted")
+    try:
+        model.load_replay_buffer(path)
+    except Exception as exc:  # object arrays (a pickle) or a replay of another configuration
+        message = (str(exc).splitlines() or [""])[0]
+        raise UsageError(f"cannot load replay {str(path)!r}: {type(exc).__name__}: {message}") from None
 
 
 # --- callbacks -------------------------------------------------------------------------------
@@ -303,12 +360,11 @@ def resume(run_dir: str | Path, steps: int | None = None) -> Path:
         raise UsageError(
             f"run already has {manifest['steps']} steps (>= {config.steps}); pass a larger --steps"
         )
-    spec = get_algo(config.algo)
     save_yaml(config, run_dir / "config.yaml")
     train_env, eval_env = _make_envs(config, run_dir, resume=True)
-    model = spec.load(config.algo, run_dir / "checkpoints" / "latest.zip", train_env)
+    model = load_agent(run_dir, config, train_env, run_dir / "checkpoints" / "latest.zip")
     if manifest.get("replay_buffer"):
-        model.load_replay_buffer(run_dir / "checkpoints" / "replay.pkl")
+        load_replay(model, run_dir, manifest)
     progress = run_dir / "progress.csv"
     if progress.exists():
         os.replace(progress, run_dir / f"progress-{manifest['steps']}.csv")

@@ -224,10 +224,10 @@ def test_replay_frames_on_the_device_train_exactly_as_on_the_host():
 def test_a_checkpointed_replay_loads_where_the_loading_agent_keeps_frames(tmp_path):
     saved = _agent(replay_frames="device")
     _fill(saved)
-    saved.save_replay_buffer(tmp_path / "replay.pkl")
+    saved.save_replay_buffer(tmp_path / "replay.npz")
     for choice, kind in (("host", np.ndarray), ("device", torch.Tensor)):
         agent = _agent(replay_frames=choice)
-        agent.load_replay_buffer(tmp_path / "replay.pkl")
+        agent.load_replay_buffer(tmp_path / "replay.npz")
         assert isinstance(agent.replay_buffer.frames, kind), choice
         frames = np.asarray(agent.replay_buffer.frames)
         np.testing.assert_array_equal(frames, saved.replay_buffer.frames.numpy())

@@ -1,11 +1,11 @@
 """RLAD's replay: each frame stored once, stacks rebuilt across episode boundaries, memory."""
 
-import pickle
 
 import numpy as np
 import torch
 
 from drivelab.agents.rlad.replay import UNKNOWN_LABEL, FrameReplayBuffer, label_index
+from drivelab.agents.storage import arrays_to_bytes, read_arrays
 from drivelab.envs.core import DriveEnv
 
 OBS = "camera:width=24:height=24:stack=3,waypoints,measurements:stack=3"
@@ -106,7 +106,7 @@ def _filled(frame_device=None, steps=40, episode=9):
     return replay
 
 
-def test_frames_kept_in_a_tensor_give_the_same_batches_and_pickle_as_numpy():
+def test_frames_kept_in_a_tensor_give_the_same_batches_and_save_as_numpy():
     host, tensor = _filled(), _filled(frame_device="cpu")
     assert isinstance(host.frames, np.ndarray) and isinstance(tensor.frames, torch.Tensor)
     assert host.nbytes == tensor.nbytes and host.unique_frame_bytes() == tensor.unique_frame_bytes()
@@ -114,9 +114,15 @@ def test_frames_kept_in_a_tensor_give_the_same_batches_and_pickle_as_numpy():
     for key in one:
         np.testing.assert_array_equal(one[key], np.asarray(two[key]), err_msg=key)
     assert isinstance(two["images"], torch.Tensor) and two["images"].shape == (16, 9, 6, 6)
-    loaded = pickle.loads(pickle.dumps(tensor))  # on the host until placed
+    arrays = tensor.state_arrays()
+    assert all(isinstance(array, np.ndarray) and array.dtype != object for array in arrays.values())
+    loaded = FrameReplayBuffer(30, (3, 6, 6), 3, (10, 2), 6, 2)  # frames on the host
+    loaded.load_state_arrays(read_arrays(arrays_to_bytes(arrays)))
     assert isinstance(loaded.frames, np.ndarray) and loaded.frame_device is None
     np.testing.assert_array_equal(loaded.frames, tensor.frames.numpy())
+    counters = ("written", "position", "stored")
+    assert [getattr(loaded, name) for name in counters] == [getattr(tensor, name) for name in counters]
+    np.testing.assert_array_equal(loaded.current, tensor.current)
     loaded.move_frames("cpu")
     assert isinstance(loaded.frames, torch.Tensor) and torch.equal(loaded.frames, tensor.frames)
     again = loaded.sample(16, np.random.default_rng(1))

@@ -24,14 +24,16 @@ there, and neither the gather of B·2K frames on the CPU nor their copy to the G
 update (on an H100 at 256×256 the two took 127 of an update's 191 ms,
 benchmarks/results/rlad_profile_gpu_256_host.md). The device tensor is allocated at the first
 write, so an agent loaded only to act reserves no device memory. The small arrays stay in numpy.
-A pickled buffer holds its frames as numpy and loads with them on the host; ``move_frames`` puts
-them where the loading agent wants them.
+A checkpoint holds the buffer as arrays (``state_arrays``, frames as numpy); ``load_state_arrays``
+puts the frames where this buffer's ``frame_device`` says.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import torch
+
+from drivelab.agents.storage import assign_arrays
 
 LIGHT_CLASSES = ("none", "green", "red_or_yellow")  # DriveEnv.traffic_light_label's values
 UNKNOWN_LABEL = -1  # no label given: left out of the auxiliary loss
@@ -154,15 +156,35 @@ class FrameReplayBuffer:
         candidates = self.sampleable()
         return self.batch(candidates[rng.integers(len(candidates), size=batch_size)])
 
-    # --- pickling and placement ---------------------------------------------------------------
-    def __getstate__(self) -> dict:
-        state = dict(self.__dict__)
+    # --- saving and placement ------------------------------------------------------------------
+    ARRAYS = ("frames", "waypoints", "measurements", "labels", "stacks", "next_newest", "actions", "rewards",
+              "terminated")  # fmt: skip
+    SCALARS = ("written", "position", "stored")
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        """Everything the buffer holds as numpy arrays (a checkpoint's ``.npz``); ``current`` (the
+        open episode's stack) is empty when no episode has started."""
+        arrays = {name: getattr(self, name) for name in self.ARRAYS}
         if isinstance(self.frames, torch.Tensor):
-            state["frames"] = self.frames.cpu().numpy()
-        return {**state, "frame_device": None}  # loads on the host: ``move_frames`` places it
+            arrays["frames"] = self.frames.cpu().numpy()
+        current = np.zeros(0, dtype=np.int64) if self.current is None else self.current
+        scalars = {name: np.asarray(getattr(self, name), dtype=np.int64) for name in self.SCALARS}
+        return {**arrays, **scalars, "current": current}
+
+    def load_state_arrays(self, arrays: dict[str, np.ndarray]) -> None:
+        """Restore ``state_arrays`` into this buffer (same capacity, shapes and stack), its frames
+        placed on ``frame_device``."""
+        assign_arrays(self, arrays, self.ARRAYS + self.SCALARS)
+        current = arrays.get("current")
+        if current is None or current.dtype != np.int64 or current.shape not in ((0,), (self.stack,)):
+            raise ValueError("the replay's 'current' stack does not fit this buffer")
+        self.current = current.copy() if len(current) else None
+        self.move_frames(self.frame_device)
 
     def __setstate__(self, state: dict) -> None:
-        self.__dict__.update({"frame_device": None, **state})  # pickles from before frame_device
+        """Pickles of earlier drivelab versions (``drivelab convert-run`` reads them; some predate
+        ``frame_device``)."""
+        self.__dict__.update({"frame_device": None, **state})
 
     def move_frames(self, device: torch.device | str | None) -> None:
         """Keep the frames on ``device`` from now on (None: the host, as numpy)."""

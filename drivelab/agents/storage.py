@@ -1,0 +1,175 @@
+"""Safe files for agents and replays: tensors, arrays and JSON, never pickles.
+
+A run directory may come from someone else, so nothing read here can execute code: tensors and
+state dicts go through ``torch.load(weights_only=True)`` (plain containers of tensors and numbers
+only), arrays through ``np.load(allow_pickle=False)`` (an object array is refused), everything else
+is JSON. Spaces are described in JSON and compared with the spaces of the environment the run's
+config makes. Files from drivelab before this format (pickles inside) raise ``OldFormatError``;
+``drivelab convert-run`` rewrites a directory the user trusts.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import pickle  # only for its exception type: nothing here unpickles
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from gymnasium import spaces
+
+PICKLED_MEMBERS = ("data", "spaces.pkl", "pytorch_variables.pth")  # SB3's and drivelab's old zips
+
+
+class OldFormatError(ValueError):
+    """A file in the pickle format of earlier drivelab versions (loading it would unpickle)."""
+
+    def __init__(self, path: str | Path) -> None:
+        super().__init__(f"{str(path)!r} is in the old pickle format")
+        self.path = Path(path)
+
+
+# --- tensors -----------------------------------------------------------------------------------
+def tensors_to_bytes(state: Any) -> bytes:
+    """Nested dicts/lists of tensors and numbers (state dicts, optimizer states) as torch bytes."""
+    buffer = io.BytesIO()
+    torch.save(state, buffer)
+    return buffer.getvalue()
+
+
+def tensors_from_bytes(data: bytes) -> Any:
+    """The inverse of ``tensors_to_bytes``; refuses anything but tensors and plain containers."""
+    try:
+        return torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError:
+        raise ValueError("the tensor file holds objects other than tensors (refused)") from None
+
+
+# --- arrays ------------------------------------------------------------------------------------
+def arrays_to_bytes(arrays: dict[str, np.ndarray]) -> bytes:
+    """Arrays (no object dtype) as ``.npz`` bytes."""
+    buffer = io.BytesIO()
+    np.savez(buffer, **arrays)
+    return buffer.getvalue()
+
+
+def read_arrays(source: str | Path | bytes) -> dict[str, np.ndarray]:
+    """Every array of an ``.npz`` file or its bytes; object arrays are refused (ValueError)."""
+    handle = io.BytesIO(source) if isinstance(source, bytes) else source
+    with np.load(handle, allow_pickle=False) as archive:
+        return {key: archive[key] for key in archive.files}
+
+
+def write_arrays(path: str | Path, arrays: dict[str, np.ndarray], meta: dict | None = None) -> None:
+    """An ``.npz`` file of ``arrays`` plus ``meta`` (JSON, stored as a string array ``__meta__``)."""
+    extra = {} if meta is None else {"__meta__": np.asarray(json.dumps(meta))}
+    with open(path, "wb") as handle:
+        np.savez(handle, **arrays, **extra)
+
+
+def split_meta(arrays: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], dict]:
+    """(arrays, meta) of a ``write_arrays`` file read back with ``read_arrays``."""
+    arrays = dict(arrays)
+    meta = arrays.pop("__meta__", None)
+    return arrays, ({} if meta is None else json.loads(str(meta)))
+
+
+def assign_arrays(target: Any, arrays: dict[str, np.ndarray], names: tuple[str, ...]) -> None:
+    """Copy ``arrays[name]`` into ``target.name`` for each name, after checking that each has the
+    shape and dtype of the attribute it replaces (a replay saved by another configuration fails)."""
+    for name in names:
+        if name not in arrays:
+            raise ValueError(f"the replay has no {name!r} array")
+        current = getattr(target, name)
+        if isinstance(current, torch.Tensor):
+            current = current.cpu().numpy()
+        value = arrays[name]
+        if value.shape != np.shape(current) or value.dtype != np.asarray(current).dtype:
+            raise ValueError(
+                f"replay array {name!r} is {value.dtype}{value.shape}, this agent's is "
+                f"{np.asarray(current).dtype}{np.shape(current)}"
+            )
+    for name in names:
+        value = arrays[name]
+        setattr(target, name, value.item() if value.ndim == 0 else value.copy())
+
+
+# --- spaces ------------------------------------------------------------------------------------
+def _bound(values: np.ndarray) -> Any:
+    """A Box bound as JSON: one number when all are equal, else nested lists."""
+    flat = values.ravel()
+    if flat.size and np.all(flat == flat[0]):
+        return flat[0].item()
+    return values.tolist()
+
+
+def space_to_json(space: spaces.Space) -> dict:
+    """A gymnasium space (Box, Discrete, MultiDiscrete, MultiBinary, Dict, Tuple) as JSON."""
+    if isinstance(space, spaces.Box):
+        return {"type": "Box", "shape": list(space.shape), "dtype": space.dtype.str,
+                "low": _bound(space.low), "high": _bound(space.high)}  # fmt: skip
+    if isinstance(space, spaces.Discrete):
+        return {"type": "Discrete", "n": int(space.n), "start": int(space.start)}
+    if isinstance(space, spaces.MultiDiscrete):
+        return {"type": "MultiDiscrete", "nvec": space.nvec.tolist()}
+    if isinstance(space, spaces.MultiBinary):
+        return {"type": "MultiBinary", "n": np.asarray(space.n).tolist()}
+    if isinstance(space, spaces.Dict):
+        return {"type": "Dict", "spaces": [[key, space_to_json(sub)] for key, sub in space.spaces.items()]}
+    if isinstance(space, spaces.Tuple):
+        return {"type": "Tuple", "spaces": [space_to_json(sub) for sub in space.spaces]}
+    raise ValueError(f"cannot describe a {type(space).__name__} space")
+
+
+def space_from_json(data: dict) -> spaces.Space:
+    """The space ``space_to_json`` described."""
+    kind = data["type"]
+    if kind == "Box":
+        dtype, shape = np.dtype(data["dtype"]), tuple(data["shape"])
+        low = np.broadcast_to(np.asarray(data["low"], dtype=dtype), shape)
+        high = np.broadcast_to(np.asarray(data["high"], dtype=dtype), shape)
+        return spaces.Box(low, high, shape, dtype)
+    if kind == "Discrete":
+        return spaces.Discrete(int(data["n"]), start=int(data["start"]))
+    if kind == "MultiDiscrete":
+        return spaces.MultiDiscrete(np.asarray(data["nvec"], dtype=np.int64))
+    if kind == "MultiBinary":
+        return spaces.MultiBinary(data["n"])
+    if kind == "Dict":
+        return spaces.Dict({key: space_from_json(sub) for key, sub in data["spaces"]})
+    if kind == "Tuple":
+        return spaces.Tuple([space_from_json(sub) for sub in data["spaces"]])
+    raise ValueError(f"unknown space type {kind!r}")
+
+
+def check_spaces(saved: dict, observation_space: spaces.Space, action_space: spaces.Space) -> None:
+    """Fail when an environment's spaces differ from those a model was saved with."""
+    if (space_from_json(saved["observation_space"]), space_from_json(saved["action_space"])) != (
+        observation_space, action_space
+    ):
+        raise ValueError("the environment's observation or action space differs from the saved model's")
+
+
+# --- zips --------------------------------------------------------------------------------------
+def read_zip(path: str | Path, meta_name: str) -> tuple[dict, zipfile.ZipFile]:
+    """(JSON metadata ``meta_name``, open archive) of a model zip; an old pickled zip raises
+    ``OldFormatError`` before anything inside it is read."""
+    archive = zipfile.ZipFile(path)
+    names = set(archive.namelist())
+    if names & set(PICKLED_MEMBERS) or meta_name not in names:
+        archive.close()
+        if names & set(PICKLED_MEMBERS):
+            raise OldFormatError(path)
+        raise ValueError(f"{str(path)!r} has no {meta_name}")
+    return json.loads(archive.read(meta_name)), archive
+
+
+def is_old_format(path: str | Path) -> bool:
+    """Whether ``path`` is a model zip in the old pickle format (read without unpickling)."""
+    if not zipfile.is_zipfile(path):
+        return False
+    with zipfile.ZipFile(path) as archive:
+        return bool(set(archive.namelist()) & set(PICKLED_MEMBERS))
