@@ -311,7 +311,7 @@ def test_evaluate_after_obs_edited(work, run_dir):
     assert_refused(
         work,
         ["evaluate", str(run_dir), "--episodes", "1"],
-        "reads observations Box(35,), but the obs of its config.yaml give Box(240,)",
+        "but its environment gives Box(0.0, 1.0, (240,), float32) and Discrete(5) (was config.yaml edited",
     )
 
 
