@@ -63,6 +63,7 @@ FORMAT = 1
 COUNTERS = (
     "num_timesteps", "_n_updates", "_episode_num", "_n_calls", "exploration_rate",
     "_current_progress_remaining",
+    "epsilon", "_obs", "_episode_return", "_episode_length",  # Q-learning's
 )  # fmt: skip
 EPISODE_BUFFERS = ("ep_info_buffer", "ep_success_buffer", "episode_returns")  # logged means only
 STALE_RESULTS = ("eval.json", "nocrash.json", "learning_curve.png", "model.zip")
@@ -228,7 +229,7 @@ def _rng_state(model) -> tuple[dict, dict[str, np.ndarray]]:
         "python": random.getstate(),
         "numpy": {"pos": numpy_state["state"]["pos"], "has_gauss": numpy_state["has_gauss"],
                   "gauss": numpy_state["gauss"]},
-        "action_space": model.action_space.np_random.bit_generator.state,
+        "action_space": None,
         "agent_rng": None,
         "torch_cuda": 0,
     }  # fmt: skip
@@ -236,6 +237,8 @@ def _rng_state(model) -> tuple[dict, dict[str, np.ndarray]]:
         states = torch.cuda.get_rng_state_all()
         meta["torch_cuda"] = len(states)
         arrays.update({f"torch_cuda_{i}": state.numpy() for i, state in enumerate(states)})
+    if getattr(model, "action_space", None) is not None:
+        meta["action_space"] = model.action_space.np_random.bit_generator.state
     if isinstance(getattr(model, "rng", None), np.random.Generator):
         meta["agent_rng"] = model.rng.bit_generator.state
     if isinstance(getattr(model, "generator", None), torch.Generator):
@@ -295,7 +298,8 @@ def _restore_rngs(model, meta: dict, arrays: dict[str, np.ndarray]) -> None:
         torch.cuda.set_rng_state_all(
             [torch.from_numpy(np.array(arrays[f"torch_cuda_{i}"])) for i in range(meta["torch_cuda"])]
         )
-    model.action_space.np_random.bit_generator.state = meta["action_space"]
+    if meta["action_space"] is not None:
+        model.action_space.np_random.bit_generator.state = meta["action_space"]
     if meta["agent_rng"] is not None:
         model.rng.bit_generator.state = meta["agent_rng"]
     if "agent_generator" in arrays:

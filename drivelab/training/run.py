@@ -164,7 +164,7 @@ class RunCallback(BaseCallback):
         self.save_replay = get_algo(config.algo).sb3_replay
         self.bar: tqdm | None = None
         self.snapshot: Snapshot | None = None
-        self.stopped = False
+        self.stopped = self.rollout_starts = False
         # rows already in the logs (after a resume cut them back to the checkpoint)
         self.monitor_rows = count_rows(run_dir / "monitor.csv", 2) - worlds.episodes()
         self.evaluation_rows = count_rows(run_dir / "evaluations.csv", 1)
@@ -187,6 +187,11 @@ class RunCallback(BaseCallback):
         return {"monitor": self.monitor_rows + self.worlds.episodes(), "evaluations": self.evaluation_rows}
 
     def _on_rollout_start(self) -> None:
+        self.rollout_starts = True
+        self.safe_point()
+
+    def safe_point(self) -> None:
+        """Take the snapshot; write the periodic checkpoint when one is due."""
         self.snapshot = take_snapshot(self.model, self.worlds, self.rows())
         if self.num_timesteps >= self.next_checkpoint:
             self.checkpoint(self.snapshot)
@@ -197,6 +202,8 @@ class RunCallback(BaseCallback):
         if self.num_timesteps >= self.next_eval:
             self.evaluate()
             self.next_eval += self.config.resolved_eval_every
+        if not self.rollout_starts:  # a loop without rollout starts (Q-learning, the expert) calls
+            self.safe_point()  # on_step at the end of a whole step: that is its safe point
         self.stopped = self.stop.requested
         return not self.stopped
 
