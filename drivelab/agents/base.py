@@ -8,9 +8,12 @@ derive from ``OwnAgent``, which implements everything but the learning loop):
   and then.
 - ``learn(total_timesteps, callback, reset_num_timesteps=False)``: trains for ``total_timesteps``
   more environment steps. It calls ``callback.init_callback(self)`` and
-  ``callback.on_training_start(locals(), globals())``; after every environment step
-  ``callback.update_locals(locals())`` then ``callback.on_step()``, stopping when that returns
-  False; finally ``callback.on_training_end()``.
+  ``callback.on_training_start(locals(), globals())``; ``callback.on_rollout_start()`` between
+  training phases (before every step for off-policy agents, every rollout for on-policy ones),
+  where nothing is half-done; right after every environment step, before the step changes the
+  replay, the networks or the optimizer, ``callback.update_locals(locals())`` then
+  ``callback.on_step()``, stopping when that returns False; finally ``callback.on_training_end()``.
+  (SB3's loops keep the same order; checkpoints rely on it, see ``training/resume_state.py``.)
 - ``num_timesteps``: environment steps taken so far, exact, so that a resume continues to the
   requested total.
 - ``predict(obs, deterministic=True)`` → ``(action, None)`` for one unbatched observation.

@@ -381,6 +381,7 @@ class DuelingDoubleDQN(OwnAgent):
         callback.on_training_start(locals(), globals())
         metrics: dict[str, float] = {}
         while self.num_timesteps < target_steps:
+            callback.on_rollout_start()  # a safe point: nothing is half-done (contract in base.py)
             progress = self.num_timesteps / max(target_steps, 1)
             explored = progress / config.exploration_fraction if config.exploration_fraction else 1.0
             epsilon = linear(config.exploration_initial_eps, config.exploration_final_eps, explored)
@@ -391,6 +392,9 @@ class DuelingDoubleDQN(OwnAgent):
                 action = int(self.q_values(observation[None]).argmax(dim=1)[0])
             new_obs, reward, terminated, truncated, info = env.step(action)
             self.num_timesteps += 1
+            callback.update_locals(locals())
+            if not callback.on_step():  # before the step changes the replay or the networks
+                break
             # a time-limit end is not terminal: its target still bootstraps from the next state
             next_observation = flatten_observation(new_obs, self.observation_space)
             self.replay_buffer.add(observation, action, float(reward), next_observation, terminated)
@@ -412,9 +416,6 @@ class DuelingDoubleDQN(OwnAgent):
                 self.update_target()
             if self.num_timesteps % config.log_interval == 0:
                 self._log(metrics, epsilon, learning_rate, start_steps, start_time)
-            callback.update_locals(locals())
-            if not callback.on_step():
-                break
         callback.on_training_end()
         return self
 

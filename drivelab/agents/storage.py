@@ -147,7 +147,8 @@ def space_from_json(data: dict) -> spaces.Space:
 
 def check_spaces(saved: dict, observation_space: spaces.Space, action_space: spaces.Space) -> None:
     """Fail when an environment's spaces differ from those a model was saved with."""
-    saved_obs, saved_action = space_from_json(saved["observation_space"]), space_from_json(saved["action_space"])
+    saved_obs = space_from_json(saved["observation_space"])
+    saved_action = space_from_json(saved["action_space"])
     if (saved_obs, saved_action) != (observation_space, action_space):
         raise ValueError(
             f"the model reads observations {saved_obs} and takes actions {saved_action}, but its environment "

@@ -8,13 +8,15 @@ Run directory layout::
     evaluations.csv        one row per periodic evaluation
     checkpoints/latest.zip + latest.json (manifest: steps, sha256, config identity)
     checkpoints/replay.npz replay buffer of off-policy agents (arrays)
+    checkpoints/resume-<steps>.json + .npz  what an exact resume needs beyond the model
+                           (generators, counters, the training episodes; resume_state.py)
     model.zip              final model: tensors (``torch.load(weights_only=True)``) and JSON
+    learning_curve.png     training returns and evaluation returns against steps
+    videos/                periodic-evaluation videos (when asked)
 
 Nothing in a run directory is unpickled (``agents/storage.py``): a run from elsewhere cannot run
 code when it is evaluated or resumed. The manifest's sha256 only detects a truncated or corrupted
 checkpoint; stored beside the file, it proves nothing against deliberate tampering.
-    learning_curve.png     training returns and evaluation returns against steps
-    videos/                periodic-evaluation videos (when asked)
 """
 
 from __future__ import annotations
@@ -47,12 +49,30 @@ from drivelab.training.evaluate import (
     run_episodes,
     write_video,
 )
+from drivelab.training.resume_state import (
+    RecordEpisodes,
+    RecordVecEpisodes,
+    Snapshot,
+    StopRequest,
+    TrainingWorlds,
+    apply_to_model,
+    apply_truncation,
+    count_rows,
+    plan_truncation,
+    prune_states,
+    read_state,
+    restore,
+    take_snapshot,
+    warn_inexact,
+    write_state,
+)
 
 REPLAY_LIMIT_BYTES = 512 * 2**20  # larger replay buffers are not checkpointed (resume refills)
 
 
 class TrainingInterrupted(KeyboardInterrupt):
-    """Ctrl-C during training, after the checkpoint was saved."""
+    """SIGINT or SIGTERM during training; ``steps``: the checkpoint to resume from (the one saved
+    on the way out, or after a second signal that stopped at once, the latest one before)."""
 
     def __init__(self, run_dir: Path, steps: int) -> None:
         super().__init__(f"interrupted at step {steps}")
@@ -185,17 +205,32 @@ def load_replay(model, run_dir: Path, manifest: dict) -> None:
 
 # --- callbacks -------------------------------------------------------------------------------
 class RunCallback(BaseCallback):
-    """Progress bar, periodic evaluation (CSV + logger + optional video) and checkpoints."""
+    """Progress bar, periodic evaluation (CSV + logger + optional video), checkpoints, stopping.
 
-    def __init__(self, run_dir: Path, config: RunConfig, eval_env) -> None:
+    Evaluations run in ``on_step``. Checkpoints are written at rollout starts, the safe points of
+    ``resume_state``: each rollout start takes a ``Snapshot``, and when ``stop`` is requested
+    (SIGINT/SIGTERM) ``on_step`` returns False, so the learning loop ends before the step changes
+    anything learned, and ``_learn`` saves the run as it was at that snapshot.
+    """
+
+    def __init__(
+        self, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWorlds, stop: StopRequest
+    ) -> None:
         super().__init__()
         self.run_dir, self.config, self.eval_env = run_dir, config, eval_env
+        self.worlds, self.stop = worlds, stop
         self.save_replay = get_algo(config.algo).sb3_replay
         self.bar: tqdm | None = None
+        self.snapshot: Snapshot | None = None
+        self.stopped = self.rollout_starts = False
+        # rows already in the logs (after a resume cut them back to the checkpoint)
+        self.monitor_rows = count_rows(run_dir / "monitor.csv", 2) - worlds.episodes()
+        self.evaluation_rows = count_rows(run_dir / "evaluations.csv", 1)
 
     def _on_training_start(self) -> None:
         self.next_eval = _next_multiple(self.num_timesteps, self.config.resolved_eval_every)
         self.next_checkpoint = _next_multiple(self.num_timesteps, self.config.resolved_checkpoint_every)
+        self.checkpoint_steps = self.num_timesteps  # a resumed run starts at its checkpoint
         self.bar = tqdm(
             total=self.config.steps,
             initial=self.num_timesteps,
@@ -205,19 +240,44 @@ class RunCallback(BaseCallback):
             dynamic_ncols=True,
         )
 
+    def rows(self) -> dict[str, int]:
+        """Data rows written so far to monitor.csv and evaluations.csv."""
+        return {"monitor": self.monitor_rows + self.worlds.episodes(), "evaluations": self.evaluation_rows}
+
+    def _on_rollout_start(self) -> None:
+        self.rollout_starts = True
+        self.safe_point()
+
+    def safe_point(self) -> None:
+        """Take the snapshot; write the periodic checkpoint when one is due."""
+        self.snapshot = take_snapshot(self.model, self.worlds, self.rows())
+        if self.num_timesteps >= self.next_checkpoint:
+            self.checkpoint(self.snapshot)
+            self.next_checkpoint = _next_multiple(self.num_timesteps, self.config.resolved_checkpoint_every)
+
     def _on_step(self) -> bool:
         self.bar.update(self.model.num_timesteps - self.bar.n)
         if self.num_timesteps >= self.next_eval:
             self.evaluate()
             self.next_eval += self.config.resolved_eval_every
-        if self.num_timesteps >= self.next_checkpoint:
-            save_checkpoint(self.model, self.run_dir, self.config, self.save_replay)
-            self.next_checkpoint += self.config.resolved_checkpoint_every
-        return True
+        if not self.rollout_starts:  # a loop without rollout starts (Q-learning, the expert) calls
+            self.safe_point()  # on_step at the end of a whole step: that is its safe point
+        self.stopped = self.stop.requested
+        return not self.stopped
 
     def _on_training_end(self) -> None:
         if self.bar is not None:
             self.bar.close()
+
+    def checkpoint(self, snapshot: Snapshot) -> None:
+        """The model's checkpoint and the resume state of ``snapshot`` (taken at the model's
+        present state), the resume state first: the manifest, written last, commits both."""
+        folder = self.run_dir / "checkpoints"
+        folder.mkdir(exist_ok=True)
+        write_state(folder, snapshot)
+        save_checkpoint(self.model, self.run_dir, self.config, self.save_replay)
+        prune_states(folder, snapshot.steps)
+        self.checkpoint_steps = snapshot.steps
 
     def evaluate(self) -> dict:
         policy = lambda obs: self.model.predict(obs, deterministic=True)[0]  # noqa: E731
@@ -237,6 +297,7 @@ class RunCallback(BaseCallback):
             if new:
                 writer.writeheader()
             writer.writerow(row)
+        self.evaluation_rows += 1
         for key in ("mean_return", "success_rate", "crash_rate"):
             self.logger.record(f"eval/{key}", summary[key])
         if frames:
@@ -298,23 +359,27 @@ def _check_model(spec, config: RunConfig, probe) -> None:
 
 
 def _make_envs(config: RunConfig, run_dir: Path, resume: bool):
-    """The training env (``n_envs`` worlds as an SB3 VecEnv when more than one) logging its
-    episodes to monitor.csv, and the evaluation env."""
+    """(training env, evaluation env, the training env's ``TrainingWorlds``). The training env has
+    ``n_envs`` worlds (an SB3 VecEnv when more than one), logs its episodes to monitor.csv (appending
+    on a resume) and records them for the checkpoints' resume state; it is seeded with the run's
+    seed (an exact resume then replays its checkpoint's episodes over that)."""
     from drivelab.envs.core import DriveEnv
 
     monitor = str(run_dir / "monitor.csv")
     if config.n_envs == 1:
-        train_env = Monitor(DriveEnv(**config.env_kwargs()), filename=monitor, override_existing=not resume)
+        recorder = RecordEpisodes(DriveEnv(**config.env_kwargs()))
+        train_env = Monitor(recorder, filename=monitor, override_existing=not resume)
         train_env.reset(seed=config.seed)
     else:
         from drivelab.envs.vector import DriveVectorEnv, SB3VecEnv
 
-        train_env = VecMonitor(SB3VecEnv(DriveVectorEnv(config.n_envs, **config.env_kwargs())))
+        recorder = RecordVecEpisodes(SB3VecEnv(DriveVectorEnv(config.n_envs, **config.env_kwargs())))
+        train_env = VecMonitor(recorder)
         train_env.results_writer = ResultsWriter(
             monitor, header={"t_start": train_env.t_start, "env_id": config.env}, override_existing=not resume
         )
         train_env.seed(config.seed)
-    return train_env, DriveEnv(**config.eval_env_kwargs())
+    return train_env, DriveEnv(**config.eval_env_kwargs()), TrainingWorlds.of(train_env, recorder)
 
 
 def _check_n_envs(config: RunConfig) -> None:
@@ -338,19 +403,26 @@ def train(config: RunConfig, runs_root: str | Path = "runs") -> Path:
     _create_run_dir(run_dir)
     try:
         save_yaml(config, run_dir / "config.yaml")
-        train_env, eval_env = _make_envs(config, run_dir, resume=False)
+        train_env, eval_env, worlds = _make_envs(config, run_dir, resume=False)
         model = spec.build(config.algo, train_env, config.seed, dict(config.hyperparams), run_dir)
     except Exception as exc:
         shutil.rmtree(run_dir, ignore_errors=True)  # bad hyperparameters: leave nothing behind
         if isinstance(exc, (TypeError, ValueError)) and not isinstance(exc, UsageError):
             raise UsageError(f"bad hyperparameters for {config.algo!r}: {exc}") from None
         raise
-    _learn(model, run_dir, config, eval_env)
+    _learn(model, run_dir, config, eval_env, worlds)
     return run_dir
 
 
 def resume(run_dir: str | Path, steps: int | None = None) -> Path:
-    """Continue a run from its latest checkpoint up to ``steps`` (default: its configured total)."""
+    """Continue a run from its latest checkpoint up to ``steps`` (default: its configured total).
+
+    With the checkpoint's resume state the continuation is exactly the uninterrupted run's
+    (``resume_state``). Everything is read and checked (config, checkpoint, resume state, replay,
+    logs) before anything is written; then the logs are cut back to the checkpoint (monitor.csv
+    and evaluations.csv to the rows it had written, progress.csv to its step) and the results of
+    the older model (eval.json, nocrash.json, learning_curve.png, model.zip) are removed.
+    """
     run_dir = Path(run_dir)
     config = load_run_config(run_dir)
     manifest = verify_checkpoint(run_dir, config)
@@ -360,32 +432,64 @@ def resume(run_dir: str | Path, steps: int | None = None) -> Path:
         raise UsageError(
             f"run already has {manifest['steps']} steps (>= {config.steps}); pass a larger --steps"
         )
+    folder = run_dir / "checkpoints"
+    snapshot = read_state(folder, manifest["steps"])
+    changes = plan_truncation(run_dir, manifest["steps"], snapshot)
+    model = _load_checkpoint(config, run_dir, manifest)
+    # everything checked: from here on the run directory changes
+    apply_truncation(run_dir, changes, manifest["steps"])
     save_yaml(config, run_dir / "config.yaml")
-    train_env, eval_env = _make_envs(config, run_dir, resume=True)
-    model = load_agent(run_dir, config, train_env, run_dir / "checkpoints" / "latest.zip")
-    if manifest.get("replay_buffer"):
-        load_replay(model, run_dir, manifest)
-    progress = run_dir / "progress.csv"
-    if progress.exists():
-        os.replace(progress, run_dir / f"progress-{manifest['steps']}.csv")
-    _learn(model, run_dir, config, eval_env)
+    train_env, eval_env, worlds = _make_envs(config, run_dir, resume=True)
+    model.set_env(train_env)
+    if snapshot is None:
+        warn_inexact()
+    else:
+        restore(model, worlds, snapshot)
+    _learn(model, run_dir, config, eval_env, worlds)
     return run_dir
 
 
-def _learn(model, run_dir: Path, config: RunConfig, eval_env) -> None:
+def _load_checkpoint(config: RunConfig, run_dir: Path, manifest: dict):
+    """The checkpoint's model with its replay buffer, rebuilt on an unmonitored copy of the training
+    env (as many worlds; ``set_env`` later gives it the monitored one), so that nothing is written."""
+    from drivelab.envs.core import DriveEnv
+
+    if config.n_envs == 1:
+        env = DriveEnv(**config.env_kwargs())
+    else:
+        from drivelab.envs.vector import DriveVectorEnv, SB3VecEnv
+
+        env = SB3VecEnv(DriveVectorEnv(config.n_envs, **config.env_kwargs()))
+    model = load_agent(run_dir, config, env, run_dir / "checkpoints" / "latest.zip")
+    if manifest.get("replay_buffer"):
+        load_replay(model, run_dir, manifest)
+    return model
+
+
+def _learn(model, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWorlds) -> None:
+    """Train to ``config.steps``, then save the final checkpoint, model and learning curve.
+
+    SIGINT/SIGTERM stop at the next step: the run is put back to the last safe point's snapshot
+    and checkpointed there (``TrainingInterrupted``). A second signal stops at once, without a new
+    checkpoint (the state may be half-updated); the run then resumes from the previous one.
+    """
     model.set_logger(configure(str(run_dir), ["csv", "tensorboard"]))
-    callback = RunCallback(run_dir, config, eval_env)
-    try:
-        model.learn(
-            total_timesteps=config.steps - model.num_timesteps,
-            callback=callback,
-            reset_num_timesteps=False,
-        )
-    except KeyboardInterrupt:
-        callback._on_training_end()
-        save_checkpoint(model, run_dir, config, callback.save_replay)
-        raise TrainingInterrupted(run_dir, model.num_timesteps) from None
-    save_checkpoint(model, run_dir, config, callback.save_replay)
+    with StopRequest() as stop:
+        callback = RunCallback(run_dir, config, eval_env, worlds, stop)
+        try:
+            model.learn(
+                total_timesteps=config.steps - model.num_timesteps,
+                callback=callback,
+                reset_num_timesteps=False,
+            )
+        except KeyboardInterrupt:
+            callback._on_training_end()
+            raise TrainingInterrupted(run_dir, callback.checkpoint_steps) from None
+        if callback.stopped:
+            apply_to_model(model, callback.snapshot)
+            callback.checkpoint(callback.snapshot)
+            raise TrainingInterrupted(run_dir, callback.snapshot.steps)
+        callback.checkpoint(take_snapshot(model, worlds, callback.rows()))
     model.save(run_dir / "model.tmp.zip")
     os.replace(run_dir / "model.tmp.zip", run_dir / "model.zip")
     from drivelab.training.plots import plot_learning_curve

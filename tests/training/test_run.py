@@ -1,6 +1,8 @@
 """Run directories: train, evaluate, checkpoints, Ctrl-C and resume (tiny step counts)."""
 
 import json
+import os
+import signal
 import zipfile
 
 import pytest
@@ -72,16 +74,17 @@ def test_existing_run_name_is_refused(tmp_path):
 
 
 def test_interrupt_saves_checkpoint_and_resume_continues(tmp_path, monkeypatch):
+    """SIGINT in step 48 stops before the step changes anything learned: the checkpoint is the
+    state before it (47 steps); resume continues to the total, then with a larger --steps."""
     original = run_module.RunCallback._on_step
 
-    def interrupt_after_48(self):
-        original(self)
-        if self.num_timesteps >= 48:
-            raise KeyboardInterrupt
-        return True
+    def interrupt_at_48(self):
+        if self.num_timesteps == 48:
+            os.kill(os.getpid(), signal.SIGINT)
+        return original(self)
 
-    monkeypatch.setattr(run_module.RunCallback, "_on_step", interrupt_after_48)
-    with pytest.raises(run_module.TrainingInterrupted, match="interrupted at step 48"):
+    monkeypatch.setattr(run_module.RunCallback, "_on_step", interrupt_at_48)
+    with pytest.raises(run_module.TrainingInterrupted, match="interrupted at step 47"):
         run_module.train(
             _config(
                 steps=96, algo="dqn", action="meta", hyperparams={"learning_starts": 8, "buffer_size": 500}
@@ -90,7 +93,7 @@ def test_interrupt_saves_checkpoint_and_resume_continues(tmp_path, monkeypatch):
         )
     run_dir = tmp_path / "tiny"
     manifest = json.loads((run_dir / "checkpoints/latest.json").read_text())
-    assert manifest["steps"] == 48 and manifest["replay_buffer"] is True
+    assert manifest["steps"] == 47 and manifest["replay_buffer"] is True
     assert not (run_dir / "model.zip").exists()
 
     monkeypatch.setattr(run_module.RunCallback, "_on_step", original)
@@ -101,8 +104,12 @@ def test_interrupt_saves_checkpoint_and_resume_continues(tmp_path, monkeypatch):
 
     with pytest.raises(UsageError, match="already has 96 steps"):
         run_module.resume(run_dir)
+    evaluate_run(run_dir, episodes=1)
     run_module.resume(run_dir, steps=112)
     assert json.loads((run_dir / "checkpoints/latest.json").read_text())["steps"] == 112
+    assert not (run_dir / "eval.json").exists()  # it described the 96-step model
+    steps = [int(line.split(",")[0]) for line in (run_dir / "evaluations.csv").read_text().splitlines()[1:]]
+    assert steps == [32, 64, 96]  # once each, the next evaluation is due at 128
 
 
 def test_corrupted_or_foreign_checkpoint_is_refused(tmp_path):

@@ -339,12 +339,16 @@ class RLAD(OwnAgent):
         callback.on_training_start(locals(), globals())
         metrics: dict[str, float] = {}
         while self.num_timesteps < target_steps:
+            callback.on_rollout_start()  # a safe point: nothing is half-done (contract in base.py)
             if self.num_timesteps < config.learning_starts:
                 action = self.rng.uniform(-1.0, 1.0, size=self.low.shape).astype(np.float32)
             else:
                 action = self.act(self._last_obs, deterministic=False)
             new_obs, reward, terminated, truncated, info = env.step(self.to_env_action(action))
             self.num_timesteps += 1
+            callback.update_locals(locals())
+            if not callback.on_step():  # before the step changes the replay or the networks
+                break
             replay.add(action, float(reward), bool(terminated), *self._record(new_obs, info))
             if "episode" in info:
                 self.episode_returns.append(float(info["episode"]["r"]))
@@ -357,9 +361,6 @@ class RLAD(OwnAgent):
                 metrics = self.train_step()
             if self.num_timesteps % config.log_interval == 0:
                 self._log_progress(metrics, start_steps, start_time)
-            callback.update_locals(locals())
-            if not callback.on_step():
-                break
         callback.on_training_end()
         return self
 

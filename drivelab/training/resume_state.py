@@ -1,0 +1,534 @@
+"""Exact resume: the state a checkpoint needs beyond the model so that an interrupted and resumed
+run continues exactly as the uninterrupted one would have, and the safe points where it is taken.
+
+What decides the rest of a run, besides the weights, optimizer and replay (the model's own files):
+
+- the random generators: python ``random``, numpy's global generator (SB3 DQN's exploration and
+  replay sampling, SB3 PPO's minibatch shuffles), torch's (SB3 PPO's action sampling), the model's
+  action space (SB3 DQN's warm-up ``action_space.sample()``) and our own agents' ``rng`` and
+  ``generator``;
+- the learning loop's counters (steps, updates, episodes, DQN's ε and target-update clock) and its
+  current observation;
+- the training environment, mid-episode. Simulator objects are not serialised: an episode is a
+  deterministic function of the generator state its reset draws from (``DriveEnv.reset`` draws the
+  episode seed from ``np_random``; backend and sensors are seeded from that) and of the actions
+  since. ``RecordEpisodes`` / ``RecordVecEpisodes`` log, per world, that state and those actions;
+  ``restore`` sets the state, resets and replays the actions, and checks that the replay ends in
+  the saved observation;
+- the monitors' partial episodes (their returns so far) and how many rows monitor.csv and
+  evaluations.csv held, so that a resume cuts rows written after the checkpoint.
+
+Safe points. A checkpoint must describe a state from which the remaining training is exactly the
+uninterrupted one. Every learning loop (SB3's and ours) calls ``callback.on_rollout_start()``
+between its training phases (SB3 DQN and our off-policy agents before every step, on-policy
+agents before every rollout) and ``callback.on_step()`` right after the environment step, before
+the step changes anything learned (replay, weights, optimizer). So a ``Snapshot`` taken at the
+rollout start stays valid until the next rollout start: when SIGINT/SIGTERM arrive
+(``StopRequest`` turns them into a flag), ``on_step`` returns False, the loop stops, and the
+run is rolled back to the snapshot (``Snapshot.apply_to_model``) before it is saved; the steps
+since (part of a rollout) are done again after the resume. Periodic checkpoints are written at
+rollout starts.
+
+Files: ``checkpoints/resume-<steps>.json`` (everything JSON can hold) and ``resume-<steps>.npz``
+(arrays: torch generator states, actions, observations; no object arrays, loaded with
+``allow_pickle=False``). They are written before the checkpoint manifest, keyed by the step count
+the manifest names, so a crash between the two leaves the previous checkpoint's pair in place.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import os
+import random
+import signal
+import sys
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from gymnasium.utils import seeding
+from stable_baselines3.common.vec_env import VecEnvWrapper
+
+from drivelab.errors import UsageError
+
+FORMAT = 1
+# what the learning loops keep between steps: SB3's (BaseAlgorithm, OffPolicyAlgorithm, DQN) and ours
+COUNTERS = (
+    "num_timesteps", "_n_updates", "_episode_num", "_n_calls", "exploration_rate",
+    "_current_progress_remaining",
+    "epsilon", "_obs", "_episode_return", "_episode_length",  # Q-learning's
+)  # fmt: skip
+EPISODE_BUFFERS = ("ep_info_buffer", "ep_success_buffer", "episode_returns")  # logged means only
+STALE_RESULTS = ("eval.json", "nocrash.json", "learning_curve.png", "model.zip")
+
+
+# --- stopping at a safe point ------------------------------------------------------------------
+class StopRequest:
+    """SIGINT and SIGTERM set ``requested`` while training runs (a second one interrupts at once);
+    the previous handlers come back on exit. Outside the main thread no handler is installed."""
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self) -> None:
+        self.requested = False
+        self.previous: dict[int, Any] = {}
+
+    def _handle(self, signum, frame) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+
+    def __enter__(self) -> StopRequest:
+        try:
+            for signum in self.SIGNALS:
+                self.previous[signum] = signal.signal(signum, self._handle)
+        except ValueError:  # not the main thread
+            self.previous.clear()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for signum, handler in self.previous.items():
+            signal.signal(signum, handler)
+
+
+# --- recording the training worlds ---------------------------------------------------------------
+class EpisodeLog:
+    """Per world: the ``np_random`` state its current episode's reset drew from, and the actions
+    taken since (each a copy)."""
+
+    def __init__(self, worlds: int) -> None:
+        self.starts: list[dict | None] = [None] * worlds
+        self.actions: list[list[np.ndarray]] = [[] for _ in range(worlds)]
+
+    def started(self, index: int, state: dict) -> None:
+        self.starts[index], self.actions[index] = state, []
+
+    def stepped(self, index: int, action: Any) -> None:
+        self.actions[index].append(np.array(action, copy=True))
+
+    def mark(self) -> list[tuple[dict | None, list, int]]:
+        """The log as it is now, without copying: episodes only grow their own action list, and a
+        new episode starts a new list."""
+        return [(start, actions, len(actions))
+                for start, actions in zip(self.starts, self.actions, strict=True)]
+
+
+def _state_before_reset(env: gym.Env, generator: np.random.Generator, state: dict) -> dict:
+    """The state the reset that just happened drew from: ``state`` (taken before it) when the env
+    kept ``generator``, else (it was reseeded) a fresh generator of its new seed."""
+    if env.np_random is generator:
+        return state
+    return seeding.np_random(env.np_random_seed)[0].bit_generator.state
+
+
+class RecordEpisodes(gym.Wrapper):
+    """Logs one DriveEnv's episodes into ``log`` (world 0); sits right around the DriveEnv."""
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self.log = EpisodeLog(1)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        drive = self.env.unwrapped
+        generator = drive.np_random
+        state = generator.bit_generator.state
+        result = self.env.reset(seed=seed, options=options)
+        self.log.started(0, _state_before_reset(drive, generator, state))
+        return result
+
+    def step(self, action):
+        self.log.stepped(0, action)
+        return self.env.step(action)
+
+
+class RecordVecEpisodes(VecEnvWrapper):
+    """Logs the episodes of every world of an ``SB3VecEnv`` (whose worlds reset inside ``step``)."""
+
+    def __init__(self, venv) -> None:
+        super().__init__(venv)
+        self.worlds = venv.vector_env.envs
+        self.log = EpisodeLog(len(self.worlds))
+
+    def _generators(self) -> list[tuple[np.random.Generator, dict]]:
+        return [(world.np_random, world.np_random.bit_generator.state) for world in self.worlds]
+
+    def reset(self):
+        before = self._generators()
+        obs = self.venv.reset()
+        for index, (world, (generator, state)) in enumerate(zip(self.worlds, before, strict=True)):
+            self.log.started(index, _state_before_reset(world, generator, state))
+        return obs
+
+    def step_async(self, actions: np.ndarray) -> None:
+        self._actions, self._before = actions, self._generators()  # a step draws only when it resets
+        self.venv.step_async(actions)
+
+    def step_wait(self):
+        obs, rewards, dones, infos = self.venv.step_wait()
+        for index, done in enumerate(dones):
+            if done:
+                self.log.started(index, self._before[index][1])
+            else:
+                self.log.stepped(index, self._actions[index])
+        return obs, rewards, dones, infos
+
+
+@dataclass
+class TrainingWorlds:
+    """The training env's monitor (SB3 ``Monitor`` or ``VecMonitor``), its episode log and its
+    DriveEnvs."""
+
+    monitor: Any
+    log: EpisodeLog
+    worlds: list
+
+    @classmethod
+    def of(cls, monitor, recorder) -> TrainingWorlds:
+        worlds = recorder.worlds if isinstance(recorder, RecordVecEpisodes) else [recorder.unwrapped]
+        return cls(monitor, recorder.log, worlds)
+
+    @property
+    def vector(self) -> bool:
+        return hasattr(self.monitor, "episode_count")
+
+    def episodes(self) -> int:
+        """Episodes the monitor finished (rows it wrote) in this process."""
+        return int(self.monitor.episode_count) if self.vector else len(self.monitor.episode_returns)
+
+
+# --- snapshots -------------------------------------------------------------------------------------
+@dataclass
+class Snapshot:
+    """A safe point's state: ``meta`` for JSON, ``arrays`` for .npz, ``worlds`` the episode log mark."""
+
+    steps: int
+    meta: dict
+    arrays: dict[str, np.ndarray] = field(default_factory=dict)
+    worlds: list = field(default_factory=list)
+
+    def world_actions(self) -> list[np.ndarray]:
+        return [_stack_actions(actions[:count]) for _, actions, count in self.worlds]
+
+
+def _stack_actions(actions: list[np.ndarray]) -> np.ndarray:
+    return np.stack(actions) if actions else np.zeros((0,), dtype=np.float32)
+
+
+def _rng_state(model) -> tuple[dict, dict[str, np.ndarray]]:
+    """Every generator training draws from: JSON part and array part."""
+    numpy_state = np.random.get_state(legacy=False)
+    arrays = {"numpy_key": numpy_state["state"]["key"].copy(), "torch_cpu": torch.get_rng_state().numpy()}
+    meta = {
+        "python": random.getstate(),
+        "numpy": {"pos": numpy_state["state"]["pos"], "has_gauss": numpy_state["has_gauss"],
+                  "gauss": numpy_state["gauss"]},
+        "action_space": None,
+        "agent_rng": None,
+        "torch_cuda": 0,
+    }  # fmt: skip
+    if torch.cuda.is_available() and torch.cuda.is_initialized():
+        states = torch.cuda.get_rng_state_all()
+        meta["torch_cuda"] = len(states)
+        arrays.update({f"torch_cuda_{i}": state.numpy() for i, state in enumerate(states)})
+    if getattr(model, "action_space", None) is not None:
+        meta["action_space"] = model.action_space.np_random.bit_generator.state
+    if isinstance(getattr(model, "rng", None), np.random.Generator):
+        meta["agent_rng"] = model.rng.bit_generator.state
+    if isinstance(getattr(model, "generator", None), torch.Generator):
+        arrays["agent_generator"] = model.generator.get_state().numpy()
+    return meta, arrays
+
+
+def _observation_arrays(obs: Any, prefix: str) -> tuple[Any, dict[str, np.ndarray]]:
+    """(how ``obs`` is stored, its arrays): "array", a list of dict keys, or None."""
+    if obs is None:
+        return None, {}
+    if isinstance(obs, dict):
+        return list(obs), {f"{prefix}.{key}": np.array(value, copy=True) for key, value in obs.items()}
+    return "array", {prefix: np.array(obs, copy=True)}
+
+
+def take_snapshot(model, worlds: TrainingWorlds, rows: dict[str, int]) -> Snapshot:
+    """The state at a safe point. ``rows``: monitor.csv and evaluations.csv data rows written."""
+    rng, arrays = _rng_state(model)
+    layout, obs_arrays = _observation_arrays(getattr(model, "_last_obs", None), "last_obs")
+    arrays.update(obs_arrays)
+    starts = getattr(model, "_last_episode_starts", None)
+    if starts is not None:
+        arrays["last_episode_starts"] = np.array(starts, copy=True)
+    monitor = worlds.monitor
+    if worlds.vector:
+        arrays["monitor_returns"] = monitor.episode_returns.copy()
+        arrays["monitor_lengths"] = monitor.episode_lengths.copy()
+        partial: dict = {"episode_count": int(monitor.episode_count)}
+    else:
+        partial = {"rewards": [float(r) for r in monitor.rewards]}
+    partial["elapsed_s"] = time.time() - monitor.t_start
+    meta = {
+        "format": FORMAT,
+        "steps": int(model.num_timesteps),
+        "rng": rng,
+        "counters": {name: getattr(model, name) for name in COUNTERS if hasattr(model, name)},
+        "buffers": {name: list(getattr(model, name)) for name in EPISODE_BUFFERS
+                    if isinstance(getattr(model, name, None), deque)},
+        "last_obs": layout,
+        "monitor": partial,
+        "rows": dict(rows),
+    }  # fmt: skip
+    return Snapshot(int(model.num_timesteps), meta, arrays, worlds.log.mark())
+
+
+def _restore_rngs(model, meta: dict, arrays: dict[str, np.ndarray]) -> None:
+    version, internal, gauss = meta["python"]
+    random.setstate((version, tuple(internal), gauss))
+    numpy_meta = meta["numpy"]
+    np.random.set_state({
+        "bit_generator": "MT19937", "state": {"key": arrays["numpy_key"], "pos": numpy_meta["pos"]},
+        "has_gauss": numpy_meta["has_gauss"], "gauss": numpy_meta["gauss"],
+    })  # fmt: skip
+    torch.set_rng_state(torch.from_numpy(np.array(arrays["torch_cpu"])))
+    if meta["torch_cuda"] and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(
+            [torch.from_numpy(np.array(arrays[f"torch_cuda_{i}"])) for i in range(meta["torch_cuda"])]
+        )
+    if meta["action_space"] is not None:
+        model.action_space.np_random.bit_generator.state = meta["action_space"]
+    if meta["agent_rng"] is not None:
+        model.rng.bit_generator.state = meta["agent_rng"]
+    if "agent_generator" in arrays:
+        model.generator.set_state(torch.from_numpy(np.array(arrays["agent_generator"])))
+
+
+def _saved_observation(layout: Any, arrays: dict[str, np.ndarray], prefix: str) -> Any:
+    if layout is None:
+        return None
+    if layout == "array":
+        return np.array(arrays[prefix])
+    return {key: np.array(arrays[f"{prefix}.{key}"]) for key in layout}
+
+
+def apply_to_model(model, snapshot: Snapshot) -> None:
+    """Put the model's counters, current observation, episode buffers and every generator back to
+    ``snapshot`` (weights and optimizer are untouched: they do not change between safe points)."""
+    meta, arrays = snapshot.meta, snapshot.arrays
+    for name, value in meta["counters"].items():
+        setattr(model, name, value)
+    for name, values in meta["buffers"].items():
+        current = getattr(model, name, None)
+        maxlen = current.maxlen if isinstance(current, deque) else getattr(model, "_stats_window_size", 100)
+        setattr(model, name, deque(values, maxlen=maxlen))
+    if meta["last_obs"] is not None:
+        model._last_obs = _saved_observation(meta["last_obs"], arrays, "last_obs")
+    if "last_episode_starts" in arrays:
+        model._last_episode_starts = np.array(arrays["last_episode_starts"])
+    _restore_rngs(model, meta["rng"], arrays)
+
+
+# --- restoring the environment -------------------------------------------------------------------
+def _replay_world(world, start: dict, actions: np.ndarray) -> Any:
+    """Reset ``world`` from generator state ``start`` and take ``actions``; the last observation."""
+    world.np_random.bit_generator.state = start
+    obs, _ = world.reset()
+    for action in actions:
+        obs, _, terminated, truncated, _ = world.step(action)
+        if terminated or truncated:
+            raise UsageError("the checkpoint's episode ends early when replayed (the environment changed?)")
+    return obs
+
+
+def _matches(saved: Any, obs: Any, index: int | None) -> bool:
+    """Whether world ``index``'s part of the saved current observation equals the replayed ``obs``
+    (None: the saved one is a single world's). Shapes that differ (an image transposed by SB3's
+    wrapper) are not compared."""
+    if isinstance(saved, dict):
+        return all(_matches(saved[key], obs[key], index) for key in saved)
+    part = saved if index is None else saved[index]
+    obs = np.asarray(obs)
+    return part.shape != obs.shape or np.array_equal(part, obs.astype(part.dtype))
+
+
+def restore(model, worlds: TrainingWorlds, snapshot: Snapshot) -> None:
+    """Bring a freshly built training env and a loaded model to ``snapshot``: replay every world's
+    episode, restore the monitor's partial episodes, then the model's counters and generators."""
+    meta, arrays = snapshot.meta, snapshot.arrays
+    saved = _saved_observation(meta["last_obs"], arrays, "last_obs")
+    batched = not isinstance(model.get_env(), gym.Env)
+    for index, (world, (start, actions, count)) in enumerate(
+        zip(worlds.worlds, snapshot.worlds, strict=True)
+    ):
+        replayed = _replay_world(world, start, _stack_actions(actions[:count]))
+        worlds.log.started(index, start)
+        worlds.log.actions[index] = list(actions[:count])
+        if saved is not None and not _matches(saved, replayed, index if batched else None):
+            raise UsageError(
+                "the checkpoint's episode does not replay to its observation (the environment changed?)"
+            )
+    monitor, partial = worlds.monitor, meta["monitor"]
+    if worlds.vector:
+        monitor.episode_returns[:] = arrays["monitor_returns"]
+        monitor.episode_lengths[:] = arrays["monitor_lengths"]
+    else:
+        monitor.rewards, monitor.needs_reset = list(partial["rewards"]), False
+    monitor.t_start = time.time() - partial["elapsed_s"]  # monitor.csv's t goes on from the checkpoint
+    apply_to_model(model, snapshot)
+
+
+# --- files -----------------------------------------------------------------------------------------
+def _paths(folder: Path, steps: int) -> tuple[Path, Path]:
+    return folder / f"resume-{steps}.json", folder / f"resume-{steps}.npz"
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(f"cannot store {type(value).__name__} in a resume state")
+
+
+def write_state(folder: Path, snapshot: Snapshot) -> None:
+    """``resume-<steps>.json`` + ``.npz``, each written to a temporary name then renamed."""
+    json_path, npz_path = _paths(folder, snapshot.steps)
+    arrays = dict(snapshot.arrays)
+    for index, actions in enumerate(snapshot.world_actions()):
+        arrays[f"world_{index}_actions"] = actions
+    tmp_npz = folder / "resume.tmp.npz"
+    with tmp_npz.open("wb") as handle:
+        np.savez(handle, **arrays)
+    meta = {**snapshot.meta, "worlds": [{"start": start} for start, _, _ in snapshot.worlds],
+            "npz_sha256": hashlib.sha256(tmp_npz.read_bytes()).hexdigest()}  # fmt: skip
+    os.replace(tmp_npz, npz_path)
+    tmp_json = folder / "resume.tmp.json"
+    tmp_json.write_text(json.dumps(meta, default=_json_default))
+    os.replace(tmp_json, json_path)
+
+
+def read_state(folder: Path, steps: int) -> Snapshot | None:
+    """The resume state of the checkpoint at ``steps`` (None when it has none: a checkpoint of an
+    older drivelab); a damaged one is a UsageError."""
+    json_path, npz_path = _paths(folder, steps)
+    if not json_path.is_file():
+        return None
+    try:
+        meta = json.loads(json_path.read_text())
+        if meta.get("format") != FORMAT or meta["steps"] != steps:
+            raise ValueError("format or steps")
+        if hashlib.sha256(npz_path.read_bytes()).hexdigest() != meta["npz_sha256"]:
+            raise ValueError("checksum")
+        with np.load(npz_path, allow_pickle=False) as data:
+            arrays = {key: data[key] for key in data.files}
+        worlds = []
+        for index, world in enumerate(meta.pop("worlds")):
+            actions = list(arrays.pop(f"world_{index}_actions"))
+            worlds.append((world["start"], actions, len(actions)))
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise UsageError(f"resume state {str(json_path)!r} is damaged ({exc})") from None
+    return Snapshot(steps, meta, arrays, worlds)
+
+
+def prune_states(folder: Path, keep_steps: int) -> None:
+    """Remove the resume states of earlier checkpoints (after the manifest moved on)."""
+    keep = set(_paths(folder, keep_steps))
+    for path in folder.glob("resume-*.*"):
+        if path not in keep:
+            path.unlink(missing_ok=True)
+
+
+# --- logs back to the checkpoint -------------------------------------------------------------------
+def count_rows(path: Path, header_lines: int) -> int:
+    """Data rows of a CSV log (0 when it does not exist)."""
+    if not path.is_file():
+        return 0
+    with path.open() as handle:
+        return max(sum(1 for _ in handle) - header_lines, 0)
+
+
+def _head(path: Path, header_lines: int, rows: int) -> str | None:
+    """The text of ``path`` cut after ``rows`` data rows (None: nothing to cut)."""
+    if not path.is_file():
+        return None
+    lines = path.read_text().splitlines(keepends=True)
+    return None if len(lines) <= header_lines + rows else "".join(lines[: header_lines + rows])
+
+
+def _progress_upto(path: Path, steps: int) -> str | None:
+    """progress.csv's rows logged at ``steps`` or before ("" when none is; None: unchanged)."""
+    lines = path.read_text().splitlines(keepends=True)
+    if not lines:
+        return None
+    header = next(csv.reader(lines[:1]))
+    if "time/total_timesteps" not in header:
+        return None
+    column = header.index("time/total_timesteps")
+    kept = [line for line, row in zip(lines[1:], csv.reader(lines[1:]), strict=True)
+            if len(row) > column and row[column] and float(row[column]) <= steps]  # fmt: skip
+    if len(kept) == len(lines) - 1:
+        return None
+    return "".join(lines[:1] + kept) if kept else ""
+
+
+def _evaluations_upto(path: Path, steps: int) -> str | None:
+    """evaluations.csv's rows of ``steps`` or before (for checkpoints without a resume state)."""
+    if not path.is_file():
+        return None
+    lines = path.read_text().splitlines(keepends=True)
+    kept = [line for line, row in zip(lines[1:], csv.reader(lines[1:]), strict=True) if int(row[0]) <= steps]
+    return None if len(kept) == len(lines) - 1 else "".join(lines[:1] + kept)
+
+
+def plan_truncation(run_dir: Path, steps: int, snapshot: Snapshot | None) -> dict[Path, str | None]:
+    """What a resume from the checkpoint at ``steps`` must rewrite (path → new text) or delete
+    (path → None): logs written after the checkpoint, and results of the older model. Reads only;
+    an unreadable log is a UsageError."""
+    changes: dict[Path, str | None] = {}
+    try:
+        if snapshot is not None:
+            rows = snapshot.meta["rows"]
+            cuts = {
+                run_dir / "monitor.csv": _head(run_dir / "monitor.csv", 2, rows["monitor"]),
+                run_dir / "evaluations.csv": _head(run_dir / "evaluations.csv", 1, rows["evaluations"]),
+            }
+        else:  # no row counts: evaluations by their step; monitor.csv cannot be cut exactly
+            cuts = {run_dir / "evaluations.csv": _evaluations_upto(run_dir / "evaluations.csv", steps)}
+        for path in sorted(run_dir.glob("progress*.csv")):
+            cuts[path] = _progress_upto(path, steps)
+    except (OSError, ValueError, IndexError, csv.Error, UnicodeDecodeError) as exc:
+        raise UsageError(f"cannot read the logs of {str(run_dir)!r} to resume ({exc})") from None
+    for path, text in cuts.items():
+        if text is not None:
+            changes[path] = text if text != "" else None
+    for name in STALE_RESULTS:
+        if (run_dir / name).exists():
+            changes[run_dir / name] = None
+    return changes
+
+
+def apply_truncation(run_dir: Path, changes: dict[Path, str | None], steps: int) -> None:
+    """Write ``plan_truncation``'s changes, then set the remaining progress.csv aside as
+    ``progress-<steps>.csv`` (the logger starts a new progress.csv)."""
+    for path, text in changes.items():
+        if text is None:
+            path.unlink(missing_ok=True)
+        else:
+            tmp = path.with_name(path.name + ".tmp")
+            tmp.write_text(text)
+            os.replace(tmp, path)
+    progress = run_dir / "progress.csv"
+    if progress.exists():
+        target, suffix = run_dir / f"progress-{steps}.csv", 1
+        while target.exists():
+            target, suffix = run_dir / f"progress-{steps}-{suffix}.csv", suffix + 1
+        os.replace(progress, target)
+
+
+def warn_inexact() -> None:
+    print(
+        "warning: the checkpoint has no resume state (an older drivelab wrote it); training goes on "
+        "from a new episode and will not match an uninterrupted run",
+        file=sys.stderr,
+    )
