@@ -129,7 +129,7 @@ class DriveVectorEnv(VectorEnv):
         return self._stack(observations), rewards, terminations, truncations, infos
 
     def close_extras(self, **kwargs: Any) -> None:
-        for env in self.envs:
+        for env in getattr(self, "envs", []):  # none when __init__ refused its arguments
             env.close()
 
 
