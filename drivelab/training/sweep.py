@@ -246,7 +246,6 @@ def run_cell(config_values: dict, runs_dir: str, action: str, eval_episodes: int
             if action in ("train", "restart"):
                 run.train(config, root)
             elif action == "resume":
-                (run_dir / "eval.json").unlink(missing_ok=True)  # it describes the shorter run
                 run.resume(run_dir, config.steps)
             if eval_episodes and action != "skip":
                 evaluate_run(run_dir, episodes=eval_episodes)
