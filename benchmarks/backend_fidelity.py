@@ -33,7 +33,7 @@ from drivelab.envs.backends.fast import traffic as T  # noqa: E402
 from drivelab.envs.backends.fast.backend import SUPPORTED, FastBackend  # noqa: E402
 from drivelab.envs.backends.highway import HighwayBackend  # noqa: E402
 from drivelab.envs.scenarios import SCENARIOS  # noqa: E402
-from drivelab.envs.world import WorldState  # noqa: E402
+from drivelab.world.state import WorldState  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 EGO_CYCLE = (1, 1, 1, 1, 0, 1, 1, 1, 1, 2)  # IDLE x4, LANE_LEFT, IDLE x4, LANE_RIGHT

@@ -4,7 +4,7 @@ import dataclasses
 
 import numpy as np
 
-from drivelab.envs.world import Ego, Events, RoadMap, Route, WorldState
+from drivelab.world.state import Ego, Events, RoadMap, Route, WorldState
 
 
 def world(

@@ -12,8 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.envs.world import WorldState
 from drivelab.errors import UsageError
+from drivelab.world.state import WorldState
 
 META_ACTIONS = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")
 

@@ -13,11 +13,11 @@ from gymnasium import spaces
 from drivelab.envs.actions import ActionAdapter, make_action
 from drivelab.envs.metrics import EpisodeMetrics
 from drivelab.envs.scenarios import check_traffic, get_scenario
-from drivelab.envs.world import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW, WorldState
 from drivelab.errors import UsageError
 from drivelab.perception.birdeye import render_birdeye
 from drivelab.perception.sensors import make_sensor, split_sensor_list
 from drivelab.rewards.shapers import RewardShaper
+from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW, WorldState
 
 BACKENDS = ("auto", "fast", "highway")
 LIGHT_LABEL_DISTANCE_M = 18.0  # RLAD's auxiliary label: a light within this distance ahead

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from drivelab.envs.world import WorldState
+from drivelab.world.state import WorldState
 
 
 class EpisodeMetrics:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from drivelab.envs.world import Route
+from drivelab.world.state import Route
 
 SEARCH_WINDOW_M = 60.0  # after the first projection, look no farther than this from the last one
 CLOSED_GAP_M = 5.0  # a polyline whose ends are this close is a circuit

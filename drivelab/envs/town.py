@@ -21,7 +21,7 @@ import numpy as np
 from highway_env.road.lane import AbstractLane, CircularLane, LineType, StraightLane
 from highway_env.road.road import RoadNetwork
 
-from drivelab.envs.world import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW
+from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW
 
 LANE_WIDTH_M = AbstractLane.DEFAULT_WIDTH
 RIGHT_TURN_RADIUS_M = LANE_WIDTH_M + 5  # highway-env's intersection geometry

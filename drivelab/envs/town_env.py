@@ -28,7 +28,7 @@ from drivelab.envs.town import (
     shortest_route,
     street_crossings,
 )
-from drivelab.envs.world import LIGHT_GREEN, LIGHT_YELLOW
+from drivelab.world.state import LIGHT_GREEN, LIGHT_YELLOW
 
 STOP_MARGIN_M = 1.0  # front bumper to stop line once stopped
 PAVEMENT_M = LANE_WIDTH_M + 1.5  # a waiting pedestrian stands this far from the street's axis

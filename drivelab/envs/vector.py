@@ -20,8 +20,8 @@ from gymnasium.vector.utils import batch_space, concatenate, create_empty_array,
 from stable_baselines3.common.vec_env import VecEnv
 
 from drivelab.envs.core import DriveEnv
-from drivelab.envs.world import WorldState
 from drivelab.errors import UsageError
+from drivelab.world.state import WorldState
 
 
 class FastBatch:

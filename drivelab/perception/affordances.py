@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.envs.world import LIGHT_RED, LIGHT_YELLOW, WorldState
 from drivelab.perception.base import Sensor, ego_frame
+from drivelab.world.state import LIGHT_RED, LIGHT_YELLOW, WorldState
 
 FIELDS = (
     "speed_mps",  # the ego's speed

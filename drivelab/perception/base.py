@@ -1,56 +1,79 @@
-"""The Sensor protocol: a WorldState in, one observation array out."""
+"""The Sensor protocol: K worlds in (a WorldBatch), K observations written into one buffer."""
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Sequence
 
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.envs.world import WorldState
+from drivelab.world.batch import WorldBatch
+from drivelab.world.geometry import box_corners, ego_frame  # noqa: F401  (re-exported for sensors)
+from drivelab.world.state import WorldState
 
 
 class Sensor(ABC):
-    """Turns a WorldState into one observation array with a declared gymnasium space.
+    """Turns the K worlds of a WorldBatch into K observations of one declared (single-world) space.
 
-    A sensor may keep history (past ego positions, the previous traffic); ``reset`` clears it
-    at the start of each episode and hands over the episode's random generator.
+    Batched use (the environments): ``reset(batch, rngs, mask)`` when worlds start an episode,
+    then ``observe(batch, out)`` once per policy step writes ``(K, *space.shape)`` into ``out``.
+    One-world use (tests, notebooks): ``reset(world, rng)`` and ``observe(world)`` return the
+    observation of that world alone, through the same batched code with K = 1.
+
+    Subclasses implement ``_observe(batch, out)`` and, when they keep history, ``_reset(batch,
+    mask)`` over ``(K, …)`` state arrays; ``self.rngs[k]`` is world k's episode generator, the only
+    source of noise.
     """
 
     name: str = "sensor"
 
     @property
     @abstractmethod
-    def space(self) -> spaces.Box:
-        """The observation space, fixed at construction."""
+    def space(self) -> spaces.Space:
+        """The observation space of one world, fixed at construction."""
 
-    def reset(self, world: WorldState, rng: np.random.Generator) -> None:
-        """Clear history at the start of an episode. ``rng`` is the only source of noise."""
-        self.rng = rng
+    def reset(
+        self,
+        batch: WorldBatch | WorldState,
+        rngs: Sequence[np.random.Generator] | np.random.Generator,
+        mask: np.ndarray | None = None,
+    ) -> None:
+        """Clear the history of the worlds where ``mask`` (default: all) at the start of their
+        episode; ``rngs[k]`` becomes world k's generator. A WorldState and one generator reset a
+        one-world sensor."""
+        if isinstance(batch, WorldState):
+            batch, rngs = WorldBatch.stack([batch]), [rngs]
+        count = batch.num_worlds
+        if len(getattr(self, "rngs", ())) != count:  # a new number of worlds: every world starts
+            self.rngs, mask = [None] * count, None
+        mask = np.ones(count, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
+        for k in np.flatnonzero(mask):
+            self.rngs[k] = rngs[k]
+        self._reset(batch, np.asarray(mask, dtype=bool))
+
+    def _reset(self, batch: WorldBatch, mask: np.ndarray) -> None:
+        """Clear the ``(K, …)`` history of the worlds where ``mask`` (sensors without history: nothing)."""
+        return None
+
+    def observe(self, batch: WorldBatch | WorldState, out: np.ndarray | None = None) -> np.ndarray:
+        """The observations of every world, written into ``out`` (allocated when None) and
+        returned; for a WorldState, that world's observation alone."""
+        if isinstance(batch, WorldState):
+            return self.observe(WorldBatch.stack([batch]))[0]
+        if out is None:
+            out = self.empty(batch.num_worlds)
+        self._observe(batch, out)
+        return out
 
     @abstractmethod
-    def observe(self, world: WorldState) -> np.ndarray:
-        """The observation for ``world``; called once per policy step, after ``reset``."""
+    def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
+        """Write the K observations of ``batch`` into ``out`` (K, *space.shape); called once per
+        policy step, after ``reset``."""
 
-
-def ego_frame(points: np.ndarray, position: np.ndarray, heading: float) -> np.ndarray:
-    """World points (..., 2) → ego frame: x forward along the heading, y to the ego's right."""
-    cos_h, sin_h = np.cos(heading), np.sin(heading)
-    delta = np.asarray(points, dtype=float) - position
-    x = delta[..., 0] * cos_h + delta[..., 1] * sin_h
-    y = -delta[..., 0] * sin_h + delta[..., 1] * cos_h
-    return np.stack([x, y], axis=-1)
-
-
-def box_corners(boxes: np.ndarray) -> np.ndarray:
-    """Corners (N, 4, 2) of rotated rectangles given as rows (x, y, heading, length, width)."""
-    x, y, heading, length, width = (boxes[:, i] for i in range(5))
-    cos_h, sin_h = np.cos(heading), np.sin(heading)
-    half_l = np.array([1, 1, -1, -1]) * (length[:, None] / 2)
-    half_w = np.array([-1, 1, 1, -1]) * (width[:, None] / 2)
-    corners_x = x[:, None] + half_l * cos_h[:, None] - half_w * sin_h[:, None]
-    corners_y = y[:, None] + half_l * sin_h[:, None] + half_w * cos_h[:, None]
-    return np.stack([corners_x, corners_y], axis=-1)
+    def empty(self, num_worlds: int) -> np.ndarray:
+        """A zeroed ``(num_worlds, *space.shape)`` buffer of the space's dtype."""
+        return np.zeros((num_worlds, *self.space.shape), dtype=self.space.dtype)
 
 
 ZEBRA_STRIPE_M = (0.5, 1.0)  # stripe width, and stripe-to-stripe pitch across the road

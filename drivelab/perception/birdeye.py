@@ -10,7 +10,6 @@ import cv2
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.envs.world import MARKING_DASHED, MARKING_SOLID, RoadMap, WorldState
 from drivelab.perception.base import Sensor, zebra_stripes
 from drivelab.perception.topdown import (
     SHIFT,
@@ -21,6 +20,7 @@ from drivelab.perception.topdown import (
     segments_near,
     stop_bars,
 )
+from drivelab.world.state import MARKING_DASHED, MARKING_SOLID, RoadMap, WorldState
 
 GRASS = (96, 140, 84)
 ROAD = (70, 70, 74)

@@ -20,10 +20,8 @@ import cv2
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.envs.world import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW, MARKING_SOLID, RoadMap, WorldState
 from drivelab.perception.base import ZEBRA_STRIPE_M, Sensor, box_corners, ego_frame, zebra_stripes
 from drivelab.perception.birdeye import DashedMarkings
-from drivelab.perception.pinhole import PinholeModel
 from drivelab.perception.topdown import (
     SHIFT,
     _clip_half_plane,
@@ -31,6 +29,8 @@ from drivelab.perception.topdown import (
     per_road,
     segments_near,
 )
+from drivelab.world.pinhole import PinholeModel
+from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW, MARKING_SOLID, RoadMap, WorldState
 
 SKY = (150, 190, 235)
 GRASS = (96, 140, 84)

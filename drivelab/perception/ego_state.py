@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.envs.world import WorldState
 from drivelab.perception.base import Sensor, ego_frame
+from drivelab.world.state import WorldState
 
 FUSION_FEATURES = ("speed", "lane_offset", "front_distance", "front_relative_speed", "heading_alignment")
 EXTRA_FEATURES = ("heading_error_sin", "steering", "acceleration", "lane_curvature", "lane_position")

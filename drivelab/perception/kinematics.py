@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.envs.world import WorldState
 from drivelab.perception.base import Sensor, ego_frame
+from drivelab.world.batch import WorldBatch
 
 FEATURES = ("presence", "x", "y", "vx", "vy", "cos_h", "sin_h")
 
@@ -44,29 +44,34 @@ class Kinematics(Sensor):
     def space(self) -> spaces.Box:
         return self._space
 
-    def observe(self, world: WorldState) -> np.ndarray:
-        ego = world.ego
-        rows = np.zeros((self.vehicles_count, len(FEATURES)))
+    def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
+        ego, count = batch.ego, self.vehicles_count
+        rows = np.zeros((batch.num_worlds, count, len(FEATURES)))  # (K, rows, 7)
         relative_heading = ego.heading - ego.lane_heading
-        rows[0] = [1.0, 0.0, 0.0, ego.speed_mps / self.speed_scale_mps, 0.0,
-                   np.cos(relative_heading), np.sin(relative_heading)]  # fmt: skip
-        others = world.vehicles
-        if len(others) and self.vehicles_count > 1:
-            position = ego_frame(others[:, :2], ego.position, ego.heading)
-            distance = np.hypot(position[:, 0], position[:, 1])
-            seen = np.flatnonzero(distance <= self.perception_distance_m)
-            nearest = seen[np.argsort(distance[seen], kind="stable")][: self.vehicles_count - 1]
-            if len(nearest):
-                heading = others[nearest, 2] - ego.heading
-                speed = others[nearest, 3]
-                # velocity of the other relative to the ego, in the ego frame
-                vx = speed * np.cos(heading) - ego.speed_mps
-                vy = speed * np.sin(heading)
-                count = len(nearest)
-                rows[1 : 1 + count, 0] = 1.0
-                rows[1 : 1 + count, 1:3] = position[nearest] / self.perception_distance_m
-                rows[1 : 1 + count, 3] = vx / self.speed_scale_mps
-                rows[1 : 1 + count, 4] = vy / self.speed_scale_mps
-                rows[1 : 1 + count, 5] = np.cos(heading)
-                rows[1 : 1 + count, 6] = np.sin(heading)
-        return np.clip(rows, -1.0, 1.0).astype(np.float32).reshape(-1)
+        rows[:, 0, 0] = 1.0
+        rows[:, 0, 3] = ego.speed_mps / self.speed_scale_mps
+        rows[:, 0, 5], rows[:, 0, 6] = np.cos(relative_heading), np.sin(relative_heading)
+        others = batch.vehicles  # (K, N, 6)
+        if others.shape[1] and count > 1:
+            position = ego_frame(others[..., :2], ego.position[:, None], ego.heading[:, None])
+            distance = np.hypot(position[..., 0], position[..., 1])
+            seen = batch.vehicle_valid & (distance <= self.perception_distance_m)
+            # nearest first; unseen slots sort last (a stable sort keeps highway-env's order on ties)
+            order = np.argsort(np.where(seen, distance, np.inf), axis=1, kind="stable")[:, : count - 1]
+            worlds = np.arange(batch.num_worlds)[:, None]
+            present = seen[worlds, order]  # (K, count - 1)
+            nearest = others[worlds, order]
+            heading = nearest[..., 2] - ego.heading[:, None]
+            speed = nearest[..., 3]
+            # velocity of the other relative to the ego, in the ego frame
+            vx = speed * np.cos(heading) - ego.speed_mps[:, None]
+            vy = speed * np.sin(heading)
+            block = rows[:, 1 : 1 + order.shape[1]]
+            block[..., 0] = 1.0
+            block[..., 1:3] = position[worlds, order] / self.perception_distance_m
+            block[..., 3] = vx / self.speed_scale_mps
+            block[..., 4] = vy / self.speed_scale_mps
+            block[..., 5] = np.cos(heading)
+            block[..., 6] = np.sin(heading)
+            block *= present[..., None]
+        out[...] = np.clip(rows, -1.0, 1.0).reshape(batch.num_worlds, -1)

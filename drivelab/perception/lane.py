@@ -15,10 +15,10 @@ import cv2
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.envs.world import WorldState
 from drivelab.perception.base import Sensor
 from drivelab.perception.camera import PinholeModel, render_camera
 from drivelab.perception.line import row_centres
+from drivelab.world.state import WorldState
 
 LANE_CAMERA = PinholeModel(width=160, height=120, fov_deg=90, height_m=1.5, pitch_deg=15, max_range_m=80)
 LANE_ROWS_M = (4.0, 6.0, 9.0, 13.0)  # nearest row first; the seed does not give its rows

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.envs.world import WorldState
 from drivelab.perception.base import Sensor, box_corners, ego_frame
+from drivelab.world.state import WorldState
 
 
 def _near_parts(segments: np.ndarray, range_m: float) -> np.ndarray:

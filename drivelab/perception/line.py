@@ -14,9 +14,9 @@ import cv2
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.envs.world import WorldState
 from drivelab.perception.base import Sensor
 from drivelab.perception.camera import PinholeModel, render_camera
+from drivelab.world.state import WorldState
 
 # A 160 x 120 camera with the line rows 3–8 m ahead, where the 0.3 m line is at least 3 px wide,
 # so that a 3 x 3 opening keeps it. The seed does not give its rows; these are our choice.

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.envs.world import WorldState
 from drivelab.perception.base import Sensor
+from drivelab.world.state import WorldState
 
 MAX_STEERING_RAD = np.pi / 3  # highway-env's largest steering angle (ControlledVehicle)
 

@@ -4,14 +4,12 @@ from __future__ import annotations
 
 import inspect
 import math
-from collections import deque
 
 import numpy as np
 import yaml
 from gymnasium import spaces
 
 from drivelab.config import YamlLoader
-from drivelab.envs.world import WorldState
 from drivelab.errors import UsageError
 from drivelab.perception.affordances import Affordances
 from drivelab.perception.base import Sensor
@@ -26,6 +24,7 @@ from drivelab.perception.measurements import Measurements
 from drivelab.perception.topdown import TopDown
 from drivelab.perception.ttc_grid import TTCGrid
 from drivelab.perception.waypoints import Waypoints
+from drivelab.world.batch import WorldBatch
 
 _ALL = (Kinematics, Lidar, TopDown, BirdEye, EgoState, Waypoints, Measurements, Camera, LineState, LaneState)
 SENSORS: dict[str, type[Sensor]] = {cls.name: cls for cls in (*_ALL, TTCGrid, Affordances)}
@@ -46,7 +45,8 @@ SENSOR_HELP = {
 
 
 class FrameStack(Sensor):
-    """The last ``frames`` observations of ``sensor`` concatenated along its channel axis."""
+    """The last ``frames`` observations of ``sensor`` concatenated along its channel axis; the
+    history is a ``(K, frames, …)`` array, and a world's first frame fills its whole stack."""
 
     def __init__(self, sensor: Sensor, frames: int) -> None:
         if frames < 1:
@@ -58,24 +58,34 @@ class FrameStack(Sensor):
         inner = sensor.space
         repeat = lambda a: np.concatenate([a] * frames, axis=self.axis)  # noqa: E731
         self._space = spaces.Box(repeat(inner.low), repeat(inner.high), dtype=inner.dtype)
-        self.history: deque[np.ndarray] = deque(maxlen=frames)
+        self.history = sensor.empty(0)[:, None].repeat(frames, axis=1)  # (K, frames, *inner shape)
+        self.started = np.zeros(0, dtype=bool)  # per world: a frame was seen this episode
 
     @property
     def space(self) -> spaces.Box:
         return self._space
 
-    def reset(self, world: WorldState, rng: np.random.Generator) -> None:
-        super().reset(world, rng)
-        self.sensor.reset(world, rng)
-        self.history.clear()
+    def reset(self, batch, rngs, mask=None) -> None:
+        super().reset(batch, rngs, mask)
+        self.sensor.reset(batch, rngs, mask)
 
-    def observe(self, world: WorldState) -> np.ndarray:
-        frame = self.sensor.observe(world)
-        if not self.history:  # the first frame of an episode fills the whole stack
-            self.history.extend([frame] * self.frames)
-        else:
-            self.history.append(frame)
-        return np.concatenate(list(self.history), axis=self.axis)
+    def _reset(self, batch: WorldBatch, mask: np.ndarray) -> None:
+        if len(self.started) != batch.num_worlds:
+            self.history = np.zeros(
+                (batch.num_worlds, self.frames, *self.sensor.space.shape), self.sensor.space.dtype
+            )
+            self.started = np.zeros(batch.num_worlds, dtype=bool)
+        self.started[mask] = False
+
+    def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
+        frame = self.sensor.observe(batch)
+        self.history[:, :-1] = np.where(
+            self.started.reshape((-1,) + (1,) * (frame.ndim)), self.history[:, 1:], frame[:, None]
+        )
+        self.history[:, -1] = frame
+        self.started[:] = True
+        # (K, frames, *shape) → frames concatenated along the channel axis of each observation
+        out[...] = np.concatenate(np.moveaxis(self.history, 1, 0), axis=1 if self.axis == 0 else -1)
 
 
 def parse_sensor_spec(spec: str | dict) -> tuple[str, dict]:

@@ -19,8 +19,8 @@ import cv2
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.envs.world import RoadMap, WorldState
 from drivelab.perception.base import Sensor, box_corners, ego_frame
+from drivelab.world.state import RoadMap, WorldState
 
 SHIFT = 4  # OpenCV sub-pixel bits: coordinates are drawn to 1/16 pixel
 SCALE = 1 << SHIFT

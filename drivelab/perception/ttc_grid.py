@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.envs.world import WorldState
 from drivelab.perception.base import Sensor, ego_frame
+from drivelab.world.state import WorldState
 
 TTC_EDGES_S = np.array([2.0, 4.0, 8.0])  # bins [0, 2), [2, 4), [4, 8), ≥ 8 s or never
 SPEED_EDGES_MPS = np.array([22.0, 27.0])  # highway-env's target speeds 20 / 25 / 30 m/s, binned

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.envs.world import WorldState
 from drivelab.perception.base import Sensor, ego_frame
+from drivelab.world.state import WorldState
 
 
 class Waypoints(Sensor):

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from drivelab.envs.world import WorldState
 from drivelab.errors import UsageError
 from drivelab.rewards.terms import TERMS
+from drivelab.world.state import WorldState
 
 
 @dataclass(frozen=True)

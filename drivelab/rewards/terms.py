@@ -10,8 +10,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from drivelab.envs.world import LIGHT_GREEN, WorldState
-from drivelab.perception.base import ego_frame
+from drivelab.world.geometry import ego_frame
+from drivelab.world.state import LIGHT_GREEN, WorldState
 
 Term = Callable[[WorldState, WorldState, object], float]
 TERMS: dict[str, Term] = {}

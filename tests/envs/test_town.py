@@ -27,7 +27,7 @@ from drivelab.envs.town_env import (
     left_turn_must_wait,
     random_route,
 )
-from drivelab.envs.world import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW
+from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW
 
 
 @pytest.mark.parametrize("layout", sorted(LAYOUTS))

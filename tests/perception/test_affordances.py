@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from drivelab.envs.core import DriveEnv
-from drivelab.envs.world import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW, Route
 from drivelab.perception.affordances import FIELDS, Affordances
+from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW, Route
 from tests.worlds import world
 
 

@@ -4,9 +4,9 @@ import dataclasses
 
 import numpy as np
 
-from drivelab.envs.world import MARKING_DASHED, MARKING_SOLID, Events, RoadMap
 from drivelab.perception import birdeye
 from drivelab.perception.birdeye import BirdEye, render_birdeye
+from drivelab.world.state import MARKING_DASHED, MARKING_SOLID, Events, RoadMap
 from tests.worlds import world
 
 

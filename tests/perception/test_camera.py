@@ -6,7 +6,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from drivelab.envs.world import (
+from drivelab.perception import camera
+from drivelab.perception.camera import Camera, PinholeModel, lateral_at_distances, render_masks
+from drivelab.perception.sensors import make_sensor
+from drivelab.world.state import (
     LIGHT_GREEN,
     LIGHT_RED,
     LIGHT_YELLOW,
@@ -15,9 +18,6 @@ from drivelab.envs.world import (
     RoadMap,
     Route,
 )
-from drivelab.perception import camera
-from drivelab.perception.camera import Camera, PinholeModel, lateral_at_distances, render_masks
-from drivelab.perception.sensors import make_sensor
 from tests.worlds import world
 
 STRAIGHT = np.array([[-50.0, 0.0], [500.0, 0.0]])

@@ -5,8 +5,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from drivelab.envs.world import RoadMap
 from drivelab.perception.lidar import Lidar, cast_rays
+from drivelab.world.state import RoadMap
 from tests.worlds import world
 
 CAR = (5.0, 2.0)  # length, width

@@ -9,8 +9,8 @@ import dataclasses
 
 import numpy as np
 
-from drivelab.envs.world import RoadMap
 from drivelab.perception.topdown import TopDown, clip_rows, to_pixels
+from drivelab.world.state import RoadMap
 from tests.worlds import world
 
 CAR = (5.0, 2.0)
@@ -173,8 +173,8 @@ def test_route_channel():
 def test_lights_channel_draws_stop_bars_by_state():
     import dataclasses
 
-    from drivelab.envs.world import LIGHT_GREEN, LIGHT_RED
     from drivelab.perception.topdown import TopDown
+    from drivelab.world.state import LIGHT_GREEN, LIGHT_RED
     from tests.worlds import world
 
     # a red light 10 m ahead in the ego's lane, a green one 10 m behind (heading the other way)

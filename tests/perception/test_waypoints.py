@@ -5,9 +5,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from drivelab.envs.world import Route
 from drivelab.perception.measurements import Measurements
 from drivelab.perception.waypoints import Waypoints
+from drivelab.world.state import Route
 from tests.worlds import world
 
 

@@ -5,9 +5,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from drivelab.envs.world import RoadMap, Route
 from drivelab.rewards import terms
 from drivelab.rewards.shapers import RewardShaper
+from drivelab.world.state import RoadMap, Route
 from tests.worlds import world
 
 LINE = np.array([[-50.0, 0.0], [500.0, 0.0]])

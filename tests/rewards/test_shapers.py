@@ -3,9 +3,9 @@ import pytest
 
 from drivelab.envs.backends.highway import HighwayBackend
 from drivelab.envs.scenarios import SCENARIOS
-from drivelab.envs.world import Events
 from drivelab.errors import UsageError
 from drivelab.rewards.shapers import PRESETS, RewardShaper, parse_reward
+from drivelab.world.state import Events
 from tests.worlds import world
 
 

@@ -5,8 +5,8 @@ import dataclasses
 import numpy as np
 import pytest
 
-from drivelab.envs.world import LIGHT_GREEN, LIGHT_RED, Events
 from drivelab.rewards import terms
+from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, Events
 from tests.worlds import world
 
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from drivelab.envs.route import RouteTracker
 from drivelab.envs.scenarios import Scenario
-from drivelab.envs.world import LIGHT_RED, Ego, Events, RoadMap, WorldState
+from drivelab.world.state import LIGHT_RED, Ego, Events, RoadMap, WorldState
 
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 

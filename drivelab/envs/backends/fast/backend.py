@@ -24,8 +24,8 @@ from drivelab.envs.backends.fast.spawn import IntersectionTraffic, spawn_highway
 from drivelab.envs.backends.highway import HighwayBackend, build_road_map
 from drivelab.envs.route import RouteTracker
 from drivelab.envs.scenarios import SCENARIOS, Scenario
-from drivelab.envs.world import Ego, Events, WorldState
 from drivelab.errors import UsageError
+from drivelab.world.state import Ego, Events, WorldState
 
 SUPPORTED = tuple(name for name, scenario in SCENARIOS.items() if scenario.fast_backend)
 SPAWNERS = {"highway": spawn_highway}

@@ -7,6 +7,7 @@ highway-env), angles in radians, speeds in m/s.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -44,6 +45,16 @@ class RoadMap:
     guide_lines: tuple[np.ndarray, ...] = ()
     crossings: np.ndarray = field(default_factory=lambda: np.zeros((0, 5)))  # zebra crossings (C, 5):
     # centre x, y, heading (the direction pedestrians walk), length (across the road), width
+
+    # geometry derived from this map by its readers (raster layers, guide-line segments, …), built
+    # once per map by ``derived``: the map is immutable, so it is never stale and dies with the map
+    derived_cache: dict = field(default_factory=dict, compare=False, repr=False)
+
+    def derived(self, key: object, build: Callable[[RoadMap], object]) -> object:
+        """``build(self)``, computed on the first call with ``key`` and kept on this map."""
+        if key not in self.derived_cache:
+            self.derived_cache[key] = build(self)
+        return self.derived_cache[key]
 
     @staticmethod
     def empty() -> RoadMap:

@@ -1,0 +1,417 @@
+"""WorldBatch: K worlds as arrays — the one thing every sensor, reward term, rule and metric reads.
+
+Shapes (K worlds, N vehicle slots, P pedestrian slots, L light slots, R route points):
+
+- ``ego``: :class:`EgoBatch`, every field of :class:`~drivelab.world.state.Ego` as a ``(K,)``
+  array (``position`` is ``(K, 2)``);
+- ``vehicles`` ``(K, N, 6)`` with ``vehicle_valid`` ``(K, N)``; ``pedestrians`` ``(K, P, 6)`` with
+  ``pedestrian_valid``; ``traffic_lights`` ``(K, L, 4)`` with ``light_valid``. Rows past a world's
+  count are zeros and must be masked out;
+- ``route``: :class:`RouteBatch`, polylines padded to ``(K, R, 2)`` by repeating the last point;
+- ``events``: :class:`EventsBatch`, ``(K,)`` booleans and a collision code (no strings);
+- ``time_s``, ``max_speed_mps``, ``speed_limit_mps`` ``(K,)``; ``dt_s`` one float;
+- roads: the distinct immutable :class:`~drivelab.world.state.RoadMap` objects in ``roads`` and
+  each world's entry in ``road_index`` ``(K,)`` (one map shared by every world of a scenario).
+
+A WorldBatch is a value: simulators hand out a new one per step and nothing mutates it, so the
+batch before a step stays valid for reward terms. ``batch[k]`` is world k as a
+:class:`~drivelab.world.state.WorldState` (tests, notebooks, the reference backend), and
+``WorldBatch.stack(worlds)`` builds a batch from WorldStates.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from drivelab.world.geometry import wrap_to_pi
+from drivelab.world.state import Ego, Events, RoadMap, Route, WorldState
+
+# ``EventsBatch.collision_kind`` codes, and the names WorldState's Events use for them
+COLLISION_NONE, COLLISION_VEHICLE, COLLISION_PEDESTRIAN, COLLISION_OBJECT = range(4)
+COLLISION_NAMES = ("", "vehicle", "pedestrian", "object")
+
+EGO_FLOAT_FIELDS = (
+    "heading", "speed_mps", "steering", "acceleration_mps2", "length_m", "width_m", "lane_width_m",
+    "lateral_offset_m", "lane_heading", "lane_curvature",
+)  # fmt: skip
+EGO_INT_FIELDS = ("lane_id", "lane_count", "target_lane_id")
+EGO_BOOL_FIELDS = ("on_road", "in_intersection")
+EVENT_FLAGS = ("collided", "off_road", "arrived", "red_light_crossed", "blocked", "off_route")
+
+
+@dataclass(frozen=True)
+class EgoBatch:
+    """The K controlled vehicles: :class:`~drivelab.world.state.Ego`'s fields as ``(K,)`` arrays."""
+
+    position: np.ndarray  # (K, 2)
+    heading: np.ndarray
+    speed_mps: np.ndarray
+    steering: np.ndarray
+    acceleration_mps2: np.ndarray
+    length_m: np.ndarray
+    width_m: np.ndarray
+    lane_id: np.ndarray
+    lane_count: np.ndarray
+    target_lane_id: np.ndarray
+    lane_width_m: np.ndarray
+    lateral_offset_m: np.ndarray
+    lane_heading: np.ndarray
+    lane_curvature: np.ndarray
+    on_road: np.ndarray
+    in_intersection: np.ndarray
+
+    @property
+    def forward_speed_mps(self) -> np.ndarray:
+        """(K,) speed projected on the lane direction."""
+        return self.speed_mps * np.cos(self.heading - self.lane_heading)
+
+    @staticmethod
+    def stack(egos: list[Ego]) -> EgoBatch:
+        values = {"position": np.array([ego.position for ego in egos], dtype=float).reshape(-1, 2)}
+        for names, dtype in ((EGO_FLOAT_FIELDS, float), (EGO_INT_FIELDS, np.int64), (EGO_BOOL_FIELDS, bool)):
+            for name in names:
+                values[name] = np.array([getattr(ego, name) for ego in egos], dtype=dtype)
+        return EgoBatch(**values)
+
+    def __getitem__(self, k: int) -> Ego:
+        values = {"position": self.position[k].copy()}
+        for names, cast in ((EGO_FLOAT_FIELDS, float), (EGO_INT_FIELDS, int), (EGO_BOOL_FIELDS, bool)):
+            for name in names:
+                values[name] = cast(getattr(self, name)[k])
+        return Ego(**values)
+
+
+@dataclass(frozen=True)
+class RouteBatch:
+    """K routes: polylines padded to a common length by repeating their last point.
+
+    :param polyline: (K, R, 2) points; world k's real points are ``polyline[k, :count[k]]``.
+    :param stations_m: (K, R) arc length of each point (padding repeats the last).
+    :param count: (K,) number of real points (≥ 2).
+    :param progress_m: (K,) arc length travelled along the route.
+    :param length_m: (K,) total arc length; ``inf`` where the road does not end.
+    :param closed: (K,) the route is a circuit (arc lengths wrap round the lap).
+    """
+
+    polyline: np.ndarray
+    stations_m: np.ndarray
+    count: np.ndarray
+    progress_m: np.ndarray
+    length_m: np.ndarray
+    closed: np.ndarray
+
+    @property
+    def remaining_m(self) -> np.ndarray:
+        return np.maximum(self.length_m - self.progress_m, 0.0)
+
+    @staticmethod
+    def stack(routes: list[Route]) -> RouteBatch:
+        polylines = [np.asarray(route.polyline, dtype=float).reshape(-1, 2) for route in routes]
+        stations = [
+            _stations(route.polyline) if route.stations_m is None else route.stations_m for route in routes
+        ]
+        size = max(max(len(p) for p in polylines), 2)
+        return RouteBatch(
+            polyline=np.stack([pad_edge(p, size) for p in polylines]),
+            stations_m=np.stack([pad_edge(np.asarray(s, dtype=float), size) for s in stations]),
+            count=np.array([len(p) for p in polylines], dtype=np.int64),
+            progress_m=np.array([route.progress_m for route in routes], dtype=float),
+            length_m=np.array([route.length_m for route in routes], dtype=float),
+            closed=np.array([route.closed for route in routes], dtype=bool),
+        )
+
+    def __getitem__(self, k: int) -> Route:
+        n = int(self.count[k])
+        return Route(
+            self.polyline[k, :n],
+            float(self.progress_m[k]),
+            float(self.length_m[k]),
+            self.stations_m[k, :n],
+            bool(self.closed[k]),
+        )
+
+    def poses_at(self, distances_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Points (K, D, 2) and headings (K, D) at arc lengths ``distances_m`` (K, D) — or (K,),
+        giving (K, 2) and (K,) — along each world's route: clamped to its ends, wrapped round the
+        lap on a circuit (as :meth:`Route.poses_at`)."""
+        distances = np.asarray(distances_m, dtype=float)
+        single = distances.ndim == 1
+        distances = distances.reshape(len(self.count), -1)
+        k = np.arange(len(self.count))
+        last = self.stations_m[k, self.count - 1][:, None]
+        lap = self.closed[:, None] & (last > 0)
+        distances = np.where(lap, np.mod(distances, np.where(lap, last, 1.0)), distances)
+        distances = np.clip(distances, 0.0, last)
+        # one searchsorted over all K routes: shift each world's stations past the previous world's
+        shift = (np.arange(len(k)) * (np.max(last, initial=0.0) + 1.0))[:, None]
+        flat = (self.stations_m + shift).ravel()
+        found = np.searchsorted(flat, (distances + shift).ravel(), side="right").reshape(distances.shape)
+        segment = found - 1 - (k * self.stations_m.shape[1])[:, None]
+        segment = np.clip(segment, 0, (self.count - 2)[:, None])
+        rows = k[:, None]
+        start, end = self.polyline[rows, segment], self.polyline[rows, segment + 1]
+        span = np.maximum(self.stations_m[rows, segment + 1] - self.stations_m[rows, segment], 1e-12)
+        fraction = ((distances - self.stations_m[rows, segment]) / span)[..., None]
+        delta = end - start
+        points, headings = start + fraction * delta, np.arctan2(delta[..., 1], delta[..., 0])
+        return (points[:, 0], headings[:, 0]) if single else (points, headings)
+
+
+@dataclass(frozen=True)
+class EventsBatch:
+    """What happened during the last step, per world: ``(K,)`` booleans and a collision code
+    (``COLLISION_*``)."""
+
+    collided: np.ndarray
+    collision_kind: np.ndarray
+    off_road: np.ndarray
+    arrived: np.ndarray
+    red_light_crossed: np.ndarray
+    blocked: np.ndarray
+    off_route: np.ndarray
+
+    @staticmethod
+    def none(num_worlds: int) -> EventsBatch:
+        """No event in any of ``num_worlds`` worlds."""
+        flags = {name: np.zeros(num_worlds, dtype=bool) for name in EVENT_FLAGS}
+        return EventsBatch(collision_kind=np.zeros(num_worlds, dtype=np.int8), **flags)
+
+    @staticmethod
+    def stack(events: list[Events]) -> EventsBatch:
+        flags = {name: np.array([getattr(e, name) for e in events], dtype=bool) for name in EVENT_FLAGS}
+        kinds = np.array([COLLISION_NAMES.index(e.collision_with) for e in events], dtype=np.int8)
+        return EventsBatch(collision_kind=kinds, **flags)
+
+    def __getitem__(self, k: int) -> Events:
+        flags = {name: bool(getattr(self, name)[k]) for name in EVENT_FLAGS}
+        return Events(collision_with=COLLISION_NAMES[int(self.collision_kind[k])], **flags)
+
+
+@dataclass(frozen=True)
+class WorldBatch:
+    """K worlds of one scenario, as arrays (see the module docstring for every shape)."""
+
+    time_s: np.ndarray
+    dt_s: float
+    ego: EgoBatch
+    vehicles: np.ndarray
+    vehicle_valid: np.ndarray
+    roads: tuple[RoadMap, ...]
+    road_index: np.ndarray
+    route: RouteBatch
+    events: EventsBatch
+    traffic_lights: np.ndarray
+    light_valid: np.ndarray
+    pedestrians: np.ndarray
+    pedestrian_valid: np.ndarray
+    max_speed_mps: np.ndarray
+    speed_limit_mps: np.ndarray
+
+    @property
+    def num_worlds(self) -> int:
+        return len(self.time_s)
+
+    def __len__(self) -> int:
+        return len(self.time_s)
+
+    @property
+    def road(self) -> RoadMap:
+        """The road map every world shares (an error when the worlds drive different maps)."""
+        if len(self.roads) != 1:
+            raise ValueError(f"the worlds of this batch drive {len(self.roads)} different road maps")
+        return self.roads[0]
+
+    def road_of(self, k: int) -> RoadMap:
+        return self.roads[int(self.road_index[k])]
+
+    @staticmethod
+    def stack(worlds: list[WorldState]) -> WorldBatch:
+        """The batch of ``worlds`` (at least one), in order."""
+        if not worlds:
+            raise ValueError("a WorldBatch needs at least one world")
+        roads: list[RoadMap] = []
+        road_index = []
+        for world in worlds:
+            found = next((i for i, road in enumerate(roads) if road is world.road), None)
+            if found is None:
+                roads.append(world.road)
+                found = len(roads) - 1
+            road_index.append(found)
+        vehicles, vehicle_valid = _stack_rows([w.vehicles for w in worlds], 6)
+        pedestrians, pedestrian_valid = _stack_rows([w.pedestrians for w in worlds], 6)
+        lights, light_valid = _stack_rows([w.traffic_lights for w in worlds], 4)
+        return WorldBatch(
+            time_s=np.array([w.time_s for w in worlds], dtype=float),
+            dt_s=float(worlds[0].dt_s),
+            ego=EgoBatch.stack([w.ego for w in worlds]),
+            vehicles=vehicles,
+            vehicle_valid=vehicle_valid,
+            roads=tuple(roads),
+            road_index=np.array(road_index, dtype=np.int64),
+            route=RouteBatch.stack([w.route for w in worlds]),
+            events=EventsBatch.stack([w.events for w in worlds]),
+            traffic_lights=lights,
+            light_valid=light_valid,
+            pedestrians=pedestrians,
+            pedestrian_valid=pedestrian_valid,
+            max_speed_mps=np.array([w.max_speed_mps for w in worlds], dtype=float),
+            speed_limit_mps=np.array([w.speed_limit_mps for w in worlds], dtype=float),
+        )
+
+    def __getitem__(self, k: int) -> WorldState:
+        """World ``k`` as a WorldState (copies of its rows; the padding left out)."""
+        return WorldState(
+            time_s=float(self.time_s[k]),
+            dt_s=self.dt_s,
+            ego=self.ego[k],
+            vehicles=self.vehicles[k, self.vehicle_valid[k]],
+            road=self.road_of(k),
+            route=self.route[k],
+            events=self.events[k],
+            traffic_lights=self.traffic_lights[k, self.light_valid[k]],
+            pedestrians=self.pedestrians[k, self.pedestrian_valid[k]],
+            max_speed_mps=float(self.max_speed_mps[k]),
+            speed_limit_mps=float(self.speed_limit_mps[k]),
+        )
+
+    def worlds(self) -> list[WorldState]:
+        """Every world as a WorldState (for code that still reads one world at a time)."""
+        return [self[k] for k in range(self.num_worlds)]
+
+    def replace(self, **changes) -> WorldBatch:
+        return dataclasses.replace(self, **changes)
+
+    def with_events(self, **flags: np.ndarray) -> WorldBatch:
+        """The same batch with some event arrays replaced (``blocked=…``, ``off_route=…``)."""
+        return dataclasses.replace(self, events=dataclasses.replace(self.events, **flags))
+
+    def where(self, mask: np.ndarray, other: WorldBatch) -> WorldBatch:
+        """World k from ``other`` where ``mask[k]``, else from this batch (e.g. reset worlds
+        merged into a stepped batch). Slot counts are padded to the larger of the two."""
+        mask = np.asarray(mask, dtype=bool)
+        roads = list(self.roads)
+        remap = []
+        for road in other.roads:
+            found = next((i for i, known in enumerate(roads) if known is road), None)
+            if found is None:
+                roads.append(road)
+                found = len(roads) - 1
+            remap.append(found)
+        pick = lambda a, b: _where_rows(mask, a, b)  # noqa: E731
+        pick_edge = lambda a, b: _where_rows(mask, a, b, edge=True)  # noqa: E731
+        return WorldBatch(
+            time_s=pick(self.time_s, other.time_s),
+            dt_s=self.dt_s,
+            ego=EgoBatch(
+                **{f.name: pick(getattr(self.ego, f.name), getattr(other.ego, f.name)) for f in _FIELDS_EGO}
+            ),
+            vehicles=pick(self.vehicles, other.vehicles),
+            vehicle_valid=pick(self.vehicle_valid, other.vehicle_valid),
+            roads=tuple(roads),
+            road_index=np.where(mask, np.asarray(remap, dtype=np.int64)[other.road_index], self.road_index),
+            route=RouteBatch(
+                polyline=pick_edge(self.route.polyline, other.route.polyline),
+                stations_m=pick_edge(self.route.stations_m, other.route.stations_m),
+                **{
+                    name: pick(getattr(self.route, name), getattr(other.route, name))
+                    for name in ("count", "progress_m", "length_m", "closed")
+                },
+            ),
+            events=EventsBatch(
+                **{
+                    f.name: pick(getattr(self.events, f.name), getattr(other.events, f.name))
+                    for f in _FIELDS_EVENTS
+                }
+            ),
+            traffic_lights=pick(self.traffic_lights, other.traffic_lights),
+            light_valid=pick(self.light_valid, other.light_valid),
+            pedestrians=pick(self.pedestrians, other.pedestrians),
+            pedestrian_valid=pick(self.pedestrian_valid, other.pedestrian_valid),
+            max_speed_mps=pick(self.max_speed_mps, other.max_speed_mps),
+            speed_limit_mps=pick(self.speed_limit_mps, other.speed_limit_mps),
+        )
+
+    def road_users(self) -> tuple[np.ndarray, np.ndarray]:
+        """(K, N + P, 6) every body on the road besides the ego — vehicles, then pedestrians — and
+        its (K, N + P) valid mask."""
+        if self.pedestrians.shape[1] == 0:
+            return self.vehicles, self.vehicle_valid
+        users = np.concatenate([self.vehicles, self.pedestrians], axis=1)
+        return users, np.concatenate([self.vehicle_valid, self.pedestrian_valid], axis=1)
+
+    def light_ahead(self, max_distance_m: float) -> tuple[np.ndarray, np.ndarray]:
+        """Per world, the LIGHT_* state (``-1``: none) and distance (m, ``inf``: none) of the nearest
+        traffic light whose stop line is ahead within ``max_distance_m``, in the ego's lane and
+        facing its way (approach heading within 45°) — :meth:`WorldState.light_ahead` for K."""
+        lights, ego = self.traffic_lights, self.ego
+        if lights.shape[1] == 0:
+            return np.full(self.num_worlds, -1, dtype=np.int64), np.full(self.num_worlds, np.inf)
+        cos_h, sin_h = np.cos(ego.heading)[:, None], np.sin(ego.heading)[:, None]
+        delta = lights[..., :2] - ego.position[:, None, :]
+        ahead = delta[..., 0] * cos_h + delta[..., 1] * sin_h
+        beside = -delta[..., 0] * sin_h + delta[..., 1] * cos_h
+        aligned = np.abs(wrap_to_pi(lights[..., 2] - ego.heading[:, None])) < np.pi / 4
+        mine = (
+            self.light_valid
+            & aligned
+            & (ahead > 0)
+            & (ahead <= max_distance_m)
+            & (np.abs(beside) < ego.lane_width_m[:, None] / 2)
+        )
+        distance = np.where(mine, ahead, np.inf)
+        nearest = np.argmin(distance, axis=1)
+        rows = np.arange(self.num_worlds)
+        found = mine[rows, nearest]
+        state = np.where(found, lights[rows, nearest, 3].astype(np.int64), -1)
+        return state, np.where(found, distance[rows, nearest], np.inf)
+
+
+_FIELDS_EGO = dataclasses.fields(EgoBatch)
+_FIELDS_EVENTS = dataclasses.fields(EventsBatch)
+
+
+def _stations(polyline: np.ndarray) -> np.ndarray:
+    steps = np.linalg.norm(np.diff(np.asarray(polyline, dtype=float), axis=0), axis=1)
+    return np.r_[0.0, np.cumsum(steps)]
+
+
+def pad_edge(array: np.ndarray, size: int) -> np.ndarray:
+    """``array`` (R, ...) extended to ``size`` rows by repeating its last row."""
+    missing = size - len(array)
+    if missing <= 0:
+        return array
+    return np.concatenate([array, np.repeat(array[-1:], missing, axis=0)])
+
+
+def _stack_rows(arrays: list[np.ndarray], columns: int) -> tuple[np.ndarray, np.ndarray]:
+    """Row arrays of different lengths → zero-padded (K, N, columns) and the (K, N) valid mask."""
+    arrays = [np.asarray(a, dtype=float).reshape(-1, columns) for a in arrays]
+    size = max(len(a) for a in arrays)
+    out = np.zeros((len(arrays), size, columns))
+    valid = np.zeros((len(arrays), size), dtype=bool)
+    for k, rows in enumerate(arrays):
+        out[k, : len(rows)] = rows
+        valid[k, : len(rows)] = True
+    return out, valid
+
+
+def _where_rows(mask: np.ndarray, a: np.ndarray, b: np.ndarray, edge: bool = False) -> np.ndarray:
+    """Rows of ``b`` where ``mask`` else of ``a``; a slot axis (axis 1) is padded to the larger size
+    (with zeros, or by repeating the last slot when ``edge``)."""
+    if a.ndim > 1 and a.shape[1] != b.shape[1]:
+        size = max(a.shape[1], b.shape[1])
+        a, b = (_pad_slots(x, size, edge) for x in (a, b))
+    return np.where(mask.reshape((-1,) + (1,) * (a.ndim - 1)), b, a)
+
+
+def _pad_slots(array: np.ndarray, size: int, edge: bool) -> np.ndarray:
+    missing = size - array.shape[1]
+    if missing <= 0:
+        return array
+    if edge:
+        return np.concatenate([array, np.repeat(array[:, -1:], missing, axis=1)], axis=1)
+    widths = [(0, 0), (0, missing)] + [(0, 0)] * (array.ndim - 2)
+    return np.pad(array, widths)
