@@ -27,7 +27,7 @@ def _backend(scenario_name: str, traffic: str, control: str):
     return backend_class(scenario, traffic, control, None)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def world_sequences(
     scenario: str, num_worlds: int = 8, steps: int = 10, traffic: str = "dense", seed: int = 0
 ) -> tuple[tuple[tuple[WorldState, ...], np.ndarray], ...]:

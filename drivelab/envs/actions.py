@@ -13,35 +13,50 @@ import numpy as np
 from gymnasium import spaces
 
 from drivelab.errors import UsageError
+from drivelab.world.batch import WorldBatch
 from drivelab.world.state import WorldState
 
 META_ACTIONS = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")
 
 
-def _index(action, size: int) -> int:
-    index = int(np.asarray(action).reshape(-1)[0])
-    if not 0 <= index < size:
-        raise ValueError(f"action {index} is outside Discrete({size})")
-    return index
+def _indices(actions, size: int) -> np.ndarray:
+    """(K,) integer actions of a Discrete(size) space, checked."""
+    indices = np.asarray(actions).reshape(-1).astype(np.int64)
+    wrong = (indices < 0) | (indices >= size)
+    if wrong.any():
+        raise ValueError(f"action {int(indices[wrong][0])} is outside Discrete({size})")
+    return indices
 
 
 class ActionAdapter:
-    """Maps an agent action to a backend control. ``control`` says which kind the backend runs."""
+    """Maps the agents' actions of K worlds to backend controls: meta-action indices ``(K,)`` or
+    normalised ``[acceleration, steering]`` rows ``(K, 2)``. ``control`` says which kind the
+    backend runs. ``to_control`` / ``control_for`` are the one-world forms (tests, notebooks)."""
 
     name: str = "adapter"
     control: str = "continuous"
     space: spaces.Space
 
-    def to_control(self, action) -> int | np.ndarray:
+    def to_controls(self, actions) -> np.ndarray:
+        """The controls for a batch of actions (K, …) that need no world state."""
         raise NotImplementedError
 
-    def control_for(self, action, world: WorldState) -> int | np.ndarray:
-        """The control for ``action`` in ``world`` (the state before the step). Adapters with a
-        feedback loop read the world; the others only map the action."""
-        return self.to_control(action)
+    def controls_for(self, actions, batch: WorldBatch) -> np.ndarray:
+        """The controls for ``actions`` (K, …) in ``batch`` (the worlds before the step). Adapters
+        with a feedback loop read the worlds; the others only map the actions."""
+        return self.to_controls(actions)
 
-    def reset(self) -> None:
-        """Forget any controller state at the start of an episode."""
+    def to_control(self, action) -> int | np.ndarray:
+        """One world's control for one action."""
+        return self.to_controls(np.asarray(action)[None])[0]
+
+    def control_for(self, action, world: WorldState) -> int | np.ndarray:
+        """One world's control for ``action`` in ``world`` (the state before the step)."""
+        return self.controls_for(np.asarray(action)[None], WorldBatch.stack([world]))[0]
+
+    def reset(self, mask: np.ndarray | None = None) -> None:
+        """Forget any controller state of the worlds where ``mask`` (default: all) at the start of
+        their episode."""
 
     def describe(self) -> str:
         raise NotImplementedError
@@ -55,8 +70,8 @@ class MetaAction(ActionAdapter):
     def __init__(self) -> None:
         self.space = spaces.Discrete(len(META_ACTIONS))
 
-    def to_control(self, action) -> int:
-        return _index(action, len(META_ACTIONS))
+    def to_controls(self, actions) -> np.ndarray:
+        return _indices(actions, len(META_ACTIONS))
 
     def describe(self) -> str:
         return "5 highway-env meta-actions (lane left, idle, lane right, faster, slower)"
@@ -87,8 +102,8 @@ class GridAction(ActionAdapter):
         object.__setattr__(self, "table", grid)  # rows: [acceleration, steering]
         object.__setattr__(self, "space", spaces.Discrete(len(grid)))
 
-    def to_control(self, action) -> np.ndarray:
-        return self.table[_index(action, len(self.table))]
+    def to_controls(self, actions) -> np.ndarray:
+        return self.table[_indices(actions, len(self.table))]
 
     def describe(self) -> str:
         return f"{len(self.table)} (steering x acceleration) pairs, {self.steer_levels} x {self.accel_levels}"
@@ -102,9 +117,9 @@ class ContinuousAction(ActionAdapter):
     def __init__(self) -> None:
         self.space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
 
-    def to_control(self, action) -> np.ndarray:
-        steer, accel = np.clip(np.asarray(action, dtype=np.float32).reshape(2), -1.0, 1.0)
-        return np.array([accel, steer], dtype=np.float32)  # highway-env's order
+    def to_controls(self, actions) -> np.ndarray:
+        clipped = np.clip(np.asarray(actions, dtype=np.float32).reshape(-1, 2), -1.0, 1.0)
+        return clipped[:, ::-1].copy()  # [acceleration, steering], highway-env's order
 
     def describe(self) -> str:
         return "continuous [steering, acceleration] in [-1, 1] (±45°, ±5 m/s²)"
@@ -131,23 +146,30 @@ class TargetSpeedAction(ActionAdapter):
         self.space = spaces.Box(np.array([0.0, -1.0], np.float32), np.array([1.0, 1.0], np.float32))
         self.reset()
 
-    def reset(self) -> None:
-        self.integral, self.previous_error = 0.0, None
+    def reset(self, mask: np.ndarray | None = None) -> None:
+        if mask is None:
+            self.integral, self.previous_error = np.zeros(0), np.zeros(0)
+            return
+        self.integral[mask], self.previous_error[mask] = 0.0, np.nan
 
-    def pid(self, target_mps: float, speed_mps: float, dt_s: float) -> float:
-        """One PID update: the normalised acceleration that drives ``speed_mps`` to ``target_mps``."""
+    def pid(self, target_mps: np.ndarray, speed_mps: np.ndarray, dt_s: float) -> np.ndarray:
+        """One PID update per world: the normalised accelerations (K,) that drive ``speed_mps``
+        to ``target_mps``."""
+        target_mps, speed_mps = np.atleast_1d(target_mps), np.atleast_1d(speed_mps)
+        if self.integral.shape != speed_mps.shape:  # a new number of worlds: fresh controllers
+            self.integral, self.previous_error = np.zeros(speed_mps.shape), np.full(speed_mps.shape, np.nan)
         error = target_mps - speed_mps
-        self.integral += error * dt_s
-        derivative = 0.0 if self.previous_error is None else (error - self.previous_error) / dt_s
+        self.integral = self.integral + error * dt_s
+        derivative = np.where(np.isnan(self.previous_error), 0.0, (error - self.previous_error) / dt_s)
         self.previous_error = error
-        return float(np.clip(self.kp * error + self.ki * self.integral + self.kd * derivative, -1.0, 1.0))
+        return np.clip(self.kp * error + self.ki * self.integral + self.kd * derivative, -1.0, 1.0)
 
-    def control_for(self, action, world: WorldState) -> np.ndarray:
-        speed_fraction, steer = np.clip(np.asarray(action, dtype=np.float32).reshape(2), [0.0, -1.0], 1.0)
-        accel = self.pid(float(speed_fraction) * self.max_speed_mps, world.ego.speed_mps, world.dt_s)
-        return np.array([accel, steer], dtype=np.float32)  # highway-env's order
+    def controls_for(self, actions, batch: WorldBatch) -> np.ndarray:
+        rows = np.clip(np.asarray(actions, dtype=np.float32).reshape(-1, 2), [0.0, -1.0], 1.0)
+        accel = self.pid(rows[:, 0].astype(float) * self.max_speed_mps, batch.ego.speed_mps, batch.dt_s)
+        return np.stack([accel, rows[:, 1]], axis=1).astype(np.float32)  # highway-env's order
 
-    def to_control(self, action) -> np.ndarray:
+    def to_controls(self, actions) -> np.ndarray:
         raise UsageError("target_speed actions need the world's speed: call control_for(action, world)")
 
     def describe(self) -> str:
@@ -178,8 +200,8 @@ class SeedTable(ActionAdapter):
         self.table = np.array([[throttle, steer] for throttle, steer in rows], dtype=np.float32)
         self.space = spaces.Discrete(len(rows))
 
-    def to_control(self, action) -> np.ndarray:
-        return self.table[_index(action, len(self.table))]  # [acceleration, steering], highway-env's order
+    def to_controls(self, actions) -> np.ndarray:
+        return self.table[_indices(actions, len(self.table))]  # [acceleration, steering], highway-env's order
 
     def describe(self) -> str:
         rows = ", ".join(f"({t:g}, {s:+g})" for t, s in self.table.tolist())

@@ -1,166 +1,456 @@
-"""K DriveEnvs as one vector env; on the fast backend their worlds are simulated by one kernel call.
+"""VectorDriveEnv: K worlds of one scenario stepped, sensed, rewarded and judged as arrays.
 
-``DriveVectorEnv`` follows gymnasium's ``VectorEnv`` API with same-step autoreset (a finished
-sub-env is reset inside the step that ended it; its last observation and info are in
-``infos["final_obs"]`` / ``infos["final_info"]``). ``SB3VecEnv`` puts the same object behind
-stable-baselines3's ``VecEnv`` API for on-policy training (PPO, A2C with ``n_envs`` worlds).
+The product of drivelab's environment layer (DESIGN.md v2). One ``step`` maps the K actions to
+controls, steps the simulator once for all K worlds (a WorldBatch out), applies the episode rules,
+the reward terms and the metrics to (K,) arrays, and writes each sensor's (K, …) observations.
+``DriveEnv`` (envs/core.py) is its K = 1 view; ``SB3VecEnv`` puts it behind stable-baselines3's
+``VecEnv`` API.
 
-On the ``fast`` backend each step applies every ego's control, then steps all K worlds' vehicles
-as one stacked array (``traffic.simulate_batch``), then lets each env read its new WorldState:
-the per-vehicle work is one compiled loop whatever K is; sensors and rewards stay per env.
+Autoreset: gymnasium's NEXT_STEP by default (a finished world is reset by the step after the one
+that ended it, as gymnasium's vector wrappers expect), or SAME_STEP (reset inside the ending step;
+its last observation and info go to ``infos["final_obs"]`` / ``infos["final_info"]``), which the
+SB3 adapter uses.
 """
 
 from __future__ import annotations
 
+import inspect
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
-from gymnasium.vector.utils import batch_space, concatenate, create_empty_array, iterate
+from gymnasium.vector.utils import batch_space
 from stable_baselines3.common.vec_env import VecEnv
 
-from drivelab.envs.core import DriveEnv
+from drivelab.envs.actions import ActionAdapter, make_action
+from drivelab.envs.metrics import BatchMetrics
+from drivelab.envs.rules import EpisodeRules
+from drivelab.envs.scenarios import check_traffic, get_scenario
 from drivelab.errors import UsageError
-from drivelab.world.state import WorldState
+from drivelab.perception.birdeye import render_birdeye
+from drivelab.perception.sensors import make_sensor, split_sensor_list
+from drivelab.rewards.shapers import RewardShaper
+from drivelab.world.batch import WorldBatch
+from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW
+
+BACKENDS = ("auto", "fast", "highway")
+LIGHT_LABEL_DISTANCE_M = 18.0  # RLAD's auxiliary label: a light within this distance ahead
+LIGHT_LABELS = {-1: "none", LIGHT_GREEN: "green", LIGHT_YELLOW: "red_or_yellow", LIGHT_RED: "red_or_yellow"}
+RUN_KEYWORDS = ("scenario", "obs", "action", "reward", "traffic", "backend")  # RunConfig fields
+RENDER_SIZE_HW, RENDER_PIXELS_PER_M = (256, 512), 4.0
 
 
-class FastBatch:
-    """Steps the worlds of several FastBackends (same scenario) with one kernel call.
+def _check_keywords(duration_s, offroad_terminal, action_options, backend_options) -> None:
+    """The types and ranges of the option keywords, as one-line UsageErrors."""
+    if duration_s is not None and (
+        isinstance(duration_s, bool)
+        or not isinstance(duration_s, (int, float))
+        or not 0 < duration_s < float("inf")
+    ):
+        raise UsageError(f"duration_s must be a number of seconds > 0, got {duration_s!r}")
+    if not isinstance(offroad_terminal, bool):
+        raise UsageError(f"offroad_terminal must be true or false, got {offroad_terminal!r}")
+    for name, value in (("action_options", action_options), ("backend_options", backend_options)):
+        if value is not None and not isinstance(value, dict):
+            raise UsageError(f"{name} must be a mapping of options, got {value!r}")
 
-    The worlds' vehicle arrays are stacked into one buffer; each backend then works on its own
-    view of it. A world that was reset brings a new array, and the buffer is stacked again.
+
+def make_simulator(backend: str, scenario, traffic: str, control: str, num_worlds: int, overrides):
+    """The simulator of ``backend`` ("auto", "fast" or "highway") for K worlds of ``scenario``."""
+    if backend not in BACKENDS:
+        raise UsageError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")
+    if backend == "auto":
+        backend = "fast" if scenario.fast_backend else "highway"
+    if backend == "fast":
+        from drivelab.envs.backends.fast.simulator import FastSimulator
+
+        return FastSimulator(scenario, traffic, control, num_worlds, overrides)
+    from drivelab.envs.backends.highway import HighwayBackend
+    from drivelab.envs.backends.reference import PerWorldSimulator
+
+    return PerWorldSimulator(HighwayBackend, scenario, traffic, control, num_worlds, overrides)
+
+
+class VectorDriveEnv(VectorEnv):
+    """``num_envs`` worlds of one driving scenario, seen through drivelab's sensors and rewarded
+    by its shapers, stepped together as arrays.
+
+    :param num_envs: K, the number of worlds.
+    :param scenario: a name of ``drivelab.envs.scenarios.SCENARIOS``.
+    :param obs: a sensor spec (``"lidar"``, ``"lidar:beams=120:stack=3"``), a comma list, or a
+        list of specs. One sensor gives its Box; several give a Dict keyed by sensor name.
+    :param action: an action kind (``drivelab.envs.actions.ACTIONS``) or an ActionAdapter; default
+        the scenario's first.
+    :param reward: a preset, ``"term=w,…"``, ``"preset,term=w"`` or a dict of weights; default the
+        scenario's preset.
+    :param traffic: "empty", "regular" or "dense".
+    :param backend: "auto" (the compiled core where it runs the scenario, else highway), "fast"
+        or "highway" (highway-env itself, the reference).
+    :param duration_s: episode time limit; default the scenario's (in the town with fixed routes,
+        the route's NoCrash limit; a given duration caps it).
+    :param offroad_terminal: end the episode when the ego leaves the road.
+    :param action_options: keyword options of the action adapter (e.g. ``steer_levels``).
+    :param backend_options: extra highway-env config keys.
+    :param render_mode: "rgb_array" for ``render()``.
+    :param autoreset_mode: gymnasium's ``AutoresetMode`` (or its value): NEXT_STEP (default) or
+        SAME_STEP.
     """
 
-    def __init__(self, backends: list) -> None:
-        self.backends = backends
-        self.views: list[np.ndarray | None] = [None] * len(backends)
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 5, "autoreset_mode": AutoresetMode.NEXT_STEP}
 
-    def __getstate__(self) -> dict:
-        """Pickled without the views: they would come back as copies cut off from the buffer, so an
-        unpickled batch stacks its worlds again on its first step."""
-        return {**self.__dict__, "views": [None] * len(self.backends)}
-
-    def _restack(self) -> None:
-        arrays = [backend.vehicles for backend in self.backends]
-        self.offsets = np.cumsum([0] + [len(a) for a in arrays])
-        self.buffer = np.concatenate(arrays)
-        self.regulation = np.stack([backend.regulation for backend in self.backends])
-        for k, backend in enumerate(self.backends):
-            backend.vehicles = self.views[k] = self.buffer[self.offsets[k] : self.offsets[k + 1]]
-            backend.regulation = self.regulation[k]
-
-    def step(self, controls: list) -> list[WorldState]:
-        from drivelab.envs.backends.fast import traffic  # numba compiles on first import; not before
-
-        if any(b.vehicles is not view for b, view in zip(self.backends, self.views, strict=True)):
-            self._restack()
-        for backend, control in zip(self.backends, controls, strict=True):
-            backend.apply_control(control)
-        first = self.backends[0]
-        traffic.simulate_batch(
-            self.buffer, self.offsets, first.lanes, first.idm, first.frames, first.dt_s, self.regulation
+    def __init__(
+        self,
+        num_envs: int = 1,
+        scenario: str = "highway",
+        obs: str | list = "kinematics",
+        action: str | ActionAdapter | None = None,
+        reward: str | dict | None = None,
+        traffic: str = "regular",
+        backend: str = "auto",
+        duration_s: float | None = None,
+        offroad_terminal: bool = True,
+        action_options: dict | None = None,
+        backend_options: dict | None = None,
+        render_mode: str | None = None,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+    ) -> None:
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+            raise UsageError(f"num_envs must be an integer >= 1 (got {num_envs!r})")
+        _check_keywords(duration_s, offroad_terminal, action_options, backend_options)
+        try:
+            autoreset_mode = AutoresetMode(autoreset_mode)
+        except ValueError:
+            raise UsageError(f"unknown autoreset_mode {autoreset_mode!r} (next_step or same_step)") from None
+        if autoreset_mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
+            raise UsageError(
+                f"autoreset_mode {autoreset_mode.value!r} is not supported (next_step or same_step)"
+            )
+        self.scenario = get_scenario(scenario)
+        check_traffic(traffic)
+        action = self.scenario.action_kinds[0] if action is None else action
+        reward = self.scenario.default_reward if reward is None else reward
+        self.adapter = (
+            action if isinstance(action, ActionAdapter) else make_action(action, **(action_options or {}))
         )
-        return [backend.after_simulation() for backend in self.backends]
-
-
-class DriveVectorEnv(VectorEnv):
-    """``num_envs`` copies of one DriveEnv configuration, stepped together.
-
-    :param num_envs: number of sub-environments (worlds).
-    :param env_kwargs: DriveEnv arguments shared by every sub-env (scenario, obs, backend, ...).
-    """
-
-    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP}
-
-    def __init__(self, num_envs: int, **env_kwargs: Any) -> None:
-        if num_envs < 1:
-            raise UsageError(f"num_envs must be >= 1 (got {num_envs})")
-        env_kwargs.pop("seed", None)
-        self.envs = [DriveEnv(**env_kwargs) for _ in range(num_envs)]
-        self.num_envs = num_envs
-        first = self.envs[0]
-        self.single_observation_space = first.observation_space
-        self.single_action_space = first.action_space
-        self.observation_space = batch_space(self.single_observation_space, num_envs)
-        self.action_space = batch_space(self.single_action_space, num_envs)
-        self.metadata = {**first.metadata, "autoreset_mode": AutoresetMode.SAME_STEP}
-        self.render_mode = None
-        fast = [type(env.backend).__name__ == "FastBackend" for env in self.envs]
-        self.batch = FastBatch([env.backend for env in self.envs]) if all(fast) else None
-
-    def _stack(self, observations: list) -> Any:
-        out = create_empty_array(self.single_observation_space, self.num_envs)
-        return concatenate(self.single_observation_space, observations, out)
-
-    def reset(self, *, seed: int | list[int] | None = None, options: dict | None = None):
-        """Reset every sub-env; an int seed gives sub-env i the seed ``seed + i``."""
-        if seed is None or isinstance(seed, int):
-            seeds = [None if seed is None else seed + i for i in range(self.num_envs)]
+        if self.adapter.name not in self.scenario.action_kinds:
+            raise UsageError(
+                f"scenario {scenario!r} cannot take action {self.adapter.name!r} "
+                f"(it takes {', '.join(self.scenario.action_kinds)})"
+            )
+        self.sensors = [make_sensor(spec) for spec in split_sensor_list(obs)]
+        names = [s.name for s in self.sensors]
+        if len(set(names)) != len(names):
+            raise UsageError(f"sensor listed twice in {names}")
+        self.reward_shaper = RewardShaper(reward)
+        self.num_envs = int(num_envs)
+        self.simulator = make_simulator(
+            backend, self.scenario, traffic, self.adapter.control, self.num_envs, backend_options
+        )
+        self.duration_s = float(duration_s or self.simulator.duration_s)
+        self.duration_given = duration_s is not None
+        self.rules = EpisodeRules(self.scenario, offroad_terminal)
+        self.metrics = BatchMetrics()
+        self.render_mode = render_mode
+        self.autoreset_mode = autoreset_mode
+        self.metadata = {
+            **self.metadata,
+            "render_fps": self.simulator.policy_frequency_hz,
+            "autoreset_mode": autoreset_mode,
+        }
+        self.single_action_space = self.adapter.space
+        if len(self.sensors) == 1:
+            self.single_observation_space = self.sensors[0].space
         else:
-            seeds = list(seed)
-        observations, infos = [], {}
-        for i, (env, env_seed) in enumerate(zip(self.envs, seeds, strict=True)):
-            obs, info = env.reset(seed=env_seed, options=options)
-            observations.append(obs)
-            infos = self._add_info(infos, info, i)
-        return self._stack(observations), infos
+            self.single_observation_space = spaces.Dict({s.name: s.space for s in self.sensors})
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        # each world's generator of episode seeds (a DriveEnv's ``np_random``)
+        self.world_rngs: list[np.random.Generator] = [seeding.np_random()[0] for _ in range(self.num_envs)]
+        self.world_seeds: list[int | None] = [None] * self.num_envs
+        self.batch: WorldBatch | None = None
+        self.observations: np.ndarray | dict[str, np.ndarray] | None = None  # the last ones returned
+        self.episode_seeds = np.zeros(self.num_envs, dtype=np.int64)
+        self.pending_reset = np.zeros(self.num_envs, dtype=bool)  # NEXT_STEP: reset on the next step
+
+    # --- observations ------------------------------------------------------------------------
+    def _observe(self, batch: WorldBatch) -> np.ndarray | dict[str, np.ndarray]:
+        if len(self.sensors) == 1:
+            return self.sensors[0].observe(batch)
+        return {s.name: s.observe(batch) for s in self.sensors}
+
+    def _observe_again(self, observations, batch: WorldBatch, worlds: np.ndarray):
+        """Observe only ``worlds`` (just reset within this step) and write their rows in."""
+        fresh = self._observe(batch.select(worlds))
+        if isinstance(observations, dict):
+            for name in observations:
+                observations[name][worlds] = fresh[name]
+        else:
+            observations[worlds] = fresh
+        return observations
+
+    # --- episodes ----------------------------------------------------------------------------
+    def _start(self, mask: np.ndarray) -> None:
+        """New episodes in the worlds of ``mask``: episode seeds from each world's generator, then
+        the simulator, the adapter, the sensors, the rules and the metrics reset by mask."""
+        worlds = np.flatnonzero(mask)
+        for k in worlds:
+            self.episode_seeds[k] = int(self.world_rngs[k].integers(2**31 - 1))
+        batch = self.simulator.reset_where(mask, self.episode_seeds)
+        self.adapter.reset(mask)
+        for index, sensor in enumerate(self.sensors):
+            rngs = [np.random.default_rng([int(seed), index]) for seed in self.episode_seeds]
+            sensor.reset(batch, rngs, mask)
+        # an evaluation route brings its own time limit (the town's NoCrash protocol); a duration
+        # given to this env still caps it
+        limit = np.full(self.num_envs, self.duration_s)
+        route_limits = getattr(self.simulator, "route_time_limit_s", None)
+        if route_limits is not None:
+            route_limits = np.broadcast_to(np.asarray(route_limits, dtype=float), limit.shape)
+            has_route = np.isfinite(route_limits)
+            capped = np.minimum(route_limits, self.duration_s) if self.duration_given else route_limits
+            limit = np.where(has_route, capped, limit)
+        self.rules.reset(mask, limit)
+        self.metrics.reset(batch, mask)
+        self.batch = batch
+
+    def _seed_worlds(self, seed: int | list[int | None] | None) -> None:
+        if seed is None:
+            return
+        seeds = (
+            [seed + k for k in range(self.num_envs)] if isinstance(seed, (int, np.integer)) else list(seed)
+        )
+        if len(seeds) != self.num_envs:
+            raise UsageError(f"reset got {len(seeds)} seeds for {self.num_envs} worlds")
+        for k, world_seed in enumerate(seeds):
+            if world_seed is not None:
+                self.world_rngs[k], self.world_seeds[k] = seeding.np_random(int(world_seed))
+
+    def reset(self, *, seed: int | list[int | None] | None = None, options: dict | None = None):
+        """Start every world's episode; an int seed gives world k the seed ``seed + k`` (a list,
+        one per world). ``options={"reset_mask": mask}`` (gymnasium's partial reset) starts only
+        the worlds of ``mask``. Infos: ``episode_seed`` and ``traffic_light`` per world."""
+        self._seed_worlds(seed)
+        mask = np.ones(self.num_envs, dtype=bool)
+        if options and options.get("reset_mask") is not None and self.batch is not None:
+            mask = np.asarray(options["reset_mask"], dtype=bool).reshape(self.num_envs)
+        self._start(mask)
+        self.pending_reset &= ~mask
+        if mask.all():
+            self.observations = self._observe(self.batch)
+        else:
+            self.observations = self._observe_again(
+                _copy(self.observations), self.batch, np.flatnonzero(mask)
+            )
+        return self.observations, self._reset_infos(mask)
+
+    def _reset_infos(self, mask: np.ndarray) -> dict:
+        infos = {
+            "episode_seed": self.episode_seeds.copy(),
+            "traffic_light": self.traffic_light_labels(),
+        }
+        infos.update({f"_{key}": mask.copy() for key in list(infos)})
+        return infos
 
     def step(self, actions: Any):
-        """One step of every sub-env (same-step autoreset)."""
-        actions = list(iterate(self.action_space, actions))
-        controls = [env.adapter.control_for(a, env.world) for env, a in zip(self.envs, actions, strict=True)]
-        if self.batch is not None:
-            worlds = self.batch.step(controls)
+        """One policy step of every world (see the module docstring for autoreset)."""
+        if self.batch is None:
+            raise RuntimeError("call reset() before step()")
+        prev = self.batch
+        controls = self.adapter.controls_for(actions, prev)
+        stepped = self.simulator.step(controls)
+        batch, terminated, truncated = self.rules.apply(stepped)
+        rewards, terms = self.reward_shaper(prev, batch, controls)
+        self.metrics.update(batch, rewards)
+        done = terminated | truncated
+        infos = self._step_infos(batch, terms, done, truncated)
+        restarting = self.pending_reset.copy()  # NEXT_STEP: these worlds begin a new episode now
+        self.batch = batch
+        if restarting.any():
+            self._start(restarting)
+            rewards = np.where(restarting, 0.0, rewards)
+            terminated, truncated = terminated & ~restarting, truncated & ~restarting
+            done = terminated | truncated
+            for key in ("episode_metrics",):
+                if key in infos:
+                    infos[f"_{key}"] = infos[f"_{key}"] & ~restarting
+            infos["episode_seed"] = self.episode_seeds.copy()
+            infos["_episode_seed"] = restarting
+        observations = self._observe(self.batch)
+        infos["traffic_light"] = self.traffic_light_labels()
+        if self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
+            infos["final_obs"] = _rows_as_objects(observations, done)
+            infos["final_info"] = _final_infos(infos, done)
+            infos["_final_obs"] = infos["_final_info"] = done.copy()
+            self._start(done)
+            observations = self._observe_again(observations, self.batch, np.flatnonzero(done))
+            infos["episode_seed"] = self.episode_seeds.copy()
+            infos["_episode_seed"] = done | restarting
+            infos["traffic_light"] = self.traffic_light_labels()
+            self.pending_reset[:] = False
         else:
-            worlds = [env.backend.step(c) for env, c in zip(self.envs, controls, strict=True)]
-        observations, infos, self.info_list = [], {}, []
-        rewards = np.zeros(self.num_envs)
-        terminations = np.zeros(self.num_envs, dtype=bool)
-        truncations = np.zeros(self.num_envs, dtype=bool)
-        for i, (env, world, control) in enumerate(zip(self.envs, worlds, controls, strict=True)):
-            obs, rewards[i], terminations[i], truncations[i], info = env.finish_step(world, control)
-            if terminations[i] or truncations[i]:
-                final = {"final_obs": obs, "final_info": info}
-                obs, info = env.reset()
-                info = {**info, **final}
-            observations.append(obs)
-            self.info_list.append(info)
-            infos = self._add_info(infos, info, i)
-        return self._stack(observations), rewards, terminations, truncations, infos
+            self.pending_reset = (
+                done if self.autoreset_mode == AutoresetMode.NEXT_STEP else self.pending_reset
+            )
+        self.observations = observations
+        return observations, rewards, terminated, truncated, infos
 
-    def close_extras(self, **kwargs: Any) -> None:
-        for env in getattr(self, "envs", []):  # none when __init__ refused its arguments
-            env.close()
+    def _step_infos(self, batch: WorldBatch, terms: dict[str, np.ndarray], done, truncated) -> dict:
+        """Per-world arrays: reward terms, speed, events, and the finished worlds' episode metrics."""
+        events, every = batch.events, np.ones(self.num_envs, dtype=bool)
+        infos = {
+            "reward_terms": dict(terms),
+            "speed_mps": batch.ego.speed_mps.copy(),
+            "crashed": events.collided.copy(),
+            "off_road": events.off_road.copy(),
+            "arrived": events.arrived.copy(),
+        }
+        infos.update({f"_{key}": every for key in list(infos)})
+        infos["_reward_terms"] = every
+        if done.any():
+            summaries = self.metrics.summaries(done, self.scenario.arrival != "none", truncated)
+            metrics = np.empty(self.num_envs, dtype=object)
+            for k, summary in zip(np.flatnonzero(done), summaries, strict=True):
+                metrics[k] = summary
+            infos["episode_metrics"], infos["_episode_metrics"] = metrics, done.copy()
+        return infos
+
+    def traffic_light_labels(self) -> np.ndarray:
+        """(K,) "none", "green" or "red_or_yellow": the light ahead within 18 m (RLAD's label)."""
+        state, _ = self.batch.light_ahead(LIGHT_LABEL_DISTANCE_M)
+        return np.array([LIGHT_LABELS[int(s)] for s in state], dtype=object)
+
+    def replay(self, starts: list[dict], actions: list[np.ndarray]):
+        """Bring every world to where its recorded episode was: world k's episode-seed generator
+        set to ``starts[k]`` (a bit-generator state), its episode started, then ``actions[k]``
+        taken. Worlds are independent, so each starts late enough to end with the others (before
+        that it drives an episode its reset discards). Returns the observations, as after a step."""
+        lengths = np.array([len(a) for a in actions])
+        total = int(lengths.max(initial=0))
+        begin = total - lengths
+        observations, _ = self.reset()
+        for t in range(total + 1):
+            starting = np.flatnonzero(begin == t)
+            if len(starting):
+                for k in starting:
+                    self.world_rngs[k].bit_generator.state = starts[k]
+                mask = np.zeros(self.num_envs, dtype=bool)
+                mask[starting] = True
+                self._start(mask)  # and the first observation of those worlds, as reset gives it
+                observations = self._observe_again(observations, self.batch, starting)
+            if t == total:
+                return observations
+            step_actions = [
+                np.asarray(actions[k][t - begin[k]]) if t >= begin[k] else self.single_action_space.sample()
+                for k in range(self.num_envs)
+            ]
+            observations, _, terminated, truncated, _ = self.step(np.stack(step_actions))
+            self.pending_reset[:] = False
+            if ((terminated | truncated) & (begin <= t)).any():
+                raise UsageError(
+                    "the checkpoint's episode ends early when replayed (the environment changed?)"
+                )
+        return observations
+
+    # --- rendering -----------------------------------------------------------------------------
+    def render(self) -> tuple[np.ndarray, ...] | None:
+        """One 256×512 bird's-eye RGB frame per world (drivelab's own renderer)."""
+        if self.batch is None or self.render_mode != "rgb_array":
+            return None
+        return tuple(self.render_world(k) for k in range(self.num_envs))
+
+    def render_world(self, k: int) -> np.ndarray:
+        return render_birdeye(self.batch[k], size_hw=RENDER_SIZE_HW, pixels_per_meter=RENDER_PIXELS_PER_M)
+
+
+def _copy(observations):
+    if isinstance(observations, dict):
+        return {name: value.copy() for name, value in observations.items()}
+    return observations.copy()
+
+
+def _rows_as_objects(observations, mask: np.ndarray) -> np.ndarray:
+    """(K,) object array holding each masked world's own observation (copied), gymnasium's layout
+    of ``final_obs``."""
+    rows = np.empty(len(mask), dtype=object)
+    for k in np.flatnonzero(mask):
+        if isinstance(observations, dict):
+            rows[k] = {name: value[k].copy() for name, value in observations.items()}
+        else:
+            rows[k] = observations[k].copy()
+    return rows
+
+
+def _final_infos(infos: dict, mask: np.ndarray) -> np.ndarray:
+    """(K,) object array of each finished world's own step info as a plain dict."""
+    rows = np.empty(len(mask), dtype=object)
+    for k in np.flatnonzero(mask):
+        info = {}
+        for key, value in infos.items():
+            if key.startswith("_"):
+                continue
+            if key == "reward_terms":
+                info[key] = {name: float(v[k]) for name, v in value.items()}
+            elif infos.get(f"_{key}", np.ones(len(mask), bool))[k]:
+                info[key] = value[k].item() if isinstance(value[k], np.generic) else value[k]
+        rows[k] = info
+    return rows
+
+
+def env_option_names() -> tuple[str, ...]:
+    """Keywords a run's ``env_options`` may set: all but those the run's own fields give (scenario,
+    obs, ...) and those training sets itself (render_mode, num_envs, autoreset_mode)."""
+    parameters = inspect.signature(VectorDriveEnv.__init__).parameters
+    taken = (*RUN_KEYWORDS, "self", "render_mode", "num_envs", "autoreset_mode")
+    return tuple(name for name in parameters if name not in taken)
+
+
+def check_env_options(options: dict) -> None:
+    """An unknown ``env_options`` key is a UsageError naming the known ones (values are checked
+    by the env itself)."""
+    known = env_option_names()
+    for key in options:
+        if key not in known:
+            raise UsageError(f"unknown env_options key {key!r} (known: {', '.join(known)})")
 
 
 class SB3VecEnv(VecEnv):
-    """A DriveVectorEnv behind stable-baselines3's VecEnv API (dones, list infos with
-    ``terminal_observation`` and ``TimeLimit.truncated``)."""
+    """A VectorDriveEnv behind stable-baselines3's VecEnv API (dones, list infos with
+    ``terminal_observation`` and ``TimeLimit.truncated``); the env autoresets in the same step."""
 
-    def __init__(self, vector_env: DriveVectorEnv) -> None:
+    def __init__(self, vector_env: VectorDriveEnv) -> None:
+        if vector_env.autoreset_mode != AutoresetMode.SAME_STEP:
+            raise ValueError("SB3VecEnv needs a VectorDriveEnv with autoreset_mode=SAME_STEP")
         self.vector_env = vector_env
         super().__init__(
             vector_env.num_envs, vector_env.single_observation_space, vector_env.single_action_space
         )
+        self.render_mode = "rgb_array"
         self._actions: Any = None
         self._seed: int | None = None
 
     def reset(self):
-        obs, _ = self.vector_env.reset(seed=self._seed)
+        obs, infos = self.vector_env.reset(seed=self._seed)
         self._seed = None
+        self.reset_infos = [{"episode_seed": int(seed)} for seed in infos["episode_seed"]]
         return obs
 
     def step_async(self, actions: np.ndarray) -> None:
         self._actions = actions
 
     def step_wait(self):
-        obs, rewards, terminations, truncations, _ = self.vector_env.step(self._actions)
+        obs, rewards, terminations, truncations, infos = self.vector_env.step(self._actions)
         dones = terminations | truncations
         listed = []
-        for i, info in enumerate(self.vector_env.info_list):
-            if dones[i]:  # SB3 wants the last episode's info, with its final observation
-                info = {**info.pop("final_info"), "terminal_observation": info.pop("final_obs")}
-                info["TimeLimit.truncated"] = bool(truncations[i] and not terminations[i])
+        for k in range(self.num_envs):
+            if dones[k]:  # SB3 wants the last episode's info, with its final observation
+                info = dict(infos["final_info"][k])
+                info["terminal_observation"] = infos["final_obs"][k]
+                info["TimeLimit.truncated"] = bool(truncations[k] and not terminations[k])
+            else:
+                info = _world_info(infos, k)
             listed.append(info)
         return obs, rewards.astype(np.float32), dones, listed
 
@@ -171,24 +461,53 @@ class SB3VecEnv(VecEnv):
     def close(self) -> None:
         self.vector_env.close()
 
-    def _targets(self, indices) -> list[DriveEnv]:
-        return [self.vector_env.envs[i] for i in self._get_indices(indices)]
+    def get_images(self) -> list[np.ndarray]:
+        """Each world's bird's-eye frame (SB3's ``VecVideoRecorder`` tiles them)."""
+        if self.vector_env.batch is None:
+            return [None] * self.num_envs
+        return [self.vector_env.render_world(k) for k in range(self.num_envs)]
 
     def get_attr(self, attr_name: str, indices=None) -> list:
-        return [getattr(env, attr_name) for env in self._targets(indices)]
+        return [getattr(self.vector_env, attr_name) for _ in self._get_indices(indices)]
 
     def set_attr(self, attr_name: str, value: Any, indices=None) -> None:
-        for env in self._targets(indices):
-            setattr(env, attr_name, value)
+        setattr(self.vector_env, attr_name, value)
 
     def env_method(self, method_name: str, *method_args, indices=None, **method_kwargs) -> list:
-        return [getattr(env, method_name)(*method_args, **method_kwargs) for env in self._targets(indices)]
+        method = getattr(self.vector_env, method_name)
+        return [method(*method_args, **method_kwargs) for _ in self._get_indices(indices)]
 
     def env_is_wrapped(self, wrapper_class, indices=None) -> list[bool]:
-        return [False for _ in self._targets(indices)]
+        return [False for _ in self._get_indices(indices)]
 
 
-def make_vec(scenario: str = "highway", num_envs: int = 8, **env_kwargs: Any) -> DriveVectorEnv:
-    """``num_envs`` DriveEnvs of ``scenario`` as one gymnasium vector env (fast backend by default)."""
-    env_kwargs.setdefault("backend", "fast")
-    return DriveVectorEnv(num_envs, scenario=scenario, **env_kwargs)
+def _world_info(infos: dict, k: int) -> dict:
+    """World ``k``'s entries of gymnasium-style vector infos, as one plain dict."""
+    info = {}
+    for key, value in infos.items():
+        if key.startswith("_") or key in ("final_obs", "final_info"):
+            continue
+        if key == "reward_terms":
+            info[key] = {name: float(v[k]) for name, v in value.items()}
+        elif infos.get(f"_{key}", None) is None or infos[f"_{key}"][k]:
+            info[key] = value[k].item() if isinstance(value[k], np.generic) else value[k]
+    return info
+
+
+def make_vec(scenario: str = "highway", num_envs: int = 8, **env_kwargs: Any) -> gym.vector.VectorEnv:
+    """``num_envs`` worlds of ``scenario`` as one gymnasium vector env (each id's
+    ``vector_entry_point``): a VectorDriveEnv where the compiled core runs the scenario, else
+    (the town, the circuits on the reference backend) gymnasium's ``AsyncVectorEnv`` of DriveEnvs,
+    one process per world."""
+    env_kwargs.pop("max_episode_steps", None)
+    backend = env_kwargs.get("backend", "auto")
+    compiled = backend == "fast" or (backend == "auto" and get_scenario(scenario).fast_backend)
+    if compiled or num_envs == 1:
+        return VectorDriveEnv(num_envs, scenario=scenario, **env_kwargs)
+    from drivelab.envs.core import DriveEnv
+
+    mode = env_kwargs.pop("autoreset_mode", AutoresetMode.NEXT_STEP)
+    return gym.vector.AsyncVectorEnv(
+        [lambda: DriveEnv(scenario=scenario, **env_kwargs) for _ in range(num_envs)],
+        autoreset_mode=AutoresetMode(mode),
+    )

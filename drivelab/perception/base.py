@@ -23,7 +23,10 @@ class Sensor(ABC):
 
     Subclasses implement ``_observe(batch, out)`` and, when they keep history, ``_reset(batch,
     mask)`` over ``(K, …)`` state arrays; ``self.rngs[k]`` is world k's episode generator, the only
-    source of noise.
+    source of noise. ``_observe`` may get a sub-batch (``batch.select``: the environment observes
+    the worlds it just reset a second time in a same-step autoreset): per-world state is then
+    read and written at ``state[batch.rows]`` and world i of the sub-batch is slot
+    ``batch.slots[i]``, so only those worlds advance.
     """
 
     name: str = "sensor"

@@ -79,13 +79,12 @@ class FrameStack(Sensor):
 
     def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
         frame = self.sensor.observe(batch)
-        self.history[:, :-1] = np.where(
-            self.started.reshape((-1,) + (1,) * (frame.ndim)), self.history[:, 1:], frame[:, None]
-        )
-        self.history[:, -1] = frame
-        self.started[:] = True
-        # (K, frames, *shape) → frames concatenated along the channel axis of each observation
-        out[...] = np.concatenate(np.moveaxis(self.history, 1, 0), axis=1 if self.axis == 0 else -1)
+        rows = batch.rows  # a sub-batch advances only its own worlds' stacks
+        history, started = self.history[rows], self.started[rows]
+        history[:, :-1] = np.where(started.reshape((-1,) + (1,) * frame.ndim), history[:, 1:], frame[:, None])
+        history[:, -1] = frame
+        self.history[rows], self.started[rows] = history, True
+        out[...] = np.concatenate(np.moveaxis(history, 1, 0), axis=1 if self.axis == 0 else -1)
 
 
 def parse_sensor_spec(spec: str | dict) -> tuple[str, dict]:

@@ -116,8 +116,9 @@ class EpisodeLog:
     def mark(self) -> list[tuple[dict | None, list, int]]:
         """The log as it is now, without copying: episodes only grow their own action list, and a
         new episode starts a new list."""
-        return [(start, actions, len(actions))
-                for start, actions in zip(self.starts, self.actions, strict=True)]
+        return [
+            (start, actions, len(actions)) for start, actions in zip(self.starts, self.actions, strict=True)
+        ]
 
 
 def _state_before_reset(env: gym.Env, generator: np.random.Generator, state: dict) -> dict:
@@ -153,17 +154,21 @@ class RecordVecEpisodes(VecEnvWrapper):
 
     def __init__(self, venv) -> None:
         super().__init__(venv)
-        self.worlds = venv.vector_env.envs
-        self.log = EpisodeLog(len(self.worlds))
+        self.vector = venv.vector_env
+        self.log = EpisodeLog(self.vector.num_envs)
 
     def _generators(self) -> list[tuple[np.random.Generator, dict]]:
-        return [(world.np_random, world.np_random.bit_generator.state) for world in self.worlds]
+        return [(rng, rng.bit_generator.state) for rng in self.vector.world_rngs]
 
     def reset(self):
         before = self._generators()
+        seeds = self.venv._seed
         obs = self.venv.reset()
-        for index, (world, (generator, state)) in enumerate(zip(self.worlds, before, strict=True)):
-            self.log.started(index, _state_before_reset(world, generator, state))
+        for index, (generator, state) in enumerate(before):
+            if self.vector.world_rngs[index] is not generator:  # reseeded: the new seed's first state
+                world_seed = seeds + index
+                state = seeding.np_random(world_seed)[0].bit_generator.state
+            self.log.started(index, state)
         return obs
 
     def step_async(self, actions: np.ndarray) -> None:
@@ -191,7 +196,7 @@ class TrainingWorlds:
 
     @classmethod
     def of(cls, monitor, recorder) -> TrainingWorlds:
-        worlds = recorder.worlds if isinstance(recorder, RecordVecEpisodes) else [recorder.unwrapped]
+        worlds = recorder.vector if isinstance(recorder, RecordVecEpisodes) else [recorder.unwrapped]
         return cls(monitor, recorder.log, worlds)
 
     @property
@@ -343,6 +348,12 @@ def _replay_world(world, start: dict, actions: np.ndarray) -> Any:
     return obs
 
 
+def _observation_row(observations: Any, index: int) -> Any:
+    if isinstance(observations, dict):
+        return {key: value[index] for key, value in observations.items()}
+    return observations[index]
+
+
 def _matches(saved: Any, obs: Any, index: int | None) -> bool:
     """Whether world ``index``'s part of the saved current observation equals the replayed ``obs``
     (None: the saved one is a single world's). Shapes that differ (an image transposed by SB3's
@@ -360,13 +371,21 @@ def restore(model, worlds: TrainingWorlds, snapshot: Snapshot) -> None:
     meta, arrays = snapshot.meta, snapshot.arrays
     saved = _saved_observation(meta["last_obs"], arrays, "last_obs")
     batched = not isinstance(model.get_env(), gym.Env)
-    for index, (world, (start, actions, count)) in enumerate(
-        zip(worlds.worlds, snapshot.worlds, strict=True)
-    ):
-        replayed = _replay_world(world, start, _stack_actions(actions[:count]))
-        worlds.log.started(index, start)
-        worlds.log.actions[index] = list(actions[:count])
-        if saved is not None and not _matches(saved, replayed, index if batched else None):
+    if batched:  # one VectorDriveEnv: every world replayed together
+        starts = [start for start, _, _ in snapshot.worlds]
+        actions = [_stack_actions(actions[:count]) for _, actions, count in snapshot.worlds]
+        replayed = worlds.worlds.replay(starts, actions)
+        for index, (start, actions_k, count) in enumerate(snapshot.worlds):
+            worlds.log.started(index, start)
+            worlds.log.actions[index] = list(actions_k[:count])
+        observations = [_observation_row(replayed, index) for index in range(len(snapshot.worlds))]
+    else:
+        (world,), ((start, actions, count),) = worlds.worlds, snapshot.worlds
+        observations = [_replay_world(world, start, _stack_actions(actions[:count]))]
+        worlds.log.started(0, start)
+        worlds.log.actions[0] = list(actions[:count])
+    for index, replayed_obs in enumerate(observations):
+        if saved is not None and not _matches(saved, replayed_obs, index if batched else None):
             raise UsageError(
                 "the checkpoint's episode does not replay to its observation (the environment changed?)"
             )

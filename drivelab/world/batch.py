@@ -209,6 +209,9 @@ class WorldBatch:
     pedestrian_valid: np.ndarray
     max_speed_mps: np.ndarray
     speed_limit_mps: np.ndarray
+    # for a sub-batch (``select``): the slot of each row among the K worlds a sensor keeps state
+    # for (None: row k is slot k)
+    slots: np.ndarray | None = None
 
     @property
     def num_worlds(self) -> int:
@@ -276,6 +279,35 @@ class WorldBatch:
             max_speed_mps=float(self.max_speed_mps[k]),
             speed_limit_mps=float(self.speed_limit_mps[k]),
         )
+
+    def select(self, indices: np.ndarray) -> WorldBatch:
+        """The sub-batch of worlds ``indices`` (their ``slots`` say which they are, so that stateful
+        sensors advance only those worlds' history)."""
+        indices = np.asarray(indices, dtype=np.int64)
+        take = lambda a: a[indices]  # noqa: E731
+        return WorldBatch(
+            time_s=take(self.time_s),
+            dt_s=self.dt_s,
+            ego=EgoBatch(**{f.name: take(getattr(self.ego, f.name)) for f in _FIELDS_EGO}),
+            vehicles=take(self.vehicles),
+            vehicle_valid=take(self.vehicle_valid),
+            roads=self.roads,
+            road_index=take(self.road_index),
+            route=RouteBatch(**{f.name: take(getattr(self.route, f.name)) for f in _FIELDS_ROUTE}),
+            events=EventsBatch(**{f.name: take(getattr(self.events, f.name)) for f in _FIELDS_EVENTS}),
+            traffic_lights=take(self.traffic_lights),
+            light_valid=take(self.light_valid),
+            pedestrians=take(self.pedestrians),
+            pedestrian_valid=take(self.pedestrian_valid),
+            max_speed_mps=take(self.max_speed_mps),
+            speed_limit_mps=take(self.speed_limit_mps),
+            slots=indices if self.slots is None else self.slots[indices],
+        )
+
+    @property
+    def rows(self) -> np.ndarray | slice:
+        """Index of this batch's worlds into per-world state arrays of K rows (``state[batch.rows]``)."""
+        return slice(None) if self.slots is None else self.slots
 
     def worlds(self) -> list[WorldState]:
         """Every world as a WorldState (for code that still reads one world at a time)."""
@@ -371,6 +403,7 @@ class WorldBatch:
 
 _FIELDS_EGO = dataclasses.fields(EgoBatch)
 _FIELDS_EVENTS = dataclasses.fields(EventsBatch)
+_FIELDS_ROUTE = dataclasses.fields(RouteBatch)
 
 
 def _stations(polyline: np.ndarray) -> np.ndarray:

@@ -1,68 +1,208 @@
-"""Vector envs: K worlds stepped together behave exactly as K separate DriveEnvs."""
+"""VectorDriveEnv: K worlds stepped together give exactly the episodes of K separate DriveEnvs, and
+the vector env meets gymnasium's and SB3's conventions."""
 
+import pickle
+
+import gymnasium
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import data_equivalence
+from gymnasium.vector import AutoresetMode
 from stable_baselines3 import PPO
 
+from drivelab.envs import gym_id
 from drivelab.envs.core import DriveEnv
-from drivelab.envs.vector import DriveVectorEnv, SB3VecEnv, make_vec
+from drivelab.envs.vector import SB3VecEnv, VectorDriveEnv, make_vec
 from drivelab.errors import UsageError
 
 KWARGS = {"obs": "kinematics", "traffic": "regular", "duration_s": 6}
 
 
-@pytest.mark.parametrize("scenario", ["highway", "roundabout", "intersection"])
-def test_batched_worlds_match_separate_envs(scenario):
-    """The one-kernel batch gives every sub-env the same transitions as its own DriveEnv,
-    across autoresets (episodes of 6 s end inside the 15 steps)."""
+def _equal(a, b) -> None:
+    if isinstance(a, dict):
+        assert a.keys() == b.keys()
+        for key in a:
+            np.testing.assert_array_equal(a[key], b[key])
+    else:
+        np.testing.assert_array_equal(a, b)
+
+
+def _row(observations, k):
+    if isinstance(observations, dict):
+        return {name: value[k] for name, value in observations.items()}
+    return observations[k]
+
+
+@pytest.mark.parametrize(
+    "scenario, backend, mode, obs",
+    [
+        ("highway", "fast", "same_step", "kinematics"),
+        ("highway", "fast", "next_step", "kinematics,lidar:beams=32:stack=2"),
+        ("roundabout", "fast", "same_step", "kinematics"),
+        ("intersection", "fast", "next_step", "kinematics"),
+        ("merge", "highway", "same_step", "kinematics"),
+    ],
+)
+def test_k_worlds_give_the_episodes_of_k_separate_envs(scenario, backend, mode, obs):
+    """Same seeds, same actions: every world's observations, rewards, ends, infos and episode
+    metrics equal those of its own DriveEnv, across autoresets (episodes of 6 s end inside 40
+    steps, at different steps in different worlds)."""
     k = 4
-    vector = make_vec(scenario, num_envs=k, **KWARGS)
-    assert vector.batch is not None
-    singles = [DriveEnv(scenario, backend="fast", **KWARGS) for _ in range(k)]
-    obs, _ = vector.reset(seed=10)
+    kwargs = {**KWARGS, "obs": obs, "backend": backend}
+    vector = VectorDriveEnv(k, scenario=scenario, autoreset_mode=mode, **kwargs)
+    singles = [DriveEnv(scenario, **kwargs) for _ in range(k)]
+    observations, infos = vector.reset(seed=10)
     for i, env in enumerate(singles):
-        single_obs, _ = env.reset(seed=10 + i)
-        np.testing.assert_array_equal(obs[i], single_obs)
+        single_obs, single_info = env.reset(seed=10 + i)
+        _equal(_row(observations, i), single_obs)
+        assert infos["episode_seed"][i] == single_info["episode_seed"]
     rng = np.random.default_rng(0)
-    ends = 0
-    for _ in range(15):
-        actions = rng.integers(5, size=k)
-        obs, rewards, terminations, truncations, infos = vector.step(actions)
+    ends, restarting = 0, np.zeros(k, dtype=bool)
+    for _ in range(40):
+        actions = rng.integers(vector.single_action_space.n, size=k)
+        observations, rewards, terminations, truncations, infos = vector.step(actions)
         for i, env in enumerate(singles):
+            if restarting[i]:  # NEXT_STEP: this step reset world i instead of stepping it
+                single_obs, info = env.reset()
+                assert (rewards[i], terminations[i], truncations[i]) == (0.0, False, False)
+                assert infos["episode_seed"][i] == info["episode_seed"]
+                _equal(_row(observations, i), single_obs)
+                continue
             single_obs, reward, terminated, truncated, info = env.step(int(actions[i]))
             assert (terminated, truncated) == (terminations[i], truncations[i])
             assert reward == rewards[i]
+            assert info["reward_terms"] == {name: float(v[i]) for name, v in infos["reward_terms"].items()}
             if terminated or truncated:
                 ends += 1
-                assert data_equivalence(infos["final_obs"][i], single_obs)
-                single_obs, _ = env.reset()
-            np.testing.assert_array_equal(obs[i], single_obs)
-    assert ends >= k  # every world finished at least one episode and was reset
+                assert infos["episode_metrics"][i] == info["episode_metrics"]
+                if mode == "same_step":
+                    assert data_equivalence(infos["final_obs"][i], single_obs)
+                    assert infos["final_info"][i]["episode_metrics"] == info["episode_metrics"]
+                    single_obs, _ = env.reset()
+            _equal(_row(observations, i), single_obs)
+        restarting = (terminations | truncations) if mode == "next_step" else restarting
+    assert ends >= k  # every world finished at least one episode
 
 
-def test_highway_backend_vector_env_steps_each_world():
-    vector = DriveVectorEnv(2, scenario="highway", backend="highway", obs="kinematics", duration_s=2)
-    assert vector.batch is None
-    obs, _ = vector.reset(seed=0)
-    assert obs.shape == (2, *vector.single_observation_space.shape)
-    obs, rewards, *_ = vector.step(np.array([1, 1]))
-    assert vector.observation_space.contains(obs) and rewards.shape == (2,)
+def test_gymnasium_vector_wrappers_take_the_next_step_env():
+    """gymnasium's NormalizeObservation and FlattenObservation refuse SAME_STEP vector envs."""
+    vector = VectorDriveEnv(3, scenario="highway", obs="kinematics,ego_state", duration_s=2)
+    assert vector.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP
+    wrapped = gymnasium.wrappers.vector.NormalizeObservation(
+        gymnasium.wrappers.vector.FlattenObservation(vector)
+    )
+    observations, _ = wrapped.reset(seed=0)
+    assert observations.shape == (3, 35 + 5)
+    for _ in range(12):
+        observations, rewards, *_ = wrapped.step(wrapped.action_space.sample())
+    assert np.isfinite(observations).all() and rewards.shape == (3,)
+
+
+def test_make_vec_takes_the_vector_entry_point_with_the_auto_backend():
+    vector = gymnasium.make_vec(gym_id("highway"), num_envs=3, vectorization_mode="vector_entry_point")
+    assert isinstance(vector, VectorDriveEnv) and vector.num_envs == 3
+    assert type(vector.simulator).__name__ == "FastSimulator"
+    observations, _ = vector.reset(seed=1)
+    assert observations.shape == (3, 35)
+    default = gymnasium.make_vec(gym_id("merge"), num_envs=2)  # the entry point is the default
+    assert isinstance(default, VectorDriveEnv)
+
+
+def test_scenarios_off_the_compiled_core_batch_in_subprocesses():
+    vector = make_vec("follow-line", num_envs=2, obs="line")
+    try:
+        assert isinstance(vector, gymnasium.vector.AsyncVectorEnv)
+        observations, _ = vector.reset(seed=0)
+        assert observations.shape == (2,)
+    finally:
+        vector.close()
+
+
+def test_render_gives_one_frame_per_world_and_sb3_get_images():
+    vector = VectorDriveEnv(2, scenario="highway", render_mode="rgb_array", autoreset_mode="same_step")
+    vector.reset(seed=0)
+    frames = vector.render()
+    assert len(frames) == 2 and frames[0].shape == (256, 512, 3) and frames[0].dtype == np.uint8
+    assert not np.array_equal(frames[0], frames[1])  # two different worlds
+    venv = SB3VecEnv(vector)
+    images = venv.get_images()
+    assert len(images) == 2 and np.array_equal(images[0], frames[0])
+    tiled = venv.render(mode="rgb_array")
+    assert tiled.ndim == 3 and tiled.shape[2] == 3
+
+
+def test_gymnasium_record_video_and_sb3_vec_video_recorder(tmp_path):
+    pytest.importorskip("moviepy")
+    from stable_baselines3.common.vec_env import VecVideoRecorder
+
+    vector = VectorDriveEnv(2, scenario="highway", render_mode="rgb_array", duration_s=2)
+    recorded = gymnasium.wrappers.vector.RecordVideo(
+        vector, str(tmp_path / "gym"), step_trigger=lambda t: t == 0
+    )
+    recorded.reset(seed=0)
+    for _ in range(4):
+        recorded.step(recorded.action_space.sample())
+    recorded.close()
+    assert list((tmp_path / "gym").glob("*.mp4"))
+    venv = VecVideoRecorder(
+        SB3VecEnv(VectorDriveEnv(2, scenario="highway", render_mode="rgb_array", autoreset_mode="same_step")),
+        str(tmp_path / "sb3"),
+        record_video_trigger=lambda t: t == 0,
+        video_length=3,
+    )
+    venv.reset()
+    for _ in range(4):
+        venv.step(np.array([1, 1]))
+    venv.close()
+    assert list((tmp_path / "sb3").glob("*.mp4"))
+
+
+def test_vector_env_round_trips_through_pickle():
+    vector = VectorDriveEnv(2, scenario="merge", obs="kinematics,lidar:beams=8:stack=2")
+    vector.reset(seed=5)
+    vector.action_space.seed(1)
+    vector.step(vector.action_space.sample())
+    copy = pickle.loads(pickle.dumps(vector))
+    for _ in range(6):
+        actions = vector.action_space.sample()
+        original, restored = vector.step(actions), copy.step(actions)
+        _equal(original[0], restored[0])
+        for a, b in zip(original[1:4], restored[1:4], strict=True):
+            np.testing.assert_array_equal(a, b)
+
+
+def test_partial_reset_starts_only_the_masked_worlds():
+    vector = VectorDriveEnv(3, scenario="highway", obs="kinematics")
+    first, _ = vector.reset(seed=0)
+    vector.step(np.array([1, 1, 1]))
+    kept = vector.observations.copy()
+    again, infos = vector.reset(options={"reset_mask": np.array([False, True, False])})
+    np.testing.assert_array_equal(again[[0, 2]], kept[[0, 2]])
+    assert infos["_episode_seed"].tolist() == [False, True, False]
+    assert not np.array_equal(again[1], first[1])  # world 1 drew its next episode seed
 
 
 def test_sb3_ppo_trains_on_the_vec_env():
-    venv = SB3VecEnv(make_vec("highway", num_envs=4, obs="kinematics", traffic="regular", duration_s=4))
+    venv = SB3VecEnv(
+        make_vec("highway", num_envs=4, autoreset_mode="same_step", **{**KWARGS, "duration_s": 4})
+    )
     model = PPO("MlpPolicy", venv, n_steps=16, batch_size=32, n_epochs=1, seed=0, device="cpu")
     model.learn(64)
     assert model.num_timesteps == 64
     venv.seed(3)
-    obs = venv.reset()
+    venv.reset()
     venv.step_async(np.array([1, 1, 1, 1]))
     obs, rewards, dones, infos = venv.step_wait()
     assert obs.shape == (4, *venv.observation_space.shape) and len(infos) == 4
     assert venv.get_attr("duration_s") == [4.0] * 4
 
 
-def test_bad_num_envs():
-    with pytest.raises(UsageError, match="num_envs must be >= 1"):
-        DriveVectorEnv(0, scenario="highway")
+def test_sb3_adapter_needs_same_step_autoreset():
+    with pytest.raises(ValueError, match="SAME_STEP"):
+        SB3VecEnv(VectorDriveEnv(2, scenario="highway"))
+
+
+@pytest.mark.parametrize("bad", [0, -1, 2.5, True])
+def test_bad_num_envs(bad):
+    with pytest.raises(UsageError, match="num_envs must be an integer >= 1"):
+        VectorDriveEnv(bad, scenario="highway")
