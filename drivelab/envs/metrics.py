@@ -73,6 +73,7 @@ class EpisodeMetrics:
         }
 
 
+_PEDESTRIAN_CODE = np.int8(COLLISION_PEDESTRIAN)  # compared with the int8 codes without a cast
 _ACCUMULATORS = (
     "episode_return", "length", "distance_m", "speed_sum_mps", "collisions", "pedestrian_collisions",
     "off_road_events", "red_lights", "blocked", "arrived",
@@ -122,7 +123,8 @@ class BatchMetrics:
         self.start_progress_m[mask] = batch.route.progress_m[mask]
         self._remember(batch, mask)
 
-    def _remember(self, batch: WorldBatch, mask: np.ndarray) -> None:
+    def _remember(self, batch: WorldBatch, mask: np.ndarray | slice) -> None:
+        """Keep what the next update compares against: the worlds where ``mask`` of ``batch``."""
         self.last_position[mask] = batch.ego.position[mask]
         self.last_collided[mask] = batch.events.collided[mask]
         self.last_off_road[mask] = batch.events.off_road[mask]
@@ -138,12 +140,12 @@ class BatchMetrics:
         self.speed_sum_mps += batch.ego.speed_mps
         new_collision = events.collided & ~self.last_collided
         self.collisions += new_collision
-        self.pedestrian_collisions += new_collision & (events.collision_kind == COLLISION_PEDESTRIAN)
+        self.pedestrian_collisions += new_collision & (events.collision_kind == _PEDESTRIAN_CODE)
         self.off_road_events += events.off_road & ~self.last_off_road
         self.red_lights += events.red_light_crossed
         self.blocked += events.blocked
         self.arrived |= events.arrived
-        self._remember(batch, np.ones(batch.num_worlds, dtype=bool))
+        self._remember(batch, slice(None))
 
     def summaries(
         self, mask: np.ndarray, has_goal: bool, timed_out: np.ndarray
