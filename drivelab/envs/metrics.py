@@ -1,9 +1,11 @@
-"""EpisodeMetrics: what evaluation reports about one episode, accumulated from WorldStates."""
+"""What evaluation reports about an episode: EpisodeMetrics for one world, accumulated from
+WorldStates, and BatchMetrics, the same for K worlds as (K,) accumulators."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from drivelab.world.batch import COLLISION_PEDESTRIAN, WorldBatch
 from drivelab.world.state import WorldState
 
 
@@ -69,3 +71,114 @@ class EpisodeMetrics:
             "blocked": self.blocked,
             "route_completion": float(np.clip(completion, 0.0, 1.0)) if has_goal else None,
         }
+
+
+_PEDESTRIAN_CODE = np.int8(COLLISION_PEDESTRIAN)  # compared with the int8 codes without a cast
+_ACCUMULATORS = (
+    "episode_return", "length", "distance_m", "speed_sum_mps", "collisions", "pedestrian_collisions",
+    "off_road_events", "red_lights", "blocked", "arrived",
+)  # fmt: skip
+
+
+class BatchMetrics:
+    """:class:`EpisodeMetrics` for K worlds at once: ``(K,)`` accumulators, reset by mask.
+
+    ``reset(batch, mask)`` starts the episodes of the masked worlds, ``update(batch, rewards)`` adds
+    one step of every world, and ``summaries(mask, has_goal, timed_out)`` gives the summary dict of
+    each masked world (the same keys and values as ``EpisodeMetrics.summary``).
+    """
+
+    def __init__(self) -> None:
+        self._allocate(0)
+
+    def _allocate(self, count: int) -> None:
+        self.episode_return = np.zeros(count)
+        self.length = np.zeros(count, dtype=np.int64)
+        self.distance_m = np.zeros(count)
+        self.speed_sum_mps = np.zeros(count)
+        self.collisions = np.zeros(count, dtype=np.int64)
+        self.pedestrian_collisions = np.zeros(count, dtype=np.int64)
+        self.off_road_events = np.zeros(count, dtype=np.int64)
+        self.red_lights = np.zeros(count, dtype=np.int64)
+        self.blocked = np.zeros(count, dtype=np.int64)
+        self.arrived = np.zeros(count, dtype=bool)
+        self.start_progress_m = np.zeros(count)
+        # the last world's ego position (K, 2), collision and off-road flags, and route
+        self.last_position = np.zeros((count, 2))
+        self.last_collided = np.zeros(count, dtype=bool)
+        self.last_off_road = np.zeros(count, dtype=bool)
+        self.last_progress_m = np.zeros(count)
+        self.last_route_length_m = np.zeros(count)
+
+    def reset(self, batch: WorldBatch, mask: np.ndarray | None = None) -> None:
+        """Start the episodes of the worlds where ``mask`` (K,; default all) from their first world
+        in ``batch``. A new number of worlds starts every world."""
+        count = batch.num_worlds
+        if mask is None or count != len(self.length):
+            self._allocate(count)
+            mask = np.ones(count, dtype=bool)
+        mask = np.asarray(mask, dtype=bool)
+        for name in _ACCUMULATORS:
+            getattr(self, name)[mask] = 0
+        self.start_progress_m[mask] = batch.route.progress_m[mask]
+        self._remember(batch, mask)
+
+    def _remember(self, batch: WorldBatch, mask: np.ndarray | slice) -> None:
+        """Keep what the next update compares against: the worlds where ``mask`` of ``batch``."""
+        self.last_position[mask] = batch.ego.position[mask]
+        self.last_collided[mask] = batch.events.collided[mask]
+        self.last_off_road[mask] = batch.events.off_road[mask]
+        self.last_progress_m[mask] = batch.route.progress_m[mask]
+        self.last_route_length_m[mask] = batch.route.length_m[mask]
+
+    def update(self, batch: WorldBatch, rewards: np.ndarray) -> None:
+        """Add the step of every world that led to ``batch``, with its ``rewards`` (K,)."""
+        events = batch.events
+        self.episode_return += rewards
+        self.length += 1
+        self.distance_m += np.linalg.norm(batch.ego.position - self.last_position, axis=1)
+        self.speed_sum_mps += batch.ego.speed_mps
+        new_collision = events.collided & ~self.last_collided
+        self.collisions += new_collision
+        self.pedestrian_collisions += new_collision & (events.collision_kind == _PEDESTRIAN_CODE)
+        self.off_road_events += events.off_road & ~self.last_off_road
+        self.red_lights += events.red_light_crossed
+        self.blocked += events.blocked
+        self.arrived |= events.arrived
+        self._remember(batch, slice(None))
+
+    def summaries(
+        self, mask: np.ndarray, has_goal: bool, timed_out: np.ndarray
+    ) -> list[dict[str, float | None]]:
+        """The final numbers of each world where ``mask`` (K,), in order (``EpisodeMetrics.summary``
+        for each; ``timed_out`` (K,) says whose episode reached its time limit)."""
+        crashed = self.collisions > 0
+        clean = ~crashed & (self.off_road_events == 0)
+        success = self.arrived if has_goal else (np.asarray(timed_out, dtype=bool) & clean)
+        finite = np.isfinite(self.last_route_length_m)
+        with np.errstate(invalid="ignore"):
+            completion = np.where(
+                finite,
+                (self.last_progress_m - self.start_progress_m)
+                / np.maximum(self.last_route_length_m - self.start_progress_m, 1e-6),
+                np.nan,
+            )
+        completion = np.clip(completion, 0.0, 1.0)
+        mean_speed = self.speed_sum_mps / np.maximum(self.length, 1)
+        return [
+            {
+                "return": float(self.episode_return[k]),
+                "length": int(self.length[k]),
+                "distance_km": float(self.distance_m[k] / 1000),
+                "mean_speed_mps": float(mean_speed[k]),
+                "success": float(success[k]),
+                "crashed": float(crashed[k]),
+                "collisions": int(self.collisions[k]),
+                "pedestrian_collisions": int(self.pedestrian_collisions[k]),
+                "off_road_events": int(self.off_road_events[k]),
+                "red_lights": int(self.red_lights[k]),
+                "blocked": int(self.blocked[k]),
+                "route_completion": float(completion[k]) if has_goal else None,
+            }
+            for k in np.flatnonzero(mask)  # only the worlds whose episode ends: a dict each
+        ]

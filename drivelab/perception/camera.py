@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.perception.base import ZEBRA_STRIPE_M, Sensor, box_corners, ego_frame, zebra_stripes
+from drivelab.perception.base import ZEBRA_STRIPE_M, Sensor, box_corners, zebra_stripes
 from drivelab.perception.birdeye import DashedMarkings
 from drivelab.perception.topdown import (
     SHIFT,
@@ -30,6 +30,8 @@ from drivelab.perception.topdown import (
     segments_near,
 )
 from drivelab.world.pinhole import PinholeModel
+from drivelab.world.road_geometry import GuideSegments, lateral_at_distances, polyline_segments  # noqa: F401
+from drivelab.world.road_geometry import ego_ground as _ego_ground
 from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW, MARKING_SOLID, RoadMap, WorldState
 
 SKY = (150, 190, 235)
@@ -51,10 +53,6 @@ PEDESTRIAN_COLOURS = ((200, 60, 160), (170, 50, 135), (200, 60, 160), (170, 50, 
 MARKING_WIDTH_M = 0.15  # white lane markings
 GUIDE_WIDTH_M = 0.3  # the follow-line circuit's yellow line is painted wider
 MASKS = ("left_line", "right_line", "guide_line")
-
-
-def _ego_ground(world: WorldState, points_world: np.ndarray) -> np.ndarray:
-    return ego_frame(points_world, world.ego.position, world.ego.heading)
 
 
 def _near_clip_m(model: PinholeModel) -> float:
@@ -114,18 +112,6 @@ def _strip_quads(segments: np.ndarray, width_m: float) -> tuple[np.ndarray, np.n
     normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1) / length[:, None] * (width_m / 2)
     quads = np.stack([start + normal, end + normal, end - normal, start - normal], axis=1)
     return quads.reshape(-1, 2), np.full(len(segments), 4, dtype=int)
-
-
-def polyline_segments(polyline: np.ndarray) -> np.ndarray:
-    return np.stack([polyline[:-1], polyline[1:]], axis=1) if len(polyline) > 1 else np.zeros((0, 2, 2))
-
-
-class GuideSegments:
-    """All guide-line polylines of a road as one segment array (computed once per road)."""
-
-    def __init__(self, road: RoadMap) -> None:
-        parts = [polyline_segments(np.asarray(line, dtype=float)) for line in road.guide_lines]
-        self.segments = np.concatenate(parts) if parts else np.zeros((0, 2, 2))
 
 
 class PaintedSegments:
@@ -201,24 +187,6 @@ def ego_lane_lines(world: WorldState) -> tuple[np.ndarray, np.ndarray]:
     half = world.ego.lane_width_m / 2
     route = np.asarray(world.route.polyline, dtype=float)
     return _offset_polyline(route, -half), _offset_polyline(route, half)
-
-
-def lateral_at_distances(world: WorldState, segments: np.ndarray, distances_m: np.ndarray) -> np.ndarray:
-    """Where world ``segments`` (M, 2, 2) cross the ground line ``x = d`` ahead of the ego: the ego-frame
-    y (m) of the crossing nearest the ego's axis, per distance (nan where nothing crosses)."""
-    distances = np.asarray(distances_m, dtype=float)
-    if len(segments) == 0:
-        return np.full(distances.shape, np.nan)
-    local = _ego_ground(world, segments)
-    x0, x1 = local[:, 0, 0][None, :], local[:, 1, 0][None, :]
-    y0, y1 = local[:, 0, 1][None, :], local[:, 1, 1][None, :]
-    d = distances.reshape(-1, 1)
-    span = np.where(np.abs(x1 - x0) < 1e-12, np.nan, x1 - x0)
-    t = (d - x0) / span
-    y = np.where((t >= 0) & (t <= 1), y0 + t * (y1 - y0), np.nan)
-    y = np.where(np.isnan(y), np.inf, y)
-    best = np.take_along_axis(y, np.argmin(np.abs(y), axis=1)[:, None], axis=1)[:, 0]
-    return np.where(np.isfinite(best), best, np.nan).reshape(distances.shape)
 
 
 def _near(world: WorldState, segments: np.ndarray, model: PinholeModel) -> np.ndarray:

@@ -18,10 +18,9 @@ from gymnasium import spaces
 from drivelab.perception.base import Sensor
 from drivelab.perception.camera import PinholeModel, render_camera
 from drivelab.perception.line import row_centres
+from drivelab.world.pinhole import LANE_CAMERA, LANE_ROWS_M
 from drivelab.world.state import WorldState
 
-LANE_CAMERA = PinholeModel(width=160, height=120, fov_deg=90, height_m=1.5, pitch_deg=15, max_range_m=80)
-LANE_ROWS_M = (4.0, 6.0, 9.0, 13.0)  # nearest row first; the seed does not give its rows
 LANE_WIDTH_M = 3.5
 SEED_IMAGE_WIDTH = 1024  # the seed's f* bands are in pixels of a 1024-wide frame
 # State strips: the offset of C from the image centre against the seed's own f* band edges 30 and

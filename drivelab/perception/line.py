@@ -15,13 +15,10 @@ import numpy as np
 from gymnasium import spaces
 
 from drivelab.perception.base import Sensor
-from drivelab.perception.camera import PinholeModel, render_camera
+from drivelab.perception.camera import render_camera
+from drivelab.world.pinhole import LINE_CAMERA, LINE_ROWS_M
 from drivelab.world.state import WorldState
 
-# A 160 x 120 camera with the line rows 3–8 m ahead, where the 0.3 m line is at least 3 px wide,
-# so that a 3 x 3 opening keeps it. The seed does not give its rows; these are our choice.
-LINE_CAMERA = PinholeModel(width=160, height=120, fov_deg=90, height_m=1.5, pitch_deg=15, max_range_m=80)
-LINE_ROWS_M = (3.0, 4.5, 6.0, 8.0)  # nearest row first
 # OpenCV hue runs 0–180: yellow is about 30; saturated and bright, unlike road, grass and sky
 YELLOW_LOW, YELLOW_HIGH = np.array([20, 120, 120]), np.array([40, 255, 255])
 

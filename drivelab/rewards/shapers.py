@@ -4,8 +4,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from drivelab.errors import UsageError
 from drivelab.rewards.terms import TERMS
+from drivelab.world.batch import WorldBatch
 from drivelab.world.state import WorldState
 
 
@@ -106,21 +109,30 @@ def parse_reward(spec: str | dict | RewardSpec) -> RewardSpec:
 
 
 class RewardShaper:
-    """Computes the reward of a step and every term's weighted contribution."""
+    """Computes the reward of a step for K worlds and every term's weighted contribution."""
 
     def __init__(self, spec: str | dict | RewardSpec) -> None:
         self.spec = parse_reward(spec)
         self.terms = {name: TERMS[name] for name in self.spec.weights}
 
-    def __call__(self, prev: WorldState, world: WorldState, control) -> tuple[float, dict[str, float]]:
-        """(reward, {term: weight · value}) for the step prev → world."""
+    def __call__(self, prev: WorldBatch | WorldState, batch: WorldBatch | WorldState, control) -> tuple:
+        """``(rewards (K,), {term: weight · value (K,)})`` for the step prev → batch, ``control``
+        being ``(K,)`` meta-actions or ``(K, 2)`` continuous controls. For one world (two
+        WorldStates and its control) the same as floats: ``(reward, {term: weight · value})``."""
+        if isinstance(batch, WorldState):
+            control = None if control is None else np.asarray(control)[None]
+            rewards, contributions = self(WorldBatch.stack([prev]), WorldBatch.stack([batch]), control)
+            return float(rewards[0]), {name: float(value[0]) for name, value in contributions.items()}
         contributions = {
-            name: self.spec.weights[name] * float(fn(prev, world, control)) for name, fn in self.terms.items()
+            name: self.spec.weights[name] * np.asarray(fn(prev, batch, control), dtype=float)
+            for name, fn in self.terms.items()
         }
-        reward = sum(contributions.values())
+        rewards = np.zeros(batch.num_worlds)
+        for value in contributions.values():  # in the spec's order, as the single-world sum was
+            rewards = rewards + value
         if self.spec.normalize is not None:
             low, high = self.spec.normalize
-            reward = (reward - low) / (high - low)
+            rewards = (rewards - low) / (high - low)
         if self.spec.gate is not None:
-            reward *= float(TERMS[self.spec.gate](prev, world, control))
-        return float(reward), contributions
+            rewards = rewards * np.asarray(TERMS[self.spec.gate](prev, batch, control), dtype=float)
+        return rewards, contributions

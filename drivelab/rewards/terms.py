@@ -1,7 +1,10 @@
-"""Reward terms: small pure functions ``term(prev, world, control) -> float``.
+"""Reward terms: small pure functions ``term(prev, batch, control) -> (K,)``.
 
-Each reads only WorldStates (the one before the step and the one after) and returns an
-unweighted value; presets and users weight them (see ``drivelab.rewards.shapers``).
+Each reads only WorldBatches (the K worlds before the step and after it) and the controls that
+were applied, and returns one unweighted value per world as a float ``(K,)`` array; presets and
+users weight them (see ``drivelab.rewards.shapers``). ``control`` is ``(K,)`` meta-action indices
+or ``(K, 2)`` normalised ``[acceleration, steering]`` in [-1, 1] (highway-env's order); terms
+that do not read it accept None. All arithmetic is over the K worlds at once.
 """
 
 from __future__ import annotations
@@ -10,10 +13,17 @@ from collections.abc import Callable
 
 import numpy as np
 
-from drivelab.world.geometry import ego_frame
+from drivelab.world.batch import WorldBatch
+from drivelab.world.geometry import FULL_LOCK_DEG, ego_frame
+from drivelab.world.pinhole import LANE_CAMERA, LANE_ROWS_M, LINE_CAMERA, LINE_ROWS_M, PinholeModel
+from drivelab.world.road_geometry import (
+    batch_guide_segments,
+    batch_lateral_at_distances,
+    batch_route_segments,
+)
 from drivelab.world.state import LIGHT_GREEN, WorldState
 
-Term = Callable[[WorldState, WorldState, object], float]
+Term = Callable[[WorldBatch, WorldBatch, np.ndarray | None], np.ndarray]
 TERMS: dict[str, Term] = {}
 
 
@@ -23,88 +33,92 @@ def term(function: Term) -> Term:
     return function
 
 
-def _lateral_fraction(world: WorldState) -> float:
-    """|lateral offset| as a fraction of half the lane width, in [0, 1]."""
-    half_width = max(world.ego.lane_width_m / 2, 1e-6)
-    return float(min(abs(world.ego.lateral_offset_m) / half_width, 1.0))
+def _flag(values: np.ndarray) -> np.ndarray:
+    return np.asarray(values, dtype=float)
+
+
+def _lateral_fraction(batch: WorldBatch) -> np.ndarray:
+    """(K,) |lateral offset| as a fraction of half the lane width, in [0, 1]."""
+    half_width = np.maximum(batch.ego.lane_width_m / 2, 1e-6)
+    return np.minimum(np.abs(batch.ego.lateral_offset_m) / half_width, 1.0)
 
 
 # --- highway-env's own reward (HighwayEnv._rewards) -------------------------------------------
 @term
-def collision(prev: WorldState, world: WorldState, control) -> float:
+def collision(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """1 when the ego collided during the step."""
-    return float(world.events.collided)
+    return _flag(batch.events.collided)
 
 
 @term
-def right_lane(prev: WorldState, world: WorldState, control) -> float:
+def right_lane(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """Target lane index over the rightmost index: 1 on the rightmost lane, 0 on the leftmost."""
-    return world.ego.target_lane_id / max(world.ego.lane_count - 1, 1)
+    return batch.ego.target_lane_id / np.maximum(batch.ego.lane_count - 1, 1)
 
 
 @term
-def high_speed(prev: WorldState, world: WorldState, control) -> float:
+def high_speed(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """Forward speed mapped linearly from [2/3, 1]·speed limit to [0, 1], clipped.
 
     On highway (limit 30 m/s) this is highway-env's ``reward_speed_range`` [20, 30].
     """
-    low, high = world.speed_limit_mps * 2 / 3, world.speed_limit_mps
-    return float(np.clip((world.ego.forward_speed_mps - low) / (high - low), 0.0, 1.0))
+    low, high = batch.speed_limit_mps * 2 / 3, batch.speed_limit_mps
+    return np.clip((batch.ego.forward_speed_mps - low) / (high - low), 0.0, 1.0)
 
 
 @term
-def on_road(prev: WorldState, world: WorldState, control) -> float:
+def on_road(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """1 while the ego is on a lane."""
-    return float(world.ego.on_road)
+    return _flag(batch.ego.on_road)
 
 
 # --- seed 003, the MetaDrive course reward ----------------------------------------------------
 @term
-def progress_lateral(prev: WorldState, world: WorldState, control) -> float:
+def progress_lateral(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """Metres of route progress weighted by lane centring: progress · (1 − |lateral|³) (seed 003)."""
-    progress_m = world.route.progress_m - prev.route.progress_m
-    return progress_m * (1.0 - _lateral_fraction(world) ** 3)
+    progress_m = batch.route.progress_m - prev.route.progress_m
+    return progress_m * (1.0 - _lateral_fraction(batch) ** 3)
 
 
 @term
-def speed(prev: WorldState, world: WorldState, control) -> float:
+def speed(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """Speed over 70 % of the top speed, clipped to 1, halved inside junctions (seed 003)."""
-    value = min(world.ego.speed_mps / (0.7 * world.max_speed_mps), 1.0)
-    return value / 2 if world.ego.in_intersection else value
+    value = np.minimum(batch.ego.speed_mps / (0.7 * batch.max_speed_mps), 1.0)
+    return np.where(batch.ego.in_intersection, value / 2, value)
 
 
 @term
-def crash(prev: WorldState, world: WorldState, control) -> float:
+def crash(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """1 on a collision with anything (MetaDrive's crash penalty is weighted −5)."""
-    return float(world.events.collided)
+    return _flag(batch.events.collided)
 
 
 @term
-def off_road(prev: WorldState, world: WorldState, control) -> float:
+def off_road(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """1 when the ego has left the road."""
-    return float(world.events.off_road)
+    return _flag(batch.events.off_road)
 
 
 @term
-def arrival(prev: WorldState, world: WorldState, control) -> float:
+def arrival(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """1 when the scenario's goal is reached."""
-    return float(world.events.arrived)
+    return _flag(batch.events.arrived)
 
 
 # --- seed 003, the safety-focused table used with SB3 DQN (values are the table's) ------------
 @term
-def centered(prev: WorldState, world: WorldState, control) -> float:
+def centered(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """+0.3 while within 0.5 m of the lane centre."""
-    return 0.3 if abs(world.ego.lateral_offset_m) < 0.5 else 0.0
+    return np.where(np.abs(batch.ego.lateral_offset_m) < 0.5, 0.3, 0.0)
 
 
 OVERSPEED_MPS = 20 / 3.6  # the seed capped its agent at 20 km/h
 
 
 @term
-def overspeed(prev: WorldState, world: WorldState, control) -> float:
+def overspeed(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """−1.0 above 20 km/h (the seed's cap; re-weight or drop it on fast roads)."""
-    return -1.0 if world.ego.speed_mps > OVERSPEED_MPS else 0.0
+    return np.where(batch.ego.speed_mps > OVERSPEED_MPS, -1.0, 0.0)
 
 
 CURVE_CURVATURE = 0.01  # 1/m: radius under 100 m counts as a curve
@@ -112,65 +126,69 @@ CURVE_LATERAL_ACCEL_MPS2 = 3.0  # comfortable lateral acceleration that sets the
 
 
 @term
-def curve_control(prev: WorldState, world: WorldState, control) -> float:
+def curve_control(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """In curves: +0.2 below the safe speed sqrt(a_lat/|κ|) or while slowing down, else −0.5."""
-    curvature = abs(world.ego.lane_curvature)
-    if curvature < CURVE_CURVATURE:
-        return 0.0
-    safe_speed = np.sqrt(CURVE_LATERAL_ACCEL_MPS2 / curvature)
-    slowing = world.ego.speed_mps < prev.ego.speed_mps
-    return 0.2 if world.ego.speed_mps <= safe_speed or slowing else -0.5
+    curvature = np.abs(batch.ego.lane_curvature)
+    in_curve = curvature >= CURVE_CURVATURE
+    # straight worlds get a stand-in curvature: their value is 0 whatever the safe speed
+    safe_speed = np.sqrt(CURVE_LATERAL_ACCEL_MPS2 / np.where(in_curve, curvature, 1.0))
+    speed_mps = batch.ego.speed_mps
+    calm = (speed_mps <= safe_speed) | (speed_mps < prev.ego.speed_mps)
+    return np.where(in_curve, np.where(calm, 0.2, -0.5), 0.0)
+
+
+def _heading_error(heading: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """(K,) |heading − reference| wrapped to [0, π]."""
+    return np.abs(np.angle(np.exp(1j * (heading - reference))))
 
 
 @term
-def intersection_heading(prev: WorldState, world: WorldState, control) -> float:
+def intersection_heading(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """In junctions: +0.3 when heading within 15° of the lane direction, else −0.5."""
-    if not world.ego.in_intersection:
-        return 0.0
-    error = abs(np.angle(np.exp(1j * (world.ego.heading - world.ego.lane_heading))))
-    return 0.3 if error < np.radians(15) else -0.5
+    aligned = _heading_error(batch.ego.heading, batch.ego.lane_heading) < np.radians(15)
+    return np.where(batch.ego.in_intersection, np.where(aligned, 0.3, -0.5), 0.0)
 
 
 @term
-def destination_proximity(prev: WorldState, world: WorldState, control) -> float:
+def destination_proximity(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """+0.4 within 50 m of the route's end (routes that never end give 0)."""
-    return 0.4 if np.isfinite(world.route.length_m) and world.route.remaining_m < 50 else 0.0
+    near = np.isfinite(batch.route.length_m) & (batch.route.remaining_m < 50)
+    return np.where(near, 0.4, 0.0)
 
 
 @term
-def steering_smoothness(prev: WorldState, world: WorldState, control) -> float:
+def steering_smoothness(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """+0.1 for a steering change under 0.05 rad in a step, −0.2 over 0.2 rad."""
-    change = abs(world.ego.steering - prev.ego.steering)
-    return 0.1 if change < 0.05 else (-0.2 if change > 0.2 else 0.0)
+    change = np.abs(batch.ego.steering - prev.ego.steering)
+    return np.where(change < 0.05, 0.1, np.where(change > 0.2, -0.2, 0.0))
 
 
-def _vehicles_alongside_ahead(world: WorldState) -> tuple[int, float]:
-    """Vehicles in the next lanes within 30 m ahead, and the nearest vehicle's distance."""
-    if len(world.vehicles) == 0:
-        return 0, np.inf
-    delta = world.vehicles[:, :2] - world.ego.position
-    cos_h, sin_h = np.cos(world.ego.heading), np.sin(world.ego.heading)
-    ahead = delta[:, 0] * cos_h + delta[:, 1] * sin_h
-    beside = np.abs(-delta[:, 0] * sin_h + delta[:, 1] * cos_h)
-    count = int(np.sum((ahead > 0) & (ahead < 30) & (beside > 1.5) & (beside < 8)))
-    return count, float(np.min(np.hypot(delta[:, 0], delta[:, 1])))
+def _vehicles_alongside_ahead(batch: WorldBatch) -> tuple[np.ndarray, np.ndarray]:
+    """(K,) vehicles in the next lanes within 30 m ahead, and (K,) the nearest vehicle's distance
+    (inf without vehicles)."""
+    ego = batch.ego
+    delta = batch.vehicles[..., :2] - ego.position[:, None, :]  # (K, N, 2)
+    cos_h, sin_h = np.cos(ego.heading)[:, None], np.sin(ego.heading)[:, None]
+    ahead = delta[..., 0] * cos_h + delta[..., 1] * sin_h
+    beside = np.abs(-delta[..., 0] * sin_h + delta[..., 1] * cos_h)
+    alongside = batch.vehicle_valid & (ahead > 0) & (ahead < 30) & (beside > 1.5) & (beside < 8)
+    distance = np.where(batch.vehicle_valid, np.hypot(delta[..., 0], delta[..., 1]), np.inf)
+    return alongside.sum(axis=1), np.min(distance, axis=1, initial=np.inf)
 
 
 @term
-def overtaking(prev: WorldState, world: WorldState, control) -> float:
+def overtaking(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """When a vehicle in a next lane goes from ahead to behind: +0.2 if passed with > 3 m
-    clearance, −0.5 if closer (the seed's LiDAR-based rule, read from the WorldState)."""
+    clearance, −0.5 if closer (the seed's LiDAR-based rule, read from the WorldBatch)."""
     before, _ = _vehicles_alongside_ahead(prev)
-    after, nearest_m = _vehicles_alongside_ahead(world)
-    if after >= before:
-        return 0.0
-    return 0.2 if nearest_m > 3.0 else -0.5
+    after, nearest_m = _vehicles_alongside_ahead(batch)
+    return np.where(after >= before, 0.0, np.where(nearest_m > 3.0, 0.2, -0.5))
 
 
 @term
-def sidewalk_crash(prev: WorldState, world: WorldState, control) -> float:
+def sidewalk_crash(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """−4.0 when the ego leaves the road."""
-    return -4.0 if world.events.off_road else 0.0
+    return np.where(batch.events.off_road, -4.0, 0.0)
 
 
 # --- seed 000 (RLAD) trains with CARLA-Roach's reward (shared/notes/RLAD-NOTES.md) -----------
@@ -178,84 +196,86 @@ ROACH_MAX_SPEED_MPS = 6.0
 ROACH_STEER_RAD = np.pi / 4  # steering is compared as the normalised command (highway-env: ±45°)
 
 
-def _hazard_speed(distance_m: float, stop_distance_m: float) -> float:
+def _hazard_speed(distance_m: np.ndarray, stop_distance_m: float) -> np.ndarray:
     """Roach: v_max · clip(d − d0, 0, 5) / 5, a speed that falls to 0 at d0 from the hazard."""
-    return ROACH_MAX_SPEED_MPS * float(np.clip(distance_m - stop_distance_m, 0.0, 5.0)) / 5.0
+    return ROACH_MAX_SPEED_MPS * np.clip(distance_m - stop_distance_m, 0.0, 5.0) / 5.0
 
 
-def roach_desired_speed(world: WorldState) -> float:
-    """v* = min(v_max, v_vehicle, v_pedestrian, v_light): slow for a vehicle within 9.5 m and ±45°
-    ahead (d0 = 8 m), for a pedestrian in the ego's path (ahead, within a lane's half width of its
-    axis; d0 = 6 m) and for a red or yellow light whose stop line is ahead in the ego's lane
-    (d0 = 5 m)."""
-    desired = ROACH_MAX_SPEED_MPS
-    ego = world.ego
-    if len(world.vehicles):
-        local = ego_frame(world.vehicles[:, :2], ego.position, ego.heading)
-        distance = np.hypot(local[:, 0], local[:, 1])
-        ahead = (distance < 9.5) & (np.abs(np.arctan2(local[:, 1], local[:, 0])) <= np.pi / 4)
-        if ahead.any():
-            desired = min(desired, _hazard_speed(float(distance[ahead].min()), 8.0))
-    if len(world.pedestrians):
-        local = ego_frame(world.pedestrians[:, :2], ego.position, ego.heading)
-        in_path = (local[:, 0] > 0) & (np.abs(local[:, 1]) < ego.lane_width_m / 2)
-        if in_path.any():
-            desired = min(desired, _hazard_speed(float(local[in_path, 0].min()), 6.0))
-    light = world.light_ahead(max_distance_m=np.inf)
-    if light is not None and light[0] != LIGHT_GREEN:
-        desired = min(desired, _hazard_speed(light[1], 5.0))
-    return desired
+def roach_desired_speed(batch: WorldBatch | WorldState) -> np.ndarray:
+    """(K,) v* = min(v_max, v_vehicle, v_pedestrian, v_light): slow for a vehicle within 9.5 m and
+    ±45° ahead (d0 = 8 m), for a pedestrian in the ego's path (ahead, within a lane's half width of
+    its axis; d0 = 6 m) and for a red or yellow light whose stop line is ahead in the ego's lane
+    (d0 = 5 m). A WorldState gives its one value as a float."""
+    if isinstance(batch, WorldState):
+        return float(roach_desired_speed(WorldBatch.stack([batch]))[0])
+    ego = batch.ego
+    desired = np.full(batch.num_worlds, ROACH_MAX_SPEED_MPS)
+    position, heading = ego.position[:, None, :], ego.heading[:, None]
+    local = ego_frame(batch.vehicles[..., :2], position, heading)  # (K, N, 2)
+    distance = np.hypot(local[..., 0], local[..., 1])
+    ahead = (
+        batch.vehicle_valid
+        & (distance < 9.5)
+        & (np.abs(np.arctan2(local[..., 1], local[..., 0])) <= np.pi / 4)
+    )
+    nearest = np.min(np.where(ahead, distance, np.inf), axis=1, initial=np.inf)
+    desired = np.where(ahead.any(axis=1), np.minimum(desired, _hazard_speed(nearest, 8.0)), desired)
+    local = ego_frame(batch.pedestrians[..., :2], position, heading)  # (K, P, 2)
+    in_path = (
+        batch.pedestrian_valid & (local[..., 0] > 0) & (np.abs(local[..., 1]) < ego.lane_width_m[:, None] / 2)
+    )
+    nearest = np.min(np.where(in_path, local[..., 0], np.inf), axis=1, initial=np.inf)
+    desired = np.where(in_path.any(axis=1), np.minimum(desired, _hazard_speed(nearest, 6.0)), desired)
+    state, distance_m = batch.light_ahead(max_distance_m=np.inf)
+    stop = (state >= 0) & (state != LIGHT_GREEN)
+    return np.where(stop, np.minimum(desired, _hazard_speed(distance_m, 5.0)), desired)
 
 
-def _route_pose(world: WorldState) -> tuple[np.ndarray, float]:
-    point, heading = world.route.poses_at(world.route.progress_m)
-    return point, float(heading)
+def _route_pose(batch: WorldBatch) -> tuple[np.ndarray, np.ndarray]:
+    """(K, 2) point and (K,) heading of each route at the ego's progress."""
+    return batch.route.poses_at(batch.route.progress_m)
 
 
 @term
-def roach_speed(prev: WorldState, world: WorldState, control) -> float:
+def roach_speed(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """1 − |v − v*| / v_max: drive at the hazard-aware desired speed."""
-    return 1.0 - abs(world.ego.speed_mps - roach_desired_speed(world)) / ROACH_MAX_SPEED_MPS
+    return 1.0 - np.abs(batch.ego.speed_mps - roach_desired_speed(batch)) / ROACH_MAX_SPEED_MPS
 
 
 @term
-def roach_position(prev: WorldState, world: WorldState, control) -> float:
+def roach_position(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """−(distance from the route, m) / 2."""
-    point, _ = _route_pose(world)
-    return -float(np.linalg.norm(world.ego.position - point)) / 2.0
+    point, _ = _route_pose(batch)
+    return -np.linalg.norm(batch.ego.position - point, axis=1) / 2.0
 
 
 @term
-def roach_rotation(prev: WorldState, world: WorldState, control) -> float:
+def roach_rotation(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """−|heading error against the route| (rad)."""
-    _, heading = _route_pose(world)
-    return -abs(float(np.angle(np.exp(1j * (world.ego.heading - heading)))))
+    _, heading = _route_pose(batch)
+    return -_heading_error(batch.ego.heading, heading)
 
 
 @term
-def roach_action(prev: WorldState, world: WorldState, control) -> float:
+def roach_action(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """−0.1 when the normalised steering changed by more than 0.01 in the step."""
-    change = abs(world.ego.steering - prev.ego.steering) / ROACH_STEER_RAD
-    return -0.1 if change > 0.01 else 0.0
+    change = np.abs(batch.ego.steering - prev.ego.steering) / ROACH_STEER_RAD
+    return np.where(change > 0.01, -0.1, 0.0)
 
 
 @term
-def roach_terminal(prev: WorldState, world: WorldState, control) -> float:
+def roach_terminal(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """−1 when the episode fails (collision, red light run, off-road, blocked, off the route), and
     a further −speed (m/s) for a collision or a red light run."""
-    events = world.events
-    failed = (
-        events.collided or events.red_light_crossed or events.off_road or events.blocked or events.off_route
-    )
-    value = -1.0 if failed else 0.0
-    if events.collided or events.red_light_crossed:
-        value -= world.ego.speed_mps
-    return value
+    events = batch.events
+    failed = events.collided | events.red_light_crossed | events.off_road | events.blocked | events.off_route
+    value = np.where(failed, -1.0, 0.0)
+    return np.where(events.collided | events.red_light_crossed, value - batch.ego.speed_mps, value)
 
 
 # --- seed 004, follow-line (eqs. 2, 3) and follow-lane (eq. 4) ---------------------------------
 # Both read where the painted line / the lane centre crosses the perception rows of the camera,
-# projected from the WorldState's geometry (ground truth), in pixels of the seed's own frame
+# projected from the WorldBatch's geometry (ground truth), in pixels of the seed's own frame
 # width (640 for the line, 1024 for the lane) so that its pixel bands apply unchanged.
 LINE_BAND_EDGES_PX = np.array([38.0, 2 * 38, 3 * 38, 5 * 38, 6 * 38])
 # the extracted fourth value reads "39"; we take 3 so that the values keep falling (15, 12, 10, 3, 1)
@@ -264,76 +284,87 @@ STEERING_BASE = 1.02  # the seed's λ
 LANE_BAND_EDGES_PX = np.array([15.0, 2 * 15, 3 * 20, 4 * 20])  # as extracted: 15, 30, 60, 80
 LANE_BAND_VALUES = np.array([10.0, 5.0, 2.5, 1.0, -10.0])
 LANE_ALIGNED_DEG = 6.0  # the seed's ζ
-FULL_LOCK_DEG = 45.0  # normalised steering 1 (highway-env's ContinuousAction)
 
 
-def _crossing_columns(world: WorldState, segments: np.ndarray, model, distances_m) -> np.ndarray:
-    """Image columns where ``segments`` cross the ground rows ``distances_m`` ahead (nan: not in view)."""
-    from drivelab.perception.camera import lateral_at_distances
-
+def crossing_columns(
+    batch: WorldBatch, segments: np.ndarray, model: PinholeModel, distances_m: tuple[float, ...]
+) -> np.ndarray:
+    """(K, D) image columns where each world's ``segments`` (K, M, 2, 2) cross the ground rows
+    ``distances_m`` (D,) ahead of its ego (nan: not in view)."""
     distances = np.asarray(distances_m, dtype=float)
-    lateral = lateral_at_distances(world, segments, distances)
-    columns = model.project_ground(np.stack([distances, np.nan_to_num(lateral)], axis=1))[:, 0]
+    lateral = batch_lateral_at_distances(batch, segments, distances)  # (K, D)
+    ground = np.stack([np.broadcast_to(distances, lateral.shape), np.nan_to_num(lateral)], axis=-1)
+    columns = model.project_ground(ground)[..., 0]
     inside = np.isfinite(lateral) & (columns >= -0.5) & (columns <= model.width - 0.5)
     return np.where(inside, columns, np.nan)
 
 
-def _steering_deg(control) -> float:
-    values = np.asarray(control, dtype=float).reshape(-1)
-    return float(values[1]) * FULL_LOCK_DEG if values.size == 2 else 0.0
+def _crossing_columns(
+    world: WorldState, segments: np.ndarray, model: PinholeModel, distances_m
+) -> np.ndarray:
+    """:func:`crossing_columns` of one world with segments (M, 2, 2): (D,) columns (tests)."""
+    segments = np.asarray(segments, dtype=float).reshape(1, -1, 2, 2)
+    return crossing_columns(WorldBatch.stack([world]), segments, model, distances_m)[0]
+
+
+def _steering_deg(control, num_worlds: int) -> np.ndarray:
+    """(K,) commanded front-wheel angle in degrees: 0 for meta-actions (no steering command)."""
+    if control is None:
+        return np.zeros(num_worlds)
+    values = np.asarray(control, dtype=float)
+    if values.ndim == 2 and values.shape[1] == 2:
+        return values[:, 1] * FULL_LOCK_DEG
+    return np.zeros(num_worlds)
 
 
 @term
-def line_centring(prev: WorldState, world: WorldState, control) -> float:
+def line_centring(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """Σ_j f(C_j) over the 4 line rows: 15 … 1 as the line's centre moves away from the image centre
     in 38 px bands (of 640), −100 for a row where the line is out of view (seed 004, eq. 2)."""
-    from drivelab.perception.camera import GuideSegments
-    from drivelab.perception.line import LINE_CAMERA, LINE_ROWS_M
-    from drivelab.perception.topdown import per_road
-
-    guide = per_road(world.road, GuideSegments).segments
-    columns = _crossing_columns(world, guide, LINE_CAMERA, LINE_ROWS_M)
+    columns = crossing_columns(batch, batch_guide_segments(batch), LINE_CAMERA, LINE_ROWS_M)  # (K, 4)
     offset_px = np.abs(columns - LINE_CAMERA.centre[0]) * 640 / LINE_CAMERA.width
     values = LINE_BAND_VALUES[np.searchsorted(LINE_BAND_EDGES_PX, np.nan_to_num(offset_px, nan=1e9), "right")]
-    return float(values.sum())
+    return values.sum(axis=1)
 
 
 @term
-def speed_mps(prev: WorldState, world: WorldState, control) -> float:
+def speed_mps(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """The ego's speed in m/s (seed 004, eq. 3: ``+ v``)."""
-    return world.ego.speed_mps
+    return np.asarray(batch.ego.speed_mps, dtype=float)
 
 
 @term
-def steering_power(prev: WorldState, world: WorldState, control) -> float:
+def steering_power(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """λ^|α| with λ = 1.02 and α the commanded front-wheel angle in degrees (seed 004, eq. 3; the
     extracted formula is garbled: we read it as a penalty growing with the steering angle)."""
-    return STEERING_BASE ** abs(_steering_deg(control))
+    return STEERING_BASE ** np.abs(_steering_deg(control, batch.num_worlds))
 
 
 @term
-def lane_keeping(prev: WorldState, world: WorldState, control) -> float:
+def lane_keeping(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """Seed 004, eq. 4: f*(C) by the lane centre's offset C from the image centre (10, 5, 2.5, 1, −10 in
     bands 15/30/60/80 px of 1024), doubled when the lane is within ζ = 6° of the image vertical and
     the action goes straight, halved when aligned but steering (the extracted text is garbled there;
     this is our reading of "higher reward when aligned and going straight")."""
-    from drivelab.perception.camera import polyline_segments
-    from drivelab.perception.lane import LANE_CAMERA, LANE_ROWS_M
-
-    centre = polyline_segments(np.asarray(world.route.polyline, dtype=float))
-    columns = _crossing_columns(world, centre, LANE_CAMERA, LANE_ROWS_M)
+    columns = crossing_columns(batch, batch_route_segments(batch), LANE_CAMERA, LANE_ROWS_M)  # (K, D)
     seen = np.isfinite(columns)
-    if not seen.any():
-        return float(LANE_BAND_VALUES[-1])
-    offset_px = abs(np.mean(columns[seen]) - LANE_CAMERA.centre[0]) * 1024 / LANE_CAMERA.width
-    value = float(LANE_BAND_VALUES[np.searchsorted(LANE_BAND_EDGES_PX, offset_px, "right")])
-    if seen.sum() < 2:
-        return value
+    count = seen.sum(axis=1)
+    mean = np.nansum(columns, axis=1) / np.maximum(count, 1)  # C: the mean of the rows seen
+    offset_px = np.abs(mean - LANE_CAMERA.centre[0]) * 1024 / LANE_CAMERA.width
+    value = np.where(
+        count > 0,
+        LANE_BAND_VALUES[np.searchsorted(LANE_BAND_EDGES_PX, offset_px, "right")],
+        LANE_BAND_VALUES[-1],
+    )
     # g*: angle between the image vertical (p1 → p2) and the lane direction (p3 → p4), nearest and
     # farthest rows where the centre is seen
-    rows = LANE_CAMERA.row_of_distance(np.asarray(LANE_ROWS_M)[seen])
-    near, far = np.array([columns[seen][0], rows[0]]), np.array([columns[seen][-1], rows[-1]])
-    angle_deg = abs(np.degrees(np.arctan2(far[0] - near[0], near[1] - far[1])))
-    if angle_deg > LANE_ALIGNED_DEG:
-        return value
-    return 2.0 * value if abs(_steering_deg(control)) < 1e-6 else value / 2.0
+    rows = LANE_CAMERA.row_of_distance(np.asarray(LANE_ROWS_M))  # (D,)
+    worlds = np.arange(batch.num_worlds)
+    near = np.argmax(seen, axis=1)
+    far = seen.shape[1] - 1 - np.argmax(seen[:, ::-1], axis=1)
+    angle_deg = np.abs(
+        np.degrees(np.arctan2(columns[worlds, far] - columns[worlds, near], rows[near] - rows[far]))
+    )
+    aligned = (count >= 2) & (angle_deg <= LANE_ALIGNED_DEG)
+    straight = np.abs(_steering_deg(control, batch.num_worlds)) < 1e-6
+    return np.where(aligned, np.where(straight, 2.0 * value, value / 2.0), value)

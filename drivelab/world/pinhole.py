@@ -97,3 +97,12 @@ class PinholeModel:
         along = np.cos(pitch) - slope * np.sin(pitch)
         with np.errstate(divide="ignore"):
             return np.where(falling > 1e-9, self.forward_m + self.height_m * along / falling, np.inf)
+
+
+# The follow-line and follow-lane cameras of seed 004 (their sensors and reward terms share them).
+# A 160 x 120 camera with the line rows 3–8 m ahead, where the 0.3 m line is at least 3 px wide,
+# so that a 3 x 3 opening keeps it. The seed does not give its rows; these are our choice.
+LINE_CAMERA = PinholeModel(width=160, height=120, fov_deg=90, height_m=1.5, pitch_deg=15, max_range_m=80)
+LINE_ROWS_M = (3.0, 4.5, 6.0, 8.0)  # nearest row first
+LANE_CAMERA = PinholeModel(width=160, height=120, fov_deg=90, height_m=1.5, pitch_deg=15, max_range_m=80)
+LANE_ROWS_M = (4.0, 6.0, 9.0, 13.0)  # nearest row first; the seed does not give its rows

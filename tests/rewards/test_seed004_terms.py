@@ -8,6 +8,7 @@ import pytest
 from drivelab.rewards import terms
 from drivelab.rewards.shapers import RewardShaper
 from drivelab.world.state import RoadMap, Route
+from tests.rewards.one_world import one
 from tests.worlds import world
 
 LINE = np.array([[-50.0, 0.0], [500.0, 0.0]])
@@ -19,10 +20,10 @@ def _guided(**ego):
 
 
 def test_line_centring_bands():
-    assert terms.line_centring(None, _guided(), None) == 4 * 15  # the line under the image centre
-    assert terms.line_centring(None, world(), None) == 4 * -100  # no line in sight
+    assert one(terms.line_centring, None, _guided(), None) == 4 * 15  # the line under the image centre
+    assert one(terms.line_centring, None, world(), None) == 4 * -100  # no line in sight
     # 0.8 m to the side: at 3 m ahead the line is 0.8·f/depth px off centre, more than 3·38 of 640
-    shifted = terms.line_centring(None, _guided(position=np.array([0.0, 0.8])), None)
+    shifted = one(terms.line_centring, None, _guided(position=np.array([0.0, 0.8])), None)
     assert shifted < 4 * 15 and shifted > 4 * -100
 
 
@@ -37,13 +38,13 @@ def test_line_follow_preset_sums_terms():
 def test_lane_keeping_alignment_and_action():
     w = dataclasses.replace(world(), route=Route(LINE, 0.0, np.inf))
     straight, turning = np.array([0.6, 0.0]), np.array([0.35, 0.04])
-    assert terms.lane_keeping(None, w, straight) == 20.0  # centred (10), aligned and straight: x2
-    assert terms.lane_keeping(None, w, turning) == 5.0  # aligned but steering: /2
+    assert one(terms.lane_keeping, None, w, straight) == 20.0  # centred (10), aligned and straight: x2
+    assert one(terms.lane_keeping, None, w, turning) == 5.0  # aligned but steering: /2
     # heading 15° off: the centre moves more than 80 px (of 1024) off the image centre → f* = −10,
     # while the centre points still run within 6° of the image vertical: doubled for going straight
     skewed = dataclasses.replace(w, ego=dataclasses.replace(w.ego, heading=np.radians(15)))
-    assert terms.lane_keeping(None, skewed, straight) == -20.0
+    assert one(terms.lane_keeping, None, skewed, straight) == -20.0
     behind = dataclasses.replace(
         w, ego=dataclasses.replace(w.ego, heading=np.pi, position=np.array([-60.0, 0]))
     )
-    assert terms.lane_keeping(None, behind, straight) == -10.0  # the lane out of view
+    assert one(terms.lane_keeping, None, behind, straight) == -10.0  # the lane out of view
