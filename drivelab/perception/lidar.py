@@ -154,29 +154,31 @@ class Lidar(Sensor):
         delta_x, delta_y = users[..., 0] - position_x, users[..., 1] - position_y
         box_x = delta_x * cos_h + delta_y * sin_h  # (K, U)
         box_y = -delta_x * sin_h + delta_y * cos_h
-        length, width = users[..., 4], users[..., 5]
         # a body whose centre is farther than range + half its diagonal cannot be hit
-        reach = self.range_m + 0.5 * np.hypot(length, width)
-        valid = valid & (box_x * box_x + box_y * box_y <= reach * reach)
-        turn = users[..., 2] - ego.heading[:, None]
-        cos_b, sin_b = np.cos(turn)[..., None], np.sin(turn)[..., None]
-        half_l = _CORNER_LENGTH * (length[..., None] / 2)  # (K, U, 4), as box_corners
-        half_w = _CORNER_WIDTH * (width[..., None] / 2)
-        corner_x = box_x[..., None] + half_l * cos_b - half_w * sin_b
-        corner_y = box_y[..., None] + half_l * sin_b + half_w * cos_b
-        next_x, next_y = corner_x[..., _NEXT_CORNER], corner_y[..., _NEXT_CORNER]
+        reach = self.range_m + 0.5 * np.hypot(users[..., 4], users[..., 5])
+        kept = valid & (box_x * box_x + box_y * box_y <= reach * reach)
+        # the bodies within reach as a flat list (V,): boxes in the ego frame (centre turned,
+        # heading made relative), so that their corners come out there
+        body_world = np.nonzero(kept)[0]
+        box_x, box_y, bodies = box_x[kept][:, None], box_y[kept][:, None], users[kept]
+        turn = bodies[:, 2] - ego.heading[body_world]
+        cos_b, sin_b = np.cos(turn)[:, None], np.sin(turn)[:, None]
+        half_l = _CORNER_LENGTH * (bodies[:, 4, None] / 2)  # (V, 4), as box_corners
+        half_w = _CORNER_WIDTH * (bodies[:, 5, None] / 2)
+        corner_x = box_x + half_l * cos_b - half_w * sin_b
+        corner_y = box_y + half_l * sin_b + half_w * cos_b
+        next_x, next_y = corner_x[:, _NEXT_CORNER], corner_y[:, _NEXT_CORNER]
         # Only sides facing the ego can be hit first (back-face culling halves the work). Corners
         # run around the box so that the ego is outside a side when start × following < 0; an
         # ego inside a box (a crash) faces none of them and keeps all four.
-        facing = corner_x * next_y - corner_y * next_x < 0
-        facing |= ~facing.any(axis=2, keepdims=True)
-        sides = valid[..., None] & facing  # (K, U, 4)
+        facing = corner_x * next_y - corner_y * next_x < 0  # (V, 4)
+        facing |= ~facing.any(axis=1, keepdims=True)
         return (
-            np.concatenate([edge_x[..., 0][edge_valid], corner_x[sides]]),
-            np.concatenate([edge_y[..., 0][edge_valid], corner_y[sides]]),
-            np.concatenate([edge_x[..., 1][edge_valid], next_x[sides]]),
-            np.concatenate([edge_y[..., 1][edge_valid], next_y[sides]]),
-            np.concatenate([np.nonzero(edge_valid)[0], np.nonzero(sides)[0]]),
+            np.concatenate([edge_x[..., 0][edge_valid], corner_x[facing]]),
+            np.concatenate([edge_y[..., 0][edge_valid], corner_y[facing]]),
+            np.concatenate([edge_x[..., 1][edge_valid], next_x[facing]]),
+            np.concatenate([edge_y[..., 1][edge_valid], next_y[facing]]),
+            np.concatenate([np.nonzero(edge_valid)[0], body_world[np.nonzero(facing)[0]]]),
         )
 
     def distances_m(self, batch: WorldBatch | WorldState) -> np.ndarray:
