@@ -11,7 +11,8 @@ import numpy as np
 from gymnasium import spaces
 
 from drivelab.perception.base import Sensor, ego_frame
-from drivelab.world.state import LIGHT_RED, LIGHT_YELLOW, WorldState
+from drivelab.world.batch import EgoBatch, WorldBatch
+from drivelab.world.state import LIGHT_RED, LIGHT_YELLOW
 
 FIELDS = (
     "speed_mps",  # the ego's speed
@@ -51,75 +52,86 @@ class Affordances(Sensor):
     def space(self) -> spaces.Box:
         return self._space
 
-    def observe(self, world: WorldState) -> np.ndarray:
-        ego, route = world.ego, world.route
-        stations = np.arange(0.0, self.range_m + ROUTE_STEP_M, ROUTE_STEP_M)
-        path, _ = route.poses_at(route.progress_m + stations)
-        values = dict.fromkeys(FIELDS, self.range_m)
-        values["speed_mps"], values["light_red"], values["light_yellow"] = ego.speed_mps, 0.0, 0.0
-        light = world.light_ahead(self.range_m)
-        if light is not None:
-            values["stop_line_m"] = light[1]
-            values["light_red"] = float(light[0] == LIGHT_RED)
-            values["light_yellow"] = float(light[0] == LIGHT_YELLOW)
-        leader = self._nearest_on_route(world.vehicles, path, stations, ego, VEHICLE_CORRIDOR_M)
-        if leader is not None:
-            values["leader_m"] = leader[0]
-            row = world.vehicles[leader[1]]
-            values["leader_speed_mps"] = row[3] * float(np.cos(row[2] - ego.heading))
-        else:
-            values["leader_speed_mps"] = 0.0
-        walker = self._nearest_on_route(
-            world.pedestrians, path, stations, ego, PEDESTRIAN_CORRIDOR_M, PEDESTRIAN_HEADING_M
+    def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
+        ego, route, count = batch.ego, batch.route, batch.num_worlds
+        stations = np.arange(0.0, self.range_m + ROUTE_STEP_M, ROUTE_STEP_M)  # (S,)
+        path, _ = route.poses_at(route.progress_m[:, None] + stations)  # (K, S, 2)
+        values = {field: np.full(count, self.range_m) for field in FIELDS}
+        values["speed_mps"] = ego.speed_mps
+        state, stop_line_m = batch.light_ahead(self.range_m)  # (K,): state -1 where no light
+        has_light = state >= 0
+        values["stop_line_m"] = np.where(has_light, stop_line_m, self.range_m)
+        values["light_red"] = (state == LIGHT_RED).astype(float)
+        values["light_yellow"] = (state == LIGHT_YELLOW).astype(float)
+        found, leader_m, leader = _nearest_on_route(
+            batch.vehicles, batch.vehicle_valid, path, stations, ego, VEHICLE_CORRIDOR_M
         )
-        if walker is not None:
-            values["pedestrian_m"] = walker[0]
-        if light is not None and self._turns_left_after(world, light[1]):
-            values["oncoming_m"] = self._oncoming(world)
-        return np.array([values[f] for f in FIELDS], dtype=np.float32)
+        values["leader_m"] = np.where(found, leader_m, self.range_m)
+        speed_along = leader[:, 3] * np.cos(leader[:, 2] - ego.heading)
+        values["leader_speed_mps"] = np.where(found, speed_along, 0.0)
+        found, walker_m, _ = _nearest_on_route(
+            batch.pedestrians, batch.pedestrian_valid, path, stations, ego, PEDESTRIAN_CORRIDOR_M,
+            PEDESTRIAN_HEADING_M,
+        )  # fmt: skip
+        values["pedestrian_m"] = np.where(found, walker_m, self.range_m)
+        turning = has_light & _turns_left_after(batch, np.where(has_light, stop_line_m, 0.0))
+        values["oncoming_m"] = np.where(turning, self._oncoming(batch), self.range_m)
+        out[...] = np.stack([values[field] for field in FIELDS], axis=1)
 
-    @staticmethod
-    def _nearest_on_route(
-        bodies, path, stations, ego, corridor_m, heading_for_m=0.0
-    ) -> tuple[float, int] | None:
-        """(distance along the route, row) of the nearest body ahead of the ego within
-        ``corridor_m`` of the route, or within ``heading_for_m`` and moving towards it; None if none."""
-        if len(bodies) == 0:
-            return None
-        gaps = np.linalg.norm(bodies[:, None, :2] - path[None], axis=2)  # (N, S)
-        nearest = gaps.argmin(axis=1)
-        gap = gaps[np.arange(len(bodies)), nearest]
-        velocity = bodies[:, 3:4] * np.column_stack([np.cos(bodies[:, 2]), np.sin(bodies[:, 2])])
-        towards = np.einsum("ij,ij->i", velocity, path[nearest] - bodies[:, :2]) > 0
-        ahead = ego_frame(bodies[:, :2], ego.position, ego.heading)[:, 0] > 0
-        on = ahead & ((gap < corridor_m) | (towards & (gap < heading_for_m)))
-        if not on.any():
-            return None
-        rows = np.flatnonzero(on)
-        best = rows[np.argmin(stations[nearest[rows]])]
-        return float(stations[nearest[best]]), int(best)
+    def _oncoming(self, batch: WorldBatch) -> np.ndarray:
+        """(K,) distance to the nearest moving vehicle ahead that drives against the ego in the
+        opposite lane (left of it, within ``ONCOMING_LATERAL_M``: not on a parallel street), at
+        most ``range_m``."""
+        vehicles, ego = batch.vehicles, batch.ego  # vehicles (K, N, 6)
+        local = ego_frame(vehicles[..., :2], ego.position[:, None], ego.heading[:, None])  # (K, N, 2)
+        against = np.cos(vehicles[..., 2] - ego.heading[:, None]) < ONCOMING_COS
+        moving = vehicles[..., 3] > 0.5
+        ahead = (local[..., 0] > 0) & (local[..., 0] < self.range_m)
+        left = (local[..., 1] < 0) & (local[..., 1] > -ONCOMING_LATERAL_M)
+        found = batch.vehicle_valid & against & moving & ahead & left
+        distance = np.where(found, np.hypot(local[..., 0], local[..., 1]), np.inf)
+        return np.minimum(np.min(distance, axis=1, initial=np.inf), self.range_m)
 
-    @staticmethod
-    def _turns_left_after(world: WorldState, distance_m: float) -> bool:
-        """The route bends left past the point ``distance_m`` ahead: 20 m further on it lies more
-        than 6 m to the left of where it was heading."""
-        route = world.route
-        points, headings = route.poses_at(
-            route.progress_m + np.array([distance_m, distance_m + LEFT_TURN_AHEAD_M])
-        )
-        lateral = ego_frame(points[1:], points[0], float(headings[0]))[0, 1]
-        return bool(lateral < -LEFT_TURN_M)
 
-    def _oncoming(self, world: WorldState) -> float:
-        """Distance to the nearest moving vehicle ahead that drives against the ego in the opposite
-        lane (left of it, within ``ONCOMING_LATERAL_M``: not on a parallel street), at most ``range_m``."""
-        vehicles, ego = world.vehicles, world.ego
-        if len(vehicles) == 0:
-            return self.range_m
-        local = ego_frame(vehicles[:, :2], ego.position, ego.heading)
-        against = np.cos(vehicles[:, 2] - ego.heading) < ONCOMING_COS
-        moving = vehicles[:, 3] > 0.5
-        ahead = (local[:, 0] > 0) & (local[:, 0] < self.range_m)
-        left = (local[:, 1] < 0) & (local[:, 1] > -ONCOMING_LATERAL_M)
-        found = against & moving & ahead & left
-        return min(float(np.hypot(*local[found].T).min()), self.range_m) if found.any() else self.range_m
+def _nearest_on_route(
+    bodies: np.ndarray,
+    valid: np.ndarray,
+    path: np.ndarray,
+    stations: np.ndarray,
+    ego: EgoBatch,
+    corridor_m: float,
+    heading_for_m: float = 0.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per world, the nearest body ahead of the ego within ``corridor_m`` of the route, or within
+    ``heading_for_m`` and moving towards it: (K,) found, (K,) its distance along the route and
+    (K, 6) its row (meaningful where found).
+
+    :param bodies: (K, N, 6) rows with their (K, N) ``valid`` mask.
+    :param path: (K, S, 2) route points at the (S,) arc lengths ``stations`` ahead of the ego.
+    """
+    count, size = bodies.shape[:2]
+    if size == 0:
+        return np.zeros(count, dtype=bool), np.zeros(count), np.zeros((count, 6))
+    gaps = np.linalg.norm(bodies[:, :, None, :2] - path[:, None], axis=3)  # (K, N, S)
+    nearest = gaps.argmin(axis=2)  # (K, N) the route point nearest each body
+    worlds, rows = np.arange(count)[:, None], np.arange(size)
+    gap = gaps[worlds, rows, nearest]
+    velocity = bodies[..., 3:4] * np.stack([np.cos(bodies[..., 2]), np.sin(bodies[..., 2])], axis=-1)
+    to_route = path[worlds, nearest] - bodies[..., :2]
+    towards = velocity[..., 0] * to_route[..., 0] + velocity[..., 1] * to_route[..., 1] > 0
+    ahead = ego_frame(bodies[..., :2], ego.position[:, None], ego.heading[:, None])[..., 0] > 0
+    on = valid & ahead & ((gap < corridor_m) | (towards & (gap < heading_for_m)))
+    along = np.where(on, stations[nearest], np.inf)
+    best = np.argmin(along, axis=1)  # the first of the nearest, as a search of one world's rows
+    found = on.any(axis=1)
+    return found, along[worlds[:, 0], best], bodies[worlds[:, 0], best]
+
+
+def _turns_left_after(batch: WorldBatch, distance_m: np.ndarray) -> np.ndarray:
+    """(K,) the route bends left past the point ``distance_m`` (K,) ahead: 20 m further on it lies
+    more than 6 m to the left of where it was heading."""
+    route = batch.route
+    ahead = route.progress_m[:, None] + np.stack([distance_m, distance_m + LEFT_TURN_AHEAD_M], axis=1)
+    points, headings = route.poses_at(ahead)  # (K, 2, 2), (K, 2)
+    lateral = ego_frame(points[:, 1], points[:, 0], headings[:, 0])[:, 1]
+    return lateral < -LEFT_TURN_M

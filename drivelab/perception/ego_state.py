@@ -13,6 +13,7 @@ import numpy as np
 from gymnasium import spaces
 
 from drivelab.perception.base import Sensor, ego_frame
+from drivelab.world.batch import WorldBatch
 from drivelab.world.state import WorldState
 
 FUSION_FEATURES = ("speed", "lane_offset", "front_distance", "front_relative_speed", "heading_alignment")
@@ -49,29 +50,36 @@ class EgoState(Sensor):
     def space(self) -> spaces.Box:
         return self._space
 
-    def front_vehicle(self, world: WorldState) -> tuple[float, float]:
-        """(gap in metres, speed along the ego heading) of the nearest vehicle ahead; (inf, 0) if none."""
-        ego, others = world.ego, world.vehicles
-        if len(others) == 0:
-            return np.inf, 0.0
-        local = ego_frame(others[:, :2], ego.position, ego.heading)
-        in_path = (local[:, 0] > 0) & (np.abs(local[:, 1]) < ego.lane_width_m / 2)
-        if not in_path.any():
-            return np.inf, 0.0
-        nearest = np.flatnonzero(in_path)[np.argmin(local[in_path, 0])]
-        speed_along = others[nearest, 3] * np.cos(others[nearest, 2] - ego.heading)
-        return float(local[nearest, 0]), float(speed_along)
+    def front_vehicle(self, batch: WorldBatch | WorldState) -> tuple[np.ndarray, np.ndarray]:
+        """(K,) gaps in metres and (K,) speeds along the ego heading of the nearest vehicle ahead
+        within half a lane width of the ego's line of travel: (inf, 0) where there is none.
+        Floats for a WorldState."""
+        if isinstance(batch, WorldState):
+            gap, speed = self.front_vehicle(WorldBatch.stack([batch]))
+            return float(gap[0]), float(speed[0])
+        ego, others, count = batch.ego, batch.vehicles, batch.num_worlds  # others (K, N, 6)
+        if others.shape[1] == 0:
+            return np.full(count, np.inf), np.zeros(count)
+        local = ego_frame(others[..., :2], ego.position[:, None], ego.heading[:, None])  # (K, N, 2)
+        half_lane = ego.lane_width_m[:, None] / 2
+        in_path = batch.vehicle_valid & (local[..., 0] > 0) & (np.abs(local[..., 1]) < half_lane)
+        gaps = np.where(in_path, local[..., 0], np.inf)
+        nearest = np.argmin(gaps, axis=1)  # the first of the nearest, as a search of one world's rows
+        rows = np.arange(count)
+        gap, front = gaps[rows, nearest], others[rows, nearest]  # gap: inf where none is in the path
+        speed_along = np.where(np.isfinite(gap), front[:, 3] * np.cos(front[:, 2] - ego.heading), 0.0)
+        return gap, speed_along
 
-    def observe(self, world: WorldState) -> np.ndarray:
-        ego = world.ego
+    def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
+        ego = batch.ego
         heading_error = ego.heading - ego.lane_heading
-        gap_m, front_speed = self.front_vehicle(world)
+        gap_m, front_speed = self.front_vehicle(batch)
         has_front = np.isfinite(gap_m)
         values = [
-            ego.speed_mps / world.max_speed_mps,
-            ego.lateral_offset_m / max(ego.lane_width_m / 2, 1e-6),
-            min(gap_m / self.range_m, 1.0) if has_front else 1.0,
-            (front_speed - ego.speed_mps) / world.max_speed_mps if has_front else 0.0,
+            ego.speed_mps / batch.max_speed_mps,
+            ego.lateral_offset_m / np.maximum(ego.lane_width_m / 2, 1e-6),
+            np.where(has_front, np.minimum(gap_m / self.range_m, 1.0), 1.0),
+            np.where(has_front, (front_speed - ego.speed_mps) / batch.max_speed_mps, 0.0),
             np.cos(heading_error),
         ]
         if self.features == 10:
@@ -80,6 +88,7 @@ class EgoState(Sensor):
                 ego.steering / MAX_STEERING_RAD,
                 ego.acceleration_mps2 / MAX_ACCELERATION_MPS2,
                 ego.lane_curvature * CURVATURE_SCALE_M,
-                ego.lane_id / max(ego.lane_count - 1, 1),
+                ego.lane_id / np.maximum(ego.lane_count - 1, 1),
             ]
-        return np.clip(np.asarray(values, dtype=np.float32), -1.0, 1.0)
+        out[...] = np.stack(values, axis=1)  # (K, features)
+        np.clip(out, -1.0, 1.0, out=out)

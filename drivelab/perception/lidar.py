@@ -5,102 +5,77 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.perception.base import Sensor, box_corners, ego_frame
+from drivelab.perception.base import Sensor
+from drivelab.world.batch import WorldBatch
 from drivelab.world.state import WorldState
 
+_CORNER_LENGTH = np.array([1.0, 1.0, -1.0, -1.0])  # corners of a box, as ``box_corners`` orders them
+_CORNER_WIDTH = np.array([-1.0, 1.0, 1.0, -1.0])
+_NEXT_CORNER = np.array([1, 2, 3, 0])
 
-def _near_parts(segments: np.ndarray, range_m: float) -> np.ndarray:
-    """The parts (K, 2, 2) of segments (M, 2, 2), given relative to the ray origin, within ``range_m``.
+
+def _near_parts(
+    start_x: np.ndarray, start_y: np.ndarray, end_x: np.ndarray, end_y: np.ndarray, range_m: float
+) -> tuple[np.ndarray, ...]:
+    """The parts within ``range_m`` of segments (M,) given relative to the ray origin: their
+    start x, start y, end x, end y (T,), the (M,) mask of the segments kept, and each part's
+    (T,) distance to the origin.
 
     A segment is kept by the distance of its nearest point, not its end points (a 10 km road
     edge passes by the ego far from both ends), and cut down to the stretch inside the range
     circle, so what follows works on short, origin-relative segments (float32 is then exact
     to micrometres).
     """
-    start = segments[:, 0]
-    edge = segments[:, 1] - start
-    length2 = np.einsum("ij,ij->i", edge, edge)
-    safe_length2 = np.maximum(length2, 1e-12)
-    nearest_at = np.clip(-np.einsum("ij,ij->i", start, edge) / safe_length2, 0.0, 1.0)
-    nearest = start + nearest_at[:, None] * edge
-    distance2 = np.einsum("ij,ij->i", nearest, nearest)
+    edge_x, edge_y = end_x - start_x, end_y - start_y
+    safe_length2 = np.maximum(edge_x * edge_x + edge_y * edge_y, 1e-12)
+    nearest_at = np.clip(-(start_x * edge_x + start_y * edge_y) / safe_length2, 0.0, 1.0)
+    nearest_x, nearest_y = start_x + nearest_at * edge_x, start_y + nearest_at * edge_y
+    distance2 = nearest_x * nearest_x + nearest_y * nearest_y
     near = distance2 <= range_m * range_m
-    if not near.all():
-        start, edge, nearest_at = start[near], edge[near], nearest_at[near]
-        distance2, safe_length2 = distance2[near], safe_length2[near]
+    start_x, start_y, edge_x, edge_y = start_x[near], start_y[near], edge_x[near], edge_y[near]
+    nearest_at, distance2, safe_length2 = nearest_at[near], distance2[near], safe_length2[near]
     # half the chord the range circle cuts on the segment's line, in units of the segment
     half_chord = np.sqrt((range_m * range_m - distance2) / safe_length2)
     low = np.clip(nearest_at - half_chord, 0.0, 1.0)
     high = np.clip(nearest_at + half_chord, 0.0, 1.0)
-    return np.stack([start + low[:, None] * edge, start + high[:, None] * edge], axis=1)
+    return (
+        start_x + low * edge_x,
+        start_y + low * edge_y,
+        start_x + high * edge_x,
+        start_y + high * edge_y,
+        near,
+        np.sqrt(distance2),
+    )
 
 
-class RayCaster:
-    """A fixed fan of rays from the origin, cast against origin-relative segments.
+def _part_terms(start_x, start_y, end_x, end_y) -> tuple[np.ndarray, ...]:
+    """Per origin-relative part (T,): float32 start x, start y, edge x, edge y and start × edge."""
+    edge_x, edge_y = end_x - start_x, end_y - start_y
+    cross = start_x * edge_y - start_y * edge_x
+    return tuple(a.astype(np.float32) for a in (start_x, start_y, edge_x, edge_y, cross))
 
-    All rays × all segments at once in float32, in scratch arrays kept between calls: allocating
-    fresh (rays × segments) arrays every step costs more than the arithmetic (page faults).
 
-    :param directions: (N, 2) unit ray directions.
+def _hit_distances(direction_x, direction_y, start_x, start_y, edge_x, edge_y, s_cross_e) -> np.ndarray:
+    """Per (ray, part) pair (P,), the distance along the ray to the part: float32, ``inf`` on a miss.
+
+    Rays ``direction`` are unit vectors from the origin, parts come from ``_part_terms``. Ray t·d
+    meets segment s + u·e where t = (s × e) / (d × e) and u = (s × d) / (d × e); a hit needs
+    t ≥ 0 and 0 ≤ u ≤ 1.
     """
-
-    def __init__(self, directions: np.ndarray) -> None:
-        self.directions = np.ascontiguousarray(directions, dtype=np.float32)
-        self._capacity = 0
-
-    def _scratch(self, segments: int) -> tuple[np.ndarray, ...]:
-        if segments > self._capacity:
-            self._capacity = max(segments, 2 * self._capacity, 64)
-            size = len(self.directions) * self._capacity
-            self._columns = np.empty(4 * self._capacity, dtype=np.float32)
-            self._products = np.empty(2 * size, dtype=np.float32)
-            self._along_ray = np.empty(size, dtype=np.float32)
-            self._hit, self._test = np.empty(size, dtype=bool), np.empty(size, dtype=bool)
-        rays = len(self.directions)
-        return (
-            self._columns[: 4 * segments].reshape(2, 2 * segments),
-            self._products[: 2 * rays * segments].reshape(rays, 2 * segments),
-            self._along_ray[: rays * segments].reshape(rays, segments),
-            self._hit[: rays * segments].reshape(rays, segments),
-            self._test[: rays * segments].reshape(rays, segments),
-        )
-
-    def __call__(self, segments: np.ndarray, range_m: float) -> np.ndarray:
-        """Distance along each ray to the first segment it meets, ``range_m`` when none is nearer.
-
-        :param segments: (M, 2, 2) segments relative to the rays' origin, float64.
-        :return: (N,) float64 distances.
-        """
-        distances = np.full(len(self.directions), float(range_m))
-        parts = _near_parts(segments, range_m) if len(segments) else segments
-        count = len(parts)
-        if count == 0:
-            return distances
-        columns, products, along_ray, hit, test = self._scratch(count)
-        start, edge = parts[:, 0], parts[:, 1] - parts[:, 0]
-        # ray t·d meets segment s + u·e where t = (s × e) / (d × e) and u = (s × d) / (d × e);
-        # both d × e and s × d = d × (−s) are dot products of d with one matrix product
-        columns[0, :count], columns[1, :count] = edge[:, 1], -edge[:, 0]
-        columns[0, count:], columns[1, count:] = -start[:, 1], start[:, 0]
-        np.matmul(self.directions, columns, out=products)
-        d_cross_e, along_segment = products[:, :count], products[:, count:]
-        s_cross_e = (start[:, 0] * edge[:, 1] - start[:, 1] * edge[:, 0]).astype(np.float32)
-        # parallel pairs divide by zero and give inf or nan, which the tests below reject
-        with np.errstate(divide="ignore", invalid="ignore"):
-            np.divide(s_cross_e, d_cross_e, out=along_ray)
-            np.divide(along_segment, d_cross_e, out=along_segment)
-        np.greater_equal(along_ray, 0.0, out=hit)
-        hit &= np.greater_equal(along_segment, 0.0, out=test)
-        hit &= np.less_equal(along_segment, 1.0, out=test)
-        np.copyto(along_ray, np.float32(np.inf), where=np.logical_not(hit, out=test))
-        return np.minimum(along_ray.min(axis=1), range_m, out=distances)
+    d_cross_e = direction_x * edge_y - direction_y * edge_x
+    # parallel pairs divide by zero and give inf or nan, which the tests below reject
+    with np.errstate(divide="ignore", invalid="ignore"):
+        along_ray = s_cross_e / d_cross_e
+        along_segment = (direction_y * start_x - direction_x * start_y) / d_cross_e
+    hit = (along_ray >= 0.0) & (along_segment >= 0.0) & (along_segment <= 1.0)
+    return np.where(hit, along_ray, np.float32(np.inf))
 
 
 def cast_rays(origin: np.ndarray, angles: np.ndarray, segments: np.ndarray, range_m: float) -> np.ndarray:
     """Distance along each ray to the first segment it meets, ``range_m`` when none is nearer.
 
-    All rays × all segments in one go (float32 inside, accurate to about 1e-5 m); segments out
-    of range are dropped first. ``Lidar`` uses the same ``RayCaster``.
+    Every ray × every segment (float32 inside, accurate to about 1e-6 of the range); segments
+    out of range are dropped first. ``Lidar`` does the same arithmetic on the pairs that can hit.
 
     :param origin: (2,) ray origin, world metres.
     :param angles: (N,) world-frame ray directions, radians (from +x towards +y).
@@ -108,9 +83,17 @@ def cast_rays(origin: np.ndarray, angles: np.ndarray, segments: np.ndarray, rang
     :param range_m: the farthest distance reported.
     :return: (N,) float64 distances in metres.
     """
-    angles = np.asarray(angles, dtype=float)
-    relative = np.asarray(segments, dtype=float).reshape(-1, 2, 2) - np.asarray(origin, dtype=float)
-    return RayCaster(np.stack([np.cos(angles), np.sin(angles)], axis=-1))(relative, range_m)
+    angles = np.asarray(angles, dtype=float).reshape(-1)
+    relative = np.asarray(segments, dtype=float).reshape(-1, 4) - np.tile(np.asarray(origin, dtype=float), 2)
+    *parts, _, _ = _near_parts(*relative.T, float(range_m))
+    rays, count = len(angles), len(parts[0])
+    if count == 0:
+        return np.full(rays, float(range_m))
+    direction_x = np.repeat(np.cos(angles).astype(np.float32), count)
+    direction_y = np.repeat(np.sin(angles).astype(np.float32), count)
+    terms = [np.tile(term, rays) for term in _part_terms(*parts)]
+    along_ray = _hit_distances(direction_x, direction_y, *terms).reshape(rays, count)
+    return np.minimum(along_ray.min(axis=1).astype(float), float(range_m))
 
 
 class Lidar(Sensor):
@@ -118,12 +101,14 @@ class Lidar(Sensor):
 
     Beam ``i`` points ``2π·i/beams`` clockwise from the heading (towards the ego's right):
     beam 0 straight ahead, beam ``beams/4`` to the right, ``beams/2`` behind, ``3·beams/4`` left.
-    Beams stop at the outlines of other vehicles and at the road edges (``world.road.edges``).
+    Beams stop at the outlines of other vehicles and pedestrians and at the road edges
+    (``road.edges``). K worlds at once: every world's segments in one flat list, each tested
+    against the beams of its own angular span only (a car 30 m away spans 2 of 240 beams).
 
     :param beams: number of beams (seed 003: 240).
     :param range_m: maximum range.
     :param noise_std: std of Gaussian noise added to the normalised distances (then clipped to
-        [0, 1]), drawn from the generator handed to ``reset``.
+        [0, 1]), drawn from world k's generator handed to ``reset``.
     """
 
     name = "lidar"
@@ -132,48 +117,118 @@ class Lidar(Sensor):
         if beams < 1 or range_m <= 0 or noise_std < 0:
             raise ValueError("lidar needs beams >= 1, range_m > 0 and noise_std >= 0")
         self.beams, self.range_m, self.noise_std = int(beams), float(range_m), float(noise_std)
-        offsets = 2 * np.pi * np.arange(self.beams) / self.beams
+        self.beam_step = 2 * np.pi / self.beams
+        offsets = self.beam_step * np.arange(self.beams)
         # beams in the ego frame (x forward, y right): the world is turned into it instead
-        self.caster = RayCaster(np.stack([np.cos(offsets), np.sin(offsets)], axis=-1))
+        self.direction_x = np.cos(offsets).astype(np.float32)
+        self.direction_y = np.sin(offsets).astype(np.float32)
+        # A part this close to the ego is tested against every beam: nearer, the float32 rounding
+        # of the part (~1e-7 · range) could move its ends by more than the one-beam margin below.
+        self.close_m = 1e-4 * self.range_m / min(self.beam_step, 1.0)
         self._space = spaces.Box(0.0, 1.0, shape=(self.beams,), dtype=np.float32)
-        self.rng = np.random.default_rng(0)  # replaced by the episode's generator in ``reset``
 
     @property
     def space(self) -> spaces.Box:
         return self._space
 
-    def segments(self, world: WorldState) -> np.ndarray:
-        """Everything the beams can hit, as (M, 2, 2) segments in the ego frame."""
-        ego = world.ego
-        edges = ego_frame(world.road.edges, ego.position, ego.heading)
-        vehicles = world.road_users()  # pedestrians reflect beams too
-        if len(vehicles) == 0:
-            return edges
-        # boxes in the ego frame (centre turned, heading made relative), so corners come out there
-        boxes = vehicles[:, [0, 1, 2, 4, 5]]
-        boxes[:, :2] = ego_frame(boxes[:, :2], ego.position, ego.heading)
-        boxes[:, 2] -= ego.heading
-        # a vehicle whose centre is farther than range + half its diagonal cannot be hit
-        reach = self.range_m + 0.5 * np.hypot(boxes[:, 3], boxes[:, 4])
-        boxes = boxes[np.einsum("ij,ij->i", boxes[:, :2], boxes[:, :2]) <= reach * reach]
-        if len(boxes) == 0:
-            return edges
-        corners = box_corners(boxes)
-        following = np.roll(corners, -1, axis=1)
+    def segments(self, batch: WorldBatch) -> tuple[np.ndarray, np.ndarray]:
+        """Everything the beams can hit: (M, 2, 2) segments in their world's ego frame, and the
+        (M,) world each belongs to."""
+        start_x, start_y, end_x, end_y, worlds = self._segments(batch)
+        return np.stack([np.stack([start_x, start_y], -1), np.stack([end_x, end_y], -1)], 1), worlds
+
+    def _segments(self, batch: WorldBatch) -> tuple[np.ndarray, ...]:
+        """``segments`` as flat (M,) arrays: start x, start y, end x, end y, world."""
+        ego = batch.ego
+        cos_h, sin_h = np.cos(ego.heading)[:, None], np.sin(ego.heading)[:, None]  # (K, 1)
+        position_x, position_y = ego.position[:, 0, None], ego.position[:, 1, None]
+        # road edges: (K or 1, E, 2) end points turned into each world's ego frame
+        edges, edge_valid = _road_edges(batch)
+        delta_x, delta_y = edges[..., 0] - position_x[..., None], edges[..., 1] - position_y[..., None]
+        edge_x = delta_x * cos_h[..., None] + delta_y * sin_h[..., None]  # (K, E, 2)
+        edge_y = -delta_x * sin_h[..., None] + delta_y * cos_h[..., None]
+        edge_valid = np.broadcast_to(edge_valid, edge_x.shape[:2])
+        # other bodies (pedestrians reflect beams too) as boxes in the ego frame: centre turned,
+        # heading made relative, so the corners come out there
+        users, valid = batch.road_users()  # (K, U, 6)
+        delta_x, delta_y = users[..., 0] - position_x, users[..., 1] - position_y
+        box_x = delta_x * cos_h + delta_y * sin_h  # (K, U)
+        box_y = -delta_x * sin_h + delta_y * cos_h
+        # a body whose centre is farther than range + half its diagonal cannot be hit
+        reach = self.range_m + 0.5 * np.hypot(users[..., 4], users[..., 5])
+        kept = valid & (box_x * box_x + box_y * box_y <= reach * reach)
+        # the bodies within reach as a flat list (V,): boxes in the ego frame (centre turned,
+        # heading made relative), so that their corners come out there
+        body_world = np.nonzero(kept)[0]
+        box_x, box_y, bodies = box_x[kept][:, None], box_y[kept][:, None], users[kept]
+        turn = bodies[:, 2] - ego.heading[body_world]
+        cos_b, sin_b = np.cos(turn)[:, None], np.sin(turn)[:, None]
+        half_l = _CORNER_LENGTH * (bodies[:, 4, None] / 2)  # (V, 4), as box_corners
+        half_w = _CORNER_WIDTH * (bodies[:, 5, None] / 2)
+        corner_x = box_x + half_l * cos_b - half_w * sin_b
+        corner_y = box_y + half_l * sin_b + half_w * cos_b
+        next_x, next_y = corner_x[:, _NEXT_CORNER], corner_y[:, _NEXT_CORNER]
         # Only sides facing the ego can be hit first (back-face culling halves the work). Corners
         # run around the box so that the ego is outside a side when start × following < 0; an
         # ego inside a box (a crash) faces none of them and keeps all four.
-        facing = corners[..., 0] * following[..., 1] - corners[..., 1] * following[..., 0] < 0
+        facing = corner_x * next_y - corner_y * next_x < 0  # (V, 4)
         facing |= ~facing.any(axis=1, keepdims=True)
-        sides = np.stack([corners[facing], following[facing]], axis=1)
-        return np.concatenate([edges, sides]) if len(edges) else sides
+        return (
+            np.concatenate([edge_x[..., 0][edge_valid], corner_x[facing]]),
+            np.concatenate([edge_y[..., 0][edge_valid], corner_y[facing]]),
+            np.concatenate([edge_x[..., 1][edge_valid], next_x[facing]]),
+            np.concatenate([edge_y[..., 1][edge_valid], next_y[facing]]),
+            np.concatenate([np.nonzero(edge_valid)[0], body_world[np.nonzero(facing)[0]]]),
+        )
 
-    def distances_m(self, world: WorldState) -> np.ndarray:
-        """Noise-free distances in metres, (beams,)."""
-        return self.caster(self.segments(world), self.range_m)
+    def distances_m(self, batch: WorldBatch | WorldState) -> np.ndarray:
+        """Noise-free distances in metres, (K, beams); (beams,) for a WorldState."""
+        if isinstance(batch, WorldState):
+            return self.distances_m(WorldBatch.stack([batch]))[0]
+        beams, step = self.beams, self.beam_step
+        *segments, worlds = self._segments(batch)
+        start_x, start_y, end_x, end_y, near, closest = _near_parts(*segments, self.range_m)
+        worlds = worlds[near]
+        # the beams each part can meet: its angular span, one beam of margin either side
+        angle_start = np.arctan2(start_y, start_x)
+        turn = np.arctan2(end_y, end_x) - angle_start
+        turn = (turn + np.pi) % (2 * np.pi) - np.pi  # [-π, π): a segment spans at most half a turn
+        spans = (np.abs(turn) // step).astype(np.intp) + 4
+        first = (np.minimum(angle_start, angle_start + turn) // step).astype(np.intp) - 1
+        every = (spans >= beams) | (closest < self.close_m)
+        spans[every], first[every] = beams, 0
+        # one entry per (part, beam) pair
+        pair_part = np.repeat(np.arange(len(spans)), spans)
+        offset = np.arange(len(pair_part)) - np.repeat(np.cumsum(spans) - spans, spans)
+        pair_beam = (first[pair_part] + offset) % beams
+        terms = [term[pair_part] for term in _part_terms(start_x, start_y, end_x, end_y)]
+        along_ray = _hit_distances(self.direction_x[pair_beam], self.direction_y[pair_beam], *terms)
+        nearest = np.full(batch.num_worlds * beams, np.inf, dtype=np.float32)
+        np.minimum.at(nearest, worlds[pair_part] * beams + pair_beam, along_ray)
+        return np.minimum(nearest.reshape(batch.num_worlds, beams).astype(float), self.range_m)
 
-    def observe(self, world: WorldState) -> np.ndarray:
-        normalised = self.distances_m(world) / self.range_m
+    def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
+        normalised = self.distances_m(batch) / self.range_m
         if self.noise_std > 0:
-            normalised += self.rng.normal(0.0, self.noise_std, size=self.beams)
-        return np.clip(normalised, 0.0, 1.0).astype(np.float32)
+            # each world draws from its own episode generator: one call per world
+            for k in range(batch.num_worlds):
+                normalised[k] += self.rngs[k].normal(0.0, self.noise_std, size=self.beams)
+        out[...] = np.clip(normalised, 0.0, 1.0)
+
+
+def _road_edges(batch: WorldBatch) -> tuple[np.ndarray, np.ndarray]:
+    """The road edges each world sees: (1, E, 2, 2) when every world drives one map, else (K, E, 2, 2)
+    padded across the maps, with the (1 or K, E) valid mask."""
+    roads = batch.roads
+    if len(roads) == 1:
+        edges = np.asarray(roads[0].edges, dtype=float).reshape(1, -1, 2, 2)
+        return edges, np.ones(edges.shape[:2], dtype=bool)
+    # several maps (worlds built apart): pad their edges to one array, a row per map
+    sizes = [len(road.edges) for road in roads]
+    padded = np.zeros((len(roads), max(sizes), 2, 2))
+    valid = np.arange(max(sizes)) < np.array(sizes)[:, None]
+    if max(sizes):
+        padded[valid] = np.concatenate(
+            [np.asarray(road.edges, dtype=float).reshape(-1, 2, 2) for road in roads]
+        )
+    return padded[batch.road_index], valid[batch.road_index]

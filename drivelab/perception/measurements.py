@@ -6,7 +6,7 @@ import numpy as np
 from gymnasium import spaces
 
 from drivelab.perception.base import Sensor
-from drivelab.world.state import WorldState
+from drivelab.world.batch import WorldBatch
 
 MAX_STEERING_RAD = np.pi / 3  # highway-env's largest steering angle (ControlledVehicle)
 
@@ -24,6 +24,7 @@ class Measurements(Sensor):
     def space(self) -> spaces.Box:
         return self._space
 
-    def observe(self, world: WorldState) -> np.ndarray:
-        values = [world.ego.speed_mps / world.max_speed_mps, world.ego.steering / MAX_STEERING_RAD]
-        return np.clip(np.array(values, dtype=np.float32), -1.0, 1.0)
+    def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
+        out[:, 0] = batch.ego.speed_mps / batch.max_speed_mps
+        out[:, 1] = batch.ego.steering / MAX_STEERING_RAD
+        np.clip(out, -1.0, 1.0, out=out)

@@ -13,36 +13,41 @@ import numpy as np
 from gymnasium import spaces
 
 from drivelab.perception.base import Sensor, ego_frame
+from drivelab.world.batch import WorldBatch
 from drivelab.world.state import WorldState
 
 TTC_EDGES_S = np.array([2.0, 4.0, 8.0])  # bins [0, 2), [2, 4), [4, 8), ≥ 8 s or never
 SPEED_EDGES_MPS = np.array([22.0, 27.0])  # highway-env's target speeds 20 / 25 / 30 m/s, binned
 
 
-def lane_ttc_s(world: WorldState) -> np.ndarray:
+def lane_ttc_s(batch: WorldBatch | WorldState) -> np.ndarray:
     """Time to collision (s) with the nearest closing vehicle ahead in the lanes −1, 0, +1 (left, own,
-    right; inf where none closes in, 0 where the lane does not exist)."""
-    ego = world.ego
-    ttc = np.full(3, np.inf)
-    lane_exists = np.array([ego.lane_id > 0, True, ego.lane_id < ego.lane_count - 1])
-    if len(world.vehicles):
-        local = ego_frame(world.vehicles[:, :2], ego.position, ego.heading)
-        relative_lane = np.round((local[:, 1] + ego.lateral_offset_m) / max(ego.lane_width_m, 1e-6)).astype(
-            int
-        )
-        gap = local[:, 0] - (world.vehicles[:, 4] + ego.length_m) / 2
-        closing = ego.speed_mps - world.vehicles[:, 3] * np.cos(world.vehicles[:, 2] - ego.heading)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            time_s = np.where((gap > -ego.length_m) & (closing > 0), np.maximum(gap, 0.0) / closing, np.inf)
-        for offset in (-1, 0, 1):
-            in_lane = relative_lane == offset
-            if in_lane.any():
-                ttc[offset + 1] = time_s[in_lane].min()
+    right; inf where none closes in, 0 where the lane does not exist): (K, 3), or (3,) for a
+    WorldState."""
+    if isinstance(batch, WorldState):
+        return lane_ttc_s(WorldBatch.stack([batch]))[0]
+    ego, vehicles = batch.ego, batch.vehicles  # vehicles (K, N, 6)
+    lane_exists = np.stack(
+        [ego.lane_id > 0, np.ones(batch.num_worlds, dtype=bool), ego.lane_id < ego.lane_count - 1], axis=1
+    )
+    local = ego_frame(vehicles[..., :2], ego.position[:, None], ego.heading[:, None])  # (K, N, 2)
+    lane_width = np.maximum(ego.lane_width_m, 1e-6)[:, None]
+    relative_lane = np.round((local[..., 1] + ego.lateral_offset_m[:, None]) / lane_width).astype(int)
+    length = ego.length_m[:, None]
+    gap = local[..., 0] - (vehicles[..., 4] + length) / 2
+    closing = ego.speed_mps[:, None] - vehicles[..., 3] * np.cos(vehicles[..., 2] - ego.heading[:, None])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        time_s = np.where((gap > -length) & (closing > 0), np.maximum(gap, 0.0) / closing, np.inf)
+    time_s = np.where(batch.vehicle_valid, time_s, np.inf)
+    # the nearest in each of the three lanes: (K, N, 3) → (K, 3), inf where the lane has none
+    in_lane = relative_lane[..., None] == np.arange(-1, 2)
+    ttc = np.min(np.where(in_lane, time_s[..., None], np.inf), axis=1, initial=np.inf)
     return np.where(lane_exists, ttc, 0.0)
 
 
 class TTCGrid(Sensor):
-    """Discrete highway state: time-to-collision bins of 3 lanes and a speed bin (``Discrete(192)``)."""
+    """Discrete highway state: time-to-collision bins of 3 lanes and a speed bin (``Discrete(192)``);
+    batched, the observations are ``(K,)`` integers."""
 
     name = "ttc_grid"
 
@@ -54,7 +59,7 @@ class TTCGrid(Sensor):
     def space(self) -> spaces.Discrete:
         return self._space
 
-    def observe(self, world: WorldState) -> np.int64:
-        lanes = np.searchsorted(TTC_EDGES_S, lane_ttc_s(world), side="right")
-        speed = int(np.searchsorted(SPEED_EDGES_MPS, world.ego.speed_mps, side="right"))
-        return np.int64(int(lanes[0] + self.bins * lanes[1] + self.bins**2 * lanes[2]) + self.bins**3 * speed)
+    def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
+        lanes = np.searchsorted(TTC_EDGES_S, lane_ttc_s(batch), side="right")  # (K, 3)
+        speed = np.searchsorted(SPEED_EDGES_MPS, batch.ego.speed_mps, side="right")  # (K,)
+        out[...] = lanes[:, 0] + self.bins * lanes[:, 1] + self.bins**2 * lanes[:, 2] + self.bins**3 * speed

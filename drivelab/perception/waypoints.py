@@ -6,7 +6,7 @@ import numpy as np
 from gymnasium import spaces
 
 from drivelab.perception.base import Sensor, ego_frame
-from drivelab.world.state import WorldState
+from drivelab.world.batch import WorldBatch
 
 
 class Waypoints(Sensor):
@@ -33,9 +33,9 @@ class Waypoints(Sensor):
     def space(self) -> spaces.Box:
         return self._space
 
-    def observe(self, world: WorldState) -> np.ndarray:
-        route = world.route
-        distances = route.progress_m + self.spacing_m * np.arange(1, self.count + 1)
-        points, _ = route.poses_at(distances)
-        local = ego_frame(points, world.ego.position, world.ego.heading)
-        return np.clip(local, -self.range_m, self.range_m).astype(np.float32)
+    def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
+        route, ego = batch.route, batch.ego
+        distances = route.progress_m[:, None] + self.spacing_m * np.arange(1, self.count + 1)  # (K, count)
+        points, _ = route.poses_at(distances)  # (K, count, 2)
+        local = ego_frame(points, ego.position[:, None], ego.heading[:, None])
+        out[...] = np.clip(local, -self.range_m, self.range_m)
