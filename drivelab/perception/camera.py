@@ -20,15 +20,10 @@ import cv2
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.perception.base import ZEBRA_STRIPE_M, Sensor, box_corners, ego_frame, zebra_stripes
-from drivelab.perception.birdeye import DashedMarkings
-from drivelab.perception.topdown import (
-    SHIFT,
-    _clip_half_plane,
-    fixed_point,
-    per_road,
-    segments_near,
-)
+from drivelab.perception.base import ZEBRA_STRIPE_M, Sensor, box_corners, ego_frame
+from drivelab.perception.birdeye import DashedMarkings, zebra_boxes
+from drivelab.perception.topdown import SHIFT, _clip_half_plane, fixed_point, road_users, segments_near
+from drivelab.world.batch import WorldBatch
 from drivelab.world.pinhole import PinholeModel
 from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW, MARKING_SOLID, RoadMap, WorldState
 
@@ -66,16 +61,20 @@ def _near_clip_m(model: PinholeModel) -> float:
 
 
 def _ground_polygons(
-    model: PinholeModel, world: WorldState, groups: list[tuple[np.ndarray, np.ndarray]]
+    model: PinholeModel,
+    position: np.ndarray,
+    heading: float,
+    groups: list[tuple[np.ndarray, np.ndarray]],
 ) -> list[list[np.ndarray]]:
     """Ground polygons in world coordinates, in groups of (vertices one after another, counts) →
-    per group, the fixed-point pixel polygons in sight. All groups share one clip and projection."""
+    per group, the fixed-point pixel polygons in sight of the ego at ``position`` (2,) and
+    ``heading``. All groups share one clip and projection."""
     groups = [(p, c) for p, c in groups]
     sizes = [len(c) for _, c in groups]
     counts = np.concatenate([c for _, c in groups]) if groups else np.zeros(0, dtype=int)
     if counts.sum() == 0:
         return [[] for _ in groups]
-    points = _ego_ground(world, np.concatenate([p for p, c in groups if len(c)]))
+    points = ego_frame(np.concatenate([p for p, c in groups if len(c)]), position, heading)
     near = _near_clip_m(model)
     # cull polygons wholly outside one side of the view wedge (behind, left or right of it)
     slope = model.width / 2 / model.focal_px
@@ -221,22 +220,32 @@ def lateral_at_distances(world: WorldState, segments: np.ndarray, distances_m: n
     return np.where(np.isfinite(best), best, np.nan).reshape(distances.shape)
 
 
-def _near(world: WorldState, segments: np.ndarray, model: PinholeModel) -> np.ndarray:
+def _near(position: np.ndarray, segments: np.ndarray, model: PinholeModel) -> np.ndarray:
+    """The segments (M, 2, 2) within the camera's drawing range of an ego at ``position`` (2,)."""
     if len(segments) == 0:
         return segments
     reach = model.forward_m + model.max_range_m
-    return segments[segments_near(segments, np.asarray(world.ego.position, float), reach)]
+    return segments[segments_near(segments, position, reach)]
 
 
-def _draw_road_users(image: np.ndarray, model: PinholeModel, world: WorldState) -> None:
-    """Other vehicles and pedestrians as boxes: visible side faces shaded by orientation, then the
-    top; pedestrians are tall, narrow and coloured apart."""
-    users = world.road_users()
-    if len(users) == 0:
+def _road_user_corners(batch: WorldBatch) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Ground corners (K, N + P, 4, 2) in each ego's frame of every world's vehicles then
+    pedestrians (front-left, front-right, … as ``box_corners``), their (K, N + P) valid mask and
+    the (K, N + P) mask of the pedestrians."""
+    users, valid = road_users(batch)
+    is_pedestrian = np.broadcast_to(np.arange(users.shape[1]) >= batch.vehicles.shape[1], valid.shape)
+    corners = box_corners(users[..., [0, 1, 2, 4, 5]])
+    position, heading = batch.ego.position[:, None, None], batch.ego.heading[:, None, None]
+    return ego_frame(corners, position, heading), valid, is_pedestrian
+
+
+def _draw_road_users(
+    image: np.ndarray, model: PinholeModel, corners: np.ndarray, is_pedestrian: np.ndarray
+) -> None:
+    """Other vehicles and pedestrians, ground corners (N, 4, 2) in the ego frame, as boxes: visible
+    side faces shaded by orientation, then the top; pedestrians are tall, narrow and coloured apart."""
+    if len(corners) == 0:
         return
-    boxes = np.asarray(users, dtype=float)[:, [0, 1, 2, 4, 5]]
-    is_pedestrian = np.arange(len(boxes)) >= len(world.vehicles)
-    corners = _ego_ground(world, box_corners(boxes))  # (N, 4, 2): front-left, front-right, ...
     distance = np.hypot(*(corners.mean(axis=1) - [model.forward_m, 0.0]).T)
     ahead = (corners[..., 0] > model.forward_m + model.near_m).all(axis=1) & (distance < model.max_range_m)
     order = np.argsort(-distance[ahead])  # painter's order: far to near
@@ -262,16 +271,15 @@ def _draw_road_users(image: np.ndarray, model: PinholeModel, world: WorldState) 
         cv2.fillConvexPoly(image, pixels[user, 4:], roof, cv2.LINE_8, SHIFT)
 
 
-def _draw_traffic_lights(image: np.ndarray, model: PinholeModel, world: WorldState) -> None:
-    """Traffic lights (rows x, y, heading, LIGHT_* state) as a pole and a lamp in the state's colour."""
-    lights = np.asarray(world.traffic_lights, dtype=float).reshape(-1, 4)
-    if len(lights) == 0:
-        return
-    local = _ego_ground(world, lights[:, :2])
+def _draw_traffic_lights(
+    image: np.ndarray, model: PinholeModel, local: np.ndarray, states: np.ndarray
+) -> None:
+    """Traffic lights, stop lines (L, 2) in the ego frame and LIGHT_* states (L,), as a pole and a
+    lamp in the state's colour."""
     seen = (local[:, 0] > model.forward_m + model.near_m) & (
         local[:, 0] < model.forward_m + model.max_range_m
     )
-    for (x, y), state in zip(local[seen], lights[seen, 3], strict=True):
+    for (x, y), state in zip(local[seen], states[seen], strict=True):
         points = np.array([[x, y, 0.0], [x, y, LIGHT_HEIGHT_M]])
         # the camera is pitched down: a lamp just past the ground near plane can be behind the
         # image plane, where the projection flips and overflows OpenCV's int32 pixels
@@ -284,22 +292,21 @@ def _draw_traffic_lights(image: np.ndarray, model: PinholeModel, world: WorldSta
         cv2.circle(image, tuple(np.round(lamp).astype(int)), radius, colour, -1, cv2.LINE_8)
 
 
-def _ground_layers(world: WorldState, model: PinholeModel) -> tuple[np.ndarray, list, list]:
-    """(lane polygons (P, 2) with counts) and the painted strips as [(quads, counts, colour)]."""
-    road = world.road
-    position = np.asarray(world.ego.position, dtype=float)
+def _ground_layers(road: RoadMap, position: np.ndarray, model: PinholeModel) -> tuple[tuple, list]:
+    """(lane polygons (P, 2) with counts) and the painted strips as [(segments, width, colour)] of
+    ``road`` within the camera's reach of an ego at ``position`` (2,)."""
     reach = model.forward_m + model.max_range_m
-    lanes = per_road(road, LanePieces)
+    lanes: LanePieces = road.derived(LanePieces, LanePieces)
     lane_points, lane_counts = np.zeros((0, 2)), np.zeros(0, dtype=int)
     if len(lanes.counts):
         visible = np.hypot(*(lanes.centres - position).T) <= reach + lanes.radii
         lane_points, lane_counts = lanes.vertices[visible[lanes.owner]], lanes.counts[visible]
-    solid, guide = per_road(road, PaintedSegments).near(position, reach)
-    dashed_lines = per_road(road, DashedMarkings)
+    solid, guide = road.derived(PaintedSegments, PaintedSegments).near(position, reach)
+    dashed_lines: DashedMarkings = road.derived(DashedMarkings, DashedMarkings)
     dashed = dashed_lines.dashes(position, reach) if len(dashed_lines.length) else np.zeros((0, 2, 2))
     strips = [(np.concatenate([solid, dashed]), MARKING_WIDTH_M, WHITE), (guide, GUIDE_WIDTH_M, YELLOW)]
     if len(road.crossings):
-        stripes = zebra_stripes(road.crossings)
+        stripes = road.derived(zebra_boxes, zebra_boxes)
         along = np.column_stack([np.cos(stripes[:, 2]), np.sin(stripes[:, 2])]) * stripes[:, 3:4] / 2
         segments = np.stack([stripes[:, :2] - along, stripes[:, :2] + along], axis=1)
         strips.append((segments[segments_near(segments, position, reach)], ZEBRA_STRIPE_M[0], WHITE))
@@ -307,32 +314,48 @@ def _ground_layers(world: WorldState, model: PinholeModel) -> tuple[np.ndarray, 
 
 
 def render_camera(world: WorldState, model: PinholeModel) -> np.ndarray:
-    """The camera's RGB uint8 image (H, W, 3) of ``world``."""
-    image = np.empty((model.height, model.width, 3), dtype=np.uint8)
-    image[:] = GRASS
-    image[: int(np.clip(np.ceil(model.horizon_row), 0, model.height))] = SKY
-    lanes, strips = _ground_layers(world, model)
-    groups = [lanes] + [_strip_quads(segments, width) for segments, width, _ in strips]
-    projected = _ground_polygons(model, world, groups)
-    _fill_strips(image, projected[0], ROAD)  # lane pieces are quads: convex, also once clipped
-    for polygons, (_, _, colour) in zip(projected[1:], strips, strict=True):
-        _fill_strips(image, polygons, colour)
-    _draw_road_users(image, model, world)
-    _draw_traffic_lights(image, model, world)
-    return image
+    """The camera's RGB uint8 image (H, W, 3) of one world."""
+    image = np.empty((1, model.height, model.width, 3), dtype=np.uint8)
+    draw_camera(WorldBatch.stack([world]), model, image)
+    return image[0]
+
+
+def draw_camera(batch: WorldBatch, model: PinholeModel, out: np.ndarray) -> None:
+    """Draw the K worlds' camera images into ``out`` (K, H, W, 3) uint8.
+
+    Road users and traffic lights go to each ego's frame for all K worlds at once; the road's
+    ground layers (culled per world against that world's map) and the OpenCV drawing run world by
+    world.
+    """
+    users, users_valid, is_pedestrian = _road_user_corners(batch)
+    lights = ego_frame(batch.traffic_lights[..., :2], batch.ego.position[:, None], batch.ego.heading[:, None])
+    out[:] = GRASS
+    out[:, : int(np.clip(np.ceil(model.horizon_row), 0, model.height))] = SKY
+    for k in range(batch.num_worlds):  # one OpenCV raster per world
+        image, position, heading = out[k], batch.ego.position[k], batch.ego.heading[k]
+        lanes, strips = _ground_layers(batch.road_of(k), position, model)
+        groups = [lanes] + [_strip_quads(segments, width) for segments, width, _ in strips]
+        projected = _ground_polygons(model, position, heading, groups)
+        _fill_strips(image, projected[0], ROAD)  # lane pieces are quads: convex, also once clipped
+        for polygons, (_, _, colour) in zip(projected[1:], strips, strict=True):
+            _fill_strips(image, polygons, colour)
+        _draw_road_users(image, model, users[k][users_valid[k]], is_pedestrian[k][users_valid[k]])
+        valid = batch.light_valid[k]
+        _draw_traffic_lights(image, model, lights[k][valid], batch.traffic_lights[k, valid, 3])
 
 
 def render_masks(world: WorldState, model: PinholeModel) -> np.ndarray:
     """Ground-truth masks (3, H, W) uint8 in {0, 1}: the ego lane's left line, its right line (both
     continuous, as wide as a painted marking) and the guide line, in the camera's projection."""
     masks = np.zeros((len(MASKS), model.height, model.width), dtype=np.uint8)
+    position = np.asarray(world.ego.position, dtype=float)
     left, right = ego_lane_lines(world)
-    guide = per_road(world.road, GuideSegments).segments
+    guide = world.road.derived(GuideSegments, GuideSegments).segments
     widths = (MARKING_WIDTH_M, MARKING_WIDTH_M, GUIDE_WIDTH_M)
     groups = [
-        _strip_quads(_near(world, s, model), w) for s, w in zip((left, right, guide), widths, strict=True)
+        _strip_quads(_near(position, s, model), w) for s, w in zip((left, right, guide), widths, strict=True)
     ]
-    for channel, polygons in enumerate(_ground_polygons(model, world, groups)):
+    for channel, polygons in enumerate(_ground_polygons(model, position, world.ego.heading, groups)):
         _fill_strips(masks[channel], polygons, 1)
     return masks
 
@@ -372,8 +395,8 @@ class Camera(Sensor):
     def space(self) -> spaces.Box:
         return self._space
 
-    def observe(self, world: WorldState) -> np.ndarray:
-        return render_camera(world, self.model)
+    def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
+        draw_camera(batch, self.model, out)
 
     def masks(self, world: WorldState) -> np.ndarray:
         """Ground-truth line masks (3, H, W) for ``world`` (see ``render_masks``)."""

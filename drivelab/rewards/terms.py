@@ -289,9 +289,8 @@ def line_centring(prev: WorldState, world: WorldState, control) -> float:
     in 38 px bands (of 640), −100 for a row where the line is out of view (seed 004, eq. 2)."""
     from drivelab.perception.camera import GuideSegments
     from drivelab.perception.line import LINE_CAMERA, LINE_ROWS_M
-    from drivelab.perception.topdown import per_road
 
-    guide = per_road(world.road, GuideSegments).segments
+    guide = world.road.derived(GuideSegments, GuideSegments).segments
     columns = _crossing_columns(world, guide, LINE_CAMERA, LINE_ROWS_M)
     offset_px = np.abs(columns - LINE_CAMERA.centre[0]) * 640 / LINE_CAMERA.width
     values = LINE_BAND_VALUES[np.searchsorted(LINE_BAND_EDGES_PX, np.nan_to_num(offset_px, nan=1e9), "right")]
