@@ -123,10 +123,11 @@ def draw_birdeye(batch: WorldBatch, out: np.ndarray, pixels_per_meter: float) ->
     ego = batch.ego
     ego_boxes = np.column_stack([ego.position, ego.heading, ego.length_m, ego.width_m])[:, None]
     egos, _ = view.boxes(ego_boxes, np.ones((count, 1), dtype=bool))
+    lanes = view.lanes(batch)
     out[:] = GRASS
     for k in range(count):  # one OpenCV raster per world
         image, road, position = out[k], batch.road_of(k), view.positions[k]
-        fill_each(image, view.lanes(k, road), ROAD, cv2.LINE_AA)
+        fill_each(image, lanes[k], ROAD, cv2.LINE_AA)
         if batch.route.count[k] > 1:
             cv2.polylines(image, routes[k], False, ROUTE, width_px, cv2.LINE_AA, SHIFT)
         solid = np.asarray(road.markings)[road.marking_kinds == MARKING_SOLID]

@@ -114,6 +114,18 @@ def _clip_half_plane(
     return points, counts
 
 
+def _clip_rows_counts(
+    points: np.ndarray, counts: np.ndarray, top: float, bottom: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Polygons (pixel vertices (P, 2), one after another, ``counts`` (L,)) cut to the rows
+    ``top``..``bottom``: the cut vertices and the (L,) new counts (0 for a polygon cut away)."""
+    if len(points) and points[:, 1].min() < top:
+        points, counts = _clip_half_plane(points, counts, top, keep_below=False)
+    if len(points) and points[:, 1].max() > bottom:
+        points, counts = _clip_half_plane(points, counts, bottom, keep_below=True)
+    return points, counts
+
+
 def clip_rows(points: np.ndarray, counts: np.ndarray, top: float, bottom: float) -> list[np.ndarray]:
     """Cut polygons (pixel vertices, one after another) to the rows ``top``..``bottom``.
 
@@ -122,10 +134,7 @@ def clip_rows(points: np.ndarray, counts: np.ndarray, top: float, bottom: float)
 
     :return: the non-empty clipped polygons as float (K, 2) arrays.
     """
-    if points[:, 1].min() < top:
-        points, counts = _clip_half_plane(points, counts, top, keep_below=False)
-    if len(points) and points[:, 1].max() > bottom:
-        points, counts = _clip_half_plane(points, counts, bottom, keep_below=True)
+    points, counts = _clip_rows_counts(points, counts, top, bottom)
     polygons = np.split(points, np.cumsum(counts)[:-1])
     return [polygon for polygon in polygons if len(polygon) >= 3]
 
@@ -163,16 +172,39 @@ class View:
         """World points (..., 2) seen from ego ``k`` → float pixel coordinates (..., 2)."""
         return to_pixels(points_world, self.positions[k], self.headings[k], self.size_hw, self.ppm)
 
-    def lanes(self, k: int, road: RoadMap) -> list[np.ndarray]:
-        """The lane polygons that reach world ``k``'s image, projected in one go and cut to its rows."""
-        lanes: LanePolygons = road.derived(LanePolygons, LanePolygons)
-        visible = np.hypot(*(lanes.centres - self.positions[k]).T) <= self.radius_m + lanes.radii
-        if not visible.any():
-            return []
-        pixels = self.pixels_of(k, lanes.vertices[visible[lanes.owner]])
+    def lanes(self, batch: WorldBatch) -> list[list[np.ndarray]]:
+        """Per world, the lane polygons of its map that reach its image, as fixed-point pixel
+        polygons cut to its rows: culled per map for all its worlds at once, then projected and
+        cut for all K worlds in one go."""
+        vertices, world_of_vertex, counts, owners = [], [], [], []
+        for index, road in enumerate(batch.roads):
+            worlds = np.flatnonzero(batch.road_index == index)
+            lanes: LanePolygons = road.derived(LanePolygons, LanePolygons)
+            offset = lanes.centres[None] - self.positions[worlds, None]  # (W, L, 2)
+            visible = np.hypot(offset[..., 0], offset[..., 1]) <= self.radius_m + lanes.radii  # (W, L)
+            seen_by, vertex = np.nonzero(visible[:, lanes.owner])  # world-major, each world's lanes in order
+            vertices.append(lanes.vertices[vertex])
+            world_of_vertex.append(worlds[seen_by])
+            counts.append(np.broadcast_to(lanes.counts, visible.shape)[visible])
+            owners.append(np.repeat(worlds, visible.sum(axis=1)))
+        polygons: list[list[np.ndarray]] = [[] for _ in self.headings]
+        counts, owners = np.concatenate(counts), np.concatenate(owners)
+        if counts.sum() == 0:
+            return polygons
+        world_of_vertex = np.concatenate(world_of_vertex)
+        pixels = to_pixels(
+            np.concatenate(vertices),
+            self.positions[world_of_vertex],
+            self.headings[world_of_vertex],
+            self.size_hw,
+            self.ppm,
+        )
         margin = 4.0  # rows beyond the image: the cut edges (and their anti-aliasing) stay unseen
-        polygons = clip_rows(pixels, lanes.counts[visible], -margin, self.size_hw[0] - 1 + margin)
-        return [fixed_point(polygon) for polygon in polygons]
+        pixels, counts = _clip_rows_counts(pixels, counts, -margin, self.size_hw[0] - 1 + margin)
+        for world, polygon in zip(owners, np.split(fixed_point(pixels), np.cumsum(counts)[:-1]), strict=True):
+            if len(polygon) >= 3:
+                polygons[world].append(polygon)
+        return polygons
 
     def polylines(self, polylines: np.ndarray, counts: np.ndarray, width_px: int) -> list[list[np.ndarray]]:
         """Per world, the segments of its polyline (K, R, 2) (``counts[k]`` real points) that reach
@@ -340,9 +372,10 @@ class TopDown(Sensor):
             bar_corners, bars_seen = view.boxes(bars, batch.light_valid, EXACT_INSET_PX)
             levels = LIGHT_LEVELS[batch.traffic_lights[..., 3].astype(int)]
         out[...] = 0
+        lanes = view.lanes(batch)
         for k in range(count):  # one OpenCV raster per world
             image = out[k]
-            fill_each(image[0], view.lanes(k, batch.road_of(k)), 255)
+            fill_each(image[0], lanes[k], 255)
             if batch.route.count[k] > 1:
                 cv2.polylines(image[1], routes[k], False, 255, width_px, cv2.LINE_8, SHIFT)
             fill_boxes(image[2], dot_corners[k][dots_seen[k]], 255)
