@@ -27,7 +27,8 @@ os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 import torch  # noqa: E402
 
 from drivelab.perception.lane import LaneState, classical_lane_masks, lane_centres, state_of  # noqa: E402
-from drivelab.perception.lane_cnn import generate_lane_frames, iou, load_lane_cnn  # noqa: E402
+from drivelab.perception.lane_cnn import iou, load_lane_cnn  # noqa: E402
+from drivelab.training.lane_dataset import generate_lane_frames  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 

@@ -400,12 +400,15 @@ def train_lane(
     """Train the seed-004 lane segmentation CNN on frames and masks drivelab renders itself."""
     import torch
 
-    from drivelab.perception.lane_cnn import WEIGHTS_PATH, train_lane_cnn
+    from drivelab.perception.lane_cnn import WEIGHTS_PATH
+    from drivelab.training.lane_dataset import train_lane_detector
 
     if frames < 1 or epochs < 1:
         _fail("--frames and --epochs must be >= 1")
     torch.set_num_threads(min(2, torch.get_num_threads()))
-    summary = train_lane_cnn(frames=frames, epochs=epochs, seed=seed, out=out or WEIGHTS_PATH, log=typer.echo)
+    summary = train_lane_detector(
+        frames=frames, epochs=epochs, seed=seed, out=out or WEIGHTS_PATH, log=typer.echo
+    )
     size_kib, seconds = summary["bytes"] / 1024, summary["seconds"]
     typer.echo(f"weights: {summary['weights']} ({size_kib:.0f} KiB, trained in {seconds:.0f} s)")
 

@@ -13,13 +13,14 @@ from gymnasium import spaces
 from drivelab.perception.base import Sensor, zebra_stripes
 from drivelab.perception.topdown import (
     SHIFT,
+    STOP_BAR_M,
     View,
     fill_boxes,
     fill_each,
-    per_road,
+    fixed_point,
     segments_near,
-    stop_bars,
 )
+from drivelab.world.batch import WorldBatch
 from drivelab.world.state import MARKING_DASHED, MARKING_SOLID, RoadMap, WorldState
 
 GRASS = (96, 140, 84)
@@ -84,42 +85,66 @@ class DashedMarkings:
 def render_birdeye(
     world: WorldState, size_hw: tuple[int, int] = (128, 128), pixels_per_meter: float = 3.0
 ) -> np.ndarray:
-    """An RGB uint8 image (H, W, 3) of the road, route, markings, traffic and ego.
+    """An RGB uint8 image (H, W, 3) of the road, route, markings, traffic and ego of one world.
 
     Grass background, dark road (lane polygons), the route as a faint band, white solid and
     light-grey dashed markings, traffic lights as stop bars in their colour, other vehicles blue,
-    the ego green (red after a collision).
+    pedestrians magenta, the ego green (red after a collision).
 
     :param size_hw: image height and width in pixels (videos use larger ones, e.g. (256, 512)).
     :param pixels_per_meter: resolution.
     """
-    height, width = size_hw
-    image = np.empty((height, width, 3), dtype=np.uint8)
-    image[:] = GRASS
-    view = View(world, size_hw, pixels_per_meter)
-    road = world.road
-    fill_each(image, view.lanes(road), ROAD, cv2.LINE_AA)
-    if len(world.route.polyline) > 1:
-        width_px = max(int(round(ROUTE_WIDTH_M * pixels_per_meter)), 1)
-        route = view.polyline(world.route.polyline, width_px)
-        cv2.polylines(image, route, False, ROUTE, width_px, cv2.LINE_AA, SHIFT)
-    solid = np.asarray(road.markings)[road.marking_kinds == MARKING_SOLID]
-    solid = solid[segments_near(solid, view.position, view.radius_m)]
-    dashed = per_road(road, DashedMarkings).dashes(view.position, view.radius_m)
-    for lines, colour in ((solid, SOLID_LINE), (dashed, DASHED_LINE)):
-        if len(lines):
-            cv2.polylines(image, list(view(lines)), False, colour, 1, cv2.LINE_AA, SHIFT)
-    if len(road.crossings):
-        fill_boxes(image, view.boxes(zebra_stripes(road.crossings)), ZEBRA, cv2.LINE_AA)
-    for bar, state in zip(stop_bars(world.traffic_lights), world.traffic_lights[:, 3], strict=True):
-        fill_boxes(image, view.boxes(bar[None]), LIGHT_COLOURS[int(state)], cv2.LINE_AA)
-    fill_boxes(image, view.vehicles(world.vehicles), VEHICLE, cv2.LINE_AA)
-    if len(world.pedestrians):
-        fill_boxes(image, view.vehicles(world.pedestrians), PEDESTRIAN, cv2.LINE_AA)
-    ego = world.ego
-    ego_box = np.array([[*ego.position, ego.heading, ego.length_m, ego.width_m]])
-    fill_boxes(image, view.boxes(ego_box), EGO_CRASHED if world.events.collided else EGO, cv2.LINE_AA)
-    return image
+    image = np.empty((1, *size_hw, 3), dtype=np.uint8)
+    draw_birdeye(WorldBatch.stack([world]), image, pixels_per_meter)
+    return image[0]
+
+
+def zebra_boxes(road: RoadMap) -> np.ndarray:
+    """The road's zebra stripes as rectangles (S, 5) (computed once per map)."""
+    return zebra_stripes(road.crossings)
+
+
+def draw_birdeye(batch: WorldBatch, out: np.ndarray, pixels_per_meter: float) -> None:
+    """Draw the K worlds' bird's-eye images into ``out`` (K, H, W, 3) uint8 (see ``render_birdeye``).
+
+    The ego-frame transforms and culling of routes, traffic, lights and egos run over all K worlds
+    at once; the road layers (per map) and the OpenCV drawing run world by world.
+    """
+    count = batch.num_worlds
+    size_hw = out.shape[1:3]
+    view = View.of(batch, size_hw, pixels_per_meter)
+    width_px = max(int(round(ROUTE_WIDTH_M * pixels_per_meter)), 1)
+    routes = view.polylines(batch.route.polyline, batch.route.count, width_px)
+    lights = batch.traffic_lights  # (K, L, 4) → stop bars (K, L, 5), as ``stop_bars`` draws them
+    bars = np.concatenate([lights[..., :3], np.broadcast_to(STOP_BAR_M, (*lights.shape[:2], 2))], axis=-1)
+    bar_corners, bars_seen = view.boxes(bars, batch.light_valid)
+    vehicles, vehicles_seen = view.vehicles(batch.vehicles, batch.vehicle_valid)
+    pedestrians, pedestrians_seen = view.vehicles(batch.pedestrians, batch.pedestrian_valid)
+    ego = batch.ego
+    ego_boxes = np.column_stack([ego.position, ego.heading, ego.length_m, ego.width_m])[:, None]
+    egos, _ = view.boxes(ego_boxes, np.ones((count, 1), dtype=bool))
+    lanes = view.lanes(batch)
+    out[:] = GRASS
+    for k in range(count):  # one OpenCV raster per world
+        image, road, position = out[k], batch.road_of(k), view.positions[k]
+        fill_each(image, lanes[k], ROAD, cv2.LINE_AA)
+        if batch.route.count[k] > 1:
+            cv2.polylines(image, routes[k], False, ROUTE, width_px, cv2.LINE_AA, SHIFT)
+        solid = np.asarray(road.markings)[road.marking_kinds == MARKING_SOLID]
+        solid = solid[segments_near(solid, position, view.radius_m)]
+        dashed = road.derived(DashedMarkings, DashedMarkings).dashes(position, view.radius_m)
+        for lines, colour in ((solid, SOLID_LINE), (dashed, DASHED_LINE)):
+            if len(lines):
+                pixels = fixed_point(view.pixels_of(k, lines))
+                cv2.polylines(image, list(pixels), False, colour, 1, cv2.LINE_AA, SHIFT)
+        if len(road.crossings):
+            fill_boxes(image, view.boxes_of(k, road.derived(zebra_boxes, zebra_boxes)), ZEBRA, cv2.LINE_AA)
+        for corners, state in zip(bar_corners[k][bars_seen[k]], lights[k, bars_seen[k], 3], strict=True):
+            cv2.fillConvexPoly(image, corners, LIGHT_COLOURS[int(state)], cv2.LINE_AA, SHIFT)
+        fill_boxes(image, vehicles[k][vehicles_seen[k]], VEHICLE, cv2.LINE_AA)
+        fill_boxes(image, pedestrians[k][pedestrians_seen[k]], PEDESTRIAN, cv2.LINE_AA)
+        colour = EGO_CRASHED if batch.events.collided[k] else EGO
+        cv2.fillConvexPoly(image, egos[k, 0], colour, cv2.LINE_AA, SHIFT)
 
 
 class BirdEye(Sensor):
@@ -141,5 +166,5 @@ class BirdEye(Sensor):
     def space(self) -> spaces.Box:
         return self._space
 
-    def observe(self, world: WorldState) -> np.ndarray:
-        return render_birdeye(world, (self.size, self.size), self.ppm)
+    def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
+        draw_birdeye(batch, out, self.ppm)

@@ -20,18 +20,12 @@ import cv2
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.perception.base import ZEBRA_STRIPE_M, Sensor, box_corners, zebra_stripes
-from drivelab.perception.birdeye import DashedMarkings
-from drivelab.perception.topdown import (
-    SHIFT,
-    _clip_half_plane,
-    fixed_point,
-    per_road,
-    segments_near,
-)
+from drivelab.perception.base import ZEBRA_STRIPE_M, Sensor, box_corners, ego_frame
+from drivelab.perception.birdeye import DashedMarkings, zebra_boxes
+from drivelab.perception.topdown import SHIFT, _clip_half_plane, fixed_point, road_users, segments_near
+from drivelab.world.batch import WorldBatch
 from drivelab.world.pinhole import PinholeModel
 from drivelab.world.road_geometry import GuideSegments, lateral_at_distances, polyline_segments  # noqa: F401
-from drivelab.world.road_geometry import ego_ground as _ego_ground
 from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW, MARKING_SOLID, RoadMap, WorldState
 
 SKY = (150, 190, 235)
@@ -64,16 +58,43 @@ def _near_clip_m(model: PinholeModel) -> float:
 
 
 def _ground_polygons(
-    model: PinholeModel, world: WorldState, groups: list[tuple[np.ndarray, np.ndarray]]
+    model: PinholeModel,
+    position: np.ndarray,
+    heading: float,
+    groups: list[tuple[np.ndarray, np.ndarray]],
 ) -> list[list[np.ndarray]]:
     """Ground polygons in world coordinates, in groups of (vertices one after another, counts) →
-    per group, the fixed-point pixel polygons in sight. All groups share one clip and projection."""
-    groups = [(p, c) for p, c in groups]
-    sizes = [len(c) for _, c in groups]
-    counts = np.concatenate([c for _, c in groups]) if groups else np.zeros(0, dtype=int)
-    if counts.sum() == 0:
-        return [[] for _ in groups]
-    points = _ego_ground(world, np.concatenate([p for p, c in groups if len(c)]))
+    per group, the fixed-point pixel polygons in sight of the ego at ``position`` (2,) and
+    ``heading`` (one world of ``_ground_polygons_batch``)."""
+    return _ground_polygons_batch(model, np.reshape(position, (1, 2)), np.reshape(heading, 1), [groups])[0]
+
+
+def _ground_polygons_batch(
+    model: PinholeModel,
+    positions: np.ndarray,
+    headings: np.ndarray,
+    groups: list[list[tuple[np.ndarray, np.ndarray]]],
+) -> list[list[list[np.ndarray]]]:
+    """K worlds' ground polygons (per world, groups of (world vertices one after another, counts))
+    → per world and group, the fixed-point pixel polygons in sight of that world's ego at
+    ``positions[k]`` (K, 2), ``headings[k]`` (K,). All worlds and groups share one transform,
+    cull, clip and projection."""
+    result: list[list[list[np.ndarray]]] = [[[] for _ in world_groups] for world_groups in groups]
+    parts = [
+        (k, g, p, c)
+        for k, world_groups in enumerate(groups)
+        for g, (p, c) in enumerate(world_groups)
+        if len(c)
+    ]
+    if not parts or sum(int(c.sum()) for *_, c in parts) == 0:
+        return result
+    counts = np.concatenate([c for *_, c in parts])
+    polygon_world = np.concatenate([np.full(len(c), k) for k, _, _, c in parts])
+    polygon_group = np.concatenate([np.full(len(c), g) for _, g, _, c in parts])
+    world_of_vertex = np.concatenate([np.full(len(p), k) for k, _, p, _ in parts])
+    points = ego_frame(
+        np.concatenate([p for *_, p, _ in parts]), positions[world_of_vertex], headings[world_of_vertex]
+    )
     near = _near_clip_m(model)
     # cull polygons wholly outside one side of the view wedge (behind, left or right of it)
     slope = model.width / 2 / model.focal_px
@@ -89,18 +110,10 @@ def _ground_polygons(
     if len(swapped) and swapped[:, 1].min() < near:
         swapped, counts = _clip_half_plane(swapped, counts, near, keep_below=False)
     pixels = fixed_point(model.project_ground(swapped[:, ::-1])) if len(swapped) else np.zeros((0, 2))
-    ends = np.cumsum(counts).tolist()
-    starts = [0] + ends[:-1]
-    result, first = [], 0
-    for size in sizes:
-        result.append(
-            [
-                pixels[a:b]
-                for a, b in zip(starts[first : first + size], ends[first : first + size], strict=True)
-                if b - a >= 3
-            ]
-        )
-        first += size
+    ends = np.cumsum(counts)
+    for index in np.flatnonzero(counts >= 3):
+        polygon = pixels[ends[index] - counts[index] : ends[index]]
+        result[polygon_world[index]][polygon_group[index]].append(polygon)
     return result
 
 
@@ -189,85 +202,106 @@ def ego_lane_lines(world: WorldState) -> tuple[np.ndarray, np.ndarray]:
     return _offset_polyline(route, -half), _offset_polyline(route, half)
 
 
-def _near(world: WorldState, segments: np.ndarray, model: PinholeModel) -> np.ndarray:
+def _near(position: np.ndarray, segments: np.ndarray, model: PinholeModel) -> np.ndarray:
+    """The segments (M, 2, 2) within the camera's drawing range of an ego at ``position`` (2,)."""
     if len(segments) == 0:
         return segments
     reach = model.forward_m + model.max_range_m
-    return segments[segments_near(segments, np.asarray(world.ego.position, float), reach)]
+    return segments[segments_near(segments, position, reach)]
 
 
-def _draw_road_users(image: np.ndarray, model: PinholeModel, world: WorldState) -> None:
-    """Other vehicles and pedestrians as boxes: visible side faces shaded by orientation, then the
-    top; pedestrians are tall, narrow and coloured apart."""
-    users = world.road_users()
-    if len(users) == 0:
-        return
-    boxes = np.asarray(users, dtype=float)[:, [0, 1, 2, 4, 5]]
-    is_pedestrian = np.arange(len(boxes)) >= len(world.vehicles)
-    corners = _ego_ground(world, box_corners(boxes))  # (N, 4, 2): front-left, front-right, ...
-    distance = np.hypot(*(corners.mean(axis=1) - [model.forward_m, 0.0]).T)
-    ahead = (corners[..., 0] > model.forward_m + model.near_m).all(axis=1) & (distance < model.max_range_m)
-    order = np.argsort(-distance[ahead])  # painter's order: far to near
-    corners, is_pedestrian = corners[ahead][order], is_pedestrian[ahead][order]
-    if len(corners) == 0:
-        return
+def _road_user_corners(batch: WorldBatch) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Ground corners (K, N + P, 4, 2) in each ego's frame of every world's vehicles then
+    pedestrians (front-left, front-right, … as ``box_corners``), their (K, N + P) valid mask and
+    the (K, N + P) mask of the pedestrians."""
+    users, valid = road_users(batch)
+    is_pedestrian = np.broadcast_to(np.arange(users.shape[1]) >= batch.vehicles.shape[1], valid.shape)
+    corners = box_corners(users[..., [0, 1, 2, 4, 5]])
+    position, heading = batch.ego.position[:, None, None], batch.ego.heading[:, None, None]
+    return ego_frame(corners, position, heading), valid, is_pedestrian
+
+
+def _road_user_quads(
+    model: PinholeModel, batch: WorldBatch
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The road users in front of each camera, for all K worlds at once: fixed-point pixels (U, 8, 2)
+    of their boxes' bottom then top corners, the (U, 4) side faces seen, (U,) pedestrian flags and
+    distances, and the (K + 1,) offsets of each world's users in those rows."""
+    corners, valid, is_pedestrian = _road_user_corners(batch)
+    distance = np.hypot(*np.moveaxis(corners.mean(axis=2) - [model.forward_m, 0.0], -1, 0))  # (K, M)
+    ahead = (
+        valid
+        & (corners[..., 0] > model.forward_m + model.near_m).all(axis=-1)
+        & (distance < model.max_range_m)
+    )
+    world, slot = np.nonzero(ahead)  # world-major, each world's users in order
+    corners, is_pedestrian, distance = corners[world, slot], is_pedestrian[world, slot], distance[world, slot]
     count = len(corners)
     bottom = np.concatenate([corners, np.zeros((count, 4, 1))], axis=2)
     heights = np.where(is_pedestrian, PEDESTRIAN_HEIGHT_M, VEHICLE_HEIGHT_M)
     top = np.concatenate([corners, np.broadcast_to(heights[:, None, None], (count, 4, 1))], axis=2)
-    pixels = fixed_point(model.project(np.concatenate([bottom, top], axis=1)))  # (N, 8, 2)
-    following = np.array([1, 2, 3, 0])
-    middle = (corners + corners[:, following]) / 2
+    pixels = fixed_point(model.project(np.concatenate([bottom, top], axis=1)))  # (U, 8, 2)
+    middle = (corners + corners[:, FOLLOWING]) / 2
     outward = middle - corners.mean(axis=1, keepdims=True)
     camera = np.array([model.forward_m, 0.0])
-    facing = np.einsum("nki,nki->nk", outward, camera - middle) > 0  # (N, 4) faces seen
-    for user in range(count):
+    facing = np.einsum("nki,nki->nk", outward, camera - middle) > 0  # (U, 4) faces seen
+    offsets = np.r_[0, np.cumsum(ahead.sum(axis=1))]
+    return pixels, facing, is_pedestrian, distance, offsets
+
+
+FOLLOWING = np.array([1, 2, 3, 0])  # the corner after each of ``box_corners``' four
+
+
+def _draw_road_users(
+    image: np.ndarray, pixels: np.ndarray, facing: np.ndarray, is_pedestrian: np.ndarray, distance: np.ndarray
+) -> None:
+    """One world's road users in front of its camera (rows of ``_road_user_quads``) as boxes, far to
+    near: visible side faces shaded by orientation, then the top; pedestrians are tall, narrow and
+    coloured apart."""
+    for user in np.argsort(-distance):  # painter's order: far to near
         faces, roof = (PEDESTRIAN_COLOURS, PEDESTRIAN_COLOURS[0]) if is_pedestrian[user] else (
             FACE_COLOURS, ROOF_COLOUR)  # fmt: skip
         for face in np.flatnonzero(facing[user]):
-            quad = pixels[user, [face, following[face], following[face] + 4, face + 4]]
+            quad = pixels[user, [face, FOLLOWING[face], FOLLOWING[face] + 4, face + 4]]
             cv2.fillConvexPoly(image, quad, faces[face], cv2.LINE_8, SHIFT)
         cv2.fillConvexPoly(image, pixels[user, 4:], roof, cv2.LINE_8, SHIFT)
 
 
-def _draw_traffic_lights(image: np.ndarray, model: PinholeModel, world: WorldState) -> None:
-    """Traffic lights (rows x, y, heading, LIGHT_* state) as a pole and a lamp in the state's colour."""
-    lights = np.asarray(world.traffic_lights, dtype=float).reshape(-1, 4)
-    if len(lights) == 0:
-        return
-    local = _ego_ground(world, lights[:, :2])
-    seen = (local[:, 0] > model.forward_m + model.near_m) & (
-        local[:, 0] < model.forward_m + model.max_range_m
+def _traffic_light_marks(
+    model: PinholeModel, batch: WorldBatch
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Traffic lights (K, L) as a pole and a lamp, for all K worlds at once: the (K, L) mask of those
+    drawn, integer pixels (K, L, 2, 2) of each pole's foot and lamp, and the lamps' radii (K, L)."""
+    local = ego_frame(batch.traffic_lights[..., :2], batch.ego.position[:, None], batch.ego.heading[:, None])
+    x, y = local[..., 0], local[..., 1]
+    seen = (
+        batch.light_valid & (x > model.forward_m + model.near_m) & (x < model.forward_m + model.max_range_m)
     )
-    for (x, y), state in zip(local[seen], lights[seen, 3], strict=True):
-        points = np.array([[x, y, 0.0], [x, y, LIGHT_HEIGHT_M]])
-        # the camera is pitched down: a lamp just past the ground near plane can be behind the
-        # image plane, where the projection flips and overflows OpenCV's int32 pixels
-        if model.to_camera(points)[:, 2].min() <= model.near_m:
-            continue
-        foot, lamp = model.project(points)
-        radius = max(int(round(0.3 * model.focal_px / max(x - model.forward_m, 1e-3))), 1)
-        cv2.line(image, tuple(np.round(foot).astype(int)), tuple(np.round(lamp).astype(int)), (40, 40, 40), 1)
-        colour = LIGHT_COLOURS.get(int(state), (200, 200, 200))
-        cv2.circle(image, tuple(np.round(lamp).astype(int)), radius, colour, -1, cv2.LINE_8)
+    foot = np.stack([x, y, np.zeros_like(x)], axis=-1)
+    points = np.stack([foot, foot + [0.0, 0.0, LIGHT_HEIGHT_M]], axis=-2)  # (K, L, 2, 3)
+    # the camera is pitched down: a lamp just past the ground near plane can be behind the image
+    # plane, where the projection flips and overflows OpenCV's int32 pixels
+    seen &= model.to_camera(points)[..., 2].min(axis=-1) > model.near_m
+    pixels = np.round(np.where(seen[..., None, None], model.project(points), 0.0)).astype(int)
+    radius = np.maximum(np.round(0.3 * model.focal_px / np.maximum(x - model.forward_m, 1e-3)), 1)
+    return seen, pixels, np.where(seen, radius, 1).astype(int), batch.traffic_lights[..., 3]
 
 
-def _ground_layers(world: WorldState, model: PinholeModel) -> tuple[np.ndarray, list, list]:
-    """(lane polygons (P, 2) with counts) and the painted strips as [(quads, counts, colour)]."""
-    road = world.road
-    position = np.asarray(world.ego.position, dtype=float)
+def _ground_layers(road: RoadMap, position: np.ndarray, model: PinholeModel) -> tuple[tuple, list]:
+    """(lane polygons (P, 2) with counts) and the painted strips as [(segments, width, colour)] of
+    ``road`` within the camera's reach of an ego at ``position`` (2,)."""
     reach = model.forward_m + model.max_range_m
-    lanes = per_road(road, LanePieces)
+    lanes: LanePieces = road.derived(LanePieces, LanePieces)
     lane_points, lane_counts = np.zeros((0, 2)), np.zeros(0, dtype=int)
     if len(lanes.counts):
         visible = np.hypot(*(lanes.centres - position).T) <= reach + lanes.radii
         lane_points, lane_counts = lanes.vertices[visible[lanes.owner]], lanes.counts[visible]
-    solid, guide = per_road(road, PaintedSegments).near(position, reach)
-    dashed_lines = per_road(road, DashedMarkings)
+    solid, guide = road.derived(PaintedSegments, PaintedSegments).near(position, reach)
+    dashed_lines: DashedMarkings = road.derived(DashedMarkings, DashedMarkings)
     dashed = dashed_lines.dashes(position, reach) if len(dashed_lines.length) else np.zeros((0, 2, 2))
     strips = [(np.concatenate([solid, dashed]), MARKING_WIDTH_M, WHITE), (guide, GUIDE_WIDTH_M, YELLOW)]
     if len(road.crossings):
-        stripes = zebra_stripes(road.crossings)
+        stripes = road.derived(zebra_boxes, zebra_boxes)
         along = np.column_stack([np.cos(stripes[:, 2]), np.sin(stripes[:, 2])]) * stripes[:, 3:4] / 2
         segments = np.stack([stripes[:, :2] - along, stripes[:, :2] + along], axis=1)
         strips.append((segments[segments_near(segments, position, reach)], ZEBRA_STRIPE_M[0], WHITE))
@@ -275,32 +309,55 @@ def _ground_layers(world: WorldState, model: PinholeModel) -> tuple[np.ndarray, 
 
 
 def render_camera(world: WorldState, model: PinholeModel) -> np.ndarray:
-    """The camera's RGB uint8 image (H, W, 3) of ``world``."""
-    image = np.empty((model.height, model.width, 3), dtype=np.uint8)
-    image[:] = GRASS
-    image[: int(np.clip(np.ceil(model.horizon_row), 0, model.height))] = SKY
-    lanes, strips = _ground_layers(world, model)
-    groups = [lanes] + [_strip_quads(segments, width) for segments, width, _ in strips]
-    projected = _ground_polygons(model, world, groups)
-    _fill_strips(image, projected[0], ROAD)  # lane pieces are quads: convex, also once clipped
-    for polygons, (_, _, colour) in zip(projected[1:], strips, strict=True):
-        _fill_strips(image, polygons, colour)
-    _draw_road_users(image, model, world)
-    _draw_traffic_lights(image, model, world)
-    return image
+    """The camera's RGB uint8 image (H, W, 3) of one world."""
+    image = np.empty((1, model.height, model.width, 3), dtype=np.uint8)
+    draw_camera(WorldBatch.stack([world]), model, image)
+    return image[0]
+
+
+def draw_camera(batch: WorldBatch, model: PinholeModel, out: np.ndarray) -> None:
+    """Draw the K worlds' camera images into ``out`` (K, H, W, 3) uint8.
+
+    Each world's road is culled against its map; then the ground polygons of all K worlds, their
+    road users and traffic lights are transformed, culled and projected together; only the OpenCV
+    drawing runs world by world.
+    """
+    count = batch.num_worlds
+    layers = [_ground_layers(batch.road_of(k), batch.ego.position[k], model) for k in range(count)]
+    groups = [
+        [lanes] + [_strip_quads(segments, width) for segments, width, _ in strips] for lanes, strips in layers
+    ]
+    projected = _ground_polygons_batch(model, batch.ego.position, batch.ego.heading, groups)
+    users, facing, is_pedestrian, distance, offsets = _road_user_quads(model, batch)
+    lights_seen, light_pixels, radii, states = _traffic_light_marks(model, batch)
+    out[:] = GRASS
+    out[:, : int(np.clip(np.ceil(model.horizon_row), 0, model.height))] = SKY
+    for k in range(count):  # one OpenCV raster per world
+        image = out[k]
+        _fill_strips(image, projected[k][0], ROAD)  # lane pieces are quads: convex, also once clipped
+        for polygons, (_, _, colour) in zip(projected[k][1:], layers[k][1], strict=True):
+            _fill_strips(image, polygons, colour)
+        mine = slice(offsets[k], offsets[k + 1])
+        _draw_road_users(image, users[mine], facing[mine], is_pedestrian[mine], distance[mine])
+        for light in np.flatnonzero(lights_seen[k]):
+            foot, lamp = (tuple(point) for point in light_pixels[k, light].tolist())
+            cv2.line(image, foot, lamp, (40, 40, 40), 1)
+            colour = LIGHT_COLOURS.get(int(states[k, light]), (200, 200, 200))
+            cv2.circle(image, lamp, int(radii[k, light]), colour, -1, cv2.LINE_8)
 
 
 def render_masks(world: WorldState, model: PinholeModel) -> np.ndarray:
     """Ground-truth masks (3, H, W) uint8 in {0, 1}: the ego lane's left line, its right line (both
     continuous, as wide as a painted marking) and the guide line, in the camera's projection."""
     masks = np.zeros((len(MASKS), model.height, model.width), dtype=np.uint8)
+    position = np.asarray(world.ego.position, dtype=float)
     left, right = ego_lane_lines(world)
-    guide = per_road(world.road, GuideSegments).segments
+    guide = world.road.derived(GuideSegments, GuideSegments).segments
     widths = (MARKING_WIDTH_M, MARKING_WIDTH_M, GUIDE_WIDTH_M)
     groups = [
-        _strip_quads(_near(world, s, model), w) for s, w in zip((left, right, guide), widths, strict=True)
+        _strip_quads(_near(position, s, model), w) for s, w in zip((left, right, guide), widths, strict=True)
     ]
-    for channel, polygons in enumerate(_ground_polygons(model, world, groups)):
+    for channel, polygons in enumerate(_ground_polygons(model, position, world.ego.heading, groups)):
         _fill_strips(masks[channel], polygons, 1)
     return masks
 
@@ -340,8 +397,8 @@ class Camera(Sensor):
     def space(self) -> spaces.Box:
         return self._space
 
-    def observe(self, world: WorldState) -> np.ndarray:
-        return render_camera(world, self.model)
+    def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
+        draw_camera(batch, self.model, out)
 
     def masks(self, world: WorldState) -> np.ndarray:
         """Ground-truth line masks (3, H, W) for ``world`` (see ``render_masks``)."""

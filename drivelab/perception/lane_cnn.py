@@ -1,15 +1,14 @@
-"""The seed's lane-line segmentation CNN (seed 004, section 4.1), its training data and training.
+"""The seed's lane-line segmentation CNN (seed 004, section 4.1) and its training on given frames.
 
 A small encoder-decoder (8 768 weights, 40 KB on disk) maps a 120 x 160 camera frame to two masks, the ego
 lane's left and right lines. It is trained on frames and ground-truth masks that drivelab's own
-camera renders on the follow-lane circuit at random poses (``generate_lane_frames``), so nothing
-is downloaded; the trained weights ship in ``drivelab/perception/weights/lane_cnn.pt``.
-``drivelab perception train-lane`` retrains them.
+camera renders on the follow-lane circuit at random poses (``drivelab.training.lane_dataset``, which
+drives the simulator: perception never builds one), so nothing is downloaded; the trained weights
+ship in ``drivelab/perception/weights/lane_cnn.pt``. ``drivelab perception train-lane`` retrains them.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from pathlib import Path
 
@@ -19,11 +18,8 @@ from torch import nn
 from torch.nn import functional
 
 from drivelab.errors import UsageError
-from drivelab.perception.camera import render_camera, render_masks
 
 WEIGHTS_PATH = Path(__file__).parent / "weights" / "lane_cnn.pt"
-MAX_LATERAL_M = 1.2  # training poses: offset from the lane centre, uniform in ±this
-HEADING_STD_DEG = 4.0  # and heading error, normal
 
 
 class LaneNet(nn.Module):
@@ -54,9 +50,14 @@ class LaneNet(nn.Module):
 
     @torch.no_grad()
     def segment(self, image_rgb: np.ndarray) -> np.ndarray:
-        """One RGB uint8 frame (H, W, 3) → left/right line masks (2, H, W) bool."""
-        batch = torch.from_numpy(np.ascontiguousarray(image_rgb.transpose(2, 0, 1))).float()[None] / 255.0
-        return (self(batch)[0] > 0).numpy()
+        """RGB uint8 frames (K, H, W, 3) → left/right line masks (K, 2, H, W) bool, in one forward
+        pass; one frame (H, W, 3) → (2, H, W)."""
+        frames = np.asarray(image_rgb)
+        batch = torch.from_numpy(
+            np.ascontiguousarray(frames.reshape(-1, *frames.shape[-3:]).transpose(0, 3, 1, 2))
+        )
+        masks = (self(batch.float() / 255.0) > 0).numpy()
+        return masks[0] if frames.ndim == 3 else masks
 
 
 def load_lane_cnn(path: str | Path | None = None) -> LaneNet:
@@ -76,40 +77,6 @@ def load_lane_cnn(path: str | Path | None = None) -> LaneNet:
     return network.eval()
 
 
-def generate_lane_frames(count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """``count`` camera frames (N, H, W, 3) uint8 and their left/right masks (N, 2, H, W) uint8 of the
-    follow-lane circuit, at random places, lanes, lateral offsets and heading errors."""
-    from drivelab.envs.backends.highway import HighwayBackend
-    from drivelab.envs.scenarios import get_scenario
-    from drivelab.perception.lane import LANE_CAMERA
-
-    rng = np.random.default_rng(seed)
-    backend = HighwayBackend(get_scenario("follow-lane"), "empty", "continuous")
-    images = np.empty((count, LANE_CAMERA.height, LANE_CAMERA.width, 3), np.uint8)
-    masks = np.empty((count, 2, LANE_CAMERA.height, LANE_CAMERA.width), np.uint8)
-    world = None
-    for index in range(count):
-        if index % 40 == 0:  # a new episode: another lane of the circuit
-            world = backend.reset(int(rng.integers(2**31 - 1)))
-            route = np.asarray(world.route.polyline, dtype=float)
-            stations = np.r_[0.0, np.cumsum(np.hypot(*np.diff(route, axis=0).T))]
-        station = rng.uniform(0.0, stations[-1] - 1.0)
-        segment = int(np.searchsorted(stations, station, side="right")) - 1
-        direction = route[segment + 1] - route[segment]
-        direction /= np.linalg.norm(direction)
-        centre = route[segment] + (station - stations[segment]) * direction
-        lateral = rng.uniform(-MAX_LATERAL_M, MAX_LATERAL_M)
-        heading = np.arctan2(direction[1], direction[0]) + np.radians(rng.normal(0.0, HEADING_STD_DEG))
-        position = centre + lateral * np.array([-direction[1], direction[0]])
-        ego = dataclasses.replace(
-            world.ego, position=position, heading=float(heading), lateral_offset_m=lateral
-        )
-        posed = dataclasses.replace(world, ego=ego)
-        images[index] = render_camera(posed, LANE_CAMERA)
-        masks[index] = render_masks(posed, LANE_CAMERA)[:2]
-    return images, masks
-
-
 def iou(predicted: np.ndarray, truth: np.ndarray) -> float:
     """Intersection over union of two boolean arrays (1 when both are empty)."""
     union = np.logical_or(predicted, truth).sum()
@@ -117,7 +84,8 @@ def iou(predicted: np.ndarray, truth: np.ndarray) -> float:
 
 
 def train_lane_cnn(
-    frames: int = 1500,
+    images: np.ndarray,
+    masks: np.ndarray,
     epochs: int = 15,
     seed: int = 0,
     out: str | Path = WEIGHTS_PATH,
@@ -125,13 +93,15 @@ def train_lane_cnn(
     learning_rate: float = 3e-3,
     width: int = 12,
     log=print,
-    data: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> dict:
-    """Generate ``frames`` training frames (or take ``data``: frames and masks), train a LaneNet with
-    Adam on a class-weighted binary cross-entropy, save its weights to ``out`` and return a summary."""
+    """Train a LaneNet with Adam on a class-weighted binary cross-entropy, save its weights to
+    ``out`` and return a summary.
+
+    :param images: training frames (N, H, W, 3) uint8.
+    :param masks: their left/right line masks (N, 2, H, W) in {0, 1}.
+    """
     torch.manual_seed(seed)
     started = time.perf_counter()
-    images, masks = data if data is not None else generate_lane_frames(frames, seed)
     frames = len(images)
     inputs = torch.from_numpy(images.transpose(0, 3, 1, 2).copy()).float() / 255.0
     targets = torch.from_numpy(masks).float()

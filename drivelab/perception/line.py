@@ -15,9 +15,9 @@ import numpy as np
 from gymnasium import spaces
 
 from drivelab.perception.base import Sensor
-from drivelab.perception.camera import render_camera
+from drivelab.perception.camera import draw_camera
+from drivelab.world.batch import WorldBatch
 from drivelab.world.pinhole import LINE_CAMERA, LINE_ROWS_M
-from drivelab.world.state import WorldState
 
 # OpenCV hue runs 0–180: yellow is about 30; saturated and bright, unlike road, grass and sky
 YELLOW_LOW, YELLOW_HIGH = np.array([20, 120, 120]), np.array([40, 255, 255])
@@ -32,12 +32,13 @@ def yellow_mask(image_rgb: np.ndarray, kernel_px: int = 3) -> np.ndarray:
 
 
 def row_centres(mask: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """Mean column of the mask's pixels in each of ``rows`` (nan where a row has none)."""
-    selected = mask[rows] > 0
-    counts = selected.sum(axis=1)
-    columns = np.arange(mask.shape[1])
+    """Mean column of the mask's pixels in each of ``rows`` (nan where a row has none): masks
+    (..., H, W) → centres (..., len(rows))."""
+    selected = mask[..., rows, :] > 0
+    counts = selected.sum(axis=-1)
+    columns = np.arange(mask.shape[-1])
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(counts > 0, (selected * columns).sum(axis=1) / counts, np.nan)
+        return np.where(counts > 0, (selected * columns).sum(axis=-1) / counts, np.nan)
 
 
 def strip_of(centres: np.ndarray, width: int, strips: int) -> np.ndarray:
@@ -46,9 +47,12 @@ def strip_of(centres: np.ndarray, width: int, strips: int) -> np.ndarray:
     return np.where(np.isnan(centres), strips, np.clip(index, 0, strips - 1))
 
 
-def encode_state(values: np.ndarray, base: int) -> int:
-    """Row values (nearest row first) → one integer in base ``base`` (the nearest row is the lowest digit)."""
-    return int(np.sum(np.asarray(values) * base ** np.arange(len(values))))
+def encode_state(values: np.ndarray, base: int) -> int | np.ndarray:
+    """Row values (..., rows), nearest row first → integers (...) in base ``base`` (the nearest row
+    is the lowest digit); one row vector gives a Python int."""
+    values = np.asarray(values)
+    codes = np.sum(values * base ** np.arange(values.shape[-1]), axis=-1)
+    return int(codes) if values.ndim == 1 else codes
 
 
 class LineState(Sensor):
@@ -67,7 +71,9 @@ class LineState(Sensor):
         self.model = LINE_CAMERA
         self.rows = np.round(self.model.row_of_distance(np.array(LINE_ROWS_M))).astype(int)
         self._space = spaces.Discrete((self.strips + 1) ** len(LINE_ROWS_M))
-        self.centres = np.full(len(LINE_ROWS_M), np.nan)
+        # (K, 4) line centre columns found at the last observe, for plots and tests
+        self.centres = np.full((0, len(LINE_ROWS_M)), np.nan)
+        self.frames = np.zeros((0, self.model.height, self.model.width, 3), dtype=np.uint8)
 
     @property
     def space(self) -> spaces.Discrete:
@@ -81,6 +87,12 @@ class LineState(Sensor):
         """Line centre columns at the 4 rows of a camera frame (nan where not seen)."""
         return row_centres(yellow_mask(image_rgb, self.kernel_px), self.rows)
 
-    def observe(self, world: WorldState) -> np.int64:
-        self.centres = self.detect(render_camera(world, self.model))
-        return np.int64(encode_state(strip_of(self.centres, self.model.width, self.strips), self.strips + 1))
+    def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
+        if len(self.frames) != batch.num_worlds:
+            self.frames = np.empty((batch.num_worlds, *self.frames.shape[1:]), dtype=np.uint8)
+        draw_camera(batch, self.model, self.frames)  # (K, H, W, 3)
+        masks = np.stack(
+            [yellow_mask(frame, self.kernel_px) for frame in self.frames]
+        )  # one opening per image
+        self.centres = row_centres(masks, self.rows)
+        out[...] = encode_state(strip_of(self.centres, self.model.width, self.strips), self.strips + 1)

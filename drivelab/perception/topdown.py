@@ -10,17 +10,15 @@ the four middle pixels of an even-sized image, and the view is exactly symmetric
 
 from __future__ import annotations
 
-import weakref
-from collections import deque
-from collections.abc import Callable, Iterable
-from typing import TypeVar
+from collections.abc import Iterable
 
 import cv2
 import numpy as np
 from gymnasium import spaces
 
 from drivelab.perception.base import Sensor, box_corners, ego_frame
-from drivelab.world.state import RoadMap, WorldState
+from drivelab.world.batch import WorldBatch
+from drivelab.world.state import RoadMap
 
 SHIFT = 4  # OpenCV sub-pixel bits: coordinates are drawn to 1/16 pixel
 SCALE = 1 << SHIFT
@@ -38,9 +36,6 @@ LIGHT_LEVELS = np.array([85, 170, 255])  # green, yellow, red in the optional li
 def stop_bars(lights: np.ndarray) -> np.ndarray:
     """Rectangles (N, 5) ``x, y, heading, length, width`` of the lights' stop bars."""
     return np.column_stack([lights[:, :3], np.tile(STOP_BAR_M, (len(lights), 1))]).reshape(-1, 5)
-
-
-T = TypeVar("T")
 
 
 def to_pixels(
@@ -81,22 +76,6 @@ def segments_near(segments: np.ndarray, centre: np.ndarray, radius: float) -> np
     return np.einsum("ij,ij->i", nearest, nearest) <= radius * radius
 
 
-_PER_ROAD: dict[tuple[int, str], tuple[weakref.ref, object]] = {}
-
-
-def per_road(road: RoadMap, build: Callable[[RoadMap], T]) -> T:
-    """``build(road)``, computed once per RoadMap object: a road is immutable and lasts an episode."""
-    key = (id(road), build.__qualname__)
-    cached = _PER_ROAD.get(key)
-    if cached is not None and cached[0]() is road:  # the weak reference guards against id reuse
-        return cached[1]  # type: ignore[return-value]
-    value = build(road)
-    if len(_PER_ROAD) >= 64:
-        _PER_ROAD.pop(next(iter(_PER_ROAD)))
-    _PER_ROAD[key] = (weakref.ref(road), value)
-    return value
-
-
 class LanePolygons:
     """All lane outlines of a road as one vertex array, with a bounding circle per lane."""
 
@@ -135,6 +114,18 @@ def _clip_half_plane(
     return points, counts
 
 
+def _clip_rows_counts(
+    points: np.ndarray, counts: np.ndarray, top: float, bottom: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Polygons (pixel vertices (P, 2), one after another, ``counts`` (L,)) cut to the rows
+    ``top``..``bottom``: the cut vertices and the (L,) new counts (0 for a polygon cut away)."""
+    if len(points) and points[:, 1].min() < top:
+        points, counts = _clip_half_plane(points, counts, top, keep_below=False)
+    if len(points) and points[:, 1].max() > bottom:
+        points, counts = _clip_half_plane(points, counts, bottom, keep_below=True)
+    return points, counts
+
+
 def clip_rows(points: np.ndarray, counts: np.ndarray, top: float, bottom: float) -> list[np.ndarray]:
     """Cut polygons (pixel vertices, one after another) to the rows ``top``..``bottom``.
 
@@ -143,84 +134,143 @@ def clip_rows(points: np.ndarray, counts: np.ndarray, top: float, bottom: float)
 
     :return: the non-empty clipped polygons as float (K, 2) arrays.
     """
-    if points[:, 1].min() < top:
-        points, counts = _clip_half_plane(points, counts, top, keep_below=False)
-    if len(points) and points[:, 1].max() > bottom:
-        points, counts = _clip_half_plane(points, counts, bottom, keep_below=True)
+    points, counts = _clip_rows_counts(points, counts, top, bottom)
     polygons = np.split(points, np.cumsum(counts)[:-1])
     return [polygon for polygon in polygons if len(polygon) >= 3]
 
 
 class View:
-    """The world → image transform for one ego pose, with culling of what is out of sight."""
+    """The world → image transforms for K ego poses, with culling of what is out of sight.
 
-    def __init__(self, world: WorldState, size_hw: tuple[int, int], pixels_per_meter: float) -> None:
-        self.position = np.asarray(world.ego.position, dtype=float)
-        self.heading = float(world.ego.heading)
+    :param positions: (K, 2) ego positions.
+    :param headings: (K,) ego headings.
+    """
+
+    def __init__(
+        self, positions: np.ndarray, headings: np.ndarray, size_hw: tuple[int, int], pixels_per_meter: float
+    ) -> None:
+        self.positions = np.asarray(positions, dtype=float).reshape(-1, 2)
+        self.headings = np.asarray(headings, dtype=float).reshape(-1)
         self.size_hw, self.ppm = size_hw, float(pixels_per_meter)
         # the image's half diagonal in metres, plus a margin for line widths
         self.radius_m = np.hypot(*size_hw) / 2 / self.ppm + 2.0
 
+    @staticmethod
+    def of(batch: WorldBatch, size_hw: tuple[int, int], pixels_per_meter: float) -> View:
+        """The view from each ego of ``batch``."""
+        return View(batch.ego.position, batch.ego.heading, size_hw, pixels_per_meter)
+
     def pixels(self, points_world: np.ndarray) -> np.ndarray:
-        """World points (..., 2) → float pixel coordinates (column, row), see ``to_pixels``."""
-        return to_pixels(points_world, self.position, self.heading, self.size_hw, self.ppm)
+        """World points (K, ..., 2), world k's in row k → float pixel coordinates (column, row)."""
+        points = np.asarray(points_world, dtype=float)
+        inner = (1,) * (points.ndim - 2)
+        count = len(self.headings)
+        position = self.positions.reshape(count, *inner, 2)
+        return to_pixels(points, position, self.headings.reshape(count, *inner), self.size_hw, self.ppm)
 
-    def __call__(self, points_world: np.ndarray) -> np.ndarray:
-        """World points (..., 2) → int32 fixed-point pixels (..., 2) for ``shift=SHIFT``."""
-        return fixed_point(self.pixels(points_world))
+    def pixels_of(self, k: int, points_world: np.ndarray) -> np.ndarray:
+        """World points (..., 2) seen from ego ``k`` → float pixel coordinates (..., 2)."""
+        return to_pixels(points_world, self.positions[k], self.headings[k], self.size_hw, self.ppm)
 
-    def lanes(self, road: RoadMap) -> list[np.ndarray]:
-        """The lane polygons that reach the image, projected in one go and cut to its rows."""
-        lanes = per_road(road, LanePolygons)
-        visible = np.hypot(*(lanes.centres - self.position).T) <= self.radius_m + lanes.radii
-        if not visible.any():
-            return []
-        pixels = self.pixels(lanes.vertices[visible[lanes.owner]])
+    def lanes(self, batch: WorldBatch) -> list[list[np.ndarray]]:
+        """Per world, the lane polygons of its map that reach its image, as fixed-point pixel
+        polygons cut to its rows: culled per map for all its worlds at once, then projected and
+        cut for all K worlds in one go."""
+        vertices, world_of_vertex, counts, owners = [], [], [], []
+        for index, road in enumerate(batch.roads):
+            worlds = np.flatnonzero(batch.road_index == index)
+            lanes: LanePolygons = road.derived(LanePolygons, LanePolygons)
+            offset = lanes.centres[None] - self.positions[worlds, None]  # (W, L, 2)
+            visible = np.hypot(offset[..., 0], offset[..., 1]) <= self.radius_m + lanes.radii  # (W, L)
+            seen_by, vertex = np.nonzero(visible[:, lanes.owner])  # world-major, each world's lanes in order
+            vertices.append(lanes.vertices[vertex])
+            world_of_vertex.append(worlds[seen_by])
+            counts.append(np.broadcast_to(lanes.counts, visible.shape)[visible])
+            owners.append(np.repeat(worlds, visible.sum(axis=1)))
+        polygons: list[list[np.ndarray]] = [[] for _ in self.headings]
+        counts, owners = np.concatenate(counts), np.concatenate(owners)
+        if counts.sum() == 0:
+            return polygons
+        world_of_vertex = np.concatenate(world_of_vertex)
+        pixels = to_pixels(
+            np.concatenate(vertices),
+            self.positions[world_of_vertex],
+            self.headings[world_of_vertex],
+            self.size_hw,
+            self.ppm,
+        )
         margin = 4.0  # rows beyond the image: the cut edges (and their anti-aliasing) stay unseen
-        polygons = clip_rows(pixels, lanes.counts[visible], -margin, self.size_hw[0] - 1 + margin)
-        return [fixed_point(polygon) for polygon in polygons]
+        pixels, counts = _clip_rows_counts(pixels, counts, -margin, self.size_hw[0] - 1 + margin)
+        for world, polygon in zip(owners, np.split(fixed_point(pixels), np.cumsum(counts)[:-1]), strict=True):
+            if len(polygon) >= 3:
+                polygons[world].append(polygon)
+        return polygons
 
-    def polyline(self, points_world: np.ndarray, width_px: int) -> list[np.ndarray]:
-        """A polyline's segments that reach the image, as (2, 2) fixed-point pixel arrays.
+    def polylines(self, polylines: np.ndarray, counts: np.ndarray, width_px: int) -> list[list[np.ndarray]]:
+        """Per world, the segments of its polyline (K, R, 2) (``counts[k]`` real points) that reach
+        its image, as (2, 2) fixed-point pixel arrays.
 
         Each segment is cut to a band of rows around the image, because OpenCV's thick lines,
         like its polygons, cost time in proportion to the rows they span.
         """
-        pixels = self.pixels(points_world)
-        start, end = pixels[:-1], pixels[1:]
+        pixels = self.pixels(polylines)  # (K, R, 2)
+        start, end = pixels[:, :-1], pixels[:, 1:]
         margin = width_px / 2 + 2.0
         top, bottom = -margin, self.size_hw[0] - 1 + margin
-        low = np.minimum(start[:, 1], end[:, 1])
-        high = np.maximum(start[:, 1], end[:, 1])
-        seen = (high >= top) & (low <= bottom)
-        start, end = start[seen], end[seen]
-        rise = end[:, 1] - start[:, 1]
+        low = np.minimum(start[..., 1], end[..., 1])
+        high = np.maximum(start[..., 1], end[..., 1])
+        real = np.arange(start.shape[1]) < (np.asarray(counts) - 1)[:, None]
+        seen = real & (high >= top) & (low <= bottom)  # (K, R - 1)
+        rise = end[..., 1] - start[..., 1]
         flat = np.abs(rise) < 1e-9
         rise = np.where(flat, 1.0, rise)
         # parameters of the segment where it crosses the top and bottom rows, ordered
-        at_top, at_bottom = (top - start[:, 1]) / rise, (bottom - start[:, 1]) / rise
+        at_top, at_bottom = (top - start[..., 1]) / rise, (bottom - start[..., 1]) / rise
         enter = np.where(flat, 0.0, np.clip(np.minimum(at_top, at_bottom), 0.0, 1.0))
         leave = np.where(flat, 1.0, np.clip(np.maximum(at_top, at_bottom), 0.0, 1.0))
         delta = end - start
-        cut = np.stack([start + enter[:, None] * delta, start + leave[:, None] * delta], axis=1)
-        return list(fixed_point(cut))
+        cut = fixed_point(
+            np.stack([start + enter[..., None] * delta, start + leave[..., None] * delta], axis=2)
+        )
+        return [list(cut[k][seen[k]]) for k in range(len(cut))]
 
-    def boxes(self, boxes: np.ndarray, inset_px: float = 0.0) -> np.ndarray:
-        """Fixed-point corners (K, 4, 2) of the rectangles (N, 5) ``x, y, heading, length, width``
-        in sight, each side moved ``inset_px`` pixels inwards (see ``EXACT_INSET_PX``)."""
-        if len(boxes) == 0:
-            return np.zeros((0, 4, 2), dtype=np.int32)
-        reach = self.radius_m + np.hypot(boxes[:, 3], boxes[:, 4]) / 2
-        offset = boxes[:, :2] - self.position
-        boxes = boxes[np.einsum("ij,ij->i", offset, offset) <= reach * reach]
+    def boxes(
+        self, boxes: np.ndarray, valid: np.ndarray, inset_px: float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Fixed-point corners (K, N, 4, 2) of the rectangles (K, N, 5) ``x, y, heading, length,
+        width``, each side moved ``inset_px`` pixels inwards (see ``EXACT_INSET_PX``), and the
+        (K, N) mask of those valid and in sight."""
+        boxes = np.asarray(boxes, dtype=float)
+        reach = self.radius_m + np.hypot(boxes[..., 3], boxes[..., 4]) / 2
+        offset = boxes[..., :2] - self.positions[:, None]
+        seen = valid & (offset[..., 0] * offset[..., 0] + offset[..., 1] * offset[..., 1] <= reach * reach)
         if inset_px:
             boxes = boxes.copy()
-            boxes[:, 3:] = np.maximum(boxes[:, 3:] - 2 * inset_px / self.ppm, 0.0)
-        return self(box_corners(boxes))
+            boxes[..., 3:] = np.maximum(boxes[..., 3:] - 2 * inset_px / self.ppm, 0.0)
+        return fixed_point(self.pixels(box_corners(boxes))), seen
 
-    def vehicles(self, vehicles: np.ndarray, inset_px: float = 0.0) -> np.ndarray:
-        """Fixed-point corners (K, 4, 2) of the vehicles (rows of ``VEHICLE_COLUMNS``) in sight."""
-        return self.boxes(vehicles[:, [0, 1, 2, 4, 5]], inset_px)
+    def boxes_of(self, k: int, boxes: np.ndarray, inset_px: float = 0.0) -> np.ndarray:
+        """Fixed-point corners (M, 4, 2) of the rectangles (N, 5) in sight of ego ``k`` (see ``boxes``)."""
+        boxes = np.asarray(boxes, dtype=float).reshape(1, -1, 5)
+        one = View(self.positions[k : k + 1], self.headings[k : k + 1], self.size_hw, self.ppm)
+        corners, seen = one.boxes(boxes, np.ones(boxes.shape[:2], dtype=bool), inset_px)
+        return corners[0][seen[0]]
+
+    def vehicles(
+        self, vehicles: np.ndarray, valid: np.ndarray, inset_px: float = 0.0
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``boxes`` of the vehicles (K, N, 6) (rows of ``VEHICLE_COLUMNS``)."""
+        return self.boxes(vehicles[..., [0, 1, 2, 4, 5]], valid, inset_px)
+
+
+def road_users(batch: WorldBatch) -> tuple[np.ndarray, np.ndarray]:
+    """Every body besides the ego, (K, N + P, 6) vehicles then pedestrians, and its (K, N + P) valid mask."""
+    if batch.pedestrians.shape[1] == 0:
+        return batch.vehicles, batch.vehicle_valid
+    return (
+        np.concatenate([batch.vehicles, batch.pedestrians], axis=1),
+        np.concatenate([batch.vehicle_valid, batch.pedestrian_valid], axis=1),
+    )
 
 
 Colour = int | tuple[int, int, int]
@@ -270,40 +320,81 @@ class TopDown(Sensor):
         self.lights = bool(lights)
         channels = len(CHANNELS) + int(self.lights)
         self._space = spaces.Box(0, 255, shape=(channels, self.size, self.size), dtype=np.uint8)
-        self.past_positions: deque[np.ndarray] = deque(maxlen=self.history)
-        self.previous_vehicles: np.ndarray | None = None
+        # history over K worlds: the last ``history`` ego positions (oldest first, the newest
+        # ``past_count[k]`` rows real) and the traffic at the previous observe
+        self.past_positions = np.zeros((0, self.history, 2))  # (K, history, 2)
+        self.past_count = np.zeros(0, dtype=np.int64)  # (K,)
+        self.previous_traffic = np.zeros((0, 0, 6))  # (K, M, 6)
+        self.previous_valid = np.zeros((0, 0), dtype=bool)  # (K, M)
+        self.has_previous = np.zeros(0, dtype=bool)  # (K,) False on an episode's first frame
 
     @property
     def space(self) -> spaces.Box:
         return self._space
 
-    def reset(self, world: WorldState, rng: np.random.Generator) -> None:
-        super().reset(world, rng)
-        self.past_positions.clear()
-        self.previous_vehicles = None
+    def _reset(self, batch: WorldBatch, mask: np.ndarray) -> None:
+        count = batch.num_worlds
+        if len(self.past_count) != count:
+            self.past_positions = np.zeros((count, self.history, 2))
+            self.past_count = np.zeros(count, dtype=np.int64)
+            self.previous_traffic = np.zeros((count, 0, 6))
+            self.previous_valid = np.zeros((count, 0), dtype=bool)
+            self.has_previous = np.zeros(count, dtype=bool)
+        self.past_count[mask] = 0
+        self.has_previous[mask] = False
 
-    def observe(self, world: WorldState) -> np.ndarray:
-        image = np.zeros(self._space.shape, dtype=np.uint8)
-        view = View(world, (self.size, self.size), self.ppm)
-        fill_each(image[0], view.lanes(world.road), 255)
-        route = world.route.polyline
-        if len(route) > 1:
-            width_px = max(int(round(ROUTE_WIDTH_M * self.ppm)), 1)
-            cv2.polylines(image[1], view.polyline(route, width_px), False, 255, width_px, cv2.LINE_8, SHIFT)
-        if self.past_positions:
-            # squares, not cv2.circle: OpenCV's sub-pixel circles are off by up to half a pixel
-            dots = np.empty((len(self.past_positions), 5))
-            dots[:, :2] = self.past_positions
-            dots[:, 2], dots[:, 3:] = world.ego.heading, PAST_DOT_M
-            fill_boxes(image[2], view.boxes(dots, EXACT_INSET_PX), 255)
-        if self.history:
-            self.past_positions.append(np.array(world.ego.position, dtype=float))
-        traffic = world.road_users()  # vehicles and pedestrians
-        fill_boxes(image[3], view.vehicles(traffic, EXACT_INSET_PX), 255)
-        previous = traffic if self.previous_vehicles is None else self.previous_vehicles
-        fill_boxes(image[4], view.vehicles(previous, EXACT_INSET_PX), 255)
-        self.previous_vehicles = np.array(traffic, dtype=float)
+    def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
+        count = batch.num_worlds
+        if len(self.past_count) != count:  # observed before any reset: every world starts now
+            self._reset(batch, np.ones(count, dtype=bool))
+        view = View.of(batch, (self.size, self.size), self.ppm)
+        width_px = max(int(round(ROUTE_WIDTH_M * self.ppm)), 1)
+        routes = view.polylines(batch.route.polyline, batch.route.count, width_px)
+        # squares, not cv2.circle: OpenCV's sub-pixel circles are off by up to half a pixel
+        dots = np.empty((count, self.history, 5))
+        dots[..., :2] = self.past_positions
+        dots[..., 2], dots[..., 3:] = batch.ego.heading[:, None], PAST_DOT_M
+        past = np.arange(self.history) >= self.history - self.past_count[:, None]  # (K, history)
+        dot_corners, dots_seen = view.boxes(dots, past, EXACT_INSET_PX)
+        traffic, traffic_valid = road_users(batch)
+        now, now_seen = view.vehicles(traffic, traffic_valid, EXACT_INSET_PX)
+        size = max(traffic.shape[1], self.previous_traffic.shape[1])
+        first = ~self.has_previous[:, None, None]  # the first frame shows the traffic now twice
+        previous = np.where(first, _pad_slots(traffic, size), _pad_slots(self.previous_traffic, size))
+        previous_valid = np.where(
+            first[..., 0], _pad_slots(traffic_valid, size), _pad_slots(self.previous_valid, size)
+        )
+        before, before_seen = view.vehicles(previous, previous_valid, EXACT_INSET_PX)
         if self.lights:
-            for bar, state in zip(stop_bars(world.traffic_lights), world.traffic_lights[:, 3], strict=True):
-                fill_boxes(image[5], view.boxes(bar[None], EXACT_INSET_PX), int(LIGHT_LEVELS[int(state)]))
-        return image
+            lights = batch.traffic_lights  # (K, L, 4) → stop bars (K, L, 5), as ``stop_bars`` draws them
+            bar_size = np.broadcast_to(STOP_BAR_M, (*lights.shape[:2], 2))
+            bars = np.concatenate([lights[..., :3], bar_size], axis=-1)
+            bar_corners, bars_seen = view.boxes(bars, batch.light_valid, EXACT_INSET_PX)
+            levels = LIGHT_LEVELS[batch.traffic_lights[..., 3].astype(int)]
+        out[...] = 0
+        lanes = view.lanes(batch)
+        for k in range(count):  # one OpenCV raster per world
+            image = out[k]
+            fill_each(image[0], lanes[k], 255)
+            if batch.route.count[k] > 1:
+                cv2.polylines(image[1], routes[k], False, 255, width_px, cv2.LINE_8, SHIFT)
+            fill_boxes(image[2], dot_corners[k][dots_seen[k]], 255)
+            fill_boxes(image[3], now[k][now_seen[k]], 255)
+            fill_boxes(image[4], before[k][before_seen[k]], 255)
+            if self.lights:
+                for corners, level in zip(bar_corners[k][bars_seen[k]], levels[k][bars_seen[k]], strict=True):
+                    cv2.fillConvexPoly(image[5], corners, int(level), cv2.LINE_8, SHIFT)
+        if self.history:
+            self.past_positions[:, :-1] = self.past_positions[:, 1:].copy()
+            self.past_positions[:, -1] = batch.ego.position
+            self.past_count = np.minimum(self.past_count + 1, self.history)
+        self.previous_traffic, self.previous_valid = traffic.copy(), traffic_valid.copy()
+        self.has_previous[:] = True
+
+
+def _pad_slots(array: np.ndarray, size: int) -> np.ndarray:
+    """``array`` (K, N, ...) zero-padded to ``size`` slots on axis 1."""
+    missing = size - array.shape[1]
+    if missing <= 0:
+        return array
+    return np.pad(array, [(0, 0), (0, missing)] + [(0, 0)] * (array.ndim - 2))

@@ -8,7 +8,6 @@ from drivelab.envs.core import DriveEnv
 from drivelab.perception.camera import GuideSegments, render_camera
 from drivelab.perception.lane import LOST_STATE, LaneState, classical_lane_masks, lane_centres, state_of
 from drivelab.perception.line import LINE_CAMERA, LINE_ROWS_M, LineState, encode_state, strip_of
-from drivelab.perception.topdown import per_road
 from drivelab.rewards.terms import _crossing_columns
 
 
@@ -54,13 +53,14 @@ def test_line_detector_within_one_strip(line_frames):
     visible = detected = 0
     for world in line_frames:
         sensor.observe(world)
-        guide = per_road(world.road, GuideSegments).segments
+        guide = world.road.derived(GuideSegments, GuideSegments).segments
         truth = _crossing_columns(world, guide, LINE_CAMERA, LINE_ROWS_M)
         seen = np.isfinite(truth) & (np.abs(truth - 80) < 70)  # away from the image border
-        both = seen & np.isfinite(sensor.centres)
-        found = strip_of(sensor.centres[both], 160, 5)
+        centres = sensor.centres[0]  # the one world's (4,) row centres
+        both = seen & np.isfinite(centres)
+        found = strip_of(centres[both], 160, 5)
         assert np.all(np.abs(found - strip_of(truth[both], 160, 5)) <= 1)
-        assert np.all(np.abs(sensor.centres[both] - truth[both]) < 160 / 5)
+        assert np.all(np.abs(centres[both] - truth[both]) < 160 / 5)
         visible, detected = visible + int(seen.sum()), detected + int(both.sum())
     # in sharp bends the far row's line is foreshortened below the 3 px opening and can be missed
     assert visible >= 40 and detected >= 0.9 * visible
@@ -90,8 +90,9 @@ def test_lane_classical_detector_on_a_centred_frame():
 
 def test_shipped_lane_cnn_on_held_out_frames(tmp_path):
     from drivelab.errors import UsageError
-    from drivelab.perception.lane_cnn import WEIGHTS_PATH, generate_lane_frames, iou, train_lane_cnn
+    from drivelab.perception.lane_cnn import WEIGHTS_PATH, iou, train_lane_cnn
     from drivelab.perception.sensors import make_sensor
+    from drivelab.training.lane_dataset import generate_lane_frames
 
     assert WEIGHTS_PATH.stat().st_size < 2 * 2**20
     images, truth = generate_lane_frames(8, seed=777)
@@ -108,9 +109,7 @@ def test_shipped_lane_cnn_on_held_out_frames(tmp_path):
         assert abs(states[0] - states[1]) <= 1
     assert classical.masks(images[0]).shape == (2, 120, 160)
     # retraining writes loadable weights; missing weights are a usage error
-    summary = train_lane_cnn(
-        epochs=1, out=tmp_path / "w.pt", log=lambda _: None, data=(images[:4], truth[:4])
-    )
+    summary = train_lane_cnn(images[:4], truth[:4], epochs=1, out=tmp_path / "w.pt", log=lambda _: None)
     assert len(summary["losses"]) == 1 and LaneState(weights=str(tmp_path / "w.pt")).network is not None
     with pytest.raises(UsageError, match="lane CNN weights not found"):
         make_sensor(f"lane:weights={tmp_path / 'missing.pt'}")
