@@ -5,9 +5,8 @@ sub-env is reset inside the step that ended it; its last observation and info ar
 ``infos["final_obs"]`` / ``infos["final_info"]``). ``SB3VecEnv`` puts the same object behind
 stable-baselines3's ``VecEnv`` API for on-policy training (PPO, A2C with ``n_envs`` worlds).
 
-On the ``fast`` backend each step applies every ego's control, then steps all K worlds' vehicles
-as one stacked array (``traffic.simulate_batch``), then lets each env read its new WorldState:
-the per-vehicle work is one compiled loop whatever K is; sensors and rewards stay per env.
+Each step steps every sub-env's backend in turn (the batched FastSimulator is not wired in
+here yet); sensors and rewards stay per env.
 """
 
 from __future__ import annotations
@@ -21,46 +20,6 @@ from stable_baselines3.common.vec_env import VecEnv
 
 from drivelab.envs.core import DriveEnv
 from drivelab.errors import UsageError
-from drivelab.world.state import WorldState
-
-
-class FastBatch:
-    """Steps the worlds of several FastBackends (same scenario) with one kernel call.
-
-    The worlds' vehicle arrays are stacked into one buffer; each backend then works on its own
-    view of it. A world that was reset brings a new array, and the buffer is stacked again.
-    """
-
-    def __init__(self, backends: list) -> None:
-        self.backends = backends
-        self.views: list[np.ndarray | None] = [None] * len(backends)
-
-    def __getstate__(self) -> dict:
-        """Pickled without the views: they would come back as copies cut off from the buffer, so an
-        unpickled batch stacks its worlds again on its first step."""
-        return {**self.__dict__, "views": [None] * len(self.backends)}
-
-    def _restack(self) -> None:
-        arrays = [backend.vehicles for backend in self.backends]
-        self.offsets = np.cumsum([0] + [len(a) for a in arrays])
-        self.buffer = np.concatenate(arrays)
-        self.regulation = np.stack([backend.regulation for backend in self.backends])
-        for k, backend in enumerate(self.backends):
-            backend.vehicles = self.views[k] = self.buffer[self.offsets[k] : self.offsets[k + 1]]
-            backend.regulation = self.regulation[k]
-
-    def step(self, controls: list) -> list[WorldState]:
-        from drivelab.envs.backends.fast import traffic  # numba compiles on first import; not before
-
-        if any(b.vehicles is not view for b, view in zip(self.backends, self.views, strict=True)):
-            self._restack()
-        for backend, control in zip(self.backends, controls, strict=True):
-            backend.apply_control(control)
-        first = self.backends[0]
-        traffic.simulate_batch(
-            self.buffer, self.offsets, first.lanes, first.idm, first.frames, first.dt_s, self.regulation
-        )
-        return [backend.after_simulation() for backend in self.backends]
 
 
 class DriveVectorEnv(VectorEnv):
@@ -85,8 +44,6 @@ class DriveVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, num_envs)
         self.metadata = {**first.metadata, "autoreset_mode": AutoresetMode.SAME_STEP}
         self.render_mode = None
-        fast = [type(env.backend).__name__ == "FastBackend" for env in self.envs]
-        self.batch = FastBatch([env.backend for env in self.envs]) if all(fast) else None
 
     def _stack(self, observations: list) -> Any:
         out = create_empty_array(self.single_observation_space, self.num_envs)
@@ -109,10 +66,7 @@ class DriveVectorEnv(VectorEnv):
         """One step of every sub-env (same-step autoreset)."""
         actions = list(iterate(self.action_space, actions))
         controls = [env.adapter.control_for(a, env.world) for env, a in zip(self.envs, actions, strict=True)]
-        if self.batch is not None:
-            worlds = self.batch.step(controls)
-        else:
-            worlds = [env.backend.step(c) for env, c in zip(self.envs, controls, strict=True)]
+        worlds = [env.backend.step(c) for env, c in zip(self.envs, controls, strict=True)]
         observations, infos, self.info_list = [], {}, []
         rewards = np.zeros(self.num_envs)
         terminations = np.zeros(self.num_envs, dtype=bool)
