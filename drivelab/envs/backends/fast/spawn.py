@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import numpy as np
 from gymnasium.utils import seeding
-from highway_env import utils as hw_utils
 
 from drivelab.envs.backends.fast import lanes as L
 from drivelab.envs.backends.fast import traffic as T
@@ -72,58 +71,45 @@ def spawn_highway(seed: int, table: L.LaneTable, graph_keys: dict, config: dict,
 
 
 class IntersectionTraffic:
-    """IntersectionEnv's traffic between steps on vehicle rows: vehicles that reached the end of
-    their exit leave (``_clear_vehicles``), and a new one may arrive (``_spawn_vehicle``), drawing
-    from highway-env's own generator in highway-env's order so that episodes stay identical.
+    """IntersectionEnv's arrivals between steps on one world's vehicle rows: a new vehicle may
+    arrive (``_spawn_vehicle``), drawing from the world's own generator in highway-env's order so
+    that episodes stay identical. (Departures, ``_clear_vehicles``, are compiled:
+    ``simulator.clear_departed``.)
 
-    :param env: the highway-env IntersectionEnv that built the episode (its generator, network,
-        vehicle class).
     :param table: the road's LaneTable.
+    :param network: the highway-env road network (its shortest paths, once per entry and exit).
+    :param vehicle_class: highway-env's ``other_vehicles_type`` class (its length, width, delay).
     """
 
-    def __init__(self, env, table: L.LaneTable) -> None:
-        self.rng, self.network, self.table = env.np_random, env.road.network, table
-        self.vehicle_class = hw_utils.class_from_path(env.config["other_vehicles_type"])
+    def __init__(self, table: L.LaneTable, network, vehicle_class) -> None:
+        self.table, self.network, self.vehicle_class = table, network, vehicle_class
         self.paths: dict[tuple[str, str], list[str]] = {}
-
-    def _lane_names(self, row: np.ndarray) -> tuple:
-        return self.table.indices[int(row[T.LANE])]
-
-    def has_exited(self, row: np.ndarray, exit_distance_m: float) -> bool:
-        """IntersectionEnv.has_arrived: on an exit lane, at least ``exit_distance_m`` along it."""
-        _from, _to, _ = self._lane_names(row)
-        s, _ = L.local_coordinates(self.table.rows, int(row[T.LANE]), row[T.X], row[T.Y])
-        return "il" in _from and "o" in _to and s >= exit_distance_m
-
-    def clear(self, vehicles: np.ndarray, ego: int) -> tuple[np.ndarray, int]:
-        """Drop the vehicles leaving the scene (and any without a route); the ego stays."""
-        keep = []
-        for k, row in enumerate(vehicles):
-            lane = int(row[T.LANE])
-            leaving = self.has_exited(row, self.table.rows[lane, L.LENGTH] - 4 * row[T.LEN])
-            keep.append(k == ego or not (leaving or row[T.ROUTED] == 0))
-        keep = np.array(keep, dtype=bool)
-        return vehicles[keep], int(np.count_nonzero(keep[:ego]))
 
     def spawn(
         self,
         vehicles: np.ndarray,
+        rng: np.random.Generator,
         spawn_probability: float,
         longitudinal: float = 0.0,
         position_deviation: float = 1.0,
         speed_deviation: float = 1.0,
-    ) -> np.ndarray:
-        """Maybe add one vehicle at an entry, routed to another exit (IntersectionEnv._spawn_vehicle)."""
-        rng, lanes = self.rng, self.table.rows
+    ) -> np.ndarray | None:
+        """The row of a vehicle arriving at an entry, routed to another exit, or None when none
+        arrives (IntersectionEnv._spawn_vehicle).
+
+        :param vehicles: (N, VEHICLE_COLUMNS) the world's rows.
+        :param rng: the world's generator (highway-env's ``np_random`` of that episode).
+        """
+        lanes = self.table.rows
         if rng.uniform() > spawn_probability:
-            return vehicles
+            return None
         entry, exit_ = rng.choice(range(4), size=2, replace=False)
         lane = self.table.row_of[(f"o{entry}", f"ir{entry}", 0)]
         s = longitudinal + 5.0 + rng.normal() * position_deviation
         speed = 8.0 + rng.normal() * speed_deviation
         x, y = L.position(lanes, lane, s, 0.0)
         if len(vehicles) and np.min(np.linalg.norm(vehicles[:, [T.X, T.Y]] - [x, y], axis=1)) < 15:
-            return vehicles
+            return None
         row = np.zeros(T.VEHICLE_COLUMNS)
         row[T.X], row[T.Y], row[T.HEADING], row[T.SPEED] = x, y, L.heading_at(lanes, lane, s), speed
         row[T.LANE] = row[T.TARGET_LANE] = L.closest_lane(lanes, x, y, row[T.HEADING])
@@ -142,4 +128,4 @@ class IntersectionTraffic:
             row[T.ROUTE + 2 * k] = self.table.road_of(_from, _to)
             row[T.ROUTE + 2 * k + 1] = -1 if lane_id is None else lane_id
         row[T.DELTA] = rng.uniform(low=DELTA_RANGE[0], high=DELTA_RANGE[1])  # randomize_behavior
-        return np.vstack([vehicles, row])
+        return row

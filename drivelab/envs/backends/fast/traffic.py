@@ -14,7 +14,7 @@ same as highway-env's. Each function names the highway-env method it reproduces:
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from drivelab.envs.backends.fast.lanes import (
     FIRST_OF_ROAD,
@@ -521,18 +521,19 @@ def simulate(
         handle_collisions(v, dt)
 
 
-@njit(cache=True)
-def simulate_batch(
+@njit(cache=True, parallel=True)
+def simulate_worlds(
     v: np.ndarray,
-    offsets: np.ndarray,
+    count: np.ndarray,
     lanes: np.ndarray,
     p: np.ndarray,
     frames: int,
     dt: float,
     regulation: np.ndarray,
 ) -> None:
-    """``simulate`` for K worlds stacked in one array, world k in rows offsets[k]:offsets[k+1]
-    with its regulation state in regulation[k] (the worlds share the road and the IDM
-    parameters; they never see each other)."""
-    for k in range(offsets.size - 1):
-        simulate(v[offsets[k] : offsets[k + 1]], lanes, p, frames, dt, regulation[k])
+    """``simulate`` for K worlds: world k's vehicles are ``v[k, :count[k]]`` of the (K, N_max,
+    VEHICLE_COLUMNS) buffer and its regulation state ``regulation[k]`` (K, 2). The worlds share
+    the road and the IDM parameters and never see each other (one thread per world where numba
+    has several)."""
+    for k in prange(v.shape[0]):
+        simulate(v[k, : count[k]], lanes, p, frames, dt, regulation[k])

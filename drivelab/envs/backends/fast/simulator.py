@@ -1,0 +1,639 @@
+"""FastSimulator: K worlds of one scenario stepped, reset and exported as arrays.
+
+Every world's vehicles live in one preallocated ``(K, N_max, VEHICLE_COLUMNS)`` buffer with a
+per-world count (rows past it are zeros) and the row of its ego; a reset rewrites that world's
+rows only. A step applies the K controls, runs ``traffic.simulate_worlds`` (one compiled call,
+one thread per world where numba has several), the scenario's arrivals and departures, the K
+route projections and the export into a :class:`~drivelab.world.batch.WorldBatch`, all compiled
+loops over worlds.
+
+The road (LaneTable, RoadMap, routes) is converted from highway-env once per scenario and
+configuration and shared by every simulator of it (``_road``). The highway is spawned by
+drivelab's own ``spawn.spawn_highway``: no highway-env object outlives that conversion. The other
+scenarios are set up by highway-env's own code: one builder env per simulator resets the
+masked worlds one after the other and each is taken over as arrays; the intersection's arrivals
+between steps then draw from the world's own generator, a copy of the builder's right after that
+world's reset (the numbers highway-env's ``np_random`` would have given it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from highway_env import utils as hw_utils
+from highway_env.road.regulation import RegulatedRoad
+from highway_env.vehicle.behavior import IDMVehicle
+from highway_env.vehicle.controller import ControlledVehicle
+from highway_env.vehicle.kinematics import Vehicle
+from highway_env.vehicle.objects import Obstacle
+from numba import njit, prange
+
+from drivelab.envs.backends.fast import lanes as L
+from drivelab.envs.backends.fast import traffic as T
+from drivelab.envs.backends.fast.spawn import IntersectionTraffic, spawn_highway
+from drivelab.envs.backends.highway import HighwayBackend, build_road_map
+from drivelab.envs.route import SEARCH_WINDOW_M, RouteTracker
+from drivelab.envs.scenarios import SCENARIOS, Scenario
+from drivelab.errors import UsageError
+from drivelab.world.batch import (
+    COLLISION_NONE,
+    COLLISION_VEHICLE,
+    EgoBatch,
+    EventsBatch,
+    RouteBatch,
+    WorldBatch,
+)
+from drivelab.world.state import RoadMap
+
+SUPPORTED = tuple(name for name, scenario in SCENARIOS.items() if scenario.fast_backend)
+SPAWNERS = {"highway": spawn_highway}  # scenarios whose episodes drivelab sets up itself
+META = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")
+LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER = range(5)
+ACCELERATION_RANGE, STEERING_RANGE = (-5.0, 5.0), (-np.pi / 4, np.pi / 4)  # ContinuousAction's
+
+# How a scenario's episode reaches its goal, by ``Scenario.arrival``: (rule, threshold, traffic
+# flow). ARRIVE_PAST_X: the ego's x beyond the threshold (the merge's end, x > 370). ARRIVE_EXIT:
+# the ego on an exit lane at least the threshold along it (IntersectionEnv.has_arrived, 25 m); a
+# scenario with a traffic flow also loses the vehicles that reach the end of their exit and may
+# get a new one at an entry after every step (IntersectionEnv.step).
+ARRIVE_NEVER, ARRIVE_PAST_X, ARRIVE_EXIT = 0, 1, 2
+ARRIVAL_RULES = {
+    "none": (ARRIVE_NEVER, 0.0, False),
+    "merge_end": (ARRIVE_PAST_X, 370.0, False),
+    "exit": (ARRIVE_EXIT, 25.0, True),
+}
+
+# Columns of the export kernel's float, int and flag outputs
+(
+    EX_X, EX_Y, EX_HEADING, EX_SPEED, EX_STEER, EX_ACCEL, EX_LEN, EX_WID, EX_LANE_WIDTH, EX_LATERAL,
+    EX_LANE_HEADING, EX_SPEED_LIMIT, EX_HEADING_CHANGE,
+) = range(13)  # fmt: skip
+EX_FLOATS = 13
+EX_LANE_ID, EX_LANE_COUNT, EX_TARGET_LANE_ID = range(3)
+EX_ON_ROAD, EX_IN_JUNCTION, EX_CRASHED, EX_ARRIVED = range(4)
+EXPORTED_COLUMNS = np.array([T.X, T.Y, T.HEADING, T.SPEED, T.LEN, T.WID])  # WorldState.vehicles
+
+
+def vehicles_to_array(vehicles: list, table: L.LaneTable, objects: list = ()) -> np.ndarray:
+    """highway-env vehicles, then its obstacles → rows of ``traffic.VEHICLE_COLUMNS``, in order."""
+    row_of = table.row_of
+    array = np.zeros((len(vehicles) + len(objects), T.VEHICLE_COLUMNS))
+    for i, vehicle in enumerate(vehicles):
+        if type(vehicle) is not IDMVehicle and isinstance(vehicle, IDMVehicle):
+            raise NotImplementedError(f"the fast backend has no {type(vehicle).__name__}")
+        row = array[i]
+        row[T.X], row[T.Y] = vehicle.position
+        row[T.HEADING], row[T.SPEED] = vehicle.heading, vehicle.speed
+        row[T.STEER] = vehicle.action.get("steering", 0.0)
+        row[T.ACCEL] = vehicle.action.get("acceleration", 0.0)
+        row[T.LANE] = row_of[vehicle.lane_index]
+        row[T.TARGET_LANE] = row_of[getattr(vehicle, "target_lane_index", vehicle.lane_index)]
+        row[T.TARGET_SPEED] = getattr(vehicle, "target_speed", 0.0)
+        row[T.DELTA] = getattr(vehicle, "DELTA", IDMVehicle.DELTA)
+        row[T.TIMER] = getattr(vehicle, "timer", 0.0)
+        row[T.CRASHED] = float(vehicle.crashed)
+        row[T.CHECK_COLLISIONS] = float(vehicle.check_collisions)
+        row[T.LEN], row[T.WID] = vehicle.LENGTH, vehicle.WIDTH
+        if isinstance(vehicle, IDMVehicle):
+            row[T.KIND] = T.IDM
+        elif isinstance(vehicle, ControlledVehicle):
+            row[T.KIND] = T.CONTROLLED
+        elif isinstance(vehicle, Vehicle):
+            row[T.KIND] = T.PLAIN
+        route = getattr(vehicle, "route", None)
+        row[T.ROUTED] = float(route is not None)
+        row[T.YIELDING] = float(getattr(vehicle, "is_yielding", False))
+        route = route or []
+        if len(route) > T.MAX_ROUTE:
+            raise NotImplementedError(f"the fast backend keeps routes of at most {T.MAX_ROUTE} roads")
+        row[T.ROUTE_END] = len(route)
+        for k, (_from, _to, lane_id) in enumerate(route):
+            row[T.ROUTE + 2 * k] = table.road_of(_from, _to)
+            row[T.ROUTE + 2 * k + 1] = -1 if lane_id is None else lane_id
+    for k, obstacle in enumerate(objects, start=len(vehicles)):
+        if type(obstacle) is not Obstacle:
+            raise NotImplementedError(f"the fast backend has no {type(obstacle).__name__}")
+        row = array[k]
+        row[T.X], row[T.Y] = obstacle.position
+        row[T.HEADING], row[T.SPEED] = obstacle.heading, obstacle.speed
+        row[T.LANE] = row[T.TARGET_LANE] = row_of[obstacle.lane_index]
+        row[T.CHECK_COLLISIONS] = float(obstacle.check_collisions)
+        row[T.LEN], row[T.WID], row[T.KIND] = obstacle.LENGTH, obstacle.WIDTH, T.OBSTACLE
+    return array
+
+
+def idm_parameters() -> np.ndarray:
+    """IDMVehicle's class parameters as the kernels read them."""
+    return np.array([float(getattr(IDMVehicle, name)) for name in T.IDM_PARAMETERS])
+
+
+# --- the road, converted once per scenario and configuration ----------------------------------------
+
+
+@dataclass
+class _Road:
+    """A scenario's road and timing as arrays, shared by every simulator of that configuration.
+
+    :param routes: ego route per start lane row (filled lazily from a builder where not complete).
+    :param in_junction: (L,) lane rows that count as junction area.
+    :param exit_lane: (L,) lane rows that are an intersection exit (from "il…" to "o…").
+    """
+
+    table: L.LaneTable
+    road_map: RoadMap
+    graph_keys: dict
+    config: dict
+    target_speeds: np.ndarray
+    frames: int
+    dt_s: float
+    policy_frequency_hz: float
+    duration_s: float
+    routes: dict
+    in_junction: np.ndarray
+    exit_lane: np.ndarray
+    regulation_period: int
+
+
+_ROADS: dict[tuple, _Road] = {}
+
+
+def _road_key(scenario: Scenario, traffic: str, control: str, overrides: dict | None) -> tuple:
+    return (repr(scenario), traffic, control, repr(sorted((overrides or {}).items())))
+
+
+def _convert_road(builder: HighwayBackend, scenario: Scenario, all_routes: bool) -> _Road:
+    """The road highway-env built in ``builder`` (after a reset) as a _Road; with ``all_routes``
+    the ego route from every lane is planned now (the builder is then no longer needed)."""
+    env = builder.env
+    network = env.road.network
+    table = L.LaneTable.from_network(network)
+    config = env.config
+    routes = {}
+    if all_routes:
+        for row, index in enumerate(table.indices):
+            routes[row] = builder.route_for(builder._plan_route(index))
+    if isinstance(env.road, RegulatedRoad) and RegulatedRoad.YIELD_DURATION != 0:
+        raise NotImplementedError("the fast backend assumes RegulatedRoad.YIELD_DURATION = 0")
+    dt_s = 1 / config["simulation_frequency"]
+    return _Road(
+        table=table,
+        road_map=build_road_map(network),
+        graph_keys={f: list(to) for f, to in network.graph.items()},
+        config=dict(config),
+        target_speeds=np.asarray(getattr(env.action_type, "target_speeds", [0.0]), dtype=float),
+        frames=int(config["simulation_frequency"] // config["policy_frequency"]),
+        dt_s=dt_s,
+        policy_frequency_hz=builder.policy_frequency_hz,
+        duration_s=builder.duration_s,
+        routes=routes,
+        in_junction=np.array([scenario.in_junction(index) for index in table.indices], dtype=bool),
+        exit_lane=np.array([("il" in f and "o" in t) for f, t, _ in table.indices], dtype=bool),
+        regulation_period=int(1 / dt_s / RegulatedRoad.REGULATION_FREQUENCY)
+        if isinstance(env.road, RegulatedRoad)
+        else 0,
+    )
+
+
+# --- compiled kernels over K worlds ---------------------------------------------------------------
+
+
+@njit(cache=True)
+def apply_meta(
+    v: np.ndarray,
+    count: np.ndarray,
+    ego: np.ndarray,
+    lanes: np.ndarray,
+    actions: np.ndarray,
+    speeds: np.ndarray,
+) -> None:
+    """MDPVehicle.act for each world's ego meta-action ``actions[k]`` (the controls follow in the
+    kernel): FASTER / SLOWER step the target speed, the lane changes retarget when reachable."""
+    for k in range(v.shape[0]):
+        w, e, action = v[k, : count[k]], ego[k], actions[k]
+        if action == FASTER or action == SLOWER:
+            top = speeds.size - 1
+            ratio = (w[e, T.SPEED] - speeds[0]) / (speeds[-1] - speeds[0])
+            index = int(min(max(np.rint(ratio * top), 0.0), float(top)))  # np.round: half to even
+            index = min(max(index + (1 if action == FASTER else -1), 0), top)
+            w[e, T.TARGET_SPEED] = speeds[index]
+            continue
+        T.follow_road(w, lanes, e)
+        if action == LANE_LEFT or action == LANE_RIGHT:
+            target = int(w[e, T.TARGET_LANE])
+            first, lane_count = int(lanes[target, L.FIRST_OF_ROAD]), int(lanes[target, L.LANE_COUNT])
+            lane_id = int(lanes[target, L.LANE_ID]) + (1 if action == LANE_RIGHT else -1)
+            candidate = first + min(max(lane_id, 0), lane_count - 1)
+            if L.is_reachable_from(lanes, candidate, w[e, T.X], w[e, T.Y]):
+                w[e, T.TARGET_LANE] = candidate
+
+
+@njit(cache=True)
+def exited(lanes: np.ndarray, exit_lane: np.ndarray, row: np.ndarray, distance_m: float) -> bool:
+    """IntersectionEnv.has_arrived for one vehicle row: on an exit lane, ``distance_m`` along it."""
+    lane = int(row[T.LANE])
+    if not exit_lane[lane]:
+        return False
+    s, _ = L.local_coordinates(lanes, lane, row[T.X], row[T.Y])
+    return s >= distance_m
+
+
+@njit(cache=True, parallel=True)
+def clear_departed(
+    v: np.ndarray, count: np.ndarray, ego: np.ndarray, lanes: np.ndarray, exit_lane: np.ndarray
+) -> None:
+    """IntersectionEnv._clear_vehicles in every world: drop the vehicles at the end of their exit
+    (and any without a route), the ego excepted; the kept rows close up in order, the freed rows
+    become zeros, ``count`` and ``ego`` follow."""
+    for k in prange(v.shape[0]):
+        kept, new_ego = 0, ego[k]
+        for j in range(count[k]):
+            row = v[k, j]
+            leaving = exited(lanes, exit_lane, row, lanes[int(row[T.LANE]), L.LENGTH] - 4 * row[T.LEN])
+            if j == ego[k] or not (leaving or row[T.ROUTED] == 0):
+                if j == ego[k]:
+                    new_ego = kept
+                if kept != j:
+                    v[k, kept] = v[k, j]
+                kept += 1
+        v[k, kept : count[k]] = 0.0
+        count[k], ego[k] = kept, new_ego
+
+
+@njit(cache=True, parallel=True)
+def project_routes(
+    x: np.ndarray,
+    y: np.ndarray,
+    route: np.ndarray,
+    starts: np.ndarray,
+    segments: np.ndarray,
+    lengths2: np.ndarray,
+    segment_m: np.ndarray,
+    stations: np.ndarray,
+    segment_count: np.ndarray,
+    closed: np.ndarray,
+    fresh: np.ndarray,
+    progress: np.ndarray,
+) -> None:
+    """RouteTracker.project for K egos at (x[k], y[k]) on route ``route[k]`` of the padded route
+    table (R routes: ``starts`` / ``segments`` (R, S, 2), ``lengths2`` / ``segment_m`` /
+    ``stations`` (R, S + 1)); in place in ``progress`` (K,): the nearest point where ``fresh[k]``,
+    else the nearest within SEARCH_WINDOW_M of the previous progress (unwrapped on a circuit).
+    Same arithmetic in the same order as RouteTracker's numpy code."""
+    for k in prange(x.size):
+        r = route[k]
+        previous = progress[k]
+        lap = stations[r, segment_count[r]]
+        best, best_distance = 0.0, np.inf
+        for i in range(segment_count[r]):
+            sx, sy = starts[r, i, 0], starts[r, i, 1]
+            gx, gy = segments[r, i, 0], segments[r, i, 1]
+            t = ((x[k] - sx) * gx + (y[k] - sy) * gy) / lengths2[r, i]
+            t = min(max(t, 0.0), 1.0)
+            dx, dy = sx + t * gx - x[k], sy + t * gy - y[k]
+            distance = np.sqrt(dx * dx + dy * dy)
+            station = stations[r, i] + t * segment_m[r, i]
+            if fresh[k]:
+                value = station
+            else:
+                gap = station - previous
+                if closed[r]:
+                    gap = (gap + lap / 2) % lap - lap / 2
+                distance = distance + 1e3 * (np.abs(gap) > SEARCH_WINDOW_M)
+                value = previous + gap
+            if distance < best_distance:
+                best, best_distance = value, distance
+        progress[k] = best
+
+
+@njit(cache=True, parallel=True)
+def export_worlds(
+    v: np.ndarray,
+    count: np.ndarray,
+    ego: np.ndarray,
+    lanes: np.ndarray,
+    in_junction: np.ndarray,
+    exit_lane: np.ndarray,
+    arrival: int,
+    arrival_threshold: float,
+    floats: np.ndarray,
+    ints: np.ndarray,
+    flags: np.ndarray,
+    vehicles: np.ndarray,
+    valid: np.ndarray,
+) -> None:
+    """What WorldBatch needs of K worlds, into zeroed outputs: the ego's ``floats`` (K, EX_FLOATS),
+    ``ints`` (K, 3) and ``flags`` (K, 4) (columns EX_*), and the other vehicles, obstacles left
+    out as highway-env exports them, in ``vehicles`` (K, N, 6) with ``valid`` (K, N)."""
+    for k in prange(v.shape[0]):
+        e = ego[k]
+        row = v[k, e]
+        lane = int(row[T.LANE])
+        s, lateral = L.local_coordinates(lanes, lane, row[T.X], row[T.Y])
+        target = int(row[T.TARGET_LANE]) if row[T.KIND] != T.PLAIN else lane
+        limit = lanes[lane, L.SPEED_LIMIT]
+        out = floats[k]
+        out[EX_X], out[EX_Y], out[EX_HEADING], out[EX_SPEED] = (
+            row[T.X],
+            row[T.Y],
+            row[T.HEADING],
+            row[T.SPEED],
+        )
+        out[EX_STEER], out[EX_ACCEL], out[EX_LEN], out[EX_WID] = (
+            row[T.STEER],
+            row[T.ACCEL],
+            row[T.LEN],
+            row[T.WID],
+        )
+        out[EX_LANE_WIDTH], out[EX_LATERAL] = lanes[lane, L.WIDTH], lateral
+        out[EX_LANE_HEADING] = L.heading_at(lanes, lane, s)
+        out[EX_SPEED_LIMIT] = 30.0 if np.isnan(limit) else limit
+        out[EX_HEADING_CHANGE] = L.heading_at(lanes, lane, s + 1.0) - L.heading_at(lanes, lane, s - 1.0)
+        ints[k, EX_LANE_ID], ints[k, EX_LANE_COUNT] = lanes[lane, L.LANE_ID], lanes[lane, L.LANE_COUNT]
+        ints[k, EX_TARGET_LANE_ID] = lanes[target, L.LANE_ID]
+        flags[k, EX_ON_ROAD] = L.on_lane(lanes, lane, s, lateral, 0.0)
+        flags[k, EX_IN_JUNCTION] = in_junction[lane]
+        flags[k, EX_CRASHED] = row[T.CRASHED] > 0
+        if arrival == ARRIVE_PAST_X:
+            flags[k, EX_ARRIVED] = row[T.X] > arrival_threshold
+        elif arrival == ARRIVE_EXIT:
+            flags[k, EX_ARRIVED] = exited(lanes, exit_lane, row, arrival_threshold)
+        n = 0
+        for j in range(count[k]):
+            if j == e or v[k, j, T.KIND] == T.OBSTACLE:
+                continue
+            for c in range(EXPORTED_COLUMNS.size):
+                vehicles[k, n, c] = v[k, j, EXPORTED_COLUMNS[c]]
+            valid[k, n] = True
+            n += 1
+
+
+# --- the simulator ------------------------------------------------------------------------------
+
+
+class FastSimulator:
+    """K worlds of one scenario on drivelab's compiled traffic model, as arrays.
+
+    :param scenario: a scenario in ``SUPPORTED``.
+    :param traffic: "empty", "regular" or "dense".
+    :param control: "meta" or "continuous".
+    :param num_worlds: K.
+    :param overrides: extra highway-env config keys.
+    """
+
+    route_time_limit_s = None  # the town's reference backend sets one; no fast scenario has one
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        traffic: str,
+        control: str,
+        num_worlds: int,
+        overrides: dict | None = None,
+    ) -> None:
+        if scenario.name not in SUPPORTED:
+            raise UsageError(
+                f"backend 'fast' does not run scenario {scenario.name!r} yet "
+                f"(it runs {', '.join(SUPPORTED)}); use --backend highway"
+            )
+        if scenario.arrival not in ARRIVAL_RULES:
+            raise UsageError(f"the fast backend has no arrival rule {scenario.arrival!r}")
+        if num_worlds < 1:
+            raise UsageError(f"num_worlds must be >= 1 (got {num_worlds})")
+        self.scenario, self.control, self.num_worlds = scenario, control, num_worlds
+        self.spawner = SPAWNERS.get(scenario.name)
+        key = _road_key(scenario, traffic, control, overrides)
+        self.builder: HighwayBackend | None = None
+        if self.spawner is None:  # highway-env sets up every episode: one builder, kept
+            self.builder = HighwayBackend(scenario, traffic, control, overrides)
+        road = _ROADS.get(key)
+        if road is None:
+            builder = self.builder or HighwayBackend(scenario, traffic, control, overrides)
+            builder.reset(0)
+            road = _ROADS[key] = _convert_road(builder, scenario, all_routes=self.spawner is not None)
+        self._road = road
+        self.table, self.lanes, self.road = road.table, road.table.rows, road.road_map
+        self.policy_frequency_hz, self.duration_s = road.policy_frequency_hz, road.duration_s
+        self.frames, self.dt_s = road.frames, road.dt_s
+        self.idm = idm_parameters()
+        self.arrival, self.arrival_threshold, self.traffic_flow = ARRIVAL_RULES[scenario.arrival]
+        self.arrivals = None
+        if self.traffic_flow:
+            env = self.builder.env
+            self.arrivals = IntersectionTraffic(
+                self.table, env.road.network, hw_utils.class_from_path(env.config["other_vehicles_type"])
+            )
+        k = num_worlds
+        self.vehicles = np.zeros((k, 1, T.VEHICLE_COLUMNS))  # grows to the largest world
+        self.count = np.zeros(k, dtype=np.int64)
+        self.ego = np.zeros(k, dtype=np.int64)
+        self.regulation = np.zeros((k, 2))
+        self.time_s = np.zeros(k)
+        self.progress_m = np.zeros(k)
+        self.route_index = np.zeros(k, dtype=np.int64)
+        self.rngs: list[np.random.Generator | None] = [None] * k
+        self._route_of_lane: dict[int, int] = {}
+        self._trackers: list[RouteTracker] = []
+        self.batch: WorldBatch | None = None
+
+    # --- buffers --------------------------------------------------------------------------------
+    def _fit(self, rows: int) -> None:
+        """Grow the vehicle buffer to at least ``rows`` rows per world (doubling)."""
+        capacity = self.vehicles.shape[1]
+        if rows <= capacity:
+            return
+        grown = np.zeros((self.num_worlds, max(rows, 2 * capacity), T.VEHICLE_COLUMNS))
+        grown[:, :capacity] = self.vehicles
+        self.vehicles = grown
+
+    def _route_for_lane(self, lane: int) -> int:
+        """The index of the ego route that starts on lane row ``lane`` (planned on first use)."""
+        if lane not in self._route_of_lane:
+            tracker = self._road.routes.get(lane)
+            if tracker is None:
+                tracker = self._road.routes[lane] = self.builder.route_for(
+                    self.builder._plan_route(self.table.indices[lane])
+                )
+            self._route_of_lane[lane] = len(self._trackers)
+            self._trackers.append(tracker)
+            self._pad_routes()
+        return self._route_of_lane[lane]
+
+    def _pad_routes(self) -> None:
+        """The routes in use as padded arrays (R routes, S segments at most), last point repeated."""
+        trackers = self._trackers
+        points = max(len(t.polyline) for t in trackers)
+        segments = points - 1
+
+        def pad(arrays, size):
+            return np.stack([np.concatenate([a, np.repeat(a[-1:], size - len(a), axis=0)]) for a in arrays])
+
+        self.r_polyline = pad([t.polyline for t in trackers], points)
+        self.r_stations = pad([t.stations for t in trackers], points)
+        self.r_starts = pad([t._starts for t in trackers], segments)
+        self.r_segments = pad([t._segments for t in trackers], segments)
+        self.r_lengths2 = pad([t._lengths2 for t in trackers], segments)
+        self.r_segment_m = np.sqrt(self.r_lengths2)
+        self.r_count = np.array([len(t.polyline) for t in trackers], dtype=np.int64)
+        self.r_length = np.array([t.length_m for t in trackers])
+        self.r_closed = np.array([t.closed for t in trackers], dtype=bool)
+
+    # --- episodes -------------------------------------------------------------------------------
+    def _episode(self, seed: int) -> tuple[np.ndarray, int, np.ndarray, np.random.Generator | None]:
+        """A new episode's (vehicle rows, ego row, regulation state, generator between steps)."""
+        road = self._road
+        if self.spawner is not None:
+            rows = self.spawner(
+                seed, self.table, road.graph_keys, road.config, self.control, road.target_speeds
+            )
+            return rows, 0, np.zeros(2), None
+        env = self.builder.env
+        env.reset(seed=int(seed))
+        self.builder.arrange_traffic()
+        rows = vehicles_to_array(env.road.vehicles, self.table, env.road.objects)
+        ego = env.road.vehicles.index(env.vehicle)
+        regulation = np.zeros(2)
+        if road.regulation_period:
+            regulation[:] = road.regulation_period, env.road.steps
+        rng = None
+        if self.traffic_flow:  # the episode's generator from here on, as highway-env's would go on
+            rng = np.random.Generator(type(env.np_random.bit_generator)())
+            rng.bit_generator.state = env.np_random.bit_generator.state
+        return rows, ego, regulation, rng
+
+    def reset_where(self, mask: np.ndarray, seeds: np.ndarray) -> WorldBatch:
+        """Start a new episode from ``seeds[k]`` in every world where ``mask[k]`` (K,); the other
+        worlds are untouched. Returns the whole batch."""
+        mask = np.asarray(mask, dtype=bool)
+        for k in np.flatnonzero(mask):  # one episode set-up per reset world (not per step)
+            rows, ego, regulation, rng = self._episode(int(seeds[k]))
+            self._fit(len(rows))
+            self.vehicles[k] = 0.0
+            self.vehicles[k, : len(rows)] = rows
+            self.count[k], self.ego[k], self.regulation[k], self.rngs[k] = len(rows), ego, regulation, rng
+            self.route_index[k] = self._route_for_lane(int(rows[ego, T.LANE]))
+            self.time_s[k] = 0.0
+        self._project(fresh=mask)
+        self.batch = self._export()
+        return self.batch
+
+    def step(self, controls: np.ndarray) -> WorldBatch:
+        """One policy step of every world: the egos' controls, ``frames`` simulation steps, the
+        traffic's departures and arrivals, the route progress; returns the new batch.
+
+        :param controls: meta: (K,) int meta-actions; continuous: (K, 2) [acceleration, steering]
+            normalised in [-1, 1] (highway-env's order).
+        """
+        if self.batch is None:
+            raise UsageError("FastSimulator.step before reset_where")
+        self.apply_controls(controls)
+        T.simulate_worlds(
+            self.vehicles, self.count, self.lanes, self.idm, self.frames, self.dt_s, self.regulation
+        )
+        self.time_s += 1 / self.policy_frequency_hz
+        if self.traffic_flow:  # IntersectionEnv.step: clear, then maybe spawn
+            clear_departed(self.vehicles, self.count, self.ego, self.lanes, self._road.exit_lane)
+            self._spawn_arrivals()
+        self._project(fresh=np.zeros(self.num_worlds, dtype=bool))
+        self.batch = self._export()
+        return self.batch
+
+    def apply_controls(self, controls: np.ndarray) -> None:
+        """Set every ego's meta-action targets or continuous controls (before simulating)."""
+        if self.control == "meta":
+            actions = np.asarray(controls).reshape(self.num_worlds).astype(np.int64)
+            apply_meta(self.vehicles, self.count, self.ego, self.lanes, actions, self._road.target_speeds)
+            return
+        # ContinuousAction.get_action, in the controls' own dtype as highway-env computes it
+        controls = np.clip(np.asarray(controls).reshape(self.num_worlds, 2), -1, 1)
+        worlds = np.arange(self.num_worlds)
+        self.vehicles[worlds, self.ego, T.ACCEL] = hw_utils.lmap(controls[:, 0], [-1, 1], ACCELERATION_RANGE)
+        self.vehicles[worlds, self.ego, T.STEER] = hw_utils.lmap(controls[:, 1], [-1, 1], STEERING_RANGE)
+
+    def _spawn_arrivals(self) -> None:
+        """IntersectionEnv._spawn_vehicle in each world, from its own generator (its draws are
+        sequential per world: this is the one loop over worlds of a step, intersection only)."""
+        probability = self._road.config["spawn_probability"]
+        for k in range(self.num_worlds):
+            n = int(self.count[k])
+            row = self.arrivals.spawn(self.vehicles[k, :n], self.rngs[k], probability)
+            if row is not None:
+                self._fit(n + 1)
+                self.vehicles[k, n] = row
+                self.count[k] = n + 1
+
+    def _project(self, fresh: np.ndarray) -> None:
+        ego = self.vehicles[np.arange(self.num_worlds), self.ego]
+        project_routes(
+            ego[:, T.X].copy(), ego[:, T.Y].copy(), self.route_index, self.r_starts, self.r_segments,
+            self.r_lengths2, self.r_segment_m, self.r_stations, self.r_count - 1, self.r_closed,
+            fresh, self.progress_m,
+        )  # fmt: skip
+
+    def _export(self) -> WorldBatch:
+        k, slots = self.num_worlds, max(self.vehicles.shape[1] - 1, 0)
+        floats, ints = np.zeros((k, EX_FLOATS)), np.zeros((k, 3), dtype=np.int64)
+        flags = np.zeros((k, 4), dtype=bool)
+        vehicles, valid = np.zeros((k, slots, 6)), np.zeros((k, slots), dtype=bool)
+        road = self._road
+        export_worlds(
+            self.vehicles, self.count, self.ego, self.lanes, road.in_junction, road.exit_lane,
+            self.arrival, self.arrival_threshold, floats, ints, flags, vehicles, valid,
+        )  # fmt: skip
+        # the old WorldState's formula, numpy's complex exp and angle, for the same last bits
+        curvature = np.angle(np.exp(1j * floats[:, EX_HEADING_CHANGE])) / 2.0
+        ego = EgoBatch(
+            position=floats[:, [EX_X, EX_Y]],
+            heading=floats[:, EX_HEADING],
+            speed_mps=floats[:, EX_SPEED],
+            steering=floats[:, EX_STEER],
+            acceleration_mps2=floats[:, EX_ACCEL],
+            length_m=floats[:, EX_LEN],
+            width_m=floats[:, EX_WID],
+            lane_id=ints[:, EX_LANE_ID],
+            lane_count=ints[:, EX_LANE_COUNT],
+            target_lane_id=ints[:, EX_TARGET_LANE_ID],
+            lane_width_m=floats[:, EX_LANE_WIDTH],
+            lateral_offset_m=floats[:, EX_LATERAL],
+            lane_heading=floats[:, EX_LANE_HEADING],
+            lane_curvature=curvature,
+            on_road=flags[:, EX_ON_ROAD],
+            in_intersection=flags[:, EX_IN_JUNCTION],
+        )
+        events = EventsBatch.none(k)
+        collided = flags[:, EX_CRASHED]
+        events = EventsBatch(
+            collided=collided,
+            collision_kind=np.where(collided, COLLISION_VEHICLE, COLLISION_NONE).astype(np.int8),
+            off_road=~flags[:, EX_ON_ROAD],
+            arrived=flags[:, EX_ARRIVED],
+            red_light_crossed=events.red_light_crossed,
+            blocked=events.blocked,
+            off_route=events.off_route,
+        )
+        r = self.route_index
+        route = RouteBatch(
+            polyline=self.r_polyline[r],
+            stations_m=self.r_stations[r],
+            count=self.r_count[r],
+            progress_m=self.progress_m.copy(),
+            length_m=self.r_length[r],
+            closed=self.r_closed[r],
+        )
+        return WorldBatch(
+            time_s=self.time_s.copy(),
+            dt_s=1.0 / self.policy_frequency_hz,
+            ego=ego,
+            vehicles=vehicles,
+            vehicle_valid=valid,
+            roads=(self.road,),
+            road_index=np.zeros(k, dtype=np.int64),
+            route=route,
+            events=events,
+            traffic_lights=np.zeros((k, 0, 4)),
+            light_valid=np.zeros((k, 0), dtype=bool),
+            pedestrians=np.zeros((k, 0, 6)),
+            pedestrian_valid=np.zeros((k, 0), dtype=bool),
+            max_speed_mps=np.full(k, T.MAX_SPEED),
+            speed_limit_mps=floats[:, EX_SPEED_LIMIT],
+        )

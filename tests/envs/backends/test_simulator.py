@@ -1,0 +1,146 @@
+"""FastSimulator: K worlds in one simulator are exactly K single-world backends, reset by mask."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from drivelab.envs.backends.fast import traffic as T
+from drivelab.envs.backends.fast.backend import FastBackend
+from drivelab.envs.backends.fast.simulator import FastSimulator
+from drivelab.envs.scenarios import SCENARIOS
+from drivelab.errors import UsageError
+from drivelab.world.batch import COLLISION_VEHICLE, WorldBatch
+
+# (scenario, traffic, control): every scenario the fast backend runs, with traffic
+CASES = [
+    ("highway", "regular", "meta"),
+    ("highway", "dense", "continuous"),
+    ("merge", "dense", "meta"),
+    ("roundabout", "dense", "meta"),
+    ("intersection", "dense", "meta"),
+    ("intersection", "regular", "continuous"),
+    ("racetrack", "dense", "continuous"),
+]
+
+
+def assert_same(a, b, path: str = "world") -> None:
+    """WorldStates (or any of their parts) equal bit for bit, types included."""
+    if dataclasses.is_dataclass(a):
+        assert type(a) is type(b), path
+        for field in dataclasses.fields(a):
+            if field.compare:
+                assert_same(getattr(a, field.name), getattr(b, field.name), f"{path}.{field.name}")
+    elif isinstance(a, np.ndarray):
+        assert isinstance(b, np.ndarray) and a.shape == b.shape, path
+        np.testing.assert_array_equal(a, b, err_msg=path)
+    elif isinstance(a, tuple):
+        assert isinstance(b, tuple) and len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            assert_same(x, y, f"{path}[{i}]")
+    else:
+        assert type(a) is type(b) and a == b, f"{path}: {a!r} != {b!r}"
+
+
+def _controls(control: str, rng: np.random.Generator, worlds: int) -> np.ndarray:
+    if control == "meta":
+        return rng.integers(5, size=worlds)
+    return (rng.uniform(-1, 1, (worlds, 2)) * [1.0, 0.1]).astype(np.float32)
+
+
+@pytest.mark.parametrize("scenario, traffic, control", CASES)
+def test_k_worlds_are_k_single_backends(scenario, traffic, control):
+    """World k of one K-world simulator runs exactly the episodes of its own K=1 backend (same
+    seeds, same controls), with the worlds starting new episodes at different steps."""
+    worlds, steps = 3, 14
+    simulator = FastSimulator(SCENARIOS[scenario], traffic, control, worlds)
+    singles = [FastBackend(SCENARIOS[scenario], traffic, control) for _ in range(worlds)]
+    rng = np.random.default_rng(1)
+    seeds = np.arange(worlds) * 11 + 3
+    batch = simulator.reset_where(np.ones(worlds, dtype=bool), seeds)
+    expected = [single.reset(int(seed)) for single, seed in zip(singles, seeds, strict=True)]
+    resets = 0
+    for t in range(1, steps):
+        mask = np.array([t % (4 + k) == 0 for k in range(worlds)])
+        controls = _controls(control, rng, worlds)
+        batch = simulator.step(controls)
+        expected = [single.step(c) for single, c in zip(singles, controls, strict=True)]
+        if mask.any():
+            seeds = rng.integers(1000, size=worlds)
+            before = batch
+            batch = simulator.reset_where(mask, seeds)
+            for k in np.flatnonzero(mask):
+                expected[k] = singles[k].reset(int(seeds[k]))
+            for k in np.flatnonzero(~mask):  # the worlds not reset are what the step left
+                assert_same(batch[k], before[k])
+            resets += int(mask.sum())
+        assert batch.num_worlds == worlds and batch.vehicles.shape[0] == worlds
+        for k in range(worlds):
+            assert_same(batch[k], expected[k], f"{scenario} world {k} step {t}")
+            rows = simulator.vehicles[k, : simulator.count[k]]
+            np.testing.assert_array_equal(rows, singles[k].vehicles)
+            assert not simulator.vehicles[k, simulator.count[k] :].any()  # padding stays zero
+    assert resets >= 5
+
+
+def _state(simulator: FastSimulator, k: int) -> tuple:
+    rng = simulator.rngs[k]
+    return (
+        simulator.vehicles[k].copy(),
+        int(simulator.count[k]),
+        int(simulator.ego[k]),
+        tuple(simulator.regulation[k]),
+        float(simulator.time_s[k]),
+        float(simulator.progress_m[k]),
+        None if rng is None else str(rng.bit_generator.state),
+    )
+
+
+@pytest.mark.parametrize("scenario", ["highway", "intersection"])
+def test_reset_where_leaves_the_other_worlds_bit_identical(scenario):
+    worlds = 4
+    simulator = FastSimulator(SCENARIOS[scenario], "dense", "meta", worlds)
+    simulator.reset_where(np.ones(worlds, dtype=bool), np.arange(worlds))
+    for _ in range(6):
+        stepped = simulator.step(np.full(worlds, 3))
+    mask = np.array([False, True, False, True])
+    kept = {k: _state(simulator, k) for k in (0, 2)}
+    batch = simulator.reset_where(mask, np.array([0, 50, 0, 51]))
+    for k in (0, 2):
+        capacity = kept[k][0].shape[0]
+        after = _state(simulator, k)
+        np.testing.assert_array_equal(after[0][:capacity], kept[k][0])
+        assert after[1:] == kept[k][1:]
+        assert_same(batch[k], stepped[k])
+    for k in (1, 3):
+        assert batch.time_s[k] == 0.0 and stepped.time_s[k] > 0.0
+    assert batch.ego.position[1, 0] != stepped.ego.position[1, 0]
+
+
+def test_batch_shapes_and_events():
+    """The exported arrays have the documented (K, ...) shapes, a fixed vehicle slot count for a
+    fixed buffer, and a vehicle collision reported with its code."""
+    worlds = 5
+    simulator = FastSimulator(SCENARIOS["highway"], "dense", "meta", worlds)
+    batch = simulator.reset_where(np.ones(worlds, dtype=bool), np.arange(worlds))
+    slots = simulator.vehicles.shape[1] - 1
+    assert isinstance(batch, WorldBatch) and batch.road is simulator.road
+    assert batch.vehicles.shape == (worlds, slots, 6) and batch.vehicle_valid.shape == (worlds, slots)
+    assert batch.ego.position.shape == (worlds, 2) and batch.route.polyline.shape[0] == worlds
+    np.testing.assert_array_equal(batch.vehicle_valid.sum(axis=1), simulator.count - 1)
+    # drive every ego into its neighbour: collisions are reported per world, with the vehicle code
+    ego = simulator.vehicles[np.arange(worlds), simulator.ego]
+    others = simulator.vehicles[:, 1]
+    simulator.vehicles[:, 1, [T.X, T.Y]] = ego[:, [T.X, T.Y]] + [3.0, 0.0]
+    simulator.vehicles[:, 1, T.SPEED] = others[:, T.SPEED] * 0
+    batch = simulator.step(np.ones(worlds, dtype=int))
+    assert batch.events.collided.all()
+    assert (batch.events.collision_kind == COLLISION_VEHICLE).all()
+
+
+def test_refuses_bad_arguments():
+    with pytest.raises(UsageError, match="num_worlds must be >= 1"):
+        FastSimulator(SCENARIOS["highway"], "regular", "meta", 0)
+    simulator = FastSimulator(SCENARIOS["highway"], "regular", "meta", 2)
+    with pytest.raises(UsageError, match="before reset_where"):
+        simulator.step(np.zeros(2, dtype=int))
