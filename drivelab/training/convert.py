@@ -72,8 +72,8 @@ def _save(save, path: Path) -> None:
 
 def convert_run(run_dir: str | Path) -> list[Path]:
     """Rewrite the old-format model, checkpoint and replay of ``run_dir``; the files rewritten."""
+    from drivelab.training.checkpoints import file_sha256, load_agent
     from drivelab.training.evaluate import load_run_config
-    from drivelab.training.run import file_sha256, load_agent
 
     run_dir = Path(run_dir)
     config = load_run_config(run_dir)
@@ -107,4 +107,3 @@ def convert_run(run_dir: str | Path) -> list[Path]:
     except Exception as exc:  # not a drivelab run of the old format
         raise UsageError(f"cannot convert {str(run_dir)!r}: {type(exc).__name__}: {exc}") from None
     return written
-

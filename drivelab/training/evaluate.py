@@ -103,7 +103,7 @@ def evaluate_run(
 ) -> dict:
     """Evaluate the final model of ``run_dir`` (or its latest checkpoint); write eval.json."""
     from drivelab.envs.core import DriveEnv
-    from drivelab.training.run import load_agent
+    from drivelab.training.checkpoints import load_agent
 
     run_dir = Path(run_dir)
     config = load_run_config(run_dir)
