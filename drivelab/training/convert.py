@@ -18,7 +18,7 @@ from pathlib import Path
 
 import torch
 
-from drivelab.agents.registry import own_classes
+from drivelab.agents.registry import get_algo, own_classes
 from drivelab.agents.storage import is_old_format, space_to_json
 from drivelab.config import RunConfig
 from drivelab.errors import UsageError
@@ -26,9 +26,7 @@ from drivelab.errors import UsageError
 
 def _old_sb3(config: RunConfig, path: Path):
     """An SB3 model from SB3's pickle format, as drivelab's safe-saving class."""
-    from drivelab.agents.sb3 import SB3_CLASSES
-
-    model = SB3_CLASSES[config.algo].load(path, device="cpu")
+    model = get_algo(config.algo).agent_class().load(path, device="cpu")
     model.drivelab_hyperparams = json.loads(json.dumps(dict(config.hyperparams)))
     return model
 
