@@ -12,8 +12,9 @@ from pathlib import Path
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.config import RunConfig, build_config, load_yaml
+from drivelab.config import RunConfig, build_config
 from drivelab.errors import UsageError
+from drivelab.yaml_io import load_yaml
 
 EVAL_SEED_OFFSET = 10_000  # evaluation episodes never reuse training seeds
 
