@@ -48,7 +48,7 @@ def _command_line() -> str | None:
 @app.command()
 def envs() -> None:
     """List scenarios, sensors, action kinds, reward presets and algorithms, one per line."""
-    from drivelab.agents.registry import ALGO_NAMES, get_algo
+    from drivelab.agents.registry import ALGORITHMS
     from drivelab.envs.actions import ACTIONS, make_action
     from drivelab.envs.scenarios import SCENARIOS
     from drivelab.perception.sensors import SENSOR_HELP
@@ -62,8 +62,7 @@ def envs() -> None:
         typer.echo(f"action    {name:<18} {make_action(name).describe()}")
     for name, preset in PRESETS.items():
         typer.echo(f"reward    {name:<18} {preset.description}")
-    for name in ALGO_NAMES:
-        spec = get_algo(name)
+    for name, spec in ALGORITHMS.items():
         typer.echo(f"algo      {name:<18} {spec.description} (actions: {', '.join(spec.action_kinds)})")
 
 

@@ -82,7 +82,6 @@ def stopping_speed(distance_m: float, brake_mps2: float) -> float:
 class RuleBasedExpert(OwnAgent):
     """The town's rule-based driver (see the module docstring)."""
 
-    algo = "expert"
     config_class = ExpertConfig
 
     def _build(self) -> None:

@@ -124,17 +124,14 @@ def agent_classes(family: str) -> dict[str, type]:
     return {name: spec.agent_class() for name, spec in ALGORITHMS.items() if spec.family == family}
 
 
-def own_classes() -> dict[str, type]:
-    """drivelab's own agents: algorithm name → class."""
-    return agent_classes("own")
-
-
 def algo_of(agent_class: type) -> str:
-    """The algorithm name whose agents are of ``agent_class`` (what a saved model records)."""
+    """The algorithm name whose agents are of ``agent_class`` (what a saved model records); found
+    by entry point, so no other algorithm's module is imported."""
+    entry_point = f"{agent_class.__module__}:{agent_class.__qualname__}"
     for name, spec in ALGORITHMS.items():
-        if spec.agent_class() is agent_class:
+        if spec.implementation == entry_point:
             return name
-    raise KeyError(f"{agent_class.__name__} is no registered algorithm's agent class")
+    raise LookupError(f"{agent_class.__qualname__} is no registered algorithm's agent class")
 
 
 def get_algo(name: str) -> AlgoSpec:

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import torch
 
-from drivelab.agents.registry import get_algo, own_classes
+from drivelab.agents.registry import get_algo
 from drivelab.agents.storage import is_old_format, space_to_json
 from drivelab.config import RunConfig
 from drivelab.errors import UsageError
@@ -33,7 +33,7 @@ def _old_sb3(config: RunConfig, path: Path):
 
 def _old_own(config: RunConfig, path: Path):
     """An own agent from the old zip (``spaces.pkl`` and a pickled ``state.pt``)."""
-    cls = own_classes()[config.algo]
+    cls = get_algo(config.algo).agent_class()
     with zipfile.ZipFile(path) as archive:
         meta = json.loads(archive.read("agent.json"))
         observation_space, action_space = pickle.loads(archive.read("spaces.pkl"))
@@ -75,9 +75,10 @@ def convert_run(run_dir: str | Path) -> list[Path]:
 
     run_dir = Path(run_dir)
     config = load_run_config(run_dir)
-    if config.algo == "qlearning":
+    family = get_algo(config.algo).family
+    if family == "qlearning":
         return []  # Q-learning always saved JSON and numeric arrays
-    load_old = _old_own if config.algo in own_classes() else _old_sb3
+    load_old = _old_own if family == "own" else _old_sb3
     folder, written = run_dir / "checkpoints", []
     checkpoint, replay = folder / "latest.zip", folder / "replay.pkl"
     try:
