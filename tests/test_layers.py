@@ -73,7 +73,7 @@ LAYERS = (
 # anything): the list can only shrink.
 KNOWN_VIOLATIONS = {
     ("drivelab.rewards.terms", "drivelab.perception.camera"):
-        "seed-004 lane/line terms project the route through the camera's pinhole helpers",
+        "seed-004 terms use camera.py's lateral_at_distances, GuideSegments, polyline_segments",
     ("drivelab.rewards.terms", "drivelab.perception.line"):
         "seed-004 line term reads LINE_CAMERA / LINE_ROWS_M from the line sensor",
     ("drivelab.rewards.terms", "drivelab.perception.lane"):
@@ -89,7 +89,7 @@ KNOWN_VIOLATIONS = {
     ("drivelab.perception.sensors", "drivelab.config"):
         "imports YamlLoader through drivelab.config (training layer); it lives in drivelab.yaml_io",
     ("drivelab.envs.backends.highway", "drivelab.envs.town"):
-        "approach_of parses the town's lane node names to find the light governing the ego's lane",
+        "red-light rule: approach_of parses the town's node names ('…:ir<arm>') for the light crossed",
     ("drivelab.envs.backends.highway", "drivelab.envs.scenarios"):
         "the simulator reads its Scenario preset (road class, arrival rule, junction nodes) itself",
     ("drivelab.envs.backends.fast.backend", "drivelab.envs.scenarios"):
