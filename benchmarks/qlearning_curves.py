@@ -34,7 +34,7 @@ import torch  # noqa: E402
 
 from drivelab.agents.qlearning import QLearning  # noqa: E402
 from drivelab.envs.core import DriveEnv  # noqa: E402
-from drivelab.training.qlearning_plots import plot_qlearning  # noqa: E402
+from drivelab.agents.qlearning_plots import plot_qlearning  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 SETUPS = {

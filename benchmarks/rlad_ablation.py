@@ -26,12 +26,12 @@ from pathlib import Path
 
 import torch
 
-from drivelab.config import load_yaml
+from drivelab.training.checkpoints import file_sha256
 from drivelab.training.compare import group_runs, load_run, write_report
 from drivelab.training.nocrash import INFRACTIONS, LEVELS, NOCRASH_SEED, nocrash
-from drivelab.training.run import file_sha256
 from drivelab.training.stats import summarize
 from drivelab.training.sweep import expand_sweep, run_dirs, run_sweep
+from drivelab.yaml_io import load_yaml
 
 HERE = Path(__file__).parent
 SWEEP = HERE / "sweeps" / "rlad-ablation.yaml"

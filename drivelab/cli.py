@@ -24,7 +24,7 @@ def _fail(message: str) -> None:
 
 
 def _parse_pairs(pairs: list[str], what: str) -> dict:
-    from drivelab.config import parse_yaml
+    from drivelab.yaml_io import parse_yaml
 
     values = {}
     for pair in pairs:
@@ -48,7 +48,7 @@ def _command_line() -> str | None:
 @app.command()
 def envs() -> None:
     """List scenarios, sensors, action kinds, reward presets and algorithms, one per line."""
-    from drivelab.agents.registry import ALGO_NAMES, get_algo
+    from drivelab.agents.registry import ALGORITHMS
     from drivelab.envs.actions import ACTIONS, make_action
     from drivelab.envs.scenarios import SCENARIOS
     from drivelab.perception.sensors import SENSOR_HELP
@@ -62,8 +62,7 @@ def envs() -> None:
         typer.echo(f"action    {name:<18} {make_action(name).describe()}")
     for name, preset in PRESETS.items():
         typer.echo(f"reward    {name:<18} {preset.description}")
-    for name in ALGO_NAMES:
-        spec = get_algo(name)
+    for name, spec in ALGORITHMS.items():
         typer.echo(f"algo      {name:<18} {spec.description} (actions: {', '.join(spec.action_kinds)})")
 
 
@@ -108,11 +107,12 @@ def train(
     ),
 ) -> None:
     """Train an agent and write a run directory."""
-    from drivelab.config import build_config, load_yaml
+    from drivelab.config import build_config
     from drivelab.hyperparams import with_shipped_hyperparams
     from drivelab.training.run import TrainingInterrupted
     from drivelab.training.run import resume as resume_run
     from drivelab.training.run import train as train_run
+    from drivelab.yaml_io import load_yaml
 
     switches = _rlad_switches(no_alix, no_aux, no_augment, waypoint_encoder)
     try:
@@ -317,8 +317,8 @@ def ablate(
     address: str | None = typer.Option(None, help="existing Ray cluster address (with --executor ray)"),
 ) -> None:
     """Train one agent under several rewards (or a reward minus one term at a time) and compare."""
-    from drivelab.config import load_yaml
     from drivelab.training.ablate import ablate as run_ablation
+    from drivelab.yaml_io import load_yaml
 
     try:
         base = load_yaml(config) if config is not None else {}

@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -13,6 +12,7 @@ import yaml
 
 from drivelab.envs.scenarios import SCENARIOS
 from drivelab.errors import UsageError
+from drivelab.yaml_io import YamlLoader  # noqa: F401  (perception/sensors.py still imports it from here)
 
 
 @dataclass(frozen=True)
@@ -159,40 +159,6 @@ def build_config(values: dict) -> RunConfig:
     if scenario is not None:  # an unknown one is reported when the env is built
         values = {"action": scenario.action_kinds[0], "reward": scenario.default_reward, **values}
     return RunConfig(**{k: _check_type(k, v) for k, v in values.items()})
-
-
-class YamlLoader(yaml.SafeLoader):
-    """PyYAML's safe loader, reading ``1e-3`` as the number it is (YAML 1.2) instead of a string."""
-
-
-YamlLoader.add_implicit_resolver(
-    "tag:yaml.org,2002:float", re.compile(r"^[-+]?(?:\d+\.?\d*|\.\d+)[eE][-+]?\d+$"), list("-+0123456789.")
-)
-
-
-def parse_yaml(text: str):
-    """``text`` as YAML, with ``YamlLoader``."""
-    return yaml.load(text, Loader=YamlLoader)
-
-
-def load_yaml(path: str | Path) -> dict:
-    """Read a YAML mapping, with a one-line error for a missing or malformed file."""
-    path = Path(path)
-    if not path.is_file():
-        raise UsageError(f"config file {str(path)!r} does not exist")
-    try:
-        data = parse_yaml(path.read_text(encoding="utf-8"))
-    except UnicodeDecodeError as exc:
-        raise UsageError(f"config file {str(path)!r} is not UTF-8 text (byte {exc.start})") from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}" if mark else ""
-        raise UsageError(f"malformed YAML in {str(path)!r}{where}: {getattr(exc, 'problem', exc)}") from None
-    if data is None:
-        data = {}
-    if not isinstance(data, dict):
-        raise UsageError(f"{str(path)!r} must hold a mapping of config fields, not {type(data).__name__}")
-    return data
 
 
 def save_yaml(config: RunConfig, path: Path) -> None:

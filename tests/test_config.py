@@ -1,7 +1,8 @@
 import pytest
 
-from drivelab.config import RunConfig, build_config, load_yaml
+from drivelab.config import RunConfig, build_config
 from drivelab.errors import UsageError
+from drivelab.yaml_io import load_yaml
 
 
 def test_build_config_coerces_obs_list():
@@ -75,7 +76,7 @@ def test_town_runs_are_evaluated_without_new_targets():
 
 def test_exponent_numbers_are_numbers_in_yaml_and_on_the_command_line(tmp_path):
     from drivelab.cli import _parse_pairs
-    from drivelab.config import parse_yaml
+    from drivelab.yaml_io import parse_yaml
 
     path = tmp_path / "run.yaml"
     path.write_text("algo: ppo\nhyperparams: {learning_rate: 1e-3, ent_coef: -2.5E-2, tag: e5, n: 7}\n")

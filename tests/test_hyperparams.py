@@ -1,9 +1,11 @@
 """Shipped hyper-parameter files: lookup by scenario, overrides, and what a new run records."""
 
+from importlib import resources
+
 import yaml
 from typer.testing import CliRunner
 
-from drivelab.agents.sb3 import DEFAULT_HYPERPARAMS
+from drivelab.agents.registry import ALGORITHMS
 from drivelab.cli import app
 from drivelab.hyperparams import resolve_hyperparams, shipped_hyperparams, with_shipped_hyperparams
 
@@ -18,8 +20,28 @@ def test_scenario_entry_default_and_overrides():
 
 
 def test_highway_files_hold_the_documented_defaults():
-    for algo, values in DEFAULT_HYPERPARAMS.items():
-        assert shipped_hyperparams(algo, "highway") == values, algo
+    # highway-env's scripts/sb3_highway_dqn.py and sb3_highway_ppo.py; every SB3 algorithm has a file
+    dqn, ppo = shipped_hyperparams("dqn", "default"), shipped_hyperparams("ppo", "default")
+    assert (dqn["learning_rate"], dqn["buffer_size"], dqn["gamma"], dqn["target_update_interval"]) == (
+        5e-4, 15_000, 0.8, 50)  # fmt: skip
+    assert (ppo["n_steps"], ppo["batch_size"], ppo["n_epochs"], ppo["gamma"]) == (256, 64, 10, 0.8)
+    for algo, spec in ALGORITHMS.items():
+        if spec.family == "sb3":
+            assert shipped_hyperparams(algo, "highway") == shipped_hyperparams(algo, "default") != {}, algo
+
+
+def test_every_file_names_a_registered_algorithm():
+    files = [f.name for f in resources.files("drivelab.hyperparams").iterdir() if f.name.endswith(".yaml")]
+    assert files and all(name.removesuffix(".yaml") in ALGORITHMS for name in files), files
+
+
+def test_sb3_models_start_from_the_files_default_entry():
+    import gymnasium
+
+    from drivelab.agents.sb3 import build_sb3
+
+    model = build_sb3("dqn", gymnasium.make("CartPole-v1"), 0, {"learning_starts": 7}, None)
+    assert (model.gamma, model.buffer_size, model.learning_starts) == (0.8, 15_000, 7)
 
 
 def test_lookups_are_independent_copies():

@@ -27,7 +27,7 @@ from drivelab.cli import app
 from drivelab.config import build_config, save_yaml
 from drivelab.envs.core import DriveEnv
 from drivelab.errors import UsageError
-from drivelab.training import run as run_module
+from drivelab.training import checkpoints
 
 runner = CliRunner()
 FAST = {"duration_s": 6}
@@ -72,10 +72,10 @@ def _build(config):
 def _write_manifest(run_dir, config, steps=100, replay_name=None):
     """A manifest that matches the checkpoint (sha256 and config): only the payload can stop a load."""
     folder = run_dir / "checkpoints"
-    manifest = {"steps": steps, "sha256": run_module.file_sha256(folder / "latest.zip"),
+    manifest = {"steps": steps, "sha256": checkpoints.file_sha256(folder / "latest.zip"),
                 "config_identity": config.identity(), "replay_buffer": replay_name is not None}  # fmt: skip
     if replay_name is not None:
-        manifest["replay_sha256"] = run_module.file_sha256(folder / replay_name)
+        manifest["replay_sha256"] = checkpoints.file_sha256(folder / replay_name)
     (folder / "latest.json").write_text(json.dumps(manifest))
 
 
@@ -305,7 +305,7 @@ def test_a_failed_checkpoint_write_leaves_the_previous_checkpoint_and_no_debris(
     run_dir = _run_dir(tmp_path, config)
     model, _ = _build(config)
     model.learn(50)
-    run_module.save_checkpoint(model, run_dir, config, save_replay=True)
+    checkpoints.save_checkpoint(model, run_dir, config, save_replay=True)
     before = {path.name: path.read_bytes() for path in (run_dir / "checkpoints").iterdir()}
     model.learn(20, reset_num_timesteps=False)
 
@@ -315,10 +315,10 @@ def test_a_failed_checkpoint_write_leaves_the_previous_checkpoint_and_no_debris(
 
     model.save_replay_buffer = disk_full
     with pytest.raises(UsageError, match="cannot write checkpoint in .*: No space left on device$"):
-        run_module.save_checkpoint(model, run_dir, config, save_replay=True)
+        checkpoints.save_checkpoint(model, run_dir, config, save_replay=True)
     after = {path.name: path.read_bytes() for path in (run_dir / "checkpoints").iterdir()}
     assert after == before  # no *.tmp* file, the old checkpoint untouched
-    manifest = run_module.verify_checkpoint(run_dir, config)
+    manifest = checkpoints.verify_checkpoint(run_dir, config)
     assert manifest["steps"] == 50 and manifest["replay_buffer"]
 
 
@@ -336,11 +336,11 @@ def test_convert_run_rewrites_a_trusted_old_run_that_then_loads(tmp_path):
     result = runner.invoke(app, ["convert-run", str(run_dir)])
     assert result.exit_code == 0, result.output
     assert not (run_dir / "checkpoints/replay.pkl").exists()
-    loaded = run_module.load_agent(run_dir, config)
+    loaded = checkpoints.load_agent(run_dir, config)
     _state_dicts_equal(model.get_parameters(), loaded.get_parameters())
-    manifest = run_module.verify_checkpoint(run_dir, config)
-    checkpoint = run_module.load_agent(run_dir, config, env, run_dir / "checkpoints/latest.zip")
-    run_module.load_replay(checkpoint, run_dir, manifest)
+    manifest = checkpoints.verify_checkpoint(run_dir, config)
+    checkpoint = checkpoints.load_agent(run_dir, config, env, run_dir / "checkpoints/latest.zip")
+    checkpoints.load_replay(checkpoint, run_dir, manifest)
     np.testing.assert_array_equal(checkpoint.replay_buffer.observations, model.replay_buffer.observations)
     assert checkpoint.num_timesteps == 50 and checkpoint.exploration_rate == model.exploration_rate
     arrays = read_arrays(run_dir / "checkpoints/replay.npz")

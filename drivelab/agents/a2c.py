@@ -85,7 +85,6 @@ def a2c_loss(
 class OwnA2C(OnPolicyAgent):
     """Synchronous advantage actor-critic: one gradient step per rollout of ``n_steps``."""
 
-    algo = "a2c_own"
     config_class = A2CConfig
 
     def update(self, rollout: Rollout) -> dict[str, float]:

@@ -41,6 +41,7 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.logger import Logger, configure
 
+from drivelab.agents.registry import algo_of
 from drivelab.agents.storage import (
     check_spaces,
     read_arrays,
@@ -115,6 +116,13 @@ def batch_of_one(obs: Any) -> Any:
     return np.asarray(obs)[None]
 
 
+class RegisteredName:
+    """Class attribute: the name ``agents/registry.py`` registers the class it is read from under."""
+
+    def __get__(self, instance, owner: type) -> str:
+        return algo_of(owner)
+
+
 class OwnAgent:
     """Everything run.py needs from an agent, except the learning loop (``learn``) and networks.
 
@@ -128,7 +136,7 @@ class OwnAgent:
     :param env: the training environment (not needed to act).
     """
 
-    algo = "own"
+    algo = RegisteredName()
     config_class: type
 
     def __init__(

@@ -282,7 +282,6 @@ def linear(start: float, end: float, progress: float) -> float:
 class DuelingDoubleDQN(OwnAgent):
     """Seed 003's Dueling Double DQN agent with prioritised replay."""
 
-    algo = "dueling_ddqn"
     config_class = DuelingDDQNConfig
 
     def _build(self) -> None:

@@ -26,9 +26,9 @@ from stable_baselines3.common.callbacks import BaseCallback
 from drivelab.agents.base import OwnAgent
 from drivelab.errors import UsageError
 from drivelab.perception.affordances import FIELDS
+from drivelab.world.geometry import FULL_LOCK_RAD, ROACH_MAX_SPEED_MPS
 
 SCENARIOS = ("town",)  # the scenarios its rules were written and tested for
-STEER_RAD = np.pi / 4  # a steering command of 1 is highway-env's full lock, 45°
 
 
 @dataclass(frozen=True)
@@ -50,8 +50,8 @@ class ExpertConfig:
     :param yield_watch_m: an oncoming vehicle closer than this makes a left turn wait.
     """
 
-    cruise_speed_mps: float = 6.0
-    max_speed_mps: float = 6.0
+    cruise_speed_mps: float = ROACH_MAX_SPEED_MPS
+    max_speed_mps: float = ROACH_MAX_SPEED_MPS
     brake_mps2: float = 2.5
     hard_brake_mps2: float = 4.0
     half_length_m: float = 2.5
@@ -82,7 +82,6 @@ def stopping_speed(distance_m: float, brake_mps2: float) -> float:
 class RuleBasedExpert(OwnAgent):
     """The town's rule-based driver (see the module docstring)."""
 
-    algo = "expert"
     config_class = ExpertConfig
 
     def _build(self) -> None:
@@ -129,7 +128,7 @@ class RuleBasedExpert(OwnAgent):
         target = np.array([np.interp(lookahead_m, arc, points[:, axis]) for axis in (0, 1)])
         distance_sq = max(float(target @ target), 1e-6)
         curvature = 2.0 * target[1] / distance_sq  # pure pursuit: κ = 2·y / L²
-        steer = np.arctan(self.config.wheelbase_m * curvature) / STEER_RAD
+        steer = np.arctan(self.config.wheelbase_m * curvature) / FULL_LOCK_RAD  # 1: full lock
         return float(np.clip(steer, -1.0, 1.0)), curvature
 
     def _bend_ahead(self, waypoints: np.ndarray) -> float:

@@ -104,7 +104,6 @@ def minibatch(observations, indices: torch.Tensor):
 class OwnPPO(OnPolicyAgent):
     """Proximal policy optimisation with a clipped surrogate, from rollouts of ``n_steps``."""
 
-    algo = "ppo_own"
     config_class = PPOConfig
 
     def update(self, rollout: Rollout) -> dict[str, float]:

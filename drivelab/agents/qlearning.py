@@ -284,7 +284,7 @@ def load_qlearning(algo: str, path: Path, env: gym.Env | None, hyperparams: dict
 
 def write_run_artifacts(agent: QLearning, run_dir: str | Path) -> list[Path]:
     """Write the seed's three-panel plot and the Q-table (``.npy`` and ``.csv``) into ``run_dir``."""
-    from drivelab.training.qlearning_plots import plot_qlearning
+    from drivelab.agents.qlearning_plots import plot_qlearning
 
     run_dir = Path(run_dir)
     np.save(run_dir / "q_table.npy", agent.q_table)

@@ -1,158 +1,144 @@
-"""``--algo`` names → agents, with the action kinds each can take."""
+"""``--algo`` names → agents, with the action kinds each can take: ``ALGORITHMS``, the one table.
+
+Everything else that lists algorithms derives from it: ``ALGO_NAMES`` (the CLI's help), the agent
+classes by family (``agent_classes``), and the class → name lookup SB3 models save under
+(``algo_of``). Implementations are named by entry point (``"module:attribute"``, as gymnasium
+registers environments) and imported when first used, so listing the algorithms imports neither
+torch nor stable-baselines3.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import importlib
 from dataclasses import dataclass
 
 from drivelab.errors import UsageError
+
+FAMILIES = {  # how a family's agents are built and loaded: (builder, loader) entry points
+    "sb3": ("drivelab.agents.sb3:build_sb3", "drivelab.agents.sb3:load_sb3"),
+    "own": ("drivelab.agents.registry:build_own", "drivelab.agents.registry:load_own"),
+    "qlearning": ("drivelab.agents.qlearning:build_qlearning", "drivelab.agents.qlearning:load_qlearning"),
+}
+
+
+def load_entry_point(entry_point: str):
+    """The object an entry point ``"package.module:attribute"`` names (its module imported)."""
+    module, _, attribute = entry_point.partition(":")
+    return getattr(importlib.import_module(module), attribute)
 
 
 @dataclass(frozen=True)
 class AlgoSpec:
     """A registered algorithm.
 
-    :param build: (algo, env, seed, hyperparams, log_dir) → a new agent.
-    :param load: (algo, path, env or None, hyperparams=None, seed=None) → a saved agent; nothing in
-        the file is unpickled. ``hyperparams`` and ``seed`` are the run config's (the file's own when
-        None, and they must agree); SB3 models are rebuilt from them and need ``env``.
+    :param implementation: entry point of its agent class (an SB3 class for the ``sb3`` family).
+    :param family: "sb3", "own" or "qlearning": which builder and loader make its agents
+        (``FAMILIES``). Builders take (algo, env, seed, hyperparams, log_dir); loaders take (algo,
+        path, env or None, hyperparams=None, seed=None) and unpickle nothing. ``hyperparams`` and
+        ``seed`` are the run config's (the file's own when None, and they must agree); SB3 models
+        are rebuilt from them and need ``env``.
     :param action_kinds: action adapters it accepts.
     :param sb3_replay: the agent has a replay buffer worth checkpointing (``replay_buffer.observations``,
         ``save_replay_buffer``, ``load_replay_buffer``, as SB3's off-policy models).
     :param observation_kinds: observation kinds it can read (``networks.observation_kind``):
         "vector", "image" (channels-first uint8), "image+vector" (a Dict of both), "other".
     :param multi_env: it trains on a vector env of several worlds (``n_envs`` > 1).
-    :param observation_check: observation space → why the agent cannot read it (None: it can),
-        for agents that need particular sensors.
+    :param observation_check: entry point of a function: observation space → why the agent cannot
+        read it (None: it can), for agents that need particular sensors.
     """
 
     name: str
     description: str
     action_kinds: tuple[str, ...]
-    build: Callable
-    load: Callable
+    implementation: str
+    family: str
     sb3_replay: bool = False
     observation_kinds: tuple[str, ...] = ("vector", "image", "image+vector", "other")
     multi_env: bool = False
-    observation_check: Callable | None = None
+    observation_check: str | None = None
+
+    def agent_class(self) -> type:
+        """The class of its agents (importing its module)."""
+        return load_entry_point(self.implementation)
+
+    def build(self, algo: str, env, seed: int, hyperparams: dict, log_dir) -> object:
+        """A fresh agent for ``env``."""
+        return load_entry_point(FAMILIES[self.family][0])(algo, env, seed, hyperparams, log_dir)
+
+    def load(self, algo: str, path, env, hyperparams: dict | None = None, seed: int | None = None) -> object:
+        """A saved agent (``env`` may be None for acting only, except for SB3 models)."""
+        return load_entry_point(FAMILIES[self.family][1])(algo, path, env, hyperparams, seed)
 
 
 def build_own(algo: str, env, seed: int, hyperparams: dict, log_dir) -> object:
-    """A fresh agent of drivelab's own (``dueling_ddqn``, ``a2c_own``, ``ppo_own``)."""
-    return own_classes()[algo](env.observation_space, env.action_space, seed, hyperparams, env)
+    """A fresh agent of drivelab's own (``dueling_ddqn``, ``a2c_own``, ``ppo_own``, ...)."""
+    return get_algo(algo).agent_class()(env.observation_space, env.action_space, seed, hyperparams, env)
 
 
 def load_own(algo: str, path, env, hyperparams: dict | None = None, seed: int | None = None) -> object:
     """A saved agent of drivelab's own (``env`` may be None for acting only)."""
-    return own_classes()[algo].load(path, env, hyperparams, seed)
+    return get_algo(algo).agent_class().load(path, env, hyperparams, seed)
 
 
-def own_classes() -> dict[str, type]:
-    from drivelab.agents.a2c import OwnA2C
-    from drivelab.agents.dueling_ddqn import DuelingDoubleDQN
-    from drivelab.agents.expert import RuleBasedExpert
-    from drivelab.agents.ppo import OwnPPO
-    from drivelab.agents.rlad.sac import RLAD, DrQ
+_DISCRETE, _CONTINUOUS = ("meta", "grid"), ("continuous", "target_speed")
+_READABLE = ("vector", "image", "image+vector")
+_RLAD_CHECK = "drivelab.agents.rlad.sac:observation_error"
 
-    return {
-        "dueling_ddqn": DuelingDoubleDQN,
-        "a2c_own": OwnA2C,
-        "ppo_own": OwnPPO,
-        "rlad": RLAD,
-        "drq": DrQ,
-        "expert": RuleBasedExpert,
-    }
+ALGORITHMS: dict[str, AlgoSpec] = {
+    spec.name: spec
+    for spec in (
+        AlgoSpec("dqn", "stable-baselines3 DQN", _DISCRETE, "drivelab.agents.sb3:DrivelabDQN", "sb3",
+                 sb3_replay=True, multi_env=True),
+        AlgoSpec("ppo", "stable-baselines3 PPO", _DISCRETE + _CONTINUOUS, "drivelab.agents.sb3:DrivelabPPO",
+                 "sb3", multi_env=True),
+        AlgoSpec("a2c", "stable-baselines3 A2C", _DISCRETE + _CONTINUOUS, "drivelab.agents.sb3:DrivelabA2C",
+                 "sb3", multi_env=True),
+        AlgoSpec("sac", "stable-baselines3 SAC", _CONTINUOUS, "drivelab.agents.sb3:DrivelabSAC", "sb3",
+                 sb3_replay=True, multi_env=True),
+        AlgoSpec("dueling_ddqn", "drivelab's Dueling Double DQN, prioritised replay (seed 003)", _DISCRETE,
+                 "drivelab.agents.dueling_ddqn:DuelingDoubleDQN", "own", sb3_replay=True,
+                 observation_kinds=("vector",)),
+        AlgoSpec("a2c_own", "drivelab's A2C, tanh-Gaussian, seed 003's CNN / fusion network", ("continuous",),
+                 "drivelab.agents.a2c:OwnA2C", "own", observation_kinds=_READABLE),
+        AlgoSpec("ppo_own", "drivelab's PPO, tanh-Gaussian, seed 003's CNN / fusion network", ("continuous",),
+                 "drivelab.agents.ppo:OwnPPO", "own", observation_kinds=_READABLE),
+        AlgoSpec("rlad", "drivelab's RLAD: SAC from pixels, A-LIX, DrQ shifts, WayConv1D, traffic-light loss "
+                 "(seed 000)", _CONTINUOUS, "drivelab.agents.rlad.sac:RLAD", "own", sb3_replay=True,
+                 observation_check=_RLAD_CHECK),
+        AlgoSpec("drq", "DrQ baseline of seed 000: rlad without A-LIX and the traffic-light loss, MLP "
+                 "waypoints", _CONTINUOUS, "drivelab.agents.rlad.sac:DrQ", "own", sb3_replay=True,
+                 observation_check=_RLAD_CHECK),
+        AlgoSpec("qlearning", "tabular Q-learning over discrete states (seed 004): line, lane, ttc_grid",
+                 ("seed_line", "seed_lane", "meta", "grid"), "drivelab.agents.qlearning:QLearning",
+                 "qlearning", observation_kinds=("other",)),  # a Discrete state; the builder checks it
+        AlgoSpec("expert", "rule-based town driver on waypoints + privileged affordances (learns nothing)",
+                 ("target_speed",), "drivelab.agents.expert:RuleBasedExpert", "own"),
+    )
+}  # fmt: skip
 
-
-def _registry() -> dict[str, AlgoSpec]:
-    from drivelab.agents.qlearning import build_qlearning, load_qlearning
-    from drivelab.agents.rlad.sac import observation_error
-    from drivelab.agents.sb3 import build_sb3, load_sb3
-
-    discrete, continuous = ("meta", "grid"), ("continuous", "target_speed")
-    everything = discrete + continuous
-    readable = ("vector", "image", "image+vector")
-    return {
-        "dqn": AlgoSpec(
-            "dqn", "stable-baselines3 DQN", discrete, build_sb3, load_sb3, sb3_replay=True, multi_env=True
-        ),
-        "ppo": AlgoSpec("ppo", "stable-baselines3 PPO", everything, build_sb3, load_sb3, multi_env=True),
-        "a2c": AlgoSpec("a2c", "stable-baselines3 A2C", everything, build_sb3, load_sb3, multi_env=True),
-        "sac": AlgoSpec(
-            "sac", "stable-baselines3 SAC", continuous, build_sb3, load_sb3, sb3_replay=True, multi_env=True
-        ),
-        "dueling_ddqn": AlgoSpec(
-            "dueling_ddqn",
-            "drivelab's Dueling Double DQN, prioritised replay (seed 003)",
-            discrete,
-            build_own,
-            load_own,
-            sb3_replay=True,
-            observation_kinds=("vector",),
-        ),
-        "a2c_own": AlgoSpec(
-            "a2c_own",
-            "drivelab's A2C, tanh-Gaussian, seed 003's CNN / fusion network",
-            ("continuous",),
-            build_own,
-            load_own,
-            observation_kinds=readable,
-        ),
-        "ppo_own": AlgoSpec(
-            "ppo_own",
-            "drivelab's PPO, tanh-Gaussian, seed 003's CNN / fusion network",
-            ("continuous",),
-            build_own,
-            load_own,
-            observation_kinds=readable,
-        ),
-        "rlad": AlgoSpec(
-            "rlad",
-            "drivelab's RLAD: SAC from pixels, A-LIX, DrQ shifts, WayConv1D, traffic-light loss (seed 000)",
-            continuous,
-            build_own,
-            load_own,
-            sb3_replay=True,
-            observation_check=observation_error,
-        ),
-        "drq": AlgoSpec(
-            "drq",
-            "DrQ baseline of seed 000: rlad without A-LIX and the traffic-light loss, MLP waypoints",
-            continuous,
-            build_own,
-            load_own,
-            sb3_replay=True,
-            observation_check=observation_error,
-        ),
-        "qlearning": AlgoSpec(
-            "qlearning",
-            "tabular Q-learning over discrete states (seed 004): line, lane, ttc_grid",
-            ("seed_line", "seed_lane", "meta", "grid"),
-            build_qlearning,
-            load_qlearning,
-            observation_kinds=("other",),  # a Discrete state; the builder checks it is one
-        ),
-        "expert": AlgoSpec(
-            "expert",
-            "rule-based town driver on waypoints + privileged affordances (learns nothing)",
-            ("target_speed",),
-            build_own,
-            load_own,
-        ),
-    }
+ALGO_NAMES = tuple(ALGORITHMS)
 
 
-ALGO_NAMES = (
-    "dqn", "ppo", "a2c", "sac", "dueling_ddqn", "a2c_own", "ppo_own", "rlad", "drq", "qlearning", "expert",
-)  # fmt: skip
+def agent_classes(family: str) -> dict[str, type]:
+    """Algorithm name → agent class for every algorithm of ``family`` ("sb3", "own", "qlearning")."""
+    return {name: spec.agent_class() for name, spec in ALGORITHMS.items() if spec.family == family}
+
+
+def algo_of(agent_class: type) -> str:
+    """The algorithm name whose agents are of ``agent_class`` (what a saved model records); found
+    by entry point, so no other algorithm's module is imported."""
+    entry_point = f"{agent_class.__module__}:{agent_class.__qualname__}"
+    for name, spec in ALGORITHMS.items():
+        if spec.implementation == entry_point:
+            return name
+    raise LookupError(f"{agent_class.__qualname__} is no registered algorithm's agent class")
 
 
 def get_algo(name: str) -> AlgoSpec:
     """The algorithm called ``name``, or a UsageError listing the known ones."""
-    registry = _registry()
-    if name not in registry:
-        raise UsageError(f"unknown algorithm {name!r} (choose from {', '.join(registry)})")
-    return registry[name]
+    if name not in ALGORITHMS:
+        raise UsageError(f"unknown algorithm {name!r} (choose from {', '.join(ALGORITHMS)})")
+    return ALGORITHMS[name]
 
 
 def check_combination(algo: str, action: str, observation_space=None) -> AlgoSpec:
@@ -171,7 +157,8 @@ def check_combination(algo: str, action: str, observation_space=None) -> AlgoSpe
                 f"algorithm {algo!r} cannot read {kind!r} observations "
                 f"(it reads {', '.join(spec.observation_kinds)})"
             )
-        problem = spec.observation_check(observation_space) if spec.observation_check else None
+        check = load_entry_point(spec.observation_check) if spec.observation_check else None
+        problem = check(observation_space) if check else None
         if problem is not None:
             raise UsageError(f"algorithm {algo!r} {problem}")
     return spec

@@ -27,6 +27,7 @@ from stable_baselines3 import A2C, DQN, PPO, SAC
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.utils import get_device
 
+from drivelab.agents.registry import algo_of, get_algo
 from drivelab.agents.sb3_params import check_sb3_hyperparams
 from drivelab.agents.storage import (
     check_spaces,
@@ -39,6 +40,7 @@ from drivelab.agents.storage import (
     write_arrays,
 )
 from drivelab.errors import UsageError
+from drivelab.hyperparams import shipped_hyperparams
 
 FORMAT = "drivelab-sb3-1"
 # model attributes that further training reads, restored after a load (those a model lacks are skipped)
@@ -58,7 +60,7 @@ class SafeSave:
         parameters = {"state_dicts": self.get_parameters(), "variables": tensors}
         meta = {
             "format": FORMAT,
-            "algo": ALGO_OF[type(self)],
+            "algo": algo_of(type(self)),
             "seed": self.seed,
             "hyperparams": self.drivelab_hyperparams,
             "n_envs": self.n_envs,
@@ -121,12 +123,6 @@ class DrivelabSAC(SafeSave, SAC):
     """SB3 SAC saved without pickles."""
 
 
-SB3_CLASSES: dict[str, type[BaseAlgorithm]] = {
-    "dqn": DrivelabDQN, "ppo": DrivelabPPO, "a2c": DrivelabA2C, "sac": DrivelabSAC,
-}  # fmt: skip
-ALGO_OF = {cls: algo for algo, cls in SB3_CLASSES.items()}
-
-
 def _attribute(model: BaseAlgorithm, dotted: str):
     for part in dotted.split("."):
         model = getattr(model, part)
@@ -138,33 +134,6 @@ def _json_number(value):
     if isinstance(value, np.generic):
         return value.item()
     raise TypeError(f"cannot store {type(value).__name__} in a model file")
-
-# Defaults follow highway-env's documented SB3 examples (scripts/sb3_highway_*.py) where they
-# exist; the rest are SB3's own. ``--hyperparams`` / YAML ``hyperparams`` override any key.
-DEFAULT_HYPERPARAMS: dict[str, dict] = {
-    "dqn": {
-        "policy_kwargs": {"net_arch": [256, 256]},
-        "learning_rate": 5e-4,
-        "buffer_size": 15_000,
-        "learning_starts": 200,
-        "batch_size": 32,
-        "gamma": 0.8,
-        "train_freq": 1,
-        "gradient_steps": 1,
-        "target_update_interval": 50,
-        "exploration_fraction": 0.7,
-    },
-    "ppo": {
-        "policy_kwargs": {"net_arch": {"pi": [256, 256], "vf": [256, 256]}},
-        "n_steps": 256,
-        "batch_size": 64,
-        "n_epochs": 10,
-        "learning_rate": 5e-4,
-        "gamma": 0.8,
-    },
-    "a2c": {"n_steps": 16, "learning_rate": 7e-4, "gamma": 0.8},
-    "sac": {"buffer_size": 50_000, "learning_starts": 200, "batch_size": 64, "gamma": 0.9},
-}
 
 
 def policy_for(space: spaces.Space) -> str:
@@ -200,15 +169,18 @@ def seed_network_kwargs(algo: str, space: spaces.Space) -> dict:
 def build_sb3(algo: str, env: gym.Env, seed: int, hyperparams: dict, log_dir: Path | None) -> BaseAlgorithm:
     """A fresh SB3 model for ``env``. ``features_extractor``: "sb3" (SB3's own networks, default)
     or "seed" (seed 003's CNN / fusion network, ``seed_network_kwargs``). ``device``: "cpu" (the
-    default), "cuda" or "auto". Every value is checked first (``sb3_params``)."""
-    kwargs = check_sb3_hyperparams(algo, {"device": "cpu", **DEFAULT_HYPERPARAMS[algo], **hyperparams})
+    default), "cuda" or "auto". Keys ``hyperparams`` leaves out take the ``default`` entry of
+    ``drivelab/hyperparams/<algo>.yaml`` (highway-env's documented SB3 examples, else SB3's own).
+    Every value is checked first (``sb3_params``)."""
+    defaults = shipped_hyperparams(algo, "default")
+    kwargs = check_sb3_hyperparams(algo, {"device": "cpu", **defaults, **hyperparams})
     extractor = kwargs.pop("features_extractor", "sb3")
     if extractor == "seed":
         kwargs["policy_kwargs"] = {**seed_network_kwargs(algo, env.observation_space),
                                    **hyperparams.get("policy_kwargs", {})}  # fmt: skip
     elif extractor != "sb3":
         raise UsageError(f"features_extractor must be 'sb3' or 'seed', got {extractor!r}")
-    model = SB3_CLASSES[algo](
+    model = get_algo(algo).agent_class()(
         policy_for(env.observation_space), env, seed=seed, verbose=0, **kwargs
     )
     model.drivelab_hyperparams = json.loads(json.dumps(dict(hyperparams)))  # saved with the model

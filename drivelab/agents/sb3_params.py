@@ -15,6 +15,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from drivelab.agents.registry import get_algo
 from drivelab.errors import UsageError
 
 DEVICES = ("cpu", "cuda", "auto")
@@ -194,19 +195,15 @@ def _check_value(algo: str, key: str, value, param: Param):
 
 def settable(algo: str) -> dict[str, Param]:
     """The declared hyper-parameters of ``algo`` that the installed SB3's constructor takes."""
-    from drivelab.agents.sb3 import SB3_CLASSES
-
-    accepted = inspect.signature(SB3_CLASSES[algo].__init__).parameters
+    accepted = inspect.signature(get_algo(algo).agent_class().__init__).parameters
     return {key: param for key, param in PARAMS[algo].items() if key in accepted}
 
 
 def check_sb3_hyperparams(algo: str, hyperparams: dict) -> dict:
     """``hyperparams`` with every value checked against ``algo``'s declared type and range
     (integral floats as ints); an unknown, unsettable or out-of-range key is a UsageError."""
-    from drivelab.agents.sb3 import SB3_CLASSES
-
     declared = settable(algo)
-    constructor = inspect.signature(SB3_CLASSES[algo].__init__).parameters
+    constructor = inspect.signature(get_algo(algo).agent_class().__init__).parameters
     special = {
         key: check
         for key, check in {**SPECIAL, **(SAC_SPECIAL if algo == "sac" else {})}.items()

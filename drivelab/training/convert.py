@@ -18,7 +18,7 @@ from pathlib import Path
 
 import torch
 
-from drivelab.agents.registry import own_classes
+from drivelab.agents.registry import get_algo
 from drivelab.agents.storage import is_old_format, space_to_json
 from drivelab.config import RunConfig
 from drivelab.errors import UsageError
@@ -26,16 +26,14 @@ from drivelab.errors import UsageError
 
 def _old_sb3(config: RunConfig, path: Path):
     """An SB3 model from SB3's pickle format, as drivelab's safe-saving class."""
-    from drivelab.agents.sb3 import SB3_CLASSES
-
-    model = SB3_CLASSES[config.algo].load(path, device="cpu")
+    model = get_algo(config.algo).agent_class().load(path, device="cpu")
     model.drivelab_hyperparams = json.loads(json.dumps(dict(config.hyperparams)))
     return model
 
 
 def _old_own(config: RunConfig, path: Path):
     """An own agent from the old zip (``spaces.pkl`` and a pickled ``state.pt``)."""
-    cls = own_classes()[config.algo]
+    cls = get_algo(config.algo).agent_class()
     with zipfile.ZipFile(path) as archive:
         meta = json.loads(archive.read("agent.json"))
         observation_space, action_space = pickle.loads(archive.read("spaces.pkl"))
@@ -72,14 +70,15 @@ def _save(save, path: Path) -> None:
 
 def convert_run(run_dir: str | Path) -> list[Path]:
     """Rewrite the old-format model, checkpoint and replay of ``run_dir``; the files rewritten."""
+    from drivelab.training.checkpoints import file_sha256, load_agent
     from drivelab.training.evaluate import load_run_config
-    from drivelab.training.run import file_sha256, load_agent
 
     run_dir = Path(run_dir)
     config = load_run_config(run_dir)
-    if config.algo == "qlearning":
+    family = get_algo(config.algo).family
+    if family == "qlearning":
         return []  # Q-learning always saved JSON and numeric arrays
-    load_old = _old_own if config.algo in own_classes() else _old_sb3
+    load_old = _old_own if family == "own" else _old_sb3
     folder, written = run_dir / "checkpoints", []
     checkpoint, replay = folder / "latest.zip", folder / "replay.pkl"
     try:
@@ -107,4 +106,3 @@ def convert_run(run_dir: str | Path) -> list[Path]:
     except Exception as exc:  # not a drivelab run of the old format
         raise UsageError(f"cannot convert {str(run_dir)!r}: {type(exc).__name__}: {exc}") from None
     return written
-

@@ -12,8 +12,9 @@ from pathlib import Path
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.config import RunConfig, build_config, load_yaml
+from drivelab.config import RunConfig, build_config
 from drivelab.errors import UsageError
+from drivelab.yaml_io import load_yaml
 
 EVAL_SEED_OFFSET = 10_000  # evaluation episodes never reuse training seeds
 
@@ -103,7 +104,7 @@ def evaluate_run(
 ) -> dict:
     """Evaluate the final model of ``run_dir`` (or its latest checkpoint); write eval.json."""
     from drivelab.envs.core import DriveEnv
-    from drivelab.training.run import load_agent
+    from drivelab.training.checkpoints import load_agent
 
     run_dir = Path(run_dir)
     config = load_run_config(run_dir)

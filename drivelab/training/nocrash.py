@@ -43,7 +43,7 @@ def nocrash(
     """
     from drivelab.envs.core import DriveEnv
     from drivelab.envs.town import LAYOUTS
-    from drivelab.training.run import file_sha256, load_agent, model_path
+    from drivelab.training.checkpoints import file_sha256, load_agent, model_path
 
     run_dir = Path(run_dir)
     config = load_run_config(run_dir)

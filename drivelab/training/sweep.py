@@ -38,9 +38,10 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from drivelab.config import FIELDS, RunConfig, build_config, load_yaml
+from drivelab.config import FIELDS, RunConfig, build_config
 from drivelab.errors import UsageError
 from drivelab.hyperparams import with_shipped_hyperparams
+from drivelab.yaml_io import load_yaml
 
 SWEEP_KEYS = ("name", "runs_dir", "eval_episodes", "base", "grid", "overrides")
 MERGED_FIELDS = ("hyperparams", "env_options")  # dict fields merged key by key, not replaced

@@ -18,6 +18,7 @@ import torch
 
 from drivelab.config import build_config
 from drivelab.errors import UsageError
+from drivelab.training import checkpoints
 from drivelab.training import run as run_module
 from drivelab.training.evaluate import evaluate_run
 
@@ -78,7 +79,7 @@ def _tensors(state, prefix=""):
 
 
 def _parameters(run_dir, config) -> dict:
-    agent = run_module.load_agent(run_dir, config)
+    agent = checkpoints.load_agent(run_dir, config)
     state = agent._state() if hasattr(agent, "_state") else agent.get_parameters()
     return dict(_tensors(state))
 

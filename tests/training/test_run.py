@@ -9,6 +9,7 @@ import pytest
 
 from drivelab.config import build_config
 from drivelab.errors import UsageError
+from drivelab.training import checkpoints
 from drivelab.training import run as run_module
 from drivelab.training.evaluate import evaluate_run
 
@@ -127,7 +128,7 @@ def test_corrupted_or_foreign_checkpoint_is_refused(tmp_path):
 
     config_text = (run_dir / "config.yaml").read_text()
     (run_dir / "checkpoints/latest.json").write_text(
-        json.dumps({"sha256": run_module.file_sha256(checkpoint), "config_identity": "other", "steps": 32})
+        json.dumps({"sha256": checkpoints.file_sha256(checkpoint), "config_identity": "other", "steps": 32})
     )
     with pytest.raises(UsageError, match="different config"):
         run_module.resume(run_dir, steps=64)

@@ -150,7 +150,6 @@ def observation_error(space: spaces.Space) -> str | None:
 class RLAD(OwnAgent):
     """SAC from pixels as RLAD (seed 000); ``config`` switches its parts off for the ablations."""
 
-    algo = "rlad"
     config_class = RLADConfig
 
     def _build(self) -> None:
@@ -368,5 +367,4 @@ class RLAD(OwnAgent):
 class DrQ(RLAD):
     """The DrQ baseline (``--algo drq``): ``DrQConfig``'s defaults on RLAD's machinery."""
 
-    algo = "drq"
     config_class = DrQConfig

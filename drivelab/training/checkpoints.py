@@ -1,0 +1,146 @@
+"""A run directory's checkpoints and final model: written, verified and loaded.
+
+``checkpoints/latest.zip`` (+ ``replay.npz``) is written with a manifest ``latest.json`` (steps,
+sha256, config identity); the manifest's sha256 only detects a truncated or corrupted checkpoint.
+Nothing is unpickled when a model is loaded (``agents/storage.py``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import time
+import zipfile
+from pathlib import Path
+
+from drivelab.agents.registry import get_algo
+from drivelab.agents.storage import OldFormatError, is_old_format
+from drivelab.config import RunConfig
+from drivelab.errors import UsageError
+
+REPLAY_LIMIT_BYTES = 512 * 2**20  # larger replay buffers are not checkpointed (resume refills)
+
+
+def file_sha256(path: Path) -> str:
+    """Hex SHA-256 of a file's bytes."""
+    digest = hashlib.sha256()
+    with path.open("rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def save_checkpoint(model, run_dir: Path, config: RunConfig, save_replay: bool) -> Path:
+    """Write checkpoints/latest.zip (and replay.npz) with a manifest that lets resume verify them.
+
+    Every file is written under a temporary name first and renamed only when all are written: a
+    failed write (disk full, read-only) removes the temporary files, keeps the previous checkpoint
+    valid and raises a one-line UsageError."""
+    folder = run_dir / "checkpoints"
+    temporary = {folder / "latest.tmp.zip": folder / "latest.zip"}
+    try:
+        folder.mkdir(exist_ok=True)
+        model.save(folder / "latest.tmp.zip")
+        manifest = {
+            "steps": int(model.num_timesteps),
+            "sha256": file_sha256(folder / "latest.tmp.zip"),
+            "config_identity": config.identity(),
+            "replay_buffer": False,
+            "saved_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
+        }
+        if save_replay and _replay_fits(model):
+            temporary[folder / "replay.tmp.npz"] = folder / "replay.npz"
+            model.save_replay_buffer(folder / "replay.tmp.npz")
+            manifest.update(replay_buffer=True, replay_sha256=file_sha256(folder / "replay.tmp.npz"))
+        temporary[folder / "latest.tmp.json"] = folder / "latest.json"  # renamed last: the commit
+        (folder / "latest.tmp.json").write_text(json.dumps(manifest, indent=2))
+        for tmp, final in temporary.items():
+            os.replace(tmp, final)
+    except OSError as exc:
+        for tmp in temporary:
+            with contextlib.suppress(OSError):  # on a read-only disk there may be nothing to remove
+                tmp.unlink(missing_ok=True)
+        raise UsageError(f"cannot write checkpoint in {str(folder)!r}: {exc.strerror or exc}") from None
+    return folder / "latest.zip"
+
+
+def _replay_fits(model) -> bool:
+    """Whether the model has a replay buffer small enough to checkpoint (``REPLAY_LIMIT_BYTES``)."""
+    if getattr(model, "replay_buffer", None) is None:
+        return False
+    observations = model.replay_buffer.observations  # a dict of arrays for Dict observations
+    arrays = observations.values() if isinstance(observations, dict) else [observations]
+    return sum(array.nbytes for array in arrays) * 2 < REPLAY_LIMIT_BYTES
+
+
+def old_format_error(run_dir: Path) -> UsageError:
+    """The one line for a run directory saved in the pickle format of earlier drivelab versions."""
+    return UsageError(
+        f"run {str(run_dir)!r} is in the old pickle format; if you trust it, convert it with "
+        f"`drivelab convert-run {run_dir}`"
+    )
+
+
+def verify_checkpoint(run_dir: Path, config: RunConfig) -> dict:
+    """The checkpoint manifest, after checking the file is whole and belongs to ``config``.
+
+    The sha256 detects a truncated or corrupted file only: it is stored beside the file, so it
+    proves nothing against tampering (loading never executes code, whatever the file holds)."""
+    folder = run_dir / "checkpoints"
+    manifest_path, model_path = folder / "latest.json", folder / "latest.zip"
+    if not manifest_path.is_file() or not model_path.is_file():
+        raise UsageError(f"no checkpoint in {str(run_dir)!r} (nothing to resume)")
+    try:
+        manifest = json.loads(manifest_path.read_text())
+        expected = manifest["sha256"]
+    except (json.JSONDecodeError, KeyError, TypeError):
+        raise UsageError(f"checkpoint manifest {str(manifest_path)!r} is corrupted") from None
+    if file_sha256(model_path) != expected or not zipfile.is_zipfile(model_path):
+        raise UsageError(f"checkpoint {str(model_path)!r} is truncated or corrupted (checksum mismatch)")
+    if is_old_format(model_path) or (manifest.get("replay_buffer") and (folder / "replay.pkl").is_file()):
+        raise old_format_error(run_dir)
+    if manifest.get("config_identity") != config.identity():
+        raise UsageError(f"checkpoint in {str(run_dir)!r} was made with a different config")
+    return manifest
+
+
+def model_path(run_dir: Path, config: RunConfig) -> Path:
+    """The run's final model, else its latest verified checkpoint."""
+    final = run_dir / "model.zip"
+    if final.is_file():
+        return final
+    verify_checkpoint(run_dir, config)
+    return run_dir / "checkpoints" / "latest.zip"
+
+
+def load_agent(run_dir: Path, config: RunConfig, env=None, path: Path | None = None):
+    """The agent of ``path`` (default ``model_path``), rebuilt from the run's config on ``env``
+    (default: the config's evaluation environment, whose spaces must be the saved ones)."""
+    from drivelab.envs.core import DriveEnv
+
+    spec = get_algo(config.algo)
+    path = model_path(run_dir, config) if path is None else path
+    try:
+        env = DriveEnv(**config.eval_env_kwargs()) if env is None else env
+        return spec.load(config.algo, path, env, dict(config.hyperparams), config.seed)
+    except OldFormatError:
+        raise old_format_error(run_dir) from None
+    except UsageError:
+        raise
+    except Exception as exc:  # a broken zip, a model of another algorithm or config
+        message = (str(exc).splitlines() or [""])[0]
+        raise UsageError(f"cannot load model {str(path)!r}: {type(exc).__name__}: {message}") from None
+
+
+def load_replay(model, run_dir: Path, manifest: dict) -> None:
+    """Fill ``model``'s replay buffer from the checkpoint's replay.npz, after checking its sha256."""
+    path = run_dir / "checkpoints" / "replay.npz"
+    if not path.is_file() or file_sha256(path) != manifest.get("replay_sha256"):
+        raise UsageError(f"checkpoint replay {str(path)!r} is missing, truncated or corrupted")
+    try:
+        model.load_replay_buffer(path)
+    except Exception as exc:  # object arrays (a pickle) or a replay of another configuration
+        message = (str(exc).splitlines() or [""])[0]
+        raise UsageError(f"cannot load replay {str(path)!r}: {type(exc).__name__}: {message}") from None

@@ -1,0 +1,285 @@
+"""drivelab's layering (DESIGN.md): every import points down a layer, and no files import each other.
+
+The checker reads every module of ``drivelab/`` with ``ast`` (nothing is imported): ``import x``
+and ``from x import y`` at module level and inside functions, relative imports resolved, ``from
+package import module`` counted as an import of that module. An import is an edge importer →
+imported; an edge is allowed inside a layer and to the layers below (or to those a layer names in
+``may_import``), and the edges must not form a cycle between files.
+"""
+
+from __future__ import annotations
+
+import ast
+from dataclasses import dataclass
+from pathlib import Path
+
+import networkx as nx
+
+PACKAGE_DIR = Path(__file__).resolve().parents[1] / "drivelab"
+
+
+@dataclass(frozen=True)
+class Layer:
+    """A layer: the modules under ``prefixes`` (a module belongs to its longest matching prefix).
+
+    :param rank: height; imports go to lower ranks only (layers of one rank do not import each other).
+    :param may_import: the other layers it may import; None: every layer of a lower rank.
+    """
+
+    name: str
+    rank: int
+    prefixes: tuple[str, ...]
+    may_import: frozenset[str] | None = None
+
+
+# DESIGN.md's layers mapped onto today's package layout, bottom to top.
+LAYERS = (
+    # world/: WorldBatch, WorldState, RoadMap, geometry; plus the modules that import nothing of
+    # drivelab (errors, the YAML loader that perception's sensor specs and the run config share)
+    Layer("base", 0, ("drivelab.errors", "drivelab.world", "drivelab.yaml_io")),
+    # the simulators (compiled core and the highway-env reference) and route tracking
+    Layer("sim", 1, ("drivelab.envs.backends", "drivelab.envs.route")),
+    # scenario definitions: the presets, the town's road and traffic, the circuits. circuits.py is
+    # a scenario, not a simulator: it builds the follow-line / follow-lane roads and their vehicle
+    # for highway-env (as town_env.py does the town's), is named by the presets in scenarios.py,
+    # and imports nothing of drivelab; it only lives in backends/ because it subclasses highway-env
+    Layer(
+        "scenarios",
+        2,
+        (
+            "drivelab.envs.scenarios",
+            "drivelab.envs.town",
+            "drivelab.envs.town_env",
+            "drivelab.envs.backends.circuits",
+        ),
+    ),
+    # sensors and reward terms read the WorldBatch only: not the simulators or scenarios below
+    # them (DESIGN.md: shared geometry lives in the bottom layer), and not each other
+    Layer("perception", 3, ("drivelab.perception",), may_import=frozenset({"base"})),
+    Layer("rewards", 3, ("drivelab.rewards",), may_import=frozenset({"base"})),
+    # the environments; ``drivelab`` itself (``drivelab/__init__.py``: importing it registers the
+    # gymnasium ids, ``drivelab.make`` builds a DriveEnv) is their facade
+    Layer("envs", 4, ("drivelab.envs", "drivelab")),
+    # agents, with the hyper-parameters shipped for them (data read by agents/sb3.py)
+    Layer("agents", 5, ("drivelab.agents", "drivelab.hyperparams")),
+    # runs, evaluation, comparisons; RunConfig is a training run's config (it checks the env's
+    # options through envs/, and nothing below a run reads it)
+    Layer("training", 6, ("drivelab.training", "drivelab.config")),
+    Layer("cli", 7, ("drivelab.cli",)),
+)
+
+# (importer, imported) edges that break the layering today, each in a file another change owns.
+# The test tolerates exactly these, and fails when one no longer occurs (or no longer breaks
+# anything): the list can only shrink.
+KNOWN_VIOLATIONS = {
+    ("drivelab.rewards.terms", "drivelab.perception.camera"):
+        "seed-004 terms use camera.py's lateral_at_distances, GuideSegments, polyline_segments",
+    ("drivelab.rewards.terms", "drivelab.perception.line"):
+        "seed-004 line term reads LINE_CAMERA / LINE_ROWS_M from the line sensor",
+    ("drivelab.rewards.terms", "drivelab.perception.lane"):
+        "seed-004 lane term reads LANE_CAMERA / LANE_ROWS_M from the lane sensor",
+    ("drivelab.rewards.terms", "drivelab.perception.topdown"):
+        "seed-004 terms use topdown's per-road cache of guide segments",
+    ("drivelab.perception.lane_cnn", "drivelab.perception.lane"):
+        "cycle: lane.py loads the CNN from lane_cnn.py, lane_cnn.py reads LANE_CAMERA from lane.py",
+    ("drivelab.perception.lane_cnn", "drivelab.envs.backends.highway"):
+        "the lane CNN's training data is rendered from worlds of a HighwayBackend it builds itself",
+    ("drivelab.perception.lane_cnn", "drivelab.envs.scenarios"):
+        "the lane CNN picks the scenario whose worlds it renders for training data",
+    ("drivelab.perception.sensors", "drivelab.config"):
+        "imports YamlLoader through drivelab.config (training layer); it lives in drivelab.yaml_io",
+    ("drivelab.envs.backends.highway", "drivelab.envs.town"):
+        "red-light rule: approach_of parses the town's node names ('…:ir<arm>') for the light crossed",
+    ("drivelab.envs.backends.highway", "drivelab.envs.scenarios"):
+        "the simulator reads its Scenario preset (road class, arrival rule, junction nodes) itself",
+    ("drivelab.envs.backends.fast.backend", "drivelab.envs.scenarios"):
+        "the compiled core looks its scenario up in SCENARIOS and branches on the preset's fields",
+}  # fmt: skip
+
+
+# --- the checker ---------------------------------------------------------------------------------
+def module_sources(package_dir: Path) -> dict[str, tuple[str, bool]]:
+    """Dotted module name → (source text, is a package ``__init__``) for every ``.py`` below."""
+    sources = {}
+    for path in sorted(package_dir.rglob("*.py")):
+        parts = path.relative_to(package_dir.parent).with_suffix("").parts
+        is_package = parts[-1] == "__init__"
+        name = ".".join(parts[:-1] if is_package else parts)
+        sources[name] = (path.read_text(encoding="utf-8"), is_package)
+    return sources
+
+
+def _resolve(name: str, modules: set[str]) -> str:
+    """The module ``name`` refers to: itself, else its longest prefix that is a module."""
+    candidate = name
+    while candidate not in modules and "." in candidate:
+        candidate = candidate.rsplit(".", 1)[0]
+    return candidate if candidate in modules else name
+
+
+def import_graph(sources: dict[str, tuple[str, bool]], root: str = "drivelab") -> nx.DiGraph:
+    """Importer → imported edges between the modules of ``sources`` (imports of ``root`` only),
+    each edge with the ``line`` of its first import."""
+    modules = set(sources)
+    graph = nx.DiGraph()
+    graph.add_nodes_from(modules)
+    for module, (text, is_package) in sources.items():
+        package = module if is_package else module.rpartition(".")[0]
+        for node in ast.walk(ast.parse(text, filename=module)):
+            targets = []
+            if isinstance(node, ast.Import):
+                targets = [_resolve(alias.name, modules) for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                if node.level:  # from . import x / from ..y import z
+                    base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                    base = ".".join(base + ([node.module] if node.module else []))
+                else:
+                    base = node.module or ""
+                for alias in node.names:  # ``from package import module`` imports the module
+                    submodule = f"{base}.{alias.name}"
+                    targets.append(submodule if submodule in modules else _resolve(base, modules))
+            for target in targets:
+                if (target == root or target.startswith(root + ".")) and target != module:
+                    if not graph.has_edge(module, target):
+                        graph.add_edge(module, target, line=node.lineno)
+    return graph
+
+
+def _matches(module: str, prefix: str) -> bool:
+    # a dotted prefix covers its submodules; the bare top-level package covers only itself
+    return module == prefix or ("." in prefix and module.startswith(prefix + "."))
+
+
+def layer_of(module: str, layers: tuple[Layer, ...]) -> Layer | None:
+    """The layer of ``module``: the one with its longest matching prefix (None: unmapped)."""
+    best = max(
+        ((len(prefix), layer) for layer in layers for prefix in layer.prefixes if _matches(module, prefix)),
+        key=lambda pair: pair[0],
+        default=None,
+    )
+    return best[1] if best else None
+
+
+def allowed(importer: Layer, imported: Layer) -> bool:
+    """Whether a module of ``importer`` may import one of ``imported``."""
+    if importer.name == imported.name:
+        return True
+    if importer.may_import is not None:
+        return imported.name in importer.may_import
+    return imported.rank < importer.rank
+
+
+def layer_problems(graph: nx.DiGraph, layers: tuple[Layer, ...]) -> dict[tuple[str, str], str]:
+    """Every edge that does not point down (and every module no layer holds), with why."""
+    problems = {}
+    for module in sorted(graph.nodes):
+        if layer_of(module, layers) is None:
+            problems[(module, module)] = f"{module} belongs to no layer: add it to LAYERS"
+    for importer, imported, data in sorted(graph.edges(data=True)):
+        source, target = layer_of(importer, layers), layer_of(imported, layers)
+        if source is not None and target is not None and not allowed(source, target):
+            direction = "up" if target.rank > source.rank else "sideways"
+            problems[(importer, imported)] = (
+                f"{importer} (line {data['line']}, layer {source.name}) imports {imported} "
+                f"(layer {target.name}): {direction}"
+            )
+    return problems
+
+
+def cycles(graph: nx.DiGraph) -> list[list[str]]:
+    """One cycle (a closed list of modules) per strongly connected component of two or more files."""
+    found = []
+    for component in nx.strongly_connected_components(graph):
+        if len(component) > 1:
+            edges = nx.find_cycle(graph.subgraph(component))
+            found.append([edge[0] for edge in edges] + [edges[0][0]])
+    return sorted(found)
+
+
+def check(graph: nx.DiGraph, layers: tuple[Layer, ...], known: dict[tuple[str, str], str]) -> list[str]:
+    """Everything wrong with ``graph``: layer violations and cycles not in ``known``, and entries of
+    ``known`` that no longer occur or no longer break the layering."""
+    messages = []
+    violations = layer_problems(graph, layers)
+    messages += [message for edge, message in violations.items() if edge not in known]
+    in_cycle = {
+        (a, b)
+        for component in nx.strongly_connected_components(graph)
+        for a, b in graph.subgraph(component).edges
+    }
+    for importer, imported in sorted(known):
+        if not graph.has_edge(importer, imported):
+            messages.append(f"stale KNOWN_VIOLATIONS entry: {importer} no longer imports {imported}")
+        elif (importer, imported) not in violations and (importer, imported) not in in_cycle:
+            messages.append(f"stale KNOWN_VIOLATIONS entry: {importer} → {imported} breaks no rule now")
+    tolerated = graph.copy()
+    tolerated.remove_edges_from(known)
+    for cycle in cycles(tolerated):
+        steps = [
+            f"{a} (line {tolerated.edges[a, b]['line']})" for a, b in zip(cycle, cycle[1:], strict=False)
+        ]
+        messages.append("import cycle: " + " → ".join(steps + [cycle[-1]]))
+    return messages
+
+
+# --- drivelab itself -----------------------------------------------------------------------------
+def test_drivelab_imports_point_down_and_form_no_cycle():
+    graph = import_graph(module_sources(PACKAGE_DIR))
+    assert len(graph) > 50 and graph.number_of_edges() > 100  # the walk found the package
+    problems = check(graph, LAYERS, KNOWN_VIOLATIONS)
+    assert not problems, "\n".join(problems)
+
+
+def test_layer_table_places_the_modules_it_names():
+    placed = {module: layer_of(module, LAYERS).name for module in module_sources(PACKAGE_DIR)}
+    assert placed["drivelab.world.batch"] == "base"
+    assert placed["drivelab.envs.backends.fast.traffic"] == "sim"
+    assert placed["drivelab.envs.backends.circuits"] == "scenarios"
+    assert placed["drivelab.envs.town_env"] == "scenarios" and placed["drivelab.envs.town"] == "scenarios"
+    assert placed["drivelab.envs.core"] == "envs" and placed["drivelab"] == "envs"
+    assert placed["drivelab.training.run"] == "training" and placed["drivelab.cli"] == "cli"
+
+
+# --- the checker on synthetic packages: it can fail -------------------------------------------------
+TOY_LAYERS = (Layer("low", 0, ("toy.low",)), Layer("high", 1, ("toy.high",)), Layer("top", 2, ("toy",)))
+
+
+def _toy(**modules: str) -> dict[str, tuple[str, bool]]:
+    sources = {"toy": ("", True), "toy.low": ("", True), "toy.high": ("", True)}
+    sources.update({name.replace("__", "."): (text, False) for name, text in modules.items()})
+    return sources
+
+
+def test_checker_reports_an_upward_import_inside_a_function():
+    graph = import_graph(
+        _toy(
+            toy__low__a="import os\n\ndef f():\n    from ..high.b import thing\n", toy__high__b="thing = 1\n"
+        ),
+        root="toy",
+    )
+    assert graph.has_edge("toy.low.a", "toy.high.b")
+    problems = check(graph, TOY_LAYERS, {})
+    assert problems == ["toy.low.a (line 4, layer low) imports toy.high.b (layer high): up"]
+    assert check(graph, TOY_LAYERS, {("toy.low.a", "toy.high.b"): "tolerated"}) == []
+
+
+def test_checker_reports_a_two_file_cycle_by_name():
+    graph = import_graph(
+        _toy(toy__high__a="from toy.high import b\n", toy__high__b="from . import a\n"), root="toy"
+    )
+    problems = check(graph, TOY_LAYERS, {})
+    assert len(problems) == 1 and problems[0].startswith("import cycle: ")
+    assert "toy.high.a (line 1)" in problems[0] and "toy.high.b (line 1)" in problems[0]
+
+
+def test_checker_reports_stale_known_entries_and_sideways_imports():
+    layers = (*TOY_LAYERS, Layer("side", 1, ("toy.side",), may_import=frozenset({"low"})))
+    graph = import_graph(
+        _toy(toy__side="import toy.high.b\n", toy__high__b="import toy.low.c\n", toy__low__c=""), root="toy"
+    )
+    known = {("toy.high.b", "toy.low.c"): "points down", ("toy.low.c", "toy.high.b"): "gone"}
+    assert check(graph, layers, known) == [
+        "toy.side (line 1, layer side) imports toy.high.b (layer high): sideways",
+        "stale KNOWN_VIOLATIONS entry: toy.high.b → toy.low.c breaks no rule now",
+        "stale KNOWN_VIOLATIONS entry: toy.low.c no longer imports toy.high.b",
+    ]
