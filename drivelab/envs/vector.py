@@ -58,6 +58,17 @@ def _check_keywords(duration_s, offroad_terminal, action_options, backend_option
             raise UsageError(f"{name} must be a mapping of options, got {value!r}")
 
 
+AUTORESET_MODES = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP}
+
+
+def autoreset_mode_of(mode: AutoresetMode | str) -> AutoresetMode:
+    """gymnasium's NEXT_STEP or SAME_STEP, given as the enum, its value or "next_step" / "same_step"."""
+    for name, member in AUTORESET_MODES.items():
+        if mode in (member, member.value, name):
+            return member
+    raise UsageError(f"unknown autoreset_mode {mode!r} (choose from {', '.join(AUTORESET_MODES)})")
+
+
 def make_simulator(backend: str, scenario, traffic: str, control: str, num_worlds: int, overrides):
     """The simulator of ``backend`` ("auto", "fast" or "highway") for K worlds of ``scenario``."""
     if backend not in BACKENDS:
@@ -120,14 +131,7 @@ class VectorDriveEnv(VectorEnv):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise UsageError(f"num_envs must be an integer >= 1 (got {num_envs!r})")
         _check_keywords(duration_s, offroad_terminal, action_options, backend_options)
-        try:
-            autoreset_mode = AutoresetMode(autoreset_mode)
-        except ValueError:
-            raise UsageError(f"unknown autoreset_mode {autoreset_mode!r} (next_step or same_step)") from None
-        if autoreset_mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
-            raise UsageError(
-                f"autoreset_mode {autoreset_mode.value!r} is not supported (next_step or same_step)"
-            )
+        autoreset_mode = autoreset_mode_of(autoreset_mode)
         self.scenario = get_scenario(scenario)
         check_traffic(traffic)
         action = self.scenario.action_kinds[0] if action is None else action
@@ -509,5 +513,5 @@ def make_vec(scenario: str = "highway", num_envs: int = 8, **env_kwargs: Any) ->
     mode = env_kwargs.pop("autoreset_mode", AutoresetMode.NEXT_STEP)
     return gym.vector.AsyncVectorEnv(
         [lambda: DriveEnv(scenario=scenario, **env_kwargs) for _ in range(num_envs)],
-        autoreset_mode=AutoresetMode(mode),
+        autoreset_mode=autoreset_mode_of(mode),
     )

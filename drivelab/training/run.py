@@ -242,9 +242,9 @@ def _make_envs(config: RunConfig, run_dir: Path, resume: bool):
         train_env = Monitor(recorder, filename=monitor, override_existing=not resume)
         train_env.reset(seed=config.seed)
     else:
-        from drivelab.envs.vector import DriveVectorEnv, SB3VecEnv
+        from drivelab.envs.vector import SB3VecEnv, VectorDriveEnv
 
-        recorder = RecordVecEpisodes(SB3VecEnv(DriveVectorEnv(config.n_envs, **config.env_kwargs())))
+        recorder = RecordVecEpisodes(SB3VecEnv(VectorDriveEnv(config.n_envs, autoreset_mode="same_step", **config.env_kwargs())))
         train_env = VecMonitor(recorder)
         train_env.results_writer = ResultsWriter(
             monitor, header={"t_start": train_env.t_start, "env_id": config.env}, override_existing=not resume
@@ -328,9 +328,9 @@ def _load_checkpoint(config: RunConfig, run_dir: Path, manifest: dict):
     if config.n_envs == 1:
         env = DriveEnv(**config.env_kwargs())
     else:
-        from drivelab.envs.vector import DriveVectorEnv, SB3VecEnv
+        from drivelab.envs.vector import SB3VecEnv, VectorDriveEnv
 
-        env = SB3VecEnv(DriveVectorEnv(config.n_envs, **config.env_kwargs()))
+        env = SB3VecEnv(VectorDriveEnv(config.n_envs, autoreset_mode="same_step", **config.env_kwargs()))
     model = load_agent(run_dir, config, env, run_dir / "checkpoints" / "latest.zip")
     if manifest.get("replay_buffer"):
         load_replay(model, run_dir, manifest)
