@@ -33,8 +33,8 @@ os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 import torch  # noqa: E402
 
 from drivelab.agents.qlearning import QLearning  # noqa: E402
-from drivelab.envs.core import DriveEnv  # noqa: E402
 from drivelab.agents.qlearning_plots import plot_qlearning  # noqa: E402
+from drivelab.envs.core import DriveEnv  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 SETUPS = {

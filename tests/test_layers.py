@@ -5,6 +5,11 @@ and ``from x import y`` at module level and inside functions, relative imports r
 package import module`` counted as an import of that module. An import is an edge importer →
 imported; an edge is allowed inside a layer and to the layers below (or to those a layer names in
 ``may_import``), and the edges must not form a cycle between files.
+
+Not counted: the parent packages Python runs first. Importing any ``drivelab.envs.*`` module runs
+``drivelab/envs/__init__.py`` (gymnasium registration, which reads the scenarios), so at run time
+the simulators still load the top of ``envs/``; moving ``backends/`` and the scenarios out of
+``envs/`` (DESIGN.md's ``sim/`` and ``scenarios/``) ends that.
 """
 
 from __future__ import annotations
