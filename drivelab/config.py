@@ -12,7 +12,6 @@ import yaml
 
 from drivelab.envs.scenarios import SCENARIOS
 from drivelab.errors import UsageError
-from drivelab.yaml_io import YamlLoader  # noqa: F401  (perception/sensors.py still imports it from here)
 
 
 @dataclass(frozen=True)

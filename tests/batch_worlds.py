@@ -54,4 +54,6 @@ def world_sequences(
 
 def batches(scenario: str, **options) -> list[tuple[WorldBatch, np.ndarray]]:
     """``world_sequences`` as (WorldBatch, started mask) pairs."""
-    return [(WorldBatch.stack(list(worlds)), started) for worlds, started in world_sequences(scenario, **options)]
+    return [
+        (WorldBatch.stack(list(worlds)), started) for worlds, started in world_sequences(scenario, **options)
+    ]

@@ -147,8 +147,9 @@ class TargetSpeedAction(ActionAdapter):
         self.reset()
 
     def reset(self, mask: np.ndarray | None = None) -> None:
-        if mask is None:
-            self.integral, self.previous_error = np.zeros(0), np.zeros(0)
+        if mask is None or len(mask) != len(self.integral):  # all worlds, or a new number of them
+            size = 0 if mask is None else len(mask)
+            self.integral, self.previous_error = np.zeros(size), np.full(size, np.nan)
             return
         self.integral[mask], self.previous_error[mask] = 0.0, np.nan
 

@@ -26,7 +26,7 @@ from gymnasium.vector.utils import batch_space
 from stable_baselines3.common.vec_env import VecEnv
 
 from drivelab.envs.actions import ActionAdapter, make_action
-from drivelab.envs.metrics import BatchMetrics
+from drivelab.envs.metrics import EpisodeMetrics
 from drivelab.envs.rules import EpisodeRules
 from drivelab.envs.scenarios import check_traffic, get_scenario
 from drivelab.errors import UsageError
@@ -156,7 +156,7 @@ class VectorDriveEnv(VectorEnv):
         self.duration_s = float(duration_s or self.simulator.duration_s)
         self.duration_given = duration_s is not None
         self.rules = EpisodeRules(self.scenario, offroad_terminal)
-        self.metrics = BatchMetrics()
+        self.metrics = EpisodeMetrics()
         self.render_mode = render_mode
         self.autoreset_mode = autoreset_mode
         self.metadata = {
@@ -205,7 +205,9 @@ class VectorDriveEnv(VectorEnv):
         batch = self.simulator.reset_where(mask, self.episode_seeds)
         self.adapter.reset(mask)
         for index, sensor in enumerate(self.sensors):
-            rngs = [np.random.default_rng([int(seed), index]) for seed in self.episode_seeds]
+            rngs = [None] * self.num_envs
+            for k in worlds:
+                rngs[k] = np.random.default_rng([int(self.episode_seeds[k]), index])
             sensor.reset(batch, rngs, mask)
         # an evaluation route brings its own time limit (the town's NoCrash protocol); a duration
         # given to this env still caps it

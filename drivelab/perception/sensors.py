@@ -9,7 +9,6 @@ import numpy as np
 import yaml
 from gymnasium import spaces
 
-from drivelab.config import YamlLoader
 from drivelab.errors import UsageError
 from drivelab.perception.affordances import Affordances
 from drivelab.perception.base import Sensor
@@ -25,6 +24,7 @@ from drivelab.perception.topdown import TopDown
 from drivelab.perception.ttc_grid import TTCGrid
 from drivelab.perception.waypoints import Waypoints
 from drivelab.world.batch import WorldBatch
+from drivelab.yaml_io import YamlLoader
 
 _ALL = (Kinematics, Lidar, TopDown, BirdEye, EgoState, Waypoints, Measurements, Camera, LineState, LaneState)
 SENSORS: dict[str, type[Sensor]] = {cls.name: cls for cls in (*_ALL, TTCGrid, Affordances)}

@@ -244,7 +244,9 @@ def _make_envs(config: RunConfig, run_dir: Path, resume: bool):
     else:
         from drivelab.envs.vector import SB3VecEnv, VectorDriveEnv
 
-        recorder = RecordVecEpisodes(SB3VecEnv(VectorDriveEnv(config.n_envs, autoreset_mode="same_step", **config.env_kwargs())))
+        recorder = RecordVecEpisodes(
+            SB3VecEnv(VectorDriveEnv(config.n_envs, autoreset_mode="same_step", **config.env_kwargs()))
+        )
         train_env = VecMonitor(recorder)
         train_env.results_writer = ResultsWriter(
             monitor, header={"t_start": train_env.t_start, "env_id": config.env}, override_existing=not resume

@@ -1,6 +1,5 @@
 """RLAD's replay: each frame stored once, stacks rebuilt across episode boundaries, memory."""
 
-
 import numpy as np
 import torch
 

@@ -1,4 +1,4 @@
-"""BatchMetrics over K worlds gives, for every episode, EpisodeMetrics' summary of that world
+"""EpisodeMetrics over K worlds gives, for every episode, the one-world metrics' summary of that world
 alone, on random worlds whose episodes start and end at different steps."""
 
 import dataclasses
@@ -7,10 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from drivelab.envs.metrics import BatchMetrics, EpisodeMetrics
+from drivelab.envs.metrics import EpisodeMetrics
 from drivelab.world.batch import WorldBatch
 from drivelab.world.state import Events
 from tests.batch_worlds import world_sequences
+from tests.envs.one_world_metrics import OneWorldMetrics
 
 NUM_WORLDS = 8
 
@@ -44,7 +45,7 @@ def _assert_same_summary(batched: dict, single: dict) -> None:
 def test_batch_metrics_equal_episode_metrics_world_by_world(scenario, has_goal):
     sequence = world_sequences(scenario, num_worlds=NUM_WORLDS)
     rng = np.random.default_rng(5)
-    metrics, single = BatchMetrics(), [None] * NUM_WORLDS
+    metrics, single = EpisodeMetrics(), [None] * NUM_WORLDS
     summaries = 0
     for t, (worlds, started) in enumerate(sequence):
         worlds = [w if started[k] else _with_events(w, rng) for k, w in enumerate(worlds)]
@@ -58,7 +59,7 @@ def test_batch_metrics_equal_episode_metrics_world_by_world(scenario, has_goal):
             for k in np.flatnonzero(~started):
                 single[k].update(worlds[k], float(rewards[k]))
         for k in np.flatnonzero(started):
-            single[k] = EpisodeMetrics(worlds[k])
+            single[k] = OneWorldMetrics(worlds[k])
         # episodes end where the next step starts a new one, and every episode at the last step
         ending = sequence[t + 1][1] if t + 1 < len(sequence) else np.ones(NUM_WORLDS, dtype=bool)
         timed_out = rng.random(NUM_WORLDS) < 0.5
@@ -78,7 +79,7 @@ def test_counts_on_a_known_episode():
     moving[2] = dataclasses.replace(moving[2], events=Events(collided=True, collision_with="pedestrian"))
     moving[3] = dataclasses.replace(moving[3], events=Events(off_road=True, red_light_crossed=True))
     still = [world() for _ in range(4)]
-    metrics = BatchMetrics()
+    metrics = EpisodeMetrics()
     metrics.reset(WorldBatch.stack([moving[0], still[0]]))
     for step in range(1, 4):
         metrics.update(WorldBatch.stack([moving[step], still[step]]), np.array([1.0, -0.5]))

@@ -29,7 +29,9 @@ def _equal(a, b) -> None:
 
 def _same_metrics(a: dict, b: dict) -> bool:
     """Episode metrics equal, NaN (no route completion on a road without an end) equal to NaN."""
-    return a.keys() == b.keys() and all(a[key] == b[key] or a[key] != a[key] and b[key] != b[key] for key in a)
+    return a.keys() == b.keys() and all(
+        a[key] == b[key] or a[key] != a[key] and b[key] != b[key] for key in a
+    )
 
 
 def _row(observations, k):
