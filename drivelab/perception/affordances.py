@@ -34,7 +34,8 @@ ONCOMING_LATERAL_M = 10.0  # the opposite lane (4 m to the left) with room for t
 
 
 class Affordances(Sensor):
-    """``FIELDS`` as float32; a distance with nothing found reads ``range_m``.
+    """``FIELDS`` as float32; a distance with nothing found reads ``range_m``. K worlds at once:
+    every body against every route point of its world, ``(K, N, S)``, with no loop over worlds.
 
     :param range_m: how far along the route to look.
     """
@@ -53,30 +54,31 @@ class Affordances(Sensor):
         return self._space
 
     def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
-        ego, route, count = batch.ego, batch.route, batch.num_worlds
+        ego, route = batch.ego, batch.route
         stations = np.arange(0.0, self.range_m + ROUTE_STEP_M, ROUTE_STEP_M)  # (S,)
         path, _ = route.poses_at(route.progress_m[:, None] + stations)  # (K, S, 2)
-        values = {field: np.full(count, self.range_m) for field in FIELDS}
-        values["speed_mps"] = ego.speed_mps
-        state, stop_line_m = batch.light_ahead(self.range_m)  # (K,): state -1 where no light
+        state, stop_line_m = batch.light_ahead(self.range_m)  # (K,): state -1 where there is none
         has_light = state >= 0
-        values["stop_line_m"] = np.where(has_light, stop_line_m, self.range_m)
-        values["light_red"] = (state == LIGHT_RED).astype(float)
-        values["light_yellow"] = (state == LIGHT_YELLOW).astype(float)
-        found, leader_m, leader = _nearest_on_route(
+        leader_found, leader_m, leader = _nearest_on_route(
             batch.vehicles, batch.vehicle_valid, path, stations, ego, VEHICLE_CORRIDOR_M
         )
-        values["leader_m"] = np.where(found, leader_m, self.range_m)
-        speed_along = leader[:, 3] * np.cos(leader[:, 2] - ego.heading)
-        values["leader_speed_mps"] = np.where(found, speed_along, 0.0)
-        found, walker_m, _ = _nearest_on_route(
+        walker_found, walker_m, _ = _nearest_on_route(
             batch.pedestrians, batch.pedestrian_valid, path, stations, ego, PEDESTRIAN_CORRIDOR_M,
             PEDESTRIAN_HEADING_M,
         )  # fmt: skip
-        values["pedestrian_m"] = np.where(found, walker_m, self.range_m)
+        leader_speed_mps = leader[:, 3] * np.cos(leader[:, 2] - ego.heading)  # along the ego's heading
         turning = has_light & _turns_left_after(batch, np.where(has_light, stop_line_m, 0.0))
-        values["oncoming_m"] = np.where(turning, self._oncoming(batch), self.range_m)
-        out[...] = np.stack([values[field] for field in FIELDS], axis=1)
+        values = {
+            "speed_mps": ego.speed_mps,
+            "stop_line_m": np.where(has_light, stop_line_m, self.range_m),
+            "light_red": (state == LIGHT_RED).astype(float),
+            "light_yellow": (state == LIGHT_YELLOW).astype(float),
+            "leader_m": np.where(leader_found, leader_m, self.range_m),
+            "leader_speed_mps": np.where(leader_found, leader_speed_mps, 0.0),
+            "pedestrian_m": np.where(walker_found, walker_m, self.range_m),
+            "oncoming_m": np.where(turning, self._oncoming(batch), self.range_m),
+        }
+        out[...] = np.stack([values[field] for field in FIELDS], axis=1)  # (K, fields)
 
     def _oncoming(self, batch: WorldBatch) -> np.ndarray:
         """(K,) distance to the nearest moving vehicle ahead that drives against the ego in the

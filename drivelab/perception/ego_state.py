@@ -24,7 +24,8 @@ CURVATURE_SCALE_M = 50.0  # curvature · 50 m: a 50 m radius reads 1
 
 
 class EgoState(Sensor):
-    """``features`` numbers in [-1, 1] (``FUSION_FEATURES``, then ``EXTRA_FEATURES`` when 10).
+    """``features`` numbers in [-1, 1] (``FUSION_FEATURES``, then ``EXTRA_FEATURES`` when 10);
+    batched, ``(K, features)``.
 
     - speed: ego speed over the world's maximum speed;
     - lane_offset: signed offset from the lane centre over half the lane width (+ right);

@@ -131,14 +131,9 @@ class Lidar(Sensor):
     def space(self) -> spaces.Box:
         return self._space
 
-    def segments(self, batch: WorldBatch) -> tuple[np.ndarray, np.ndarray]:
-        """Everything the beams can hit: (M, 2, 2) segments in their world's ego frame, and the
-        (M,) world each belongs to."""
-        start_x, start_y, end_x, end_y, worlds = self._segments(batch)
-        return np.stack([np.stack([start_x, start_y], -1), np.stack([end_x, end_y], -1)], 1), worlds
-
     def _segments(self, batch: WorldBatch) -> tuple[np.ndarray, ...]:
-        """``segments`` as flat (M,) arrays: start x, start y, end x, end y, world."""
+        """Everything the beams can hit, as flat (M,) arrays: start x, start y, end x, end y in
+        the ego frame of the world each segment belongs to, and that world."""
         ego = batch.ego
         cos_h, sin_h = np.cos(ego.heading)[:, None], np.sin(ego.heading)[:, None]  # (K, 1)
         position_x, position_y = ego.position[:, 0, None], ego.position[:, 1, None]
@@ -148,8 +143,7 @@ class Lidar(Sensor):
         edge_x = delta_x * cos_h[..., None] + delta_y * sin_h[..., None]  # (K, E, 2)
         edge_y = -delta_x * sin_h[..., None] + delta_y * cos_h[..., None]
         edge_valid = np.broadcast_to(edge_valid, edge_x.shape[:2])
-        # other bodies (pedestrians reflect beams too) as boxes in the ego frame: centre turned,
-        # heading made relative, so the corners come out there
+        # other bodies (pedestrians reflect beams too): their centres in the ego frame
         users, valid = batch.road_users()  # (K, U, 6)
         delta_x, delta_y = users[..., 0] - position_x, users[..., 1] - position_y
         box_x = delta_x * cos_h + delta_y * sin_h  # (K, U)
@@ -189,7 +183,8 @@ class Lidar(Sensor):
         *segments, worlds = self._segments(batch)
         start_x, start_y, end_x, end_y, near, closest = _near_parts(*segments, self.range_m)
         worlds = worlds[near]
-        # the beams each part can meet: its angular span, one beam of margin either side
+        # the beams each part can meet: its angular span, one beam of margin either side (a beam
+        # farther outside cannot pass the float32 hit test, so this equals testing every beam)
         angle_start = np.arctan2(start_y, start_x)
         turn = np.arctan2(end_y, end_x) - angle_start
         turn = (turn + np.pi) % (2 * np.pi) - np.pi  # [-π, π): a segment spans at most half a turn

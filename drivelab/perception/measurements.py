@@ -13,7 +13,7 @@ MAX_STEERING_RAD = np.pi / 3  # highway-env's largest steering angle (Controlled
 
 class Measurements(Sensor):
     """``[speed / max speed, steering / 60°]``, both clipped to [-1, 1]; ``stack=3`` gives RLAD's
-    three frames (6 numbers)."""
+    three frames (6 numbers). Batched: ``(K, 2)``."""
 
     name = "measurements"
 

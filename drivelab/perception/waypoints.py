@@ -12,6 +12,7 @@ from drivelab.world.batch import WorldBatch
 class Waypoints(Sensor):
     """The route ``count`` points ahead, ``spacing_m`` apart from the ego's projection on it, as
     (x forward, y right) metres in the ego frame; past the route's end the last point repeats.
+    Batched: ``(K, count, 2)`` from ``RouteBatch.poses_at`` over every world at once.
 
     RLAD feeds N = 10 planner waypoints; CARLA's planner spacing is not stated in the paper, so
     2 m (about one car length apart, 20 m of look-ahead) is our choice.

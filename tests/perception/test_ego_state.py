@@ -19,6 +19,8 @@ def test_front_vehicle_in_lane():
     ]
     sensor = EgoState()
     obs = sensor.observe(world(vehicles=vehicles, lateral_offset_m=1.0))
+    assert sensor.front_vehicle(world(vehicles=vehicles, lateral_offset_m=1.0)) == (20.0, 15.0)
+    assert sensor.front_vehicle(world(vehicles=vehicles[2:])) == (np.inf, 0.0)
     assert obs.shape == (5,) and obs.dtype == np.float32
     np.testing.assert_allclose(obs, [0.5, 0.5, 0.4, -0.125, 1.0], atol=1e-6)
 
