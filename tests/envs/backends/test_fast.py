@@ -52,6 +52,25 @@ def test_lane_geometry_matches_highway_env(scenario):
             np.testing.assert_allclose(L.position(table.rows, row, s, 1.0), lane.position(s, 1.0), atol=1e-9)
 
 
+@pytest.mark.parametrize("scenario", sorted(SCENARIOS))
+def test_closest_lane_with_a_hint_is_the_same_lane(scenario):
+    """Measuring a hinted lane first (and skipping lanes that cannot beat it) changes nothing:
+    for points near and between lanes, whatever the hint, the answer is the plain scan's, ties
+    included (points exactly on a lane joint are equally near two lanes)."""
+    builder = HighwayBackend(SCENARIOS[scenario], "empty", "continuous")
+    builder.reset(seed=0)
+    table = L.LaneTable.from_network(builder.env.road.network)
+    rng = np.random.default_rng(1)
+    points = builder.road_map.lane_centerlines
+    for _ in range(60):
+        centre = points[rng.integers(len(points))]
+        x, y = centre[rng.integers(len(centre))] + rng.normal(0, 2, 2) * rng.integers(2)
+        heading = rng.uniform(-np.pi, np.pi)
+        expected = L.closest_lane(table.rows, x, y, heading)
+        for hint in range(len(table.indices)):
+            assert L.closest_lane(table.rows, x, y, heading, hint) == expected
+
+
 @pytest.mark.parametrize("control", ["meta", "continuous"])
 @pytest.mark.parametrize("traffic", ["empty", "regular", "dense"])
 def test_spawn_reproduces_highway_env_episodes(control, traffic):
