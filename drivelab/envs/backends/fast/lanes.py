@@ -88,12 +88,12 @@ class LaneTable:
         return self.row_of[(_from, _to, 0)]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def wrap_to_pi(angle: float) -> float:
     return ((angle + np.pi) % (2 * np.pi)) - np.pi
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def local_coordinates(lanes: np.ndarray, lane: int, x: float, y: float) -> tuple[float, float]:
     """(longitudinal, lateral) of the world point (x, y) in ``lane``."""
     row = lanes[lane]
@@ -111,7 +111,7 @@ def local_coordinates(lanes: np.ndarray, lane: int, x: float, y: float) -> tuple
     return longitudinal, lateral
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def heading_at(lanes: np.ndarray, lane: int, longitudinal: float) -> float:
     row = lanes[lane]
     if row[KIND] == CIRCLE:
@@ -123,7 +123,7 @@ def heading_at(lanes: np.ndarray, lane: int, longitudinal: float) -> float:
     return row[HEADING]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def on_lane(lanes: np.ndarray, lane: int, longitudinal: float, lateral: float, margin: float) -> bool:
     row = lanes[lane]
     return (

@@ -70,14 +70,14 @@ CAR_LENGTH, CAR_WIDTH = 5.0, 2.0
 MAX_SPEED, MIN_SPEED = 40.0, -40.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def not_zero(value: float) -> float:
     if np.abs(value) > 1e-2:
         return value
     return 1e-2 if value >= 0 else -1e-2
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _clip(value: float, low: float, high: float) -> float:
     return min(max(value, low), high)
 
@@ -115,36 +115,36 @@ def start_frame(v: np.ndarray, done: np.ndarray, trig: np.ndarray) -> None:
         trig[j, 0], trig[j, 1] = np.cos(v[j, HEADING]), np.sin(v[j, HEADING])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def lane_coordinates(
     v: np.ndarray, lanes: np.ndarray, coords: np.ndarray, done: np.ndarray, lane: int
-) -> np.ndarray:
-    """(N, 3) every vehicle's ``local_coordinates`` in ``lane`` and whether it is on the lane as
-    ``Road.neighbour_vehicles`` counts it (``on_lane`` with a 1 m margin), from the frame cache."""
+) -> None:
+    """Fill ``coords[lane]`` (N, 3) once per frame: every vehicle's ``local_coordinates`` in
+    ``lane`` and whether it is on the lane as ``Road.neighbour_vehicles`` counts it (``on_lane``
+    with a 1 m margin)."""
     if not done[lane]:
         for j in range(v.shape[0]):
             s_j, r_j = local_coordinates(lanes, lane, v[j, X], v[j, Y])
             coords[lane, j, 0], coords[lane, j, 1] = s_j, r_j
             coords[lane, j, 2] = 1.0 if on_lane(lanes, lane, s_j, r_j, 1.0) else 0.0
         done[lane] = True
-    return coords[lane]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def cached_neighbours(
     v: np.ndarray, lanes: np.ndarray, coords: np.ndarray, done: np.ndarray, i: int, lane: int
 ) -> tuple[int, int]:
     """Road.neighbour_vehicles: the vehicles just ahead of and behind vehicle i along ``lane``."""
-    c = lane_coordinates(v, lanes, coords, done, lane)
-    s_i = c[i, 0]
+    lane_coordinates(v, lanes, coords, done, lane)
+    s_i = coords[lane, i, 0]
     front, rear = -1, -1
     s_front, s_rear = 0.0, 0.0
     for j in range(v.shape[0]):
         if j == i:
             continue
-        if c[j, 2] == 0.0:
+        if coords[lane, j, 2] == 0.0:
             continue
-        s_j = c[j, 0]
+        s_j = coords[lane, j, 0]
         if s_i <= s_j and (front < 0 or s_j <= s_front):
             front, s_front = j, s_j
         if s_j < s_i and (rear < 0 or s_j > s_rear):
@@ -159,7 +159,7 @@ def neighbours(v: np.ndarray, lanes: np.ndarray, i: int, lane: int) -> tuple[int
     return cached_neighbours(v, lanes, coords, done, i, lane)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def cached_desired_gap(v: np.ndarray, p: np.ndarray, trig: np.ndarray, ego: int, front: int) -> float:
     """IDMVehicle.desired_gap, projected on the ego's direction (``trig``: headings' cos, sin)."""
     ab = -p[COMFORT_ACC_MAX] * p[COMFORT_ACC_MIN]
@@ -170,7 +170,7 @@ def cached_desired_gap(v: np.ndarray, p: np.ndarray, trig: np.ndarray, ego: int,
     return p[DISTANCE_WANTED] + v[ego, SPEED] * p[TIME_WANTED] + v[ego, SPEED] * dv / (2 * np.sqrt(ab))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def cached_idm_acceleration(
     v: np.ndarray,
     lanes: np.ndarray,
@@ -193,8 +193,9 @@ def cached_idm_acceleration(
     ratio = max(v[ego, SPEED], 0.0) / np.abs(not_zero(target_speed))
     acceleration = p[COMFORT_ACC_MAX] * (1 - ratio ** v[me, DELTA])
     if front >= 0:
-        c = lane_coordinates(v, lanes, coords, done, lane)
-        gap = cached_desired_gap(v, p, trig, ego, front) / not_zero(c[front, 0] - c[ego, 0])
+        lane_coordinates(v, lanes, coords, done, lane)
+        gap_m = coords[lane, front, 0] - coords[lane, ego, 0]
+        gap = cached_desired_gap(v, p, trig, ego, front) / not_zero(gap_m)
         acceleration -= p[COMFORT_ACC_MAX] * gap**2
     return acceleration
 
@@ -212,9 +213,10 @@ def cached_mobil(
 ) -> bool:
     """IDMVehicle.mobil: is a change to ``lane`` safe for the new follower, and worth it?"""
     new_preceding, new_following = cached_neighbours(v, lanes, coords, done, i, lane)
-    cache = (coords, done, trig)
-    new_following_a = cached_idm_acceleration(v, lanes, p, *cache, i, new_following, new_preceding)
-    new_following_pred_a = cached_idm_acceleration(v, lanes, p, *cache, i, new_following, i)
+    new_following_a = cached_idm_acceleration(
+        v, lanes, p, coords, done, trig, i, new_following, new_preceding
+    )
+    new_following_pred_a = cached_idm_acceleration(v, lanes, p, coords, done, trig, i, new_following, i)
     if new_following_pred_a < -p[MAX_BRAKING_IMPOSED]:
         return False
     old_preceding, old_following = cached_neighbours(v, lanes, coords, done, i, int(v[i, LANE]))
@@ -271,8 +273,8 @@ def change_lane_policy(
                     and (v[j, KIND] == CONTROLLED or v[j, KIND] == IDM)
                     and int(v[j, TARGET_LANE]) == target
                 ):
-                    c = lane_coordinates(v, lanes, coords, done, lane)
-                    if 0 < c[j, 0] - c[i, 0] < cached_desired_gap(v, p, trig, i, j):
+                    lane_coordinates(v, lanes, coords, done, lane)
+                    if 0 < coords[lane, j, 0] - coords[lane, i, 0] < cached_desired_gap(v, p, trig, i, j):
                         v[i, TARGET_LANE] = lane
                         break
         return
