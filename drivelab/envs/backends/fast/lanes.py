@@ -153,7 +153,7 @@ def is_reachable_from(lanes: np.ndarray, lane: int, x: float, y: float) -> bool:
     )
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def closest_lane(lanes: np.ndarray, x: float, y: float, heading: float, hint: int = -1) -> int:
     """highway-env's get_closest_lane_index: L1 distance plus heading misalignment, first minimum.
 

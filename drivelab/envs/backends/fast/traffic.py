@@ -82,7 +82,7 @@ def _clip(value: float, low: float, high: float) -> float:
     return min(max(value, low), high)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def steering_control(v: np.ndarray, lanes: np.ndarray, i: int, target: int) -> float:
     """ControlledVehicle.steering_control: lateral P → heading reference → heading P → steering."""
     s, r = local_coordinates(lanes, target, v[i, X], v[i, Y])
@@ -250,7 +250,7 @@ def mobil(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, i: int, lane: int) ->
     return cached_mobil(v, lanes, p, coords, done, trig, i, lane)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def change_lane_policy(
     v: np.ndarray,
     lanes: np.ndarray,
@@ -342,7 +342,7 @@ def next_lane(v: np.ndarray, lanes: np.ndarray, i: int) -> int:
     return best_lane
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def follow_road(v: np.ndarray, lanes: np.ndarray, i: int) -> None:
     """ControlledVehicle.follow_road: at the end of the target lane, target the next one."""
     target = int(v[i, TARGET_LANE])
@@ -379,7 +379,7 @@ def act(
         v[i, ACCEL] = _clip(acceleration, -p[ACC_MAX], p[ACC_MAX])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def step_vehicle(v: np.ndarray, lanes: np.ndarray, i: int, dt: float) -> None:
     """Vehicle.step: clip the actions, integrate the kinematic bicycle, find the lane."""
     if v[i, KIND] == IDM:
