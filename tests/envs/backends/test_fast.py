@@ -162,6 +162,24 @@ def test_idm_follower_behind_a_braking_leader():
     assert not follower.crashed and state[0, T.CRASHED] == 0
 
 
+def test_neighbours_match_highway_env_with_ties():
+    """The lane-sorted neighbour search finds highway-env's front and rear vehicles, also where
+    several vehicles share a longitudinal position (highway-env keeps the last such row ahead and
+    the first behind) and for vehicles off the queried lane."""
+    road, table = _straight_road(3)
+    rng = np.random.default_rng(4)
+    for _ in range(16):
+        x = float(rng.choice([10.0, 20.0, 30.0, 45.0]))
+        y = 4.0 * int(rng.integers(3)) + float(rng.choice([0.0, 0.5, 2.8]))
+        road.vehicles.append(IDMVehicle(road, np.array([x, y]), 0.0, 20.0))
+    state = vehicles_to_array(road.vehicles, table)
+    for i, vehicle in enumerate(road.vehicles):
+        for row, lane_index in enumerate(table.indices):
+            expected = road.neighbour_vehicles(vehicle, lane_index)
+            expected = tuple(-1 if v is None else road.vehicles.index(v) for v in expected)
+            assert T.neighbours(state, table.rows, i, row) == expected
+
+
 @pytest.mark.parametrize(
     "others, expected",
     [

@@ -98,19 +98,19 @@ def steering_control(v: np.ndarray, lanes: np.ndarray, i: int, target: int) -> f
 
 @njit(cache=True)
 def frame_cache(v: np.ndarray, lanes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Scratch arrays for one simulation frame's ``act``: every vehicle's (longitudinal,
-    lateral, on the lane within 1 m) in a lane (L, N, 3), filled per lane on first use (``done``
-    (L,)), and
-    the cosine and sine of every heading (N, 2). Positions and headings do not change during
-    ``act``, so each value is computed once per frame instead of once per use (same function,
-    same inputs: the same bits)."""
-    coords = np.empty((lanes.shape[0], v.shape[0], 3))
-    return coords, np.zeros(lanes.shape[0], dtype=np.bool_), np.empty((v.shape[0], 2))
+    """Scratch arrays for one simulation frame's ``act``. ``coords`` (L, N, 4): per lane, every
+    vehicle's (longitudinal, lateral, on the lane within 1 m) and, in column 3, the vehicles on
+    the lane sorted by (longitudinal, row); ``done`` (L,): how many vehicles are on the lane, -1
+    until the lane is first used in the frame; ``trig`` (N, 2): the cosine and sine of every
+    heading. Positions and headings do not change during ``act``, so each value is computed once
+    per frame instead of once per use (same function, same inputs: the same bits)."""
+    coords = np.empty((lanes.shape[0], v.shape[0], 4))
+    return coords, np.full(lanes.shape[0], -1, dtype=np.int64), np.empty((v.shape[0], 2))
 
 
 @njit(cache=True)
 def start_frame(v: np.ndarray, done: np.ndarray, trig: np.ndarray) -> None:
-    done[:] = False
+    done[:] = -1
     for j in range(v.shape[0]):
         trig[j, 0], trig[j, 1] = np.cos(v[j, HEADING]), np.sin(v[j, HEADING])
 
@@ -119,36 +119,66 @@ def start_frame(v: np.ndarray, done: np.ndarray, trig: np.ndarray) -> None:
 def lane_coordinates(
     v: np.ndarray, lanes: np.ndarray, coords: np.ndarray, done: np.ndarray, lane: int
 ) -> None:
-    """Fill ``coords[lane]`` (N, 3) once per frame: every vehicle's ``local_coordinates`` in
-    ``lane`` and whether it is on the lane as ``Road.neighbour_vehicles`` counts it (``on_lane``
-    with a 1 m margin)."""
-    if not done[lane]:
-        for j in range(v.shape[0]):
-            s_j, r_j = local_coordinates(lanes, lane, v[j, X], v[j, Y])
-            coords[lane, j, 0], coords[lane, j, 1] = s_j, r_j
-            coords[lane, j, 2] = 1.0 if on_lane(lanes, lane, s_j, r_j, 1.0) else 0.0
-        done[lane] = True
+    """Fill ``coords[lane]`` once per frame: every vehicle's ``local_coordinates`` in ``lane``,
+    whether it is on the lane as ``Road.neighbour_vehicles`` counts it (``on_lane`` with a 1 m
+    margin), and the rows of those on it sorted by (longitudinal, row) (insertion sort: a lane
+    holds a handful)."""
+    if done[lane] >= 0:
+        return
+    count = 0
+    for j in range(v.shape[0]):
+        s_j, r_j = local_coordinates(lanes, lane, v[j, X], v[j, Y])
+        coords[lane, j, 0], coords[lane, j, 1] = s_j, r_j
+        coords[lane, j, 2] = 0.0
+        if on_lane(lanes, lane, s_j, r_j, 1.0):
+            coords[lane, j, 2] = 1.0
+            rank = count
+            while rank > 0 and coords[lane, int(coords[lane, rank - 1, 3]), 0] > s_j:
+                coords[lane, rank, 3] = coords[lane, rank - 1, 3]
+                rank -= 1
+            coords[lane, rank, 3] = j
+            count += 1
+    done[lane] = count
 
 
 @njit(cache=True, inline="always")
 def cached_neighbours(
     v: np.ndarray, lanes: np.ndarray, coords: np.ndarray, done: np.ndarray, i: int, lane: int
 ) -> tuple[int, int]:
-    """Road.neighbour_vehicles: the vehicles just ahead of and behind vehicle i along ``lane``."""
+    """Road.neighbour_vehicles: the vehicles just ahead of and behind vehicle i along ``lane``.
+
+    highway-env scans every vehicle on the lane: the front one is the nearest at or ahead of i
+    (the last row among equals), the rear one the nearest behind (the first row among equals).
+    Here the same vehicles are found by a binary search in the lane's sorted order."""
     lane_coordinates(v, lanes, coords, done, lane)
+    count = done[lane]
     s_i = coords[lane, i, 0]
+    low, high = 0, count
+    while low < high:  # the first rank at or ahead of s_i
+        middle = (low + high) // 2
+        if coords[lane, int(coords[lane, middle, 3]), 0] < s_i:
+            low = middle + 1
+        else:
+            high = middle
     front, rear = -1, -1
-    s_front, s_rear = 0.0, 0.0
-    for j in range(v.shape[0]):
-        if j == i:
-            continue
-        if coords[lane, j, 2] == 0.0:
-            continue
-        s_j = coords[lane, j, 0]
-        if s_i <= s_j and (front < 0 or s_j <= s_front):
-            front, s_front = j, s_j
-        if s_j < s_i and (rear < 0 or s_j > s_rear):
-            rear, s_rear = j, s_j
+    rank = low
+    while rank < count and int(coords[lane, rank, 3]) == i:
+        rank += 1
+    if rank < count:
+        front = int(coords[lane, rank, 3])
+        s_front = coords[lane, front, 0]
+        for later in range(rank + 1, count):
+            j = int(coords[lane, later, 3])
+            if coords[lane, j, 0] != s_front:
+                break
+            if j != i:
+                front = j
+    if low > 0:
+        rank = low - 1
+        s_rear = coords[lane, int(coords[lane, rank, 3]), 0]
+        while rank > 0 and coords[lane, int(coords[lane, rank - 1, 3]), 0] == s_rear:
+            rank -= 1
+        rear = int(coords[lane, rank, 3])
     return front, rear
 
 
