@@ -1,11 +1,13 @@
 """Traffic kernel cost per world-step on the fast backend (highway, regular traffic, meta control).
 
-    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/kernel_speed.py [--worlds 1,64,256] [--steps 200]
+    NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/kernel_speed.py [--worlds 1,64,256] [--steps 200] [--wall]
 
 K worlds in one FastSimulator, reset from seeds 0..K-1, driven with random meta-actions (worlds
-reset where their episode ended, as a vector env does). Reports, per world-step, the microseconds
-spent in the traffic kernel alone (``traffic.simulate_worlds``) and in a whole ``step`` (controls,
-kernel, arrivals, route projection and the WorldBatch export).
+reset where their episode ended, as a vector env does). Reports, per world-step, the CPU
+microseconds (process time: steadier on a busy machine; with one numba thread it is the wall
+time; ``--wall`` for wall-clock time, to compare thread counts) spent in the traffic kernel
+alone (``traffic.simulate_worlds``) and in a whole ``step`` (controls, kernel, arrivals, route
+projection and the WorldBatch export) with the resets.
 """
 
 from __future__ import annotations
@@ -20,7 +22,9 @@ from drivelab.envs.backends.fast import traffic as T
 from drivelab.envs.scenarios import SCENARIOS
 
 
-def measure(scenario: str, traffic: str, worlds: int, steps: int) -> tuple[float, float]:
+def measure(
+    scenario: str, traffic: str, worlds: int, steps: int, clock=time.process_time
+) -> tuple[float, float]:
     sim = S.FastSimulator(SCENARIOS[scenario], traffic, "meta", worlds)
     sim.reset_where(np.ones(worlds, dtype=bool), np.arange(worlds))
     rng = np.random.default_rng(0)
@@ -29,15 +33,15 @@ def measure(scenario: str, traffic: str, worlds: int, steps: int) -> tuple[float
 
     def timed(*args):
         nonlocal kernel_s
-        start = time.perf_counter()
+        start = clock()
         original(*args)
-        kernel_s += time.perf_counter() - start
+        kernel_s += clock() - start
 
     S.T.simulate_worlds = timed
     try:
         sim.step(rng.integers(5, size=worlds))  # compile outside the timing
         kernel_s, seed = 0.0, worlds
-        start = time.perf_counter()
+        start = clock()
         for _ in range(steps):
             batch = sim.step(rng.integers(5, size=worlds))
             done = batch.events.collided | batch.events.off_road | (batch.time_s >= sim.duration_s)
@@ -45,7 +49,7 @@ def measure(scenario: str, traffic: str, worlds: int, steps: int) -> tuple[float
                 seeds = seed + np.arange(worlds)
                 seed += worlds
                 sim.reset_where(done, seeds)
-        total_s = time.perf_counter() - start
+        total_s = clock() - start
     finally:
         S.T.simulate_worlds = original
     return kernel_s / (steps * worlds) * 1e6, total_s / (steps * worlds) * 1e6
@@ -57,9 +61,11 @@ def main() -> None:
     parser.add_argument("--traffic", default="regular")
     parser.add_argument("--worlds", default="1,64")
     parser.add_argument("--steps", type=int, default=200)
+    parser.add_argument("--wall", action="store_true", help="wall-clock time (to compare thread counts)")
     args = parser.parse_args()
+    clock = time.perf_counter if args.wall else time.process_time
     for worlds in (int(k) for k in args.worlds.split(",")):
-        kernel, total = measure(args.scenario, args.traffic, worlds, args.steps)
+        kernel, total = measure(args.scenario, args.traffic, worlds, args.steps, clock)
         print(f"K={worlds}: kernel {kernel:.1f} us/world-step, whole step {total:.1f} us/world-step")
 
 

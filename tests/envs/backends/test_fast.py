@@ -52,6 +52,25 @@ def test_lane_geometry_matches_highway_env(scenario):
             np.testing.assert_allclose(L.position(table.rows, row, s, 1.0), lane.position(s, 1.0), atol=1e-9)
 
 
+@pytest.mark.parametrize("scenario", sorted(SCENARIOS))
+def test_closest_lane_with_a_hint_is_the_same_lane(scenario):
+    """Measuring a hinted lane first (and skipping lanes that cannot beat it) changes nothing:
+    for points near and between lanes, whatever the hint, the answer is the plain scan's, ties
+    included (points exactly on a lane joint are equally near two lanes)."""
+    builder = HighwayBackend(SCENARIOS[scenario], "empty", "continuous")
+    builder.reset(seed=0)
+    table = L.LaneTable.from_network(builder.env.road.network)
+    rng = np.random.default_rng(1)
+    points = builder.road_map.lane_centerlines
+    for _ in range(60):
+        centre = points[rng.integers(len(points))]
+        x, y = centre[rng.integers(len(centre))] + rng.normal(0, 2, 2) * rng.integers(2)
+        heading = rng.uniform(-np.pi, np.pi)
+        expected = L.closest_lane(table.rows, x, y, heading)
+        for hint in range(len(table.indices)):
+            assert L.closest_lane(table.rows, x, y, heading, hint) == expected
+
+
 @pytest.mark.parametrize("control", ["meta", "continuous"])
 @pytest.mark.parametrize("traffic", ["empty", "regular", "dense"])
 def test_spawn_reproduces_highway_env_episodes(control, traffic):
@@ -141,6 +160,24 @@ def test_idm_follower_behind_a_braking_leader():
         speeds.append(follower.speed)
     assert min(speeds) < 12.0  # the follower did brake hard behind the leader
     assert not follower.crashed and state[0, T.CRASHED] == 0
+
+
+def test_neighbours_match_highway_env_with_ties():
+    """The lane-sorted neighbour search finds highway-env's front and rear vehicles, also where
+    several vehicles share a longitudinal position (highway-env keeps the last such row ahead and
+    the first behind) and for vehicles off the queried lane."""
+    road, table = _straight_road(3)
+    rng = np.random.default_rng(4)
+    for _ in range(16):
+        x = float(rng.choice([10.0, 20.0, 30.0, 45.0]))
+        y = 4.0 * int(rng.integers(3)) + float(rng.choice([0.0, 0.5, 2.8]))
+        road.vehicles.append(IDMVehicle(road, np.array([x, y]), 0.0, 20.0))
+    state = vehicles_to_array(road.vehicles, table)
+    for i, vehicle in enumerate(road.vehicles):
+        for row, lane_index in enumerate(table.indices):
+            expected = road.neighbour_vehicles(vehicle, lane_index)
+            expected = tuple(-1 if v is None else road.vehicles.index(v) for v in expected)
+            assert T.neighbours(state, table.rows, i, row) == expected
 
 
 @pytest.mark.parametrize(

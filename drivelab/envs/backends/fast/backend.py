@@ -36,6 +36,7 @@ class FastBackend:
     def __init__(
         self, scenario: Scenario, traffic: str = "regular", control: str = "meta", overrides=None
     ) -> None:
+        self.scenario, self.control = scenario, control
         self.simulator = FastSimulator(scenario, traffic, control, 1, overrides)
         self.world: WorldState | None = None
 

@@ -88,12 +88,12 @@ class LaneTable:
         return self.row_of[(_from, _to, 0)]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def wrap_to_pi(angle: float) -> float:
     return ((angle + np.pi) % (2 * np.pi)) - np.pi
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def local_coordinates(lanes: np.ndarray, lane: int, x: float, y: float) -> tuple[float, float]:
     """(longitudinal, lateral) of the world point (x, y) in ``lane``."""
     row = lanes[lane]
@@ -111,7 +111,7 @@ def local_coordinates(lanes: np.ndarray, lane: int, x: float, y: float) -> tuple
     return longitudinal, lateral
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def heading_at(lanes: np.ndarray, lane: int, longitudinal: float) -> float:
     row = lanes[lane]
     if row[KIND] == CIRCLE:
@@ -123,7 +123,7 @@ def heading_at(lanes: np.ndarray, lane: int, longitudinal: float) -> float:
     return row[HEADING]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def on_lane(lanes: np.ndarray, lane: int, longitudinal: float, lateral: float, margin: float) -> bool:
     row = lanes[lane]
     return (
@@ -153,15 +153,32 @@ def is_reachable_from(lanes: np.ndarray, lane: int, x: float, y: float) -> bool:
     )
 
 
-@njit(cache=True)
-def closest_lane(lanes: np.ndarray, x: float, y: float, heading: float) -> int:
-    """highway-env's get_closest_lane_index: L1 distance plus heading misalignment, first minimum."""
+@njit(cache=True, inline="always")
+def closest_lane(lanes: np.ndarray, x: float, y: float, heading: float, hint: int = -1) -> int:
+    """highway-env's get_closest_lane_index: L1 distance plus heading misalignment, first minimum.
+
+    ``hint`` (a lane likely to be the closest: the vehicle's lane before it moved) is measured
+    first; a lane whose distance before the heading term (which only adds) already reaches the
+    best is then skipped without computing that term. Ties still go to the first lane in order,
+    so the answer is the same as scanning every lane in order.
+    """
     best, best_distance = 0, np.inf
-    for lane in range(lanes.shape[0]):
-        s, r = local_coordinates(lanes, lane, x, y)
-        angle = np.abs(wrap_to_pi(heading - heading_at(lanes, lane, s)))
-        distance = np.abs(r) + max(s - lanes[lane, LENGTH], 0.0) + max(0.0 - s, 0.0) + angle
+    if hint >= 0:
+        s, r = local_coordinates(lanes, hint, x, y)
+        angle = np.abs(wrap_to_pi(heading - heading_at(lanes, hint, s)))
+        distance = np.abs(r) + max(s - lanes[hint, LENGTH], 0.0) + max(0.0 - s, 0.0) + angle
         if distance < best_distance:
+            best, best_distance = hint, distance
+    for lane in range(lanes.shape[0]):
+        if lane == hint:
+            continue
+        s, r = local_coordinates(lanes, lane, x, y)
+        partial = np.abs(r) + max(s - lanes[lane, LENGTH], 0.0) + max(0.0 - s, 0.0)
+        if partial > best_distance or (partial == best_distance and lane > best):
+            continue
+        angle = np.abs(wrap_to_pi(heading - heading_at(lanes, lane, s)))
+        distance = partial + angle
+        if distance < best_distance or (distance == best_distance and lane < best):
             best, best_distance = lane, distance
     return best
 

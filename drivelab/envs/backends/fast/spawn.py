@@ -9,11 +9,78 @@ from __future__ import annotations
 
 import numpy as np
 from gymnasium.utils import seeding
+from numba import njit
 
 from drivelab.envs.backends.fast import lanes as L
 from drivelab.envs.backends.fast import traffic as T
 
 DELTA_RANGE = (3.5, 4.5)  # IDMVehicle.DELTA_RANGE
+
+
+@njit(cache=True)
+def _create_random(
+    rng: np.random.Generator,
+    lanes: np.ndarray,
+    to_roads: np.ndarray,
+    to_count: np.ndarray,
+    decay: np.ndarray,
+    speed: float,
+    lane_id: int,
+    spacing: float,
+    front_x: float,
+) -> np.ndarray:
+    """Vehicle.create_random as a vehicle row: a random road (``Generator.choice`` of a sequence
+    draws ``integers(0, len)``: the same numbers), ``lane_id`` or a random lane (-1), ``speed`` or
+    a random one within its speed limit (NaN), placed ahead of the front-most vehicle
+    (``front_x``, NaN: none yet). numba's Generator methods draw numpy's numbers from the same
+    bit generator state."""
+    f = rng.integers(0, to_count.size)
+    road = to_roads[f, rng.integers(0, to_count[f])]
+    count = int(lanes[road, L.LANE_COUNT])
+    lane = road + (lane_id if lane_id >= 0 else rng.integers(0, count))
+    if np.isnan(speed):
+        limit = lanes[lane, L.SPEED_LIMIT]
+        speed = rng.uniform(0.7 * limit, 0.8 * limit)
+    offset = spacing * (12 + 1.0 * speed) * decay[count]
+    x0 = 3 * offset if np.isnan(front_x) else front_x
+    x0 += offset * rng.uniform(0.9, 1.1)
+    x, y = L.position(lanes, lane, x0, 0.0)
+    row = np.zeros(T.VEHICLE_COLUMNS)
+    row[T.X], row[T.Y], row[T.HEADING], row[T.SPEED] = x, y, L.heading_at(lanes, lane, x0), speed
+    row[T.LANE] = row[T.TARGET_LANE] = L.closest_lane(lanes, x, y, row[T.HEADING])
+    row[T.TARGET_SPEED] = speed
+    row[T.DELTA] = 4.0
+    row[T.LEN], row[T.WID] = T.CAR_LENGTH, T.CAR_WIDTH
+    return row
+
+
+@njit(cache=True)
+def _spawn_rows(
+    rng: np.random.Generator,
+    lanes: np.ndarray,
+    to_roads: np.ndarray,
+    to_count: np.ndarray,
+    decay: np.ndarray,
+    ego_lane_id: int,
+    ego_spacing: float,
+    vehicles: int,
+    spacing: float,
+) -> np.ndarray:
+    """HighwayEnv._create_vehicles as (1 + vehicles, VEHICLE_COLUMNS) rows, the ego first (its
+    kind and target speed set by the caller)."""
+    rows = np.zeros((1 + vehicles, T.VEHICLE_COLUMNS))
+    rows[0] = _create_random(rng, lanes, to_roads, to_count, decay, 25.0, ego_lane_id, ego_spacing, np.nan)
+    rows[0, T.CHECK_COLLISIONS] = 1.0
+    # every highway lane starts at x = 0 along +x: a vehicle's longitudinal coordinate is its x
+    front_x = rows[0, T.X]
+    for k in range(1, 1 + vehicles):
+        row = _create_random(rng, lanes, to_roads, to_count, decay, np.nan, -1, spacing, front_x)
+        front_x = max(front_x, row[T.X])
+        row[T.KIND] = T.IDM
+        row[T.TIMER] = ((row[T.X] + row[T.Y]) * np.pi) % 1.0  # IDMVehicle's initial timer
+        row[T.DELTA] = rng.uniform(DELTA_RANGE[0], DELTA_RANGE[1])
+        rows[k] = row
+    return rows
 
 
 def spawn_highway(seed: int, table: L.LaneTable, graph_keys: dict, config: dict, control: str, target_speeds):
@@ -23,36 +90,22 @@ def spawn_highway(seed: int, table: L.LaneTable, graph_keys: dict, config: dict,
     :param config: the highway-env config (vehicles_count, vehicles_density, ego_spacing, initial_lane_id).
     """
     rng, _ = seeding.np_random(int(seed))
-    rows, row_of, lanes = [], table.row_of, table.rows
+    lanes = table.rows
+    row_of = table.row_of
     froms = list(graph_keys)
-    longitudinals: list[float] = []
-
-    # Generator.choice(sequence) draws integers(0, len): the same numbers, without its overhead
-    def create_random(speed, lane_id, spacing):
-        _from = froms[rng.integers(len(froms))]
-        _to = graph_keys[_from][rng.integers(len(graph_keys[_from]))]
-        count = int(lanes[row_of[(_from, _to, 0)], L.LANE_COUNT])
-        _id = lane_id if lane_id is not None else rng.integers(count)
-        lane = row_of[(_from, _to, int(_id))]
-        if speed is None:
-            limit = lanes[lane, L.SPEED_LIMIT]
-            speed = rng.uniform(0.7 * limit, 0.8 * limit)
-        offset = spacing * (12 + 1.0 * speed) * np.exp(-5 / 40 * count)
-        x0 = max(longitudinals) if longitudinals else 3 * offset
-        x0 += offset * rng.uniform(0.9, 1.1)
-        x, y = L.position(lanes, lane, x0, 0.0)
-        # every highway lane starts at x = 0 along +x: a vehicle's longitudinal coordinate is its x
-        longitudinals.append(x)
-        row = np.zeros(T.VEHICLE_COLUMNS)
-        row[T.X], row[T.Y], row[T.HEADING], row[T.SPEED] = x, y, L.heading_at(lanes, lane, x0), speed
-        row[T.LANE] = row[T.TARGET_LANE] = L.closest_lane(lanes, x, y, row[T.HEADING])
-        row[T.TARGET_SPEED] = speed
-        row[T.DELTA] = 4.0
-        row[T.LEN], row[T.WID] = T.CAR_LENGTH, T.CAR_WIDTH
-        return row
-
-    ego = create_random(25.0, config["initial_lane_id"], config["ego_spacing"])
-    ego[T.CHECK_COLLISIONS] = 1.0
+    width = max(len(tos) for tos in graph_keys.values())
+    to_roads = np.zeros((len(froms), width), dtype=np.int64)
+    to_count = np.array([len(graph_keys[f]) for f in froms], dtype=np.int64)
+    for k, f in enumerate(froms):
+        to_roads[k, : to_count[k]] = [row_of[(f, t, 0)] for t in graph_keys[f]]
+    # numpy's exp, as highway-env computes the spacing factor (numba's may round differently)
+    decay = np.array([np.exp(-5 / 40 * count) for count in range(int(lanes[:, L.LANE_COUNT].max()) + 1)])
+    lane_id = config["initial_lane_id"]
+    rows = _spawn_rows(
+        rng, lanes, to_roads, to_count, decay, -1 if lane_id is None else int(lane_id),
+        float(config["ego_spacing"]), int(config["vehicles_count"]), float(1 / config["vehicles_density"]),
+    )  # fmt: skip
+    ego = rows[0]
     if control == "meta":  # MDPVehicle snaps its target speed to the nearest allowed one
         speeds = np.asarray(target_speeds, dtype=float)
         ratio = (ego[T.SPEED] - speeds[0]) / (speeds[-1] - speeds[0])
@@ -60,14 +113,7 @@ def spawn_highway(seed: int, table: L.LaneTable, graph_keys: dict, config: dict,
         ego[T.KIND] = T.CONTROLLED
     else:  # a plain kinematic vehicle has no target speed
         ego[T.KIND], ego[T.TARGET_SPEED] = T.PLAIN, 0.0
-    rows.append(ego)
-    for _ in range(config["vehicles_count"]):
-        row = create_random(None, None, 1 / config["vehicles_density"])
-        row[T.KIND] = T.IDM
-        row[T.TIMER] = ((row[T.X] + row[T.Y]) * np.pi) % 1.0  # IDMVehicle's initial timer
-        row[T.DELTA] = rng.uniform(low=DELTA_RANGE[0], high=DELTA_RANGE[1])
-        rows.append(row)
-    return np.array(rows)
+    return rows
 
 
 class IntersectionTraffic:

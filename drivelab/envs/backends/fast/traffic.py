@@ -13,6 +13,7 @@ same as highway-env's. Each function names the highway-env method it reproduces:
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from numba import njit, prange
 
@@ -69,19 +70,19 @@ CAR_LENGTH, CAR_WIDTH = 5.0, 2.0
 MAX_SPEED, MIN_SPEED = 40.0, -40.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def not_zero(value: float) -> float:
     if np.abs(value) > 1e-2:
         return value
     return 1e-2 if value >= 0 else -1e-2
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _clip(value: float, low: float, high: float) -> float:
     return min(max(value, low), high)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def steering_control(v: np.ndarray, lanes: np.ndarray, i: int, target: int) -> float:
     """ControlledVehicle.steering_control: lateral P → heading reference → heading P → steering."""
     s, r = local_coordinates(lanes, target, v[i, X], v[i, Y])
@@ -96,37 +97,121 @@ def steering_control(v: np.ndarray, lanes: np.ndarray, i: int, target: int) -> f
 
 
 @njit(cache=True)
-def neighbours(v: np.ndarray, lanes: np.ndarray, i: int, lane: int) -> tuple[int, int]:
-    """Road.neighbour_vehicles: the vehicles just ahead of and behind vehicle i along ``lane``."""
-    s_i, _ = local_coordinates(lanes, lane, v[i, X], v[i, Y])
-    front, rear = -1, -1
-    s_front, s_rear = 0.0, 0.0
+def frame_cache(v: np.ndarray, lanes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Scratch arrays for one simulation frame's ``act``. ``coords`` (L, N, 4): per lane, every
+    vehicle's (longitudinal, lateral, on the lane within 1 m) and, in column 3, the vehicles on
+    the lane sorted by (longitudinal, row); ``done`` (L,): how many vehicles are on the lane, -1
+    until the lane is first used in the frame; ``trig`` (N, 2): the cosine and sine of every
+    heading. Positions and headings do not change during ``act``, so each value is computed once
+    per frame instead of once per use (same function, same inputs: the same bits)."""
+    coords = np.empty((lanes.shape[0], v.shape[0], 4))
+    return coords, np.full(lanes.shape[0], -1, dtype=np.int64), np.empty((v.shape[0], 2))
+
+
+@njit(cache=True)
+def start_frame(v: np.ndarray, done: np.ndarray, trig: np.ndarray) -> None:
+    done[:] = -1
     for j in range(v.shape[0]):
-        if j == i:
-            continue
+        trig[j, 0], trig[j, 1] = np.cos(v[j, HEADING]), np.sin(v[j, HEADING])
+
+
+@njit(cache=True, inline="always")
+def lane_coordinates(
+    v: np.ndarray, lanes: np.ndarray, coords: np.ndarray, done: np.ndarray, lane: int
+) -> None:
+    """Fill ``coords[lane]`` once per frame: every vehicle's ``local_coordinates`` in ``lane``,
+    whether it is on the lane as ``Road.neighbour_vehicles`` counts it (``on_lane`` with a 1 m
+    margin), and the rows of those on it sorted by (longitudinal, row) (insertion sort: a lane
+    holds a handful)."""
+    if done[lane] >= 0:
+        return
+    count = 0
+    for j in range(v.shape[0]):
         s_j, r_j = local_coordinates(lanes, lane, v[j, X], v[j, Y])
-        if not on_lane(lanes, lane, s_j, r_j, 1.0):
-            continue
-        if s_i <= s_j and (front < 0 or s_j <= s_front):
-            front, s_front = j, s_j
-        if s_j < s_i and (rear < 0 or s_j > s_rear):
-            rear, s_rear = j, s_j
+        coords[lane, j, 0], coords[lane, j, 1] = s_j, r_j
+        coords[lane, j, 2] = 0.0
+        if on_lane(lanes, lane, s_j, r_j, 1.0):
+            coords[lane, j, 2] = 1.0
+            rank = count
+            while rank > 0 and coords[lane, int(coords[lane, rank - 1, 3]), 0] > s_j:
+                coords[lane, rank, 3] = coords[lane, rank - 1, 3]
+                rank -= 1
+            coords[lane, rank, 3] = j
+            count += 1
+    done[lane] = count
+
+
+@njit(cache=True, inline="always")
+def cached_neighbours(
+    v: np.ndarray, lanes: np.ndarray, coords: np.ndarray, done: np.ndarray, i: int, lane: int
+) -> tuple[int, int]:
+    """Road.neighbour_vehicles: the vehicles just ahead of and behind vehicle i along ``lane``.
+
+    highway-env scans every vehicle on the lane: the front one is the nearest at or ahead of i
+    (the last row among equals), the rear one the nearest behind (the first row among equals).
+    Here the same vehicles are found by a binary search in the lane's sorted order."""
+    lane_coordinates(v, lanes, coords, done, lane)
+    count = done[lane]
+    s_i = coords[lane, i, 0]
+    low, high = 0, count
+    while low < high:  # the first rank at or ahead of s_i
+        middle = (low + high) // 2
+        if coords[lane, int(coords[lane, middle, 3]), 0] < s_i:
+            low = middle + 1
+        else:
+            high = middle
+    front, rear = -1, -1
+    rank = low
+    while rank < count and int(coords[lane, rank, 3]) == i:
+        rank += 1
+    if rank < count:
+        front = int(coords[lane, rank, 3])
+        s_front = coords[lane, front, 0]
+        for later in range(rank + 1, count):
+            j = int(coords[lane, later, 3])
+            if coords[lane, j, 0] != s_front:
+                break
+            if j != i:
+                front = j
+    if low > 0:
+        rank = low - 1
+        s_rear = coords[lane, int(coords[lane, rank, 3]), 0]
+        while rank > 0 and coords[lane, int(coords[lane, rank - 1, 3]), 0] == s_rear:
+            rank -= 1
+        rear = int(coords[lane, rank, 3])
     return front, rear
 
 
 @njit(cache=True)
-def desired_gap(v: np.ndarray, p: np.ndarray, ego: int, front: int) -> float:
-    """IDMVehicle.desired_gap, projected on the ego's direction."""
+def neighbours(v: np.ndarray, lanes: np.ndarray, i: int, lane: int) -> tuple[int, int]:
+    """``cached_neighbours`` without a frame cache."""
+    coords, done, _ = frame_cache(v, lanes)
+    return cached_neighbours(v, lanes, coords, done, i, lane)
+
+
+@njit(cache=True, inline="always")
+def cached_desired_gap(v: np.ndarray, p: np.ndarray, trig: np.ndarray, ego: int, front: int) -> float:
+    """IDMVehicle.desired_gap, projected on the ego's direction (``trig``: headings' cos, sin)."""
     ab = -p[COMFORT_ACC_MAX] * p[COMFORT_ACC_MIN]
-    cos_e, sin_e = np.cos(v[ego, HEADING]), np.sin(v[ego, HEADING])
-    dvx = v[ego, SPEED] * cos_e - v[front, SPEED] * np.cos(v[front, HEADING])
-    dvy = v[ego, SPEED] * sin_e - v[front, SPEED] * np.sin(v[front, HEADING])
+    cos_e, sin_e = trig[ego, 0], trig[ego, 1]
+    dvx = v[ego, SPEED] * cos_e - v[front, SPEED] * trig[front, 0]
+    dvy = v[ego, SPEED] * sin_e - v[front, SPEED] * trig[front, 1]
     dv = dvx * cos_e + dvy * sin_e
     return p[DISTANCE_WANTED] + v[ego, SPEED] * p[TIME_WANTED] + v[ego, SPEED] * dv / (2 * np.sqrt(ab))
 
 
-@njit(cache=True)
-def idm_acceleration(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, me: int, ego: int, front: int) -> float:
+@njit(cache=True, inline="always")
+def cached_idm_acceleration(
+    v: np.ndarray,
+    lanes: np.ndarray,
+    p: np.ndarray,
+    coords: np.ndarray,
+    done: np.ndarray,
+    trig: np.ndarray,
+    me: int,
+    ego: int,
+    front: int,
+) -> float:
     """IDMVehicle.acceleration as computed by vehicle ``me`` (its DELTA) for ``ego`` behind ``front``."""
     if ego < 0 or v[ego, KIND] == OBSTACLE:  # highway-env: only a Vehicle accelerates
         return 0.0
@@ -138,23 +223,34 @@ def idm_acceleration(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, me: int, e
     ratio = max(v[ego, SPEED], 0.0) / np.abs(not_zero(target_speed))
     acceleration = p[COMFORT_ACC_MAX] * (1 - ratio ** v[me, DELTA])
     if front >= 0:
-        s_front, _ = local_coordinates(lanes, lane, v[front, X], v[front, Y])
-        s_ego, _ = local_coordinates(lanes, lane, v[ego, X], v[ego, Y])
-        gap = desired_gap(v, p, ego, front) / not_zero(s_front - s_ego)
+        lane_coordinates(v, lanes, coords, done, lane)
+        gap_m = coords[lane, front, 0] - coords[lane, ego, 0]
+        gap = cached_desired_gap(v, p, trig, ego, front) / not_zero(gap_m)
         acceleration -= p[COMFORT_ACC_MAX] * gap**2
     return acceleration
 
 
 @njit(cache=True)
-def mobil(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, i: int, lane: int) -> bool:
+def cached_mobil(
+    v: np.ndarray,
+    lanes: np.ndarray,
+    p: np.ndarray,
+    coords: np.ndarray,
+    done: np.ndarray,
+    trig: np.ndarray,
+    i: int,
+    lane: int,
+) -> bool:
     """IDMVehicle.mobil: is a change to ``lane`` safe for the new follower, and worth it?"""
-    new_preceding, new_following = neighbours(v, lanes, i, lane)
-    new_following_a = idm_acceleration(v, lanes, p, i, new_following, new_preceding)
-    new_following_pred_a = idm_acceleration(v, lanes, p, i, new_following, i)
+    new_preceding, new_following = cached_neighbours(v, lanes, coords, done, i, lane)
+    new_following_a = cached_idm_acceleration(
+        v, lanes, p, coords, done, trig, i, new_following, new_preceding
+    )
+    new_following_pred_a = cached_idm_acceleration(v, lanes, p, coords, done, trig, i, new_following, i)
     if new_following_pred_a < -p[MAX_BRAKING_IMPOSED]:
         return False
-    old_preceding, old_following = neighbours(v, lanes, i, int(v[i, LANE]))
-    self_pred_a = idm_acceleration(v, lanes, p, i, i, new_preceding)
+    old_preceding, old_following = cached_neighbours(v, lanes, coords, done, i, int(v[i, LANE]))
+    self_pred_a = cached_idm_acceleration(v, lanes, p, coords, done, trig, i, i, new_preceding)
     start = int(v[i, ROUTE_START])
     if start < v[i, ROUTE_END] and v[i, ROUTE + 2 * start + 1] >= 0:
         # the next route step names a lane: only move towards it, and only without hard braking
@@ -163,9 +259,11 @@ def mobil(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, i: int, lane: int) ->
         if np.sign(lanes[lane, LANE_ID] - target_id) != np.sign(wanted_id - target_id):
             return False
         return not self_pred_a < -p[MAX_BRAKING_IMPOSED]
-    self_a = idm_acceleration(v, lanes, p, i, i, old_preceding)
-    old_following_a = idm_acceleration(v, lanes, p, i, old_following, i)
-    old_following_pred_a = idm_acceleration(v, lanes, p, i, old_following, old_preceding)
+    self_a = cached_idm_acceleration(v, lanes, p, coords, done, trig, i, i, old_preceding)
+    old_following_a = cached_idm_acceleration(v, lanes, p, coords, done, trig, i, old_following, i)
+    old_following_pred_a = cached_idm_acceleration(
+        v, lanes, p, coords, done, trig, i, old_following, old_preceding
+    )
     jerk = (
         self_pred_a
         - self_a
@@ -175,7 +273,23 @@ def mobil(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, i: int, lane: int) ->
 
 
 @njit(cache=True)
-def change_lane_policy(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, i: int) -> None:
+def mobil(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, i: int, lane: int) -> bool:
+    """``cached_mobil`` without a frame cache (as highway-env's ``IDMVehicle.mobil``)."""
+    coords, done, trig = frame_cache(v, lanes)
+    start_frame(v, done, trig)
+    return cached_mobil(v, lanes, p, coords, done, trig, i, lane)
+
+
+@njit(cache=True, inline="always")
+def change_lane_policy(
+    v: np.ndarray,
+    lanes: np.ndarray,
+    p: np.ndarray,
+    coords: np.ndarray,
+    done: np.ndarray,
+    trig: np.ndarray,
+    i: int,
+) -> None:
     """IDMVehicle.change_lane_policy: abort a change into a lane someone else is entering; else,
     every LANE_CHANGE_DELAY seconds, ask MOBIL about each side lane (the right one last)."""
     lane, target = int(v[i, LANE]), int(v[i, TARGET_LANE])
@@ -189,9 +303,8 @@ def change_lane_policy(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, i: int) 
                     and (v[j, KIND] == CONTROLLED or v[j, KIND] == IDM)
                     and int(v[j, TARGET_LANE]) == target
                 ):
-                    s_j, _ = local_coordinates(lanes, lane, v[j, X], v[j, Y])
-                    s_i, _ = local_coordinates(lanes, lane, v[i, X], v[i, Y])
-                    if 0 < s_j - s_i < desired_gap(v, p, i, j):
+                    lane_coordinates(v, lanes, coords, done, lane)
+                    if 0 < coords[lane, j, 0] - coords[lane, i, 0] < cached_desired_gap(v, p, trig, i, j):
                         v[i, TARGET_LANE] = lane
                         break
         return
@@ -207,7 +320,7 @@ def change_lane_policy(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, i: int) 
             continue
         if np.abs(v[i, SPEED]) < 1:
             continue
-        if mobil(v, lanes, p, i, candidate):
+        if cached_mobil(v, lanes, p, coords, done, trig, i, candidate):
             v[i, TARGET_LANE] = candidate
 
 
@@ -259,7 +372,7 @@ def next_lane(v: np.ndarray, lanes: np.ndarray, i: int) -> int:
     return best_lane
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def follow_road(v: np.ndarray, lanes: np.ndarray, i: int) -> None:
     """ControlledVehicle.follow_road: at the end of the target lane, target the next one."""
     target = int(v[i, TARGET_LANE])
@@ -269,8 +382,11 @@ def follow_road(v: np.ndarray, lanes: np.ndarray, i: int) -> None:
 
 
 @njit(cache=True)
-def act(v: np.ndarray, lanes: np.ndarray, p: np.ndarray) -> None:
-    """Road.act: every vehicle decides its controls, in list order."""
+def act(
+    v: np.ndarray, lanes: np.ndarray, p: np.ndarray, coords: np.ndarray, done: np.ndarray, trig: np.ndarray
+) -> None:
+    """Road.act: every vehicle decides its controls, in list order (``frame_cache`` arrays)."""
+    start_frame(v, done, trig)
     for i in range(v.shape[0]):
         kind = v[i, KIND]
         if kind == PLAIN or kind == OBSTACLE:
@@ -282,17 +398,18 @@ def act(v: np.ndarray, lanes: np.ndarray, p: np.ndarray) -> None:
             v[i, STEER] = steering_control(v, lanes, i, int(v[i, TARGET_LANE]))
             v[i, ACCEL] = KP_A * (v[i, TARGET_SPEED] - v[i, SPEED])
             continue
-        change_lane_policy(v, lanes, p, i)
+        change_lane_policy(v, lanes, p, coords, done, trig, i)
         v[i, STEER] = steering_control(v, lanes, i, int(v[i, TARGET_LANE]))
-        front, _ = neighbours(v, lanes, i, int(v[i, LANE]))
-        acceleration = idm_acceleration(v, lanes, p, i, i, front)
+        front, _ = cached_neighbours(v, lanes, coords, done, i, int(v[i, LANE]))
+        acceleration = cached_idm_acceleration(v, lanes, p, coords, done, trig, i, i, front)
         if int(v[i, LANE]) != int(v[i, TARGET_LANE]):
-            front, _ = neighbours(v, lanes, i, int(v[i, TARGET_LANE]))
-            acceleration = min(acceleration, idm_acceleration(v, lanes, p, i, i, front))
+            front, _ = cached_neighbours(v, lanes, coords, done, i, int(v[i, TARGET_LANE]))
+            target_a = cached_idm_acceleration(v, lanes, p, coords, done, trig, i, i, front)
+            acceleration = min(acceleration, target_a)
         v[i, ACCEL] = _clip(acceleration, -p[ACC_MAX], p[ACC_MAX])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def step_vehicle(v: np.ndarray, lanes: np.ndarray, i: int, dt: float) -> None:
     """Vehicle.step: clip the actions, integrate the kinematic bicycle, find the lane."""
     if v[i, KIND] == IDM:
@@ -314,7 +431,7 @@ def step_vehicle(v: np.ndarray, lanes: np.ndarray, i: int, dt: float) -> None:
         v[i, HAS_IMPACT] = 0.0
     v[i, HEADING] += v[i, SPEED] * np.sin(beta) / (v[i, LEN] / 2) * dt
     v[i, SPEED] += v[i, ACCEL] * dt
-    v[i, LANE] = closest_lane(lanes, v[i, X], v[i, Y], v[i, HEADING])
+    v[i, LANE] = closest_lane(lanes, v[i, X], v[i, Y], v[i, HEADING], int(v[i, LANE]))
 
 
 @njit(cache=True)
@@ -383,6 +500,9 @@ def handle_collisions(v: np.ndarray, dt: float) -> None:
     """Road.step's collision pass: each vehicle against the vehicles after it, then the obstacles
     (which sit after every vehicle), as RoadObject.handle_collisions."""
     n = v.shape[0]
+    diagonals = np.empty(n)
+    for i in range(n):
+        diagonals[i] = np.sqrt(v[i, LEN] ** 2 + v[i, WID] ** 2)
     for i in range(n):
         if v[i, KIND] == OBSTACLE:
             break
@@ -390,8 +510,10 @@ def handle_collisions(v: np.ndarray, dt: float) -> None:
             if not (v[i, CHECK_COLLISIONS] > 0 or v[j, CHECK_COLLISIONS] > 0):
                 continue
             dx, dy = v[j, X] - v[i, X], v[j, Y] - v[i, Y]
-            diagonals = np.sqrt(v[i, LEN] ** 2 + v[i, WID] ** 2) + np.sqrt(v[j, LEN] ** 2 + v[j, WID] ** 2)
-            if np.sqrt(dx * dx + dy * dy) > diagonals / 2 + v[i, SPEED] * dt:
+            reach = (diagonals[i] + diagonals[j]) / 2 + v[i, SPEED] * dt
+            # sqrt(dx² + dy²) ≥ max(|dx|, |dy|) in floating point too: a pair apart by more than
+            # the reach along x or y is skipped without the square root, as the test below would
+            if np.abs(dx) > reach or np.abs(dy) > reach or np.sqrt(dx * dx + dy * dy) > reach:
                 continue
             ci, si = np.cos(v[i, HEADING]), np.sin(v[i, HEADING])
             cj, sj = np.cos(v[j, HEADING]), np.sin(v[j, HEADING])
@@ -509,8 +631,9 @@ def simulate(
     :param regulation: [period, road steps so far]: a RegulatedRoad enforces its rules every
         ``period`` road steps (0: a plain Road); the step count is updated in place.
     """
+    coords, done, trig = frame_cache(v, lanes)
     for _ in range(frames):
-        act(v, lanes, p)
+        act(v, lanes, p, coords, done, trig)
         if regulation[0] > 0:
             regulation[1] += 1
             if regulation[1] % regulation[0] == 0:
@@ -521,7 +644,18 @@ def simulate(
         handle_collisions(v, dt)
 
 
+@njit(cache=True)
+def _simulate_worlds_serial(v, count, lanes, p, frames, dt, regulation) -> None:
+    for k in range(v.shape[0]):
+        simulate(v[k, : count[k]], lanes, p, frames, dt, regulation[k])
+
+
 @njit(cache=True, parallel=True)
+def _simulate_worlds_parallel(v, count, lanes, p, frames, dt, regulation) -> None:
+    for k in prange(v.shape[0]):
+        simulate(v[k, : count[k]], lanes, p, frames, dt, regulation[k])
+
+
 def simulate_worlds(
     v: np.ndarray,
     count: np.ndarray,
@@ -533,7 +667,9 @@ def simulate_worlds(
 ) -> None:
     """``simulate`` for K worlds: world k's vehicles are ``v[k, :count[k]]`` of the (K, N_max,
     VEHICLE_COLUMNS) buffer and its regulation state ``regulation[k]`` (K, 2). The worlds share
-    the road and the IDM parameters and never see each other (one thread per world where numba
-    has several)."""
-    for k in prange(v.shape[0]):
-        simulate(v[k, : count[k]], lanes, p, frames, dt, regulation[k])
+    the road and the IDM parameters and never see each other: one numba thread per world where
+    numba has several threads and there are several worlds (else the serial loop, which saves
+    the thread pool's launch)."""
+    parallel = v.shape[0] > 1 and numba.get_num_threads() > 1
+    kernel = _simulate_worlds_parallel if parallel else _simulate_worlds_serial
+    kernel(v, count, lanes, p, frames, dt, regulation)
