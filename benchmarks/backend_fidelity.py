@@ -30,8 +30,9 @@ os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 import numpy as np  # noqa: E402
 
 from drivelab.envs.backends.fast import traffic as T  # noqa: E402
-from drivelab.envs.backends.fast.backend import SUPPORTED, FastBackend  # noqa: E402
+from drivelab.envs.backends.fast.backend import FastBackend  # noqa: E402
 from drivelab.envs.backends.highway import HighwayBackend  # noqa: E402
+from drivelab.envs.scenarios import FAST_SCENARIOS as SUPPORTED  # noqa: E402
 from drivelab.envs.scenarios import SCENARIOS  # noqa: E402
 from drivelab.world.state import WorldState  # noqa: E402
 

@@ -24,10 +24,12 @@ os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 
 import numpy as np  # noqa: E402
 
-from drivelab.envs.backends.fast.backend import SUPPORTED  # noqa: E402
-from drivelab.envs.core import DriveEnv  # noqa: E402
+from drivelab.envs.core import (
+    DriveEnv,  # noqa: E402
+    make_vec,  # noqa: E402
+)
+from drivelab.envs.scenarios import FAST_SCENARIOS as SUPPORTED  # noqa: E402
 from drivelab.envs.scenarios import SCENARIOS  # noqa: E402
-from drivelab.envs.vector import make_vec  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 

@@ -119,7 +119,7 @@ def main() -> None:
         print(vector_rate("highway", "kinematics", args.worlds, args.steps, args.seed))
         return
 
-    from drivelab.envs.backends.fast.backend import SUPPORTED
+    from drivelab.envs.scenarios import FAST_SCENARIOS as SUPPORTED
 
     cases = [("highway", name, spec) for name, spec in SENSORS.items()]
     cases += [(scenario, "kinematics", "kinematics") for scenario in SUPPORTED if scenario != "highway"]
@@ -161,7 +161,8 @@ def main() -> None:
         f"# Batch speed: {args.worlds} worlds in one VectorDriveEnv against one DriveEnv",
         "",
         f"Command: `{result['command']}`  ",
-        f"Machine: {result['machine']}; date {result['date']}; {args.repeats} interleaved repeats, one thread.",
+        f"Machine: {result['machine']}; date {result['date']}; {args.repeats} interleaved repeats, "
+        "one thread.",
         "",
         "Random actions, resets included, regular traffic. Rates are env steps/s of all worlds together;",
         "the ratio is the median of the per-repeat ratios (vector / single, measured back to back).",
@@ -169,8 +170,8 @@ def main() -> None:
         f"| scenario | sensor | one DriveEnv steps/s | K = {args.worlds} steps/s | ratio |",
         "|---|---|---|---|---|",
         *[
-            f"| {r['scenario']} | {r['sensor']} | {r['reference_steps_per_s']:.0f} | {r['steps_per_s']:.0f} | "
-            f"{r['ratio_median']:.2f}x |"
+            f"| {r['scenario']} | {r['sensor']} | {r['reference_steps_per_s']:.0f} | "
+            f"{r['steps_per_s']:.0f} | {r['ratio_median']:.2f}x |"
             for r in rows
         ],
         "",
@@ -178,8 +179,9 @@ def main() -> None:
         "",
         "| 1 thread steps/s | 2 threads steps/s | ratio |",
         "|---|---|---|",
-        f"| {result['threads_k256']['reference_steps_per_s']:.0f} | {result['threads_k256']['steps_per_s']:.0f} | "
-        f"{result['threads_k256']['ratio_median']:.2f}x |",
+        "| {reference_steps_per_s:.0f} | {steps_per_s:.0f} | {ratio_median:.2f}x |".format(
+            **result["threads_k256"]
+        ),
         "",
     ]
     if baseline:

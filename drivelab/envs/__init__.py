@@ -19,6 +19,6 @@ for _name in SCENARIOS:
         gymnasium.register(
             gym_id(_name),
             entry_point="drivelab.envs.core:DriveEnv",
-            vector_entry_point="drivelab.envs.vector:make_vec",
+            vector_entry_point="drivelab.envs.core:make_vec",
             kwargs={"scenario": _name},
         )

@@ -14,9 +14,8 @@ from gymnasium import spaces
 
 from drivelab.errors import UsageError
 from drivelab.world.batch import WorldBatch
+from drivelab.world.scenario import META_ACTIONS
 from drivelab.world.state import WorldState
-
-META_ACTIONS = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")
 
 
 def _indices(actions, size: int) -> np.ndarray:

@@ -1,5 +1,6 @@
 """DriveEnv: one world of a driving scenario as a gymnasium ``Env`` — the K = 1 view of
-``VectorDriveEnv``, so that one world and K worlds run the same code."""
+``VectorDriveEnv``, so that one world and K worlds run the same code — and ``make_vec``, the vector
+env of each registered id."""
 
 from __future__ import annotations
 
@@ -9,11 +10,13 @@ import gymnasium as gym
 import numpy as np
 
 from drivelab.envs.actions import ActionAdapter
+from drivelab.envs.scenarios import get_scenario
 from drivelab.envs.vector import (  # noqa: F401  (re-exported: the options of DriveEnv)
     BACKENDS,
     LIGHT_LABEL_DISTANCE_M,
     VectorDriveEnv,
     _world_info,
+    autoreset_mode_of,
     check_env_options,
     env_option_names,
 )
@@ -91,6 +94,12 @@ class DriveEnv(gym.Env):
         return self.vector.simulator
 
     @property
+    def backend(self):
+        """The reference simulator's one-world backend (highway-env, for tests and notebooks that
+        reach into it); on the compiled core, the simulator itself."""
+        return getattr(self.simulator, "backends", [self.simulator])[0]
+
+    @property
     def world(self) -> WorldState | None:
         """The current world as a WorldState (None before the first reset)."""
         return None if self.vector.batch is None else self.vector.batch[0]
@@ -133,3 +142,20 @@ def _first(observations):
     if isinstance(observations, dict):
         return {name: value[0] for name, value in observations.items()}
     return observations[0]
+
+
+def make_vec(scenario: str = "highway", num_envs: int = 8, **env_kwargs: Any) -> gym.vector.VectorEnv:
+    """``num_envs`` worlds of ``scenario`` as one gymnasium vector env (each id's
+    ``vector_entry_point``): a VectorDriveEnv where the compiled core runs the scenario, else
+    (the town, the circuits on the reference backend) gymnasium's ``AsyncVectorEnv`` of DriveEnvs,
+    one process per world."""
+    env_kwargs.pop("max_episode_steps", None)
+    backend = env_kwargs.get("backend", "auto")
+    compiled = backend == "fast" or (backend == "auto" and get_scenario(scenario).fast_backend)
+    if compiled or num_envs == 1:
+        return VectorDriveEnv(num_envs, scenario=scenario, **env_kwargs)
+    mode = env_kwargs.pop("autoreset_mode", "next_step")
+    return gym.vector.AsyncVectorEnv(
+        [lambda: DriveEnv(scenario=scenario, **env_kwargs) for _ in range(num_envs)],
+        autoreset_mode=autoreset_mode_of(mode),
+    )

@@ -215,6 +215,12 @@ class TownLights:
     :param offsets_s: per junction, where its cycle starts (drawn per episode).
     """
 
+    @staticmethod
+    def approach_of(lane_index: tuple) -> tuple[int, int] | None:
+        """(junction, arm) when ``lane_index`` is a street ending at a stop line, else None (the
+        simulator asks the lights, so that it need not know the town's node names)."""
+        return approach_of(lane_index)
+
     def __init__(self, layout: TownLayout, timings: LightTimings, offsets_s: np.ndarray) -> None:
         self.layout, self.timings, self.offsets_s = layout, timings, np.asarray(offsets_s, dtype=float)
         self.approaches = signalised(layout)

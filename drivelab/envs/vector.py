@@ -17,7 +17,6 @@ from __future__ import annotations
 import inspect
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
@@ -498,22 +497,3 @@ def _world_info(infos: dict, k: int) -> dict:
         elif infos.get(f"_{key}", None) is None or infos[f"_{key}"][k]:
             info[key] = value[k].item() if isinstance(value[k], np.generic) else value[k]
     return info
-
-
-def make_vec(scenario: str = "highway", num_envs: int = 8, **env_kwargs: Any) -> gym.vector.VectorEnv:
-    """``num_envs`` worlds of ``scenario`` as one gymnasium vector env (each id's
-    ``vector_entry_point``): a VectorDriveEnv where the compiled core runs the scenario, else
-    (the town, the circuits on the reference backend) gymnasium's ``AsyncVectorEnv`` of DriveEnvs,
-    one process per world."""
-    env_kwargs.pop("max_episode_steps", None)
-    backend = env_kwargs.get("backend", "auto")
-    compiled = backend == "fast" or (backend == "auto" and get_scenario(scenario).fast_backend)
-    if compiled or num_envs == 1:
-        return VectorDriveEnv(num_envs, scenario=scenario, **env_kwargs)
-    from drivelab.envs.core import DriveEnv
-
-    mode = env_kwargs.pop("autoreset_mode", AutoresetMode.NEXT_STEP)
-    return gym.vector.AsyncVectorEnv(
-        [lambda: DriveEnv(scenario=scenario, **env_kwargs) for _ in range(num_envs)],
-        autoreset_mode=autoreset_mode_of(mode),
-    )

@@ -371,7 +371,7 @@ def restore(model, worlds: TrainingWorlds, snapshot: Snapshot) -> None:
     meta, arrays = snapshot.meta, snapshot.arrays
     saved = _saved_observation(meta["last_obs"], arrays, "last_obs")
     batched = not isinstance(model.get_env(), gym.Env)
-    if batched:  # one VectorDriveEnv: every world replayed together
+    if not isinstance(worlds.worlds, list):  # one VectorDriveEnv: every world replayed together
         starts = [start for start, _, _ in snapshot.worlds]
         actions = [_stack_actions(actions[:count]) for _, actions, count in snapshot.worlds]
         replayed = worlds.worlds.replay(starts, actions)

@@ -7,7 +7,7 @@ import gymnasium
 import numpy as np
 import pytest
 
-from drivelab.envs.backends.fast.backend import SUPPORTED
+from drivelab.envs.scenarios import FAST_SCENARIOS as SUPPORTED
 from drivelab.envs.scenarios import SCENARIOS
 from drivelab.envs.vector import VectorDriveEnv
 

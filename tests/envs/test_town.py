@@ -27,6 +27,7 @@ from drivelab.envs.town_env import (
     left_turn_must_wait,
     random_route,
 )
+from drivelab.world.batch import WorldBatch
 from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW
 
 
@@ -166,7 +167,7 @@ def test_light_ahead_and_its_label():
     assert behind.light_ahead(10.0) is None and world().light_ahead(18.0) is None
     env = DriveEnv("town", obs="kinematics", action="target_speed", traffic="empty")
     env.reset(seed=0)
-    env.world = state
+    env.vector.batch = WorldBatch.stack([state])
     assert env.traffic_light_label() == "red_or_yellow"
 
 
@@ -175,7 +176,7 @@ def test_leaving_the_route_and_being_blocked_end_the_episode():
     env.reset(seed=1)
     _, _, terminated, _, info = env.step(np.array([0.0, 0.0]))  # standing still
     assert not terminated and info["traffic_light"] in ("none", "green", "red_or_yellow")
-    env.scenario = dataclasses.replace(env.scenario, blocked_after_s=0.5)
+    env.vector.rules.blocked_after_s = 0.5
     steps = 0
     while not terminated and steps < 10:
         _, reward, terminated, _, info = env.step(np.array([0.0, 0.0]))

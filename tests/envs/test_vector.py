@@ -11,8 +11,8 @@ from gymnasium.vector import AutoresetMode
 from stable_baselines3 import PPO
 
 from drivelab.envs import gym_id
-from drivelab.envs.core import DriveEnv
-from drivelab.envs.vector import SB3VecEnv, VectorDriveEnv, make_vec
+from drivelab.envs.core import DriveEnv, make_vec
+from drivelab.envs.vector import SB3VecEnv, VectorDriveEnv
 from drivelab.errors import UsageError
 
 KWARGS = {"obs": "kinematics", "traffic": "regular", "duration_s": 6}

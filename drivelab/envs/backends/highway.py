@@ -14,7 +14,7 @@ import os
 import numpy as np
 
 from drivelab.envs.route import RouteTracker
-from drivelab.envs.scenarios import Scenario
+from drivelab.world.scenario import Scenario
 from drivelab.world.state import LIGHT_RED, Ego, Events, RoadMap, WorldState
 
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
@@ -22,8 +22,6 @@ os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 from highway_env import utils as hw_utils  # noqa: E402
 from highway_env.road.lane import LineType, StraightLane  # noqa: E402
 from highway_env.vehicle.behavior import IDMVehicle  # noqa: E402
-
-from drivelab.envs.town import approach_of  # noqa: E402
 
 SAMPLE_SPACING_M = 2.0  # curved lanes are turned into polylines with points this far apart
 ROUTE_TIMEOUT_MPS = 10 / 3.6  # an evaluation route must be driven at 10 km/h on average
@@ -276,7 +274,7 @@ class HighwayBackend:
         """The ego crossed a stop line (left a street for the junction lanes behind it) on red."""
         if self.lights is None:
             return False
-        approach = approach_of(previous_lane)
+        approach = self.lights.approach_of(previous_lane)
         if approach is None or self.env.vehicle.lane_index[0] != previous_lane[1]:
             return False
         return self.lights.state(*approach, self.env.time) == LIGHT_RED

@@ -13,19 +13,18 @@ import numpy as np
 
 from drivelab.envs.backends.fast import lanes as L
 from drivelab.envs.backends.fast.simulator import (  # noqa: F401  (re-exported: tests, benchmarks)
-    SUPPORTED,
     FastSimulator,
     idm_parameters,
     vehicles_to_array,
 )
-from drivelab.envs.scenarios import Scenario
+from drivelab.world.scenario import Scenario
 from drivelab.world.state import WorldState
 
 
 class FastBackend:
     """Same scenarios, same WorldState as HighwayBackend, simulated by compiled array code.
 
-    :param scenario: a scenario in ``SUPPORTED``.
+    :param scenario: a scenario the compiled core runs (``fast_backend``).
     :param traffic: "empty", "regular" or "dense".
     :param control: "meta" or "continuous".
     :param overrides: extra highway-env config keys.

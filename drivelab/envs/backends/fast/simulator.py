@@ -34,7 +34,6 @@ from drivelab.envs.backends.fast import traffic as T
 from drivelab.envs.backends.fast.spawn import IntersectionTraffic, spawn_highway
 from drivelab.envs.backends.highway import HighwayBackend, build_road_map
 from drivelab.envs.route import SEARCH_WINDOW_M, RouteTracker
-from drivelab.envs.scenarios import SCENARIOS, Scenario
 from drivelab.errors import UsageError
 from drivelab.world.batch import (
     COLLISION_NONE,
@@ -44,11 +43,11 @@ from drivelab.world.batch import (
     RouteBatch,
     WorldBatch,
 )
+from drivelab.world.scenario import META_ACTIONS, Scenario
 from drivelab.world.state import RoadMap
 
-SUPPORTED = tuple(name for name, scenario in SCENARIOS.items() if scenario.fast_backend)
 SPAWNERS = {"highway": spawn_highway}  # scenarios whose episodes drivelab sets up itself
-META = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")
+META = META_ACTIONS
 LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER = range(5)
 ACCELERATION_RANGE, STEERING_RANGE = (-5.0, 5.0), (-np.pi / 4, np.pi / 4)  # ContinuousAction's
 
@@ -376,7 +375,7 @@ def export_worlds(
 class FastSimulator:
     """K worlds of one scenario on drivelab's compiled traffic model, as arrays.
 
-    :param scenario: a scenario in ``SUPPORTED``.
+    :param scenario: a scenario the compiled core runs (``fast_backend``).
     :param traffic: "empty", "regular" or "dense".
     :param control: "meta" or "continuous".
     :param num_worlds: K.
@@ -393,10 +392,9 @@ class FastSimulator:
         num_worlds: int,
         overrides: dict | None = None,
     ) -> None:
-        if scenario.name not in SUPPORTED:
+        if not scenario.fast_backend:
             raise UsageError(
-                f"backend 'fast' does not run scenario {scenario.name!r} yet "
-                f"(it runs {', '.join(SUPPORTED)}); use --backend highway"
+                f"backend 'fast' does not run scenario {scenario.name!r} yet; use --backend highway"
             )
         if scenario.arrival not in ARRIVAL_RULES:
             raise UsageError(f"the fast backend has no arrival rule {scenario.arrival!r}")
