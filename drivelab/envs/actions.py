@@ -14,6 +14,7 @@ from gymnasium import spaces
 
 from drivelab.errors import UsageError
 from drivelab.world.batch import WorldBatch
+from drivelab.world.geometry import ROACH_MAX_SPEED_MPS
 from drivelab.world.scenario import META_ACTIONS
 from drivelab.world.state import WorldState
 
@@ -137,7 +138,7 @@ class TargetSpeedAction(ActionAdapter):
     name, control = "target_speed", "continuous"
 
     def __init__(
-        self, max_speed_mps: float = 6.0, kp: float = 1.0, ki: float = 0.2, kd: float = 0.001
+        self, max_speed_mps: float = ROACH_MAX_SPEED_MPS, kp: float = 1.0, ki: float = 0.2, kd: float = 0.001
     ) -> None:
         if max_speed_mps <= 0:
             raise UsageError("target_speed needs max_speed_mps > 0")

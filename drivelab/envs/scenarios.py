@@ -36,6 +36,7 @@ SCENARIOS: dict[str, Scenario] = {
                 "dense": {"extra_vehicles": 6},
             },
             arrival="merge_end",
+            arrival_x_m=370.0,
         ),
         Scenario(
             "roundabout",
@@ -63,6 +64,7 @@ SCENARIOS: dict[str, Scenario] = {
             },
             destination="o1",
             arrival="exit",
+            traffic_flow=True,
             intersection_nodes=("ir0", "ir1", "ir2", "ir3"),
             meta_target_speeds=(0, 4.5, 9),
         ),
@@ -70,7 +72,8 @@ SCENARIOS: dict[str, Scenario] = {
             "racetrack",
             "highway_env.envs.racetrack_env.RacetrackEnv",
             "two-lane closed circuit with tight curves",
-            config={"duration": 60},
+            # highway-env's own observation off: off-road is judged by drivelab, not highway-env
+            config={"duration": 60, "observation": {"type": "Kinematics"}},
             traffic={
                 "empty": {"other_vehicles": 0},
                 "regular": {"other_vehicles": 1},

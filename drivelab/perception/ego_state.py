@@ -14,11 +14,12 @@ from gymnasium import spaces
 
 from drivelab.perception.base import Sensor, ego_frame
 from drivelab.world.batch import WorldBatch
+from drivelab.world.geometry import FULL_LOCK_RAD
 from drivelab.world.state import WorldState
 
 FUSION_FEATURES = ("speed", "lane_offset", "front_distance", "front_relative_speed", "heading_alignment")
 EXTRA_FEATURES = ("heading_error_sin", "steering", "acceleration", "lane_curvature", "lane_position")
-MAX_STEERING_RAD = np.pi / 4  # highway-env's steering range
+MAX_STEERING_RAD = FULL_LOCK_RAD  # highway-env's steering range
 MAX_ACCELERATION_MPS2 = 5.0  # highway-env's acceleration range
 CURVATURE_SCALE_M = 50.0  # curvature · 50 m: a 50 m radius reads 1
 

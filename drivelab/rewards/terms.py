@@ -14,7 +14,7 @@ from collections.abc import Callable
 import numpy as np
 
 from drivelab.world.batch import WorldBatch
-from drivelab.world.geometry import FULL_LOCK_DEG, ego_frame
+from drivelab.world.geometry import FULL_LOCK_DEG, FULL_LOCK_RAD, ROACH_MAX_SPEED_MPS, ego_frame
 from drivelab.world.pinhole import LANE_CAMERA, LANE_ROWS_M, LINE_CAMERA, LINE_ROWS_M, PinholeModel
 from drivelab.world.road_geometry import (
     batch_guide_segments,
@@ -192,8 +192,7 @@ def sidewalk_crash(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
 
 
 # --- seed 000 (RLAD) trains with CARLA-Roach's reward (shared/notes/RLAD-NOTES.md) -----------
-ROACH_MAX_SPEED_MPS = 6.0
-ROACH_STEER_RAD = np.pi / 4  # steering is compared as the normalised command (highway-env: ±45°)
+ROACH_STEER_RAD = FULL_LOCK_RAD  # steering is compared as the normalised command (highway-env: ±45°)
 
 
 def _hazard_speed(distance_m: np.ndarray, stop_distance_m: float) -> np.ndarray:

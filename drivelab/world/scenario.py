@@ -38,6 +38,8 @@ class Scenario:
     traffic: dict = field(default_factory=dict)
     destination: str | None = None
     arrival: str = "none"
+    arrival_x_m: float | None = None  # "merge_end": the goal is reached past this x
+    traffic_flow: bool = False  # vehicles leave at the exits and arrive at the entries between steps
     intersection_nodes: tuple[str, ...] = ()
     continuous_policy_frequency_hz: int = 5
     meta_target_speeds: tuple[float, ...] | None = None

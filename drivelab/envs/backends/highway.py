@@ -149,8 +149,6 @@ class HighwayBackend:
         else:
             config["action"] = {"type": "ContinuousAction", "longitudinal": True, "lateral": True}
             config["policy_frequency"] = scenario.continuous_policy_frequency_hz
-        if scenario.name == "racetrack":  # off-road is judged by drivelab, not highway-env
-            config["observation"] = {"type": "Kinematics"}
         config.update(overrides or {})
         env_class = hw_utils.class_from_path(scenario.env_class)
         self.env = _without_observation_and_info(env_class)(config=config)
@@ -194,7 +192,7 @@ class HighwayBackend:
         previous_lane = env.vehicle.lane_index
         env.time += 1 / env.config["policy_frequency"]
         env._simulate(control)
-        if self.scenario.name == "intersection":  # highway-env does this in its own step()
+        if self.scenario.traffic_flow:  # highway-env does this in its own step() (IntersectionEnv)
             env._clear_vehicles()
             env._spawn_vehicle(spawn_probability=env.config["spawn_probability"])
         ego = env.vehicle
@@ -293,7 +291,7 @@ class HighwayBackend:
         if self.scenario.arrival == "route_end":
             return self.route.length_m - self.progress_m < 2.0
         if self.scenario.arrival == "merge_end":
-            return bool(ego.position[0] > 370)
+            return bool(ego.position[0] > self.scenario.arrival_x_m)
         if self.scenario.arrival == "exit":
             return bool(self.env.has_arrived(ego))
         return False

@@ -43,25 +43,22 @@ from drivelab.world.batch import (
     RouteBatch,
     WorldBatch,
 )
+from drivelab.world.geometry import FULL_LOCK_RAD
 from drivelab.world.scenario import META_ACTIONS, Scenario
 from drivelab.world.state import RoadMap
 
 SPAWNERS = {"highway": spawn_highway}  # scenarios whose episodes drivelab sets up itself
 META = META_ACTIONS
 LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER = range(5)
-ACCELERATION_RANGE, STEERING_RANGE = (-5.0, 5.0), (-np.pi / 4, np.pi / 4)  # ContinuousAction's
+ACCELERATION_RANGE, STEERING_RANGE = (-5.0, 5.0), (-FULL_LOCK_RAD, FULL_LOCK_RAD)  # ContinuousAction's
 
-# How a scenario's episode reaches its goal, by ``Scenario.arrival``: (rule, threshold, traffic
-# flow). ARRIVE_PAST_X: the ego's x beyond the threshold (the merge's end, x > 370). ARRIVE_EXIT:
-# the ego on an exit lane at least the threshold along it (IntersectionEnv.has_arrived, 25 m); a
-# scenario with a traffic flow also loses the vehicles that reach the end of their exit and may
-# get a new one at an entry after every step (IntersectionEnv.step).
+# How a scenario's episode reaches its goal, by ``Scenario.arrival``: (rule, threshold).
+# ARRIVE_PAST_X: the ego's x beyond ``Scenario.arrival_x_m`` (the merge's end). ARRIVE_EXIT: the ego
+# on an exit lane at least the threshold along it (IntersectionEnv.has_arrived, 25 m). A scenario
+# with a ``traffic_flow`` also loses the vehicles that reach the end of their exit and may get a
+# new one at an entry after every step (IntersectionEnv.step).
 ARRIVE_NEVER, ARRIVE_PAST_X, ARRIVE_EXIT = 0, 1, 2
-ARRIVAL_RULES = {
-    "none": (ARRIVE_NEVER, 0.0, False),
-    "merge_end": (ARRIVE_PAST_X, 370.0, False),
-    "exit": (ARRIVE_EXIT, 25.0, True),
-}
+ARRIVAL_RULES = {"none": (ARRIVE_NEVER, 0.0), "merge_end": (ARRIVE_PAST_X, None), "exit": (ARRIVE_EXIT, 25.0)}
 
 # Columns of the export kernel's float, int and flag outputs
 (
@@ -416,7 +413,10 @@ class FastSimulator:
         self.policy_frequency_hz, self.duration_s = road.policy_frequency_hz, road.duration_s
         self.frames, self.dt_s = road.frames, road.dt_s
         self.idm = idm_parameters()
-        self.arrival, self.arrival_threshold, self.traffic_flow = ARRIVAL_RULES[scenario.arrival]
+        self.arrival, self.arrival_threshold = ARRIVAL_RULES[scenario.arrival]
+        self.traffic_flow = scenario.traffic_flow
+        if self.arrival == ARRIVE_PAST_X:
+            self.arrival_threshold = float(scenario.arrival_x_m)
         self.arrivals = None
         if self.traffic_flow:
             env = self.builder.env
