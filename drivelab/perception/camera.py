@@ -120,12 +120,14 @@ def _ground_polygons_batch(
     return result
 
 
-def _strip_quads(segments: np.ndarray, width_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """Segments (M, 2, 2) → rectangles (4·M, 2) ``width_m`` wide around them, and counts (M,)."""
+def _strip_quads(segments: np.ndarray, width_m: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Segments (M, 2, 2) → rectangles (4·M, 2) ``width_m`` (one, or (M,) per segment) wide around
+    them, and counts (M,)."""
     start, end = segments[:, 0], segments[:, 1]
     direction = end - start
     length = np.maximum(np.hypot(direction[:, 0], direction[:, 1]), 1e-9)
-    normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1) / length[:, None] * (width_m / 2)
+    half_width = np.reshape(np.asarray(width_m, dtype=float) / 2, (-1, 1))
+    normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1) / length[:, None] * half_width
     quads = np.stack([start + normal, end + normal, end - normal, start - normal], axis=1)
     return quads.reshape(-1, 2), np.full(len(segments), 4, dtype=int)
 
@@ -357,8 +359,15 @@ def draw_camera(batch: WorldBatch, model: PinholeModel, out: np.ndarray) -> None
     """
     count = batch.num_worlds
     layers = [_ground_layers(batch.road_of(k), batch.ego.position[k], model) for k in range(count)]
+    # every world's painted strips as rectangles in one pass, then back to their world and kind
+    strips = [(segments, width) for _, world_strips in layers for segments, width, _ in world_strips]
+    widths = np.concatenate([np.full(len(segments), width) for segments, width in strips])
+    quads, _ = _strip_quads(np.concatenate([segments for segments, _ in strips]).reshape(-1, 2, 2), widths)
+    sizes = np.cumsum([len(segments) for segments, _ in strips])
+    quads = iter(np.split(quads.reshape(-1, 4, 2), sizes[:-1]))
     groups = [
-        [lanes] + [_strip_quads(segments, width) for segments, width, _ in strips] for lanes, strips in layers
+        [lanes] + [(next(quads).reshape(-1, 2), np.full(len(s), 4, dtype=int)) for s, _, _ in world_strips]
+        for lanes, world_strips in layers
     ]
     projected = _ground_polygons_batch(model, batch.ego.position, batch.ego.heading, groups)
     users, facing, is_pedestrian, distance, offsets = _road_user_quads(model, batch)
