@@ -13,12 +13,12 @@ from gymnasium import spaces
 from drivelab.perception.base import Sensor, zebra_stripes
 from drivelab.perception.topdown import (
     SHIFT,
-    STOP_BAR_M,
     View,
     fill_boxes,
     fill_each,
     fixed_point,
     segments_near,
+    stop_bars,
 )
 from drivelab.world.batch import WorldBatch
 from drivelab.world.state import MARKING_DASHED, MARKING_SOLID, RoadMap, WorldState
@@ -115,8 +115,8 @@ def draw_birdeye(batch: WorldBatch, out: np.ndarray, pixels_per_meter: float) ->
     view = View.of(batch, size_hw, pixels_per_meter)
     width_px = max(int(round(ROUTE_WIDTH_M * pixels_per_meter)), 1)
     routes = view.polylines(batch.route.polyline, batch.route.count, width_px)
-    lights = batch.traffic_lights  # (K, L, 4) → stop bars (K, L, 5), as ``stop_bars`` draws them
-    bars = np.concatenate([lights[..., :3], np.broadcast_to(STOP_BAR_M, (*lights.shape[:2], 2))], axis=-1)
+    lights = batch.traffic_lights  # (K, L, 4)
+    bars = stop_bars(lights)  # (K, L, 5)
     bar_corners, bars_seen = view.boxes(bars, batch.light_valid)
     vehicles, vehicles_seen = view.vehicles(batch.vehicles, batch.vehicle_valid)
     pedestrians, pedestrians_seen = view.vehicles(batch.pedestrians, batch.pedestrian_valid)

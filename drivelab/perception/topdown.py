@@ -34,8 +34,9 @@ LIGHT_LEVELS = np.array([85, 170, 255])  # green, yellow, red in the optional li
 
 
 def stop_bars(lights: np.ndarray) -> np.ndarray:
-    """Rectangles (N, 5) ``x, y, heading, length, width`` of the lights' stop bars."""
-    return np.column_stack([lights[:, :3], np.tile(STOP_BAR_M, (len(lights), 1))]).reshape(-1, 5)
+    """Rectangles (..., 5) ``x, y, heading, length, width`` of the stop bars of lights (..., 4)."""
+    lights = np.asarray(lights, dtype=float)
+    return np.concatenate([lights[..., :3], np.broadcast_to(STOP_BAR_M, (*lights.shape[:-1], 2))], axis=-1)
 
 
 def to_pixels(
@@ -366,9 +367,7 @@ class TopDown(Sensor):
         )
         before, before_seen = view.vehicles(previous, previous_valid, EXACT_INSET_PX)
         if self.lights:
-            lights = batch.traffic_lights  # (K, L, 4) → stop bars (K, L, 5), as ``stop_bars`` draws them
-            bar_size = np.broadcast_to(STOP_BAR_M, (*lights.shape[:2], 2))
-            bars = np.concatenate([lights[..., :3], bar_size], axis=-1)
+            bars = stop_bars(batch.traffic_lights)  # (K, L, 5)
             bar_corners, bars_seen = view.boxes(bars, batch.light_valid, EXACT_INSET_PX)
             levels = LIGHT_LEVELS[batch.traffic_lights[..., 3].astype(int)]
         out[...] = 0
