@@ -287,7 +287,7 @@ def fill_each(
 
 
 def fill_boxes(image: np.ndarray, corners: np.ndarray, colour: Colour, line_type: int = cv2.LINE_8) -> None:
-    """Fill rectangles (K, 4, 2) given as fixed-point corners (convex, so the fast fill)."""
+    """Fill rectangles (N, 4, 2) given as fixed-point corners (convex, so the fast fill)."""
     for box in corners:
         cv2.fillConvexPoly(image, box, colour, line_type, SHIFT)
 
@@ -302,6 +302,11 @@ class TopDown(Sensor):
     so channels 3 and 4 together show the relative motion of traffic. See the module docstring
     for the pixel mapping: vehicles and dots cover exactly the pixels whose centres they contain;
     lanes and the route get OpenCV's usual extra half pixel around their outline.
+
+    K worlds per call: routes, past positions, traffic and stop bars of all K worlds are moved to
+    their ego frames and culled at once, lanes once per map; then one OpenCV raster per world.
+    The history (past positions, previous traffic) is kept as (K, …) arrays, cleared by ``reset``
+    for the worlds in its mask.
 
     :param size: image height and width in pixels (seed 003: 84).
     :param pixels_per_meter: resolution; 2 px/m shows 21 m on each side of the ego at 84 px.
