@@ -59,9 +59,16 @@ class DashedMarkings:
         self.arc = cumulative - cumulative[chain_head]
 
     def dashes(self, centre: np.ndarray, radius: float) -> np.ndarray:
-        """The dashes (K, 2, 2) within ``radius`` of ``centre``, world coordinates."""
-        seen = segments_near(self.segments, centre, radius)
-        segments, length, arc = self.segments[seen], self.length[seen], self.arc[seen]
+        """The dashes (D, 2, 2) within ``radius`` of ``centre`` (2,), world coordinates."""
+        return self.dashes_around(np.reshape(centre, (1, 2)), radius)[0]
+
+    def dashes_around(self, centres: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+        """The dashes (D, 2, 2) within ``radius`` of each of W ``centres`` (W, 2), world
+        coordinates, all centres' in one array (centre by centre), and the centre of each (D,)."""
+        seen = segments_near(self.segments, centres, radius)  # (W, M)
+        around, index = np.nonzero(seen)  # (segment, centre) pairs, centre by centre
+        segments, length, arc = self.segments[index], self.length[index], self.arc[index]
+        centre = centres[around]
         # the stretch of each segment inside the circle, as arc lengths [low, high] along it
         direction = (segments[:, 1] - segments[:, 0]) / length[:, None]
         nearest = np.einsum("ij,ij->i", centre - segments[:, 0], direction)
@@ -79,7 +86,9 @@ class DashedMarkings:
         begin = np.clip(k * DASH_PERIOD_M - arc[owner], 0.0, length[owner])
         finish = np.clip(k * DASH_PERIOD_M + DASH_LENGTH_M - arc[owner], 0.0, length[owner])
         origin, unit = segments[owner, 0], direction[owner]
-        return np.stack([origin + begin[:, None] * unit, origin + finish[:, None] * unit], axis=1)
+        return np.stack([origin + begin[:, None] * unit, origin + finish[:, None] * unit], axis=1), around[
+            owner
+        ]
 
 
 def render_birdeye(

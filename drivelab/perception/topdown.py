@@ -65,16 +65,18 @@ def fixed_point(pixels: np.ndarray) -> np.ndarray:
 
 
 def segments_near(segments: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
-    """Mask (M,) of the segments (M, 2, 2) that come within ``radius`` of ``centre``.
+    """Mask (M,) of the segments (M, 2, 2) that come within ``radius`` of ``centre`` (2,), or mask
+    (W, M) for W centres (W, 2).
 
     Tests each segment's nearest point, so a 10 km road line passing the ego counts.
     """
-    start = segments[:, 0] - centre
+    centre = np.asarray(centre, dtype=float)
+    start = segments[:, 0] - centre[..., None, :]  # (..., M, 2)
     edge = segments[:, 1] - segments[:, 0]
     length2 = np.maximum(np.einsum("ij,ij->i", edge, edge), 1e-12)
-    along = np.clip(-np.einsum("ij,ij->i", start, edge) / length2, 0.0, 1.0)
-    nearest = start + along[:, None] * edge
-    return np.einsum("ij,ij->i", nearest, nearest) <= radius * radius
+    along = np.clip(-np.einsum("...ij,ij->...i", start, edge) / length2, 0.0, 1.0)
+    nearest = start + along[..., None] * edge
+    return np.einsum("...ij,...ij->...i", nearest, nearest) <= radius * radius
 
 
 class LanePolygons:
