@@ -113,11 +113,33 @@ def zebra_boxes(road: RoadMap) -> np.ndarray:
     return zebra_stripes(road.crossings)
 
 
+def solid_markings(road: RoadMap) -> np.ndarray:
+    """The road's solid markings (M, 2, 2) (computed once per map)."""
+    return np.asarray(road.markings, dtype=float).reshape(-1, 2, 2)[road.marking_kinds == MARKING_SOLID]
+
+
+def markings_in_sight(batch: WorldBatch, radius_m: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per world, the (solid segments (S, 2, 2), dashes (D, 2, 2)) of its road within ``radius_m``
+    of its ego, culled map by map for all the worlds on that map at once."""
+    found: list = [None] * batch.num_worlds
+    for index, road in enumerate(batch.roads):
+        worlds = np.flatnonzero(batch.road_index == index)
+        positions = batch.ego.position[worlds]  # (W, 2)
+        solid = road.derived(solid_markings, solid_markings)
+        solid_near = segments_near(solid, positions, radius_m)  # (W, S)
+        dashes, dash_world = road.derived(DashedMarkings, DashedMarkings).dashes_around(positions, radius_m)
+        bounds = np.searchsorted(dash_world, np.arange(len(worlds) + 1))
+        for w, k in enumerate(worlds):
+            found[k] = (solid[solid_near[w]], dashes[bounds[w] : bounds[w + 1]])
+    return found
+
+
 def draw_birdeye(batch: WorldBatch, out: np.ndarray, pixels_per_meter: float) -> None:
     """Draw the K worlds' bird's-eye images into ``out`` (K, H, W, 3) uint8 (see ``render_birdeye``).
 
-    The ego-frame transforms and culling of routes, traffic, lights and egos run over all K worlds
-    at once; the road layers (per map) and the OpenCV drawing run world by world.
+    The ego-frame transforms and culling of lanes, routes, traffic, lights and egos run over all K
+    worlds at once, the markings' culling over all the worlds of a map; the OpenCV drawing runs
+    world by world.
     """
     count = batch.num_worlds
     size_hw = out.shape[1:3]
@@ -133,16 +155,14 @@ def draw_birdeye(batch: WorldBatch, out: np.ndarray, pixels_per_meter: float) ->
     ego_boxes = np.column_stack([ego.position, ego.heading, ego.length_m, ego.width_m])[:, None]
     egos, _ = view.boxes(ego_boxes, np.ones((count, 1), dtype=bool))
     lanes = view.lanes(batch)
+    markings = markings_in_sight(batch, view.radius_m)
     out[:] = GRASS
     for k in range(count):  # one OpenCV raster per world
-        image, road, position = out[k], batch.road_of(k), view.positions[k]
+        image, road = out[k], batch.road_of(k)
         fill_each(image, lanes[k], ROAD, cv2.LINE_AA)
         if batch.route.count[k] > 1:
             cv2.polylines(image, routes[k], False, ROUTE, width_px, cv2.LINE_AA, SHIFT)
-        solid = np.asarray(road.markings)[road.marking_kinds == MARKING_SOLID]
-        solid = solid[segments_near(solid, position, view.radius_m)]
-        dashed = road.derived(DashedMarkings, DashedMarkings).dashes(position, view.radius_m)
-        for lines, colour in ((solid, SOLID_LINE), (dashed, DASHED_LINE)):
+        for lines, colour in zip(markings[k], (SOLID_LINE, DASHED_LINE), strict=True):
             if len(lines):
                 pixels = fixed_point(view.pixels_of(k, lines))
                 cv2.polylines(image, list(pixels), False, colour, 1, cv2.LINE_AA, SHIFT)
