@@ -58,10 +58,6 @@ class DashedMarkings:
         chain_head = np.maximum.accumulate(np.where(joined, 0, np.arange(count)))
         self.arc = cumulative - cumulative[chain_head]
 
-    def dashes(self, centre: np.ndarray, radius: float) -> np.ndarray:
-        """The dashes (D, 2, 2) within ``radius`` of ``centre`` (2,), world coordinates."""
-        return self.dashes_around(np.reshape(centre, (1, 2)), radius)[0]
-
     def dashes_around(self, centres: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
         """The dashes (D, 2, 2) within ``radius`` of each of W ``centres`` (W, 2), world
         coordinates, all centres' in one array (centre by centre), and the centre of each (D,)."""
