@@ -144,12 +144,20 @@ def draw_birdeye(batch: WorldBatch, out: np.ndarray, pixels_per_meter: float) ->
     routes = view.polylines(batch.route.polyline, batch.route.count, width_px)
     lights = batch.traffic_lights  # (K, L, 4)
     bars = stop_bars(lights)  # (K, L, 5)
-    bar_corners, bars_seen = view.boxes(bars, batch.light_valid)
-    vehicles, vehicles_seen = view.vehicles(batch.vehicles, batch.vehicle_valid)
-    pedestrians, pedestrians_seen = view.vehicles(batch.pedestrians, batch.pedestrian_valid)
     ego = batch.ego
     ego_boxes = np.column_stack([ego.position, ego.heading, ego.length_m, ego.width_m])[:, None]
-    egos, _ = view.boxes(ego_boxes, np.ones((count, 1), dtype=bool))
+    columns = [0, 1, 2, 4, 5]  # vehicle rows → rectangles x, y, heading, length, width
+    # every rectangle of every world moved to its ego frame and culled in one pass
+    (bar_corners, bars_seen), (vehicles, vehicles_seen), (pedestrians, pedestrians_seen), (egos, _) = (
+        view.box_groups(
+            [
+                (bars, batch.light_valid),
+                (batch.vehicles[..., columns], batch.vehicle_valid),
+                (batch.pedestrians[..., columns], batch.pedestrian_valid),
+                (ego_boxes, np.ones((count, 1), dtype=bool)),
+            ]
+        )
+    )
     lanes = view.lanes(batch)
     markings = markings_in_sight(batch, view.radius_m)
     out[:] = GRASS

@@ -252,18 +252,25 @@ class View:
             boxes[..., 3:] = np.maximum(boxes[..., 3:] - 2 * inset_px / self.ppm, 0.0)
         return fixed_point(self.pixels(box_corners(boxes))), seen
 
+    def box_groups(
+        self, groups: list[tuple[np.ndarray, np.ndarray]], inset_px: float = 0.0
+    ) -> list[tuple[np.ndarray, np.ndarray]]:
+        """``boxes`` of several groups of rectangles [(boxes (K, N_i, 5), valid (K, N_i))] in one
+        pass: [(corners (K, N_i, 4, 2), seen (K, N_i))], group by group."""
+        corners, seen = self.boxes(
+            np.concatenate([boxes for boxes, _ in groups], axis=1),
+            np.concatenate([valid for _, valid in groups], axis=1),
+            inset_px,
+        )
+        edges = np.cumsum([0] + [boxes.shape[1] for boxes, _ in groups])
+        return [(corners[:, a:b], seen[:, a:b]) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+
     def boxes_of(self, k: int, boxes: np.ndarray, inset_px: float = 0.0) -> np.ndarray:
         """Fixed-point corners (M, 4, 2) of the rectangles (N, 5) in sight of ego ``k`` (see ``boxes``)."""
         boxes = np.asarray(boxes, dtype=float).reshape(1, -1, 5)
         one = View(self.positions[k : k + 1], self.headings[k : k + 1], self.size_hw, self.ppm)
         corners, seen = one.boxes(boxes, np.ones(boxes.shape[:2], dtype=bool), inset_px)
         return corners[0][seen[0]]
-
-    def vehicles(
-        self, vehicles: np.ndarray, valid: np.ndarray, inset_px: float = 0.0
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """``boxes`` of the vehicles (K, N, 6) (rows of ``VEHICLE_COLUMNS``)."""
-        return self.boxes(vehicles[..., [0, 1, 2, 4, 5]], valid, inset_px)
 
 
 def road_users(batch: WorldBatch) -> tuple[np.ndarray, np.ndarray]:
@@ -363,20 +370,24 @@ class TopDown(Sensor):
         dots[..., :2] = self.past_positions
         dots[..., 2], dots[..., 3:] = batch.ego.heading[:, None], PAST_DOT_M
         past = np.arange(self.history) >= self.history - self.past_count[:, None]  # (K, history)
-        dot_corners, dots_seen = view.boxes(dots, past, EXACT_INSET_PX)
         traffic, traffic_valid = road_users(batch)
-        now, now_seen = view.vehicles(traffic, traffic_valid, EXACT_INSET_PX)
         size = max(traffic.shape[1], self.previous_traffic.shape[1])
         first = ~self.has_previous[:, None, None]  # the first frame shows the traffic now twice
         previous = np.where(first, _pad_slots(traffic, size), _pad_slots(self.previous_traffic, size))
         previous_valid = np.where(
             first[..., 0], _pad_slots(traffic_valid, size), _pad_slots(self.previous_valid, size)
         )
-        before, before_seen = view.vehicles(previous, previous_valid, EXACT_INSET_PX)
+        columns = [0, 1, 2, 4, 5]  # vehicle rows → rectangles x, y, heading, length, width
+        groups = [
+            (dots, past),
+            (traffic[..., columns], traffic_valid),
+            (previous[..., columns], previous_valid),
+        ]
         if self.lights:
-            bars = stop_bars(batch.traffic_lights)  # (K, L, 5)
-            bar_corners, bars_seen = view.boxes(bars, batch.light_valid, EXACT_INSET_PX)
+            groups.append((stop_bars(batch.traffic_lights), batch.light_valid))  # (K, L, 5)
             levels = LIGHT_LEVELS[batch.traffic_lights[..., 3].astype(int)]
+        # every rectangle of every world moved to its ego frame and culled in one pass
+        boxes = view.box_groups(groups, EXACT_INSET_PX)
         out[...] = 0
         lanes = view.lanes(batch)
         for k in range(count):  # one OpenCV raster per world
@@ -384,10 +395,10 @@ class TopDown(Sensor):
             fill_each(image[0], lanes[k], 255)
             if batch.route.count[k] > 1:
                 cv2.polylines(image[1], routes[k], False, 255, width_px, cv2.LINE_8, SHIFT)
-            fill_boxes(image[2], dot_corners[k][dots_seen[k]], 255)
-            fill_boxes(image[3], now[k][now_seen[k]], 255)
-            fill_boxes(image[4], before[k][before_seen[k]], 255)
+            for channel, (corners, seen) in zip((2, 3, 4), boxes, strict=False):  # dots, traffic now, before
+                fill_boxes(image[channel], corners[k][seen[k]], 255)
             if self.lights:
+                bar_corners, bars_seen = boxes[3]
                 for corners, level in zip(bar_corners[k][bars_seen[k]], levels[k][bars_seen[k]], strict=True):
                     cv2.fillConvexPoly(image[5], corners, int(level), cv2.LINE_8, SHIFT)
         if self.history:
