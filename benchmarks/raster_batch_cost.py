@@ -69,8 +69,10 @@ def main() -> None:
         for worlds in (1, args.worlds):
             cost = per_world_step_us(spec, sequence, worlds, args.mode, args.repeats)
             results[f"{name} {scenario} K={worlds}"] = round(cost, 1)
-            line = f"{name:8s} {scenario:8s} K={worlds:3d} {args.mode}: {cost:8.1f} µs per world-step"
-            print(line, flush=True)
+            print(
+                f"{name:8s} {scenario:8s} K={worlds:3d} {args.mode}: {cost:8.1f} µs per world-step",
+                flush=True,
+            )
     print(json.dumps(results))
 
 

@@ -13,12 +13,12 @@ from gymnasium import spaces
 from drivelab.perception.base import Sensor, zebra_stripes
 from drivelab.perception.topdown import (
     SHIFT,
-    STOP_BAR_M,
     View,
     fill_boxes,
     fill_each,
     fixed_point,
     segments_near,
+    stop_bars,
 )
 from drivelab.world.batch import WorldBatch
 from drivelab.world.state import MARKING_DASHED, MARKING_SOLID, RoadMap, WorldState
@@ -58,10 +58,13 @@ class DashedMarkings:
         chain_head = np.maximum.accumulate(np.where(joined, 0, np.arange(count)))
         self.arc = cumulative - cumulative[chain_head]
 
-    def dashes(self, centre: np.ndarray, radius: float) -> np.ndarray:
-        """The dashes (K, 2, 2) within ``radius`` of ``centre``, world coordinates."""
-        seen = segments_near(self.segments, centre, radius)
-        segments, length, arc = self.segments[seen], self.length[seen], self.arc[seen]
+    def dashes_around(self, centres: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+        """The dashes (D, 2, 2) within ``radius`` of each of W ``centres`` (W, 2), world
+        coordinates, all centres' in one array (centre by centre), and the centre of each (D,)."""
+        seen = segments_near(self.segments, centres, radius)  # (W, M)
+        around, index = np.nonzero(seen)  # (segment, centre) pairs, centre by centre
+        segments, length, arc = self.segments[index], self.length[index], self.arc[index]
+        centre = centres[around]
         # the stretch of each segment inside the circle, as arc lengths [low, high] along it
         direction = (segments[:, 1] - segments[:, 0]) / length[:, None]
         nearest = np.einsum("ij,ij->i", centre - segments[:, 0], direction)
@@ -79,7 +82,9 @@ class DashedMarkings:
         begin = np.clip(k * DASH_PERIOD_M - arc[owner], 0.0, length[owner])
         finish = np.clip(k * DASH_PERIOD_M + DASH_LENGTH_M - arc[owner], 0.0, length[owner])
         origin, unit = segments[owner, 0], direction[owner]
-        return np.stack([origin + begin[:, None] * unit, origin + finish[:, None] * unit], axis=1)
+        return np.stack([origin + begin[:, None] * unit, origin + finish[:, None] * unit], axis=1), around[
+            owner
+        ]
 
 
 def render_birdeye(
@@ -104,36 +109,64 @@ def zebra_boxes(road: RoadMap) -> np.ndarray:
     return zebra_stripes(road.crossings)
 
 
+def solid_markings(road: RoadMap) -> np.ndarray:
+    """The road's solid markings (M, 2, 2) (computed once per map)."""
+    return np.asarray(road.markings, dtype=float).reshape(-1, 2, 2)[road.marking_kinds == MARKING_SOLID]
+
+
+def markings_in_sight(batch: WorldBatch, radius_m: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per world, the (solid segments (S, 2, 2), dashes (D, 2, 2)) of its road within ``radius_m``
+    of its ego, culled map by map for all the worlds on that map at once."""
+    found: list = [None] * batch.num_worlds
+    for index, road in enumerate(batch.roads):
+        worlds = np.flatnonzero(batch.road_index == index)
+        positions = batch.ego.position[worlds]  # (W, 2)
+        solid = road.derived(solid_markings, solid_markings)
+        solid_near = segments_near(solid, positions, radius_m)  # (W, S)
+        dashes, dash_world = road.derived(DashedMarkings, DashedMarkings).dashes_around(positions, radius_m)
+        bounds = np.searchsorted(dash_world, np.arange(len(worlds) + 1))
+        for w, k in enumerate(worlds):
+            found[k] = (solid[solid_near[w]], dashes[bounds[w] : bounds[w + 1]])
+    return found
+
+
 def draw_birdeye(batch: WorldBatch, out: np.ndarray, pixels_per_meter: float) -> None:
     """Draw the K worlds' bird's-eye images into ``out`` (K, H, W, 3) uint8 (see ``render_birdeye``).
 
-    The ego-frame transforms and culling of routes, traffic, lights and egos run over all K worlds
-    at once; the road layers (per map) and the OpenCV drawing run world by world.
+    The ego-frame transforms and culling of lanes, routes, traffic, lights and egos run over all K
+    worlds at once, the markings' culling over all the worlds of a map; the OpenCV drawing runs
+    world by world.
     """
     count = batch.num_worlds
     size_hw = out.shape[1:3]
     view = View.of(batch, size_hw, pixels_per_meter)
     width_px = max(int(round(ROUTE_WIDTH_M * pixels_per_meter)), 1)
     routes = view.polylines(batch.route.polyline, batch.route.count, width_px)
-    lights = batch.traffic_lights  # (K, L, 4) → stop bars (K, L, 5), as ``stop_bars`` draws them
-    bars = np.concatenate([lights[..., :3], np.broadcast_to(STOP_BAR_M, (*lights.shape[:2], 2))], axis=-1)
-    bar_corners, bars_seen = view.boxes(bars, batch.light_valid)
-    vehicles, vehicles_seen = view.vehicles(batch.vehicles, batch.vehicle_valid)
-    pedestrians, pedestrians_seen = view.vehicles(batch.pedestrians, batch.pedestrian_valid)
+    lights = batch.traffic_lights  # (K, L, 4)
+    bars = stop_bars(lights)  # (K, L, 5)
     ego = batch.ego
     ego_boxes = np.column_stack([ego.position, ego.heading, ego.length_m, ego.width_m])[:, None]
-    egos, _ = view.boxes(ego_boxes, np.ones((count, 1), dtype=bool))
+    columns = [0, 1, 2, 4, 5]  # vehicle rows → rectangles x, y, heading, length, width
+    # every rectangle of every world moved to its ego frame and culled in one pass
+    (bar_corners, bars_seen), (vehicles, vehicles_seen), (pedestrians, pedestrians_seen), (egos, _) = (
+        view.box_groups(
+            [
+                (bars, batch.light_valid),
+                (batch.vehicles[..., columns], batch.vehicle_valid),
+                (batch.pedestrians[..., columns], batch.pedestrian_valid),
+                (ego_boxes, np.ones((count, 1), dtype=bool)),
+            ]
+        )
+    )
     lanes = view.lanes(batch)
+    markings = markings_in_sight(batch, view.radius_m)
     out[:] = GRASS
     for k in range(count):  # one OpenCV raster per world
-        image, road, position = out[k], batch.road_of(k), view.positions[k]
+        image, road = out[k], batch.road_of(k)
         fill_each(image, lanes[k], ROAD, cv2.LINE_AA)
         if batch.route.count[k] > 1:
             cv2.polylines(image, routes[k], False, ROUTE, width_px, cv2.LINE_AA, SHIFT)
-        solid = np.asarray(road.markings)[road.marking_kinds == MARKING_SOLID]
-        solid = solid[segments_near(solid, position, view.radius_m)]
-        dashed = road.derived(DashedMarkings, DashedMarkings).dashes(position, view.radius_m)
-        for lines, colour in ((solid, SOLID_LINE), (dashed, DASHED_LINE)):
+        for lines, colour in zip(markings[k], (SOLID_LINE, DASHED_LINE), strict=True):
             if len(lines):
                 pixels = fixed_point(view.pixels_of(k, lines))
                 cv2.polylines(image, list(pixels), False, colour, 1, cv2.LINE_AA, SHIFT)

@@ -117,12 +117,14 @@ def _ground_polygons_batch(
     return result
 
 
-def _strip_quads(segments: np.ndarray, width_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """Segments (M, 2, 2) → rectangles (4·M, 2) ``width_m`` wide around them, and counts (M,)."""
+def _strip_quads(segments: np.ndarray, width_m: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Segments (M, 2, 2) → rectangles (4·M, 2) ``width_m`` (one, or (M,) per segment) wide around
+    them, and counts (M,)."""
     start, end = segments[:, 0], segments[:, 1]
     direction = end - start
     length = np.maximum(np.hypot(direction[:, 0], direction[:, 1]), 1e-9)
-    normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1) / length[:, None] * (width_m / 2)
+    half_width = np.reshape(np.asarray(width_m, dtype=float) / 2, (-1, 1))
+    normal = np.stack([-direction[:, 1], direction[:, 0]], axis=1) / length[:, None] * half_width
     quads = np.stack([start + normal, end + normal, end - normal, start - normal], axis=1)
     return quads.reshape(-1, 2), np.full(len(segments), 4, dtype=int)
 
@@ -136,12 +138,14 @@ class PaintedSegments:
         self.guide = GuideSegments(road).segments
         self.circles = [_circles(segments) for segments in (self.solid, self.guide)]
 
-    def near(self, position: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray]:
-        """(solid, guide) segments whose bounding circle comes within ``reach`` of ``position``."""
-        return tuple(
-            segments[np.hypot(*(centre - position).T) <= reach + radius]
-            for segments, (centre, radius) in zip((self.solid, self.guide), self.circles, strict=True)
-        )
+    def near_masks(self, positions: np.ndarray, reach: float) -> tuple[np.ndarray, np.ndarray]:
+        """Masks (W, M) of the (solid, guide) segments whose bounding circle comes within ``reach``
+        of each of W ``positions`` (W, 2)."""
+        masks = []
+        for centre, radius in self.circles:
+            offset = centre[None] - positions[:, None]  # (W, M, 2)
+            masks.append(np.hypot(offset[..., 0], offset[..., 1]) <= reach + radius)
+        return masks[0], masks[1]
 
 
 PIECE_STATIONS = 2  # lane pieces span this many of the road map's 2 m stations
@@ -287,25 +291,39 @@ def _traffic_light_marks(
     return seen, pixels, np.where(seen, radius, 1).astype(int), batch.traffic_lights[..., 3]
 
 
-def _ground_layers(road: RoadMap, position: np.ndarray, model: PinholeModel) -> tuple[tuple, list]:
-    """(lane polygons (P, 2) with counts) and the painted strips as [(segments, width, colour)] of
-    ``road`` within the camera's reach of an ego at ``position`` (2,)."""
+def _ground_layers(batch: WorldBatch, model: PinholeModel) -> list[tuple[tuple, list]]:
+    """Per world, its road's (lane polygons (P, 2) with counts) and painted strips as
+    [(segments, width, colour)] within the camera's reach of its ego; culled map by map for all
+    the worlds on that map at once."""
     reach = model.forward_m + model.max_range_m
-    lanes: LanePieces = road.derived(LanePieces, LanePieces)
-    lane_points, lane_counts = np.zeros((0, 2)), np.zeros(0, dtype=int)
-    if len(lanes.counts):
-        visible = np.hypot(*(lanes.centres - position).T) <= reach + lanes.radii
-        lane_points, lane_counts = lanes.vertices[visible[lanes.owner]], lanes.counts[visible]
-    solid, guide = road.derived(PaintedSegments, PaintedSegments).near(position, reach)
-    dashed_lines: DashedMarkings = road.derived(DashedMarkings, DashedMarkings)
-    dashed = dashed_lines.dashes(position, reach) if len(dashed_lines.length) else np.zeros((0, 2, 2))
-    strips = [(np.concatenate([solid, dashed]), MARKING_WIDTH_M, WHITE), (guide, GUIDE_WIDTH_M, YELLOW)]
-    if len(road.crossings):
-        stripes = road.derived(zebra_boxes, zebra_boxes)
-        along = np.column_stack([np.cos(stripes[:, 2]), np.sin(stripes[:, 2])]) * stripes[:, 3:4] / 2
-        segments = np.stack([stripes[:, :2] - along, stripes[:, :2] + along], axis=1)
-        strips.append((segments[segments_near(segments, position, reach)], ZEBRA_STRIPE_M[0], WHITE))
-    return (lane_points, lane_counts), strips
+    layers: list = [None] * batch.num_worlds
+    for index, road in enumerate(batch.roads):
+        worlds = np.flatnonzero(batch.road_index == index)
+        positions = batch.ego.position[worlds]  # (W, 2)
+        lanes: LanePieces = road.derived(LanePieces, LanePieces)
+        offset = lanes.centres[None] - positions[:, None]
+        visible = np.hypot(offset[..., 0], offset[..., 1]) <= reach + lanes.radii  # (W, P)
+        painted: PaintedSegments = road.derived(PaintedSegments, PaintedSegments)
+        solid_near, guide_near = painted.near_masks(positions, reach)
+        dashed_lines: DashedMarkings = road.derived(DashedMarkings, DashedMarkings)
+        dashes, dash_world = dashed_lines.dashes_around(positions, reach)
+        dash_bounds = np.searchsorted(dash_world, np.arange(len(worlds) + 1))
+        if len(road.crossings):
+            stripes = road.derived(zebra_boxes, zebra_boxes)
+            along = np.column_stack([np.cos(stripes[:, 2]), np.sin(stripes[:, 2])]) * stripes[:, 3:4] / 2
+            zebra = np.stack([stripes[:, :2] - along, stripes[:, :2] + along], axis=1)
+            zebra_near = segments_near(zebra, positions, reach)  # (W, S)
+        for w, k in enumerate(worlds):
+            lane_points, lane_counts = lanes.vertices[visible[w][lanes.owner]], lanes.counts[visible[w]]
+            dashed = dashes[dash_bounds[w] : dash_bounds[w + 1]]
+            strips = [
+                (np.concatenate([painted.solid[solid_near[w]], dashed]), MARKING_WIDTH_M, WHITE),
+                (painted.guide[guide_near[w]], GUIDE_WIDTH_M, YELLOW),
+            ]
+            if len(road.crossings):
+                strips.append((zebra[zebra_near[w]], ZEBRA_STRIPE_M[0], WHITE))
+            layers[k] = ((lane_points, lane_counts), strips)
+    return layers
 
 
 def render_camera(world: WorldState, model: PinholeModel) -> np.ndarray:
@@ -323,9 +341,16 @@ def draw_camera(batch: WorldBatch, model: PinholeModel, out: np.ndarray) -> None
     drawing runs world by world.
     """
     count = batch.num_worlds
-    layers = [_ground_layers(batch.road_of(k), batch.ego.position[k], model) for k in range(count)]
+    layers = _ground_layers(batch, model)
+    # every world's painted strips as rectangles in one pass, then back to their world and kind
+    strips = [(segments, width) for _, world_strips in layers for segments, width, _ in world_strips]
+    widths = np.concatenate([np.full(len(segments), width) for segments, width in strips])
+    quads, _ = _strip_quads(np.concatenate([segments for segments, _ in strips]).reshape(-1, 2, 2), widths)
+    sizes = np.cumsum([len(segments) for segments, _ in strips])
+    quads = iter(np.split(quads.reshape(-1, 4, 2), sizes[:-1]))
     groups = [
-        [lanes] + [_strip_quads(segments, width) for segments, width, _ in strips] for lanes, strips in layers
+        [lanes] + [(next(quads).reshape(-1, 2), np.full(len(s), 4, dtype=int)) for s, _, _ in world_strips]
+        for lanes, world_strips in layers
     ]
     projected = _ground_polygons_batch(model, batch.ego.position, batch.ego.heading, groups)
     users, facing, is_pedestrian, distance, offsets = _road_user_quads(model, batch)

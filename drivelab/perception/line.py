@@ -24,11 +24,16 @@ YELLOW_LOW, YELLOW_HIGH = np.array([20, 120, 120]), np.array([40, 255, 255])
 
 
 def yellow_mask(image_rgb: np.ndarray, kernel_px: int = 3) -> np.ndarray:
-    """HSV threshold on yellow, then erosion and dilation with a ``kernel_px`` square (uint8 0/255)."""
-    hsv = cv2.cvtColor(image_rgb, cv2.COLOR_RGB2HSV)
-    mask = cv2.inRange(hsv, YELLOW_LOW, YELLOW_HIGH)
+    """HSV threshold on yellow, then erosion and dilation with a ``kernel_px`` square (uint8 0/255):
+    frames (..., H, W, 3) → masks (..., H, W). The threshold is per pixel, so K frames go through it
+    as one tall image; the opening looks at neighbours, so it runs frame by frame."""
+    shape = image_rgb.shape
+    hsv = cv2.cvtColor(np.ascontiguousarray(image_rgb).reshape(-1, shape[-2], 3), cv2.COLOR_RGB2HSV)
+    masks = cv2.inRange(hsv, YELLOW_LOW, YELLOW_HIGH).reshape(-1, *shape[-3:-1])
     kernel = np.ones((kernel_px, kernel_px), np.uint8)
-    return cv2.dilate(cv2.erode(mask, kernel), kernel)
+    for mask in masks:
+        cv2.dilate(cv2.erode(mask, kernel), kernel, dst=mask)
+    return masks.reshape(shape[:-1])
 
 
 def row_centres(mask: np.ndarray, rows: np.ndarray) -> np.ndarray:
@@ -84,15 +89,13 @@ class LineState(Sensor):
         return self._space.n - 1
 
     def detect(self, image_rgb: np.ndarray) -> np.ndarray:
-        """Line centre columns at the 4 rows of a camera frame (nan where not seen)."""
+        """Line centre columns at the 4 rows of a camera frame (H, W, 3) → (4,), or of frames
+        (K, H, W, 3) → (K, 4) (nan where not seen)."""
         return row_centres(yellow_mask(image_rgb, self.kernel_px), self.rows)
 
     def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
         if len(self.frames) != batch.num_worlds:
             self.frames = np.empty((batch.num_worlds, *self.frames.shape[1:]), dtype=np.uint8)
         draw_camera(batch, self.model, self.frames)  # (K, H, W, 3)
-        masks = np.stack(
-            [yellow_mask(frame, self.kernel_px) for frame in self.frames]
-        )  # one opening per image
-        self.centres = row_centres(masks, self.rows)
+        self.centres = row_centres(yellow_mask(self.frames, self.kernel_px), self.rows)  # (K, 4)
         out[...] = encode_state(strip_of(self.centres, self.model.width, self.strips), self.strips + 1)

@@ -34,8 +34,9 @@ LIGHT_LEVELS = np.array([85, 170, 255])  # green, yellow, red in the optional li
 
 
 def stop_bars(lights: np.ndarray) -> np.ndarray:
-    """Rectangles (N, 5) ``x, y, heading, length, width`` of the lights' stop bars."""
-    return np.column_stack([lights[:, :3], np.tile(STOP_BAR_M, (len(lights), 1))]).reshape(-1, 5)
+    """Rectangles (..., 5) ``x, y, heading, length, width`` of the stop bars of lights (..., 4)."""
+    lights = np.asarray(lights, dtype=float)
+    return np.concatenate([lights[..., :3], np.broadcast_to(STOP_BAR_M, (*lights.shape[:-1], 2))], axis=-1)
 
 
 def to_pixels(
@@ -64,16 +65,18 @@ def fixed_point(pixels: np.ndarray) -> np.ndarray:
 
 
 def segments_near(segments: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
-    """Mask (M,) of the segments (M, 2, 2) that come within ``radius`` of ``centre``.
+    """Mask (M,) of the segments (M, 2, 2) that come within ``radius`` of ``centre`` (2,), or mask
+    (W, M) for W centres (W, 2).
 
     Tests each segment's nearest point, so a 10 km road line passing the ego counts.
     """
-    start = segments[:, 0] - centre
+    centre = np.asarray(centre, dtype=float)
+    start = segments[:, 0] - centre[..., None, :]  # (..., M, 2)
     edge = segments[:, 1] - segments[:, 0]
     length2 = np.maximum(np.einsum("ij,ij->i", edge, edge), 1e-12)
-    along = np.clip(-np.einsum("ij,ij->i", start, edge) / length2, 0.0, 1.0)
-    nearest = start + along[:, None] * edge
-    return np.einsum("ij,ij->i", nearest, nearest) <= radius * radius
+    along = np.clip(-np.einsum("...ij,ij->...i", start, edge) / length2, 0.0, 1.0)
+    nearest = start + along[..., None] * edge
+    return np.einsum("...ij,...ij->...i", nearest, nearest) <= radius * radius
 
 
 class LanePolygons:
@@ -249,18 +252,25 @@ class View:
             boxes[..., 3:] = np.maximum(boxes[..., 3:] - 2 * inset_px / self.ppm, 0.0)
         return fixed_point(self.pixels(box_corners(boxes))), seen
 
+    def box_groups(
+        self, groups: list[tuple[np.ndarray, np.ndarray]], inset_px: float = 0.0
+    ) -> list[tuple[np.ndarray, np.ndarray]]:
+        """``boxes`` of several groups of rectangles [(boxes (K, N_i, 5), valid (K, N_i))] in one
+        pass: [(corners (K, N_i, 4, 2), seen (K, N_i))], group by group."""
+        corners, seen = self.boxes(
+            np.concatenate([boxes for boxes, _ in groups], axis=1),
+            np.concatenate([valid for _, valid in groups], axis=1),
+            inset_px,
+        )
+        edges = np.cumsum([0] + [boxes.shape[1] for boxes, _ in groups])
+        return [(corners[:, a:b], seen[:, a:b]) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+
     def boxes_of(self, k: int, boxes: np.ndarray, inset_px: float = 0.0) -> np.ndarray:
         """Fixed-point corners (M, 4, 2) of the rectangles (N, 5) in sight of ego ``k`` (see ``boxes``)."""
         boxes = np.asarray(boxes, dtype=float).reshape(1, -1, 5)
         one = View(self.positions[k : k + 1], self.headings[k : k + 1], self.size_hw, self.ppm)
         corners, seen = one.boxes(boxes, np.ones(boxes.shape[:2], dtype=bool), inset_px)
         return corners[0][seen[0]]
-
-    def vehicles(
-        self, vehicles: np.ndarray, valid: np.ndarray, inset_px: float = 0.0
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """``boxes`` of the vehicles (K, N, 6) (rows of ``VEHICLE_COLUMNS``)."""
-        return self.boxes(vehicles[..., [0, 1, 2, 4, 5]], valid, inset_px)
 
 
 def road_users(batch: WorldBatch) -> tuple[np.ndarray, np.ndarray]:
@@ -286,7 +296,7 @@ def fill_each(
 
 
 def fill_boxes(image: np.ndarray, corners: np.ndarray, colour: Colour, line_type: int = cv2.LINE_8) -> None:
-    """Fill rectangles (K, 4, 2) given as fixed-point corners (convex, so the fast fill)."""
+    """Fill rectangles (N, 4, 2) given as fixed-point corners (convex, so the fast fill)."""
     for box in corners:
         cv2.fillConvexPoly(image, box, colour, line_type, SHIFT)
 
@@ -301,6 +311,11 @@ class TopDown(Sensor):
     so channels 3 and 4 together show the relative motion of traffic. See the module docstring
     for the pixel mapping: vehicles and dots cover exactly the pixels whose centres they contain;
     lanes and the route get OpenCV's usual extra half pixel around their outline.
+
+    K worlds per call: routes, past positions, traffic and stop bars of all K worlds are moved to
+    their ego frames and culled at once, lanes once per map; then one OpenCV raster per world.
+    The history (past positions, previous traffic) is kept as (K, …) arrays, cleared by ``reset``
+    for the worlds in its mask.
 
     :param size: image height and width in pixels (seed 003: 84).
     :param pixels_per_meter: resolution; 2 px/m shows 21 m on each side of the ego at 84 px.
@@ -355,22 +370,24 @@ class TopDown(Sensor):
         dots[..., :2] = self.past_positions
         dots[..., 2], dots[..., 3:] = batch.ego.heading[:, None], PAST_DOT_M
         past = np.arange(self.history) >= self.history - self.past_count[:, None]  # (K, history)
-        dot_corners, dots_seen = view.boxes(dots, past, EXACT_INSET_PX)
         traffic, traffic_valid = road_users(batch)
-        now, now_seen = view.vehicles(traffic, traffic_valid, EXACT_INSET_PX)
         size = max(traffic.shape[1], self.previous_traffic.shape[1])
         first = ~self.has_previous[:, None, None]  # the first frame shows the traffic now twice
         previous = np.where(first, _pad_slots(traffic, size), _pad_slots(self.previous_traffic, size))
         previous_valid = np.where(
             first[..., 0], _pad_slots(traffic_valid, size), _pad_slots(self.previous_valid, size)
         )
-        before, before_seen = view.vehicles(previous, previous_valid, EXACT_INSET_PX)
+        columns = [0, 1, 2, 4, 5]  # vehicle rows → rectangles x, y, heading, length, width
+        groups = [
+            (dots, past),
+            (traffic[..., columns], traffic_valid),
+            (previous[..., columns], previous_valid),
+        ]
         if self.lights:
-            lights = batch.traffic_lights  # (K, L, 4) → stop bars (K, L, 5), as ``stop_bars`` draws them
-            bar_size = np.broadcast_to(STOP_BAR_M, (*lights.shape[:2], 2))
-            bars = np.concatenate([lights[..., :3], bar_size], axis=-1)
-            bar_corners, bars_seen = view.boxes(bars, batch.light_valid, EXACT_INSET_PX)
+            groups.append((stop_bars(batch.traffic_lights), batch.light_valid))  # (K, L, 5)
             levels = LIGHT_LEVELS[batch.traffic_lights[..., 3].astype(int)]
+        # every rectangle of every world moved to its ego frame and culled in one pass
+        boxes = view.box_groups(groups, EXACT_INSET_PX)
         out[...] = 0
         lanes = view.lanes(batch)
         for k in range(count):  # one OpenCV raster per world
@@ -378,10 +395,10 @@ class TopDown(Sensor):
             fill_each(image[0], lanes[k], 255)
             if batch.route.count[k] > 1:
                 cv2.polylines(image[1], routes[k], False, 255, width_px, cv2.LINE_8, SHIFT)
-            fill_boxes(image[2], dot_corners[k][dots_seen[k]], 255)
-            fill_boxes(image[3], now[k][now_seen[k]], 255)
-            fill_boxes(image[4], before[k][before_seen[k]], 255)
+            for channel, (corners, seen) in zip((2, 3, 4), boxes, strict=False):  # dots, traffic now, before
+                fill_boxes(image[channel], corners[k][seen[k]], 255)
             if self.lights:
+                bar_corners, bars_seen = boxes[3]
                 for corners, level in zip(bar_corners[k][bars_seen[k]], levels[k][bars_seen[k]], strict=True):
                     cv2.fillConvexPoly(image[5], corners, int(level), cv2.LINE_8, SHIFT)
         if self.history:
