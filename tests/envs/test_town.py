@@ -101,7 +101,7 @@ def test_running_a_red_light_is_detected_exactly_once():
         "town", obs="kinematics", action="continuous", traffic="empty", backend="highway", duration_s=30
     )
     env.reset(seed=0)
-    env.scenario = dataclasses.replace(env.scenario, route_deviation_m=None)  # the ego is moved off its route
+    env.vector.rules.route_deviation_m = None  # the ego is moved off its route
     backend = env.backend
     hw = backend.env
     lights = backend.lights
