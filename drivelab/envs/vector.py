@@ -38,6 +38,7 @@ from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW
 BACKENDS = ("auto", "fast", "highway")
 LIGHT_LABEL_DISTANCE_M = 18.0  # RLAD's auxiliary label: a light within this distance ahead
 LIGHT_LABELS = {-1: "none", LIGHT_GREEN: "green", LIGHT_YELLOW: "red_or_yellow", LIGHT_RED: "red_or_yellow"}
+_LABEL_OF_STATE = np.array([LIGHT_LABELS[state] for state in sorted(LIGHT_LABELS)], dtype=object)  # state + 1
 RUN_KEYWORDS = ("scenario", "obs", "action", "reward", "traffic", "backend")  # RunConfig fields
 RENDER_SIZE_HW, RENDER_PIXELS_PER_M = (256, 512), 4.0
 
@@ -325,7 +326,7 @@ class VectorDriveEnv(VectorEnv):
     def traffic_light_labels(self) -> np.ndarray:
         """(K,) "none", "green" or "red_or_yellow": the light ahead within 18 m (RLAD's label)."""
         state, _ = self.batch.light_ahead(LIGHT_LABEL_DISTANCE_M)
-        return np.array([LIGHT_LABELS[int(s)] for s in state], dtype=object)
+        return _LABEL_OF_STATE[state + 1]
 
     def replay(self, starts: list[dict], actions: list[np.ndarray]):
         """Bring every world to where its recorded episode was: world k's episode-seed generator

@@ -31,7 +31,7 @@ from numba import njit
 
 from drivelab.envs.backends.fast import lanes as L
 from drivelab.envs.backends.fast import traffic as T
-from drivelab.envs.backends.fast.spawn import IntersectionTraffic, spawn_highway
+from drivelab.envs.backends.fast.spawn import IntersectionTraffic, highway_spawn_tables, spawn_highway
 from drivelab.envs.backends.highway import HighwayBackend, build_road_map
 from drivelab.envs.route import SEARCH_WINDOW_M, RouteTracker
 from drivelab.errors import UsageError
@@ -399,6 +399,7 @@ class FastSimulator:
             raise UsageError(f"num_worlds must be >= 1 (got {num_worlds})")
         self.scenario, self.control, self.num_worlds = scenario, control, num_worlds
         self.spawner = SPAWNERS.get(scenario.name)
+        self._spawn_tables = None  # the spawner's static arrays of this road, made at the first reset
         key = _road_key(scenario, traffic, control, overrides)
         self.builder: HighwayBackend | None = None
         if self.spawner is None:  # highway-env sets up every episode: one builder, kept
@@ -483,8 +484,16 @@ class FastSimulator:
         """A new episode's (vehicle rows, ego row, regulation state, generator between steps)."""
         road = self._road
         if self.spawner is not None:
+            if self._spawn_tables is None:
+                self._spawn_tables = highway_spawn_tables(self.table, road.graph_keys)
             rows = self.spawner(
-                seed, self.table, road.graph_keys, road.config, self.control, road.target_speeds
+                seed,
+                self.table,
+                road.graph_keys,
+                road.config,
+                self.control,
+                road.target_speeds,
+                self._spawn_tables,
             )
             return rows, 0, np.zeros(2), None
         env = self.builder.env

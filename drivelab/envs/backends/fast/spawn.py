@@ -83,15 +83,10 @@ def _spawn_rows(
     return rows
 
 
-def spawn_highway(seed: int, table: L.LaneTable, graph_keys: dict, config: dict, control: str, target_speeds):
-    """Vehicle rows for a highway episode, the ego first, as highway-env would place them.
-
-    :param graph_keys: ``{from: [to, ...]}`` of the road network, in its order.
-    :param config: the highway-env config (vehicles_count, vehicles_density, ego_spacing, initial_lane_id).
-    """
-    rng, _ = seeding.np_random(int(seed))
-    lanes = table.rows
-    row_of = table.row_of
+def highway_spawn_tables(table: L.LaneTable, graph_keys: dict) -> tuple[np.ndarray, ...]:
+    """The road's static arrays ``spawn_highway`` draws from: (to_roads, to_count, decay), computed
+    once per road by the simulator and handed to every reset."""
+    row_of, lanes = table.row_of, table.rows
     froms = list(graph_keys)
     width = max(len(tos) for tos in graph_keys.values())
     to_roads = np.zeros((len(froms), width), dtype=np.int64)
@@ -100,9 +95,23 @@ def spawn_highway(seed: int, table: L.LaneTable, graph_keys: dict, config: dict,
         to_roads[k, : to_count[k]] = [row_of[(f, t, 0)] for t in graph_keys[f]]
     # numpy's exp, as highway-env computes the spacing factor (numba's may round differently)
     decay = np.array([np.exp(-5 / 40 * count) for count in range(int(lanes[:, L.LANE_COUNT].max()) + 1)])
+    return to_roads, to_count, decay
+
+
+def spawn_highway(
+    seed: int, table: L.LaneTable, graph_keys: dict, config: dict, control: str, target_speeds, tables=None
+):
+    """Vehicle rows for a highway episode, the ego first, as highway-env would place them.
+
+    :param graph_keys: ``{from: [to, ...]}`` of the road network, in its order.
+    :param config: the highway-env config (vehicles_count, vehicles_density, ego_spacing, initial_lane_id).
+    :param tables: ``highway_spawn_tables(table, graph_keys)``, when the caller keeps them.
+    """
+    rng, _ = seeding.np_random(int(seed))
+    to_roads, to_count, decay = tables if tables is not None else highway_spawn_tables(table, graph_keys)
     lane_id = config["initial_lane_id"]
     rows = _spawn_rows(
-        rng, lanes, to_roads, to_count, decay, -1 if lane_id is None else int(lane_id),
+        rng, table.rows, to_roads, to_count, decay, -1 if lane_id is None else int(lane_id),
         float(config["ego_spacing"]), int(config["vehicles_count"]), float(1 / config["vehicles_density"]),
     )  # fmt: skip
     ego = rows[0]
