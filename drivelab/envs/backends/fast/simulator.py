@@ -592,7 +592,7 @@ class FastSimulator:
         # the old WorldState's formula, numpy's complex exp and angle, for the same last bits
         curvature = np.angle(np.exp(1j * floats[:, EX_HEADING_CHANGE])) / 2.0
         ego = EgoBatch(
-            position=floats[:, [EX_X, EX_Y]],
+            position=floats[:, EX_X : EX_Y + 1],  # (K, 2): the columns are adjacent
             heading=floats[:, EX_HEADING],
             speed_mps=floats[:, EX_SPEED],
             steering=floats[:, EX_STEER],
@@ -609,16 +609,15 @@ class FastSimulator:
             on_road=flags[:, EX_ON_ROAD],
             in_intersection=flags[:, EX_IN_JUNCTION],
         )
-        events = EventsBatch.none(k)
-        collided = flags[:, EX_CRASHED]
+        collided, no_event = flags[:, EX_CRASHED], np.zeros(k, dtype=bool)
         events = EventsBatch(
             collided=collided,
             collision_kind=np.where(collided, COLLISION_VEHICLE, COLLISION_NONE).astype(np.int8),
             off_road=~flags[:, EX_ON_ROAD],
             arrived=flags[:, EX_ARRIVED],
-            red_light_crossed=events.red_light_crossed,
-            blocked=events.blocked,
-            off_route=events.off_route,
+            red_light_crossed=no_event,  # the rules add blocked and off_route; no lights here
+            blocked=no_event,
+            off_route=no_event,
         )
         r = self.route_index
         route = RouteBatch(
