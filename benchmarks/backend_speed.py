@@ -4,9 +4,8 @@
 
 Both backends run the same DriveEnv (kinematics sensor, highway reward) and the same random
 action sequence, resetting at episode ends (resets are part of the cost). Repeats interleave the
-two backends; the reported speed-up is the median of the per-repeat ratios. Batched mode: K
-highway worlds in one DriveVectorEnv (one kernel call per step for all K), total env steps/s,
-against one fast DriveEnv measured in the same repeat.
+two backends; the reported speed-up is the median of the per-repeat ratios. K worlds stepped
+together are measured by ``benchmarks/batch_speed.py``.
 """
 
 from __future__ import annotations
@@ -26,8 +25,7 @@ import numpy as np  # noqa: E402
 
 from drivelab.envs.core import (
     DriveEnv,  # noqa: E402
-    make_vec,  # noqa: E402
-)
+    )
 from drivelab.envs.scenarios import FAST_SCENARIOS as SUPPORTED  # noqa: E402
 from drivelab.envs.scenarios import SCENARIOS  # noqa: E402
 
@@ -45,41 +43,6 @@ def steps_per_second(env: DriveEnv, steps: int, seed: int) -> float:
         if terminated or truncated:
             env.reset(seed=int(rng.integers(1 << 30)))
     return steps / (time.perf_counter() - start)
-
-
-def vector_steps_per_second(vector, steps: int, seed: int) -> float:
-    """Total env steps per second of a vector env (autoresets included)."""
-    vector.action_space.seed(seed)
-    actions = [vector.action_space.sample() for _ in range(max(steps // vector.num_envs, 1))]
-    vector.reset(seed=seed)
-    start = time.perf_counter()
-    for action in actions:
-        vector.step(action)
-    return len(actions) * vector.num_envs / (time.perf_counter() - start)
-
-
-def batched_rows(steps: int, repeats: int, sizes: tuple[int, ...]) -> list[dict]:
-    single = DriveEnv("highway", obs="kinematics", backend="fast")
-    vectors = {k: make_vec("highway", num_envs=k, obs="kinematics") for k in sizes}
-    for vector in vectors.values():
-        vector_steps_per_second(vector, 2 * vector.num_envs, seed=0)  # compile before timing
-    rates = {k: [] for k in sizes}
-    ratios = {k: [] for k in sizes}
-    singles = []
-    for repeat in range(repeats):
-        singles.append(steps_per_second(single, steps, repeat))
-        for k, vector in vectors.items():
-            rates[k].append(vector_steps_per_second(vector, steps, repeat))
-            ratios[k].append(rates[k][-1] / singles[-1])
-    return [
-        {
-            "worlds": k,
-            "single_env_steps_per_s": statistics.median(singles),
-            "batched_steps_per_s": statistics.median(rates[k]),
-            "ratio_median": statistics.median(ratios[k]),
-        }
-        for k in sizes
-    ]
 
 
 def main() -> None:
@@ -110,15 +73,12 @@ def main() -> None:
         }
         rows.append(row)
         print(row)
-    batched = batched_rows(args.steps, args.repeats, (1, 8, 64))
-    print(batched)
     result = {
         "command": "python " + " ".join(sys.argv),
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "repeats": args.repeats,
         "rows": rows,
-        "batched": batched,
     }
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "backend_speed.json").write_text(json.dumps(result, indent=2))
@@ -141,16 +101,7 @@ def main() -> None:
             for r in rows
         ],
         "",
-        "Batched mode, highway: K worlds in one `DriveVectorEnv` (one kernel call steps all K), against",
-        "one fast DriveEnv in the same repeats. Sensors, rewards and metrics still run per world.",
-        "",
-        "| worlds K | one env steps/s | batched steps/s (all worlds) | ratio (median) |",
-        "|---|---|---|---|",
-        *[
-            f"| {b['worlds']} | {b['single_env_steps_per_s']:.0f} | {b['batched_steps_per_s']:.0f} | "
-            f"{b['ratio_median']:.2f}x |"
-            for b in batched
-        ],
+        "K worlds stepped together: `benchmarks/batch_speed.py`.",
         "",
     ]
     (RESULTS / "backend_speed.md").write_text("\n".join(lines))
