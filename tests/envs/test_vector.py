@@ -1,7 +1,6 @@
 """VectorDriveEnv: K worlds stepped together give exactly the episodes of K separate DriveEnvs, and
-the vector env meets gymnasium's and SB3's conventions."""
+the vector env meets gymnasium's and SB3's conventions (pickling: tests/envs/test_pickle.py)."""
 
-import pickle
 
 import gymnasium
 import numpy as np
@@ -162,20 +161,6 @@ def test_gymnasium_record_video_and_sb3_vec_video_recorder(tmp_path):
         venv.step(np.array([1, 1]))
     venv.close()
     assert list((tmp_path / "sb3").glob("*.mp4"))
-
-
-def test_vector_env_round_trips_through_pickle():
-    vector = VectorDriveEnv(2, scenario="merge", obs="kinematics,lidar:beams=8:stack=2")
-    vector.reset(seed=5)
-    vector.action_space.seed(1)
-    vector.step(vector.action_space.sample())
-    copy = pickle.loads(pickle.dumps(vector))
-    for _ in range(6):
-        actions = vector.action_space.sample()
-        original, restored = vector.step(actions), copy.step(actions)
-        _equal(original[0], restored[0])
-        for a, b in zip(original[1:4], restored[1:4], strict=True):
-            np.testing.assert_array_equal(a, b)
 
 
 def test_partial_reset_starts_only_the_masked_worlds():
