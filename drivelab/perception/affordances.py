@@ -41,6 +41,7 @@ class Affordances(Sensor):
     """
 
     name = "affordances"
+    help = "privileged: speed, next light and its state, leader, pedestrian, oncoming (m)"
 
     def __init__(self, *, range_m: float = 40.0) -> None:
         if range_m <= 0:

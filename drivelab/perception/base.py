@@ -30,6 +30,7 @@ class Sensor(ABC):
     """
 
     name: str = "sensor"
+    help: str = ""  # one line for `drivelab envs`
 
     @property
     @abstractmethod

@@ -188,6 +188,7 @@ class BirdEye(Sensor):
     """
 
     name = "birdeye"
+    help = "128x128 RGB bird's-eye view, ego-centred and heading-aligned"
 
     def __init__(self, *, size: int = 128, pixels_per_meter: float = 3.0) -> None:
         if size < 8 or pixels_per_meter <= 0:

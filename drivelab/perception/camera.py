@@ -400,6 +400,7 @@ class Camera(Sensor):
     """
 
     name = "camera"
+    help = "84x84 RGB first-person pinhole camera (fov, height, pitch configurable)"
 
     def __init__(
         self,

@@ -41,6 +41,7 @@ class EgoState(Sensor):
     """
 
     name = "ego_state"
+    help = "speed, lane offset, front gap, front relative speed, heading alignment (features=10: +5)"
 
     def __init__(self, *, features: int = 5, range_m: float = 50.0) -> None:
         if features not in (5, 10) or range_m <= 0:

@@ -29,6 +29,7 @@ class Kinematics(Sensor):
     """
 
     name = "kinematics"
+    help = "nearest vehicles' presence, position, velocity, heading in the ego frame"
 
     def __init__(
         self, *, vehicles_count: int = 5, perception_distance_m: float = 100.0, speed_scale_mps: float = 80.0

@@ -90,6 +90,7 @@ class LaneState(Sensor):
     """
 
     name = "lane"
+    help = "seed 004 follow-lane state: lane centre by the lane CNN (or classical), 5 strips + lost"
 
     def __init__(self, *, detector: str = "cnn", weights: str | None = None) -> None:
         if detector not in DETECTORS:

@@ -112,6 +112,7 @@ class Lidar(Sensor):
     """
 
     name = "lidar"
+    help = "240 beams (configurable) hitting vehicles and road edges, distance / range"
 
     def __init__(self, *, beams: int = 240, range_m: float = 50.0, noise_std: float = 0.0) -> None:
         if beams < 1 or range_m <= 0 or noise_std < 0:

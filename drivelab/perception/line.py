@@ -68,6 +68,7 @@ class LineState(Sensor):
     """
 
     name = "line"
+    help = "seed 004 follow-line state: yellow line centre at 4 rows, each in one of 5 strips or lost"
 
     def __init__(self, *, strips: int = 5, kernel_px: int = 3) -> None:
         if strips < 2 or kernel_px < 1:

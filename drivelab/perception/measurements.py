@@ -16,6 +16,7 @@ class Measurements(Sensor):
     three frames (6 numbers). Batched: ``(K, 2)``."""
 
     name = "measurements"
+    help = "[speed / max speed, steering / 60 deg]; stack=3 for RLAD's three frames"
 
     def __init__(self) -> None:
         self._space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)

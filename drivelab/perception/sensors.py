@@ -26,22 +26,13 @@ from drivelab.perception.waypoints import Waypoints
 from drivelab.world.batch import WorldBatch
 from drivelab.yaml_io import YamlLoader
 
-_ALL = (Kinematics, Lidar, TopDown, BirdEye, EgoState, Waypoints, Measurements, Camera, LineState, LaneState)
-SENSORS: dict[str, type[Sensor]] = {cls.name: cls for cls in (*_ALL, TTCGrid, Affordances)}
-SENSOR_HELP = {
-    "kinematics": "nearest vehicles' presence, position, velocity, heading in the ego frame",
-    "lidar": "240 beams (configurable) hitting vehicles and road edges, distance / range",
-    "topdown": "5x84x84 semantic image: road, route, past ego positions, traffic now / one step earlier",
-    "birdeye": "128x128 RGB bird's-eye view, ego-centred and heading-aligned",
-    "ego_state": "speed, lane offset, front gap, front relative speed, heading alignment (features=10: +5)",
-    "waypoints": "next 10 route points, 2 m apart, in the ego frame (m), the last repeated past the end",
-    "measurements": "[speed / max speed, steering / 60 deg]; stack=3 for RLAD's three frames",
-    "camera": "84x84 RGB first-person pinhole camera (fov, height, pitch configurable)",
-    "line": "seed 004 follow-line state: yellow line centre at 4 rows, each in one of 5 strips or lost",
-    "ttc_grid": "discrete highway state: time-to-collision bins of 3 lanes x speed bin (192 states)",
-    "affordances": "privileged: speed, next light and its state, leader, pedestrian, oncoming (m)",
-    "lane": "seed 004 follow-lane state: lane centre by the lane CNN (or classical), 5 strips + lost",
+# the sensor registry, declared once: names, options (keyword defaults) and help come from the classes
+SENSORS: dict[str, type[Sensor]] = {
+    cls.name: cls
+    for cls in (Kinematics, Lidar, TopDown, BirdEye, EgoState, Waypoints, Measurements, Camera, LineState)
+    + (LaneState, TTCGrid, Affordances)
 }
+SENSOR_HELP = {name: cls.help for name, cls in SENSORS.items()}  # one line each, from the class
 
 
 class FrameStack(Sensor):

@@ -325,6 +325,7 @@ class TopDown(Sensor):
     """
 
     name = "topdown"
+    help = "5x84x84 semantic image: road, route, past ego positions, traffic now / one step earlier"
 
     def __init__(
         self, *, size: int = 84, pixels_per_meter: float = 2.0, history: int = 10, lights: bool = False

@@ -50,6 +50,7 @@ class TTCGrid(Sensor):
     batched, the observations are ``(K,)`` integers."""
 
     name = "ttc_grid"
+    help = "discrete highway state: time-to-collision bins of 3 lanes x speed bin (192 states)"
 
     def __init__(self) -> None:
         self.bins = len(TTC_EDGES_S) + 1

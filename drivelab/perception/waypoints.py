@@ -22,6 +22,7 @@ class Waypoints(Sensor):
     """
 
     name = "waypoints"
+    help = "next 10 route points, 2 m apart, in the ego frame (m), the last repeated past the end"
 
     def __init__(self, *, count: int = 10, spacing_m: float = 2.0) -> None:
         if count < 1 or spacing_m <= 0:
