@@ -52,6 +52,16 @@ def world_sequences(
     return tuple(sequence)
 
 
+def assert_same_observations(a, b) -> None:
+    """Observations (arrays, or dicts of arrays) equal bit for bit."""
+    if isinstance(a, dict):
+        assert a.keys() == b.keys()
+        for key in a:
+            np.testing.assert_array_equal(a[key], b[key])
+    else:
+        np.testing.assert_array_equal(a, b)
+
+
 def batches(scenario: str, **options) -> list[tuple[WorldBatch, np.ndarray]]:
     """``world_sequences`` as (WorldBatch, started mask) pairs."""
     return [

@@ -279,9 +279,8 @@ class VectorDriveEnv(VectorEnv):
             rewards = np.where(restarting, 0.0, rewards)
             terminated, truncated = terminated & ~restarting, truncated & ~restarting
             done = terminated | truncated
-            for key in ("episode_metrics",):
-                if key in infos:
-                    infos[f"_{key}"] = infos[f"_{key}"] & ~restarting
+            if "episode_metrics" in infos:  # a restarted world's stepped episode never happened
+                infos["_episode_metrics"] = infos["_episode_metrics"] & ~restarting
             infos["episode_seed"] = self.episode_seeds.copy()
             infos["_episode_seed"] = restarting
         observations = self._observe(self.batch)

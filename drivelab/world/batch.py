@@ -174,12 +174,6 @@ class EventsBatch:
     off_route: np.ndarray
 
     @staticmethod
-    def none(num_worlds: int) -> EventsBatch:
-        """No event in any of ``num_worlds`` worlds."""
-        flags = {name: np.zeros(num_worlds, dtype=bool) for name in EVENT_FLAGS}
-        return EventsBatch(collision_kind=np.zeros(num_worlds, dtype=np.int8), **flags)
-
-    @staticmethod
     def stack(events: list[Events]) -> EventsBatch:
         flags = {name: np.array([getattr(e, name) for e in events], dtype=bool) for name in EVENT_FLAGS}
         kinds = np.array([COLLISION_NAMES.index(e.collision_with) for e in events], dtype=np.int8)
@@ -308,13 +302,6 @@ class WorldBatch:
     def rows(self) -> np.ndarray | slice:
         """Index of this batch's worlds into per-world state arrays of K rows (``state[batch.rows]``)."""
         return slice(None) if self.slots is None else self.slots
-
-    def worlds(self) -> list[WorldState]:
-        """Every world as a WorldState (for code that still reads one world at a time)."""
-        return [self[k] for k in range(self.num_worlds)]
-
-    def replace(self, **changes) -> WorldBatch:
-        return dataclasses.replace(self, **changes)
 
     def with_events(self, **flags: np.ndarray) -> WorldBatch:
         """The same batch with some event arrays replaced (``blocked=…``, ``off_route=…``)."""

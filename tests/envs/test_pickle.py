@@ -10,6 +10,7 @@ import pytest
 from drivelab.envs.scenarios import FAST_SCENARIOS as SUPPORTED
 from drivelab.envs.scenarios import SCENARIOS
 from drivelab.envs.vector import VectorDriveEnv
+from tests.batch_worlds import assert_same_observations
 
 ENV_IDS = sorted(env_id for env_id in gymnasium.registry if env_id.startswith("drivelab/"))
 CASES = [
@@ -18,16 +19,6 @@ CASES = [
     for backend in ("highway", "fast")
     if backend == "highway" or gymnasium.spec(env_id).kwargs["scenario"] in SUPPORTED
 ]
-
-
-def _assert_same(a, b) -> None:
-    """Observations (arrays or dicts of arrays) equal bit for bit."""
-    if isinstance(a, dict):
-        assert a.keys() == b.keys()
-        for key in a:
-            np.testing.assert_array_equal(a[key], b[key])
-    else:
-        np.testing.assert_array_equal(a, b)
 
 
 def test_every_scenario_has_a_case():
@@ -49,7 +40,7 @@ def test_env_round_trips_through_pickle_mid_episode(env_id, backend):
     for _ in range(4):
         action = env.action_space.sample()
         original, restored = env.step(action), copy.step(action)
-        _assert_same(original[0], restored[0])
+        assert_same_observations(original[0], restored[0])
         assert original[1:4] == restored[1:4]  # reward, terminated, truncated
         if original[2] or original[3]:
             break
@@ -65,6 +56,6 @@ def test_vector_env_round_trips_through_pickle(backend):
     for _ in range(3):
         actions = vector.action_space.sample()
         original, restored = vector.step(actions), copy.step(actions)
-        _assert_same(original[0], restored[0])
+        assert_same_observations(original[0], restored[0])
         for a, b in zip(original[1:4], restored[1:4], strict=True):
             np.testing.assert_array_equal(a, b)

@@ -1,7 +1,6 @@
 """VectorDriveEnv: K worlds stepped together give exactly the episodes of K separate DriveEnvs, and
 the vector env meets gymnasium's and SB3's conventions (pickling: tests/envs/test_pickle.py)."""
 
-
 import gymnasium
 import numpy as np
 import pytest
@@ -13,17 +12,9 @@ from drivelab.envs import gym_id
 from drivelab.envs.core import DriveEnv, make_vec
 from drivelab.envs.vector import SB3VecEnv, VectorDriveEnv
 from drivelab.errors import UsageError
+from tests.batch_worlds import assert_same_observations
 
 KWARGS = {"obs": "kinematics", "traffic": "regular", "duration_s": 6}
-
-
-def _equal(a, b) -> None:
-    if isinstance(a, dict):
-        assert a.keys() == b.keys()
-        for key in a:
-            np.testing.assert_array_equal(a[key], b[key])
-    else:
-        np.testing.assert_array_equal(a, b)
 
 
 def _same_metrics(a: dict, b: dict) -> bool:
@@ -60,7 +51,7 @@ def test_k_worlds_give_the_episodes_of_k_separate_envs(scenario, backend, mode, 
     observations, infos = vector.reset(seed=10)
     for i, env in enumerate(singles):
         single_obs, single_info = env.reset(seed=10 + i)
-        _equal(_row(observations, i), single_obs)
+        assert_same_observations(_row(observations, i), single_obs)
         assert infos["episode_seed"][i] == single_info["episode_seed"]
     rng = np.random.default_rng(0)
     ends, restarting = 0, np.zeros(k, dtype=bool)
@@ -72,7 +63,7 @@ def test_k_worlds_give_the_episodes_of_k_separate_envs(scenario, backend, mode, 
                 single_obs, info = env.reset()
                 assert (rewards[i], terminations[i], truncations[i]) == (0.0, False, False)
                 assert infos["episode_seed"][i] == info["episode_seed"]
-                _equal(_row(observations, i), single_obs)
+                assert_same_observations(_row(observations, i), single_obs)
                 continue
             single_obs, reward, terminated, truncated, info = env.step(int(actions[i]))
             assert (terminated, truncated) == (terminations[i], truncations[i])
@@ -85,7 +76,7 @@ def test_k_worlds_give_the_episodes_of_k_separate_envs(scenario, backend, mode, 
                     assert data_equivalence(infos["final_obs"][i], single_obs)
                     assert _same_metrics(infos["final_info"][i]["episode_metrics"], info["episode_metrics"])
                     single_obs, _ = env.reset()
-            _equal(_row(observations, i), single_obs)
+            assert_same_observations(_row(observations, i), single_obs)
         restarting = (terminations | truncations) if mode == "next_step" else restarting
     assert ends >= k  # every world finished at least one episode
 
