@@ -196,18 +196,25 @@ class VectorDriveEnv(VectorEnv):
         return observations
 
     # --- episodes ----------------------------------------------------------------------------
-    def _start(self, mask: np.ndarray) -> None:
-        """New episodes in the worlds of ``mask``: episode seeds from each world's generator, then
-        the simulator, the adapter, the sensors, the rules and the metrics reset by mask."""
-        worlds = np.flatnonzero(mask)
-        for k in worlds:
+    def _draw_seeds(self, mask: np.ndarray) -> None:
+        """The next episode seed of every world of ``mask``, from that world's generator."""
+        for k in np.flatnonzero(mask):
             self.episode_seeds[k] = int(self.world_rngs[k].integers(2**31 - 1))
-        batch = self.simulator.reset_where(mask, self.episode_seeds)
+
+    def _start(self, mask: np.ndarray, batch: WorldBatch | None = None) -> None:
+        """New episodes in the worlds of ``mask``: episode seeds from each world's generator, then
+        the simulator, the adapter, the sensors, the rules and the metrics reset by mask. With
+        ``batch``, the simulator has already started them (in its step) from the drawn seeds."""
+        worlds = np.flatnonzero(mask)
+        if batch is None:
+            self._draw_seeds(mask)
+            batch = self.simulator.reset_where(mask, self.episode_seeds)
         self.adapter.reset(mask)
         for index, sensor in enumerate(self.sensors):
             rngs = [None] * self.num_envs
-            for k in worlds:
-                rngs[k] = np.random.default_rng([int(self.episode_seeds[k]), index])
+            if sensor.uses_rng:
+                for k in worlds:
+                    rngs[k] = np.random.default_rng([int(self.episode_seeds[k]), index])
             sensor.reset(batch, rngs, mask)
         # an evaluation route brings its own time limit (the town's NoCrash protocol); a duration
         # given to this env still caps it
@@ -266,20 +273,23 @@ class VectorDriveEnv(VectorEnv):
             raise RuntimeError("call reset() before step()")
         prev = self.batch
         controls = self.adapter.controls_for(actions, prev)
-        stepped = self.simulator.step(controls)
+        restarting = self.pending_reset.copy()  # NEXT_STEP: these worlds begin a new episode now
+        self._draw_seeds(restarting)
+        stepped = self.simulator.step(controls, restarting, self.episode_seeds)
         batch, terminated, truncated = self.rules.apply(stepped)
         rewards, terms = self.reward_shaper(prev, batch, controls)
         self.metrics.update(batch, rewards)
         done = terminated | truncated
         infos = self._step_infos(batch, terms, done, truncated)
-        restarting = self.pending_reset.copy()  # NEXT_STEP: these worlds begin a new episode now
         self.batch = batch
-        if restarting.any():
-            self._start(restarting)
+        if restarting.any():  # their values above judged no step of theirs: discarded
+            if batch is not stepped:  # a restarted world starts with its simulator's events
+                self.batch = batch.where(restarting, stepped)
+            self._start(restarting, self.batch)
             rewards = np.where(restarting, 0.0, rewards)
             terminated, truncated = terminated & ~restarting, truncated & ~restarting
             done = terminated | truncated
-            if "episode_metrics" in infos:  # a restarted world's stepped episode never happened
+            if "episode_metrics" in infos:
                 infos["_episode_metrics"] = infos["_episode_metrics"] & ~restarting
             infos["episode_seed"] = self.episode_seeds.copy()
             infos["_episode_seed"] = restarting

@@ -31,6 +31,9 @@ class Sensor(ABC):
 
     name: str = "sensor"
     help: str = ""  # one line for `drivelab envs`
+    # draws noise from ``self.rngs``: the environments make episode generators only for such sensors
+    # (the others get None in ``rngs``: a generator costs ~10 µs to seed, per world and reset)
+    uses_rng: bool = False
 
     @property
     @abstractmethod

@@ -70,24 +70,38 @@ class Kinematics(Sensor):
 def nearest_rows(
     vehicles, valid, position, cos_h, sin_h, speed_mps, cos_other, sin_other, reach, speed_scale, rows
 ):
-    """Rows 1… of every world: its nearest seen vehicles, nearest first (a stable sort: on ties
-    highway-env's order), position and velocity relative to the ego in the ego frame
-    (``ego_frame``'s arithmetic), heading relative to the ego."""
+    """Rows 1… of every world: its nearest seen vehicles, nearest first (on ties highway-env's
+    order, as a stable sort gives), position and velocity relative to the ego in the ego frame
+    (``ego_frame``'s arithmetic), heading relative to the ego. The nearest are selected by
+    insertion into the few rows wanted (a strict comparison keeps the earlier vehicle first on
+    ties), not by sorting every slot."""
     num_worlds, slots = valid.shape
+    wanted = min(rows.shape[1] - 1, slots)
+    chosen = np.empty(wanted, dtype=np.int64)
     key = np.empty(slots)
     x, y = np.empty(slots), np.empty(slots)
     for k in range(num_worlds):
+        found = 0
         for j in range(slots):
+            if not valid[k, j]:
+                continue
             dx, dy = vehicles[k, j, 0] - position[k, 0], vehicles[k, j, 1] - position[k, 1]
             x[j] = dx * cos_h[k] + dy * sin_h[k]
             y[j] = -dx * sin_h[k] + dy * cos_h[k]
             distance = np.hypot(x[j], y[j])
-            key[j] = distance if valid[k, j] and distance <= reach else np.inf
-        order = np.argsort(key, kind="mergesort")
-        for r in range(min(rows.shape[1] - 1, slots)):
-            j = order[r]
-            if key[j] == np.inf:
-                break
+            if not distance <= reach:
+                continue
+            key[j] = distance
+            if found == wanted and not distance < key[chosen[wanted - 1]]:
+                continue
+            rank = min(found, wanted - 1)
+            while rank > 0 and distance < key[chosen[rank - 1]]:
+                chosen[rank] = chosen[rank - 1]
+                rank -= 1
+            chosen[rank] = j
+            found = min(found + 1, wanted)
+        for r in range(found):
+            j = chosen[r]
             speed, row = vehicles[k, j, 3], rows[k, 1 + r]
             row[0] = 1.0
             row[1], row[2] = x[j] / reach, y[j] / reach

@@ -118,6 +118,7 @@ class Lidar(Sensor):
         if beams < 1 or range_m <= 0 or noise_std < 0:
             raise ValueError("lidar needs beams >= 1, range_m > 0 and noise_std >= 0")
         self.beams, self.range_m, self.noise_std = int(beams), float(range_m), float(noise_std)
+        self.uses_rng = self.noise_std > 0
         self.beam_step = 2 * np.pi / self.beams
         offsets = self.beam_step * np.arange(self.beams)
         # beams in the ego frame (x forward, y right): the world is turned into it instead

@@ -43,6 +43,7 @@ class FrameStack(Sensor):
         if frames < 1:
             raise UsageError(f"stack must be >= 1 for sensor {sensor.name!r}")
         self.sensor, self.frames, self.name = sensor, frames, sensor.name
+        self.uses_rng = sensor.uses_rng
         # images stack along their channel axis: first for (C, H, W), last for RGB (H, W, 3)
         rgb = len(sensor.space.shape) == 3 and sensor.space.shape[-1] == 3
         self.axis = -1 if rgb else 0

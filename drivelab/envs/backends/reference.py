@@ -51,9 +51,12 @@ class PerWorldSimulator:
             self.worlds[k] = self.backends[k].reset(int(seeds[k]))
         return WorldBatch.stack(self.worlds)
 
-    def step(self, controls: np.ndarray) -> WorldBatch:
-        """One policy step of every world: ``controls`` (K,) meta-actions or (K, 2) rows."""
-        self.worlds = [
-            backend.step(control) for backend, control in zip(self.backends, controls, strict=True)
-        ]
+    def step(
+        self, controls: np.ndarray, restart: np.ndarray | None = None, seeds: np.ndarray | None = None
+    ) -> WorldBatch:
+        """One policy step of every world: ``controls`` (K,) meta-actions or (K, 2) rows; the
+        worlds of ``restart`` (K,) start a new episode from ``seeds[k]`` instead."""
+        for k, (backend, control) in enumerate(zip(self.backends, controls, strict=True)):
+            restarting = restart is not None and restart[k]
+            self.worlds[k] = backend.reset(int(seeds[k])) if restarting else backend.step(control)
         return WorldBatch.stack(self.worlds)

@@ -144,3 +144,46 @@ def test_refuses_bad_arguments():
     simulator = FastSimulator(SCENARIOS["highway"], "regular", "meta", 2)
     with pytest.raises(UsageError, match="before reset_where"):
         simulator.step(np.zeros(2, dtype=int))
+
+
+@pytest.mark.parametrize("scenario, traffic, control", CASES)
+def test_restart_in_step_is_a_step_then_reset_where(scenario, traffic, control):
+    """``step(controls, restart, seeds)`` (NEXT_STEP autoreset: the restarting worlds are set up
+    instead of simulated) gives the batch and state of a step followed by ``reset_where``."""
+    worlds = 4
+    a = FastSimulator(SCENARIOS[scenario], traffic, control, worlds)
+    b = FastSimulator(SCENARIOS[scenario], traffic, control, worlds)
+    rng = np.random.default_rng(7)
+    for simulator in (a, b):
+        simulator.reset_where(np.ones(worlds, dtype=bool), np.arange(worlds) + 20)
+    for t in range(8):
+        controls = _controls(control, rng, worlds)
+        restart = np.array([(t + k) % 3 == 0 for k in range(worlds)])
+        seeds = rng.integers(1000, size=worlds)
+        a.step(controls)
+        expected = a.reset_where(restart, seeds)
+        got = b.step(controls, restart, seeds)
+        for k in range(worlds):
+            assert_same(got[k], expected[k], f"{scenario} world {k} step {t}")
+            assert _state(b, k)[1:] == _state(a, k)[1:]
+            np.testing.assert_array_equal(b.vehicles[k], a.vehicles[k])
+
+
+@pytest.mark.parametrize("traffic", ["empty", "regular", "dense"])
+@pytest.mark.parametrize("control", ["meta", "continuous"])
+def test_batched_highway_set_up_is_spawn_highway(traffic, control):
+    """The highway's episodes set up for many worlds in one call are ``spawn_highway``'s rows
+    (tested against highway-env's own reset) in every world, padding zero."""
+    from drivelab.envs.backends.fast.spawn import spawn_highway
+
+    seeds = np.array([0, 3, 99, 2**31 - 2, 123456])
+    simulator = FastSimulator(SCENARIOS["highway"], traffic, control, len(seeds))
+    simulator.reset_where(np.ones(len(seeds), dtype=bool), seeds)
+    road = simulator._road
+    for k, seed in enumerate(seeds):
+        rows = spawn_highway(
+            int(seed), simulator.table, road.graph_keys, road.config, control, road.target_speeds
+        )
+        assert simulator.count[k] == len(rows) and simulator.ego[k] == 0
+        np.testing.assert_array_equal(simulator.vehicles[k, : len(rows)], rows)
+        assert not simulator.vehicles[k, len(rows) :].any()

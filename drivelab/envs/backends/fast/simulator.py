@@ -30,7 +30,9 @@ from highway_env.vehicle.objects import Obstacle
 from numba import njit
 
 from drivelab.envs.backends.fast import lanes as L
+from drivelab.envs.backends.fast import pcg64
 from drivelab.envs.backends.fast import traffic as T
+from drivelab.envs.backends.fast.highway_spawn import spawn_highway_worlds
 from drivelab.envs.backends.fast.spawn import IntersectionTraffic, highway_spawn_tables, spawn_highway
 from drivelab.envs.backends.highway import HighwayBackend, build_road_map
 from drivelab.envs.route import SEARCH_WINDOW_M, RouteTracker
@@ -269,15 +271,19 @@ def project_routes(
     segment_count: np.ndarray,
     closed: np.ndarray,
     fresh: np.ndarray,
+    update: np.ndarray,
     progress: np.ndarray,
 ) -> None:
     """RouteTracker.project for K egos at (x[k], y[k]) on route ``route[k]`` of the padded route
     table (R routes: ``starts`` / ``segments`` (R, S, 2), ``lengths2`` / ``segment_m`` /
-    ``stations`` (R, S + 1)); in place in ``progress`` (K,): the nearest point where ``fresh[k]``,
+    ``stations`` (R, S + 1)); in place in ``progress`` (K,), for the worlds of ``update`` (a
+    projection is not idempotent to the last bit): the nearest point where ``fresh[k]``,
     else the nearest within SEARCH_WINDOW_M of the previous progress (unwrapped on a circuit).
     Same arithmetic in the same order as RouteTracker's numpy code. (Serial: well under a
     microsecond per world.)"""
     for k in range(x.size):
+        if not update[k]:
+            continue
         r = route[k]
         previous = progress[k]
         lap = stations[r, segment_count[r]]
@@ -433,6 +439,7 @@ class FastSimulator:
         self.progress_m = np.zeros(k)
         self.route_index = np.zeros(k, dtype=np.int64)
         self.rngs: list[np.random.Generator | None] = [None] * k
+        self._lane_route: np.ndarray | None = None  # route index per lane row (batched set-up)
         self._route_of_lane: dict[int, int] = {}
         self._trackers: list[RouteTracker] = []
         self.batch: WorldBatch | None = None
@@ -514,36 +521,74 @@ class FastSimulator:
         """Start a new episode from ``seeds[k]`` in every world where ``mask[k]`` (K,); the other
         worlds are untouched. Returns the whole batch."""
         mask = np.asarray(mask, dtype=bool)
-        for k in np.flatnonzero(mask):  # one episode set-up per reset world (not per step)
-            rows, ego, regulation, rng = self._episode(int(seeds[k]))
-            self._fit(len(rows))
-            self.vehicles[k] = 0.0
-            self.vehicles[k, : len(rows)] = rows
-            self.count[k], self.ego[k], self.regulation[k], self.rngs[k] = len(rows), ego, regulation, rng
-            self.route_index[k] = self._route_for_lane(int(rows[ego, T.LANE]))
-            self.time_s[k] = 0.0
-        self._project(fresh=mask)
+        self._start_episodes(np.flatnonzero(mask), seeds)
+        self._project(fresh=mask, update=mask)
         self.batch = self._export()
         return self.batch
 
-    def step(self, controls: np.ndarray) -> WorldBatch:
+    def _start_episodes(self, worlds: np.ndarray, seeds: np.ndarray) -> None:
+        """New episodes in ``worlds`` from ``seeds[k]``: the highway in one compiled call for all
+        of them, the other scenarios one episode set-up per world."""
+        if worlds.size == 0:
+            return
+        if self.spawner is spawn_highway:
+            self._spawn_highway(worlds, seeds)
+        else:
+            for k in worlds:
+                rows, ego, regulation, rng = self._episode(int(seeds[k]))
+                self._fit(len(rows))
+                self.vehicles[k] = 0.0
+                self.vehicles[k, : len(rows)] = rows
+                self.count[k], self.ego[k], self.regulation[k], self.rngs[k] = len(rows), ego, regulation, rng
+                self.route_index[k] = self._route_for_lane(int(rows[ego, T.LANE]))
+        self.time_s[worlds] = 0.0
+
+    def _spawn_highway(self, worlds: np.ndarray, seeds: np.ndarray) -> None:
+        """``spawn_highway_worlds`` for ``worlds``; every lane's route is registered at the first
+        call so that a world's route index is an array lookup."""
+        road, config = self._road, self._road.config
+        if self._spawn_tables is None:
+            self._spawn_tables = highway_spawn_tables(self.table, road.graph_keys)
+            lanes = range(len(self.table.indices))
+            self._lane_route = np.array([self._route_for_lane(lane) for lane in lanes])
+        vehicles = int(config["vehicles_count"])
+        self._fit(1 + vehicles)
+        lane_id = config["initial_lane_id"]
+        speeds = road.target_speeds if self.control == "meta" else np.zeros(0)
+        spawn_highway_worlds(
+            pcg64.seeded_states(seeds[worlds]), worlds, self.vehicles, self.count, self.ego, self.lanes,
+            *self._spawn_tables, -1 if lane_id is None else int(lane_id), float(config["ego_spacing"]),
+            vehicles, float(1 / config["vehicles_density"]), np.asarray(speeds, dtype=float),
+        )  # fmt: skip
+        self.regulation[worlds] = 0.0
+        self.route_index[worlds] = self._lane_route[self.vehicles[worlds, 0, T.LANE].astype(np.int64)]
+
+    def step(
+        self, controls: np.ndarray, restart: np.ndarray | None = None, seeds: np.ndarray | None = None
+    ) -> WorldBatch:
         """One policy step of every world: the egos' controls, ``frames`` simulation steps, the
         traffic's departures and arrivals, the route progress; returns the new batch.
 
         :param controls: meta: (K,) int meta-actions; continuous: (K, 2) [acceleration, steering]
             normalised in [-1, 1] (highway-env's order).
+        :param restart: (K,) bool: these worlds start a new episode from ``seeds[k]`` instead of
+            stepping (gymnasium's NEXT_STEP autoreset), as ``reset_where`` would start it.
         """
         if self.batch is None:
             raise UsageError("FastSimulator.step before reset_where")
+        if restart is None:
+            restart = np.zeros(self.num_worlds, dtype=bool)
+        restart = np.asarray(restart, dtype=bool)
         self.apply_controls(controls)
         T.simulate_worlds(
-            self.vehicles, self.count, self.lanes, self.idm, self.frames, self.dt_s, self.regulation
+            self.vehicles, self.count, self.lanes, self.idm, self.frames, self.dt_s, self.regulation, ~restart
         )
         self.time_s += 1 / self.policy_frequency_hz
         if self.traffic_flow:  # IntersectionEnv.step: clear, then maybe spawn
             clear_departed(self.vehicles, self.count, self.ego, self.lanes, self._road.exit_lane)
             self._spawn_arrivals()
-        self._project(fresh=np.zeros(self.num_worlds, dtype=bool))
+        self._start_episodes(np.flatnonzero(restart), seeds)
+        self._project(fresh=restart, update=np.ones(self.num_worlds, dtype=bool))
         self.batch = self._export()
         return self.batch
 
@@ -571,12 +616,12 @@ class FastSimulator:
                 self.vehicles[k, n] = row
                 self.count[k] = n + 1
 
-    def _project(self, fresh: np.ndarray) -> None:
+    def _project(self, fresh: np.ndarray, update: np.ndarray) -> None:
         ego = self.vehicles[np.arange(self.num_worlds), self.ego]
         project_routes(
             ego[:, T.X].copy(), ego[:, T.Y].copy(), self.route_index, self.r_starts, self.r_segments,
             self.r_lengths2, self.r_segment_m, self.r_stations, self.r_count - 1, self.r_closed,
-            fresh, self.progress_m,
+            fresh, update, self.progress_m,
         )  # fmt: skip
 
     def _export(self) -> WorldBatch:

@@ -645,15 +645,17 @@ def simulate(
 
 
 @njit(cache=True)
-def _simulate_worlds_serial(v, count, lanes, p, frames, dt, regulation) -> None:
+def _simulate_worlds_serial(v, count, lanes, p, frames, dt, regulation, active) -> None:
     for k in range(v.shape[0]):
-        simulate(v[k, : count[k]], lanes, p, frames, dt, regulation[k])
+        if active[k]:
+            simulate(v[k, : count[k]], lanes, p, frames, dt, regulation[k])
 
 
 @njit(cache=True, parallel=True)
-def _simulate_worlds_parallel(v, count, lanes, p, frames, dt, regulation) -> None:
+def _simulate_worlds_parallel(v, count, lanes, p, frames, dt, regulation, active) -> None:
     for k in prange(v.shape[0]):
-        simulate(v[k, : count[k]], lanes, p, frames, dt, regulation[k])
+        if active[k]:
+            simulate(v[k, : count[k]], lanes, p, frames, dt, regulation[k])
 
 
 def simulate_worlds(
@@ -664,12 +666,16 @@ def simulate_worlds(
     frames: int,
     dt: float,
     regulation: np.ndarray,
+    active: np.ndarray | None = None,
 ) -> None:
     """``simulate`` for K worlds: world k's vehicles are ``v[k, :count[k]]`` of the (K, N_max,
-    VEHICLE_COLUMNS) buffer and its regulation state ``regulation[k]`` (K, 2). The worlds share
+    VEHICLE_COLUMNS) buffer and its regulation state ``regulation[k]`` (K, 2); only the worlds
+    of ``active`` (K,) bool (default: all) are simulated. The worlds share
     the road and the IDM parameters and never see each other: one numba thread per world where
     numba has several threads and there are several worlds (else the serial loop, which saves
     the thread pool's launch)."""
     parallel = v.shape[0] > 1 and numba.get_num_threads() > 1
     kernel = _simulate_worlds_parallel if parallel else _simulate_worlds_serial
-    kernel(v, count, lanes, p, frames, dt, regulation)
+    if active is None:
+        active = np.ones(v.shape[0], dtype=np.bool_)
+    kernel(v, count, lanes, p, frames, dt, regulation, active)

@@ -1,0 +1,100 @@
+"""The highway's episode set-up for many worlds in one compiled call.
+
+``spawn_highway_worlds`` writes, for each world to reset, the rows ``HighwayEnv._create_vehicles``
+(one controlled vehicle, ``Vehicle.create_random``, ``IDMVehicle.randomize_behavior``) would
+create from that world's seed, straight into the simulator's vehicle buffer. The random numbers
+come from :mod:`pcg64` generators seeded as ``gymnasium.utils.seeding.np_random(seed)``, drawn in
+highway-env's order, so a seed gives the same vehicles as highway-env's own reset (tested).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from drivelab.envs.backends.fast import lanes as L
+from drivelab.envs.backends.fast import pcg64
+from drivelab.envs.backends.fast import traffic as T
+
+DELTA_RANGE = (3.5, 4.5)  # IDMVehicle.DELTA_RANGE
+
+
+@njit(cache=True)
+def _create_random(
+    rng: np.ndarray,
+    lanes: np.ndarray,
+    to_roads: np.ndarray,
+    to_count: np.ndarray,
+    decay: np.ndarray,
+    speed: float,
+    lane_id: int,
+    spacing: float,
+    front_x: float,
+    row: np.ndarray,
+) -> None:
+    """Vehicle.create_random into ``row``: a random road (``np_random.choice`` of a sequence draws
+    ``integers(0, len)``), ``lane_id`` or a random lane (-1), ``speed`` or a random one within its
+    speed limit (NaN), placed ahead of the front-most vehicle (``front_x``, NaN: none yet)."""
+    f = pcg64.bounded_int(rng, to_count.size)
+    road = to_roads[f, pcg64.bounded_int(rng, to_count[f])]
+    count = int(lanes[road, L.LANE_COUNT])
+    lane = road + (lane_id if lane_id >= 0 else pcg64.bounded_int(rng, count))
+    if np.isnan(speed):
+        limit = lanes[lane, L.SPEED_LIMIT]
+        speed = pcg64.uniform(rng, 0.7 * limit, 0.8 * limit)
+    offset = spacing * (12 + 1.0 * speed) * decay[count]
+    x0 = 3 * offset if np.isnan(front_x) else front_x
+    x0 += offset * pcg64.uniform(rng, 0.9, 1.1)
+    x, y = L.position(lanes, lane, x0, 0.0)
+    row[:] = 0.0
+    row[T.X], row[T.Y], row[T.HEADING], row[T.SPEED] = x, y, L.heading_at(lanes, lane, x0), speed
+    row[T.LANE] = row[T.TARGET_LANE] = L.closest_lane(lanes, x, y, row[T.HEADING])
+    row[T.TARGET_SPEED] = speed
+    row[T.DELTA] = 4.0
+    row[T.LEN], row[T.WID] = T.CAR_LENGTH, T.CAR_WIDTH
+
+
+@njit(cache=True)
+def spawn_highway_worlds(
+    states: np.ndarray,
+    worlds: np.ndarray,
+    v: np.ndarray,
+    count: np.ndarray,
+    ego: np.ndarray,
+    lanes: np.ndarray,
+    to_roads: np.ndarray,
+    to_count: np.ndarray,
+    decay: np.ndarray,
+    ego_lane_id: int,
+    ego_spacing: float,
+    vehicles: int,
+    spacing: float,
+    target_speeds: np.ndarray,
+) -> None:
+    """HighwayEnv._create_vehicles in world ``worlds[m]`` from generator ``states[m]`` (M, 6),
+    for every m: rows ``v[k, :1 + vehicles]`` (the ego first, the rest zeros), ``count[k]`` and
+    ``ego[k]`` = 0. A non-empty ``target_speeds`` makes the ego an MDPVehicle (its target speed
+    snapped to the nearest allowed one, as MDPVehicle does), an empty one a plain vehicle."""
+    for m in range(worlds.size):
+        k, rng = worlds[m], states[m]
+        w = v[k]
+        w[:] = 0.0
+        _create_random(rng, lanes, to_roads, to_count, decay, 25.0, ego_lane_id, ego_spacing, np.nan, w[0])
+        w[0, T.CHECK_COLLISIONS] = 1.0
+        if target_speeds.size:
+            top = target_speeds.size - 1
+            ratio = (w[0, T.SPEED] - target_speeds[0]) / (target_speeds[-1] - target_speeds[0])
+            index = int(min(max(np.rint(ratio * top), 0.0), float(top)))  # np.round: half to even
+            w[0, T.TARGET_SPEED], w[0, T.KIND] = target_speeds[index], T.CONTROLLED
+        else:  # a plain kinematic vehicle has no target speed
+            w[0, T.TARGET_SPEED], w[0, T.KIND] = 0.0, T.PLAIN
+        # every highway lane starts at x = 0 along +x: a vehicle's longitudinal coordinate is its x
+        front_x = w[0, T.X]
+        for j in range(1, 1 + vehicles):
+            row = w[j]
+            _create_random(rng, lanes, to_roads, to_count, decay, np.nan, -1, spacing, front_x, row)
+            front_x = max(front_x, row[T.X])
+            row[T.KIND] = T.IDM
+            row[T.TIMER] = ((row[T.X] + row[T.Y]) * np.pi) % 1.0  # IDMVehicle's initial timer
+            row[T.DELTA] = pcg64.uniform(rng, DELTA_RANGE[0], DELTA_RANGE[1])
+        count[k], ego[k] = 1 + vehicles, 0

@@ -1,0 +1,46 @@
+"""The compiled PCG64 draws numpy's numbers: seeded as gymnasium's ``np_random``, same order."""
+
+import numpy as np
+import pytest
+from gymnasium.utils import seeding
+
+from drivelab.envs.backends.fast import pcg64
+
+
+@pytest.mark.parametrize("seed", [0, 1, 42, 2**31 - 2, 2**40 + 7])
+def test_seeded_state_is_numpys(seed):
+    state = pcg64.seeded_states([seed])[0]
+    expected = seeding.np_random(seed)[0].bit_generator.state["state"]
+    assert (int(state[pcg64.STATE_HI]) << 64) | int(state[pcg64.STATE_LO]) == expected["state"]
+    assert (int(state[pcg64.INC_HI]) << 64) | int(state[pcg64.INC_LO]) == expected["inc"]
+
+
+@pytest.mark.parametrize("seed", [3, 2024])
+def test_mixed_draws_follow_numpys_generator(seed):
+    """integers(0, n) (32-bit buffered Lemire, n = 1 draws nothing), uniform and raw 64-bit
+    outputs interleaved at random give numpy's numbers exactly."""
+    generator, _ = seeding.np_random(seed)
+    state = pcg64.seeded_states([seed])[0]
+    choose = np.random.default_rng(seed + 1)
+    for _ in range(3000):
+        kind = choose.integers(3)
+        if kind == 0:
+            n = int(choose.choice([1, 2, 3, 7, 1000, 2**31, 2**32 - 1]))
+            assert pcg64.bounded_int(state, n) == generator.integers(0, n)
+        elif kind == 1:
+            low, high = choose.uniform(-5, 5), choose.uniform(5, 50)
+            assert pcg64.uniform(state, low, high) == generator.uniform(low, high)
+        else:
+            assert pcg64.next_uint64(state) == generator.bit_generator.random_raw()
+
+
+def test_seed_sequence_hash_is_numpys_for_many_seeds():
+    large = np.random.default_rng(0).integers(0, 2**62, 200)
+    seeds = np.concatenate([np.arange(50), large, [2**32 - 1, 2**32]])
+    states = pcg64.seeded_states(seeds)
+    for seed, state in zip(seeds, states, strict=True):
+        expected = np.random.PCG64(np.random.SeedSequence(int(seed))).state["state"]
+        assert (int(state[pcg64.STATE_HI]) << 64) | int(state[pcg64.STATE_LO]) == expected["state"], seed
+        assert (int(state[pcg64.INC_HI]) << 64) | int(state[pcg64.INC_LO]) == expected["inc"], seed
+    with pytest.raises(ValueError, match="seeds must be >= 0"):
+        pcg64.seeded_states([-1])
