@@ -365,11 +365,15 @@ def randomize_behavior(row: np.ndarray, rng: np.random.Generator) -> None:
 
 
 def random_lane_index(road, rng: np.random.Generator) -> int:
-    """RoadNetwork.random_lane_index as a lane row: the same three draws."""
+    """RoadNetwork.random_lane_index as a lane row: the same three draws (``Generator.choice``
+    of a list draws ``integers(0, len)``, the same number, without building an array)."""
     graph = road.graph_keys
-    _from = rng.choice(list(graph))
-    _to = rng.choice(graph[_from])
-    first = road.geometry.row_of[(_from, _to, 0)]
+    froms = road.cache.get("froms")
+    if froms is None:
+        froms = road.cache["froms"] = list(graph)
+    _from = froms[rng.integers(0, len(froms))]
+    tos = graph[_from]
+    first = road.geometry.row_of[(_from, tos[rng.integers(0, len(tos))], 0)]
     return first + int(rng.integers(int(road.table.rows[first, L.LANE_COUNT])))
 
 
