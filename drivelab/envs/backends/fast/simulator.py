@@ -7,13 +7,13 @@ one thread per world where numba has several), the scenario's arrivals and depar
 route projections and the export into a :class:`~drivelab.world.batch.WorldBatch`, all compiled
 loops over worlds.
 
-The road (LaneTable, RoadMap, routes) is converted from highway-env once per scenario and
-configuration and shared by every simulator of it (``_road``). The highway is spawned by
-drivelab's own ``spawn.spawn_highway``: no highway-env object outlives that conversion. The other
-scenarios are set up by highway-env's own code: one builder env per simulator resets the
-masked worlds one after the other and each is taken over as arrays; the intersection's arrivals
-between steps then draw from the world's own generator, a copy of the builder's right after that
-world's reset (the numbers highway-env's ``np_random`` would have given it).
+The road (LaneTable, RoadMap, the ego's route from every lane, shortest paths, the vehicle
+classes' constants) is converted from highway-env once per scenario and configuration and shared
+by every simulator of it (``_road``); no highway-env object outlives that conversion. Every
+episode is then set up by drivelab's own spawner of the scenario (``SPAWNERS``: the same draws
+from the same seed as highway-env's ``_make_vehicles``, hence the same vehicles); the
+intersection's arrivals between steps draw from the generator its spawner returned, as
+highway-env's ``np_random`` would go on.
 """
 
 from __future__ import annotations
@@ -33,7 +33,16 @@ from drivelab.envs.backends.fast import lanes as L
 from drivelab.envs.backends.fast import pcg64
 from drivelab.envs.backends.fast import traffic as T
 from drivelab.envs.backends.fast.highway_spawn import spawn_highway_worlds
-from drivelab.envs.backends.fast.spawn import IntersectionTraffic, highway_spawn_tables, spawn_highway
+from drivelab.envs.backends.fast.spawn import (
+    LaneGeometry,
+    all_shortest_paths,
+    highway_spawn_tables,
+    spawn_highway_episode,
+)
+from drivelab.envs.backends.fast.spawn_intersection import IntersectionTraffic, spawn_intersection
+from drivelab.envs.backends.fast.spawn_merge import spawn_merge
+from drivelab.envs.backends.fast.spawn_racetrack import spawn_racetrack
+from drivelab.envs.backends.fast.spawn_roundabout import spawn_roundabout
 from drivelab.envs.backends.highway import HighwayBackend, build_road_map
 from drivelab.envs.route import SEARCH_WINDOW_M, RouteTracker
 from drivelab.errors import UsageError
@@ -49,7 +58,15 @@ from drivelab.world.geometry import FULL_LOCK_RAD
 from drivelab.world.scenario import META_ACTIONS, Scenario
 from drivelab.world.state import RoadMap
 
-SPAWNERS = {"highway": spawn_highway}  # scenarios whose episodes drivelab sets up itself
+# Each scenario's episode set-up: spawner(seed, road, control) -> (vehicle rows (N, VEHICLE_COLUMNS),
+# ego row, regulation (2,), the generator its draws go on from between steps, or None)
+SPAWNERS = {
+    "highway": spawn_highway_episode,
+    "merge": spawn_merge,
+    "roundabout": spawn_roundabout,
+    "intersection": spawn_intersection,
+    "racetrack": spawn_racetrack,
+}
 META = META_ACTIONS
 LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER = range(5)
 ACCELERATION_RANGE, STEERING_RANGE = (-5.0, 5.0), (-FULL_LOCK_RAD, FULL_LOCK_RAD)  # ContinuousAction's
@@ -133,9 +150,19 @@ def idm_parameters() -> np.ndarray:
 class _Road:
     """A scenario's road and timing as arrays, shared by every simulator of that configuration.
 
-    :param routes: ego route per start lane row (filled lazily from a builder where not complete).
+    :param routes: ego route (RouteTracker) per start lane row, planned at conversion for every
+        lane a route can be planned from.
     :param in_junction: (L,) lane rows that count as junction area.
     :param exit_lane: (L,) lane rows that are an intersection exit (from "il…" to "o…").
+    :param geometry: highway-env's lane formulas over the table (the spawners').
+    :param paths: ``RoadNetwork.shortest_path`` between every two nodes.
+    :param objects: (M, VEHICLE_COLUMNS) the road's static obstacles, after every vehicle.
+    :param idm: the IDM / MOBIL parameters as the traffic class had them at conversion.
+    :param ego_length, ego_width: the ego class's size; ``npc_*``, ``lane_change_delay``,
+        ``idm_delta``: the traffic class's size, LANE_CHANGE_DELAY and default DELTA.
+    :param keep_npcs, extra_vehicles: the traffic level's drivelab keys (HighwayBackend's).
+    :param destination: the scenario's destination node (extra vehicles are routed to it).
+    :param cache: static arrays a spawner derives from the road, made at its first use.
     """
 
     table: L.LaneTable
@@ -151,6 +178,20 @@ class _Road:
     in_junction: np.ndarray
     exit_lane: np.ndarray
     regulation_period: int
+    geometry: LaneGeometry
+    paths: dict
+    objects: np.ndarray
+    idm: np.ndarray
+    ego_length: float
+    ego_width: float
+    npc_length: float
+    npc_width: float
+    lane_change_delay: float
+    idm_delta: float
+    keep_npcs: bool
+    extra_vehicles: int
+    destination: str | None
+    cache: dict
 
 
 _ROADS: dict[tuple, _Road] = {}
@@ -160,24 +201,29 @@ def _road_key(scenario: Scenario, traffic: str, control: str, overrides: dict | 
     return (repr(scenario), traffic, control, repr(sorted((overrides or {}).items())))
 
 
-def _convert_road(builder: HighwayBackend, scenario: Scenario, all_routes: bool) -> _Road:
-    """The road highway-env built in ``builder`` (after a reset) as a _Road; with ``all_routes``
-    the ego route from every lane is planned now (the builder is then no longer needed)."""
+def _convert_road(builder: HighwayBackend, scenario: Scenario) -> _Road:
+    """The road highway-env built in ``builder`` (after a reset) as a _Road, with everything the
+    episodes need planned now: the builder is dropped afterwards."""
     env = builder.env
     network = env.road.network
     table = L.LaneTable.from_network(network)
     config = env.config
     routes = {}
-    if all_routes:
-        for row, index in enumerate(table.indices):
-            routes[row] = builder.route_for(builder._plan_route(index))
+    for row, index in enumerate(table.indices):
+        lanes = builder._plan_route(index)
+        if lanes:  # no route from a lane with no path to the destination: no ego starts there
+            routes[row] = builder.route_for(lanes)
     if isinstance(env.road, RegulatedRoad) and RegulatedRoad.YIELD_DURATION != 0:
         raise NotImplementedError("the fast backend assumes RegulatedRoad.YIELD_DURATION = 0")
     dt_s = 1 / config["simulation_frequency"]
+    npc_class = hw_utils.class_from_path(config["other_vehicles_type"])
+    if npc_class is not IDMVehicle:
+        raise NotImplementedError(f"the fast backend has no {npc_class.__name__}")
+    graph_keys = {f: list(to) for f, to in network.graph.items()}
     return _Road(
         table=table,
         road_map=build_road_map(network),
-        graph_keys={f: list(to) for f, to in network.graph.items()},
+        graph_keys=graph_keys,
         config=dict(config),
         target_speeds=np.asarray(getattr(env.action_type, "target_speeds", [0.0]), dtype=float),
         frames=int(config["simulation_frequency"] // config["policy_frequency"]),
@@ -190,6 +236,20 @@ def _convert_road(builder: HighwayBackend, scenario: Scenario, all_routes: bool)
         regulation_period=int(1 / dt_s / RegulatedRoad.REGULATION_FREQUENCY)
         if isinstance(env.road, RegulatedRoad)
         else 0,
+        geometry=LaneGeometry(table),
+        paths=all_shortest_paths(graph_keys),
+        objects=vehicles_to_array([], table, env.road.objects),
+        idm=idm_parameters(),
+        ego_length=float(env.vehicle.LENGTH),
+        ego_width=float(env.vehicle.WIDTH),
+        npc_length=float(npc_class.LENGTH),
+        npc_width=float(npc_class.WIDTH),
+        lane_change_delay=float(npc_class.LANE_CHANGE_DELAY),
+        idm_delta=float(IDMVehicle.DELTA),
+        keep_npcs=builder.keep_npcs,
+        extra_vehicles=builder.extra_vehicles,
+        destination=scenario.destination,
+        cache={},
     )
 
 
@@ -403,18 +463,17 @@ class FastSimulator:
             raise UsageError(f"the fast backend has no arrival rule {scenario.arrival!r}")
         if num_worlds < 1:
             raise UsageError(f"num_worlds must be >= 1 (got {num_worlds})")
+        if scenario.name not in SPAWNERS:
+            raise UsageError(f"the fast backend has no episode set-up for scenario {scenario.name!r}")
         self.scenario, self.control, self.num_worlds = scenario, control, num_worlds
-        self.spawner = SPAWNERS.get(scenario.name)
-        self._spawn_tables = None  # the spawner's static arrays of this road, made at the first reset
+        self.spawner = SPAWNERS[scenario.name]
         key = _road_key(scenario, traffic, control, overrides)
-        self.builder: HighwayBackend | None = None
-        if self.spawner is None:  # highway-env sets up every episode: one builder, kept
-            self.builder = HighwayBackend(scenario, traffic, control, overrides)
         road = _ROADS.get(key)
-        if road is None:
-            builder = self.builder or HighwayBackend(scenario, traffic, control, overrides)
+        if road is None:  # highway-env builds the road once; nothing of it is kept but arrays
+            builder = HighwayBackend(scenario, traffic, control, overrides)
             builder.reset(0)
-            road = _ROADS[key] = _convert_road(builder, scenario, all_routes=self.spawner is not None)
+            road = _ROADS[key] = _convert_road(builder, scenario)
+            del builder
         self._road = road
         self.table, self.lanes, self.road = road.table, road.table.rows, road.road_map
         self.policy_frequency_hz, self.duration_s = road.policy_frequency_hz, road.duration_s
@@ -426,10 +485,7 @@ class FastSimulator:
             self.arrival_threshold = float(scenario.arrival_x_m)
         self.arrivals = None
         if self.traffic_flow:
-            env = self.builder.env
-            self.arrivals = IntersectionTraffic(
-                self.table, env.road.network, hw_utils.class_from_path(env.config["other_vehicles_type"])
-            )
+            self.arrivals = IntersectionTraffic.of(road)
         k = num_worlds
         self.vehicles = np.zeros((k, 1, T.VEHICLE_COLUMNS))  # grows to the largest world
         self.count = np.zeros(k, dtype=np.int64)
@@ -455,13 +511,11 @@ class FastSimulator:
         self.vehicles = grown
 
     def _route_for_lane(self, lane: int) -> int:
-        """The index of the ego route that starts on lane row ``lane`` (planned on first use)."""
+        """The index of the ego route that starts on lane row ``lane`` (padded on first use)."""
         if lane not in self._route_of_lane:
             tracker = self._road.routes.get(lane)
             if tracker is None:
-                tracker = self._road.routes[lane] = self.builder.route_for(
-                    self.builder._plan_route(self.table.indices[lane])
-                )
+                raise NotImplementedError(f"no ego route from lane {self.table.indices[lane]}")
             self._route_of_lane[lane] = len(self._trackers)
             self._trackers.append(tracker)
             self._pad_routes()
@@ -489,32 +543,7 @@ class FastSimulator:
     # --- episodes -------------------------------------------------------------------------------
     def _episode(self, seed: int) -> tuple[np.ndarray, int, np.ndarray, np.random.Generator | None]:
         """A new episode's (vehicle rows, ego row, regulation state, generator between steps)."""
-        road = self._road
-        if self.spawner is not None:
-            if self._spawn_tables is None:
-                self._spawn_tables = highway_spawn_tables(self.table, road.graph_keys)
-            rows = self.spawner(
-                seed,
-                self.table,
-                road.graph_keys,
-                road.config,
-                self.control,
-                road.target_speeds,
-                self._spawn_tables,
-            )
-            return rows, 0, np.zeros(2), None
-        env = self.builder.env
-        env.reset(seed=int(seed))
-        self.builder.arrange_traffic()
-        rows = vehicles_to_array(env.road.vehicles, self.table, env.road.objects)
-        ego = env.road.vehicles.index(env.vehicle)
-        regulation = np.zeros(2)
-        if road.regulation_period:
-            regulation[:] = road.regulation_period, env.road.steps
-        rng = None
-        if self.traffic_flow:  # the episode's generator from here on, as highway-env's would go on
-            rng = np.random.Generator(type(env.np_random.bit_generator)())
-            rng.bit_generator.state = env.np_random.bit_generator.state
+        rows, ego, regulation, rng = self.spawner(int(seed), self._road, self.control)
         return rows, ego, regulation, rng
 
     def reset_where(self, mask: np.ndarray, seeds: np.ndarray) -> WorldBatch:
@@ -531,7 +560,7 @@ class FastSimulator:
         of them, the other scenarios one episode set-up per world."""
         if worlds.size == 0:
             return
-        if self.spawner is spawn_highway:
+        if self.spawner is spawn_highway_episode:
             self._spawn_highway(worlds, seeds)
         else:
             for k in worlds:
@@ -547,8 +576,10 @@ class FastSimulator:
         """``spawn_highway_worlds`` for ``worlds``; every lane's route is registered at the first
         call so that a world's route index is an array lookup."""
         road, config = self._road, self._road.config
-        if self._spawn_tables is None:
-            self._spawn_tables = highway_spawn_tables(self.table, road.graph_keys)
+        tables = road.cache.get("highway")
+        if tables is None:
+            tables = road.cache["highway"] = highway_spawn_tables(self.table, road.graph_keys)
+        if self._lane_route is None:
             lanes = range(len(self.table.indices))
             self._lane_route = np.array([self._route_for_lane(lane) for lane in lanes])
         vehicles = int(config["vehicles_count"])
@@ -557,7 +588,7 @@ class FastSimulator:
         speeds = road.target_speeds if self.control == "meta" else np.zeros(0)
         spawn_highway_worlds(
             pcg64.seeded_states(seeds[worlds]), worlds, self.vehicles, self.count, self.ego, self.lanes,
-            *self._spawn_tables, -1 if lane_id is None else int(lane_id), float(config["ego_spacing"]),
+            *tables, -1 if lane_id is None else int(lane_id), float(config["ego_spacing"]),
             vehicles, float(1 / config["vehicles_density"]), np.asarray(speeds, dtype=float),
         )  # fmt: skip
         self.regulation[worlds] = 0.0
