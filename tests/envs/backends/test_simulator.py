@@ -171,19 +171,17 @@ def test_restart_in_step_is_a_step_then_reset_where(scenario, traffic, control):
 
 @pytest.mark.parametrize("traffic", ["empty", "regular", "dense"])
 @pytest.mark.parametrize("control", ["meta", "continuous"])
-def test_batched_highway_set_up_is_spawn_highway(traffic, control):
-    """The highway's episodes set up for many worlds in one call are ``spawn_highway``'s rows
-    (tested against highway-env's own reset) in every world, padding zero."""
-    from drivelab.envs.backends.fast.spawn import spawn_highway
+def test_batched_highway_set_up_is_the_one_world_set_up(traffic, control):
+    """The highway's episodes set up for many worlds in one call (the simulator's reset) are the
+    scenario's one-world spawner's rows (that one is tested against highway-env's own reset in
+    test_fast and test_spawn) in every world, padding zero."""
+    from drivelab.envs.backends.fast.spawn import spawn_highway_episode
 
     seeds = np.array([0, 3, 99, 2**31 - 2, 123456])
     simulator = FastSimulator(SCENARIOS["highway"], traffic, control, len(seeds))
     simulator.reset_where(np.ones(len(seeds), dtype=bool), seeds)
-    road = simulator._road
     for k, seed in enumerate(seeds):
-        rows = spawn_highway(
-            int(seed), simulator.table, road.graph_keys, road.config, control, road.target_speeds
-        )
-        assert simulator.count[k] == len(rows) and simulator.ego[k] == 0
+        rows, ego, _, _ = spawn_highway_episode(int(seed), simulator._road, control)
+        assert simulator.count[k] == len(rows) and simulator.ego[k] == ego == 0
         np.testing.assert_array_equal(simulator.vehicles[k, : len(rows)], rows)
         assert not simulator.vehicles[k, len(rows) :].any()

@@ -22,7 +22,7 @@ SEEDS = (0, 1, 4, 6, 15)  # intersection: 0, 4, 6 and 15 round differently with 
 # highway-env's racetrack cannot place a meta-action ego (its MDPVehicle partial has no make_on_lane)
 CASES = [
     (scenario, traffic, control)
-    for scenario in ("merge", "roundabout", "racetrack", "intersection")
+    for scenario in ("highway", "merge", "roundabout", "racetrack", "intersection")
     for traffic in TRAFFIC_LEVELS
     for control in ("meta", "continuous")
     if not (scenario == "racetrack" and control == "meta")

@@ -55,12 +55,10 @@ def _create_random(
 
 
 @njit(cache=True)
-def spawn_highway_worlds(
+def _spawn_worlds(
     states: np.ndarray,
     worlds: np.ndarray,
     v: np.ndarray,
-    count: np.ndarray,
-    ego: np.ndarray,
     lanes: np.ndarray,
     to_roads: np.ndarray,
     to_count: np.ndarray,
@@ -72,9 +70,9 @@ def spawn_highway_worlds(
     target_speeds: np.ndarray,
 ) -> None:
     """HighwayEnv._create_vehicles in world ``worlds[m]`` from generator ``states[m]`` (M, 6),
-    for every m: rows ``v[k, :1 + vehicles]`` (the ego first, the rest zeros), ``count[k]`` and
-    ``ego[k]`` = 0. A non-empty ``target_speeds`` makes the ego an MDPVehicle (its target speed
-    snapped to the nearest allowed one, as MDPVehicle does), an empty one a plain vehicle."""
+    for every m: rows ``v[k, :1 + vehicles]``, the ego first, the rest zeros. A non-empty
+    ``target_speeds`` makes the ego an MDPVehicle (its target speed snapped to the nearest
+    allowed one, as MDPVehicle does), an empty one a plain vehicle."""
     for m in range(worlds.size):
         k, rng = worlds[m], states[m]
         w = v[k]
@@ -97,4 +95,39 @@ def spawn_highway_worlds(
             row[T.KIND] = T.IDM
             row[T.TIMER] = ((row[T.X] + row[T.Y]) * np.pi) % 1.0  # IDMVehicle's initial timer
             row[T.DELTA] = pcg64.uniform(rng, DELTA_RANGE[0], DELTA_RANGE[1])
-        count[k], ego[k] = 1 + vehicles, 0
+
+
+def highway_spawn_tables(table: L.LaneTable, graph_keys: dict) -> tuple[np.ndarray, ...]:
+    """The road's static arrays the set-up draws from: (to_roads, to_count, decay)."""
+    row_of, lanes = table.row_of, table.rows
+    froms = list(graph_keys)
+    width = max(len(tos) for tos in graph_keys.values())
+    to_roads = np.zeros((len(froms), width), dtype=np.int64)
+    to_count = np.array([len(graph_keys[f]) for f in froms], dtype=np.int64)
+    for k, f in enumerate(froms):
+        to_roads[k, : to_count[k]] = [row_of[(f, t, 0)] for t in graph_keys[f]]
+    # numpy's exp, as highway-env computes the spacing factor (numba's may round differently)
+    decay = np.array([np.exp(-5 / 40 * count) for count in range(int(lanes[:, L.LANE_COUNT].max()) + 1)])
+    return to_roads, to_count, decay
+
+
+def spawn_highway_worlds(road, control: str, seeds: np.ndarray, worlds: np.ndarray, v: np.ndarray) -> int:
+    """Set up a highway episode from ``seeds[m]`` in world ``worlds[m]`` of the vehicle buffer
+    ``v`` (K, N, VEHICLE_COLUMNS), N at least the returned row count; the ego is row 0.
+
+    :param road: the simulator's converted road (its LaneTable, graph, config, target speeds;
+        the static arrays are kept in ``road.cache``).
+    :param control: "meta" (an MDPVehicle ego) or "continuous" (a plain vehicle).
+    """
+    tables = road.cache.get("highway")
+    if tables is None:
+        tables = road.cache["highway"] = highway_spawn_tables(road.table, road.graph_keys)
+    config = road.config
+    lane_id, vehicles = config["initial_lane_id"], int(config["vehicles_count"])
+    speeds = np.asarray(road.target_speeds if control == "meta" else (), dtype=float)
+    _spawn_worlds(
+        pcg64.seeded_states(seeds), np.asarray(worlds, dtype=np.int64), v, road.table.rows, *tables,
+        -1 if lane_id is None else int(lane_id), float(config["ego_spacing"]), vehicles,
+        float(1 / config["vehicles_density"]), speeds,
+    )  # fmt: skip
+    return 1 + vehicles

@@ -30,15 +30,9 @@ from highway_env.vehicle.objects import Obstacle
 from numba import njit
 
 from drivelab.envs.backends.fast import lanes as L
-from drivelab.envs.backends.fast import pcg64
 from drivelab.envs.backends.fast import traffic as T
 from drivelab.envs.backends.fast.highway_spawn import spawn_highway_worlds
-from drivelab.envs.backends.fast.spawn import (
-    LaneGeometry,
-    all_shortest_paths,
-    highway_spawn_tables,
-    spawn_highway_episode,
-)
+from drivelab.envs.backends.fast.spawn import LaneGeometry, all_shortest_paths, spawn_highway_episode
 from drivelab.envs.backends.fast.spawn_intersection import IntersectionTraffic, spawn_intersection
 from drivelab.envs.backends.fast.spawn_merge import spawn_merge
 from drivelab.envs.backends.fast.spawn_racetrack import spawn_racetrack
@@ -575,23 +569,13 @@ class FastSimulator:
     def _spawn_highway(self, worlds: np.ndarray, seeds: np.ndarray) -> None:
         """``spawn_highway_worlds`` for ``worlds``; every lane's route is registered at the first
         call so that a world's route index is an array lookup."""
-        road, config = self._road, self._road.config
-        tables = road.cache.get("highway")
-        if tables is None:
-            tables = road.cache["highway"] = highway_spawn_tables(self.table, road.graph_keys)
         if self._lane_route is None:
             lanes = range(len(self.table.indices))
             self._lane_route = np.array([self._route_for_lane(lane) for lane in lanes])
-        vehicles = int(config["vehicles_count"])
-        self._fit(1 + vehicles)
-        lane_id = config["initial_lane_id"]
-        speeds = road.target_speeds if self.control == "meta" else np.zeros(0)
-        spawn_highway_worlds(
-            pcg64.seeded_states(seeds[worlds]), worlds, self.vehicles, self.count, self.ego, self.lanes,
-            *tables, -1 if lane_id is None else int(lane_id), float(config["ego_spacing"]),
-            vehicles, float(1 / config["vehicles_density"]), np.asarray(speeds, dtype=float),
-        )  # fmt: skip
-        self.regulation[worlds] = 0.0
+        self._fit(1 + int(self._road.config["vehicles_count"]))
+        rows = spawn_highway_worlds(self._road, self.control, seeds[worlds], worlds, self.vehicles)
+        self.count[worlds] = rows
+        self.ego[worlds], self.regulation[worlds] = 0, 0.0
         self.route_index[worlds] = self._lane_route[self.vehicles[worlds, 0, T.LANE].astype(np.int64)]
 
     def step(

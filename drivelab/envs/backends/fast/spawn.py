@@ -1,148 +1,36 @@
 """Episode set-up without highway-env objects, drawing the same random numbers in the same order.
 
-``spawn_highway`` reproduces ``HighwayEnv._create_vehicles`` (one controlled vehicle) with
-``Vehicle.create_random`` and ``IDMVehicle.randomize_behavior``: given the same seed it places
-the same vehicles at the same positions and speeds as highway-env does (tested).
-
-The other scenarios' set-ups (``spawn_merge``, ``spawn_roundabout``, ``spawn_racetrack``,
-``spawn_intersection``) share the helpers below: highway-env's lane formulas in numpy call for
-call (``LaneGeometry``: the same bits as highway-env on any CPU), its vehicle constructors as
-rows (``vehicle_row``), its route planning (``shortest_path``, ``plan_route``) and drivelab's
-traffic levels (``arrange_traffic``). Every spawner has the signature
-``spawner(seed, road, control) -> (rows, ego_row, regulation, rng)``: ``road`` is the
-simulator's converted road (its LaneTable, geometry, config, paths and the vehicle constants
-read once at conversion), ``rows`` (N, VEHICLE_COLUMNS) the vehicles then the road's obstacles
-as ``vehicles_to_array`` lays them out, ``regulation`` (2,) the RegulatedRoad state, ``rng`` the
-episode's generator where draws go on between steps (else None).
+The highway's set-up is compiled for many worlds at once (``highway_spawn``; here its one-world
+form ``spawn_highway_episode``). The other scenarios' set-ups (``spawn_merge``,
+``spawn_roundabout``, ``spawn_racetrack``, ``spawn_intersection``) share the helpers below:
+highway-env's lane formulas in numpy call for call (``LaneGeometry``: the same bits as highway-
+env on any CPU), its vehicle constructors as rows (``vehicle_row``), its route planning
+(``shortest_path``, ``plan_route``) and drivelab's traffic levels (``arrange_traffic``). Every
+spawner has the signature ``spawner(seed, road, control) -> (rows, ego_row, regulation, rng)``:
+``road`` is the simulator's converted road (its LaneTable, geometry, config, paths and the
+vehicle constants read once at conversion), ``rows`` (N, VEHICLE_COLUMNS) the vehicles then the
+road's obstacles as ``vehicles_to_array`` lays them out, ``regulation`` (2,) the RegulatedRoad
+state, ``rng`` the episode's generator where draws go on between steps (else None).
 """
 
 from __future__ import annotations
 
 import numpy as np
-from gymnasium.utils import seeding
 from numba import njit
 
 from drivelab.envs.backends.fast import lanes as L
 from drivelab.envs.backends.fast import traffic as T
+from drivelab.envs.backends.fast.highway_spawn import spawn_highway_worlds
 
 DELTA_RANGE = (3.5, 4.5)  # IDMVehicle.DELTA_RANGE
 
 
-@njit(cache=True)
-def _create_random(
-    rng: np.random.Generator,
-    lanes: np.ndarray,
-    to_roads: np.ndarray,
-    to_count: np.ndarray,
-    decay: np.ndarray,
-    speed: float,
-    lane_id: int,
-    spacing: float,
-    front_x: float,
-) -> np.ndarray:
-    """Vehicle.create_random as a vehicle row: a random road (``Generator.choice`` of a sequence
-    draws ``integers(0, len)``: the same numbers), ``lane_id`` or a random lane (-1), ``speed`` or
-    a random one within its speed limit (NaN), placed ahead of the front-most vehicle
-    (``front_x``, NaN: none yet). numba's Generator methods draw numpy's numbers from the same
-    bit generator state."""
-    f = rng.integers(0, to_count.size)
-    road = to_roads[f, rng.integers(0, to_count[f])]
-    count = int(lanes[road, L.LANE_COUNT])
-    lane = road + (lane_id if lane_id >= 0 else rng.integers(0, count))
-    if np.isnan(speed):
-        limit = lanes[lane, L.SPEED_LIMIT]
-        speed = rng.uniform(0.7 * limit, 0.8 * limit)
-    offset = spacing * (12 + 1.0 * speed) * decay[count]
-    x0 = 3 * offset if np.isnan(front_x) else front_x
-    x0 += offset * rng.uniform(0.9, 1.1)
-    x, y = L.position(lanes, lane, x0, 0.0)
-    row = np.zeros(T.VEHICLE_COLUMNS)
-    row[T.X], row[T.Y], row[T.HEADING], row[T.SPEED] = x, y, L.heading_at(lanes, lane, x0), speed
-    row[T.LANE] = row[T.TARGET_LANE] = L.closest_lane(lanes, x, y, row[T.HEADING])
-    row[T.TARGET_SPEED] = speed
-    row[T.DELTA] = 4.0
-    row[T.LEN], row[T.WID] = T.CAR_LENGTH, T.CAR_WIDTH
-    return row
-
-
-@njit(cache=True)
-def _spawn_rows(
-    rng: np.random.Generator,
-    lanes: np.ndarray,
-    to_roads: np.ndarray,
-    to_count: np.ndarray,
-    decay: np.ndarray,
-    ego_lane_id: int,
-    ego_spacing: float,
-    vehicles: int,
-    spacing: float,
-) -> np.ndarray:
-    """HighwayEnv._create_vehicles as (1 + vehicles, VEHICLE_COLUMNS) rows, the ego first (its
-    kind and target speed set by the caller)."""
-    rows = np.zeros((1 + vehicles, T.VEHICLE_COLUMNS))
-    rows[0] = _create_random(rng, lanes, to_roads, to_count, decay, 25.0, ego_lane_id, ego_spacing, np.nan)
-    rows[0, T.CHECK_COLLISIONS] = 1.0
-    # every highway lane starts at x = 0 along +x: a vehicle's longitudinal coordinate is its x
-    front_x = rows[0, T.X]
-    for k in range(1, 1 + vehicles):
-        row = _create_random(rng, lanes, to_roads, to_count, decay, np.nan, -1, spacing, front_x)
-        front_x = max(front_x, row[T.X])
-        row[T.KIND] = T.IDM
-        row[T.TIMER] = ((row[T.X] + row[T.Y]) * np.pi) % 1.0  # IDMVehicle's initial timer
-        row[T.DELTA] = rng.uniform(DELTA_RANGE[0], DELTA_RANGE[1])
-        rows[k] = row
-    return rows
-
-
-def highway_spawn_tables(table: L.LaneTable, graph_keys: dict) -> tuple[np.ndarray, ...]:
-    """The road's static arrays ``spawn_highway`` draws from: (to_roads, to_count, decay), computed
-    once per road by the simulator and handed to every reset."""
-    row_of, lanes = table.row_of, table.rows
-    froms = list(graph_keys)
-    width = max(len(tos) for tos in graph_keys.values())
-    to_roads = np.zeros((len(froms), width), dtype=np.int64)
-    to_count = np.array([len(graph_keys[f]) for f in froms], dtype=np.int64)
-    for k, f in enumerate(froms):
-        to_roads[k, : to_count[k]] = [row_of[(f, t, 0)] for t in graph_keys[f]]
-    # numpy's exp, as highway-env computes the spacing factor (numba's may round differently)
-    decay = np.array([np.exp(-5 / 40 * count) for count in range(int(lanes[:, L.LANE_COUNT].max()) + 1)])
-    return to_roads, to_count, decay
-
-
-def spawn_highway(
-    seed: int, table: L.LaneTable, graph_keys: dict, config: dict, control: str, target_speeds, tables=None
-):
-    """Vehicle rows for a highway episode, the ego first, as highway-env would place them.
-
-    :param graph_keys: ``{from: [to, ...]}`` of the road network, in its order.
-    :param config: the highway-env config (vehicles_count, vehicles_density, ego_spacing, initial_lane_id).
-    :param tables: ``highway_spawn_tables(table, graph_keys)``, when the caller keeps them.
-    """
-    rng, _ = seeding.np_random(int(seed))
-    to_roads, to_count, decay = tables if tables is not None else highway_spawn_tables(table, graph_keys)
-    lane_id = config["initial_lane_id"]
-    rows = _spawn_rows(
-        rng, table.rows, to_roads, to_count, decay, -1 if lane_id is None else int(lane_id),
-        float(config["ego_spacing"]), int(config["vehicles_count"]), float(1 / config["vehicles_density"]),
-    )  # fmt: skip
-    ego = rows[0]
-    if control == "meta":  # MDPVehicle snaps its target speed to the nearest allowed one
-        speeds = np.asarray(target_speeds, dtype=float)
-        ratio = (ego[T.SPEED] - speeds[0]) / (speeds[-1] - speeds[0])
-        ego[T.TARGET_SPEED] = speeds[int(np.clip(np.round(ratio * (speeds.size - 1)), 0, speeds.size - 1))]
-        ego[T.KIND] = T.CONTROLLED
-    else:  # a plain kinematic vehicle has no target speed
-        ego[T.KIND], ego[T.TARGET_SPEED] = T.PLAIN, 0.0
-    return rows
-
-
 def spawn_highway_episode(seed: int, road, control: str):
-    """``spawn_highway`` with the uniform spawner signature (its static arrays kept on the road)."""
-    tables = road.cache.get("highway")
-    if tables is None:
-        tables = road.cache["highway"] = highway_spawn_tables(road.table, road.graph_keys)
-    rows = spawn_highway(seed, road.table, road.graph_keys, road.config, control, road.target_speeds, tables)
-    return rows, 0, np.zeros(2), None
+    """The highway's set-up of one world (``highway_spawn.spawn_highway_worlds`` with M = 1;
+    the simulator calls that for all its reset worlds at once)."""
+    rows = np.zeros((1, 1 + int(road.config["vehicles_count"]), T.VEHICLE_COLUMNS))
+    spawn_highway_worlds(road, control, np.array([seed]), np.zeros(1, dtype=np.int64), rows)
+    return rows[0], 0, np.zeros(2), None
 
 
 # --- highway-env's lane formulas, call for call -----------------------------------------------
