@@ -3,6 +3,7 @@ the rules read a Scenario handed to them and never look presets up themselves.""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 META_ACTIONS = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")  # highway-env's meta-actions
@@ -20,6 +21,8 @@ class Scenario:
     :param destination: road-network node the ego is routed to (None: follow the road).
     :param arrival: how the backend decides the goal is reached: "none", "merge_end", "exit".
     :param intersection_nodes: road-network nodes whose lanes count as junction area.
+    :param junction_needs_both_ends: a lane is junction area only when it also ends at one of
+        those nodes (the roundabout: its exits leave ring nodes too).
     :param meta_target_speeds: the speeds FASTER / SLOWER step through (None: highway-env's
         default 20, 25, 30 m/s), as in highway-env's own config of the scenario.
     :param fast_backend: drivelab's fast backend runs it (the "auto" backend then picks it).
@@ -29,6 +32,14 @@ class Scenario:
     :param circuit: the road is a closed loop: the route is one whole lap (however long).
     :param guide_line: a yellow line is painted along the route (follow-line).
     :param keep_lane: leaving the ego's starting lane counts as leaving the road (follow-lane).
+    :param spawn: the compiled core's episode set-up of one world, ``spawn(seed, road, control)
+        -> (vehicle rows, ego row, regulation (2,), generator between steps or None)`` (``road``:
+        the simulator's converted road); None: the compiled core cannot run the scenario.
+    :param spawn_many: the same for many worlds in one call, ``spawn_many(road, control, seeds,
+        worlds, vehicles) -> rows per world`` writing into the (K, N, C) buffer (None: ``spawn``
+        once per reset world).
+    :param arrivals: ``arrivals(road)`` gives the object whose ``spawn(rows, rng, probability)``
+        brings a vehicle in between steps (a scenario with a ``traffic_flow``).
     """
 
     name: str
@@ -51,10 +62,14 @@ class Scenario:
     circuit: bool = False
     guide_line: bool = False
     keep_lane: bool = False
+    junction_needs_both_ends: bool = False
+    spawn: Callable | None = field(default=None, repr=False)
+    spawn_many: Callable | None = field(default=None, repr=False)
+    arrivals: Callable | None = field(default=None, repr=False)
 
     def in_junction(self, lane_index: tuple) -> bool:
         """Whether highway-env lane (from, to, id) is junction area: it leaves a junction node
-        (on the roundabout, it must also end at one: the exits leave the ring too)."""
+        (and ends at one, with ``junction_needs_both_ends``)."""
         if lane_index[0] not in self.intersection_nodes:
             return False
-        return self.name != "roundabout" or lane_index[1] in self.intersection_nodes
+        return not self.junction_needs_both_ends or lane_index[1] in self.intersection_nodes

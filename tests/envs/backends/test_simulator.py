@@ -175,13 +175,11 @@ def test_batched_highway_set_up_is_the_one_world_set_up(traffic, control):
     """The highway's episodes set up for many worlds in one call (the simulator's reset) are the
     scenario's one-world spawner's rows (that one is tested against highway-env's own reset in
     test_fast and test_spawn) in every world, padding zero."""
-    from drivelab.envs.backends.fast.spawn import spawn_highway_episode
-
     seeds = np.array([0, 3, 99, 2**31 - 2, 123456])
     simulator = FastSimulator(SCENARIOS["highway"], traffic, control, len(seeds))
     simulator.reset_where(np.ones(len(seeds), dtype=bool), seeds)
     for k, seed in enumerate(seeds):
-        rows, ego, _, _ = spawn_highway_episode(int(seed), simulator._road, control)
+        rows, ego, _, _ = SCENARIOS["highway"].spawn(int(seed), simulator._road, control)
         assert simulator.count[k] == len(rows) and simulator.ego[k] == ego == 0
         np.testing.assert_array_equal(simulator.vehicles[k, : len(rows)], rows)
         assert not simulator.vehicles[k, len(rows) :].any()

@@ -10,7 +10,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from highway_env.road.lane import CircularLane, SineLane, StraightLane
 from numba import njit
 
 STRAIGHT, SINE, CIRCLE = 0, 1, 2
@@ -43,6 +42,8 @@ class LaneTable:
 
     @staticmethod
     def from_network(network) -> LaneTable:
+        from highway_env.road.lane import CircularLane, SineLane, StraightLane  # only to convert a road
+
         indices = [
             (f, t, i) for f, to in network.graph.items() for t, lanes in to.items() for i in range(len(lanes))
         ]

@@ -10,7 +10,8 @@ loops over worlds.
 The road (LaneTable, RoadMap, the ego's route from every lane, shortest paths, the vehicle
 classes' constants) is converted from highway-env once per scenario and configuration and shared
 by every simulator of it (``_road``); no highway-env object outlives that conversion. Every
-episode is then set up by drivelab's own spawner of the scenario (``SPAWNERS``: the same draws
+episode is then set up by drivelab's own spawner of the scenario (its ``Scenario.spawn`` hook,
+or ``spawn_many`` for all reset worlds in one call: the same draws
 from the same seed as highway-env's ``_make_vehicles``, hence the same vehicles); the
 intersection's arrivals between steps draw from the generator its spawner returned, as
 highway-env's ``np_random`` would go on.
@@ -31,12 +32,7 @@ from numba import njit
 
 from drivelab.envs.backends.fast import lanes as L
 from drivelab.envs.backends.fast import traffic as T
-from drivelab.envs.backends.fast.highway_spawn import spawn_highway_worlds
-from drivelab.envs.backends.fast.spawn import LaneGeometry, all_shortest_paths, spawn_highway_episode
-from drivelab.envs.backends.fast.spawn_intersection import IntersectionTraffic, spawn_intersection
-from drivelab.envs.backends.fast.spawn_merge import spawn_merge
-from drivelab.envs.backends.fast.spawn_racetrack import spawn_racetrack
-from drivelab.envs.backends.fast.spawn_roundabout import spawn_roundabout
+from drivelab.envs.backends.fast.spawn import LaneGeometry, all_shortest_paths
 from drivelab.envs.backends.highway import HighwayBackend, build_road_map
 from drivelab.envs.route import SEARCH_WINDOW_M, RouteTracker
 from drivelab.errors import UsageError
@@ -52,15 +48,6 @@ from drivelab.world.geometry import FULL_LOCK_RAD
 from drivelab.world.scenario import META_ACTIONS, Scenario
 from drivelab.world.state import RoadMap
 
-# Each scenario's episode set-up: spawner(seed, road, control) -> (vehicle rows (N, VEHICLE_COLUMNS),
-# ego row, regulation (2,), the generator its draws go on from between steps, or None)
-SPAWNERS = {
-    "highway": spawn_highway_episode,
-    "merge": spawn_merge,
-    "roundabout": spawn_roundabout,
-    "intersection": spawn_intersection,
-    "racetrack": spawn_racetrack,
-}
 META = META_ACTIONS
 LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER = range(5)
 ACCELERATION_RANGE, STEERING_RANGE = (-5.0, 5.0), (-FULL_LOCK_RAD, FULL_LOCK_RAD)  # ContinuousAction's
@@ -457,10 +444,9 @@ class FastSimulator:
             raise UsageError(f"the fast backend has no arrival rule {scenario.arrival!r}")
         if num_worlds < 1:
             raise UsageError(f"num_worlds must be >= 1 (got {num_worlds})")
-        if scenario.name not in SPAWNERS:
+        if scenario.spawn is None:
             raise UsageError(f"the fast backend has no episode set-up for scenario {scenario.name!r}")
         self.scenario, self.control, self.num_worlds = scenario, control, num_worlds
-        self.spawner = SPAWNERS[scenario.name]
         key = _road_key(scenario, traffic, control, overrides)
         road = _ROADS.get(key)
         if road is None:  # highway-env builds the road once; nothing of it is kept but arrays
@@ -479,7 +465,7 @@ class FastSimulator:
             self.arrival_threshold = float(scenario.arrival_x_m)
         self.arrivals = None
         if self.traffic_flow:
-            self.arrivals = IntersectionTraffic.of(road)
+            self.arrivals = scenario.arrivals(road)
         k = num_worlds
         self.vehicles = np.zeros((k, 1, T.VEHICLE_COLUMNS))  # grows to the largest world
         self.count = np.zeros(k, dtype=np.int64)
@@ -537,7 +523,7 @@ class FastSimulator:
     # --- episodes -------------------------------------------------------------------------------
     def _episode(self, seed: int) -> tuple[np.ndarray, int, np.ndarray, np.random.Generator | None]:
         """A new episode's (vehicle rows, ego row, regulation state, generator between steps)."""
-        rows, ego, regulation, rng = self.spawner(int(seed), self._road, self.control)
+        rows, ego, regulation, rng = self.scenario.spawn(int(seed), self._road, self.control)
         return rows, ego, regulation, rng
 
     def reset_where(self, mask: np.ndarray, seeds: np.ndarray) -> WorldBatch:
@@ -554,8 +540,8 @@ class FastSimulator:
         of them, the other scenarios one episode set-up per world."""
         if worlds.size == 0:
             return
-        if self.spawner is spawn_highway_episode:
-            self._spawn_highway(worlds, seeds)
+        if self.scenario.spawn_many is not None:
+            self._spawn_many(worlds, seeds)
         else:
             for k in worlds:
                 rows, ego, regulation, rng = self._episode(int(seeds[k]))
@@ -566,17 +552,20 @@ class FastSimulator:
                 self.route_index[k] = self._route_for_lane(int(rows[ego, T.LANE]))
         self.time_s[worlds] = 0.0
 
-    def _spawn_highway(self, worlds: np.ndarray, seeds: np.ndarray) -> None:
-        """``spawn_highway_worlds`` for ``worlds``; every lane's route is registered at the first
-        call so that a world's route index is an array lookup."""
+    def _spawn_many(self, worlds: np.ndarray, seeds: np.ndarray) -> None:
+        """The scenario's many-world set-up for ``worlds`` (no regulation, no generator between
+        steps); every lane's route is registered at the first call so that a world's route index
+        is an array lookup."""
         if self._lane_route is None:
             lanes = range(len(self.table.indices))
             self._lane_route = np.array([self._route_for_lane(lane) for lane in lanes])
-        self._fit(1 + int(self._road.config["vehicles_count"]))
-        rows = spawn_highway_worlds(self._road, self.control, seeds[worlds], worlds, self.vehicles)
-        self.count[worlds] = rows
-        self.ego[worlds], self.regulation[worlds] = 0, 0.0
-        self.route_index[worlds] = self._lane_route[self.vehicles[worlds, 0, T.LANE].astype(np.int64)]
+        rows, count, ego = self.scenario.spawn_many(self._road, self.control, seeds[worlds])
+        self._fit(rows.shape[1])
+        self.vehicles[worlds] = 0.0
+        self.vehicles[worlds, : rows.shape[1]] = rows
+        self.count[worlds], self.ego[worlds], self.regulation[worlds] = count, ego, 0.0
+        ego_lane = rows[np.arange(len(worlds)), ego, T.LANE].astype(np.int64)
+        self.route_index[worlds] = self._lane_route[ego_lane]
 
     def step(
         self, controls: np.ndarray, restart: np.ndarray | None = None, seeds: np.ndarray | None = None

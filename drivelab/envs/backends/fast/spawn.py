@@ -1,8 +1,8 @@
 """Episode set-up without highway-env objects, drawing the same random numbers in the same order.
 
-The highway's set-up is compiled for many worlds at once (``highway_spawn``; here its one-world
-form ``spawn_highway_episode``). The other scenarios' set-ups (``spawn_merge``,
-``spawn_roundabout``, ``spawn_racetrack``, ``spawn_intersection``) share the helpers below:
+The scenarios' set-ups (each in its module of ``drivelab.envs.scenarios``: ``spawn_merge``,
+``spawn_roundabout``, ``spawn_racetrack``, ``spawn_intersection``; the highway's is compiled for
+many worlds at once) share the helpers below:
 highway-env's lane formulas in numpy call for call (``LaneGeometry``: the same bits as highway-
 env on any CPU), its vehicle constructors as rows (``vehicle_row``), its route planning
 (``shortest_path``, ``plan_route``) and drivelab's traffic levels (``arrange_traffic``). Every
@@ -20,17 +20,8 @@ from numba import njit
 
 from drivelab.envs.backends.fast import lanes as L
 from drivelab.envs.backends.fast import traffic as T
-from drivelab.envs.backends.fast.highway_spawn import spawn_highway_worlds
 
 DELTA_RANGE = (3.5, 4.5)  # IDMVehicle.DELTA_RANGE
-
-
-def spawn_highway_episode(seed: int, road, control: str):
-    """The highway's set-up of one world (``highway_spawn.spawn_highway_worlds`` with M = 1;
-    the simulator calls that for all its reset worlds at once)."""
-    rows = np.zeros((1, 1 + int(road.config["vehicles_count"]), T.VEHICLE_COLUMNS))
-    spawn_highway_worlds(road, control, np.array([seed]), np.zeros(1, dtype=np.int64), rows)
-    return rows[0], 0, np.zeros(2), None
 
 
 # --- highway-env's lane formulas, call for call -----------------------------------------------

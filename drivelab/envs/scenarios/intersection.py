@@ -28,6 +28,7 @@ from drivelab.envs.backends.fast.spawn import (
     too_close,
     vehicle_row,
 )
+from drivelab.world.scenario import Scenario
 
 WARM_UP_STEPS = 3  # seconds of traffic before the ego is placed (``simulation_steps``)
 EGO_CLEARANCE_M = 20.0  # vehicles nearer the ego than this are removed ("prevent early collisions")
@@ -137,3 +138,23 @@ def spawn_intersection(
     vehicles.append(ego)
     vehicles, ego_index = arrange_traffic(road, vehicles, len(vehicles) - 1, rng)
     return finish(road, vehicles), ego_index, regulation, rng
+
+
+SCENARIO = Scenario(
+    "intersection",
+    "highway_env.envs.intersection_env.IntersectionEnv",
+    "unsignalised 4-way crossing, turn left to exit o1",
+    config={"duration": 13, "destination": "o1"},
+    traffic={
+        "empty": {"keep_npcs": False, "initial_vehicle_count": 0, "spawn_probability": 0.0},
+        "regular": {"initial_vehicle_count": 10, "spawn_probability": 0.6},
+        "dense": {"initial_vehicle_count": 15, "spawn_probability": 0.9},
+    },
+    destination="o1",
+    arrival="exit",
+    traffic_flow=True,
+    intersection_nodes=("ir0", "ir1", "ir2", "ir3"),
+    meta_target_speeds=(0, 4.5, 9),
+    spawn=spawn_intersection,
+    arrivals=IntersectionTraffic.of,
+)

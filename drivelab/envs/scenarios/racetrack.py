@@ -14,6 +14,7 @@ from drivelab.envs.backends.fast.spawn import (
     random_lane_index,
     too_close,
 )
+from drivelab.world.scenario import Scenario
 
 
 def spawn_racetrack(seed: int, road, control: str) -> tuple[np.ndarray, int, np.ndarray, None]:
@@ -47,3 +48,19 @@ def spawn_racetrack(seed: int, road, control: str) -> tuple[np.ndarray, int, np.
                 vehicles.append(row)
     vehicles, ego = arrange_traffic(road, vehicles, 0, rng)
     return finish(road, vehicles), ego, np.zeros(2), None
+
+
+SCENARIO = Scenario(
+    "racetrack",
+    "highway_env.envs.racetrack_env.RacetrackEnv",
+    "two-lane closed circuit with tight curves",
+    # highway-env's own observation off: off-road is judged by drivelab, not highway-env
+    config={"duration": 60, "observation": {"type": "Kinematics"}},
+    traffic={
+        "empty": {"other_vehicles": 0},
+        "regular": {"other_vehicles": 1},
+        "dense": {"other_vehicles": 5},
+    },
+    action_kinds=("grid", "continuous", "target_speed"),  # highway-env's racetrack: no meta-actions
+    spawn=spawn_racetrack,
+)

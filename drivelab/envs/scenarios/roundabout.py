@@ -15,7 +15,9 @@ from drivelab.envs.backends.fast.spawn import (
     randomize_behavior,
     vehicle_row,
 )
+from drivelab.world.scenario import Scenario
 
+RING = ("se", "ex", "ee", "nx", "ne", "wx", "we", "sx")  # the nodes around the ring
 DESTINATIONS = ["exr", "sxr", "nxr"]  # the exits RoundaboutEnv routes its traffic to
 EGO_DESTINATION = "nxs"
 POSITION_DEVIATION = SPEED_DEVIATION = 2.0
@@ -65,3 +67,21 @@ def spawn_roundabout(seed: int, road, control: str) -> tuple[np.ndarray, int, np
         vehicles.append(row)
     vehicles, ego_index = arrange_traffic(road, vehicles, 0, rng)
     return finish(road, vehicles), ego_index, np.zeros(2), None
+
+
+SCENARIO = Scenario(
+    "roundabout",
+    "highway_env.envs.roundabout_env.RoundaboutEnv",
+    "two-lane roundabout, enter from the south and leave to the north",
+    config={"duration": 11},
+    traffic={
+        "empty": {"keep_npcs": False},
+        "regular": {},
+        "dense": {"extra_vehicles": 5},
+    },
+    destination="nxs",
+    intersection_nodes=RING,
+    meta_target_speeds=(0, 8, 16),
+    spawn=spawn_roundabout,
+    junction_needs_both_ends=True,
+)

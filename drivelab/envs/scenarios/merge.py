@@ -8,6 +8,7 @@ from gymnasium.utils import seeding
 
 from drivelab.envs.backends.fast import traffic as T
 from drivelab.envs.backends.fast.spawn import arrange_traffic, ego_kind, finish, vehicle_row
+from drivelab.world.scenario import Scenario
 
 # (longitudinal m, speed m/s) of the three highway vehicles MergeEnv places around the ego
 HIGHWAY_VEHICLES = ((90.0, 29.0), (70.0, 31.0), (5.0, 31.5))
@@ -33,3 +34,19 @@ def spawn_merge(seed: int, road, control: str) -> tuple[np.ndarray, int, np.ndar
     vehicles.append(merging)
     vehicles, ego = arrange_traffic(road, vehicles, 0, rng)
     return finish(road, vehicles), ego, np.zeros(2), None
+
+
+SCENARIO = Scenario(
+    "merge",
+    "highway_env.envs.merge_env.MergeEnv",
+    "highway with an on-ramp merging in; ends after the merge (x > 370 m)",
+    config={"duration": 40},
+    traffic={
+        "empty": {"keep_npcs": False},
+        "regular": {},
+        "dense": {"extra_vehicles": 6},
+    },
+    arrival="merge_end",
+    arrival_x_m=370.0,
+    spawn=spawn_merge,
+)

@@ -1,4 +1,4 @@
-"""The highway's episode set-up for many worlds in one compiled call.
+"""The highway: its preset and its episode set-up, for many worlds in one compiled call.
 
 ``spawn_highway_worlds`` writes, for each world to reset, the rows ``HighwayEnv._create_vehicles``
 (one controlled vehicle, ``Vehicle.create_random``, ``IDMVehicle.randomize_behavior``) would
@@ -15,8 +15,8 @@ from numba import njit
 from drivelab.envs.backends.fast import lanes as L
 from drivelab.envs.backends.fast import pcg64
 from drivelab.envs.backends.fast import traffic as T
-
-DELTA_RANGE = (3.5, 4.5)  # IDMVehicle.DELTA_RANGE
+from drivelab.envs.backends.fast.spawn import DELTA_RANGE
+from drivelab.world.scenario import Scenario
 
 
 @njit(cache=True)
@@ -111,9 +111,9 @@ def highway_spawn_tables(table: L.LaneTable, graph_keys: dict) -> tuple[np.ndarr
     return to_roads, to_count, decay
 
 
-def spawn_highway_worlds(road, control: str, seeds: np.ndarray, worlds: np.ndarray, v: np.ndarray) -> int:
-    """Set up a highway episode from ``seeds[m]`` in world ``worlds[m]`` of the vehicle buffer
-    ``v`` (K, N, VEHICLE_COLUMNS), N at least the returned row count; the ego is row 0.
+def spawn_highway_worlds(road, control: str, seeds: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Highway episodes from ``seeds`` (M,): ``(rows (M, N, VEHICLE_COLUMNS), count (M,), ego row
+    (M,))``, the ego first in every world (the ``Scenario.spawn_many`` hook).
 
     :param road: the simulator's converted road (its LaneTable, graph, config, target speeds;
         the static arrays are kept in ``road.cache``).
@@ -125,9 +125,33 @@ def spawn_highway_worlds(road, control: str, seeds: np.ndarray, worlds: np.ndarr
     config = road.config
     lane_id, vehicles = config["initial_lane_id"], int(config["vehicles_count"])
     speeds = np.asarray(road.target_speeds if control == "meta" else (), dtype=float)
+    seeds = np.asarray(seeds, dtype=np.int64)
+    rows = np.zeros((seeds.size, 1 + vehicles, T.VEHICLE_COLUMNS))
     _spawn_worlds(
-        pcg64.seeded_states(seeds), np.asarray(worlds, dtype=np.int64), v, road.table.rows, *tables,
+        pcg64.seeded_states(seeds), np.arange(seeds.size), rows, road.table.rows, *tables,
         -1 if lane_id is None else int(lane_id), float(config["ego_spacing"]), vehicles,
         float(1 / config["vehicles_density"]), speeds,
     )  # fmt: skip
-    return 1 + vehicles
+    return rows, np.full(seeds.size, 1 + vehicles, dtype=np.int64), np.zeros(seeds.size, dtype=np.int64)
+
+
+def spawn_highway(seed: int, road, control: str):
+    """One world's set-up (``spawn_highway_worlds`` with M = 1), with the uniform spawner
+    signature ``(seed, road, control) -> (rows, ego row, regulation, None)``."""
+    rows, _, _ = spawn_highway_worlds(road, control, np.array([seed]))
+    return rows[0], 0, np.zeros(2), None
+
+
+SCENARIO = Scenario(
+    "highway",
+    "highway_env.envs.highway_env.HighwayEnvFast",
+    "3-lane straight highway, 30 s (highway-env's highway-fast settings)",
+    config={"lanes_count": 3, "duration": 30},
+    traffic={
+        "empty": {"vehicles_count": 0},
+        "regular": {"vehicles_count": 20},
+        "dense": {"vehicles_count": 35, "vehicles_density": 1.5},
+    },
+    spawn=spawn_highway,
+    spawn_many=spawn_highway_worlds,
+)

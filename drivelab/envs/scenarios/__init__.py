@@ -1,0 +1,48 @@
+"""Scenarios: one module per scenario holds its preset (which road, how much traffic, its rules)
+and, for the compiled core, its hooks (``Scenario.spawn`` / ``spawn_many``: the episode
+set-up; ``Scenario.arrivals``: vehicles arriving between steps). The simulators read a Scenario
+handed to them; nothing below this package looks a scenario up by name."""
+
+from __future__ import annotations
+
+from drivelab.envs.scenarios import circuits, highway, intersection, merge, racetrack, roundabout, town
+from drivelab.envs.scenarios.circuits import SEED_TABLES
+from drivelab.errors import UsageError
+from drivelab.world.scenario import Scenario
+
+TRAFFIC_LEVELS = ("empty", "regular", "dense")
+
+
+SCENARIOS: dict[str, Scenario] = {
+    s.name: s
+    for s in (
+        highway.SCENARIO,
+        merge.SCENARIO,
+        roundabout.SCENARIO,
+        intersection.SCENARIO,
+        racetrack.SCENARIO,
+        town.SCENARIO,
+        circuits.FOLLOW_LINE,
+        circuits.FOLLOW_LANE,
+    )
+}
+
+__all__ = ["SCENARIOS", "FAST_SCENARIOS", "SEED_TABLES", "TRAFFIC_LEVELS", "check_traffic", "get_scenario"]
+
+
+FAST_SCENARIOS = tuple(
+    name for name, scenario in SCENARIOS.items() if scenario.fast_backend
+)  # the compiled core's
+
+
+def get_scenario(name: str) -> Scenario:
+    """The scenario called ``name``, or a UsageError listing the known ones."""
+    if name not in SCENARIOS:
+        raise UsageError(f"unknown scenario {name!r} (choose from {', '.join(SCENARIOS)})")
+    return SCENARIOS[name]
+
+
+def check_traffic(level: str) -> str:
+    if level not in TRAFFIC_LEVELS:
+        raise UsageError(f"unknown traffic level {level!r} (choose from {', '.join(TRAFFIC_LEVELS)})")
+    return level

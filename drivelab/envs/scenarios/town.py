@@ -1,0 +1,25 @@
+"""The signalised town (seed 000): its preset. The road, lights, pedestrians and traffic are
+highway-env objects built by ``drivelab.envs.town_env``; the compiled core does not run it yet."""
+
+from __future__ import annotations
+
+from drivelab.world.scenario import Scenario
+
+SCENARIO = Scenario(
+    "town",
+    "drivelab.envs.town_env.TownEnv",
+    "signalised town (train layout; layout=test for the test town): lights, pedestrians, routes",
+    config={"duration": 60, "retarget": True},  # training: a new target on arrival (NoCrash: off)
+    traffic={
+        "empty": {"vehicles_count": 0, "pedestrians_count": 0},
+        "regular": {"vehicles_count": 15, "pedestrians_count": 10},
+        "dense": {"vehicles_count": 30, "pedestrians_count": 20},
+    },
+    arrival="route_end",
+    default_reward="roach",
+    intersection_nodes=tuple(f"J{j}:ir{k}" for j in range(9) for k in range(4)),
+    meta_target_speeds=(0, 4.5, 9),
+    fast_backend=False,  # its vehicles stop for lights: not in the compiled kernels yet
+    route_deviation_m=3.5,  # NoCrash / Roach episode rules
+    blocked_after_s=90.0,
+)
