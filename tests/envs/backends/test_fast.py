@@ -286,14 +286,24 @@ def test_whole_traffic_matches_highway_env(scenario, traffic, seeds):
     compare_episodes(scenario, traffic, seeds, ROUNDING_ATOL)
 
 
-def _dispatch_without_avx512() -> dict[str, str]:
-    """Environment for a Python that rounds like a CPU without AVX-512: numpy's AVX-512 dispatch
-    targets disabled (the names numpy itself lists) and OpenBLAS on its SSE3 kernel (runs on any
-    x86-64 CPU)."""
+def run_without_avx512(script: str) -> str:
+    """Run ``script`` in a fresh Python that rounds like a CPU without AVX-512 (numpy's AVX-512
+    dispatch targets disabled, the names numpy itself lists, and OpenBLAS on its SSE3 kernel:
+    runs on any x86-64 CPU; numpy reads its switch at import, hence a subprocess); its stdout."""
     from numpy._core._multiarray_umath import __cpu_dispatch__
 
     avx512 = [t for t in __cpu_dispatch__ if t.startswith("AVX512") or t == "X86_V4"]
-    return {"NPY_DISABLE_CPU_FEATURES": " ".join(avx512), "OPENBLAS_CORETYPE": "Prescott"}
+    env = {
+        **os.environ,
+        "NPY_DISABLE_CPU_FEATURES": " ".join(avx512),
+        "OPENBLAS_CORETYPE": "Prescott",
+        "PYGAME_HIDE_SUPPORT_PROMPT": "1",
+    }
+    result = subprocess.run(
+        [sys.executable, "-c", script], cwd=REPO, env=env, capture_output=True, text=True, timeout=600
+    )
+    assert result.returncode == 0, result.stderr[-3000:]
+    return result.stdout
 
 
 def test_without_avx512_dispatch_the_backends_agree_bit_for_bit():
@@ -306,12 +316,7 @@ def test_without_avx512_dispatch_the_backends_agree_bit_for_bit():
         "from tests.envs.backends.test_fast import compare_episodes\n"
         "print(compare_episodes('intersection', 'regular', (1, 4), atol=0.0))\n"
     )
-    env = {**os.environ, **_dispatch_without_avx512(), "PYGAME_HIDE_SUPPORT_PROMPT": "1"}
-    result = subprocess.run(
-        [sys.executable, "-c", script], cwd=REPO, env=env, capture_output=True, text=True, timeout=600
-    )
-    assert result.returncode == 0, result.stderr[-3000:]
-    assert float(result.stdout.split()[-1]) == 0.0
+    assert float(run_without_avx512(script).split()[-1]) == 0.0
 
 
 def test_drive_env_on_the_fast_backend():

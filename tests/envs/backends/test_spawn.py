@@ -3,9 +3,6 @@ the road's conversion."""
 
 import gc
 import os
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,7 +14,6 @@ from drivelab.envs.backends.fast.spawn import shortest_path
 from drivelab.envs.backends.highway import HighwayBackend
 from drivelab.envs.scenarios import FAST_SCENARIOS, SCENARIOS, TRAFFIC_LEVELS
 
-REPO = Path(__file__).resolve().parents[3]
 SEEDS = (0, 1, 4, 6, 15)  # intersection: 0, 4, 6 and 15 round differently with AVX-512 (see below)
 # highway-env's racetrack cannot place a meta-action ego (its MDPVehicle partial has no make_on_lane)
 CASES = [
@@ -76,7 +72,7 @@ def test_setup_gives_highway_envs_vehicles(scenario, traffic, control):
 def test_intersection_setup_bit_for_bit_without_avx512_dispatch():
     """The intersection's set-up in a fresh interpreter whose numpy and OpenBLAS kernels are held
     below AVX-512: every row bit for bit, seeds that differ by ULPs with AVX-512 included."""
-    from tests.envs.backends.test_fast import _dispatch_without_avx512
+    from tests.envs.backends.test_fast import run_without_avx512
 
     script = (
         "from tests.envs.backends.test_spawn import compare_setups, SEEDS\n"
@@ -85,12 +81,7 @@ def test_intersection_setup_bit_for_bit_without_avx512_dispatch():
         "        compare_setups('intersection', traffic, control, SEEDS, atol=0.0)\n"
         "print('exact')\n"
     )
-    env = {**os.environ, **_dispatch_without_avx512(), "PYGAME_HIDE_SUPPORT_PROMPT": "1"}
-    result = subprocess.run(
-        [sys.executable, "-c", script], cwd=REPO, env=env, capture_output=True, text=True, timeout=600
-    )
-    assert result.returncode == 0, result.stderr[-3000:]
-    assert result.stdout.split()[-1] == "exact"
+    assert run_without_avx512(script).split()[-1] == "exact"
 
 
 @pytest.mark.parametrize("scenario", FAST_SCENARIOS)
