@@ -100,20 +100,19 @@ class EpisodeMetrics:
             )
         completion = np.clip(completion, 0.0, 1.0)
         mean_speed = self.speed_sum_mps / np.maximum(self.length, 1)
-        return [
-            {
-                "return": float(self.episode_return[k]),
-                "length": int(self.length[k]),
-                "distance_km": float(self.distance_m[k] / 1000),
-                "mean_speed_mps": float(mean_speed[k]),
-                "success": float(success[k]),
-                "crashed": float(crashed[k]),
-                "collisions": int(self.collisions[k]),
-                "pedestrian_collisions": int(self.pedestrian_collisions[k]),
-                "off_road_events": int(self.off_road_events[k]),
-                "red_lights": int(self.red_lights[k]),
-                "blocked": int(self.blocked[k]),
-                "route_completion": float(completion[k]) if has_goal else None,
-            }
-            for k in np.flatnonzero(mask)  # only the worlds whose episode ends: a dict each
-        ]
+        ended = np.flatnonzero(mask)  # only the worlds whose episode ends: a dict each
+        columns = {
+            "return": self.episode_return[ended].astype(float).tolist(),
+            "length": self.length[ended].astype(int).tolist(),
+            "distance_km": (self.distance_m[ended] / 1000).astype(float).tolist(),
+            "mean_speed_mps": mean_speed[ended].astype(float).tolist(),
+            "success": success[ended].astype(float).tolist(),
+            "crashed": crashed[ended].astype(float).tolist(),
+            "collisions": self.collisions[ended].astype(int).tolist(),
+            "pedestrian_collisions": self.pedestrian_collisions[ended].astype(int).tolist(),
+            "off_road_events": self.off_road_events[ended].astype(int).tolist(),
+            "red_lights": self.red_lights[ended].astype(int).tolist(),
+            "blocked": self.blocked[ended].astype(int).tolist(),
+            "route_completion": completion[ended].astype(float).tolist() if has_goal else [None] * len(ended),
+        }
+        return [dict(zip(columns, values, strict=True)) for values in zip(*columns.values(), strict=True)]
