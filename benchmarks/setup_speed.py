@@ -1,0 +1,76 @@
+"""Episode set-up speed of the compiled core: one world's ``FastSimulator._episode`` per scenario.
+
+    OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/setup_speed.py [--seeds 100]
+    PYTHONPATH=<an older checkout> .venv/bin/python benchmarks/setup_speed.py --no-save  # compare
+
+Regular traffic; meta-actions (continuous control on the racetrack, whose meta-action ego
+highway-env cannot place). Each row is the mean over ``--seeds`` set-ups after one untimed
+set-up (compilation). Run against an older checkout with ``PYTHONPATH`` (the script uses only
+``FastSimulator``, ``SCENARIOS`` and ``_episode``, which older trees have too) to compare.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+
+RESULTS = Path(__file__).parent / "results"
+CASES = (("highway", "meta"), ("merge", "meta"), ("roundabout", "meta"), ("intersection", "meta"))
+CASES += (("racetrack", "continuous"),)
+
+
+def setup_ms(scenario: str, control: str, seeds: int) -> float:
+    """Mean milliseconds of one episode set-up of ``scenario`` (regular traffic)."""
+    from drivelab.envs.backends.fast.simulator import FastSimulator
+    from drivelab.envs.scenarios import SCENARIOS
+
+    simulator = FastSimulator(SCENARIOS[scenario], "regular", control, 1)
+    simulator._episode(0)
+    start = time.perf_counter()
+    for seed in range(seeds):
+        simulator._episode(seed)
+    return (time.perf_counter() - start) / seeds * 1e3
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seeds", type=int, default=100)
+    parser.add_argument("--no-save", action="store_true", help="print only (e.g. for an older checkout)")
+    args = parser.parse_args()
+    rows = [
+        {"scenario": name, "control": control, "ms_per_setup": setup_ms(name, control, args.seeds)}
+        for name, control in CASES
+    ]
+    for row in rows:
+        print(f"{row['scenario']:12s} {row['ms_per_setup']:.3f} ms per set-up")
+    if args.no_save:
+        return
+    command = f"OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1 python benchmarks/setup_speed.py --seeds {args.seeds}"
+    machine = f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+    RESULTS.mkdir(exist_ok=True)
+    (RESULTS / "setup_speed.json").write_text(
+        json.dumps({"command": command, "machine": machine, "rows": rows}, indent=2) + "\n"
+    )
+    lines = [
+        "# Episode set-up speed (one world, regular traffic)",
+        "",
+        f"Command: `{command}`  ",
+        f"Machine: {machine}; mean over {args.seeds} seeds after one untimed set-up.",
+        "",
+        "| scenario | control | ms per set-up |",
+        "|---|---|---|",
+        *(f"| {r['scenario']} | {r['control']} | {r['ms_per_setup']:.3f} |" for r in rows),
+        "",
+    ]
+    (RESULTS / "setup_speed.md").write_text("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
