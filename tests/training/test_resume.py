@@ -35,6 +35,7 @@ SETUPS = {
                      "hyperparams": {"learning_starts": 30, "buffer_size": 500, "batch_size": 16}},
     "ppo_own": {"algo": "ppo_own", "action": "continuous", "steps": 192,
                 "hyperparams": {"n_steps": 32, "batch_size": 16, "n_epochs": 2}},
+    "a2c_own": {"algo": "a2c_own", "action": "continuous", "steps": 160, "hyperparams": {"n_steps": 32}},
 }  # fmt: skip
 
 
@@ -109,6 +110,7 @@ def _assert_same_run(reference, resumed, config) -> None:
         ("ppo-2-worlds", 75, signal.SIGINT, 64),
         ("dueling_ddqn", 77, signal.SIGTERM, 76),
         ("ppo_own", 75, signal.SIGINT, 64),
+        ("a2c_own", 75, signal.SIGTERM, 64),
     ],
 )
 def test_interrupted_and_resumed_run_equals_the_uninterrupted_one(
