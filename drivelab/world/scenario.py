@@ -35,9 +35,9 @@ class Scenario:
     :param spawn: the compiled core's episode set-up of one world, ``spawn(seed, road, control)
         -> (vehicle rows, ego row, regulation (2,), generator between steps or None)`` (``road``:
         the simulator's converted road); None: the compiled core cannot run the scenario.
-    :param spawn_many: the same for many worlds in one call, ``spawn_many(road, control, seeds,
-        worlds, vehicles) -> rows per world`` writing into the (K, N, C) buffer (None: ``spawn``
-        once per reset world).
+    :param spawn_many: the same for many worlds in one call, ``spawn_many(road, control, seeds
+        (M,)) -> (rows (M, N, C), count (M,), ego row (M,))``, worlds without regulation or a
+        generator between steps (None: ``spawn`` once per reset world).
     :param arrivals: ``arrivals(road)`` gives the object whose ``spawn(rows, rng, probability)``
         brings a vehicle in between steps (a scenario with a ``traffic_flow``).
     """

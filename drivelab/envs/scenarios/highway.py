@@ -57,7 +57,6 @@ def _create_random(
 @njit(cache=True)
 def _spawn_worlds(
     states: np.ndarray,
-    worlds: np.ndarray,
     v: np.ndarray,
     lanes: np.ndarray,
     to_roads: np.ndarray,
@@ -69,14 +68,12 @@ def _spawn_worlds(
     spacing: float,
     target_speeds: np.ndarray,
 ) -> None:
-    """HighwayEnv._create_vehicles in world ``worlds[m]`` from generator ``states[m]`` (M, 6),
-    for every m: rows ``v[k, :1 + vehicles]``, the ego first, the rest zeros. A non-empty
+    """HighwayEnv._create_vehicles in world m of ``v`` (M, 1 + vehicles, VEHICLE_COLUMNS) from
+    generator ``states[m]`` (M, 6), the ego first. A non-empty
     ``target_speeds`` makes the ego an MDPVehicle (its target speed snapped to the nearest
     allowed one, as MDPVehicle does), an empty one a plain vehicle."""
-    for m in range(worlds.size):
-        k, rng = worlds[m], states[m]
-        w = v[k]
-        w[:] = 0.0
+    for m in range(states.shape[0]):
+        rng, w = states[m], v[m]
         _create_random(rng, lanes, to_roads, to_count, decay, 25.0, ego_lane_id, ego_spacing, np.nan, w[0])
         w[0, T.CHECK_COLLISIONS] = 1.0
         if target_speeds.size:
@@ -128,7 +125,7 @@ def spawn_highway_worlds(road, control: str, seeds: np.ndarray) -> tuple[np.ndar
     seeds = np.asarray(seeds, dtype=np.int64)
     rows = np.zeros((seeds.size, 1 + vehicles, T.VEHICLE_COLUMNS))
     _spawn_worlds(
-        pcg64.seeded_states(seeds), np.arange(seeds.size), rows, road.table.rows, *tables,
+        pcg64.seeded_states(seeds), rows, road.table.rows, *tables,
         -1 if lane_id is None else int(lane_id), float(config["ego_spacing"]), vehicles,
         float(1 / config["vehicles_density"]), speeds,
     )  # fmt: skip

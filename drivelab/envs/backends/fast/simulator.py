@@ -476,7 +476,18 @@ class FastSimulator:
         self.route_index = np.zeros(k, dtype=np.int64)
         self.rngs: list[np.random.Generator | None] = [None] * k
         self._lane_route: np.ndarray | None = None  # route index per lane row (batched set-up)
-        self._constants: dict[str, np.ndarray] = {}
+        # export arrays that never change, shared read-only by every batch
+        self._no_event = np.zeros(k, dtype=bool)
+        self._empty = {
+            "road_index": np.zeros(k, dtype=np.int64),
+            "traffic_lights": np.zeros((k, 0, 4)),
+            "light_valid": np.zeros((k, 0), dtype=bool),
+            "pedestrians": np.zeros((k, 0, 6)),
+            "pedestrian_valid": np.zeros((k, 0), dtype=bool),
+            "max_speed_mps": np.full(k, T.MAX_SPEED),
+        }
+        for array in (self._no_event, *self._empty.values()):
+            array.setflags(write=False)
         self._route_cache: tuple[np.ndarray, dict] | None = None  # (route_index, RouteBatch arrays)
         self._route_of_lane: dict[int, int] = {}
         self._trackers: list[RouteTracker] = []
@@ -660,7 +671,7 @@ class FastSimulator:
             on_road=flags[:, EX_ON_ROAD],
             in_intersection=flags[:, EX_IN_JUNCTION],
         )
-        collided, no_event = flags[:, EX_CRASHED], self._constant("no_event", lambda: np.zeros(k, dtype=bool))
+        collided, no_event = flags[:, EX_CRASHED], self._no_event
         events = EventsBatch(
             collided=collided,
             collision_kind=np.where(collided, COLLISION_VEHICLE, COLLISION_NONE).astype(np.int8),
@@ -678,24 +689,11 @@ class FastSimulator:
             vehicles=vehicles,
             vehicle_valid=valid,
             roads=(self.road,),
-            road_index=self._constant("road_index", lambda: np.zeros(k, dtype=np.int64)),
             route=route,
             events=events,
-            traffic_lights=self._constant("lights", lambda: np.zeros((k, 0, 4))),
-            light_valid=self._constant("light_valid", lambda: np.zeros((k, 0), dtype=bool)),
-            pedestrians=self._constant("pedestrians", lambda: np.zeros((k, 0, 6))),
-            pedestrian_valid=self._constant("pedestrian_valid", lambda: np.zeros((k, 0), dtype=bool)),
-            max_speed_mps=self._constant("max_speed", lambda: np.full(k, T.MAX_SPEED)),
             speed_limit_mps=floats[:, EX_SPEED_LIMIT],
+            **self._empty,
         )
-
-    def _constant(self, name: str, make) -> np.ndarray:
-        """An export array that never changes (made once, read-only: every batch shares it)."""
-        array = self._constants.get(name)
-        if array is None:
-            array = self._constants[name] = make()
-            array.setflags(write=False)
-        return array
 
     def _routes(self) -> dict[str, np.ndarray]:
         """Every world's route arrays for RouteBatch, remade only when a world's route changed
