@@ -18,18 +18,21 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
-from highway_env.road.lane import AbstractLane, CircularLane, LineType, StraightLane
+from highway_env.road.lane import CircularLane, LineType, StraightLane
 from highway_env.road.road import RoadNetwork
 
-from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW
-
-LANE_WIDTH_M = AbstractLane.DEFAULT_WIDTH
-RIGHT_TURN_RADIUS_M = LANE_WIDTH_M + 5  # highway-env's intersection geometry
-LEFT_TURN_RADIUS_M = RIGHT_TURN_RADIUS_M + LANE_WIDTH_M
-OUTER_M = RIGHT_TURN_RADIUS_M + LANE_WIDTH_M / 2  # junction centre to stop line
-SPEED_LIMIT_MPS = 10.0
-TURN_SPEED_MPS = 5.0  # speed limit of the turning lanes in the junctions
-ARM_DIRECTIONS = ((0, 1), (-1, 0), (0, -1), (1, 0))  # grid steps (column, row) of arms 0..3
+from drivelab.envs.backends.roads.town_rules import (  # noqa: F401 (re-exported for the town's users)
+    ARM_DIRECTIONS,
+    CROSSING_WIDTH_M,
+    LANE_WIDTH_M,
+    LEFT_TURN_RADIUS_M,
+    OUTER_M,
+    RIGHT_TURN_RADIUS_M,
+    SPEED_LIMIT_MPS,
+    TURN_SPEED_MPS,
+    LightTimings,
+    light_state,
+)
 
 
 @dataclass(frozen=True)
@@ -143,9 +146,6 @@ def build_network(layout: TownLayout) -> RoadNetwork:
     return net
 
 
-CROSSING_WIDTH_M = 3.0  # along the street
-
-
 def street_crossings(layout: TownLayout) -> np.ndarray:
     """One zebra crossing in the middle of every street: rows (centre x, y, walking heading,
     length across the road, width along it)."""
@@ -156,33 +156,6 @@ def street_crossings(layout: TownLayout) -> np.ndarray:
         heading = float(np.arctan2(along[1], along[0])) + np.pi / 2
         rows.append([*centre, heading, 2 * LANE_WIDTH_M, CROSSING_WIDTH_M])
     return np.array(rows, dtype=float).reshape(-1, 5)
-
-
-@dataclass(frozen=True)
-class LightTimings:
-    """Seconds of each phase of a junction's cycle (per axis: green, yellow, then all red)."""
-
-    green_s: float = 10.0
-    yellow_s: float = 3.0
-    all_red_s: float = 1.0
-
-    @property
-    def cycle_s(self) -> float:
-        return 2 * (self.green_s + self.yellow_s + self.all_red_s)
-
-
-def light_state(timings: LightTimings, arm: int, time_s: float, offset_s: float = 0.0) -> int:
-    """LIGHT_GREEN / LIGHT_YELLOW / LIGHT_RED of ``arm`` at ``time_s`` for a junction whose cycle
-    started at ``offset_s``: arms 0 and 2 go first, then arms 1 and 3."""
-    half = timings.green_s + timings.yellow_s + timings.all_red_s
-    phase = (time_s - offset_s) % timings.cycle_s
-    if arm % 2 == 1:
-        phase = (phase - half) % timings.cycle_s
-    if phase < timings.green_s:
-        return LIGHT_GREEN
-    if phase < timings.green_s + timings.yellow_s:
-        return LIGHT_YELLOW
-    return LIGHT_RED
 
 
 def signalised(layout: TownLayout) -> list[tuple[int, int]]:

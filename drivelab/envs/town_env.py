@@ -18,8 +18,23 @@ from highway_env.road.road import Road
 from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.objects import RoadObject
 
+from drivelab.envs.backends.roads.town_rules import (  # noqa: F401 (re-exported)
+    COURTESY_M,
+    CROSSING_CLEAR_M,
+    CROSSING_GAP_M,
+    CROSSING_GAP_S,
+    FACING_COS,
+    FIXED_ROUTE_COUNT,
+    MEAN_WAIT_S,
+    MOVING_MPS,
+    ONCOMING_WATCH_M,
+    PAVEMENT_M,
+    ROUTE_GOAL_TRIES,
+    STOP_MARGIN_M,
+    TURN_BRAKE_MARGIN_M,
+    WRECK_CLEARED_S,
+)
 from drivelab.envs.town import (
-    LANE_WIDTH_M,
     LAYOUTS,
     LightTimings,
     TownLights,
@@ -29,16 +44,6 @@ from drivelab.envs.town import (
     street_crossings,
 )
 from drivelab.world.state import LIGHT_GREEN, LIGHT_YELLOW
-
-STOP_MARGIN_M = 1.0  # front bumper to stop line once stopped
-PAVEMENT_M = LANE_WIDTH_M + 1.5  # a waiting pedestrian stands this far from the street's axis
-CROSSING_GAP_M, CROSSING_GAP_S = 6.0, 2.5  # a pedestrian waits while a vehicle closes in within
-# 6 m + 2.5 s of travel of the crossing
-CROSSING_CLEAR_M = 8.0  # nor while a vehicle stands within this of the crossing's centre
-COURTESY_M = 15.0  # nor while a vehicle facing the crossing waits this close to it
-MEAN_WAIT_S = 20.0  # on the pavement between two crossings (exponential)
-MOVING_MPS = 0.5  # a vehicle slower than this cannot hurt a pedestrian
-WRECK_CLEARED_S = 10.0
 
 
 class Pedestrian(RoadObject):
@@ -90,7 +95,7 @@ class Pedestrian(RoadObject):
             distance = float(np.linalg.norm(to_crossing))
             if distance < CROSSING_CLEAR_M:  # standing on or next to the crossing
                 return False
-            facing = float(np.dot(vehicle.direction, to_crossing)) > 0.7 * distance
+            facing = float(np.dot(vehicle.direction, to_crossing)) > FACING_COS * distance
             if facing and distance < CROSSING_GAP_M + CROSSING_GAP_S * max(vehicle.speed, 0.0):
                 return False
             if facing and distance < COURTESY_M:  # a vehicle waiting for the crossing goes first
@@ -198,7 +203,7 @@ class TownVehicle(IDMVehicle):
         if turn is not None:
             next_limit = self.road.network.get_lane(turn).speed_limit
             ahead_m = self.lane.length - self.lane.local_coordinates(self.position)[0]
-            if ahead_m < 5.0 + (self.speed**2 - next_limit**2) / (2 * -self.COMFORT_ACC_MIN):
+            if ahead_m < TURN_BRAKE_MARGIN_M + (self.speed**2 - next_limit**2) / (2 * -self.COMFORT_ACC_MIN):
                 limit = min(limit, next_limit)
         self.target_speed = limit
         super().act(action)
@@ -218,9 +223,6 @@ class TownVehicle(IDMVehicle):
         if not self.route or len(self.route) <= 1:  # the route (from the lane it steers to) ran out
             self.route = random_route(self.road, self.target_lane_index)
         super().follow_road()
-
-
-ONCOMING_WATCH_M = 30.0  # a left turn yields to oncoming vehicles this close to the junction
 
 
 def left_turn_must_wait(road: Road, turn: tuple, vehicle=None) -> bool:
@@ -253,14 +255,11 @@ def street_lanes(network) -> list[tuple]:
 def random_route(road: Road, start: tuple) -> list[tuple]:
     """A shortest route from lane ``start`` to a random stop line of another street."""
     goals = [lane[1] for lane in street_lanes(road.network) if lane[1] != start[1]]
-    for _ in range(10):
+    for _ in range(ROUTE_GOAL_TRIES):
         route = shortest_route(road.network, start[:2], goals[road.np_random.integers(len(goals))])
         if route:
             return route
     return [start]
-
-
-FIXED_ROUTE_COUNT = 25
 
 
 def fixed_routes(network) -> list[tuple[tuple, str]]:
