@@ -14,13 +14,14 @@ offset so that the town is not in lock-step.
 
 from __future__ import annotations
 
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 from highway_env.road.lane import CircularLane, LineType, StraightLane
 from highway_env.road.road import RoadNetwork
 
+from drivelab.envs.backends.roads.town_arrays import TownRoadArrays, town_arrays_from_network
+from drivelab.envs.backends.roads.town_arrays import shortest_route as graph_shortest_route
 from drivelab.envs.backends.roads.town_rules import (  # noqa: F401 (re-exported for the town's users)
     ARM_DIRECTIONS,
     CROSSING_WIDTH_M,
@@ -164,20 +165,9 @@ def signalised(layout: TownLayout) -> list[tuple[int, int]]:
 
 
 def shortest_route(network: RoadNetwork, start: tuple[str, str], goal: str) -> list[tuple[str, str, int]]:
-    """Lane indices from road ``start`` to node ``goal`` by breadth-first search (one lane per road).
-
-    Unlike highway-env's ``shortest_path`` this never revisits a node and returns [] when the goal
-    cannot be reached."""
-    queue, seen = deque([(start[1], [start[0], start[1]])]), {start[1]}
-    while queue:
-        node, path = queue.popleft()
-        if node == goal:
-            return [(a, b, 0) for a, b in zip(path[:-1], path[1:], strict=True)]
-        for nxt in network.graph.get(node, {}):
-            if nxt not in seen:
-                seen.add(nxt)
-                queue.append((nxt, path + [nxt]))
-    return []
+    """Lane indices from road ``start`` to node ``goal`` by breadth-first search (one lane per road);
+    [] when the goal cannot be reached (``roads.town_arrays.shortest_route`` on the network's graph)."""
+    return graph_shortest_route(network.graph, start, goal)
 
 
 class TownLights:
@@ -221,3 +211,15 @@ def approach_of(lane_index: tuple) -> tuple[int, int] | None:
         return None
     junction, arm = _to[1:].split(":ir")
     return int(junction), int(arm)
+
+
+def road_arrays(layout: TownLayout) -> TownRoadArrays:
+    """The compiled kernels' arrays of ``layout`` (lane metadata, lights, crossings, routes)."""
+    lights = TownLights(layout, LightTimings(), np.zeros(len(layout.junctions)))
+    return town_arrays_from_network(
+        build_network(layout),
+        lights.approaches,
+        np.column_stack([lights.positions, lights.headings]),
+        street_crossings(layout),
+        len(layout.junctions),
+    )
