@@ -44,3 +44,15 @@ def test_seed_sequence_hash_is_numpys_for_many_seeds():
         assert (int(state[pcg64.INC_HI]) << 64) | int(state[pcg64.INC_LO]) == expected["inc"], seed
     with pytest.raises(ValueError, match="seeds must be >= 0"):
         pcg64.seeded_states([-1])
+
+
+def test_state_round_trips_through_numpy():
+    rng = np.random.default_rng(7)
+    rng.integers(10, size=3)  # leaves half a 64-bit output buffered
+    words = pcg64.state_of(rng)
+    expected = [rng.integers(0, 17) for _ in range(5)] + [rng.uniform(2.0, 3.0)]
+    drawn = [pcg64.bounded_int(words, 17) for _ in range(5)] + [pcg64.uniform(words, 2.0, 3.0)]
+    assert drawn == expected
+    other = np.random.default_rng(0)
+    pcg64.set_state(other, words)
+    assert other.integers(0, 1000, size=4).tolist() == rng.integers(0, 1000, size=4).tolist()

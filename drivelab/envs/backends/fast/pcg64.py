@@ -187,3 +187,29 @@ def bounded_int(state: np.ndarray, n: int) -> int:
 def uniform(state: np.ndarray, low: float, high: float) -> float:
     """``Generator.uniform(low, high)``: low + (high - low) * a 53-bit double."""
     return low + (high - low) * (float(next_uint64(state) >> np.uint64(11)) * _DOUBLE_UNIT)
+
+
+def state_of(generator: np.random.Generator) -> np.ndarray:
+    """(6,) words of a numpy ``Generator`` on PCG64, so that compiled code draws what it would next."""
+    state = generator.bit_generator.state
+    if state["bit_generator"] != "PCG64":
+        raise ValueError(f"expected a PCG64 generator, got {state['bit_generator']}")
+    words = np.zeros(6, dtype=np.uint64)
+    mask = (1 << 64) - 1
+    words[STATE_HI], words[STATE_LO] = state["state"]["state"] >> 64, state["state"]["state"] & mask
+    words[INC_HI], words[INC_LO] = state["state"]["inc"] >> 64, state["state"]["inc"] & mask
+    words[HAS_UINT32], words[UINTEGER] = state["has_uint32"], state["uinteger"]
+    return words
+
+
+def set_state(generator: np.random.Generator, words: np.ndarray) -> None:
+    """Put ``words`` (6,) into a numpy ``Generator`` on PCG64: it then draws what compiled code would."""
+    generator.bit_generator.state = {
+        "bit_generator": "PCG64",
+        "state": {
+            "state": (int(words[STATE_HI]) << 64) | int(words[STATE_LO]),
+            "inc": (int(words[INC_HI]) << 64) | int(words[INC_LO]),
+        },
+        "has_uint32": int(words[HAS_UINT32]),
+        "uinteger": int(words[UINTEGER]),
+    }
