@@ -71,12 +71,22 @@ EX_ON_ROAD, EX_IN_JUNCTION, EX_CRASHED, EX_ARRIVED = range(4)
 EXPORTED_COLUMNS = np.array([T.X, T.Y, T.HEADING, T.SPEED, T.LEN, T.WID])  # WorldState.vehicles
 
 
-def vehicles_to_array(vehicles: list, table: L.LaneTable, objects: list = ()) -> np.ndarray:
-    """highway-env vehicles, then its obstacles → rows of ``traffic.VEHICLE_COLUMNS``, in order."""
+def vehicles_to_array(
+    vehicles: list, table: L.LaneTable, objects: list = (), town_class: type | None = None
+) -> np.ndarray:
+    """highway-env vehicles, then its obstacles → rows of ``traffic.VEHICLE_COLUMNS``, in order.
+
+    :param town_class: the reference's town vehicle class (``TownVehicle``): its vehicles become
+        KIND ``TOWN`` rows, and every row is ``TOWN_VEHICLE_COLUMNS`` wide (the town's long routes).
+    """
     row_of = table.row_of
-    array = np.zeros((len(vehicles) + len(objects), T.VEHICLE_COLUMNS))
+    columns, max_route = (
+        (T.VEHICLE_COLUMNS, T.MAX_ROUTE) if town_class is None else (T.TOWN_VEHICLE_COLUMNS, T.TOWN_MAX_ROUTE)
+    )
+    array = np.zeros((len(vehicles) + len(objects), columns))
     for i, vehicle in enumerate(vehicles):
-        if type(vehicle) is not IDMVehicle and isinstance(vehicle, IDMVehicle):
+        town = town_class is not None and type(vehicle) is town_class
+        if type(vehicle) is not IDMVehicle and isinstance(vehicle, IDMVehicle) and not town:
             raise NotImplementedError(f"the fast backend has no {type(vehicle).__name__}")
         row = array[i]
         row[T.X], row[T.Y] = vehicle.position
@@ -91,7 +101,11 @@ def vehicles_to_array(vehicles: list, table: L.LaneTable, objects: list = ()) ->
         row[T.CRASHED] = float(vehicle.crashed)
         row[T.CHECK_COLLISIONS] = float(vehicle.check_collisions)
         row[T.LEN], row[T.WID] = vehicle.LENGTH, vehicle.WIDTH
-        if isinstance(vehicle, IDMVehicle):
+        row[T.WRECKED_S] = getattr(vehicle, "wrecked_s", 0.0)
+        row[T.PEDAL] = getattr(vehicle, "pedal_mps2", 0.0)
+        if town:
+            row[T.KIND] = T.TOWN
+        elif isinstance(vehicle, IDMVehicle):
             row[T.KIND] = T.IDM
         elif isinstance(vehicle, ControlledVehicle):
             row[T.KIND] = T.CONTROLLED
@@ -101,8 +115,8 @@ def vehicles_to_array(vehicles: list, table: L.LaneTable, objects: list = ()) ->
         row[T.ROUTED] = float(route is not None)
         row[T.YIELDING] = float(getattr(vehicle, "is_yielding", False))
         route = route or []
-        if len(route) > T.MAX_ROUTE:
-            raise NotImplementedError(f"the fast backend keeps routes of at most {T.MAX_ROUTE} roads")
+        if len(route) > max_route:
+            raise NotImplementedError(f"the fast backend keeps routes of at most {max_route} roads")
         row[T.ROUTE_END] = len(route)
         for k, (_from, _to, lane_id) in enumerate(route):
             row[T.ROUTE + 2 * k] = table.road_of(_from, _to)
