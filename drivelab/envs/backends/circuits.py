@@ -20,9 +20,10 @@ from highway_env.road.lane import CircularLane, LineType, StraightLane
 from highway_env.road.road import Road, RoadNetwork
 from highway_env.vehicle.kinematics import Vehicle
 
-# A constant throttle of 0.35 (5 m/s² · 0.35 commanded) settles at 30 km/h, the speed the seed
-# reports for its lane actions: drag = 5 · 0.35 / (30 / 3.6).
-DRAG_PER_S = 5.0 * 0.35 / (30.0 / 3.6)
+from drivelab.envs.backends.fast.traffic import PEDAL_DRAG_PER_S
+
+# the pedal's drag (seed 004's speeds), shared with the compiled kernel
+DRAG_PER_S = PEDAL_DRAG_PER_S
 
 # Circuits as (kind, length_m) straights and (kind, radius_m, turn_deg) arcs, starting at the
 # origin heading +x; a positive turn is to the right (heading grows, y points right). Both close
