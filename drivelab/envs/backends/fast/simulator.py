@@ -674,6 +674,12 @@ class FastSimulator:
             self.vehicles, self.count, self.ego, self.lanes, road.in_junction, road.exit_lane,
             self.arrival, self.arrival_threshold, floats, ints, flags, vehicles, valid,
         )  # fmt: skip
+        return self._export_arrays(floats, ints, flags, vehicles, valid)
+
+    def _export_arrays(
+        self, floats: np.ndarray, ints: np.ndarray, flags: np.ndarray, vehicles: np.ndarray, valid: np.ndarray
+    ) -> WorldBatch:
+        """The WorldBatch of ``export_worlds``' outputs (the town adds its lights and pedestrians)."""
         # the old WorldState's formula, numpy's complex exp and angle, for the same last bits
         curvature = np.angle(np.exp(1j * floats[:, EX_HEADING_CHANGE])) / 2.0
         ego = EgoBatch(

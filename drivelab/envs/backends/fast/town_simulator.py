@@ -1,0 +1,348 @@
+"""K worlds of the signalised town on the compiled core: lights, pedestrians and town traffic.
+
+``TownSimulator`` is ``FastSimulator``'s town: the same API (``reset_where``, ``step`` with
+NEXT_STEP restarts, ``batch``), the same road conversion and ego controls, and per world what the
+reference (``HighwayBackend`` on ``TownEnv``) keeps as objects:
+
+- vehicle rows ``(K, N_max, TOWN_VEHICLE_COLUMNS)`` (the ego and KIND ``TOWN`` traffic) and
+  pedestrian rows ``(K, P_max, PEDESTRIAN_COLUMNS)``, in the reference's list orders;
+- the light offsets ``(K, J)`` and each world's PCG64 words ``(K, 6)``: every random draw of the
+  frames (random routes, pedestrians' waits) and of the retargets comes from them, in the
+  reference's order, so a seed gives the reference's episode;
+- the ego's planned route (lane rows) and its polyline, which grows when a training episode
+  retargets on arrival, and the NoCrash time limit of fixed routes (``route_time_limit_s``).
+
+One policy step of a world (``simulate_town_worlds``): the light states at the step's end time
+(the reference's lights read ``env.time``, advanced before its frames), then per frame: every
+vehicle acts (``town_traffic.town_act``), the pedestrians walk, the vehicles step and collide,
+moving vehicles hit pedestrians, wrecks are towed (``pedestrians``). Then the ego's route
+progress, its retarget, and the events: a red light run is judged on the lanes before and after
+the step, as the reference judges it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numba
+import numpy as np
+from numba import njit, prange
+
+from drivelab.envs.backends.fast import lanes as L
+from drivelab.envs.backends.fast import pcg64
+from drivelab.envs.backends.fast import town_rows as R
+from drivelab.envs.backends.fast import traffic as T
+from drivelab.envs.backends.fast.pedestrians import (
+    clear_wrecks,
+    hit_pedestrians,
+    light_states,
+    walk_pedestrians,
+)
+from drivelab.envs.backends.fast.simulator import (
+    EX_CRASHED,
+    EX_FLOATS,
+    EX_ON_ROAD,
+    FastSimulator,
+    export_worlds,
+    project_routes,
+)
+from drivelab.envs.backends.fast.town_traffic import road_arrays_tuple, town_act, town_frame_cache, town_step
+from drivelab.envs.backends.roads.town_rules import PEDESTRIAN_SIZE_M, LightTimings
+from drivelab.envs.route import RouteTracker
+from drivelab.world.batch import (
+    COLLISION_NONE,
+    COLLISION_PEDESTRIAN,
+    COLLISION_VEHICLE,
+    EventsBatch,
+    WorldBatch,
+)
+from drivelab.world.state import LIGHT_RED
+
+ARRIVAL_REMAINING_M = 2.0  # HighwayBackend._arrived for "route_end": under 2 m of route left
+
+
+@njit(cache=True)
+def _simulate_town(
+    v, count, ego, peds, pcount, lanes, p, coords, done, trig, junction, from_arm, to_arm, turn,
+    end_junction, end_arm, light, street_lanes, routes, route_length, states, rng, frames, dt,
+):  # fmt: skip
+    """One policy step (``frames`` frames of ``dt``) of one world; returns (count, ego)."""
+    for _ in range(frames):
+        town_act(
+            v, count, peds, pcount, lanes, p, coords, done, trig, junction, from_arm, to_arm, turn,
+            end_junction, end_arm, light, street_lanes, routes, route_length, states, rng,
+        )  # fmt: skip
+        walk_pedestrians(peds, pcount, v, count, dt, rng)
+        town_step(v, count, lanes, dt)
+        T.handle_collisions(v[:count], dt)
+        hit_pedestrians(peds, pcount, v, count, ego)
+        count, ego = clear_wrecks(v, count, ego, dt)
+    return count, ego
+
+
+@njit(cache=True)
+def _light_states_worlds(light_junction, light_arm, offsets, timings, time_s, active, out) -> None:
+    for k in range(out.shape[0]):
+        if active[k]:
+            light_states(
+                light_junction, light_arm, offsets[k], timings[0], timings[1], timings[2], time_s[k], out[k]
+            )
+
+
+def _town_kernel(parallel: bool):
+    def body(
+        v, count, ego, peds, pcount, lanes, p, coords, done, trig, junction, from_arm, to_arm, turn,
+        end_junction, end_arm, light, street_lanes, routes, route_length, states, rng, frames, dt, active,
+    ):  # fmt: skip
+        for k in prange(v.shape[0]):
+            if active[k]:
+                count[k], ego[k] = _simulate_town(
+                    v[k], count[k], ego[k], peds[k], pcount[k], lanes, p, coords[k], done[k], trig[k],
+                    junction, from_arm, to_arm, turn, end_junction, end_arm, light, street_lanes, routes,
+                    route_length, states[k], rng[k], frames, dt,
+                )  # fmt: skip
+
+    return njit(cache=True, parallel=parallel)(body)
+
+
+_SERIAL, _PARALLEL = _town_kernel(False), _town_kernel(True)
+
+
+@njit(cache=True)
+def export_pedestrians(peds, pcount, pedestrians, pedestrian_valid, hit_ego) -> None:
+    """The pedestrians not crashed (spawn order) of K worlds into zeroed ``pedestrians`` (K, P, 6)
+    (x, y, heading, speed, length, width) with ``pedestrian_valid``; ``hit_ego`` (K,): one of them
+    was hit by the ego (the collision's kind)."""
+    for k in range(peds.shape[0]):
+        n = 0
+        for i in range(pcount[k]):
+            if peds[k, i, R.P_HIT_EGO] > 0:
+                hit_ego[k] = True
+            if peds[k, i, R.P_CRASHED] > 0:
+                continue
+            pedestrians[k, n, 0], pedestrians[k, n, 1] = peds[k, i, R.P_X], peds[k, i, R.P_Y]
+            pedestrians[k, n, 2], pedestrians[k, n, 3] = peds[k, i, R.P_HEADING], peds[k, i, R.P_SPEED]
+            pedestrians[k, n, 4] = pedestrians[k, n, 5] = PEDESTRIAN_SIZE_M
+            pedestrian_valid[k, n] = True
+            n += 1
+
+
+class TownSimulator(FastSimulator):
+    """K worlds of the town on drivelab's compiled kernels, as arrays (see the module docstring).
+
+    :param scenario: the town scenario (``Scenario.spawn`` returns a ``TownEpisode`` as its fourth item).
+    :param traffic: "empty", "regular" or "dense".
+    :param control: "meta" or "continuous".
+    :param num_worlds: K.
+    :param overrides: extra TownEnv config keys ("layout", "fixed_routes", "retarget", …).
+    """
+
+    def __init__(self, scenario, traffic: str, control: str, num_worlds: int, overrides: dict | None = None):
+        super().__init__(scenario, traffic, control, num_worlds, overrides)
+        from drivelab.envs.scenarios.town import TownSetup  # the town's set-up, read once per road
+
+        road, k = self._road, num_worlds
+        self.setup = TownSetup.of(road)
+        arrays = self.arrays = self.setup.arrays
+        self.road_args = road_arrays_tuple(arrays)
+        self.road = dataclasses.replace(self.road, crossings=arrays.crossings)
+        self.roads = (self.road,)
+        self.retarget = bool(road.config.get("retarget"))
+        timings = LightTimings(**road.config["light_timings"])
+        self.timings = np.array([timings.green_s, timings.yellow_s, timings.all_red_s])
+        self.in_junction = arrays.in_junction
+        n_max = 1 + self.setup.vehicles_count
+        p_max = max(self.setup.pedestrians_count, 1)
+        self.vehicles = np.zeros((k, n_max, T.TOWN_VEHICLE_COLUMNS))
+        self.peds = np.zeros((k, p_max, R.PEDESTRIAN_COLUMNS))
+        self.pcount = np.zeros(k, dtype=np.int64)
+        self.offsets = np.zeros((k, arrays.junction_count))
+        self.rng_words = np.zeros((k, 6), dtype=np.uint64)
+        self.light_state = np.zeros((k, len(arrays.light_junction)), dtype=np.int64)
+        self.route_time_limit_s = np.full(k, np.inf)
+        self.ego_routes: list[list[int]] = [[] for _ in range(k)]
+        self.trackers: list[RouteTracker | None] = [None] * k
+        self.route_index = np.arange(k)
+        self._route_version = 0
+        cache = [town_frame_cache(n_max, p_max, len(self.lanes)) for _ in range(k)]
+        self.coords = np.stack([c[0] for c in cache])
+        self.done = np.stack([c[1] for c in cache])
+        self.trig = np.stack([c[2] for c in cache])
+        self._scratch_rng = np.random.default_rng(0)  # draws a retarget from a world's words
+        self._light_valid = np.ones((k, len(arrays.light_junction)), dtype=bool)
+        self._light_valid.setflags(write=False)
+        self._max_speed = self._empty["max_speed_mps"]
+        self._road_index = self._empty["road_index"]
+
+    # --- episodes -------------------------------------------------------------------------------
+    def _start_episodes(self, worlds: np.ndarray, seeds: np.ndarray) -> None:
+        """New town episodes in ``worlds`` from ``seeds[k]`` (the town's set-up, one per world)."""
+        for k in worlds:
+            rows, ego, _, episode = self.scenario.spawn(int(seeds[k]), self._road, self.control)
+            self.vehicles[k] = 0.0
+            self.vehicles[k, : len(rows)] = rows
+            self.peds[k] = 0.0
+            self.peds[k, : len(episode.pedestrians)] = episode.pedestrians
+            self.count[k], self.ego[k], self.pcount[k] = len(rows), ego, len(episode.pedestrians)
+            self.offsets[k] = episode.light_offsets_s
+            self.rng_words[k] = episode.rng_state
+            self.route_time_limit_s[k] = episode.route_time_limit_s
+            self.ego_routes[k] = [int(lane) for lane in episode.ego_route]
+            self._set_route(k)
+            self.start_lane_id[k] = 0
+        self.time_s[worlds] = 0.0
+        if worlds.size:
+            active = np.zeros(self.num_worlds, dtype=bool)
+            active[worlds] = True
+            self._update_lights(active)
+
+    def _set_route(self, k: int) -> None:
+        """World k's route polyline from its planned lanes (``HighwayBackend.route_for``)."""
+        from drivelab.envs.scenarios.town import route_polyline
+
+        self.trackers[k] = RouteTracker(
+            route_polyline(self.setup.geometry, self.ego_routes[k]), has_goal=True
+        )
+        self._route_version += 1
+        self._pad_world_routes()
+
+    def _pad_world_routes(self) -> None:
+        """Every world's route as padded (K, S) arrays, last point repeated (``_pad_routes``)."""
+        self._trackers = [t if t is not None else self.trackers[0] for t in self.trackers]
+        self._pad_routes()
+
+    def _update_lights(self, active: np.ndarray) -> None:
+        aj, aa = self.arrays.light_junction, self.arrays.light_arm
+        _light_states_worlds(aj, aa, self.offsets, self.timings, self.time_s, active, self.light_state)
+
+    # --- stepping -------------------------------------------------------------------------------
+    def step(self, controls: np.ndarray, restart: np.ndarray | None = None, seeds: np.ndarray | None = None):
+        """One policy step of every world (see ``FastSimulator.step``)."""
+        if self.batch is None:
+            raise_before_reset()
+        k = self.num_worlds
+        restart = np.zeros(k, dtype=bool) if restart is None else np.asarray(restart, dtype=bool)
+        active = ~restart
+        worlds = np.arange(k)
+        previous_lane = self.vehicles[worlds, self.ego, T.LANE].astype(np.int64)
+        self.apply_controls(controls)
+        self.time_s[active] += 1 / self.policy_frequency_hz  # the lights read the step's end time
+        self._update_lights(active)
+        parallel = k > 1 and numba.get_num_threads() > 1
+        (_PARALLEL if parallel else _SERIAL)(
+            self.vehicles, self.count, self.ego, self.peds, self.pcount, self.lanes, self.idm, self.coords,
+            self.done, self.trig, *self.road_args, self.light_state, self.rng_words, self.frames, self.dt_s,
+            active,
+        )  # fmt: skip
+        ego_rows = self.vehicles[worlds, self.ego]
+        lane = ego_rows[:, T.LANE].astype(np.int64)
+        light = self.arrays.light[previous_lane]
+        state = self.light_state[worlds, np.maximum(light, 0)]
+        crossed = self.lanes[lane, L.FROM_NODE] == self.lanes[previous_lane, L.TO_NODE]
+        self._red_light = active & (light >= 0) & crossed & (state == LIGHT_RED)
+        self._project(fresh=np.zeros(k, dtype=bool), update=active)
+        if self.retarget:
+            self._retarget(active)
+        self._start_episodes(np.flatnonzero(restart), seeds)
+        self._project(fresh=restart, update=restart)
+        self._red_light = self._red_light & active
+        self.batch = self._export()
+        return self.batch
+
+    def reset_where(self, mask: np.ndarray, seeds: np.ndarray) -> WorldBatch:
+        self._red_light = np.zeros(self.num_worlds, dtype=bool)
+        return super().reset_where(mask, seeds)
+
+    def _retarget(self, active: np.ndarray) -> None:
+        """TownEnv.extend_route in every world that arrived: a random route on from the end of
+        the ego's, drawn from the world's generator after its frames; the meta-action ego's
+        planned lanes grow by it; the progress is projected on the longer route."""
+        remaining = self.r_length - self.progress_m
+        for k in np.flatnonzero(active & (remaining < ARRIVAL_REMAINING_M)):
+            pcg64.set_state(self._scratch_rng, self.rng_words[k])
+            more = self.setup.random_route(self.ego_routes[k][-1], self._scratch_rng)[1:]
+            self.rng_words[k] = pcg64.state_of(self._scratch_rng)
+            self.ego_routes[k] = self.ego_routes[k] + [int(lane) for lane in more]
+            row = self.vehicles[k, self.ego[k]]
+            if row[T.KIND] == T.CONTROLLED:
+                _append_route(row, more)
+            self._set_route(k)
+            update = np.zeros(self.num_worlds, dtype=bool)
+            update[k] = True
+            self._project(fresh=np.zeros(self.num_worlds, dtype=bool), update=update)
+
+    def _project(self, fresh: np.ndarray, update: np.ndarray) -> None:
+        ego = self.vehicles[np.arange(self.num_worlds), self.ego]
+        project_routes(
+            ego[:, T.X].copy(), ego[:, T.Y].copy(), self.route_index, self.r_starts, self.r_segments,
+            self.r_lengths2, self.r_segment_m, self.r_stations, self.r_count - 1, self.r_closed,
+            fresh, update, self.progress_m,
+        )  # fmt: skip
+
+    # --- export ---------------------------------------------------------------------------------
+    def _export(self) -> WorldBatch:
+        k = self.num_worlds
+        floats, ints = np.zeros((k, EX_FLOATS)), np.zeros((k, 3), dtype=np.int64)
+        flags = np.zeros((k, 4), dtype=bool)
+        slots = max(self.vehicles.shape[1] - 1, 0)
+        vehicles, valid = np.zeros((k, slots, 6)), np.zeros((k, slots), dtype=bool)
+        export_worlds(
+            self.vehicles, self.count, self.ego, self.lanes, self.in_junction, self._road.exit_lane,
+            0, 0.0, floats, ints, flags, vehicles, valid,
+        )  # fmt: skip
+        pedestrians = np.zeros((k, self.peds.shape[1], 6))
+        pedestrian_valid = np.zeros((k, self.peds.shape[1]), dtype=bool)
+        hit_ego = np.zeros(k, dtype=bool)
+        export_pedestrians(self.peds, self.pcount, pedestrians, pedestrian_valid, hit_ego)
+        batch = self._export_arrays(floats, ints, flags, vehicles, valid)
+        collided = flags[:, EX_CRASHED]
+        kind = np.where(hit_ego, COLLISION_PEDESTRIAN, COLLISION_VEHICLE)
+        remaining = self.r_length - self.progress_m
+        events = EventsBatch(
+            collided=collided,
+            collision_kind=np.where(collided, kind, COLLISION_NONE).astype(np.int8),
+            off_road=~flags[:, EX_ON_ROAD],
+            arrived=remaining < ARRIVAL_REMAINING_M,
+            red_light_crossed=self._red_light.copy(),
+            blocked=self._no_event,
+            off_route=self._no_event,
+        )
+        lights = np.concatenate(
+            [
+                np.broadcast_to(self.arrays.light_xyh, (k, *self.arrays.light_xyh.shape)),
+                self.light_state[..., None],
+            ],
+            axis=2,
+        )
+        return dataclasses.replace(
+            batch,
+            events=events,
+            traffic_lights=lights,
+            light_valid=self._light_valid,
+            pedestrians=pedestrians,
+            pedestrian_valid=pedestrian_valid,
+        )
+
+
+def _append_route(row: np.ndarray, lanes) -> None:
+    """Append lane rows to a vehicle row's planned route (roads of one lane: road = lane row),
+    closing up the entries already driven when the row would overflow."""
+    start, end = int(row[T.ROUTE_START]), int(row[T.ROUTE_END])
+    capacity = (row.size - T.ROUTE) // 2
+    if end + len(lanes) > capacity:
+        kept = row[T.ROUTE + 2 * start : T.ROUTE + 2 * end].copy()
+        row[T.ROUTE : T.ROUTE + kept.size] = kept
+        start, end = 0, end - start
+        row[T.ROUTE_START] = 0.0
+    if end + len(lanes) > capacity:
+        raise NotImplementedError(f"the town's vehicle rows keep routes of at most {capacity} roads")
+    for lane in lanes:
+        row[T.ROUTE + 2 * end], row[T.ROUTE + 2 * end + 1] = lane, 0.0
+        end += 1
+    row[T.ROUTE_END], row[T.ROUTED] = end, 1.0
+
+
+def raise_before_reset() -> None:
+    from drivelab.errors import UsageError
+
+    raise UsageError("TownSimulator.step before reset_where")
