@@ -16,9 +16,10 @@ differ between the two by an ULP. The operands are: ``_gap_clear`` dx, dy = cros
 vehicle position and ``direction · (dx, dy)``; ``walk`` (position − centre) · across; the hit
 prefilter pedestrian minus vehicle; the spawn spacing check vehicle minus new position;
 ``lane_distance_to`` other minus self. A pedestrian's wait on the pavement is
-``MEAN_WAIT_S * standard_exponential(method="inv")`` (−log(1 − U), one double drawn), a
-distribution the kernels draw bit for bit from the same PCG64 state (numpy's default ziggurat is
-not reproduced there).
+``MEAN_WAIT_S * standard_exponential(method="inv")``: numpy computes ``-log1p(-U)`` of one
+53-bit double U (not ``-log(1 - U)``, which differs in the last bit for ~7 % of draws), which the
+kernels draw bit for bit from the same PCG64 state (numpy's default ziggurat is not reproduced
+there).
 """
 
 from __future__ import annotations
