@@ -15,7 +15,9 @@ kernels do the same operations in the same order, so that only highway-env's own
 differ between the two by an ULP. The operands are: ``_gap_clear`` dx, dy = crossing centre minus
 vehicle position and ``direction · (dx, dy)``; ``walk`` (position − centre) · across; the hit
 prefilter pedestrian minus vehicle; the spawn spacing check vehicle minus new position;
-``lane_distance_to`` other minus self. A pedestrian's wait on the pavement is
+``lane_distance_to`` other minus self. A pedestrian's walking heading is ``math.atan2`` (libm's,
+as compiled code calls it; numpy's ``arctan2`` dispatches SIMD kernels that differ from it by an
+ULP on AVX-512 CPUs). A pedestrian's wait on the pavement is
 ``MEAN_WAIT_S * standard_exponential(method="inv")``: numpy computes ``-log1p(-U)`` of one
 53-bit double U (not ``-log(1 - U)``, which differs in the last bit for ~7 % of draws), which the
 kernels draw bit for bit from the same PCG64 state (numpy's default ziggurat is not reproduced
@@ -94,7 +96,8 @@ class Pedestrian(RoadObject):
         if self.speed == 0.0:
             self.wait_s -= dt
             if self.wait_s <= 0.0 and self._gap_clear(vehicles):
-                self.heading = float(np.arctan2(*(-self.side * self.across)[::-1]))
+                back = -self.side  # walk towards the other pavement
+                self.heading = math.atan2(back * float(self.across[1]), back * float(self.across[0]))
                 self.speed = self.pace_mps
             return
         self.position = self.position + self.speed * dt * self.direction
