@@ -7,9 +7,26 @@ for yellow ones when they can stop comfortably) and wander on random routes. Ped
 the pavement at a zebra crossing in the middle of each street and walk across when no vehicle is
 about to reach it; vehicles must yield to those on the crossing (IDM sees them as leaders) and a
 vehicle that touches one has collided.
+
+Arithmetic. Distances and dot products of 2-vectors are written out as scalar Python float
+operations, ``math.sqrt(dx * dx + dy * dy)`` and ``ax * bx + ay * by`` (x term first), never
+``np.linalg.norm`` / ``np.dot``, whose results may depend on the CPU's SIMD or BLAS: the compiled
+kernels do the same operations in the same order, so that only highway-env's own lane formulas can
+differ between the two by an ULP. The operands are: ``_gap_clear`` dx, dy = crossing centre minus
+vehicle position and ``direction · (dx, dy)``; ``walk`` (position − centre) · across; the hit
+prefilter pedestrian minus vehicle; the spawn spacing check vehicle minus new position;
+``lane_distance_to`` other minus self. A pedestrian's walking heading is ``math.atan2`` (libm's,
+as compiled code calls it; numpy's ``arctan2`` dispatches SIMD kernels that differ from it by an
+ULP on AVX-512 CPUs). A pedestrian's wait on the pavement is
+``MEAN_WAIT_S * standard_exponential(method="inv")``: numpy computes ``-log1p(-U)`` of one
+53-bit double U (not ``-log(1 - U)``, which differs in the last bit for ~7 % of draws), which the
+kernels draw bit for bit from the same PCG64 state (numpy's default ziggurat is not reproduced
+there).
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from highway_env import utils
@@ -79,23 +96,27 @@ class Pedestrian(RoadObject):
         if self.speed == 0.0:
             self.wait_s -= dt
             if self.wait_s <= 0.0 and self._gap_clear(vehicles):
-                self.heading = float(np.arctan2(*(-self.side * self.across)[::-1]))
+                back = -self.side  # walk towards the other pavement
+                self.heading = math.atan2(back * float(self.across[1]), back * float(self.across[0]))
                 self.speed = self.pace_mps
             return
         self.position = self.position + self.speed * dt * self.direction
-        if -self.side * float(np.dot(self.position - self.centre, self.across)) >= PAVEMENT_M:
+        dx, dy = self.position[0] - self.centre[0], self.position[1] - self.centre[1]
+        if -self.side * float(dx * self.across[0] + dy * self.across[1]) >= PAVEMENT_M:
             self.side, self.speed = -self.side, 0.0
-            self.wait_s = float(self.rng.exponential(MEAN_WAIT_S))
+            self.wait_s = float(MEAN_WAIT_S * self.rng.standard_exponential(method="inv"))
 
     def _gap_clear(self, vehicles: list) -> bool:
         """No vehicle heading for the crossing within 6 m + 2.5 s of its travel, nor one waiting
         within 15 m of it (so that pedestrians and vehicles take turns), nor one on it."""
+        cx, cy = float(self.centre[0]), float(self.centre[1])
         for vehicle in vehicles:
-            to_crossing = self.centre - vehicle.position
-            distance = float(np.linalg.norm(to_crossing))
+            dx, dy = cx - float(vehicle.position[0]), cy - float(vehicle.position[1])
+            distance = math.sqrt(dx * dx + dy * dy)
             if distance < CROSSING_CLEAR_M:  # standing on or next to the crossing
                 return False
-            facing = float(np.dot(vehicle.direction, to_crossing)) > FACING_COS * distance
+            direction = vehicle.direction
+            facing = float(direction[0]) * dx + float(direction[1]) * dy > FACING_COS * distance
             if facing and distance < CROSSING_GAP_M + CROSSING_GAP_S * max(vehicle.speed, 0.0):
                 return False
             if facing and distance < COURTESY_M:  # a vehicle waiting for the crossing goes first
@@ -122,22 +143,23 @@ class TownRoad(Road):
         self._clear_wrecks(dt)
 
     def _hit_pedestrians(self) -> None:
-        """Exact box checks only for moving vehicles near a pedestrian (one array test first)."""
+        """Exact box checks only for moving vehicles near a pedestrian: pairs (pedestrian not
+        crashed before this pass, vehicle faster than MOVING_MPS), pedestrian-major, whose centres
+        are nearer than half the pedestrian's diagonal plus the largest moving diagonal."""
         walkers = [p for p in self.pedestrians if not p.crashed]
         moving = [v for v in self.vehicles if v.speed > MOVING_MPS]
         if not walkers or not moving:
             return
-        gaps = np.linalg.norm(
-            np.array([p.position for p in walkers])[:, None] - np.array([v.position for v in moving])[None],
-            axis=2,
-        )
         reach = (walkers[0].diagonal + max(v.diagonal for v in moving)) / 2
-        for i, j in zip(*np.nonzero(gaps < reach), strict=True):
-            pedestrian, vehicle = walkers[i], moving[j]
-            if not pedestrian.crashed and vehicle._is_colliding(pedestrian, 0.0)[0]:
-                vehicle.crashed = pedestrian.crashed = True
-                pedestrian.hit_by = vehicle
-                self.objects.remove(pedestrian)  # taken off the street: no obstacle to traffic
+        for pedestrian in walkers:
+            px, py = float(pedestrian.position[0]), float(pedestrian.position[1])
+            for vehicle in moving:
+                dx, dy = px - float(vehicle.position[0]), py - float(vehicle.position[1])
+                if math.sqrt(dx * dx + dy * dy) < reach and not pedestrian.crashed:
+                    if vehicle._is_colliding(pedestrian, 0.0)[0]:
+                        vehicle.crashed = pedestrian.crashed = True
+                        pedestrian.hit_by = vehicle
+                        self.objects.remove(pedestrian)  # taken off the street: no obstacle to traffic
 
     def _clear_wrecks(self, dt: float) -> None:
         """Crashed NPC vehicles are towed away after ``WRECK_CLEARED_S`` (they would block a
@@ -213,7 +235,9 @@ class TownVehicle(IDMVehicle):
         distance, signed as highway-env's. Its own measure projects onto the current lane, which
         for a leader already round a corner is far too short (and stays so while it drives off)."""
         along = super().lane_distance_to(other, lane)
-        return float(np.copysign(np.linalg.norm(other.position - self.position), along))
+        dx = float(other.position[0]) - float(self.position[0])
+        dy = float(other.position[1]) - float(self.position[1])
+        return math.copysign(math.sqrt(dx * dx + dy * dy), along)
 
     def step(self, dt: float) -> None:
         super().step(dt)
@@ -245,6 +269,13 @@ def left_turn_must_wait(road: Road, turn: tuple, vehicle=None) -> bool:
             if remaining_m < ONCOMING_WATCH_M:
                 return True
     return False
+
+
+def _distance(a: np.ndarray, b: np.ndarray) -> float:
+    """|a − b| of two (2,) points as scalar arithmetic (``math.sqrt(dx * dx + dy * dy)``, dx =
+    a_x − b_x): the compiled set-up and kernels compute it the same way, bit for bit."""
+    dx, dy = float(a[0]) - float(b[0]), float(a[1]) - float(b[1])
+    return math.sqrt(dx * dx + dy * dy)
 
 
 def street_lanes(network) -> list[tuple]:
@@ -353,7 +384,7 @@ class TownEnv(AbstractEnv):
                 index = streets[rng.integers(len(streets))]
                 lane = road.network.get_lane(index)
                 position = lane.position(rng.uniform(5.0, lane.length - 5.0), 0.0)
-                if min(np.linalg.norm(v.position - position) for v in road.vehicles) > 12.0:
+                if min(_distance(v.position, position) for v in road.vehicles) > 12.0:
                     break
             else:
                 continue

@@ -1,0 +1,489 @@
+"""The town's vehicles as compiled loops over ONE world's arrays (the caller loops the worlds).
+
+``town_act`` is ``Road.act()`` of the reference town (``drivelab.envs.town_env``): every vehicle
+row decides its controls in list order. The ego rows behave as in ``traffic.act``
+(``CONTROLLED``: the meta-action ego's lane following and speed control; ``PLAIN`` and
+``PEDAL_KIND`` keep their last action). ``TOWN`` rows are highway-env's ``TownVehicle``:
+
+- ``TownVehicle.act``: the target speed is the current lane's limit, or the next planned lane's
+  (the turn's) once within TURN_BRAKE_MARGIN_M plus the braking distance to it, computed before
+  ``follow_road`` (a crashed vehicle sets it too, then does nothing else);
+- ``TownVehicle.follow_road``: with at most one route entry left, a new ``random_route`` from the
+  target lane (goals: the streets' end nodes except the target lane's, in street order; up to
+  ROUTE_GOAL_TRIES draws of ``integers(len(goals))`` on the world's PCG64 words; the route from the
+  precomputed BFS table; else the target lane alone), then ``ControlledVehicle.follow_road``;
+- ``IDMVehicle.act``: ``change_lane_policy`` (``traffic``'s; every town road has one lane, so only
+  its timer reset is ever reached), steering to the target lane, IDM behind the leader on the
+  current lane and, while changing lanes, on the target lane;
+- leaders are found as ``Road.neighbour_vehicles`` with ``neighbour_vehicles_connected_lanes``:
+  on the lane, else on its successor roads (offset by the lane's length), else on its predecessor
+  roads (offset by minus their length), over the vehicles and then the pedestrians that are not
+  crashed (highway-env's ``road.objects``), the last of equals in front; the gap is
+  ``TownVehicle.lane_distance_to``: the straight-line distance, signed by the projection on the
+  current lane;
+- ``TownVehicle.acceleration``: IDM, then the minimum with a stopped virtual leader at the stop
+  line when ``stop_line_ahead`` says stop: red always; yellow unless v² / (2 max(ahead, 1e-3))
+  exceeds the comfortable deceleration; green only when the next planned lane is a left turn that
+  must wait (``left_turn_must_wait``).
+
+``town_step`` is ``Road.step``'s vehicle loop: ``Vehicle.step`` for every row, and for ``TOWN``
+rows the IDM timer and ``TownVehicle.step``'s no-reversing clamp.
+
+Arrays (one world):
+- ``v`` (N_max, TOWN_VEHICLE_COLUMNS) vehicle rows (``traffic``'s columns), rows ``0..count-1``
+  live, in ``road.vehicles`` order; a row's route capacity is ``(v.shape[1] - ROUTE) // 2``;
+- ``peds`` (P_max, PEDESTRIAN_COLUMNS) pedestrian rows (``town_rows``), rows ``0..pcount-1`` live,
+  in spawn order;
+- ``lanes`` (L, LANE_COLUMNS) the lane table; ``p`` (9,) the IDM parameters
+  (``traffic.IDM_PARAMETERS``);
+- ``coords``, ``done``, ``trig``: the frame cache of ``town_frame_cache``;
+- the ``TownRoadArrays`` fields of ``road_arrays_tuple`` (in that order);
+- ``light_states`` (M,) int64: LIGHT_* of each light row at the step's end time;
+- ``rng_words`` (6,) uint64: the world's PCG64 state (``pcg64``), advanced in place.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from drivelab.envs.backends.fast.lanes import (
+    FIRST_OF_ROAD,
+    FROM_NODE,
+    LANE_COUNT,
+    LANE_ID,
+    LENGTH,
+    SPEED_LIMIT,
+    TO_NODE,
+    local_coordinates,
+    on_lane,
+)
+from drivelab.envs.backends.fast.pcg64 import bounded_int
+from drivelab.envs.backends.fast.town_rows import P_CRASHED, P_HEADING, P_SPEED, P_X, P_Y, TURN_LEFT
+from drivelab.envs.backends.fast.traffic import (
+    ACC_MAX,
+    ACCEL,
+    COMFORT_ACC_MAX,
+    COMFORT_ACC_MIN,
+    CONTROLLED,
+    CRASHED,
+    DELTA,
+    DISTANCE_WANTED,
+    KIND,
+    KP_A,
+    LANE,
+    LEN,
+    OBSTACLE,
+    PEDAL_KIND,
+    PLAIN,
+    ROUTE,
+    ROUTE_END,
+    ROUTE_START,
+    ROUTED,
+    SPEED,
+    STEER,
+    TARGET_LANE,
+    TARGET_SPEED,
+    TIME_WANTED,
+    TIMER,
+    TOWN,
+    X,
+    Y,
+    _clip,
+    cached_desired_gap,
+    cached_idm_acceleration,
+    change_lane_policy,
+    follow_road,
+    lane_coordinates,
+    not_zero,
+    start_frame,
+    steering_control,
+    step_vehicle,
+)
+from drivelab.envs.backends.roads.town_rules import (
+    MOVING_MPS,
+    ONCOMING_WATCH_M,
+    ROUTE_GOAL_TRIES,
+    STOP_MARGIN_M,
+    TURN_BRAKE_MARGIN_M,
+)
+from drivelab.world.state import LIGHT_GREEN, LIGHT_YELLOW
+
+NO_STOP = -1.0  # stop_line_ahead's None (a distance to stop at is never negative)
+
+
+def town_frame_cache(vehicles: int, pedestrians: int, lane_count: int):
+    """Scratch arrays of one frame's ``town_act`` for up to ``vehicles`` vehicle rows and
+    ``pedestrians`` pedestrian rows on ``lane_count`` lanes: ``coords`` (L, N+P, 4), ``done``
+    (2, L) int64, ``trig`` (N+P, 2). ``coords[lane, j]`` is (longitudinal, lateral, on the lane
+    within 1 m, -) of vehicle j < count, and of pedestrian k at j = count + k; column 3 holds
+    ``traffic.lane_coordinates``' sorted vehicle rows. ``done[0]`` is ``traffic``'s per-lane
+    vehicle flag (-1 until filled), ``done[1]`` the pedestrians' (0 until filled). ``trig`` holds
+    the cosine and sine of the headings, vehicles then pedestrians. Allocate once per world and
+    reuse every frame (``town_act`` resets the flags)."""
+    size = vehicles + pedestrians
+    return np.empty((lane_count, size, 4)), np.full((2, lane_count), -1, dtype=np.int64), np.empty((size, 2))
+
+
+def road_arrays_tuple(arrays) -> tuple:
+    """The ``TownRoadArrays`` fields ``town_act`` takes, in its argument order: ``junction``,
+    ``from_arm``, ``to_arm``, ``turn``, ``end_junction``, ``end_arm``, ``light`` (each (L,) int64),
+    ``street_lanes`` (S,) int64, ``routes`` (L, S, W) int64, ``route_length`` (L, S) int64."""
+    return (
+        np.ascontiguousarray(arrays.junction, dtype=np.int64),
+        np.ascontiguousarray(arrays.from_arm, dtype=np.int64),
+        np.ascontiguousarray(arrays.to_arm, dtype=np.int64),
+        np.ascontiguousarray(arrays.turn, dtype=np.int64),
+        np.ascontiguousarray(arrays.end_junction, dtype=np.int64),
+        np.ascontiguousarray(arrays.end_arm, dtype=np.int64),
+        np.ascontiguousarray(arrays.light, dtype=np.int64),
+        np.ascontiguousarray(arrays.street_lanes, dtype=np.int64),
+        np.ascontiguousarray(arrays.routes, dtype=np.int64),
+        np.ascontiguousarray(arrays.route_length, dtype=np.int64),
+    )
+
+
+@njit(cache=True, inline="always")
+def planned_next(v: np.ndarray, lanes: np.ndarray, i: int) -> int:
+    """TownVehicle.next_lane: the lane row of the first route entry that starts where vehicle i's
+    current lane ends, else -1 (a route entry without a lane id names the road's lane 0)."""
+    end_node = lanes[int(v[i, LANE]), TO_NODE]
+    for k in range(int(v[i, ROUTE_START]), int(v[i, ROUTE_END])):
+        road = int(v[i, ROUTE + 2 * k])
+        if lanes[road, FROM_NODE] == end_node:
+            return road + max(int(v[i, ROUTE + 2 * k + 1]), 0)
+    return -1
+
+
+@njit(cache=True)
+def random_route(
+    v: np.ndarray,
+    lanes: np.ndarray,
+    i: int,
+    start: int,
+    street_lanes: np.ndarray,
+    routes: np.ndarray,
+    route_length: np.ndarray,
+    rng_words: np.ndarray,
+) -> None:
+    """town_env.random_route from lane row ``start`` into vehicle i's route entries: a goal drawn
+    among the streets' end nodes other than ``start``'s (street order), up to ROUTE_GOAL_TRIES
+    times until one is reachable; else the route is ``start`` alone."""
+    end_node = lanes[start, TO_NODE]
+    goals = 0
+    for g in range(street_lanes.shape[0]):
+        if lanes[street_lanes[g], TO_NODE] != end_node:
+            goals += 1
+    capacity = (v.shape[1] - ROUTE) // 2
+    for _ in range(ROUTE_GOAL_TRIES):
+        pick = bounded_int(rng_words, goals)
+        street = -1
+        for g in range(street_lanes.shape[0]):
+            if lanes[street_lanes[g], TO_NODE] != end_node:
+                if pick == 0:
+                    street = g
+                    break
+                pick -= 1
+        n = route_length[start, street]
+        if n > 0:
+            if n > capacity:
+                raise ValueError("a town route is longer than the vehicle row's route capacity")
+            for k in range(n):
+                row = routes[start, street, k]
+                v[i, ROUTE + 2 * k] = lanes[row, FIRST_OF_ROAD]
+                v[i, ROUTE + 2 * k + 1] = lanes[row, LANE_ID]
+            v[i, ROUTE_START], v[i, ROUTE_END], v[i, ROUTED] = 0.0, n, 1.0
+            return
+    v[i, ROUTE] = lanes[start, FIRST_OF_ROAD]
+    v[i, ROUTE + 1] = lanes[start, LANE_ID]
+    v[i, ROUTE_START], v[i, ROUTE_END], v[i, ROUTED] = 0.0, 1.0, 1.0
+
+
+@njit(cache=True, inline="always")
+def fill_lane(
+    v: np.ndarray, peds: np.ndarray, lanes: np.ndarray, coords: np.ndarray, done: np.ndarray, lane: int
+) -> None:
+    """The frame cache of ``lane``: the vehicles' lane coordinates (``traffic.lane_coordinates``)
+    and the pedestrians' at rows ``count + k``, once per frame."""
+    lane_coordinates(v, lanes, coords, done[0], lane)
+    if done[1, lane] > 0:
+        return
+    count = v.shape[0]
+    for k in range(peds.shape[0]):
+        s, r = local_coordinates(lanes, lane, peds[k, P_X], peds[k, P_Y])
+        coords[lane, count + k, 0], coords[lane, count + k, 1] = s, r
+        coords[lane, count + k, 2] = 1.0 if on_lane(lanes, lane, s, r, 1.0) else 0.0
+    done[1, lane] = 1
+
+
+@njit(cache=True)
+def connected_front(
+    v: np.ndarray,
+    peds: np.ndarray,
+    lanes: np.ndarray,
+    coords: np.ndarray,
+    done: np.ndarray,
+    i: int,
+    lane: int,
+) -> int:
+    """Road.neighbour_vehicles(vehicle i, lane)[0] with ``neighbour_vehicles_connected_lanes``:
+    the row of the leader (a vehicle j < count, or pedestrian k as count + k), -1 for none.
+
+    Each object is placed on the first of (the lane, its successor roads' lanes, its predecessor
+    roads' lanes, in the network's order) it lies on (``on_lane``, 1 m margin), its longitudinal
+    coordinate shifted into the lane's frame; the leader is the nearest at or ahead of vehicle i,
+    the last in scan order (vehicles, then pedestrians not crashed) among equals."""
+    count = v.shape[0]
+    lane_id = lanes[lane, LANE_ID]
+    search = np.empty(lanes.shape[0] + 1, dtype=np.int64)
+    offset = np.empty(lanes.shape[0] + 1)
+    search[0], offset[0], size = lane, 0.0, 1
+    for road in range(lanes.shape[0]):  # successor roads, in graph order
+        if lanes[road, FIRST_OF_ROAD] == road and lanes[road, FROM_NODE] == lanes[lane, TO_NODE]:
+            search[size] = road + (int(lane_id) if lane_id < lanes[road, LANE_COUNT] else 0)
+            offset[size] = lanes[lane, LENGTH]
+            size += 1
+    for road in range(lanes.shape[0]):  # predecessor roads, in graph order
+        if lanes[road, FIRST_OF_ROAD] == road and lanes[road, TO_NODE] == lanes[lane, FROM_NODE]:
+            previous = road + (int(lane_id) if lane_id < lanes[road, LANE_COUNT] else 0)
+            search[size], offset[size] = previous, -lanes[previous, LENGTH]
+            size += 1
+    fill_lane(v, peds, lanes, coords, done, lane)
+    s = coords[lane, i, 0]
+    front, s_front = -1, 0.0
+    for j in range(count + peds.shape[0]):
+        if j == i or (j >= count and peds[j - count, P_CRASHED] > 0):
+            continue
+        for k in range(size):
+            fill_lane(v, peds, lanes, coords, done, search[k])
+            if coords[search[k], j, 2] == 0.0:
+                continue
+            s_j = coords[search[k], j, 0] + offset[k]
+            if s <= s_j and (front < 0 or s_j <= s_front):
+                front, s_front = j, s_j
+            break
+    return front
+
+
+@njit(cache=True)
+def left_turn_must_wait(
+    v: np.ndarray,
+    lanes: np.ndarray,
+    i: int,
+    turn_lane: int,
+    junction: np.ndarray,
+    from_arm: np.ndarray,
+    to_arm: np.ndarray,
+    turn: np.ndarray,
+    end_junction: np.ndarray,
+    end_arm: np.ndarray,
+) -> bool:
+    """town_env.left_turn_must_wait: ``turn_lane`` is a left turn and another vehicle (the ego
+    included) moving at MOVING_MPS or more is in the junction coming from the opposite arm (not
+    leaving by it), or on the street to the opposite stop line within ONCOMING_WATCH_M of it."""
+    if turn[turn_lane] != TURN_LEFT:
+        return False
+    j, opposite = junction[turn_lane], (from_arm[turn_lane] + 2) % 4
+    for o in range(v.shape[0]):
+        if o == i or v[o, SPEED] < MOVING_MPS:
+            continue
+        lane = int(v[o, LANE])
+        if junction[lane] == j and from_arm[lane] == opposite and to_arm[lane] != opposite:
+            return True
+        if end_junction[lane] == j and end_arm[lane] == opposite:
+            s, _ = local_coordinates(lanes, lane, v[o, X], v[o, Y])
+            if lanes[lane, LENGTH] - s < ONCOMING_WATCH_M:
+                return True
+    return False
+
+
+@njit(cache=True)
+def stop_line_ahead(
+    v: np.ndarray,
+    lanes: np.ndarray,
+    p: np.ndarray,
+    i: int,
+    junction: np.ndarray,
+    from_arm: np.ndarray,
+    to_arm: np.ndarray,
+    turn: np.ndarray,
+    end_junction: np.ndarray,
+    end_arm: np.ndarray,
+    light: np.ndarray,
+    light_states: np.ndarray,
+) -> float:
+    """TownVehicle.stop_line_ahead: metres from vehicle i's front bumper to the stop line it must
+    stop at, else NO_STOP."""
+    lane = int(v[i, LANE])
+    if light[lane] < 0:
+        return NO_STOP
+    state = light_states[light[lane]]
+    s, _ = local_coordinates(lanes, lane, v[i, X], v[i, Y])
+    ahead_m = lanes[lane, LENGTH] - s - v[i, LEN] / 2
+    if ahead_m < 0:
+        return NO_STOP
+    if state == LIGHT_GREEN:
+        turn_lane = planned_next(v, lanes, i)
+        if turn_lane >= 0 and left_turn_must_wait(
+            v, lanes, i, turn_lane, junction, from_arm, to_arm, turn, end_junction, end_arm
+        ):
+            return ahead_m
+        return NO_STOP
+    if state == LIGHT_YELLOW and v[i, SPEED] ** 2 / (2 * max(ahead_m, 1e-3)) > -p[COMFORT_ACC_MIN]:
+        return NO_STOP
+    return ahead_m
+
+
+@njit(cache=True)
+def town_acceleration(
+    v: np.ndarray,
+    peds: np.ndarray,
+    lanes: np.ndarray,
+    p: np.ndarray,
+    coords: np.ndarray,
+    done: np.ndarray,
+    trig: np.ndarray,
+    i: int,
+    front: int,
+    junction: np.ndarray,
+    from_arm: np.ndarray,
+    to_arm: np.ndarray,
+    turn: np.ndarray,
+    end_junction: np.ndarray,
+    end_arm: np.ndarray,
+    light: np.ndarray,
+    light_states: np.ndarray,
+) -> float:
+    """TownVehicle.acceleration(self, front): IDM with the straight-line gap to ``front`` (a
+    vehicle row, a pedestrian as count + k, or -1), then the stop line's virtual leader."""
+    count = v.shape[0]
+    acceleration = cached_idm_acceleration(v, lanes, p, coords, done[0], trig, i, i, -1)
+    if front >= 0:
+        if front < count:
+            fx, fy = v[front, X], v[front, Y]
+            desired_gap = cached_desired_gap(v, p, trig, i, front)
+        else:
+            k = front - count
+            fx, fy = peds[k, P_X], peds[k, P_Y]
+            ab = -p[COMFORT_ACC_MAX] * p[COMFORT_ACC_MIN]
+            cos_e, sin_e = trig[i, 0], trig[i, 1]
+            dvx = v[i, SPEED] * cos_e - peds[k, P_SPEED] * trig[front, 0]
+            dvy = v[i, SPEED] * sin_e - peds[k, P_SPEED] * trig[front, 1]
+            dv = dvx * cos_e + dvy * sin_e
+            desired_gap = (
+                p[DISTANCE_WANTED] + v[i, SPEED] * p[TIME_WANTED] + v[i, SPEED] * dv / (2 * np.sqrt(ab))
+            )
+        lane = int(v[i, LANE])
+        fill_lane(v, peds, lanes, coords, done, lane)
+        along = coords[lane, front, 0] - coords[lane, i, 0]
+        dx, dy = fx - v[i, X], fy - v[i, Y]
+        gap_m = math.copysign(math.sqrt(dx * dx + dy * dy), along)
+        acceleration -= p[COMFORT_ACC_MAX] * (desired_gap / not_zero(gap_m)) ** 2
+    ahead_m = stop_line_ahead(
+        v, lanes, p, i, junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states
+    )
+    if ahead_m == NO_STOP:
+        return acceleration
+    gap_m = ahead_m - STOP_MARGIN_M + p[DISTANCE_WANTED]
+    speed = max(v[i, SPEED], 0.0)
+    ab = -p[COMFORT_ACC_MAX] * p[COMFORT_ACC_MIN]
+    desired_gap = p[DISTANCE_WANTED] + speed * p[TIME_WANTED] + speed * speed / (2 * np.sqrt(ab))
+    target = not_zero(v[i, TARGET_SPEED])
+    stop = p[COMFORT_ACC_MAX] * (1 - (speed / np.abs(target)) ** v[i, DELTA])
+    stop -= p[COMFORT_ACC_MAX] * (desired_gap / not_zero(gap_m)) ** 2
+    return min(acceleration, stop)
+
+
+@njit(cache=True)
+def town_act(
+    v: np.ndarray,
+    count: int,
+    peds: np.ndarray,
+    pcount: int,
+    lanes: np.ndarray,
+    p: np.ndarray,
+    coords: np.ndarray,
+    done: np.ndarray,
+    trig: np.ndarray,
+    junction: np.ndarray,
+    from_arm: np.ndarray,
+    to_arm: np.ndarray,
+    turn: np.ndarray,
+    end_junction: np.ndarray,
+    end_arm: np.ndarray,
+    light: np.ndarray,
+    street_lanes: np.ndarray,
+    routes: np.ndarray,
+    route_length: np.ndarray,
+    light_states: np.ndarray,
+    rng_words: np.ndarray,
+) -> None:
+    """Road.act of one town world: rows ``0..count-1`` of ``v`` decide their controls in order
+    (see the module docstring for the arrays); random routes draw on ``rng_words``."""
+    w, q = v[:count], peds[:pcount]
+    start_frame(w, done[0], trig)
+    done[1, :] = 0
+    for k in range(pcount):
+        trig[count + k, 0], trig[count + k, 1] = np.cos(q[k, P_HEADING]), np.sin(q[k, P_HEADING])
+    for i in range(count):
+        kind = w[i, KIND]
+        if kind == PLAIN or kind == PEDAL_KIND or kind == OBSTACLE:
+            continue  # plain and pedal vehicles keep their last action; obstacles never act
+        if kind == CONTROLLED:
+            follow_road(w, lanes, i)
+            w[i, STEER] = steering_control(w, lanes, i, int(w[i, TARGET_LANE]))
+            w[i, ACCEL] = KP_A * (w[i, TARGET_SPEED] - w[i, SPEED])
+            continue
+        if kind != TOWN:
+            raise ValueError("town_act drives CONTROLLED, PLAIN, PEDAL_KIND and TOWN rows only")
+        # TownVehicle.act: the turn's speed limit, before follow_road
+        lane = int(w[i, LANE])
+        limit = lanes[lane, SPEED_LIMIT]
+        turn_lane = planned_next(w, lanes, i)
+        if turn_lane >= 0:
+            next_limit = lanes[turn_lane, SPEED_LIMIT]
+            s, _ = local_coordinates(lanes, lane, w[i, X], w[i, Y])
+            ahead_m = lanes[lane, LENGTH] - s
+            braking = (w[i, SPEED] ** 2 - next_limit**2) / (2 * -p[COMFORT_ACC_MIN])
+            if ahead_m < TURN_BRAKE_MARGIN_M + braking:
+                limit = min(limit, next_limit)
+        w[i, TARGET_SPEED] = limit
+        if w[i, CRASHED] > 0:
+            continue
+        if w[i, ROUTE_END] - w[i, ROUTE_START] <= 1:
+            random_route(w, lanes, i, int(w[i, TARGET_LANE]), street_lanes, routes, route_length, rng_words)
+        follow_road(w, lanes, i)
+        change_lane_policy(w, lanes, p, coords, done[0], trig, i)
+        w[i, STEER] = steering_control(w, lanes, i, int(w[i, TARGET_LANE]))
+        front = connected_front(w, q, lanes, coords, done, i, lane)
+        acceleration = town_acceleration(
+            w, q, lanes, p, coords, done, trig, i, front,
+            junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states,
+        )  # fmt: skip
+        target = int(w[i, TARGET_LANE])
+        if lane != target:
+            front = connected_front(w, q, lanes, coords, done, i, target)
+            target_a = town_acceleration(
+                w, q, lanes, p, coords, done, trig, i, front,
+                junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states,
+            )  # fmt: skip
+            acceleration = min(acceleration, target_a)
+        w[i, ACCEL] = _clip(acceleration, -p[ACC_MAX], p[ACC_MAX])
+
+
+@njit(cache=True)
+def town_step(v: np.ndarray, count: int, lanes: np.ndarray, dt: float) -> None:
+    """Road.step's vehicle loop for rows ``0..count-1``: Vehicle.step (``traffic.step_vehicle``);
+    a TOWN row first adds ``dt`` to its IDM timer and after the step does not reverse
+    (``speed = max(speed, 0)``). The ego (not TOWN) is not clamped."""
+    for i in range(count):
+        kind = v[i, KIND]
+        if kind == OBSTACLE:
+            continue
+        if kind == TOWN:
+            v[i, TIMER] += dt
+        step_vehicle(v, lanes, i, dt)
+        if kind == TOWN and v[i, SPEED] < 0.0:  # Python's max(speed, 0.0): speed unless 0.0 > speed
+            v[i, SPEED] = 0.0

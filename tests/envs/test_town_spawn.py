@@ -1,0 +1,169 @@
+"""The compiled core's town set-up (``scenarios.town.town_episode``) gives the reference's episode
+bit for bit: the same vehicle rows, pedestrian rows, light offsets, ego route, NoCrash time limit
+and generator state after ``TownEnv._reset`` (design memo §3, L2).
+
+Every float is compared exactly (``array_equal``), on any CPU: the set-up makes highway-env's own
+numpy calls on the same values (``LaneGeometry``'s lane formulas, ``np.cos``/``np.sin`` of a
+crossing's heading, the route polyline and ``RouteTracker``), and the NPC spacing check is the
+reference's scalar ``math.sqrt(dx * dx + dy * dy)``; so where numpy's AVX-512 kernels round
+differently, both sides round alike (this machine runs them).
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from drivelab.envs.backends.fast import pcg64
+from drivelab.envs.backends.fast import traffic as T
+from drivelab.envs.backends.fast.spawn import LaneGeometry
+from drivelab.envs.scenarios import SCENARIOS
+from drivelab.envs.scenarios.town import TownSetup, spawn_town, town_episode
+from drivelab.envs.town_env import fixed_routes
+from tests.envs.town_reference import reference_town, town_rows, town_tables
+
+SEEDS = (0, 1, 2, 3)
+LAYOUTS = ("train", "test")
+TRAFFIC = ("empty", "regular", "dense")
+_TABLES: dict = {}
+
+
+def tables(layout: str) -> tuple:
+    """(LaneTable, TownRoadArrays) of a layout, built once per test session."""
+    if layout not in _TABLES:
+        _TABLES[layout] = town_tables(layout)
+    return _TABLES[layout]
+
+
+def town_road(backend, layout: str) -> SimpleNamespace:
+    """The fields of the simulator's converted road that the town's set-up reads, taken from a
+    reference backend (its config and vehicle classes)."""
+    from highway_env.vehicle.behavior import IDMVehicle
+
+    table, arrays = tables(layout)
+    env = backend.env
+    return SimpleNamespace(
+        table=table,
+        geometry=LaneGeometry(table),
+        config=dict(env.config),
+        target_speeds=np.asarray(getattr(env.action_type, "target_speeds", [0.0]), dtype=float),
+        ego_length=float(env.vehicle.LENGTH),
+        ego_width=float(env.vehicle.WIDTH),
+        npc_length=float(IDMVehicle.LENGTH),
+        npc_width=float(IDMVehicle.WIDTH),
+        lane_change_delay=float(IDMVehicle.LANE_CHANGE_DELAY),
+        idm_delta=float(IDMVehicle.DELTA),
+        cache={"town_arrays": arrays},
+    )
+
+
+def compare_setups(layout: str, traffic: str, control: str, fixed: bool, seeds=SEEDS) -> list[int]:
+    """Set up each seed both ways and assert everything equal. Returns the NPC counts placed."""
+    config = {"fixed_routes": True, "retarget": False} if fixed else {}
+    backend = reference_town(layout, traffic, seeds[0], control, **config)
+    road = town_road(backend, layout)
+    setup = TownSetup.of(road)
+    table, arrays = tables(layout)
+    placed = []
+    for seed in seeds:
+        backend.reset(seed)
+        env = backend.env
+        vehicles, pedestrians, ego = town_rows(env, table, arrays)
+        episode = town_episode(seed, setup, control)
+        message = f"{layout} {traffic} {control} fixed={fixed} seed {seed}"
+        assert episode.vehicles.shape == vehicles.shape, message
+        np.testing.assert_array_equal(episode.vehicles, vehicles, err_msg=message)
+        assert episode.ego == ego == 0, message
+        assert episode.pedestrians.shape == pedestrians.shape, message
+        np.testing.assert_array_equal(episode.pedestrians, pedestrians, err_msg=message)
+        np.testing.assert_array_equal(episode.light_offsets_s, env.road.lights.offsets_s, err_msg=message)
+        route = [table.row_of[index] for index in env.ego_route]
+        np.testing.assert_array_equal(episode.ego_route, route, err_msg=message)
+        limit = np.inf if backend.route_time_limit_s is None else backend.route_time_limit_s
+        assert episode.route_time_limit_s == limit, message
+        np.testing.assert_array_equal(episode.rng_state, pcg64.state_of(env.np_random), err_msg=message)
+        assert episode.rng.bit_generator.state == env.np_random.bit_generator.state, message
+        placed.append(len(vehicles) - 1)
+    return placed
+
+
+@pytest.mark.parametrize("layout", LAYOUTS)
+@pytest.mark.parametrize("traffic", TRAFFIC)
+@pytest.mark.parametrize("fixed", [False, True], ids=["retarget", "fixed_routes"])
+def test_setup_gives_the_reference_episode_with_a_meta_ego(layout, traffic, fixed):
+    compare_setups(layout, traffic, "meta", fixed)
+
+
+@pytest.mark.parametrize("layout", LAYOUTS)
+@pytest.mark.parametrize("traffic", TRAFFIC)
+@pytest.mark.parametrize("fixed", [False, True], ids=["retarget", "fixed_routes"])
+def test_setup_gives_the_reference_episode_with_a_continuous_ego(layout, traffic, fixed):
+    """A kinematic ego: a PLAIN row without a route (the episode's route is still planned)."""
+    compare_setups(layout, traffic, "continuous", fixed, seeds=SEEDS[:2])
+
+
+def test_dense_test_town_skips_npcs_without_a_free_spot():
+    """The 10 placement tries run out on the small test town at 30 NPCs (its 14 streets hold
+    about 15 at 12 m spacing): the set-up skips those NPCs as the reference does."""
+    placed = compare_setups("test", "dense", "meta", False, seeds=(0, 1))
+    assert all(10 < count < 30 for count in placed)  # 14 and 14 of 30
+
+
+@pytest.mark.parametrize("layout", LAYOUTS)
+def test_fixed_routes_are_the_references(layout):
+    """The 25 NoCrash routes from the route table equal ``town_env.fixed_routes`` of the network."""
+    from drivelab.envs.town import LAYOUTS as TOWN_LAYOUTS
+    from drivelab.envs.town import build_network
+
+    backend = reference_town(layout, "empty", 0, "meta", fixed_routes=True, retarget=False)
+    setup = TownSetup.of(town_road(backend, layout))
+    table, arrays = tables(layout)
+    network = build_network(TOWN_LAYOUTS[layout])
+    expected = [(table.row_of[start], goal) for start, goal in fixed_routes(network)]
+    got = [(int(arrays.street_lanes[a]), table.indices[arrays.street_lanes[b]][1]) for a, b in setup.fixed]
+    assert got == expected and len(got) == 25
+    assert len({tuple(pair) for pair in setup.fixed.tolist()}) > 1
+
+
+def test_spawn_hook_returns_the_episode():
+    """``Scenario.spawn``'s (rows, ego row, regulation, between-steps state) for the town: the
+    vehicle rows and ego row of the TownEpisode, zeros, and the TownEpisode itself."""
+    assert SCENARIOS["town"].spawn is spawn_town
+    backend = reference_town("train", "regular", 5, "meta")
+    road = town_road(backend, "train")
+    rows, ego, regulation, episode = spawn_town(5, road, "meta")
+    assert rows is episode.vehicles and ego == episode.ego == 0
+    np.testing.assert_array_equal(regulation, np.zeros(2))
+    assert rows.shape == (16, T.TOWN_VEHICLE_COLUMNS) and episode.pedestrians.shape[0] == 10
+    assert TownSetup.of(road) is road.cache["town_setup"]  # built once per road
+    again = spawn_town(5, road, "meta")[3]
+    np.testing.assert_array_equal(again.rng_state, episode.rng_state)
+    np.testing.assert_array_equal(again.vehicles, episode.vehicles)
+    other = spawn_town(6, road, "meta")[3]
+    assert not np.array_equal(other.vehicles[:, T.X], episode.vehicles[:, T.X])
+
+
+def test_a_pedestrians_next_wait_is_the_inverse_transform_exponential():
+    """The reference's wait on reaching the far pavement is MEAN_WAIT_S * -log1p(-U) of the next
+    53-bit double U of its generator (``standard_exponential(method="inv")``): one draw, which
+    the compiled kernels reproduce from the PCG64 words (note log1p: ``-log(1 - U)`` differs)."""
+    from drivelab.envs.town import LAYOUTS as TOWN_LAYOUTS
+    from drivelab.envs.town import build_network, street_crossings
+    from drivelab.envs.town_env import MEAN_WAIT_S, PAVEMENT_M, Pedestrian, TownRoad
+
+    layout = TOWN_LAYOUTS["test"]
+    road = TownRoad(network=build_network(layout), np_random=np.random.default_rng(0), record_history=False)
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        walker = Pedestrian(road, street_crossings(layout)[seed % 7], -1, rng)
+        walker.speed = walker.pace_mps  # walking towards pavement +1, one step from it
+        walker.position = walker.centre + (PAVEMENT_M - 0.05) * walker.across
+        words = pcg64.state_of(rng)
+        walker.walk(0.1, [])
+        assert walker.side == 1 and walker.speed == 0.0
+        u = float(pcg64.next_uint64(words) >> np.uint64(11)) * 2.0**-53
+        assert walker.wait_s == MEAN_WAIT_S * -math.log1p(-u)
+        np.testing.assert_array_equal(pcg64.state_of(rng), words)
