@@ -76,9 +76,9 @@ def make_simulator(backend: str, scenario, traffic: str, control: str, num_world
     if backend == "auto":
         backend = "fast" if scenario.fast_backend else "highway"
     if backend == "fast":
-        from drivelab.envs.backends.fast.simulator import FastSimulator
+        from drivelab.envs.backends.fast.backend import fast_simulator
 
-        return FastSimulator(scenario, traffic, control, num_worlds, overrides)
+        return fast_simulator(scenario, traffic, control, num_worlds, overrides)
     from drivelab.envs.backends.highway import HighwayBackend
     from drivelab.envs.backends.reference import PerWorldSimulator
 

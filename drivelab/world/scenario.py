@@ -32,6 +32,9 @@ class Scenario:
     :param circuit: the road is a closed loop: the route is one whole lap (however long).
     :param guide_line: a yellow line is painted along the route (follow-line).
     :param keep_lane: leaving the ego's starting lane counts as leaving the road (follow-lane).
+    :param town_traffic: its traffic is the town's (lights, pedestrians, town vehicles on random
+        routes): the compiled core runs it with its town simulator, whose ``spawn`` hook returns
+        the episode's ``TownEpisode`` as its fourth item.
     :param spawn: the compiled core's episode set-up of one world, ``spawn(seed, road, control)
         -> (vehicle rows, ego row, regulation (2,), generator between steps or None)`` (``road``:
         the simulator's converted road); None: the compiled core cannot run the scenario.
@@ -62,6 +65,7 @@ class Scenario:
     circuit: bool = False
     guide_line: bool = False
     keep_lane: bool = False
+    town_traffic: bool = False
     junction_needs_both_ends: bool = False
     spawn: Callable | None = field(default=None, repr=False)
     spawn_many: Callable | None = field(default=None, repr=False)

@@ -21,6 +21,15 @@ from drivelab.world.scenario import Scenario
 from drivelab.world.state import WorldState
 
 
+def fast_simulator(scenario: Scenario, traffic: str, control: str, num_worlds: int, overrides=None):
+    """K worlds of ``scenario`` on the compiled core: the town's simulator for town traffic."""
+    if scenario.town_traffic:
+        from drivelab.envs.backends.fast.town_simulator import TownSimulator
+
+        return TownSimulator(scenario, traffic, control, num_worlds, overrides)
+    return FastSimulator(scenario, traffic, control, num_worlds, overrides)
+
+
 class FastBackend:
     """Same scenarios, same WorldState as HighwayBackend, simulated by compiled array code.
 
@@ -30,14 +39,18 @@ class FastBackend:
     :param overrides: extra highway-env config keys.
     """
 
-    route_time_limit_s = None
-
     def __init__(
         self, scenario: Scenario, traffic: str = "regular", control: str = "meta", overrides=None
     ) -> None:
         self.scenario, self.control = scenario, control
-        self.simulator = FastSimulator(scenario, traffic, control, 1, overrides)
+        self.simulator = fast_simulator(scenario, traffic, control, 1, overrides)
         self.world: WorldState | None = None
+
+    @property
+    def route_time_limit_s(self) -> float | None:
+        """The NoCrash time limit of the episode's fixed route (the town), else None."""
+        limits = getattr(self.simulator, "route_time_limit_s", None)
+        return None if limits is None or not np.isfinite(limits[0]) else float(limits[0])
 
     @property
     def policy_frequency_hz(self) -> float:

@@ -58,8 +58,14 @@ ACCELERATION_RANGE, STEERING_RANGE = (-5.0, 5.0), (-FULL_LOCK_RAD, FULL_LOCK_RAD
 # on an exit lane at least the threshold along it (IntersectionEnv.has_arrived, 25 m). A scenario
 # with a ``traffic_flow`` also loses the vehicles that reach the end of their exit and may get a
 # new one at an entry after every step (IntersectionEnv.step).
-ARRIVE_NEVER, ARRIVE_PAST_X, ARRIVE_EXIT = 0, 1, 2
-ARRIVAL_RULES = {"none": (ARRIVE_NEVER, 0.0), "merge_end": (ARRIVE_PAST_X, None), "exit": (ARRIVE_EXIT, 25.0)}
+# ARRIVE_ROUTE_END: less than the threshold of the ego's route left (the town's planned route).
+ARRIVE_NEVER, ARRIVE_PAST_X, ARRIVE_EXIT, ARRIVE_ROUTE_END = 0, 1, 2, 3
+ARRIVAL_RULES = {
+    "none": (ARRIVE_NEVER, 0.0),
+    "merge_end": (ARRIVE_PAST_X, None),
+    "exit": (ARRIVE_EXIT, 25.0),
+    "route_end": (ARRIVE_ROUTE_END, 2.0),
+}
 
 # Columns of the export kernel's float, int and flag outputs
 (
@@ -197,6 +203,12 @@ def _road_key(scenario: Scenario, traffic: str, control: str, overrides: dict | 
     return (repr(scenario), traffic, control, repr(sorted((overrides or {}).items())))
 
 
+def _static_objects(road) -> list:
+    """The road's obstacles: its objects but the town's pedestrians (they are set up per episode)."""
+    walkers = {id(p) for p in getattr(road, "pedestrians", [])}
+    return [o for o in road.objects if id(o) not in walkers]
+
+
 def _convert_road(builder: HighwayBackend, scenario: Scenario) -> _Road:
     """The road highway-env built in ``builder`` (after a reset) as a _Road, with everything the
     episodes need planned now: the builder is dropped afterwards."""
@@ -234,7 +246,7 @@ def _convert_road(builder: HighwayBackend, scenario: Scenario) -> _Road:
         else 0,
         geometry=LaneGeometry(table),
         paths=all_shortest_paths(graph_keys),
-        objects=vehicles_to_array([], table, env.road.objects),
+        objects=vehicles_to_array([], table, _static_objects(env.road)),
         idm=idm_parameters(),
         ego_length=float(env.vehicle.LENGTH),
         ego_width=float(env.vehicle.WIDTH),
@@ -708,7 +720,7 @@ class FastSimulator:
             collided=collided,
             collision_kind=np.where(collided, COLLISION_VEHICLE, COLLISION_NONE).astype(np.int8),
             off_road=off_road,
-            arrived=flags[:, EX_ARRIVED],
+            arrived=flags[:, EX_ARRIVED] if self.arrival != ARRIVE_ROUTE_END else self._route_ended(),
             red_light_crossed=no_event,  # the rules add blocked and off_route; no lights here
             blocked=no_event,
             off_route=no_event,
@@ -730,6 +742,10 @@ class FastSimulator:
                 else {**self._empty, "road_index": self.route_index.copy()}
             ),
         )
+
+    def _route_ended(self) -> np.ndarray:
+        """(K,) less than the arrival threshold of the ego's route is left."""
+        return self.r_length[self.route_index] - self.progress_m < self.arrival_threshold
 
     def _routes(self) -> dict[str, np.ndarray]:
         """Every world's route arrays for RouteBatch, remade only when a world's route changed

@@ -58,8 +58,6 @@ from drivelab.world.batch import (
 )
 from drivelab.world.state import LIGHT_RED
 
-ARRIVAL_REMAINING_M = 2.0  # HighwayBackend._arrived for "route_end": under 2 m of route left
-
 
 @njit(cache=True)
 def _simulate_town(
@@ -211,6 +209,21 @@ class TownSimulator(FastSimulator):
         self._trackers = [t if t is not None else self.trackers[0] for t in self.trackers]
         self._pad_routes()
 
+    def _routes(self) -> dict[str, np.ndarray]:
+        """The worlds' route arrays for RouteBatch, remade when a world's route changed."""
+        if self._route_cache is None or self._route_cache[0] != self._route_version:
+            arrays = {
+                "polyline": self.r_polyline.copy(),
+                "stations_m": self.r_stations.copy(),
+                "count": self.r_count.copy(),
+                "length_m": self.r_length.copy(),
+                "closed": self.r_closed.copy(),
+            }
+            for array in arrays.values():
+                array.setflags(write=False)
+            self._route_cache = (self._route_version, arrays)
+        return self._route_cache[1]
+
     def _update_lights(self, active: np.ndarray) -> None:
         aj, aa = self.arrays.light_junction, self.arrays.light_arm
         _light_states_worlds(aj, aa, self.offsets, self.timings, self.time_s, active, self.light_state)
@@ -257,8 +270,7 @@ class TownSimulator(FastSimulator):
         """TownEnv.extend_route in every world that arrived: a random route on from the end of
         the ego's, drawn from the world's generator after its frames; the meta-action ego's
         planned lanes grow by it; the progress is projected on the longer route."""
-        remaining = self.r_length - self.progress_m
-        for k in np.flatnonzero(active & (remaining < ARRIVAL_REMAINING_M)):
+        for k in np.flatnonzero(active & self._route_ended()):
             pcg64.set_state(self._scratch_rng, self.rng_words[k])
             more = self.setup.random_route(self.ego_routes[k][-1], self._scratch_rng)[1:]
             self.rng_words[k] = pcg64.state_of(self._scratch_rng)
@@ -297,12 +309,11 @@ class TownSimulator(FastSimulator):
         batch = self._export_arrays(floats, ints, flags, vehicles, valid)
         collided = flags[:, EX_CRASHED]
         kind = np.where(hit_ego, COLLISION_PEDESTRIAN, COLLISION_VEHICLE)
-        remaining = self.r_length - self.progress_m
         events = EventsBatch(
             collided=collided,
             collision_kind=np.where(collided, kind, COLLISION_NONE).astype(np.int8),
             off_road=~flags[:, EX_ON_ROAD],
-            arrived=remaining < ARRIVAL_REMAINING_M,
+            arrived=batch.events.arrived,
             red_light_crossed=self._red_light.copy(),
             blocked=self._no_event,
             off_route=self._no_event,
