@@ -5,8 +5,12 @@ and generator state after ``TownEnv._reset`` (design memo §3, L2).
 Every float is compared exactly (``array_equal``), on any CPU: the set-up makes highway-env's own
 numpy calls on the same values (``LaneGeometry``'s lane formulas, ``np.cos``/``np.sin`` of a
 crossing's heading, the route polyline and ``RouteTracker``), and the NPC spacing check is the
-reference's scalar ``math.sqrt(dx * dx + dy * dy)``; so where numpy's AVX-512 kernels round
-differently, both sides round alike (this machine runs them).
+reference's scalar ``math.sqrt(dx * dx + dy * dy)`` (numpy's element-wise operations, each
+correctly rounded); so where numpy's AVX-512 kernels round differently, both sides round alike.
+Checked both ways: on an AVX-512 CPU (AMD EPYC), and with its AVX-512 dispatch off
+(``test_fast.run_without_avx512``, dense traffic, both layouts, route modes and controls, 3
+seeds), every array equal; no subprocess test is kept: the set-up has no compiled arithmetic
+of its own (``LaneGeometry.closest_lane`` only shortlists lanes for numpy to decide).
 """
 
 from __future__ import annotations
