@@ -1,9 +1,18 @@
-"""The signalised town (seed 000): its preset. The road, lights, pedestrians and traffic are
-highway-env objects built by ``drivelab.envs.town_env``; the compiled core does not run it yet."""
+"""The signalised town (seed 000): its preset. The road is described as blocks
+(``drivelab.envs.town.road_description``); the lights, pedestrians and traffic are highway-env
+objects built by ``drivelab.envs.town_env``; the compiled core does not run it yet."""
 
 from __future__ import annotations
 
+from drivelab.envs.backends.roads.description import RoadDescription
+from drivelab.envs.town import LAYOUTS, road_description
 from drivelab.world.scenario import Scenario
+
+
+def town_road(config: dict) -> RoadDescription:
+    """The town's road for a config: its ``layout`` ("train" by default, as ``TownEnv``'s)."""
+    return road_description(LAYOUTS[config.get("layout", "train")])
+
 
 SCENARIO = Scenario(
     "town",
@@ -22,4 +31,5 @@ SCENARIO = Scenario(
     fast_backend=False,  # its vehicles stop for lights: not in the compiled kernels yet
     route_deviation_m=3.5,  # NoCrash / Roach episode rules
     blocked_after_s=90.0,
+    road=town_road,
 )

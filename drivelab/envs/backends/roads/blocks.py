@@ -176,7 +176,6 @@ class Junction:
         """The junction's lanes, as junction ``index`` at ``centre`` (2,)."""
         w, records = LANE_WIDTH_M, []
         left_centre = np.array([-LEFT_TURN_RADIUS_M + w / 2, LEFT_TURN_RADIUS_M - w / 2])
-        lines = {"n": LINE_NONE, "c": LINE_CONTINUOUS}
         for k in self.arms:
             angle, turn = np.radians(90 * k), rotation(k)
             nodes = {"start_node": f"J{index}:ir{k}", "junction": index, "from_arm": k}
@@ -186,21 +185,21 @@ class Junction:
                     end_node=f"J{index}:il{(k - 1) % 4}", to_arm=(k - 1) % 4, turn=TURN_RIGHT, kind=ARC,
                     centre=tuple(centre + turn @ np.array([OUTER_M, OUTER_M])), radius=RIGHT_TURN_RADIUS_M,
                     start_phase=angle + np.radians(180), end_phase=angle + np.radians(270),
-                    lines=(lines["n"], lines["c"]), speed_limit=TURN_SPEED_MPS, width=w, **nodes,
+                    lines=(LINE_NONE, LINE_CONTINUOUS), speed_limit=TURN_SPEED_MPS, width=w, **nodes,
                 ))  # fmt: skip
             if (k + 1) % 4 in self.arms:
                 records.append(LaneRecord(
                     end_node=f"J{index}:il{(k + 1) % 4}", to_arm=(k + 1) % 4, turn=TURN_LEFT, kind=ARC,
                     centre=tuple(centre + turn @ left_centre),
                     radius=LEFT_TURN_RADIUS_M, start_phase=angle, end_phase=angle + np.radians(-90),
-                    clockwise=False, lines=(lines["n"], lines["n"]), speed_limit=TURN_SPEED_MPS, width=w,
+                    clockwise=False, lines=(LINE_NONE, LINE_NONE), speed_limit=TURN_SPEED_MPS, width=w,
                     **nodes,
                 ))  # fmt: skip
             if (k + 2) % 4 in self.arms:
                 records.append(LaneRecord(
                     end_node=f"J{index}:il{(k + 2) % 4}", to_arm=(k + 2) % 4, turn=TURN_STRAIGHT,
                     kind=STRAIGHT, start=tuple(centre + turn @ np.array([w / 2, OUTER_M])),
-                    end=tuple(centre + turn @ np.array([w / 2, -OUTER_M])), lines=(lines["n"], lines["n"]),
+                    end=tuple(centre + turn @ np.array([w / 2, -OUTER_M])), lines=(LINE_NONE, LINE_NONE),
                     speed_limit=SPEED_LIMIT_MPS, width=w, **nodes,
                 ))  # fmt: skip
         return records
