@@ -10,6 +10,8 @@ description (main 2317419): a formula that drifts makes these tests fail.
 from __future__ import annotations
 
 import dataclasses
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -374,3 +376,20 @@ def test_scenarios_describe_their_roads():
         _assert_same_network(to_road_network(road), expected)
         _assert_same_network(to_road_network(scenario.road({})), expected)
         assert len(road.guide_lines) == int(scenario.guide_line)
+
+
+def test_the_fast_path_builds_no_highway_env_object():
+    code = (
+        "import sys\n"
+        "from drivelab.envs.backends.fast.lanes import LaneTable\n"
+        "from drivelab.envs.backends.roads.road_map import road_map\n"
+        "from drivelab.envs.backends.roads.town_arrays_description import town_arrays\n"
+        "from drivelab.envs.scenarios.circuits import FOLLOW_LINE\n"
+        "from drivelab.envs.scenarios.town import SCENARIO\n"
+        "for road in (SCENARIO.road({'layout': 'test'}), FOLLOW_LINE.road({})):\n"
+        "    LaneTable.from_description(road), road_map(road)\n"
+        "town_arrays(SCENARIO.road({'layout': 'test'}))\n"
+        "print(sorted(m for m in sys.modules if m.startswith('highway_env')))\n"
+    )
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert result.stdout.strip() == "[]"
