@@ -393,3 +393,24 @@ def test_the_fast_path_builds_no_highway_env_object():
     )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert result.stdout.strip() == "[]"
+
+
+@pytest.mark.parametrize("name", sorted(ROADS))
+def test_connected_lanes_are_the_ones_highway_env_searches(name):
+    desc, oracle = ROADS[name]
+    offsets, rows, before = desc.connected_lanes
+    indices = desc.indices
+    for row, (f, t, i) in enumerate(indices):
+        expected = []  # Road.neighbour_vehicles with neighbour_vehicles_connected_lanes
+        for to, lanes in oracle.graph.get(t, {}).items():
+            expected.append(((t, to, i if i < len(lanes) else 0), False))
+        for origin, to_dict in oracle.graph.items():
+            if f in to_dict:
+                expected.append(((origin, f, i if i < len(to_dict[f]) else 0), True))
+        found = [
+            (indices[r], bool(b))
+            for r, b in zip(
+                rows[offsets[row] : offsets[row + 1]], before[offsets[row] : offsets[row + 1]], strict=True
+            )
+        ]
+        assert found == expected
