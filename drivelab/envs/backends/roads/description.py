@@ -153,11 +153,19 @@ class RoadDescription:
     guide_lines: tuple[np.ndarray, ...] = ()
     palette: str = "day"
 
+    def __post_init__(self) -> None:
+        # a description is shared (the town's is cached per layout): its arrays are read-only
+        for value in vars(self).values():
+            for array in value if isinstance(value, tuple) else (value,):
+                if isinstance(array, np.ndarray):
+                    array.flags.writeable = False
+
     @staticmethod
     def from_lanes(records: list[LaneRecord], **rest) -> RoadDescription:
         """A description of ``records`` put in highway-env's graph order (a stable grouping by
-        origin node, then destination node, each by first use); ``rest``: the other fields, with
-        light rows given per lane by ``RoadDescription.light_rows``."""
+        origin node, then destination node, each by first use); ``rest``: the other fields
+        (``crossing_lanes`` as positions in ``records``). Each lane's ``light`` is the row of
+        (end_junction, end_arm) among (``light_junction``, ``light_arm``), else -1."""
         order = _graph_order(records)
         records = [records[k] for k in order]
         nodes = tuple(dict.fromkeys(node for r in records for node in (r.start_node, r.end_node)))

@@ -88,6 +88,6 @@ def road_map(desc: RoadDescription) -> RoadMap:
         markings=stack(markings),
         marking_kinds=np.concatenate(kinds) if kinds else np.zeros(0, dtype=int),
         edges=stack(edges),
-        guide_lines=tuple(desc.guide_lines),
-        crossings=np.asarray(desc.crossings, dtype=float).reshape(-1, 5),
+        guide_lines=tuple(line.copy() for line in desc.guide_lines),
+        crossings=np.array(desc.crossings, dtype=float).reshape(-1, 5),
     )
