@@ -106,11 +106,11 @@ def test_make_vec_takes_the_vector_entry_point_with_the_auto_backend():
 
 
 def test_scenarios_off_the_compiled_core_batch_in_subprocesses():
-    vector = make_vec("follow-line", num_envs=2, obs="line")
+    vector = make_vec("town", num_envs=2, obs="waypoints", traffic="empty")
     try:
         assert isinstance(vector, gymnasium.vector.AsyncVectorEnv)
         observations, _ = vector.reset(seed=0)
-        assert observations.shape == (2,)
+        assert observations.shape == (2, 10, 2)
     finally:
         vector.close()
 

@@ -19,6 +19,7 @@ from highway_env.envs.common.abstract import AbstractEnv
 from highway_env.road.road import Road, RoadNetwork
 from highway_env.vehicle.kinematics import Vehicle
 
+from drivelab.envs.backends.fast.traffic import PEDAL_DRAG_PER_S
 from drivelab.envs.backends.roads.blocks import circuit
 from drivelab.envs.backends.roads.highway_network import to_road_network
 from drivelab.envs.backends.roads.tracks import (  # noqa: F401 (re-exported for the circuits' users)
@@ -28,9 +29,8 @@ from drivelab.envs.backends.roads.tracks import (  # noqa: F401 (re-exported for
     FOLLOW_LINE_TRACK,
 )
 
-# A constant throttle of 0.35 (5 m/s² · 0.35 commanded) settles at 30 km/h, the speed the seed
-# reports for its lane actions: drag = 5 · 0.35 / (30 / 3.6).
-DRAG_PER_S = 5.0 * 0.35 / (30.0 / 3.6)
+# the pedal's drag (seed 004's speeds), shared with the compiled kernel
+DRAG_PER_S = PEDAL_DRAG_PER_S
 
 
 class PedalVehicle(Vehicle):

@@ -1,15 +1,32 @@
 """Seed 004's circuits: the follow-line and follow-lane presets (their roads are described as
-blocks, ``roads.blocks.circuit``; their highway-env environments and vehicle are in
-``drivelab.envs.backends.circuits``)."""
+blocks, ``roads.blocks.circuit``; their reference environments and vehicle are highway-env
+classes in ``drivelab.envs.backends.circuits``) and their compiled-core set-up."""
 
 from __future__ import annotations
 
+import numpy as np
+from gymnasium.utils import seeding
+
+from drivelab.envs.backends.fast import traffic as T
+from drivelab.envs.backends.fast.spawn import finish, make_on_lane, random_lane_index
 from drivelab.envs.backends.roads.blocks import circuit
 from drivelab.envs.backends.roads.description import RoadDescription
 from drivelab.envs.backends.roads.tracks import FOLLOW_LANE_ROAD, FOLLOW_LINE_ROAD
 from drivelab.world.scenario import Scenario
 
 SEED_TABLES = ("seed_line", "seed_lane")  # seed 004's two 5-action (throttle, steering) tables
+
+
+def spawn_circuit(seed: int, road, control: str) -> tuple[np.ndarray, int, np.ndarray, None]:
+    """CircuitEnv._reset as a row: the pedal ego on a random lane (``random_lane_index``'s
+    draws), a uniform distance along it, at the configured initial speed; no traffic."""
+    if control != "continuous":
+        raise NotImplementedError("the circuits' pedal ego takes continuous controls")
+    rng, _ = seeding.np_random(int(seed))
+    lane = random_lane_index(road, rng)
+    longitudinal = float(rng.uniform(0, road.geometry.length(lane)))
+    ego = make_on_lane(road, lane, longitudinal, float(road.config["initial_speed"]), T.PEDAL_KIND)
+    return finish(road, [ego]), 0, np.zeros(2), None
 
 
 def _circuit_road(config: dict, defaults: dict, guide_line: bool) -> RoadDescription:
@@ -37,7 +54,7 @@ FOLLOW_LINE = Scenario(
     default_reward="line_follow",
     circuit=True,
     guide_line=True,
-    fast_backend=False,  # the guide line and the drag of seed 004's ego are highway-backend only
+    spawn=spawn_circuit,
     road=follow_line_road,
 )
 
@@ -51,6 +68,6 @@ FOLLOW_LANE = Scenario(
     default_reward="lane_follow",
     circuit=True,
     keep_lane=True,
-    fast_backend=False,
+    spawn=spawn_circuit,
     road=follow_lane_road,
 )

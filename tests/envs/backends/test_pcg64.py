@@ -56,3 +56,40 @@ def test_state_round_trips_through_numpy():
     other = np.random.default_rng(0)
     pcg64.set_state(other, words)
     assert other.integers(0, 1000, size=4).tolist() == rng.integers(0, 1000, size=4).tolist()
+
+
+@pytest.mark.parametrize("seed", [5, 77])
+def test_standard_exponential_inv_is_numpys(seed):
+    """standard_exponential(method="inv") gives numpy's bits, interleaved with integers(0, n) (which
+    leaves half a 64-bit output buffered: the exponential draw must not touch the buffer) and
+    uniform draws, after a state transfer from a generator that has drawn already."""
+    generator = np.random.default_rng(seed)
+    generator.integers(0, 10, size=int(seed % 3))
+    state = pcg64.state_of(generator)
+    choose = np.random.default_rng(seed + 1)
+    exponentials = 0
+    for _ in range(20000):
+        kind = choose.integers(4)
+        if kind <= 1:
+            assert pcg64.standard_exponential_inv(state) == generator.standard_exponential(method="inv")
+            exponentials += 1
+        elif kind == 2:
+            n = int(choose.choice([2, 5, 31, 2**31]))
+            assert pcg64.bounded_int(state, n) == generator.integers(0, n)
+        else:
+            assert pcg64.uniform(state, 0.0, 40.0) == generator.uniform(0.0, 40.0)
+    assert exponentials > 9000
+    after = np.random.default_rng(0)
+    pcg64.set_state(after, state)
+    assert after.bit_generator.state == generator.bit_generator.state
+
+
+def test_standard_exponential_inv_covers_its_range():
+    """Many draws straight from one stream: every value equal, including the tail (U near 1) and
+    values near 0 (U near 0), where -log(1 - U) loses the most bits."""
+    generator = np.random.default_rng(123)
+    state = pcg64.state_of(generator)
+    ours = np.array([pcg64.standard_exponential_inv(state) for _ in range(200000)])
+    expected = generator.standard_exponential(200000, method="inv")
+    assert np.array_equal(ours, expected)
+    assert ours.min() < 1e-4 and ours.max() > 10.0

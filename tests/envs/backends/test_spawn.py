@@ -14,6 +14,7 @@ from drivelab.envs.backends.fast.spawn import shortest_path
 from drivelab.envs.backends.highway import HighwayBackend
 from drivelab.envs.scenarios import FAST_SCENARIOS, SCENARIOS, TRAFFIC_LEVELS
 
+CONTINUOUS_ONLY = ("racetrack", "follow-line", "follow-lane")  # no meta-action ego there
 SEEDS = (0, 1, 4, 6, 15)  # intersection: 0, 4, 6 and 15 round differently with AVX-512 (see below)
 # highway-env's racetrack cannot place a meta-action ego (its MDPVehicle partial has no make_on_lane)
 CASES = [
@@ -119,7 +120,7 @@ def test_no_highway_env_object_alive_in_the_simulator(scenario):
     """After construction, resets and steps, nothing of highway-env is reachable from a
     simulator (its road, caches and generators included), and the builder env that converted
     the road is gone."""
-    control = "continuous" if scenario == "racetrack" else "meta"
+    control = "continuous" if scenario in CONTINUOUS_ONLY else "meta"
     simulator = FastSimulator(SCENARIOS[scenario], "dense", control, 3)
     rng = np.random.default_rng(0)
     simulator.reset_where(np.ones(3, dtype=bool), np.array([0, 1, 2]))

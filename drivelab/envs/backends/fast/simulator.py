@@ -19,6 +19,7 @@ highway-env's ``np_random`` would go on.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -71,12 +72,22 @@ EX_ON_ROAD, EX_IN_JUNCTION, EX_CRASHED, EX_ARRIVED = range(4)
 EXPORTED_COLUMNS = np.array([T.X, T.Y, T.HEADING, T.SPEED, T.LEN, T.WID])  # WorldState.vehicles
 
 
-def vehicles_to_array(vehicles: list, table: L.LaneTable, objects: list = ()) -> np.ndarray:
-    """highway-env vehicles, then its obstacles → rows of ``traffic.VEHICLE_COLUMNS``, in order."""
+def vehicles_to_array(
+    vehicles: list, table: L.LaneTable, objects: list = (), town_class: type | None = None
+) -> np.ndarray:
+    """highway-env vehicles, then its obstacles → rows of ``traffic.VEHICLE_COLUMNS``, in order.
+
+    :param town_class: the reference's town vehicle class (``TownVehicle``): its vehicles become
+        KIND ``TOWN`` rows, and every row is ``TOWN_VEHICLE_COLUMNS`` wide (the town's long routes).
+    """
     row_of = table.row_of
-    array = np.zeros((len(vehicles) + len(objects), T.VEHICLE_COLUMNS))
+    columns, max_route = (
+        (T.VEHICLE_COLUMNS, T.MAX_ROUTE) if town_class is None else (T.TOWN_VEHICLE_COLUMNS, T.TOWN_MAX_ROUTE)
+    )
+    array = np.zeros((len(vehicles) + len(objects), columns))
     for i, vehicle in enumerate(vehicles):
-        if type(vehicle) is not IDMVehicle and isinstance(vehicle, IDMVehicle):
+        town = town_class is not None and type(vehicle) is town_class
+        if type(vehicle) is not IDMVehicle and isinstance(vehicle, IDMVehicle) and not town:
             raise NotImplementedError(f"the fast backend has no {type(vehicle).__name__}")
         row = array[i]
         row[T.X], row[T.Y] = vehicle.position
@@ -91,7 +102,11 @@ def vehicles_to_array(vehicles: list, table: L.LaneTable, objects: list = ()) ->
         row[T.CRASHED] = float(vehicle.crashed)
         row[T.CHECK_COLLISIONS] = float(vehicle.check_collisions)
         row[T.LEN], row[T.WID] = vehicle.LENGTH, vehicle.WIDTH
-        if isinstance(vehicle, IDMVehicle):
+        row[T.WRECKED_S] = getattr(vehicle, "wrecked_s", 0.0)
+        row[T.PEDAL] = getattr(vehicle, "pedal_mps2", 0.0)
+        if town:
+            row[T.KIND] = T.TOWN
+        elif isinstance(vehicle, IDMVehicle):
             row[T.KIND] = T.IDM
         elif isinstance(vehicle, ControlledVehicle):
             row[T.KIND] = T.CONTROLLED
@@ -101,8 +116,8 @@ def vehicles_to_array(vehicles: list, table: L.LaneTable, objects: list = ()) ->
         row[T.ROUTED] = float(route is not None)
         row[T.YIELDING] = float(getattr(vehicle, "is_yielding", False))
         route = route or []
-        if len(route) > T.MAX_ROUTE:
-            raise NotImplementedError(f"the fast backend keeps routes of at most {T.MAX_ROUTE} roads")
+        if len(route) > max_route:
+            raise NotImplementedError(f"the fast backend keeps routes of at most {max_route} roads")
         row[T.ROUTE_END] = len(route)
         for k, (_from, _to, lane_id) in enumerate(route):
             row[T.ROUTE + 2 * k] = table.road_of(_from, _to)
@@ -456,6 +471,7 @@ class FastSimulator:
             del builder
         self._road = road
         self.table, self.lanes, self.road = road.table, road.table.rows, road.road_map
+        self.roads: tuple[RoadMap, ...] = (self.road,)
         self.policy_frequency_hz, self.duration_s = road.policy_frequency_hz, road.duration_s
         self.frames, self.dt_s = road.frames, road.dt_s
         self.idm = idm_parameters()
@@ -474,6 +490,7 @@ class FastSimulator:
         self.time_s = np.zeros(k)
         self.progress_m = np.zeros(k)
         self.route_index = np.zeros(k, dtype=np.int64)
+        self.start_lane_id = np.zeros(k, dtype=np.int64)  # keep_lane: the lane the episode began on
         self.rngs: list[np.random.Generator | None] = [None] * k
         self._lane_route: np.ndarray | None = None  # route index per lane row (batched set-up)
         # export arrays that never change, shared read-only by every batch
@@ -532,6 +549,8 @@ class FastSimulator:
         self.r_count = np.array([len(t.polyline) for t in trackers], dtype=np.int64)
         self.r_length = np.array([t.length_m for t in trackers])
         self.r_closed = np.array([t.closed for t in trackers], dtype=bool)
+        if self.scenario.guide_line:  # painted along the route: one whole lap, a road map per route
+            self.roads = tuple(dataclasses.replace(self.road, guide_lines=(t.polyline,)) for t in trackers)
 
     # --- episodes -------------------------------------------------------------------------------
     def _episode(self, seed: int) -> tuple[np.ndarray, int, np.ndarray, np.random.Generator | None]:
@@ -563,6 +582,8 @@ class FastSimulator:
                 self.vehicles[k, : len(rows)] = rows
                 self.count[k], self.ego[k], self.regulation[k], self.rngs[k] = len(rows), ego, regulation, rng
                 self.route_index[k] = self._route_for_lane(int(rows[ego, T.LANE]))
+        ego_lane = self.vehicles[worlds, self.ego[worlds], T.LANE].astype(np.int64)
+        self.start_lane_id[worlds] = self.lanes[ego_lane, L.LANE_ID]
         self.time_s[worlds] = 0.0
 
     def _spawn_many(self, worlds: np.ndarray, seeds: np.ndarray) -> None:
@@ -618,7 +639,9 @@ class FastSimulator:
         # ContinuousAction.get_action, in the controls' own dtype as highway-env computes it
         controls = np.clip(np.asarray(controls).reshape(self.num_worlds, 2), -1, 1)
         worlds = np.arange(self.num_worlds)
-        self.vehicles[worlds, self.ego, T.ACCEL] = hw_utils.lmap(controls[:, 0], [-1, 1], ACCELERATION_RANGE)
+        acceleration = hw_utils.lmap(controls[:, 0], [-1, 1], ACCELERATION_RANGE)
+        self.vehicles[worlds, self.ego, T.ACCEL] = acceleration
+        self.vehicles[worlds, self.ego, T.PEDAL] = acceleration  # a pedal ego's command (the circuits)
         self.vehicles[worlds, self.ego, T.STEER] = hw_utils.lmap(controls[:, 1], [-1, 1], STEERING_RANGE)
 
     def _spawn_arrivals(self) -> None:
@@ -672,10 +695,13 @@ class FastSimulator:
             in_intersection=flags[:, EX_IN_JUNCTION],
         )
         collided, no_event = flags[:, EX_CRASHED], self._no_event
+        off_road = ~flags[:, EX_ON_ROAD]
+        if self.scenario.keep_lane:  # follow-lane: leaving the starting lane is leaving the road
+            off_road = off_road | (ints[:, EX_LANE_ID] != self.start_lane_id)
         events = EventsBatch(
             collided=collided,
             collision_kind=np.where(collided, COLLISION_VEHICLE, COLLISION_NONE).astype(np.int8),
-            off_road=~flags[:, EX_ON_ROAD],
+            off_road=off_road,
             arrived=flags[:, EX_ARRIVED],
             red_light_crossed=no_event,  # the rules add blocked and off_route; no lights here
             blocked=no_event,
@@ -688,11 +714,15 @@ class FastSimulator:
             ego=ego,
             vehicles=vehicles,
             vehicle_valid=valid,
-            roads=(self.road,),
+            roads=self.roads,
             route=route,
             events=events,
             speed_limit_mps=floats[:, EX_SPEED_LIMIT],
-            **self._empty,
+            **(
+                self._empty
+                if not self.scenario.guide_line
+                else {**self._empty, "road_index": self.route_index.copy()}
+            ),
         )
 
     def _routes(self) -> dict[str, np.ndarray]:

@@ -77,6 +77,9 @@ KP_A, KP_HEADING, KP_LATERAL = 1 / TAU_ACC, 1 / TAU_HEADING, 1 / TAU_LATERAL
 MAX_STEERING_ANGLE = np.pi / 3
 CAR_LENGTH, CAR_WIDTH = 5.0, 2.0
 MAX_SPEED, MIN_SPEED = 40.0, -40.0
+# Seed 004's pedal vehicle: a constant throttle of 0.35 (5 m/s² · 0.35 commanded) settles at
+# 30 km/h, the speed the seed reports for its lane actions: drag = 5 · 0.35 / (30 / 3.6).
+PEDAL_DRAG_PER_S = 5.0 * 0.35 / (30.0 / 3.6)
 
 
 @njit(cache=True, inline="always")
@@ -398,8 +401,8 @@ def act(
     start_frame(v, done, trig)
     for i in range(v.shape[0]):
         kind = v[i, KIND]
-        if kind == PLAIN or kind == OBSTACLE:
-            continue  # a plain vehicle keeps the last continuous action; obstacles never act
+        if kind == PLAIN or kind == PEDAL_KIND or kind == OBSTACLE:
+            continue  # plain and pedal vehicles keep the last continuous action; obstacles never act
         if kind == IDM and v[i, CRASHED] > 0:
             continue
         follow_road(v, lanes, i)
@@ -420,9 +423,12 @@ def act(
 
 @njit(cache=True, inline="always")
 def step_vehicle(v: np.ndarray, lanes: np.ndarray, i: int, dt: float) -> None:
-    """Vehicle.step: clip the actions, integrate the kinematic bicycle, find the lane."""
+    """Vehicle.step: clip the actions, integrate the kinematic bicycle, find the lane. A pedal
+    vehicle's acceleration is first its pedal minus the drag (the circuits' PedalVehicle.step)."""
     if v[i, KIND] == IDM:
         v[i, TIMER] += dt
+    elif v[i, KIND] == PEDAL_KIND:
+        v[i, ACCEL] = v[i, PEDAL] - PEDAL_DRAG_PER_S * v[i, SPEED]
     if v[i, CRASHED] > 0:
         v[i, STEER] = 0.0
         v[i, ACCEL] = -1.0 * v[i, SPEED]
