@@ -31,6 +31,7 @@ from drivelab.envs.backends.roads.description import (
     LaneRecord,
     RoadDescription,
 )
+from drivelab.envs.backends.roads.road_map import lane_points, lane_stations
 from drivelab.envs.backends.roads.town_rules import (
     ARM_DIRECTIONS,
     CROSSING_WIDTH_M,
@@ -49,7 +50,7 @@ Cell = tuple[int, int]
 # --- segments chained by pose ------------------------------------------------------------------
 @dataclass(frozen=True)
 class Straight:
-    """A straight segment ``length_m`` long (every lane of the road)."""
+    """A straight segment ``length_m`` long: ``lane`` lays each of its parallel lanes."""
 
     length_m: float
 
@@ -65,8 +66,8 @@ class Straight:
 
 @dataclass(frozen=True)
 class Arc:
-    """A circular segment of the reference line's ``radius_m`` turning ``turn_deg`` (positive: to
-    the right, heading grows with y pointing right)."""
+    """A circular segment turning ``turn_deg`` (positive: to the right, heading grows with y
+    pointing right) with ``radius_m`` along its reference line: ``lane`` lays each parallel lane."""
 
     radius_m: float
     turn_deg: float
@@ -121,8 +122,6 @@ def circuit(
         heading = float(reference.heading_at(reference.length))
     guide = ()
     if guide_line:
-        from drivelab.envs.backends.roads.road_map import lane_points, lane_stations
-
         lap = records[::lane_count]
         guide = (np.concatenate([lane_points(lane, lane_stations(lane), 0.0) for lane in lap]),)
     return RoadDescription.from_lanes(records, guide_lines=guide)
