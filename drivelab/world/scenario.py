@@ -43,6 +43,9 @@ class Scenario:
         generator between steps (None: ``spawn`` once per reset world).
     :param arrivals: ``arrivals(road)`` gives the object whose ``spawn(rows, rng, probability)``
         brings a vehicle in between steps (a scenario with a ``traffic_flow``).
+    :param road: ``road(config)``: the scenario's ``RoadDescription`` from its config (the
+        highway-env config the scenario's environment gets: scenario, traffic level and backend
+        options merged); None: the road is highway-env's (converted from its network).
     """
 
     name: str
@@ -70,6 +73,7 @@ class Scenario:
     spawn: Callable | None = field(default=None, repr=False)
     spawn_many: Callable | None = field(default=None, repr=False)
     arrivals: Callable | None = field(default=None, repr=False)
+    road: Callable[[dict], object] | None = field(default=None, repr=False)
 
     def in_junction(self, lane_index: tuple) -> bool:
         """Whether highway-env lane (from, to, id) is junction area: it leaves a junction node

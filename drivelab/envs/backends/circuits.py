@@ -1,42 +1,36 @@
 """highway-env roads for seed 004's follow-line and follow-lane tasks (no traffic).
 
-Both are closed circuits built from straights and circular arcs with highway-env's road network
-(``StraightLane``, ``CircularLane``), turning right and left, so the ``highway`` backend runs them
-like any other scenario. The follow-line circuit is one wide lane with a yellow line painted along
-its centre (exported as ``RoadMap.guide_lines`` by the backend); the follow-lane circuit has three
-lanes with dashed lines between them.
+Both are closed circuits of straights and circular arcs turning right and left, described as
+blocks (``roads.blocks.circuit``, tracks in ``roads.tracks``) and turned into highway-env's road
+network (``StraightLane``, ``CircularLane``), so the ``highway`` backend runs them like any other
+scenario. The follow-line circuit is one wide lane with a yellow line painted along its centre
+(exported as ``RoadMap.guide_lines`` by the backend); the follow-lane circuit has three lanes with
+dashed lines between them.
 
 The ego is a ``PedalVehicle``: the seed's CARLA actions are throttle values, which in CARLA give a
 speed that levels off, so its acceleration is the commanded one minus a speed-proportional drag
-(``DRAG_PER_S``). Only this module and ``highway.py`` import highway-env.
+(``DRAG_PER_S``).
 """
 
 from __future__ import annotations
 
-import numpy as np
 from highway_env import utils
 from highway_env.envs.common.abstract import AbstractEnv
-from highway_env.road.lane import CircularLane, LineType, StraightLane
 from highway_env.road.road import Road, RoadNetwork
 from highway_env.vehicle.kinematics import Vehicle
 
 from drivelab.envs.backends.fast.traffic import PEDAL_DRAG_PER_S
+from drivelab.envs.backends.roads.blocks import circuit
+from drivelab.envs.backends.roads.highway_network import to_road_network
+from drivelab.envs.backends.roads.tracks import (  # noqa: F401 (re-exported for the circuits' users)
+    FOLLOW_LANE_ROAD,
+    FOLLOW_LANE_TRACK,
+    FOLLOW_LINE_ROAD,
+    FOLLOW_LINE_TRACK,
+)
 
 # the pedal's drag (seed 004's speeds), shared with the compiled kernel
 DRAG_PER_S = PEDAL_DRAG_PER_S
-
-# Circuits as (kind, length_m) straights and (kind, radius_m, turn_deg) arcs, starting at the
-# origin heading +x; a positive turn is to the right (heading grows, y points right). Both close
-# exactly (the closing straights were solved for by hand).
-FOLLOW_LINE_TRACK = (
-    ("straight", 70.0), ("arc", 30.0, 90.0), ("straight", 20.0), ("arc", 30.0, 90.0),
-    ("straight", 10.0), ("arc", 25.0, -90.0), ("straight", 10.0), ("arc", 25.0, 90.0),
-    ("straight", 10.0), ("arc", 30.0, 90.0), ("straight", 80.0), ("arc", 30.0, 90.0),
-)  # fmt: skip
-FOLLOW_LANE_TRACK = tuple(
-    (kind, *(value * 4.0 if index == 0 else value for index, value in enumerate(rest)))
-    for kind, *rest in FOLLOW_LINE_TRACK
-)  # the same shape four times larger: radii 100–120 m suit the seed's small lane steering angles
 
 
 class PedalVehicle(Vehicle):
@@ -55,44 +49,13 @@ class PedalVehicle(Vehicle):
 
 
 def build_circuit(track, lane_count: int, lane_width_m: float, speed_limit_mps: float) -> RoadNetwork:
-    """A closed road of ``lane_count`` parallel lanes along ``track`` (see ``FOLLOW_LINE_TRACK``).
+    """A closed road of ``lane_count`` parallel lanes along ``track`` (see ``FOLLOW_LINE_TRACK``),
+    as highway-env lanes (``roads.blocks.circuit``).
 
     Lane 0 is the leftmost; the outer lines are solid, the lines between lanes dashed. Nodes are
     named "0", "1", … so that node ``k`` starts segment ``k`` and the last segment ends at "0".
     """
-    network = RoadNetwork()
-    position, heading = np.zeros(2), 0.0
-    offsets = (np.arange(lane_count) - (lane_count - 1) / 2) * lane_width_m
-    for index, (kind, *values) in enumerate(track):
-        start, end = str(index), str((index + 1) % len(track))
-        for lane_id, offset in enumerate(offsets):
-            line_types = (
-                LineType.CONTINUOUS if lane_id == 0 else LineType.STRIPED,
-                LineType.CONTINUOUS if lane_id == lane_count - 1 else LineType.NONE,
-            )
-            normal = np.array([-np.sin(heading), np.cos(heading)])  # to the right
-            if kind == "straight":
-                (length,) = values
-                direction = np.array([np.cos(heading), np.sin(heading)])
-                lane = StraightLane(
-                    position + offset * normal, position + offset * normal + length * direction,
-                    line_types=line_types, width=lane_width_m, speed_limit=speed_limit_mps,
-                )  # fmt: skip
-            else:
-                radius, turn_deg = values
-                side = 1.0 if turn_deg > 0 else -1.0
-                centre = position + side * radius * normal
-                start_phase = heading - side * np.pi / 2
-                lane = CircularLane(
-                    centre, radius - side * offset, start_phase, start_phase + np.radians(turn_deg),
-                    clockwise=side > 0, line_types=line_types, width=lane_width_m,
-                    speed_limit=speed_limit_mps,
-                )  # fmt: skip
-            network.add_lane(start, end, lane)
-        reference = network.get_lane((start, end, 0))
-        position = reference.position(reference.length, -offsets[0])
-        heading = float(reference.heading_at(reference.length))
-    return network
+    return to_road_network(circuit(track, lane_count, lane_width_m, speed_limit_mps))
 
 
 class CircuitEnv(AbstractEnv):
@@ -113,10 +76,7 @@ class CircuitEnv(AbstractEnv):
                 "simulation_frequency": 10,  # 2 substeps per 5 Hz step: the ego alone, no collisions to catch
                 "policy_frequency": 5,
                 "duration": 60,
-                "track": FOLLOW_LINE_TRACK,
-                "lanes_count": 1,
-                "lane_width": 7.0,
-                "speed_limit": 20.0,
+                **FOLLOW_LINE_ROAD,  # track, lanes_count, lane_width, speed_limit
                 "initial_speed": 5.0,
             },
         )
@@ -160,5 +120,5 @@ class FollowLaneEnv(CircuitEnv):
     @classmethod
     def default_config(cls) -> dict:
         config = super().default_config()
-        config.update({"track": FOLLOW_LANE_TRACK, "lanes_count": 3, "lane_width": 3.5, "duration": 60})
+        config.update({**FOLLOW_LANE_ROAD, "duration": 60})
         return config

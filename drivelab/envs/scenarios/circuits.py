@@ -1,5 +1,6 @@
-"""Seed 004's circuits: the follow-line and follow-lane presets (their reference roads and vehicle
-are highway-env classes in ``drivelab.envs.backends.circuits``) and their compiled-core set-up."""
+"""Seed 004's circuits: the follow-line and follow-lane presets (their roads are described as
+blocks, ``roads.blocks.circuit``; their reference environments and vehicle are highway-env
+classes in ``drivelab.envs.backends.circuits``) and their compiled-core set-up."""
 
 from __future__ import annotations
 
@@ -8,6 +9,9 @@ from gymnasium.utils import seeding
 
 from drivelab.envs.backends.fast import traffic as T
 from drivelab.envs.backends.fast.spawn import finish, make_on_lane, random_lane_index
+from drivelab.envs.backends.roads.blocks import circuit
+from drivelab.envs.backends.roads.description import RoadDescription
+from drivelab.envs.backends.roads.tracks import FOLLOW_LANE_ROAD, FOLLOW_LINE_ROAD
 from drivelab.world.scenario import Scenario
 
 SEED_TABLES = ("seed_line", "seed_lane")  # seed 004's two 5-action (throttle, steering) tables
@@ -25,6 +29,21 @@ def spawn_circuit(seed: int, road, control: str) -> tuple[np.ndarray, int, np.nd
     return finish(road, [ego]), 0, np.zeros(2), None
 
 
+def _circuit_road(config: dict, defaults: dict, guide_line: bool) -> RoadDescription:
+    road = {key: config.get(key, value) for key, value in defaults.items()}
+    return circuit(road["track"], road["lanes_count"], road["lane_width"], road["speed_limit"], guide_line)
+
+
+def follow_line_road(config: dict) -> RoadDescription:
+    """The follow-line circuit for a config (``FollowLineEnv``'s defaults), with its guide line."""
+    return _circuit_road(config, FOLLOW_LINE_ROAD, guide_line=True)
+
+
+def follow_lane_road(config: dict) -> RoadDescription:
+    """The follow-lane circuit for a config (``FollowLaneEnv``'s defaults)."""
+    return _circuit_road(config, FOLLOW_LANE_ROAD, guide_line=False)
+
+
 FOLLOW_LINE = Scenario(
     "follow-line",
     "drivelab.envs.backends.circuits.FollowLineEnv",
@@ -36,6 +55,7 @@ FOLLOW_LINE = Scenario(
     circuit=True,
     guide_line=True,
     spawn=spawn_circuit,
+    road=follow_line_road,
 )
 
 FOLLOW_LANE = Scenario(
@@ -49,4 +69,5 @@ FOLLOW_LANE = Scenario(
     circuit=True,
     keep_lane=True,
     spawn=spawn_circuit,
+    road=follow_lane_road,
 )

@@ -38,6 +38,7 @@ from drivelab.envs.backends.fast import pcg64
 from drivelab.envs.backends.fast import town_rows as R
 from drivelab.envs.backends.fast import traffic as T
 from drivelab.envs.backends.fast.spawn import DELTA_RANGE, LaneGeometry, ego_kind, vehicle_row
+from drivelab.envs.backends.roads.description import RoadDescription
 from drivelab.envs.backends.roads.town_arrays import TownRoadArrays
 from drivelab.envs.backends.roads.town_rules import (
     FIXED_ROUTE_COUNT,
@@ -330,6 +331,13 @@ def spawn_town(seed: int, road, control: str) -> tuple[np.ndarray, int, np.ndarr
     return episode.vehicles, episode.ego, np.zeros(2), episode
 
 
+def town_road(config: dict) -> RoadDescription:
+    """The town's road for a config: its ``layout`` ("train" by default, as ``TownEnv``'s)."""
+    from drivelab.envs.town import LAYOUTS, road_description
+
+    return road_description(LAYOUTS[config.get("layout", "train")])
+
+
 SCENARIO = Scenario(
     "town",
     "drivelab.envs.town_env.TownEnv",
@@ -348,4 +356,5 @@ SCENARIO = Scenario(
     route_deviation_m=3.5,  # NoCrash / Roach episode rules
     blocked_after_s=90.0,
     spawn=spawn_town,
+    road=town_road,
 )

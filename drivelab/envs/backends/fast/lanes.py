@@ -84,6 +84,37 @@ class LaneTable:
                 raise NotImplementedError(f"the fast backend has no {type(lane).__name__} yet")
         return LaneTable(rows, tuple(indices), tuple(nodes))
 
+    @staticmethod
+    def from_description(desc) -> LaneTable:
+        """The rows of a ``roads.description.RoadDescription`` (no highway-env object): the same
+        numbers ``from_network(to_road_network(desc))`` gives, computed with highway-env's lane
+        formulas in its floating-point order (length, direction, heading of a straight lane)."""
+        from drivelab.envs.backends.roads.description import ARC
+
+        indices = desc.indices
+        rows = np.zeros((len(indices), LANE_COLUMNS))
+        rows[:, WIDTH], rows[:, SPEED_LIMIT] = desc.width, desc.speed_limit
+        rows[:, FORBIDDEN], rows[:, PRIORITY] = desc.forbidden, desc.priority
+        rows[:, LANE_ID], rows[:, FROM_NODE], rows[:, TO_NODE] = desc.lane_id, desc.lane_from, desc.lane_to
+        for row, (f, t, _) in enumerate(indices):
+            road = desc.graph[f][t]
+            values = rows[row]
+            values[LANE_COUNT], values[FIRST_OF_ROAD] = len(road), road[0]
+            if desc.kind[row] == ARC:  # highway-env's CircularLane.__init__
+                sense = 1 if desc.clockwise[row] else -1
+                radius, start_phase = desc.radius[row], desc.start_phase[row]
+                values[KIND], values[LENGTH] = CIRCLE, radius * (desc.end_phase[row] - start_phase) * sense
+                values[CENTER_X], values[CENTER_Y] = desc.centre[row]
+                values[RADIUS], values[START_PHASE], values[SENSE] = radius, start_phase, sense
+            else:  # highway-env's StraightLane.__init__
+                start, end = desc.start[row].copy(), desc.end[row].copy()
+                length = np.linalg.norm(end - start)
+                values[KIND], values[LENGTH] = STRAIGHT, length
+                values[START_X], values[START_Y] = start
+                values[DIR_X], values[DIR_Y] = (end - start) / length
+                values[HEADING] = np.arctan2(end[1] - start[1], end[0] - start[0])
+        return LaneTable(rows, indices, tuple(desc.nodes))
+
     def road_of(self, _from: str, _to: str) -> int:
         """The row of lane 0 of road (_from, _to): how routes name a road."""
         return self.row_of[(_from, _to, 0)]
