@@ -114,6 +114,15 @@ from drivelab.world.state import LIGHT_GREEN, LIGHT_YELLOW
 NO_STOP = -1.0  # stop_line_ahead's None (a distance to stop at is never negative)
 
 
+@njit(cache=True, inline="always")
+def py_square(x: float) -> float:
+    """``x ** 2`` as Python (and numpy's scalar power) computes it for a float: libm's
+    ``pow(x, 2.0)``, which is not always ``x * x`` (glibc's differs by an ULP for about 1 in 1 500
+    random speeds). LLVM rewrites ``pow(x, 2.0)`` as ``x * x``, so the exponent is made opaque:
+    ``2.0 + 0.0 * x`` is 2.0 for any finite x, which LLVM cannot assume."""
+    return x ** (2.0 + 0.0 * x)
+
+
 def town_frame_cache(vehicles: int, pedestrians: int, lane_count: int):
     """Scratch arrays of one frame's ``town_act`` for up to ``vehicles`` vehicle rows and
     ``pedestrians`` pedestrian rows on ``lane_count`` lanes: ``coords`` (L, N+P, 4), ``done``
@@ -331,7 +340,7 @@ def stop_line_ahead(
         ):
             return ahead_m
         return NO_STOP
-    if state == LIGHT_YELLOW and v[i, SPEED] ** 2 / (2 * max(ahead_m, 1e-3)) > -p[COMFORT_ACC_MIN]:
+    if state == LIGHT_YELLOW and py_square(v[i, SPEED]) / (2 * max(ahead_m, 1e-3)) > -p[COMFORT_ACC_MIN]:
         return NO_STOP
     return ahead_m
 
@@ -380,6 +389,7 @@ def town_acceleration(
         along = coords[lane, front, 0] - coords[lane, i, 0]
         dx, dy = fx - v[i, X], fy - v[i, Y]
         gap_m = math.copysign(math.sqrt(dx * dx + dy * dy), along)
+        # IDMVehicle.acceleration squares with np.power(·, 2): numpy's square, x * x
         acceleration -= p[COMFORT_ACC_MAX] * (desired_gap / not_zero(gap_m)) ** 2
     ahead_m = stop_line_ahead(
         v, lanes, p, i, junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states
@@ -392,7 +402,7 @@ def town_acceleration(
     desired_gap = p[DISTANCE_WANTED] + speed * p[TIME_WANTED] + speed * speed / (2 * np.sqrt(ab))
     target = not_zero(v[i, TARGET_SPEED])
     stop = p[COMFORT_ACC_MAX] * (1 - (speed / np.abs(target)) ** v[i, DELTA])
-    stop -= p[COMFORT_ACC_MAX] * (desired_gap / not_zero(gap_m)) ** 2
+    stop -= p[COMFORT_ACC_MAX] * py_square(desired_gap / not_zero(gap_m))
     return min(acceleration, stop)
 
 
@@ -446,7 +456,7 @@ def town_act(
             next_limit = lanes[turn_lane, SPEED_LIMIT]
             s, _ = local_coordinates(lanes, lane, w[i, X], w[i, Y])
             ahead_m = lanes[lane, LENGTH] - s
-            braking = (w[i, SPEED] ** 2 - next_limit**2) / (2 * -p[COMFORT_ACC_MIN])
+            braking = (py_square(w[i, SPEED]) - py_square(next_limit)) / (2 * -p[COMFORT_ACC_MIN])
             if ahead_m < TURN_BRAKE_MARGIN_M + braking:
                 limit = min(limit, next_limit)
         w[i, TARGET_SPEED] = limit
