@@ -46,15 +46,19 @@ BEHAVIOURS = (
 )  # fmt: skip
 
 
-def town(layout: str, traffic: str, seed: int, ego_speed: float = 9.0):
+def town(layout: str, traffic: str, seed: int, ego_speed: float = 9.0, control: str = "meta"):
     """A reset reference town whose ego drives (its meta-action target speed is ``ego_speed``, so
     that it is oncoming traffic for left turns too), with every other pedestrian standing on the
     lane next to its pavement (a leader for the vehicles) and pedestrian 1 hit: crashed and off
     ``road.objects``, so no leader any more, as ``TownRoad._hit_pedestrians`` leaves it. Every
     third town vehicle's route is cut to its first lane, as it is once driven down to it: the
-    vehicle draws a new random route in its next act."""
-    env = reference_town(layout, traffic, seed).env.unwrapped
-    env.vehicle.target_speed = ego_speed
+    vehicle draws a new random route in its next act. Town vehicle 2 has crashed (it still sets its
+    target speed, then acts no more, and brakes to a stop)."""
+    env = reference_town(layout, traffic, seed, control).env.unwrapped
+    if control == "meta":
+        env.vehicle.target_speed = ego_speed
+    else:  # the continuous ego keeps its last action: a steady throttle
+        env.vehicle.speed, env.vehicle.action = ego_speed, {"steering": 0.0, "acceleration": 1.0}
     for k, walker in enumerate(env.road.pedestrians):
         if k % 2 == 0 or k == 1:
             walker.position = walker.centre + 2.0 * walker.side * walker.across
@@ -64,6 +68,7 @@ def town(layout: str, traffic: str, seed: int, ego_speed: float = 9.0):
     for k, vehicle in enumerate(env.road.vehicles):
         if type(vehicle) is TownVehicle and k % 3 == 1:
             vehicle.route = vehicle.route[:1]
+    env.road.vehicles[2].crashed = True
     return env
 
 
@@ -157,22 +162,25 @@ def reference_act(env) -> Counter:
 
 
 SINGLE_ACT_CASES = [
-    ("train", "regular", 0, 0.0),
-    ("train", "regular", 5, 7.3),
-    ("train", "dense", 1, 11.0),
-    ("train", "dense", 2, 26.9),
-    ("test", "regular", 3, 0.0),
-    ("test", "regular", 4, 12.4),
-    ("test", "dense", 5, 3.1),
-    ("test", "dense", 6, 20.0),
+    ("train", "regular", 0, 0.0, "meta"),
+    ("train", "regular", 5, 7.3, "meta"),
+    ("train", "dense", 1, 11.0, "meta"),
+    ("train", "dense", 2, 26.9, "meta"),
+    ("test", "regular", 3, 0.0, "meta"),
+    ("test", "regular", 4, 12.4, "meta"),
+    ("test", "dense", 5, 3.1, "meta"),
+    ("test", "dense", 6, 20.0, "meta"),
+    ("train", "dense", 7, 5.0, "continuous"),
+    ("test", "regular", 8, 15.5, "continuous"),
 ]
 
 
-@pytest.mark.parametrize("layout, traffic, seed, time_s", SINGLE_ACT_CASES)
-def test_one_act_matches_the_reference(layout, traffic, seed, time_s):
-    """One frame's act from a reset town (lights at ``time_s``): every vehicle's controls, target
-    lane and speed and route, and the generator after the route draws."""
-    env = town(layout, traffic, seed)
+@pytest.mark.parametrize("layout, traffic, seed, time_s, control", SINGLE_ACT_CASES)
+def test_one_act_matches_the_reference(layout, traffic, seed, time_s, control):
+    """One frame's act from a reset town (lights at ``time_s``; a meta-action or a continuous
+    ego): every vehicle's controls, target lane and speed and route, and the generator after the
+    route draws."""
+    env = town(layout, traffic, seed, control=control)
     env.time = time_s
     kernels = Kernels(layout, len(env.road.vehicles), len(env.road.pedestrians))
     v, peds, words = kernels.rows(env)
