@@ -3,7 +3,8 @@
 ``town_act`` is ``Road.act()`` of the reference town (``drivelab.envs.town_env``): every vehicle
 row decides its controls in list order. The ego rows behave as in ``traffic.act``
 (``CONTROLLED``: the meta-action ego's lane following and speed control; ``PLAIN`` and
-``PEDAL_KIND`` keep their last action). ``TOWN`` rows are highway-env's ``TownVehicle``:
+``PEDAL_KIND`` keep their last action; ``OBSTACLE`` rows never act; ``IDM`` rows are not town
+traffic and raise). ``TOWN`` rows are highway-env's ``TownVehicle``:
 
 - ``TownVehicle.act``: the target speed is the current lane's limit, or the next planned lane's
   (the turn's) once within TURN_BRAKE_MARGIN_M plus the braking distance to it, computed before
@@ -36,7 +37,8 @@ Arrays (one world):
   in spawn order;
 - ``lanes`` (L, LANE_COLUMNS) the lane table; ``p`` (9,) the IDM parameters
   (``traffic.IDM_PARAMETERS``);
-- ``coords``, ``done``, ``trig``: the frame cache of ``town_frame_cache``;
+- ``coords``, ``done``, ``trig``: the frame cache, ``town_frame_cache(N_max, P_max, L)``, made
+  once per world (``town_act`` resets it; it must hold count + pcount objects);
 - the ``TownRoadArrays`` fields of ``road_arrays_tuple`` (in that order);
 - ``light_states`` (M,) int64: LIGHT_* of each light row at the step's end time;
 - ``rng_words`` (6,) uint64: the world's PCG64 state (``pcg64``), advanced in place.
