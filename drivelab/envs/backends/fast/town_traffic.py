@@ -3,7 +3,8 @@
 ``town_act`` is ``Road.act()`` of the reference town (``drivelab.envs.town_env``): every vehicle
 row decides its controls in list order. The ego rows behave as in ``traffic.act``
 (``CONTROLLED``: the meta-action ego's lane following and speed control; ``PLAIN`` and
-``PEDAL_KIND`` keep their last action). ``TOWN`` rows are highway-env's ``TownVehicle``:
+``PEDAL_KIND`` keep their last action; ``OBSTACLE`` rows never act; ``IDM`` rows are not town
+traffic and raise). ``TOWN`` rows are highway-env's ``TownVehicle``:
 
 - ``TownVehicle.act``: the target speed is the current lane's limit, or the next planned lane's
   (the turn's) once within TURN_BRAKE_MARGIN_M plus the braking distance to it, computed before
@@ -36,7 +37,8 @@ Arrays (one world):
   in spawn order;
 - ``lanes`` (L, LANE_COLUMNS) the lane table; ``p`` (9,) the IDM parameters
   (``traffic.IDM_PARAMETERS``);
-- ``coords``, ``done``, ``trig``: the frame cache of ``town_frame_cache``;
+- ``coords``, ``done``, ``trig``: the frame cache, ``town_frame_cache(N_max, P_max, L)``, made
+  once per world (``town_act`` resets it; it must hold count + pcount objects);
 - the ``TownRoadArrays`` fields of ``road_arrays_tuple`` (in that order);
 - ``light_states`` (M,) int64: LIGHT_* of each light row at the step's end time;
 - ``rng_words`` (6,) uint64: the world's PCG64 state (``pcg64``), advanced in place.
@@ -55,11 +57,16 @@ from drivelab.envs.backends.fast.lanes import (
     LANE_COUNT,
     LANE_ID,
     LENGTH,
+    SINE,
     SPEED_LIMIT,
     TO_NODE,
+    VEHICLE_LENGTH,
+    WIDTH,
     local_coordinates,
     on_lane,
+    position,
 )
+from drivelab.envs.backends.fast.lanes import KIND as LANE_KIND
 from drivelab.envs.backends.fast.pcg64 import bounded_int
 from drivelab.envs.backends.fast.town_rows import P_CRASHED, P_HEADING, P_SPEED, P_X, P_Y, TURN_LEFT
 from drivelab.envs.backends.fast.traffic import (
@@ -96,7 +103,6 @@ from drivelab.envs.backends.fast.traffic import (
     cached_idm_acceleration,
     change_lane_policy,
     follow_road,
-    lane_coordinates,
     not_zero,
     start_frame,
     steering_control,
@@ -114,17 +120,26 @@ from drivelab.world.state import LIGHT_GREEN, LIGHT_YELLOW
 NO_STOP = -1.0  # stop_line_ahead's None (a distance to stop at is never negative)
 
 
+@njit(cache=True, inline="always")
+def py_square(x: float) -> float:
+    """``x ** 2`` as Python (and numpy's scalar power) computes it for a float: libm's
+    ``pow(x, 2.0)``, which is not always ``x * x`` (glibc's differs by an ULP for about 1 in 1 500
+    random speeds). LLVM rewrites ``pow(x, 2.0)`` as ``x * x``, so the exponent is made opaque:
+    ``2.0 + 0.0 * x`` is 2.0 for any finite x, which LLVM cannot assume."""
+    return x ** (2.0 + 0.0 * x)
+
+
 def town_frame_cache(vehicles: int, pedestrians: int, lane_count: int):
     """Scratch arrays of one frame's ``town_act`` for up to ``vehicles`` vehicle rows and
     ``pedestrians`` pedestrian rows on ``lane_count`` lanes: ``coords`` (L, N+P, 4), ``done``
-    (2, L) int64, ``trig`` (N+P, 2). ``coords[lane, j]`` is (longitudinal, lateral, on the lane
-    within 1 m, -) of vehicle j < count, and of pedestrian k at j = count + k; column 3 holds
-    ``traffic.lane_coordinates``' sorted vehicle rows. ``done[0]`` is ``traffic``'s per-lane
-    vehicle flag (-1 until filled), ``done[1]`` the pedestrians' (0 until filled). ``trig`` holds
-    the cosine and sine of the headings, vehicles then pedestrians. Allocate once per world and
-    reuse every frame (``town_act`` resets the flags)."""
+    (L,) int64, ``trig`` (N+P, 2). ``coords[lane, j, :3]`` is (longitudinal, lateral, on the lane
+    within 1 m: 1.0 / 0.0, -1.0 until computed in this frame) of vehicle j < count, and of
+    pedestrian k at j = count + k; ``coords[..., 3]`` and ``done`` are ``traffic``'s (its sorted
+    vehicle rows per lane, and -1 or the count of vehicles on the lane once it filled it).
+    ``trig`` holds the cosine and sine of the headings, vehicles then pedestrians. Allocate once
+    per world and reuse every frame (``town_act`` resets the flags)."""
     size = vehicles + pedestrians
-    return np.empty((lane_count, size, 4)), np.full((2, lane_count), -1, dtype=np.int64), np.empty((size, 2))
+    return np.empty((lane_count, size, 4)), np.full(lane_count, -1, dtype=np.int64), np.empty((size, 2))
 
 
 def road_arrays_tuple(arrays) -> tuple:
@@ -202,20 +217,39 @@ def random_route(
 
 
 @njit(cache=True, inline="always")
-def fill_lane(
-    v: np.ndarray, peds: np.ndarray, lanes: np.ndarray, coords: np.ndarray, done: np.ndarray, lane: int
-) -> None:
-    """The frame cache of ``lane``: the vehicles' lane coordinates (``traffic.lane_coordinates``)
-    and the pedestrians' at rows ``count + k``, once per frame."""
-    lane_coordinates(v, lanes, coords, done[0], lane)
-    if done[1, lane] > 0:
+def object_xy(v: np.ndarray, peds: np.ndarray, j: int) -> tuple[float, float]:
+    """Position of vehicle j, or of pedestrian j - count."""
+    if j < v.shape[0]:
+        return v[j, X], v[j, Y]
+    return peds[j - v.shape[0], P_X], peds[j - v.shape[0], P_Y]
+
+
+@njit(cache=True, inline="always")
+def lane_s(
+    v: np.ndarray, peds: np.ndarray, lanes: np.ndarray, coords: np.ndarray, lane: int, j: int
+) -> float:
+    """Object j's longitudinal coordinate in ``lane`` (computed once per frame: the same bits)."""
+    if coords[lane, j, 2] < 0:
+        x, y = object_xy(v, peds, j)
+        s, r = local_coordinates(lanes, lane, x, y)
+        coords[lane, j, 0], coords[lane, j, 1] = s, r
+        coords[lane, j, 2] = 1.0 if on_lane(lanes, lane, s, r, 1.0) else 0.0
+    return coords[lane, j, 0]
+
+
+@njit(cache=True, inline="always")
+def lane_disc(lanes: np.ndarray, discs: np.ndarray, lane: int) -> None:
+    """``discs[lane]``: (x, y, squared radius) of a disc holding every point ``on_lane`` counts
+    as on the lane (1 m margin), made once per frame. A point at (s, r) of a straight or circular
+    lane lies |r| from the centre line at s, which lies at most |s - length/2| from the lane's
+    middle (a chord is no longer than its arc), and on_lane bounds both; 1 m more absorbs
+    rounding. Sine lanes get no disc (infinite radius)."""
+    if discs[lane, 2] >= 0:
         return
-    count = v.shape[0]
-    for k in range(peds.shape[0]):
-        s, r = local_coordinates(lanes, lane, peds[k, P_X], peds[k, P_Y])
-        coords[lane, count + k, 0], coords[lane, count + k, 1] = s, r
-        coords[lane, count + k, 2] = 1.0 if on_lane(lanes, lane, s, r, 1.0) else 0.0
-    done[1, lane] = 1
+    half = lanes[lane, LENGTH] / 2
+    discs[lane, 0], discs[lane, 1] = position(lanes, lane, half, 0.0)
+    reach = half + VEHICLE_LENGTH + lanes[lane, WIDTH] / 2 + 1.0 + 1.0
+    discs[lane, 2] = np.inf if lanes[lane, LANE_KIND] == SINE else reach * reach
 
 
 @njit(cache=True)
@@ -224,7 +258,9 @@ def connected_front(
     peds: np.ndarray,
     lanes: np.ndarray,
     coords: np.ndarray,
-    done: np.ndarray,
+    discs: np.ndarray,
+    search: np.ndarray,
+    offset: np.ndarray,
     i: int,
     lane: int,
 ) -> int:
@@ -234,11 +270,10 @@ def connected_front(
     Each object is placed on the first of (the lane, its successor roads' lanes, its predecessor
     roads' lanes, in the network's order) it lies on (``on_lane``, 1 m margin), its longitudinal
     coordinate shifted into the lane's frame; the leader is the nearest at or ahead of vehicle i,
-    the last in scan order (vehicles, then pedestrians not crashed) among equals."""
+    the last in scan order (vehicles, then pedestrians not crashed) among equals. ``search`` and
+    ``offset`` (L + 1,) are scratch."""
     count = v.shape[0]
     lane_id = lanes[lane, LANE_ID]
-    search = np.empty(lanes.shape[0] + 1, dtype=np.int64)
-    offset = np.empty(lanes.shape[0] + 1)
     search[0], offset[0], size = lane, 0.0, 1
     for road in range(lanes.shape[0]):  # successor roads, in graph order
         if lanes[road, FIRST_OF_ROAD] == road and lanes[road, FROM_NODE] == lanes[lane, TO_NODE]:
@@ -250,17 +285,24 @@ def connected_front(
             previous = road + (int(lane_id) if lane_id < lanes[road, LANE_COUNT] else 0)
             search[size], offset[size] = previous, -lanes[previous, LENGTH]
             size += 1
-    fill_lane(v, peds, lanes, coords, done, lane)
-    s = coords[lane, i, 0]
+    for k in range(size):
+        lane_disc(lanes, discs, search[k])
+    s = lane_s(v, peds, lanes, coords, lane, i)
     front, s_front = -1, 0.0
     for j in range(count + peds.shape[0]):
         if j == i or (j >= count and peds[j - count, P_CRASHED] > 0):
             continue
+        x, y = object_xy(v, peds, j)
         for k in range(size):
-            fill_lane(v, peds, lanes, coords, done, search[k])
-            if coords[search[k], j, 2] == 0.0:
+            other = search[k]
+            if coords[other, j, 2] < 0:  # not measured yet in this frame: outside its disc, off
+                dx, dy = x - discs[other, 0], y - discs[other, 1]
+                if dx * dx + dy * dy > discs[other, 2]:
+                    continue
+                lane_s(v, peds, lanes, coords, other, j)
+            if coords[other, j, 2] == 0.0:
                 continue
-            s_j = coords[search[k], j, 0] + offset[k]
+            s_j = coords[other, j, 0] + offset[k]
             if s <= s_j and (front < 0 or s_j <= s_front):
                 front, s_front = j, s_j
             break
@@ -331,7 +373,7 @@ def stop_line_ahead(
         ):
             return ahead_m
         return NO_STOP
-    if state == LIGHT_YELLOW and v[i, SPEED] ** 2 / (2 * max(ahead_m, 1e-3)) > -p[COMFORT_ACC_MIN]:
+    if state == LIGHT_YELLOW and py_square(v[i, SPEED]) / (2 * max(ahead_m, 1e-3)) > -p[COMFORT_ACC_MIN]:
         return NO_STOP
     return ahead_m
 
@@ -359,7 +401,7 @@ def town_acceleration(
     """TownVehicle.acceleration(self, front): IDM with the straight-line gap to ``front`` (a
     vehicle row, a pedestrian as count + k, or -1), then the stop line's virtual leader."""
     count = v.shape[0]
-    acceleration = cached_idm_acceleration(v, lanes, p, coords, done[0], trig, i, i, -1)
+    acceleration = cached_idm_acceleration(v, lanes, p, coords, done, trig, i, i, -1)
     if front >= 0:
         if front < count:
             fx, fy = v[front, X], v[front, Y]
@@ -376,10 +418,10 @@ def town_acceleration(
                 p[DISTANCE_WANTED] + v[i, SPEED] * p[TIME_WANTED] + v[i, SPEED] * dv / (2 * np.sqrt(ab))
             )
         lane = int(v[i, LANE])
-        fill_lane(v, peds, lanes, coords, done, lane)
-        along = coords[lane, front, 0] - coords[lane, i, 0]
+        along = lane_s(v, peds, lanes, coords, lane, front) - lane_s(v, peds, lanes, coords, lane, i)
         dx, dy = fx - v[i, X], fy - v[i, Y]
         gap_m = math.copysign(math.sqrt(dx * dx + dy * dy), along)
+        # IDMVehicle.acceleration squares with np.power(·, 2): numpy's square, x * x
         acceleration -= p[COMFORT_ACC_MAX] * (desired_gap / not_zero(gap_m)) ** 2
     ahead_m = stop_line_ahead(
         v, lanes, p, i, junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states
@@ -392,7 +434,7 @@ def town_acceleration(
     desired_gap = p[DISTANCE_WANTED] + speed * p[TIME_WANTED] + speed * speed / (2 * np.sqrt(ab))
     target = not_zero(v[i, TARGET_SPEED])
     stop = p[COMFORT_ACC_MAX] * (1 - (speed / np.abs(target)) ** v[i, DELTA])
-    stop -= p[COMFORT_ACC_MAX] * (desired_gap / not_zero(gap_m)) ** 2
+    stop -= p[COMFORT_ACC_MAX] * py_square(desired_gap / not_zero(gap_m))
     return min(acceleration, stop)
 
 
@@ -423,8 +465,10 @@ def town_act(
     """Road.act of one town world: rows ``0..count-1`` of ``v`` decide their controls in order
     (see the module docstring for the arrays); random routes draw on ``rng_words``."""
     w, q = v[:count], peds[:pcount]
-    start_frame(w, done[0], trig)
-    done[1, :] = 0
+    start_frame(w, done, trig)
+    coords[:, : count + pcount, 2] = -1.0
+    discs = np.full((lanes.shape[0], 3), -1.0)
+    search, offset = np.empty(lanes.shape[0] + 1, dtype=np.int64), np.empty(lanes.shape[0] + 1)
     for k in range(pcount):
         trig[count + k, 0], trig[count + k, 1] = np.cos(q[k, P_HEADING]), np.sin(q[k, P_HEADING])
     for i in range(count):
@@ -446,7 +490,7 @@ def town_act(
             next_limit = lanes[turn_lane, SPEED_LIMIT]
             s, _ = local_coordinates(lanes, lane, w[i, X], w[i, Y])
             ahead_m = lanes[lane, LENGTH] - s
-            braking = (w[i, SPEED] ** 2 - next_limit**2) / (2 * -p[COMFORT_ACC_MIN])
+            braking = (py_square(w[i, SPEED]) - py_square(next_limit)) / (2 * -p[COMFORT_ACC_MIN])
             if ahead_m < TURN_BRAKE_MARGIN_M + braking:
                 limit = min(limit, next_limit)
         w[i, TARGET_SPEED] = limit
@@ -455,16 +499,16 @@ def town_act(
         if w[i, ROUTE_END] - w[i, ROUTE_START] <= 1:
             random_route(w, lanes, i, int(w[i, TARGET_LANE]), street_lanes, routes, route_length, rng_words)
         follow_road(w, lanes, i)
-        change_lane_policy(w, lanes, p, coords, done[0], trig, i)
+        change_lane_policy(w, lanes, p, coords, done, trig, i)
         w[i, STEER] = steering_control(w, lanes, i, int(w[i, TARGET_LANE]))
-        front = connected_front(w, q, lanes, coords, done, i, lane)
+        front = connected_front(w, q, lanes, coords, discs, search, offset, i, lane)
         acceleration = town_acceleration(
             w, q, lanes, p, coords, done, trig, i, front,
             junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states,
         )  # fmt: skip
         target = int(w[i, TARGET_LANE])
         if lane != target:
-            front = connected_front(w, q, lanes, coords, done, i, target)
+            front = connected_front(w, q, lanes, coords, discs, search, offset, i, target)
             target_a = town_acceleration(
                 w, q, lanes, p, coords, done, trig, i, front,
                 junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states,
