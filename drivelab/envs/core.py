@@ -147,8 +147,8 @@ def _first(observations):
 def make_vec(scenario: str = "highway", num_envs: int = 8, **env_kwargs: Any) -> gym.vector.VectorEnv:
     """``num_envs`` worlds of ``scenario`` as one gymnasium vector env (each id's
     ``vector_entry_point``): a VectorDriveEnv where the compiled core runs the scenario, else
-    (the town, the circuits on the reference backend) gymnasium's ``AsyncVectorEnv`` of DriveEnvs,
-    one process per world."""
+    (``backend="highway"``, the reference) gymnasium's ``AsyncVectorEnv`` of DriveEnvs, one
+    process per world."""
     env_kwargs.pop("max_episode_steps", None)
     backend = env_kwargs.get("backend", "auto")
     compiled = backend == "fast" or (backend == "auto" and get_scenario(scenario).fast_backend)

@@ -136,11 +136,14 @@ def test_planner_routes_are_connected_and_reach_their_target(layout):
         assert ":ir" in route[-1][1] and route[-1][1] != start[1]
 
 
-def test_town_episode_exports_lights_and_route():
-    env = DriveEnv("town", obs="waypoints", action="target_speed", reward="roach", traffic="regular")
+@pytest.mark.parametrize("backend", ["fast", "highway"])
+def test_town_episode_exports_lights_and_route(backend):
+    env = DriveEnv(
+        "town", obs="waypoints", action="target_speed", reward="roach", traffic="regular", backend=backend
+    )
     obs, _ = env.reset(seed=3)
     world = env.world
-    assert type(env.backend) is HighwayBackend and SCENARIOS["town"].fast_backend is False
+    assert (type(env.backend) is HighwayBackend) == (backend == "highway") and SCENARIOS["town"].fast_backend
     assert world.traffic_lights.shape == (16, 4) and np.isfinite(world.route.length_m)
     assert len(world.vehicles) == 15 and obs.shape == (10, 2)
     positions = {
@@ -149,7 +152,9 @@ def test_town_episode_exports_lights_and_route():
         for k in LAYOUTS["train"].arms(j)
     }
     assert all(tuple(np.round(p, 6)) in positions for p in world.traffic_lights[:, :2])
-    test_town = DriveEnv("town", obs="kinematics", traffic="empty", backend_options={"layout": "test"})
+    test_town = DriveEnv(
+        "town", obs="kinematics", traffic="empty", backend_options={"layout": "test"}, backend=backend
+    )
     test_town.reset(seed=0)
     assert test_town.world.traffic_lights.shape == (6, 4)
 
@@ -172,7 +177,9 @@ def test_light_ahead_and_its_label():
 
 
 def test_leaving_the_route_and_being_blocked_end_the_episode():
-    env = DriveEnv("town", obs="kinematics", action="target_speed", reward="roach", traffic="empty")
+    env = DriveEnv(
+        "town", obs="kinematics", action="target_speed", reward="roach", traffic="empty", backend="highway"
+    )
     env.reset(seed=1)
     _, _, terminated, _, info = env.step(np.array([0.0, 0.0]))  # standing still
     assert not terminated and info["traffic_light"] in ("none", "green", "red_or_yellow")
@@ -196,7 +203,12 @@ def test_leaving_the_route_and_being_blocked_end_the_episode():
 
 def test_training_retargets_on_arrival_and_evaluation_uses_fixed_routes():
     env = DriveEnv(
-        "town", obs="kinematics", action="meta", traffic="empty", backend_options={"retarget": True}
+        "town",
+        obs="kinematics",
+        action="meta",
+        traffic="empty",
+        backend_options={"retarget": True},
+        backend="highway",
     )
     env.reset(seed=2)
     hw, route = env.backend.env, env.world.route
@@ -214,7 +226,12 @@ def test_training_retargets_on_arrival_and_evaluation_uses_fixed_routes():
     assert env.backend.route_lanes[:lanes_before] == env.backend.env.ego_route[:lanes_before]
     # evaluation: without retarget the same arrival ends the episode
     plain = DriveEnv(
-        "town", obs="kinematics", action="meta", traffic="empty", backend_options={"retarget": False}
+        "town",
+        obs="kinematics",
+        action="meta",
+        traffic="empty",
+        backend_options={"retarget": False},
+        backend="highway",
     )
     plain.reset(seed=2)
     plain.backend.env.vehicle.position = end.copy()
@@ -228,7 +245,9 @@ def test_training_retargets_on_arrival_and_evaluation_uses_fixed_routes():
 
     network = plain.backend.env.road.network
     assert fixed_routes(network) == fixed_routes(network) and len(fixed_routes(network)) == FIXED_ROUTE_COUNT
-    fixed = DriveEnv("town", obs="kinematics", traffic="empty", backend_options={"fixed_routes": True})
+    fixed = DriveEnv(
+        "town", obs="kinematics", traffic="empty", backend_options={"fixed_routes": True}, backend="highway"
+    )
     starts = {tuple(r[0]) for r in fixed_routes(network)}
     for seed in range(5):
         fixed.reset(seed=seed)
@@ -333,7 +352,9 @@ def test_a_left_turn_waits_for_oncoming_traffic():
 
 
 def test_hitting_a_pedestrian_is_a_pedestrian_collision():
-    env = DriveEnv("town", obs="measurements", action="target_speed", traffic="regular", duration_s=20)
+    env = DriveEnv(
+        "town", obs="measurements", action="target_speed", traffic="regular", duration_s=20, backend="highway"
+    )
     env.reset(seed=0)
     world = env.world
     assert world.pedestrians.shape == (10, 6) and world.road.crossings.shape == (12, 5)

@@ -24,8 +24,8 @@ import pytest
 from drivelab.envs.backends.fast import pcg64
 from drivelab.envs.backends.fast import traffic as T
 from drivelab.envs.backends.fast.spawn import LaneGeometry
+from drivelab.envs.backends.fast.town_spawn import TownSetup, spawn_town, town_episode
 from drivelab.envs.scenarios import SCENARIOS
-from drivelab.envs.scenarios.town import TownSetup, spawn_town, town_episode
 from drivelab.envs.town_env import fixed_routes
 from tests.envs.town_reference import reference_town, town_rows, town_tables
 

@@ -105,8 +105,8 @@ def test_make_vec_takes_the_vector_entry_point_with_the_auto_backend():
     assert isinstance(default, VectorDriveEnv)
 
 
-def test_scenarios_off_the_compiled_core_batch_in_subprocesses():
-    vector = make_vec("town", num_envs=2, obs="waypoints", traffic="empty")
+def test_the_reference_backend_batches_in_subprocesses():
+    vector = make_vec("town", num_envs=2, obs="waypoints", traffic="empty", backend="highway")
     try:
         assert isinstance(vector, gymnasium.vector.AsyncVectorEnv)
         observations, _ = vector.reset(seed=0)

@@ -139,9 +139,22 @@ class HighwayBackend:
     ) -> None:
         self.scenario = scenario
         self.control = control
+        config, self.keep_npcs, self.extra_vehicles = self.assemble_config(
+            scenario, traffic, control, overrides
+        )
+        env_class = hw_utils.class_from_path(scenario.env_class)
+        self.env = _without_observation_and_info(env_class)(config=config)
+        self.world: WorldState | None = None
+
+    @staticmethod
+    def assemble_config(
+        scenario: Scenario, traffic: str, control: str, overrides: dict | None
+    ) -> tuple[dict, bool, int]:
+        """(highway-env config keys given to the env, keep_npcs, extra_vehicles): the scenario's
+        config, its traffic level, the control's action type, then ``overrides``."""
         config = {**scenario.config, **scenario.traffic.get(traffic, {})}
-        self.keep_npcs = config.pop("keep_npcs", True)
-        self.extra_vehicles = config.pop("extra_vehicles", 0)
+        keep_npcs = config.pop("keep_npcs", True)
+        extra_vehicles = config.pop("extra_vehicles", 0)
         if control == "meta":
             config["action"] = {"type": "DiscreteMetaAction"}
             if scenario.meta_target_speeds:
@@ -150,9 +163,7 @@ class HighwayBackend:
             config["action"] = {"type": "ContinuousAction", "longitudinal": True, "lateral": True}
             config["policy_frequency"] = scenario.continuous_policy_frequency_hz
         config.update(overrides or {})
-        env_class = hw_utils.class_from_path(scenario.env_class)
-        self.env = _without_observation_and_info(env_class)(config=config)
-        self.world: WorldState | None = None
+        return config, keep_npcs, extra_vehicles
 
     # --- timing -------------------------------------------------------------------------------
     @property

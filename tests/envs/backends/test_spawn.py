@@ -9,6 +9,7 @@ import pytest
 from highway_env.envs.common.abstract import AbstractEnv
 
 from drivelab.envs.backends.fast import traffic as T
+from drivelab.envs.backends.fast.backend import fast_simulator
 from drivelab.envs.backends.fast.simulator import FastSimulator, vehicles_to_array
 from drivelab.envs.backends.fast.spawn import shortest_path
 from drivelab.envs.backends.highway import HighwayBackend
@@ -121,7 +122,7 @@ def test_no_highway_env_object_alive_in_the_simulator(scenario):
     simulator (its road, caches and generators included), and the builder env that converted
     the road is gone."""
     control = "continuous" if scenario in CONTINUOUS_ONLY else "meta"
-    simulator = FastSimulator(SCENARIOS[scenario], "dense", control, 3)
+    simulator = fast_simulator(SCENARIOS[scenario], "dense", control, 3)
     rng = np.random.default_rng(0)
     simulator.reset_where(np.ones(3, dtype=bool), np.array([0, 1, 2]))
     for step in range(4):

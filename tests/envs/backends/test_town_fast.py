@@ -12,7 +12,7 @@ import pytest
 from drivelab.envs.backends.fast import pcg64
 from drivelab.envs.backends.fast import town_rows as R
 from drivelab.envs.backends.fast import traffic as T
-from drivelab.envs.backends.fast.backend import FastBackend
+from drivelab.envs.backends.fast.backend import FastBackend, fast_simulator
 from drivelab.envs.backends.highway import HighwayBackend
 from drivelab.envs.scenarios import SCENARIOS
 from tests.envs.backends.test_fast import ROUNDING_ATOL, run_without_avx512
@@ -159,8 +159,6 @@ def test_without_avx512_dispatch_the_town_is_bit_for_bit():
 
 def test_k_worlds_step_as_k_single_worlds():
     """K = 4 town worlds with NEXT_STEP restarts at different steps equal four one-world runs."""
-    from drivelab.envs.backends.fast.backend import fast_simulator
-
     k, steps = 4, 25
     batch_sim = fast_simulator(TOWN, "regular", "meta", k, {"layout": "train"})
     singles = [fast_simulator(TOWN, "regular", "meta", 1, {"layout": "train"}) for _ in range(k)]

@@ -17,15 +17,14 @@ from drivelab.envs.backends.fast.simulator import (  # noqa: F401  (re-exported:
     idm_parameters,
     vehicles_to_array,
 )
+from drivelab.envs.backends.fast.town_simulator import TownSimulator
 from drivelab.world.scenario import Scenario
 from drivelab.world.state import WorldState
 
 
 def fast_simulator(scenario: Scenario, traffic: str, control: str, num_worlds: int, overrides=None):
-    """K worlds of ``scenario`` on the compiled core: the town's simulator for town traffic."""
+    """K worlds of ``scenario`` on the compiled core: the town's simulator for the town's traffic."""
     if scenario.town_traffic:
-        from drivelab.envs.backends.fast.town_simulator import TownSimulator
-
         return TownSimulator(scenario, traffic, control, num_worlds, overrides)
     return FastSimulator(scenario, traffic, control, num_worlds, overrides)
 

@@ -26,7 +26,7 @@ import numpy as np
 from highway_env import utils as hw_utils
 from highway_env.road.regulation import RegulatedRoad
 from highway_env.vehicle.behavior import IDMVehicle
-from highway_env.vehicle.controller import ControlledVehicle
+from highway_env.vehicle.controller import ControlledVehicle, MDPVehicle
 from highway_env.vehicle.kinematics import Vehicle
 from highway_env.vehicle.objects import Obstacle
 from numba import njit
@@ -261,6 +261,65 @@ def _convert_road(builder: HighwayBackend, scenario: Scenario) -> _Road:
     )
 
 
+def _describe_road(scenario: Scenario, traffic: str, control: str, overrides: dict | None) -> _Road:
+    """A _Road from the scenario's road description (``Scenario.road``): lane arrays, road map and
+    the ego's routes from the description, the config as highway-env would assemble it (its
+    class's defaults, then HighwayBackend's keys): no highway-env object is built."""
+    from drivelab.envs.backends.roads.road_map import centre_line, circuit_route, road_map
+
+    given, keep_npcs, extra_vehicles = HighwayBackend.assemble_config(scenario, traffic, control, overrides)
+    config = hw_utils.class_from_path(scenario.env_class).default_config()
+    config.update(given)
+    desc = scenario.road(config)
+    table = L.LaneTable.from_description(desc)
+    npc_class = hw_utils.class_from_path(config["other_vehicles_type"])
+    if npc_class is not IDMVehicle:
+        raise NotImplementedError(f"the fast backend has no {npc_class.__name__}")
+    routes, cache = {}, {}
+    if scenario.circuit:  # every lane's route is one lap of the circuit
+        has_goal = bool(scenario.destination) or scenario.arrival == "route_end"
+        for row in range(len(table.indices)):
+            routes[row] = RouteTracker(centre_line(desc, circuit_route(desc, row)), has_goal=has_goal)
+    if scenario.town_traffic:
+        from drivelab.envs.backends.roads.town_arrays_description import town_arrays
+
+        cache["town_arrays"] = town_arrays(desc)
+    target_speeds = [0.0]
+    if control == "meta":
+        target_speeds = config["action"].get("target_speeds", MDPVehicle.DEFAULT_TARGET_SPEEDS)
+    graph_keys = {f: list(to) for f, to in desc.graph.items()}
+    dt_s = 1 / config["simulation_frequency"]
+    return _Road(
+        table=table,
+        road_map=road_map(desc),
+        graph_keys=graph_keys,
+        config=dict(config),
+        target_speeds=np.asarray(target_speeds, dtype=float),
+        frames=int(config["simulation_frequency"] // config["policy_frequency"]),
+        dt_s=dt_s,
+        policy_frequency_hz=float(config["policy_frequency"]),
+        duration_s=float(config["duration"]),
+        routes=routes,
+        in_junction=np.array([scenario.in_junction(index) for index in table.indices], dtype=bool),
+        exit_lane=np.array([("il" in f and "o" in t) for f, t, _ in table.indices], dtype=bool),
+        regulation_period=0,
+        geometry=LaneGeometry(table),
+        paths=all_shortest_paths(graph_keys),
+        objects=np.zeros((0, T.VEHICLE_COLUMNS)),
+        idm=idm_parameters(),
+        ego_length=float(Vehicle.LENGTH),  # every ego class of highway-env keeps Vehicle's size
+        ego_width=float(Vehicle.WIDTH),
+        npc_length=float(npc_class.LENGTH),
+        npc_width=float(npc_class.WIDTH),
+        lane_change_delay=float(npc_class.LANE_CHANGE_DELAY),
+        idm_delta=float(IDMVehicle.DELTA),
+        keep_npcs=keep_npcs,
+        extra_vehicles=extra_vehicles,
+        destination=scenario.destination,
+        cache=cache,
+    )
+
+
 # --- compiled kernels over K worlds ---------------------------------------------------------------
 
 
@@ -453,7 +512,7 @@ class FastSimulator:
     :param overrides: extra highway-env config keys.
     """
 
-    route_time_limit_s = None  # the town's reference backend sets one; no fast scenario has one
+    route_time_limit_s = None  # the town's simulator has one per world (NoCrash's fixed routes)
 
     def __init__(
         self,
@@ -463,6 +522,10 @@ class FastSimulator:
         num_worlds: int,
         overrides: dict | None = None,
     ) -> None:
+        if scenario.town_traffic and type(self) is FastSimulator:
+            raise UsageError(
+                "the town's traffic runs on TownSimulator (fast.backend.fast_simulator picks it)"
+            )
         if not scenario.fast_backend:
             raise UsageError(
                 f"backend 'fast' does not run scenario {scenario.name!r} yet; use --backend highway"
@@ -476,6 +539,8 @@ class FastSimulator:
         self.scenario, self.control, self.num_worlds = scenario, control, num_worlds
         key = _road_key(scenario, traffic, control, overrides)
         road = _ROADS.get(key)
+        if road is None and scenario.road is not None:  # a described road: no highway-env object
+            road = _ROADS[key] = _describe_road(scenario, traffic, control, overrides)
         if road is None:  # highway-env builds the road once; nothing of it is kept but arrays
             builder = HighwayBackend(scenario, traffic, control, overrides)
             builder.reset(0)

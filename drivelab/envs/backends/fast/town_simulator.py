@@ -46,6 +46,7 @@ from drivelab.envs.backends.fast.simulator import (
     export_worlds,
     project_routes,
 )
+from drivelab.envs.backends.fast.town_spawn import TownSetup, route_polyline
 from drivelab.envs.backends.fast.town_traffic import road_arrays_tuple, town_act, town_frame_cache, town_step
 from drivelab.envs.backends.roads.town_rules import PEDESTRIAN_SIZE_M, LightTimings
 from drivelab.envs.route import RouteTracker
@@ -137,8 +138,6 @@ class TownSimulator(FastSimulator):
 
     def __init__(self, scenario, traffic: str, control: str, num_worlds: int, overrides: dict | None = None):
         super().__init__(scenario, traffic, control, num_worlds, overrides)
-        from drivelab.envs.scenarios.town import TownSetup  # the town's set-up, read once per road
-
         road, k = self._road, num_worlds
         self.setup = TownSetup.of(road)
         arrays = self.arrays = self.setup.arrays
@@ -196,8 +195,6 @@ class TownSimulator(FastSimulator):
 
     def _set_route(self, k: int) -> None:
         """World k's route polyline from its planned lanes (``HighwayBackend.route_for``)."""
-        from drivelab.envs.scenarios.town import route_polyline
-
         self.trackers[k] = RouteTracker(
             route_polyline(self.setup.geometry, self.ego_routes[k]), has_goal=True
         )
