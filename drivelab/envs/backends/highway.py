@@ -13,6 +13,12 @@ import os
 
 import numpy as np
 
+from drivelab.envs.backends.roads.road_map import (
+    SAMPLE_SPACING_M,  # noqa: F401 (re-exported)
+    lane_points,
+    lane_stations,
+    lanes_road_map,
+)
 from drivelab.envs.route import RouteTracker
 from drivelab.world.scenario import Scenario
 from drivelab.world.state import LIGHT_RED, Ego, Events, RoadMap, WorldState
@@ -20,60 +26,30 @@ from drivelab.world.state import LIGHT_RED, Ego, Events, RoadMap, WorldState
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 
 from highway_env import utils as hw_utils  # noqa: E402
-from highway_env.road.lane import LineType, StraightLane  # noqa: E402
+from highway_env.road.lane import StraightLane  # noqa: E402
 from highway_env.vehicle.behavior import IDMVehicle  # noqa: E402
 
-SAMPLE_SPACING_M = 2.0  # curved lanes are turned into polylines with points this far apart
 ROUTE_TIMEOUT_MPS = 10 / 3.6  # an evaluation route must be driven at 10 km/h on average
 ROUTE_LOOKAHEAD_M = 1000.0  # a route that never ends (highway, racetrack) is cut here
 
 
 def _lane_stations(lane) -> np.ndarray:
-    """Arc-length stations at which to sample a lane: its ends, plus every 2 m if curved."""
-    if isinstance(lane, StraightLane) and type(lane) is StraightLane:
-        return np.array([0.0, lane.length])
-    count = max(int(np.ceil(lane.length / SAMPLE_SPACING_M)), 1)
-    return np.linspace(0.0, lane.length, count + 1)
+    """Arc-length stations at which to sample a highway-env lane: its ends, plus every 2 m if curved."""
+    return lane_stations(lane, type(lane) is StraightLane)
 
 
 def _lane_points(lane, stations: np.ndarray, lateral: float | np.ndarray) -> np.ndarray:
-    lateral = np.broadcast_to(lateral, stations.shape)
-    return np.array([lane.position(s, r) for s, r in zip(stations, lateral, strict=True)])
-
-
-def _segments(polyline: np.ndarray) -> np.ndarray:
-    return np.stack([polyline[:-1], polyline[1:]], axis=1)
+    return lane_points(lane, stations, lateral)
 
 
 def build_road_map(network) -> RoadMap:
     """Convert highway-env's road network to arrays (once per reset)."""
-    polygons, centerlines, widths, markings, kinds, edges = [], [], [], [], [], []
-    for lane in network.lanes_list():
-        stations = _lane_stations(lane)
-        half_width = np.array([lane.width_at(s) for s in stations]) / 2
-        left = _lane_points(lane, stations, -half_width)
-        right = _lane_points(lane, stations, half_width)
-        polygons.append(np.concatenate([left, right[::-1]]))
-        centerlines.append(_lane_points(lane, stations, 0.0))
-        widths.append(lane.width_at(0.0))
-        for side, boundary in ((0, left), (1, right)):
-            line_type = lane.line_types[side]
-            if line_type == LineType.NONE:
-                continue
-            segments = _segments(boundary)
-            solid = line_type in (LineType.CONTINUOUS, LineType.CONTINUOUS_LINE)
-            markings.append(segments)
-            kinds.append(np.full(len(segments), 2 if solid else 1))
-            if solid:
-                edges.append(segments)
-    stack = lambda parts: np.concatenate(parts) if parts else np.zeros((0, 2, 2))  # noqa: E731
-    return RoadMap(
-        lane_polygons=tuple(polygons),
-        lane_centerlines=tuple(centerlines),
-        lane_widths_m=np.asarray(widths, dtype=float),
-        markings=stack(markings),
-        marking_kinds=np.concatenate(kinds) if kinds else np.zeros(0, dtype=int),
-        edges=stack(edges),
+    lanes = network.lanes_list()
+    return lanes_road_map(
+        lanes,
+        [type(lane) is StraightLane for lane in lanes],
+        [lane.width_at(0.0) for lane in lanes],
+        [tuple(int(t) for t in lane.line_types) for lane in lanes],
     )
 
 

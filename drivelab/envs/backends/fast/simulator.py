@@ -582,7 +582,9 @@ class FastSimulator:
         }
         for array in (self._no_event, *self._empty.values()):
             array.setflags(write=False)
-        self._route_cache: tuple[np.ndarray, dict] | None = None  # (route_index, RouteBatch arrays)
+        # (route_index, RouteBatch arrays, _route_version) of the last batch
+        self._route_cache: tuple[np.ndarray, dict, int] | None = None
+        self._route_version = 0  # counts route changes that keep route_index (the town's)
         self._route_of_lane: dict[int, int] = {}
         self._trackers: list[RouteTracker] = []
         self.batch: WorldBatch | None = None
@@ -815,7 +817,7 @@ class FastSimulator:
     def _routes(self) -> dict[str, np.ndarray]:
         """Every world's route arrays for RouteBatch, remade only when a world's route changed
         (read-only: consecutive batches share them)."""
-        if self._route_cache is None or not np.array_equal(self._route_cache[0], self.route_index):
+        if self._routes_stale():
             r = self.route_index.copy()
             arrays = {
                 "polyline": self.r_polyline[r],
@@ -826,5 +828,9 @@ class FastSimulator:
             }
             for array in arrays.values():
                 array.setflags(write=False)
-            self._route_cache = (r, arrays)
+            self._route_cache = (r, arrays, self._route_version)
         return self._route_cache[1]
+
+    def _routes_stale(self) -> bool:
+        """A world's route changed since the route arrays were last made."""
+        return self._route_cache is None or not np.array_equal(self._route_cache[0], self.route_index)

@@ -160,7 +160,6 @@ class TownSimulator(FastSimulator):
         self.ego_routes: list[list[int]] = [[] for _ in range(k)]
         self.trackers: list[RouteTracker | None] = [None] * k
         self.route_index = np.arange(k)
-        self._route_version = 0
         cache = [town_frame_cache(n_max, p_max, len(self.lanes)) for _ in range(k)]
         self.coords = np.stack([c[0] for c in cache])
         self.done = np.stack([c[1] for c in cache])
@@ -206,20 +205,9 @@ class TownSimulator(FastSimulator):
         self._trackers = [t if t is not None else self.trackers[0] for t in self.trackers]
         self._pad_routes()
 
-    def _routes(self) -> dict[str, np.ndarray]:
-        """The worlds' route arrays for RouteBatch, remade when a world's route changed."""
-        if self._route_cache is None or self._route_cache[0] != self._route_version:
-            arrays = {
-                "polyline": self.r_polyline.copy(),
-                "stations_m": self.r_stations.copy(),
-                "count": self.r_count.copy(),
-                "length_m": self.r_length.copy(),
-                "closed": self.r_closed.copy(),
-            }
-            for array in arrays.values():
-                array.setflags(write=False)
-            self._route_cache = (self._route_version, arrays)
-        return self._route_cache[1]
+    def _routes_stale(self) -> bool:
+        """Every world keeps its own route row (route_index is constant): stale on any change."""
+        return self._route_cache is None or self._route_cache[2] != self._route_version
 
     def _update_lights(self, active: np.ndarray) -> None:
         aj, aa = self.arrays.light_junction, self.arrays.light_arm
