@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 
 from drivelab.envs.core import (
     DriveEnv,  # noqa: E402
-    )
+)
 from drivelab.envs.scenarios import FAST_SCENARIOS as SUPPORTED  # noqa: E402
 from drivelab.envs.scenarios import SCENARIOS  # noqa: E402
 

@@ -85,7 +85,7 @@ class EpisodeRules:
             blocked = self.stopped_s > self.blocked_after_s
         off_route = np.zeros(len(moving), dtype=bool)
         if self.route_deviation_m is not None:
-            point, _ = batch.route.poses_at(batch.route.progress_m)
+            point, _ = batch.route.pose()
             off_route = np.linalg.norm(batch.ego.position - point, axis=1) > self.route_deviation_m
         # a world where neither rule fires keeps the events its simulator reported
         judged = blocked | off_route

@@ -232,7 +232,7 @@ def roach_desired_speed(batch: WorldBatch | WorldState) -> np.ndarray:
 
 def _route_pose(batch: WorldBatch) -> tuple[np.ndarray, np.ndarray]:
     """(K, 2) point and (K,) heading of each route at the ego's progress."""
-    return batch.route.poses_at(batch.route.progress_m)
+    return batch.route.pose()
 
 
 @term

@@ -22,7 +22,7 @@ batch before a step stays valid for reward terms. ``batch[k]`` is world k as a
 from __future__ import annotations
 
 import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -102,6 +102,15 @@ class RouteBatch:
     progress_m: np.ndarray
     length_m: np.ndarray
     closed: np.ndarray
+    # values derived from these arrays by their readers, made once per batch (never stale: the
+    # arrays do not change; a replaced batch starts an empty cache)
+    cache: dict = field(init=False, default_factory=dict, compare=False, repr=False)
+
+    def pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """(K, 2) point and (K,) heading of each route at its progress (``poses_at``), made once."""
+        if "pose" not in self.cache:
+            self.cache["pose"] = self.poses_at(self.progress_m)
+        return self.cache["pose"]
 
     @property
     def remaining_m(self) -> np.ndarray:
@@ -206,6 +215,8 @@ class WorldBatch:
     # for a sub-batch (``select``): the slot of each row among the K worlds a sensor keeps state
     # for (None: row k is slot k)
     slots: np.ndarray | None = None
+    # values derived by readers, made once per batch (a replaced batch starts an empty cache)
+    cache: dict = field(init=False, default_factory=dict, compare=False, repr=False)
 
     @property
     def num_worlds(self) -> int:
@@ -364,7 +375,16 @@ class WorldBatch:
     def light_ahead(self, max_distance_m: float) -> tuple[np.ndarray, np.ndarray]:
         """Per world, the LIGHT_* state (``-1``: none) and distance (m, ``inf``: none) of the nearest
         traffic light whose stop line is ahead within ``max_distance_m``, in the ego's lane and
-        facing its way (approach heading within 45°) — :meth:`WorldState.light_ahead` for K."""
+        facing its way (approach heading within 45°) — :meth:`WorldState.light_ahead` for K. The
+        nearest at any distance is found once per batch; a nearer limit only filters it."""
+        if "light_ahead" not in self.cache:
+            self.cache["light_ahead"] = self._nearest_light()
+        state, distance = self.cache["light_ahead"]
+        within = distance <= max_distance_m
+        return np.where(within, state, -1), np.where(within, distance, np.inf)
+
+    def _nearest_light(self) -> tuple[np.ndarray, np.ndarray]:
+        """``light_ahead`` without a distance limit."""
         lights, ego = self.traffic_lights, self.ego
         if lights.shape[1] == 0:
             return np.full(self.num_worlds, -1, dtype=np.int64), np.full(self.num_worlds, np.inf)
@@ -373,13 +393,7 @@ class WorldBatch:
         ahead = delta[..., 0] * cos_h + delta[..., 1] * sin_h
         beside = -delta[..., 0] * sin_h + delta[..., 1] * cos_h
         aligned = np.abs(wrap_to_pi(lights[..., 2] - ego.heading[:, None])) < np.pi / 4
-        mine = (
-            self.light_valid
-            & aligned
-            & (ahead > 0)
-            & (ahead <= max_distance_m)
-            & (np.abs(beside) < ego.lane_width_m[:, None] / 2)
-        )
+        mine = self.light_valid & aligned & (ahead > 0) & (np.abs(beside) < ego.lane_width_m[:, None] / 2)
         distance = np.where(mine, ahead, np.inf)
         nearest = np.argmin(distance, axis=1)
         rows = np.arange(self.num_worlds)
@@ -390,7 +404,7 @@ class WorldBatch:
 
 _FIELDS_EGO = dataclasses.fields(EgoBatch)
 _FIELDS_EVENTS = dataclasses.fields(EventsBatch)
-_FIELDS_ROUTE = dataclasses.fields(RouteBatch)
+_FIELDS_ROUTE = [f for f in dataclasses.fields(RouteBatch) if f.init]
 
 
 def _stations(polyline: np.ndarray) -> np.ndarray:

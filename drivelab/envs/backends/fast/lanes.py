@@ -16,9 +16,14 @@ STRAIGHT, SINE, CIRCLE = 0, 1, 2
 (
     KIND, START_X, START_Y, DIR_X, DIR_Y, HEADING, LENGTH, WIDTH, AMPLITUDE, PULSATION, PHASE,
     CENTER_X, CENTER_Y, RADIUS, START_PHASE, SENSE, SPEED_LIMIT, FORBIDDEN, LANE_ID, LANE_COUNT,
-    FIRST_OF_ROAD, FROM_NODE, TO_NODE, PRIORITY,
-) = range(24)  # fmt: skip
-LANE_COLUMNS = 24
+    FIRST_OF_ROAD, FROM_NODE, TO_NODE, PRIORITY, BOX_MIN_X, BOX_MIN_Y, BOX_MAX_X, BOX_MAX_Y,
+) = range(28)  # fmt: skip
+LANE_COLUMNS = 28
+# BOX_*: a box around the lane's centre line (a straight lane's segment, a circular lane's whole
+# circle; unbounded for a sine lane). ``closest_lane`` skips a lane whose box is farther than the
+# best distance found so far: highway-env's distance to a lane (|lateral| + how far beyond its
+# ends) is never less than the Euclidean distance to its centre line, so the answer is the same.
+BOX_MARGIN_M = 1e-6  # far above the rounding of either distance (1e-13 m on a town)
 VEHICLE_LENGTH = 5.0  # AbstractLane.VEHICLE_LENGTH
 
 
@@ -82,6 +87,7 @@ class LaneTable:
                     )
             else:
                 raise NotImplementedError(f"the fast backend has no {type(lane).__name__} yet")
+        _fill_boxes(rows)
         return LaneTable(rows, tuple(indices), tuple(nodes))
 
     @staticmethod
@@ -113,11 +119,29 @@ class LaneTable:
                 values[START_X], values[START_Y] = start
                 values[DIR_X], values[DIR_Y] = (end - start) / length
                 values[HEADING] = np.arctan2(end[1] - start[1], end[0] - start[0])
+        _fill_boxes(rows)
         return LaneTable(rows, indices, tuple(desc.nodes))
 
     def road_of(self, _from: str, _to: str) -> int:
         """The row of lane 0 of road (_from, _to): how routes name a road."""
         return self.row_of[(_from, _to, 0)]
+
+
+def _fill_boxes(rows: np.ndarray) -> None:
+    """BOX_* of every lane row (see BOX_MARGIN_M)."""
+    for values in rows:
+        if values[KIND] == STRAIGHT:
+            end_x = values[START_X] + values[LENGTH] * values[DIR_X]
+            end_y = values[START_Y] + values[LENGTH] * values[DIR_Y]
+            values[BOX_MIN_X], values[BOX_MAX_X] = min(values[START_X], end_x), max(values[START_X], end_x)
+            values[BOX_MIN_Y], values[BOX_MAX_Y] = min(values[START_Y], end_y), max(values[START_Y], end_y)
+        elif values[KIND] == CIRCLE:
+            x, y, radius = values[CENTER_X], values[CENTER_Y], values[RADIUS]
+            values[BOX_MIN_X], values[BOX_MAX_X] = x - radius, x + radius
+            values[BOX_MIN_Y], values[BOX_MAX_Y] = y - radius, y + radius
+        else:
+            values[BOX_MIN_X] = values[BOX_MIN_Y] = -np.inf
+            values[BOX_MAX_X] = values[BOX_MAX_Y] = np.inf
 
 
 @njit(cache=True, inline="always")
@@ -204,6 +228,10 @@ def closest_lane(lanes: np.ndarray, x: float, y: float, heading: float, hint: in
     for lane in range(lanes.shape[0]):
         if lane == hint:
             continue
+        row = lanes[lane]
+        outside = max(row[BOX_MIN_X] - x, x - row[BOX_MAX_X], row[BOX_MIN_Y] - y, y - row[BOX_MAX_Y])
+        if outside > best_distance + BOX_MARGIN_M:
+            continue  # its distance is at least this far: it cannot be the closest
         s, r = local_coordinates(lanes, lane, x, y)
         partial = np.abs(r) + max(s - lanes[lane, LENGTH], 0.0) + max(0.0 - s, 0.0)
         if partial > best_distance or (partial == best_distance and lane > best):
