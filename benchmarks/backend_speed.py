@@ -2,10 +2,11 @@
 
     .venv/bin/python benchmarks/backend_speed.py [--steps 600] [--repeats 5]
 
-Both backends run the same DriveEnv (kinematics sensor, highway reward) and the same random
-action sequence, resetting at episode ends (resets are part of the cost). Repeats interleave the
-two backends; the reported speed-up is the median of the per-repeat ratios. K worlds stepped
-together are measured by ``benchmarks/batch_speed.py``.
+Both backends run the same DriveEnv (the kinematics sensor, the scenario's default reward) and
+the same random action sequence, resetting at episode ends (resets are part of the cost). Repeats
+interleave the two backends; the reported speed-up is the median of the per-repeat ratios. A
+second table times the town with RLAD's observation (84x84 camera, waypoints, measurements). K
+worlds stepped together are measured by ``benchmarks/batch_speed.py``.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from drivelab.envs.scenarios import FAST_SCENARIOS as SUPPORTED  # noqa: E402
 from drivelab.envs.scenarios import SCENARIOS  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
+RLAD_OBS = "camera:stack=3,waypoints,measurements:stack=3"  # RLAD's observation (seed 000)
 
 
 def steps_per_second(env: DriveEnv, steps: int, seed: int) -> float:
@@ -51,9 +53,11 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()
     rows = []
-    for name, scenario in SCENARIOS.items():
+    cases = [(name, "kinematics") for name in SCENARIOS] + [("town", RLAD_OBS)]
+    for name, obs in cases:
+        scenario = SCENARIOS[name]
         action = "meta" if "meta" in scenario.action_kinds else "continuous"
-        make = lambda backend: DriveEnv(name, obs="kinematics", action=action, backend=backend)  # noqa: B023, E731
+        make = lambda backend: DriveEnv(name, obs=obs, action=action, backend=backend)  # noqa: B023, E731
         reference = make("highway")
         fast = make("fast") if name in SUPPORTED else None
         if fast is not None:
@@ -66,6 +70,7 @@ def main() -> None:
                 ratios.append(fast_rates[-1] / slow_rates[-1])
         row = {
             "scenario": name,
+            "obs": obs,
             "action": action,
             "highway_steps_per_s": statistics.median(slow_rates),
             "fast_steps_per_s": statistics.median(fast_rates) if fast_rates else None,
@@ -89,8 +94,9 @@ def main() -> None:
         f"Command: `{result['command']}`  ",
         f"Machine: {result['machine']}; date {result['date']}; {args.repeats} interleaved repeats.",
         "",
-        "DriveEnv with the kinematics sensor and the highway reward, default (regular) traffic, random",
-        "actions, resets included. highway-env runs a fifth of the steps per repeat (it is slow).",
+        "DriveEnv with the kinematics sensor and the scenario's default reward, default (regular)",
+        "traffic, random actions, resets included, one thread. highway-env runs a fifth of the steps",
+        "per repeat (it is slow).",
         "",
         "| scenario | action | highway-env steps/s | fast steps/s | speed-up (median ratio) |",
         "|---|---|---|---|---|",
@@ -99,6 +105,18 @@ def main() -> None:
             f"{fmt(r['fast_steps_per_s'], '.0f')} | {fmt(r['speedup_median'], '.1f')}"
             f"{'x' if r['speedup_median'] else ''} |"
             for r in rows
+            if r["obs"] == "kinematics"
+        ],
+        "",
+        f"The town with RLAD's observation (`{RLAD_OBS}`), per step:",
+        "",
+        "| scenario | highway-env ms/step | fast ms/step | speed-up (median ratio) |",
+        "|---|---|---|---|",
+        *[
+            f"| {r['scenario']} | {1000 / r['highway_steps_per_s']:.2f} | "
+            f"{1000 / r['fast_steps_per_s']:.2f} | {r['speedup_median']:.1f}x |"
+            for r in rows
+            if r["obs"] == RLAD_OBS
         ],
         "",
         "K worlds stepped together: `benchmarks/batch_speed.py`.",
