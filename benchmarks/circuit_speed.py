@@ -1,0 +1,132 @@
+"""Circuit speed: seed 004's follow-line and follow-lane on the compiled core against highway-env,
+three ways, in one run.
+
+    OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/circuit_speed.py \
+        [--steps 3000] [--repeats 5] [--worlds 64]
+
+Per circuit, interleaved repeats of:
+
+- the simulator alone (``FastBackend.step`` against ``HighwayBackend.step``: the ego's pedal and
+  steering, two frames, the WorldState), a constant 40 % throttle, resetting when it leaves the road;
+- one DriveEnv (the ``kinematics`` sensor and the circuit's default reward, as
+  ``backend_speed.py``), random actions, resets included;
+- ``--worlds`` K worlds in one VectorDriveEnv on the compiled core (every world's steps counted),
+  against one highway-env DriveEnv.
+
+Each ratio is the median of the per-repeat ratios. Writes ``benchmarks/results/circuit_speed.json``
+and ``.md``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
+
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).parent))
+from backend_speed import steps_per_second  # noqa: E402
+from batch_speed import vector_rate  # noqa: E402
+
+RESULTS = Path(__file__).parent / "results"
+CIRCUITS = ("follow-line", "follow-lane")
+
+
+def simulator_rate(backend_class, name: str, steps: int) -> float:
+    """Steps/s of one backend's ``step`` alone, 40 % throttle, straight wheel, reset off the road."""
+    from drivelab.envs.scenarios import SCENARIOS
+
+    backend = backend_class(SCENARIOS[name], "empty", "continuous")
+    backend.reset(0)
+    control = np.array([0.4, 0.0], dtype=np.float32)
+    for _ in range(10):
+        backend.step(control)
+    backend.reset(1)
+    start = time.perf_counter()
+    for step in range(steps):
+        if backend.step(control).events.off_road:
+            backend.reset(step)
+    return steps / (time.perf_counter() - start)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=3000)
+    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--worlds", type=int, default=64)
+    args = parser.parse_args()
+    from drivelab.envs.backends.fast.backend import FastBackend
+    from drivelab.envs.backends.highway import HighwayBackend
+    from drivelab.envs.core import DriveEnv
+
+    rows = []
+    for name in CIRCUITS:
+        make = lambda backend: DriveEnv(name, obs="kinematics", action="continuous", backend=backend)  # noqa: B023, E731
+        fast_env, slow_env = make("fast"), make("highway")
+        steps_per_second(fast_env, 50, seed=0)  # compile before timing
+        vector_rate(name, "kinematics", 2, 20, 0)
+        rates = {key: [] for key in ("sim_fast", "sim_highway", "env_fast", "env_highway", "vector_fast")}
+        for repeat in range(args.repeats):
+            rates["sim_fast"].append(simulator_rate(FastBackend, name, args.steps))
+            rates["sim_highway"].append(simulator_rate(HighwayBackend, name, args.steps // 5))
+            rates["env_fast"].append(steps_per_second(fast_env, args.steps, repeat))
+            rates["env_highway"].append(steps_per_second(slow_env, args.steps // 5, repeat))
+            rates["vector_fast"].append(vector_rate(name, "kinematics", args.worlds, args.steps * 2, repeat))
+            print(name, repeat, {k: round(v[-1]) for k, v in rates.items()}, flush=True)
+        ratio = lambda a, b, r=rates: statistics.median(x / y for x, y in zip(r[a], r[b], strict=True))  # noqa: E731
+        rows.append(
+            {
+                "scenario": name,
+                **{key: statistics.median(values) for key, values in rates.items()},
+                "simulator_ratio": ratio("sim_fast", "sim_highway"),
+                "one_env_ratio": ratio("env_fast", "env_highway"),
+                "vector_vs_highway_env_ratio": ratio("vector_fast", "env_highway"),
+            }
+        )
+    result = {
+        "command": "OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1 python " + " ".join(sys.argv),
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
+        "date": time.strftime("%Y-%m-%d"),
+        "repeats": args.repeats,
+        "worlds": args.worlds,
+        "rows": rows,
+    }
+    RESULTS.mkdir(exist_ok=True)
+    (RESULTS / "circuit_speed.json").write_text(json.dumps(result, indent=2))
+    lines = [
+        "# Circuit speed: follow-line and follow-lane, compiled core against highway-env",
+        "",
+        f"Command: `{result['command']}`  ",
+        f"Machine: {result['machine']}; date {result['date']}; {args.repeats} interleaved repeats, "
+        "one thread.",
+        "",
+        "Steps per second (medians) and the median of the per-repeat ratios.",
+        "",
+        "| circuit | what | highway-env | fast | ratio |",
+        "|---|---|---|---|---|",
+    ]
+    for r in rows:
+        lines += [
+            f"| {r['scenario']} | simulator step alone | {r['sim_highway']:.0f} | {r['sim_fast']:.0f} | "
+            f"{r['simulator_ratio']:.1f}x |",
+            f"| {r['scenario']} | one DriveEnv (kinematics, default reward) | {r['env_highway']:.0f} | "
+            f"{r['env_fast']:.0f} | {r['one_env_ratio']:.1f}x |",
+            f"| {r['scenario']} | K = {args.worlds} VectorDriveEnv (fast) vs one highway-env DriveEnv | "
+            f"{r['env_highway']:.0f} | {r['vector_fast']:.0f} | {r['vector_vs_highway_env_ratio']:.1f}x |",
+        ]
+    (RESULTS / "circuit_speed.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()
