@@ -414,3 +414,46 @@ def test_connected_lanes_are_the_ones_highway_env_searches(name):
             )
         ]
         assert found == expected
+
+
+@pytest.mark.parametrize(
+    "scenario, control, overrides",
+    [
+        ("town", "meta", {}),
+        ("town", "continuous", {"layout": "test", "fixed_routes": True}),
+        ("follow-line", "continuous", {}),
+        ("follow-lane", "continuous", {}),
+    ],
+)
+def test_a_described_road_converts_as_highway_env_builds_it(scenario, control, overrides):
+    """The compiled core's road from the description (no highway-env object) equals the one it
+    converts from a highway-env env built from the same config: lanes, road map, config, timing,
+    target speeds, vehicle sizes and every ego route."""
+    from drivelab.envs.backends.fast.simulator import _convert_road, _describe_road
+    from drivelab.envs.backends.highway import HighwayBackend
+    from drivelab.envs.scenarios import SCENARIOS
+
+    spec = SCENARIOS[scenario]
+    described = _describe_road(spec, "regular", control, overrides)
+    builder = HighwayBackend(spec, "regular", control, overrides)
+    builder.reset(0)
+    built = _convert_road(builder, spec)
+    np.testing.assert_array_equal(described.table.rows, built.table.rows)
+    assert described.table.indices == built.table.indices
+    for name in ("lane_centerlines", "lane_polygons"):
+        for a, b in zip(getattr(described.road_map, name), getattr(built.road_map, name), strict=True):
+            np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(described.road_map.markings, built.road_map.markings)
+    rendering = {"offscreen_rendering"}  # set by highway-env's env at construction, for its own renderer
+    assert {k: v for k, v in described.config.items() if k not in rendering} == {
+        k: v for k, v in built.config.items() if k not in rendering
+    }
+    np.testing.assert_array_equal(described.target_speeds, built.target_speeds)
+    scalars = ("frames", "dt_s", "policy_frequency_hz", "duration_s", "ego_length", "ego_width", "npc_length")
+    for name in (*scalars, "npc_width", "lane_change_delay", "idm_delta", "keep_npcs", "extra_vehicles"):
+        assert getattr(described, name) == getattr(built, name), name
+    np.testing.assert_array_equal(described.in_junction, built.in_junction)
+    if spec.circuit:  # the town's ego routes are planned per episode, not per lane
+        assert described.routes.keys() == built.routes.keys()
+        for row, tracker in built.routes.items():
+            np.testing.assert_array_equal(described.routes[row].polyline, tracker.polyline)
