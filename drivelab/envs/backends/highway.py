@@ -29,6 +29,27 @@ from highway_env import utils as hw_utils  # noqa: E402
 from highway_env.road.lane import StraightLane  # noqa: E402
 from highway_env.vehicle.behavior import IDMVehicle  # noqa: E402
 
+
+class IntersectionIDMVehicle(IDMVehicle):
+    """highway-env's IDMVehicle, for the intersection's traffic alone (its config's
+    ``other_vehicles_type``). ``IntersectionEnv._make_vehicles`` sets its traffic class's
+    DISTANCE_WANTED, COMFORT_ACC_MAX and COMFORT_ACC_MIN at every reset; on IDMVehicle itself that
+    would change every scenario's traffic for the rest of the process (the town's NPCs, which are
+    IDMVehicles, then stop for yellow lights differently once an intersection has been built).
+    On this subclass the change stays the intersection's."""
+
+
+def is_idm_class(cls: type) -> bool:
+    """``cls`` is IDMVehicle or a subclass that changes only its constants (no method of its own):
+    the compiled core's IDM/MOBIL model, with the class's parameters."""
+    if not (isinstance(cls, type) and issubclass(cls, IDMVehicle)):
+        return False
+    own = [c for c in cls.__mro__[: cls.__mro__.index(IDMVehicle)]]
+    return not any(
+        callable(value) for c in own for name, value in vars(c).items() if not name.startswith("__")
+    )
+
+
 ROUTE_TIMEOUT_MPS = 10 / 3.6  # an evaluation route must be driven at 10 km/h on average
 ROUTE_LOOKAHEAD_M = 1000.0  # a route that never ends (highway, racetrack) is cut here
 

@@ -144,7 +144,13 @@ SCENARIO = Scenario(
     "intersection",
     "highway_env.envs.intersection_env.IntersectionEnv",
     "unsignalised 4-way crossing, turn left to exit o1",
-    config={"duration": 13, "destination": "o1"},
+    # its traffic class is its own (see IntersectionIDMVehicle): highway-env's env sets its class's
+    # IDM constants, which must not change the other scenarios' traffic
+    config={
+        "duration": 13,
+        "destination": "o1",
+        "other_vehicles_type": "drivelab.envs.backends.highway.IntersectionIDMVehicle",
+    },
     traffic={
         "empty": {"keep_npcs": False, "initial_vehicle_count": 0, "spawn_probability": 0.0},
         "regular": {"initial_vehicle_count": 10, "spawn_probability": 0.6},

@@ -68,3 +68,22 @@ def test_intersection_arrival_is_success():
 @pytest.mark.parametrize("level, count", [("empty", 0), ("regular", 20), ("dense", 35)])
 def test_traffic_levels(level, count):
     assert len(HighwayBackend(SCENARIOS["highway"], level, "meta").reset(seed=0).vehicles) == count
+
+
+def test_the_intersection_keeps_its_idm_constants_to_itself():
+    """highway-env's IntersectionEnv sets its traffic class's IDM constants at every reset; they
+    land on the intersection's own subclass, so that the other scenarios' traffic (the town's
+    IDM NPCs) does not change once an intersection has been built in the process."""
+    from highway_env.vehicle.behavior import IDMVehicle
+
+    from drivelab.envs.backends.highway import IntersectionIDMVehicle
+
+    before = {
+        name: getattr(IDMVehicle, name) for name in ("DISTANCE_WANTED", "COMFORT_ACC_MAX", "COMFORT_ACC_MIN")
+    }
+    backend = HighwayBackend(SCENARIOS["intersection"], "regular", "meta")
+    backend.reset(0)
+    assert {name: getattr(IDMVehicle, name) for name in before} == before
+    assert (IntersectionIDMVehicle.DISTANCE_WANTED, IntersectionIDMVehicle.COMFORT_ACC_MIN) == (7, -3)
+    others = [v for v in backend.env.road.vehicles if v is not backend.env.vehicle]
+    assert {type(v) for v in others} == {IntersectionIDMVehicle}

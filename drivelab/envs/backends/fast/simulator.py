@@ -34,7 +34,7 @@ from numba import njit
 from drivelab.envs.backends.fast import lanes as L
 from drivelab.envs.backends.fast import traffic as T
 from drivelab.envs.backends.fast.spawn import LaneGeometry, all_shortest_paths
-from drivelab.envs.backends.highway import HighwayBackend, build_road_map
+from drivelab.envs.backends.highway import HighwayBackend, build_road_map, is_idm_class
 from drivelab.envs.route import SEARCH_WINDOW_M, RouteTracker
 from drivelab.errors import UsageError
 from drivelab.world.batch import (
@@ -93,7 +93,7 @@ def vehicles_to_array(
     array = np.zeros((len(vehicles) + len(objects), columns))
     for i, vehicle in enumerate(vehicles):
         town = town_class is not None and type(vehicle) is town_class
-        if type(vehicle) is not IDMVehicle and isinstance(vehicle, IDMVehicle) and not town:
+        if isinstance(vehicle, IDMVehicle) and not (town or is_idm_class(type(vehicle))):
             raise NotImplementedError(f"the fast backend has no {type(vehicle).__name__}")
         row = array[i]
         row[T.X], row[T.Y] = vehicle.position
@@ -140,9 +140,9 @@ def vehicles_to_array(
     return array
 
 
-def idm_parameters() -> np.ndarray:
-    """IDMVehicle's class parameters as the kernels read them."""
-    return np.array([float(getattr(IDMVehicle, name)) for name in T.IDM_PARAMETERS])
+def idm_parameters(npc_class: type = IDMVehicle) -> np.ndarray:
+    """The traffic class's IDM / MOBIL parameters (IDMVehicle's by default) as the kernels read them."""
+    return np.array([float(getattr(npc_class, name)) for name in T.IDM_PARAMETERS])
 
 
 # --- the road, converted once per scenario and configuration ----------------------------------------
@@ -225,7 +225,7 @@ def _convert_road(builder: HighwayBackend, scenario: Scenario) -> _Road:
         raise NotImplementedError("the fast backend assumes RegulatedRoad.YIELD_DURATION = 0")
     dt_s = 1 / config["simulation_frequency"]
     npc_class = hw_utils.class_from_path(config["other_vehicles_type"])
-    if npc_class is not IDMVehicle:
+    if not is_idm_class(npc_class):
         raise NotImplementedError(f"the fast backend has no {npc_class.__name__}")
     graph_keys = {f: list(to) for f, to in network.graph.items()}
     return _Road(
@@ -247,13 +247,13 @@ def _convert_road(builder: HighwayBackend, scenario: Scenario) -> _Road:
         geometry=LaneGeometry(table),
         paths=all_shortest_paths(graph_keys),
         objects=vehicles_to_array([], table, _static_objects(env.road)),
-        idm=idm_parameters(),
+        idm=idm_parameters(npc_class),
         ego_length=float(env.vehicle.LENGTH),
         ego_width=float(env.vehicle.WIDTH),
         npc_length=float(npc_class.LENGTH),
         npc_width=float(npc_class.WIDTH),
         lane_change_delay=float(npc_class.LANE_CHANGE_DELAY),
-        idm_delta=float(IDMVehicle.DELTA),
+        idm_delta=float(npc_class.DELTA),
         keep_npcs=builder.keep_npcs,
         extra_vehicles=builder.extra_vehicles,
         destination=scenario.destination,
@@ -273,7 +273,7 @@ def _describe_road(scenario: Scenario, traffic: str, control: str, overrides: di
     desc = scenario.road(config)
     table = L.LaneTable.from_description(desc)
     npc_class = hw_utils.class_from_path(config["other_vehicles_type"])
-    if npc_class is not IDMVehicle:
+    if not is_idm_class(npc_class):
         raise NotImplementedError(f"the fast backend has no {npc_class.__name__}")
     routes, cache = {}, {}
     if scenario.circuit:  # every lane's route is one lap of the circuit
@@ -306,13 +306,13 @@ def _describe_road(scenario: Scenario, traffic: str, control: str, overrides: di
         geometry=LaneGeometry(table),
         paths=all_shortest_paths(graph_keys),
         objects=np.zeros((0, T.VEHICLE_COLUMNS)),
-        idm=idm_parameters(),
+        idm=idm_parameters(npc_class),
         ego_length=float(Vehicle.LENGTH),  # every ego class of highway-env keeps Vehicle's size
         ego_width=float(Vehicle.WIDTH),
         npc_length=float(npc_class.LENGTH),
         npc_width=float(npc_class.WIDTH),
         lane_change_delay=float(npc_class.LANE_CHANGE_DELAY),
-        idm_delta=float(IDMVehicle.DELTA),
+        idm_delta=float(npc_class.DELTA),
         keep_npcs=keep_npcs,
         extra_vehicles=extra_vehicles,
         destination=scenario.destination,
@@ -551,7 +551,7 @@ class FastSimulator:
         self.roads: tuple[RoadMap, ...] = (self.road,)
         self.policy_frequency_hz, self.duration_s = road.policy_frequency_hz, road.duration_s
         self.frames, self.dt_s = road.frames, road.dt_s
-        self.idm = idm_parameters()
+        self.idm = road.idm
         self.arrival, self.arrival_threshold = ARRIVAL_RULES[scenario.arrival]
         self.traffic_flow = scenario.traffic_flow
         if self.arrival == ARRIVE_PAST_X:
