@@ -59,10 +59,6 @@ def _lane_stations(lane) -> np.ndarray:
     return lane_stations(lane, type(lane) is StraightLane)
 
 
-def _lane_points(lane, stations: np.ndarray, lateral: float | np.ndarray) -> np.ndarray:
-    return lane_points(lane, stations, lateral)
-
-
 def build_road_map(network) -> RoadMap:
     """Convert highway-env's road network to arrays (once per reset)."""
     lanes = network.lanes_list()
@@ -272,7 +268,7 @@ class HighwayBackend:
     def route_for(self, lanes: list[tuple]) -> RouteTracker:
         """A RouteTracker along the centre lines of ``lanes``."""
         network = self.env.road.network
-        points = [_lane_points(network.get_lane(i), _lane_stations(network.get_lane(i)), 0.0) for i in lanes]
+        points = [lane_points(network.get_lane(i), _lane_stations(network.get_lane(i)), 0.0) for i in lanes]
         has_goal = bool(self.scenario.destination) or self.scenario.arrival == "route_end"
         return RouteTracker(np.concatenate(points), has_goal=has_goal)
 

@@ -21,10 +21,11 @@ from highway_env.road.road import RoadNetwork
 from drivelab.envs.backends.circuits import FollowLaneEnv, FollowLineEnv, build_circuit
 from drivelab.envs.backends.fast.lanes import LaneTable
 from drivelab.envs.backends.fast.town_rows import TURN_LEFT, TURN_RIGHT, TURN_STRAIGHT
-from drivelab.envs.backends.highway import _lane_points, _lane_stations, build_road_map
+from drivelab.envs.backends.highway import _lane_stations, build_road_map
 from drivelab.envs.backends.roads import blocks
 from drivelab.envs.backends.roads.highway_network import to_road_network
 from drivelab.envs.backends.roads.road_map import centre_line, circuit_route, road_map
+from drivelab.envs.backends.roads.road_map import lane_points as _lane_points
 from drivelab.envs.backends.roads.town_arrays import shortest_route, town_arrays_from_network
 from drivelab.envs.backends.roads.town_arrays_description import town_arrays
 from drivelab.envs.backends.roads.town_rules import (

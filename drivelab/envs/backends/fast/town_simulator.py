@@ -44,12 +44,12 @@ from drivelab.envs.backends.fast.simulator import (
     EX_ON_ROAD,
     FastSimulator,
     export_worlds,
-    project_routes,
 )
 from drivelab.envs.backends.fast.town_spawn import TownSetup, route_polyline
 from drivelab.envs.backends.fast.town_traffic import road_arrays_tuple, town_act, town_frame_cache, town_step
 from drivelab.envs.backends.roads.town_rules import PEDESTRIAN_SIZE_M, LightTimings
 from drivelab.envs.route import RouteTracker
+from drivelab.errors import UsageError
 from drivelab.world.batch import (
     COLLISION_NONE,
     COLLISION_PEDESTRIAN,
@@ -185,24 +185,25 @@ class TownSimulator(FastSimulator):
             self.route_time_limit_s[k] = episode.route_time_limit_s
             self.ego_routes[k] = [int(lane) for lane in episode.ego_route]
             self._set_route(k)
-            self.start_lane_id[k] = 0
         self.time_s[worlds] = 0.0
         if worlds.size:
+            self._pad_world_routes()  # once for all the worlds that started
             active = np.zeros(self.num_worlds, dtype=bool)
             active[worlds] = True
             self._update_lights(active)
 
     def _set_route(self, k: int) -> None:
-        """World k's route polyline from its planned lanes (``HighwayBackend.route_for``)."""
+        """World k's route polyline from its planned lanes (``HighwayBackend.route_for``); the
+        padded arrays follow with ``_pad_world_routes``."""
         self.trackers[k] = RouteTracker(
             route_polyline(self.setup.geometry, self.ego_routes[k]), has_goal=True
         )
         self._route_version += 1
-        self._pad_world_routes()
 
     def _pad_world_routes(self) -> None:
         """Every world's route as padded (K, S) arrays, last point repeated (``_pad_routes``)."""
-        self._trackers = [t if t is not None else self.trackers[0] for t in self.trackers]
+        started = next(t for t in self.trackers if t is not None)  # stands in for worlds not yet reset
+        self._trackers = [t if t is not None else started for t in self.trackers]
         self._pad_routes()
 
     def _routes_stale(self) -> bool:
@@ -217,7 +218,7 @@ class TownSimulator(FastSimulator):
     def step(self, controls: np.ndarray, restart: np.ndarray | None = None, seeds: np.ndarray | None = None):
         """One policy step of every world (see ``FastSimulator.step``)."""
         if self.batch is None:
-            raise_before_reset()
+            raise UsageError("TownSimulator.step before reset_where")
         k = self.num_worlds
         restart = np.zeros(k, dtype=bool) if restart is None else np.asarray(restart, dtype=bool)
         active = ~restart
@@ -243,7 +244,6 @@ class TownSimulator(FastSimulator):
             self._retarget(active)
         self._start_episodes(np.flatnonzero(restart), seeds)
         self._project(fresh=restart, update=restart)
-        self._red_light = self._red_light & active
         self.batch = self._export()
         return self.batch
 
@@ -264,17 +264,10 @@ class TownSimulator(FastSimulator):
             if row[T.KIND] == T.CONTROLLED:
                 _append_route(row, more)
             self._set_route(k)
+            self._pad_world_routes()
             update = np.zeros(self.num_worlds, dtype=bool)
             update[k] = True
             self._project(fresh=np.zeros(self.num_worlds, dtype=bool), update=update)
-
-    def _project(self, fresh: np.ndarray, update: np.ndarray) -> None:
-        ego = self.vehicles[np.arange(self.num_worlds), self.ego]
-        project_routes(
-            ego[:, T.X].copy(), ego[:, T.Y].copy(), self.route_index, self.r_starts, self.r_segments,
-            self.r_lengths2, self.r_segment_m, self.r_stations, self.r_count - 1, self.r_closed,
-            fresh, update, self.progress_m,
-        )  # fmt: skip
 
     # --- export ---------------------------------------------------------------------------------
     def _export(self) -> WorldBatch:
@@ -336,9 +329,3 @@ def _append_route(row: np.ndarray, lanes) -> None:
         row[T.ROUTE + 2 * end], row[T.ROUTE + 2 * end + 1] = lane, 0.0
         end += 1
     row[T.ROUTE_END], row[T.ROUTED] = end, 1.0
-
-
-def raise_before_reset() -> None:
-    from drivelab.errors import UsageError
-
-    raise UsageError("TownSimulator.step before reset_where")
