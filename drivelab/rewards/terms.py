@@ -17,9 +17,9 @@ from drivelab.world.batch import WorldBatch
 from drivelab.world.geometry import FULL_LOCK_DEG, FULL_LOCK_RAD, ROACH_MAX_SPEED_MPS, ego_frame
 from drivelab.world.pinhole import LANE_CAMERA, LANE_ROWS_M, LINE_CAMERA, LINE_ROWS_M, PinholeModel
 from drivelab.world.road_geometry import (
-    batch_guide_segments,
     batch_lateral_at_distances,
-    batch_route_segments,
+    guide_segment_sets,
+    polyline_crossings,
 )
 from drivelab.world.state import LIGHT_GREEN, WorldState
 
@@ -283,18 +283,27 @@ STEERING_BASE = 1.02  # the seed's λ
 LANE_BAND_EDGES_PX = np.array([15.0, 2 * 15, 3 * 20, 4 * 20])  # as extracted: 15, 30, 60, 80
 LANE_BAND_VALUES = np.array([10.0, 5.0, 2.5, 1.0, -10.0])
 LANE_ALIGNED_DEG = 6.0  # the seed's ζ
+_LANE_ROWS_PX = LANE_CAMERA.row_of_distance(np.asarray(LANE_ROWS_M))  # image rows of the lane rows
 
 
 def crossing_columns(
-    batch: WorldBatch, segments: np.ndarray, model: PinholeModel, distances_m: tuple[float, ...]
+    batch: WorldBatch,
+    segments: np.ndarray,
+    model: PinholeModel,
+    distances_m: tuple[float, ...],
+    index: np.ndarray | None = None,
 ) -> np.ndarray:
     """(K, D) image columns where each world's ``segments`` (K, M, 2, 2) cross the ground rows
-    ``distances_m`` (D,) ahead of its ego (nan: not in view)."""
+    ``distances_m`` (D,) ahead of its ego (nan: not in view); with ``index`` (K,), world k's
+    segments are ``segments[index[k]]``; ``segments`` (K, P, 2) are polylines."""
     distances = np.asarray(distances_m, dtype=float)
-    lateral = batch_lateral_at_distances(batch, segments, distances)  # (K, D)
-    ground = np.stack([np.broadcast_to(distances, lateral.shape), np.nan_to_num(lateral)], axis=-1)
-    columns = model.project_ground(ground)[..., 0]
-    inside = np.isfinite(lateral) & (columns >= -0.5) & (columns <= model.width - 0.5)
+    if segments.ndim == 3:  # polylines (K, P, 2)
+        lateral = polyline_crossings(batch.ego.position, batch.ego.heading, segments, distances)
+    else:
+        lateral = batch_lateral_at_distances(batch, segments, distances, index)  # (K, D)
+    columns = model.ground_columns(distances, lateral)  # nan where lateral is nan
+    with np.errstate(invalid="ignore"):
+        inside = (columns >= -0.5) & (columns <= model.width - 0.5)  # false for nan
     return np.where(inside, columns, np.nan)
 
 
@@ -320,9 +329,12 @@ def _steering_deg(control, num_worlds: int) -> np.ndarray:
 def line_centring(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """Σ_j f(C_j) over the 4 line rows: 15 … 1 as the line's centre moves away from the image centre
     in 38 px bands (of 640), −100 for a row where the line is out of view (seed 004, eq. 2)."""
-    columns = crossing_columns(batch, batch_guide_segments(batch), LINE_CAMERA, LINE_ROWS_M)  # (K, 4)
+    columns = crossing_columns(
+        batch, guide_segment_sets(batch), LINE_CAMERA, LINE_ROWS_M, batch.road_index
+    )  # (K, 4)
     offset_px = np.abs(columns - LINE_CAMERA.centre[0]) * 640 / LINE_CAMERA.width
-    values = LINE_BAND_VALUES[np.searchsorted(LINE_BAND_EDGES_PX, np.nan_to_num(offset_px, nan=1e9), "right")]
+    # numpy orders nan after every number: a row out of view falls in the last band (−100)
+    values = LINE_BAND_VALUES[np.searchsorted(LINE_BAND_EDGES_PX, offset_px, "right")]
     return values.sum(axis=1)
 
 
@@ -345,7 +357,7 @@ def lane_keeping(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     bands 15/30/60/80 px of 1024), doubled when the lane is within ζ = 6° of the image vertical and
     the action goes straight, halved when aligned but steering (the extracted text is garbled there;
     this is our reading of "higher reward when aligned and going straight")."""
-    columns = crossing_columns(batch, batch_route_segments(batch), LANE_CAMERA, LANE_ROWS_M)  # (K, D)
+    columns = crossing_columns(batch, batch.route.polyline, LANE_CAMERA, LANE_ROWS_M)  # (K, D)
     seen = np.isfinite(columns)
     count = seen.sum(axis=1)
     mean = np.nansum(columns, axis=1) / np.maximum(count, 1)  # C: the mean of the rows seen
@@ -357,7 +369,7 @@ def lane_keeping(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     )
     # g*: angle between the image vertical (p1 → p2) and the lane direction (p3 → p4), nearest and
     # farthest rows where the centre is seen
-    rows = LANE_CAMERA.row_of_distance(np.asarray(LANE_ROWS_M))  # (D,)
+    rows = _LANE_ROWS_PX  # (D,)
     worlds = np.arange(batch.num_worlds)
     near = np.argmax(seen, axis=1)
     far = seen.shape[1] - 1 - np.argmax(seen[:, ::-1], axis=1)

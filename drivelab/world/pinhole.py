@@ -10,6 +10,7 @@ OpenCV's convention (integer coordinates are pixel centres): a point at camera c
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -83,6 +84,20 @@ class PinholeModel:
         """Ground points (..., 2) in the ego frame (z = 0) → float pixels (..., 2)."""
         points = np.asarray(points_ego, dtype=float)
         return self.project(np.concatenate([points, np.zeros(points.shape[:-1] + (1,))], axis=-1))
+
+    @cached_property
+    def _ground_terms(self) -> tuple[float, float, float, float, float]:
+        """(cx, focal, forward, cos p, sin p) as ``project`` computes them, made once."""
+        pitch = np.radians(self.pitch_deg)
+        return self.centre[0], self.focal_px, self.forward_m, np.cos(pitch), np.sin(pitch)
+
+    def ground_columns(self, distances_m: np.ndarray, lateral_m: np.ndarray) -> np.ndarray:
+        """Image columns (K, D) of ground points ``distances_m`` (D,) ahead and ``lateral_m`` (K, D)
+        to the right of the ego centre: ``project_ground(...)[..., 0]`` with the same operations,
+        without building the 3-D points (the reward terms' hot path)."""
+        cx, focal, forward_m, cos_p, sin_p = self._ground_terms
+        depth = np.maximum((distances_m - forward_m) * cos_p - (0.0 - self.height_m) * sin_p, 1e-6)
+        return cx + focal * lateral_m / depth
 
     def row_of_distance(self, distance_m: np.ndarray | float) -> np.ndarray:
         """Image row (float) of the ground straight ahead at ``distance_m`` ahead of the ego centre."""

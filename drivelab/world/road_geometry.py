@@ -9,6 +9,7 @@ the seed 004 camera see.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from drivelab.world.batch import WorldBatch
 from drivelab.world.geometry import ego_frame
@@ -38,14 +39,33 @@ def guide_segments(road: RoadMap) -> np.ndarray:
     return road.derived(GuideSegments, GuideSegments).segments
 
 
+_GUIDE_SETS = "guide segment sets"
+
+
+def guide_segment_sets(batch: WorldBatch) -> np.ndarray:
+    """The guide-line segments of each of the batch's distinct roads (R, M, 2, 2), padded with NaN
+    segments; world k's are ``[batch.road_index[k]]``. One road: its own array, not copied."""
+    roads = batch.roads
+    if len(roads) == 1:
+        return guide_segments(roads[0])[None]
+    # kept on the first map, with the maps it was made from (held, so their ids stay theirs)
+    made = roads[0].derived_cache.get(_GUIDE_SETS)
+    if (
+        made is None
+        or len(made[0]) != len(roads)
+        or any(a is not b for a, b in zip(made[0], roads, strict=True))
+    ):
+        per_road = [guide_segments(road) for road in roads]
+        padded = np.full((len(per_road), max(len(segments) for segments in per_road), 2, 2), np.nan)
+        for index, segments in enumerate(per_road):  # one per distinct map, not per world
+            padded[index, : len(segments)] = segments
+        made = roads[0].derived_cache[_GUIDE_SETS] = (tuple(roads), padded)
+    return made[1]
+
+
 def batch_guide_segments(batch: WorldBatch) -> np.ndarray:
     """Each world's guide-line segments (K, M, 2, 2): its road's, padded with NaN segments."""
-    per_road = [guide_segments(road) for road in batch.roads]
-    size = max(len(segments) for segments in per_road)
-    padded = np.full((len(per_road), size, 2, 2), np.nan)
-    for index, segments in enumerate(per_road):  # one per distinct map, not per world
-        padded[index, : len(segments)] = segments
-    return padded[batch.road_index]
+    return guide_segment_sets(batch)[batch.road_index]
 
 
 def batch_route_segments(batch: WorldBatch) -> np.ndarray:
@@ -55,34 +75,88 @@ def batch_route_segments(batch: WorldBatch) -> np.ndarray:
     return np.stack([polyline[:, :-1], polyline[:, 1:]], axis=2)
 
 
+@njit(cache=True)
+def _nearest_crossings(starts, ends, index, position, cos_h, sin_h, distances, out) -> None:
+    """World k's segments, from ``starts[index[k]]`` to ``ends[index[k]]`` (M, 2), in its ego
+    frame (x forward, y to the right), and for each ground line ``x = d`` the y of the crossing
+    nearest the ego's axis (the first such segment on ties; nan where none crosses) into ``out``
+    (K, D). The arithmetic is :func:`~drivelab.world.geometry.ego_frame`'s, operation for operation."""
+    best_abs = np.empty(distances.shape[0])
+    for k in range(index.shape[0]):
+        first, last = starts[index[k]], ends[index[k]]
+        c, s = cos_h[k], sin_h[k]
+        out[k, :] = np.nan
+        best_abs[:] = np.inf
+        for m in range(first.shape[0]):
+            dx0, dy0 = first[m, 0] - position[k, 0], first[m, 1] - position[k, 1]
+            dx1, dy1 = last[m, 0] - position[k, 0], last[m, 1] - position[k, 1]
+            x0, y0 = dx0 * c + dy0 * s, -dx0 * s + dy0 * c
+            x1, y1 = dx1 * c + dy1 * s, -dx1 * s + dy1 * c
+            span = x1 - x0
+            if np.abs(span) < 1e-12:
+                continue
+            for j in range(distances.shape[0]):
+                t = (distances[j] - x0) / span
+                if t >= 0 and t <= 1:  # false for NaN (padding segments)
+                    y = y0 + t * (y1 - y0)
+                    if np.abs(y) < best_abs[j]:
+                        best_abs[j], out[k, j] = np.abs(y), y
+
+
 def lateral_crossings(
-    position: np.ndarray, heading: np.ndarray, segments: np.ndarray, distances_m: np.ndarray
+    position: np.ndarray,
+    heading: np.ndarray,
+    segments: np.ndarray,
+    distances_m: np.ndarray,
+    index: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Where each world's ``segments`` (K, M, 2, 2) cross the ground line ``x = d`` ahead of its ego
-    (``position`` (K, 2), ``heading`` (K,)), for ``distances_m`` (D,): the ego-frame y (m) of the
-    crossing nearest the ego's axis, (K, D), nan where nothing crosses."""
-    distances = np.asarray(distances_m, dtype=float).reshape(-1)
-    count = len(heading)
-    if segments.shape[1] == 0:
-        return np.full((count, len(distances)), np.nan)
-    local = ego_frame(segments, position[:, None, None, :], heading[:, None, None])  # (K, M, 2, 2)
-    x0, x1 = local[:, None, :, 0, 0], local[:, None, :, 1, 0]  # (K, 1, M)
-    y0, y1 = local[:, None, :, 0, 1], local[:, None, :, 1, 1]
-    d = distances[None, :, None]  # (1, D, 1)
-    span = np.where(np.abs(x1 - x0) < 1e-12, np.nan, x1 - x0)
-    with np.errstate(invalid="ignore"):
-        t = (d - x0) / span
-        y = np.where((t >= 0) & (t <= 1), y0 + t * (y1 - y0), np.nan)  # (K, D, M)
-    y = np.where(np.isnan(y), np.inf, y)
-    best = np.take_along_axis(y, np.argmin(np.abs(y), axis=2)[..., None], axis=2)[..., 0]
-    return np.where(np.isfinite(best), best, np.nan)
+    """Where each world's segments cross the ground line ``x = d`` ahead of its ego (``position``
+    (K, 2), ``heading`` (K,)), for ``distances_m`` (D,): the ego-frame y (m) of the crossing
+    nearest the ego's axis, (K, D), nan where nothing crosses.
+
+    ``segments`` is (K, M, 2, 2), one set per world, or with ``index`` (K,) a few sets (S, M, 2, 2)
+    of which world k uses ``segments[index[k]]`` (the distinct maps' guide lines, not copied per
+    world). Compiled: one pass over each world's segments, no (K, D, M) temporaries.
+    """
+    segments = np.asarray(segments, dtype=float)
+    return _crossings(position, heading, segments[:, :, 0], segments[:, :, 1], distances_m, index)
+
+
+def polyline_crossings(
+    position: np.ndarray, heading: np.ndarray, polylines: np.ndarray, distances_m: np.ndarray
+) -> np.ndarray:
+    """:func:`lateral_crossings` of each world's polyline (K, P, 2) taken as its P − 1 segments
+    (views of the points, not a segment array)."""
+    polylines = np.asarray(polylines, dtype=float)
+    return _crossings(position, heading, polylines[:, :-1], polylines[:, 1:], distances_m, None)
+
+
+def _crossings(position, heading, starts, ends, distances_m, index) -> np.ndarray:
+    distances = np.ascontiguousarray(distances_m, dtype=float).reshape(-1)
+    heading = np.asarray(heading, dtype=float)
+    out = np.empty((len(heading), len(distances)))
+    if index is None:
+        index = np.arange(len(heading))
+    position = np.asarray(position, dtype=float)
+    _nearest_crossings(
+        starts,
+        ends,
+        np.asarray(index, dtype=np.int64),
+        position,
+        np.cos(heading),
+        np.sin(heading),
+        distances,
+        out,
+    )
+    return out
 
 
 def batch_lateral_at_distances(
-    batch: WorldBatch, segments: np.ndarray, distances_m: np.ndarray
+    batch: WorldBatch, segments: np.ndarray, distances_m: np.ndarray, index: np.ndarray | None = None
 ) -> np.ndarray:
-    """:func:`lateral_crossings` for the egos of ``batch``: (K, D) from segments (K, M, 2, 2)."""
-    return lateral_crossings(batch.ego.position, batch.ego.heading, segments, distances_m)
+    """:func:`lateral_crossings` for the egos of ``batch``: (K, D) from segments (K, M, 2, 2), or
+    from sets (S, M, 2, 2) chosen per world by ``index`` (K,)."""
+    return lateral_crossings(batch.ego.position, batch.ego.heading, segments, distances_m, index)
 
 
 def lateral_at_distances(world: WorldState, segments: np.ndarray, distances_m: np.ndarray) -> np.ndarray:

@@ -11,8 +11,11 @@ from drivelab.world.road_geometry import (
     batch_guide_segments,
     batch_lateral_at_distances,
     batch_route_segments,
+    guide_segment_sets,
     guide_segments,
     lateral_at_distances,
+    lateral_crossings,
+    polyline_crossings,
     polyline_segments,
 )
 from drivelab.world.state import RoadMap, Route
@@ -73,3 +76,66 @@ def test_route_segments_padding_crosses_nothing():
     np.testing.assert_array_equal(segments[0, 1, 0], segments[0, 1, 1])  # zero length: padding
     lateral = batch_lateral_at_distances(batch, segments, np.array([3.0, 20.0]))
     np.testing.assert_array_equal(lateral, [[0.0, 0.0], [0.0, np.nan]])
+
+
+def _lateral_by_numpy(position, heading, segments, distances):
+    """The (K, D, M) numpy formulation the compiled kernel replaced, as an independent reference."""
+    from drivelab.world.geometry import ego_frame
+
+    local = ego_frame(segments, position[:, None, None, :], heading[:, None, None])
+    x0, x1 = local[:, None, :, 0, 0], local[:, None, :, 1, 0]
+    y0, y1 = local[:, None, :, 0, 1], local[:, None, :, 1, 1]
+    d = distances[None, :, None]
+    span = np.where(np.abs(x1 - x0) < 1e-12, np.nan, x1 - x0)
+    with np.errstate(invalid="ignore"):
+        t = (d - x0) / span
+        y = np.where((t >= 0) & (t <= 1), y0 + t * (y1 - y0), np.nan)
+    y = np.where(np.isnan(y), np.inf, y)
+    best = np.take_along_axis(y, np.argmin(np.abs(y), axis=2)[..., None], axis=2)[..., 0]
+    return np.where(np.isfinite(best), best, np.nan)
+
+
+def test_compiled_crossings_equal_the_numpy_formulation():
+    rng = np.random.default_rng(7)
+    count, segments_per_world = 16, 40
+    position = rng.uniform(-20, 20, (count, 2))
+    heading = rng.uniform(-np.pi, np.pi, count)
+    segments = rng.uniform(-30, 30, (count, segments_per_world, 2, 2))
+    segments[3, 10:] = np.nan  # padding
+    segments[5, 4, 1] = segments[5, 4, 0]  # zero length
+    distances = np.array([0.5, 3.0, 8.0, 25.0])
+    expected = _lateral_by_numpy(position, heading, segments, distances)
+    got = lateral_crossings(position, heading, segments, distances)
+    # the same operations in the same order on both sides (cos/sin from numpy on both): equal bits
+    np.testing.assert_array_equal(got, expected)
+    assert np.isfinite(got).sum() > 20  # the draw does produce crossings
+    shared = lateral_crossings(position, heading, segments[:4], distances, index=np.arange(count) % 4)
+    np.testing.assert_array_equal(
+        shared, _lateral_by_numpy(position, heading, segments[np.arange(count) % 4], distances)
+    )
+
+
+def test_guide_segment_sets_follow_the_batch_roads():
+    line_a = np.array([[0.0, 1.0], [10.0, 1.0], [20.0, 1.0]])
+    line_b = np.array([[0.0, -1.0], [10.0, -1.0]])
+    a, b = _guided([line_a]), _guided([line_b])
+    first = guide_segment_sets(WorldBatch.stack([a, b, a]))
+    assert first.shape == (2, 2, 2, 2) and np.isnan(first[1, 1]).all()
+    assert guide_segment_sets(WorldBatch.stack([a, b, a])) is first  # kept while the maps are the same
+    other = _guided([line_b])
+    swapped = guide_segment_sets(WorldBatch.stack([a, other]))
+    assert swapped is not first
+    np.testing.assert_array_equal(swapped[1, :1], guide_segments(other.road))
+
+
+def test_polyline_crossings_equal_the_segments_of_the_polyline():
+    rng = np.random.default_rng(3)
+    polylines = np.cumsum(rng.uniform(-2, 6, (5, 30, 2)), axis=1)
+    polylines[2, 20:] = polylines[2, 19]  # a shorter route, padded by repeating its last point
+    position, heading = rng.uniform(0, 40, (5, 2)), rng.uniform(-np.pi, np.pi, 5)
+    distances = np.array([4.0, 6.0, 9.0, 13.0])
+    segments = np.stack([polylines[:, :-1], polylines[:, 1:]], axis=2)
+    np.testing.assert_array_equal(
+        polyline_crossings(position, heading, polylines, distances),
+        lateral_crossings(position, heading, segments, distances),
+    )
