@@ -111,6 +111,8 @@ class DriveEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         self.vector.world_rngs[0] = self.np_random  # the episode seed is drawn from np_random
+        if options and options.get("episode_seed") is not None:  # this episode, not the next drawn
+            options = {**options, "episode_seeds": [options["episode_seed"]]}
         observations, infos = self.vector.reset(options=options)
         return _first(observations), _world_info(infos, 0)
 

@@ -41,6 +41,17 @@ LIGHT_LABELS = {-1: "none", LIGHT_GREEN: "green", LIGHT_YELLOW: "red_or_yellow",
 _LABEL_OF_STATE = np.array([LIGHT_LABELS[state] for state in sorted(LIGHT_LABELS)], dtype=object)  # state + 1
 RUN_KEYWORDS = ("scenario", "obs", "action", "reward", "traffic", "backend")  # RunConfig fields
 RENDER_SIZE_HW, RENDER_PIXELS_PER_M = (256, 512), 4.0
+# Episode seeds: training draws them below TRAINING_SEED_LIMIT from each world's generator; the
+# evaluation set of every scenario is the episodes EVALUATION_SEED_BASE, +1, +2, … given directly
+# (``reset(options={"episode_seeds": …})``), so no training episode is ever an evaluation episode
+# and every run, seed and algorithm is evaluated on the same episodes.
+TRAINING_SEED_LIMIT = 2**31 - 1
+EVALUATION_SEED_BASE = 2**31
+
+
+def evaluation_seeds(count: int, start: int = 0) -> np.ndarray:
+    """The episode seeds of evaluation episodes ``start`` … ``start + count − 1`` (int64)."""
+    return EVALUATION_SEED_BASE + start + np.arange(count, dtype=np.int64)
 
 
 def _check_keywords(duration_s, offroad_terminal, action_options, backend_options) -> None:
@@ -199,15 +210,21 @@ class VectorDriveEnv(VectorEnv):
     def _draw_seeds(self, mask: np.ndarray) -> None:
         """The next episode seed of every world of ``mask``, from that world's generator."""
         for k in np.flatnonzero(mask):
-            self.episode_seeds[k] = int(self.world_rngs[k].integers(2**31 - 1))
+            self.episode_seeds[k] = int(self.world_rngs[k].integers(TRAINING_SEED_LIMIT))
 
-    def _start(self, mask: np.ndarray, batch: WorldBatch | None = None) -> None:
-        """New episodes in the worlds of ``mask``: episode seeds from each world's generator, then
-        the simulator, the adapter, the sensors, the rules and the metrics reset by mask. With
-        ``batch``, the simulator has already started them (in its step) from the drawn seeds."""
+    def _start(
+        self, mask: np.ndarray, batch: WorldBatch | None = None, episode_seeds: np.ndarray | None = None
+    ) -> None:
+        """New episodes in the worlds of ``mask``: episode seeds from each world's generator (or
+        ``episode_seeds`` (K,) given), then the simulator, the adapter, the sensors, the rules and
+        the metrics reset by mask. With ``batch``, the simulator has already started them (in its
+        step) from the drawn seeds."""
         worlds = np.flatnonzero(mask)
         if batch is None:
-            self._draw_seeds(mask)
+            if episode_seeds is None:
+                self._draw_seeds(mask)
+            else:
+                self.episode_seeds[mask] = episode_seeds[mask]
             batch = self.simulator.reset_where(mask, self.episode_seeds)
         self.adapter.reset(mask)
         for index, sensor in enumerate(self.sensors):
@@ -244,12 +261,15 @@ class VectorDriveEnv(VectorEnv):
     def reset(self, *, seed: int | list[int | None] | None = None, options: dict | None = None):
         """Start every world's episode; an int seed gives world k the seed ``seed + k`` (a list,
         one per world). ``options={"reset_mask": mask}`` (gymnasium's partial reset) starts only
-        the worlds of ``mask``. Infos: ``episode_seed`` and ``traffic_light`` per world."""
+        the worlds of ``mask``; ``options={"episode_seeds": seeds}`` (K,) plays those episodes
+        (e.g. :func:`evaluation_seeds`) instead of drawing the next ones from the worlds'
+        generators, which it leaves as they are. Infos: ``episode_seed`` and ``traffic_light``
+        per world."""
         self._seed_worlds(seed)
         mask = np.ones(self.num_envs, dtype=bool)
         if options and options.get("reset_mask") is not None and self.batch is not None:
             mask = np.asarray(options["reset_mask"], dtype=bool).reshape(self.num_envs)
-        self._start(mask)
+        self._start(mask, episode_seeds=_episode_seeds(options, self.num_envs))
         self.pending_reset &= ~mask
         if mask.all():
             self.observations = self._observe(self.batch)
@@ -507,3 +527,13 @@ def _world_info(infos: dict, k: int) -> dict:
         elif infos.get(f"_{key}", None) is None or infos[f"_{key}"][k]:
             info[key] = value[k].item() if isinstance(value[k], np.generic) else value[k]
     return info
+
+
+def _episode_seeds(options: dict | None, count: int) -> np.ndarray | None:
+    """``options["episode_seeds"]`` as (K,) int64, checked; None when not given."""
+    if not options or options.get("episode_seeds") is None:
+        return None
+    seeds = np.asarray(options["episode_seeds"])
+    if seeds.shape != (count,) or not np.issubdtype(seeds.dtype, np.integer) or (seeds < 0).any():
+        raise UsageError(f"episode_seeds must be {count} integers >= 0, got {options['episode_seeds']!r}")
+    return seeds.astype(np.int64)

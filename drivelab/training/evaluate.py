@@ -16,22 +16,31 @@ from drivelab.config import RunConfig, build_config
 from drivelab.errors import UsageError
 from drivelab.yaml_io import load_yaml
 
-EVAL_SEED_OFFSET = 10_000  # evaluation episodes never reuse training seeds
-
 
 def run_episodes(
     policy: Callable,
     env,
     episodes: int,
-    seed: int,
+    seed: int | None = None,
     record_first: bool = False,
     on_episode: Callable[[dict], None] | None = None,
 ) -> tuple[list[dict], list[np.ndarray]]:
     """Play ``episodes`` episodes; return each one's ``episode_metrics`` and, optionally, the
-    RGB frames of the first episode. ``on_episode`` is called with each episode's metrics."""
+    RGB frames of the first episode. ``on_episode`` is called with each episode's metrics.
+
+    :param seed: None: the scenario's evaluation set (episode seeds ``evaluation_seeds``: the
+        same episodes for every run, none of them a training episode); an int: episode e is the
+        first episode of the env seeded ``seed + e`` (a protocol's own seeds, as NoCrash's).
+    """
+    from drivelab.envs.vector import evaluation_seeds
+
     results, frames = [], []
+    fixed = evaluation_seeds(episodes) if seed is None else None
     for episode in range(episodes):
-        obs, _ = env.reset(seed=seed + episode)
+        if fixed is None:
+            obs, _ = env.reset(seed=seed + episode)
+        else:
+            obs, _ = env.reset(options={"episode_seed": int(fixed[episode])})
         record = record_first and episode == 0
         if record:
             frames.append(env.render())
@@ -115,7 +124,7 @@ def evaluate_run(
     agent = load_agent(run_dir, config)
     check_spaces(agent, env, run_dir)
     policy = lambda obs: agent.predict(obs, deterministic=deterministic)[0]  # noqa: E731
-    results, frames = run_episodes(policy, env, episodes, config.seed + EVAL_SEED_OFFSET, video)
+    results, frames = run_episodes(policy, env, episodes, record_first=video)
     report = {"run": str(run_dir), "algo": config.algo, "env": config.env, **aggregate(results)}
     if video:
         report["video"] = str(

@@ -40,7 +40,6 @@ from drivelab.config import RunConfig, build_config, save_yaml
 from drivelab.errors import UsageError
 from drivelab.training.checkpoints import load_agent, load_replay, save_checkpoint, verify_checkpoint
 from drivelab.training.evaluate import (
-    EVAL_SEED_OFFSET,
     aggregate,
     load_run_config,
     run_episodes,
@@ -156,7 +155,6 @@ class RunCallback(BaseCallback):
             policy,
             self.eval_env,
             self.config.eval_episodes,
-            self.config.seed + EVAL_SEED_OFFSET,
             record_first=self.config.eval_video,
         )
         summary = aggregate(results)
