@@ -61,6 +61,7 @@ def test_run_episodes_plays_the_evaluation_set_whatever_the_env_seed():
         env = Recording("highway", obs="kinematics", duration_s=2)
         env.reset(seed=env_seed)
         seen.clear()
-        results, _ = evaluate.run_episodes(lambda obs: env.action_space.sample(), env, 3)
+        space = env.action_space
+        results, _ = evaluate.run_episodes(lambda obs, space=space: space.sample(), env, 3)
         assert len(results) == 3
         assert seen == evaluation_seeds(3).tolist()
