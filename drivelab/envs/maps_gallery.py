@@ -51,7 +51,11 @@ def draw_map(ax, pg_map: PGMap, title: str | None = None) -> None:
 
 
 def draw_gallery(
-    maps: Sequence[PGMap], path: str | Path, columns: int = 4, titles: Sequence[str] | None = None, dpi: int = 80
+    maps: Sequence[PGMap],
+    path: str | Path,
+    columns: int = 4,
+    titles: Sequence[str] | None = None,
+    dpi: int = 80,
 ) -> Path:
     """Draw ``maps`` in a grid of ``columns`` to the PNG ``path``; returns the path."""
     rows = int(np.ceil(len(maps) / columns))

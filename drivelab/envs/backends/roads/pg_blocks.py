@@ -124,6 +124,12 @@ def _socket(position: np.ndarray, heading: float, count: int, width: float, name
     return Socket((float(position[0]), float(position[1])), float(heading), count, width, name)
 
 
+def _one_socket(site, letter, parameters, lanes, position, heading, count, end) -> Block:
+    """A block with one socket, at the pose where its last road (to node ``end``) ends."""
+    socket = _socket(position, heading, count, site.entry.lane_width, end)
+    return Block(site.index, letter, parameters, site.entry, (socket,), tuple(lanes))
+
+
 def first_block(lane_count: int, lane_width: float, speed_limit_mps: float) -> Block:
     """``I``: from the origin along +x, the 10 m spawn road (``>`` → ``>>``) then 40 m."""
     entry = Socket((0.0, 0.0), 0.0, lane_count, lane_width, ">")
@@ -146,7 +152,7 @@ def straight_block(site: BlockSite, parameters: dict) -> Block:
         lanes, Straight(parameters["length"]), position, heading, count, width, site.entry.node, end,
         site.speed_limit_mps,
     )  # fmt: skip
-    return Block(site.index, "S", parameters, site.entry, (_socket(position, heading, count, width, end),), tuple(lanes))
+    return _one_socket(site, "S", parameters, lanes, position, heading, count, end)
 
 
 def curve_block(site: BlockSite, parameters: dict) -> Block:
@@ -163,9 +169,17 @@ def curve_block(site: BlockSite, parameters: dict) -> Block:
         site.speed_limit_mps,
     )  # fmt: skip
     position, heading = lay_road(
-        lanes, Straight(parameters["length"]), position, heading, count, width, middle, end, site.speed_limit_mps
+        lanes,
+        Straight(parameters["length"]),
+        position,
+        heading,
+        count,
+        width,
+        middle,
+        end,
+        site.speed_limit_mps,
     )
-    return Block(site.index, "C", parameters, site.entry, (_socket(position, heading, count, width, end),), tuple(lanes))
+    return _one_socket(site, "C", parameters, lanes, position, heading, count, end)
 
 
 def _ramp_chain(out: list[LaneRecord], segments, position, heading, nodes, width: float) -> None:
@@ -211,7 +225,15 @@ def in_ramp_block(site: BlockSite, parameters: dict) -> Block:
     run = _run(ramp)
     names = [site.entry.node] + [node(site, "r", 0, k) for k in range(5)]
     position, heading = lay_road(
-        lanes, Straight(parameters["length"] + run[0]), position, heading, count, width, names[0], names[1], speed
+        lanes,
+        Straight(parameters["length"] + run[0]),
+        position,
+        heading,
+        count,
+        width,
+        names[0],
+        names[1],
+        speed,
     )
     # the ramp ends where the acceleration lane (lane ``count`` of the next road) starts
     join = position + lane_offset(count, width) * right_normal(heading)
@@ -230,8 +252,9 @@ def in_ramp_block(site: BlockSite, parameters: dict) -> Block:
     position, heading = _two_way_taper(
         lanes, position, heading, (count + 1, count), (count, count), width, tuple(names[2:5]), speed
     )
-    position, heading = lay_road(lanes, Straight(SOCKET_ROAD_M), position, heading, count, width, names[4], names[5], speed)
-    return Block(site.index, "r", parameters, site.entry, (_socket(position, heading, count, width, names[5]),), tuple(lanes))
+    socket_road = Straight(SOCKET_ROAD_M)
+    position, heading = lay_road(lanes, socket_road, position, heading, count, width, *names[4:6], speed)
+    return _one_socket(site, "r", parameters, lanes, position, heading, count, names[5])
 
 
 def out_ramp_block(site: BlockSite, parameters: dict) -> Block:
@@ -265,7 +288,7 @@ def out_ramp_block(site: BlockSite, parameters: dict) -> Block:
     _ramp_chain(lanes, ramp, leave, heading, ramp_nodes, width)
     main = Straight(_run(ramp)[0] + SOCKET_ROAD_M)
     position, heading = lay_road(lanes, main, position, heading, count, width, names[4], names[5], speed)
-    return Block(site.index, "R", parameters, site.entry, (_socket(position, heading, count, width, names[5]),), tuple(lanes))
+    return _one_socket(site, "R", parameters, lanes, position, heading, count, names[5])
 
 
 def _lane_change_block(site: BlockSite, parameters: dict, letter: str, change: int) -> Block:
@@ -280,9 +303,8 @@ def _lane_change_block(site: BlockSite, parameters: dict, letter: str, change: i
     position, heading = _two_way_taper(
         lanes, position, heading, (count, new_count), (new_count, count), width, tuple(names[1:4]), speed
     )
-    position, heading = lay_road(lanes, straight, position, heading, new_count, width, names[3], names[4], speed)
-    socket = _socket(position, heading, new_count, width, names[4])
-    return Block(site.index, letter, parameters, site.entry, (socket,), tuple(lanes))
+    position, heading = lay_road(lanes, straight, position, heading, new_count, width, *names[3:5], speed)
+    return _one_socket(site, letter, parameters, lanes, position, heading, new_count, names[4])
 
 
 def merge_block(site: BlockSite, parameters: dict) -> Block:

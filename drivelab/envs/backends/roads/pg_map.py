@@ -101,10 +101,8 @@ class Footprint:
         start = np.array([lane.start for lane in lanes], dtype=float)
         end = np.array([lane.end for lane in lanes], dtype=float)
         length = np.array([lane.length for lane in lanes], dtype=float)
-        edges = np.concatenate(
-            [lane_samples(lane, 2.0, side * lane.width / 2)[1] for lane in lanes for side in (-1, 1)]
-        )
-        return Footprint(
+        half_width = np.array([lane.width / 2 for lane in lanes], dtype=float)
+        footprint = Footprint(
             arc=np.array([not np.isnan(lane.radius) for lane in lanes]),
             start=start,
             direction=(end - start) / length[:, None],
@@ -113,9 +111,29 @@ class Footprint:
             start_phase=np.array([lane.start_phase for lane in lanes], dtype=float),
             sense=np.array([lane.sense for lane in lanes], dtype=float),
             length=length,
-            half_width=np.array([lane.width / 2 for lane in lanes], dtype=float),
-            box=np.concatenate([edges.min(axis=0), edges.max(axis=0)]),
+            half_width=half_width,
+            box=np.zeros(4),
         )
+        edges = np.concatenate([footprint.sample(2.0, side * half_width)[2] for side in (-1.0, 1.0)])
+        return dataclasses.replace(footprint, box=np.concatenate([edges.min(axis=0), edges.max(axis=0)]))
+
+    def sample(self, spacing_m: float, lateral: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(lane (P,), station (P,), point (P, 2)): every lane sampled at most ``spacing_m`` apart
+        from end to end at its ``lateral`` (L,) offset (``LaneRecord.position``, vectorised)."""
+        count = np.maximum(np.ceil(self.length / spacing_m).astype(np.int64), 1) + 1
+        lane = np.repeat(np.arange(len(count)), count)
+        first = np.repeat(np.cumsum(count) - count, count)
+        station = (np.arange(len(lane)) - first) / (count[lane] - 1) * self.length[lane]
+        lateral = lateral[lane][:, None]
+        direction = self.direction[lane]
+        normal = np.column_stack([-direction[:, 1], direction[:, 0]])
+        line = self.start[lane] + station[:, None] * direction + lateral * normal
+        sense = self.sense[lane][:, None]
+        phi = sense[:, 0] * station / self.radius[lane] + self.start_phase[lane]
+        circle = self.centre[lane] + (self.radius[lane][:, None] - lateral * sense) * np.column_stack(
+            [np.cos(phi), np.sin(phi)]
+        )
+        return lane, station, np.where(self.arc[lane][:, None], circle, line)
 
     def contains(self, points: np.ndarray) -> np.ndarray:
         """(P,) whether each point (P, 2) lies on a lane: 0 ≤ s ≤ length and |lateral| ≤ w/2, in
@@ -132,28 +150,28 @@ class Footprint:
         return ((s >= 0.0) & (s <= self.length) & (np.abs(r) <= self.half_width)).any(axis=1)
 
 
-def probe_points(block: Block) -> np.ndarray:
+def probe_points(block: Block, footprint: Footprint) -> np.ndarray:
     """(P, 2) the points MetaDrive-style probing tests: every lane's centre line and, beyond each
     road edge (a solid right line), the sidewalk's far side, every metre; not the first metre
     after the entry socket, where the previous block's lanes end."""
     entry, back = block.entry.node, reverse_node(block.entry.node)
+    from_entry = np.array([lane.start_node == entry for lane in block.lanes])
+    to_entry = np.array([lane.end_node == back for lane in block.lanes])
+    edge = np.array([lane.lines[1] == LINE_CONTINUOUS for lane in block.lanes])
+    centre = footprint.sample(PROBE_STEP_M, np.zeros(len(edge)))
+    outside = footprint.sample(PROBE_STEP_M, footprint.half_width + SIDEWALK_GAP_M)
     found = []
-    for lane in block.lanes:
-        laterals = [0.0] + ([lane.width / 2 + SIDEWALK_GAP_M] if lane.lines[1] == LINE_CONTINUOUS else [])
-        for lateral in laterals:
-            stations, points = lane_samples(lane, PROBE_STEP_M, lateral)
-            keep = np.ones(len(stations), dtype=bool)
-            if lane.start_node == entry:
-                keep &= stations >= SOCKET_SKIP_M
-            if lane.end_node == back:
-                keep &= stations <= lane.length - SOCKET_SKIP_M
-            found.append(points[keep])
+    for (lane, station, points), wanted in ((centre, np.ones_like(edge)), (outside, edge)):
+        keep = wanted[lane] & ~(from_entry[lane] & (station < SOCKET_SKIP_M))
+        keep &= ~(to_entry[lane] & (station > footprint.length[lane] - SOCKET_SKIP_M))
+        found.append(points[keep])
     return np.concatenate(found)
 
 
-def overlaps(block: Block, footprints: list[Footprint]) -> bool:
-    """Whether a probe point of ``block`` lies on a lane of the blocks before it."""
-    points = probe_points(block)
+def overlaps(block: Block, footprints: list[Footprint], own: Footprint | None = None) -> bool:
+    """Whether a probe point of ``block`` (whose footprint is ``own``) lies on a lane of the blocks
+    before it (``footprints``)."""
+    points = probe_points(block, own or Footprint.of(block))
     low, high = points.min(axis=0), points.max(axis=0)
     for footprint in footprints:
         if np.any(high < footprint.box[:2]) or np.any(low > footprint.box[2:]):
@@ -222,10 +240,11 @@ def build_blocks(
             block = BUILDERS[letter](site, sample_parameters(SPACES[letter], rng))
         except BlockFailed:
             continue
-        if max(s.lane_count for s in block.sockets) > MAX_LANES or overlaps(block, footprints):
+        footprint = Footprint.of(block)
+        if max(s.lane_count for s in block.sockets) > MAX_LANES or overlaps(block, footprints, footprint):
             continue
         blocks.append(block)
-        footprints.append(Footprint.of(block))
+        footprints.append(footprint)
     return blocks
 
 
@@ -288,7 +307,12 @@ def describe(blocks: list[Block]) -> tuple[RoadDescription, np.ndarray]:
             records.append(lane)
             owner.append(block.index)
     junctions = [b.junction for b in blocks if b.junction]
-    lights = [(j, arm, row) for j, x in enumerate(junctions) if x.signalised for arm, row in zip(x.arms, x.stop_lines)]
+    lights = [
+        (j, arm, row)
+        for j, x in enumerate(junctions)
+        if x.signalised
+        for arm, row in zip(x.arms, x.stop_lines, strict=True)
+    ]
     description = RoadDescription.from_lanes(
         records,
         junction_centre=np.array([x.centre for x in junctions], dtype=float).reshape(-1, 2),
