@@ -63,6 +63,11 @@ def test_a_bad_spec_is_refused_naming_the_problem(spec, names):
         generate_map(spec, 0)
 
 
+def test_a_block_string_that_cannot_be_built_is_refused():
+    with pytest.raises(UsageError, match="no layout after"):
+        generate_map("yyy", 0, lane_count=2)
+
+
 def test_random_blocks_follow_metadrives_distribution():
     letters = "".join(generate_map(7, seed, lane_count=2).letters[1:] for seed in range(60))
     assert set(letters) <= set(BLOCK_PROBABILITIES) and len(letters) == 420

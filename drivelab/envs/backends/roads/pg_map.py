@@ -229,8 +229,11 @@ def build_blocks(
             continue
         trials[position] += 1
         builds += 1
-        if builds > MAX_BUILDS:
-            raise RuntimeError(f"no map after {MAX_BUILDS} block builds")
+        if builds > MAX_BUILDS:  # e.g. "yy" on 2 lanes: the second merge would leave none
+            raise UsageError(
+                f"map {plan!r}: no layout after {MAX_BUILDS} block builds (a block string can ask for "
+                f"what cannot be built, such as merges below 1 lane or splits above {MAX_LANES})"
+            )
         letter, socket = chosen[position]
         site = BlockSite(
             position, blocks[-1].sockets[socket], speed_limit_mps,
