@@ -99,9 +99,9 @@ ALGORITHMS: dict[str, AlgoSpec] = {
                  "drivelab.agents.dueling_ddqn:DuelingDoubleDQN", "own", sb3_replay=True,
                  observation_kinds=("vector",)),
         AlgoSpec("a2c_own", "drivelab's A2C, tanh-Gaussian, seed 003's CNN / fusion network", ("continuous",),
-                 "drivelab.agents.a2c:OwnA2C", "own", observation_kinds=_READABLE),
+                 "drivelab.agents.a2c:OwnA2C", "own", observation_kinds=_READABLE, multi_env=True),
         AlgoSpec("ppo_own", "drivelab's PPO, tanh-Gaussian, seed 003's CNN / fusion network", ("continuous",),
-                 "drivelab.agents.ppo:OwnPPO", "own", observation_kinds=_READABLE),
+                 "drivelab.agents.ppo:OwnPPO", "own", observation_kinds=_READABLE, multi_env=True),
         AlgoSpec("rlad", "drivelab's RLAD: SAC from pixels, A-LIX, DrQ shifts, WayConv1D, traffic-light loss "
                  "(seed 000)", _CONTINUOUS, "drivelab.agents.rlad.sac:RLAD", "own", sb3_replay=True,
                  observation_check=_RLAD_CHECK),

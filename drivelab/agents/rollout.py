@@ -14,6 +14,7 @@ import numpy as np
 import torch
 from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.vec_env import VecEnv
 
 from drivelab.agents.base import OwnAgent, batch_of_one, observation_to_tensor
 from drivelab.agents.networks import TanhGaussianActorCritic
@@ -23,7 +24,7 @@ def compute_gae(
     rewards: np.ndarray,
     values: np.ndarray,
     episode_ends: np.ndarray,
-    last_value: float,
+    last_value: float | np.ndarray,
     gamma: float,
     gae_lambda: float,
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -31,21 +32,24 @@ def compute_gae(
 
     δ_t = r_t + γ·V(s_{t+1})·(1 − end_t) − V(s_t);  A_t = δ_t + γλ·(1 − end_t)·A_{t+1}.
     ``episode_ends[t]`` is 1 when the episode ended at step t (a time-limit end is bootstrapped by
-    the caller, who adds γ·V(final observation) to its reward). Returns (advantages, returns = A + V).
+    the caller, who adds γ·V(final observation) to its reward). Returns (advantages, returns = A + V)
+    as float32, shaped like ``rewards``.
 
-    :param rewards: (T,) rewards.
-    :param values: (T,) V(s_t).
-    :param episode_ends: (T,) 1.0 where the episode ended after step t.
-    :param last_value: V of the observation after the last step.
+    :param rewards: (T,) rewards, or (T, K) for K worlds stepped together.
+    :param values: V(s_t), shaped like ``rewards``.
+    :param episode_ends: 1.0 where the episode ended after step t, shaped like ``rewards``.
+    :param last_value: V of the observation after the last step (K,) (a float for (T,)).
     """
-    advantages = np.zeros(len(rewards), dtype=np.float32)
-    next_advantage, next_value = 0.0, float(last_value)
+    rewards = np.asarray(rewards, dtype=np.float64)
+    advantages = np.zeros(rewards.shape, dtype=np.float32)
+    next_advantage = np.zeros(rewards.shape[1:])
+    next_value = np.asarray(last_value, dtype=np.float64)
     for t in reversed(range(len(rewards))):
-        not_end = 1.0 - float(episode_ends[t])
+        not_end = 1.0 - np.asarray(episode_ends[t], dtype=np.float64)
         delta = rewards[t] + gamma * next_value * not_end - values[t]
         next_advantage = delta + gamma * gae_lambda * not_end * next_advantage
         advantages[t] = next_advantage
-        next_value = values[t]
+        next_value = np.asarray(values[t], dtype=np.float64)
     return advantages, advantages + np.asarray(values, dtype=np.float32)
 
 
@@ -99,52 +103,58 @@ class OnPolicyAgent(OwnAgent):
             unsquashed, _, _ = self.policy.sample(tensor, deterministic, self.generator)
         return torch.tanh(unsquashed)[0].numpy(), None
 
-    def _value(self, obs: Any) -> float:
+    def _values(self, batch: Any) -> np.ndarray:
+        """V of a batch of observations (K, ...) as float64 (K,)."""
         with torch.no_grad():
-            return float(self.policy(observation_to_tensor(batch_of_one(obs), self.observation_space))[1][0])
+            tensor = observation_to_tensor(batch, self.observation_space)
+            return self.policy(tensor)[1].double().numpy()
 
     def collect(self, callback: BaseCallback) -> Rollout | None:
-        """``n_steps`` transitions (fewer at the step budget); None when the callback stops training."""
-        config, env = self.config, self.env
+        """``n_steps`` steps of each of the env's K worlds (fewer at the step budget), stored
+        CleanRL's way as (n_steps, K) and flattened time-major for the update; None when the
+        callback stops training. The env is one gymnasium env (K = 1) or an SB3 ``VecEnv`` of K
+        worlds that resets a finished world in the step that ended it."""
+        config, worlds = self.config, _Worlds(self.env)
+        count = worlds.count
         observations, unsquashed, log_probs, values, rewards, ends = [], [], [], [], [], []
-        steps = min(config.n_steps, self._target - self.num_timesteps)
+        steps = min(config.n_steps, -(-(self._target - self.num_timesteps) // count))
         for _ in range(steps):
             with torch.no_grad():
-                tensor = observation_to_tensor(batch_of_one(self._last_obs), self.observation_space)
+                tensor = observation_to_tensor(self._last_obs, self.observation_space)
                 action, log_prob, value = self.policy.sample(tensor, generator=self.generator)
-            new_obs, reward, terminated, truncated, info = env.step(torch.tanh(action)[0].numpy())
-            self.num_timesteps += 1
-            if truncated and not terminated:  # time limit: bootstrap from the state it stopped in
-                reward += config.gamma * self._value(new_obs)
+            stepped = worlds.step(torch.tanh(action).numpy())
+            new_obs, reward, terminated, truncated, final_obs, returns = stepped
+            self.num_timesteps += count
+            bootstrap = truncated & ~terminated  # time limit: bootstrap from the state it stopped in
+            if bootstrap.any():
+                reward = reward + config.gamma * np.where(bootstrap, self._values(final_obs), 0.0)
             observations.append(self._last_obs)
-            unsquashed.append(action[0].numpy())
-            log_probs.append(float(log_prob[0]))
-            values.append(float(value[0]))
-            rewards.append(float(reward))
-            ends.append(float(terminated or truncated))
-            if "episode" in info:
-                self.episode_returns.append(float(info["episode"]["r"]))
-            if terminated or truncated:
-                new_obs, _ = env.reset()
+            unsquashed.append(action.numpy())
+            log_probs.append(log_prob.numpy())
+            values.append(value.double().numpy())
+            rewards.append(reward)
+            ends.append((terminated | truncated).astype(np.float64))
+            self.episode_returns.extend(returns)
             self._last_obs = new_obs
             callback.update_locals(locals())
             if not callback.on_step():
                 return None
         advantages, returns = compute_gae(
             np.array(rewards), np.array(values), np.array(ends),
-            self._value(self._last_obs), config.gamma, config.gae_lambda,
+            self._values(self._last_obs), config.gamma, config.gae_lambda,
         )  # fmt: skip
+        flat = lambda arrays: np.concatenate(arrays)  # noqa: E731  (T of (K, ...)) → (T·K, ...) time-major
         if isinstance(self.observation_space, spaces.Dict):
-            stacked = {key: np.stack([o[key] for o in observations]) for key in self.observation_space.spaces}
+            stacked = {key: flat([o[key] for o in observations]) for key in self.observation_space.spaces}
         else:
-            stacked = np.stack(observations)
+            stacked = flat(observations)
         return Rollout(
             observation_to_tensor(stacked, self.observation_space),
-            torch.as_tensor(np.array(unsquashed)),
-            torch.as_tensor(log_probs, dtype=torch.float32),
-            torch.as_tensor(values, dtype=torch.float32),
-            torch.as_tensor(advantages),
-            torch.as_tensor(returns),
+            torch.as_tensor(flat(unsquashed)),
+            torch.as_tensor(flat(log_probs), dtype=torch.float32),
+            torch.as_tensor(flat(values), dtype=torch.float32),
+            torch.as_tensor(advantages.reshape(-1)),
+            torch.as_tensor(returns.reshape(-1)),
         )
 
     def update(self, rollout: Rollout) -> dict[str, float]:
@@ -162,7 +172,9 @@ class OnPolicyAgent(OwnAgent):
         started = self._start_learning(total_timesteps, reset_num_timesteps)
         self._target, self._start_steps, start_time = started
         if self._last_obs is None:
-            self._last_obs, _ = self.env.reset()
+            self._last_obs = _Worlds(self.env).reset()
+        elif not _batched(self._last_obs, self.observation_space):  # saved by a one-world version
+            self._last_obs = batch_of_one(self._last_obs)
         callback = self._start_callback(callback)
         callback.on_training_start(locals(), globals())
         while self.num_timesteps < self._target:
@@ -181,3 +193,61 @@ class OnPolicyAgent(OwnAgent):
             self._log_progress(metrics, self._start_steps, start_time)
         callback.on_training_end()
         return self
+
+
+class _Worlds:
+    """The training env as K worlds: a gymnasium env (K = 1, reset here when its episode ends) or
+    an SB3 ``VecEnv`` (K = ``num_envs``, resetting a finished world itself). Observations come and
+    go batched (K, ...), dicts key by key."""
+
+    def __init__(self, env) -> None:
+        self.env = env
+        self.vector = isinstance(env, VecEnv)
+        self.count = env.num_envs if self.vector else 1
+
+    def reset(self) -> Any:
+        return self.env.reset() if self.vector else batch_of_one(self.env.reset()[0])
+
+    def step(self, actions: np.ndarray):
+        """(observations, rewards (K,), terminated (K,), truncated (K,), the final observations of
+        the worlds that ended (batched, rows of the others unspecified) or None, the returns of
+        the episodes that ended)."""
+        if self.vector:
+            new_obs, rewards, dones, infos = self.env.step(actions)
+            truncated = np.array([bool(info.get("TimeLimit.truncated", False)) for info in infos])
+            terminated = np.asarray(dones, dtype=bool) & ~truncated
+            final = None
+            if dones.any():
+                final = _copy(new_obs)
+                for k in np.flatnonzero(dones):
+                    _set_row(final, k, infos[k]["terminal_observation"])
+            returns = [float(info["episode"]["r"]) for info in infos if "episode" in info]
+            return new_obs, np.asarray(rewards, dtype=np.float64), terminated, truncated, final, returns
+        new_obs, reward, terminated, truncated, info = self.env.step(actions[0])
+        final = batch_of_one(new_obs)
+        returns = [float(info["episode"]["r"])] if "episode" in info else []
+        if terminated or truncated:
+            new_obs, _ = self.env.reset()
+        return (
+            batch_of_one(new_obs), np.array([float(reward)]), np.array([terminated]), np.array([truncated]),
+            final, returns,
+        )  # fmt: skip
+
+
+def _batched(obs: Any, space: spaces.Space) -> bool:
+    if isinstance(space, spaces.Dict):
+        key = next(iter(space.spaces))
+        return _batched(obs[key], space.spaces[key])
+    return np.ndim(obs) == len(space.shape) + 1
+
+
+def _copy(batch: Any) -> Any:
+    return {key: value.copy() for key, value in batch.items()} if isinstance(batch, dict) else batch.copy()
+
+
+def _set_row(batch: Any, k: int, row: Any) -> None:
+    if isinstance(batch, dict):
+        for key in batch:
+            batch[key][k] = row[key]
+    else:
+        batch[k] = row

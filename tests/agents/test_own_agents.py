@@ -168,3 +168,33 @@ def test_sb3_dqn_on_a_dict_observation_checkpoints_its_replay(tmp_path):
     config = _config("dueling_ddqn", algo="dqn", name="dqn", hyperparams={"learning_starts": 20})
     run_dir = run_module.train(config, tmp_path)
     assert json.loads((run_dir / "checkpoints/latest.json").read_text())["replay_buffer"] is True
+
+
+@pytest.mark.parametrize("algo", ["a2c_own", "ppo_own"])
+def test_on_policy_agents_collect_from_k_worlds(algo, monkeypatch):
+    """K = 4 worlds of one VectorDriveEnv (behind SB3's VecEnv): every update sees n_steps x K
+    transitions, and the steps of all worlds count."""
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from drivelab.envs.vector import SB3VecEnv, VectorDriveEnv
+
+    obs, action, hyperparams = CASES[algo]
+    vector = VectorDriveEnv(4, "highway", obs=obs, action=action, autoreset_mode="same_step", **ENV)
+    env = VecMonitor(SB3VecEnv(vector))
+    env.seed(2)
+    agent = get_algo(algo).build(algo, env, 0, hyperparams, None)
+    sizes, update = [], type(agent).update
+    monkeypatch.setattr(
+        type(agent),
+        "update",
+        lambda self, rollout: sizes.append(len(rollout.returns)) or update(self, rollout),
+    )
+    n_steps = hyperparams["n_steps"]
+    agent.learn(3 * n_steps * 4)
+    assert agent.num_timesteps == 3 * n_steps * 4
+    assert sizes == [n_steps * 4] * 3
+    assert agent.episode_returns  # 6 s episodes: some ended during the rollouts
+    batch = env.reset()
+    first = {key: value[0] for key, value in batch.items()} if isinstance(batch, dict) else batch[0]
+    action, _ = agent.predict(first)
+    assert action.shape == env.action_space.shape

@@ -77,3 +77,17 @@ def test_a2c_loss():
     assert metrics["policy_loss"] == pytest.approx(-0.5)
     assert metrics["value_loss"] == pytest.approx(0.5)
     assert float(loss) == pytest.approx(-0.3)
+
+
+def test_gae_over_k_worlds_is_each_world_on_its_own():
+    rng = np.random.default_rng(5)
+    steps, worlds = 12, 4
+    rewards, values = rng.normal(size=(steps, worlds)), rng.normal(size=(steps, worlds)).astype(np.float32)
+    ends = (rng.random((steps, worlds)) < 0.2).astype(float)
+    last = rng.normal(size=worlds)
+    advantages, returns = compute_gae(rewards, values, ends, last, 0.9, 0.95)
+    assert advantages.shape == returns.shape == (steps, worlds)
+    for k in range(worlds):
+        alone = compute_gae(rewards[:, k], values[:, k], ends[:, k], float(last[k]), 0.9, 0.95)
+        np.testing.assert_array_equal(advantages[:, k], alone[0])
+        np.testing.assert_array_equal(returns[:, k], alone[1])
