@@ -36,14 +36,20 @@ def _load(algo: str) -> dict:
     file = resources.files(__package__) / f"{algo}.yaml"
     if not file.is_file():
         return {}
-    # yaml.safe_load: the YAML 1.1 reading RL Zoo gives the file too (5.0e-4 is a number, 5e-4 not)
-    data = yaml.safe_load(file.read_text())
+    return parse_zoo_file(file.read_text(), f"{algo}.yaml")
+
+
+def parse_zoo_file(text: str, name: str) -> dict:
+    """The entries of an RL Zoo hyper-parameter file's ``text``, read as RL Zoo reads it
+    (``yaml.safe_load``: YAML 1.1, where 5.0e-4 is a number and 5e-4 a string). A UsageError when
+    it is not a mapping of mappings, or an entry sets a run setting drivelab cannot honour."""
+    data = yaml.safe_load(text)
     if not isinstance(data, dict) or not all(isinstance(v, dict) for v in data.values()):
-        raise UsageError(f"hyper-parameter file {algo}.yaml must map env ids to mappings")
+        raise UsageError(f"hyper-parameter file {name} must map env ids to mappings")
     for key, entry in data.items():
         unsupported = sorted(set(entry) & set(ZOO_UNSUPPORTED))
         if unsupported:
-            raise UsageError(f"hyper-parameter file {algo}.yaml: {key!r} sets RL Zoo's "
+            raise UsageError(f"hyper-parameter file {name}: {key!r} sets RL Zoo's "
                              f"{unsupported[0]!r}, which drivelab runs cannot honour")  # fmt: skip
     return data
 

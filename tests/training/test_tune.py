@@ -180,3 +180,11 @@ def test_crash_rate_is_minimised_and_log_type_is_a_log_float():
     assert study.direction == "minimize"
     learning_rate = next(p for p in study.space if p.name == "learning_rate")
     assert (learning_rate.kind, learning_rate.log, learning_rate.low) == ("float", True, 1e-4)
+
+
+def test_the_example_study_file_is_valid():
+    from pathlib import Path
+
+    study = tune.load_study(Path(__file__).parents[2] / "benchmarks" / "sweeps" / "tune-ppo-highway.yaml")
+    assert (study.name, study.n_trials, study.run["steps"]) == ("ppo-highway", 20, 20000)
+    assert {p.name for p in study.space} >= {"learning_rate", "gamma", "policy_kwargs"}
