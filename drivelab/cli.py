@@ -272,6 +272,61 @@ def sweep(
         typer.echo(f"report: {written / 'report.md'}")
 
 
+@app.command()
+def tune(
+    study_file: Path = typer.Argument(..., help="study YAML: run fields, space, n_trials, metric"),
+    study_dir: Path | None = typer.Option(
+        None, help="where the study and its trial runs go (default: the file's study_dir)"
+    ),
+    n_trials: int | None = typer.Option(None, help="trials of the study in all (default: the file's)"),
+    executor: str = typer.Option("pool", help=EXECUTOR_HELP),
+    workers: int | None = typer.Option(None, help="trials at once (default: one per core)"),
+    address: str | None = typer.Option(None, help="existing Ray cluster address (with --executor ray)"),
+    write_best: Path | None = typer.Option(
+        None, help="also set the env's entry of this RL Zoo hyper-parameter file to the best values"
+    ),
+) -> None:
+    """Tune hyper-parameters with Optuna (TPE, median pruning); a re-run continues the study."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from drivelab.training.tune import check_zoo_file, load_study, run_study
+    from drivelab.training.tune import write_best as write_best_file
+
+    try:
+        study = load_study(study_file, study_dir, n_trials)
+        if write_best is not None:
+            check_zoo_file(write_best)
+        summary = run_study(study, executor, workers, address, command=_command_line())
+        written = write_best_file(study, summary, write_best) if write_best is not None else None
+    except UsageError as exc:
+        _fail(str(exc))
+    except KeyboardInterrupt:
+        _interrupted()
+    table = Table(title=f"study {study.name}: {study.metric} ({study.direction})")
+    for column in ("trial", "did", "result", "seconds"):
+        table.add_column(column, justify="right" if column == "seconds" else "left")
+    for o in summary["outcomes"]:
+        result = f"FAILED: {o['error']}" if not o["ok"] else "ok"
+        result = f"pruned at step {o['stopped']}" if o["ok"] and o["stopped"] is not None else result
+        table.add_row(o["name"], o["action"], result, f"{o['seconds']:.1f}")
+    Console().print(table)
+    best = summary["best"]
+    if best is not None:
+        typer.echo(f"best: {best['run_dir']} {study.metric} {best['value']:.4g} {best['params']}")
+    typer.echo(f"study directory: {study.study_dir}  (summary.md, trials.csv, best-hyperparams.yml)")
+    if written is not None:
+        typer.echo(f"wrote {written}")
+    failed = [o["name"] for o in summary["outcomes"] if not o["ok"]]
+    if failed:
+        typer.echo(
+            f"error: {len(failed)} trial(s) failed; see {study.study_dir / '.sweep-logs'}/<trial>.log; "
+            "re-running the command replaces them",
+            err=True,
+        )
+        raise typer.Exit(1)
+
+
 def _split_rewards(values: list[str]) -> list[str]:
     """``--rewards`` values → reward specs. ``;`` separates specs; with commas, a piece without
     ``=`` starts a new spec and ``term=weight`` pieces join the spec before them."""

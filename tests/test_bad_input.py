@@ -443,3 +443,92 @@ def test_device_cuda_trains_sb3_on_the_gpu():
     assert model.device.type == "cuda"
     model.learn(16)
     assert model.num_timesteps == 16
+
+
+# --- drivelab tune: the study file ------------------------------------------------------------------
+TUNE_BASE = (
+    "algo: ppo\nenv: highway\ntraffic: empty\nbackend: fast\nsteps: 64\nn_trials: 3\n"
+    "hyperparams: {n_steps: 16, batch_size: 16}\n"
+)
+GAMMA = "space: {gamma: {type: float, low: 0.8, high: 0.99}}\n"
+# (study file text, extra options, expected part of the message)
+TUNE_CASES = {
+    "unknown param type": (
+        TUNE_BASE + "space: {gamma: {type: uniform, low: 0.8, high: 0.99}}\n",
+        [],
+        "tune space 'gamma' has unknown type 'uniform' (choose from float, int, log, categorical)",
+    ),
+    "empty space": (TUNE_BASE + "space: {}\n", [], "needs a non-empty 'space'"),
+    "no space": (TUNE_BASE, [], "needs a non-empty 'space'"),
+    "n_trials 0": (
+        TUNE_BASE.replace("n_trials: 3", "n_trials: 0") + GAMMA,
+        [],
+        "'n_trials' must be an integer >= 1, got 0",
+    ),
+    "--n-trials -2": (TUNE_BASE + GAMMA, ["--n-trials", "-2"], "'n_trials' must be an integer >= 1, got -2"),
+    "unknown algo": (TUNE_BASE.replace("algo: ppo", "algo: bogus") + GAMMA, [], "unknown algorithm 'bogus'"),
+    "unknown metric": (TUNE_BASE + GAMMA + "metric: fun\n", [], "unknown tune metric 'fun'"),
+    "unknown key": (TUNE_BASE + GAMMA + "trials: 4\n", [], "unknown tune key 'trials'"),
+    "no steps": (TUNE_BASE.replace("steps: 64\n", "") + GAMMA, [], "needs 'steps', the training budget"),
+    "low above high": (
+        TUNE_BASE + "space: {gamma: {type: float, low: 0.99, high: 0.8}}\n",
+        [],
+        "needs low < high",
+    ),
+    "log from 0": (
+        TUNE_BASE + "space: {learning_rate: {type: log, low: 0, high: 0.1}}\n",
+        [],
+        "low must be > 0, got 0",
+    ),
+    "no choices": (
+        TUNE_BASE + "space: {batch_size: {type: categorical, choices: []}}\n",
+        [],
+        "needs 'choices'",
+    ),
+    "not a hyper-parameter": (
+        TUNE_BASE + "space: {bogus: {type: int, low: 1, high: 4}}\n",
+        [],
+        "unknown hyperparameter 'bogus' for 'ppo'",
+    ),
+    "value out of range": (
+        TUNE_BASE + "space: {gamma: {type: float, low: 0.9, high: 2}}\n",
+        [],
+        "'gamma' of 'ppo' must be a number in [0, 1]",
+    ),
+    "bad choice": (
+        TUNE_BASE + "space: {batch_size: {type: categorical, choices: [16, 0]}}\n",
+        [],
+        "'batch_size' of 'ppo' must be an integer >= 1, got 0",
+    ),
+    "bad fixed value": (
+        TUNE_BASE.replace("batch_size: 16", "batch_size: -1") + GAMMA,
+        [],
+        "'batch_size' of 'ppo'",
+    ),
+    "bad executor": (TUNE_BASE + GAMMA, ["--executor", "slurm"], "unknown executor 'slurm'"),
+    "write-best not YAML": (
+        TUNE_BASE + GAMMA,
+        ["--write-best", "notes.txt"],
+        "is not a YAML hyper-parameter file",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(TUNE_CASES))
+def test_tune_refuses(work, case):
+    text, options, message = TUNE_CASES[case]
+    (work / "study.yaml").write_text(text)
+    (work / "notes.txt").write_text("a: [b\n")
+    assert_refused(work, ["tune", "study.yaml", "--study-dir", "study", "--workers", "1", *options], message)
+    assert not (work / "study").exists()
+
+
+def test_tune_refuses_a_folder_of_another_study(work):
+    (work / "study.yaml").write_text(TUNE_BASE + GAMMA)
+    other = work / "study"
+    other.mkdir()
+    (other / "study.yaml").write_text("algo: dqn\n")
+    assert_refused(work, ["tune", "study.yaml", "--study-dir", "study"], "holds another study")
+    (other / "study.yaml").unlink()
+    (other / "thesis.tex").write_text("mine")
+    assert_refused(work, ["tune", "study.yaml", "--study-dir", "study"], "holds no drivelab study")

@@ -2,6 +2,7 @@
 
 from importlib import resources
 
+import pytest
 import yaml
 from typer.testing import CliRunner
 
@@ -70,3 +71,91 @@ def test_cli_train_records_resolved_hyperparams(tmp_path):
     assert saved["gamma"] == 0.5 and saved["n_steps"] == 16  # command line wins
     assert saved["learning_rate"] == 5e-4  # from drivelab/hyperparams/ppo.yaml
     assert saved["policy_kwargs"] == {"net_arch": {"pi": [256, 256], "vf": [256, 256]}}
+
+
+# --- RL Zoo's format ---------------------------------------------------------------------------
+# rl_zoo3 is not installed beside drivelab: its dependency typepy[datetime] pins python-dateutil
+# < 3, which would downgrade the installed 4.0.0. These tests read our files as rl_zoo3 2.9's code
+# does (rl_zoo3/exp_manager.py, ExperimentManager): read_hyperparameters (yaml.safe_load; the env
+# id's entry, else "default"), _preprocess_hyperparams (n_timesteps → int, env_kwargs for the env,
+# train_freq list → tuple, the rest passed on) and setup_experiment (ALGOS[algo](env=env,
+# tensorboard_log=..., seed=..., verbose=..., device=..., **hyperparams), SB3's own classes).
+SB3_FILES = [algo for algo, spec in ALGORITHMS.items() if spec.family == "sb3"]
+
+
+def _zoo_file(algo: str) -> dict:
+    return yaml.safe_load((resources.files("drivelab.hyperparams") / f"{algo}.yaml").read_text())
+
+
+def _zoo_model(algo: str, env_id: str, entry: dict):
+    """What rl_zoo3 train --algo ALGO --env ENV_ID -conf drivelab/hyperparams/ALGO.yaml builds."""
+    import gymnasium
+    import stable_baselines3
+
+    hyperparams = dict(entry)
+    del hyperparams["n_timesteps"]  # RL Zoo's budget: learn(int(n_timesteps))
+    env = gymnasium.make(env_id, **hyperparams.pop("env_kwargs", {}))
+    if isinstance(hyperparams.get("train_freq"), list):
+        hyperparams["train_freq"] = tuple(hyperparams["train_freq"])
+    model_class = getattr(stable_baselines3, algo.upper())
+    model = model_class(env=env, tensorboard_log=None, seed=0, verbose=0, device="cpu", **hyperparams)
+    return model, env
+
+
+@pytest.mark.parametrize("algo", SB3_FILES)
+def test_rl_zoo_reads_the_files(algo):
+    from drivelab.agents.sb3 import policy_for
+    from drivelab.envs import gym_id
+    from drivelab.envs.scenarios import SCENARIOS
+    from drivelab.yaml_io import YamlLoader
+
+    text = (resources.files("drivelab.hyperparams") / f"{algo}.yaml").read_text()
+    table = _zoo_file(algo)
+    assert table == yaml.load(text, Loader=YamlLoader)  # YAML 1.1 and drivelab's reading agree
+    ids = {gym_id(name) for name in SCENARIOS}
+    assert "default" in table and set(table) - {"default"} <= ids, set(table) - ids
+    for env_id, entry in table.items():
+        assert isinstance(entry["n_timesteps"], int) and entry["n_timesteps"] > 0, env_id
+        model, env = _zoo_model(algo, "drivelab/Highway-v0" if env_id == "default" else env_id, entry)
+        # the network class is the one drivelab gives the environment's observation
+        assert entry["policy"] == policy_for(env.observation_space), env_id
+        assert model.policy_class is type(model).policy_aliases[entry["policy"]]
+        numbers = {k: v for k, v in entry.items() if isinstance(v, (int, float)) and k != "train_freq"}
+        assert {k: getattr(model, k) for k in numbers if k != "n_timesteps"} == {
+            k: v for k, v in numbers.items() if k != "n_timesteps"}, env_id  # fmt: skip
+        # drivelab reads the same entry, without RL Zoo's run settings
+        scenario = next((n for n in SCENARIOS if gym_id(n) == env_id), env_id)
+        shipped = shipped_hyperparams(algo, scenario)
+        assert shipped == {k: v for k, v in entry.items() if k not in ("n_timesteps", "policy", "env_kwargs")}
+        env.close()
+
+
+def test_drivelab_reads_entries_by_scenario_or_env_id():
+    from drivelab.hyperparams import zoo_entry
+
+    assert shipped_hyperparams("ppo", "racetrack") == shipped_hyperparams("ppo", "drivelab/Racetrack-v0")
+    entry = zoo_entry("ppo", "racetrack")
+    assert (entry["n_timesteps"], entry["policy"], entry["gamma"]) == (100_000, "MlpPolicy", 0.9)
+    assert not {"n_timesteps", "policy", "env_kwargs"} & set(shipped_hyperparams("sac", "highway"))
+    assert zoo_entry("sac", "highway")["env_kwargs"] == {"action": "continuous"}
+    # follow-line has no entry: RL Zoo and drivelab both take `default`
+    assert zoo_entry("dqn", "follow-line") == zoo_entry("dqn", "default")
+
+
+def test_rl_zoo_settings_drivelab_cannot_honour_are_refused():
+    from drivelab.errors import UsageError
+    from drivelab.hyperparams import parse_zoo_file
+
+    with pytest.raises(UsageError, match="'drivelab/Highway-v0' sets RL Zoo's 'normalize'"):
+        parse_zoo_file("drivelab/Highway-v0: {n_timesteps: 10, normalize: true}\n", "x.yaml")
+    with pytest.raises(UsageError, match="must map env ids to mappings"):
+        parse_zoo_file("- 1\n", "x.yaml")
+
+
+def test_written_files_read_back_as_numbers_in_yaml_1_1():
+    from drivelab.hyperparams import parse_zoo_file, zoo_yaml
+
+    entry = {"n_timesteps": 20000, "learning_rate": 1e-05, "gamma": 0.95, "ent_coef": 3e20, "net": [64, 64]}
+    text = zoo_yaml({"drivelab/Merge-v0": entry, "default": entry}, "tuned\nsecond line")
+    assert text.startswith("# tuned\n# second line\n") and "&" not in text  # no anchors
+    assert parse_zoo_file(text, "x.yaml") == {"drivelab/Merge-v0": entry, "default": entry}

@@ -27,6 +27,7 @@ import gc
 import os
 import shutil
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 from stable_baselines3.common.callbacks import BaseCallback
@@ -73,20 +74,38 @@ class TrainingInterrupted(KeyboardInterrupt):
         self.run_dir, self.steps = run_dir, steps
 
 
+class StoppedByEvaluation(Exception):
+    """``on_evaluation`` returned False (a pruned tuning trial): the run stopped and was
+    checkpointed at ``steps``, as after SIGINT, and can be resumed."""
+
+    def __init__(self, run_dir: Path, steps: int) -> None:
+        super().__init__(f"stopped after an evaluation, checkpointed at step {steps}")
+        self.run_dir, self.steps = run_dir, steps
+
+
 # --- callbacks -------------------------------------------------------------------------------
 class RunCallback(BaseCallback):
     """Progress bar, periodic evaluation (CSV + logger + optional video), checkpoints, stopping.
 
-    Evaluations run in ``on_step``. Checkpoints are written at rollout starts, the safe points of
+    Evaluations run in ``on_step``; ``on_evaluation(step, summary)``, when given, is called after
+    each, and returning False stops the run as a stop request does (``StoppedByEvaluation``).
+    Checkpoints are written at rollout starts, the safe points of
     ``resume_state``: each rollout start takes a ``Snapshot``, and when ``stop`` is requested
     (SIGINT/SIGTERM) ``on_step`` returns False, so the learning loop ends before the step changes
     anything learned, and ``_learn`` saves the run as it was at that snapshot.
     """
 
     def __init__(
-        self, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWorlds, stop: StopRequest
+        self,
+        run_dir: Path,
+        config: RunConfig,
+        eval_env,
+        worlds: TrainingWorlds,
+        stop: StopRequest,
+        on_evaluation: Callable[[int, dict], bool | None] | None = None,
     ) -> None:
         super().__init__()
+        self.on_evaluation, self.halted = on_evaluation, False
         self.run_dir, self.config, self.eval_env = run_dir, config, eval_env
         self.worlds, self.stop = worlds, stop
         self.save_replay = get_algo(config.algo).sb3_replay
@@ -128,11 +147,13 @@ class RunCallback(BaseCallback):
     def _on_step(self) -> bool:
         self.bar.update(self.model.num_timesteps - self.bar.n)
         if self.num_timesteps >= self.next_eval:
-            self.evaluate()
+            summary = self.evaluate()
             self.next_eval += self.config.resolved_eval_every
+            if self.on_evaluation is not None and self.on_evaluation(self.num_timesteps, summary) is False:
+                self.halted = True
         if not self.rollout_starts:  # a loop without rollout starts (Q-learning, the expert) calls
             self.safe_point()  # on_step at the end of a whole step: that is its safe point
-        self.stopped = self.stop.requested
+        self.stopped = self.stop.requested or self.halted
         return not self.stopped
 
     def _on_training_end(self) -> None:
@@ -260,8 +281,16 @@ def _check_n_envs(config: RunConfig) -> None:
         )
 
 
-def train(config: RunConfig, runs_root: str | Path = "runs") -> Path:
-    """Train a new run; every input is validated (the agent built once) before anything is written."""
+def train(
+    config: RunConfig,
+    runs_root: str | Path = "runs",
+    on_evaluation: Callable[[int, dict], bool | None] | None = None,
+) -> Path:
+    """Train a new run; every input is validated (the agent built once) before anything is written.
+
+    :param on_evaluation: called after each periodic evaluation with (step, its summary); False
+        stops the run there, checkpointed, with ``StoppedByEvaluation`` (a pruned tuning trial).
+    """
     from drivelab.envs.core import DriveEnv
 
     check_combination(config.algo, config.action)
@@ -281,11 +310,15 @@ def train(config: RunConfig, runs_root: str | Path = "runs") -> Path:
         if isinstance(exc, (TypeError, ValueError)) and not isinstance(exc, UsageError):
             raise UsageError(f"bad hyperparameters for {config.algo!r}: {exc}") from None
         raise
-    _learn(model, run_dir, config, eval_env, worlds)
+    _learn(model, run_dir, config, eval_env, worlds, on_evaluation)
     return run_dir
 
 
-def resume(run_dir: str | Path, steps: int | None = None) -> Path:
+def resume(
+    run_dir: str | Path,
+    steps: int | None = None,
+    on_evaluation: Callable[[int, dict], bool | None] | None = None,
+) -> Path:
     """Continue a run from its latest checkpoint up to ``steps`` (default: its configured total).
 
     With the checkpoint's resume state the continuation is exactly the uninterrupted run's
@@ -293,6 +326,7 @@ def resume(run_dir: str | Path, steps: int | None = None) -> Path:
     logs) before anything is written; then the logs are cut back to the checkpoint (monitor.csv
     and evaluations.csv to the rows it had written, progress.csv to its step) and the results of
     the older model (eval.json, nocrash.json, learning_curve.png, model.zip) are removed.
+    ``on_evaluation``: as for ``train``.
     """
     run_dir = Path(run_dir)
     config = load_run_config(run_dir)
@@ -316,7 +350,7 @@ def resume(run_dir: str | Path, steps: int | None = None) -> Path:
         warn_inexact()
     else:
         restore(model, worlds, snapshot)
-    _learn(model, run_dir, config, eval_env, worlds)
+    _learn(model, run_dir, config, eval_env, worlds, on_evaluation)
     return run_dir
 
 
@@ -337,7 +371,8 @@ def _load_checkpoint(config: RunConfig, run_dir: Path, manifest: dict):
     return model
 
 
-def _learn(model, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWorlds) -> None:
+def _learn(model, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWorlds,
+           on_evaluation: Callable[[int, dict], bool | None] | None = None) -> None:  # fmt: skip
     """Train to ``config.steps``, then save the final checkpoint, model and learning curve.
 
     SIGINT/SIGTERM stop at the next step: the run is put back to the last safe point's snapshot
@@ -346,7 +381,7 @@ def _learn(model, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWo
     """
     model.set_logger(configure(str(run_dir), ["csv", "tensorboard"]))
     with StopRequest() as stop:
-        callback = RunCallback(run_dir, config, eval_env, worlds, stop)
+        callback = RunCallback(run_dir, config, eval_env, worlds, stop, on_evaluation)
         try:
             model.learn(
                 total_timesteps=config.steps - model.num_timesteps,
@@ -359,6 +394,8 @@ def _learn(model, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWo
         if callback.stopped:
             apply_to_model(model, callback.snapshot)
             callback.checkpoint(callback.snapshot)
+            if callback.halted and not stop.requested:
+                raise StoppedByEvaluation(run_dir, callback.snapshot.steps)
             raise TrainingInterrupted(run_dir, callback.snapshot.steps)
         callback.checkpoint(take_snapshot(model, worlds, callback.rows()))
     model.save(run_dir / "model.tmp.zip")

@@ -31,8 +31,8 @@ import re
 import shutil
 import time
 import traceback
-from collections.abc import Iterator
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -217,12 +217,16 @@ def plan(sweep: Sweep) -> list[tuple[Cell, str]]:
     ]
 
 
-def run_cell(config_values: dict, runs_dir: str, action: str, eval_episodes: int) -> dict:
+def run_cell(config_values: dict, runs_dir: str, action: str, eval_episodes: int, on_evaluation=None) -> dict:
     """Do one cell's work in a worker (process-pool worker or Ray task); never raises.
 
     Output (progress bars, warnings) goes to ``runs_dir/.sweep-logs/<name>.log``.
 
-    :returns: ``{"name", "action", "ok", "seconds", "error"}``.
+    :param on_evaluation: called after each periodic evaluation as ``on_evaluation(step, summary)``
+        (``run.train``); returning False stops the run there, checkpointed (a pruned tuning trial:
+        ``drivelab.training.tune``). It must pickle for the process pool and Ray.
+    :returns: ``{"name", "action", "ok", "seconds", "error", "stopped"}``; ``stopped``: the step at
+        which ``on_evaluation`` stopped the run (no final evaluation then), else None.
     """
     import torch
 
@@ -235,7 +239,7 @@ def run_cell(config_values: dict, runs_dir: str, action: str, eval_episodes: int
     run_dir = root / config.name
     (root / LOG_FOLDER).mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
-    outcome = {"name": config.name, "action": action, "ok": True, "error": None}
+    outcome = {"name": config.name, "action": action, "ok": True, "error": None, "stopped": None}
     with (
         (root / LOG_FOLDER / f"{config.name}.log").open("a") as log,
         contextlib.redirect_stderr(log),
@@ -245,11 +249,13 @@ def run_cell(config_values: dict, runs_dir: str, action: str, eval_episodes: int
             if action == "restart":
                 shutil.rmtree(run_dir)
             if action in ("train", "restart"):
-                run.train(config, root)
+                run.train(config, root, on_evaluation=on_evaluation)
             elif action == "resume":
-                run.resume(run_dir, config.steps)
+                run.resume(run_dir, config.steps, on_evaluation=on_evaluation)
             if eval_episodes and action != "skip":
                 evaluate_run(run_dir, episodes=eval_episodes)
+        except run.StoppedByEvaluation as stop:
+            outcome["stopped"] = stop.steps
         except BaseException as exc:  # noqa: BLE001 - reported to the driver, which goes on
             traceback.print_exc(file=log)
             outcome.update(ok=False, error=f"{type(exc).__name__}: {exc}")
@@ -258,24 +264,51 @@ def run_cell(config_values: dict, runs_dir: str, action: str, eval_episodes: int
 
 
 # --- executing -------------------------------------------------------------------------------
-def _in_process(jobs: list[dict]) -> Iterator[dict]:
-    for job in jobs:
-        yield run_cell(**job)
+def execute(
+    function: Callable[..., dict],
+    jobs: Iterable[dict],
+    executor: str = "pool",
+    workers: int = 1,
+    address: str | None = None,
+    in_flight: int | None = None,
+) -> Iterator[dict]:
+    """``function(**job)`` for each job, yielded as each finishes: in this process (``pool`` with
+    one worker, one job after another), a spawned process pool, or Ray tasks (see ``run_sweep``).
+
+    :param function: a module-level function (it must pickle), e.g. ``run_cell``; it should not raise.
+    :param jobs: keyword arguments of each call. It is read lazily: a job is drawn when a slot is
+        free, so a job may depend on the results yielded before it (``tune`` asks Optuna for a
+        trial only then).
+    :param in_flight: at most this many calls submitted at once; None: every job at once (Ray
+        then schedules them over the whole cluster).
+    """
+    if executor not in EXECUTORS:
+        raise UsageError(f"unknown executor {executor!r} (choose from {', '.join(EXECUTORS)})")
+    if executor == "ray":
+        return _ray(function, iter(jobs), workers, address, in_flight)
+    if workers == 1:  # one worker: run here, one after another (no process start-up)
+        return (function(**job) for job in jobs)
+    return _pool(function, iter(jobs), workers, in_flight)
 
 
-def _pool(jobs: list[dict], workers: int) -> Iterator[dict]:
+def _pool(function: Callable, jobs: Iterator[dict], workers: int, in_flight: int | None) -> Iterator[dict]:
     context = multiprocessing.get_context("spawn")  # fresh interpreters: no forked torch/numba state
     with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
-        futures = [pool.submit(run_cell, **job) for job in jobs]
+        pending = set()
         try:
-            for future in as_completed(futures):
-                yield future.result()
+            pending.update(pool.submit(function, **job) for job in itertools.islice(jobs, in_flight))
+            while pending:
+                done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for future in done:
+                    yield future.result()
+                    pending.update(pool.submit(function, **job) for job in itertools.islice(jobs, 1))
         except KeyboardInterrupt:
             pool.shutdown(wait=True, cancel_futures=True)
             raise
 
 
-def _ray(jobs: list[dict], workers: int, address: str | None) -> Iterator[dict]:
+def _ray(function: Callable, jobs: Iterator[dict], workers: int, address: str | None,
+         in_flight: int | None) -> Iterator[dict]:  # fmt: skip
     try:
         import ray
     except ImportError:
@@ -291,14 +324,27 @@ def _ray(jobs: list[dict], workers: int, address: str | None) -> Iterator[dict]:
             # "local": always a fresh cluster of our own, never someone else's running one
             ray.init(address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False)
     try:
-        remote = ray.remote(num_cpus=1, max_retries=0)(run_cell)
-        pending = [remote.remote(**job) for job in jobs]
+        remote = ray.remote(num_cpus=1, max_retries=0)(function)
+        pending = [remote.remote(**job) for job in itertools.islice(jobs, in_flight)]
         while pending:
             done, pending = ray.wait(pending, num_returns=1)
             yield ray.get(done[0])
+            pending += [remote.remote(**job) for job in itertools.islice(jobs, 1)]
     finally:
         if started:
             ray.shutdown()
+
+
+def check_workers(executor: str, workers: int | None, address: str | None) -> int:
+    """The number of parallel runs (default: one per core), checked with the executor choice."""
+    if executor not in EXECUTORS:
+        raise UsageError(f"unknown executor {executor!r} (choose from {', '.join(EXECUTORS)})")
+    if address and executor != "ray":
+        raise UsageError("--address is for --executor ray")
+    workers = workers or os.cpu_count() or 1
+    if workers < 1:
+        raise UsageError(f"--workers must be >= 1, got {workers}")
+    return workers
 
 
 def run_sweep(
@@ -316,18 +362,12 @@ def run_sweep(
     :param address: an existing Ray cluster (``ray://host:10001`` or ``auto``); it needs drivelab
         installed on its nodes and ``runs_dir`` on storage they share.
     """
-    if executor not in EXECUTORS:
-        raise UsageError(f"unknown executor {executor!r} (choose from {', '.join(EXECUTORS)})")
-    if address and executor != "ray":
-        raise UsageError("--address is for --executor ray")
-    workers = workers or os.cpu_count() or 1
-    if workers < 1:
-        raise UsageError(f"--workers must be >= 1, got {workers}")
+    workers = check_workers(executor, workers, address)
     steps = plan(sweep)
     runs_dir = sweep.runs_dir.resolve()
     runs_dir.mkdir(parents=True, exist_ok=True)
     outcomes = [
-        {"name": c.config.name, "action": "skip", "ok": True, "error": None, "seconds": 0.0}
+        {"name": c.config.name, "action": "skip", "ok": True, "error": None, "seconds": 0.0, "stopped": None}
         for c, action in steps
         if action == "skip"
     ]
@@ -339,12 +379,7 @@ def run_sweep(
     ]  # fmt: skip
     if not jobs:
         return outcomes
-    if executor == "ray":
-        results = _ray(jobs, workers, address)
-    elif workers == 1:  # one worker: run here, one after another (no process start-up)
-        results = _in_process(jobs)
-    else:
-        results = _pool(jobs, workers)
+    results = execute(run_cell, jobs, executor, workers, address)
     with tqdm(total=len(jobs), desc=f"sweep ({executor}, {workers} workers)", unit="run") as bar:
         for outcome in results:
             outcomes.append(outcome)
