@@ -10,7 +10,10 @@ import drivelab.envs  # noqa: F401  (registers the gymnasium ids)
 def make(scenario: str, **kwargs):
     """Build a DriveEnv: ``drivelab.make("highway", obs=["lidar", "topdown"], seed=0)``.
 
-    Same keyword arguments as ``gymnasium.make("drivelab/Highway-v0", ...)``; see DriveEnv.
+    ``scenario`` is a name or its gymnasium id (``"drivelab/Highway-v0"``). Same keyword arguments
+    as ``gymnasium.make("drivelab/Highway-v0", ...)``; see DriveEnv. ``config={...}`` takes
+    highway-env's config dict as its users write it:
+    ``drivelab.make("highway", config={"observation": {"type": "Kinematics"}, "lanes_count": 4})``.
     """
     from drivelab.envs.core import DriveEnv
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import yaml
 
-from drivelab.envs.scenarios import SCENARIOS
+from drivelab.envs.scenarios import SCENARIOS, scenario_name
 from drivelab.errors import UsageError
 
 
@@ -154,6 +154,8 @@ def build_config(values: dict) -> RunConfig:
         raise UsageError(f"unknown config field {unknown[0]!r} (known: {', '.join(FIELDS)})")
     if "algo" not in values:
         raise UsageError("config has no 'algo' (give --algo or algo: in the YAML)")
+    if isinstance(values.get("env"), str):  # a gymnasium id (drivelab/Highway-v0) names its scenario
+        values = {**values, "env": scenario_name(values["env"])}
     scenario = SCENARIOS.get(values.get("env", RunConfig.env))
     if scenario is not None:  # an unknown one is reported when the env is built
         values = {"action": scenario.action_kinds[0], "reward": scenario.default_reward, **values}

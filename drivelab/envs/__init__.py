@@ -6,13 +6,7 @@ from __future__ import annotations
 
 import gymnasium
 
-from drivelab.envs.scenarios import SCENARIOS
-
-
-def gym_id(scenario: str) -> str:
-    """``"highway"`` → ``"drivelab/Highway-v0"``, ``"follow-line"`` → ``"drivelab/FollowLine-v0"``."""
-    return f"drivelab/{''.join(part.capitalize() for part in scenario.split('-'))}-v0"
-
+from drivelab.envs.scenarios import SCENARIOS, gym_id
 
 for _name in SCENARIOS:
     if gym_id(_name) not in gymnasium.registry:

@@ -45,6 +45,8 @@ class DriveEnv(gym.Env):
     :param offroad_terminal: end the episode when the ego leaves the road.
     :param action_options: keyword options of the action adapter (e.g. ``steer_levels``).
     :param backend_options: extra highway-env config keys.
+    :param config: a highway-env config dict, as highway-env's users write it
+        (``envs/highway_config.py``); the keyword arguments given beside it win.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 5}
@@ -52,17 +54,18 @@ class DriveEnv(gym.Env):
     def __init__(
         self,
         scenario: str = "highway",
-        obs: str | list = "kinematics",
+        obs: str | list | None = None,
         action: str | ActionAdapter | None = None,
         reward: str | dict | None = None,
         traffic: str = "regular",
         backend: str = "auto",
         duration_s: float | None = None,
-        offroad_terminal: bool = True,
+        offroad_terminal: bool | None = None,
         action_options: dict | None = None,
         backend_options: dict | None = None,
         render_mode: str | None = None,
         seed: int | None = None,
+        config: dict | None = None,
     ) -> None:
         super().__init__()
         self.vector = VectorDriveEnv(
@@ -78,6 +81,7 @@ class DriveEnv(gym.Env):
             action_options=action_options,
             backend_options=backend_options,
             render_mode=render_mode,
+            config=config,
         )
         vector = self.vector
         self.scenario, self.adapter, self.sensors = vector.scenario, vector.adapter, vector.sensors

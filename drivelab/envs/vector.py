@@ -25,6 +25,7 @@ from gymnasium.vector.utils import batch_space
 from stable_baselines3.common.vec_env import VecEnv
 
 from drivelab.envs.actions import ActionAdapter, make_action
+from drivelab.envs.highway_config import env_kwargs_from_config
 from drivelab.envs.metrics import EpisodeMetrics
 from drivelab.envs.rules import EpisodeRules
 from drivelab.envs.scenarios import check_traffic, get_scenario
@@ -119,6 +120,8 @@ class VectorDriveEnv(VectorEnv):
     :param render_mode: "rgb_array" for ``render()``.
     :param autoreset_mode: gymnasium's ``AutoresetMode`` (or its value): NEXT_STEP (default) or
         SAME_STEP.
+    :param config: a highway-env config dict, as highway-env's users write it
+        (``envs/highway_config.py``); the keyword arguments given beside it win.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 5, "autoreset_mode": AutoresetMode.NEXT_STEP}
@@ -127,20 +130,30 @@ class VectorDriveEnv(VectorEnv):
         self,
         num_envs: int = 1,
         scenario: str = "highway",
-        obs: str | list = "kinematics",
+        obs: str | list | None = None,
         action: str | ActionAdapter | None = None,
         reward: str | dict | None = None,
         traffic: str = "regular",
         backend: str = "auto",
         duration_s: float | None = None,
-        offroad_terminal: bool = True,
+        offroad_terminal: bool | None = None,
         action_options: dict | None = None,
         backend_options: dict | None = None,
         render_mode: str | None = None,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        config: dict | None = None,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise UsageError(f"num_envs must be an integer >= 1 (got {num_envs!r})")
+        if config is not None:
+            given = {"obs": obs, "action": action, "reward": reward, "duration_s": duration_s,
+                     "offroad_terminal": offroad_terminal, "backend_options": backend_options}  # fmt: skip
+            translated = env_kwargs_from_config(config, **{k: v for k, v in given.items() if v is not None})
+            obs, action, reward = (translated.get(key) for key in ("obs", "action", "reward"))
+            duration_s, offroad_terminal = translated.get("duration_s"), translated.get("offroad_terminal")
+            backend_options = translated.get("backend_options")
+        obs = "kinematics" if obs is None else obs
+        offroad_terminal = True if offroad_terminal is None else offroad_terminal
         _check_keywords(duration_s, offroad_terminal, action_options, backend_options)
         autoreset_mode = autoreset_mode_of(autoreset_mode)
         self.scenario = get_scenario(scenario)

@@ -27,7 +27,10 @@ SCENARIOS: dict[str, Scenario] = {
     )
 }
 
-__all__ = ["SCENARIOS", "FAST_SCENARIOS", "SEED_TABLES", "TRAFFIC_LEVELS", "check_traffic", "get_scenario"]
+__all__ = [
+    "SCENARIOS", "FAST_SCENARIOS", "SEED_TABLES", "TRAFFIC_LEVELS", "check_traffic", "get_scenario", "gym_id",
+    "scenario_name",
+]  # fmt: skip
 
 
 FAST_SCENARIOS = tuple(
@@ -35,8 +38,24 @@ FAST_SCENARIOS = tuple(
 )  # the compiled core's
 
 
+def gym_id(scenario: str) -> str:
+    """``"highway"`` → ``"drivelab/Highway-v0"``, ``"follow-line"`` → ``"drivelab/FollowLine-v0"``."""
+    return f"drivelab/{''.join(part.capitalize() for part in scenario.split('-'))}-v0"
+
+
+SCENARIO_OF_ID = {gym_id(name): name for name in SCENARIOS}
+
+
+def scenario_name(name: str) -> str:
+    """A scenario's name from its name or its gymnasium id (``drivelab/Highway-v0``); other
+    strings are returned as they are (``get_scenario`` reports them)."""
+    return SCENARIO_OF_ID.get(name, name)
+
+
 def get_scenario(name: str) -> Scenario:
-    """The scenario called ``name``, or a UsageError listing the known ones."""
+    """The scenario called ``name`` (or registered as the gymnasium id ``name``), or a UsageError
+    listing the known ones."""
+    name = scenario_name(name)
     if name not in SCENARIOS:
         raise UsageError(f"unknown scenario {name!r} (choose from {', '.join(SCENARIOS)})")
     return SCENARIOS[name]
