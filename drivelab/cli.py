@@ -96,7 +96,7 @@ def train(
     eval_episodes: int | None = typer.Option(None),
     video: bool = typer.Option(False, "--video", help="record a video at each periodic evaluation"),
     checkpoint_every: int | None = typer.Option(None, help="steps between checkpoints (0: 10 per run)"),
-    n_envs: int | None = typer.Option(None, help="worlds stepped together (SB3, a2c_own, ppo_own)"),
+    n_envs: int | None = typer.Option(None, help="worlds stepped together (SB3 and own agents)"),
     hyperparams: list[str] = typer.Option([], "--hyperparams", "-H", help="algorithm override key=value"),
     resume: Path | None = typer.Option(None, help="continue this run directory from its checkpoint"),
     no_alix: bool = typer.Option(False, "--no-alix", help="rlad/drq: no A-LIX (-H alix=false)"),

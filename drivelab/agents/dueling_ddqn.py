@@ -27,8 +27,9 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from torch import nn
 
-from drivelab.agents.base import OwnAgent
+from drivelab.agents.base import OwnAgent, batch_of_one
 from drivelab.agents.storage import assign_arrays
+from drivelab.agents.worlds import Worlds, is_batched
 from drivelab.errors import UsageError
 
 
@@ -165,11 +166,19 @@ class PrioritizedReplayBuffer:
         self.position, self.size = 0, 0
 
     def add(self, observation, action: int, reward: float, next_observation, terminal: bool) -> None:
-        i = self.position
-        self.observations[i], self.next_observations[i] = observation, next_observation
-        self.actions[i], self.rewards[i], self.terminals[i] = action, reward, float(terminal)
-        self.tree.update(np.array([i]), np.array([self.max_priority]))
-        self.position, self.size = (i + 1) % self.capacity, min(self.size + 1, self.capacity)
+        self.add_many(
+            np.asarray(observation)[None], np.array([action]), np.array([reward]),
+            np.asarray(next_observation)[None], np.array([terminal]),
+        )  # fmt: skip
+
+    def add_many(self, observations, actions, rewards, next_observations, terminals) -> None:
+        """M transitions (K worlds' steps, in world order), each at the largest priority seen."""
+        for m in range(len(actions)):
+            i = self.position
+            self.observations[i], self.next_observations[i] = observations[m], next_observations[m]
+            self.actions[i], self.rewards[i], self.terminals[i] = actions[m], rewards[m], float(terminals[m])
+            self.position, self.size = (i + 1) % self.capacity, min(self.size + 1, self.capacity)
+            self.tree.update(np.array([i]), np.array([self.max_priority]))
 
     def sample(
         self, batch_size: int, beta: float, rng: np.random.Generator
@@ -274,6 +283,16 @@ def flatten_observation(obs: Any, space: spaces.Space) -> np.ndarray:
     return np.asarray(obs, dtype=np.float32).ravel()
 
 
+def flatten_batch(batch: Any, space: spaces.Space) -> np.ndarray:
+    """K observations (batched, a Dict key by key) as (K, flat size) float32, each row
+    ``flatten_observation`` of one."""
+    if isinstance(space, spaces.Dict):
+        parts = [np.asarray(batch[key], dtype=np.float32) for key in space.spaces]
+        return np.concatenate([part.reshape(len(part), -1) for part in parts], axis=1)
+    batch = np.asarray(batch, dtype=np.float32)
+    return batch.reshape(len(batch), -1)
+
+
 def linear(start: float, end: float, progress: float) -> float:
     """start → end as progress goes 0 → 1, constant after."""
     return start + (end - start) * min(max(progress, 0.0), 1.0)
@@ -371,11 +390,16 @@ class DuelingDoubleDQN(OwnAgent):
         reset_num_timesteps: bool = True,
         progress_bar: bool = False,
     ) -> DuelingDoubleDQN:
-        """Act ε-greedily, store, learn, until ``total_timesteps`` more steps (contract in base.py)."""
-        config, env = self.config, self.env
+        """Act ε-greedily in each of the env's K worlds, store, learn, until ``total_timesteps``
+        more steps of all worlds (contract in base.py). ``train_freq``, ``target_update_interval``
+        and ``log_interval`` count transitions, so K worlds keep one world's updates per
+        transition: a step of K worlds that passes n multiples of ``train_freq`` trains n times."""
+        config, worlds = self.config, Worlds(self.env)
         target_steps, start_steps, start_time = self._start_learning(total_timesteps, reset_num_timesteps)
         if self._last_obs is None:
-            self._last_obs, _ = env.reset()
+            self._last_obs = worlds.reset()
+        elif not is_batched(self._last_obs, self.observation_space):  # saved by a one-world version
+            self._last_obs = batch_of_one(self._last_obs)
         callback = self._start_callback(callback)
         callback.on_training_start(locals(), globals())
         metrics: dict[str, float] = {}
@@ -384,36 +408,41 @@ class DuelingDoubleDQN(OwnAgent):
             progress = self.num_timesteps / max(target_steps, 1)
             explored = progress / config.exploration_fraction if config.exploration_fraction else 1.0
             epsilon = linear(config.exploration_initial_eps, config.exploration_final_eps, explored)
-            observation = flatten_observation(self._last_obs, self.observation_space)
-            if self.rng.random() < epsilon:
-                action = int(self.rng.integers(self.action_space.n))
-            else:
-                action = int(self.q_values(observation[None]).argmax(dim=1)[0])
-            new_obs, reward, terminated, truncated, info = env.step(action)
-            self.num_timesteps += 1
+            observations = flatten_batch(self._last_obs, self.observation_space)
+            explore = self.rng.random(worlds.count) < epsilon
+            actions = np.zeros(worlds.count, dtype=np.int64)
+            if not explore.all():
+                actions[:] = self.q_values(observations).argmax(dim=1).numpy()
+            for k in np.flatnonzero(explore):  # one draw per exploring world, in world order
+                actions[k] = self.rng.integers(self.action_space.n)
+            new_obs, rewards, terminated, truncated, final_obs, returns = worlds.step(actions)
+            before, self.num_timesteps = self.num_timesteps, self.num_timesteps + worlds.count
             callback.update_locals(locals())
             if not callback.on_step():  # before the step changes the replay or the networks
                 break
             # a time-limit end is not terminal: its target still bootstraps from the next state
-            next_observation = flatten_observation(new_obs, self.observation_space)
-            self.replay_buffer.add(observation, action, float(reward), next_observation, terminated)
-            if "episode" in info:
-                self.episode_returns.append(float(info["episode"]["r"]))
-            self._last_obs = env.reset()[0] if terminated or truncated else new_obs
+            next_observations = flatten_batch(new_obs, self.observation_space)
+            ended = terminated | truncated
+            if ended.any():
+                next_observations[ended] = flatten_batch(final_obs, self.observation_space)[ended]
+            self.replay_buffer.add_many(observations, actions, rewards, next_observations, terminated)
+            self.episode_returns.extend(returns)
+            self._last_obs = new_obs
             learning_rate = linear(config.learning_rate, config.final_learning_rate, progress)
             ready = (
                 self.num_timesteps > config.learning_starts and self.replay_buffer.size >= config.batch_size
             )
-            if ready and self.num_timesteps % config.train_freq == 0:
+            trainings = _multiples(before, self.num_timesteps, config.train_freq)
+            if ready and trainings:
                 for group in self.optimizer.param_groups:
                     group["lr"] = learning_rate
-                for _ in range(config.gradient_steps):
+                for _ in range(config.gradient_steps * trainings):
                     metrics = self.train_step(progress)
                 if config.tau < 1.0:
                     self.update_target()
-            if config.tau == 1.0 and self.num_timesteps % config.target_update_interval == 0:
+            if config.tau == 1.0 and _multiples(before, self.num_timesteps, config.target_update_interval):
                 self.update_target()
-            if self.num_timesteps % config.log_interval == 0:
+            if _multiples(before, self.num_timesteps, config.log_interval):
                 self._log(metrics, epsilon, learning_rate, start_steps, start_time)
         callback.on_training_end()
         return self
@@ -423,3 +452,9 @@ class DuelingDoubleDQN(OwnAgent):
     ) -> None:
         schedule = {"epsilon": epsilon, "learning_rate": learning_rate}
         self._log_progress({**metrics, **schedule}, start_steps, start_time)
+
+
+def _multiples(before: int, after: int, every: int) -> int:
+    """How many multiples of ``every`` lie in (before, after]: for one world, 1 when ``after`` is
+    one and 0 otherwise (the ``after % every == 0`` test)."""
+    return after // every - before // every

@@ -97,7 +97,7 @@ ALGORITHMS: dict[str, AlgoSpec] = {
                  sb3_replay=True, multi_env=True),
         AlgoSpec("dueling_ddqn", "drivelab's Dueling Double DQN, prioritised replay (seed 003)", _DISCRETE,
                  "drivelab.agents.dueling_ddqn:DuelingDoubleDQN", "own", sb3_replay=True,
-                 observation_kinds=("vector",)),
+                 observation_kinds=("vector",), multi_env=True),
         AlgoSpec("a2c_own", "drivelab's A2C, tanh-Gaussian, seed 003's CNN / fusion network", ("continuous",),
                  "drivelab.agents.a2c:OwnA2C", "own", observation_kinds=_READABLE, multi_env=True),
         AlgoSpec("ppo_own", "drivelab's PPO, tanh-Gaussian, seed 003's CNN / fusion network", ("continuous",),

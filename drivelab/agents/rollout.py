@@ -14,10 +14,10 @@ import numpy as np
 import torch
 from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.vec_env import VecEnv
 
 from drivelab.agents.base import OwnAgent, batch_of_one, observation_to_tensor
 from drivelab.agents.networks import TanhGaussianActorCritic
+from drivelab.agents.worlds import Worlds, is_batched
 
 
 def compute_gae(
@@ -114,7 +114,7 @@ class OnPolicyAgent(OwnAgent):
         CleanRL's way as (n_steps, K) and flattened time-major for the update; None when the
         callback stops training. The env is one gymnasium env (K = 1) or an SB3 ``VecEnv`` of K
         worlds that resets a finished world in the step that ended it."""
-        config, worlds = self.config, _Worlds(self.env)
+        config, worlds = self.config, Worlds(self.env)
         count = worlds.count
         observations, unsquashed, log_probs, values, rewards, ends = [], [], [], [], [], []
         steps = min(config.n_steps, -(-(self._target - self.num_timesteps) // count))
@@ -172,8 +172,8 @@ class OnPolicyAgent(OwnAgent):
         started = self._start_learning(total_timesteps, reset_num_timesteps)
         self._target, self._start_steps, start_time = started
         if self._last_obs is None:
-            self._last_obs = _Worlds(self.env).reset()
-        elif not _batched(self._last_obs, self.observation_space):  # saved by a one-world version
+            self._last_obs = Worlds(self.env).reset()
+        elif not is_batched(self._last_obs, self.observation_space):  # saved by a one-world version
             self._last_obs = batch_of_one(self._last_obs)
         callback = self._start_callback(callback)
         callback.on_training_start(locals(), globals())
@@ -193,61 +193,3 @@ class OnPolicyAgent(OwnAgent):
             self._log_progress(metrics, self._start_steps, start_time)
         callback.on_training_end()
         return self
-
-
-class _Worlds:
-    """The training env as K worlds: a gymnasium env (K = 1, reset here when its episode ends) or
-    an SB3 ``VecEnv`` (K = ``num_envs``, resetting a finished world itself). Observations come and
-    go batched (K, ...), dicts key by key."""
-
-    def __init__(self, env) -> None:
-        self.env = env
-        self.vector = isinstance(env, VecEnv)
-        self.count = env.num_envs if self.vector else 1
-
-    def reset(self) -> Any:
-        return self.env.reset() if self.vector else batch_of_one(self.env.reset()[0])
-
-    def step(self, actions: np.ndarray):
-        """(observations, rewards (K,), terminated (K,), truncated (K,), the final observations of
-        the worlds that ended (batched, rows of the others unspecified) or None, the returns of
-        the episodes that ended)."""
-        if self.vector:
-            new_obs, rewards, dones, infos = self.env.step(actions)
-            truncated = np.array([bool(info.get("TimeLimit.truncated", False)) for info in infos])
-            terminated = np.asarray(dones, dtype=bool) & ~truncated
-            final = None
-            if dones.any():
-                final = _copy(new_obs)
-                for k in np.flatnonzero(dones):
-                    _set_row(final, k, infos[k]["terminal_observation"])
-            returns = [float(info["episode"]["r"]) for info in infos if "episode" in info]
-            return new_obs, np.asarray(rewards, dtype=np.float64), terminated, truncated, final, returns
-        new_obs, reward, terminated, truncated, info = self.env.step(actions[0])
-        final = batch_of_one(new_obs)
-        returns = [float(info["episode"]["r"])] if "episode" in info else []
-        if terminated or truncated:
-            new_obs, _ = self.env.reset()
-        return (
-            batch_of_one(new_obs), np.array([float(reward)]), np.array([terminated]), np.array([truncated]),
-            final, returns,
-        )  # fmt: skip
-
-
-def _batched(obs: Any, space: spaces.Space) -> bool:
-    if isinstance(space, spaces.Dict):
-        key = next(iter(space.spaces))
-        return _batched(obs[key], space.spaces[key])
-    return np.ndim(obs) == len(space.shape) + 1
-
-
-def _copy(batch: Any) -> Any:
-    return {key: value.copy() for key, value in batch.items()} if isinstance(batch, dict) else batch.copy()
-
-
-def _set_row(batch: Any, k: int, row: Any) -> None:
-    if isinstance(batch, dict):
-        for key in batch:
-            batch[key][k] = row[key]
-    else:
-        batch[k] = row

@@ -198,3 +198,24 @@ def test_on_policy_agents_collect_from_k_worlds(algo, monkeypatch):
     first = {key: value[0] for key, value in batch.items()} if isinstance(batch, dict) else batch[0]
     action, _ = agent.predict(first)
     assert action.shape == env.action_space.shape
+
+
+def test_dueling_ddqn_acts_in_k_worlds_at_one_worlds_updates_per_transition(monkeypatch):
+    from stable_baselines3.common.vec_env import VecMonitor
+
+    from drivelab.envs.vector import SB3VecEnv, VectorDriveEnv
+
+    obs, action, hyperparams = CASES["dueling_ddqn"]
+    vector = VectorDriveEnv(3, "highway", obs=obs, action=action, autoreset_mode="same_step", **ENV)
+    env = VecMonitor(SB3VecEnv(vector))
+    env.seed(1)
+    agent = get_algo("dueling_ddqn").build("dueling_ddqn", env, 0, {**hyperparams, "train_freq": 2}, None)
+    updates, train_step = [], type(agent).train_step
+    monkeypatch.setattr(type(agent), "train_step", lambda self, p: updates.append(1) or train_step(self, p))
+    agent.learn(60)
+    assert agent.num_timesteps == agent.replay_buffer.size == 60
+    # from the first step of 3 that ends past learning_starts (18 -> 21) on: one update per
+    # multiple of train_freq = 2 passed, i.e. 2 updates on every other step of 3 transitions
+    assert len(updates) == 60 // 2 - 18 // 2
+    terminals = agent.replay_buffer.terminals[:60]
+    assert set(np.unique(terminals)) <= {0.0, 1.0}

@@ -36,6 +36,8 @@ SETUPS = {
     "ppo_own": {"algo": "ppo_own", "action": "continuous", "steps": 192,
                 "hyperparams": {"n_steps": 32, "batch_size": 16, "n_epochs": 2}},
     "a2c_own": {"algo": "a2c_own", "action": "continuous", "steps": 160, "hyperparams": {"n_steps": 32}},
+    "dueling_ddqn-3-worlds": {"algo": "dueling_ddqn", "action": "meta", "steps": 150, "n_envs": 3,
+                              "hyperparams": {"learning_starts": 30, "buffer_size": 500, "batch_size": 16}},
     "ppo_own-4-worlds": {"algo": "ppo_own", "action": "continuous", "steps": 256, "n_envs": 4,
                          "hyperparams": {"n_steps": 8, "batch_size": 16, "n_epochs": 2}},
 }  # fmt: skip
@@ -113,7 +115,13 @@ def _assert_same_run(reference, resumed, config) -> None:
         ("dueling_ddqn", 77, signal.SIGTERM, 76),
         ("ppo_own", 75, signal.SIGINT, 64),
         ("a2c_own", 75, signal.SIGTERM, 64),
-        ("ppo_own-4-worlds", 100, signal.SIGINT, 96),  # rollouts of 8 steps x 4 worlds
+        ("ppo_own-4-worlds", 100, signal.SIGINT, 96),
+        (
+            "dueling_ddqn-3-worlds",
+            77,
+            signal.SIGTERM,
+            75,
+        ),  # safe points every 3 steps  # rollouts of 8 steps x 4 worlds
     ],
 )
 def test_interrupted_and_resumed_run_equals_the_uninterrupted_one(

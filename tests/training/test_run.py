@@ -155,7 +155,9 @@ def test_on_policy_training_on_several_worlds(tmp_path):
 
 def test_n_envs_is_refused_for_single_world_agents(tmp_path):
     with pytest.raises(UsageError, match="trains in one world: n_envs must be 1"):
-        run_module.train(_config(algo="dueling_ddqn", action="meta", obs="kinematics", n_envs=2), tmp_path)
+        run_module.train(
+            _config(algo="qlearning", env="follow-line", action="seed_line", obs="line", n_envs=2), tmp_path
+        )
     assert not any(tmp_path.iterdir())
     with pytest.raises(UsageError, match="'n_envs' must be >= 1"):
         _config(n_envs=0)

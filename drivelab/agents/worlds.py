@@ -1,0 +1,76 @@
+"""The training env as K worlds, the one loop of acting shared by drivelab's own agents.
+
+An agent trains on one gymnasium env (K = 1) or on an SB3 ``VecEnv`` of K worlds (``drivelab
+train --n-envs K``: a VectorDriveEnv that resets a finished world in the step that ended it).
+``Worlds`` gives both the VecEnv's shape: observations batched (K, ...), rewards and flags (K,),
+the final observation of every world whose episode ended, and the returns of the episodes that
+ended, so the agents' collect loops are written once, for K worlds.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from stable_baselines3.common.vec_env import VecEnv
+
+from drivelab.agents.base import batch_of_one
+
+
+class Worlds:
+    """The training env as K worlds: a gymnasium env (K = 1, reset here when its episode ends) or
+    an SB3 ``VecEnv`` (K = ``num_envs``, resetting a finished world itself). Observations come and
+    go batched (K, ...), dicts key by key."""
+
+    def __init__(self, env) -> None:
+        self.env = env
+        self.vector = isinstance(env, VecEnv)
+        self.count = env.num_envs if self.vector else 1
+
+    def reset(self) -> Any:
+        return self.env.reset() if self.vector else batch_of_one(self.env.reset()[0])
+
+    def step(self, actions: np.ndarray):
+        """(observations, rewards (K,), terminated (K,), truncated (K,), the final observations of
+        the worlds that ended (batched, rows of the others unspecified) or None, the returns of
+        the episodes that ended)."""
+        if self.vector:
+            new_obs, rewards, dones, infos = self.env.step(actions)
+            truncated = np.array([bool(info.get("TimeLimit.truncated", False)) for info in infos])
+            terminated = np.asarray(dones, dtype=bool) & ~truncated
+            final = None
+            if dones.any():
+                final = _copy(new_obs)
+                for k in np.flatnonzero(dones):
+                    _set_row(final, k, infos[k]["terminal_observation"])
+            returns = [float(info["episode"]["r"]) for info in infos if "episode" in info]
+            return new_obs, np.asarray(rewards, dtype=np.float64), terminated, truncated, final, returns
+        new_obs, reward, terminated, truncated, info = self.env.step(actions[0])
+        final = batch_of_one(new_obs)
+        returns = [float(info["episode"]["r"])] if "episode" in info else []
+        if terminated or truncated:
+            new_obs, _ = self.env.reset()
+        return (
+            batch_of_one(new_obs), np.array([float(reward)]), np.array([terminated]), np.array([truncated]),
+            final, returns,
+        )  # fmt: skip
+
+
+def is_batched(obs: Any, space: spaces.Space) -> bool:
+    if isinstance(space, spaces.Dict):
+        key = next(iter(space.spaces))
+        return is_batched(obs[key], space.spaces[key])
+    return np.ndim(obs) == len(space.shape) + 1
+
+
+def _copy(batch: Any) -> Any:
+    return {key: value.copy() for key, value in batch.items()} if isinstance(batch, dict) else batch.copy()
+
+
+def _set_row(batch: Any, k: int, row: Any) -> None:
+    if isinstance(batch, dict):
+        for key in batch:
+            batch[key][k] = row[key]
+    else:
+        batch[k] = row
