@@ -17,8 +17,10 @@ two simulation steps, as the paper's CARLA runs; one agent step is one environme
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
+import weakref
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,6 +35,7 @@ from torch import nn
 from drivelab.agents.base import OwnAgent
 from drivelab.agents.rlad.augmentation import default_pad, random_shift
 from drivelab.agents.rlad.fast import COMPILE_MODES, compile_unavailable, draw_update_noise
+from drivelab.agents.rlad.memory import DeviceMemoryLedger, cuda_free_bytes, device_key
 from drivelab.agents.rlad.networks import Actor, StateEncoder, TrafficLightHead, TwinCritic
 from drivelab.agents.rlad.replay import RECORD_SLACK, UNKNOWN_LABEL, FrameReplayBuffer, label_index
 from drivelab.agents.rlad.waypoints import WAYPOINT_ENCODERS
@@ -70,7 +73,8 @@ class RLADConfig:
     :param device: "auto" (CUDA when available, else CPU), "cpu", "cuda" or "cuda:N".
     :param replay_frames: where the replay keeps its frames: "host" (numpy), "device" (a tensor on
         ``device``, gathered there) or "auto" (the device when it is a GPU with room for them in
-        half its free memory, else the host).
+        half its free memory, else the host; the processes of one machine share the decision
+        through ``memory.DeviceMemoryLedger``, so several runs on one GPU do not overcommit it).
     :param fast_update: the update without host round trips, fused Adam (``fast.py`` says what
         it changes: the same update to float32 rounding).
     :param compile: with ``fast_update``, ``torch.compile`` mode of its pure-tensor parts: "none",
@@ -208,10 +212,12 @@ class RLAD(OwnAgent):
         height, width, channels = space["camera"].shape
         self.pad = config.augment_pad or default_pad(min(height, width))
         frame_shape = (3, height, width)
+        self._frames_reservation: weakref.finalize | None = None
         self.replay_buffer = FrameReplayBuffer(
             config.buffer_size, frame_shape, channels // 3, space["waypoints"].shape,
             space["measurements"].shape[0], actions, self._frame_device(frame_shape),
         )  # fmt: skip
+        self.replay_buffer.on_allocate = self._frames_allocated
         self.low, self.high = self.action_space.low, self.action_space.high
         self._last_obs = None
         self.episode_returns: deque[float] = deque(maxlen=100)
@@ -223,9 +229,24 @@ class RLAD(OwnAgent):
             return self.device
         if choice == "host" or self.device.type != "cuda":
             return None
+        if self._frames_reservation is not None:  # deciding again (a loaded replay): release the last
+            self._frames_reservation()
         records = self.config.buffer_size * (1 + RECORD_SLACK) + 1
-        free, _ = torch.cuda.mem_get_info(self.device)
-        return self.device if records * math.prod(frame_shape) < free / 2 else None
+        ledger = DeviceMemoryLedger()
+        free = functools.partial(cuda_free_bytes, self.device)
+        token = ledger.reserve(device_key(self.device), int(records * math.prod(frame_shape)), free)
+        if token is None:
+            self._frames_reservation = None
+            return None
+        self._frames_reservation = weakref.finalize(self, ledger.release, token)  # also at exit
+        self._frames_claim = (ledger, token)
+        return self.device
+
+    def _frames_allocated(self) -> None:
+        """The replay allocated its device frames: the ledger counts them as taken, not pending."""
+        if self._frames_reservation is not None and self._frames_reservation.alive:
+            ledger, token = self._frames_claim
+            ledger.allocated(token)
 
     def _build_fast_update(self) -> None:
         """The fast update's objectives, compiled when ``compile`` asks and inductor can
@@ -247,6 +268,7 @@ class RLAD(OwnAgent):
     def load_replay_buffer(self, path: str | Path) -> None:
         """A checkpointed replay, its frames placed as this agent's ``replay_frames`` says."""
         super().load_replay_buffer(path)
+        self.replay_buffer.on_allocate = self._frames_allocated
         self.replay_buffer.move_frames(self._frame_device(self.replay_buffer.frames.shape[1:]))
 
     def _modules(self) -> dict[str, nn.Module | torch.optim.Optimizer]:
