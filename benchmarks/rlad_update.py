@@ -173,7 +173,7 @@ def main() -> None:
     where = "gpu" if cuda else "cpu"
     device_name = torch.cuda.get_device_name() if cuda else "networks on the CPU"
     result = {
-        "command": "python " + " ".join(sys.argv),
+        "command": f"OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', '')} python " + " ".join(sys.argv),
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, "
         f"torch {torch.__version__}, {device_name}",
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),

@@ -129,14 +129,17 @@ def adaptive_local_signal_mixing(
     :param generator: draws the random offset (unused when ``offset`` is given).
     :param learn_strength: this layer produces S's dual gradient (the encoder's last layer).
     :param target: β, the target normalised discontinuity.
-    :param offset: the offset (2,) in [−1, 1]² already drawn, on the features' device: the
-        shift is then computed and applied on the device (``shift_bilinear_tensor``).
+    :param offset: the offset (2,) in [−1, 1]² already drawn, on the features' device: on a
+        GPU, or when compiled, the shift is then computed and applied on the device
+        (``shift_bilinear_tensor``); eager on the CPU, as with a drawn offset (the same numbers).
     """
     if learn_strength:
         features = DualStrengthGradient.apply(features, strength, target)
-    if offset is not None:
+    if offset is not None and (features.device.type != "cpu" or torch.compiler.is_compiling()):
         return shift_bilinear_tensor(features, offset * (MAX_SHIFT_PX * strength.detach()))
-    offset = torch.rand(2, generator=generator) * 2.0 - 1.0
+    if offset is None:
+        offset = torch.rand(2, generator=generator) * 2.0 - 1.0
+    # on the CPU reading the numbers costs nothing, and shifted slices beat index_select (eager)
     scale = MAX_SHIFT_PX * float(strength.detach())
     return shift_bilinear(features, (float(offset[0]) * scale, float(offset[1]) * scale))
 

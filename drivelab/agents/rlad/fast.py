@@ -8,11 +8,12 @@ What changes against the plain update, and what it does to the result:
   for the actor loss) is drawn up front from the agent's CPU generator, in the plain update's order
   and shapes, so both updates use the same numbers (``draw_update_noise``); they reach the device
   in a few copies;
-- A-LIX resamples at a shift computed on the device (``alix.shift_bilinear_tensor``): no
-  ``float(S)`` per layer. The shift is rounded in float32 instead of a Python double: the
-  features differ from the plain update's by ~1e-7 relative;
-- the auxiliary loss is the masked mean of the per-sample cross-entropy (no branch on whether the
-  batch holds a labelled sample; the sum's order may differ from ``cross_entropy``'s by an ulp). A
+- A-LIX resamples at a shift computed on the device (``alix.shift_bilinear_tensor``) on a GPU
+  and when compiled: no ``float(S)`` per layer. The shift is rounded in float32 instead of a
+  Python double: the features differ from the plain update's by ~1e-7 relative. Eager on the CPU
+  (where reading a number costs nothing) it shifts as the plain update does, bitwise;
+- the auxiliary loss is the summed cross-entropy over the labelled samples divided by their
+  count, at least 1 (no branch on whether the batch holds a labelled sample). A
   batch without any labelled sample steps the head's Adam with zero gradients where the plain
   update leaves the head out (the town labels every observation, so this does not arise there);
 - the actor loss reads the critic through detached parameters (``torch.func.functional_call``):

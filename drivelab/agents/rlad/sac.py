@@ -401,10 +401,10 @@ class RLAD(OwnAgent):
                 known = labels != UNKNOWN_LABEL
                 count = known.sum().clamp(min=1)
                 logits = self.traffic_light_head(image).float()
-                per_sample = nn.functional.cross_entropy(
-                    logits, labels, ignore_index=UNKNOWN_LABEL, reduction="none"
+                total = nn.functional.cross_entropy(
+                    logits, labels, ignore_index=UNKNOWN_LABEL, reduction="sum"
                 )
-                aux_loss = per_sample.sum() / count
+                aux_loss = total / count  # cross_entropy's mean, 0 without a labelled sample
                 loss = loss + config.aux_weight * aux_loss
                 accuracy = ((logits.detach().argmax(dim=1) == labels) & known).sum() / count
                 metrics.update(aux_loss=aux_loss.detach(), aux_accuracy=accuracy)
