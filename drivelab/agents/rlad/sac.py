@@ -173,6 +173,9 @@ class RLAD(OwnAgent):
     """SAC from pixels as RLAD (seed 000); ``config`` switches its parts off for the ablations."""
 
     config_class = RLADConfig
+    # checkpoints keep the replay up to this size (run.py's default is 512 MiB): 100 k transitions
+    # at 84x84 take 2.2 GB, and a long run resumes exactly only with them (at 256x256, 21 GB do not)
+    replay_checkpoint_limit_bytes = 16 * 2**30
 
     def _build(self) -> None:
         error = observation_error(self.observation_space)
