@@ -39,13 +39,15 @@ then, in the same session, the same command until it exits with 0, each within a
 last (a slice stops itself after 8 minutes, leaving time for the checkpoints)::
 
     OMP_NUM_THREADS=1 python benchmarks/rlad_ablation.py --variants rlad drq --workers 6 \
-        --time-limit-s 480 --checkpoint-every 2000 \
+        --time-limit-s 480 --checkpoint-every 10000 \
         --hyperparams '{"device": "cuda", "fast_update": true, "compile": "reduce-overhead"}'
 
 (the ablations: ``--variants no-alix no-aux mlp-waypoints --workers 9``; NoCrash and the report:
 the same command without ``--variants``). Six processes share the GPU; ``replay_frames=auto``
 puts the frames of as many of them on the GPU as fit in half its free memory
-(``drivelab.agents.rlad.memory``), the others keep theirs on the host. Budget: six runs of 100 k
+(``drivelab.agents.rlad.memory``), the others keep theirs on the host. Every checkpoint writes the
+run's replay (2.2 GB, twice while it is replaced): a slice's own stop writes one, so periodic
+checkpoints are rare; 15 runs' replays (33 GB) fit the 64 GB disk. Budget: six runs of 100 k
 steps are 600 k updates; at the issue's target of 10 ms per update that is 100 minutes of GPU time,
 more than a session holds. Within one session's ~25 minutes of training they reach about
 25 min / (6 × update time) steps each (25 k at 10 ms, 100 k at 2.5 ms): pass ``--steps`` to what
