@@ -118,8 +118,10 @@ def test_the_device_side_alix_shift_equals_the_host_one():
 
 
 def test_the_compiled_fast_update_equals_the_plain_update():
-    """inductor on the CPU (a C++ compiler is on this machine; ~1 min to compile)."""
-    assert sac.compile_unavailable(torch.device("cpu")) is None
+    """inductor on the CPU (~1 min to compile on an idle 2-core machine, seconds once cached)."""
+    reason = sac.compile_unavailable(torch.device("cpu"))
+    if reason is not None:  # the fallback is tested below
+        pytest.skip(reason)
     plain = _agent(seed=3)
     fast = _agent(seed=3, fast_update=True, compile="default")
     assert fast._critic_objective_fn is not fast._critic_objective  # compiled
