@@ -1,8 +1,10 @@
-"""RLAD and its three ablations × 3 seeds in the training town, then NoCrash on the test town.
+"""RLAD, DrQ and RLAD's three ablations × 3 seeds in the training town, then NoCrash on the test town.
 
     .venv/bin/python benchmarks/rlad_ablation.py [--steps N] [--episodes 25] [--workers 1]
 
-1. ``drivelab sweep benchmarks/sweeps/rlad-ablation.yaml`` (re-running resumes unfinished runs);
+1. the runs of ``benchmarks/sweeps/rlad-ablation.yaml`` (as ``drivelab sweep``), RLAD and DrQ
+   first: re-running the command skips finished runs and resumes unfinished ones from their last
+   checkpoint (``drivelab.training.sweep``), exactly (``drivelab.training.resume_state``);
 2. ``drivelab benchmark nocrash RUN`` for every run (success per traffic level, infractions);
 3. ``drivelab compare`` of the runs (learning curves with 90 % bands, bootstrap intervals) into
    ``benchmarks/results/rlad-ablation/`` plus ``nocrash.md``: NoCrash success per variant and level,
@@ -12,7 +14,45 @@
 were made on another machine and only their small files were brought back).
 
 ``--steps`` (and ``--eval-every``) shrink the budget for a check of the pipeline; such runs go
-to their own runs directory and report directory so they never mix with the real ones.
+to their own runs directory and report directory so they never mix with the real ones
+(``--runs-dir`` and ``--out`` put them elsewhere).
+
+Slices. A command may be stopped (the GPU machine ends each command after 10 minutes and each
+session after 30): ``--time-limit-s T`` stops every run T seconds after the command started, at
+its next safe point, with a checkpoint (replay included), and ``--stop-after-steps N`` after N
+more steps of each run; runs not started by then wait. The command then exits with status 3 and
+says how far the runs got; the same command run again continues them (and, once every run is
+finished, evaluates and reports). ``--variants`` restricts a slice to some variants (RLAD and
+DrQ first, as the issue's priorities).
+
+The experiment on a GPU machine (H100, 16 cores; camera 84x84, Table II's batch 256 and replay
+100 k, ≥ 100 k steps). Nothing on that machine outlives a session (30 minutes of device time at
+most; the machine goes back 30 s after a command unless the next one comes): the run directories,
+whose replays take 2.2 GB each at 100 k × 84x84, cannot be brought back (64 MiB), so runs continue
+across the ≤ 10-minute commands of one session, not across sessions. First measure the update
+(about 2 minutes)::
+
+    python benchmarks/rlad_update.py --device cuda --size 84 256 \
+        --variants plain fast compiled cuda-graphs cuda-graphs-bf16 --profile
+
+then, in the same session, the same command until it exits with 0, each within a minute of the
+last (a slice stops itself after 8 minutes, leaving time for the checkpoints)::
+
+    OMP_NUM_THREADS=1 python benchmarks/rlad_ablation.py --variants rlad drq --workers 6 \
+        --time-limit-s 480 --checkpoint-every 10000 \
+        --hyperparams '{"device": "cuda", "fast_update": true, "compile": "reduce-overhead"}'
+
+(the ablations: ``--variants no-alix no-aux mlp-waypoints --workers 9``; NoCrash and the report:
+the same command without ``--variants``). Six processes share the GPU; ``replay_frames=auto``
+puts the frames of as many of them on the GPU as fit in half its free memory
+(``drivelab.agents.rlad.memory``), the others keep theirs on the host. Every checkpoint writes the
+run's replay (2.2 GB, twice while it is replaced): a slice's own stop writes one, so periodic
+checkpoints are rare; 15 runs' replays (33 GB) fit the 64 GB disk. Budget: six runs of 100 k
+steps are 600 k updates; at the issue's target of 10 ms per update that is 100 minutes of GPU time,
+more than a session holds. Within one session's ~25 minutes of training they reach about
+25 min / (6 × update time) steps each (25 k at 10 ms, 100 k at 2.5 ms): pass ``--steps`` to what
+the measured update allows (with ``--eval-every`` a tenth of it, for the learning curves) so that
+the runs finish, and state the budget reached.
 """
 
 from __future__ import annotations
@@ -20,8 +60,12 @@ from __future__ import annotations
 import argparse
 import json
 import multiprocessing
+import os
+import signal
 import sys
-from concurrent.futures import ProcessPoolExecutor
+import threading
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
 
 import torch
@@ -29,17 +73,30 @@ import torch
 from drivelab.training.checkpoints import file_sha256
 from drivelab.training.compare import group_runs, load_run, write_report
 from drivelab.training.nocrash import INFRACTIONS, LEVELS, NOCRASH_SEED, nocrash
+from drivelab.training.resume_state import StopRequest
 from drivelab.training.stats import summarize
-from drivelab.training.sweep import expand_sweep, run_dirs, run_sweep
+from drivelab.training.sweep import Sweep, expand_sweep, plan, run_cell, run_dirs
 from drivelab.yaml_io import load_yaml
 
 HERE = Path(__file__).parent
 SWEEP = HERE / "sweeps" / "rlad-ablation.yaml"
+UNFINISHED = 3  # exit status of a slice that left runs to continue
+VARIANTS = {  # --variants names → the paper's names (``variant``)
+    "rlad": "RLAD", "drq": "DrQ", "no-alix": "no A-LIX", "no-aux": "no traffic-light loss",
+    "mlp-waypoints": "MLP waypoints",
+}  # fmt: skip
 
 
 def variant(record) -> str:
-    """The paper's name of a run's variant, from the switches in its hyper-parameters."""
+    """The paper's name of a run's variant, from the switches in its hyper-parameters (DrQ: RLAD
+    without A-LIX and the traffic-light loss, with MLP waypoints, as ``DrQConfig``)."""
     hyperparams = record.config.hyperparams or {}
+    if record.config.algo == "drq" or (
+        hyperparams.get("alix") is False
+        and hyperparams.get("aux") is False
+        and hyperparams.get("waypoint_encoder") == "mlp"
+    ):
+        return "DrQ" + (" (no augmentation)" if hyperparams.get("augment") is False else "")
     off = [
         name
         for name, is_off in (
@@ -117,14 +174,114 @@ def _one_thread() -> None:
     torch.set_num_threads(1)  # one evaluation per core: no oversubscription
 
 
-def nocrash_all(directories: list[Path], episodes: int, workers: int) -> dict[Path, dict]:
-    """``nocrash_once`` for every run, ``workers`` runs at a time (fresh interpreters)."""
+def _nocrash_before(run_dir: Path, episodes: int, deadline: float | None) -> dict | None:
+    """``nocrash_once``, or None when ``deadline`` (``time.time()``) passed before it started."""
+    if deadline is not None and time.time() >= deadline:
+        return None
+    return nocrash_once(run_dir, episodes)
+
+
+def nocrash_all(
+    directories: list[Path], episodes: int, workers: int, deadline: float | None = None
+) -> dict[Path, dict | None]:
+    """``nocrash_once`` for every run, ``workers`` runs at a time (fresh interpreters); None for
+    the runs not started before ``deadline``."""
     if workers <= 1:
-        return {d: nocrash_once(d, episodes) for d in directories}
+        return {d: _nocrash_before(d, episodes, deadline) for d in directories}
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_one_thread) as pool:
-        futures = {d: pool.submit(nocrash_once, d, episodes) for d in directories}
+        futures = {d: pool.submit(_nocrash_before, d, episodes, deadline) for d in directories}
         return {d: future.result() for d, future in futures.items()}
+
+
+# --- slices: runs that stop at a deadline or after some steps, and continue when re-run ----------
+def _stop_at(deadline: float, finished: threading.Event) -> None:
+    """From ``deadline`` on, wait until training is under way (its SIGTERM handler, a
+    ``StopRequest``'s, is installed), then send this process one SIGTERM: training stops at its
+    next safe point with a checkpoint (``drivelab.training.run``). Nothing is sent once the job is
+    done, or while it is not training (building, evaluating): a signal there would be lost or
+    would stop an evaluation half-way."""
+    if finished.wait(max(deadline - time.time(), 0.0)):
+        return
+    while not finished.is_set():
+        handler = signal.getsignal(signal.SIGTERM)
+        if isinstance(getattr(handler, "__self__", None), StopRequest):
+            os.kill(os.getpid(), signal.SIGTERM)
+            return
+        finished.wait(0.2)
+
+
+def run_cell_until(job: dict, deadline: float | None) -> dict:
+    """``sweep.run_cell`` for one job, stopped at ``deadline`` (``time.time()``) by ``_stop_at``;
+    a job not started by then is left for the next slice (``"action": "wait"``)."""
+    if deadline is not None and time.time() >= deadline:
+        return {"name": build_name(job), "action": "wait", "ok": False, "error": "deadline", "seconds": 0.0}
+    finished = threading.Event()
+    previous = signal.signal(signal.SIGTERM, lambda signum, frame: None)  # a late timer: ignored
+    if deadline is not None:
+        threading.Thread(target=_stop_at, args=(deadline, finished), daemon=True).start()
+    try:
+        return run_cell(**job)
+    finally:
+        finished.set()
+        signal.signal(signal.SIGTERM, previous)
+
+
+def build_name(job: dict) -> str:
+    return job["config_values"]["name"]
+
+
+def slice_jobs(sweep: Sweep, stop_after_steps: int | None) -> tuple[list[dict], list[str]]:
+    """The sweep's unfinished cells as ``run_cell`` jobs (and the finished ones' names). With
+    ``stop_after_steps``, a job trains at most that many more steps (its config's ``steps``
+    lowered, the final evaluation left for the slice that reaches the full budget)."""
+    jobs, finished = [], []
+    for cell, action in plan(sweep):
+        if action == "skip":
+            finished.append(cell.config.name)
+            continue
+        values, eval_episodes = cell.config.to_dict(), sweep.eval_episodes
+        if stop_after_steps is not None and action in ("train", "restart", "resume"):
+            done = checkpoint_steps(sweep.runs_dir / cell.config.name) if action == "resume" else 0
+            if done + stop_after_steps < cell.config.steps:
+                values["steps"], eval_episodes = done + stop_after_steps, 0
+        jobs.append({"config_values": values, "runs_dir": str(sweep.runs_dir.resolve()), "action": action,
+                     "eval_episodes": eval_episodes})  # fmt: skip
+    return jobs, finished
+
+
+def checkpoint_steps(run_dir: Path) -> int:
+    """Steps of a run's latest checkpoint (0 without one)."""
+    manifest = run_dir / "checkpoints" / "latest.json"
+    return int(json.loads(manifest.read_text())["steps"]) if manifest.is_file() else 0
+
+
+def run_slice(
+    sweep: Sweep, workers: int, deadline: float | None = None, stop_after_steps: int | None = None
+) -> dict[str, list[str]]:
+    """Run the sweep's unfinished cells until ``deadline`` or for ``stop_after_steps`` more steps
+    each; the names of the runs ``finished``, ``stopped`` (to continue), ``failed``."""
+    sweep.runs_dir.mkdir(parents=True, exist_ok=True)
+    jobs, finished = slice_jobs(sweep, stop_after_steps)
+    if workers <= 1:
+        outcomes = [run_cell_until(job, deadline) for job in jobs]
+    else:
+        context = multiprocessing.get_context("spawn")
+        with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+            futures = [pool.submit(run_cell_until, job, deadline) for job in jobs]
+            outcomes = [future.result() for future in as_completed(futures)]
+    status: dict[str, list[str]] = {"finished": list(finished), "stopped": [], "failed": []}
+    full = {cell.config.name: cell.config.steps for cell in sweep.cells}
+    for outcome in outcomes:
+        name = outcome["name"]
+        interrupted = outcome["action"] == "wait" or str(outcome["error"]).startswith("TrainingInterrupted")
+        if not outcome["ok"] and not interrupted:
+            status["failed"].append(f"{name}: {outcome['error']}")
+        elif checkpoint_steps(sweep.runs_dir / name) < full[name] or interrupted:
+            status["stopped"].append(name)
+        else:
+            status["finished"].append(name)
+    return status
 
 
 def main() -> None:
@@ -147,18 +304,45 @@ def main() -> None:
         action="store_true",
         help="rewrite nocrash.md from the runs' nocrash.json (no training, no evaluation)",
     )
+    parser.add_argument("--runs-dir", type=Path, default=None, help="where the run directories go")
+    parser.add_argument("--seeds", type=int, default=None, help="seeds per variant (default: the file's 3)")
+    parser.add_argument("--checkpoint-every", type=int, default=None, help="steps between checkpoints")
+    parser.add_argument(
+        "--time-limit-s", type=float, default=None,
+        help="stop every run this many seconds after the start, with a checkpoint; exit 3 if unfinished",
+    )  # fmt: skip
+    parser.add_argument(
+        "--stop-after-steps", type=int, default=None,
+        help="train each unfinished run at most this many more steps; exit 3 if unfinished",
+    )  # fmt: skip
+    parser.add_argument(
+        "--variants", nargs="+", choices=list(VARIANTS), default=None,
+        help="only these variants' runs (all: NoCrash and the report need every run finished)",
+    )  # fmt: skip
     args = parser.parse_args()
+    start = time.time()
+    deadline = None if args.time_limit_s is None else start + args.time_limit_s
     spec = load_yaml(SWEEP)
     tiny = args.steps is not None
     if tiny:
         spec["base"] = {**spec["base"], "steps": args.steps, "eval_every": args.eval_every or args.steps}
         spec["runs_dir"] = spec["runs_dir"] + f"-{args.steps}steps"
+    if args.runs_dir is not None:
+        spec["runs_dir"] = str(args.runs_dir)
+    if args.seeds is not None:
+        spec["grid"] = {**spec["grid"], "seed": args.seeds}
+    if args.checkpoint_every is not None:
+        spec["base"] = {**spec["base"], "checkpoint_every": args.checkpoint_every}
     if args.hyperparams:
         spec["base"] = {**spec["base"], "hyperparams": json.loads(args.hyperparams)}
     if args.duration_s is not None:
         spec["base"] = {**spec["base"], "env_options": {"duration_s": args.duration_s}}
     out = args.out or HERE / "results" / ("rlad-ablation" + (f"-{args.steps}steps" if tiny else ""))
     sweep = expand_sweep(spec)
+    if args.variants:
+        wanted = {VARIANTS[name] for name in args.variants}
+        cells = tuple(c for c in sweep.cells if variant(c) in wanted)
+        sweep = Sweep(cells, sweep.runs_dir, sweep.eval_episodes)
     directories = run_dirs(sweep)
     command = "python " + " ".join(sys.argv)
     if args.report_only:
@@ -168,17 +352,30 @@ def main() -> None:
         report.mkdir(parents=True, exist_ok=True)
         made = "runs, evaluations and their machine: report.md"
     else:
-        outcomes = run_sweep(sweep, workers=args.workers)
-        failed = [o["name"] for o in outcomes if not o["ok"]]
-        if failed:
-            sys.exit(f"runs failed: {', '.join(failed)} (logs in {sweep.runs_dir / '.sweep-logs'})")
-        reports = nocrash_all(directories, args.episodes, args.workers)
+        status = run_slice(sweep, args.workers, deadline, args.stop_after_steps)
+        if status["failed"]:
+            sys.exit(f"runs failed: {'; '.join(status['failed'])} (logs in {sweep.runs_dir / '.sweep-logs'})")
+        if status["stopped"]:
+            steps = {name: checkpoint_steps(sweep.runs_dir / name) for name in status["stopped"]}
+            print(f"{len(status['finished'])} runs finished; unfinished (checkpointed steps): "
+                  + ", ".join(f"{name} {n:,}" for name, n in steps.items())
+                  + f". Run the same command again to continue ({time.time() - start:.0f} s).")  # fmt: skip
+            sys.exit(UNFINISHED)
+        if args.variants:
+            print(f"{len(directories)} runs of {', '.join(args.variants)} finished; NoCrash and the "
+                  "report run without --variants")  # fmt: skip
+            return
+        evaluated = nocrash_all(directories, args.episodes, args.workers, deadline)
+        if any(report is None for report in evaluated.values()):
+            print("NoCrash unfinished at the time limit: run the same command again to continue")
+            sys.exit(UNFINISHED)
+        reports = {d: report for d, report in evaluated.items() if report is not None}
         records = [load_run(d) for d in directories]
         report = write_report(records, out, title="RLAD ablation in the town", command=command)
         made = "machine: report.md"
     episodes = {r["episodes_per_level"] for r in reports.values()}
     text = [
-        "# NoCrash (test town): RLAD and its ablations",
+        "# NoCrash (test town): RLAD, DrQ and RLAD's ablations",
         "",
         f"Command: `{command}` ({made})  ",
         f"{', '.join(map(str, sorted(episodes)))} episodes per traffic level and run, on the test town's "

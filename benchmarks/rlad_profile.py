@@ -53,6 +53,9 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--top", type=int, default=15, help="operators listed per table")
     parser.add_argument("--replay-frames", default="auto", help="auto, host or device (RLAD's replay_frames)")
+    parser.add_argument(
+        "--hyperparams", default="{}", help='JSON of more RLAD hyper-parameters, e.g. {"fast_update": true}'
+    )
     args = parser.parse_args()
     torch.set_num_threads(1)
     cuda = args.device.startswith("cuda")
@@ -73,6 +76,7 @@ def main() -> None:
             "buffer_size": 4 * args.batch_size,
             "device": args.device,
             "replay_frames": args.replay_frames,
+            **json.loads(args.hyperparams),
         },
         env,
     )
@@ -106,10 +110,12 @@ def main() -> None:
         "size": args.size,
         "batch_size": args.batch_size,
         "replay_frames": frames_on,
+        "hyperparams": json.loads(args.hyperparams),
         "ms": rows,
     }
     RESULTS.mkdir(exist_ok=True)
-    name = f"rlad_profile_{'gpu' if cuda else 'cpu'}_{args.size}_{frames_on}"
+    fast = "_fast" if agent.config.fast_update else ""
+    name = f"rlad_profile_{'gpu' if cuda else 'cpu'}_{args.size}_{frames_on}{fast}"
     (RESULTS / f"{name}.json").write_text(json.dumps(result, indent=2))
     lines = [
         f"# Where an RLAD update spends its time ({'GPU' if cuda else 'CPU'})",

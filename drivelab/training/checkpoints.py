@@ -67,12 +67,15 @@ def save_checkpoint(model, run_dir: Path, config: RunConfig, save_replay: bool) 
 
 
 def _replay_fits(model) -> bool:
-    """Whether the model has a replay buffer small enough to checkpoint (``REPLAY_LIMIT_BYTES``)."""
+    """Whether the model has a replay buffer small enough to checkpoint (``REPLAY_LIMIT_BYTES``, or
+    the model's own ``replay_checkpoint_limit_bytes``: RLAD's, whose long runs resume exactly only
+    with their replay)."""
     if getattr(model, "replay_buffer", None) is None:
         return False
     observations = model.replay_buffer.observations  # a dict of arrays for Dict observations
     arrays = observations.values() if isinstance(observations, dict) else [observations]
-    return sum(array.nbytes for array in arrays) * 2 < REPLAY_LIMIT_BYTES
+    limit = getattr(model, "replay_checkpoint_limit_bytes", REPLAY_LIMIT_BYTES)
+    return sum(array.nbytes for array in arrays) * 2 < limit
 
 
 def old_format_error(run_dir: Path) -> UsageError:

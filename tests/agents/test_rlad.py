@@ -231,3 +231,19 @@ def test_a_checkpointed_replay_loads_where_the_loading_agent_keeps_frames(tmp_pa
         assert isinstance(agent.replay_buffer.frames, kind), choice
         frames = np.asarray(agent.replay_buffer.frames)
         np.testing.assert_array_equal(frames, saved.replay_buffer.frames.numpy())
+
+
+def test_checkpoints_keep_the_replay_of_a_long_run(monkeypatch):
+    """RLAD's replay is checkpointed up to its own limit (100 k transitions at 84x84: 2.2 GB), above
+    the 512 MiB under which other agents' replays are; without it a resume would start empty."""
+    from drivelab.training import checkpoints
+
+    records = int(100_000 * 1.05) + 1
+    assert 2 * records * 3 * 84 * 84 < RLAD.replay_checkpoint_limit_bytes < 2 * records * 3 * 256 * 256
+    agent = _agent()
+    frames = agent.replay_buffer.observations["frames"].nbytes
+    assert checkpoints._replay_fits(agent)
+    monkeypatch.setattr(checkpoints, "REPLAY_LIMIT_BYTES", frames)  # the default limit: too small
+    assert checkpoints._replay_fits(agent)
+    monkeypatch.setattr(type(agent), "replay_checkpoint_limit_bytes", frames)
+    assert not checkpoints._replay_fits(agent)

@@ -40,6 +40,15 @@ SETUPS = {
                               "hyperparams": {"learning_starts": 30, "buffer_size": 500, "batch_size": 16}},
     "ppo_own-4-worlds": {"algo": "ppo_own", "action": "continuous", "steps": 256, "n_envs": 4,
                          "hyperparams": {"n_steps": 8, "batch_size": 16, "n_epochs": 2}},
+    # pixel SAC: the replay (frames, stacks, the open episode) is part of the checkpoint
+    **{name: {"algo": algo, "env": "town", "obs": ["camera:width=24:height=24:stack=3", "waypoints",
+                                                     "measurements:stack=3"],
+              "action": "target_speed", "reward": "roach", "traffic": "empty", "steps": 90,
+              "env_options": {"duration_s": 3},
+              "hyperparams": {"learning_starts": 20, "batch_size": 4, "buffer_size": 64, "hidden_size": 32,
+                              "log_interval": 10, **extra}}
+       for name, algo, extra in (("rlad", "rlad", {}), ("drq", "drq", {}),
+                                 ("rlad-fast", "rlad", {"fast_update": True}))},
 }  # fmt: skip
 
 
@@ -115,13 +124,11 @@ def _assert_same_run(reference, resumed, config) -> None:
         ("dueling_ddqn", 77, signal.SIGTERM, 76),
         ("ppo_own", 75, signal.SIGINT, 64),
         ("a2c_own", 75, signal.SIGTERM, 64),
-        ("ppo_own-4-worlds", 100, signal.SIGINT, 96),
-        (
-            "dueling_ddqn-3-worlds",
-            77,
-            signal.SIGTERM,
-            75,
-        ),  # safe points every 3 steps  # rollouts of 8 steps x 4 worlds
+        ("ppo_own-4-worlds", 100, signal.SIGINT, 96),  # rollouts of 8 steps x 4 worlds
+        ("dueling_ddqn-3-worlds", 77, signal.SIGTERM, 75),  # safe points every 3 steps
+        ("rlad", 47, signal.SIGTERM, 46),  # mid-episode, the replay half full
+        ("drq", 47, signal.SIGINT, 46),
+        ("rlad-fast", 47, signal.SIGTERM, 46),
     ],
 )
 def test_interrupted_and_resumed_run_equals_the_uninterrupted_one(

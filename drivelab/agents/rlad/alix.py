@@ -14,6 +14,14 @@ ND is the normalised discontinuity of the feature gradient that reaches that lay
 gradient after the mixing has smoothed it), so gradient descent raises S while ND > β and lowers
 it otherwise, and ND settles near β. The earlier layers use the same S without producing its
 gradient.
+
+``shift_bilinear_tensor`` is the same resampling with the shift given as a tensor (on the
+features' device), for the fast update (sac.py, ``fast_update``): no value goes back to Python,
+so a GPU never waits for the host and the update can be compiled or captured in a CUDA graph. The
+two integer windows around the shift are gathered with ``index_select`` at indices computed on the
+device and clamped to the edge (the replicate padding, without a padding op), and mixed with the
+same association as ``shift_bilinear``; the result differs from it only by the rounding of the
+shift itself (float32 on the device against a Python double, ~1e-7).
 """
 
 from __future__ import annotations
@@ -63,7 +71,7 @@ class DualStrengthGradient(torch.autograd.Function):
 
     @staticmethod
     def backward(ctx, gradient: torch.Tensor):
-        dual = ctx.target - normalized_discontinuity(gradient)
+        dual = ctx.target - normalized_discontinuity(gradient.float())  # float32 under bf16 autocast too
         return gradient, dual.reshape(ctx.strength_shape).to(gradient.dtype), None
 
 
@@ -87,23 +95,56 @@ def shift_bilinear(features: torch.Tensor, shift_px: tuple[float, float]) -> tor
     return (1.0 - fy) * upper + fy * lower
 
 
+def _mix_axis(features: torch.Tensor, dim: int, shift: torch.Tensor) -> torch.Tensor:
+    """``features`` resampled along ``dim`` at positions i + ``shift``: linear interpolation
+    between the two integer windows around the shift, gathered at indices computed on the device
+    and clamped to the edge (replicate padding)."""
+    size = features.shape[dim]
+    floor = torch.floor(shift)
+    fraction = shift - floor
+    first = torch.arange(size, device=features.device) + floor.long()
+    lower = features.index_select(dim, first.clamp(0, size - 1))
+    upper = features.index_select(dim, (first + 1).clamp(0, size - 1))
+    return (1.0 - fraction) * lower + fraction * upper
+
+
+def shift_bilinear_tensor(features: torch.Tensor, shift_px: torch.Tensor) -> torch.Tensor:
+    """``shift_bilinear`` with the (row, column) shift as a tensor (2,) on the features' device;
+    no host synchronisation. (B, C, H, W) → (B, C, H, W)."""
+    return _mix_axis(_mix_axis(features, 3, shift_px[1]), 2, shift_px[0])
+
+
 def adaptive_local_signal_mixing(
     features: torch.Tensor,
     strength: torch.Tensor,
-    generator: torch.Generator,
+    generator: torch.Generator | None,
     learn_strength: bool,
     target: float = TARGET_DISCONTINUITY,
+    offset: torch.Tensor | None = None,
 ) -> torch.Tensor:
     """One A-LIX layer in training mode (see the module docstring).
 
     :param features: feature maps (B, C, H, W) after a conv + ReLU.
     :param strength: the shared strength S (a parameter, clamped to [0, 1] by the caller).
-    :param generator: draws the random offset.
+    :param generator: draws the random offset (unused when ``offset`` is given).
     :param learn_strength: this layer produces S's dual gradient (the encoder's last layer).
     :param target: β, the target normalised discontinuity.
+    :param offset: the offset (2,) in [−1, 1]² already drawn, on the features' device: on a
+        GPU, or when compiled, the shift is then computed and applied on the device
+        (``shift_bilinear_tensor``); eager on the CPU, as with a drawn offset (the same numbers).
     """
     if learn_strength:
         features = DualStrengthGradient.apply(features, strength, target)
-    offset = torch.rand(2, generator=generator) * 2.0 - 1.0
+    if offset is not None and (features.device.type != "cpu" or torch.compiler.is_compiling()):
+        return shift_bilinear_tensor(features, offset * (MAX_SHIFT_PX * strength.detach()))
+    if offset is None:
+        offset = torch.rand(2, generator=generator) * 2.0 - 1.0
+    # on the CPU reading the numbers costs nothing, and shifted slices beat index_select (eager)
     scale = MAX_SHIFT_PX * float(strength.detach())
     return shift_bilinear(features, (float(offset[0]) * scale, float(offset[1]) * scale))
+
+
+def draw_offsets(generator: torch.Generator, layers: int) -> torch.Tensor:
+    """The offsets (``layers``, 2) in [−1, 1]² that ``layers`` A-LIX layers draw from ``generator``
+    one after another (the same numbers as the layers' own draws)."""
+    return torch.stack([torch.rand(2, generator=generator) * 2.0 - 1.0 for _ in range(layers)])

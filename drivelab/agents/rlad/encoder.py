@@ -81,11 +81,17 @@ class ImageEncoder(nn.Module):
         self.strength = nn.Parameter(torch.tensor(float(alix_init))) if alix else None
         self.generator = torch.Generator().manual_seed(0)  # the agent hands in its own
 
-    def conv_features(self, images: torch.Tensor) -> torch.Tensor:
-        """The last feature map, flattened; pixels are scaled to [−0.5, 0.5]."""
+    def conv_features(self, images: torch.Tensor, offsets: torch.Tensor | None = None) -> torch.Tensor:
+        """The last feature map, flattened; pixels are scaled to [−0.5, 0.5].
+
+        :param images: (B, C, H, W), uint8 (or float in [0, 255]).
+        :param offsets: A-LIX's offsets (9, 2), already drawn (``alix.draw_offsets``), on the
+            images' device: the mixing then runs without a host synchronisation, and the caller
+            has clamped S to [0, 1] (the fast update). None: each layer draws from ``generator``.
+        """
         x = images.float() / 255.0 - 0.5
         mixing = self.alix and self.training
-        if mixing:
+        if mixing and offsets is None:
             with torch.no_grad():
                 self.strength.clamp_(0.0, 1.0)
         last = len(self.convs) - 1
@@ -93,9 +99,10 @@ class ImageEncoder(nn.Module):
             x = torch.relu(conv(x))
             if mixing:
                 x = adaptive_local_signal_mixing(
-                    x, self.strength, self.generator, learn_strength=index == last, target=self.alix_target
-                )
+                    x, self.strength, self.generator, learn_strength=index == last, target=self.alix_target,
+                    offset=None if offsets is None else offsets[index],
+                )  # fmt: skip
         return x.flatten(1)
 
-    def forward(self, images: torch.Tensor) -> torch.Tensor:
-        return self.head(self.conv_features(images))
+    def forward(self, images: torch.Tensor, offsets: torch.Tensor | None = None) -> torch.Tensor:
+        return self.head(self.conv_features(images, offsets))

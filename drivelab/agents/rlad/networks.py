@@ -38,10 +38,14 @@ class StateEncoder(nn.Module):
         self.features = IMAGE_FEATURES + MEASUREMENT_FEATURES + WAYPOINT_FEATURES
 
     def forward(
-        self, images: torch.Tensor, waypoints: torch.Tensor, measurements: torch.Tensor
+        self,
+        images: torch.Tensor,
+        waypoints: torch.Tensor,
+        measurements: torch.Tensor,
+        offsets: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """(h, image latent ĩ)."""
-        image = self.image(images)
+        """(h, image latent ĩ); ``offsets``: A-LIX's pre-drawn offsets (``ImageEncoder.conv_features``)."""
+        image = self.image(images, offsets)
         return torch.cat([image, self.measurements(measurements), self.waypoints(waypoints)], dim=1), image
 
 
@@ -66,11 +70,15 @@ class Actor(nn.Module):
         span = self.log_std_max - self.log_std_min
         return mean, self.log_std_min + 0.5 * span * (torch.tanh(log_std) + 1.0)
 
-    def sample(self, h: torch.Tensor, generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
-        """(a in [−1, 1], log π(a|h)) by the reparameterisation u = μ + σ·ε."""
+    def sample(
+        self, h: torch.Tensor, generator: torch.Generator | None, noise: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """(a in [−1, 1], log π(a|h)) by the reparameterisation u = μ + σ·ε; ε (B, |A|) is
+        ``noise`` when given (already drawn, on h's device), else drawn from ``generator``."""
         mean, log_std = self(h)
-        distribution = torch.distributions.Normal(mean, log_std.exp())
-        noise = torch.randn(mean.shape, generator=generator).to(mean.device)  # drawn on the CPU: seeded
+        distribution = torch.distributions.Normal(mean, log_std.exp(), validate_args=False)
+        if noise is None:
+            noise = torch.randn(mean.shape, generator=generator).to(mean.device)  # drawn on the CPU: seeded
         unsquashed = mean + log_std.exp() * noise
         return torch.tanh(unsquashed), squashed_log_prob(distribution, unsquashed)
 

@@ -30,6 +30,8 @@ puts the frames where this buffer's ``frame_device`` says.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 import torch
 
@@ -82,6 +84,7 @@ class FrameReplayBuffer:
         self.written = 0  # records written so far
         self.position, self.stored = 0, 0
         self.current: np.ndarray | None = None  # record numbers of the current observation's stack
+        self.on_allocate: Callable[[], None] | None = None  # called once the device frames exist
 
     # --- writing -------------------------------------------------------------------------------
     def _write(self, frame: np.ndarray, waypoints, measurements, label: int) -> int:
@@ -90,7 +93,7 @@ class FrameReplayBuffer:
             self.frames[slot] = frame
         else:
             if not isinstance(self.frames, torch.Tensor):  # the first write: allocate on the device
-                self.frames = torch.as_tensor(self.frames, device=self.frame_device)
+                self._frames_to(self.frame_device)
             self.frames[slot] = torch.as_tensor(frame)
         self.waypoints[slot] = waypoints
         self.measurements[slot], self.labels[slot] = measurements, label
@@ -184,7 +187,7 @@ class FrameReplayBuffer:
     def __setstate__(self, state: dict) -> None:
         """Pickles of earlier drivelab versions (``drivelab convert-run`` reads them; some predate
         ``frame_device``)."""
-        self.__dict__.update({"frame_device": None, **state})
+        self.__dict__.update({"frame_device": None, "on_allocate": None, **state})
 
     def move_frames(self, device: torch.device | str | None) -> None:
         """Keep the frames on ``device`` from now on (None: the host, as numpy)."""
@@ -193,7 +196,12 @@ class FrameReplayBuffer:
             if isinstance(self.frames, torch.Tensor):
                 self.frames = self.frames.cpu().numpy()
         elif self.written > 0 or isinstance(self.frames, torch.Tensor):
-            self.frames = torch.as_tensor(self.frames, device=self.frame_device)
+            self._frames_to(self.frame_device)
+
+    def _frames_to(self, device: torch.device) -> None:
+        self.frames = torch.as_tensor(self.frames, device=device)
+        if self.on_allocate is not None:
+            self.on_allocate()
 
     # --- memory --------------------------------------------------------------------------------
     @property

@@ -17,7 +17,10 @@ two simulation steps, as the paper's CARLA runs; one agent step is one environme
 
 from __future__ import annotations
 
+import functools
 import math
+import warnings
+import weakref
 from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,6 +34,8 @@ from torch import nn
 
 from drivelab.agents.base import OwnAgent
 from drivelab.agents.rlad.augmentation import default_pad, random_shift
+from drivelab.agents.rlad.fast import COMPILE_MODES, compile_unavailable, draw_update_noise
+from drivelab.agents.rlad.memory import DeviceMemoryLedger, cuda_free_bytes, device_key
 from drivelab.agents.rlad.networks import Actor, StateEncoder, TrafficLightHead, TwinCritic
 from drivelab.agents.rlad.replay import RECORD_SLACK, UNKNOWN_LABEL, FrameReplayBuffer, label_index
 from drivelab.agents.rlad.waypoints import WAYPOINT_ENCODERS
@@ -68,7 +73,15 @@ class RLADConfig:
     :param device: "auto" (CUDA when available, else CPU), "cpu", "cuda" or "cuda:N".
     :param replay_frames: where the replay keeps its frames: "host" (numpy), "device" (a tensor on
         ``device``, gathered there) or "auto" (the device when it is a GPU with room for them in
-        half its free memory, else the host).
+        half its free memory, else the host; the processes of one machine share the decision
+        through ``memory.DeviceMemoryLedger``, so several runs on one GPU do not overcommit it).
+    :param fast_update: the update without host round trips, fused Adam (``fast.py`` says what
+        it changes: the same update to float32 rounding).
+    :param compile: with ``fast_update``, ``torch.compile`` mode of its pure-tensor parts: "none",
+        "default", "reduce-overhead" (CUDA graphs on a GPU) or "max-autotune".
+    :param bf16: with ``fast_update``, bfloat16 autocast of the forward passes (changes the result
+        at ~1e-2 relative; off by default).
+    :param channels_last: with ``fast_update``, the image encoder's convolutions in NHWC.
     """
 
     buffer_size: int = 100_000
@@ -94,6 +107,10 @@ class RLADConfig:
     log_interval: int = 500
     device: str = "auto"
     replay_frames: str = "auto"
+    fast_update: bool = False
+    compile: str = "none"
+    bf16: bool = False
+    channels_last: bool = False
 
     def check(self, algo: str) -> None:
         if min(self.buffer_size, self.train_freq, self.log_interval) < 1 or self.batch_size < 2:
@@ -115,6 +132,11 @@ class RLADConfig:
                 f"{algo!r}: replay_frames must be one of {', '.join(REPLAY_FRAMES)}, "
                 f"got {self.replay_frames!r}"
             )
+        if self.compile not in COMPILE_MODES:
+            modes = ", ".join(COMPILE_MODES)
+            raise UsageError(f"{algo!r}: compile must be one of {modes}, got {self.compile!r}")
+        if not self.fast_update and (self.compile != "none" or self.bf16 or self.channels_last):
+            raise UsageError(f"{algo!r}: compile, bf16 and channels_last need fast_update=true")
         if self.waypoint_encoder not in WAYPOINT_ENCODERS:
             raise UsageError(
                 f"{algo!r}: waypoint_encoder must be one of {', '.join(WAYPOINT_ENCODERS)}, "
@@ -151,6 +173,9 @@ class RLAD(OwnAgent):
     """SAC from pixels as RLAD (seed 000); ``config`` switches its parts off for the ablations."""
 
     config_class = RLADConfig
+    # checkpoints keep the replay up to this size (run.py's default is 512 MiB): 100 k transitions
+    # at 84x84 take 2.2 GB, and a long run resumes exactly only with them (at 256x256, 21 GB do not)
+    replay_checkpoint_limit_bytes = 16 * 2**30
 
     def _build(self) -> None:
         error = observation_error(self.observation_space)
@@ -182,16 +207,20 @@ class RLAD(OwnAgent):
         groups = [{"params": learned}]
         if strength:  # S: its own Adam group (A-LIX's dual step)
             groups.append({"params": strength, "lr": config.alix_learning_rate, "betas": (0.5, 0.999)})
-        self.critic_optimizer = torch.optim.Adam(groups, lr=config.learning_rate)
-        self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=config.learning_rate)
-        self.alpha_optimizer = torch.optim.Adam([self.log_alpha], lr=config.learning_rate)
+        fused = {"fused": True} if config.fast_update else {}
+        self.critic_optimizer = torch.optim.Adam(groups, lr=config.learning_rate, **fused)
+        self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=config.learning_rate, **fused)
+        self.alpha_optimizer = torch.optim.Adam([self.log_alpha], lr=config.learning_rate, **fused)
+        self._build_fast_update()
         height, width, channels = space["camera"].shape
         self.pad = config.augment_pad or default_pad(min(height, width))
         frame_shape = (3, height, width)
+        self._frames_reservation: weakref.finalize | None = None
         self.replay_buffer = FrameReplayBuffer(
             config.buffer_size, frame_shape, channels // 3, space["waypoints"].shape,
             space["measurements"].shape[0], actions, self._frame_device(frame_shape),
         )  # fmt: skip
+        self.replay_buffer.on_allocate = self._frames_allocated
         self.low, self.high = self.action_space.low, self.action_space.high
         self._last_obs = None
         self.episode_returns: deque[float] = deque(maxlen=100)
@@ -203,13 +232,46 @@ class RLAD(OwnAgent):
             return self.device
         if choice == "host" or self.device.type != "cuda":
             return None
+        if self._frames_reservation is not None:  # deciding again (a loaded replay): release the last
+            self._frames_reservation()
         records = self.config.buffer_size * (1 + RECORD_SLACK) + 1
-        free, _ = torch.cuda.mem_get_info(self.device)
-        return self.device if records * math.prod(frame_shape) < free / 2 else None
+        ledger = DeviceMemoryLedger()
+        free = functools.partial(cuda_free_bytes, self.device)
+        token = ledger.reserve(device_key(self.device), int(records * math.prod(frame_shape)), free)
+        if token is None:
+            self._frames_reservation = None
+            return None
+        self._frames_reservation = weakref.finalize(self, ledger.release, token)  # also at exit
+        self._frames_claim = (ledger, token)
+        return self.device
+
+    def _frames_allocated(self) -> None:
+        """The replay allocated its device frames: the ledger counts them as taken, not pending."""
+        if self._frames_reservation is not None and self._frames_reservation.alive:
+            ledger, token = self._frames_claim
+            ledger.allocated(token)
+
+    def _build_fast_update(self) -> None:
+        """The fast update's objectives, compiled when ``compile`` asks and inductor can
+        (``fast.py``); the encoder in NHWC when ``channels_last``."""
+        config = self.config
+        self._critic_objective_fn, self._actor_objective_fn = self._critic_objective, self._actor_objective
+        if config.channels_last:
+            self.encoder.image.convs.to(memory_format=torch.channels_last)
+        if config.compile == "none":
+            return
+        reason = compile_unavailable(self.device)
+        if reason is not None:
+            warnings.warn(f"{self.algo}: {reason}; the fast update runs without torch.compile", stacklevel=2)
+            return
+        mode = None if config.compile == "default" else config.compile
+        self._critic_objective_fn = torch.compile(self._critic_objective, mode=mode)
+        self._actor_objective_fn = torch.compile(self._actor_objective, mode=mode)
 
     def load_replay_buffer(self, path: str | Path) -> None:
         """A checkpointed replay, its frames placed as this agent's ``replay_frames`` says."""
         super().load_replay_buffer(path)
+        self.replay_buffer.on_allocate = self._frames_allocated
         self.replay_buffer.move_frames(self._frame_device(self.replay_buffer.frames.shape[1:]))
 
     def _modules(self) -> dict[str, nn.Module | torch.optim.Optimizer]:
@@ -269,8 +331,11 @@ class RLAD(OwnAgent):
         return tensors
 
     def train_step(self, batch: dict[str, np.ndarray] | None = None) -> dict[str, float]:
-        """One update of critics + encoder (+ auxiliary head), actor, temperature and targets."""
+        """One update of critics + encoder (+ auxiliary head), actor, temperature and targets
+        (the fast one, ``_fast_update``, with ``fast_update``)."""
         config = self.config
+        if config.fast_update:
+            return self._floats(self._fast_update(batch))
         if batch is None:
             batch = self.replay_buffer.sample(config.batch_size, self.rng)
         t = self._batch_tensors(batch)
@@ -314,6 +379,105 @@ class RLAD(OwnAgent):
             metrics["alix_strength"] = self.encoder.image.strength.item()
         return metrics
 
+    # --- the fast update (fast.py) ------------------------------------------------------------
+    def _critic_objective(
+        self, t: dict[str, torch.Tensor], noise: dict[str, torch.Tensor | None], alpha: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor, dict[str, torch.Tensor]]:
+        """Critic (eq. 1, 2) + auxiliary (eq. 4) loss of the fast update, pure tensor code:
+        (loss, h detached (B, 304), metrics as 0-dim tensors)."""
+        config = self.config
+        with torch.autocast(self.device.type, torch.bfloat16, enabled=config.bf16):
+            with torch.no_grad():
+                next_h, _ = self.encoder(
+                    t["next_images"], t["next_waypoints"], t["next_measurements"], noise["next_offsets"]
+                )
+                next_action, next_log_prob = self.actor.sample(next_h, None, noise["next_noise"])
+                next_q = torch.min(*self.critic_target(next_h, next_action)) - alpha * next_log_prob
+                target = t["rewards"] + config.gamma * (1.0 - t["terminated"]) * next_q.float()
+            h, image = self.encoder(t["images"], t["waypoints"], t["measurements"], noise["offsets"])
+            q1, q2 = self.critic(h, t["actions"])
+            q1, q2 = q1.float(), q2.float()
+            critic_loss = nn.functional.mse_loss(q1, target) + nn.functional.mse_loss(q2, target)
+            loss, metrics = critic_loss, {"critic_loss": critic_loss.detach(), "q_mean": q1.detach().mean()}
+            if config.aux:  # the masked mean over labelled samples (fast.py)
+                labels = t["labels"]
+                known = labels != UNKNOWN_LABEL
+                count = known.sum().clamp(min=1)
+                logits = self.traffic_light_head(image).float()
+                total = nn.functional.cross_entropy(
+                    logits, labels, ignore_index=UNKNOWN_LABEL, reduction="sum"
+                )
+                aux_loss = total / count  # cross_entropy's mean, 0 without a labelled sample
+                loss = loss + config.aux_weight * aux_loss
+                accuracy = ((logits.detach().argmax(dim=1) == labels) & known).sum() / count
+                metrics.update(aux_loss=aux_loss.detach(), aux_accuracy=accuracy)
+        return loss, h.detach(), metrics
+
+    def _actor_objective(
+        self, h: torch.Tensor, noise: torch.Tensor, alpha: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Actor loss (eq. 3) of the fast update on the detached state, the critics read through
+        detached parameters: (loss, log π (B,) detached)."""
+        with torch.autocast(self.device.type, torch.bfloat16, enabled=self.config.bf16):
+            action, log_prob = self.actor.sample(h, None, noise)
+            fixed = {name: p.detach() for name, p in self.critic.named_parameters()}
+            q1, q2 = torch.func.functional_call(self.critic, fixed, (h, action))
+            actor_loss = (alpha * log_prob.float() - torch.min(q1, q2).float()).mean()
+        return actor_loss, log_prob.detach().float()
+
+    def _fast_update(self, batch: dict[str, np.ndarray] | None = None) -> dict[str, torch.Tensor]:
+        """``train_step``'s update, fast (``fast.py``); metrics as 0-dim tensors on the device."""
+        config, device = self.config, self.device
+        if batch is None:
+            batch = self.replay_buffer.sample(config.batch_size, self.rng)
+        batch_size = len(batch["actions"])
+        layers = len(self.encoder.image.convs) if config.alix else 0
+        pad = self.pad if config.augment else 0
+        drawn = draw_update_noise(self.generator, batch_size, self.low.shape[0], pad, layers)
+        noise = {key: None if v is None else v.to(device, non_blocking=True) for key, v in drawn.items()}
+        t = {key: torch.as_tensor(value).to(device, non_blocking=True) for key, value in batch.items()}
+        if pad:
+            t["images"] = random_shift(t["images"], pad, None, noise["shifts"])
+            t["next_images"] = random_shift(t["next_images"], pad, None, noise["next_shifts"])
+        if config.channels_last:
+            for key in ("images", "next_images"):
+                t[key] = t[key].contiguous(memory_format=torch.channels_last)
+        if config.compile == "reduce-overhead" and device.type == "cuda":
+            torch.compiler.cudagraph_mark_step_begin()  # the last update's graph outputs are dead
+        self.encoder.train()
+        if config.alix:
+            with torch.no_grad():
+                self.encoder.image.strength.clamp_(0.0, 1.0)
+        alpha = self.log_alpha.detach().exp()
+        loss, h, metrics = self._critic_objective_fn(t, noise, alpha)
+        self.critic_optimizer.zero_grad()
+        loss.backward()
+        self.critic_optimizer.step()
+        actor_loss, log_prob = self._actor_objective_fn(h, noise["noise"], alpha)
+        alpha_loss = (self.log_alpha.exp() * (-log_prob - self.target_entropy)).mean()
+        self.actor_optimizer.zero_grad()
+        self.alpha_optimizer.zero_grad()
+        (actor_loss + alpha_loss).backward()  # disjoint parameters: the same gradients as two backwards
+        self.actor_optimizer.step()
+        self.alpha_optimizer.step()
+        with torch.no_grad():  # θ̄ ← τθ + (1 − τ)θ̄
+            targets, online = list(self.critic_target.parameters()), list(self.critic.parameters())
+            torch._foreach_lerp_(targets, online, config.tau)
+        metrics = {key: value.clone() for key, value in metrics.items()}  # graph outputs are reused
+        metrics.update(actor_loss=actor_loss.detach().clone(), alpha=self.log_alpha.detach().exp(),
+                       entropy=-log_prob.mean())  # fmt: skip
+        if config.alix:
+            metrics["alix_strength"] = self.encoder.image.strength.detach().clone()
+        return metrics
+
+    @staticmethod
+    def _floats(metrics: dict[str, torch.Tensor]) -> dict[str, float]:
+        """Tensor metrics → floats with one host synchronisation."""
+        if not metrics:
+            return {}
+        values = torch.stack([value.float() for value in metrics.values()]).tolist()
+        return dict(zip(metrics, values, strict=True))
+
     def _record(self, obs: dict, info: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
         """What the replay keeps of an observation: newest frame (3, H, W), waypoints,
         measurements, and the traffic-light label of ``info``."""
@@ -336,7 +500,7 @@ class RLAD(OwnAgent):
             replay.start_episode(*self._record(self._last_obs, info))
         callback = self._start_callback(callback)
         callback.on_training_start(locals(), globals())
-        metrics: dict[str, float] = {}
+        metrics: dict[str, Any] = {}  # the fast update's are tensors until logged
         while self.num_timesteps < target_steps:
             callback.on_rollout_start()  # a safe point: nothing is half-done (contract in base.py)
             if self.num_timesteps < config.learning_starts:
@@ -357,9 +521,10 @@ class RLAD(OwnAgent):
             self._last_obs = new_obs
             ready = self.num_timesteps >= config.learning_starts and replay.size >= config.batch_size
             if ready and self.num_timesteps % config.train_freq == 0:
-                metrics = self.train_step()
+                metrics = self._fast_update() if config.fast_update else self.train_step()
             if self.num_timesteps % config.log_interval == 0:
-                self._log_progress(metrics, start_steps, start_time)
+                logged = self._floats(metrics) if config.fast_update else metrics
+                self._log_progress(logged, start_steps, start_time)
         callback.on_training_end()
         return self
 
