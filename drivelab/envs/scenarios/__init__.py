@@ -5,7 +5,16 @@ handed to them; nothing below this package looks a scenario up by name."""
 
 from __future__ import annotations
 
-from drivelab.envs.scenarios import circuits, highway, intersection, merge, racetrack, roundabout, town
+from drivelab.envs.scenarios import (
+    blocks,
+    circuits,
+    highway,
+    intersection,
+    merge,
+    racetrack,
+    roundabout,
+    town,
+)
 from drivelab.envs.scenarios.circuits import SEED_TABLES
 from drivelab.errors import UsageError
 from drivelab.world.scenario import Scenario
@@ -24,6 +33,7 @@ SCENARIOS: dict[str, Scenario] = {
         town.SCENARIO,
         circuits.FOLLOW_LINE,
         circuits.FOLLOW_LANE,
+        blocks.SCENARIO,
     )
 }
 

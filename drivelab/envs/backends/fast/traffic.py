@@ -612,14 +612,18 @@ def front_distance(v: np.ndarray, i: int, j: int) -> float:
 
 
 @njit(cache=True)
-def enforce_road_rules(v: np.ndarray, lanes: np.ndarray) -> None:
+def enforce_road_rules(v: np.ndarray, lanes: np.ndarray, release_cap_mps: float = np.inf) -> None:
     """RegulatedRoad.enforce_road_rules: release the vehicles that yielded (highway-env's
     YIELD_DURATION is 0: they yield until the next regulation step), then, for each pair that may
-    conflict, the one on the lower-priority lane (or behind) stops."""
+    conflict, the one on the lower-priority lane (or behind) stops.
+
+    :param release_cap_mps: a released vehicle's target speed is its lane's speed limit, at most
+        this (the procedural maps' traffic cruises below the limit; inf: highway-env's rule)."""
     n = v.shape[0]
     for i in range(n):
         if v[i, YIELDING] > 0:
-            v[i, TARGET_SPEED] = lanes[int(v[i, LANE]), SPEED_LIMIT]
+            limit = lanes[int(v[i, LANE]), SPEED_LIMIT]
+            v[i, TARGET_SPEED] = release_cap_mps if limit > release_cap_mps else limit  # NaN kept
             v[i, YIELDING] = 0.0
     for i in range(n - 1):
         if v[i, KIND] == OBSTACLE:
@@ -639,12 +643,19 @@ def enforce_road_rules(v: np.ndarray, lanes: np.ndarray) -> None:
 
 @njit(cache=True)
 def simulate(
-    v: np.ndarray, lanes: np.ndarray, p: np.ndarray, frames: int, dt: float, regulation: np.ndarray
+    v: np.ndarray,
+    lanes: np.ndarray,
+    p: np.ndarray,
+    frames: int,
+    dt: float,
+    regulation: np.ndarray,
+    release_cap_mps: float = np.inf,
 ) -> None:
     """AbstractEnv._simulate for ``frames`` simulation steps of ``dt`` seconds.
 
     :param regulation: [period, road steps so far]: a RegulatedRoad enforces its rules every
         ``period`` road steps (0: a plain Road); the step count is updated in place.
+    :param release_cap_mps: ``enforce_road_rules``' cap on a released vehicle's target speed.
     """
     coords, done, trig = frame_cache(v, lanes)
     for _ in range(frames):
@@ -652,7 +663,7 @@ def simulate(
         if regulation[0] > 0:
             regulation[1] += 1
             if regulation[1] % regulation[0] == 0:
-                enforce_road_rules(v, lanes)
+                enforce_road_rules(v, lanes, release_cap_mps)
         for i in range(v.shape[0]):
             if v[i, KIND] != OBSTACLE:
                 step_vehicle(v, lanes, i, dt)
