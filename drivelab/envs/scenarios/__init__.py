@@ -37,12 +37,23 @@ SCENARIOS: dict[str, Scenario] = {
     )
 }
 
-__all__ = ["SCENARIOS", "FAST_SCENARIOS", "SEED_TABLES", "TRAFFIC_LEVELS", "check_traffic", "get_scenario"]
+__all__ = [
+    "SCENARIOS",
+    "FAST_SCENARIOS",
+    "REFERENCE_SCENARIOS",
+    "SEED_TABLES",
+    "TRAFFIC_LEVELS",
+    "check_traffic",
+    "get_scenario",
+]
 
 
 FAST_SCENARIOS = tuple(
     name for name, scenario in SCENARIOS.items() if scenario.fast_backend
 )  # the compiled core's
+REFERENCE_SCENARIOS = tuple(
+    name for name, scenario in SCENARIOS.items() if scenario.reference_backend
+)  # highway-env's (the reference backend's)
 
 
 def get_scenario(name: str) -> Scenario:
