@@ -8,8 +8,8 @@ number of random blocks; 3), ``start_seed`` (0) and ``num_scenarios`` (1): the m
 ``lane_count`` (3; null: 2 or 3 per map), ``lane_width`` (3.5; null: U[3, 4.5] per map),
 ``signalised`` (false: lights at the intersections when true) and ``traffic_density``.
 
-Traffic levels set ``traffic_density``: empty 0, regular 0.1 (MetaDrive's default), dense 0.3
-(three times it; MetaDrive's own examples use 0.05 to 0.3).
+Traffic levels set ``traffic_density``: empty 0, regular 0.1 (MetaDrive's default), dense 0.2
+(twice it; any density in [0, 1] can be given).
 
 Only the compiled core runs these maps (``backend="fast"``): highway-env has no such road.
 """
@@ -26,7 +26,7 @@ from drivelab.envs.backends.fast.blocks_spawn import (
 from drivelab.envs.backends.roads.description import RoadDescription
 from drivelab.world.scenario import Scenario
 
-DENSITIES = {"empty": 0.0, "regular": 0.1, "dense": 0.3}
+DENSITIES = {"empty": 0.0, "regular": 0.1, "dense": 0.2}
 # MetaDrive steps its agents every 0.1 s (5 physics steps of 0.02 s, metadrive/envs/base_env.py):
 # 10 decisions a second over 20 simulation frames of the compiled core
 POLICY_FREQUENCY_HZ, SIMULATION_FREQUENCY_HZ = 10, 20

@@ -57,14 +57,14 @@ ARRIVAL_WINDOW_M = 5.0  # MetaDrive's arrive_dest: within 5 m of the final road'
 def _simulate_serial(v, count, lanes, start, stop, p, frames, dt, regulation, active, cap) -> None:
     for k in range(v.shape[0]):
         if active[k]:
-            T.simulate(v[k, : count[k]], lanes[start[k] : stop[k]], p, frames, dt, regulation[k], cap)
+            T.simulate(v[k, : count[k]], lanes[start[k] : stop[k]], p, frames, dt, regulation[k], cap, True)
 
 
 @njit(cache=True, parallel=True)
 def _simulate_parallel(v, count, lanes, start, stop, p, frames, dt, regulation, active, cap) -> None:
     for k in prange(v.shape[0]):
         if active[k]:
-            T.simulate(v[k, : count[k]], lanes[start[k] : stop[k]], p, frames, dt, regulation[k], cap)
+            T.simulate(v[k, : count[k]], lanes[start[k] : stop[k]], p, frames, dt, regulation[k], cap, True)
 
 
 def simulate_map_worlds(
@@ -82,7 +82,9 @@ def simulate_map_worlds(
 ) -> None:
     """``traffic.simulate`` of world k's vehicles ``v[k, :count[k]]`` (K, N_max, VEHICLE_COLUMNS)
     on its map's lane rows ``lanes[start[k]:stop[k]]`` for the worlds of ``active`` (K,); one numba
-    thread per world where numba has several (``traffic.simulate_worlds``' rule)."""
+    thread per world where numba has several (``traffic.simulate_worlds``' rule). Right of way is
+    enforced at the junctions only (``enforce_road_rules``' ``prioritised_only``), and a vehicle
+    that yielded cruises on at ``release_cap_mps``."""
     parallel = v.shape[0] > 1 and numba.get_num_threads() > 1
     kernel = _simulate_parallel if parallel else _simulate_serial
     kernel(v, count, lanes, start, stop, p, frames, dt, regulation, active, release_cap_mps)
@@ -172,7 +174,10 @@ class BlocksSimulator(FastSimulator):
         slot = self._slot_of.get(seed)
         if slot is not None:
             return slot
-        bmap = blocks_map(self.map_set.generate(seed), self._road)
+        converted = self._road.cache.setdefault("blocks_maps", {})  # shared by this config's simulators
+        bmap = converted.get(seed)
+        if bmap is None:
+            bmap = converted[seed] = blocks_map(self.map_set.generate(seed), self._road)
         slot = self._slot_of[seed] = len(self.maps)
         self.maps.append(bmap)
         self.map_start = np.append(self.map_start, len(self.lanes))

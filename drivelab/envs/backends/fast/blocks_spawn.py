@@ -43,8 +43,10 @@ EGO_SPAWN_SPEED_MPS = 0.0
 # drivelab's time limit of a block episode: the route driven at 5 m/s on average (18 km/h), plus
 # 10 s to get going. MetaDrive's horizon (1000 steps of 0.1 s = 100 s) is long for a 3-block route.
 ROUTE_PACE_MPS, ROUTE_START_S = 5.0, 10.0
-# a vehicle placed nearer than this to one placed before it (crossing or merging lanes) is dropped
-MIN_SPAWN_GAP_M = 6.0
+# a vehicle placed within this (along, across) its heading of one placed before it (where lanes
+# cross or merge) is dropped: a car length and a metre, a car width and half a metre (vehicles on
+# neighbouring lanes, a lane width apart, stay)
+SPAWN_CLEARANCE_M = (6.0, 2.5)
 # right of way (``traffic.enforce_road_rules``): an intersection's arms 0 and 2 (the road the block
 # is entered on, straight through) over arms 1 and 3, a left turn one below its arm (as highway-env's
 # IntersectionEnv ranks its lanes); a roundabout's ring over the curves entering it
@@ -156,8 +158,8 @@ class BlocksMap:
     :param in_junction: (L,) intersection lanes and roundabout curves and ring.
     :param solid: (L, 2) whether the lane's left / right line is solid (centre line, road edge).
     :param dead_end: (L,) lanes whose end leads nowhere (traffic leaves the map there).
-    :param successor_start: (L + 1,) / ``successors`` (E,): CSR of the roads (their lane-0 rows)
-        leaving the end of each lane row's road.
+    :param successor_start: (L + 1,) / ``successors`` (E,): CSR of the lanes that continue each
+        lane row (``_continuations``).
     :param spot_lane: / ``spot_s`` / ``spot_block`` (S,): the candidate traffic spots (lane row,
         longitudinal position, block index); ``block_spots`` (B,): floor(length / 10) of each
         block's candidate lanes (B blocks).
@@ -261,11 +263,7 @@ def blocks_map(pg: PGMap, base_road) -> BlocksMap:
         )
         for lane in spawn_lanes
     }
-    # successors: the roads (lane-0 rows) leaving the end node of each row's road
-    first_rows = np.flatnonzero(rows[:, L.FIRST_OF_ROAD] == np.arange(len(rows)))
-    leaving = [first_rows[rows[first_rows, L.FROM_NODE] == rows[r, L.TO_NODE]] for r in range(len(rows))]
-    successor_start = np.concatenate([[0], np.cumsum([len(s) for s in leaving])]).astype(np.int64)
-    successors = np.concatenate(leaving).astype(np.int64) if leaving else np.zeros(0, dtype=np.int64)
+    successor_start, successors = _continuations(rows)
     spot_lane, spot_s, spot_block, block_spots = _spots(pg, rows[:, L.LENGTH])
     return BlocksMap(
         pg=pg,
@@ -282,6 +280,27 @@ def blocks_map(pg: PGMap, base_road) -> BlocksMap:
         spot_block=spot_block,
         block_spots=block_spots,
     )
+
+
+CONTINUATION_M, CONTINUATION_RAD = 0.05, 0.05  # a lane continues another: it starts where that ends
+
+
+def _continuations(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """CSR of the lanes that continue each lane row (L,): those leaving its end node that start
+    where it ends, heading on as it heads (``successors[start[r]:start[r + 1]]``, row order)."""
+    count = len(rows)
+    ends = np.array([L.position(rows, r, rows[r, L.LENGTH], 0.0) for r in range(count)]).reshape(-1, 2)
+    starts = np.array([L.position(rows, r, 0.0, 0.0) for r in range(count)]).reshape(-1, 2)
+    end_heading = np.array([L.heading_at(rows, r, rows[r, L.LENGTH]) for r in range(count)])
+    start_heading = np.array([L.heading_at(rows, r, 0.0) for r in range(count)])
+    turn = np.angle(np.exp(1j * (start_heading[None, :] - end_heading[:, None])))
+    continues = (
+        (rows[None, :, L.FROM_NODE] == rows[:, None, L.TO_NODE])
+        & (np.linalg.norm(starts[None, :, :] - ends[:, None, :], axis=-1) < CONTINUATION_M)
+        & (np.abs(turn) < CONTINUATION_RAD)
+    )  # (L, L): row r, then the lanes continuing it
+    start = np.concatenate([[0], np.cumsum(continues.sum(axis=1))]).astype(np.int64)
+    return start, np.nonzero(continues)[1].astype(np.int64)
 
 
 @njit(cache=True)
@@ -301,8 +320,12 @@ def _traffic_rows(
 ) -> None:
     """Traffic vehicle rows (M, VEHICLE_COLUMNS) at ``s`` (M,) on lane rows ``lane`` (M,), heading
     along them at ``speed`` (their target speed), with DELTA ``delta`` (M,) and a route: their
-    road, then a random walk through the roads after it, ``walk`` (M, MAX_ROUTE - 1) uniform draws
-    in [0, 1) picking each next road among those leaving the last (a dead end stops it)."""
+    lane, then a random walk through the lanes that continue it (``successor_start`` /
+    ``successors``: ``_continuations``), ``walk`` (M, MAX_ROUTE - 1) uniform draws in [0, 1)
+    picking each next lane (a dead end stops it). Every route step names its lane: MOBIL then
+    keeps the vehicle in it (``traffic.cached_mobil``), so that it never has to swerve where a
+    road splits or merges; traffic keeps its lane (MetaDrive's IDM policy changes lanes only to
+    overtake)."""
     for m in range(lane.size):
         row, k = rows[m], lane[m]
         x, y = L.position(lanes, k, s[m], 0.0)
@@ -315,27 +338,32 @@ def _traffic_rows(
         row[T.CHECK_COLLISIONS], row[T.KIND] = 1.0, T.IDM
         row[T.LEN], row[T.WID] = length, width
         current = int(row[T.LANE])
-        road = int(lanes[current, L.FIRST_OF_ROAD])
-        row[T.ROUTE], row[T.ROUTE + 1] = road, lanes[current, L.LANE_ID]
+        row[T.ROUTE], row[T.ROUTE + 1] = lanes[current, L.FIRST_OF_ROAD], lanes[current, L.LANE_ID]
         end = 1
         for j in range(walk.shape[1]):
-            first, stop = successor_start[road], successor_start[road + 1]
+            first, stop = successor_start[current], successor_start[current + 1]
             if stop == first:
                 break
-            road = successors[first + int(walk[m, j] * (stop - first))]
-            row[T.ROUTE + 2 * end], row[T.ROUTE + 2 * end + 1] = road, -1.0
+            current = successors[first + int(walk[m, j] * (stop - first))]
+            row[T.ROUTE + 2 * end] = lanes[current, L.FIRST_OF_ROAD]
+            row[T.ROUTE + 2 * end + 1] = lanes[current, L.LANE_ID]
             end += 1
         row[T.ROUTED], row[T.ROUTE_START], row[T.ROUTE_END] = 1.0, 0.0, end
 
 
 @njit(cache=True)
-def _spaced(points: np.ndarray, gap_m: float) -> np.ndarray:
-    """(M,) bool: each point (M, 2) kept unless nearer than ``gap_m`` to a kept point before it
-    (sequential: whether a point stays depends on those kept before it)."""
-    keep = np.ones(points.shape[0], dtype=np.bool_)
-    for m in range(1, points.shape[0]):
+def _spaced(rows: np.ndarray, along_m: float, across_m: float) -> np.ndarray:
+    """(M,) bool: each vehicle row kept unless within ``along_m`` along and ``across_m`` across
+    the heading of a kept vehicle before it (sequential: whether a vehicle stays depends on those
+    kept before it)."""
+    keep = np.ones(rows.shape[0], dtype=np.bool_)
+    for m in range(1, rows.shape[0]):
         for j in range(m):
-            if keep[j] and np.hypot(points[m, 0] - points[j, 0], points[m, 1] - points[j, 1]) < gap_m:
+            if not keep[j]:
+                continue
+            dx, dy = rows[m, T.X] - rows[j, T.X], rows[m, T.Y] - rows[j, T.Y]
+            c, s = np.cos(rows[j, T.HEADING]), np.sin(rows[j, T.HEADING])
+            if np.abs(dx * c + dy * s) < along_m and np.abs(dy * c - dx * s) < across_m:
                 keep[m] = False
                 break
     return keep
@@ -348,7 +376,7 @@ def spawn_blocks_episode(
     [period, 0], None)``. The ego (first row) on a random lane of the spawn road at s = 5 m, at
     rest; per block after the spawn road floor(block spots · ``density``) traffic vehicles on
     distinct random spots (MetaDrive's trigger-mode count), each on a random route; vehicles
-    nearer than MIN_SPAWN_GAP_M to the ego or to one placed before them are dropped."""
+    within SPAWN_CLEARANCE_M of the ego or of one placed before them are dropped."""
     rng = np.random.default_rng(int(seed))
     road, table = bmap.road, bmap.table
     lane = int(bmap.spawn_lanes[rng.integers(len(bmap.spawn_lanes))])
@@ -373,7 +401,7 @@ def spawn_blocks_episode(
         road.npc_length, road.npc_width, road.lane_change_delay, rows,
     )  # fmt: skip
     everyone = np.concatenate([ego[None], rows])
-    everyone = everyone[_spaced(everyone[:, T.X : T.Y + 1].copy(), MIN_SPAWN_GAP_M)]
+    everyone = everyone[_spaced(everyone, *SPAWN_CLEARANCE_M)]
     return everyone, 0, np.array([float(road.regulation_period), 0.0]), None
 
 
