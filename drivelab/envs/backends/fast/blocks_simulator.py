@@ -99,15 +99,27 @@ def apply_meta_map_worlds(v, count, ego, lanes, start, stop, actions, speeds) ->
 
 @njit(cache=True)
 def export_map_worlds(
-    v, count, ego, lanes, start, stop, in_junction, dead_end, floats, ints, flags, vehicles, valid
+    v, count, ego, lanes, start, stop, in_junction, dead_end, solid, floats, ints, flags, vehicles, valid
 ) -> None:
-    """``export_world`` of each world on its map's lane rows (arrival is judged on the route)."""
+    """``export_world`` of each world on its map's lane rows (arrival is judged on the route),
+    then MetaDrive's out of road: off every lane, or the ego's body across a solid line of its
+    lane (``solid`` (L_total, 2): left, right; lateral offsets grow to the right)."""
     for k in range(v.shape[0]):
         a, b = start[k], stop[k]
         export_world(
             v[k, : count[k]], ego[k], lanes[a:b], in_junction[a:b], dead_end[a:b], ARRIVE_NEVER, 0.0,
             floats[k], ints[k], flags[k], vehicles[k], valid[k],
         )  # fmt: skip
+        lane = a + int(v[k, ego[k], T.LANE])
+        half_body, half_lane, lateral = (
+            floats[k, EX_WID] / 2,
+            floats[k, EX_LANE_WIDTH] / 2,
+            floats[k, EX_LATERAL],
+        )
+        if (solid[lane, 0] and lateral - half_body < -half_lane) or (
+            solid[lane, 1] and lateral + half_body > half_lane
+        ):
+            flags[k, EX_ON_ROAD] = False
 
 
 @njit(cache=True)
@@ -269,16 +281,7 @@ class BlocksSimulator(FastSimulator):
         vehicles, valid = np.zeros((k, slots, 6)), np.zeros((k, slots), dtype=bool)
         export_map_worlds(
             self.vehicles, self.count, self.ego, self.lanes, self.lane_start, self.lane_stop,
-            self.in_junction, self.dead_end, floats, ints, flags, vehicles, valid,
+            self.in_junction, self.dead_end, self.solid, floats, ints, flags, vehicles, valid,
         )  # fmt: skip
-        # MetaDrive's out of road: off every lane, or the body across a solid line of its lane
-        lane = self.lane_start + self.vehicles[np.arange(k), self.ego, T.LANE].astype(np.int64)
-        solid = self.solid[lane]
-        half_body, half_lane = floats[:, EX_WID] / 2, floats[:, EX_LANE_WIDTH] / 2
-        lateral = floats[:, EX_LATERAL]  # positive to the right (highway-env's lanes)
-        across = (solid[:, 0] & (lateral - half_body < -half_lane)) | (
-            solid[:, 1] & (lateral + half_body > half_lane)
-        )
-        flags[:, EX_ON_ROAD] &= ~across
         self._empty = {**self._empty, "road_index": self.world_map.copy()}
         return self._export_arrays(floats, ints, flags, vehicles, valid)
