@@ -93,6 +93,7 @@ def test_the_episode_seed_picks_the_map_of_the_set():
     np.testing.assert_array_equal(simulator.world_map, [0, 1, 2, 1])  # map seeds 0, 1, 2, 1 → slots
     assert [simulator.map_of(k).pg.seed for k in range(4)] == [0, 1, 2, 1]
     assert len(batch.roads) == 3 and all(m.pg.letters == "IOSX" for m in simulator.maps)
+    np.testing.assert_array_equal(batch.road_index, [0, 1, 2, 1])
     for k in range(4):  # each world's road map, lanes and route are its map's
         bmap = simulator.map_of(k)
         assert batch.road_of(k) is bmap.road.road_map
@@ -100,6 +101,10 @@ def test_the_episode_seed_picks_the_map_of_the_set():
         np.testing.assert_array_equal(rows, bmap.table.rows)
         ego_lane = int(simulator.vehicles[k, simulator.ego[k], T.LANE])
         assert batch.route.length_m[k] == bmap.routes[ego_lane].length_m
+    # a batch holds the maps its worlds drive, not every map loaded
+    batch = simulator.reset_where(np.array([True, False, True, True]), np.array([1, 0, 1, 1]))
+    assert len(simulator.maps) == 3 and len(batch.roads) == 1 and (batch.road_index == 0).all()
+    assert batch.road_of(0) is simulator.maps[1].road.road_map
     # the same map seed gives the same map, a different one another map
     assert np.array_equal(simulator.map_of(1).table.rows, simulator.map_of(3).table.rows)
     assert not np.array_equal(
@@ -380,3 +385,13 @@ def test_scenario_config_is_kept_whole():
         "map": 3, "start_seed": 0, "num_scenarios": 1, "lane_count": 3,
     }  # fmt: skip
     assert BLOCKS.road({"map": "OSX"}).lane_count == generate_map("OSX", 0).description.lane_count
+
+
+def test_maps_draws_a_gallery_of_the_map_set(tmp_path):
+    out = tmp_path / "gallery.png"
+    result = CliRunner().invoke(app, ["maps", "--map", "OSX", "--seeds", "3:2", "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    for args, message in ((["--seeds", "3"], "start:count"), (["--map", "OSQ"], "unknown block letter")):
+        result = CliRunner().invoke(app, ["maps", *args, "--out", str(out)])
+        assert result.exit_code == 2 and message in result.output

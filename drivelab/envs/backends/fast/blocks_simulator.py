@@ -11,8 +11,8 @@ world k reads the rows ``[lane_start[k], lane_stop[k])`` of its map. The compile
 the other scenarios' (``traffic.simulate``, ``export_world``, ``meta_action``), called per world on
 that slice of rows, a view in which the world's lane indices are the map's own: one compiled
 call steps all K worlds, with no Python loop over worlds or vehicles. Each world's RoadMap (for
-the sensors and renderers) is its map's: ``WorldBatch.roads`` holds the maps loaded and
-``road_index`` each world's.
+the sensors and renderers) is its map's: ``WorldBatch.roads`` holds the maps the K worlds drive
+(at most K, however many the set has) and ``road_index`` each world's.
 
 Episode rules (MetaDrive's, ``metadrive/envs/metadrive_env.py``): arrival within 5 m of the
 route's end (the destination road's end), out of road when not on a lane or when the ego's body
@@ -171,7 +171,10 @@ class BlocksSimulator(FastSimulator):
         self.dead_end = np.zeros(0, dtype=bool)
         self.solid = np.zeros((0, 2), dtype=bool)
         self.map_start = np.zeros(0, dtype=np.int64)  # first stacked row of each map
-        self.roads: tuple[RoadMap, ...] = ()
+        self.map_roads: tuple[RoadMap, ...] = ()  # every loaded map's RoadMap, by slot
+        self.roads: tuple[RoadMap, ...] = ()  # the maps the worlds drive now (a batch's roads)
+        self._road_index = np.zeros(k, dtype=np.int64)
+        self._roads_of: np.ndarray | None = None  # the world_map the two above were made for
         self.world_map = np.zeros(k, dtype=np.int64)
         self.lane_start = np.zeros(k, dtype=np.int64)
         self.lane_stop = np.zeros(k, dtype=np.int64)
@@ -197,7 +200,7 @@ class BlocksSimulator(FastSimulator):
         self.in_junction = np.concatenate([self.in_junction, bmap.in_junction])
         self.dead_end = np.concatenate([self.dead_end, bmap.dead_end])
         self.solid = np.concatenate([self.solid, bmap.solid])
-        self.roads = (*self.roads, bmap.road.road_map)
+        self.map_roads = (*self.map_roads, bmap.road.road_map)
         return slot
 
     def map_of(self, k: int) -> BlocksMap:
@@ -283,5 +286,10 @@ class BlocksSimulator(FastSimulator):
             self.vehicles, self.count, self.ego, self.lanes, self.lane_start, self.lane_stop,
             self.in_junction, self.dead_end, self.solid, floats, ints, flags, vehicles, valid,
         )  # fmt: skip
-        self._empty = {**self._empty, "road_index": self.world_map.copy()}
+        if self._roads_of is None or not np.array_equal(self._roads_of, self.world_map):
+            used, index = np.unique(self.world_map, return_inverse=True)
+            self.roads = tuple(self.map_roads[slot] for slot in used)
+            self._road_index, self._roads_of = index.astype(np.int64), self.world_map.copy()
+            self._road_index.setflags(write=False)
+        self._empty = {**self._empty, "road_index": self._road_index}
         return self._export_arrays(floats, ints, flags, vehicles, valid)
