@@ -468,6 +468,43 @@ def train_lane(
     typer.echo(f"weights: {summary['weights']} ({size_kib:.0f} KiB, trained in {seconds:.0f} s)")
 
 
+def _map_seeds(text: str) -> tuple[int, int]:
+    """``start:count`` as (start, count), checked."""
+    start, sep, count = text.partition(":")
+    if not sep or not start.strip().isdigit() or not count.strip().isdigit() or int(count) < 1:
+        raise UsageError(f"--seeds {text!r} must look like start:count, e.g. 0:8")
+    return int(start), int(count)
+
+
+@app.command()
+def maps(
+    map_spec: str = typer.Option(
+        "3", "--map", help="a block string such as OSX, or a number of random blocks"
+    ),
+    seeds: str = typer.Option(
+        "0:8", help="map seeds start:count (the blocks scenario's start_seed, num_scenarios)"
+    ),
+    lane_count: int = typer.Option(3, help="lanes per direction (0: 2 or 3 per map)"),
+    columns: int = typer.Option(4, help="maps per row"),
+    out: Path = typer.Option(Path("maps.png"), "--out", "-o", help="PNG to write"),
+) -> None:
+    """Draw a gallery of procedural maps (the blocks scenario's) to a PNG."""
+    from drivelab.envs.backends.fast.blocks_spawn import MapSet
+    from drivelab.envs.maps_gallery import draw_gallery
+
+    try:
+        start, count = _map_seeds(seeds)
+        spec = int(map_spec) if map_spec.strip().isdigit() else map_spec
+        config = {"map": spec, "start_seed": start, "num_scenarios": count}
+        map_set = MapSet.from_config({**config, "lane_count": lane_count or None})
+        if columns < 1:
+            raise UsageError("--columns must be >= 1")
+        path = draw_gallery([map_set.generate(seed) for seed in range(start, start + count)], out, columns)
+    except UsageError as exc:
+        _fail(str(exc))
+    typer.echo(f"gallery: {path}")
+
+
 def main() -> None:
     """Entry point of the ``drivelab`` console script."""
     try:

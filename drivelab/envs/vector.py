@@ -87,6 +87,8 @@ def make_simulator(backend: str, scenario, traffic: str, control: str, num_world
         raise UsageError(f"unknown backend {backend!r} (choose from {', '.join(BACKENDS)})")
     if backend == "auto":
         backend = "fast" if scenario.fast_backend else "highway"
+    if backend == "highway" and not scenario.reference_backend:
+        raise UsageError(f"scenario {scenario.name!r} runs on the compiled core only (backend fast or auto)")
     if backend == "fast":
         from drivelab.envs.backends.fast.backend import fast_simulator
 

@@ -52,6 +52,19 @@ PRESETS: dict[str, RewardSpec] = {
         description="seed 003: 2.5*progress*(1-|lat|^3) + 0.5*speed (halved in junctions), "
         "crash/off-road -5, arrival +10",
     ),
+    "metadrive": RewardSpec(
+        # metadrive/envs/metadrive_env.py default_config: driving_reward 1.0, speed_reward 0.1,
+        # success_reward 10.0, out_of_road_penalty 5.0, crash_vehicle_penalty 5.0
+        {
+            "metadrive_progress": 1.0,
+            "metadrive_speed": 0.1,
+            "metadrive_success": 10.0,
+            "metadrive_out_of_road": -5.0,
+            "metadrive_crash": -5.0,
+        },
+        description="MetaDrive's default: 1.0*route progress (m) + 0.1*speed/80 km/h; a terminal "
+        "step gets only +10 arrival, -5 out of road or -5 crash (in that order)",
+    ),
     "roach": RewardSpec(
         {name: 1.0 for name in ROACH_TERMS},
         description="CARLA-Roach's (RLAD, seed 000): speed to a hazard-aware target, route position "

@@ -105,6 +105,58 @@ def arrival(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     return _flag(batch.events.arrived)
 
 
+# --- MetaDrive's default reward (metadrive/envs/metadrive_env.py, reward_function) ---------
+# r = 1.0 · Δs + 0.1 · speed / 80 km/h per step; a terminal event replaces it, checked in
+# MetaDrive's order: +10 arrival, −5 out of road, −5 crash (weights in the "metadrive" preset)
+METADRIVE_MAX_SPEED_MPS = 80 / 3.6  # MetaDrive's ego's max_speed_km_h (cmp/vehicle/vehicle_type.py)
+
+
+def _metadrive_events(batch: WorldBatch) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(K,) each: arrived; out of road and not arrived; crashed and neither (MetaDrive's order)."""
+    events = batch.events
+    arrived = events.arrived
+    out_of_road = events.off_road & ~arrived
+    crashed = events.collided & ~arrived & ~events.off_road
+    return arrived, out_of_road, crashed
+
+
+def _metadrive_running(batch: WorldBatch) -> np.ndarray:
+    """(K,) 1.0 where no terminal event replaces the step reward, else 0.0."""
+    arrived, out_of_road, crashed = _metadrive_events(batch)
+    return _flag(~(arrived | out_of_road | crashed))
+
+
+@term
+def metadrive_progress(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
+    """Metres of route progress in the step (MetaDrive's driving_reward term, use_lateral_reward
+    off), 0 on a terminal step."""
+    return (batch.route.progress_m - prev.route.progress_m) * _metadrive_running(batch)
+
+
+@term
+def metadrive_speed(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
+    """Speed over MetaDrive's 80 km/h top speed (its speed_reward term), 0 on a terminal step."""
+    return batch.ego.speed_mps / METADRIVE_MAX_SPEED_MPS * _metadrive_running(batch)
+
+
+@term
+def metadrive_success(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
+    """1 on arrival at the destination (MetaDrive's success_reward)."""
+    return _flag(_metadrive_events(batch)[0])
+
+
+@term
+def metadrive_out_of_road(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
+    """1 when out of road without arriving (MetaDrive's out_of_road_penalty)."""
+    return _flag(_metadrive_events(batch)[1])
+
+
+@term
+def metadrive_crash(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
+    """1 on a collision, neither arrived nor out of road (MetaDrive's crash_vehicle_penalty)."""
+    return _flag(_metadrive_events(batch)[2])
+
+
 # --- seed 003, the safety-focused table used with SB3 DQN (values are the table's) ------------
 @term
 def centered(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:

@@ -35,6 +35,10 @@ class Scenario:
     :param town_traffic: its traffic is the town's (lights, pedestrians, town vehicles on random
         routes): the compiled core runs it with its town simulator, whose ``spawn`` hook returns
         the episode's ``TownEpisode`` as its fourth item.
+    :param procedural_maps: its worlds drive maps generated from seeds (the blocks): the compiled
+        core runs it with its blocks simulator, which hands ``spawn`` a map (a ``BlocksMap``) as
+        its ``road``; each episode's seed picks the map from the scenario's set.
+    :param reference_backend: highway-env's reference backend can run it (``backend="highway"``).
     :param spawn: the compiled core's episode set-up of one world, ``spawn(seed, road, control)
         -> (vehicle rows, ego row, regulation (2,), generator between steps or None)`` (``road``:
         the simulator's converted road); None: the compiled core cannot run the scenario.
@@ -70,6 +74,8 @@ class Scenario:
     keep_lane: bool = False
     town_traffic: bool = False
     junction_needs_both_ends: bool = False
+    procedural_maps: bool = False
+    reference_backend: bool = True
     spawn: Callable | None = field(default=None, repr=False)
     spawn_many: Callable | None = field(default=None, repr=False)
     arrivals: Callable | None = field(default=None, repr=False)

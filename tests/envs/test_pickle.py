@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from drivelab.envs.scenarios import FAST_SCENARIOS as SUPPORTED
-from drivelab.envs.scenarios import SCENARIOS
+from drivelab.envs.scenarios import REFERENCE_SCENARIOS, SCENARIOS
 from drivelab.envs.vector import VectorDriveEnv
 from tests.batch_worlds import assert_same_observations
 
@@ -17,7 +17,8 @@ CASES = [
     (env_id, backend)
     for env_id in ENV_IDS
     for backend in ("highway", "fast")
-    if backend == "highway" or gymnasium.spec(env_id).kwargs["scenario"] in SUPPORTED
+    if gymnasium.spec(env_id).kwargs["scenario"]
+    in (REFERENCE_SCENARIOS if backend == "highway" else SUPPORTED)
 ]
 
 

@@ -348,3 +348,43 @@ def lateral_at_distances(world: WorldState, segments: np.ndarray, distances_m: n
     y = np.where(np.isnan(y), np.inf, y)
     best = np.take_along_axis(y, np.argmin(np.abs(y), axis=1)[:, None], axis=1)[:, 0]
     return np.where(np.isfinite(best), best, np.nan).reshape(distances.shape)
+
+
+# --- MetaDrive's default reward (issue 18: written one world at a time, as the reference) ------
+def _metadrive_terminal(world: WorldState) -> str:
+    """The terminal event that replaces the step reward, in MetaDrive's order, or ""."""
+    events = world.events
+    if events.arrived:
+        return "success"
+    if events.off_road:
+        return "out_of_road"
+    return "crash" if events.collided else ""
+
+
+@term
+def metadrive_progress(prev: WorldState, world: WorldState, control) -> float:
+    """Route progress of the step in metres, 0 on a terminal step."""
+    if _metadrive_terminal(world):
+        return 0.0
+    return world.route.progress_m - prev.route.progress_m
+
+
+@term
+def metadrive_speed(prev: WorldState, world: WorldState, control) -> float:
+    """Speed over 80 km/h, 0 on a terminal step."""
+    return 0.0 if _metadrive_terminal(world) else world.ego.speed_mps / (80 / 3.6)
+
+
+@term
+def metadrive_success(prev: WorldState, world: WorldState, control) -> float:
+    return float(_metadrive_terminal(world) == "success")
+
+
+@term
+def metadrive_out_of_road(prev: WorldState, world: WorldState, control) -> float:
+    return float(_metadrive_terminal(world) == "out_of_road")
+
+
+@term
+def metadrive_crash(prev: WorldState, world: WorldState, control) -> float:
+    return float(_metadrive_terminal(world) == "crash")

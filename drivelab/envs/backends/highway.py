@@ -20,6 +20,7 @@ from drivelab.envs.backends.roads.road_map import (
     lanes_road_map,
 )
 from drivelab.envs.route import RouteTracker
+from drivelab.errors import UsageError
 from drivelab.world.scenario import Scenario
 from drivelab.world.state import LIGHT_RED, Ego, Events, RoadMap, WorldState
 
@@ -130,6 +131,10 @@ class HighwayBackend:
         control: str = "meta",
         overrides: dict | None = None,
     ) -> None:
+        if not scenario.reference_backend:
+            raise UsageError(
+                f"scenario {scenario.name!r} runs on the compiled core only (backend fast or auto)"
+            )
         self.scenario = scenario
         self.control = control
         config, self.keep_npcs, self.extra_vehicles = self.assemble_config(

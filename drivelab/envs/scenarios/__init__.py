@@ -5,7 +5,16 @@ handed to them; nothing below this package looks a scenario up by name."""
 
 from __future__ import annotations
 
-from drivelab.envs.scenarios import circuits, highway, intersection, merge, racetrack, roundabout, town
+from drivelab.envs.scenarios import (
+    blocks,
+    circuits,
+    highway,
+    intersection,
+    merge,
+    racetrack,
+    roundabout,
+    town,
+)
 from drivelab.envs.scenarios.circuits import SEED_TABLES
 from drivelab.errors import UsageError
 from drivelab.world.scenario import Scenario
@@ -24,18 +33,22 @@ SCENARIOS: dict[str, Scenario] = {
         town.SCENARIO,
         circuits.FOLLOW_LINE,
         circuits.FOLLOW_LANE,
+        blocks.SCENARIO,
     )
 }
 
 __all__ = [
-    "SCENARIOS", "FAST_SCENARIOS", "SEED_TABLES", "TRAFFIC_LEVELS", "check_traffic", "get_scenario", "gym_id",
-    "scenario_name",
+    "SCENARIOS", "FAST_SCENARIOS", "REFERENCE_SCENARIOS", "SEED_TABLES", "TRAFFIC_LEVELS", "check_traffic",
+    "get_scenario", "gym_id", "scenario_name",
 ]  # fmt: skip
 
 
 FAST_SCENARIOS = tuple(
     name for name, scenario in SCENARIOS.items() if scenario.fast_backend
 )  # the compiled core's
+REFERENCE_SCENARIOS = tuple(
+    name for name, scenario in SCENARIOS.items() if scenario.reference_backend
+)  # highway-env's (the reference backend's)
 
 
 def gym_id(scenario: str) -> str:

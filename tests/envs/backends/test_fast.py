@@ -22,13 +22,13 @@ from drivelab.envs.backends.fast.backend import (
 )
 from drivelab.envs.backends.highway import HighwayBackend
 from drivelab.envs.core import DriveEnv
-from drivelab.envs.scenarios import SCENARIOS
+from drivelab.envs.scenarios import REFERENCE_SCENARIOS, SCENARIOS
 from drivelab.errors import UsageError
 
 REPO = Path(__file__).resolve().parents[3]
 
 
-@pytest.mark.parametrize("scenario", sorted(SCENARIOS))
+@pytest.mark.parametrize("scenario", sorted(REFERENCE_SCENARIOS))
 def test_lane_geometry_matches_highway_env(scenario):
     control = "continuous"
     builder = HighwayBackend(SCENARIOS[scenario], "empty", control)
@@ -52,7 +52,7 @@ def test_lane_geometry_matches_highway_env(scenario):
             np.testing.assert_allclose(L.position(table.rows, row, s, 1.0), lane.position(s, 1.0), atol=1e-9)
 
 
-@pytest.mark.parametrize("scenario", sorted(SCENARIOS))
+@pytest.mark.parametrize("scenario", sorted(REFERENCE_SCENARIOS))
 def test_closest_lane_with_a_hint_is_the_same_lane(scenario):
     """Measuring a hinted lane first (and skipping lanes that cannot beat it) changes nothing:
     for points near and between lanes, whatever the hint, the answer is the plain scan's, ties

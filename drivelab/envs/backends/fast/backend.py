@@ -23,7 +23,12 @@ from drivelab.world.state import WorldState
 
 
 def fast_simulator(scenario: Scenario, traffic: str, control: str, num_worlds: int, overrides=None):
-    """K worlds of ``scenario`` on the compiled core: the town's simulator for the town's traffic."""
+    """K worlds of ``scenario`` on the compiled core: the town's simulator for the town's traffic,
+    the blocks simulator for procedural maps."""
+    if scenario.procedural_maps:
+        from drivelab.envs.backends.fast.blocks_simulator import BlocksSimulator
+
+        return BlocksSimulator(scenario, traffic, control, num_worlds, overrides)
     if scenario.town_traffic:
         return TownSimulator(scenario, traffic, control, num_worlds, overrides)
     return FastSimulator(scenario, traffic, control, num_worlds, overrides)

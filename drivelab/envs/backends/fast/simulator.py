@@ -261,15 +261,24 @@ def _convert_road(builder: HighwayBackend, scenario: Scenario) -> _Road:
     )
 
 
+def described_config(
+    scenario: Scenario, traffic: str, control: str, overrides: dict | None
+) -> tuple[dict, bool, int]:
+    """(config, keep_npcs, extra_vehicles) of a described road: the config as highway-env would
+    assemble it (its class's defaults, then HighwayBackend's keys)."""
+    given, keep_npcs, extra_vehicles = HighwayBackend.assemble_config(scenario, traffic, control, overrides)
+    config = hw_utils.class_from_path(scenario.env_class).default_config()
+    config.update(given)
+    return config, keep_npcs, extra_vehicles
+
+
 def _describe_road(scenario: Scenario, traffic: str, control: str, overrides: dict | None) -> _Road:
     """A _Road from the scenario's road description (``Scenario.road``): lane arrays, road map and
     the ego's routes from the description, the config as highway-env would assemble it (its
     class's defaults, then HighwayBackend's keys): no highway-env object is built."""
     from drivelab.envs.backends.roads.road_map import centre_line, circuit_route, road_map
 
-    given, keep_npcs, extra_vehicles = HighwayBackend.assemble_config(scenario, traffic, control, overrides)
-    config = hw_utils.class_from_path(scenario.env_class).default_config()
-    config.update(given)
+    config, keep_npcs, extra_vehicles = described_config(scenario, traffic, control, overrides)
     desc = scenario.road(config)
     table = L.LaneTable.from_description(desc)
     npc_class = hw_utils.class_from_path(config["other_vehicles_type"])
@@ -323,6 +332,27 @@ def _describe_road(scenario: Scenario, traffic: str, control: str, overrides: di
 # --- compiled kernels over K worlds ---------------------------------------------------------------
 
 
+@njit(cache=True, inline="always")
+def meta_action(w: np.ndarray, e: int, lanes: np.ndarray, action: int, speeds: np.ndarray) -> None:
+    """MDPVehicle.act for the ego (row ``e``) of one world's vehicles ``w`` (N, VEHICLE_COLUMNS):
+    FASTER / SLOWER step the target speed, the lane changes retarget when reachable."""
+    if action == FASTER or action == SLOWER:
+        top = speeds.size - 1
+        ratio = (w[e, T.SPEED] - speeds[0]) / (speeds[-1] - speeds[0])
+        index = int(min(max(np.rint(ratio * top), 0.0), float(top)))  # np.round: half to even
+        index = min(max(index + (1 if action == FASTER else -1), 0), top)
+        w[e, T.TARGET_SPEED] = speeds[index]
+        return
+    T.follow_road(w, lanes, e)
+    if action == LANE_LEFT or action == LANE_RIGHT:
+        target = int(w[e, T.TARGET_LANE])
+        first, lane_count = int(lanes[target, L.FIRST_OF_ROAD]), int(lanes[target, L.LANE_COUNT])
+        lane_id = int(lanes[target, L.LANE_ID]) + (1 if action == LANE_RIGHT else -1)
+        candidate = first + min(max(lane_id, 0), lane_count - 1)
+        if L.is_reachable_from(lanes, candidate, w[e, T.X], w[e, T.Y]):
+            w[e, T.TARGET_LANE] = candidate
+
+
 @njit(cache=True)
 def apply_meta(
     v: np.ndarray,
@@ -332,25 +362,9 @@ def apply_meta(
     actions: np.ndarray,
     speeds: np.ndarray,
 ) -> None:
-    """MDPVehicle.act for each world's ego meta-action ``actions[k]`` (the controls follow in the
-    kernel): FASTER / SLOWER step the target speed, the lane changes retarget when reachable."""
+    """``meta_action`` of each world's ego ``actions[k]`` (the controls follow in the kernel)."""
     for k in range(v.shape[0]):
-        w, e, action = v[k, : count[k]], ego[k], actions[k]
-        if action == FASTER or action == SLOWER:
-            top = speeds.size - 1
-            ratio = (w[e, T.SPEED] - speeds[0]) / (speeds[-1] - speeds[0])
-            index = int(min(max(np.rint(ratio * top), 0.0), float(top)))  # np.round: half to even
-            index = min(max(index + (1 if action == FASTER else -1), 0), top)
-            w[e, T.TARGET_SPEED] = speeds[index]
-            continue
-        T.follow_road(w, lanes, e)
-        if action == LANE_LEFT or action == LANE_RIGHT:
-            target = int(w[e, T.TARGET_LANE])
-            first, lane_count = int(lanes[target, L.FIRST_OF_ROAD]), int(lanes[target, L.LANE_COUNT])
-            lane_id = int(lanes[target, L.LANE_ID]) + (1 if action == LANE_RIGHT else -1)
-            candidate = first + min(max(lane_id, 0), lane_count - 1)
-            if L.is_reachable_from(lanes, candidate, w[e, T.X], w[e, T.Y]):
-                w[e, T.TARGET_LANE] = candidate
+        meta_action(v[k, : count[k]], ego[k], lanes, actions[k], speeds)
 
 
 @njit(cache=True)
@@ -436,6 +450,65 @@ def project_routes(
         progress[k] = best
 
 
+@njit(cache=True, inline="always")
+def export_world(
+    w: np.ndarray,
+    e: int,
+    lanes: np.ndarray,
+    in_junction: np.ndarray,
+    exit_lane: np.ndarray,
+    arrival: int,
+    arrival_threshold: float,
+    out: np.ndarray,
+    ints: np.ndarray,
+    flags: np.ndarray,
+    vehicles: np.ndarray,
+    valid: np.ndarray,
+) -> None:
+    """What WorldBatch needs of one world (vehicles ``w`` (N, VEHICLE_COLUMNS), ego row ``e``),
+    into zeroed outputs: the ego's ``out`` (EX_FLOATS,), ``ints`` (3,) and ``flags`` (4,)
+    (columns EX_*), and the other vehicles, obstacles left out as highway-env exports them, in
+    ``vehicles`` (N - 1, 6) with ``valid`` (N - 1,)."""
+    row = w[e]
+    lane = int(row[T.LANE])
+    s, lateral = L.local_coordinates(lanes, lane, row[T.X], row[T.Y])
+    target = int(row[T.TARGET_LANE]) if row[T.KIND] != T.PLAIN else lane
+    limit = lanes[lane, L.SPEED_LIMIT]
+    out[EX_X], out[EX_Y], out[EX_HEADING], out[EX_SPEED] = (
+        row[T.X],
+        row[T.Y],
+        row[T.HEADING],
+        row[T.SPEED],
+    )
+    out[EX_STEER], out[EX_ACCEL], out[EX_LEN], out[EX_WID] = (
+        row[T.STEER],
+        row[T.ACCEL],
+        row[T.LEN],
+        row[T.WID],
+    )
+    out[EX_LANE_WIDTH], out[EX_LATERAL] = lanes[lane, L.WIDTH], lateral
+    out[EX_LANE_HEADING] = L.heading_at(lanes, lane, s)
+    out[EX_SPEED_LIMIT] = 30.0 if np.isnan(limit) else limit
+    out[EX_HEADING_CHANGE] = L.heading_at(lanes, lane, s + 1.0) - L.heading_at(lanes, lane, s - 1.0)
+    ints[EX_LANE_ID], ints[EX_LANE_COUNT] = lanes[lane, L.LANE_ID], lanes[lane, L.LANE_COUNT]
+    ints[EX_TARGET_LANE_ID] = lanes[target, L.LANE_ID]
+    flags[EX_ON_ROAD] = L.on_lane(lanes, lane, s, lateral, 0.0)
+    flags[EX_IN_JUNCTION] = in_junction[lane]
+    flags[EX_CRASHED] = row[T.CRASHED] > 0
+    if arrival == ARRIVE_PAST_X:
+        flags[EX_ARRIVED] = row[T.X] > arrival_threshold
+    elif arrival == ARRIVE_EXIT:
+        flags[EX_ARRIVED] = exited(lanes, exit_lane, row, arrival_threshold)
+    n = 0
+    for j in range(w.shape[0]):
+        if j == e or w[j, T.KIND] == T.OBSTACLE:
+            continue
+        for c in range(EXPORTED_COLUMNS.size):
+            vehicles[n, c] = w[j, EXPORTED_COLUMNS[c]]
+        valid[n] = True
+        n += 1
+
+
 @njit(cache=True)
 def export_worlds(
     v: np.ndarray,
@@ -452,51 +525,14 @@ def export_worlds(
     vehicles: np.ndarray,
     valid: np.ndarray,
 ) -> None:
-    """What WorldBatch needs of K worlds, into zeroed outputs: the ego's ``floats`` (K, EX_FLOATS),
-    ``ints`` (K, 3) and ``flags`` (K, 4) (columns EX_*), and the other vehicles, obstacles left
-    out as highway-env exports them, in ``vehicles`` (K, N, 6) with ``valid`` (K, N). (Serial:
-    about a microsecond per world, less than a thread pool's launch.)"""
+    """``export_world`` of K worlds on one road: ``floats`` (K, EX_FLOATS), ``ints`` (K, 3),
+    ``flags`` (K, 4), ``vehicles`` (K, N, 6), ``valid`` (K, N). (Serial: about a microsecond
+    per world, less than a thread pool's launch.)"""
     for k in range(v.shape[0]):
-        e = ego[k]
-        row = v[k, e]
-        lane = int(row[T.LANE])
-        s, lateral = L.local_coordinates(lanes, lane, row[T.X], row[T.Y])
-        target = int(row[T.TARGET_LANE]) if row[T.KIND] != T.PLAIN else lane
-        limit = lanes[lane, L.SPEED_LIMIT]
-        out = floats[k]
-        out[EX_X], out[EX_Y], out[EX_HEADING], out[EX_SPEED] = (
-            row[T.X],
-            row[T.Y],
-            row[T.HEADING],
-            row[T.SPEED],
-        )
-        out[EX_STEER], out[EX_ACCEL], out[EX_LEN], out[EX_WID] = (
-            row[T.STEER],
-            row[T.ACCEL],
-            row[T.LEN],
-            row[T.WID],
-        )
-        out[EX_LANE_WIDTH], out[EX_LATERAL] = lanes[lane, L.WIDTH], lateral
-        out[EX_LANE_HEADING] = L.heading_at(lanes, lane, s)
-        out[EX_SPEED_LIMIT] = 30.0 if np.isnan(limit) else limit
-        out[EX_HEADING_CHANGE] = L.heading_at(lanes, lane, s + 1.0) - L.heading_at(lanes, lane, s - 1.0)
-        ints[k, EX_LANE_ID], ints[k, EX_LANE_COUNT] = lanes[lane, L.LANE_ID], lanes[lane, L.LANE_COUNT]
-        ints[k, EX_TARGET_LANE_ID] = lanes[target, L.LANE_ID]
-        flags[k, EX_ON_ROAD] = L.on_lane(lanes, lane, s, lateral, 0.0)
-        flags[k, EX_IN_JUNCTION] = in_junction[lane]
-        flags[k, EX_CRASHED] = row[T.CRASHED] > 0
-        if arrival == ARRIVE_PAST_X:
-            flags[k, EX_ARRIVED] = row[T.X] > arrival_threshold
-        elif arrival == ARRIVE_EXIT:
-            flags[k, EX_ARRIVED] = exited(lanes, exit_lane, row, arrival_threshold)
-        n = 0
-        for j in range(count[k]):
-            if j == e or v[k, j, T.KIND] == T.OBSTACLE:
-                continue
-            for c in range(EXPORTED_COLUMNS.size):
-                vehicles[k, n, c] = v[k, j, EXPORTED_COLUMNS[c]]
-            valid[k, n] = True
-            n += 1
+        export_world(
+            v[k, : count[k]], ego[k], lanes, in_junction, exit_lane, arrival, arrival_threshold,
+            floats[k], ints[k], flags[k], vehicles[k], valid[k],
+        )  # fmt: skip
 
 
 # --- the simulator ------------------------------------------------------------------------------
@@ -537,16 +573,7 @@ class FastSimulator:
         if scenario.spawn is None:
             raise UsageError(f"the fast backend has no episode set-up for scenario {scenario.name!r}")
         self.scenario, self.control, self.num_worlds = scenario, control, num_worlds
-        key = _road_key(scenario, traffic, control, overrides)
-        road = _ROADS.get(key)
-        if road is None and scenario.road is not None:  # a described road: no highway-env object
-            road = _ROADS[key] = _describe_road(scenario, traffic, control, overrides)
-        if road is None:  # highway-env builds the road once; nothing of it is kept but arrays
-            builder = HighwayBackend(scenario, traffic, control, overrides)
-            builder.reset(0)
-            road = _ROADS[key] = _convert_road(builder, scenario)
-            del builder
-        self._road = road
+        road = self._road = self._load_road(scenario, traffic, control, overrides)
         self.table, self.lanes, self.road = road.table, road.table.rows, road.road_map
         self.roads: tuple[RoadMap, ...] = (self.road,)
         self.policy_frequency_hz, self.duration_s = road.policy_frequency_hz, road.duration_s
@@ -588,6 +615,20 @@ class FastSimulator:
         self._route_of_lane: dict[int, int] = {}
         self._trackers: list[RouteTracker] = []
         self.batch: WorldBatch | None = None
+
+    @staticmethod
+    def _load_road(scenario: Scenario, traffic: str, control: str, overrides: dict | None) -> _Road:
+        """The scenario's road for this configuration, converted at its first use (``_ROADS``)."""
+        key = _road_key(scenario, traffic, control, overrides)
+        road = _ROADS.get(key)
+        if road is None and scenario.road is not None:  # a described road: no highway-env object
+            road = _ROADS[key] = _describe_road(scenario, traffic, control, overrides)
+        if road is None:  # highway-env builds the road once; nothing of it is kept but arrays
+            builder = HighwayBackend(scenario, traffic, control, overrides)
+            builder.reset(0)
+            road = _ROADS[key] = _convert_road(builder, scenario)
+            del builder
+        return road
 
     # --- buffers --------------------------------------------------------------------------------
     def _fit(self, rows: int) -> None:

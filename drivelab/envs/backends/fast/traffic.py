@@ -612,22 +612,35 @@ def front_distance(v: np.ndarray, i: int, j: int) -> float:
 
 
 @njit(cache=True)
-def enforce_road_rules(v: np.ndarray, lanes: np.ndarray) -> None:
+def enforce_road_rules(
+    v: np.ndarray, lanes: np.ndarray, release_cap_mps: float = np.inf, prioritised_only: bool = False
+) -> None:
     """RegulatedRoad.enforce_road_rules: release the vehicles that yielded (highway-env's
     YIELD_DURATION is 0: they yield until the next regulation step), then, for each pair that may
-    conflict, the one on the lower-priority lane (or behind) stops."""
+    conflict, the one on the lower-priority lane (or behind) stops.
+
+    :param release_cap_mps: a released vehicle's target speed is its lane's speed limit, at most
+        this (the procedural maps' traffic cruises below the limit; inf: highway-env's rule).
+    :param prioritised_only: only pairs where one vehicle is on a lane of priority > 0 (the
+        procedural maps' junctions and their approaches) are regulated; elsewhere IDM/MOBIL alone
+        keeps the gaps (False: every pair, highway-env's rule)."""
     n = v.shape[0]
     for i in range(n):
         if v[i, YIELDING] > 0:
-            v[i, TARGET_SPEED] = lanes[int(v[i, LANE]), SPEED_LIMIT]
+            limit = lanes[int(v[i, LANE]), SPEED_LIMIT]
+            v[i, TARGET_SPEED] = release_cap_mps if limit > release_cap_mps else limit  # NaN kept
             v[i, YIELDING] = 0.0
     for i in range(n - 1):
         if v[i, KIND] == OBSTACLE:
             break
         for j in range(i + 1, n):
-            if v[j, KIND] == OBSTACLE or not conflict_possible(v, lanes, i, j):
+            if v[j, KIND] == OBSTACLE:
                 continue
             priority_i, priority_j = lanes[int(v[i, LANE]), PRIORITY], lanes[int(v[j, LANE]), PRIORITY]
+            if prioritised_only and priority_i <= 0 and priority_j <= 0:
+                continue
+            if not conflict_possible(v, lanes, i, j):
+                continue
             if priority_i != priority_j:
                 yielding = j if priority_i > priority_j else i
             else:  # the one behind yields
@@ -639,12 +652,20 @@ def enforce_road_rules(v: np.ndarray, lanes: np.ndarray) -> None:
 
 @njit(cache=True)
 def simulate(
-    v: np.ndarray, lanes: np.ndarray, p: np.ndarray, frames: int, dt: float, regulation: np.ndarray
+    v: np.ndarray,
+    lanes: np.ndarray,
+    p: np.ndarray,
+    frames: int,
+    dt: float,
+    regulation: np.ndarray,
+    release_cap_mps: float = np.inf,
+    prioritised_only: bool = False,
 ) -> None:
     """AbstractEnv._simulate for ``frames`` simulation steps of ``dt`` seconds.
 
     :param regulation: [period, road steps so far]: a RegulatedRoad enforces its rules every
         ``period`` road steps (0: a plain Road); the step count is updated in place.
+    :param release_cap_mps: / ``prioritised_only``: ``enforce_road_rules``' options.
     """
     coords, done, trig = frame_cache(v, lanes)
     for _ in range(frames):
@@ -652,7 +673,7 @@ def simulate(
         if regulation[0] > 0:
             regulation[1] += 1
             if regulation[1] % regulation[0] == 0:
-                enforce_road_rules(v, lanes)
+                enforce_road_rules(v, lanes, release_cap_mps, prioritised_only)
         for i in range(v.shape[0]):
             if v[i, KIND] != OBSTACLE:
                 step_vehicle(v, lanes, i, dt)

@@ -1,0 +1,295 @@
+"""K worlds of procedural block maps on the compiled core, each world on its own map.
+
+``BlocksSimulator`` is ``FastSimulator`` (same API: ``reset_where``, ``step`` with NEXT_STEP
+restarts, ``batch``) for a scenario whose maps come from seeds (``Scenario.procedural_maps``):
+an episode's seed picks its map from the scenario's set (``MapSet.seed_of``), and the K worlds
+of a batch may drive K different maps.
+
+Every map is converted once (``BlocksMap``: its own LaneTable with lane rows local to it) and
+the tables of the maps loaded so far are stacked into one ``(L_total, LANE_COLUMNS)`` array;
+world k reads the rows ``[lane_start[k], lane_stop[k])`` of its map. The compiled kernels are
+the other scenarios' (``traffic.simulate``, ``export_world``, ``meta_action``), called per world on
+that slice of rows, a view in which the world's lane indices are the map's own: one compiled
+call steps all K worlds, with no Python loop over worlds or vehicles. Each world's RoadMap (for
+the sensors and renderers) is its map's: ``WorldBatch.roads`` holds the maps the K worlds drive
+(at most K, however many the set has) and ``road_index`` each world's.
+
+Episode rules (MetaDrive's, ``metadrive/envs/metadrive_env.py``): arrival within 5 m of the
+route's end (the destination road's end), out of road when not on a lane or when the ego's body
+crosses a solid line (the centre line or the road's edge: ``on_continuous_line_done``), crash on
+any collision; the time limit is the route's (``blocks_spawn.route_time_limit_s``).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+from numba import njit, prange
+
+from drivelab.envs.backends.fast import lanes as L
+from drivelab.envs.backends.fast import traffic as T
+from drivelab.envs.backends.fast.blocks_spawn import (
+    TRAFFIC_SPEED_MPS,
+    BlocksMap,
+    MapSet,
+    blocks_map,
+    route_time_limit_s,
+)
+from drivelab.envs.backends.fast.simulator import (
+    ARRIVE_NEVER,
+    EX_FLOATS,
+    EX_LANE_WIDTH,
+    EX_LATERAL,
+    EX_ON_ROAD,
+    EX_WID,
+    FastSimulator,
+    export_world,
+    meta_action,
+)
+from drivelab.errors import UsageError
+from drivelab.world.batch import WorldBatch
+from drivelab.world.state import RoadMap
+
+ARRIVAL_WINDOW_M = 5.0  # MetaDrive's arrive_dest: within 5 m of the final road's end
+
+
+@njit(cache=True)
+def _simulate_serial(v, count, lanes, start, stop, p, frames, dt, regulation, active, cap) -> None:
+    for k in range(v.shape[0]):
+        if active[k]:
+            T.simulate(v[k, : count[k]], lanes[start[k] : stop[k]], p, frames, dt, regulation[k], cap, True)
+
+
+@njit(cache=True, parallel=True)
+def _simulate_parallel(v, count, lanes, start, stop, p, frames, dt, regulation, active, cap) -> None:
+    for k in prange(v.shape[0]):
+        if active[k]:
+            T.simulate(v[k, : count[k]], lanes[start[k] : stop[k]], p, frames, dt, regulation[k], cap, True)
+
+
+def simulate_map_worlds(
+    v: np.ndarray,
+    count: np.ndarray,
+    lanes: np.ndarray,
+    start: np.ndarray,
+    stop: np.ndarray,
+    p: np.ndarray,
+    frames: int,
+    dt: float,
+    regulation: np.ndarray,
+    active: np.ndarray,
+    release_cap_mps: float,
+) -> None:
+    """``traffic.simulate`` of world k's vehicles ``v[k, :count[k]]`` (K, N_max, VEHICLE_COLUMNS)
+    on its map's lane rows ``lanes[start[k]:stop[k]]`` for the worlds of ``active`` (K,); one numba
+    thread per world where numba has several (``traffic.simulate_worlds``' rule). Right of way is
+    enforced at the junctions only (``enforce_road_rules``' ``prioritised_only``), and a vehicle
+    that yielded cruises on at ``release_cap_mps``."""
+    parallel = v.shape[0] > 1 and numba.get_num_threads() > 1
+    kernel = _simulate_parallel if parallel else _simulate_serial
+    kernel(v, count, lanes, start, stop, p, frames, dt, regulation, active, release_cap_mps)
+
+
+@njit(cache=True)
+def apply_meta_map_worlds(v, count, ego, lanes, start, stop, actions, speeds) -> None:
+    """``meta_action`` of each world's ego on its map's lane rows."""
+    for k in range(v.shape[0]):
+        meta_action(v[k, : count[k]], ego[k], lanes[start[k] : stop[k]], actions[k], speeds)
+
+
+@njit(cache=True)
+def export_map_worlds(
+    v, count, ego, lanes, start, stop, in_junction, dead_end, solid, floats, ints, flags, vehicles, valid
+) -> None:
+    """``export_world`` of each world on its map's lane rows (arrival is judged on the route),
+    then MetaDrive's out of road: off every lane, or the ego's body across a solid line of its
+    lane (``solid`` (L_total, 2): left, right; lateral offsets grow to the right)."""
+    for k in range(v.shape[0]):
+        a, b = start[k], stop[k]
+        export_world(
+            v[k, : count[k]], ego[k], lanes[a:b], in_junction[a:b], dead_end[a:b], ARRIVE_NEVER, 0.0,
+            floats[k], ints[k], flags[k], vehicles[k], valid[k],
+        )  # fmt: skip
+        lane = a + int(v[k, ego[k], T.LANE])
+        half_body, half_lane, lateral = (
+            floats[k, EX_WID] / 2,
+            floats[k, EX_LANE_WIDTH] / 2,
+            floats[k, EX_LATERAL],
+        )
+        if (solid[lane, 0] and lateral - half_body < -half_lane) or (
+            solid[lane, 1] and lateral + half_body > half_lane
+        ):
+            flags[k, EX_ON_ROAD] = False
+
+
+@njit(cache=True)
+def clear_dead_ends(v, count, ego, lanes, start, stop, dead_end) -> None:
+    """Drop, in every world, the traffic vehicles within a vehicle length of the end of a lane that
+    leads nowhere (they leave the map; MetaDrive recycles them too); the kept rows close up in
+    order, the freed rows become zeros, ``count`` and ``ego`` follow."""
+    for k in range(v.shape[0]):
+        lanes_k, dead_k = lanes[start[k] : stop[k]], dead_end[start[k] : stop[k]]
+        kept, new_ego = 0, ego[k]
+        for j in range(count[k]):
+            row = v[k, j]
+            lane = int(row[T.LANE])
+            leaving = False
+            if j != ego[k] and dead_k[lane]:
+                s, _ = L.local_coordinates(lanes_k, lane, row[T.X], row[T.Y])
+                leaving = s > lanes_k[lane, L.LENGTH] - row[T.LEN]
+            if not leaving:
+                if j == ego[k]:
+                    new_ego = kept
+                if kept != j:
+                    v[k, kept] = v[k, j]
+                kept += 1
+        v[k, kept : count[k]] = 0.0
+        count[k], ego[k] = kept, new_ego
+
+
+class BlocksSimulator(FastSimulator):
+    """K worlds of a procedural-maps scenario on the compiled core (see the module docstring).
+
+    :param scenario: a scenario with ``procedural_maps`` (its ``spawn(seed, blocks_map, control)``).
+    :param traffic: "empty", "regular" or "dense".
+    :param control: "meta" or "continuous".
+    :param num_worlds: K.
+    :param overrides: config keys: the map set's (``map``, ``start_seed``, ``num_scenarios``,
+        ``lane_count``, ``lane_width``, ``signalised``), ``traffic_density``, highway-env's.
+    """
+
+    def __init__(self, scenario, traffic: str, control: str, num_worlds: int, overrides: dict | None = None):
+        if not scenario.procedural_maps:
+            raise UsageError(f"scenario {scenario.name!r} has no procedural maps")
+        super().__init__(scenario, traffic, control, num_worlds, overrides)
+        k = num_worlds
+        self.map_set = MapSet.from_config(self._road.config)
+        self.maps: list[BlocksMap] = []
+        self._slot_of: dict[int, int] = {}  # map seed → slot in ``maps``
+        self.lanes = np.zeros((0, L.LANE_COLUMNS))  # every loaded map's rows, stacked
+        self.in_junction = np.zeros(0, dtype=bool)
+        self.dead_end = np.zeros(0, dtype=bool)
+        self.solid = np.zeros((0, 2), dtype=bool)
+        self.map_start = np.zeros(0, dtype=np.int64)  # first stacked row of each map
+        self.map_roads: tuple[RoadMap, ...] = ()  # every loaded map's RoadMap, by slot
+        self.roads: tuple[RoadMap, ...] = ()  # the maps the worlds drive now (a batch's roads)
+        self._road_index = np.zeros(k, dtype=np.int64)
+        self._roads_of: np.ndarray | None = None  # the world_map the two above were made for
+        self.world_map = np.zeros(k, dtype=np.int64)
+        self.lane_start = np.zeros(k, dtype=np.int64)
+        self.lane_stop = np.zeros(k, dtype=np.int64)
+        self.route_time_limit_s = np.full(k, np.inf)
+        self._route_of: dict[tuple[int, int], int] = {}  # (map slot, spawn lane) → route index
+        self.arrival_threshold = ARRIVAL_WINDOW_M
+        self._slot(self.map_set.start_seed)  # the first map: the road the base class converted
+
+    # --- maps -------------------------------------------------------------------------------------
+    def _slot(self, seed: int) -> int:
+        """The slot of map ``seed`` in ``maps``, converting and stacking it at its first use."""
+        slot = self._slot_of.get(seed)
+        if slot is not None:
+            return slot
+        converted = self._road.cache.setdefault("blocks_maps", {})  # shared by this config's simulators
+        bmap = converted.get(seed)
+        if bmap is None:
+            bmap = converted[seed] = blocks_map(self.map_set.generate(seed), self._road)
+        slot = self._slot_of[seed] = len(self.maps)
+        self.maps.append(bmap)
+        self.map_start = np.append(self.map_start, len(self.lanes))
+        self.lanes = np.concatenate([self.lanes, bmap.table.rows])
+        self.in_junction = np.concatenate([self.in_junction, bmap.in_junction])
+        self.dead_end = np.concatenate([self.dead_end, bmap.dead_end])
+        self.solid = np.concatenate([self.solid, bmap.solid])
+        self.map_roads = (*self.map_roads, bmap.road.road_map)
+        return slot
+
+    def map_of(self, k: int) -> BlocksMap:
+        """World k's map."""
+        return self.maps[int(self.world_map[k])]
+
+    def _route(self, slot: int, lane: int) -> int:
+        """The route index of the ego route from spawn lane ``lane`` of map ``slot``."""
+        key = (slot, lane)
+        if key not in self._route_of:
+            tracker = self.maps[slot].routes.get(lane)
+            if tracker is None:
+                raise NotImplementedError(f"no ego route from lane {lane} of map {slot}")
+            self._route_of[key] = len(self._trackers)
+            self._trackers.append(tracker)
+            self._pad_routes()
+        return self._route_of[key]
+
+    # --- episodes -------------------------------------------------------------------------------
+    def _start_episodes(self, worlds: np.ndarray, seeds: np.ndarray) -> None:
+        """New episodes in ``worlds``: each seed's map, then the scenario's set-up on it (one call
+        per world started: the vehicles of each are made by one compiled call)."""
+        for k in worlds:
+            seed = int(seeds[k])
+            slot = self._slot(self.map_set.seed_of(seed))
+            bmap = self.maps[slot]
+            rows, ego, regulation, _ = self.scenario.spawn(seed, bmap, self.control)
+            self._fit(len(rows))
+            self.vehicles[k] = 0.0
+            self.vehicles[k, : len(rows)] = rows
+            self.count[k], self.ego[k], self.regulation[k] = len(rows), ego, regulation
+            self.world_map[k] = slot
+            self.lane_start[k] = self.map_start[slot]
+            self.lane_stop[k] = self.map_start[slot] + len(bmap.table.rows)
+            lane = int(rows[ego, T.LANE])
+            self.route_index[k] = self._route(slot, lane)
+            self.route_time_limit_s[k] = route_time_limit_s(self._trackers[self.route_index[k]])
+            self.start_lane_id[k] = bmap.table.rows[lane, L.LANE_ID]
+        self.time_s[worlds] = 0.0
+
+    # --- stepping -------------------------------------------------------------------------------
+    def step(
+        self, controls: np.ndarray, restart: np.ndarray | None = None, seeds: np.ndarray | None = None
+    ) -> WorldBatch:
+        """One policy step of every world (see ``FastSimulator.step``); traffic at a dead end leaves."""
+        if self.batch is None:
+            raise UsageError("BlocksSimulator.step before reset_where")
+        restart = (
+            np.zeros(self.num_worlds, dtype=bool) if restart is None else np.asarray(restart, dtype=bool)
+        )
+        self.apply_controls(controls)
+        simulate_map_worlds(
+            self.vehicles, self.count, self.lanes, self.lane_start, self.lane_stop, self.idm, self.frames,
+            self.dt_s, self.regulation, ~restart, TRAFFIC_SPEED_MPS,
+        )  # fmt: skip
+        clear_dead_ends(
+            self.vehicles, self.count, self.ego, self.lanes, self.lane_start, self.lane_stop, self.dead_end
+        )
+        self.time_s += 1 / self.policy_frequency_hz
+        self._start_episodes(np.flatnonzero(restart), seeds)
+        self._project(fresh=restart, update=np.ones(self.num_worlds, dtype=bool))
+        self.batch = self._export()
+        return self.batch
+
+    def apply_controls(self, controls: np.ndarray) -> None:
+        """The egos' meta-actions on their maps' lanes, or continuous controls (as FastSimulator)."""
+        if self.control != "meta":
+            super().apply_controls(controls)
+            return
+        actions = np.asarray(controls).reshape(self.num_worlds).astype(np.int64)
+        apply_meta_map_worlds(
+            self.vehicles, self.count, self.ego, self.lanes, self.lane_start, self.lane_stop, actions,
+            self._road.target_speeds,
+        )  # fmt: skip
+
+    # --- export ---------------------------------------------------------------------------------
+    def _export(self) -> WorldBatch:
+        k, slots = self.num_worlds, max(self.vehicles.shape[1] - 1, 0)
+        floats, ints = np.zeros((k, EX_FLOATS)), np.zeros((k, 3), dtype=np.int64)
+        flags = np.zeros((k, 4), dtype=bool)
+        vehicles, valid = np.zeros((k, slots, 6)), np.zeros((k, slots), dtype=bool)
+        export_map_worlds(
+            self.vehicles, self.count, self.ego, self.lanes, self.lane_start, self.lane_stop,
+            self.in_junction, self.dead_end, self.solid, floats, ints, flags, vehicles, valid,
+        )  # fmt: skip
+        if self._roads_of is None or not np.array_equal(self._roads_of, self.world_map):
+            used, index = np.unique(self.world_map, return_inverse=True)
+            self.roads = tuple(self.map_roads[slot] for slot in used)
+            self._road_index, self._roads_of = index.astype(np.int64), self.world_map.copy()
+            self._road_index.setflags(write=False)
+        self._empty = {**self._empty, "road_index": self._road_index}
+        return self._export_arrays(floats, ints, flags, vehicles, valid)

@@ -1,0 +1,71 @@
+"""Procedural block maps (issue 18; MetaDrive's PG maps, seed 003's "OSX"): the preset and its
+compiled-core hooks.
+
+Config keys (``backend_options`` / a run's ``env_options.backend_options``), MetaDrive's names
+and defaults (``metadrive/envs/metadrive_env.py``): ``map`` (a block string such as ``"OSX"`` or a
+number of random blocks; 3), ``start_seed`` (0) and ``num_scenarios`` (1): the maps of seeds
+``start_seed`` … ``start_seed + num_scenarios − 1``, each episode on the map its seed picks;
+``lane_count`` (3; null: 2 or 3 per map), ``lane_width`` (3.5; null: U[3, 4.5] per map),
+``signalised`` (false: lights at the intersections when true) and ``traffic_density``.
+
+Traffic levels set ``traffic_density``: empty 0, regular 0.1 (MetaDrive's default), dense 0.2
+(twice it; any density in [0, 1] can be given).
+
+Only the compiled core runs these maps (``backend="fast"``): highway-env has no such road.
+"""
+
+from __future__ import annotations
+
+from drivelab.envs.backends.fast.blocks_spawn import (
+    MAP_DEFAULTS,
+    BlocksMap,
+    MapSet,
+    spawn_blocks_episode,
+    traffic_density,
+)
+from drivelab.envs.backends.roads.description import RoadDescription
+from drivelab.world.scenario import Scenario
+
+DENSITIES = {"empty": 0.0, "regular": 0.1, "dense": 0.2}
+# MetaDrive steps its agents every 0.1 s (5 physics steps of 0.02 s, metadrive/envs/base_env.py):
+# 10 decisions a second over 20 simulation frames of the compiled core
+POLICY_FREQUENCY_HZ, SIMULATION_FREQUENCY_HZ = 10, 20
+# MetaDrive's horizon: 1000 steps of 0.1 s (an episode's own limit is its route's, see
+# ``blocks_spawn.route_time_limit_s``; this applies where no route gives one)
+HORIZON_S = 100.0
+
+
+def blocks_road(config: dict) -> RoadDescription:
+    """The road of the first map of the config's set (seed ``start_seed``)."""
+    maps = MapSet.from_config(config)
+    return maps.generate(maps.start_seed).description
+
+
+def spawn_blocks(seed: int, bmap: BlocksMap, control: str):
+    """An episode on ``bmap`` (the map ``seed`` picked) at the config's traffic density:
+    ``blocks_spawn.spawn_blocks_episode``."""
+    return spawn_blocks_episode(seed, bmap, control, traffic_density(bmap.road.config))
+
+
+SCENARIO = Scenario(
+    "blocks",
+    "highway_env.envs.common.abstract.AbstractEnv",  # only its default config is read
+    "procedural block maps (MetaDrive's; map=OSX or N random blocks, num_scenarios maps from "
+    "start_seed): route from the spawn road to the last block, IDM traffic",
+    config={
+        **{key: value for key, value in MAP_DEFAULTS.items() if key != "traffic_density"},
+        "duration": HORIZON_S,
+        "simulation_frequency": SIMULATION_FREQUENCY_HZ,
+        "policy_frequency": POLICY_FREQUENCY_HZ,
+    },
+    traffic={level: {"traffic_density": density} for level, density in DENSITIES.items()},
+    arrival="route_end",
+    continuous_policy_frequency_hz=POLICY_FREQUENCY_HZ,
+    meta_target_speeds=(0, 5, 10, 15, 20),
+    action_kinds=("continuous", "grid", "meta", "target_speed"),
+    default_reward="metadrive",
+    procedural_maps=True,
+    reference_backend=False,
+    spawn=spawn_blocks,
+    road=blocks_road,
+)
