@@ -6,7 +6,8 @@ and defaults (``metadrive/envs/metadrive_env.py``): ``map`` (a block string such
 number of random blocks; 3), ``start_seed`` (0) and ``num_scenarios`` (1): the maps of seeds
 ``start_seed`` … ``start_seed + num_scenarios − 1``, each episode on the map its seed picks;
 ``lane_count`` (3; null: 2 or 3 per map), ``lane_width`` (3.5; null: U[3, 4.5] per map),
-``signalised`` (false: lights at the intersections when true) and ``traffic_density``.
+``signalised`` (false; the generator can place lights at intersections, but the blocks
+simulator runs no light cycle yet, so true is refused) and ``traffic_density``.
 
 Traffic levels set ``traffic_density``: empty 0, regular 0.1 (MetaDrive's default), dense 0.2
 (twice it; any density in [0, 1] can be given).

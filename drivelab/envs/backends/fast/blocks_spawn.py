@@ -115,6 +115,8 @@ class MapSet:
         signalised = config.get("signalised", MAP_DEFAULTS["signalised"])
         if not isinstance(signalised, bool):
             raise UsageError(f"signalised must be true or false, got {signalised!r}")
+        if signalised:  # the maps can carry lights (generate_map), the blocks simulator runs none yet
+            raise UsageError("signalised intersections are not simulated on blocks maps yet")
         return MapSet(
             spec if isinstance(spec, str) else int(spec),
             _integer(config, "start_seed", 0),
