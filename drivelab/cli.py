@@ -97,6 +97,7 @@ def train(
     video: bool = typer.Option(False, "--video", help="record a video at each periodic evaluation"),
     checkpoint_every: int | None = typer.Option(None, help="steps between checkpoints (0: 10 per run)"),
     n_envs: int | None = typer.Option(None, help="worlds stepped together (SB3 and own agents)"),
+    eval_maps: str | None = typer.Option(None, help="blocks: evaluate on maps START:COUNT (unseen maps)"),
     hyperparams: list[str] = typer.Option([], "--hyperparams", "-H", help="algorithm override key=value"),
     resume: Path | None = typer.Option(None, help="continue this run directory from its checkpoint"),
     no_alix: bool = typer.Option(False, "--no-alix", help="rlad/drq: no A-LIX (-H alix=false)"),
@@ -119,7 +120,20 @@ def train(
         if resume is not None:
             given = [
                 o
-                for o in (algo, env, obs, action, reward, seed, traffic, backend, config, name, n_envs)
+                for o in (
+                    algo,
+                    env,
+                    obs,
+                    action,
+                    reward,
+                    seed,
+                    traffic,
+                    backend,
+                    config,
+                    name,
+                    n_envs,
+                    eval_maps,
+                )
                 if o is not None
             ]
             if given or hyperparams or switches:
@@ -131,7 +145,7 @@ def train(
                 "algo": algo, "env": env, "obs": obs, "action": action, "reward": reward,
                 "steps": steps, "seed": seed, "traffic": traffic, "backend": backend, "name": name,
                 "eval_every": eval_every, "eval_episodes": eval_episodes,
-                "checkpoint_every": checkpoint_every, "n_envs": n_envs,
+                "checkpoint_every": checkpoint_every, "n_envs": n_envs, "eval_maps": eval_maps,
             }  # fmt: skip
             values.update({k: v for k, v in cli.items() if v is not None})
             if video:

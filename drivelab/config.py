@@ -34,6 +34,10 @@ class RunConfig:
     :param checkpoint_every: environment steps between checkpoints (0: ten over the run).
     :param hyperparams: algorithm keyword overrides (e.g. ``{"learning_rate": 1e-3}``).
     :param env_options: extra DriveEnv keywords (``duration_s``, ``action_options``, ...).
+    :param n_envs: worlds stepped together while training.
+    :param eval_maps: procedural maps only (``blocks``): ``"START:COUNT"``, evaluation on the maps
+        of seeds START … START + COUNT − 1 instead of the training set (MetaDrive's ``start_seed``
+        / ``num_scenarios``; e.g. train on ``num_scenarios: 100`` and evaluate on ``"1000:100"``).
     """
 
     algo: str
@@ -53,6 +57,7 @@ class RunConfig:
     hyperparams: dict = field(default_factory=dict)
     env_options: dict = field(default_factory=dict)
     n_envs: int = 1
+    eval_maps: str | None = None
 
     def env_kwargs(self) -> dict:
         """Keyword arguments of DriveEnv for this run."""
@@ -72,6 +77,10 @@ class RunConfig:
         kwargs = self.env_kwargs()
         if SCENARIOS[self.env].config.get("retarget"):
             kwargs["backend_options"] = {**(kwargs.get("backend_options") or {}), "retarget": False}
+        if self.eval_maps is not None:
+            start, count = parse_maps(self.eval_maps)
+            options = {"start_seed": start, "num_scenarios": count}
+            kwargs["backend_options"] = {**(kwargs.get("backend_options") or {}), **options}
         return kwargs
 
     def to_dict(self) -> dict:
@@ -84,6 +93,8 @@ class RunConfig:
         data = {k: v for k, v in self.to_dict().items() if k not in ("steps", "name")}
         if data["n_envs"] == 1:  # runs made before the field existed keep their identity
             del data["n_envs"]
+        if data["eval_maps"] is None:
+            del data["eval_maps"]
         return hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
     @property
@@ -100,10 +111,25 @@ MAX_SEED = 2**31 - 1  # plus evaluation offsets and episode numbers, still below
 _TYPES = {"int": int, "str": str, "bool": bool, "dict": dict}
 
 
+def parse_maps(value: str) -> tuple[int, int]:
+    """``"START:COUNT"`` → (start, count): integers, start >= 0, count >= 1."""
+    start, colon, count = str(value).partition(":")
+    try:
+        start_seed, number = int(start), int(count)
+    except ValueError:
+        start_seed, number = -1, 0
+    if not colon or start_seed < 0 or number < 1:
+        raise UsageError(f"eval_maps must be START:COUNT (start >= 0, count >= 1), got {value!r}")
+    return start_seed, number
+
+
 def _check_type(name: str, value):
     """Coerce/validate one field; the error names the field."""
-    if value is None and name == "name":
+    if value is None and name in ("name", "eval_maps"):
         return None
+    if name == "eval_maps":
+        parse_maps(value)
+        return str(value)
     if name == "obs":
         if isinstance(value, str):
             value = [v.strip() for v in value.split(",") if v.strip()]
@@ -159,7 +185,10 @@ def build_config(values: dict) -> RunConfig:
     scenario = SCENARIOS.get(values.get("env", RunConfig.env))
     if scenario is not None:  # an unknown one is reported when the env is built
         values = {"action": scenario.action_kinds[0], "reward": scenario.default_reward, **values}
-    return RunConfig(**{k: _check_type(k, v) for k, v in values.items()})
+    config = RunConfig(**{k: _check_type(k, v) for k, v in values.items()})
+    if config.eval_maps is not None and config.env in SCENARIOS and not SCENARIOS[config.env].procedural_maps:
+        raise UsageError(f"eval_maps is for procedural maps (blocks); {config.env!r} has one road")
+    return config
 
 
 def save_yaml(config: RunConfig, path: Path) -> None:

@@ -73,6 +73,21 @@ TRAIN_CASES = {
         "'stack' of 'topdown' must be an",
     ),
     "seed -1": (["--algo", "ppo", "--seed", "-1"], {}, "'seed' must be between 0 and"),
+    "eval-maps without a count": (
+        ["--algo", "ppo", "--env", "blocks", "--eval-maps", "5"],
+        {},
+        "eval_maps must be START:COUNT",
+    ),
+    "eval-maps count 0": (
+        ["--algo", "ppo", "--env", "blocks", "--eval-maps", "3:0"],
+        {},
+        "eval_maps must be START:COUNT",
+    ),
+    "eval-maps on one road": (
+        ["--algo", "ppo", "--env", "highway", "--eval-maps", "0:5"],
+        {},
+        "eval_maps is for procedural maps",
+    ),
     "env_options bogus": (
         ["--config", "run.yaml"],
         {"run.yaml": b"algo: ppo\nenv_options: {bogus_option: 1}\n"},

@@ -395,3 +395,24 @@ def test_maps_draws_a_gallery_of_the_map_set(tmp_path):
     for args, message in ((["--seeds", "3"], "start:count"), (["--map", "OSQ"], "unknown block letter")):
         result = CliRunner().invoke(app, ["maps", *args, "--out", str(out)])
         assert result.exit_code == 2 and message in result.output
+
+
+def test_eval_maps_evaluate_on_another_map_set():
+    from drivelab.config import build_config
+    from drivelab.envs.core import DriveEnv
+
+    training = {"map": 3, "num_scenarios": 4, "start_seed": 0}
+    config = build_config(
+        {"algo": "ppo", "env": "blocks", "action": "continuous", "eval_maps": "1000:2",
+         "env_options": {"backend_options": training}}
+    )  # fmt: skip
+    assert config.env_kwargs()["backend_options"] == training
+    evaluation = config.eval_env_kwargs()["backend_options"]
+    assert evaluation == {"map": 3, "num_scenarios": 2, "start_seed": 1000}
+    env = DriveEnv(**config.eval_env_kwargs())
+    env.reset(options={"episode_seed": 7})
+    assert env.vector.simulator.map_of(0).pg.seed in (1000, 1001)
+    assert (
+        build_config({"algo": "ppo", "env": "blocks"}).identity()
+        == build_config({"algo": "ppo", "env": "blocks", "eval_maps": None}).identity()
+    )  # runs without the field keep their identity
