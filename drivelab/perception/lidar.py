@@ -139,12 +139,14 @@ class Lidar(Sensor):
         ego = batch.ego
         cos_h, sin_h = np.cos(ego.heading)[:, None], np.sin(ego.heading)[:, None]  # (K, 1)
         position_x, position_y = ego.position[:, 0, None], ego.position[:, 1, None]
-        # road edges: (K or 1, E, 2) end points turned into each world's ego frame
-        edges, edge_valid = _road_edges(batch)
-        delta_x, delta_y = edges[..., 0] - position_x[..., None], edges[..., 1] - position_y[..., None]
-        edge_x = delta_x * cos_h[..., None] + delta_y * sin_h[..., None]  # (K, E, 2)
-        edge_y = -delta_x * sin_h[..., None] + delta_y * cos_h[..., None]
-        edge_valid = np.broadcast_to(edge_valid, edge_x.shape[:2])
+        # road edges: those whose bounding box comes within range of the ego (the others lie
+        # farther than the range and ``_near_parts`` would drop them), as a flat list (W,) of
+        # (world, edge) pairs, end points turned into the ego frame of their world
+        edge_world, chosen = _edges_within(batch, self.range_m + 1.0)  # a metre over rounding
+        delta_x = chosen[..., 0] - position_x[edge_world]
+        delta_y = chosen[..., 1] - position_y[edge_world]
+        edge_x = delta_x * cos_h[edge_world] + delta_y * sin_h[edge_world]  # (W, 2)
+        edge_y = -delta_x * sin_h[edge_world] + delta_y * cos_h[edge_world]
         # other bodies (pedestrians reflect beams too): their centres in the ego frame
         users, valid = batch.road_users()  # (K, U, 6)
         delta_x, delta_y = users[..., 0] - position_x, users[..., 1] - position_y
@@ -170,11 +172,11 @@ class Lidar(Sensor):
         facing = corner_x * next_y - corner_y * next_x < 0  # (V, 4)
         facing |= ~facing.any(axis=1, keepdims=True)
         return (
-            np.concatenate([edge_x[..., 0][edge_valid], corner_x[facing]]),
-            np.concatenate([edge_y[..., 0][edge_valid], corner_y[facing]]),
-            np.concatenate([edge_x[..., 1][edge_valid], next_x[facing]]),
-            np.concatenate([edge_y[..., 1][edge_valid], next_y[facing]]),
-            np.concatenate([np.nonzero(edge_valid)[0], body_world[np.nonzero(facing)[0]]]),
+            np.concatenate([edge_x[:, 0], corner_x[facing]]),
+            np.concatenate([edge_y[:, 0], corner_y[facing]]),
+            np.concatenate([edge_x[:, 1], next_x[facing]]),
+            np.concatenate([edge_y[:, 1], next_y[facing]]),
+            np.concatenate([edge_world, body_world[np.nonzero(facing)[0]]]),
         )
 
     def distances_m(self, batch: WorldBatch | WorldState) -> np.ndarray:
@@ -213,19 +215,30 @@ class Lidar(Sensor):
         out[...] = np.clip(normalised, 0.0, 1.0)
 
 
-def _road_edges(batch: WorldBatch) -> tuple[np.ndarray, np.ndarray]:
-    """The road edges each world sees: (1, E, 2, 2) when every world drives one map, else (K, E, 2, 2)
-    padded across the maps, with the (1 or K, E) valid mask."""
-    roads = batch.roads
-    if len(roads) == 1:
-        edges = np.asarray(roads[0].edges, dtype=float).reshape(1, -1, 2, 2)
-        return edges, np.ones(edges.shape[:2], dtype=bool)
-    # several maps (worlds built apart): pad their edges to one array, a row per map
-    sizes = [len(road.edges) for road in roads]
-    padded = np.zeros((len(roads), max(sizes), 2, 2))
-    valid = np.arange(max(sizes)) < np.array(sizes)[:, None]
-    if max(sizes):
-        padded[valid] = np.concatenate(
-            [np.asarray(road.edges, dtype=float).reshape(-1, 2, 2) for road in roads]
-        )
-    return padded[batch.road_index], valid[batch.road_index]
+class EdgeBoxes:
+    """A road's edges' bounding boxes as (4, E): centre x, centre y, half width, half height."""
+
+    def __init__(self, road) -> None:
+        edges = np.asarray(road.edges, dtype=float).reshape(-1, 2, 2)
+        low, high = edges.min(axis=1), edges.max(axis=1)  # (E, 2)
+        self.boxes = np.concatenate([(low + high) / 2, (high - low) / 2], axis=1).T.copy()
+
+
+def _edge_boxes(road) -> np.ndarray:
+    return road.derived(EdgeBoxes, EdgeBoxes).boxes
+
+
+def _edges_within(batch: WorldBatch, reach_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """(worlds (W,), edges (W, 2, 2)): every road edge whose bounding box lies within ``reach_m``
+    of its world's ego along x and along y, with that world, one map at a time (not one world)."""
+    position = batch.ego.position
+    worlds, chosen = [], []
+    for row, road in enumerate(batch.roads):
+        on_map = np.flatnonzero(batch.road_index == row) if len(batch.roads) > 1 else np.arange(len(position))
+        centre_x, centre_y, half_x, half_y = _edge_boxes(road)  # (E,) each
+        near = np.abs(centre_x - position[on_map, 0, None]) <= half_x + reach_m  # (K_map, E)
+        near &= np.abs(centre_y - position[on_map, 1, None]) <= half_y + reach_m
+        world, edge = np.nonzero(near)
+        worlds.append(on_map[world])
+        chosen.append(np.asarray(road.edges, dtype=float).reshape(-1, 2, 2)[edge])
+    return np.concatenate(worlds), np.concatenate(chosen)
