@@ -126,3 +126,33 @@ def test_bad_options_raise():
         Lidar(beams=0)
     with pytest.raises(ValueError):
         Lidar(noise_std=-1.0)
+
+
+def test_worlds_on_several_block_maps_see_their_own_road_edges():
+    """The bounding-box prefilter keeps every edge a beam can reach: each world's distances equal
+    brute-force rays against all of its map's edges and the other vehicles' sides."""
+    from drivelab.envs.vector import VectorDriveEnv
+    from drivelab.world.geometry import box_corners
+
+    vector = VectorDriveEnv(4, "blocks", obs="kinematics", backend_options={"map": 4, "num_scenarios": 4})
+    vector.action_space.seed(3)
+    vector.reset(seed=5)
+    for _ in range(15):
+        vector.step(vector.action_space.sample())
+    batch = vector.batch
+    assert len(batch.roads) > 1
+    lidar = Lidar(beams=90)
+    distances = lidar.distances_m(batch)
+    assert (distances < lidar.range_m).mean() > 0.2  # road edges and cars are in view
+    for k in range(batch.num_worlds):
+        world = batch[k]
+        corners = (
+            box_corners(world.vehicles[:, :6][:, [0, 1, 2, 4, 5]])
+            if len(world.vehicles)
+            else np.zeros((0, 4, 2))
+        )
+        sides = np.stack([corners, np.roll(corners, -1, axis=1)], axis=2).reshape(-1, 2, 2)
+        segments = np.concatenate([np.asarray(world.road.edges).reshape(-1, 2, 2), sides])
+        angles = world.ego.heading + lidar.beam_step * np.arange(lidar.beams)
+        expected = cast_rays(world.ego.position, angles, segments, lidar.range_m)
+        np.testing.assert_allclose(distances[k], expected, atol=1e-4 * lidar.range_m)  # float32 inside
