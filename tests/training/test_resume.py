@@ -36,6 +36,11 @@ SETUPS = {
     "ppo_own": {"algo": "ppo_own", "action": "continuous", "steps": 192,
                 "hyperparams": {"n_steps": 32, "batch_size": 16, "n_epochs": 2}},
     "a2c_own": {"algo": "a2c_own", "action": "continuous", "steps": 160, "hyperparams": {"n_steps": 32}},
+    "bc": {"algo": "bc", "env": "town", "obs": "waypoints,measurements", "action": "target_speed",
+           "steps": 200, "hyperparams": {"round_steps": 40, "epochs": 2, "batch_size": 16}},
+    "dagger-2-worlds": {"algo": "dagger", "env": "town", "obs": "waypoints,measurements", "n_envs": 2,
+                        "action": "target_speed", "steps": 200,
+                        "hyperparams": {"round_steps": 40, "epochs": 2, "batch_size": 16}},
 }  # fmt: skip
 
 
@@ -111,6 +116,8 @@ def _assert_same_run(reference, resumed, config) -> None:
         ("dueling_ddqn", 77, signal.SIGTERM, 76),
         ("ppo_own", 75, signal.SIGINT, 64),
         ("a2c_own", 75, signal.SIGTERM, 64),
+        ("bc", 95, signal.SIGINT, 80),  # rounds of 40 steps: back to the third round's start
+        ("dagger-2-worlds", 95, signal.SIGTERM, 80),
     ],
 )
 def test_interrupted_and_resumed_run_equals_the_uninterrupted_one(
