@@ -162,6 +162,8 @@ class BehaviourCloning(OwnAgent):
     # --- learning ---------------------------------------------------------------------------------
     def evaluate_on(self, indices: np.ndarray) -> dict[str, float]:
         """Loss and action agreement (``imitation_data.action_agreement``) on the samples ``indices``."""
+        if len(indices) == 0:
+            return {"loss": float("nan"), "agreement": float("nan")}
         data, losses, predicted = self.demonstrations, [], []
         with torch.no_grad():
             for chunk in np.array_split(indices, max(1, -(-len(indices) // 1024))):
@@ -169,8 +171,6 @@ class BehaviourCloning(OwnAgent):
                 expert = torch.as_tensor(data.actions[chunk])
                 losses.append(float(imitation_loss(self.policy, obs, expert, self.config.loss)) * len(chunk))
                 predicted.append(self.act(data.select(chunk)))
-        if len(indices) == 0:
-            return {"loss": float("nan"), "agreement": float("nan")}
         agreement = action_agreement(np.concatenate(predicted), data.actions[indices])
         return {"loss": sum(losses) / len(indices), "agreement": agreement}
 
