@@ -92,7 +92,8 @@ def test_console_script_exit_code():
     assert result.returncode == 2
     assert result.stderr.strip() == (
         "error: unknown algorithm 'nope' "
-        "(choose from dqn, ppo, a2c, sac, dueling_ddqn, a2c_own, ppo_own, rlad, drq, qlearning, expert)"
+        "(choose from dqn, ppo, a2c, sac, dueling_ddqn, a2c_own, ppo_own, rlad, drq, qlearning, expert, bc, "
+        "dagger)"
     )
 
 

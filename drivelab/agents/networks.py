@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 from gymnasium import spaces
 from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
@@ -29,10 +30,13 @@ def is_image(space: spaces.Space) -> bool:
 
 
 def is_vector(space: spaces.Space) -> bool:
-    """A 1-D Box, or a Dict of them."""
+    """A 1-D Box or a floating-point Box of any shape (``waypoints``' (10, 2): the encoders flatten
+    it), or a Dict of them."""
     if isinstance(space, spaces.Dict):
         return all(is_vector(sub) for sub in space.spaces.values())
-    return isinstance(space, spaces.Box) and len(space.shape) == 1
+    if not isinstance(space, spaces.Box) or len(space.shape) == 0:
+        return False
+    return len(space.shape) == 1 or np.issubdtype(space.dtype, np.floating)
 
 
 def observation_kind(space: spaces.Space) -> str:
@@ -73,7 +77,7 @@ class SeedCnn(nn.Module):
 class FusionEncoder(nn.Module):
     """Image (SeedCnn, 256) + LiDAR FC 128 (key ``lidar``, if present) + every other vector FC 64 → 256.
 
-    Vectors other than ``lidar`` are concatenated in key order before their FC layer.
+    Vectors other than ``lidar`` are flattened and concatenated in key order before their FC layer.
     """
 
     def __init__(self, space: spaces.Dict, features: int = 256) -> None:
@@ -87,7 +91,7 @@ class FusionEncoder(nn.Module):
             self.lidar = nn.Sequential(nn.Linear(space[self.lidar_key].shape[0], 128), nn.ReLU())
             width += 128
         if self.vector_keys:
-            size = sum(space[k].shape[0] for k in self.vector_keys)
+            size = sum(spaces.flatdim(space[k]) for k in self.vector_keys)
             self.vector = nn.Sequential(nn.Linear(size, 64), nn.ReLU())
             width += 64
         self.fusion = nn.Sequential(nn.Linear(width, features), nn.ReLU())  # 256 + 128 + 64 = 448 → 256
@@ -98,7 +102,7 @@ class FusionEncoder(nn.Module):
         if self.lidar_key:
             parts.append(self.lidar(obs[self.lidar_key]))
         if self.vector_keys:
-            parts.append(self.vector(torch.cat([obs[k] for k in self.vector_keys], dim=1)))
+            parts.append(self.vector(torch.cat([obs[k].flatten(1) for k in self.vector_keys], dim=1)))
         return self.fusion(torch.cat(parts, dim=1))
 
 
@@ -116,8 +120,8 @@ class MlpEncoder(nn.Module):
 
     def forward(self, obs) -> torch.Tensor:
         if self.keys is not None:
-            obs = torch.cat([obs[k].flatten(1) for k in self.keys], dim=1)
-        return self.net(obs)
+            return self.net(torch.cat([obs[k].flatten(1) for k in self.keys], dim=1))
+        return self.net(obs.flatten(1))
 
 
 def make_encoder(space: spaces.Space) -> nn.Module:

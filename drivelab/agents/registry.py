@@ -113,6 +113,12 @@ ALGORITHMS: dict[str, AlgoSpec] = {
                  "qlearning", observation_kinds=("other",)),  # a Discrete state; the builder checks it
         AlgoSpec("expert", "rule-based town driver on waypoints + privileged affordances (learns nothing)",
                  ("target_speed",), "drivelab.agents.expert:RuleBasedExpert", "own"),
+        AlgoSpec("bc", "behaviour cloning of the town's expert on the learner's own --obs (tanh-Gaussian, "
+                 "seed 003's networks)", ("target_speed",), "drivelab.agents.bc:BehaviourCloning", "own",
+                 sb3_replay=True, observation_kinds=_READABLE, multi_env=True),
+        AlgoSpec("dagger", "DAgger: the learner drives (beta-mixture with the town's expert), the expert "
+                 "labels, the data aggregate", ("target_speed",), "drivelab.agents.dagger:DAgger", "own",
+                 sb3_replay=True, observation_kinds=_READABLE, multi_env=True),
     )
 }  # fmt: skip
 

@@ -16,7 +16,7 @@ from drivelab.errors import UsageError
 
 
 def test_every_entry_resolves_and_names_itself():
-    assert ALGO_NAMES == tuple(ALGORITHMS) and len(ALGO_NAMES) == 11
+    assert ALGO_NAMES == tuple(ALGORITHMS) and len(ALGO_NAMES) == 13
     for name, spec in ALGORITHMS.items():
         assert spec.name == name and spec.family in FAMILIES
         cls = spec.agent_class()
@@ -30,9 +30,10 @@ def test_every_entry_resolves_and_names_itself():
 def test_families_and_the_names_agents_save_under():
     assert sorted(agent_classes("sb3")) == ["a2c", "dqn", "ppo", "sac"]
     own = agent_classes("own")
-    assert sorted(own) == ["a2c_own", "drq", "dueling_ddqn", "expert", "ppo_own", "rlad"]
+    assert sorted(own) == ["a2c_own", "bc", "dagger", "drq", "dueling_ddqn", "expert", "ppo_own", "rlad"]
     assert {cls.algo for cls in own.values()} == set(own)  # OwnAgent.algo reads the registry
     assert issubclass(own["drq"], own["rlad"]) and own["drq"].algo == "drq"
+    assert issubclass(own["dagger"], own["bc"]) and own["dagger"].algo == "dagger"
     with pytest.raises(LookupError, match="no registered algorithm"):
         algo_of(UsageError)
 

@@ -49,6 +49,11 @@ SETUPS = {
                               "log_interval": 10, **extra}}
        for name, algo, extra in (("rlad", "rlad", {}), ("drq", "drq", {}),
                                  ("rlad-fast", "rlad", {"fast_update": True}))},
+    "bc": {"algo": "bc", "env": "town", "obs": "waypoints,measurements", "action": "target_speed",
+           "steps": 200, "hyperparams": {"round_steps": 40, "epochs": 2, "batch_size": 16}},
+    "dagger-2-worlds": {"algo": "dagger", "env": "town", "obs": "waypoints,measurements", "n_envs": 2,
+                        "action": "target_speed", "steps": 200,
+                        "hyperparams": {"round_steps": 40, "epochs": 2, "batch_size": 16}},
 }  # fmt: skip
 
 
@@ -129,6 +134,8 @@ def _assert_same_run(reference, resumed, config) -> None:
         ("rlad", 47, signal.SIGTERM, 46),  # mid-episode, the replay half full
         ("drq", 47, signal.SIGINT, 46),
         ("rlad-fast", 47, signal.SIGTERM, 46),
+        ("bc", 95, signal.SIGINT, 80),  # rounds of 40 steps: back to the third round's start
+        ("dagger-2-worlds", 95, signal.SIGTERM, 80),
     ],
 )
 def test_interrupted_and_resumed_run_equals_the_uninterrupted_one(

@@ -1,0 +1,248 @@
+"""Behaviour cloning of the town's rule-based expert (``--algo bc``): supervised learning of the
+expert's actions from the learner's own observation.
+
+The expert (``expert.py``) reads privileged sensors (route waypoints and affordances: the light's
+state, the distances to the leader, the stop line, pedestrians); the learner reads the run's
+``--obs``, e.g. ``topdown:lights=true,waypoints,measurements``. Demonstrations are generated on
+the run's training env: each of its K worlds (``--n-envs``) is driven by the expert while the
+learner's observation and the expert's action are recorded (``imitation_data.py``).
+
+Training runs in rounds: ``round_steps`` environment steps of demonstrations are added to the
+dataset, then ``epochs`` passes of minibatch Adam over all of it (a fixed ~``validation_fraction``
+of the samples held out), then the validation loss and the action agreement are logged. The loss
+is the squared error of tanh(μ) (``loss=mse``) or the tanh-Gaussian's negative log-likelihood of
+the expert's action (``loss=nll``, which also fits σ).
+
+The policy is the tanh-Gaussian actor-critic of our PPO (``networks.py``: seed 003's CNN, its
+fusion network or an MLP, following the observation), so a cloned policy's weights load into
+``ppo_own`` for fine-tuning (its value head is left untrained here). The dataset is the agent's
+``replay_buffer``: run.py checkpoints it as an ``.npz`` beside the model, so a run resumes exactly.
+Behaviour cloning is DAgger with β = 1 at every iteration (``dagger.py``).
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+from gymnasium import spaces
+from stable_baselines3.common.callbacks import BaseCallback
+from torch import nn
+
+from drivelab.agents.base import OwnAgent, batch_of_one, observation_to_tensor
+from drivelab.agents.expert import SCENARIOS
+from drivelab.agents.imitation_data import (
+    Demonstrations,
+    Teacher,
+    Worlds,
+    action_agreement,
+    collect,
+    stack_steps,
+    vector_env_of,
+)
+from drivelab.agents.networks import TanhGaussianActorCritic, squashed_log_prob
+from drivelab.errors import UsageError
+
+LOSSES = ("mse", "nll")
+ATANH_LIMIT = 1.0 - 1e-4  # expert actions at ±1 (full speed) are clipped before atanh for the NLL
+
+
+@dataclass(frozen=True)
+class BCConfig:
+    """Hyper-parameters (``-H key=value``).
+
+    :param learning_rate: Adam step size.
+    :param batch_size: minibatch size.
+    :param epochs: passes over the whole dataset after each round of demonstrations.
+    :param round_steps: environment steps of demonstrations between two training phases.
+    :param validation_fraction: share of the samples held out for the validation loss.
+    :param loss: "mse" (squared error of tanh μ) or "nll" (tanh-Gaussian negative log-likelihood).
+    :param max_grad_norm: gradient clipping by global norm.
+    :param log_std_init: initial log σ (σ ≈ 0.37: a PPO fine-tuning starts near the cloned policy).
+    """
+
+    learning_rate: float = 1e-3
+    batch_size: int = 256
+    epochs: int = 2
+    round_steps: int = 2000
+    validation_fraction: float = 0.1
+    loss: str = "mse"
+    max_grad_norm: float = 1.0
+    log_std_init: float = -1.0
+
+    def check(self, algo: str) -> None:
+        if min(self.batch_size, self.epochs, self.round_steps) < 1:
+            raise UsageError(f"{algo!r} needs batch_size, epochs and round_steps >= 1")
+        if self.learning_rate <= 0 or self.max_grad_norm <= 0:
+            raise UsageError(f"{algo!r} needs a positive learning_rate and max_grad_norm")
+        if not 0 <= self.validation_fraction < 1:
+            raise UsageError(f"{algo!r} needs 0 <= validation_fraction < 1")
+        if self.loss not in LOSSES:
+            raise UsageError(f"{algo!r} loss must be one of {', '.join(LOSSES)}, got {self.loss!r}")
+
+
+def imitation_loss(
+    policy: TanhGaussianActorCritic, obs: Any, expert: torch.Tensor, kind: str
+) -> torch.Tensor:
+    """The loss of a minibatch: ``mse`` = mean((tanh μ(s) − a*)²); ``nll`` = −mean log π(a*|s)
+    for the tanh-Gaussian π (a* clipped into (−1, 1) for the inverse tanh).
+
+    :param obs: batched observation tensors (B, …).
+    :param expert: the expert's actions (B, A).
+    """
+    mean, _ = policy(obs)
+    if kind == "mse":
+        return nn.functional.mse_loss(torch.tanh(mean), expert)
+    unsquashed = torch.atanh(expert.clamp(-ATANH_LIMIT, ATANH_LIMIT))
+    return -squashed_log_prob(policy.distribution(mean), unsquashed).mean()
+
+
+class BehaviourCloning(OwnAgent):
+    """A learner that imitates the rule-based expert on its own observation (module docstring)."""
+
+    config_class = BCConfig
+
+    def _build(self) -> None:
+        if not isinstance(self.action_space, spaces.Box) or self.action_space.shape != (2,):
+            raise UsageError(f"{self.algo} imitates the expert's --action target_speed")
+        if self.env is not None:
+            scenario = vector_env_of(self.env).scenario.name
+            if scenario not in SCENARIOS:
+                raise UsageError(f"{self.algo} imitates the town's expert: --env town, not {scenario!r}")
+        self.policy = TanhGaussianActorCritic(
+            self.observation_space, 2, shared_encoder=True, log_std_init=self.config.log_std_init
+        )
+        self.optimizer = torch.optim.Adam(self.policy.parameters(), lr=self.config.learning_rate)
+        self.teacher = Teacher()
+        self.replay_buffer = Demonstrations(
+            self.observation_space, 2, self.config.validation_fraction, self.rng
+        )
+        self._n_updates = 0  # training phases done = DAgger iterations done
+        self._last_obs = None
+        self.episode_returns: deque[float] = deque(maxlen=100)
+
+    @property
+    def demonstrations(self) -> Demonstrations:
+        """The labelled states gathered so far (checkpointed by run.py as the replay buffer)."""
+        return self.replay_buffer
+
+    def _state(self) -> dict[str, Any]:
+        return {
+            "policy": self.policy.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "rounds": torch.tensor(self._n_updates),
+        }
+
+    def _set_state(self, state: dict[str, Any]) -> None:
+        self.policy.load_state_dict(state["policy"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        self._n_updates = int(state["rounds"])
+
+    # --- acting -----------------------------------------------------------------------------------
+    def act(self, obs: Any, deterministic: bool = True) -> np.ndarray:
+        """Actions (B, 2) for a batch of observations (B, …), clipped to the action space."""
+        with torch.no_grad():
+            tensor = observation_to_tensor(obs, self.observation_space)
+            unsquashed, _, _ = self.policy.sample(tensor, deterministic, self.generator)
+        actions = torch.tanh(unsquashed).numpy()
+        return np.clip(actions, self.action_space.low, self.action_space.high)
+
+    def predict(self, obs: Any, state=None, episode_start=None, deterministic: bool = True):
+        """(tanh μ, or tanh of a sample when not deterministic, clipped; None) for one observation."""
+        return self.act(batch_of_one(obs), deterministic)[0], None
+
+    # --- DAgger's mixture ----------------------------------------------------------------------------
+    def beta(self, iteration: int) -> float:
+        """β of iteration ``iteration`` (1-based): the probability the expert acts. Cloning: always 1."""
+        return 1.0
+
+    # --- learning ---------------------------------------------------------------------------------
+    def evaluate_on(self, indices: np.ndarray) -> dict[str, float]:
+        """Loss and action agreement (``imitation_data.action_agreement``) on the samples ``indices``."""
+        if len(indices) == 0:
+            return {"loss": float("nan"), "agreement": float("nan")}
+        data, losses, predicted = self.demonstrations, [], []
+        with torch.no_grad():
+            for chunk in np.array_split(indices, max(1, -(-len(indices) // 1024))):
+                obs = observation_to_tensor(data.select(chunk), self.observation_space)
+                expert = torch.as_tensor(data.actions[chunk])
+                losses.append(float(imitation_loss(self.policy, obs, expert, self.config.loss)) * len(chunk))
+                predicted.append(self.act(data.select(chunk)))
+        agreement = action_agreement(np.concatenate(predicted), data.actions[indices])
+        return {"loss": sum(losses) / len(indices), "agreement": agreement}
+
+    def fit(self) -> dict[str, float]:
+        """``epochs`` passes of minibatch Adam over the training samples; the mean training loss of
+        the last pass, and the loss and agreement on the validation samples."""
+        config, data = self.config, self.demonstrations
+        training, validation = data.split()
+        losses: list[float] = []
+        for _ in range(config.epochs):
+            losses = []
+            order = training[torch.randperm(len(training), generator=self.generator).numpy()]
+            for start in range(0, len(order), config.batch_size):
+                rows = np.sort(order[start : start + config.batch_size])
+                obs = observation_to_tensor(data.select(rows), self.observation_space)
+                loss = imitation_loss(self.policy, obs, torch.as_tensor(data.actions[rows]), config.loss)
+                self.optimizer.zero_grad()
+                loss.backward()
+                nn.utils.clip_grad_norm_(self.policy.parameters(), config.max_grad_norm)
+                self.optimizer.step()
+                losses.append(loss.item())
+        held_out = self.evaluate_on(validation)
+        return {
+            "loss": float(np.mean(losses)) if losses else float("nan"),
+            "validation_loss": held_out["loss"],
+            "validation_agreement": held_out["agreement"],
+            "dataset_size": len(data),
+        }
+
+    def learn(
+        self,
+        total_timesteps: int,
+        callback: BaseCallback | None = None,
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> BehaviourCloning:
+        """Rounds of demonstrations and training until ``total_timesteps`` more environment steps were
+        taken (all K worlds count; contract in base.py). Round i drives the training env with the
+        mixture βᵢ (``beta``), labels every visited state with the expert's action, adds them to the
+        dataset, then trains on all of it. The dataset and the weights change only after the
+        round's last ``on_step``, so each round start is a safe point for the checkpoints."""
+        target, start_steps, start_time = self._start_learning(total_timesteps, reset_num_timesteps)
+        worlds = Worlds(self.env)
+        worlds.episode_returns = self.episode_returns
+        if self._last_obs is None:
+            self._last_obs = worlds.reset()
+        callback = self._start_callback(callback)
+        callback.on_training_start(locals(), globals())
+
+        def on_step(obs: Any) -> bool:
+            self.num_timesteps += worlds.num_worlds
+            self._last_obs = obs
+            callback.update_locals(locals())
+            return callback.on_step()
+
+        while self.num_timesteps < target:
+            callback.on_rollout_start()
+            iteration = self._n_updates + 1
+            beta = self.beta(iteration)
+            steps = min(self.config.round_steps, target - self.num_timesteps)
+            observations, labels, _, finished = collect(
+                worlds, self.teacher, self._last_obs, -(-steps // worlds.num_worlds), beta,
+                learner=self.act, rng=self.rng, on_step=on_step,
+            )  # fmt: skip
+            if not finished:
+                break
+            callback.on_rollout_end()
+            self.demonstrations.add(
+                stack_steps(observations, self.observation_space), np.concatenate(labels), iteration
+            )
+            metrics = self.fit()
+            self._n_updates = iteration
+            self._log_progress({**metrics, "beta": beta, "iteration": iteration}, start_steps, start_time)
+        callback.on_training_end()
+        return self

@@ -1,0 +1,49 @@
+"""DAgger (Ross, Gordon & Bagnell, AISTATS 2011) with the town's rule-based expert (``--algo dagger``).
+
+Behaviour cloning fails by compounding errors: once the learner drifts where the expert never
+drives (off the lane centre, too fast into a bend), it has no labels for those states. DAgger
+lets the learner visit them and asks the expert what it would have done there:
+
+- iteration i drives the training worlds with the mixture πᵢ = βᵢ·π* + (1 − βᵢ)·π̂ᵢ: in each world
+  and at each step the expert acts with probability βᵢ, else the current learner (deterministic);
+- every visited state is labelled with the expert's action (the privileged sensors are computed
+  for every world, so the expert can be asked in any state the learner reaches);
+- the labelled states join all those gathered before (the aggregate), and the learner is retrained
+  on the aggregate (continuing from its weights: ``epochs`` passes per iteration).
+
+β₁ = 1 (the first iteration is behaviour cloning), βᵢ = p^(i−1) with p = ``beta_decay``. An
+iteration is one round of ``round_steps`` environment steps; everything else (the learner, the
+dataset, the losses, checkpoints) is ``bc.py``'s.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from drivelab.agents.bc import BCConfig, BehaviourCloning
+from drivelab.errors import UsageError
+
+
+@dataclass(frozen=True)
+class DAggerConfig(BCConfig):
+    """Behaviour cloning's hyper-parameters (``bc.BCConfig``) and the mixture's decay.
+
+    :param beta_decay: p of βᵢ = p^(i−1) (0: the learner alone acts from the second iteration on).
+    """
+
+    beta_decay: float = 0.5
+
+    def check(self, algo: str) -> None:
+        super().check(algo)
+        if not 0 <= self.beta_decay <= 1:
+            raise UsageError(f"{algo!r} needs 0 <= beta_decay <= 1, got {self.beta_decay}")
+
+
+class DAgger(BehaviourCloning):
+    """Dataset aggregation: the learner drives (mixed with the expert), the expert labels."""
+
+    config_class = DAggerConfig
+
+    def beta(self, iteration: int) -> float:
+        """βᵢ = p^(i−1): 1 at the first iteration."""
+        return float(self.config.beta_decay ** (iteration - 1))

@@ -1,0 +1,378 @@
+"""Expert demonstrations for imitation (``bc``, ``dagger``): the teacher, the dataset, the collection loop.
+
+Two observations of one state. The learner sees the run's ``--obs`` (non-privileged: a top-down
+image with lights, waypoints, measurements, ...); the rule-based expert (``expert.py``) reads the
+privileged ``waypoints`` and ``affordances``. Both sensors are stateless (no history, no noise), so
+the teacher computes them beside the learner's, from the same ``WorldBatch`` the environment has
+just observed (``VectorDriveEnv.batch``): the training env stays the run's own, and its K worlds'
+privileged views cost one batched ``observe`` per step.
+
+- ``Teacher``: the expert's actions (K, 2) for the K worlds of a batch.
+- ``Demonstrations``: the labelled states, growing numpy arrays (an ``.npz`` file, never a pickle),
+  each sample marked for training or validation when it is added.
+- ``Worlds``: the run's training env (a one-world ``DriveEnv`` or an SB3 VecEnv of K worlds) seen
+  as K worlds: batched observations, autoreset, the ``WorldBatch`` behind them.
+- ``collect``: drive the worlds with the β-mixture of expert and learner, label every visited state.
+- ``generate_demonstrations``: expert-only data from a ``VectorDriveEnv`` of K worlds on the
+  compiled core, without a run (tests, notebooks, benchmarks).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+import torch
+from gymnasium import spaces
+
+from drivelab.agents.base import batch_of_one
+from drivelab.agents.storage import read_arrays, split_meta, write_arrays
+from drivelab.errors import UsageError
+from drivelab.perception.affordances import Affordances
+from drivelab.perception.waypoints import Waypoints
+
+AGREEMENT_TOLERANCE = 0.1  # an action agrees with the expert's when every component is this close
+
+
+class Teacher:
+    """The rule-based expert, acting from the privileged sensors computed on a ``WorldBatch``.
+
+    :param hyperparams: the expert's own rules (``expert.ExpertConfig``), default its defaults.
+    """
+
+    def __init__(self, hyperparams: dict | None = None) -> None:
+        from drivelab.agents.expert import RuleBasedExpert
+        from drivelab.envs.actions import make_action
+
+        self.sensors = {"waypoints": Waypoints(), "affordances": Affordances()}
+        space = spaces.Dict({name: sensor.space for name, sensor in self.sensors.items()})
+        with torch.random.fork_rng(devices=[]):  # an OwnAgent seeds torch: keep the caller's stream
+            self.expert = RuleBasedExpert(space, make_action("target_speed").space, 0, hyperparams)
+
+    def observe(self, batch) -> dict[str, np.ndarray]:
+        """The expert's observations of every world: ``waypoints`` (K, 10, 2), ``affordances`` (K, 8)."""
+        return {name: sensor.observe(batch) for name, sensor in self.sensors.items()}
+
+    def actions(self, batch) -> np.ndarray:
+        """(K, 2) ``[target speed fraction, steering]`` of the expert in each world of ``batch``.
+
+        The expert's rules are written for one world (``RuleBasedExpert.predict``), so this loops
+        over the K worlds; its sensors are batched."""
+        views = self.observe(batch)
+        rows = [
+            self.expert.predict({name: view[k] for name, view in views.items()})[0]
+            for k in range(batch.num_worlds)
+        ]
+        return np.stack(rows).astype(np.float32)
+
+
+def action_agreement(
+    predicted: np.ndarray, expert: np.ndarray, tolerance: float = AGREEMENT_TOLERANCE
+) -> float:
+    """Fraction of the rows (N, A) of ``predicted`` whose every component is within ``tolerance`` of
+    the expert's (action units: speed fraction in [0, 1], steering in [-1, 1])."""
+    predicted, expert = np.asarray(predicted), np.asarray(expert)
+    if len(expert) == 0:
+        return float("nan")
+    return float(np.mean(np.all(np.abs(predicted - expert) <= tolerance, axis=1)))
+
+
+class Demonstrations:
+    """Labelled states: the learner's observations (N, …) (a dict of arrays for a Dict space), the
+    expert's actions (N, A), the DAgger iteration that visited each (N,) and a validation mask (N,).
+
+    Arrays grow by doubling their capacity, so aggregating is amortised O(1) per sample.
+
+    :param observation_space: the learner's observation space (one world).
+    :param action_size: A.
+    :param validation_fraction: each added sample goes to validation with this probability.
+    :param rng: the generator of that draw.
+    """
+
+    def __init__(
+        self,
+        observation_space: spaces.Space,
+        action_size: int,
+        validation_fraction: float = 0.1,
+        rng: np.random.Generator | None = None,
+    ) -> None:
+        self.observation_space, self.action_size = observation_space, int(action_size)
+        self.validation_fraction = float(validation_fraction)
+        self.rng = rng if rng is not None else np.random.default_rng(0)
+        self.size = 0
+        self._observations = _allocate(observation_space, 0)
+        self._actions = np.zeros((0, self.action_size), dtype=np.float32)
+        self._iterations = np.zeros(0, dtype=np.int64)
+        self._validation = np.zeros(0, dtype=bool)
+
+    def __len__(self) -> int:
+        return self.size
+
+    # views of the filled part
+    @property
+    def observations(self) -> np.ndarray | dict[str, np.ndarray]:
+        return _rows(self._observations, slice(0, self.size))
+
+    @property
+    def actions(self) -> np.ndarray:
+        return self._actions[: self.size]
+
+    @property
+    def iterations(self) -> np.ndarray:
+        return self._iterations[: self.size]
+
+    @property
+    def validation(self) -> np.ndarray:
+        return self._validation[: self.size]
+
+    def add(self, observations: Any, actions: np.ndarray, iteration: int = 1) -> None:
+        """Append a batch: ``observations`` (B, …) (dict of arrays for a Dict space), ``actions`` (B, A)."""
+        actions = np.asarray(actions, dtype=np.float32).reshape(-1, self.action_size)
+        count = len(actions)
+        validation = self.rng.random(count) < self.validation_fraction
+        self._append(observations, actions, np.full(count, iteration, dtype=np.int64), validation)
+
+    def _append(self, observations, actions, iterations, validation) -> None:
+        count, end = len(actions), self.size + len(actions)
+        if end > len(self._actions):
+            capacity = max(end, 2 * len(self._actions), 256)
+            self._observations = _grow(self._observations, capacity)
+            self._actions = _grown(self._actions, capacity)
+            self._iterations = _grown(self._iterations, capacity)
+            self._validation = _grown(self._validation, capacity)
+        rows = slice(self.size, end)
+        if isinstance(self._observations, dict):
+            for key, array in self._observations.items():
+                array[rows] = np.asarray(observations[key]).reshape(count, *array.shape[1:])
+        else:
+            self._observations[rows] = np.asarray(observations).reshape(count, *self._observations.shape[1:])
+        self._actions[rows], self._iterations[rows], self._validation[rows] = actions, iterations, validation
+        self.size = end
+
+    def split(self) -> tuple[np.ndarray, np.ndarray]:
+        """(training indices, validation indices) of the samples held."""
+        mask = self.validation
+        return np.flatnonzero(~mask), np.flatnonzero(mask)
+
+    def select(self, indices: np.ndarray) -> Any:
+        """The observations of rows ``indices`` (an array, or a dict of arrays)."""
+        return _rows(self._observations, indices)
+
+    # --- files: npz of plain arrays ----------------------------------------------------------------
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        """Every array (``obs`` or ``obs.<key>``, ``actions``, ``iterations``, ``validation``)."""
+        observations = self.observations
+        if isinstance(observations, dict):
+            arrays = {f"obs.{key}": value for key, value in observations.items()}
+        else:
+            arrays = {"obs": observations}
+        return {
+            **arrays,
+            "actions": self.actions,
+            "iterations": self.iterations,
+            "validation": self.validation,
+        }
+
+    def load_state_arrays(self, arrays: dict[str, np.ndarray]) -> None:
+        """Replace the samples held by those of ``state_arrays`` (shapes checked against the space)."""
+        keys = (
+            list(self.observation_space.spaces) if isinstance(self.observation_space, spaces.Dict) else None
+        )
+        observations = {key: arrays[f"obs.{key}"] for key in keys} if keys else arrays["obs"]
+        for key, sub in _subspaces(self.observation_space).items():
+            array = observations[key] if keys else observations
+            if array.shape[1:] != sub.shape:
+                raise ValueError(
+                    f"demonstrations of shape {array.shape[1:]} for a space of shape {sub.shape}"
+                )
+        actions = np.asarray(arrays["actions"], dtype=np.float32)
+        if actions.ndim != 2 or actions.shape[1] != self.action_size:
+            raise ValueError(
+                f"demonstrated actions of shape {actions.shape} for {self.action_size} components"
+            )
+        self.size = 0
+        self._observations = _allocate(self.observation_space, 0)
+        self._actions = np.zeros((0, self.action_size), dtype=np.float32)
+        self._iterations = np.zeros(0, dtype=np.int64)
+        self._validation = np.zeros(0, dtype=bool)
+        self._append(observations, actions, arrays["iterations"], arrays["validation"])
+
+    def save(self, path: str | Path) -> None:
+        """An ``.npz`` file of the arrays (the validation fraction as JSON metadata)."""
+        write_arrays(path, self.state_arrays(), {"validation_fraction": self.validation_fraction})
+
+    @classmethod
+    def load(cls, path: str | Path, observation_space: spaces.Space, action_size: int) -> Demonstrations:
+        """Demonstrations saved by ``save`` (read with ``allow_pickle=False``)."""
+        arrays, meta = split_meta(read_arrays(path))
+        data = cls(observation_space, action_size, meta.get("validation_fraction", 0.1))
+        data.load_state_arrays(arrays)
+        return data
+
+
+def _subspaces(space: spaces.Space) -> dict[str, spaces.Space]:
+    return dict(space.spaces) if isinstance(space, spaces.Dict) else {"": space}
+
+
+def _allocate(space: spaces.Space, capacity: int):
+    if isinstance(space, spaces.Dict):
+        return {key: np.zeros((capacity, *sub.shape), dtype=sub.dtype) for key, sub in space.spaces.items()}
+    return np.zeros((capacity, *space.shape), dtype=space.dtype)
+
+
+def _grown(array: np.ndarray, capacity: int) -> np.ndarray:
+    bigger = np.zeros((capacity, *array.shape[1:]), dtype=array.dtype)
+    bigger[: len(array)] = array
+    return bigger
+
+
+def _grow(observations, capacity: int):
+    if isinstance(observations, dict):
+        return {key: _grown(value, capacity) for key, value in observations.items()}
+    return _grown(observations, capacity)
+
+
+def _rows(observations, index):
+    if isinstance(observations, dict):
+        return {key: value[index] for key, value in observations.items()}
+    return observations[index]
+
+
+# --- the training worlds ---------------------------------------------------------------------------
+def vector_env_of(env: Any):
+    """The ``VectorDriveEnv`` under a training env: itself, a ``DriveEnv``'s (wrapped or not), or
+    an SB3 VecEnv's (``SB3VecEnv`` under its wrappers)."""
+    from drivelab.envs.vector import VectorDriveEnv
+
+    if isinstance(env, VectorDriveEnv):
+        return env
+    base = env.unwrapped
+    vector = getattr(base, "vector", None) or getattr(base, "vector_env", None)
+    if not isinstance(vector, VectorDriveEnv):
+        raise UsageError("imitation needs drivelab's own environment (a DriveEnv or a VectorDriveEnv)")
+    return vector
+
+
+class Worlds:
+    """A training env as K worlds: ``reset`` and ``step`` return its own observations (one world's
+    for a ``gym.Env``, batched for an SB3 VecEnv); ``batched`` turns them into (K, …); the
+    finished worlds start again inside ``step`` (so ``batch`` always holds the state of the
+    observation last returned); ``episode_returns`` collects the Monitor's finished episodes."""
+
+    def __init__(self, env: Any) -> None:
+        self.env, self.single = env, isinstance(env, gym.Env)
+        self.vector = vector_env_of(env)
+        self.num_worlds = self.vector.num_envs
+        self.episode_returns: list[float] = []
+
+    @property
+    def batch(self):
+        """The ``WorldBatch`` of the K worlds now."""
+        return self.vector.batch
+
+    def batched(self, obs: Any) -> Any:
+        return batch_of_one(obs) if self.single else obs
+
+    def reset(self) -> Any:
+        return self.env.reset()[0] if self.single else self.env.reset()
+
+    def step(self, actions: np.ndarray) -> Any:
+        """One step of every world with ``actions`` (K, A); the next observations."""
+        if self.single:
+            obs, _, terminated, truncated, info = self.env.step(actions[0])
+            infos = [info]
+            if terminated or truncated:
+                obs, _ = self.env.reset()
+        else:
+            obs, _, _, infos = self.env.step(actions)
+        self.episode_returns += [float(info["episode"]["r"]) for info in infos if "episode" in info]
+        return obs
+
+
+def collect(
+    worlds: Worlds,
+    teacher: Teacher,
+    obs: Any,
+    steps: int,
+    beta: float = 1.0,
+    learner: Callable[[Any], np.ndarray] | None = None,
+    rng: np.random.Generator | None = None,
+    on_step: Callable[[Any], bool] | None = None,
+) -> tuple[list, list, Any, bool]:
+    """Drive ``steps`` steps of all K worlds from observation ``obs``, labelling each visited state.
+
+    Each world's action is the expert's with probability ``beta``, else ``learner``'s (DAgger's
+    mixture policy πᵢ = βᵢ·π* + (1 − βᵢ)·π̂ᵢ, drawn per world and step from ``rng``); the label is
+    always the expert's. ``on_step(obs)`` runs after every step; returning False stops at once.
+
+    :param learner: batched observations (K, …) → actions (K, A); not called when ``beta`` is 1.
+    :returns: (observations per step (K, …), expert actions per step (K, A), the observation after
+        the last step, whether it ran to the end).
+    """
+    observations, labels = [], []
+    rng = rng if rng is not None else np.random.default_rng(0)
+    for _ in range(steps):
+        batched = worlds.batched(obs)
+        expert = teacher.actions(worlds.batch)
+        actions = expert
+        if beta < 1.0:
+            from_learner = rng.random(worlds.num_worlds) >= beta
+            if from_learner.any():
+                actions = np.where(from_learner[:, None], learner(batched), expert).astype(np.float32)
+        observations.append(_copy(batched))
+        labels.append(expert)
+        obs = worlds.step(actions)
+        if on_step is not None and not on_step(obs):
+            return observations, labels, obs, False
+    return observations, labels, obs, True
+
+
+def stack_steps(observations: list, space: spaces.Space) -> Any:
+    """Per-step batches [(K, …)] → one (steps·K, …) array (a dict of them for a Dict space)."""
+    if isinstance(space, spaces.Dict):
+        return {key: np.concatenate([o[key] for o in observations]) for key in space.spaces}
+    return np.concatenate(observations)
+
+
+def _copy(obs: Any) -> Any:
+    if isinstance(obs, dict):
+        return {key: np.array(value, copy=True) for key, value in obs.items()}
+    return np.array(obs, copy=True)
+
+
+def generate_demonstrations(
+    steps: int,
+    num_worlds: int = 8,
+    seed: int = 0,
+    obs: str | list = "topdown:lights=true,waypoints,measurements",
+    traffic: str = "regular",
+    validation_fraction: float = 0.1,
+    expert_hyperparams: dict | None = None,
+    **env_kwargs: Any,
+) -> Demonstrations:
+    """The expert driving ``num_worlds`` town worlds on the compiled core for ``steps`` steps in all,
+    each state recorded with the learner's observation ``obs`` and labelled with the expert's action.
+
+    :param env_kwargs: further ``VectorDriveEnv`` keywords (``backend``, ``duration_s``, ...).
+    """
+    from drivelab.envs.vector import SB3VecEnv, VectorDriveEnv
+
+    if steps < 1 or num_worlds < 1:
+        raise UsageError("generate_demonstrations needs steps >= 1 and num_worlds >= 1")
+    env_kwargs.setdefault("scenario", "town")
+    vector = VectorDriveEnv(
+        num_worlds, obs=obs, action="target_speed", traffic=traffic, autoreset_mode="same_step", **env_kwargs
+    )
+    env = SB3VecEnv(vector)
+    env.seed(seed)
+    worlds, teacher = Worlds(env), Teacher(expert_hyperparams)
+    data = Demonstrations(
+        vector.single_observation_space, 2, validation_fraction, np.random.default_rng(seed)
+    )
+    observations, labels, _, _ = collect(worlds, teacher, worlds.reset(), -(-steps // num_worlds))
+    data.add(stack_steps(observations, vector.single_observation_space), np.concatenate(labels))
+    env.close()
+    return data
