@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 from gymnasium import spaces
+from numba import njit
 
 from drivelab.perception.base import Sensor
 from drivelab.world.batch import WorldBatch
@@ -96,6 +97,54 @@ def cast_rays(origin: np.ndarray, angles: np.ndarray, segments: np.ndarray, rang
     return np.minimum(along_ray.min(axis=1).astype(float), float(range_m))
 
 
+@njit(cache=True, error_model="numpy")
+def _cast_parts(
+    start_x, start_y, end_x, end_y, worlds, range_m, beams, step, close_m, direction_x, direction_y, nearest
+) -> None:
+    """``Lidar.distances_m``'s beams against every segment (M,) of ``_segments``, compiled: per
+    segment the part within range (``_near_parts``' float64 arithmetic), the beams of its angular
+    span with one beam of margin either side (every beam for a part very close to the ego), and
+    the float32 hit test of ``_part_terms`` / ``_hit_distances``, keeping the nearest hit of each
+    (world, beam) in ``nearest`` (K · beams,) float32. The margin means a beam outside the span
+    cannot pass the hit test, so a last-bit difference in the span's arctan2 changes nothing."""
+    range2 = range_m * range_m
+    for m in range(start_x.shape[0]):
+        sx, sy = start_x[m], start_y[m]
+        edge_x, edge_y = end_x[m] - sx, end_y[m] - sy
+        safe_length2 = max(edge_x * edge_x + edge_y * edge_y, 1e-12)
+        nearest_at = min(max(-(sx * edge_x + sy * edge_y) / safe_length2, 0.0), 1.0)
+        nearest_x, nearest_y = sx + nearest_at * edge_x, sy + nearest_at * edge_y
+        distance2 = nearest_x * nearest_x + nearest_y * nearest_y
+        if not distance2 <= range2:
+            continue
+        half_chord = np.sqrt((range2 - distance2) / safe_length2)
+        low = min(max(nearest_at - half_chord, 0.0), 1.0)
+        high = min(max(nearest_at + half_chord, 0.0), 1.0)
+        part_x, part_y = sx + low * edge_x, sy + low * edge_y
+        part_end_x, part_end_y = sx + high * edge_x, sy + high * edge_y
+        angle_start = np.arctan2(part_y, part_x)
+        turn = np.arctan2(part_end_y, part_end_x) - angle_start
+        turn = (turn + np.pi) % (2 * np.pi) - np.pi
+        span = int(np.abs(turn) // step) + 4
+        first = int(min(angle_start, angle_start + turn) // step) - 1
+        if span >= beams or np.sqrt(distance2) < close_m:
+            span, first = beams, 0
+        part_edge_x, part_edge_y = part_end_x - part_x, part_end_y - part_y
+        s_x, s_y = np.float32(part_x), np.float32(part_y)
+        e_x, e_y = np.float32(part_edge_x), np.float32(part_edge_y)
+        s_cross_e = np.float32(part_x * part_edge_y - part_y * part_edge_x)
+        row = worlds[m] * beams
+        for offset in range(span):
+            beam = (first + offset) % beams
+            d_x, d_y = direction_x[beam], direction_y[beam]
+            d_cross_e = d_x * e_y - d_y * e_x
+            along_ray = s_cross_e / d_cross_e
+            along_segment = (d_y * s_x - d_x * s_y) / d_cross_e
+            if along_ray >= 0.0 and along_segment >= 0.0 and along_segment <= 1.0:
+                if along_ray < nearest[row + beam]:
+                    nearest[row + beam] = along_ray
+
+
 class Lidar(Sensor):
     """``beams`` distances around the ego, divided by ``range_m`` (1 = nothing within range).
 
@@ -185,25 +234,18 @@ class Lidar(Sensor):
             return self.distances_m(WorldBatch.stack([batch]))[0]
         beams, step = self.beams, self.beam_step
         *segments, worlds = self._segments(batch)
-        start_x, start_y, end_x, end_y, near, closest = _near_parts(*segments, self.range_m)
-        worlds = worlds[near]
-        # the beams each part can meet: its angular span, one beam of margin either side (a beam
-        # farther outside cannot pass the float32 hit test, so this equals testing every beam)
-        angle_start = np.arctan2(start_y, start_x)
-        turn = np.arctan2(end_y, end_x) - angle_start
-        turn = (turn + np.pi) % (2 * np.pi) - np.pi  # [-π, π): a segment spans at most half a turn
-        spans = (np.abs(turn) // step).astype(np.intp) + 4
-        first = (np.minimum(angle_start, angle_start + turn) // step).astype(np.intp) - 1
-        every = (spans >= beams) | (closest < self.close_m)
-        spans[every], first[every] = beams, 0
-        # one entry per (part, beam) pair
-        pair_part = np.repeat(np.arange(len(spans)), spans)
-        offset = np.arange(len(pair_part)) - np.repeat(np.cumsum(spans) - spans, spans)
-        pair_beam = (first[pair_part] + offset) % beams
-        terms = [term[pair_part] for term in _part_terms(start_x, start_y, end_x, end_y)]
-        along_ray = _hit_distances(self.direction_x[pair_beam], self.direction_y[pair_beam], *terms)
         nearest = np.full(batch.num_worlds * beams, np.inf, dtype=np.float32)
-        np.minimum.at(nearest, worlds[pair_part] * beams + pair_beam, along_ray)
+        _cast_parts(
+            *segments,
+            worlds,
+            self.range_m,
+            beams,
+            step,
+            self.close_m,
+            self.direction_x,
+            self.direction_y,
+            nearest,
+        )
         return np.minimum(nearest.reshape(batch.num_worlds, beams).astype(float), self.range_m)
 
     def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
