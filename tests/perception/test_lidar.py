@@ -156,3 +156,42 @@ def test_worlds_on_several_block_maps_see_their_own_road_edges():
         angles = world.ego.heading + lidar.beam_step * np.arange(lidar.beams)
         expected = cast_rays(world.ego.position, angles, segments, lidar.range_m)
         np.testing.assert_allclose(distances[k], expected, atol=1e-4 * lidar.range_m)  # float32 inside
+
+
+def _numpy_distances(lidar: Lidar, batch) -> np.ndarray:
+    """The vectorised numpy formulation the compiled pass replaced (every (part, beam) pair of each
+    part's angular span as arrays), as an independent reference for exact equality."""
+    from drivelab.perception.lidar import _hit_distances, _near_parts, _part_terms
+
+    beams, step = lidar.beams, lidar.beam_step
+    *segments, worlds = lidar._segments(batch)
+    start_x, start_y, end_x, end_y, near, closest = _near_parts(*segments, lidar.range_m)
+    worlds = worlds[near]
+    angle_start = np.arctan2(start_y, start_x)
+    turn = (np.arctan2(end_y, end_x) - angle_start + np.pi) % (2 * np.pi) - np.pi
+    spans = (np.abs(turn) // step).astype(np.intp) + 4
+    first = (np.minimum(angle_start, angle_start + turn) // step).astype(np.intp) - 1
+    every = (spans >= beams) | (closest < lidar.close_m)
+    spans[every], first[every] = beams, 0
+    pair_part = np.repeat(np.arange(len(spans)), spans)
+    offset = np.arange(len(pair_part)) - np.repeat(np.cumsum(spans) - spans, spans)
+    pair_beam = (first[pair_part] + offset) % beams
+    terms = [term[pair_part] for term in _part_terms(start_x, start_y, end_x, end_y)]
+    along_ray = _hit_distances(lidar.direction_x[pair_beam], lidar.direction_y[pair_beam], *terms)
+    nearest = np.full(batch.num_worlds * beams, np.inf, dtype=np.float32)
+    np.minimum.at(nearest, worlds[pair_part] * beams + pair_beam, along_ray)
+    return np.minimum(nearest.reshape(batch.num_worlds, beams).astype(float), lidar.range_m)
+
+
+@pytest.mark.parametrize("scenario", ["highway", "town", "roundabout"])
+def test_compiled_beams_equal_the_numpy_formulation(scenario):
+    from drivelab.envs.vector import VectorDriveEnv
+
+    vector = VectorDriveEnv(4, scenario, obs="kinematics")
+    vector.action_space.seed(2)
+    vector.reset(seed=9)
+    lidar = Lidar()
+    for _ in range(12):
+        vector.step(vector.action_space.sample())
+        # the same float64 / float32 operations on both sides: equal bits
+        np.testing.assert_array_equal(lidar.distances_m(vector.batch), _numpy_distances(lidar, vector.batch))
