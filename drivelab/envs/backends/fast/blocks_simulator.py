@@ -37,7 +37,6 @@ from drivelab.envs.backends.fast.blocks_spawn import (
 )
 from drivelab.envs.backends.fast.simulator import (
     ARRIVE_NEVER,
-    EX_FLOATS,
     EX_LANE_WIDTH,
     EX_LATERAL,
     EX_ON_ROAD,
@@ -278,10 +277,7 @@ class BlocksSimulator(FastSimulator):
 
     # --- export ---------------------------------------------------------------------------------
     def _export(self) -> WorldBatch:
-        k, slots = self.num_worlds, max(self.vehicles.shape[1] - 1, 0)
-        floats, ints = np.zeros((k, EX_FLOATS)), np.zeros((k, 3), dtype=np.int64)
-        flags = np.zeros((k, 4), dtype=bool)
-        vehicles, valid = np.zeros((k, slots, 6)), np.zeros((k, slots), dtype=bool)
+        floats, ints, flags, vehicles, valid = self._export_buffers()
         export_map_worlds(
             self.vehicles, self.count, self.ego, self.lanes, self.lane_start, self.lane_stop,
             self.in_junction, self.dead_end, self.solid, floats, ints, flags, vehicles, valid,

@@ -784,11 +784,15 @@ class FastSimulator:
             fresh, update, self.progress_m,
         )  # fmt: skip
 
-    def _export(self) -> WorldBatch:
+    def _export_buffers(self) -> tuple[np.ndarray, ...]:
+        """Zeroed (floats, ints, flags, vehicles, valid) arrays the export kernels fill."""
         k, slots = self.num_worlds, max(self.vehicles.shape[1] - 1, 0)
         floats, ints = np.zeros((k, EX_FLOATS)), np.zeros((k, 3), dtype=np.int64)
         flags = np.zeros((k, 4), dtype=bool)
-        vehicles, valid = np.zeros((k, slots, 6)), np.zeros((k, slots), dtype=bool)
+        return floats, ints, flags, np.zeros((k, slots, 6)), np.zeros((k, slots), dtype=bool)
+
+    def _export(self) -> WorldBatch:
+        floats, ints, flags, vehicles, valid = self._export_buffers()
         road = self._road
         export_worlds(
             self.vehicles, self.count, self.ego, self.lanes, road.in_junction, road.exit_lane,
