@@ -52,6 +52,26 @@ def test_lane_geometry_matches_highway_env(scenario):
             np.testing.assert_allclose(L.position(table.rows, row, s, 1.0), lane.position(s, 1.0), atol=1e-9)
 
 
+def test_wrap_to_pi_is_highway_envs_formula_bit_for_bit():
+    """The compiled wrap_to_pi skips ``fmod`` within one period: every angle, the boundaries,
+    signed zeros, huge values and NaN give exactly the bits of ``((a + pi) % (2 pi)) - pi``."""
+    rng = np.random.default_rng(0)
+    two_pi = 2 * np.pi
+    special = [0.0, -0.0, np.pi, -np.pi, two_pi, -two_pi, 3 * np.pi, -3 * np.pi, 1e-300, -1e-300, 1e300]
+    edges = [np.nextafter(e, d) for e in (np.pi, -np.pi, 3 * np.pi, -3 * np.pi) for d in (-np.inf, np.inf)]
+    angles = np.r_[
+        special, edges, np.inf, -np.inf, np.nan, rng.uniform(-20, 20, 5000), rng.normal(0, 1e-9, 500)
+    ]
+    for angle in angles:
+        expected = ((float(angle) + np.pi) % two_pi) - np.pi
+        got = L.wrap_to_pi(float(angle))
+        assert (
+            np.isnan(got)
+            if np.isnan(expected)
+            else np.float64(got).tobytes() == np.float64(expected).tobytes()
+        )
+
+
 @pytest.mark.parametrize("scenario", sorted(REFERENCE_SCENARIOS))
 def test_closest_lane_with_a_hint_is_the_same_lane(scenario):
     """Measuring a hinted lane first (and skipping lanes that cannot beat it) changes nothing:

@@ -144,9 +144,22 @@ def _fill_boxes(rows: np.ndarray) -> None:
             values[BOX_MAX_X] = values[BOX_MAX_Y] = np.inf
 
 
+TWO_PI = 2 * np.pi
+
+
 @njit(cache=True, inline="always")
 def wrap_to_pi(angle: float) -> float:
-    return ((angle + np.pi) % (2 * np.pi)) - np.pi
+    """highway-env's ``((angle + pi) % (2 pi)) - pi``, bit for bit. Python's float ``%`` is
+    ``fmod`` plus a sign fix; ``fmod`` (a slow library call) is exact and returns its argument
+    when that lies within one period, so the two usual cases are written out: ``x`` in [0, 2 pi)
+    gives ``x`` (``+0.0`` for a zero, the same once pi is taken off), ``x`` in (-2 pi, 0) gives
+    ``x + 2 pi``, as Python computes them."""
+    x = angle + np.pi
+    if 0.0 <= x < TWO_PI:
+        return x - np.pi
+    if -TWO_PI < x < 0.0:
+        return (x + TWO_PI) - np.pi
+    return (x % TWO_PI) - np.pi
 
 
 @njit(cache=True, inline="always")

@@ -213,6 +213,47 @@ def cached_desired_gap(v: np.ndarray, p: np.ndarray, trig: np.ndarray, ego: int,
 
 
 @njit(cache=True, inline="always")
+def idm_free_road(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, me: int, ego: int) -> float:
+    """The free-road term of IDMVehicle.acceleration as computed by vehicle ``me`` (its DELTA)
+    for ``ego``: what ``ego`` would do with no one ahead (0 for no vehicle or an obstacle)."""
+    if ego < 0 or v[ego, KIND] == OBSTACLE:  # highway-env: only a Vehicle accelerates
+        return 0.0
+    target_speed = v[ego, TARGET_SPEED] if v[ego, KIND] != PLAIN else 0.0
+    limit = lanes[int(v[ego, LANE]), SPEED_LIMIT]
+    if not np.isnan(limit):
+        target_speed = _clip(target_speed, 0.0, limit)
+    ratio = max(v[ego, SPEED], 0.0) / np.abs(not_zero(target_speed))
+    return p[COMFORT_ACC_MAX] * (1 - ratio ** v[me, DELTA])
+
+
+@njit(cache=True, inline="always")
+def idm_behind(
+    v: np.ndarray,
+    lanes: np.ndarray,
+    p: np.ndarray,
+    coords: np.ndarray,
+    done: np.ndarray,
+    trig: np.ndarray,
+    free_road: float,
+    ego: int,
+    front: int,
+) -> float:
+    """IDMVehicle.acceleration from its free-road term (``idm_free_road``): less the interaction
+    with ``front`` (none: -1). MOBIL asks about one vehicle behind several fronts; the free-road
+    term (a ``pow``) is the same for all of them and is computed once."""
+    if ego < 0 or v[ego, KIND] == OBSTACLE:
+        return 0.0
+    acceleration = free_road
+    if front >= 0:
+        lane = int(v[ego, LANE])
+        lane_coordinates(v, lanes, coords, done, lane)
+        gap_m = coords[lane, front, 0] - coords[lane, ego, 0]
+        gap = cached_desired_gap(v, p, trig, ego, front) / not_zero(gap_m)
+        acceleration -= p[COMFORT_ACC_MAX] * gap**2
+    return acceleration
+
+
+@njit(cache=True, inline="always")
 def cached_idm_acceleration(
     v: np.ndarray,
     lanes: np.ndarray,
@@ -225,21 +266,8 @@ def cached_idm_acceleration(
     front: int,
 ) -> float:
     """IDMVehicle.acceleration as computed by vehicle ``me`` (its DELTA) for ``ego`` behind ``front``."""
-    if ego < 0 or v[ego, KIND] == OBSTACLE:  # highway-env: only a Vehicle accelerates
-        return 0.0
-    target_speed = v[ego, TARGET_SPEED] if v[ego, KIND] != PLAIN else 0.0
-    lane = int(v[ego, LANE])
-    limit = lanes[lane, SPEED_LIMIT]
-    if not np.isnan(limit):
-        target_speed = _clip(target_speed, 0.0, limit)
-    ratio = max(v[ego, SPEED], 0.0) / np.abs(not_zero(target_speed))
-    acceleration = p[COMFORT_ACC_MAX] * (1 - ratio ** v[me, DELTA])
-    if front >= 0:
-        lane_coordinates(v, lanes, coords, done, lane)
-        gap_m = coords[lane, front, 0] - coords[lane, ego, 0]
-        gap = cached_desired_gap(v, p, trig, ego, front) / not_zero(gap_m)
-        acceleration -= p[COMFORT_ACC_MAX] * gap**2
-    return acceleration
+    free_road = idm_free_road(v, lanes, p, me, ego)
+    return idm_behind(v, lanes, p, coords, done, trig, free_road, ego, front)
 
 
 @njit(cache=True)
@@ -255,14 +283,16 @@ def cached_mobil(
 ) -> bool:
     """IDMVehicle.mobil: is a change to ``lane`` safe for the new follower, and worth it?"""
     new_preceding, new_following = cached_neighbours(v, lanes, coords, done, i, lane)
-    new_following_a = cached_idm_acceleration(
-        v, lanes, p, coords, done, trig, i, new_following, new_preceding
+    new_following_free = idm_free_road(v, lanes, p, i, new_following)
+    new_following_a = idm_behind(
+        v, lanes, p, coords, done, trig, new_following_free, new_following, new_preceding
     )
-    new_following_pred_a = cached_idm_acceleration(v, lanes, p, coords, done, trig, i, new_following, i)
+    new_following_pred_a = idm_behind(v, lanes, p, coords, done, trig, new_following_free, new_following, i)
     if new_following_pred_a < -p[MAX_BRAKING_IMPOSED]:
         return False
     old_preceding, old_following = cached_neighbours(v, lanes, coords, done, i, int(v[i, LANE]))
-    self_pred_a = cached_idm_acceleration(v, lanes, p, coords, done, trig, i, i, new_preceding)
+    self_free = idm_free_road(v, lanes, p, i, i)
+    self_pred_a = idm_behind(v, lanes, p, coords, done, trig, self_free, i, new_preceding)
     start = int(v[i, ROUTE_START])
     if start < v[i, ROUTE_END] and v[i, ROUTE + 2 * start + 1] >= 0:
         # the next route step names a lane: only move towards it, and only without hard braking
@@ -271,10 +301,11 @@ def cached_mobil(
         if np.sign(lanes[lane, LANE_ID] - target_id) != np.sign(wanted_id - target_id):
             return False
         return not self_pred_a < -p[MAX_BRAKING_IMPOSED]
-    self_a = cached_idm_acceleration(v, lanes, p, coords, done, trig, i, i, old_preceding)
-    old_following_a = cached_idm_acceleration(v, lanes, p, coords, done, trig, i, old_following, i)
-    old_following_pred_a = cached_idm_acceleration(
-        v, lanes, p, coords, done, trig, i, old_following, old_preceding
+    self_a = idm_behind(v, lanes, p, coords, done, trig, self_free, i, old_preceding)
+    old_following_free = idm_free_road(v, lanes, p, i, old_following)
+    old_following_a = idm_behind(v, lanes, p, coords, done, trig, old_following_free, old_following, i)
+    old_following_pred_a = idm_behind(
+        v, lanes, p, coords, done, trig, old_following_free, old_following, old_preceding
     )
     jerk = (
         self_pred_a
