@@ -482,8 +482,15 @@ def step_vehicle(v: np.ndarray, lanes: np.ndarray, i: int, dt: float) -> None:
 
 @njit(cache=True)
 def _polygon(v: np.ndarray, i: int) -> np.ndarray:
-    c, s = np.cos(v[i, HEADING]), np.sin(v[i, HEADING])
+    """Vehicle i's rectangle: its 4 corners and the first again, (5, 2)."""
     corners = np.empty((5, 2))
+    _polygon_into(v, i, corners)
+    return corners
+
+
+@njit(cache=True, inline="always")
+def _polygon_into(v: np.ndarray, i: int, corners: np.ndarray) -> None:
+    c, s = np.cos(v[i, HEADING]), np.sin(v[i, HEADING])
     half_l, half_w = v[i, LEN] / 2, v[i, WID] / 2
     local = ((-half_l, -half_w), (-half_l, half_w), (half_l, half_w), (half_l, -half_w))
     for k in range(4):
@@ -491,7 +498,6 @@ def _polygon(v: np.ndarray, i: int) -> np.ndarray:
         corners[k, 0] = c * px + -s * py + v[i, X]
         corners[k, 1] = s * px + c * py + v[i, Y]
     corners[4] = corners[0]
-    return corners
 
 
 @njit(cache=True)
@@ -546,7 +552,7 @@ def handle_collisions(v: np.ndarray, dt: float) -> None:
     """Road.step's collision pass: each vehicle against the vehicles after it, then the obstacles
     (which sit after every vehicle), as RoadObject.handle_collisions."""
     n = v.shape[0]
-    diagonals = np.empty(n)
+    diagonals, polygon_i, polygon_j = np.empty(n), np.empty((5, 2)), np.empty((5, 2))
     for i in range(n):
         diagonals[i] = np.sqrt(v[i, LEN] ** 2 + v[i, WID] ** 2)
     for i in range(n):
@@ -563,8 +569,10 @@ def handle_collisions(v: np.ndarray, dt: float) -> None:
                 continue
             ci, si = np.cos(v[i, HEADING]), np.sin(v[i, HEADING])
             cj, sj = np.cos(v[j, HEADING]), np.sin(v[j, HEADING])
+            _polygon_into(v, i, polygon_i)
+            _polygon_into(v, j, polygon_j)
             intersecting, will_intersect, tx, ty = polygons_intersecting(
-                _polygon(v, i), _polygon(v, j),
+                polygon_i, polygon_j,
                 v[i, SPEED] * ci * dt, v[i, SPEED] * si * dt, v[j, SPEED] * cj * dt, v[j, SPEED] * sj * dt,
             )  # fmt: skip
             if will_intersect:
