@@ -218,7 +218,10 @@ def zoo() -> None:
     """List the shipped agents: name, scenario, algorithm, observation, measured metrics."""
     from drivelab.training.zoo import headline, shipped_agents
 
-    for agent in shipped_agents():
+    agents = shipped_agents()
+    if not agents:
+        typer.echo("no shipped agents (benchmarks/zoo_build.py packs them)")
+    for agent in agents:
         card = agent.card
         typer.echo(f"{agent.name:<16} {card['env']:<10} {card['algo']:<8} obs {','.join(card['obs'])}")
         typer.echo(f"{'':<16} {headline(card)}")

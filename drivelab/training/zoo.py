@@ -97,8 +97,9 @@ def headline(card: dict) -> str:
             )
         else:
             parts.append(
-                f"crash {100 * metrics['crash_rate']:.0f} %, success {100 * metrics['success_rate']:.0f} %, "
-                f"{metrics['mean_speed_mps']:.1f} m/s ({metrics['episodes']} evaluation episodes)"
+                f"evaluation set: crash {100 * metrics['crash_rate']:.0f} %, success "
+                f"{100 * metrics['success_rate']:.0f} %, {metrics['mean_speed_mps']:.1f} m/s "
+                f"({metrics['episodes']} episodes)"
             )
     return "; ".join(parts) or "not measured"
 

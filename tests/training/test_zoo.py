@@ -103,11 +103,17 @@ def test_listing_and_resolving(tiny_run, tiny_zoo):
     result = runner.invoke(app, ["zoo"])
     assert result.exit_code == 0, result.output
     assert result.output.split()[:4] == ["tiny", "town", "ppo", "obs"]
-    assert "crash 25 %, success 50 %, 21.0 m/s (4 evaluation episodes)" in result.output
+    assert "evaluation set: crash 25 %, success 50 %, 21.0 m/s (4 episodes)" in result.output
     assert zoo.resolve("tiny") == (tiny_zoo / "tiny", "tiny")
     assert zoo.resolve(tiny_run) == (tiny_run, None)  # a directory is a run directory
     with pytest.raises(UsageError, match="shipped agent 'no-such-agent' does not exist.*lists: tiny"):
         zoo.resolve("no-such-agent")
+
+
+def test_an_empty_zoo_says_so(tmp_path, monkeypatch):
+    monkeypatch.setattr(zoo, "ZOO_DIR", tmp_path / "nothing")
+    result = runner.invoke(app, ["zoo"])
+    assert result.exit_code == 0 and result.output.startswith("no shipped agents")
 
 
 def test_enjoy_plays_the_evaluation_episodes_of_drivelab_evaluate(tiny_zoo, tmp_path):
@@ -223,8 +229,12 @@ def test_every_shipped_file_is_package_data():
 
 @pytest.mark.parametrize("agent", SHIPPED, ids=[agent.name for agent in SHIPPED])
 def test_shipped_agents_load_without_unpickling(agent, monkeypatch):
+    """No pickled member; tensors only through ``torch.load(weights_only=True)`` (its restricted
+    unpickler of tensors and plain containers); ``pickle.load(s)`` never called."""
     with zipfile.ZipFile(agent.path / "model.zip") as archive:
         assert not set(archive.namelist()) & set(PICKLED_MEMBERS)
+    config = load_run_config(agent.path)
+    load_agent(agent.path, config)  # first: torch's lazy imports, which may use pickle themselves
     loads = []
     real_load = torch.load
 
@@ -233,10 +243,12 @@ def test_shipped_agents_load_without_unpickling(agent, monkeypatch):
         loads.append(args)
         return real_load(*args, **kwargs)
 
+    def refuse(*args, **kwargs):
+        raise AssertionError("unpickled")
+
     monkeypatch.setattr(torch, "load", checked_load)
-    for name in ("load", "loads", "Unpickler"):
-        monkeypatch.setattr(pickle, name, lambda *a, **k: pytest.fail("unpickled"))
-    config = load_run_config(agent.path)
+    monkeypatch.setattr(pickle, "load", refuse)
+    monkeypatch.setattr(pickle, "loads", refuse)
     assert load_agent(agent.path, config) is not None and loads
 
 
