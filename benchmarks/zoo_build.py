@@ -37,10 +37,18 @@ TOWN_DAGGER = [
     "--steps", "20000", "--n-envs", "8", "--eval-every", "5000", "--eval-episodes", "2",
     "-H", "round_steps=2000", "-H", "epochs=2", "-H", "beta_decay=0.5", "--seed", "0",
 ]  # fmt: skip
-TOWN_MEASURE = [
-    ("evaluation set", ["evaluate", "{name}", "--episodes", "100"]),
-    ("nocrash", ["benchmark", "nocrash", "{name}", "--town", "test", "--episodes", "25"]),
-]
+
+
+def town_measure(nocrash_episodes: int) -> list[tuple[str, list[str]]]:
+    """The evaluation set (100 episodes) and NoCrash on the test town (episodes per level)."""
+    return [
+        ("evaluation set", ["evaluate", "{name}", "--episodes", "100"]),
+        (
+            "nocrash",
+            ["benchmark", "nocrash", "{name}", "--town", "test", "--episodes", str(nocrash_episodes)],
+        ),
+    ]
+
 
 AGENTS: dict[str, dict] = {
     "town-dagger": {
@@ -50,7 +58,7 @@ AGENTS: dict[str, dict] = {
             "benchmarks/results/imitation_town.md"
         ),
         "train": [*TOWN_DAGGER[:6], "--obs", "topdown:lights=true,waypoints,measurements", *TOWN_DAGGER[6:]],
-        "measure": TOWN_MEASURE,
+        "measure": town_measure(100),
     },
     "town-dagger-privileged": {
         "description": (
@@ -58,7 +66,7 @@ AGENTS: dict[str, dict] = {
             "itself reads (route waypoints, measurements, affordances: the light, the leader, pedestrians)"
         ),
         "train": [*TOWN_DAGGER[:6], "--obs", "waypoints,measurements,affordances", *TOWN_DAGGER[6:]],
-        "measure": TOWN_MEASURE,
+        "measure": town_measure(25),
     },
     "highway-ppo": {
         "description": (

@@ -153,6 +153,8 @@ def test_cli_enjoy_prints_progress_and_metrics(tiny_zoo, tmp_path):
     assert result.exit_code == 0, result.output
     assert "episode 1/2:" in result.output and "episode 2/2:" in result.output
     assert "crash rate" in result.output and f"video: {tmp_path / 'v.gif'}" in result.output
+    result = runner.invoke(app, ["enjoy", str(tiny_zoo / "tiny"), "--episodes", "1", "--seed", "3"])
+    assert result.exit_code == 0 and "episode 1/1:" in result.output, result.output  # a run directory
 
 
 def test_evaluate_and_nocrash_take_a_zoo_name_and_write_outside_the_package(tiny_zoo, tmp_path, monkeypatch):
