@@ -221,10 +221,11 @@ def zoo() -> None:
     agents = shipped_agents()
     if not agents:
         typer.echo("no shipped agents (benchmarks/zoo_build.py packs them)")
+    width = max((len(agent.name) for agent in agents), default=0)
     for agent in agents:
         card = agent.card
-        typer.echo(f"{agent.name:<16} {card['env']:<10} {card['algo']:<8} obs {','.join(card['obs'])}")
-        typer.echo(f"{'':<16} {headline(card)}")
+        typer.echo(f"{agent.name:<{width}}  {card['env']:<10} {card['algo']:<8} obs {','.join(card['obs'])}")
+        typer.echo(f"{'':<{width}}  {headline(card)}")
 
 
 @app.command()
