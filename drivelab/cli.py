@@ -169,26 +169,36 @@ def train(
     typer.echo(f"run directory: {run_dir}")
 
 
+RUN_OR_AGENT = "a run directory written by drivelab train, or a shipped agent's name (drivelab zoo)"
+OUT_HELP = "folder for the reports (default: the run directory; for a shipped agent runs/zoo-NAME)"
+
+
 @app.command()
 def evaluate(
-    run_dir: Path = typer.Argument(..., help="a run directory written by drivelab train"),
+    run_dir: str = typer.Argument(..., metavar="RUN_DIR|NAME", help=RUN_OR_AGENT),
     episodes: int = typer.Option(10, help="evaluation episodes"),
     video: bool = typer.Option(False, "--video", help="write an mp4 (or gif) of the first episode"),
     stochastic: bool = typer.Option(
         False, "--stochastic", help="sample actions instead of the greedy policy"
     ),
+    out: Path | None = typer.Option(None, help=OUT_HELP),
 ) -> None:
     """Evaluate a run's model: print the driving metrics and write eval.json."""
     from rich.console import Console
     from rich.table import Table
 
     from drivelab.training.evaluate import evaluate_run, metrics_rows
+    from drivelab.training.zoo import report_dir, resolve
 
     try:
-        report = evaluate_run(run_dir, episodes=episodes, video=video, deterministic=not stochastic)
+        path, name = resolve(run_dir)
+        out_dir = report_dir(run_dir, out)
+        report = evaluate_run(
+            path, episodes=episodes, video=video, deterministic=not stochastic, out_dir=out_dir
+        )
     except UsageError as exc:
         _fail(str(exc))
-    table = Table(title=f"{report['algo']} on {report['env']}: {report['episodes']} episodes")
+    table = Table(title=f"{name or report['algo']} on {report['env']}: {report['episodes']} episodes")
     table.add_column("metric")
     table.add_column("value", justify="right")
     for label, value in metrics_rows(report):
@@ -196,7 +206,68 @@ def evaluate(
     Console().print(table)
     if "video" in report:
         typer.echo(f"video: {report['video']}")
-    typer.echo(f"run directory: {run_dir}  (eval.json written)")
+    typer.echo(
+        f"run directory: {path}  (eval.json written)"
+        if out_dir is None
+        else f"eval.json written in {out_dir}"
+    )
+
+
+@app.command()
+def zoo() -> None:
+    """List the shipped agents: name, scenario, algorithm, observation, measured metrics."""
+    from drivelab.training.zoo import headline, shipped_agents
+
+    agents = shipped_agents()
+    if not agents:
+        typer.echo("no shipped agents (benchmarks/zoo_build.py packs them)")
+    width = max((len(agent.name) for agent in agents), default=0)
+    for agent in agents:
+        card = agent.card
+        typer.echo(f"{agent.name:<{width}}  {card['env']:<10} {card['algo']:<8} obs {','.join(card['obs'])}")
+        typer.echo(f"{'':<{width}}  {headline(card)}")
+
+
+@app.command()
+def enjoy(
+    agent: str = typer.Argument(..., metavar="NAME|RUN_DIR", help=RUN_OR_AGENT),
+    episodes: int = typer.Option(3, help="episodes to drive"),
+    video: Path | None = typer.Option(None, help="write the episodes to this .mp4 (or .gif)"),
+    seed: int | None = typer.Option(
+        None, help="episode e is that of the env seeded SEED + e (default: the fixed evaluation episodes)"
+    ),
+) -> None:
+    """Drive an agent greedily on its scenario, print each episode and the metrics; nothing else is
+    written."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from drivelab.training.evaluate import metrics_rows
+    from drivelab.training.zoo import enjoy as drive
+
+    def progress(index: int, metrics: dict) -> None:
+        outcome = "success" if metrics["success"] else "crash" if metrics["crashed"] else "no success"
+        typer.echo(
+            f"episode {index + 1}/{episodes}: {outcome}, return {metrics['return']:.2f}, "
+            f"{metrics['length']} steps, {metrics['mean_speed_mps']:.1f} m/s, "
+            f"{1000 * metrics['distance_km']:.0f} m"
+        )
+
+    try:
+        report = drive(agent, episodes=episodes, video=video, seed=seed, on_episode=progress)
+    except UsageError as exc:
+        _fail(str(exc))
+    episodes_text = "fixed evaluation episodes" if seed is None else f"episodes of seeds {seed}+e"
+    table = Table(
+        title=f"{report['agent']} ({report['algo']}) on {report['env']}: {episodes} {episodes_text}"
+    )
+    table.add_column("metric")
+    table.add_column("value", justify="right")
+    for label, value in metrics_rows(report):
+        table.add_row(label, value)
+    Console().print(table)
+    if "video" in report:
+        typer.echo(f"video: {report['video']} ({report['video_frames']} frames)")
 
 
 @app.command()
@@ -440,16 +511,22 @@ app.add_typer(benchmark_app, name="benchmark")
 
 @benchmark_app.command("nocrash")
 def benchmark_nocrash(
-    run_dir: Path = typer.Argument(..., help="a run directory trained in the town"),
+    run_dir: str = typer.Argument(
+        ..., metavar="RUN_DIR|NAME", help="a run directory trained in the town, or a shipped town agent"
+    ),
     town: str = typer.Option("test", help="layout to drive in: test (unseen) or train"),
     episodes: int = typer.Option(25, help="episodes per traffic level"),
     level: str = typer.Option("regular", help="traffic level of the infraction table"),
+    out: Path | None = typer.Option(None, help=OUT_HELP),
 ) -> None:
     """NoCrash-style success per traffic level and infractions per km (writes nocrash.json/.md)."""
     from drivelab.training.nocrash import nocrash, report_markdown
+    from drivelab.training.zoo import report_dir, resolve
 
     try:
-        report = nocrash(run_dir, town=town, episodes=episodes, infraction_level=level)
+        path, _ = resolve(run_dir)
+        out_dir = report_dir(run_dir, out)
+        report = nocrash(path, town=town, episodes=episodes, infraction_level=level, out_dir=out_dir)
     except UsageError as exc:
         _fail(str(exc))
     typer.echo(report_markdown(report))

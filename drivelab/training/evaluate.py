@@ -24,9 +24,11 @@ def run_episodes(
     seed: int | None = None,
     record_first: bool = False,
     on_episode: Callable[[dict], None] | None = None,
+    on_frame: Callable[[np.ndarray], None] | None = None,
 ) -> tuple[list[dict], list[np.ndarray]]:
     """Play ``episodes`` episodes; return each one's ``episode_metrics`` and, optionally, the
-    RGB frames of the first episode. ``on_episode`` is called with each episode's metrics.
+    RGB frames of the first episode. ``on_episode`` is called with each episode's metrics,
+    ``on_frame`` (when given) with every frame of every episode (``env.render()``, not kept).
 
     :param seed: None: the scenario's evaluation set (episode seeds ``evaluation_seeds``: the
         same episodes for every run, none of them a training episode); an int: episode e is the
@@ -44,10 +46,14 @@ def run_episodes(
         record = record_first and episode == 0
         if record:
             frames.append(env.render())
+        if on_frame is not None:
+            on_frame(frames[-1] if record else env.render())
         while True:
             obs, _, terminated, truncated, info = env.step(policy(obs))
             if record:
                 frames.append(env.render())
+            if on_frame is not None:
+                on_frame(frames[-1] if record else env.render())
             if terminated or truncated:
                 results.append(info["episode_metrics"])
                 if on_episode is not None:
@@ -110,8 +116,10 @@ def evaluate_run(
     episodes: int = 10,
     video: bool = False,
     deterministic: bool = True,
+    out_dir: str | Path | None = None,
 ) -> dict:
-    """Evaluate the final model of ``run_dir`` (or its latest checkpoint); write eval.json."""
+    """Evaluate the final model of ``run_dir`` (or its latest checkpoint); write eval.json (and
+    the video) into ``out_dir`` (default: the run directory; created if missing)."""
     from drivelab.envs.core import DriveEnv
     from drivelab.training.checkpoints import load_agent
 
@@ -119,21 +127,35 @@ def evaluate_run(
     config = load_run_config(run_dir)
     if episodes < 1:
         raise UsageError("--episodes must be >= 1")
-    check_writable(run_dir, "eval.json")
+    if out_dir is None:
+        out_dir = run_dir
+        check_writable(out_dir, "eval.json")
     env = DriveEnv(**config.eval_env_kwargs())
     agent = load_agent(run_dir, config)
     check_spaces(agent, env, run_dir)
+    if out_dir is not run_dir:  # created only once the model has loaded
+        out_dir = make_out_dir(Path(out_dir))
+        check_writable(out_dir, "eval.json")
     policy = lambda obs: agent.predict(obs, deterministic=deterministic)[0]  # noqa: E731
     results, frames = run_episodes(policy, env, episodes, record_first=video)
     report = {"run": str(run_dir), "algo": config.algo, "env": config.env, **aggregate(results)}
     if video:
         report["video"] = str(
-            write_video(frames, run_dir / "videos" / "evaluate", env.metadata["render_fps"])
+            write_video(frames, out_dir / "videos" / "evaluate", env.metadata["render_fps"])
         )
-    tmp = run_dir / "eval.tmp.json"
+    tmp = out_dir / "eval.tmp.json"
     tmp.write_text(json.dumps({**report, "per_episode": results}, indent=2))
-    os.replace(tmp, run_dir / "eval.json")
+    os.replace(tmp, out_dir / "eval.json")
     return report
+
+
+def make_out_dir(path: Path) -> Path:
+    """``path`` as a folder for reports, created if missing; a UsageError if it cannot be."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UsageError(f"cannot create report folder {str(path)!r}: {exc.strerror or exc}") from None
+    return path
 
 
 def check_writable(run_dir: Path, name: str) -> None:

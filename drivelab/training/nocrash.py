@@ -33,9 +33,14 @@ INFRACTIONS = (  # Table IV's columns: (label, key of ``aggregate``)
 
 
 def nocrash(
-    run_dir: str | Path, town: str = "test", episodes: int = 25, infraction_level: str = "regular"
+    run_dir: str | Path,
+    town: str = "test",
+    episodes: int = 25,
+    infraction_level: str = "regular",
+    out_dir: str | Path | None = None,
 ) -> dict:
-    """Evaluate ``run_dir`` on the NoCrash protocol; write nocrash.json and nocrash.md into it.
+    """Evaluate ``run_dir`` on the NoCrash protocol; write nocrash.json and nocrash.md into it
+    (or into ``out_dir``, created if missing: a shipped agent's reports go outside the package).
 
     :param town: the layout to drive in: "test" (unseen during training) or "train".
     :param episodes: episodes per traffic level.
@@ -44,6 +49,7 @@ def nocrash(
     from drivelab.envs.core import DriveEnv
     from drivelab.envs.town import LAYOUTS
     from drivelab.training.checkpoints import file_sha256, load_agent, model_path
+    from drivelab.training.evaluate import check_writable, make_out_dir
 
     run_dir = Path(run_dir)
     config = load_run_config(run_dir)
@@ -57,6 +63,8 @@ def nocrash(
         raise UsageError(f"unknown traffic level {infraction_level!r} (choose from {', '.join(LEVELS)})")
     evaluated = model_path(run_dir, config)
     agent = load_agent(run_dir, config)
+    out_dir = run_dir if out_dir is None else make_out_dir(Path(out_dir))
+    check_writable(out_dir, "nocrash.json")
     policy = lambda obs: agent.predict(obs, deterministic=True)[0]  # noqa: E731
     levels = {}
     with tqdm(total=len(LEVELS) * episodes, desc=f"nocrash {config.algo}", unit="episode") as bar:
@@ -79,8 +87,8 @@ def nocrash(
         "levels": levels,
         "infraction_level": infraction_level,
     }
-    _write(run_dir / "nocrash.json", json.dumps(report, indent=2))
-    _write(run_dir / "nocrash.md", report_markdown(report))
+    _write(out_dir / "nocrash.json", json.dumps(report, indent=2))
+    _write(out_dir / "nocrash.md", report_markdown(report))
     return report
 
 

@@ -1,0 +1,354 @@
+"""Shipped agents: the zoo inside the package, ``drivelab zoo`` and ``drivelab enjoy``.
+
+A shipped agent is a run directory cut down to what acting needs, in ``drivelab/zoo/<name>/``:
+
+    config.yaml   the run's resolved config (the environment the agent was trained and is evaluated on)
+    model.zip     the run's final model in the run directories' safe format (``agents/storage.py``:
+                  tensors read with ``torch.load(weights_only=True)``, spaces and counters as JSON),
+                  weights in float16, the optimizer's moments dropped (they only matter to further
+                  training): a quarter of the run's model.zip
+    card.json     what it is and how well it drives: algorithm, scenario, observation, action,
+                  reward, hyper-parameters, training steps and time, the command that trained it,
+                  and every evaluation measured on it with the command that measured it
+
+Loading one is loading a run directory (``checkpoints.load_agent``): nothing is unpickled, and
+every command that takes a run directory (``evaluate``, ``benchmark nocrash``, ``enjoy``) takes a
+zoo name too. ``benchmarks/zoo_build.py`` trains, packs and measures the shipped agents from their
+recorded commands.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from drivelab.errors import UsageError
+
+ZOO_DIR = Path(__file__).resolve().parents[1] / "zoo"
+CARD_FORMAT = "drivelab-zoo-1"
+VIDEO_SUFFIXES = (".mp4", ".gif")
+
+
+@dataclass(frozen=True)
+class ShippedAgent:
+    """One agent of the zoo: its folder (a run directory: config.yaml, model.zip) and its card."""
+
+    name: str
+    path: Path
+    card: dict
+
+
+def shipped_agents(zoo_dir: Path | None = None) -> list[ShippedAgent]:
+    """Every agent of ``zoo_dir`` (default: the package's zoo), sorted by name."""
+    zoo_dir = ZOO_DIR if zoo_dir is None else zoo_dir
+    agents = []
+    for card_path in sorted(zoo_dir.glob("*/card.json")) if zoo_dir.is_dir() else []:
+        if card_path.parent.name.startswith("."):  # a pack in progress
+            continue
+        card = json.loads(card_path.read_text())
+        agents.append(ShippedAgent(card_path.parent.name, card_path.parent, card))
+    return agents
+
+
+def resolve(target: str | Path, zoo_dir: Path | None = None) -> tuple[Path, str | None]:
+    """(run directory, zoo name or None) of what a command was given: an existing directory is a
+    run directory; otherwise ``target`` must name a shipped agent."""
+    path = Path(target)
+    if path.is_dir():
+        return path, None
+    agents = {agent.name: agent for agent in shipped_agents(zoo_dir)}
+    if str(target) in agents:
+        return agents[str(target)].path, str(target)
+    names = ", ".join(agents) or "none"
+    raise UsageError(
+        f"run directory or shipped agent {str(target)!r} does not exist (`drivelab zoo` lists: {names})"
+    )
+
+
+def report_dir(target: str | Path, out: Path | None, runs_dir: Path = Path("runs")) -> Path | None:
+    """Where an evaluation of ``target`` writes its reports: ``out`` when given, else None (the
+    run directory itself) for a run directory and ``runs_dir/zoo-<name>`` for a shipped agent, so
+    that the package stays as shipped."""
+    _, name = resolve(target)
+    if out is not None or name is None:
+        return out
+    return runs_dir / f"zoo-{name}"
+
+
+# --- the card's numbers ------------------------------------------------------------------------
+def headline(card: dict) -> str:
+    """One line of the card's main measured numbers, with their episode counts."""
+    parts = []
+    for evaluation in card.get("evaluations", []):
+        metrics = evaluation["metrics"]
+        if evaluation["protocol"] == "nocrash":
+            levels = metrics["levels"]
+            success = " / ".join(f"{100 * levels[level]['success_rate']:.0f}" for level in levels)
+            parts.append(
+                f"NoCrash {metrics['town']} town {'/'.join(levels)} {success} % "
+                f"({metrics['episodes_per_level']} episodes per level)"
+            )
+        else:
+            parts.append(
+                f"evaluation set: crash {100 * metrics['crash_rate']:.0f} %, success "
+                f"{100 * metrics['success_rate']:.0f} %, {metrics['mean_speed_mps']:.1f} m/s "
+                f"({metrics['episodes']} episodes)"
+            )
+    return "; ".join(parts) or "not measured"
+
+
+# --- packing -----------------------------------------------------------------------------------
+def _drop_optimizer_moments(agent) -> None:
+    """Empty the state (Adam's moments) of every optimizer the agent holds, directly or in its
+    SB3 policy: a fresh optimizer's, so the model loads as before and acts identically."""
+    import torch
+
+    holders = [agent, getattr(agent, "policy", None)]
+    for holder in (h for h in holders if h is not None):
+        for value in vars(holder).values():
+            if isinstance(value, torch.optim.Optimizer):
+                value.state.clear()
+
+
+def _halve(state, converted: dict):
+    """``state`` (nested dicts/lists of tensors) with every float32 tensor as float16; a tensor
+    shared by two entries (a shared encoder) stays one tensor (``converted``: by storage view)."""
+    import torch
+
+    if isinstance(state, dict):
+        return {key: _halve(value, converted) for key, value in state.items()}
+    if isinstance(state, (list, tuple)):
+        return type(state)(_halve(value, converted) for value in state)
+    if isinstance(state, torch.Tensor) and state.dtype == torch.float32:
+        view = (
+            state.untyped_storage().data_ptr(),
+            state.storage_offset(),
+            tuple(state.shape),
+            state.stride(),
+        )
+        if view not in converted:
+            converted[view] = state.half()
+        return converted[view]
+    return state
+
+
+def _store_half_precision(path: Path) -> None:
+    """Rewrite the tensor files (``*.pt``) of the model zip ``path`` with float16 weights. The
+    loaders copy them into the float32 networks (``load_state_dict`` casts), so a model loads as
+    before, in half the bytes; its actions change in the last digits (the card's numbers are
+    measured on the shipped weights)."""
+    import zipfile
+
+    from drivelab.agents.storage import tensors_from_bytes, tensors_to_bytes
+
+    with zipfile.ZipFile(path) as archive:
+        members = {name: archive.read(name) for name in archive.namelist()}
+    for name in members:
+        if name.endswith(".pt"):
+            members[name] = tensors_to_bytes(_halve(tensors_from_bytes(members[name]), {}))
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as archive:
+        for name, data in members.items():
+            archive.writestr(name, data)
+
+
+def pack(
+    run_dir: str | Path,
+    name: str,
+    description: str,
+    command: str,
+    timing: dict | None = None,
+    zoo_dir: Path | None = None,
+) -> Path:
+    """Copy ``run_dir``'s config and final model into ``zoo_dir/name`` (replacing an older copy)
+    with a card: ``description``, the ``command`` that trained the run, its ``timing`` (e.g.
+    ``train_wall_s``, ``train_cpu_s``, ``machine``; default: the run's train_timing.json if any),
+    and what the run directory records (algorithm, environment, hyper-parameters, steps). The
+    model is loaded and saved again without the optimizer's moments, its weights in float16
+    (``_store_half_precision``). Evaluations are added by ``add_evaluation``."""
+    from drivelab.config import check_run_name, save_yaml
+    from drivelab.training.checkpoints import file_sha256, load_agent
+    from drivelab.training.evaluate import load_run_config
+
+    run_dir, zoo_dir = Path(run_dir), ZOO_DIR if zoo_dir is None else zoo_dir
+    check_run_name(name)
+    config = load_run_config(run_dir)
+    if not (run_dir / "model.zip").is_file():
+        raise UsageError(f"{str(run_dir)!r} has no final model.zip (train it to the end first)")
+    agent = load_agent(run_dir, config)
+    _drop_optimizer_moments(agent)
+    timing_path = run_dir / "train_timing.json"
+    if timing is None:
+        timing = json.loads(timing_path.read_text()) if timing_path.is_file() else {}
+    zoo_dir.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{name}.", dir=zoo_dir))
+    staging.chmod(0o755)  # mkdtemp's 0700 would make the installed agent unreadable to others
+    try:
+        save_yaml(config, staging / "config.yaml")
+        agent.save(staging / "model.zip")
+        _store_half_precision(staging / "model.zip")
+        full = {
+            "format": CARD_FORMAT,
+            "name": name,
+            "description": description,
+            "algo": config.algo,
+            "env": config.env,
+            "obs": list(config.obs),
+            "action": config.action,
+            "reward": config.reward,
+            "traffic": config.traffic,
+            "seed": config.seed,
+            "hyperparams": config.hyperparams,
+            "training": {
+                "steps": int(agent.num_timesteps),
+                "n_envs": config.n_envs,
+                **timing,
+                "command": command,
+            },
+            "model": {
+                "file": "model.zip",
+                "bytes": (staging / "model.zip").stat().st_size,
+                "sha256": file_sha256(staging / "model.zip"),
+                "weights": "float16 (loaded into the float32 networks)",
+                "optimizer_moments": "dropped (acting does not use them; fine-tuning restarts Adam)",
+            },
+            "evaluations": [],
+        }
+        (staging / "card.json").write_text(json.dumps(full, indent=2) + "\n")
+        target = zoo_dir / name
+        if target.exists():
+            shutil.rmtree(target)
+        os.replace(staging, target)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    return target
+
+
+def add_evaluation(name: str, evaluation: dict, zoo_dir: Path | None = None) -> dict:
+    """Record ``evaluation`` (protocol, episodes, command, metrics, machine) in ``name``'s card,
+    replacing an earlier one of the same protocol; the card as written."""
+    path = (ZOO_DIR if zoo_dir is None else zoo_dir) / name / "card.json"
+    card = json.loads(path.read_text())
+    kept = [e for e in card["evaluations"] if e["protocol"] != evaluation["protocol"]]
+    card["evaluations"] = [*kept, evaluation]
+    path.write_text(json.dumps(card, indent=2) + "\n")
+    return card
+
+
+# --- enjoy -------------------------------------------------------------------------------------
+def check_video_path(path: Path) -> None:
+    """A UsageError unless a video can be written at ``path``: a known suffix, an mp4 encoder for
+    .mp4, an existing writable folder, not a folder itself (checked before any episode)."""
+    if path.suffix.lower() not in VIDEO_SUFFIXES:
+        raise UsageError(f"--video {str(path)!r} must end in .mp4 or .gif")
+    if path.suffix.lower() == ".mp4":
+        try:
+            import imageio_ffmpeg
+
+            imageio_ffmpeg.get_ffmpeg_exe()
+        except (ImportError, RuntimeError):
+            raise UsageError(
+                "no mp4 encoder (imageio-ffmpeg's ffmpeg) is installed: use a .gif path"
+            ) from None
+    if path.is_dir():
+        raise UsageError(f"--video {str(path)!r} is a directory")
+    folder = path.parent
+    if not folder.is_dir():
+        raise UsageError(f"cannot write --video {str(path)!r}: folder {str(folder)!r} does not exist")
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as exc:
+        raise UsageError(f"cannot write --video {str(path)!r}: {exc.strerror}") from None
+
+
+class VideoFile:
+    """Frames streamed to an mp4 (imageio-ffmpeg) or gif (Pillow) under a temporary name, renamed
+    to ``path`` by ``close`` and removed by ``discard``: a failed run leaves no partial video."""
+
+    def __init__(self, path: Path, fps: float) -> None:
+        import imageio.v2 as imageio
+
+        self.path = path
+        self.temporary = path.with_name(f".{path.stem}.partial{path.suffix}")
+        if path.suffix.lower() == ".mp4":
+            self.writer = imageio.get_writer(self.temporary, fps=fps, macro_block_size=1)
+        else:
+            self.writer = imageio.get_writer(self.temporary, mode="I", duration=1000 / fps, loop=0)
+        self.frames = 0
+
+    def append(self, frame: np.ndarray) -> None:
+        self.writer.append_data(frame)
+        self.frames += 1
+
+    def close(self) -> Path:
+        self.writer.close()
+        os.replace(self.temporary, self.path)
+        return self.path
+
+    def discard(self) -> None:
+        try:
+            self.writer.close()
+        finally:
+            self.temporary.unlink(missing_ok=True)
+
+
+def enjoy(
+    target: str | Path,
+    episodes: int = 3,
+    video: Path | None = None,
+    seed: int | None = None,
+    on_episode: Callable[[int, dict], None] | None = None,
+    zoo_dir: Path | None = None,
+) -> dict:
+    """Drive a shipped agent (or a run directory's model) greedily for ``episodes`` episodes and
+    return its metrics (``evaluate.aggregate``) with the per-episode ones; writes only ``video``.
+
+    :param seed: None: the scenario's fixed evaluation episodes, the same as ``drivelab evaluate``;
+        an int S: episode e is the first episode of the env seeded S + e.
+    :param on_episode: called with (episode index, episode metrics) after each episode.
+    """
+    from drivelab.envs.core import DriveEnv
+    from drivelab.training.checkpoints import load_agent
+    from drivelab.training.evaluate import aggregate, check_spaces, load_run_config, run_episodes
+
+    if episodes < 1:
+        raise UsageError("--episodes must be >= 1")
+    if seed is not None and not 0 <= seed < 2**31 - 1:
+        raise UsageError("--seed must be in [0, 2**31 - 1)")
+    run_dir, name = resolve(target, zoo_dir)
+    config = load_run_config(run_dir)
+    if video is not None:
+        check_video_path(video)
+    env = DriveEnv(**config.eval_env_kwargs())
+    agent = load_agent(run_dir, config)
+    check_spaces(agent, env, run_dir)
+    policy = lambda obs: agent.predict(obs, deterministic=True)[0]  # noqa: E731
+    writer = VideoFile(video, env.metadata["render_fps"]) if video is not None else None
+    done: list[dict] = []
+
+    def episode_done(metrics: dict) -> None:
+        done.append(metrics)
+        if on_episode is not None:
+            on_episode(len(done) - 1, metrics)
+
+    try:
+        on_frame = writer.append if writer is not None else None
+        results, _ = run_episodes(policy, env, episodes, seed, on_episode=episode_done, on_frame=on_frame)
+    except BaseException:
+        if writer is not None:
+            writer.discard()
+        raise
+    report = {"agent": name or str(run_dir), "algo": config.algo, "env": config.env, **aggregate(results)}
+    report["seed"] = seed
+    if writer is not None:
+        report["video"] = str(writer.close())
+        report["video_frames"] = writer.frames
+    report["per_episode"] = results
+    return report

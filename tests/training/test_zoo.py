@@ -1,0 +1,266 @@
+"""Shipped agents: packing, listing, loading without unpickling, ``enjoy`` and zoo names elsewhere."""
+
+import fnmatch
+import json
+import math
+import pickle
+import tomllib
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from drivelab.agents.storage import PICKLED_MEMBERS
+from drivelab.cli import app
+from drivelab.config import build_config
+from drivelab.envs.core import DriveEnv
+from drivelab.errors import UsageError
+from drivelab.training import run as run_module
+from drivelab.training import zoo
+from drivelab.training.checkpoints import load_agent
+from drivelab.training.evaluate import aggregate, evaluate_run, load_run_config
+from drivelab.training.nocrash import nocrash
+
+runner = CliRunner()
+ROOT = Path(__file__).resolve().parents[2]
+SHIPPED = zoo.shipped_agents()
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory) -> Path:
+    """A town run of 16 PPO steps with one-second episodes (one Adam step: the optimizer has moments)."""
+    config = build_config(
+        {"algo": "ppo", "env": "town", "obs": "waypoints", "action": "target_speed", "traffic": "empty",
+         "steps": 16, "seed": 0, "name": "town", "eval_every": 16, "eval_episodes": 1,
+         "hyperparams": {"n_steps": 16, "batch_size": 16, "n_epochs": 1}, "env_options": {"duration_s": 1}}
+    )  # fmt: skip
+    return run_module.train(config, tmp_path_factory.mktemp("runs"))
+
+
+@pytest.fixture
+def tiny_zoo(tiny_run, tmp_path, monkeypatch) -> Path:
+    """A zoo of one agent, ``tiny``, packed from ``tiny_run``; the package's zoo is out of reach."""
+    zoo_dir = tmp_path / "zoo"
+    monkeypatch.setattr(zoo, "ZOO_DIR", zoo_dir)
+    zoo.pack(tiny_run, "tiny", "a test agent", "drivelab train ...", {"train_wall_s": 1.0})
+    return zoo_dir
+
+
+def _files(folder: Path) -> set[str]:
+    return {str(p.relative_to(folder)) for p in folder.rglob("*")}
+
+
+def _observations(env, count: int = 5) -> list:
+    obs, _ = env.reset(options={"episode_seed": 7})
+    observations = [obs]
+    for _ in range(count - 1):
+        obs, *_ = env.step(env.action_space.sample())
+        observations.append(obs)
+    return observations
+
+
+def test_pack_copies_config_and_model_without_optimizer_moments_and_writes_a_card(tiny_run, tiny_zoo):
+    folder = tiny_zoo / "tiny"
+    assert _files(folder) == {"card.json", "config.yaml", "model.zip"}
+    card = json.loads((folder / "card.json").read_text())
+    assert card["format"] == zoo.CARD_FORMAT and card["name"] == "tiny"
+    assert (card["algo"], card["env"], card["obs"], card["action"]) == (
+        "ppo",
+        "town",
+        ["waypoints"],
+        "target_speed",
+    )
+    assert card["training"]["steps"] == 16 and card["training"]["command"] == "drivelab train ..."
+    assert card["training"]["train_wall_s"] == 1.0 and card["evaluations"] == []
+    assert card["model"]["bytes"] == (folder / "model.zip").stat().st_size
+    # no Adam moments, float16 weights: a quarter of the bytes, the run's weights rounded, its actions
+    assert (folder / "model.zip").stat().st_size < (tiny_run / "model.zip").stat().st_size / 2
+    original = load_agent(tiny_run, load_run_config(tiny_run))
+    shipped = load_agent(folder, load_run_config(folder))
+    assert original.policy.optimizer.state and not shipped.policy.optimizer.state
+    weights = original.policy.state_dict()
+    for key, value in shipped.policy.state_dict().items():
+        assert value.dtype == torch.float32 and torch.equal(value, weights[key].half().float()), key
+    env = DriveEnv(**load_run_config(folder).eval_env_kwargs())
+    for obs in _observations(env):
+        run_action = original.predict(obs, deterministic=True)[0]
+        assert np.allclose(shipped.predict(obs, deterministic=True)[0], run_action, atol=1e-2)
+    # packing again replaces the folder and leaves no staging folder behind
+    zoo.pack(tiny_run, "tiny", "again", "drivelab train ...")
+    assert [p.name for p in tiny_zoo.iterdir()] == ["tiny"]
+    assert json.loads((folder / "card.json").read_text())["description"] == "again"
+
+
+def test_listing_and_resolving(tiny_run, tiny_zoo):
+    zoo.add_evaluation(
+        "tiny", {"protocol": "evaluation set", "metrics": {"crash_rate": 0.25, "success_rate": 0.5,
+                                                          "mean_speed_mps": 21.04, "episodes": 4}}
+    )  # fmt: skip
+    assert [agent.name for agent in zoo.shipped_agents()] == ["tiny"]
+    result = runner.invoke(app, ["zoo"])
+    assert result.exit_code == 0, result.output
+    assert result.output.split()[:4] == ["tiny", "town", "ppo", "obs"]
+    assert "evaluation set: crash 25 %, success 50 %, 21.0 m/s (4 episodes)" in result.output
+    assert zoo.resolve("tiny") == (tiny_zoo / "tiny", "tiny")
+    assert zoo.resolve(tiny_run) == (tiny_run, None)  # a directory is a run directory
+    with pytest.raises(UsageError, match="shipped agent 'no-such-agent' does not exist.*lists: tiny"):
+        zoo.resolve("no-such-agent")
+
+
+def test_an_empty_zoo_says_so(tmp_path, monkeypatch):
+    monkeypatch.setattr(zoo, "ZOO_DIR", tmp_path / "nothing")
+    result = runner.invoke(app, ["zoo"])
+    assert result.exit_code == 0 and result.output.startswith("no shipped agents")
+
+
+def test_enjoy_plays_the_evaluation_episodes_of_drivelab_evaluate(tiny_zoo, tmp_path):
+    seen = []
+    report = zoo.enjoy("tiny", episodes=3, on_episode=lambda i, metrics: seen.append(i))
+    assert seen == [0, 1, 2] and report["agent"] == "tiny" and report["episodes"] == 3
+    evaluated = evaluate_run(tiny_zoo / "tiny", episodes=3, out_dir=tmp_path / "reports")
+    assert {key: report[key] for key in evaluated if key != "run"} == {
+        key: value for key, value in evaluated.items() if key != "run"
+    }
+    assert aggregate(report["per_episode"]) == {key: report[key] for key in aggregate(report["per_episode"])}
+    # another seed plays other episodes, reproducibly
+    other = zoo.enjoy("tiny", episodes=3, seed=5)
+    assert other["per_episode"] == zoo.enjoy("tiny", episodes=3, seed=5)["per_episode"]
+    assert other["per_episode"] != report["per_episode"]
+
+
+@pytest.mark.parametrize("suffix", [".gif", ".mp4"])
+def test_enjoy_writes_every_frame_of_every_episode(tiny_zoo, tmp_path, suffix):
+    import imageio.v3 as iio
+
+    path = tmp_path / f"drive{suffix}"
+    report = zoo.enjoy("tiny", episodes=2, video=path)
+    expected = sum(episode["length"] + 1 for episode in report["per_episode"])  # reset frame + steps
+    assert report["video"] == str(path) and report["video_frames"] == expected
+    assert len(iio.imread(path, index=None)) == expected
+    assert _files(tmp_path) == {
+        path.name,
+        "zoo",
+        "zoo/tiny",
+        *[f"zoo/tiny/{n}" for n in _files(tiny_zoo / "tiny")],
+    }
+
+
+def test_cli_enjoy_prints_progress_and_metrics(tiny_zoo, tmp_path):
+    result = runner.invoke(app, ["enjoy", "tiny", "--episodes", "2", "--video", str(tmp_path / "v.gif")])
+    assert result.exit_code == 0, result.output
+    assert "episode 1/2:" in result.output and "episode 2/2:" in result.output
+    assert "crash rate" in result.output and f"video: {tmp_path / 'v.gif'}" in result.output
+    result = runner.invoke(app, ["enjoy", str(tiny_zoo / "tiny"), "--episodes", "1", "--seed", "3"])
+    assert result.exit_code == 0 and "episode 1/1:" in result.output, result.output  # a run directory
+
+
+def test_evaluate_and_nocrash_take_a_zoo_name_and_write_outside_the_package(tiny_zoo, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    before = _files(tiny_zoo)
+    result = runner.invoke(app, ["evaluate", "tiny", "--episodes", "2"])
+    assert result.exit_code == 0, result.output
+    assert json.loads((tmp_path / "runs" / "zoo-tiny" / "eval.json").read_text())["episodes"] == 2
+    result = runner.invoke(app, ["benchmark", "nocrash", "tiny", "--episodes", "1", "--out", "nc"])
+    assert result.exit_code == 0, result.output
+    assert json.loads((tmp_path / "nc" / "nocrash.json").read_text())["episodes_per_level"] == 1
+    assert _files(tiny_zoo) == before  # the shipped agent is never written to
+    assert nocrash(tiny_zoo / "tiny", episodes=1, out_dir=tmp_path / "again")["episodes_per_level"] == 1
+
+
+@pytest.mark.parametrize(
+    "arguments, message",
+    [
+        (["enjoy", "no-such-agent"], "shipped agent 'no-such-agent' does not exist"),
+        (["enjoy", "tiny", "--episodes", "0"], "--episodes must be >= 1"),
+        (["enjoy", "tiny", "--seed", "-1"], "--seed must be in"),
+        (["enjoy", "tiny", "--video", "out.avi"], "must end in .mp4 or .gif"),
+        (["enjoy", "tiny", "--video", "missing/out.mp4"], "folder 'missing' does not exist"),
+        (["enjoy", "tiny", "--video", "folder.mp4"], "is a directory"),
+        (["evaluate", "no-such-agent"], "shipped agent 'no-such-agent' does not exist"),
+        (["benchmark", "nocrash", "no-such-agent"], "shipped agent 'no-such-agent' does not exist"),
+    ],
+)
+def test_bad_input_is_one_error_line_and_writes_nothing(tiny_zoo, tmp_path, monkeypatch, arguments, message):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "folder.mp4").mkdir()
+    before = _files(tmp_path)
+    result = runner.invoke(app, arguments)
+    assert result.exit_code == 2, result.output
+    lines = result.output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and message in lines[0], result.output
+    assert _files(tmp_path) == before
+
+
+def test_an_unwritable_video_folder_is_refused_before_driving(tiny_zoo, tmp_path, monkeypatch):
+    monkeypatch.setattr(zoo.tempfile, "TemporaryFile", _raise_read_only)
+    monkeypatch.setattr("drivelab.training.evaluate.run_episodes", lambda *a, **k: pytest.fail("drove"))
+    with pytest.raises(UsageError, match="cannot write --video .*Read-only file system"):
+        zoo.enjoy("tiny", video=tmp_path / "out.gif")
+    assert not (tmp_path / "out.gif").exists()
+
+
+def _raise_read_only(*args, **kwargs):
+    raise OSError(30, "Read-only file system")
+
+
+# --- the agents shipped in the package ---------------------------------------------------------
+def test_the_zoo_ships_agents_with_complete_cards():
+    assert {agent.card["env"] for agent in SHIPPED} >= {"town"}
+    for agent in SHIPPED:
+        card = agent.card
+        assert _files(agent.path) == {"card.json", "config.yaml", "model.zip"}, agent.name
+        assert card["model"]["bytes"] == (agent.path / "model.zip").stat().st_size < 2 * 2**20
+        config = load_run_config(agent.path)
+        assert (card["algo"], card["env"], card["obs"]) == (config.algo, config.env, list(config.obs))
+        assert card["training"]["command"].startswith("drivelab train ") and card["training"]["steps"] > 0
+        assert card["evaluations"] and card["check"]["episodes"] == 3
+        for evaluation in card["evaluations"]:
+            assert evaluation["command"].startswith("drivelab ") and evaluation["episodes"] >= 10
+
+
+def test_every_shipped_file_is_package_data():
+    patterns = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]
+    for agent in SHIPPED:
+        for name in _files(agent.path):
+            relative = f"zoo/{agent.name}/{name}"
+            assert any(fnmatch.fnmatch(relative, pattern) for pattern in patterns["drivelab"]), relative
+
+
+@pytest.mark.parametrize("agent", SHIPPED, ids=[agent.name for agent in SHIPPED])
+def test_shipped_agents_load_without_unpickling(agent, monkeypatch):
+    """No pickled member; tensors only through ``torch.load(weights_only=True)`` (its restricted
+    unpickler of tensors and plain containers); ``pickle.load(s)`` never called."""
+    with zipfile.ZipFile(agent.path / "model.zip") as archive:
+        assert not set(archive.namelist()) & set(PICKLED_MEMBERS)
+    config = load_run_config(agent.path)
+    load_agent(agent.path, config)  # first: torch's lazy imports, which may use pickle themselves
+    loads = []
+    real_load = torch.load
+
+    def checked_load(*args, **kwargs):
+        assert kwargs.get("weights_only") is True
+        loads.append(args)
+        return real_load(*args, **kwargs)
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("unpickled")
+
+    monkeypatch.setattr(torch, "load", checked_load)
+    monkeypatch.setattr(pickle, "load", refuse)
+    monkeypatch.setattr(pickle, "loads", refuse)
+    assert load_agent(agent.path, config) is not None and loads
+
+
+@pytest.mark.parametrize("agent", SHIPPED, ids=[agent.name for agent in SHIPPED])
+def test_shipped_agents_reproduce_their_recorded_check(agent):
+    """``drivelab enjoy NAME --episodes 3`` gives the numbers recorded when the agent was packed."""
+    recorded = agent.card["check"]["metrics"]
+    measured = aggregate(zoo.enjoy(agent.name, episodes=3)["per_episode"])
+    for key, value in recorded.items():
+        if value is None or isinstance(value, int):
+            assert measured[key] == value, key
+        else:
+            assert math.isclose(measured[key], value, rel_tol=1e-9, abs_tol=1e-9), key
