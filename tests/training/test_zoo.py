@@ -256,11 +256,14 @@ def test_shipped_agents_load_without_unpickling(agent, monkeypatch):
 
 @pytest.mark.parametrize("agent", SHIPPED, ids=[agent.name for agent in SHIPPED])
 def test_shipped_agents_reproduce_their_recorded_check(agent):
-    """``drivelab enjoy NAME --episodes 3`` gives the numbers recorded when the agent was packed."""
+    """``drivelab enjoy NAME --episodes 3`` gives the numbers recorded when the agent was packed:
+    counts exactly; real numbers to 1e-3, because the network's float32 kernels and numpy's SIMD
+    math round differently on other x86-64 CPUs (~1e-6 relative), while a change of behaviour
+    moves a 3-episode mean by far more than 1e-3."""
     recorded = agent.card["check"]["metrics"]
     measured = aggregate(zoo.enjoy(agent.name, episodes=3)["per_episode"])
     for key, value in recorded.items():
         if value is None or isinstance(value, int):
             assert measured[key] == value, key
         else:
-            assert math.isclose(measured[key], value, rel_tol=1e-9, abs_tol=1e-9), key
+            assert math.isclose(measured[key], value, rel_tol=1e-3, abs_tol=1e-6), key
