@@ -177,6 +177,9 @@ def evaluate(
     stochastic: bool = typer.Option(
         False, "--stochastic", help="sample actions instead of the greedy policy"
     ),
+    maps: str | None = typer.Option(
+        None, help="blocks: play maps START:COUNT instead (writes eval-maps-START-COUNT.json)"
+    ),
 ) -> None:
     """Evaluate a run's model: print the driving metrics and write eval.json."""
     from rich.console import Console
@@ -185,7 +188,9 @@ def evaluate(
     from drivelab.training.evaluate import evaluate_run, metrics_rows
 
     try:
-        report = evaluate_run(run_dir, episodes=episodes, video=video, deterministic=not stochastic)
+        report = evaluate_run(
+            run_dir, episodes=episodes, video=video, deterministic=not stochastic, maps=maps
+        )
     except UsageError as exc:
         _fail(str(exc))
     table = Table(title=f"{report['algo']} on {report['env']}: {report['episodes']} episodes")
@@ -196,7 +201,8 @@ def evaluate(
     Console().print(table)
     if "video" in report:
         typer.echo(f"video: {report['video']}")
-    typer.echo(f"run directory: {run_dir}  (eval.json written)")
+    written = "eval.json" if maps is None else "eval-maps-{}-{}.json".format(*report["maps"].split(":"))
+    typer.echo(f"run directory: {run_dir}  ({written} written)")
 
 
 @app.command()
