@@ -17,6 +17,8 @@ of the N maps 100 / N times, with other traffic than in training).
 
 Resumable: a run whose directory holds model.zip is not trained again (one without it is resumed
 from its checkpoint, or started over), an evaluation whose JSON is there is not played again.
+A larger ``--steps`` continues complete runs (``drivelab train --resume RUN --steps STEPS``) and
+keeps their earlier evaluations in ``RUN/steps-<steps>/``: the report shows both budgets.
 ``--report-only`` writes the report from what is there.
 
 Intervals: per run, the success rate's 90 % Wilson interval over its episodes, and the train−test
@@ -69,39 +71,66 @@ def run_values(maps: int, seed: int, steps: int) -> dict:
 
 
 def train_command(maps: int, seed: int, steps: int) -> str:
-    return (
+    """The ``drivelab train`` command(s) of a run: trained to its ``eval_every`` (the first budget),
+    then continued to ``steps`` when that is larger."""
+    name, runs = f"ppo-maps{maps}-s{seed}", os.path.relpath(RUNS)
+    first = load_run_config(RUNS / name).eval_every
+    command = (
         f"drivelab train --algo ppo --env blocks --obs {OBS} --action continuous --reward metadrive "
-        f"--n-envs {N_ENVS} --steps {steps} --seed {seed} --eval-maps {TEST_MAPS} --eval-every {steps} "
-        f"--eval-episodes 1 --name ppo-maps{maps}-s{seed} --runs-dir {RUNS} --config maps-{maps}.yaml"
-        f"  # maps-{maps}.yaml: env_options: {{backend_options: {{map: {BLOCKS}, start_seed: 0, "
-        f"num_scenarios: {maps}}}}}"
+        f"--n-envs {N_ENVS} --steps {first} --seed {seed} --eval-maps {TEST_MAPS} --eval-every {first} "
+        f"--eval-episodes 1 --name {name} --runs-dir {runs} --config maps-{maps}.yaml"
     )
+    if steps > first:
+        command += f" && drivelab train --resume {runs}/{name} --steps {steps}"
+    yaml = f"{{backend_options: {{map: {BLOCKS}, start_seed: 0, num_scenarios: {maps}}}}}"
+    return f"{command}  # maps-{maps}.yaml: env_options: {yaml}"
 
 
 def ensure_trained(maps: int, seed: int, steps: int) -> Path:
-    """The run directory with its model.zip: trained, resumed or left as it is; its times kept in
-    ``<run>.timing.json`` beside it."""
+    """The run directory with its model.zip at ``steps``: trained, resumed, continued or left as
+    it is; its times kept in ``<run>.timing.json`` beside it.
+
+    A complete run of fewer steps is continued to ``steps`` (``drivelab train --resume RUN --steps
+    STEPS``: exactly the uninterrupted run), after its evaluations and times are moved into
+    ``RUN/steps-<its steps>/``, where the report finds them as an earlier budget."""
     config = build_config(with_shipped_hyperparams(run_values(maps, seed, steps)))
     run_dir = RUNS / config.name
     timing = RUNS / f"{config.name}.timing.json"
+    before = json.loads(timing.read_text()) if timing.is_file() else {}
+    wall, cpu = time.perf_counter(), time.process_time()
     if (run_dir / "model.zip").is_file():
         existing = load_run_config(run_dir)
-        if existing.identity() != config.identity() or existing.steps != steps:
+        same = build_config({**config.to_dict(), "eval_every": existing.eval_every})
+        if existing.identity() != same.identity() or existing.steps > steps:
             sys.exit(f"error: {run_dir} was trained with another config; give another runs folder")
-        return run_dir
-    wall, cpu = time.perf_counter(), time.process_time()
-    resumed = False
-    if (run_dir / "checkpoints" / "latest.json").is_file():
-        try:
-            resume(run_dir, steps)
-            resumed = True
-        except UsageError as exc:
-            print(f"{run_dir}: cannot resume ({exc}); starting over", flush=True)
-    if not resumed:
-        shutil.rmtree(run_dir, ignore_errors=True)
-        train(config, RUNS)
-    record = {"train_wall_s": time.perf_counter() - wall, "train_cpu_s": time.process_time() - cpu,
-              "resumed": resumed, "load_average_1min": os.getloadavg()[0]}  # fmt: skip
+        if existing.steps == steps:
+            return run_dir
+        archive = run_dir / f"steps-{existing.steps}"
+        archive.mkdir(exist_ok=True)
+        for path in run_dir.glob("eval-maps-*.json"):
+            os.replace(path, archive / path.name)
+        if timing.is_file():
+            shutil.copy(timing, archive / "timing.json")
+        resume(run_dir, steps)
+        resumed = f"continued from {existing.steps}"
+    else:
+        resumed = ""
+        if (run_dir / "checkpoints" / "latest.json").is_file():
+            try:
+                resume(run_dir, steps)
+                resumed = "resumed"
+            except UsageError as exc:
+                print(f"{run_dir}: cannot resume ({exc}); starting over", flush=True)
+        if not resumed:
+            shutil.rmtree(run_dir, ignore_errors=True)
+            before = {}
+            train(config, RUNS)
+    record = {
+        "train_wall_s": time.perf_counter() - wall + before.get("train_wall_s", 0.0),
+        "train_cpu_s": time.process_time() - cpu + before.get("train_cpu_s", 0.0),
+        "resumed": resumed,
+        "load_average_1min": os.getloadavg()[0],
+    }
     timing.write_text(json.dumps(record, indent=2))
     return run_dir
 
@@ -186,18 +215,63 @@ def group_row(maps: int, rows: list[dict]) -> dict:
 
 
 # --- report ----------------------------------------------------------------------------------
+def group_table(groups: list[dict], rows: list[dict]) -> list[str]:
+    """Markdown lines: one row per number of maps (over seeds when there are several)."""
+    multi = any(len(g["seeds"]) > 1 for g in groups)
+    lines = [
+        "| training maps | seeds | success on train | success on 100 unseen | gap (train − test) "
+        "| out of road train / test | crash train / test | route completion train / test |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    row_of = {(r["maps"], r["seed"]): r for r in rows}
+    for g in groups:
+        if multi:
+            train, test = (
+                f"{g[f'{split}_success']:.2f} {interval(g[f'{split}_success_ci90_seeds'])} "
+                f"({interval(g[f'{split}_success_ci90_pooled'])})"
+                for split in ("train", "test")
+            )
+            gap = f"{g['gap']:+.2f} {interval(g['gap_ci90_seeds'])}"
+        else:
+            r = row_of[(g["maps"], g["seeds"][0])]
+            train = f"{g['train_success']:.2f} {interval(r['train_success_ci90'])}"
+            test = f"{g['test_success']:.2f} {interval(r['test_success_ci90'])}"
+            gap = f"{g['gap']:+.2f} {interval(r['gap_ci90'])}"
+        lines.append(
+            f"| {g['maps']} | {len(g['seeds'])} | {train} | {test} | {gap} | "
+            f"{g['train_out_of_road']:.2f} / {g['test_out_of_road']:.2f} | {g['train_crash']:.2f} / "
+            f"{g['test_crash']:.2f} | {g['train_route_completion']:.2f} / {g['test_route_completion']:.2f} |"
+        )
+    return lines
+
+
+def groups_of(rows: list[dict], maps: list[int]) -> list[dict]:
+    return [
+        group_row(m, [r for r in rows if r["maps"] == m]) for m in maps if any(r["maps"] == m for r in rows)
+    ]
+
+
 def interval(pair) -> str:
     low, high = pair
     return "n/a" if math.isnan(low) else f"[{low:.2f}, {high:.2f}]"
 
 
-def plot(groups: list[dict], rows: list[dict], path: Path) -> None:
+def plot(
+    groups: list[dict], rows: list[dict], path: Path, steps: int, earlier: dict[int, list[dict]]
+) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = plt.subplots(figsize=(6.5, 4.2))
+    for budget, earlier_groups in sorted(earlier.items()):
+        for split, colour in (("train", "tab:blue"), ("test", "tab:orange")):
+            ax.plot(
+                [g["maps"] for g in earlier_groups], [g[f"{split}_success"] for g in earlier_groups],
+                color=colour, linestyle="--", marker="x", alpha=0.5,
+                label=f"{'training' if split == 'train' else 'unseen'} maps, {budget:,} steps",
+            )  # fmt: skip
     for split, colour in (("train", "tab:blue"), ("test", "tab:orange")):
         xs = [g["maps"] for g in groups]
         ys = [g[f"{split}_success"] for g in groups]
@@ -207,7 +281,7 @@ def plot(groups: list[dict], rows: list[dict], path: Path) -> None:
         ]
         low = [y - b[0] for y, b in zip(ys, bands, strict=True)]
         high = [b[1] - y for y, b in zip(ys, bands, strict=True)]
-        label = "training maps" if split == "train" else "100 unseen maps"
+        label = f"{'training maps' if split == 'train' else '100 unseen maps'}, {steps:,} steps"
         ax.errorbar(xs, ys, yerr=[low, high], color=colour, marker="o", capsize=4, label=label)
         ax.scatter(
             [r["maps"] for r in rows], [r[f"{split}_success"] for r in rows], color=colour, alpha=0.35, s=14
@@ -218,19 +292,25 @@ def plot(groups: list[dict], rows: list[dict], path: Path) -> None:
     ax.set_xlabel("number of training maps")
     ax.set_ylabel("success rate")
     ax.set_title("PPO on procedural block maps: train vs unseen maps")
-    ax.legend()
+    ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
 
 
-def write_report(args, rows: list[dict], times: dict, skipped: list[str]) -> None:
-    groups = [
-        group_row(m, [r for r in rows if r["maps"] == m])
-        for m in args.maps
-        if any(r["maps"] == m for r in rows)
-    ]
+def write_report(
+    args,
+    rows: list[dict],
+    times: dict,
+    skipped: list[str],
+    earlier: dict[int, list[dict]],
+    earlier_cpu_s: float,
+) -> None:
+    """generalisation.md / .json / .png from the final ``rows`` and the ``earlier`` budgets' rows
+    (steps → rows of the same runs evaluated before they were continued)."""
+    groups = groups_of(rows, args.maps)
+    earlier_groups = {budget: groups_of(budget_rows, args.maps) for budget, budget_rows in earlier.items()}
     if not groups:
         print("nothing to report yet", flush=True)
         return
@@ -239,7 +319,7 @@ def write_report(args, rows: list[dict], times: dict, skipped: list[str]) -> Non
     hyperparams = ", ".join(f"{k} {v}" for k, v in first.hyperparams.items())
     machine = f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
     command = "OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1 python " + " ".join(sys.argv)
-    cpu_total = sum(t.get("train_cpu_s", 0) + t.get("eval_cpu_s", 0) for t in times.values())
+    cpu_total = sum(t.get("train_cpu_s", 0) + t.get("eval_cpu_s", 0) for t in times.values()) + earlier_cpu_s
     result = {
         "command": command,
         "machine": machine,
@@ -260,10 +340,14 @@ def write_report(args, rows: list[dict], times: dict, skipped: list[str]) -> Non
         "not_run": skipped,
         "groups": groups,
         "runs": rows,
+        "earlier_budgets": {
+            str(budget): {"groups": earlier_groups[budget], "runs": budget_rows}
+            for budget, budget_rows in sorted(earlier.items())
+        },
     }
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "generalisation.json").write_text(json.dumps(result, indent=2))
-    plot(groups, rows, RESULTS / "generalisation.png")
+    plot(groups, rows, RESULTS / "generalisation.png", args.steps, earlier_groups)
     multi = any(len(g["seeds"]) > 1 for g in groups)
     lines = [
         "# Generalisation: PPO trained on 1, 10 and 100 procedural maps (MetaDrive's experiment)",
@@ -272,7 +356,12 @@ def write_report(args, rows: list[dict], times: dict, skipped: list[str]) -> Non
         f"Machine: {machine}; shared with other jobs, niced, one thread; date {result['date']}.  ",
         f"Budget: {args.steps:,} environment steps per run ({N_ENVS} worlds), seeds "
         f"{', '.join(map(str, args.seeds))}; "
-        f"CPU time of what this report holds: {cpu_total / 60:.1f} min.",
+        f"CPU time of what this report holds: {cpu_total / 60:.1f} min"
+        + (
+            f" (with the evaluations at {', '.join(f'{b:,}' for b in sorted(earlier))} steps)."
+            if earlier
+            else "."
+        ),
         "MetaDrive's generalisation runs train PPO for about 1M steps and more, so these runs have a small "
         "fraction of that budget: the rates below are those of briefly trained policies.",
         "",
@@ -297,29 +386,8 @@ def write_report(args, rows: list[dict], times: dict, skipped: list[str]) -> Non
         if multi
         else "Intervals: 90 % Wilson over episodes (success); gap: 90 % bootstrap over episodes.",
         "",
-        "| training maps | seeds | success on train | success on 100 unseen | gap (train − test) "
-        "| out of road train / test | crash train / test | route completion train / test |",
-        "|---|---|---|---|---|---|---|---|",
     ]
-    row_of = {(r["maps"], r["seed"]): r for r in rows}
-    for g in groups:
-        if multi:
-            train, test = (
-                f"{g[f'{split}_success']:.2f} {interval(g[f'{split}_success_ci90_seeds'])} "
-                f"({interval(g[f'{split}_success_ci90_pooled'])})"
-                for split in ("train", "test")
-            )
-            gap = f"{g['gap']:+.2f} {interval(g['gap_ci90_seeds'])}"
-        else:
-            r = row_of[(g["maps"], g["seeds"][0])]
-            train = f"{g['train_success']:.2f} {interval(r['train_success_ci90'])}"
-            test = f"{g['test_success']:.2f} {interval(r['test_success_ci90'])}"
-            gap = f"{g['gap']:+.2f} {interval(r['gap_ci90'])}"
-        lines.append(
-            f"| {g['maps']} | {len(g['seeds'])} | {train} | {test} | {gap} | "
-            f"{g['train_out_of_road']:.2f} / {g['test_out_of_road']:.2f} | {g['train_crash']:.2f} / "
-            f"{g['test_crash']:.2f} | {g['train_route_completion']:.2f} / {g['test_route_completion']:.2f} |"
-        )
+    lines += group_table(groups, rows)
     lines += [
         "",
         "## Each run",
@@ -340,6 +408,16 @@ def write_report(args, rows: list[dict], times: dict, skipped: list[str]) -> Non
             f"| {t.get('train_cpu_s', math.nan) / 60:.1f} min "
             f"| {t.get('eval_cpu_s', math.nan) / 60:.1f} min |"
         )
+    for budget, budget_groups in sorted(earlier_groups.items()):
+        lines += [
+            "",
+            f"## The same runs at {budget:,} steps",
+            "",
+            f"Each run was first trained to {budget:,} steps and evaluated as above, then continued to "
+            f"{args.steps:,} (`drivelab train --resume RUN --steps {args.steps}`, which continues exactly).",
+            "",
+            *group_table(budget_groups, earlier[budget]),
+        ]
     if skipped:
         lines += ["", f"Not run within the budget: {', '.join(skipped)}."]
     lines += [
@@ -369,15 +447,17 @@ def main() -> None:
     args.seeds = [int(s) for s in args.seeds.split(",")]
     args.maps = [int(m) for m in args.maps.split(",")]
     RUNS = args.runs_dir
-    rows, times, skipped = [], {}, []
+    rows, times, skipped, earlier, earlier_cpu_s = [], {}, [], {}, 0.0
     for seed in args.seeds:  # seed-major: an unfinished budget still leaves whole seeds
         for maps in args.maps:
             key = f"maps{maps}-s{seed}"
             run_dir = RUNS / f"ppo-maps{maps}-s{seed}"
-            if args.report_only and not (run_dir / "model.zip").is_file():
-                skipped.append(key)
-                continue
-            run_dir = ensure_trained(maps, seed, args.steps)
+            if args.report_only:
+                if not (run_dir / "model.zip").is_file() or load_run_config(run_dir).steps != args.steps:
+                    skipped.append(key)
+                    continue
+            else:
+                run_dir = ensure_trained(maps, seed, args.steps)
             test_path = run_dir / "eval-maps-{}-{}.json".format(*TEST_MAPS.split(":"))
             train_path = run_dir / f"eval-maps-0-{maps}.json"
             if args.report_only and not (test_path.is_file() and train_path.is_file()):
@@ -390,8 +470,15 @@ def main() -> None:
             timing["eval_cpu_s"] = test.get("eval_cpu_s", math.nan) + train_report.get("eval_cpu_s", math.nan)
             times[key] = timing
             rows.append(run_row(maps, seed, train_report, test))
+            for archive in sorted(run_dir.glob("steps-*")):  # the run's evaluations at an earlier budget
+                paths = [archive / test_path.name, archive / train_path.name]
+                if all(path.is_file() for path in paths):
+                    old_test, old_train = (json.loads(path.read_text()) for path in paths)
+                    budget = int(archive.name.removeprefix("steps-"))
+                    earlier.setdefault(budget, []).append(run_row(maps, seed, old_train, old_test))
+                    earlier_cpu_s += old_test.get("eval_cpu_s", 0.0) + old_train.get("eval_cpu_s", 0.0)
             print(key, {k: rows[-1][k] for k in ("train_success", "test_success", "gap")}, timing, flush=True)
-    write_report(args, rows, times, skipped)
+    write_report(args, rows, times, skipped, earlier, earlier_cpu_s)
 
 
 if __name__ == "__main__":
