@@ -384,8 +384,8 @@ def write_report(
         "## Mean over seeds" if multi else "## Results",
         "",
         (
-            "Intervals: 90 % percentile bootstrap over seeds (coarse with 2–3 seeds); in brackets after it "
-            "the 90 % Wilson interval of all seeds' episodes pooled."
+            "Intervals: 90 % percentile bootstrap over seeds (coarse with so few seeds); in brackets after "
+            "it the 90 % Wilson interval of all seeds' episodes pooled."
         )
         if multi
         else "Intervals: 90 % Wilson over episodes (success); gap: 90 % bootstrap over episodes.",
