@@ -182,6 +182,9 @@ def evaluate(
         False, "--stochastic", help="sample actions instead of the greedy policy"
     ),
     out: Path | None = typer.Option(None, help=OUT_HELP),
+    maps: str | None = typer.Option(
+        None, help="blocks: play maps START:COUNT instead (writes eval-maps-START-COUNT.json)"
+    ),
 ) -> None:
     """Evaluate a run's model: print the driving metrics and write eval.json."""
     from rich.console import Console
@@ -194,7 +197,7 @@ def evaluate(
         path, name = resolve(run_dir)
         out_dir = report_dir(run_dir, out)
         report = evaluate_run(
-            path, episodes=episodes, video=video, deterministic=not stochastic, out_dir=out_dir
+            path, episodes=episodes, video=video, deterministic=not stochastic, out_dir=out_dir, maps=maps
         )
     except UsageError as exc:
         _fail(str(exc))
@@ -206,10 +209,11 @@ def evaluate(
     Console().print(table)
     if "video" in report:
         typer.echo(f"video: {report['video']}")
+    written = "eval.json" if maps is None else "eval-maps-{}-{}.json".format(*report["maps"].split(":"))
     typer.echo(
-        f"run directory: {path}  (eval.json written)"
+        f"run directory: {path}  ({written} written)"
         if out_dir is None
-        else f"eval.json written in {out_dir}"
+        else f"{written} written in {out_dir}"
     )
 
 

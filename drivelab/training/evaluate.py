@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 from gymnasium import spaces
 
-from drivelab.config import RunConfig, build_config
+from drivelab.config import RunConfig, build_config, parse_maps
 from drivelab.errors import UsageError
 from drivelab.yaml_io import load_yaml
 
@@ -117,9 +117,16 @@ def evaluate_run(
     video: bool = False,
     deterministic: bool = True,
     out_dir: str | Path | None = None,
+    maps: str | None = None,
 ) -> dict:
     """Evaluate the final model of ``run_dir`` (or its latest checkpoint); write eval.json (and
-    the video) into ``out_dir`` (default: the run directory; created if missing)."""
+    the video) into ``out_dir`` (default: the run directory; created if missing).
+
+    :param maps: procedural maps only: ``"START:COUNT"``, play on the maps of seeds START …
+        START + COUNT − 1 instead of the run's evaluation maps (its ``eval_maps``, else its
+        training maps), and write ``eval-maps-START-COUNT.json`` instead of eval.json. Episode e
+        plays map START + (2**31 + e) mod COUNT, so COUNT episodes play each map once.
+    """
     from drivelab.envs.core import DriveEnv
     from drivelab.training.checkpoints import load_agent
 
@@ -127,25 +134,31 @@ def evaluate_run(
     config = load_run_config(run_dir)
     if episodes < 1:
         raise UsageError("--episodes must be >= 1")
+    name = "eval.json"
+    if maps is not None:
+        config = build_config({**config.to_dict(), "eval_maps": maps})  # checks START:COUNT, scenario
+        name = "eval-maps-{}-{}.json".format(*parse_maps(maps))
     if out_dir is None:
         out_dir = run_dir
-        check_writable(out_dir, "eval.json")
+        check_writable(out_dir, name)
     env = DriveEnv(**config.eval_env_kwargs())
     agent = load_agent(run_dir, config)
     check_spaces(agent, env, run_dir)
     if out_dir is not run_dir:  # created only once the model has loaded
         out_dir = make_out_dir(Path(out_dir))
-        check_writable(out_dir, "eval.json")
+        check_writable(out_dir, name)
     policy = lambda obs: agent.predict(obs, deterministic=deterministic)[0]  # noqa: E731
     results, frames = run_episodes(policy, env, episodes, record_first=video)
     report = {"run": str(run_dir), "algo": config.algo, "env": config.env, **aggregate(results)}
+    if maps is not None:
+        report["maps"] = config.eval_maps
     if video:
         report["video"] = str(
             write_video(frames, out_dir / "videos" / "evaluate", env.metadata["render_fps"])
         )
-    tmp = out_dir / "eval.tmp.json"
+    tmp = out_dir / f"{name}.tmp"
     tmp.write_text(json.dumps({**report, "per_episode": results}, indent=2))
-    os.replace(tmp, out_dir / "eval.json")
+    os.replace(tmp, out_dir / name)
     return report
 
 

@@ -524,6 +524,8 @@ def plan_truncation(run_dir: Path, steps: int, snapshot: Snapshot | None) -> dic
     for name in STALE_RESULTS:
         if (run_dir / name).exists():
             changes[run_dir / name] = None
+    for path in run_dir.glob("eval-maps-*.json"):  # ``drivelab evaluate --maps``: also the old model's
+        changes[path] = None
     return changes
 
 

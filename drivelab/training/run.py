@@ -325,7 +325,8 @@ def resume(
     (``resume_state``). Everything is read and checked (config, checkpoint, resume state, replay,
     logs) before anything is written; then the logs are cut back to the checkpoint (monitor.csv
     and evaluations.csv to the rows it had written, progress.csv to its step) and the results of
-    the older model (eval.json, nocrash.json, learning_curve.png, model.zip) are removed.
+    the older model (eval.json, eval-maps-*.json, nocrash.json, learning_curve.png, model.zip) are
+    removed.
     ``on_evaluation``: as for ``train``.
     """
     run_dir = Path(run_dir)
