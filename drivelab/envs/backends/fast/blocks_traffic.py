@@ -224,17 +224,23 @@ def _side_lane(
     successor_start: np.ndarray, successors: np.ndarray,
 ) -> int:  # fmt: skip
     """The lane beside ``lane`` on ``side`` (-1 left, +1 right) when vehicle i may change to it
-    (changeable, reachable, its route going on from there), else -1."""
+    (changeable and reachable), else -1."""
     lane_id, count = lanes[lane, LANE_ID], lanes[lane, LANE_COUNT]
     if not (0 <= lane_id + side < count):
         return -1
     candidate = lane + side
     if not changeable[candidate] or not is_reachable_from(lanes, candidate, v[i, T.X], v[i, T.Y]):
         return -1
-    first = _after_road(v, lanes, i, candidate)
-    if not route_feasible(v, lanes, successor_start, successors, i, candidate, first):
-        return -1
     return candidate
+
+
+@njit(cache=True, inline="always")
+def _route_goes_on(
+    v: np.ndarray, lanes: np.ndarray, i: int, lane: int, successor_start: np.ndarray, successors: np.ndarray
+) -> bool:
+    """Vehicle i's route can be driven on from ``lane`` (``route_feasible`` after its road)."""
+    first = _after_road(v, lanes, i, lane)
+    return route_feasible(v, lanes, successor_start, successors, i, lane, first)
 
 
 @njit(cache=True)
@@ -268,6 +274,7 @@ def blocks_change_lane_policy(
                 candidate >= 0
                 and not ending[candidate]
                 and merge_safe(v, lanes, p, coords, done, trig, i, candidate, successor_start, successors)
+                and _route_goes_on(v, lanes, i, candidate, successor_start, successors)
             ):
                 v[i, T.TARGET_LANE] = candidate
                 return
@@ -279,8 +286,10 @@ def blocks_change_lane_policy(
         return
     for side in (-1, 1):
         candidate = _side_lane(v, lanes, i, lane, side, changeable, successor_start, successors)
-        if candidate >= 0 and blocks_mobil(
-            v, lanes, p, coords, done, trig, i, candidate, successor_start, successors
+        if (
+            candidate >= 0
+            and blocks_mobil(v, lanes, p, coords, done, trig, i, candidate, successor_start, successors)
+            and _route_goes_on(v, lanes, i, candidate, successor_start, successors)
         ):
             v[i, T.TARGET_LANE] = candidate
 
