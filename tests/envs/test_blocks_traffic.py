@@ -217,3 +217,38 @@ def test_lane_changes_are_allowed_side_by_side_only():
     mixed = np.array([len(set(kinds[road == r])) > 1 for r in road])
     assert not bmap.changeable[mixed].any()
     assert bmap.ending.any() and (letters[bmap.ending] == "r").all() and bmap.changeable[bmap.ending].all()
+
+
+def test_affordances_and_the_topdown_lights_channel_see_block_lights():
+    """The affordances sensor reads the red light 10 m ahead in the ego's lane (per-lane light
+    rows), and topdown's optional lights channel draws stop bars, only where there are lights."""
+    from drivelab.perception.affordances import FIELDS
+    from drivelab.perception.sensors import make_sensor
+
+    simulator = fast_simulator(BLOCKS, "empty", "continuous", 2, SIGNALISED)
+    simulator.reset_where(np.ones(2, dtype=bool), np.arange(2))
+    for k in range(2):
+        bmap = simulator.map_of(k)
+        lane, rows = _approach(bmap), bmap.table.rows
+        simulator.offsets[k, 0] = _offset_for(13.5, LightTimings().cycle_s)
+        ego = simulator.vehicles[k, simulator.ego[k]]
+        s = rows[lane, L.LENGTH] - 10.0 - ego[T.LEN] / 2 * (k == 1)
+        ego[T.X], ego[T.Y] = L.position(rows, lane, s, 0.0)
+        ego[T.HEADING], ego[T.LANE] = L.heading_at(rows, lane, s), lane
+    simulator._update_lights(np.ones(2, dtype=bool))
+    batch = simulator._export()
+    state, distance = batch.light_ahead(40.0)
+    np.testing.assert_array_equal(state, [LIGHT_RED, LIGHT_RED])
+    np.testing.assert_allclose(distance, [10.0, 10.0 + 2.5], atol=1e-9)
+    affordances = make_sensor("affordances")
+    affordances.reset(batch, [np.random.default_rng(0)] * 2)
+    observed = affordances.observe(batch)
+    assert (observed[:, FIELDS.index("light_red")] == 1).all()
+    topdown = make_sensor("topdown:lights=true")
+    topdown.reset(batch, [np.random.default_rng(0)] * 2)
+    image = topdown.observe(batch)
+    assert image.shape[1] == 6 and (image[:, 5] > 0).any(axis=(1, 2)).all()
+    unsignalised = fast_simulator(BLOCKS, "empty", "continuous", 2, {**SIGNALISED, "signalised": False})
+    plain = unsignalised.reset_where(np.ones(2, dtype=bool), np.arange(2))
+    topdown.reset(plain, [np.random.default_rng(0)] * 2)
+    assert (topdown.observe(plain)[:, 5] == 0).all()
