@@ -252,3 +252,17 @@ def test_affordances_and_the_topdown_lights_channel_see_block_lights():
     plain = unsignalised.reset_where(np.ones(2, dtype=bool), np.arange(2))
     topdown.reset(plain, [np.random.default_rng(0)] * 2)
     assert (topdown.observe(plain)[:, 5] == 0).all()
+
+
+def test_the_ego_tops_out_at_metadrives_80_kmh():
+    """Full throttle on a straight map for 20 s: the ego reaches 80 km/h and no more (MetaDrive's
+    top speed; highway-env's 40 m/s elsewhere), and the sensors' speed scale is it."""
+    simulator = fast_simulator(BLOCKS, "empty", "continuous", 1, {"map": "SSS"})
+    batch = simulator.reset_where(np.ones(1, dtype=bool), np.array([0]))
+    np.testing.assert_allclose(batch.max_speed_mps, [80 / 3.6])
+    speeds = []
+    for _ in range(200):
+        speeds.append(simulator.step(np.array([[1.0, 0.0]])).ego.speed_mps[0])
+    assert 80 / 3.6 - 0.5 < max(speeds) <= 80 / 3.6 + 0.3
+    highway = fast_simulator(get_scenario("highway"), "empty", "continuous", 1)
+    assert (highway.reset_where(np.ones(1, dtype=bool), np.array([0])).max_speed_mps == 40.0).all()

@@ -64,13 +64,16 @@ from drivelab.world.batch import WorldBatch
 from drivelab.world.state import LIGHT_RED, RoadMap
 
 ARRIVAL_WINDOW_M = 5.0  # MetaDrive's arrive_dest: within 5 m of the final road's end
+# MetaDrive's ego tops out at 80 km/h (metadrive/component/vehicle/vehicle_type.py, max_speed_km_h;
+# its default reward's speed term divides by it too)
+EGO_MAX_SPEED_MPS = 80.0 / 3.6
 
 
 def _world_kernel(parallel: bool):
     def body(
         v, count, lanes, start, stop, p, frames, dt, regulation, active, cap, junction, from_arm, to_arm,
         turn, end_junction, end_arm, light, changeable, ending, successor_start, successors, light_start,
-        light_stop, light_states,
+        light_stop, light_states, ego_max_speed_mps,
     ):  # fmt: skip
         for k in prange(v.shape[0]):
             if active[k]:
@@ -79,7 +82,7 @@ def _world_kernel(parallel: bool):
                     v[k, : count[k]], lanes[a:b], p, frames, dt, regulation[k], cap, junction[a:b],
                     from_arm[a:b], to_arm[a:b], turn[a:b], end_junction[a:b], end_arm[a:b], light[a:b],
                     changeable[a:b], ending[a:b], successor_start[a : b + 1], successors,
-                    light_states[k, : light_stop[k] - light_start[k]],
+                    light_states[k, : light_stop[k] - light_start[k]], ego_max_speed_mps,
                 )  # fmt: skip
 
     return njit(cache=True, parallel=parallel)(body)
@@ -104,6 +107,7 @@ def simulate_map_worlds(
     light_start: np.ndarray,
     light_stop: np.ndarray,
     light_states: np.ndarray,
+    ego_max_speed_mps: float,
 ) -> None:
     """``blocks_traffic.blocks_simulate`` of world k's vehicles ``v[k, :count[k]]`` (K, N_max,
     VEHICLE_COLUMNS) on its map's lane rows ``lanes[start[k]:stop[k]]`` for the worlds of
@@ -118,12 +122,13 @@ def simulate_map_worlds(
     :param light_start: / ``light_stop`` (K,): world k's lights, the rows of its map in the stacked
         light table; ``light_states`` (K, M_max) their LIGHT_* states (world k's first
         ``light_stop[k] - light_start[k]``).
+    :param ego_max_speed_mps: the egos' top speed.
     """
     parallel = v.shape[0] > 1 and numba.get_num_threads() > 1
     kernel = _PARALLEL if parallel else _SERIAL
     kernel(
         v, count, lanes, start, stop, p, frames, dt, regulation, active, release_cap_mps, *road, light_start,
-        light_stop, light_states,
+        light_stop, light_states, ego_max_speed_mps,
     )  # fmt: skip
 
 
@@ -258,6 +263,9 @@ class BlocksSimulator(FastSimulator):
         self.route_time_limit_s = np.full(k, np.inf)
         self._route_of: dict[tuple[int, int], int] = {}  # (map slot, spawn lane) → route index
         self.arrival_threshold = ARRIVAL_WINDOW_M
+        top_speed = np.full(k, EGO_MAX_SPEED_MPS)  # the sensors' speed scale (ego_state, measurements)
+        top_speed.setflags(write=False)
+        self._empty = {**self._empty, "max_speed_mps": top_speed}
         self._slot(self.map_set.start_seed)  # the first map: the road the base class converted
 
     # --- maps -------------------------------------------------------------------------------------
@@ -382,7 +390,7 @@ class BlocksSimulator(FastSimulator):
         simulate_map_worlds(
             self.vehicles, self.count, self.lanes, self.lane_start, self.lane_stop, self.idm, self.frames,
             self.dt_s, self.regulation, ~restart, TRAFFIC_SPEED_MPS, self.road_arrays, self.light_start,
-            self.light_stop, self.light_state,
+            self.light_stop, self.light_state, EGO_MAX_SPEED_MPS,
         )  # fmt: skip
         clear_dead_ends(
             self.vehicles, self.count, self.ego, self.lanes, self.lane_start, self.lane_stop, self.dead_end

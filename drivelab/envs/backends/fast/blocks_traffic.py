@@ -356,10 +356,14 @@ def blocks_act(
 def blocks_simulate(
     v, lanes, p, frames, dt, regulation, release_cap_mps, junction, from_arm, to_arm, turn,
     end_junction, end_arm, light, changeable, ending, successor_start, successors, light_states,
+    ego_max_speed_mps,
 ) -> None:  # fmt: skip
     """``traffic.simulate`` (``frames`` frames of ``dt``; the road's rules every ``regulation[0]``
     frames, at the junctions only, a released vehicle cruising at ``release_cap_mps``) with
-    ``blocks_act``; the lights hold their states (``light_states``) through the step."""
+    ``blocks_act``; the lights hold their states (``light_states``) through the step. The ego rows
+    (every row but the traffic's) go no faster than ``ego_max_speed_mps``: above it their
+    acceleration is clipped as ``Vehicle.clip_actions`` clips at MAX_SPEED (MetaDrive's ego tops
+    out at 80 km/h, highway-env's at 40 m/s)."""
     coords, done, trig = T.frame_cache(v, lanes)
     for _ in range(frames):
         blocks_act(
@@ -371,6 +375,10 @@ def blocks_simulate(
             if regulation[1] % regulation[0] == 0:
                 T.enforce_road_rules(v, lanes, release_cap_mps, True)
         for i in range(v.shape[0]):
-            if v[i, T.KIND] != T.OBSTACLE:
-                T.step_vehicle(v, lanes, i, dt)
+            kind = v[i, T.KIND]
+            if kind == T.OBSTACLE:
+                continue
+            if kind != T.IDM and v[i, T.SPEED] > ego_max_speed_mps:
+                v[i, T.ACCEL] = min(v[i, T.ACCEL], 1.0 * (ego_max_speed_mps - v[i, T.SPEED]))
+            T.step_vehicle(v, lanes, i, dt)
         T.handle_collisions(v, dt)
