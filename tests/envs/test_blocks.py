@@ -272,18 +272,24 @@ def test_the_route_time_limit_truncates():
 def test_traffic_drives_every_block_without_leaving_the_road(spec):
     """Scripted: dense traffic on two maps that hold every block type, 200 steps (20 s): every
     vehicle stays within half its lane's width plus 0.5 m of the lane it is on, none crashes,
-    and the traffic is seen moving on every block of the map."""
+    the traffic is seen moving on every block of the map, and it changes lanes (MOBIL)."""
     simulator = fast_simulator(
         BLOCKS, "dense", "continuous", 2, {"map": spec, "lane_count": 2, "num_scenarios": 2}
     )
     simulator.reset_where(np.ones(2, dtype=bool), np.array([0, 1]))
     visited = [set(), set()]
+    changes = 0
     for _ in range(200):
         simulator.step(np.zeros((2, 2)))  # the egos stand on the spawn road
         for k in range(2):
             bmap = simulator.map_of(k)
             rows, v = bmap.table.rows, simulator.vehicles[k, 1 : simulator.count[k]]
             lanes = v[:, T.LANE].astype(int)
+            target = v[:, T.TARGET_LANE].astype(int)
+            # a lane change: targeting a lane beside its own (a taper's lane drifting nearer its
+            # neighbour also reads so, on lanes not ``changeable``)
+            changing = (lanes != target) & (rows[lanes, L.FIRST_OF_ROAD] == rows[target, L.FIRST_OF_ROAD])
+            changes += int((changing & bmap.changeable[target]).sum())
             for row, lane in zip(v, lanes, strict=True):
                 s, lateral = L.local_coordinates(rows, lane, row[T.X], row[T.Y])
                 assert abs(lateral) <= rows[lane, L.WIDTH] / 2 + 0.5
@@ -292,6 +298,7 @@ def test_traffic_drives_every_block_without_leaving_the_road(spec):
             visited[k] |= set(bmap.pg.lane_block[lanes[v[:, T.SPEED] > 1.0]].tolist())
     for k in range(2):
         assert visited[k] >= set(range(1, len(simulator.map_of(k).pg.blocks)))
+    assert changes > 0
 
 
 # --- rewards -----------------------------------------------------------------------------------

@@ -6,8 +6,9 @@ and defaults (``metadrive/envs/metadrive_env.py``): ``map`` (a block string such
 number of random blocks; 3), ``start_seed`` (0) and ``num_scenarios`` (1): the maps of seeds
 ``start_seed`` … ``start_seed + num_scenarios − 1``, each episode on the map its seed picks;
 ``lane_count`` (3; null: 2 or 3 per map), ``lane_width`` (3.5; null: U[3, 4.5] per map),
-``signalised`` (false; the generator can place lights at intersections, but the blocks
-simulator runs no light cycle yet, so true is refused) and ``traffic_density``.
+``signalised`` (false; true: the town's traffic lights at every X and T intersection, each
+junction's cycle from a random offset per episode: NPCs stop at red, running a red light is the
+ego's red-light event, and the lights are exported for the sensors) and ``traffic_density``.
 
 Traffic levels set ``traffic_density``: empty 0, regular 0.1 (MetaDrive's default), dense 0.2
 (twice it; any density in [0, 1] can be given).
@@ -52,7 +53,7 @@ SCENARIO = Scenario(
     "blocks",
     "highway_env.envs.common.abstract.AbstractEnv",  # only its default config is read
     "procedural block maps (MetaDrive's; map=OSX or N random blocks, num_scenarios maps from "
-    "start_seed): route from the spawn road to the last block, IDM traffic",
+    "start_seed): route from the spawn road to the last block, IDM/MOBIL traffic",
     config={
         **{key: value for key, value in MAP_DEFAULTS.items() if key != "traffic_density"},
         "duration": HORIZON_S,

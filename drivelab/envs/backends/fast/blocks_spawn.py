@@ -115,8 +115,6 @@ class MapSet:
         signalised = config.get("signalised", MAP_DEFAULTS["signalised"])
         if not isinstance(signalised, bool):
             raise UsageError(f"signalised must be true or false, got {signalised!r}")
-        if signalised:  # the maps can carry lights (generate_map), the blocks simulator runs none yet
-            raise UsageError("signalised intersections are not simulated on blocks maps yet")
         return MapSet(
             spec if isinstance(spec, str) else int(spec),
             _integer(config, "start_seed", 0),
@@ -165,6 +163,16 @@ class BlocksMap:
     :param spot_lane: / ``spot_s`` / ``spot_block`` (S,): the candidate traffic spots (lane row,
         longitudinal position, block index); ``block_spots`` (B,): floor(length / 10) of each
         block's candidate lanes (B blocks).
+    :param changeable: (L,) lanes where traffic may change lanes (``changeable_lanes``);
+        ``ending`` (L,) those of them that lead into a merging taper (``ending_lanes``).
+    :param junction_arrays: the description's (L,) int64 ``junction``, ``from_arm``, ``to_arm``,
+        ``turn``, ``end_junction``, ``end_arm``, ``light`` (``blocks_traffic``'s argument order).
+    :param junction_count: J, the map's intersections (X and T); ``light_junction``,
+        ``light_arm`` (M,), ``light_xyh`` (M, 3): its lights (none unless signalised), one per arm
+        at the middle of the arm's stop line.
+    :param signal_xyh: (S, 3) the stop point (x, y, heading) of every lane that ends at a light,
+        and ``signal_light`` (S,) that light's row: the lights as the batch exports them, one per
+        lane, so that a lane's light stands in it (``WorldBatch.light_ahead``).
     """
 
     pg: PGMap
@@ -180,6 +188,15 @@ class BlocksMap:
     spot_s: np.ndarray
     spot_block: np.ndarray
     block_spots: np.ndarray
+    changeable: np.ndarray
+    ending: np.ndarray
+    junction_arrays: tuple[np.ndarray, ...]
+    junction_count: int
+    light_junction: np.ndarray
+    light_arm: np.ndarray
+    light_xyh: np.ndarray
+    signal_xyh: np.ndarray
+    signal_light: np.ndarray
 
     @property
     def table(self) -> L.LaneTable:
@@ -196,6 +213,41 @@ def _priorities(pg: PGMap, rows: np.ndarray) -> None:
     priority = np.where(junction | approach, main - (junction & (desc.turn == TURN_LEFT)), priority)
     ring = np.array([bool(_RING_NODE.match(f)) and bool(_RING_NODE.match(t)) for f, t, _ in desc.indices])
     rows[:, L.PRIORITY] = np.where(ring, RING_PRIORITY, priority)
+
+
+def ending_lanes(rows: np.ndarray, changeable: np.ndarray) -> np.ndarray:
+    """(L,) the ``changeable`` lanes that lead into a taper merging into a neighbouring lane (the
+    in-ramp's acceleration lane, the merge's lane that ends): traffic leaves them for a
+    neighbouring lane as soon as that is safe (``blocks_traffic``)."""
+    start, successors = _continuations(rows)
+    source = np.repeat(np.arange(len(rows)), np.diff(start))
+    merging = _merging(rows, start, successors)
+    ending = np.zeros(len(rows), dtype=bool)
+    ending[source[merging[successors]]] = True
+    return ending & changeable
+
+
+def _merging(rows: np.ndarray, start: np.ndarray, successors: np.ndarray) -> np.ndarray:
+    """(L,) the lanes that end by merging into a neighbour: a lane continuing into another lane id
+    on a road of fewer lanes, into a lane that continues another lane too; and the arcs of the
+    taper leading to it (arc lanes of a road whose other lanes are straight)."""
+    road = rows[:, L.FIRST_OF_ROAD].astype(np.int64)
+    source = np.repeat(np.arange(len(rows)), np.diff(start))
+    joined = np.bincount(successors, minlength=len(rows)) >= 2  # lanes continuing two lanes
+    ends = (
+        (rows[successors, L.LANE_ID] != rows[source, L.LANE_ID])
+        & (rows[successors, L.LANE_COUNT] < rows[source, L.LANE_COUNT])
+        & joined[successors]
+    )
+    merging = np.zeros(len(rows), dtype=bool)
+    merging[source[ends]] = True
+    kind = rows[:, L.KIND]
+    mixed = np.zeros(len(rows), dtype=bool)
+    np.logical_or.at(mixed, road, kind != kind[road])
+    for _ in range(2):  # a taper is two arcs: the first leads into the second
+        leads = merging[successors] & mixed[road[source]] & (kind[source] == L.CIRCLE)
+        merging[source[leads]] = True
+    return merging
 
 
 def _ego_route_rows(pg: PGMap, lane_id: int) -> list[int]:
@@ -267,6 +319,12 @@ def blocks_map(pg: PGMap, base_road) -> BlocksMap:
     }
     successor_start, successors = _continuations(rows)
     spot_lane, spot_s, spot_block, block_spots = _spots(pg, rows[:, L.LENGTH])
+    changeable = changeable_lanes(rows, in_junction)
+    signal_lanes = np.flatnonzero(np.asarray(desc.light) >= 0)
+    junction_arrays = tuple(
+        np.ascontiguousarray(getattr(desc, name), dtype=np.int64)
+        for name in ("junction", "from_arm", "to_arm", "turn", "end_junction", "end_arm", "light")
+    )
     return BlocksMap(
         pg=pg,
         road=road,
@@ -281,7 +339,34 @@ def blocks_map(pg: PGMap, base_road) -> BlocksMap:
         spot_s=spot_s,
         spot_block=spot_block,
         block_spots=block_spots,
+        changeable=changeable,
+        ending=ending_lanes(rows, changeable),
+        junction_arrays=junction_arrays,
+        junction_count=len(desc.junction_centre),
+        light_junction=np.asarray(desc.light_junction, dtype=np.int64),
+        light_arm=np.asarray(desc.light_arm, dtype=np.int64),
+        light_xyh=np.asarray(desc.light_xyh, dtype=float).reshape(-1, 3),
+        signal_xyh=np.array(
+            [
+                [*L.position(rows, r, rows[r, L.LENGTH], 0.0), L.heading_at(rows, r, rows[r, L.LENGTH])]
+                for r in signal_lanes
+            ]
+        ).reshape(-1, 3),
+        signal_light=np.asarray(desc.light, dtype=np.int64)[signal_lanes],
     )
+
+
+def changeable_lanes(rows: np.ndarray, in_junction: np.ndarray) -> np.ndarray:
+    """(L,) the lanes where traffic may change lanes (MOBIL): those of roads of two lanes or more
+    whose lanes are all of one kind (side by side: a straight road, a curve, a ramp's main road
+    away from its tapers), outside the intersections and the roundabouts' curves and ring."""
+    road = rows[:, L.FIRST_OF_ROAD].astype(np.int64)
+    kind = rows[:, L.KIND]
+    lowest, highest = np.full(len(rows), np.inf), np.full(len(rows), -np.inf)
+    np.minimum.at(lowest, road, kind)
+    np.maximum.at(highest, road, kind)
+    side_by_side = (rows[:, L.LANE_COUNT] >= 2) & (lowest[road] == highest[road])
+    return side_by_side & ~np.asarray(in_junction, dtype=bool)
 
 
 CONTINUATION_M, CONTINUATION_RAD = 0.05, 0.05  # a lane continues another: it starts where that ends
@@ -373,12 +458,14 @@ def _spaced(rows: np.ndarray, along_m: float, across_m: float) -> np.ndarray:
 
 def spawn_blocks_episode(
     seed: int, bmap: BlocksMap, control: str, density: float
-) -> tuple[np.ndarray, int, np.ndarray, None]:
+) -> tuple[np.ndarray, int, np.ndarray, np.ndarray]:
     """An episode on ``bmap`` from ``seed``: ``(rows (N, VEHICLE_COLUMNS), ego row, regulation
-    [period, 0], None)``. The ego (first row) on a random lane of the spawn road at s = 5 m, at
-    rest; per block after the spawn road floor(block spots · ``density``) traffic vehicles on
-    distinct random spots (MetaDrive's trigger-mode count), each on a random route; vehicles
-    within SPAWN_CLEARANCE_M of the ego or of one placed before them are dropped."""
+    [period, 0], light offsets (J,))``. The ego (first row) on a random lane of the spawn road at
+    s = 5 m, at rest; per block after the spawn road floor(block spots · ``density``) traffic
+    vehicles on distinct random spots (MetaDrive's trigger-mode count), each on a random route;
+    vehicles within SPAWN_CLEARANCE_M of the ego or of one placed before them are dropped. A map
+    with lights then draws each intersection's cycle offset uniform in [0, cycle) (the town's
+    draw); without lights nothing more is drawn (J = 0)."""
     rng = np.random.default_rng(int(seed))
     road, table = bmap.road, bmap.table
     lane = int(bmap.spawn_lanes[rng.integers(len(bmap.spawn_lanes))])
@@ -404,7 +491,10 @@ def spawn_blocks_episode(
     )  # fmt: skip
     everyone = np.concatenate([ego[None], rows])
     everyone = everyone[_spaced(everyone, *SPAWN_CLEARANCE_M)]
-    return everyone, 0, np.array([float(road.regulation_period), 0.0]), None
+    offsets = np.zeros(0)
+    if len(bmap.light_arm):
+        offsets = rng.uniform(0.0, bmap.pg.description.timings.cycle_s, size=bmap.junction_count)
+    return everyone, 0, np.array([float(road.regulation_period), 0.0]), offsets
 
 
 def route_time_limit_s(tracker: RouteTracker) -> float:
