@@ -270,6 +270,79 @@ def cached_idm_acceleration(
     return idm_behind(v, lanes, p, coords, done, trig, free_road, ego, front)
 
 
+# What MOBIL needs of vehicle i's own lane, the same for both side lanes: a (OWN_SIZE,) scratch
+# row. The acceleration behind the front is also what ``act`` applies, so ``act`` fills the row
+# once per vehicle and frame; the old follower's two accelerations are filled on first use.
+OWN_FREE, OWN_A, OWN_FRONT, OWN_REAR, OWN_REAR_A, OWN_REAR_PRED_A, OWN_REAR_FILLED, OWN_SIZE = range(8)
+
+
+@njit(cache=True, inline="always")
+def own_lane(
+    v: np.ndarray,
+    lanes: np.ndarray,
+    p: np.ndarray,
+    coords: np.ndarray,
+    done: np.ndarray,
+    trig: np.ndarray,
+    i: int,
+    own: np.ndarray,
+) -> None:
+    """Fill ``own`` for vehicle i: its front and rear on its lane, its free-road term and its
+    acceleration behind that front (IDMVehicle.acceleration(self, front))."""
+    front, rear = cached_neighbours(v, lanes, coords, done, i, int(v[i, LANE]))
+    own[OWN_FREE] = idm_free_road(v, lanes, p, i, i)
+    own[OWN_A] = idm_behind(v, lanes, p, coords, done, trig, own[OWN_FREE], i, front)
+    own[OWN_FRONT], own[OWN_REAR], own[OWN_REAR_FILLED] = front, rear, 0.0
+
+
+@njit(cache=True, inline="always")
+def mobil_side(
+    v: np.ndarray,
+    lanes: np.ndarray,
+    p: np.ndarray,
+    coords: np.ndarray,
+    done: np.ndarray,
+    trig: np.ndarray,
+    i: int,
+    lane: int,
+    own: np.ndarray,
+) -> bool:
+    """IDMVehicle.mobil: is a change to ``lane`` safe for the new follower, and worth it?
+    (``own``: vehicle i's row of ``own_lane``; the same arithmetic as highway-env's, each value
+    computed once.)"""
+    new_preceding, new_following = cached_neighbours(v, lanes, coords, done, i, lane)
+    new_following_free = idm_free_road(v, lanes, p, i, new_following)
+    new_following_a = idm_behind(
+        v, lanes, p, coords, done, trig, new_following_free, new_following, new_preceding
+    )
+    new_following_pred_a = idm_behind(v, lanes, p, coords, done, trig, new_following_free, new_following, i)
+    if new_following_pred_a < -p[MAX_BRAKING_IMPOSED]:
+        return False
+    self_pred_a = idm_behind(v, lanes, p, coords, done, trig, own[OWN_FREE], i, new_preceding)
+    start = int(v[i, ROUTE_START])
+    if start < v[i, ROUTE_END] and v[i, ROUTE + 2 * start + 1] >= 0:
+        # the next route step names a lane: only move towards it, and only without hard braking
+        target_id = lanes[int(v[i, TARGET_LANE]), LANE_ID]
+        wanted_id = v[i, ROUTE + 2 * start + 1]
+        if np.sign(lanes[lane, LANE_ID] - target_id) != np.sign(wanted_id - target_id):
+            return False
+        return not self_pred_a < -p[MAX_BRAKING_IMPOSED]
+    if own[OWN_REAR_FILLED] == 0.0:
+        old_following, old_preceding = int(own[OWN_REAR]), int(own[OWN_FRONT])
+        old_following_free = idm_free_road(v, lanes, p, i, old_following)
+        own[OWN_REAR_A] = idm_behind(v, lanes, p, coords, done, trig, old_following_free, old_following, i)
+        own[OWN_REAR_PRED_A] = idm_behind(
+            v, lanes, p, coords, done, trig, old_following_free, old_following, old_preceding
+        )
+        own[OWN_REAR_FILLED] = 1.0
+    jerk = (
+        self_pred_a
+        - own[OWN_A]
+        + p[POLITENESS] * (new_following_pred_a - new_following_a + own[OWN_REAR_PRED_A] - own[OWN_REAR_A])
+    )
+    return jerk >= p[MIN_ACC_GAIN]
+
+
 @njit(cache=True)
 def cached_mobil(
     v: np.ndarray,
@@ -281,38 +354,10 @@ def cached_mobil(
     i: int,
     lane: int,
 ) -> bool:
-    """IDMVehicle.mobil: is a change to ``lane`` safe for the new follower, and worth it?"""
-    new_preceding, new_following = cached_neighbours(v, lanes, coords, done, i, lane)
-    new_following_free = idm_free_road(v, lanes, p, i, new_following)
-    new_following_a = idm_behind(
-        v, lanes, p, coords, done, trig, new_following_free, new_following, new_preceding
-    )
-    new_following_pred_a = idm_behind(v, lanes, p, coords, done, trig, new_following_free, new_following, i)
-    if new_following_pred_a < -p[MAX_BRAKING_IMPOSED]:
-        return False
-    old_preceding, old_following = cached_neighbours(v, lanes, coords, done, i, int(v[i, LANE]))
-    self_free = idm_free_road(v, lanes, p, i, i)
-    self_pred_a = idm_behind(v, lanes, p, coords, done, trig, self_free, i, new_preceding)
-    start = int(v[i, ROUTE_START])
-    if start < v[i, ROUTE_END] and v[i, ROUTE + 2 * start + 1] >= 0:
-        # the next route step names a lane: only move towards it, and only without hard braking
-        target_id = lanes[int(v[i, TARGET_LANE]), LANE_ID]
-        wanted_id = v[i, ROUTE + 2 * start + 1]
-        if np.sign(lanes[lane, LANE_ID] - target_id) != np.sign(wanted_id - target_id):
-            return False
-        return not self_pred_a < -p[MAX_BRAKING_IMPOSED]
-    self_a = idm_behind(v, lanes, p, coords, done, trig, self_free, i, old_preceding)
-    old_following_free = idm_free_road(v, lanes, p, i, old_following)
-    old_following_a = idm_behind(v, lanes, p, coords, done, trig, old_following_free, old_following, i)
-    old_following_pred_a = idm_behind(
-        v, lanes, p, coords, done, trig, old_following_free, old_following, old_preceding
-    )
-    jerk = (
-        self_pred_a
-        - self_a
-        + p[POLITENESS] * (new_following_pred_a - new_following_a + old_following_pred_a - old_following_a)
-    )
-    return jerk >= p[MIN_ACC_GAIN]
+    """``mobil_side`` with vehicle i's own-lane row made here."""
+    own = np.empty(OWN_SIZE)
+    own_lane(v, lanes, p, coords, done, trig, i, own)
+    return mobil_side(v, lanes, p, coords, done, trig, i, lane, own)
 
 
 @njit(cache=True)
@@ -333,8 +378,27 @@ def change_lane_policy(
     trig: np.ndarray,
     i: int,
 ) -> None:
+    """IDMVehicle.change_lane_policy (``change_lane_policy_own`` with the own-lane row made on
+    first use)."""
+    own = np.empty(OWN_SIZE)
+    own[OWN_FREE] = np.nan
+    change_lane_policy_own(v, lanes, p, coords, done, trig, i, own)
+
+
+@njit(cache=True, inline="always")
+def change_lane_policy_own(
+    v: np.ndarray,
+    lanes: np.ndarray,
+    p: np.ndarray,
+    coords: np.ndarray,
+    done: np.ndarray,
+    trig: np.ndarray,
+    i: int,
+    own: np.ndarray,
+) -> None:
     """IDMVehicle.change_lane_policy: abort a change into a lane someone else is entering; else,
-    every LANE_CHANGE_DELAY seconds, ask MOBIL about each side lane (the right one last)."""
+    every LANE_CHANGE_DELAY seconds, ask MOBIL about each side lane (the right one last).
+    ``own``: vehicle i's ``own_lane`` row, or one whose OWN_FREE is NaN (filled here if needed)."""
     lane, target = int(v[i, LANE]), int(v[i, TARGET_LANE])
     if lane != target:
         same_road = lanes[lane, FIRST_OF_ROAD] == lanes[target, FIRST_OF_ROAD]
@@ -363,7 +427,9 @@ def change_lane_policy(
             continue
         if np.abs(v[i, SPEED]) < 1:
             continue
-        if cached_mobil(v, lanes, p, coords, done, trig, i, candidate):
+        if np.isnan(own[OWN_FREE]):
+            own_lane(v, lanes, p, coords, done, trig, i, own)
+        if mobil_side(v, lanes, p, coords, done, trig, i, candidate, own):
             v[i, TARGET_LANE] = candidate
 
 
@@ -430,6 +496,7 @@ def act(
 ) -> None:
     """Road.act: every vehicle decides its controls, in list order (``frame_cache`` arrays)."""
     start_frame(v, done, trig)
+    own = np.empty(OWN_SIZE)
     for i in range(v.shape[0]):
         kind = v[i, KIND]
         if kind == PLAIN or kind == PEDAL_KIND or kind == OBSTACLE:
@@ -441,13 +508,15 @@ def act(
             v[i, STEER] = steering_control(v, lanes, i, int(v[i, TARGET_LANE]))
             v[i, ACCEL] = KP_A * (v[i, TARGET_SPEED] - v[i, SPEED])
             continue
-        change_lane_policy(v, lanes, p, coords, done, trig, i)
+        # the acceleration behind the front on its own lane, computed before the lane-change
+        # decision that reuses it (nothing it reads changes in between: the same bits)
+        own_lane(v, lanes, p, coords, done, trig, i, own)
+        change_lane_policy_own(v, lanes, p, coords, done, trig, i, own)
         v[i, STEER] = steering_control(v, lanes, i, int(v[i, TARGET_LANE]))
-        front, _ = cached_neighbours(v, lanes, coords, done, i, int(v[i, LANE]))
-        acceleration = cached_idm_acceleration(v, lanes, p, coords, done, trig, i, i, front)
+        acceleration = own[OWN_A]
         if int(v[i, LANE]) != int(v[i, TARGET_LANE]):
             front, _ = cached_neighbours(v, lanes, coords, done, i, int(v[i, TARGET_LANE]))
-            target_a = cached_idm_acceleration(v, lanes, p, coords, done, trig, i, i, front)
+            target_a = idm_behind(v, lanes, p, coords, done, trig, own[OWN_FREE], i, front)
             acceleration = min(acceleration, target_a)
         v[i, ACCEL] = _clip(acceleration, -p[ACC_MAX], p[ACC_MAX])
 
