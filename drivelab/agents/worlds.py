@@ -4,7 +4,8 @@ An agent trains on one gymnasium env (K = 1) or on an SB3 ``VecEnv`` of K worlds
 train --n-envs K``: a VectorDriveEnv that resets a finished world in the step that ended it).
 ``Worlds`` gives both the VecEnv's shape: observations batched (K, ...), rewards and flags (K,),
 the final observation of every world whose episode ended, and the returns of the episodes that
-ended, so the agents' collect loops are written once, for K worlds.
+ended, so the agents' collect loops are written once, for K worlds. ``Worlds.batch`` is the
+``WorldBatch`` behind the observations last returned (the imitation teacher reads it).
 """
 
 from __future__ import annotations
@@ -16,17 +17,38 @@ from gymnasium import spaces
 from stable_baselines3.common.vec_env import VecEnv
 
 from drivelab.agents.base import batch_of_one
+from drivelab.errors import UsageError
+
+
+def vector_env_of(env: Any):
+    """The ``VectorDriveEnv`` under a training env: itself, a ``DriveEnv``'s (wrapped or not), or
+    an SB3 VecEnv's (``SB3VecEnv`` under its wrappers)."""
+    from drivelab.envs.vector import VectorDriveEnv
+
+    if isinstance(env, VectorDriveEnv):
+        return env
+    base = env.unwrapped
+    vector = getattr(base, "vector", None) or getattr(base, "vector_env", None)
+    if not isinstance(vector, VectorDriveEnv):
+        raise UsageError("imitation needs drivelab's own environment (a DriveEnv or a VectorDriveEnv)")
+    return vector
 
 
 class Worlds:
     """The training env as K worlds: a gymnasium env (K = 1, reset here when its episode ends) or
     an SB3 ``VecEnv`` (K = ``num_envs``, resetting a finished world itself). Observations come and
-    go batched (K, ...), dicts key by key."""
+    go batched (K, ...), dicts key by key; a finished world has started again when ``step`` returns,
+    so ``batch`` always holds the state of the observations last returned."""
 
     def __init__(self, env) -> None:
         self.env = env
         self.vector = isinstance(env, VecEnv)
         self.count = env.num_envs if self.vector else 1
+
+    @property
+    def batch(self):
+        """The ``WorldBatch`` of the K worlds now (drivelab's own environment only)."""
+        return vector_env_of(self.env).batch
 
     def reset(self) -> Any:
         return self.env.reset() if self.vector else batch_of_one(self.env.reset()[0])
