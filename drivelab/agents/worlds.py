@@ -44,6 +44,8 @@ class Worlds:
         self.env = env
         self.vector = isinstance(env, VecEnv)
         self.count = env.num_envs if self.vector else 1
+        self.infos: list[dict] = [{} for _ in range(self.count)]  # the last step's, one per world
+        self.reset_infos: list[dict] = [{} for _ in range(self.count)]  # each world's latest reset's
 
     @property
     def batch(self):
@@ -51,14 +53,26 @@ class Worlds:
         return vector_env_of(self.env).batch
 
     def reset(self) -> Any:
-        return self.env.reset() if self.vector else batch_of_one(self.env.reset()[0])
+        """Start every world; the batched observations (K, ...)."""
+        if self.vector:
+            obs = self.env.reset()
+            self.reset_infos = list(getattr(self.env, "reset_infos", self.reset_infos))
+            return obs
+        obs, info = self.env.reset()
+        self.reset_infos = [info]
+        return batch_of_one(obs)
 
     def step(self, actions: np.ndarray):
         """(observations, rewards (K,), terminated (K,), truncated (K,), the final observations of
         the worlds that ended (batched, rows of the others unspecified) or None, the returns of
-        the episodes that ended)."""
+        the episodes that ended). ``infos`` then holds the step's info of every world (of the
+        step that ended it, for a finished world), ``reset_infos`` the reset's of the worlds that
+        started again."""
         if self.vector:
             new_obs, rewards, dones, infos = self.env.step(actions)
+            self.infos = infos
+            if dones.any():
+                self.reset_infos = list(getattr(self.env, "reset_infos", self.reset_infos))
             truncated = np.array([bool(info.get("TimeLimit.truncated", False)) for info in infos])
             terminated = np.asarray(dones, dtype=bool) & ~truncated
             final = None
@@ -69,14 +83,21 @@ class Worlds:
             returns = [float(info["episode"]["r"]) for info in infos if "episode" in info]
             return new_obs, np.asarray(rewards, dtype=np.float64), terminated, truncated, final, returns
         new_obs, reward, terminated, truncated, info = self.env.step(actions[0])
+        self.infos = [info]
         final = batch_of_one(new_obs)
         returns = [float(info["episode"]["r"])] if "episode" in info else []
         if terminated or truncated:
-            new_obs, _ = self.env.reset()
+            new_obs, reset_info = self.env.reset()
+            self.reset_infos = [reset_info]
         return (
             batch_of_one(new_obs), np.array([float(reward)]), np.array([terminated]), np.array([truncated]),
             final, returns,
         )  # fmt: skip
+
+
+def row(batch: Any, k: int) -> Any:
+    """World ``k``'s observation of a batch (K, ...) (a view; dicts key by key)."""
+    return {key: value[k] for key, value in batch.items()} if isinstance(batch, dict) else batch[k]
 
 
 def is_batched(obs: Any, space: spaces.Space) -> bool:
