@@ -36,7 +36,7 @@ from drivelab.agents.base import OwnAgent, batch_of_one, observation_to_tensor
 from drivelab.agents.expert import SCENARIOS
 from drivelab.agents.imitation_data import Demonstrations, Teacher, action_agreement, collect, stack_steps
 from drivelab.agents.networks import TanhGaussianActorCritic, squashed_log_prob
-from drivelab.agents.worlds import Worlds, is_batched, vector_env_of
+from drivelab.agents.worlds import Worlds, vector_env_of
 from drivelab.errors import UsageError
 
 LOSSES = ("mse", "nll")
@@ -207,10 +207,7 @@ class BehaviourCloning(OwnAgent):
         round's last ``on_step``, so each round start is a safe point for the checkpoints."""
         target, start_steps, start_time = self._start_learning(total_timesteps, reset_num_timesteps)
         worlds = Worlds(self.env)
-        if self._last_obs is None:
-            self._last_obs = worlds.reset()
-        elif not is_batched(self._last_obs, self.observation_space):  # saved by a one-world version
-            self._last_obs = batch_of_one(self._last_obs)
+        self._last_obs = worlds.start(self._last_obs, self.observation_space)
         callback = self._start_callback(callback)
         callback.on_training_start(locals(), globals())
 

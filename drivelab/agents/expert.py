@@ -23,8 +23,8 @@ import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 
-from drivelab.agents.base import OwnAgent, batch_of_one
-from drivelab.agents.worlds import Worlds, is_batched, row
+from drivelab.agents.base import OwnAgent
+from drivelab.agents.worlds import Worlds, row
 from drivelab.errors import UsageError
 from drivelab.perception.affordances import FIELDS
 from drivelab.world.geometry import FULL_LOCK_RAD, ROACH_MAX_SPEED_MPS
@@ -182,10 +182,7 @@ class RuleBasedExpert(OwnAgent):
         rules applied in each world."""
         worlds = Worlds(self.env)
         target_steps, start_steps, start_time = self._start_learning(total_timesteps, reset_num_timesteps)
-        if self._last_obs is None:
-            self._last_obs = worlds.reset()
-        elif not is_batched(self._last_obs, self.observation_space):  # saved by a one-world version
-            self._last_obs = batch_of_one(self._last_obs)
+        self._last_obs = worlds.start(self._last_obs, self.observation_space)
         callback = self._start_callback(callback)
         callback.on_training_start(locals(), globals())
         while self.num_timesteps < target_steps:

@@ -52,6 +52,14 @@ class Worlds:
         """The ``WorldBatch`` of the K worlds now (drivelab's own environment only)."""
         return vector_env_of(self.env).batch
 
+    def start(self, last_obs: Any, space: spaces.Space) -> Any:
+        """The batched observations (K, ...) a ``learn`` goes on from: the agent's ``last_obs``
+        (batched here when a one-world version saved it as one observation), or a reset's when
+        it has none."""
+        if last_obs is None:
+            return self.reset()
+        return last_obs if is_batched(last_obs, space) else batch_of_one(last_obs)
+
     def reset(self) -> Any:
         """Start every world; the batched observations (K, ...)."""
         if self.vector:
