@@ -45,7 +45,7 @@ class Worlds:
         self.vector = isinstance(env, VecEnv)
         self.count = env.num_envs if self.vector else 1
         self.infos: list[dict] = [{} for _ in range(self.count)]  # the last step's, one per world
-        self.reset_infos: list[dict] = [{} for _ in range(self.count)]  # each world's latest reset's
+        self.reset_infos: list[dict] = [{} for _ in range(self.count)]  # the latest reset's (see step)
 
     @property
     def batch(self):
@@ -74,13 +74,12 @@ class Worlds:
         """(observations, rewards (K,), terminated (K,), truncated (K,), the final observations of
         the worlds that ended (batched, rows of the others unspecified) or None, the returns of
         the episodes that ended). ``infos`` then holds the step's info of every world (of the
-        step that ended it, for a finished world), ``reset_infos`` the reset's of the worlds that
-        started again."""
+        step that ended it, for a finished world); with one world, ``reset_infos`` the reset's when
+        it started again (a VecEnv's ``reset_infos`` are its last ``reset``'s: SB3VecEnv does not
+        give the infos of the resets inside ``step``)."""
         if self.vector:
             new_obs, rewards, dones, infos = self.env.step(actions)
             self.infos = infos
-            if dones.any():
-                self.reset_infos = list(getattr(self.env, "reset_infos", self.reset_infos))
             truncated = np.array([bool(info.get("TimeLimit.truncated", False)) for info in infos])
             terminated = np.asarray(dones, dtype=bool) & ~truncated
             final = None
