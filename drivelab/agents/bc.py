@@ -34,16 +34,9 @@ from torch import nn
 
 from drivelab.agents.base import OwnAgent, batch_of_one, observation_to_tensor
 from drivelab.agents.expert import SCENARIOS
-from drivelab.agents.imitation_data import (
-    Demonstrations,
-    Teacher,
-    Worlds,
-    action_agreement,
-    collect,
-    stack_steps,
-    vector_env_of,
-)
+from drivelab.agents.imitation_data import Demonstrations, Teacher, action_agreement, collect, stack_steps
 from drivelab.agents.networks import TanhGaussianActorCritic, squashed_log_prob
+from drivelab.agents.worlds import Worlds, vector_env_of
 from drivelab.errors import UsageError
 
 LOSSES = ("mse", "nll")
@@ -214,14 +207,12 @@ class BehaviourCloning(OwnAgent):
         round's last ``on_step``, so each round start is a safe point for the checkpoints."""
         target, start_steps, start_time = self._start_learning(total_timesteps, reset_num_timesteps)
         worlds = Worlds(self.env)
-        worlds.episode_returns = self.episode_returns
-        if self._last_obs is None:
-            self._last_obs = worlds.reset()
+        self._last_obs = worlds.start(self._last_obs, self.observation_space)
         callback = self._start_callback(callback)
         callback.on_training_start(locals(), globals())
 
         def on_step(obs: Any) -> bool:
-            self.num_timesteps += worlds.num_worlds
+            self.num_timesteps += worlds.count
             self._last_obs = obs
             callback.update_locals(locals())
             return callback.on_step()
@@ -232,8 +223,8 @@ class BehaviourCloning(OwnAgent):
             beta = self.beta(iteration)
             steps = min(self.config.round_steps, target - self.num_timesteps)
             observations, labels, _, finished = collect(
-                worlds, self.teacher, self._last_obs, -(-steps // worlds.num_worlds), beta,
-                learner=self.act, rng=self.rng, on_step=on_step,
+                worlds, self.teacher, self._last_obs, -(-steps // worlds.count), beta,
+                learner=self.act, rng=self.rng, on_step=on_step, episode_returns=self.episode_returns,
             )  # fmt: skip
             if not finished:
                 break

@@ -27,9 +27,9 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from torch import nn
 
-from drivelab.agents.base import OwnAgent, batch_of_one
+from drivelab.agents.base import OwnAgent
 from drivelab.agents.storage import assign_arrays
-from drivelab.agents.worlds import Worlds, is_batched
+from drivelab.agents.worlds import Worlds
 from drivelab.errors import UsageError
 
 
@@ -396,10 +396,7 @@ class DuelingDoubleDQN(OwnAgent):
         transition: a step of K worlds that passes n multiples of ``train_freq`` trains n times."""
         config, worlds = self.config, Worlds(self.env)
         target_steps, start_steps, start_time = self._start_learning(total_timesteps, reset_num_timesteps)
-        if self._last_obs is None:
-            self._last_obs = worlds.reset()
-        elif not is_batched(self._last_obs, self.observation_space):  # saved by a one-world version
-            self._last_obs = batch_of_one(self._last_obs)
+        self._last_obs = worlds.start(self._last_obs, self.observation_space)
         callback = self._start_callback(callback)
         callback.on_training_start(locals(), globals())
         metrics: dict[str, float] = {}

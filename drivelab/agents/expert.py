@@ -24,6 +24,7 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 
 from drivelab.agents.base import OwnAgent
+from drivelab.agents.worlds import Worlds, row
 from drivelab.errors import UsageError
 from drivelab.perception.affordances import FIELDS
 from drivelab.world.geometry import FULL_LOCK_RAD, ROACH_MAX_SPEED_MPS
@@ -176,18 +177,18 @@ class RuleBasedExpert(OwnAgent):
         reset_num_timesteps: bool = True,
         progress_bar: bool = False,
     ) -> RuleBasedExpert:
-        """Drive ``total_timesteps`` steps with the rules (nothing is learned; contract in base.py)."""
-        env = self.env
+        """Drive ``total_timesteps`` steps with the rules (nothing is learned; contract in base.py).
+        The env is seen as K worlds (``worlds.Worlds``; ``drivelab train`` gives the expert one), the
+        rules applied in each world."""
+        worlds = Worlds(self.env)
         target_steps, start_steps, start_time = self._start_learning(total_timesteps, reset_num_timesteps)
-        if self._last_obs is None:
-            self._last_obs, _ = env.reset()
+        self._last_obs = worlds.start(self._last_obs, self.observation_space)
         callback = self._start_callback(callback)
         callback.on_training_start(locals(), globals())
         while self.num_timesteps < target_steps:
-            action, _ = self.predict(self._last_obs)
-            new_obs, reward, terminated, truncated, info = env.step(action)
-            self.num_timesteps += 1
-            self._last_obs = env.reset()[0] if terminated or truncated else new_obs
+            actions = np.stack([self.predict(row(self._last_obs, k))[0] for k in range(worlds.count)])
+            self._last_obs, rewards, terminated, truncated, _, _ = worlds.step(actions)
+            self.num_timesteps += worlds.count
             callback.update_locals(locals())
             if not callback.on_step():
                 break

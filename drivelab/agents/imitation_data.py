@@ -10,9 +10,9 @@ privileged views cost one batched ``observe`` per step.
 - ``Teacher``: the expert's actions (K, 2) for the K worlds of a batch.
 - ``Demonstrations``: the labelled states, growing numpy arrays (an ``.npz`` file, never a pickle),
   each sample marked for training or validation when it is added.
-- ``Worlds``: the run's training env (a one-world ``DriveEnv`` or an SB3 VecEnv of K worlds) seen
-  as K worlds: batched observations, autoreset, the ``WorldBatch`` behind them.
-- ``collect``: drive the worlds with the β-mixture of expert and learner, label every visited state.
+- ``collect``: drive the run's training env as K worlds (``worlds.Worlds``: batched observations,
+  autoreset, the ``WorldBatch`` behind them) with the β-mixture of expert and learner, label
+  every visited state.
 - ``generate_demonstrations``: expert-only data from a ``VectorDriveEnv`` of K worlds on the
   compiled core, without a run (tests, notebooks, benchmarks).
 """
@@ -23,13 +23,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 import torch
 from gymnasium import spaces
 
-from drivelab.agents.base import batch_of_one
 from drivelab.agents.storage import read_arrays, split_meta, write_arrays
+from drivelab.agents.worlds import Worlds
 from drivelab.errors import UsageError
 from drivelab.perception.affordances import Affordances
 from drivelab.perception.waypoints import Waypoints
@@ -241,57 +240,6 @@ def _rows(observations, index):
     return observations[index]
 
 
-# --- the training worlds ---------------------------------------------------------------------------
-def vector_env_of(env: Any):
-    """The ``VectorDriveEnv`` under a training env: itself, a ``DriveEnv``'s (wrapped or not), or
-    an SB3 VecEnv's (``SB3VecEnv`` under its wrappers)."""
-    from drivelab.envs.vector import VectorDriveEnv
-
-    if isinstance(env, VectorDriveEnv):
-        return env
-    base = env.unwrapped
-    vector = getattr(base, "vector", None) or getattr(base, "vector_env", None)
-    if not isinstance(vector, VectorDriveEnv):
-        raise UsageError("imitation needs drivelab's own environment (a DriveEnv or a VectorDriveEnv)")
-    return vector
-
-
-class Worlds:
-    """A training env as K worlds: ``reset`` and ``step`` return its own observations (one world's
-    for a ``gym.Env``, batched for an SB3 VecEnv); ``batched`` turns them into (K, …); the
-    finished worlds start again inside ``step`` (so ``batch`` always holds the state of the
-    observation last returned); ``episode_returns`` collects the Monitor's finished episodes."""
-
-    def __init__(self, env: Any) -> None:
-        self.env, self.single = env, isinstance(env, gym.Env)
-        self.vector = vector_env_of(env)
-        self.num_worlds = self.vector.num_envs
-        self.episode_returns: list[float] = []
-
-    @property
-    def batch(self):
-        """The ``WorldBatch`` of the K worlds now."""
-        return self.vector.batch
-
-    def batched(self, obs: Any) -> Any:
-        return batch_of_one(obs) if self.single else obs
-
-    def reset(self) -> Any:
-        return self.env.reset()[0] if self.single else self.env.reset()
-
-    def step(self, actions: np.ndarray) -> Any:
-        """One step of every world with ``actions`` (K, A); the next observations."""
-        if self.single:
-            obs, _, terminated, truncated, info = self.env.step(actions[0])
-            infos = [info]
-            if terminated or truncated:
-                obs, _ = self.env.reset()
-        else:
-            obs, _, _, infos = self.env.step(actions)
-        self.episode_returns += [float(info["episode"]["r"]) for info in infos if "episode" in info]
-        return obs
-
-
 def collect(
     worlds: Worlds,
     teacher: Teacher,
@@ -301,12 +249,15 @@ def collect(
     learner: Callable[[Any], np.ndarray] | None = None,
     rng: np.random.Generator | None = None,
     on_step: Callable[[Any], bool] | None = None,
+    episode_returns: list[float] | None = None,
 ) -> tuple[list, list, Any, bool]:
-    """Drive ``steps`` steps of all K worlds from observation ``obs``, labelling each visited state.
+    """Drive ``steps`` steps of all K worlds from the batched observations ``obs`` (K, …),
+    labelling each visited state.
 
     Each world's action is the expert's with probability ``beta``, else ``learner``'s (DAgger's
     mixture policy πᵢ = βᵢ·π* + (1 − βᵢ)·π̂ᵢ, drawn per world and step from ``rng``); the label is
     always the expert's. ``on_step(obs)`` runs after every step; returning False stops at once.
+    The returns of the episodes that end are appended to ``episode_returns`` when given.
 
     :param learner: batched observations (K, …) → actions (K, A); not called when ``beta`` is 1.
     :returns: (observations per step (K, …), expert actions per step (K, A), the observation after
@@ -315,16 +266,17 @@ def collect(
     observations, labels = [], []
     rng = rng if rng is not None else np.random.default_rng(0)
     for _ in range(steps):
-        batched = worlds.batched(obs)
         expert = teacher.actions(worlds.batch)
         actions = expert
         if beta < 1.0:
-            from_learner = rng.random(worlds.num_worlds) >= beta
+            from_learner = rng.random(worlds.count) >= beta
             if from_learner.any():
-                actions = np.where(from_learner[:, None], learner(batched), expert).astype(np.float32)
-        observations.append(_copy(batched))
+                actions = np.where(from_learner[:, None], learner(obs), expert).astype(np.float32)
+        observations.append(_copy(obs))
         labels.append(expert)
-        obs = worlds.step(actions)
+        obs, _, _, _, _, returns = worlds.step(actions)
+        if episode_returns is not None:
+            episode_returns += returns
         if on_step is not None and not on_step(obs):
             return observations, labels, obs, False
     return observations, labels, obs, True

@@ -25,6 +25,7 @@ from stable_baselines3.common.logger import Logger
 
 from drivelab.agents.base import parse_hyperparams
 from drivelab.agents.storage import read_arrays
+from drivelab.agents.worlds import Worlds
 from drivelab.errors import UsageError
 
 FORMAT = "drivelab-qlearning-1"
@@ -154,30 +155,26 @@ class QLearning:
         if callback is not None:
             callback.init_callback(self)
             callback.on_training_start(locals(), globals())
+        worlds = Worlds(self.env)  # one world: the table learns from one stream of transitions
         if self._obs is None:
-            obs, _ = self.env.reset()
-            self._obs = int(obs)
+            self._obs = int(worlds.reset()[0])
             self._episode_return, self._episode_length = 0.0, 0
         while self.num_timesteps < end:
             state = self._obs
             action = self._explore(state)
-            new_obs, reward, terminated, truncated, info = self.env.step(action)
-            next_state = int(new_obs)
-            self.update(state, action, float(reward), next_state, bool(terminated))
+            new_obs, rewards, terminated, truncated, final_obs, _ = worlds.step(np.array([action]))
+            reward, done = float(rewards[0]), bool(terminated[0] or truncated[0])
+            self.update(state, action, reward, int(final_obs[0]), bool(terminated[0]))
             self.num_timesteps += 1
             self.epsilon = max(self.config.epsilon_min, self.epsilon * self.config.epsilon_decay)
-            self._episode_return += float(reward)
+            self._episode_return += reward
             self._episode_length += 1
-            done = bool(terminated or truncated)
             if done:
                 self._end_episode()
-                obs, _ = self.env.reset()
-                next_state = int(obs)
-            self._obs = next_state
+            self._obs = int(new_obs[0])  # after a reset when the episode ended
             if callback is not None:
                 # the names SB3's callbacks read from an algorithm's rollout loop
-                rewards, dones, infos = np.array([reward]), np.array([done]), [info]  # noqa: F841
-                new_obs = np.array([next_state])  # noqa: F841
+                dones, infos = np.array([done]), worlds.infos  # noqa: F841
                 callback.update_locals(locals())
                 if not callback.on_step():
                     break

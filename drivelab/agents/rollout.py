@@ -17,7 +17,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from drivelab.agents.base import OwnAgent, batch_of_one, observation_to_tensor
 from drivelab.agents.networks import TanhGaussianActorCritic
-from drivelab.agents.worlds import Worlds, is_batched
+from drivelab.agents.worlds import Worlds
 
 
 def compute_gae(
@@ -171,10 +171,7 @@ class OnPolicyAgent(OwnAgent):
         """Collect and update until ``total_timesteps`` more steps were taken (see the contract in base)."""
         started = self._start_learning(total_timesteps, reset_num_timesteps)
         self._target, self._start_steps, start_time = started
-        if self._last_obs is None:
-            self._last_obs = Worlds(self.env).reset()
-        elif not is_batched(self._last_obs, self.observation_space):  # saved by a one-world version
-            self._last_obs = batch_of_one(self._last_obs)
+        self._last_obs = Worlds(self.env).start(self._last_obs, self.observation_space)
         callback = self._start_callback(callback)
         callback.on_training_start(locals(), globals())
         while self.num_timesteps < self._target:

@@ -39,6 +39,7 @@ from drivelab.agents.rlad.memory import DeviceMemoryLedger, cuda_free_bytes, dev
 from drivelab.agents.rlad.networks import Actor, StateEncoder, TrafficLightHead, TwinCritic
 from drivelab.agents.rlad.replay import RECORD_SLACK, UNKNOWN_LABEL, FrameReplayBuffer, label_index
 from drivelab.agents.rlad.waypoints import WAYPOINT_ENCODERS
+from drivelab.agents.worlds import Worlds, row
 from drivelab.errors import UsageError
 
 OBSERVATION_KEYS = ("camera", "waypoints", "measurements")
@@ -492,12 +493,14 @@ class RLAD(OwnAgent):
         progress_bar: bool = False,
     ) -> RLAD:
         """Warm-up with random actions, then act with the policy and update every ``train_freq``
-        steps, until ``total_timesteps`` more steps (contract in base.py)."""
-        config, env, replay = self.config, self.env, self.replay_buffer
+        steps, until ``total_timesteps`` more steps (contract in base.py). One world
+        (``worlds.Worlds`` with K = 1): the replay keeps one stream of episodes and ``_last_obs``
+        is that world's observation."""
+        config, worlds, replay = self.config, Worlds(self.env), self.replay_buffer
         target_steps, start_steps, start_time = self._start_learning(total_timesteps, reset_num_timesteps)
         if self._last_obs is None:
-            self._last_obs, info = env.reset()
-            replay.start_episode(*self._record(self._last_obs, info))
+            self._last_obs = row(worlds.reset(), 0)
+            replay.start_episode(*self._record(self._last_obs, worlds.reset_infos[0]))
         callback = self._start_callback(callback)
         callback.on_training_start(locals(), globals())
         metrics: dict[str, Any] = {}  # the fast update's are tensors until logged
@@ -507,18 +510,19 @@ class RLAD(OwnAgent):
                 action = self.rng.uniform(-1.0, 1.0, size=self.low.shape).astype(np.float32)
             else:
                 action = self.act(self._last_obs, deterministic=False)
-            new_obs, reward, terminated, truncated, info = env.step(self.to_env_action(action))
+            new_obs, rewards, terminated, truncated, final_obs, returns = worlds.step(
+                self.to_env_action(action)[None]
+            )
             self.num_timesteps += 1
             callback.update_locals(locals())
             if not callback.on_step():  # before the step changes the replay or the networks
                 break
-            replay.add(action, float(reward), bool(terminated), *self._record(new_obs, info))
-            if "episode" in info:
-                self.episode_returns.append(float(info["episode"]["r"]))
-            if terminated or truncated:
-                new_obs, reset_info = env.reset()
-                replay.start_episode(*self._record(new_obs, reset_info))
-            self._last_obs = new_obs
+            info = worlds.infos[0]
+            replay.add(action, float(rewards[0]), bool(terminated[0]), *self._record(row(final_obs, 0), info))
+            self.episode_returns += returns
+            if terminated[0] or truncated[0]:  # the world has started again: a new episode's first record
+                replay.start_episode(*self._record(row(new_obs, 0), worlds.reset_infos[0]))
+            self._last_obs = row(new_obs, 0)
             ready = self.num_timesteps >= config.learning_starts and replay.size >= config.batch_size
             if ready and self.num_timesteps % config.train_freq == 0:
                 metrics = self._fast_update() if config.fast_update else self.train_step()
