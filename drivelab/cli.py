@@ -187,10 +187,8 @@ def evaluate(
     ),
 ) -> None:
     """Evaluate a run's model: print the driving metrics and write eval.json."""
-    from rich.console import Console
-    from rich.table import Table
 
-    from drivelab.training.evaluate import evaluate_run, metrics_rows
+    from drivelab.training.evaluate import evaluate_run
     from drivelab.training.zoo import report_dir, resolve
 
     try:
@@ -201,12 +199,7 @@ def evaluate(
         )
     except UsageError as exc:
         _fail(str(exc))
-    table = Table(title=f"{name or report['algo']} on {report['env']}: {report['episodes']} episodes")
-    table.add_column("metric")
-    table.add_column("value", justify="right")
-    for label, value in metrics_rows(report):
-        table.add_row(label, value)
-    Console().print(table)
+    _print_metrics(f"{name or report['algo']} on {report['env']}: {report['episodes']} episodes", report)
     if "video" in report:
         typer.echo(f"video: {report['video']}")
     written = "eval.json" if maps is None else "eval-maps-{}-{}.json".format(*report["maps"].split(":"))
@@ -215,6 +208,21 @@ def evaluate(
         if out_dir is None
         else f"{written} written in {out_dir}"
     )
+
+
+def _print_metrics(title: str, report: dict) -> None:
+    """An evaluation report's driving metrics as a table."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from drivelab.training.evaluate import metrics_rows
+
+    table = Table(title=title)
+    table.add_column("metric")
+    table.add_column("value", justify="right")
+    for label, value in metrics_rows(report):
+        table.add_row(label, value)
+    Console().print(table)
 
 
 @app.command()
@@ -243,10 +251,7 @@ def enjoy(
 ) -> None:
     """Drive an agent greedily on its scenario, print each episode and the metrics; nothing else is
     written."""
-    from rich.console import Console
-    from rich.table import Table
 
-    from drivelab.training.evaluate import metrics_rows
     from drivelab.training.zoo import enjoy as drive
 
     def progress(index: int, metrics: dict) -> None:
@@ -262,14 +267,9 @@ def enjoy(
     except UsageError as exc:
         _fail(str(exc))
     episodes_text = "fixed evaluation episodes" if seed is None else f"episodes of seeds {seed}+e"
-    table = Table(
-        title=f"{report['agent']} ({report['algo']}) on {report['env']}: {episodes} {episodes_text}"
+    _print_metrics(
+        f"{report['agent']} ({report['algo']}) on {report['env']}: {episodes} {episodes_text}", report
     )
-    table.add_column("metric")
-    table.add_column("value", justify="right")
-    for label, value in metrics_rows(report):
-        table.add_row(label, value)
-    Console().print(table)
     if "video" in report:
         typer.echo(f"video: {report['video']} ({report['video_frames']} frames)")
 
