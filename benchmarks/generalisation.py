@@ -400,8 +400,7 @@ def write_report(
         "",
         f"Out of road, unseen minus training maps, by number of training maps: {off_road}. Crashes "
         f"end {min(crash):.2f}–{max(crash):.2f} of the episodes: drivelab's traffic drives from the "
-        "start, where MetaDrive's waits for the ego ('trigger' mode), and the ego's top speed is "
-        "highway-env's 40 m/s, not MetaDrive's 80 km/h.",
+        "start, where MetaDrive's waits for the ego ('trigger' mode).",
     ]
     lines += [
         "",
