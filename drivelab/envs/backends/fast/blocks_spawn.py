@@ -410,7 +410,7 @@ def _traffic_rows(
     lane, then a random walk through the lanes that continue it (``successor_start`` /
     ``successors``: ``_continuations``), ``walk`` (M, MAX_ROUTE - 1) uniform draws in [0, 1)
     picking each next lane (a dead end stops it). Every route step names its lane: MOBIL then
-    keeps the vehicle in it (``traffic.cached_mobil``), so that it never has to swerve where a
+    keeps the vehicle in it (``traffic.mobil_side``), so that it never has to swerve where a
     road splits or merges; traffic keeps its lane (MetaDrive's IDM policy changes lanes only to
     overtake)."""
     for m in range(lane.size):

@@ -172,7 +172,7 @@ def blocks_mobil(
     v: np.ndarray, lanes: np.ndarray, p: np.ndarray, coords: np.ndarray, done: np.ndarray,
     trig: np.ndarray, i: int, lane: int, successor_start: np.ndarray, successors: np.ndarray,
 ) -> bool:  # fmt: skip
-    """highway-env's ``IDMVehicle.mobil`` (``traffic.cached_mobil``) without its planned-lane
+    """highway-env's ``IDMVehicle.mobil`` (``traffic.mobil_side``) without its planned-lane
     branch: the change to ``lane`` is safe for the new follower (it brakes less than
     LANE_CHANGE_MAX_BRAKING_IMPOSED) and worth it (the politeness-weighted acceleration gain
     reaches LANE_CHANGE_MIN_ACC_GAIN). The route is checked by ``route_feasible`` instead; the new
@@ -207,7 +207,7 @@ def merge_safe(
 ) -> bool:  # fmt: skip
     """MOBIL's safety criterion for a mandatory change to ``lane``: neither the new follower
     behind vehicle i nor vehicle i behind its new leader brakes harder than
-    LANE_CHANGE_MAX_BRAKING_IMPOSED (``traffic.cached_mobil``'s branch for a lane the route asks
+    LANE_CHANGE_MAX_BRAKING_IMPOSED (``traffic.mobil_side``'s branch for a lane the route asks
     for; the new follower as ``blocks_mobil`` finds it)."""
     new_preceding, _ = T.cached_neighbours(v, lanes, coords, done, i, lane)
     new_following = rear_across(v, lanes, coords, done, i, lane, successor_start, successors)

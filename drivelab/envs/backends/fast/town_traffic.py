@@ -83,6 +83,8 @@ from drivelab.envs.backends.fast.traffic import (
     LANE,
     LEN,
     OBSTACLE,
+    OWN_FREE,
+    OWN_SIZE,
     PEDAL_KIND,
     PLAIN,
     ROUTE,
@@ -466,6 +468,7 @@ def town_act(
     (see the module docstring for the arrays); random routes draw on ``rng_words``."""
     w, q = v[:count], peds[:pcount]
     start_frame(w, done, trig)
+    own = np.empty(OWN_SIZE)  # MOBIL's own-lane scratch row (traffic.own_lane)
     coords[:, : count + pcount, 2] = -1.0
     discs = np.full((lanes.shape[0], 3), -1.0)
     search, offset = np.empty(lanes.shape[0] + 1, dtype=np.int64), np.empty(lanes.shape[0] + 1)
@@ -499,7 +502,8 @@ def town_act(
         if w[i, ROUTE_END] - w[i, ROUTE_START] <= 1:
             random_route(w, lanes, i, int(w[i, TARGET_LANE]), street_lanes, routes, route_length, rng_words)
         follow_road(w, lanes, i)
-        change_lane_policy(w, lanes, p, coords, done, trig, i)
+        own[OWN_FREE] = np.nan  # the own-lane row is made only if MOBIL is asked
+        change_lane_policy(w, lanes, p, coords, done, trig, i, own)
         w[i, STEER] = steering_control(w, lanes, i, int(w[i, TARGET_LANE]))
         front = connected_front(w, q, lanes, coords, discs, search, offset, i, lane)
         acceleration = town_acceleration(

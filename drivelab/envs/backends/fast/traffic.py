@@ -344,28 +344,13 @@ def mobil_side(
 
 
 @njit(cache=True)
-def cached_mobil(
-    v: np.ndarray,
-    lanes: np.ndarray,
-    p: np.ndarray,
-    coords: np.ndarray,
-    done: np.ndarray,
-    trig: np.ndarray,
-    i: int,
-    lane: int,
-) -> bool:
-    """``mobil_side`` with vehicle i's own-lane row made here."""
+def mobil(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, i: int, lane: int) -> bool:
+    """``mobil_side`` without a frame cache (as highway-env's ``IDMVehicle.mobil``)."""
+    coords, done, trig = frame_cache(v, lanes)
+    start_frame(v, done, trig)
     own = np.empty(OWN_SIZE)
     own_lane(v, lanes, p, coords, done, trig, i, own)
     return mobil_side(v, lanes, p, coords, done, trig, i, lane, own)
-
-
-@njit(cache=True)
-def mobil(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, i: int, lane: int) -> bool:
-    """``cached_mobil`` without a frame cache (as highway-env's ``IDMVehicle.mobil``)."""
-    coords, done, trig = frame_cache(v, lanes)
-    start_frame(v, done, trig)
-    return cached_mobil(v, lanes, p, coords, done, trig, i, lane)
 
 
 @njit(cache=True, inline="always")
@@ -377,28 +362,12 @@ def change_lane_policy(
     done: np.ndarray,
     trig: np.ndarray,
     i: int,
-) -> None:
-    """IDMVehicle.change_lane_policy (``change_lane_policy_own`` with the own-lane row made on
-    first use)."""
-    own = np.empty(OWN_SIZE)
-    own[OWN_FREE] = np.nan
-    change_lane_policy_own(v, lanes, p, coords, done, trig, i, own)
-
-
-@njit(cache=True, inline="always")
-def change_lane_policy_own(
-    v: np.ndarray,
-    lanes: np.ndarray,
-    p: np.ndarray,
-    coords: np.ndarray,
-    done: np.ndarray,
-    trig: np.ndarray,
-    i: int,
     own: np.ndarray,
 ) -> None:
     """IDMVehicle.change_lane_policy: abort a change into a lane someone else is entering; else,
     every LANE_CHANGE_DELAY seconds, ask MOBIL about each side lane (the right one last).
-    ``own``: vehicle i's ``own_lane`` row, or one whose OWN_FREE is NaN (filled here if needed)."""
+    ``own`` (OWN_SIZE,): vehicle i's ``own_lane`` row, or scratch whose OWN_FREE is NaN (filled
+    here when MOBIL is asked)."""
     lane, target = int(v[i, LANE]), int(v[i, TARGET_LANE])
     if lane != target:
         same_road = lanes[lane, FIRST_OF_ROAD] == lanes[target, FIRST_OF_ROAD]
@@ -511,7 +480,7 @@ def act(
         # the acceleration behind the front on its own lane, computed before the lane-change
         # decision that reuses it (nothing it reads changes in between: the same bits)
         own_lane(v, lanes, p, coords, done, trig, i, own)
-        change_lane_policy_own(v, lanes, p, coords, done, trig, i, own)
+        change_lane_policy(v, lanes, p, coords, done, trig, i, own)
         v[i, STEER] = steering_control(v, lanes, i, int(v[i, TARGET_LANE]))
         acceleration = own[OWN_A]
         if int(v[i, LANE]) != int(v[i, TARGET_LANE]):
