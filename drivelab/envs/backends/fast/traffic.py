@@ -27,13 +27,18 @@ from drivelab.envs.backends.fast.lanes import (
     SPEED_LIMIT,
     TO_NODE,
     VEHICLE_LENGTH,
+    arcsin0,
+    arctan0,
     closest_lane,
+    cos0,
     distance,
     heading_at,
     is_reachable_from,
     local_coordinates,
     on_lane,
     position,
+    sin0,
+    tan0,
     wrap_to_pi,
 )
 
@@ -100,11 +105,11 @@ def steering_control(v: np.ndarray, lanes: np.ndarray, i: int, target: int) -> f
     s, r = local_coordinates(lanes, target, v[i, X], v[i, Y])
     future_heading = heading_at(lanes, target, s + v[i, SPEED] * TAU_PURSUIT)
     lateral_speed_command = -KP_LATERAL * r
-    heading_command = np.arcsin(_clip(lateral_speed_command / not_zero(v[i, SPEED]), -1.0, 1.0))
+    heading_command = arcsin0(_clip(lateral_speed_command / not_zero(v[i, SPEED]), -1.0, 1.0))
     heading_ref = future_heading + _clip(heading_command, -np.pi / 4, np.pi / 4)
     heading_rate_command = KP_HEADING * wrap_to_pi(heading_ref - v[i, HEADING])
-    slip_angle = np.arcsin(_clip(v[i, LEN] / 2 / not_zero(v[i, SPEED]) * heading_rate_command, -1.0, 1.0))
-    steering = np.arctan(2 * np.tan(slip_angle))
+    slip_angle = arcsin0(_clip(v[i, LEN] / 2 / not_zero(v[i, SPEED]) * heading_rate_command, -1.0, 1.0))
+    steering = arctan0(2 * tan0(slip_angle))
     return _clip(steering, -MAX_STEERING_ANGLE, MAX_STEERING_ANGLE)
 
 
@@ -124,7 +129,7 @@ def frame_cache(v: np.ndarray, lanes: np.ndarray) -> tuple[np.ndarray, np.ndarra
 def start_frame(v: np.ndarray, done: np.ndarray, trig: np.ndarray) -> None:
     done[:] = -1
     for j in range(v.shape[0]):
-        trig[j, 0], trig[j, 1] = np.cos(v[j, HEADING]), np.sin(v[j, HEADING])
+        trig[j, 0], trig[j, 1] = cos0(v[j, HEADING]), sin0(v[j, HEADING])
 
 
 @njit(cache=True, inline="always")
@@ -505,15 +510,15 @@ def step_vehicle(v: np.ndarray, lanes: np.ndarray, i: int, dt: float) -> None:
         v[i, ACCEL] = min(v[i, ACCEL], 1.0 * (MAX_SPEED - v[i, SPEED]))
     elif v[i, SPEED] < MIN_SPEED:
         v[i, ACCEL] = max(v[i, ACCEL], 1.0 * (MIN_SPEED - v[i, SPEED]))
-    beta = np.arctan(1 / 2 * np.tan(v[i, STEER]))
-    v[i, X] += v[i, SPEED] * np.cos(v[i, HEADING] + beta) * dt
-    v[i, Y] += v[i, SPEED] * np.sin(v[i, HEADING] + beta) * dt
+    beta = arctan0(1 / 2 * tan0(v[i, STEER]))
+    v[i, X] += v[i, SPEED] * cos0(v[i, HEADING] + beta) * dt
+    v[i, Y] += v[i, SPEED] * sin0(v[i, HEADING] + beta) * dt
     if v[i, HAS_IMPACT] > 0:
         v[i, X] += v[i, IMPACT_X]
         v[i, Y] += v[i, IMPACT_Y]
         v[i, CRASHED] = 1.0
         v[i, HAS_IMPACT] = 0.0
-    v[i, HEADING] += v[i, SPEED] * np.sin(beta) / (v[i, LEN] / 2) * dt
+    v[i, HEADING] += v[i, SPEED] * sin0(beta) / (v[i, LEN] / 2) * dt
     v[i, SPEED] += v[i, ACCEL] * dt
     v[i, LANE] = closest_lane(lanes, v[i, X], v[i, Y], v[i, HEADING], int(v[i, LANE]))
 
@@ -528,7 +533,7 @@ def _polygon(v: np.ndarray, i: int) -> np.ndarray:
 
 @njit(cache=True, inline="always")
 def _polygon_into(v: np.ndarray, i: int, corners: np.ndarray) -> None:
-    c, s = np.cos(v[i, HEADING]), np.sin(v[i, HEADING])
+    c, s = cos0(v[i, HEADING]), sin0(v[i, HEADING])
     half_l, half_w = v[i, LEN] / 2, v[i, WID] / 2
     local = ((-half_l, -half_w), (-half_l, half_w), (half_l, half_w), (half_l, -half_w))
     for k in range(4):
@@ -605,8 +610,8 @@ def handle_collisions(v: np.ndarray, dt: float) -> None:
             # the reach along x or y is skipped without the square root, as the test below would
             if np.abs(dx) > reach or np.abs(dy) > reach or np.sqrt(dx * dx + dy * dy) > reach:
                 continue
-            ci, si = np.cos(v[i, HEADING]), np.sin(v[i, HEADING])
-            cj, sj = np.cos(v[j, HEADING]), np.sin(v[j, HEADING])
+            ci, si = cos0(v[i, HEADING]), sin0(v[i, HEADING])
+            cj, sj = cos0(v[j, HEADING]), sin0(v[j, HEADING])
             _polygon_into(v, i, polygon_i)
             _polygon_into(v, j, polygon_j)
             intersecting, will_intersect, tx, ty = polygons_intersecting(
