@@ -303,8 +303,8 @@ def own_lane(
     own[OWN_FRONT], own[OWN_REAR], own[OWN_REAR_FILLED] = front, rear, 0.0
 
 
-@njit(cache=True, inline="always")
-def mobil_side(
+@njit(cache=True)  # a call, not inlined: asked once per LANE_CHANGE_DELAY per vehicle and side, and
+def mobil_side(  # its body (5 IDM terms, a neighbour search) inlined made numba compile act for long
     v: np.ndarray,
     lanes: np.ndarray,
     p: np.ndarray,
