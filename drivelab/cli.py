@@ -170,6 +170,9 @@ def train(
 
 
 RUN_OR_AGENT = "a run directory written by drivelab train, or a shipped agent's name (drivelab zoo)"
+SIDE_BY_SIDE_HELP = (
+    "the video shows the agent's image observation beside the scene (default: when it has one)"
+)
 OUT_HELP = "folder for the reports (default: the run directory; for a shipped agent runs/zoo-NAME)"
 
 
@@ -178,6 +181,7 @@ def evaluate(
     run_dir: str = typer.Argument(..., metavar="RUN_DIR|NAME", help=RUN_OR_AGENT),
     episodes: int = typer.Option(10, help="evaluation episodes"),
     video: bool = typer.Option(False, "--video", help="write an mp4 (or gif) of the first episode"),
+    side_by_side: bool | None = typer.Option(None, "--side-by-side/--scene-only", help=SIDE_BY_SIDE_HELP),
     stochastic: bool = typer.Option(
         False, "--stochastic", help="sample actions instead of the greedy policy"
     ),
@@ -195,8 +199,9 @@ def evaluate(
         path, name = resolve(run_dir)
         out_dir = report_dir(run_dir, out)
         report = evaluate_run(
-            path, episodes=episodes, video=video, deterministic=not stochastic, out_dir=out_dir, maps=maps
-        )
+            path, episodes=episodes, video=video, deterministic=not stochastic, out_dir=out_dir, maps=maps,
+            side_by_side=side_by_side,
+        )  # fmt: skip
     except UsageError as exc:
         _fail(str(exc))
     _print_metrics(f"{name or report['algo']} on {report['env']}: {report['episodes']} episodes", report)
@@ -245,6 +250,7 @@ def enjoy(
     agent: str = typer.Argument(..., metavar="NAME|RUN_DIR", help=RUN_OR_AGENT),
     episodes: int = typer.Option(3, help="episodes to drive"),
     video: Path | None = typer.Option(None, help="write the episodes to this .mp4 (or .gif)"),
+    side_by_side: bool | None = typer.Option(None, "--side-by-side/--scene-only", help=SIDE_BY_SIDE_HELP),
     seed: int | None = typer.Option(
         None, help="episode e is that of the env seeded SEED + e (default: the fixed evaluation episodes)"
     ),
@@ -263,7 +269,9 @@ def enjoy(
         )
 
     try:
-        report = drive(agent, episodes=episodes, video=video, seed=seed, on_episode=progress)
+        report = drive(
+            agent, episodes=episodes, video=video, seed=seed, on_episode=progress, side_by_side=side_by_side
+        )
     except UsageError as exc:
         _fail(str(exc))
     episodes_text = "fixed evaluation episodes" if seed is None else f"episodes of seeds {seed}+e"

@@ -114,13 +114,17 @@ def solid_markings(road: RoadMap) -> np.ndarray:
     return np.asarray(road.markings, dtype=float).reshape(-1, 2, 2)[road.marking_kinds == MARKING_SOLID]
 
 
-def markings_in_sight(batch: WorldBatch, radius_m: float) -> list[tuple[np.ndarray, np.ndarray]]:
+def markings_in_sight(
+    batch: WorldBatch, radius_m: float, centres: np.ndarray | None = None
+) -> list[tuple[np.ndarray, np.ndarray]]:
     """Per world, the (solid segments (S, 2, 2), dashes (D, 2, 2)) of its road within ``radius_m``
-    of its ego, culled map by map for all the worlds on that map at once."""
+    of its view's centre (``centres`` (K, 2); default its ego), culled map by map for all the
+    worlds on that map at once."""
+    centres = batch.ego.position if centres is None else centres
     found: list = [None] * batch.num_worlds
     for index, road in enumerate(batch.roads):
         worlds = np.flatnonzero(batch.road_index == index)
-        positions = batch.ego.position[worlds]  # (W, 2)
+        positions = centres[worlds]  # (W, 2)
         solid = road.derived(solid_markings, solid_markings)
         solid_near = segments_near(solid, positions, radius_m)  # (W, S)
         dashes, dash_world = road.derived(DashedMarkings, DashedMarkings).dashes_around(positions, radius_m)
@@ -130,16 +134,21 @@ def markings_in_sight(batch: WorldBatch, radius_m: float) -> list[tuple[np.ndarr
     return found
 
 
-def draw_birdeye(batch: WorldBatch, out: np.ndarray, pixels_per_meter: float) -> None:
+def draw_birdeye(
+    batch: WorldBatch, out: np.ndarray, pixels_per_meter: float, view: View | None = None
+) -> None:
     """Draw the K worlds' bird's-eye images into ``out`` (K, H, W, 3) uint8 (see ``render_birdeye``).
 
     The ego-frame transforms and culling of lanes, routes, traffic, lights and egos run over all K
     worlds at once, the markings' culling over all the worlds of a map; the OpenCV drawing runs
     world by world.
+
+    :param view: the camera of each world (centre (K, 2), the world direction drawn upwards (K,),
+        ``out``'s size and ``pixels_per_meter``); default each ego's, heading up (the sensor's).
     """
     count = batch.num_worlds
     size_hw = out.shape[1:3]
-    view = View.of(batch, size_hw, pixels_per_meter)
+    view = View.of(batch, size_hw, pixels_per_meter) if view is None else view
     width_px = max(int(round(ROUTE_WIDTH_M * pixels_per_meter)), 1)
     routes = view.polylines(batch.route.polyline, batch.route.count, width_px)
     lights = batch.traffic_lights  # (K, L, 4)
@@ -159,7 +168,7 @@ def draw_birdeye(batch: WorldBatch, out: np.ndarray, pixels_per_meter: float) ->
         )
     )
     lanes = view.lanes(batch)
-    markings = markings_in_sight(batch, view.radius_m)
+    markings = markings_in_sight(batch, view.radius_m, view.positions)
     out[:] = GRASS
     for k in range(count):  # one OpenCV raster per world
         image, road = out[k], batch.road_of(k)

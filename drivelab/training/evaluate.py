@@ -25,17 +25,30 @@ def run_episodes(
     record_first: bool = False,
     on_episode: Callable[[dict], None] | None = None,
     on_frame: Callable[[np.ndarray], None] | None = None,
+    side_by_side: bool | None = None,
 ) -> tuple[list[dict], list[np.ndarray]]:
     """Play ``episodes`` episodes; return each one's ``episode_metrics`` and, optionally, the
-    RGB frames of the first episode. ``on_episode`` is called with each episode's metrics,
-    ``on_frame`` (when given) with every frame of every episode (``env.render()``, not kept).
+    video frames of the first episode. ``on_episode`` is called with each episode's metrics,
+    ``on_frame`` (when given) with every frame of every episode (not kept).
+
+    Frames are ``envs/video.py``'s, for people: one per simulation frame (``1 + frames per step
+    × steps`` per episode, played at ``video_fps(env)``), the scene along the road or the map from
+    above, with speed, action, reward and events written under it; an episode not recorded runs
+    its steps in one compiled call each, as in training.
 
     :param seed: None: the scenario's evaluation set (episode seeds ``evaluation_seeds``: the
         same episodes for every run, none of them a training episode); an int: episode e is the
         first episode of the env seeded ``seed + e`` (a protocol's own seeds, as NoCrash's).
+    :param side_by_side: show the agent's image observation left of the scene; None: when it
+        has one (camera, birdeye, topdown).
     """
     from drivelab.envs.vector import evaluation_seeds
 
+    recorder = None
+    if record_first or on_frame is not None:
+        from drivelab.envs.video import EpisodeRecorder
+
+        recorder = EpisodeRecorder(env, side_by_side)
     results, frames = [], []
     fixed = evaluation_seeds(episodes) if seed is None else None
     for episode in range(episodes):
@@ -43,17 +56,23 @@ def run_episodes(
             obs, _ = env.reset(seed=seed + episode)
         else:
             obs, _ = env.reset(options={"episode_seed": int(fixed[episode])})
-        record = record_first and episode == 0
+        keep = record_first and episode == 0
+        record = recorder is not None and (keep or on_frame is not None)
+
+        def show(new: list[np.ndarray], keep: bool = keep) -> None:
+            if keep:
+                frames.extend(new)
+            for frame in new if on_frame is not None else ():
+                on_frame(frame)
+
         if record:
-            frames.append(env.render())
-        if on_frame is not None:
-            on_frame(frames[-1] if record else env.render())
+            show([recorder.first_frame(episode)])
         while True:
-            obs, _, terminated, truncated, info = env.step(policy(obs))
             if record:
-                frames.append(env.render())
-            if on_frame is not None:
-                on_frame(frames[-1] if record else env.render())
+                (obs, _, terminated, truncated, info), new = recorder.step(policy(obs))
+                show(new)
+            else:
+                obs, _, terminated, truncated, info = env.step(policy(obs))
             if terminated or truncated:
                 results.append(info["episode_metrics"])
                 if on_episode is not None:
@@ -89,7 +108,8 @@ def aggregate(results: list[dict]) -> dict[str, float]:
 
 
 def write_video(frames: list[np.ndarray], path: Path, fps: float) -> Path:
-    """Write frames as mp4 (imageio-ffmpeg), falling back to a gif."""
+    """Write frames as mp4 (imageio-ffmpeg), falling back to a gif; ``fps``: ``video_fps(env)``
+    for ``run_episodes``' frames."""
     import imageio.v2 as imageio
 
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -118,6 +138,7 @@ def evaluate_run(
     deterministic: bool = True,
     out_dir: str | Path | None = None,
     maps: str | None = None,
+    side_by_side: bool | None = None,
 ) -> dict:
     """Evaluate the final model of ``run_dir`` (or its latest checkpoint); write eval.json (and
     the video) into ``out_dir`` (default: the run directory; created if missing).
@@ -126,8 +147,11 @@ def evaluate_run(
         START + COUNT − 1 instead of the run's evaluation maps (its ``eval_maps``, else its
         training maps), and write ``eval-maps-START-COUNT.json`` instead of eval.json. Episode e
         plays map START + (2**31 + e) mod COUNT, so COUNT episodes play each map once.
+    :param side_by_side: the video shows the agent's image observation beside the scene; None:
+        when it has one.
     """
     from drivelab.envs.core import DriveEnv
+    from drivelab.envs.video import video_fps
     from drivelab.training.checkpoints import load_agent
 
     run_dir = Path(run_dir)
@@ -148,14 +172,12 @@ def evaluate_run(
         out_dir = make_out_dir(Path(out_dir))
         check_writable(out_dir, name)
     policy = lambda obs: agent.predict(obs, deterministic=deterministic)[0]  # noqa: E731
-    results, frames = run_episodes(policy, env, episodes, record_first=video)
+    results, frames = run_episodes(policy, env, episodes, record_first=video, side_by_side=side_by_side)
     report = {"run": str(run_dir), "algo": config.algo, "env": config.env, **aggregate(results)}
     if maps is not None:
         report["maps"] = config.eval_maps
     if video:
-        report["video"] = str(
-            write_video(frames, out_dir / "videos" / "evaluate", env.metadata["render_fps"])
-        )
+        report["video"] = str(write_video(frames, out_dir / "videos" / "evaluate", video_fps(env)))
     tmp = out_dir / f"{name}.tmp"
     tmp.write_text(json.dumps({**report, "per_episode": results}, indent=2))
     os.replace(tmp, out_dir / name)

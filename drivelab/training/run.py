@@ -191,10 +191,12 @@ class RunCallback(BaseCallback):
         for key in ("mean_return", "success_rate", "crash_rate"):
             self.logger.record(f"eval/{key}", summary[key])
         if frames:
+            from drivelab.envs.video import video_fps
+
             write_video(
                 frames,
                 self.run_dir / "videos" / f"eval-{self.num_timesteps}",
-                self.eval_env.metadata["render_fps"],
+                video_fps(self.eval_env),  # run_episodes' frames: one per simulation frame
             )
         return summary
 

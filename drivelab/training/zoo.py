@@ -306,6 +306,7 @@ def enjoy(
     seed: int | None = None,
     on_episode: Callable[[int, dict], None] | None = None,
     zoo_dir: Path | None = None,
+    side_by_side: bool | None = None,
 ) -> dict:
     """Drive a shipped agent (or a run directory's model) greedily for ``episodes`` episodes and
     return its metrics (``evaluate.aggregate``) with the per-episode ones; writes only ``video``.
@@ -313,8 +314,11 @@ def enjoy(
     :param seed: None: the scenario's fixed evaluation episodes, the same as ``drivelab evaluate``;
         an int S: episode e is the first episode of the env seeded S + e.
     :param on_episode: called with (episode index, episode metrics) after each episode.
+    :param side_by_side: the video shows the agent's image observation beside the scene; None:
+        when it has one (``envs/video.py``).
     """
     from drivelab.envs.core import DriveEnv
+    from drivelab.envs.video import video_fps
     from drivelab.training.checkpoints import load_agent
     from drivelab.training.evaluate import aggregate, check_spaces, load_run_config, run_episodes
 
@@ -330,7 +334,7 @@ def enjoy(
     agent = load_agent(run_dir, config)
     check_spaces(agent, env, run_dir)
     policy = lambda obs: agent.predict(obs, deterministic=True)[0]  # noqa: E731
-    writer = VideoFile(video, env.metadata["render_fps"]) if video is not None else None
+    writer = VideoFile(video, video_fps(env)) if video is not None else None
     done: list[dict] = []
 
     def episode_done(metrics: dict) -> None:
@@ -340,7 +344,9 @@ def enjoy(
 
     try:
         on_frame = writer.append if writer is not None else None
-        results, _ = run_episodes(policy, env, episodes, seed, on_episode=episode_done, on_frame=on_frame)
+        results, _ = run_episodes(
+            policy, env, episodes, seed, on_episode=episode_done, on_frame=on_frame, side_by_side=side_by_side
+        )
     except BaseException:
         if writer is not None:
             writer.discard()

@@ -137,7 +137,8 @@ def test_enjoy_writes_every_frame_of_every_episode(tiny_zoo, tmp_path, suffix):
 
     path = tmp_path / f"drive{suffix}"
     report = zoo.enjoy("tiny", episodes=2, video=path)
-    expected = sum(episode["length"] + 1 for episode in report["per_episode"])  # reset frame + steps
+    per_step = DriveEnv(scenario="town").simulator.frames  # one frame per simulation frame
+    expected = sum(1 + per_step * episode["length"] for episode in report["per_episode"])  # + reset
     assert report["video"] == str(path) and report["video_frames"] == expected
     assert len(iio.imread(path, index=None)) == expected
     assert _files(tmp_path) == {

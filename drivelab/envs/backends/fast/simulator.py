@@ -20,6 +20,7 @@ highway-env's ``np_random`` would go on.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -549,6 +550,9 @@ class FastSimulator:
     """
 
     route_time_limit_s = None  # the town's simulator has one per world (NoCrash's fixed routes)
+    # recording (``envs/video.py``): called with the batch after every simulation frame of a step;
+    # None (the default): a step runs its frames in one compiled call
+    on_frame: Callable[[WorldBatch], None] | None = None
 
     def __init__(
         self,
@@ -738,9 +742,15 @@ class FastSimulator:
             restart = np.zeros(self.num_worlds, dtype=bool)
         restart = np.asarray(restart, dtype=bool)
         self.apply_controls(controls)
-        T.simulate_worlds(
-            self.vehicles, self.count, self.lanes, self.idm, self.frames, self.dt_s, self.regulation, ~restart
-        )
+        if self.on_frame is None:
+            T.simulate_worlds(
+                self.vehicles, self.count, self.lanes, self.idm, self.frames, self.dt_s, self.regulation,
+                ~restart,
+            )  # fmt: skip
+        else:
+            self.frame_by_frame(lambda frames: T.simulate_worlds(
+                self.vehicles, self.count, self.lanes, self.idm, frames, self.dt_s, self.regulation, ~restart
+            ))  # fmt: skip
         self.time_s += 1 / self.policy_frequency_hz
         if self.traffic_flow:  # IntersectionEnv.step: clear, then maybe spawn
             clear_departed(self.vehicles, self.count, self.ego, self.lanes, self._road.exit_lane)
@@ -749,6 +759,16 @@ class FastSimulator:
         self._project(fresh=restart, update=np.ones(self.num_worlds, dtype=bool))
         self.batch = self._export()
         return self.batch
+
+    def frame_by_frame(self, simulate: Callable[[int], None]) -> None:
+        """Recording: the step's frames as ``frames`` calls of ``simulate(1)``, ``on_frame`` shown
+        the batch after each. The kernels keep nothing from one frame to the next outside the
+        arrays they are given (their scratch is refilled every frame), so these are the frames of
+        one ``simulate(frames)`` call, bit for bit; the batches skip the route projection, which
+        runs once per step."""
+        for _ in range(self.frames):
+            simulate(1)
+            self.on_frame(self._export())
 
     def apply_controls(self, controls: np.ndarray) -> None:
         """Set every ego's meta-action targets or continuous controls (before simulating)."""

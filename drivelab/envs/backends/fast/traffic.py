@@ -139,9 +139,17 @@ def lane_coordinates(
     """Fill ``coords[lane]`` once per frame: every vehicle's ``local_coordinates`` in ``lane``,
     whether it is on the lane as ``Road.neighbour_vehicles`` counts it (``on_lane`` with a 1 m
     margin), and the rows of those on it sorted by (longitudinal, row) (insertion sort: a lane
-    holds a handful)."""
-    if done[lane] >= 0:
-        return
+    holds a handful). Only the check is inlined: the filling, inlined at each of the dozen uses
+    that ``act`` inlines, made numba compile ``act`` for minutes."""
+    if done[lane] < 0:
+        fill_lane_coordinates(v, lanes, coords, done, lane)
+
+
+@njit(cache=True)
+def fill_lane_coordinates(
+    v: np.ndarray, lanes: np.ndarray, coords: np.ndarray, done: np.ndarray, lane: int
+) -> None:
+    """``lane_coordinates``' filling of ``coords[lane]`` and ``done[lane]``."""
     count = 0
     for j in range(v.shape[0]):
         s_j, r_j = local_coordinates(lanes, lane, v[j, X], v[j, Y])
@@ -300,8 +308,8 @@ def own_lane(
     own[OWN_FRONT], own[OWN_REAR], own[OWN_REAR_FILLED] = front, rear, 0.0
 
 
-@njit(cache=True, inline="always")
-def mobil_side(
+@njit(cache=True)  # a call, not inlined: asked once per LANE_CHANGE_DELAY per vehicle and side, and
+def mobil_side(  # its body (5 IDM terms, a neighbour search) inlined made numba compile act for long
     v: np.ndarray,
     lanes: np.ndarray,
     p: np.ndarray,
