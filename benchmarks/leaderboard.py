@@ -1,0 +1,508 @@
+"""The leaderboard: the best known configuration of each algorithm per scenario, 3 training seeds,
+measured the same way, in one table per scenario.
+
+    nice -n 10 env OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1 \\
+        .venv/bin/python benchmarks/leaderboard.py [--scenarios town,blocks,...] [--seeds 0,1,2] \\
+        [--episodes 100] [--train] [--list]
+
+Every entry names its training command (``drivelab train`` arguments) and how it is judged:
+
+- ``evaluate``: ``drivelab evaluate RUN --episodes N``, the scenario's fixed evaluation episodes
+  (the same for every run, none a training episode): success, crash, out of road, mean speed;
+- ``nocrash``: ``drivelab benchmark nocrash RUN --town test --episodes N`` (the town's NoCrash, N
+  routes per traffic level): success per level;
+- ``maps``: ``drivelab evaluate RUN --maps 1000:100`` (blocks: 100 procedural maps no training run
+  draws): success, crash, out of road, mean speed.
+
+Runs live in ``benchmarks/runs`` (git-ignored). An entry whose run another benchmark already
+trains with the same command names it (``reuse``): that run is read, not trained again (its
+benchmark's timing file gives the training time). A run that does not exist is trained only with
+``--train``; without it the entry is listed under "not measured" with its command. A report is
+reused when it covers at least the episodes asked. Intervals (90 %): rates pooled over every
+seed's episodes (Wilson), speeds and returns as the mean over seeds (percentile bootstrap, as
+``drivelab compare``). Writes ``benchmarks/results/leaderboard.{json,md}``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import shlex
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from scipy.stats import binomtest
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from drivelab.training.nocrash import LEVELS  # noqa: E402
+from drivelab.training.stats import bootstrap_ci  # noqa: E402
+
+RUNS = ROOT / "benchmarks" / "runs"
+REPORTS = RUNS / "leaderboard-eval"
+RESULTS = ROOT / "benchmarks" / "results"
+UNSEEN_MAPS = "1000:100"
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One algorithm's best known configuration on one scenario."""
+
+    scenario: str  # the table it appears in
+    name: str  # its row
+    what: str
+    train: tuple[str, ...]  # drivelab train arguments, without --seed / --runs-dir / --name
+    judge: str = "evaluate"  # evaluate | nocrash | maps
+    reuse: str | None = None  # a run another benchmark trains with this command: "dir-s{seed}"
+    reused_by: str | None = None  # that benchmark
+    seeds: tuple[int, ...] | None = None  # only these seeds exist (a deterministic agent: one)
+    targets: dict = field(default_factory=dict)  # issue 19's competence targets, for the verdict
+
+    def run_dir(self, seed: int | str) -> Path:
+        if self.reuse:
+            return RUNS / self.reuse.format(seed=seed)
+        return RUNS / "leaderboard" / f"{self.scenario}-{self.name}-s{seed}"
+
+    def command(self, seed: int | str) -> list[str]:
+        run = self.run_dir(seed)
+        return [
+            "train", *self.train, "--seed", str(seed), "--runs-dir", str(run.parent.relative_to(ROOT)),
+            "--name", run.name,
+        ]  # fmt: skip
+
+
+def _args(text: str) -> tuple[str, ...]:
+    return tuple(shlex.split(text))
+
+
+TOWN_DAGGER = (
+    "--algo dagger --env town --action target_speed --traffic regular --steps 20000 --n-envs 8 "
+    "--eval-every 5000 --eval-episodes 2 -H round_steps=2000 -H epochs=2 -H beta_decay=0.5"
+)
+OSX = (
+    "--env blocks --traffic regular --backend fast -H gamma=0.99 --config benchmarks/seed003_osx.yaml "
+    "--steps 5000 --eval-every 5000 --eval-episodes 1 --checkpoint-every 1666"
+)
+TOWN_TARGETS = {"privileged": (0.90, 0.75, 0.60), "image": (0.70, 0.50, 0.35)}
+
+ENTRIES: tuple[Entry, ...] = (
+    Entry(
+        "town",
+        "expert",
+        "rule-based expert (privileged: waypoints + affordances); learns nothing",
+        _args(
+            "--algo expert --obs waypoints,affordances --steps 500 --eval-episodes 3 --env town "
+            "--action target_speed"
+        ),
+        judge="nocrash",
+        reuse="expert-town",
+        reused_by="benchmarks/nocrash_town.py",
+        seeds=(0,),
+    ),  # fmt: skip
+    Entry(
+        "town",
+        "dagger (privileged)",
+        "DAgger of the expert on waypoints + measurements + affordances",
+        _args(f"{TOWN_DAGGER} --obs waypoints,measurements,affordances"),
+        judge="nocrash",
+        reuse="competence-privileged-s{seed}",
+        reused_by="benchmarks/town_competence.py",
+        targets={"nocrash": TOWN_TARGETS["privileged"]},
+    ),
+    Entry(
+        "town",
+        "dagger (image)",
+        "DAgger of the expert on top-down image with lights + waypoints + measurements",
+        _args(f"{TOWN_DAGGER} --obs topdown:lights=true,waypoints,measurements"),
+        judge="nocrash",
+        reuse="competence-image-s{seed}",
+        reused_by="benchmarks/town_competence.py",
+        targets={"nocrash": TOWN_TARGETS["image"]},
+    ),
+    Entry(
+        "town",
+        "ppo (privileged)",
+        "SB3 PPO on waypoints + measurements + affordances, 1 M steps, 32 worlds",
+        _args(
+            "--algo ppo --obs waypoints,measurements,affordances --steps 1000000 --n-envs 32 "
+            "--eval-episodes 5 --env town --action target_speed"
+        ),
+        judge="nocrash",
+        reuse="ppo-town",
+        reused_by="benchmarks/nocrash_town.py",
+        seeds=(0,),
+        targets={"nocrash": TOWN_TARGETS["privileged"]},
+    ),  # fmt: skip
+    *(
+        Entry(
+            "blocks-osx",
+            agent,
+            what,
+            _args(f"{arguments} {OSX}"),
+            reuse=f"seed003-{agent}-s{{seed}}",
+            reused_by="benchmarks/seed003_osx.py",
+        )
+        for agent, what, arguments in (
+            (
+                "sb3_dqn",
+                "SB3 DQN, LiDAR + ego state, grid actions, the safety table",
+                "--algo dqn --obs lidar,ego_state:features=10 --action grid --reward safety_dqn",
+            ),
+            (
+                "sb3_dqn_default",
+                "SB3 DQN as above, MetaDrive's reward",
+                "--algo dqn --obs lidar,ego_state:features=10 --action grid --reward metadrive",
+            ),
+            (
+                "dueling_ddqn",
+                "Dueling DDQN, LiDAR + ego state x 3 frames (750-D), 18 actions",
+                "--algo dueling_ddqn --obs lidar:stack=3,ego_state:features=10:stack=3 --action grid "
+                "--reward metadrive_course",
+            ),
+            (
+                "a2c_topdown",
+                "A2C (own), CNN on the 5x84x84 top-down image",
+                "--algo a2c_own --obs topdown --action continuous --reward metadrive",
+            ),
+            (
+                "ppo_topdown",
+                "PPO (own), CNN on the 5x84x84 top-down image",
+                "--algo ppo_own --obs topdown --action continuous --reward metadrive",
+            ),
+            (
+                "ppo_fusion",
+                "PPO (own), top-down image + ego state + LiDAR 120",
+                "--algo ppo_own --obs topdown,ego_state,lidar:beams=120 --action continuous "
+                "--reward metadrive",
+            ),
+        )
+    ),  # fmt: skip
+    *(
+        Entry(
+            "blocks-unseen",
+            f"ppo ({maps} maps)",
+            f"SB3 PPO on LiDAR + measurements + waypoints, {maps} training maps",
+            _args(
+                f"--algo ppo --env blocks --obs lidar,measurements,waypoints --action continuous "
+                f"--reward metadrive --n-envs 8 --steps 81920 --eval-maps {UNSEEN_MAPS} "
+                f"--eval-every 81920 --eval-episodes 1 --config maps-{maps}.yaml"
+            ),
+            judge="maps",
+            reuse=f"generalisation/ppo-maps{maps}-s{{seed}}",
+            reused_by="benchmarks/generalisation.py",
+            targets={"success": 0.80},
+        )
+        for maps in (1, 10, 100)
+    ),  # fmt: skip
+)
+
+
+def _run(arguments: list[str]) -> dict[str, float]:
+    """Run a drivelab command (one thread); its wall and CPU seconds."""
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1", "CI": "true"}
+    before, start = resource.getrusage(resource.RUSAGE_CHILDREN), time.perf_counter()
+    subprocess.run([sys.executable, "-m", "drivelab.cli", *arguments], check=True, env=env, cwd=ROOT)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = after.ru_utime - before.ru_utime + after.ru_stime - before.ru_stime
+    return {"wall_s": time.perf_counter() - start, "cpu_s": cpu}
+
+
+def _training_time(run: Path) -> dict[str, float] | None:
+    """Training wall and CPU seconds, from the timing file of whichever benchmark trained ``run``."""
+    for path in (
+        run / "leaderboard_timing.json",
+        run / "competence_timing.json",
+        run / "train_timing.json",
+        run / "seed003_train.json",
+        run.with_name(run.name + ".timing.json"),
+    ):
+        if path.exists():
+            data = json.loads(path.read_text())
+            data = data.get("train", data)
+            for wall, cpu in (("wall_s", "cpu_s"), ("train_wall_s", "train_cpu_s")):
+                if wall in data and cpu in data:
+                    return {"wall_s": data[wall], "cpu_s": data[cpu]}
+    return None
+
+
+def _trained_steps(run: Path) -> int | None:
+    """The run's total training steps, from its config."""
+    import yaml
+
+    config = yaml.safe_load((run / "config.yaml").read_text())
+    return int(config.get("steps")) if config.get("steps") is not None else None
+
+
+def _report(entry: Entry, seed: int, episodes: int) -> dict:
+    """The entry's evaluation report for ``seed``, made when missing or too short."""
+    run = entry.run_dir(seed)
+    rel = str(run.relative_to(ROOT))
+    if entry.judge == "nocrash":
+        path = run / "nocrash.json"
+        report = json.loads(path.read_text()) if path.exists() else None
+        if report is None or report["episodes_per_level"] < episodes:
+            _run(["benchmark", "nocrash", rel, "--town", "test", "--episodes", str(episodes)])
+            report = json.loads(path.read_text())
+        return report
+    if entry.judge == "maps":
+        start = UNSEEN_MAPS.split(":")[0]
+        path = run / f"eval-maps-{start}-{UNSEEN_MAPS.split(':')[1]}.json"
+        if not path.exists():
+            _run(["evaluate", rel, "--maps", UNSEEN_MAPS])
+        return json.loads(path.read_text())
+    out = REPORTS / f"{entry.scenario}-{entry.name}-s{seed}".replace(" ", "_").replace("(", "").replace(
+        ")", ""
+    )
+    path = out / "eval.json"
+    report = json.loads(path.read_text()) if path.exists() else None
+    if report is None or report.get("episodes", 0) < episodes:
+        _run(["evaluate", rel, "--episodes", str(episodes), "--out", str(out.relative_to(ROOT))])
+        report = json.loads(path.read_text())
+    return report
+
+
+def _metrics(report: dict) -> dict:
+    """The numbers a row shows from one ``evaluate`` report; out of road: the episodes with an
+    off-road event (from its ``per_episode`` rows)."""
+    episodes = report["per_episode"]
+    return {
+        "episodes": int(report["episodes"]),
+        "success_rate": report["success_rate"],
+        "crash_rate": report["crash_rate"],
+        "off_road_rate": sum(e["off_road_events"] > 0 for e in episodes) / len(episodes),
+        "mean_speed_mps": report["mean_speed_mps"],
+        "mean_return": report["mean_return"],
+    }
+
+
+def measure(entry: Entry, seeds: list[int], episodes: int, train: bool) -> dict:
+    """Train (with ``train``, when missing) and judge every seed's run of ``entry``."""
+    seeds = [s for s in seeds if entry.seeds is None or s in entry.seeds]
+    command = "drivelab " + shlex.join(entry.command("S"))
+    record = {"scenario": entry.scenario, "name": entry.name, "what": entry.what, "judge": entry.judge,
+              "command": command, "trained_by": entry.reused_by or "benchmarks/leaderboard.py",
+              "seeds": {}, "missing": []}  # fmt: skip
+    for seed in seeds:
+        run = entry.run_dir(seed)
+        if not (run / "model.zip").exists():
+            if not train or entry.reuse:
+                record["missing"].append(seed)
+                continue
+            timing = _run(entry.command(seed))
+            (run / "leaderboard_timing.json").write_text(json.dumps(timing))
+        record["seeds"][seed] = {
+            "run": str(run.relative_to(ROOT)),
+            "steps": _trained_steps(run),
+            "training": _training_time(run),
+            "report": _report(entry, seed, episodes),
+        }
+    return record
+
+
+def _wilson(rates: list[float], counts: list[int]) -> dict | None:
+    if not counts or any(r is None for r in rates):
+        return None
+    hits, total = sum(round(r * n) for r, n in zip(rates, counts, strict=True)), sum(counts)
+    interval = binomtest(hits, total).proportion_ci(confidence_level=0.90, method="wilson")
+    return {"rate": hits / total, "low": interval.low, "high": interval.high, "episodes": total}
+
+
+def _mean(values: list[float | None]) -> dict | None:
+    values = [v for v in values if v is not None]
+    if not values:
+        return None
+    low, high = bootstrap_ci(values) if len(values) > 1 else (values[0], values[0])
+    return {"mean": sum(values) / len(values), "low": low, "high": high}
+
+
+def summarise(record: dict) -> dict:
+    """Pooled rates and means over the measured seeds of one entry."""
+    seeds = record["seeds"].values()
+    training = [s["training"] for s in seeds if s["training"]]
+    summary = {
+        "seeds": sorted(record["seeds"]),
+        "steps": sorted({s["steps"] for s in seeds}),
+        "train_wall_s": _mean([t["wall_s"] for t in training]),
+        "train_cpu_s": _mean([t["cpu_s"] for t in training]),
+    }
+    if record["judge"] == "nocrash":
+        summary["levels"] = {}
+        for level in LEVELS:
+            rows = [s["report"]["levels"][level] for s in seeds]
+            counts = [r["episodes"] for r in rows]
+            summary["levels"][level] = {
+                "success": _wilson([r["success_rate"] for r in rows], counts),
+                "crash": _wilson([r["crash_rate"] for r in rows], counts),
+                "speed": _mean([r["mean_speed_mps"] for r in rows]),
+            }
+        return summary
+    rows = [_metrics(s["report"]) for s in seeds]
+    counts = [r["episodes"] for r in rows]
+    for key in ("success_rate", "crash_rate", "off_road_rate"):
+        summary[key] = _wilson([r[key] for r in rows], counts)
+    summary["mean_speed_mps"] = _mean([r["mean_speed_mps"] for r in rows])
+    summary["mean_return"] = _mean([r["mean_return"] for r in rows])
+    return summary
+
+
+def _rate(value: dict | None) -> str:
+    if value is None:
+        return "–"
+    return f"{100 * value['rate']:.0f} [{100 * value['low']:.0f}, {100 * value['high']:.0f}]"
+
+
+def _num(value: dict | None, digits: int = 1) -> str:
+    if value is None:
+        return "–"
+    return f"{value['mean']:.{digits}f} [{value['low']:.{digits}f}, {value['high']:.{digits}f}]"
+
+
+def _verdict(rate: dict | None, target: float) -> str:
+    if rate is None:
+        return "–"
+    if rate["low"] >= target:
+        return "met"
+    return "not met" if rate["high"] < target else "undecided"
+
+
+def _cost(summary: dict) -> str:
+    steps = "/".join(f"{s:,}" for s in summary["steps"] if s) or "–"
+    wall, cpu = summary["train_wall_s"], summary["train_cpu_s"]
+    time_text = f"{wall['mean'] / 60:.1f} / {cpu['mean'] / 60:.1f}" if wall and cpu else "–"
+    return f"{steps} | {time_text}"
+
+
+def markdown(result: dict) -> str:
+    lines = [
+        "# Leaderboard: the best known configuration of each algorithm, per scenario",
+        "",
+        f"Command: `{result['command']}`  ",
+        f"Machine: {result['machine']}; date {result['date']}; one thread per process.  ",
+        "Rates are % pooled over every seed's episodes with their 90 % Wilson interval; speeds and returns "
+        "the mean over seeds with a 90 % bootstrap interval. Training time: the mean per seed, wall / CPU "
+        "minutes, on this 2-core machine (shared with other jobs, so wall time is an upper bound). "
+        "Returns are each agent's own reward and are not comparable across rows.",
+        "",
+    ]
+    by_scenario: dict[str, list[dict]] = {}
+    for record in result["entries"]:
+        by_scenario.setdefault(record["scenario"], []).append(record)
+    titles = {
+        "town": "Town: NoCrash on the test town (success % and crash %; `episodes` routes per level)",
+        "blocks-osx": 'Blocks, map "OSX" (seed 003\'s map): the fixed evaluation episodes',
+        "blocks-unseen": f"Blocks, 100 unseen procedural maps (`--maps {UNSEEN_MAPS}`), target success 80 %",
+    }
+    missing = []
+    for scenario, records in by_scenario.items():
+        measured = [r for r in records if r["seeds"]]
+        missing += [r for r in records if r["missing"]]
+        if not measured:
+            continue
+        lines += [f"## {titles.get(scenario, scenario)}", ""]
+        if records[0]["judge"] == "nocrash":
+            lines += [
+                "| agent | seeds | "
+                + " | ".join(f"{level} success (crash)" for level in LEVELS)
+                + " | steps | train min (wall / CPU) | verdict vs target |",
+                "|---|---|" + "---|" * len(LEVELS) + "---|---|---|",
+            ]
+            for r in measured:
+                s, targets = r["summary"], r.get("targets", {}).get("nocrash")
+                cells = [
+                    f"{_rate(s['levels'][lv]['success'])} ({_rate(s['levels'][lv]['crash'])})"
+                    for lv in LEVELS
+                ]
+                verdict = (
+                    ", ".join(f"{lv} {_verdict(s['levels'][lv]['success'], t)}"
+                              for lv, t in zip(LEVELS, targets, strict=True))
+                    if targets else "–"
+                )  # fmt: skip
+                seeds = ",".join(map(str, s["seeds"]))
+                lines.append(
+                    f"| {r['name']} | {seeds} | " + " | ".join(cells) + f" | {_cost(s)} | {verdict} |"
+                )
+        else:
+            lines += [
+                "| agent | seeds | episodes | success % | crash % | out of road % | mean speed m/s | return "
+                "| steps | train min (wall / CPU) |",
+                "|---|---|---|---|---|---|---|---|---|---|",
+            ]
+            for r in measured:
+                s = r["summary"]
+                episodes = s["success_rate"]["episodes"] if s["success_rate"] else "–"
+                lines.append(
+                    f"| {r['name']} | {','.join(map(str, s['seeds']))} | {episodes} | "
+                    f"{_rate(s['success_rate'])} | "
+                    f"{_rate(s['crash_rate'])} | {_rate(s['off_road_rate'])} | {_num(s['mean_speed_mps'])} | "
+                    f"{_num(s['mean_return'])} | {_cost(s)} |"
+                )
+        lines += ["", "| agent | what | trained by | command (S = seed) |", "|---|---|---|---|"]
+        lines += [f"| {r['name']} | {r['what']} | `{r['trained_by']}` | `{r['command']}` |" for r in measured]
+        lines.append("")
+    if missing:
+        lines += ["## Not measured here yet", "",
+                  "Entries with seeds whose run does not exist on this machine (`--train` trains them; "
+                  "a reused run comes from the benchmark named):", ""]  # fmt: skip
+        lines += [
+            f"- {r['scenario']} / {r['name']}: seeds {r['missing']} (`{r['trained_by']}`)" for r in missing
+        ]
+        lines.append("")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--scenarios", default=None, help="comma-separated tables (default: all)")
+    parser.add_argument("--seeds", default="0,1,2")
+    parser.add_argument("--episodes", type=int, default=100)
+    parser.add_argument("--train", action="store_true", help="train the entries' missing runs")
+    parser.add_argument("--list", action="store_true", help="list the entries and their commands")
+    args = parser.parse_args()
+    scenarios = sorted({e.scenario for e in ENTRIES})
+    wanted = args.scenarios.split(",") if args.scenarios else scenarios
+    unknown = [s for s in wanted if s not in scenarios]
+    if unknown or args.episodes < 1:
+        problem = (
+            f"unknown scenario {unknown[0]!r} (known: {', '.join(scenarios)})"
+            if unknown
+            else "--episodes < 1"
+        )
+        print(f"error: {problem}", file=sys.stderr)
+        raise SystemExit(2)
+    seeds = [int(s) for s in args.seeds.split(",")]
+    entries = [e for e in ENTRIES if e.scenario in wanted]
+    if args.list:
+        for entry in entries:
+            print(f"{entry.scenario:14} {entry.name:22} drivelab {shlex.join(entry.command(seeds[0]))}")
+        return
+    records = []
+    for entry in entries:
+        print(f"[leaderboard] {entry.scenario} / {entry.name}", flush=True)
+        record = measure(entry, seeds, args.episodes, args.train)
+        if record["seeds"]:
+            record["summary"] = summarise(record)
+        if entry.targets:
+            record["targets"] = entry.targets
+        records.append(record)
+    result = {
+        "command": "python benchmarks/leaderboard.py " + shlex.join(sys.argv[1:]),
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
+        "date": time.strftime("%Y-%m-%d"),
+        "episodes": args.episodes,
+        "entries": records,
+    }
+    RESULTS.mkdir(exist_ok=True)
+    (RESULTS / "leaderboard.json").write_text(json.dumps(result, indent=1, default=str))
+    (RESULTS / "leaderboard.md").write_text(markdown(result))
+    print((RESULTS / "leaderboard.md").read_text())
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,90 @@
+"""benchmarks/leaderboard.py's own arithmetic: pooled rates, verdicts, the rows made from reports,
+and its bad input (its training and evaluation run drivelab's tested commands)."""
+
+import importlib.util
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+SCRIPT = Path(__file__).parents[1] / "benchmarks" / "leaderboard.py"
+
+
+@pytest.fixture(scope="module")
+def board():
+    spec = importlib.util.spec_from_file_location("leaderboard", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["leaderboard"] = module  # its dataclass looks its module up
+    spec.loader.exec_module(module)
+    return module
+
+
+def _evaluation(success, crash, off_road, speed, n=10):
+    """An ``evaluate`` report of n episodes: the first ``success`` succeed, the next ``crash`` crash,
+    the next ``off_road`` leave the road."""
+    episodes = [{"off_road_events": int(success + crash <= k < success + crash + off_road)} for k in range(n)]
+    return {"episodes": n, "success_rate": success / n, "crash_rate": crash / n, "mean_speed_mps": speed,
+            "mean_return": 1.0, "per_episode": episodes}  # fmt: skip
+
+
+def _time(wall, cpu):
+    return {"wall_s": wall, "cpu_s": cpu}
+
+
+def test_rates_pool_every_seeds_episodes(board):
+    pooled = board._wilson([0.2, 0.4], [10, 30])
+    assert pooled["rate"] == pytest.approx(14 / 40) and pooled["episodes"] == 40
+    assert pooled["low"] < 14 / 40 < pooled["high"]
+    assert board._wilson([None], [10]) is None
+
+
+def test_verdict_needs_the_whole_interval(board):
+    assert board._verdict({"rate": 0.9, "low": 0.81, "high": 0.95}, 0.80) == "met"
+    assert board._verdict({"rate": 0.8, "low": 0.70, "high": 0.88}, 0.80) == "undecided"
+    assert board._verdict({"rate": 0.5, "low": 0.40, "high": 0.60}, 0.80) == "not met"
+
+
+def test_summary_of_evaluations(board):
+    record = {
+        "judge": "evaluate",
+        "seeds": {
+            0: {"steps": 1000, "training": _time(60.0, 30.0), "report": _evaluation(5, 2, 1, 20.0)},
+            1: {"steps": 1000, "training": _time(120.0, 90.0), "report": _evaluation(7, 1, 0, 22.0)},
+        },
+    }
+    summary = board.summarise(record)
+    assert summary["success_rate"]["rate"] == pytest.approx(12 / 20)
+    assert summary["crash_rate"]["rate"] == pytest.approx(3 / 20)
+    assert summary["off_road_rate"]["rate"] == pytest.approx(1 / 20)
+    assert summary["mean_speed_mps"]["mean"] == pytest.approx(21.0)
+    assert summary["train_cpu_s"]["mean"] == pytest.approx(60.0) and summary["steps"] == [1000]
+    record.update(scenario="highway", name="ppo", what="w", command="c", trained_by="t", missing=[2])
+    record["summary"] = summary
+    text = board.markdown({"command": "x", "machine": "m", "date": "d", "entries": [record]})
+    assert "| ppo | 0,1 | 20 | 60 [" in text and "highway / ppo: seeds [2]" in text
+
+
+def test_nocrash_summary_per_level(board):
+    level = {"episodes": 4, "success_rate": 0.75, "crash_rate": 0.25, "mean_speed_mps": 5.0}
+    report = {"levels": {name: level for name in ("empty", "regular", "dense")}}
+    record = {"judge": "nocrash", "seeds": {0: {"steps": 10, "training": None, "report": report}}}
+    summary = board.summarise(record)
+    assert summary["levels"]["dense"]["success"]["rate"] == pytest.approx(0.75)
+    assert summary["train_wall_s"] is None
+
+
+def test_every_entry_names_a_command_with_its_seed(board):
+    for entry in board.ENTRIES:
+        command = entry.command(7)
+        assert command[0] == "train" and "--seed" in command and command[command.index("--seed") + 1] == "7"
+        assert entry.judge in ("evaluate", "nocrash", "maps")
+
+
+@pytest.mark.parametrize("arguments", [["--scenarios", "nowhere"], ["--episodes", "0"]])
+def test_bad_input_is_one_error_line(arguments):
+    results = SCRIPT.parent / "results" / "leaderboard.json"
+    before = results.stat().st_mtime_ns if results.exists() else None
+    done = subprocess.run([sys.executable, str(SCRIPT), *arguments], capture_output=True, text=True)
+    assert done.returncode == 2 and done.stderr.startswith("error:") and len(done.stderr.splitlines()) == 1
+    assert (results.stat().st_mtime_ns if results.exists() else None) == before  # nothing written
