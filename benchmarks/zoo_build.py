@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import platform
 import shlex
@@ -80,6 +81,74 @@ AGENTS: dict[str, dict] = {
         ],
         "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
     },
+    **{
+        f"{scenario}-ppo": {
+            "description": (
+                f"stable-baselines3 PPO on {scenario} (kinematics, meta actions, the scenario's default "
+                "reward: highway's, regular traffic), 16 worlds; highway-env's documented PPO values"
+            ),
+            "train": [
+                "--algo", "ppo", "--env", scenario, "--obs", "kinematics", "--action", "meta",
+                "--reward", "highway", "--traffic", "regular", "--n-envs", "16", "--steps", "100000",
+                "--eval-every", "50000", "--eval-episodes", "10", "--seed", "0",
+            ],
+            "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+        }
+        for scenario in ("merge", "roundabout", "intersection")
+    },
+    "racetrack-ppo": {
+        "description": (
+            "stable-baselines3 PPO on racetrack with continuous [steering, acceleration] (highway-env's "
+            "racetrack agent steers only), 16 worlds, regular traffic (one other car); observation: "
+            "LiDAR (beams stop at the road edges and at vehicles: what highway-env's occupancy grid of "
+            "presence and on-road cells tells) and the 10-number ego state (lane offset, heading, "
+            "curvature, speed, front gap); highway-env's racetrack PPO values (gamma 0.9)"
+        ),
+        "train": [
+            "--algo", "ppo", "--env", "racetrack", "--obs", "lidar,ego_state:features=10",
+            "--action", "continuous", "--reward", "highway", "--traffic", "regular", "--n-envs", "16",
+            "--steps", "100000", "--eval-every", "50000", "--eval-episodes", "5", "--seed", "0",
+        ],
+        "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+    },
+    "follow-line-qlearning": {
+        "description": (
+            "seed 004's tabular Q-learning on follow-line: the camera's yellow-line state (1296 states), "
+            "the seed's 5-action table and reward, 20 000 steps (benchmarks/results/qlearning_follow-line.md)"
+        ),
+        "train": [
+            "--algo", "qlearning", "--env", "follow-line", "--obs", "line", "--action", "seed_line",
+            "--reward", "line_follow", "--steps", "20000", "--eval-every", "20000", "--eval-episodes",
+            "2", "--seed", "0",
+        ],
+        "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+    },
+    "follow-lane-qlearning": {
+        "description": (
+            "seed 004's tabular Q-learning on follow-lane: the camera's lane-centre state (6 states), "
+            "the seed's 5-action table and reward, 20 000 steps (benchmarks/results/qlearning_follow-lane.md)"
+        ),
+        "train": [
+            "--algo", "qlearning", "--env", "follow-lane", "--obs", "lane", "--action", "seed_lane",
+            "--reward", "lane_follow", "--steps", "20000", "--eval-every", "20000", "--eval-episodes",
+            "2", "--seed", "0",
+        ],
+        "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+    },
+    "blocks-ppo": {
+        "description": (
+            "drivelab's own PPO (CNN) on the 5x84x84 top-down image, continuous actions, on MetaDrive's "
+            "map \"OSX\" (roundabout, straight, 4-way intersection), regular traffic: seed 003's image "
+            "PPO, retrained with the arguments of benchmarks/seed003_osx.py (ppo_topdown, seed 1)"
+        ),
+        "train": [
+            "--algo", "ppo_own", "--obs", "topdown", "--action", "continuous", "--reward", "metadrive",
+            "--env", "blocks", "--traffic", "regular", "--backend", "fast", "-H", "gamma=0.99",
+            "--config", "benchmarks/seed003_osx.yaml", "--steps", "5000", "--seed", "1",
+            "--eval-every", "5000", "--eval-episodes", "1", "--checkpoint-every", "1666",
+        ],
+        "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+    },
 }  # fmt: skip
 
 
@@ -113,6 +182,12 @@ def train_and_pack(name: str, spec: dict, retrain: bool) -> None:
     pack(run_dir, name, spec["description"], "drivelab " + shlex.join(arguments), timing)
 
 
+def _defined(metrics: dict) -> dict:
+    """``metrics`` with NaN (``aggregate``'s route completion on a scenario whose route has no
+    finite length, e.g. merge) as None: a card is standard JSON, and "not defined" reads null."""
+    return {key: None if isinstance(v, float) and math.isnan(v) else v for key, v in metrics.items()}
+
+
 def measure(name: str, spec: dict) -> None:
     import torch
 
@@ -138,7 +213,7 @@ def measure(name: str, spec: dict) -> None:
             "date": time.strftime("%Y-%m-%d"),
             "wall_s": round(wall, 1),
             "cpu_s": round(cpu, 1),
-            "metrics": report,
+            "metrics": _defined(report),
         }
         if per_episode is not None:
             evaluation["successes"] = int(sum(bool(e["success"]) for e in per_episode))
@@ -148,7 +223,7 @@ def measure(name: str, spec: dict) -> None:
     check = {
         "episodes": CHECK_EPISODES,
         "command": f"drivelab enjoy {name} --episodes {CHECK_EPISODES}",
-        "metrics": aggregate(checked["per_episode"]),
+        "metrics": _defined(aggregate(checked["per_episode"])),
     }
     path = ZOO_DIR / name / "card.json"
     card = json.loads(path.read_text())
@@ -158,6 +233,10 @@ def measure(name: str, spec: dict) -> None:
 
 def _percent(value: float | None) -> str:
     return "n/a" if value is None else f"{100 * value:.0f}"
+
+
+def _per_km(value: float | None) -> str:
+    return "n/a" if value is None else f"{value:.2f}"
 
 
 def write_results() -> Path:
@@ -187,8 +266,9 @@ def write_results() -> Path:
         "",
         "Evaluation set (the scenario's fixed evaluation episodes, `drivelab evaluate`):",
         "",
-        "| agent | episodes | success % | crash % | mean speed m/s | route completion % | return |",
-        "|---|---|---|---|---|---|---|",
+        "| agent | episodes | success % | crash % | off-road per km | mean speed m/s | mean distance km "
+        "| route completion % | return |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for agent in agents:
         for evaluation in agent.card["evaluations"]:
@@ -196,7 +276,8 @@ def write_results() -> Path:
                 m = evaluation["metrics"]
                 lines.append(
                     f"| {agent.name} | {m['episodes']} | {_percent(m['success_rate'])} | "
-                    f"{_percent(m['crash_rate'])} | {m['mean_speed_mps']:.1f} | "
+                    f"{_percent(m['crash_rate'])} | {_per_km(m['off_road_per_km'])} | "
+                    f"{m['mean_speed_mps']:.1f} | {m['mean_distance_km']:.2f} | "
                     f"{_percent(m['route_completion'])} | {m['mean_return']:.1f} ± {m['std_return']:.1f} |"
                 )
     nocrash = [(a, e) for a in agents for e in a.card["evaluations"] if e["protocol"] == "nocrash"]
