@@ -1,6 +1,6 @@
 """Train, pack and measure the shipped agents (``drivelab/zoo/``) from their recorded commands.
 
-    .venv/bin/python benchmarks/zoo_build.py [NAME ...] [--retrain] [--measure-only]
+    .venv/bin/python benchmarks/zoo_build.py [NAME ...] [--retrain] [--measure-only | --check-only]
 
 For each agent of ``AGENTS`` (all by default): ``drivelab train`` with its recorded arguments into
 ``benchmarks/runs/zoo/<name>`` (skipped when that run already has its final model, unless
@@ -9,15 +9,17 @@ the optimizer's moments, card), then every recorded measurement on the packed ag
 (``drivelab evaluate NAME``, ``drivelab benchmark nocrash NAME``), whose reports go to
 ``benchmarks/runs/zoo-eval/<name>`` and whose numbers, episode counts, commands, machine and CPU
 time go into the card; finally ``drivelab enjoy NAME --episodes 3`` gives the card's ``check``,
-the numbers ``tests/training/test_zoo.py`` reproduces. Every command runs with one thread
-(``OMP_NUM_THREADS=1``). ``--measure-only`` re-measures the agents already in the zoo. Writes
-``benchmarks/results/zoo.md`` from the cards.
+the numbers ``tests/training/test_zoo.py`` reproduces (for the camera agents, its episodes cut at
+``CAMERA_CHECK_DURATION_S``, as the card records). Every command runs with one thread
+(``OMP_NUM_THREADS=1``). ``--measure-only`` re-measures the agents already in the zoo,
+``--check-only`` records only their check. Writes ``benchmarks/results/zoo.md`` from the cards.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import platform
 import shlex
@@ -31,6 +33,10 @@ RUNS = Path("benchmarks/runs/zoo")
 REPORTS = Path("benchmarks/runs/zoo-eval")
 DRIVELAB = [sys.executable, "-m", "drivelab.cli"]
 CHECK_EPISODES = 3
+# The camera-perception agents (follow-line/lane, ~25 ms a step) play their 3 check episodes cut
+# at 20 s of the 60 s (100 steps each) so that tests/training/test_zoo.py stays fast; the card
+# records the cap, and the 100-episode evaluation is uncut.
+CAMERA_CHECK_DURATION_S = 20
 
 TOWN_DAGGER = [
     "--algo", "dagger", "--env", "town", "--action", "target_speed", "--traffic", "regular",
@@ -80,6 +86,91 @@ AGENTS: dict[str, dict] = {
         ],
         "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
     },
+    **{
+        f"{scenario}-ppo": {
+            "description": (
+                f"stable-baselines3 PPO on {scenario} (kinematics, meta actions, the scenario's default "
+                "reward: highway's, regular traffic), 16 worlds; highway-env's documented PPO values"
+            ),
+            "train": [
+                "--algo", "ppo", "--env", scenario, "--obs", "kinematics", "--action", "meta",
+                "--reward", "highway", "--traffic", "regular", "--n-envs", "16", "--steps", "100000",
+                "--eval-every", "50000", "--eval-episodes", "10", "--seed", "0",
+            ],
+            "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+        }
+        for scenario in ("merge", "roundabout", "intersection")
+    },
+    "intersection-ppo-arrival": {
+        "description": (
+            "stable-baselines3 PPO on intersection as intersection-ppo, but with the weights of "
+            "highway-env's IntersectionEnv reward (collision -5, high speed 1, arrival 1; there the "
+            "arrival replaces the step's reward and the speed range is 7-9 m/s, here it adds and the "
+            "range is 2/3 to 1 of the limit, unnormalised): the highway reward pays nothing for "
+            "arriving, and intersection-ppo learns to stop short of the junction"
+        ),
+        "train": [
+            "--algo", "ppo", "--env", "intersection", "--obs", "kinematics", "--action", "meta",
+            "--reward", "collision=-5,high_speed=1,arrival=1", "--traffic", "regular", "--n-envs", "16",
+            "--steps", "100000", "--eval-every", "50000", "--eval-episodes", "10", "--seed", "0",
+        ],
+        "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+    },
+    "racetrack-ppo": {
+        "description": (
+            "stable-baselines3 PPO on racetrack with continuous [steering, acceleration] (highway-env's "
+            "racetrack agent steers only), 16 worlds, regular traffic (one other car); observation: "
+            "LiDAR (beams stop at the road edges and at vehicles: what highway-env's occupancy grid of "
+            "presence and on-road cells tells) and the 10-number ego state (lane offset, heading, "
+            "curvature, speed, front gap); highway-env's racetrack PPO values (gamma 0.9)"
+        ),
+        "train": [
+            "--algo", "ppo", "--env", "racetrack", "--obs", "lidar,ego_state:features=10",
+            "--action", "continuous", "--reward", "highway", "--traffic", "regular", "--n-envs", "16",
+            "--steps", "100000", "--eval-every", "50000", "--eval-episodes", "5", "--seed", "0",
+        ],
+        "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+    },
+    "follow-line-qlearning": {
+        "description": (
+            "seed 004's tabular Q-learning on follow-line: the camera's yellow-line state (1296 states), "
+            "the seed's 5-action table and reward, 20 000 steps (benchmarks/results/qlearning_follow-line.md)"
+        ),
+        "train": [
+            "--algo", "qlearning", "--env", "follow-line", "--obs", "line", "--action", "seed_line",
+            "--reward", "line_follow", "--steps", "20000", "--eval-every", "20000", "--eval-episodes",
+            "2", "--seed", "0",
+        ],
+        "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+        "check_duration_s": CAMERA_CHECK_DURATION_S,
+    },
+    "follow-lane-qlearning": {
+        "description": (
+            "seed 004's tabular Q-learning on follow-lane: the camera's lane-centre state (6 states), "
+            "the seed's 5-action table and reward, 20 000 steps (benchmarks/results/qlearning_follow-lane.md)"
+        ),
+        "train": [
+            "--algo", "qlearning", "--env", "follow-lane", "--obs", "lane", "--action", "seed_lane",
+            "--reward", "lane_follow", "--steps", "20000", "--eval-every", "20000", "--eval-episodes",
+            "2", "--seed", "0",
+        ],
+        "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+        "check_duration_s": CAMERA_CHECK_DURATION_S,
+    },
+    "blocks-ppo": {
+        "description": (
+            "drivelab's own PPO (CNN) on the 5x84x84 top-down image, continuous actions, on MetaDrive's "
+            "map \"OSX\" (roundabout, straight, 4-way intersection), regular traffic: seed 003's image "
+            "PPO, retrained with the arguments of benchmarks/seed003_osx.py (ppo_topdown, seed 1)"
+        ),
+        "train": [
+            "--algo", "ppo_own", "--obs", "topdown", "--action", "continuous", "--reward", "metadrive",
+            "--env", "blocks", "--traffic", "regular", "--backend", "fast", "-H", "gamma=0.99",
+            "--config", "benchmarks/seed003_osx.yaml", "--steps", "5000", "--seed", "1",
+            "--eval-every", "5000", "--eval-episodes", "1", "--checkpoint-every", "1666",
+        ],
+        "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+    },
 }  # fmt: skip
 
 
@@ -113,7 +204,26 @@ def train_and_pack(name: str, spec: dict, retrain: bool) -> None:
     pack(run_dir, name, spec["description"], "drivelab " + shlex.join(arguments), timing)
 
 
-def measure(name: str, spec: dict) -> None:
+def _defined(metrics: dict) -> dict:
+    """``metrics`` with NaN (``aggregate``'s route completion on a scenario whose route has no
+    finite length, e.g. merge) as None: a card is standard JSON, and "not defined" reads null."""
+    return {key: None if isinstance(v, float) and math.isnan(v) else v for key, v in metrics.items()}
+
+
+def capped_episodes(agent_dir: Path, episodes: int, duration_s: float) -> list[dict]:
+    """The per-episode metrics of ``drivelab enjoy`` on the agent in ``agent_dir`` (the scenario's
+    fixed evaluation episodes, greedy), with every episode cut at ``duration_s`` seconds."""
+    from drivelab.envs.core import DriveEnv
+    from drivelab.training.checkpoints import load_agent
+    from drivelab.training.evaluate import load_run_config, run_episodes
+
+    config = load_run_config(agent_dir)
+    env = DriveEnv(**{**config.eval_env_kwargs(), "duration_s": duration_s})
+    agent = load_agent(agent_dir, config)
+    return run_episodes(lambda obs: agent.predict(obs, deterministic=True)[0], env, episodes)[0]
+
+
+def measure(name: str, spec: dict, check_only: bool = False) -> None:
     import torch
 
     from drivelab.training.evaluate import aggregate
@@ -122,7 +232,7 @@ def measure(name: str, spec: dict) -> None:
     torch.set_num_threads(1)
 
     out = REPORTS / name
-    for protocol, template in spec["measure"]:
+    for protocol, template in [] if check_only else spec["measure"]:
         arguments = [part.format(name=name) for part in template] + ["--out", str(out)]
         wall, cpu = drivelab(arguments)
         report = json.loads(
@@ -138,18 +248,27 @@ def measure(name: str, spec: dict) -> None:
             "date": time.strftime("%Y-%m-%d"),
             "wall_s": round(wall, 1),
             "cpu_s": round(cpu, 1),
-            "metrics": report,
+            "metrics": _defined(report),
         }
         if per_episode is not None:
             evaluation["successes"] = int(sum(bool(e["success"]) for e in per_episode))
             evaluation["crashes"] = int(sum(bool(e["crashed"]) for e in per_episode))
         add_evaluation(name, evaluation)
-    checked = enjoy(name, episodes=CHECK_EPISODES)
-    check = {
-        "episodes": CHECK_EPISODES,
-        "command": f"drivelab enjoy {name} --episodes {CHECK_EPISODES}",
-        "metrics": aggregate(checked["per_episode"]),
-    }
+    duration_s = spec.get("check_duration_s")
+    if duration_s is None:
+        per_episode = enjoy(name, episodes=CHECK_EPISODES)["per_episode"]
+        check = {"episodes": CHECK_EPISODES, "command": f"drivelab enjoy {name} --episodes {CHECK_EPISODES}"}
+    else:
+        per_episode = capped_episodes(ZOO_DIR / name, CHECK_EPISODES, duration_s)
+        check = {
+            "episodes": CHECK_EPISODES,
+            "duration_s": duration_s,
+            "command": (
+                f"the first {CHECK_EPISODES} episodes of `drivelab enjoy {name}`, each cut at {duration_s} s "
+                "(tests/training/test_zoo.py)"
+            ),
+        }
+    check["metrics"] = _defined(aggregate(per_episode))
     path = ZOO_DIR / name / "card.json"
     card = json.loads(path.read_text())
     card["check"] = check
@@ -158,6 +277,10 @@ def measure(name: str, spec: dict) -> None:
 
 def _percent(value: float | None) -> str:
     return "n/a" if value is None else f"{100 * value:.0f}"
+
+
+def _per_km(value: float | None) -> str:
+    return "n/a" if value is None else f"{value:.2f}"
 
 
 def write_results() -> Path:
@@ -187,8 +310,9 @@ def write_results() -> Path:
         "",
         "Evaluation set (the scenario's fixed evaluation episodes, `drivelab evaluate`):",
         "",
-        "| agent | episodes | success % | crash % | mean speed m/s | route completion % | return |",
-        "|---|---|---|---|---|---|---|",
+        "| agent | episodes | success % | crash % | off-road per km | mean speed m/s | mean distance km "
+        "| route completion % | return |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for agent in agents:
         for evaluation in agent.card["evaluations"]:
@@ -196,7 +320,8 @@ def write_results() -> Path:
                 m = evaluation["metrics"]
                 lines.append(
                     f"| {agent.name} | {m['episodes']} | {_percent(m['success_rate'])} | "
-                    f"{_percent(m['crash_rate'])} | {m['mean_speed_mps']:.1f} | "
+                    f"{_percent(m['crash_rate'])} | {_per_km(m['off_road_per_km'])} | "
+                    f"{m['mean_speed_mps']:.1f} | {m['mean_distance_km']:.2f} | "
                     f"{_percent(m['route_completion'])} | {m['mean_return']:.1f} ± {m['std_return']:.1f} |"
                 )
     nocrash = [(a, e) for a in agents for e in a.card["evaluations"] if e["protocol"] == "nocrash"]
@@ -214,10 +339,11 @@ def write_results() -> Path:
                 _percent(levels[level]["success_rate"]) for level in ("empty", "regular", "dense")
             )
             lines.append(f"| {agent.name} | {evaluation['episodes']} | {cells} |")
-    lines += ["", "Commands and machines:", ""]
+    lines += ["", "What each agent is, the command that trained it and those that measured it:", ""]
     for agent in agents:
         training = agent.card["training"]
-        lines.append(f"- {agent.name}: `{training['command']}` ({training.get('machine', 'n/a')})")
+        lines.append(f"- {agent.name}: {agent.card['description']}.")
+        lines.append(f"  - `{training['command']}` ({training.get('machine', 'n/a')})")
         for evaluation in agent.card["evaluations"]:
             lines.append(f"  - `{evaluation['command']}` ({evaluation['machine']}, {evaluation['date']})")
     path = ROOT / "benchmarks" / "results" / "zoo.md"
@@ -231,6 +357,7 @@ def main() -> None:
     parser.add_argument("names", nargs="*", help=f"agents to build (default: all of {', '.join(AGENTS)})")
     parser.add_argument("--retrain", action="store_true", help="train again even if the run has its model")
     parser.add_argument("--measure-only", action="store_true", help="only re-measure the packed agents")
+    parser.add_argument("--check-only", action="store_true", help="only record the packed agents' check")
     args = parser.parse_args()
     unknown = [name for name in args.names if name not in AGENTS]
     if unknown:
@@ -238,9 +365,9 @@ def main() -> None:
     sys.path.insert(0, str(ROOT))
     os.chdir(ROOT)
     for name in args.names or AGENTS:
-        if not args.measure_only:
+        if not (args.measure_only or args.check_only):
             train_and_pack(name, AGENTS[name], args.retrain)
-        measure(name, AGENTS[name])
+        measure(name, AGENTS[name], check_only=args.check_only)
         print(f"packed drivelab/zoo/{name}", flush=True)
     print(f"wrote {write_results()}")
 

@@ -21,7 +21,7 @@ from drivelab.errors import UsageError
 from drivelab.training import run as run_module
 from drivelab.training import zoo
 from drivelab.training.checkpoints import load_agent
-from drivelab.training.evaluate import aggregate, evaluate_run, load_run_config
+from drivelab.training.evaluate import aggregate, evaluate_run, load_run_config, run_episodes
 from drivelab.training.nocrash import nocrash
 
 runner = CliRunner()
@@ -233,26 +233,38 @@ def test_every_shipped_file_is_package_data():
 @pytest.mark.parametrize("agent", SHIPPED, ids=[agent.name for agent in SHIPPED])
 def test_shipped_agents_load_without_unpickling(agent, monkeypatch):
     """No pickled member; tensors only through ``torch.load(weights_only=True)`` (its restricted
-    unpickler of tensors and plain containers); ``pickle.load(s)`` never called."""
+    unpickler of tensors and plain containers), arrays (a Q-table) only through
+    ``np.load(allow_pickle=False)``; ``pickle.load(s)`` never called."""
     with zipfile.ZipFile(agent.path / "model.zip") as archive:
-        assert not set(archive.namelist()) & set(PICKLED_MEMBERS)
+        names = set(archive.namelist())
+    assert not names & set(PICKLED_MEMBERS)
     config = load_run_config(agent.path)
     load_agent(agent.path, config)  # first: torch's lazy imports, which may use pickle themselves
-    loads = []
-    real_load = torch.load
+    loads, array_loads = [], []
+    real_load, real_np_load = torch.load, np.load
 
     def checked_load(*args, **kwargs):
         assert kwargs.get("weights_only") is True
         loads.append(args)
         return real_load(*args, **kwargs)
 
+    def checked_np_load(*args, **kwargs):
+        assert kwargs.get("allow_pickle") is False
+        array_loads.append(args)
+        return real_np_load(*args, **kwargs)
+
     def refuse(*args, **kwargs):
         raise AssertionError("unpickled")
 
     monkeypatch.setattr(torch, "load", checked_load)
+    monkeypatch.setattr(np, "load", checked_np_load)
     monkeypatch.setattr(pickle, "load", refuse)
     monkeypatch.setattr(pickle, "loads", refuse)
-    assert load_agent(agent.path, config) is not None and loads
+    assert load_agent(agent.path, config) is not None
+    # every member holding numbers was read through one of the two checked loaders
+    assert len(loads) >= sum(name.endswith(".pt") for name in names)
+    assert len(array_loads) >= sum(name.endswith((".npy", ".npz")) for name in names)
+    assert loads or array_loads
 
 
 @pytest.mark.parametrize("agent", SHIPPED, ids=[agent.name for agent in SHIPPED])
@@ -260,11 +272,24 @@ def test_shipped_agents_reproduce_their_recorded_check(agent):
     """``drivelab enjoy NAME --episodes 3`` gives the numbers recorded when the agent was packed:
     counts exactly; real numbers to 1e-3, because the network's float32 kernels and numpy's SIMD
     math round differently on other x86-64 CPUs (~1e-6 relative), while a change of behaviour
-    moves a 3-episode mean by far more than 1e-3."""
-    recorded = agent.card["check"]["metrics"]
-    measured = aggregate(zoo.enjoy(agent.name, episodes=3)["per_episode"])
+    moves a 3-episode mean by far more than 1e-3. A card records a number ``aggregate`` leaves
+    undefined (NaN: route completion where the route has no finite length, as on merge) as null.
+    A check with ``duration_s`` (the camera agents, ~25 ms a step) plays the same episodes cut at
+    that many seconds."""
+    check = agent.card["check"]
+    recorded = check["metrics"]
+    if "duration_s" in check:
+        config = load_run_config(agent.path)
+        env = DriveEnv(**{**config.eval_env_kwargs(), "duration_s": check["duration_s"]})
+        model = load_agent(agent.path, config)
+        per_episode = run_episodes(lambda obs: model.predict(obs, deterministic=True)[0], env, 3)[0]
+    else:
+        per_episode = zoo.enjoy(agent.name, episodes=3)["per_episode"]
+    measured = aggregate(per_episode)
     for key, value in recorded.items():
-        if value is None or isinstance(value, int):
+        if value is None and isinstance(measured[key], float):
+            assert math.isnan(measured[key]), key
+        elif value is None or isinstance(value, int):
             assert measured[key] == value, key
         else:
             assert math.isclose(measured[key], value, rel_tol=1e-3, abs_tol=1e-6), key
