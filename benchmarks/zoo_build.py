@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import platform
 import shlex
@@ -204,12 +203,6 @@ def train_and_pack(name: str, spec: dict, retrain: bool) -> None:
     pack(run_dir, name, spec["description"], "drivelab " + shlex.join(arguments), timing)
 
 
-def _defined(metrics: dict) -> dict:
-    """``metrics`` with NaN (``aggregate``'s route completion on a scenario whose route has no
-    finite length, e.g. merge) as None: a card is standard JSON, and "not defined" reads null."""
-    return {key: None if isinstance(v, float) and math.isnan(v) else v for key, v in metrics.items()}
-
-
 def capped_episodes(agent_dir: Path, episodes: int, duration_s: float) -> list[dict]:
     """The per-episode metrics of ``drivelab enjoy`` on the agent in ``agent_dir`` (the scenario's
     fixed evaluation episodes, greedy), with every episode cut at ``duration_s`` seconds."""
@@ -248,7 +241,7 @@ def measure(name: str, spec: dict, check_only: bool = False) -> None:
             "date": time.strftime("%Y-%m-%d"),
             "wall_s": round(wall, 1),
             "cpu_s": round(cpu, 1),
-            "metrics": _defined(report),
+            "metrics": report,
         }
         if per_episode is not None:
             evaluation["successes"] = int(sum(bool(e["success"]) for e in per_episode))
@@ -268,7 +261,7 @@ def measure(name: str, spec: dict, check_only: bool = False) -> None:
                 "(tests/training/test_zoo.py)"
             ),
         }
-    check["metrics"] = _defined(aggregate(per_episode))
+    check["metrics"] = aggregate(per_episode)
     path = ZOO_DIR / name / "card.json"
     card = json.loads(path.read_text())
     card["check"] = check

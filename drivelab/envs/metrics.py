@@ -113,6 +113,9 @@ class EpisodeMetrics:
             "off_road_events": self.off_road_events[ended].astype(int).tolist(),
             "red_lights": self.red_lights[ended].astype(int).tolist(),
             "blocked": self.blocked[ended].astype(int).tolist(),
-            "route_completion": completion[ended].astype(float).tolist() if has_goal else [None] * len(ended),
+            # a goal without a route of finite length (the merge's arrival line) has no completion
+            "route_completion": [
+                value if has_goal and np.isfinite(value) else None for value in completion[ended].tolist()
+            ],
         }
         return [dict(zip(columns, values, strict=True)) for values in zip(*columns.values(), strict=True)]

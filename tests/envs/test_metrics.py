@@ -97,3 +97,18 @@ def test_counts_on_a_known_episode():
         0.0,
     )
     assert second["mean_speed_mps"] == 20.0
+
+
+def test_a_goal_without_a_finite_route_has_no_completion():
+    """The merge arrives at a line, not at a route's end: its episodes report no route completion
+    (None, which evaluation's mean skips), never NaN."""
+    from drivelab.envs.vector import VectorDriveEnv
+
+    env = VectorDriveEnv(2, scenario="merge", obs="kinematics")
+    env.reset(seed=0)
+    finished = []
+    while len(finished) < 2:
+        _, _, terminated, truncated, infos = env.step(np.full(2, 1))
+        done = terminated | truncated
+        finished += [infos["episode_metrics"][k] for k in np.flatnonzero(done)]
+    assert all(summary["route_completion"] is None for summary in finished)
