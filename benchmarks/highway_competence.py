@@ -66,8 +66,12 @@ COMMON = ["--obs", "kinematics", "--action", "meta", "--traffic", "regular", "--
 # --steps, --eval-every, --seed, --runs-dir and --name). ``steps`` is the recipe's budget.
 RECIPES: dict[str, dict] = {
     "ppo-default": {  # the shipped highway-ppo's recipe: highway-env's documented PPO values
-        "steps": 102_400,
+        "steps": 100_000,
         "train": ["--algo", "ppo", *COMMON, "--reward", "highway", "--n-envs", "16"],
+    },
+    "ppo-fast": {  # the best of the seed-0 screen (benchmarks/results/highway_competence.md)
+        "steps": 500_000,
+        "train": ["--algo", "ppo", *COMMON, "--reward", "highway_fast", "--n-envs", "16", "-H", "gamma=0.95"],
     },
 }
 
