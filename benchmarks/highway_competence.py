@@ -65,7 +65,7 @@ COMMON = ["--obs", "kinematics", "--action", "meta", "--traffic", "regular", "--
 # Training recipes: the arguments of ``drivelab train`` after ``--env ENV`` (the script adds
 # --steps, --eval-every, --seed, --runs-dir and --name). ``steps`` is the recipe's budget.
 RECIPES: dict[str, dict] = {
-    "ppo-default": {  # the shipped highway-ppo's recipe: highway-env's documented PPO values
+    "ppo-default": {  # highway-env's documented PPO values, highway's reward: the first highway-ppo
         "steps": 100_000,
         "train": ["--algo", "ppo", *COMMON, "--reward", "highway", "--n-envs", "16"],
     },
