@@ -69,3 +69,16 @@ def test_highway_preset_reproduces_highway_envs_own_reward():
             break
     assert compared >= 3
     assert np.isfinite(ours)
+
+
+def test_highway_fast_preset_pays_speed_only_above_20_and_charges_collisions():
+    shaper = RewardShaper("highway_fast")
+    calm = world(speed_mps=20.0)
+    assert shaper(calm, calm, 1) == (0.0, {"collision": -0.0, "high_speed": 0.0})
+    fast = world(speed_mps=30.0)
+    assert shaper(calm, fast, 3)[0] == 1.0
+    reward, contributions = shaper(calm, world(speed_mps=25.0, events=Events(collided=True)), 1)
+    assert contributions == {"collision": -10.0, "high_speed": 0.5}
+    assert reward == -9.5
+    # no normalisation and no gate: a crawling step is worth nothing, a crash always costs 10
+    assert PRESETS["highway_fast"].normalize is None and PRESETS["highway_fast"].gate is None
