@@ -92,7 +92,52 @@ OSX = (
 )
 TOWN_TARGETS = {"privileged": (0.90, 0.75, 0.60), "image": (0.70, 0.50, 0.35)}
 
+HIGHWAY_PPO = "--algo ppo --obs kinematics --action meta --traffic regular --n-envs 16 --steps 100000 "
+HIGHWAY_PPO += "--eval-every 50000 --eval-episodes 10"  # the zoo's recipe (benchmarks/zoo_build.py)
+
 ENTRIES: tuple[Entry, ...] = (
+    Entry(
+        "highway",
+        "ppo",
+        "SB3 PPO, kinematics, meta actions, training reward highway_fast, gamma 0.95, 500 k steps "
+        "on 16 worlds",
+        _args(
+            "--env highway --algo ppo --obs kinematics --action meta --traffic regular "
+            "--reward highway_fast --n-envs 16 -H gamma=0.95 --steps 500000 --eval-every 250000 "
+            "--eval-episodes 10"
+        ),
+        reuse="competence-highway-ppo-fast-s{seed}",
+        reused_by="benchmarks/highway_competence.py",
+    ),
+    Entry(
+        "merge",
+        "ppo",
+        "SB3 PPO, kinematics, meta actions, the highway reward, 100 k steps on 16 worlds",
+        _args(f"--env merge {HIGHWAY_PPO} --reward highway"),
+    ),
+    Entry(
+        "roundabout",
+        "ppo",
+        "SB3 PPO, kinematics, meta actions, the highway reward, 100 k steps on 16 worlds",
+        _args(f"--env roundabout {HIGHWAY_PPO} --reward highway"),
+    ),
+    Entry(
+        "intersection",
+        "ppo",
+        "SB3 PPO, kinematics, meta actions, highway-env's intersection reward weights "
+        "(collision -5, high speed 1, arrival 1), 100 k steps on 16 worlds",
+        _args(f"--env intersection {HIGHWAY_PPO} --reward collision=-5,high_speed=1,arrival=1"),
+    ),
+    Entry(
+        "racetrack",
+        "ppo",
+        "SB3 PPO, continuous, LiDAR + 10-number ego state, the highway reward, 100 k steps on 16 worlds",
+        _args(
+            "--algo ppo --env racetrack --obs lidar,ego_state:features=10 --action continuous "
+            "--reward highway --traffic regular --n-envs 16 --steps 100000 --eval-every 50000 "
+            "--eval-episodes 5"
+        ),
+    ),
     Entry(
         "town",
         "expert",
@@ -197,7 +242,6 @@ ENTRIES: tuple[Entry, ...] = (
             judge="maps",
             reuse=f"generalisation/ppo-maps{maps}-s{{seed}}",
             reused_by="benchmarks/generalisation.py",
-            targets={"success": 0.80},
         )
         for maps in (1, 10, 100)
     ),  # fmt: skip
@@ -240,32 +284,35 @@ def _trained_steps(run: Path) -> int | None:
     return int(config.get("steps")) if config.get("steps") is not None else None
 
 
-def _report(entry: Entry, seed: int, episodes: int) -> dict:
-    """The entry's evaluation report for ``seed``, made when missing or too short."""
+def _report(entry: Entry, seed: int, episodes: int, make: bool = True) -> dict | None:
+    """The entry's evaluation report for ``seed``, made when missing or too short (without ``make``:
+    None then)."""
     run = entry.run_dir(seed)
     rel = str(run.relative_to(ROOT))
     if entry.judge == "nocrash":
-        path = run / "nocrash.json"
-        report = json.loads(path.read_text()) if path.exists() else None
-        if report is None or report["episodes_per_level"] < episodes:
-            _run(["benchmark", "nocrash", rel, "--town", "test", "--episodes", str(episodes)])
-            report = json.loads(path.read_text())
-        return report
-    if entry.judge == "maps":
-        start = UNSEEN_MAPS.split(":")[0]
-        path = run / f"eval-maps-{start}-{UNSEEN_MAPS.split(':')[1]}.json"
-        if not path.exists():
-            _run(["evaluate", rel, "--maps", UNSEEN_MAPS])
-        return json.loads(path.read_text())
-    out = REPORTS / f"{entry.scenario}-{entry.name}-s{seed}".replace(" ", "_").replace("(", "").replace(
-        ")", ""
-    )
-    path = out / "eval.json"
+        path, arguments = run / "nocrash.json", ["benchmark", "nocrash", rel, "--town", "test"]
+        arguments += ["--episodes", str(episodes)]
+        size = "episodes_per_level"
+    elif entry.judge == "maps":
+        start, count = UNSEEN_MAPS.split(":")
+        path, arguments, size = (
+            run / f"eval-maps-{start}-{count}.json",
+            ["evaluate", rel, "--maps", UNSEEN_MAPS],
+            None,
+        )
+    else:
+        name = f"{entry.scenario}-{entry.name}-s{seed}".replace(" ", "_").replace("(", "").replace(")", "")
+        out = REPORTS / name
+        path = out / "eval.json"
+        arguments = ["evaluate", rel, "--episodes", str(episodes), "--out", str(out.relative_to(ROOT))]
+        size = "episodes"
     report = json.loads(path.read_text()) if path.exists() else None
-    if report is None or report.get("episodes", 0) < episodes:
-        _run(["evaluate", rel, "--episodes", str(episodes), "--out", str(out.relative_to(ROOT))])
-        report = json.loads(path.read_text())
-    return report
+    if report is not None and (size is None or report[size] >= episodes):
+        return report
+    if not make:
+        return None
+    _run(arguments)
+    return json.loads(path.read_text())
 
 
 def _metrics(report: dict) -> dict:
@@ -282,8 +329,9 @@ def _metrics(report: dict) -> dict:
     }
 
 
-def measure(entry: Entry, seeds: list[int], episodes: int, train: bool) -> dict:
-    """Train (with ``train``, when missing) and judge every seed's run of ``entry``."""
+def measure(entry: Entry, seeds: list[int], episodes: int, train: bool, evaluate: bool = True) -> dict:
+    """Train (with ``train``, when missing) and judge every seed's run of ``entry`` (without
+    ``evaluate``, only from the reports already there: a seed without one is missing)."""
     seeds = [s for s in seeds if entry.seeds is None or s in entry.seeds]
     command = "drivelab " + shlex.join(entry.command("S"))
     record = {"scenario": entry.scenario, "name": entry.name, "what": entry.what, "judge": entry.judge,
@@ -297,11 +345,15 @@ def measure(entry: Entry, seeds: list[int], episodes: int, train: bool) -> dict:
                 continue
             timing = _run(entry.command(seed))
             (run / "leaderboard_timing.json").write_text(json.dumps(timing))
+        report = _report(entry, seed, episodes, make=evaluate)
+        if report is None:
+            record["missing"].append(seed)
+            continue
         record["seeds"][seed] = {
             "run": str(run.relative_to(ROOT)),
             "steps": _trained_steps(run),
             "training": _training_time(run),
-            "report": _report(entry, seed, episodes),
+            "report": report,
         }
     return record
 
@@ -372,6 +424,37 @@ def _verdict(rate: dict | None, target: float) -> str:
     return "not met" if rate["high"] < target else "undecided"
 
 
+# issue 19's competence targets per table: metric -> (at most / at least, value)
+JUNCTION_TARGETS = {"crash_rate": ("<=", 0.05), "success_rate": (">=", 0.90)}
+TARGETS = {
+    "highway": {"crash_rate": ("<=", 0.05), "mean_speed_mps": (">=", 25.0)},
+    "merge": JUNCTION_TARGETS,
+    "roundabout": JUNCTION_TARGETS,
+    "intersection": JUNCTION_TARGETS,
+    "racetrack": {"success_rate": (">=", 0.90)},
+    "blocks-unseen": {"success_rate": (">=", 0.80)},
+}
+
+
+def _target_verdict(summary: dict, targets: dict) -> str:
+    """ "met" when every metric's whole interval is on the target's side, "not met" when one
+    interval is wholly on the other side, else "undecided"."""
+    if not targets:
+        return "–"
+    verdicts = []
+    for key, (side, value) in targets.items():
+        interval = summary[key]
+        if interval is None:
+            return "–"
+        if side == ">=":
+            verdicts.append(_verdict(interval, value))
+        else:
+            verdicts.append(
+                "met" if interval["high"] <= value else "not met" if interval["low"] > value else "undecided"
+            )
+    return "not met" if "not met" in verdicts else "met" if set(verdicts) == {"met"} else "undecided"
+
+
 def _cost(summary: dict) -> str:
     steps = "/".join(f"{s:,}" for s in summary["steps"] if s) or "–"
     wall, cpu = summary["train_wall_s"], summary["train_cpu_s"]
@@ -394,7 +477,16 @@ def markdown(result: dict) -> str:
     by_scenario: dict[str, list[dict]] = {}
     for record in result["entries"]:
         by_scenario.setdefault(record["scenario"], []).append(record)
+    junction = (
+        "the 100 fixed evaluation episodes; success is arriving; target crash <= 5 % and success >= 90 %"
+    )
     titles = {
+        "highway": "Highway, regular traffic: fixed evaluation episodes, target crash <= 5 % at >= 25 m/s",
+        "merge": f"Merge: {junction}",
+        "roundabout": f"Roundabout: {junction}",
+        "intersection": f"Intersection: {junction}",
+        "racetrack": "Racetrack: fixed evaluation episodes, success is a whole episode without a crash "
+        "or leaving the road; target: >= 1 lap clean in >= 90 % of episodes",
         "town": "Town: NoCrash on the test town (success % and crash %; `episodes` routes per level)",
         "blocks-osx": 'Blocks, map "OSX" (seed 003\'s map): the fixed evaluation episodes',
         "blocks-unseen": f"Blocks, 100 unseen procedural maps (`--maps {UNSEEN_MAPS}`), target success 80 %",
@@ -431,9 +523,10 @@ def markdown(result: dict) -> str:
         else:
             lines += [
                 "| agent | seeds | episodes | success % | crash % | out of road % | mean speed m/s | return "
-                "| steps | train min (wall / CPU) |",
-                "|---|---|---|---|---|---|---|---|---|---|",
+                "| steps | train min (wall / CPU) | verdict vs target |",
+                "|---|---|---|---|---|---|---|---|---|---|---|",
             ]
+            targets = TARGETS.get(scenario, {})
             for r in measured:
                 s = r["summary"]
                 episodes = s["success_rate"]["episodes"] if s["success_rate"] else "–"
@@ -441,7 +534,7 @@ def markdown(result: dict) -> str:
                     f"| {r['name']} | {','.join(map(str, s['seeds']))} | {episodes} | "
                     f"{_rate(s['success_rate'])} | "
                     f"{_rate(s['crash_rate'])} | {_rate(s['off_road_rate'])} | {_num(s['mean_speed_mps'])} | "
-                    f"{_num(s['mean_return'])} | {_cost(s)} |"
+                    f"{_num(s['mean_return'])} | {_cost(s)} | {_target_verdict(s, targets)} |"
                 )
         lines += ["", "| agent | what | trained by | command (S = seed) |", "|---|---|---|---|"]
         lines += [f"| {r['name']} | {r['what']} | `{r['trained_by']}` | `{r['command']}` |" for r in measured]
@@ -459,7 +552,10 @@ def markdown(result: dict) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--scenarios", default=None, help="comma-separated tables (default: all)")
+    parser.add_argument(
+        "--scenarios", default=None, help="comma-separated tables to train and evaluate (default: all); "
+        "the other tables are made from the runs and reports already there",
+    )  # fmt: skip
     parser.add_argument("--seeds", default="0,1,2")
     parser.add_argument("--episodes", type=int, default=100)
     parser.add_argument("--train", action="store_true", help="train the entries' missing runs")
@@ -477,22 +573,24 @@ def main() -> None:
         print(f"error: {problem}", file=sys.stderr)
         raise SystemExit(2)
     seeds = [int(s) for s in args.seeds.split(",")]
-    entries = [e for e in ENTRIES if e.scenario in wanted]
     if args.list:
-        for entry in entries:
+        for entry in (e for e in ENTRIES if e.scenario in wanted):
             print(f"{entry.scenario:14} {entry.name:22} drivelab {shlex.join(entry.command(seeds[0]))}")
         return
     records = []
-    for entry in entries:
+    for entry in ENTRIES:
         print(f"[leaderboard] {entry.scenario} / {entry.name}", flush=True)
-        record = measure(entry, seeds, args.episodes, args.train)
+        chosen = entry.scenario in wanted
+        record = measure(entry, seeds, args.episodes, args.train and chosen, evaluate=chosen)
         if record["seeds"]:
             record["summary"] = summarise(record)
+        for seed_record in record["seeds"].values():  # the per-episode rows stay in the run's report
+            seed_record["report"].pop("per_episode", None)
         if entry.targets:
             record["targets"] = entry.targets
         records.append(record)
     result = {
-        "command": "python benchmarks/leaderboard.py " + shlex.join(sys.argv[1:]),
+        "command": ("python benchmarks/leaderboard.py " + shlex.join(sys.argv[1:])).strip(),
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "episodes": args.episodes,

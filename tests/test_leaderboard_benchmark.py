@@ -88,3 +88,15 @@ def test_bad_input_is_one_error_line(arguments):
     done = subprocess.run([sys.executable, str(SCRIPT), *arguments], capture_output=True, text=True)
     assert done.returncode == 2 and done.stderr.startswith("error:") and len(done.stderr.splitlines()) == 1
     assert (results.stat().st_mtime_ns if results.exists() else None) == before  # nothing written
+
+
+def test_target_verdict_reads_each_metrics_side(board):
+    met = {"crash_rate": {"low": 0.01, "high": 0.04}, "success_rate": {"low": 0.96, "high": 0.99}}
+    assert board._target_verdict(met, board.JUNCTION_TARGETS) == "met"
+    straddling = {**met, "crash_rate": {"low": 0.04, "high": 0.09}}
+    assert board._target_verdict(straddling, board.JUNCTION_TARGETS) == "undecided"
+    missed = {**straddling, "success_rate": {"low": 0.40, "high": 0.60}}
+    assert board._target_verdict(missed, board.JUNCTION_TARGETS) == "not met"
+    fast = {"crash_rate": met["crash_rate"], "mean_speed_mps": {"mean": 24.0, "low": 23.0, "high": 24.5}}
+    assert board._target_verdict(fast, board.TARGETS["highway"]) == "not met"
+    assert board._target_verdict(met, {}) == "–"
