@@ -3,7 +3,7 @@
 ``EpisodeRecorder`` wraps one world of an env (a ``DriveEnv``, or world ``k`` of a
 ``VectorDriveEnv``): while it steps, the compiled simulator runs its frames one call each and hands
 the batch after every frame to the recorder (``FastSimulator.on_frame``: the same episode, bit for
-bit, see ``frame_by_frame``), so a video has ``frames per step`` frames per policy step and plays
+bit, see ``run_frames``), so a video has ``frames per step`` frames per policy step and plays
 at the simulation frequency (highway-env's ``_automatic_rendering`` idea). highway-env's reference
 backend has no frame hook: there, one frame per policy step.
 
@@ -255,7 +255,6 @@ class EpisodeRecorder:
             )
         self.side_by_side = self.sensor is not None if side_by_side is None else side_by_side
         self.hooked = hasattr(self.vector.simulator, "on_frame")  # the compiled core's hook
-        self.frames_per_step = frames_per_step(env)
         self.fps = video_fps(env)
         self.episode = -1
         self.episode_return = 0.0

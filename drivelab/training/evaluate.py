@@ -62,8 +62,9 @@ def run_episodes(
         def show(new: list[np.ndarray], keep: bool = keep) -> None:
             if keep:
                 frames.extend(new)
-            for frame in new if on_frame is not None else ():
-                on_frame(frame)
+            if on_frame is not None:
+                for frame in new:
+                    on_frame(frame)
 
         if record:
             show([recorder.first_frame(episode)])

@@ -387,18 +387,11 @@ class BlocksSimulator(FastSimulator):
         self.apply_controls(controls)
         self.time_s += 1 / self.policy_frequency_hz
         self._update_lights(~restart)
-        if self.on_frame is None:
-            simulate_map_worlds(
-                self.vehicles, self.count, self.lanes, self.lane_start, self.lane_stop, self.idm, self.frames,
-                self.dt_s, self.regulation, ~restart, TRAFFIC_SPEED_MPS, self.road_arrays, self.light_start,
-                self.light_stop, self.light_state, EGO_MAX_SPEED_MPS,
-            )  # fmt: skip
-        else:
-            self.frame_by_frame(lambda frames: simulate_map_worlds(
-                self.vehicles, self.count, self.lanes, self.lane_start, self.lane_stop, self.idm, frames,
-                self.dt_s, self.regulation, ~restart, TRAFFIC_SPEED_MPS, self.road_arrays, self.light_start,
-                self.light_stop, self.light_state, EGO_MAX_SPEED_MPS,
-            ))  # fmt: skip
+        self.run_frames(lambda frames: simulate_map_worlds(
+            self.vehicles, self.count, self.lanes, self.lane_start, self.lane_stop, self.idm, frames,
+            self.dt_s, self.regulation, ~restart, TRAFFIC_SPEED_MPS, self.road_arrays, self.light_start,
+            self.light_stop, self.light_state, EGO_MAX_SPEED_MPS,
+        ))  # fmt: skip
         clear_dead_ends(
             self.vehicles, self.count, self.ego, self.lanes, self.lane_start, self.lane_stop, self.dead_end
         )

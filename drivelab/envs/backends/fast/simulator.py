@@ -742,15 +742,9 @@ class FastSimulator:
             restart = np.zeros(self.num_worlds, dtype=bool)
         restart = np.asarray(restart, dtype=bool)
         self.apply_controls(controls)
-        if self.on_frame is None:
-            T.simulate_worlds(
-                self.vehicles, self.count, self.lanes, self.idm, self.frames, self.dt_s, self.regulation,
-                ~restart,
-            )  # fmt: skip
-        else:
-            self.frame_by_frame(lambda frames: T.simulate_worlds(
-                self.vehicles, self.count, self.lanes, self.idm, frames, self.dt_s, self.regulation, ~restart
-            ))  # fmt: skip
+        self.run_frames(lambda frames: T.simulate_worlds(
+            self.vehicles, self.count, self.lanes, self.idm, frames, self.dt_s, self.regulation, ~restart
+        ))  # fmt: skip
         self.time_s += 1 / self.policy_frequency_hz
         if self.traffic_flow:  # IntersectionEnv.step: clear, then maybe spawn
             clear_departed(self.vehicles, self.count, self.ego, self.lanes, self._road.exit_lane)
@@ -760,12 +754,15 @@ class FastSimulator:
         self.batch = self._export()
         return self.batch
 
-    def frame_by_frame(self, simulate: Callable[[int], None]) -> None:
-        """Recording: the step's frames as ``frames`` calls of ``simulate(1)``, ``on_frame`` shown
-        the batch after each. The kernels keep nothing from one frame to the next outside the
-        arrays they are given (their scratch is refilled every frame), so these are the frames of
-        one ``simulate(frames)`` call, bit for bit; the batches skip the route projection, which
-        runs once per step."""
+    def run_frames(self, simulate: Callable[[int], None]) -> None:
+        """The step's simulation frames: one compiled call ``simulate(frames)``; while recording
+        (``on_frame`` set), ``frames`` calls of ``simulate(1)``, ``on_frame`` shown the batch after
+        each. The kernels keep nothing from one frame to the next outside the arrays they are
+        given (their scratch is refilled every frame), so both give the same frames, bit for bit;
+        the recorded batches skip the route projection, which runs once per step."""
+        if self.on_frame is None:
+            simulate(self.frames)
+            return
         for _ in range(self.frames):
             simulate(1)
             self.on_frame(self._export())

@@ -228,18 +228,11 @@ class TownSimulator(FastSimulator):
         self.time_s[active] += 1 / self.policy_frequency_hz  # the lights read the step's end time
         self._update_lights(active)
         kernel = _PARALLEL if k > 1 and numba.get_num_threads() > 1 else _SERIAL
-        if self.on_frame is None:
-            kernel(
-                self.vehicles, self.count, self.ego, self.peds, self.pcount, self.lanes, self.idm,
-                self.coords, self.done, self.trig, *self.road_args, self.light_state, self.rng_words,
-                self.frames, self.dt_s, active,
-            )  # fmt: skip
-        else:
-            self.frame_by_frame(lambda frames: kernel(
-                self.vehicles, self.count, self.ego, self.peds, self.pcount, self.lanes, self.idm,
-                self.coords, self.done, self.trig, *self.road_args, self.light_state, self.rng_words,
-                frames, self.dt_s, active,
-            ))  # fmt: skip
+        self.run_frames(lambda frames: kernel(
+            self.vehicles, self.count, self.ego, self.peds, self.pcount, self.lanes, self.idm,
+            self.coords, self.done, self.trig, *self.road_args, self.light_state, self.rng_words,
+            frames, self.dt_s, active,
+        ))  # fmt: skip
         ego_rows = self.vehicles[worlds, self.ego]
         lane = ego_rows[:, T.LANE].astype(np.int64)
         light = self.arrays.light[previous_lane]
