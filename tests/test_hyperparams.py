@@ -45,6 +45,19 @@ def test_sb3_models_start_from_the_files_default_entry():
     assert (model.gamma, model.buffer_size, model.learning_starts) == (0.8, 15_000, 7)
 
 
+def test_a2c_takes_policy_kwargs_and_leaves_them_as_given():
+    """SB3's A2C adds its optimizer class to ``policy_kwargs`` in place: the run's values stay
+    as given (and JSON, as the model saves them)."""
+    import gymnasium
+
+    from drivelab.agents.sb3 import build_sb3
+
+    given = {"policy_kwargs": {"net_arch": [8]}, "n_steps": 4}
+    model = build_sb3("a2c", gymnasium.make("CartPole-v1"), 0, given, None)
+    assert given == {"policy_kwargs": {"net_arch": [8]}, "n_steps": 4}
+    assert model.drivelab_hyperparams == given and model.policy_kwargs["net_arch"] == [8]
+
+
 def test_lookups_are_independent_copies():
     first = shipped_hyperparams("ppo", "highway")
     first["policy_kwargs"]["net_arch"]["pi"].append(1)

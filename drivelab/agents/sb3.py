@@ -15,6 +15,7 @@ As SB3's ``load`` given an environment, a loaded model has no last observation, 
 
 from __future__ import annotations
 
+import copy
 import json
 import zipfile
 from collections import deque
@@ -173,7 +174,9 @@ def build_sb3(algo: str, env: gym.Env, seed: int, hyperparams: dict, log_dir: Pa
     ``drivelab/hyperparams/<algo>.yaml`` (highway-env's documented SB3 examples, else SB3's own).
     Every value is checked first (``sb3_params``)."""
     defaults = shipped_hyperparams(algo, "default")
-    kwargs = check_sb3_hyperparams(algo, {"device": "cpu", **defaults, **hyperparams})
+    saved = json.loads(json.dumps(dict(hyperparams)))  # saved with the model, as given
+    # a copy: SB3 fills some values in place (A2C puts its optimizer class into policy_kwargs)
+    kwargs = check_sb3_hyperparams(algo, copy.deepcopy({"device": "cpu", **defaults, **hyperparams}))
     extractor = kwargs.pop("features_extractor", "sb3")
     if extractor == "seed":
         kwargs["policy_kwargs"] = {**seed_network_kwargs(algo, env.observation_space),
@@ -183,7 +186,7 @@ def build_sb3(algo: str, env: gym.Env, seed: int, hyperparams: dict, log_dir: Pa
     model = get_algo(algo).agent_class()(
         policy_for(env.observation_space), env, seed=seed, verbose=0, **kwargs
     )
-    model.drivelab_hyperparams = json.loads(json.dumps(dict(hyperparams)))  # saved with the model
+    model.drivelab_hyperparams = saved
     return model
 
 

@@ -48,6 +48,9 @@ RENDER_SIZE_HW, RENDER_PIXELS_PER_M = (256, 512), 4.0
 # and every run, seed and algorithm is evaluated on the same episodes.
 TRAINING_SEED_LIMIT = 2**31 - 1
 EVALUATION_SEED_BASE = 2**31
+# Tuning selects hyper-parameters on validation episodes, the evaluation range from here on, so
+# that no test episode (the first ones: every report, the leaderboard) chooses a configuration.
+VALIDATION_START = 1_000_000
 
 
 def evaluation_seeds(count: int, start: int = 0) -> np.ndarray:

@@ -26,6 +26,7 @@ def run_episodes(
     on_episode: Callable[[dict], None] | None = None,
     on_frame: Callable[[np.ndarray], None] | None = None,
     side_by_side: bool | None = None,
+    first: int = 0,
 ) -> tuple[list[dict], list[np.ndarray]]:
     """Play ``episodes`` episodes; return each one's ``episode_metrics`` and, optionally, the
     video frames of the first episode. ``on_episode`` is called with each episode's metrics,
@@ -41,6 +42,8 @@ def run_episodes(
         first episode of the env seeded ``seed + e`` (a protocol's own seeds, as NoCrash's).
     :param side_by_side: show the agent's image observation left of the scene; None: when it
         has one (camera, birdeye, topdown).
+    :param first: with ``seed`` None, play evaluation episodes ``first`` … ``first + episodes −
+        1`` (``VALIDATION_START``: tuning's validation episodes).
     """
     from drivelab.envs.vector import evaluation_seeds
 
@@ -50,7 +53,7 @@ def run_episodes(
 
         recorder = EpisodeRecorder(env, side_by_side)
     results, frames = [], []
-    fixed = evaluation_seeds(episodes) if seed is None else None
+    fixed = evaluation_seeds(episodes, first) if seed is None else None
     for episode in range(episodes):
         if fixed is None:
             obs, _ = env.reset(seed=seed + episode)
@@ -140,6 +143,7 @@ def evaluate_run(
     out_dir: str | Path | None = None,
     maps: str | None = None,
     side_by_side: bool | None = None,
+    first: int = 0,
 ) -> dict:
     """Evaluate the final model of ``run_dir`` (or its latest checkpoint); write eval.json (and
     the video) into ``out_dir`` (default: the run directory; created if missing).
@@ -150,6 +154,8 @@ def evaluate_run(
         plays map START + (2**31 + e) mod COUNT, so COUNT episodes play each map once.
     :param side_by_side: the video shows the agent's image observation beside the scene; None:
         when it has one.
+    :param first: play evaluation episodes ``first`` … (``run_episodes``); the report says so
+        (``first_episode``) when it is not 0.
     """
     from drivelab.envs.core import DriveEnv
     from drivelab.envs.video import video_fps
@@ -173,8 +179,12 @@ def evaluate_run(
         out_dir = make_out_dir(Path(out_dir))
         check_writable(out_dir, name)
     policy = lambda obs: agent.predict(obs, deterministic=deterministic)[0]  # noqa: E731
-    results, frames = run_episodes(policy, env, episodes, record_first=video, side_by_side=side_by_side)
+    results, frames = run_episodes(
+        policy, env, episodes, record_first=video, side_by_side=side_by_side, first=first
+    )
     report = {"run": str(run_dir), "algo": config.algo, "env": config.env, **aggregate(results)}
+    if first:
+        report["first_episode"] = first
     if maps is not None:
         report["maps"] = config.eval_maps
     if video:

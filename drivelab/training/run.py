@@ -103,9 +103,10 @@ class RunCallback(BaseCallback):
         worlds: TrainingWorlds,
         stop: StopRequest,
         on_evaluation: Callable[[int, dict], bool | None] | None = None,
+        eval_first: int = 0,
     ) -> None:
         super().__init__()
-        self.on_evaluation, self.halted = on_evaluation, False
+        self.on_evaluation, self.halted, self.eval_first = on_evaluation, False, eval_first
         self.run_dir, self.config, self.eval_env = run_dir, config, eval_env
         self.worlds, self.stop = worlds, stop
         self.save_replay = get_algo(config.algo).sb3_replay
@@ -177,6 +178,7 @@ class RunCallback(BaseCallback):
             self.eval_env,
             self.config.eval_episodes,
             record_first=self.config.eval_video,
+            first=self.eval_first,
         )
         summary = aggregate(results)
         row = {"step": self.num_timesteps, **summary}
@@ -287,11 +289,14 @@ def train(
     config: RunConfig,
     runs_root: str | Path = "runs",
     on_evaluation: Callable[[int, dict], bool | None] | None = None,
+    eval_first: int = 0,
 ) -> Path:
     """Train a new run; every input is validated (the agent built once) before anything is written.
 
     :param on_evaluation: called after each periodic evaluation with (step, its summary); False
         stops the run there, checkpointed, with ``StoppedByEvaluation`` (a pruned tuning trial).
+    :param eval_first: the periodic evaluations play evaluation episodes ``eval_first`` … (a tuning
+        trial: the validation episodes, ``VALIDATION_START``).
     """
     from drivelab.envs.core import DriveEnv
 
@@ -312,7 +317,7 @@ def train(
         if isinstance(exc, (TypeError, ValueError)) and not isinstance(exc, UsageError):
             raise UsageError(f"bad hyperparameters for {config.algo!r}: {exc}") from None
         raise
-    _learn(model, run_dir, config, eval_env, worlds, on_evaluation)
+    _learn(model, run_dir, config, eval_env, worlds, on_evaluation, eval_first)
     return run_dir
 
 
@@ -320,6 +325,7 @@ def resume(
     run_dir: str | Path,
     steps: int | None = None,
     on_evaluation: Callable[[int, dict], bool | None] | None = None,
+    eval_first: int = 0,
 ) -> Path:
     """Continue a run from its latest checkpoint up to ``steps`` (default: its configured total).
 
@@ -329,7 +335,7 @@ def resume(
     and evaluations.csv to the rows it had written, progress.csv to its step) and the results of
     the older model (eval.json, eval-maps-*.json, nocrash.json, learning_curve.png, model.zip) are
     removed.
-    ``on_evaluation``: as for ``train``.
+    ``on_evaluation``, ``eval_first``: as for ``train``.
     """
     run_dir = Path(run_dir)
     config = load_run_config(run_dir)
@@ -353,7 +359,7 @@ def resume(
         warn_inexact()
     else:
         restore(model, worlds, snapshot)
-    _learn(model, run_dir, config, eval_env, worlds, on_evaluation)
+    _learn(model, run_dir, config, eval_env, worlds, on_evaluation, eval_first)
     return run_dir
 
 
@@ -375,7 +381,8 @@ def _load_checkpoint(config: RunConfig, run_dir: Path, manifest: dict):
 
 
 def _learn(model, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWorlds,
-           on_evaluation: Callable[[int, dict], bool | None] | None = None) -> None:  # fmt: skip
+           on_evaluation: Callable[[int, dict], bool | None] | None = None,
+           eval_first: int = 0) -> None:  # fmt: skip
     """Train to ``config.steps``, then save the final checkpoint, model and learning curve.
 
     SIGINT/SIGTERM stop at the next step: the run is put back to the last safe point's snapshot
@@ -384,7 +391,7 @@ def _learn(model, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWo
     """
     model.set_logger(configure(str(run_dir), ["csv", "tensorboard"]))
     with StopRequest() as stop:
-        callback = RunCallback(run_dir, config, eval_env, worlds, stop, on_evaluation)
+        callback = RunCallback(run_dir, config, eval_env, worlds, stop, on_evaluation, eval_first)
         try:
             model.learn(
                 total_timesteps=config.steps - model.num_timesteps,

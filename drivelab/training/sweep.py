@@ -217,7 +217,14 @@ def plan(sweep: Sweep) -> list[tuple[Cell, str]]:
     ]
 
 
-def run_cell(config_values: dict, runs_dir: str, action: str, eval_episodes: int, on_evaluation=None) -> dict:
+def run_cell(
+    config_values: dict,
+    runs_dir: str,
+    action: str,
+    eval_episodes: int,
+    on_evaluation=None,
+    eval_first: int = 0,
+) -> dict:
     """Do one cell's work in a worker (process-pool worker or Ray task); never raises.
 
     Output (progress bars, warnings) goes to ``runs_dir/.sweep-logs/<name>.log``.
@@ -225,6 +232,8 @@ def run_cell(config_values: dict, runs_dir: str, action: str, eval_episodes: int
     :param on_evaluation: called after each periodic evaluation as ``on_evaluation(step, summary)``
         (``run.train``); returning False stops the run there, checkpointed (a pruned tuning trial:
         ``drivelab.training.tune``). It must pickle for the process pool and Ray.
+    :param eval_first: the periodic and final evaluations play evaluation episodes ``eval_first``
+        … (tuning's validation episodes).
     :returns: ``{"name", "action", "ok", "seconds", "error", "stopped"}``; ``stopped``: the step at
         which ``on_evaluation`` stopped the run (no final evaluation then), else None.
     """
@@ -249,11 +258,11 @@ def run_cell(config_values: dict, runs_dir: str, action: str, eval_episodes: int
             if action == "restart":
                 shutil.rmtree(run_dir)
             if action in ("train", "restart"):
-                run.train(config, root, on_evaluation=on_evaluation)
+                run.train(config, root, on_evaluation=on_evaluation, eval_first=eval_first)
             elif action == "resume":
-                run.resume(run_dir, config.steps, on_evaluation=on_evaluation)
+                run.resume(run_dir, config.steps, on_evaluation=on_evaluation, eval_first=eval_first)
             if eval_episodes and action != "skip":
-                evaluate_run(run_dir, episodes=eval_episodes)
+                evaluate_run(run_dir, episodes=eval_episodes, first=eval_first)
         except run.StoppedByEvaluation as stop:
             outcome["stopped"] = stop.steps
         except BaseException as exc:  # noqa: BLE001 - reported to the driver, which goes on

@@ -26,7 +26,9 @@ plus the study's own keys::
       batch_size: {type: categorical, choices: [32, 64, 128]}
 
 Every trial is a run directory ``<study_dir>/trial-NNNN`` (``drivelab compare`` reads them), all
-trained with the study's seed, so every trial is evaluated on the same episodes. The study lives
+trained with the study's seed, so every trial is evaluated on the same episodes: the scenario's
+validation episodes (``VALIDATION_START`` on), never its first evaluation episodes, the test
+episodes of every report and of the leaderboard, so no tuned value is chosen on them. The study lives
 in ``<study_dir>/study.journal`` (Optuna's journal file): a killed study, run again, re-dispatches
 the trials that were running (their runs resume from their latest checkpoint) and then asks for
 the missing ones. When it ends it writes ``summary.md``, ``summary.json``, ``trials.csv`` and
@@ -421,6 +423,8 @@ def run_study(
             outcomes.append(outcome)
 
         def job(number: int, trial_id: int, params: dict) -> dict | None:
+            from drivelab.envs.vector import VALIDATION_START
+
             config = study.trial_config(number, params)
             action = cell_action(folder / config.name, config, study.final_eval_episodes)
             if action == "skip":  # finished before its study was killed: only the tell is missing
@@ -430,7 +434,8 @@ def run_study(
             by_name[config.name] = number
             reporter = TrialReporter(str(folder), study.name, trial_id, study.metric, study.pruner)
             return {"config_values": config.to_dict(), "runs_dir": str(folder), "action": action,
-                    "eval_episodes": study.final_eval_episodes, "on_evaluation": reporter}  # fmt: skip
+                    "eval_episodes": study.final_eval_episodes, "on_evaluation": reporter,
+                    "eval_first": VALIDATION_START}  # fmt: skip
 
         decode = {p.name: p.decode for p in study.space}
 

@@ -8,6 +8,7 @@ from drivelab.envs.core import DriveEnv
 from drivelab.envs.vector import (
     EVALUATION_SEED_BASE,
     TRAINING_SEED_LIMIT,
+    VALIDATION_START,
     VectorDriveEnv,
     evaluation_seeds,
 )
@@ -48,20 +49,62 @@ def test_bad_episode_seeds_are_refused(bad):
         vector.reset(options={"episode_seeds": bad})
 
 
-def test_run_episodes_plays_the_evaluation_set_whatever_the_env_seed():
-    seen = []
-
+def _recording_env(seen: list):
     class Recording(DriveEnv):
         def reset(self, *, seed=None, options=None):
             obs, info = super().reset(seed=seed, options=options)
             seen.append(info["episode_seed"])
             return obs, info
 
+    return Recording("highway", obs="kinematics", duration_s=2)
+
+
+def test_run_episodes_plays_the_evaluation_set_whatever_the_env_seed():
+    seen = []
     for env_seed in (0, 1):
-        env = Recording("highway", obs="kinematics", duration_s=2)
+        env = _recording_env(seen)
         env.reset(seed=env_seed)
         seen.clear()
         space = env.action_space
         results, _ = evaluate.run_episodes(lambda obs, space=space: space.sample(), env, 3)
         assert len(results) == 3
         assert seen == evaluation_seeds(3).tolist()
+
+
+def test_validation_episodes_are_not_test_episodes():
+    """Tuning's episodes (``first=VALIDATION_START``) follow on from the test episodes every
+    report plays, and share none with the leaderboard's 100 (or any report's first 10,000)."""
+    seen = []
+    env = _recording_env(seen)
+    space = env.action_space
+    evaluate.run_episodes(lambda obs: space.sample(), env, 3, first=VALIDATION_START)
+    assert seen == evaluation_seeds(3, start=VALIDATION_START).tolist()
+    assert min(seen) > max(evaluation_seeds(10_000).tolist())
+
+
+def test_a_tuning_trial_is_judged_on_validation_episodes(tmp_path, monkeypatch):
+    """run_cell (a sweep cell, a tuning trial) passes ``eval_first`` to the periodic evaluations
+    and to the final one, whose report says where its episodes start."""
+    import json
+
+    from drivelab.training.sweep import run_cell
+
+    played = []
+    original = evaluate.run_episodes
+
+    def recording(*args, first=0, **kwargs):
+        played.append(first)
+        return original(*args, first=first, **kwargs)
+
+    monkeypatch.setattr(evaluate, "run_episodes", recording)
+    monkeypatch.setattr("drivelab.training.run.run_episodes", recording)
+    values = {
+        "name": "trial", "algo": "ppo", "env": "highway", "obs": "kinematics", "traffic": "empty",
+        "backend": "fast", "env_options": {"duration_s": 2}, "steps": 32, "eval_every": 16,
+        "eval_episodes": 1, "hyperparams": {"n_steps": 16, "batch_size": 16, "n_epochs": 1},
+    }  # fmt: skip
+    outcome = run_cell(values, str(tmp_path), "train", 2, eval_first=VALIDATION_START)
+    assert outcome["ok"], outcome["error"]
+    assert played == [VALIDATION_START] * 3  # evaluations at steps 16 and 32, then the final one
+    report = json.loads((tmp_path / "trial" / "eval.json").read_text())
+    assert report["first_episode"] == VALIDATION_START and report["episodes"] == 2
