@@ -80,25 +80,164 @@ def camera_view(batch: WorldBatch, camera: Camera) -> View:
 
 
 def draw_scene(batch: WorldBatch, camera: Camera, out: np.ndarray | None = None) -> np.ndarray:
-    """The K worlds' scenes (K, H, W, 3) uint8 seen by ``camera`` (into ``out`` when given)."""
+    """The K worlds' scenes (K, H, W, 3) uint8 seen by ``camera`` (into ``out`` when given).
+
+    The map camera copies each frame's road from its map's ``Backdrop`` (the road drawn once) and
+    draws only what moves over it; its view moves in whole pixels (``map_view``)."""
     if out is None:
         out = np.empty((batch.num_worlds, *camera.size_hw, 3), dtype=np.uint8)
-    view = camera_view(batch, camera)
-    draw_birdeye(batch, out, camera.pixels_per_meter, view)
-    if not camera.along_road:  # a small ego in a large map: ring it
-        centre = view.pixels(batch.ego.position[:, None])[:, 0]  # (K, 2) column, row
-        radius = int(round(4.0 * camera.pixels_per_meter))
-        for image, (column, row) in zip(out, np.round(centre).astype(int), strict=True):
-            cv2.circle(image, (int(column), int(row)), radius, EGO_RING, 2, cv2.LINE_AA)
+    if camera.along_road:
+        draw_birdeye(batch, out, camera.pixels_per_meter, camera_view(batch, camera))
+        return out
+    view = map_view(batch, camera)
+    for k in range(batch.num_worlds):
+        if not backdrop(batch, k, camera).copy_into(out[k], view.positions[k]):  # off its map
+            one = View(view.positions[k : k + 1], view.headings[k : k + 1], view.size_hw, view.ppm)
+            draw_birdeye(batch.select(np.array([k])), out[k : k + 1], view.ppm, one, layers="road")
+    draw_birdeye(batch, out, camera.pixels_per_meter, view, layers="moving")
+    ring_egos(batch, out, view)
     return out
 
 
-# --- the strip --------------------------------------------------------------------------------
-@lru_cache(maxsize=4)
-def _font(size: int):
-    from PIL import ImageFont
+def ring_egos(batch: WorldBatch, out: np.ndarray, view: View) -> None:
+    """A ring around each ego of ``out`` (K, H, W, 3): a small ego in a large map."""
+    centre = view.pixels(batch.ego.position[:, None])[:, 0]
+    radius = int(round(4.0 * view.ppm))
+    for image, (column, row) in zip(out, np.round(centre).astype(int), strict=True):
+        cv2.circle(image, (int(column), int(row)), radius, EGO_RING, 2, cv2.LINE_AA)
 
-    return ImageFont.load_default(size=size)
+
+class Backdrop:
+    """A map's road layer (grass, lanes, markings, crossings: ``draw_birdeye(layers="road")``)
+    drawn once over the whole map, and a frame margin around it, at a north-up camera's scale.
+
+    A frame of that camera whose centre falls on a whole pixel of the backdrop is the backdrop's
+    window around it, then the moving layer: a long video draws its map once, not every frame.
+    """
+
+    def __init__(self, batch: WorldBatch, k: int, camera: Camera) -> None:
+        from drivelab.perception.topdown import LanePolygons
+
+        self.road, self.camera = batch.road_of(k), camera
+        vertices = self.road.derived(LanePolygons, LanePolygons).vertices
+        low, high = vertices.min(axis=0), vertices.max(axis=0)
+        centre = (low + high) / 2
+        corners = np.array([[low[0], low[1]], [high[0], high[1]]])
+        probe = View(centre, -np.pi / 2, (2, 2), camera.pixels_per_meter)  # north up, as the camera
+        span = np.abs(np.subtract(*probe.pixels_of(0, corners)))  # (columns, rows) the map covers
+        height, width = (np.ceil(span[::-1]).astype(int) + np.array(camera.size_hw) + 4).tolist()
+        self.view = View(centre, -np.pi / 2, (height, width), camera.pixels_per_meter)
+        self.image = np.empty((1, height, width, 3), dtype=np.uint8)
+        one = batch.select(np.array([k]))
+        draw_birdeye(one, self.image, camera.pixels_per_meter, self.view, layers="road")
+        self.image = self.image[0]
+
+    def window(self, centre: np.ndarray) -> tuple[int, int]:
+        """The backdrop's (row, column) of the top-left pixel of a frame centred at ``centre``
+        (a frame on whole pixels of the backdrop: ``map_view``)."""
+        column, row = self.view.pixels_of(0, centre)
+        height, width = self.camera.size_hw
+        return int(round(row - (height / 2 - 0.5))), int(round(column - (width / 2 - 0.5)))
+
+    def copy_into(self, image: np.ndarray, centre: np.ndarray) -> bool:
+        """Copy the window of the frame centred at ``centre`` into ``image``; False (nothing
+        copied) when it is not all on the backdrop."""
+        row, column = self.window(centre)
+        height, width = self.camera.size_hw
+        if min(row, column) < 0 or row + height > len(self.image) or column + width > self.image.shape[1]:
+            return False
+        image[:] = self.image[row : row + height, column : column + width]
+        return True
+
+
+_BACKDROPS: list[Backdrop] = []  # the latest few (block maps change every episode)
+
+
+def backdrop(batch: WorldBatch, k: int, camera: Camera) -> Backdrop:
+    """World ``k``'s map's backdrop for ``camera``, drawn at its first use."""
+    road = batch.road_of(k)
+    for found in _BACKDROPS:
+        if found.road is road and found.camera == camera:
+            return found
+    made = Backdrop(batch, k, camera)
+    _BACKDROPS.insert(0, made)
+    del _BACKDROPS[4:]
+    return made
+
+
+def map_view(batch: WorldBatch, camera: Camera) -> View:
+    """The north-up camera of each world (``camera_view``), its centre moved by at most half a
+    pixel each way so that the frame's pixels are whole pixels of its map's backdrop: a frame is
+    then a window of it."""
+    view = camera_view(batch, camera)
+    centres = view.positions.copy()
+    half = np.array(camera.size_hw[::-1]) / 2 - 0.5  # the centre's (column, row) in a frame
+    for k in range(batch.num_worlds):
+        pixel = backdrop(batch, k, camera).view.pixels_of(0, centres[k])
+        # pixels of a north-up view: column = … + x·ppm, row = … + y·ppm (x right, y down)
+        centres[k] += (np.round(pixel - half) + half - pixel) / camera.pixels_per_meter
+    return View(centres, view.headings, view.size_hw, view.ppm)
+
+
+# --- the strip --------------------------------------------------------------------------------
+class Glyphs:
+    """Pillow's default font at one size, each word drawn once: a line of text is its words'
+    coverage masks laid side by side at their advances, blended in one go (what Pillow's
+    ``ImageDraw.text`` draws, without laying out and rasterising every frame: a strip's words and
+    numbers repeat from frame to frame)."""
+
+    LIMIT = 4096  # words kept
+
+    def __init__(self, size: int) -> None:
+        from PIL import ImageFont
+
+        self.font = ImageFont.load_default(size=size)
+        self.height = size + size // 2  # room for descenders
+        self.space = self.font.getlength(" ")
+        self.masks: dict[str, tuple[np.ndarray, float]] = {}
+
+    def word(self, word: str) -> tuple[np.ndarray, float]:
+        """``word``'s coverage (height, w) uint8 and its advance in pixels."""
+        found = self.masks.get(word)
+        if found is None:
+            from PIL import Image, ImageDraw
+
+            if len(self.masks) >= self.LIMIT:
+                self.masks.clear()
+            width = max(int(np.ceil(self.font.getbbox(word)[2])), 1)
+            picture = Image.new("L", (width, self.height))
+            ImageDraw.Draw(picture).text((0, 0), word, fill=255, font=self.font)
+            found = self.masks[word] = (np.asarray(picture), self.font.getlength(word))
+        return found
+
+    def width(self, text: str) -> float:
+        words = text.split(" ")
+        return sum(self.word(word)[1] for word in words if word) + self.space * (len(words) - 1)
+
+    def draw(self, image: np.ndarray, xy: tuple[float, int], text: str, colour) -> None:
+        """Write ``text`` on ``image`` (H, W, 3) uint8 in place, its top-left at ``xy``."""
+        left, top = int(round(xy[0])), xy[1]
+        right = min(left + int(np.ceil(self.width(text))) + self.height, image.shape[1])
+        if left >= right:
+            return
+        band = image[top : top + self.height, left:right]  # only the columns the text covers
+        coverage = np.zeros(band.shape[:2], dtype=np.uint8)
+        x = 0.0
+        for word in text.split(" "):
+            if word:
+                mask, advance = self.word(word)
+                column = int(round(x))
+                part = coverage[: mask.shape[0], column : column + mask.shape[1]]
+                np.maximum(part, mask[: part.shape[0], : part.shape[1]], out=part)
+                x += advance
+            x += self.space
+        alpha = coverage[..., None].astype(np.float32) / 255.0
+        band[:] = (band * (1.0 - alpha) + np.asarray(colour, dtype=np.float32) * alpha + 0.5).astype(np.uint8)
+
+
+@lru_cache(maxsize=4)
+def _glyphs(size: int) -> Glyphs:
+    return Glyphs(size)
 
 
 @dataclass(frozen=True)
@@ -116,27 +255,22 @@ class Caption:
 
 def draw_strip(strip: np.ndarray, caption: Caption) -> None:
     """Write ``caption`` on ``strip`` (S, W, 3) uint8, in place (Pillow's default font)."""
-    from PIL import Image, ImageDraw
-
     strip[:] = STRIP_BACKGROUND
-    picture = Image.fromarray(strip)
-    draw = ImageDraw.Draw(picture)
-    font = _font(15)
+    glyphs = _glyphs(15)
     reward = "-" if caption.reward is None else f"{caption.reward:+.3f}"
     first = (
         f"episode {caption.episode + 1}   t {caption.time_s:5.1f} s   "
         f"speed {caption.speed_mps:5.1f} m/s  {caption.speed_mps * 3.6:5.1f} km/h"
     )
     second = f"action {caption.action}   reward {reward}   return {caption.episode_return:+.2f}"
-    draw.text((8, 5), first, fill=TEXT, font=font)
-    draw.text((8, 26), second, fill=TEXT, font=font)
+    glyphs.draw(strip, (8, 5), first, TEXT)
+    glyphs.draw(strip, (8, 26), second, TEXT)
     right = strip.shape[1] - 8
     for event in reversed(caption.events):  # right-aligned badges
-        width = draw.textlength(event, font=font) + 12
-        draw.rectangle((right - width, 6, right, 40), fill=EVENT_COLOURS.get(event, (200, 60, 50)))
-        draw.text((right - width + 6, 14), event, fill=(255, 255, 255), font=font)
+        width = int(round(glyphs.width(event))) + 12
+        cv2.rectangle(strip, (right - width, 6), (right, 40), EVENT_COLOURS.get(event, (200, 60, 50)), -1)
+        glyphs.draw(strip, (right - width + 6, 14), event, (255, 255, 255))
         right -= width + 6
-    strip[:] = np.asarray(picture)
 
 
 def events_of(batch: WorldBatch, k: int, end_of_step: bool) -> tuple[str, ...]:

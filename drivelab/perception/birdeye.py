@@ -134,8 +134,15 @@ def markings_in_sight(
     return found
 
 
+LAYERS = ("all", "road", "moving")
+
+
 def draw_birdeye(
-    batch: WorldBatch, out: np.ndarray, pixels_per_meter: float, view: View | None = None
+    batch: WorldBatch,
+    out: np.ndarray,
+    pixels_per_meter: float,
+    view: View | None = None,
+    layers: str = "all",
 ) -> None:
     """Draw the K worlds' bird's-eye images into ``out`` (K, H, W, 3) uint8 (see ``render_birdeye``).
 
@@ -145,42 +152,56 @@ def draw_birdeye(
 
     :param view: the camera of each world (centre (K, 2), the world direction drawn upwards (K,),
         ``out``'s size and ``pixels_per_meter``); default each ego's, heading up (the sensor's).
+    :param layers: "all"; "road": only what never moves (grass, lanes, markings, crossings), which
+        a video draws once per map (``envs/video.py``); "moving": only the rest (route, lights,
+        traffic, ego), over what ``out`` holds. "road" then "moving" draws the route above the
+        markings, "all" below them.
     """
+    if layers not in LAYERS:
+        raise ValueError(f"layers must be one of {LAYERS}, got {layers!r}")
     count = batch.num_worlds
     size_hw = out.shape[1:3]
     view = View.of(batch, size_hw, pixels_per_meter) if view is None else view
-    width_px = max(int(round(ROUTE_WIDTH_M * pixels_per_meter)), 1)
-    routes = view.polylines(batch.route.polyline, batch.route.count, width_px)
-    lights = batch.traffic_lights  # (K, L, 4)
-    bars = stop_bars(lights)  # (K, L, 5)
-    ego = batch.ego
-    ego_boxes = np.column_stack([ego.position, ego.heading, ego.length_m, ego.width_m])[:, None]
-    columns = [0, 1, 2, 4, 5]  # vehicle rows → rectangles x, y, heading, length, width
-    # every rectangle of every world moved to its ego frame and culled in one pass
-    (bar_corners, bars_seen), (vehicles, vehicles_seen), (pedestrians, pedestrians_seen), (egos, _) = (
-        view.box_groups(
-            [
-                (bars, batch.light_valid),
-                (batch.vehicles[..., columns], batch.vehicle_valid),
-                (batch.pedestrians[..., columns], batch.pedestrian_valid),
-                (ego_boxes, np.ones((count, 1), dtype=bool)),
-            ]
+    road_layer, moving_layer = layers != "moving", layers != "road"
+    if road_layer:
+        lanes = view.lanes(batch)
+        markings = markings_in_sight(batch, view.radius_m, view.positions)
+        out[:] = GRASS
+    if moving_layer:
+        width_px = max(int(round(ROUTE_WIDTH_M * pixels_per_meter)), 1)
+        routes = view.polylines(batch.route.polyline, batch.route.count, width_px)
+        lights = batch.traffic_lights  # (K, L, 4)
+        bars = stop_bars(lights)  # (K, L, 5)
+        ego = batch.ego
+        ego_boxes = np.column_stack([ego.position, ego.heading, ego.length_m, ego.width_m])[:, None]
+        columns = [0, 1, 2, 4, 5]  # vehicle rows → rectangles x, y, heading, length, width
+        # every rectangle of every world moved to its ego frame and culled in one pass
+        (bar_corners, bars_seen), (vehicles, vehicles_seen), (pedestrians, pedestrians_seen), (egos, _) = (
+            view.box_groups(
+                [
+                    (bars, batch.light_valid),
+                    (batch.vehicles[..., columns], batch.vehicle_valid),
+                    (batch.pedestrians[..., columns], batch.pedestrian_valid),
+                    (ego_boxes, np.ones((count, 1), dtype=bool)),
+                ]
+            )
         )
-    )
-    lanes = view.lanes(batch)
-    markings = markings_in_sight(batch, view.radius_m, view.positions)
-    out[:] = GRASS
     for k in range(count):  # one OpenCV raster per world
         image, road = out[k], batch.road_of(k)
-        fill_each(image, lanes[k], ROAD, cv2.LINE_AA)
-        if batch.route.count[k] > 1:
+        if road_layer:
+            fill_each(image, lanes[k], ROAD, cv2.LINE_AA)
+        if moving_layer and batch.route.count[k] > 1:
             cv2.polylines(image, routes[k], False, ROUTE, width_px, cv2.LINE_AA, SHIFT)
-        for lines, colour in zip(markings[k], (SOLID_LINE, DASHED_LINE), strict=True):
-            if len(lines):
-                pixels = fixed_point(view.pixels_of(k, lines))
-                cv2.polylines(image, list(pixels), False, colour, 1, cv2.LINE_AA, SHIFT)
-        if len(road.crossings):
-            fill_boxes(image, view.boxes_of(k, road.derived(zebra_boxes, zebra_boxes)), ZEBRA, cv2.LINE_AA)
+        if road_layer:
+            for lines, colour in zip(markings[k], (SOLID_LINE, DASHED_LINE), strict=True):
+                if len(lines):
+                    pixels = fixed_point(view.pixels_of(k, lines))
+                    cv2.polylines(image, list(pixels), False, colour, 1, cv2.LINE_AA, SHIFT)
+            if len(road.crossings):
+                zebras = view.boxes_of(k, road.derived(zebra_boxes, zebra_boxes))
+                fill_boxes(image, zebras, ZEBRA, cv2.LINE_AA)
+        if not moving_layer:
+            continue
         for corners, state in zip(bar_corners[k][bars_seen[k]], lights[k, bars_seen[k], 3], strict=True):
             cv2.fillConvexPoly(image, corners, LIGHT_COLOURS[int(state)], cv2.LINE_AA, SHIFT)
         fill_boxes(image, vehicles[k][vehicles_seen[k]], VEHICLE, cv2.LINE_AA)
