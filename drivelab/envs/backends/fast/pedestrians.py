@@ -150,7 +150,7 @@ def _pedestrian_polygon(peds: np.ndarray, i: int) -> np.ndarray:
         px, py = local[k]
         corners[k, 0] = c * px + -s * py + peds[i, P_X]
         corners[k, 1] = s * px + c * py + peds[i, P_Y]
-    corners[4] = corners[0]
+    corners[4, 0], corners[4, 1] = corners[0, 0], corners[0, 1]  # element-wise (see traffic._polygon_into)
     return corners
 
 
@@ -201,7 +201,8 @@ def clear_wrecks(v: np.ndarray, count: int, ego: int, dt: float) -> tuple[int, i
         if j == ego:
             new_ego = kept
         if kept != j:
-            v[kept] = v[j]
+            for column in range(v.shape[1]):  # element-wise (see traffic._polygon_into)
+                v[kept, column] = v[j, column]
         kept += 1
     v[kept:count] = 0.0
     return kept, new_ego

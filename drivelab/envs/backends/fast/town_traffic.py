@@ -478,33 +478,35 @@ def town_act(
         kind = w[i, KIND]
         if kind == PLAIN or kind == PEDAL_KIND or kind == OBSTACLE:
             continue  # plain and pedal vehicles keep their last action; obstacles never act
+        if kind != CONTROLLED and kind != TOWN:
+            raise ValueError("town_act drives CONTROLLED, PLAIN, PEDAL_KIND and TOWN rows only")
+        # one call site each for the inlined follow_road and steering_control: a second copy
+        # would be compiled again (seconds of a cold start)
+        lane = int(w[i, LANE])
+        if kind == TOWN:  # TownVehicle.act: the turn's speed limit, before follow_road
+            limit = lanes[lane, SPEED_LIMIT]
+            turn_lane = planned_next(w, lanes, i)
+            if turn_lane >= 0:
+                next_limit = lanes[turn_lane, SPEED_LIMIT]
+                s, _ = local_coordinates(lanes, lane, w[i, X], w[i, Y])
+                ahead_m = lanes[lane, LENGTH] - s
+                braking = (py_square(w[i, SPEED]) - py_square(next_limit)) / (2 * -p[COMFORT_ACC_MIN])
+                if ahead_m < TURN_BRAKE_MARGIN_M + braking:
+                    limit = min(limit, next_limit)
+            w[i, TARGET_SPEED] = limit
+            if w[i, CRASHED] > 0:
+                continue
+            if w[i, ROUTE_END] - w[i, ROUTE_START] <= 1:
+                target = int(w[i, TARGET_LANE])
+                random_route(w, lanes, i, target, street_lanes, routes, route_length, rng_words)
+        follow_road(w, lanes, i)
+        if kind == TOWN:
+            own[OWN_FREE] = np.nan  # the own-lane row is made only if MOBIL is asked
+            change_lane_policy(w, lanes, p, coords, done, trig, i, own)
+        w[i, STEER] = steering_control(w, lanes, i, int(w[i, TARGET_LANE]))
         if kind == CONTROLLED:
-            follow_road(w, lanes, i)
-            w[i, STEER] = steering_control(w, lanes, i, int(w[i, TARGET_LANE]))
             w[i, ACCEL] = KP_A * (w[i, TARGET_SPEED] - w[i, SPEED])
             continue
-        if kind != TOWN:
-            raise ValueError("town_act drives CONTROLLED, PLAIN, PEDAL_KIND and TOWN rows only")
-        # TownVehicle.act: the turn's speed limit, before follow_road
-        lane = int(w[i, LANE])
-        limit = lanes[lane, SPEED_LIMIT]
-        turn_lane = planned_next(w, lanes, i)
-        if turn_lane >= 0:
-            next_limit = lanes[turn_lane, SPEED_LIMIT]
-            s, _ = local_coordinates(lanes, lane, w[i, X], w[i, Y])
-            ahead_m = lanes[lane, LENGTH] - s
-            braking = (py_square(w[i, SPEED]) - py_square(next_limit)) / (2 * -p[COMFORT_ACC_MIN])
-            if ahead_m < TURN_BRAKE_MARGIN_M + braking:
-                limit = min(limit, next_limit)
-        w[i, TARGET_SPEED] = limit
-        if w[i, CRASHED] > 0:
-            continue
-        if w[i, ROUTE_END] - w[i, ROUTE_START] <= 1:
-            random_route(w, lanes, i, int(w[i, TARGET_LANE]), street_lanes, routes, route_length, rng_words)
-        follow_road(w, lanes, i)
-        own[OWN_FREE] = np.nan  # the own-lane row is made only if MOBIL is asked
-        change_lane_policy(w, lanes, p, coords, done, trig, i, own)
-        w[i, STEER] = steering_control(w, lanes, i, int(w[i, TARGET_LANE]))
         front = connected_front(w, q, lanes, coords, discs, search, offset, i, lane)
         acceleration = town_acceleration(
             w, q, lanes, p, coords, done, trig, i, front,

@@ -548,7 +548,8 @@ def _polygon_into(v: np.ndarray, i: int, corners: np.ndarray) -> None:
         px, py = local[k]
         corners[k, 0] = c * px + -s * py + v[i, X]
         corners[k, 1] = s * px + c * py + v[i, Y]
-    corners[4] = corners[0]
+    corners[4, 0], corners[4, 1] = corners[0, 0], corners[0, 1]  # element-wise: a row copy compiles
+    # numba's shape-mismatch error message (seconds of a cold start)
 
 
 @njit(cache=True)
