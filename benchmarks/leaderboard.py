@@ -94,49 +94,76 @@ TOWN_TARGETS = {"privileged": (0.90, 0.75, 0.60), "image": (0.70, 0.50, 0.35)}
 
 HIGHWAY_PPO = "--algo ppo --obs kinematics --action meta --traffic regular --n-envs 16 --steps 100000 "
 HIGHWAY_PPO += "--eval-every 50000 --eval-episodes 10"  # the zoo's recipe (benchmarks/zoo_build.py)
+# highway-env's documented PPO values (drivelab/hyperparams/ppo.yaml's default entry) and SB3's
+# defaults for the other values tuning sets: the runs trained before the scenario entries held
+# drivelab's tuned values (benchmarks/results/tune/), pinned so that their commands still make them
+UNTUNED_PPO = (
+    "-H learning_rate=0.0005 -H n_steps=256 -H batch_size=64 -H n_epochs=10 -H gae_lambda=0.95 "
+    "-H ent_coef=0.0 -H clip_range=0.2 -H 'policy_kwargs={net_arch: {pi: [256, 256], vf: [256, 256]}}'"
+)
+HIGHWAY_FAST = (
+    "--env highway --algo ppo --obs kinematics --action meta --traffic regular --reward highway_fast "
+    "--n-envs 16 --steps 500000 --eval-every 250000 --eval-episodes 10"
+)
+
+
+JUNCTIONS = (  # scenario, training reward, what it is
+    ("merge", "highway", "the highway reward"),
+    ("roundabout", "highway", "the highway reward"),
+    ("intersection", "collision=-5,high_speed=1,arrival=1",
+     "highway-env's intersection reward weights (collision -5, high speed 1, arrival 1)"),
+)  # fmt: skip
+
+
+def _tuned(study: str) -> str:
+    return f"drivelab's tuned values (study {study}, benchmarks/results/tune/{study}/)"
+
 
 ENTRIES: tuple[Entry, ...] = (
     Entry(
         "highway",
         "ppo",
-        "SB3 PPO, kinematics, meta actions, training reward highway_fast, gamma 0.95, 500 k steps "
-        "on 16 worlds",
-        _args(
-            "--env highway --algo ppo --obs kinematics --action meta --traffic regular "
-            "--reward highway_fast --n-envs 16 -H gamma=0.95 --steps 500000 --eval-every 250000 "
-            "--eval-episodes 10"
-        ),
+        "SB3 PPO, kinematics, meta actions, training reward highway_fast, highway-env's values but "
+        "gamma 0.95, 500 k steps on 16 worlds",
+        _args(f"{HIGHWAY_FAST} {UNTUNED_PPO} -H gamma=0.95"),
         reuse="competence-highway-ppo-fast-s{seed}",
         reused_by="benchmarks/highway_competence.py",
     ),
-    Entry(
-        "merge",
-        "ppo",
-        "SB3 PPO, kinematics, meta actions, the highway reward, 100 k steps on 16 worlds",
-        _args(f"--env merge {HIGHWAY_PPO} --reward highway"),
+    *(
+        Entry(
+            scenario,
+            "ppo",
+            f"SB3 PPO, kinematics, meta actions, {what}, highway-env's values, 100 k steps on 16 worlds",
+            _args(f"--env {scenario} {HIGHWAY_PPO} --reward {reward} {UNTUNED_PPO} -H gamma=0.8"),
+        )
+        for scenario, reward, what in JUNCTIONS
     ),
-    Entry(
-        "roundabout",
-        "ppo",
-        "SB3 PPO, kinematics, meta actions, the highway reward, 100 k steps on 16 worlds",
-        _args(f"--env roundabout {HIGHWAY_PPO} --reward highway"),
+    *(  # the intersection study could not choose (every trial scored the same): no tuned values
+        Entry(
+            scenario,
+            "ppo-tuned",
+            f"SB3 PPO as above with {_tuned('ppo-' + scenario)}",
+            _args(f"--env {scenario} {HIGHWAY_PPO} --reward {reward}"),
+        )
+        for scenario, reward, what in JUNCTIONS
+        if scenario != "intersection"
     ),
-    Entry(
-        "intersection",
-        "ppo",
-        "SB3 PPO, kinematics, meta actions, highway-env's intersection reward weights "
-        "(collision -5, high speed 1, arrival 1), 100 k steps on 16 worlds",
-        _args(f"--env intersection {HIGHWAY_PPO} --reward collision=-5,high_speed=1,arrival=1"),
-    ),
-    Entry(
-        "racetrack",
-        "ppo",
-        "SB3 PPO, continuous, LiDAR + 10-number ego state, the highway reward, 100 k steps on 16 worlds",
-        _args(
-            "--algo ppo --env racetrack --obs lidar,ego_state:features=10 --action continuous "
-            "--reward highway --traffic regular --n-envs 16 --steps 100000 --eval-every 50000 "
-            "--eval-episodes 5"
-        ),
+    *(
+        Entry(
+            "racetrack",
+            name,
+            f"SB3 PPO, continuous, LiDAR + 10-number ego state, the highway reward, {values}, 100 k steps "
+            "on 16 worlds",
+            _args(
+                "--algo ppo --env racetrack --obs lidar,ego_state:features=10 --action continuous "
+                "--reward highway --traffic regular --n-envs 16 --steps 100000 --eval-every 50000 "
+                f"--eval-episodes 5 {pins}"
+            ),
+        )
+        for name, values, pins in (
+            ("ppo", "highway-env's values (gamma 0.9)", f"{UNTUNED_PPO} -H gamma=0.9"),
+            ("ppo-tuned", _tuned("ppo-racetrack"), ""),
+        )
     ),
     Entry(
         "town",
@@ -245,6 +272,19 @@ ENTRIES: tuple[Entry, ...] = (
         )
         for maps in (1, 10, 100)
     ),  # fmt: skip
+    Entry(
+        "blocks-unseen",
+        "ppo-1000-maps",
+        "SB3 PPO on LiDAR + measurements + waypoints, 1000 training maps, gamma 0.99 (MetaDrive's), "
+        "batch 256, learning rate 3e-4, 1 M steps on 16 worlds",
+        _args(
+            f"--algo ppo --env blocks --obs lidar,measurements,waypoints --action continuous "
+            f"--reward metadrive --n-envs 16 --steps 1000000 --eval-maps {UNSEEN_MAPS} --eval-every 250000 "
+            "--eval-episodes 1 --config benchmarks/maps-1000.yaml -H gamma=0.99 -H n_steps=256 "
+            "-H batch_size=256 -H learning_rate=3e-4"
+        ),
+        judge="maps",
+    ),
 )
 
 

@@ -1,5 +1,6 @@
 """Shipped hyper-parameter files: lookup by scenario, overrides, and what a new run records."""
 
+import copy
 from importlib import resources
 
 import pytest
@@ -12,8 +13,9 @@ from drivelab.hyperparams import resolve_hyperparams, shipped_hyperparams, with_
 
 
 def test_scenario_entry_default_and_overrides():
-    assert shipped_hyperparams("ppo", "racetrack")["gamma"] == 0.9  # highway-env's racetrack example
-    assert shipped_hyperparams("ppo", "highway")["gamma"] == 0.8
+    assert shipped_hyperparams("a2c", "racetrack")["gamma"] == 0.9  # highway-env's racetrack example
+    assert shipped_hyperparams("ppo", "default")["gamma"] == 0.8
+    assert shipped_hyperparams("sac", "merge") == shipped_hyperparams("sac", "default")  # no entry of its own
     assert shipped_hyperparams("dqn", "no_such_scenario") == shipped_hyperparams("dqn", "default")
     assert shipped_hyperparams("no_such_algo", "highway") == {}
     merged = resolve_hyperparams("dqn", "merge", {"gamma": 0.95, "tau": 0.5})
@@ -28,7 +30,40 @@ def test_highway_files_hold_the_documented_defaults():
     assert (ppo["n_steps"], ppo["batch_size"], ppo["n_epochs"], ppo["gamma"]) == (256, 64, 10, 0.8)
     for algo, spec in ALGORITHMS.items():
         if spec.family == "sb3":
-            assert shipped_hyperparams(algo, "highway") == shipped_hyperparams(algo, "default") != {}, algo
+            assert shipped_hyperparams(algo, "default") != {}, algo
+
+
+# entries that differ from ``default`` without being tuned, each with its documented source
+CHOSEN_ENTRIES = {
+    ("a2c", "drivelab/Racetrack-v0"),  # highway-env's racetrack example's gamma 0.9
+    ("ppo", "drivelab/Town-v0"),  # drivelab's choice: a longer horizon for the town
+}
+
+
+def _without_budget(entry: dict) -> dict:
+    return {key: value for key, value in entry.items() if key != "n_timesteps"}
+
+
+@pytest.mark.parametrize("algo", ["a2c", "dqn", "ppo", "sac"])
+def test_every_entry_is_the_default_or_a_committed_studys_best(algo):
+    """A scenario entry that differs from ``default`` (and is not a documented choice) holds the
+    best trial of the drivelab tune study committed under benchmarks/results/tune/ALGO-SCENARIO/."""
+    from pathlib import Path
+
+    results = Path(__file__).parents[1] / "benchmarks" / "results" / "tune"
+    table = _zoo_file(algo)
+    tuned = 0
+    for env_id, entry in table.items():
+        if _without_budget(entry) == _without_budget(table["default"]) or (algo, env_id) in CHOSEN_ENTRIES:
+            continue
+        scenario = env_id.removeprefix("drivelab/").removesuffix("-v0").lower()
+        best = results / f"{algo}-{scenario}" / "best-hyperparams.yml"
+        assert best.is_file(), f"{env_id} of {algo}.yaml differs from default without a committed study"
+        assert yaml.safe_load(best.read_text())[env_id] == entry, env_id
+        summary = yaml.safe_load((best.parent / "summary.json").read_text())
+        assert summary["best"]["params"].items() <= entry.items() and summary["n_trials"] >= 10
+        tuned += 1
+    assert tuned >= {"ppo": 4, "a2c": 1, "dqn": 1, "sac": 0}[algo]
 
 
 def test_every_file_names_a_registered_algorithm():
@@ -82,8 +117,8 @@ def test_cli_train_records_resolved_hyperparams(tmp_path):
     assert result.exit_code == 0, result.output
     saved = yaml.safe_load((tmp_path / "runs" / "hp" / "config.yaml").read_text())["hyperparams"]
     assert saved["gamma"] == 0.5 and saved["n_steps"] == 16  # command line wins
-    assert saved["learning_rate"] == 5e-4  # from drivelab/hyperparams/ppo.yaml
-    assert saved["policy_kwargs"] == {"net_arch": {"pi": [256, 256], "vf": [256, 256]}}
+    assert saved["learning_rate"] == shipped_hyperparams("ppo", "highway")["learning_rate"]  # the file's
+    assert saved["policy_kwargs"] == shipped_hyperparams("ppo", "highway")["policy_kwargs"]
 
 
 # --- RL Zoo's format ---------------------------------------------------------------------------
@@ -105,7 +140,7 @@ def _zoo_model(algo: str, env_id: str, entry: dict):
     import gymnasium
     import stable_baselines3
 
-    hyperparams = dict(entry)
+    hyperparams = copy.deepcopy(entry)  # SB3's A2C writes its optimizer into policy_kwargs
     del hyperparams["n_timesteps"]  # RL Zoo's budget: learn(int(n_timesteps))
     env = gymnasium.make(env_id, **hyperparams.pop("env_kwargs", {}))
     if isinstance(hyperparams.get("train_freq"), list):
@@ -134,8 +169,9 @@ def test_rl_zoo_reads_the_files(algo):
         assert entry["policy"] == policy_for(env.observation_space), env_id
         assert model.policy_class is type(model).policy_aliases[entry["policy"]]
         numbers = {k: v for k, v in entry.items() if isinstance(v, (int, float)) and k != "train_freq"}
-        assert {k: getattr(model, k) for k in numbers if k != "n_timesteps"} == {
-            k: v for k, v in numbers.items() if k != "n_timesteps"}, env_id  # fmt: skip
+        values = {k: getattr(model, k) for k in numbers if k != "n_timesteps"}
+        values = {k: v(1.0) if callable(v) else v for k, v in values.items()}  # clip_range: a schedule
+        assert values == {k: v for k, v in numbers.items() if k != "n_timesteps"}, env_id
         # drivelab reads the same entry, without RL Zoo's run settings
         scenario = next((n for n in SCENARIOS if gym_id(n) == env_id), env_id)
         shipped = shipped_hyperparams(algo, scenario)
@@ -147,8 +183,11 @@ def test_drivelab_reads_entries_by_scenario_or_env_id():
     from drivelab.hyperparams import zoo_entry
 
     assert shipped_hyperparams("ppo", "racetrack") == shipped_hyperparams("ppo", "drivelab/Racetrack-v0")
-    entry = zoo_entry("ppo", "racetrack")
+    entry = zoo_entry("a2c", "racetrack")
     assert (entry["n_timesteps"], entry["policy"], entry["gamma"]) == (100_000, "MlpPolicy", 0.9)
+    tuned = zoo_entry("ppo", "racetrack")  # the study's LiDAR + ego state observation: a Dict
+    assert tuned["policy"] == "MultiInputPolicy"
+    assert tuned["env_kwargs"]["obs"] == ["lidar", "ego_state:features=10"]
     assert not {"n_timesteps", "policy", "env_kwargs"} & set(shipped_hyperparams("sac", "highway"))
     assert zoo_entry("sac", "highway")["env_kwargs"] == {"action": "continuous"}
     # follow-line has no entry: RL Zoo and drivelab both take `default`

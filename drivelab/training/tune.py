@@ -547,12 +547,15 @@ def write_summary(study: Study, optuna_study, command: str | None = None) -> dic
 
 
 def _markdown(study: Study, summary: dict, table) -> str:
+    from drivelab.envs.vector import VALIDATION_START
+
     lines = [f"# tune {study.name}", ""]
     if summary["command"]:
         lines += ["```", summary["command"], "```", ""]
     lines += [
         f"- {summary['algo']} on {summary['env']}, {summary['steps_per_trial']} steps per trial, "
-        f"objective: {study.metric} ({study.direction}) over {study.final_eval_episodes} evaluation episodes",
+        f"objective: {study.metric} ({study.direction}) over {study.final_eval_episodes} validation episodes "
+        f"(evaluation episodes {VALIDATION_START:,} on, none of them a test episode)",
         f"- trials: {len(table)} of {study.n_trials} "
         f"({', '.join(f'{n} {s}' for s, n in sorted(summary['states'].items()))})",
     ]

@@ -182,9 +182,17 @@ def test_crash_rate_is_minimised_and_log_type_is_a_log_float():
     assert (learning_rate.kind, learning_rate.log, learning_rate.low) == ("float", True, 1e-4)
 
 
-def test_the_example_study_file_is_valid():
+@pytest.mark.parametrize(
+    "name", ["ppo-highway", "ppo-merge", "ppo-roundabout", "ppo-intersection", "ppo-racetrack", "a2c-highway",
+             "dqn-highway"],
+)  # fmt: skip
+def test_the_committed_study_files_are_valid(name):
+    """The studies whose tuned values drivelab/hyperparams/ ships read as studies of their
+    algorithm and scenario, searching the learning rate and the discount at least."""
     from pathlib import Path
 
-    study = tune.load_study(Path(__file__).parents[2] / "benchmarks" / "sweeps" / "tune-ppo-highway.yaml")
-    assert (study.name, study.n_trials, study.run["steps"]) == ("ppo-highway", 20, 20000)
-    assert {p.name for p in study.space} >= {"learning_rate", "gamma", "policy_kwargs"}
+    study = tune.load_study(Path(__file__).parents[2] / "benchmarks" / "sweeps" / f"tune-{name}.yaml")
+    algo, env = name.split("-")
+    assert (study.name, study.run["algo"], study.run["env"]) == (name, algo, env)
+    assert study.n_trials >= 10 and study.run["steps"] >= 40_000 and study.final_eval_episodes in (20, 100)
+    assert {p.name for p in study.space} >= {"learning_rate", "gamma"}
