@@ -36,6 +36,7 @@ def test_highway_files_hold_the_documented_defaults():
 # entries that differ from ``default`` without being tuned, each with its documented source
 CHOSEN_ENTRIES = {
     ("a2c", "drivelab/Racetrack-v0"),  # highway-env's racetrack example's gamma 0.9
+    ("ppo", "drivelab/Racetrack-v0"),  # the same (the ppo-racetrack study's best did worse: not kept)
     ("ppo", "drivelab/Town-v0"),  # drivelab's choice: a longer horizon for the town
 }
 
@@ -63,7 +64,7 @@ def test_every_entry_is_the_default_or_a_committed_studys_best(algo):
         summary = yaml.safe_load((best.parent / "summary.json").read_text())
         assert summary["best"]["params"].items() <= entry.items() and summary["n_trials"] >= 10
         tuned += 1
-    assert tuned >= {"ppo": 4, "a2c": 1, "dqn": 1, "sac": 0}[algo]
+    assert tuned >= {"ppo": 2, "a2c": 1, "dqn": 1, "sac": 0}[algo]
 
 
 def test_every_file_names_a_registered_algorithm():
@@ -183,11 +184,10 @@ def test_drivelab_reads_entries_by_scenario_or_env_id():
     from drivelab.hyperparams import zoo_entry
 
     assert shipped_hyperparams("ppo", "racetrack") == shipped_hyperparams("ppo", "drivelab/Racetrack-v0")
-    entry = zoo_entry("a2c", "racetrack")
+    entry = zoo_entry("ppo", "racetrack")
     assert (entry["n_timesteps"], entry["policy"], entry["gamma"]) == (100_000, "MlpPolicy", 0.9)
-    tuned = zoo_entry("ppo", "racetrack")  # the study's LiDAR + ego state observation: a Dict
-    assert tuned["policy"] == "MultiInputPolicy"
-    assert tuned["env_kwargs"]["obs"] == ["lidar", "ego_state:features=10"]
+    tuned = zoo_entry("ppo", "merge")  # a tuned entry names the study's environment
+    assert (tuned["policy"], tuned["env_kwargs"]["obs"]) == ("MlpPolicy", ["kinematics"])
     assert not {"n_timesteps", "policy", "env_kwargs"} & set(shipped_hyperparams("sac", "highway"))
     assert zoo_entry("sac", "highway")["env_kwargs"] == {"action": "continuous"}
     # follow-line has no entry: RL Zoo and drivelab both take `default`
