@@ -6,6 +6,7 @@ import pytest
 import yaml
 
 from drivelab.errors import UsageError
+from drivelab.hyperparams import shipped_hyperparams
 from drivelab.training.sweep import expand_sweep, load_sweep, plan, run_sweep
 
 TINY_PPO = {"n_steps": 16, "batch_size": 16, "n_epochs": 1}
@@ -43,7 +44,9 @@ def test_grid_expands_with_overrides_and_shipped_hyperparams(tmp_path):
     # shipped ppo.yaml (gamma 0.8, n_steps 256) under the base's learning_rate
     assert ppo.hyperparams["gamma"] == 0.8 and ppo.hyperparams["n_steps"] == 256
     assert ppo.hyperparams["learning_rate"] == 1e-3
-    assert a2c.hyperparams == {"n_steps": 8, "learning_rate": 1e-3, "gamma": 0.8} and a2c.steps == 64
+    # shipped a2c.yaml's highway entry (tuned) under the base's learning_rate and the override
+    shipped = shipped_hyperparams("a2c", "highway")
+    assert a2c.hyperparams == {**shipped, "n_steps": 8, "learning_rate": 1e-3} and a2c.steps == 64
     assert configs["abl-a2c-highway-highway_right_lane_0-s0"].steps == 32
     assert configs["abl-a2c-highway-highway_right_lane_0-s0"].env_options == {"duration_s": 8}
 
