@@ -190,26 +190,26 @@ ENTRIES: tuple[Entry, ...] = (
         reuse="expert-town",
         reused_by="benchmarks/nocrash_town.py",
         seeds=(0,),
-    ),  # fmt: skip
-    Entry(
-        "town",
-        "dagger (privileged)",
-        "DAgger of the expert on waypoints + measurements + affordances",
-        _args(f"{TOWN_DAGGER} --obs waypoints,measurements,affordances"),
-        judge="nocrash",
-        reuse="competence-privileged-s{seed}",
-        reused_by="benchmarks/town_competence.py",
-        targets={"nocrash": TOWN_TARGETS["privileged"]},
     ),
-    Entry(
-        "town",
-        "dagger (image)",
-        "DAgger of the expert on top-down image with lights + waypoints + measurements",
-        _args(f"{TOWN_DAGGER} --obs topdown:lights=true,waypoints,measurements"),
-        judge="nocrash",
-        reuse="competence-image-s{seed}",
-        reused_by="benchmarks/town_competence.py",
-        targets={"nocrash": TOWN_TARGETS["image"]},
+    *(
+        Entry(
+            "town",
+            f"dagger ({kind})",
+            f"DAgger of the expert on {what}",
+            _args(f"{TOWN_DAGGER} --obs {obs}"),
+            judge="nocrash",
+            reuse=f"competence-{kind}-s{{seed}}",
+            reused_by="benchmarks/town_competence.py",
+            targets={"nocrash": TOWN_TARGETS[kind]},
+        )
+        for kind, what, obs in (
+            ("privileged", "waypoints + measurements + affordances", "waypoints,measurements,affordances"),
+            (
+                "image",
+                "top-down image with lights + waypoints + measurements",
+                "topdown:lights=true,waypoints,measurements",
+            ),
+        )
     ),
     Entry(
         "town",
@@ -224,7 +224,7 @@ ENTRIES: tuple[Entry, ...] = (
         reused_by="benchmarks/nocrash_town.py",
         seeds=(0,),
         targets={"nocrash": TOWN_TARGETS["privileged"]},
-    ),  # fmt: skip
+    ),
     *(
         Entry(
             "blocks-osx",
@@ -268,7 +268,7 @@ ENTRIES: tuple[Entry, ...] = (
                 "--reward metadrive",
             ),
         )
-    ),  # fmt: skip
+    ),
     *(
         Entry(
             "blocks-unseen",
@@ -284,7 +284,7 @@ ENTRIES: tuple[Entry, ...] = (
             reused_by="benchmarks/generalisation.py",
         )
         for maps in (1, 10, 100)
-    ),  # fmt: skip
+    ),
     Entry(
         "blocks-unseen",
         "ppo-1000-maps",

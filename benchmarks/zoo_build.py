@@ -141,31 +141,23 @@ AGENTS: dict[str, dict] = {
         ],
         "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
     },
-    "follow-line-qlearning": {
-        "description": (
-            "seed 004's tabular Q-learning on follow-line: the camera's yellow-line state (1296 states), "
-            "the seed's 5-action table and reward, 20 000 steps (benchmarks/results/qlearning_follow-line.md)"
-        ),
-        "train": [
-            "--algo", "qlearning", "--env", "follow-line", "--obs", "line", "--action", "seed_line",
-            "--reward", "line_follow", "--steps", "20000", "--eval-every", "20000", "--eval-episodes",
-            "2", "--seed", "0",
-        ],
-        "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
-        "check_duration_s": CAMERA_CHECK_DURATION_S,
-    },
-    "follow-lane-qlearning": {
-        "description": (
-            "seed 004's tabular Q-learning on follow-lane: the camera's lane-centre state (6 states), "
-            "the seed's 5-action table and reward, 20 000 steps (benchmarks/results/qlearning_follow-lane.md)"
-        ),
-        "train": [
-            "--algo", "qlearning", "--env", "follow-lane", "--obs", "lane", "--action", "seed_lane",
-            "--reward", "lane_follow", "--steps", "20000", "--eval-every", "20000", "--eval-episodes",
-            "2", "--seed", "0",
-        ],
-        "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
-        "check_duration_s": CAMERA_CHECK_DURATION_S,
+    **{
+        f"follow-{kind}-qlearning": {
+            "description": (
+                f"seed 004's tabular Q-learning on follow-{kind}: the camera's {state}, the seed's "
+                f"5-action table and reward, 20 000 steps (benchmarks/results/qlearning_follow-{kind}.md)"
+            ),
+            "train": [
+                "--algo", "qlearning", "--env", f"follow-{kind}", "--obs", kind, "--action", f"seed_{kind}",
+                "--reward", f"{kind}_follow", "--steps", "20000", "--eval-every", "20000", "--eval-episodes",
+                "2", "--seed", "0",
+            ],
+            "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+            "check_duration_s": CAMERA_CHECK_DURATION_S,
+        }
+        for kind, state in (
+            ("line", "yellow-line state (1296 states)"), ("lane", "lane-centre state (6 states)")
+        )
     },
     "blocks-ppo": {
         "description": (

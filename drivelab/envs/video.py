@@ -122,9 +122,8 @@ class Backdrop:
         vertices = self.road.derived(LanePolygons, LanePolygons).vertices
         low, high = vertices.min(axis=0), vertices.max(axis=0)
         centre = (low + high) / 2
-        corners = np.array([[low[0], low[1]], [high[0], high[1]]])
         probe = View(centre, -np.pi / 2, (2, 2), camera.pixels_per_meter)  # north up, as the camera
-        span = np.abs(np.subtract(*probe.pixels_of(0, corners)))  # (columns, rows) the map covers
+        span = np.abs(np.subtract(*probe.pixels_of(0, np.stack([low, high]))))  # (columns, rows) covered
         height, width = (np.ceil(span[::-1]).astype(int) + np.array(camera.size_hw) + 4).tolist()
         self.view = View(centre, -np.pi / 2, (height, width), camera.pixels_per_meter)
         self.image = np.empty((1, height, width, 3), dtype=np.uint8)
@@ -217,11 +216,7 @@ class Glyphs:
     def draw(self, image: np.ndarray, xy: tuple[float, int], text: str, colour) -> None:
         """Write ``text`` on ``image`` (H, W, 3) uint8 in place, its top-left at ``xy``."""
         left, top = int(round(xy[0])), xy[1]
-        right = min(left + int(np.ceil(self.width(text))) + self.height, image.shape[1])
-        if left >= right:
-            return
-        band = image[top : top + self.height, left:right]  # only the columns the text covers
-        coverage = np.zeros(band.shape[:2], dtype=np.uint8)
+        coverage = np.zeros((self.height, max(image.shape[1] - left, 0)), dtype=np.uint8)
         x = 0.0
         for word in text.split(" "):
             if word:
@@ -231,7 +226,9 @@ class Glyphs:
                 np.maximum(part, mask[: part.shape[0], : part.shape[1]], out=part)
                 x += advance
             x += self.space
-        alpha = coverage[..., None].astype(np.float32) / 255.0
+        coverage = coverage[:, : int(np.ceil(x)) + self.height]  # blend only the columns it covers
+        band = image[top : top + self.height, left : left + coverage.shape[1]]
+        alpha = coverage[: len(band), :, None].astype(np.float32) / 255.0
         band[:] = (band * (1.0 - alpha) + np.asarray(colour, dtype=np.float32) * alpha + 0.5).astype(np.uint8)
 
 
