@@ -171,12 +171,15 @@ class TanhGaussianActorCritic(nn.Module):
     def sample(
         self, obs, deterministic: bool = False, generator: torch.Generator | None = None
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """(pre-tanh u, log π(tanh u), V): u = μ + σ·ε, ε ~ N(0, 1) drawn from ``generator``;
-        log π is corrected for the squashing."""
+        """(pre-tanh u, log π(tanh u), V): u = μ + σ·ε, ε ~ N(0, 1) drawn from ``generator``, or u = μ
+        when ``deterministic`` (nothing drawn: acting greedily, e.g. in an evaluation during training,
+        leaves the training's random stream as it was); log π is corrected for the squashing."""
         mean, value = self(obs)
         distribution = self.distribution(mean)
-        noise = torch.randn(mean.shape, generator=generator)
-        unsquashed = mean if deterministic else mean + distribution.stddev * noise
+        if deterministic:
+            unsquashed = mean
+        else:
+            unsquashed = mean + distribution.stddev * torch.randn(mean.shape, generator=generator)
         return unsquashed, squashed_log_prob(distribution, unsquashed), value
 
     def evaluate(self, obs, unsquashed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:

@@ -190,3 +190,27 @@ def test_cloned_weights_load_into_ppo_own():
     obs, _ = env.reset(seed=0)
     ppo_action = np.clip(ppo.predict(obs)[0], env.action_space.low, env.action_space.high)
     np.testing.assert_array_equal(ppo_action, cloned.predict(obs)[0])
+
+
+def test_evaluations_during_training_leave_the_learner_unchanged(tmp_path):
+    """Acting greedily (an evaluation) draws nothing from the agent's random stream, so a DAgger run
+    evaluated every round learns exactly the weights of one evaluated only at its end."""
+    import torch
+
+    from drivelab.config import build_config
+    from drivelab.training import run as run_module
+
+    def trained(eval_every: int) -> dict:
+        config = build_config(
+            {"algo": "dagger", "env": "town", "obs": PRIVILEGED, "action": "target_speed", "n_envs": 4,
+             "steps": 240, "seed": 3, "name": f"every-{eval_every}", "eval_every": eval_every,
+             "eval_episodes": 1, "env_options": {"duration_s": 4},
+             "hyperparams": {**FAST, "epochs": 2, "round_steps": 80}}
+        )  # fmt: skip
+        run_dir = run_module.train(config, tmp_path)
+        return get_algo("dagger").load("dagger", run_dir / "model.zip", None).policy.state_dict()
+
+    every_round, at_the_end = trained(80), trained(240)
+    assert every_round.keys() == at_the_end.keys()
+    for name, tensor in every_round.items():
+        torch.testing.assert_close(tensor, at_the_end[name], rtol=0, atol=0, msg=name)
