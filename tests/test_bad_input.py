@@ -318,6 +318,22 @@ TRAIN_CASES = {
         {},
         "expert drives only in the town scenario",
     ),
+    "expert on highway in 2 worlds": (
+        [
+            "--algo",
+            "expert",
+            "--env",
+            "highway",
+            "--obs",
+            "waypoints,affordances",
+            "--action",
+            "target_speed",
+            "--n-envs",
+            "2",
+        ],
+        {},
+        "expert drives only in the town scenario",
+    ),
 }
 
 

@@ -24,7 +24,7 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 
 from drivelab.agents.base import OwnAgent
-from drivelab.agents.worlds import Worlds, row
+from drivelab.agents.worlds import Worlds, row, vector_env_of
 from drivelab.errors import UsageError
 from drivelab.perception.affordances import FIELDS
 from drivelab.world.geometry import FULL_LOCK_RAD, ROACH_MAX_SPEED_MPS
@@ -93,11 +93,11 @@ class RuleBasedExpert(OwnAgent):
             raise UsageError("expert needs the affordances sensor without stacking")
         if not isinstance(self.action_space, spaces.Box) or self.action_space.shape != (2,):
             raise UsageError("expert drives with --action target_speed")
-        scenario = getattr(getattr(self.env, "unwrapped", None), "scenario", None)
-        if scenario is not None and scenario.name not in SCENARIOS:
+        scenario = vector_env_of(self.env).scenario.name if self.env is not None else None
+        if scenario is not None and scenario not in SCENARIOS:
             raise UsageError(
                 f"expert drives only in the {', '.join(SCENARIOS)} scenario (its rules read the town's "
-                f"lights, junctions and pedestrians), not in {scenario.name!r}"
+                f"lights, junctions and pedestrians), not in {scenario!r}"
             )
         self._last_obs = None
 

@@ -112,7 +112,7 @@ ALGORITHMS: dict[str, AlgoSpec] = {
                  ("seed_line", "seed_lane", "meta", "grid"), "drivelab.agents.qlearning:QLearning",
                  "qlearning", observation_kinds=("other",)),  # a Discrete state; the builder checks it
         AlgoSpec("expert", "rule-based town driver on waypoints + privileged affordances (learns nothing)",
-                 ("target_speed",), "drivelab.agents.expert:RuleBasedExpert", "own"),
+                 ("target_speed",), "drivelab.agents.expert:RuleBasedExpert", "own", multi_env=True),
         AlgoSpec("bc", "behaviour cloning of the town's expert on the learner's own --obs (tanh-Gaussian, "
                  "seed 003's networks)", ("target_speed",), "drivelab.agents.bc:BehaviourCloning", "own",
                  sb3_replay=True, observation_kinds=_READABLE, multi_env=True),

@@ -30,7 +30,9 @@ def vector_env_of(env: Any):
     base = env.unwrapped
     vector = getattr(base, "vector", None) or getattr(base, "vector_env", None)
     if not isinstance(vector, VectorDriveEnv):
-        raise UsageError("imitation needs drivelab's own environment (a DriveEnv or a VectorDriveEnv)")
+        raise UsageError(
+            "the town's expert and its learners need drivelab's own environment (DriveEnv, VectorDriveEnv)"
+        )
     return vector
 
 

@@ -88,3 +88,43 @@ def test_refuses_observations_it_cannot_read():
         RuleBasedExpert(spaces.Dict({"waypoints": SPACE["waypoints"]}), ACTIONS)
     with pytest.raises(UsageError, match="target_speed"):
         RuleBasedExpert(SPACE, spaces.Discrete(5))
+
+
+def test_drives_k_worlds_each_from_its_own_observation():
+    """``--n-envs K``: every step, the rules act in each of K worlds on that world's observation."""
+    from stable_baselines3.common.vec_env import VecEnvWrapper
+
+    from drivelab.envs.vector import SB3VecEnv, VectorDriveEnv
+
+    class Record(VecEnvWrapper):
+        def __init__(self, venv):
+            super().__init__(venv)
+            self.observations, self.actions = [], []
+
+        def reset(self):
+            self.observations.append(self.venv.reset())
+            return self.observations[-1]
+
+        def step_async(self, actions):
+            self.actions.append(np.array(actions, copy=True))
+            self.venv.step_async(actions)
+
+        def step_wait(self):
+            obs, rewards, dones, infos = self.venv.step_wait()
+            self.observations.append(obs)
+            return obs, rewards, dones, infos
+
+    vector = VectorDriveEnv(
+        4, scenario="town", obs="waypoints,affordances", action="target_speed", autoreset_mode="same_step"
+    )
+    env = Record(SB3VecEnv(vector))
+    env.seed(2)
+    expert = RuleBasedExpert(env.observation_space, env.action_space, 0, env=env)
+    expert.learn(4 * 30)
+    assert expert.num_timesteps == 120 and len(env.actions) == 30
+    single = RuleBasedExpert(env.observation_space, env.action_space, 0)
+    for obs, actions in zip(env.observations, env.actions, strict=False):  # the obs each action saw
+        for k in range(4):
+            view = {name: value[k] for name, value in obs.items()}
+            np.testing.assert_array_equal(actions[k], single.predict(view)[0])
+    assert len({tuple(a[0]) for a in env.actions}) > 1  # the worlds' actions vary: not one constant
