@@ -63,18 +63,39 @@ class ActionAdapter:
 
 
 class MetaAction(ActionAdapter):
-    """highway-env's 5 meta-actions: change lane left/right, idle, faster, slower."""
+    """highway-env's meta-actions (``DiscreteMetaAction``): change lane left/right, idle, faster, slower.
+
+    As highway-env's, ``lateral=False`` keeps the longitudinal three (slower, idle, faster: its
+    intersection's action space) and ``longitudinal=False`` the lateral three (lane left, idle, lane
+    right); action ``i`` is ``names[i]``, in highway-env's order for each set.
+
+    :param lateral: the lane changes are actions.
+    :param longitudinal: the speed changes are actions.
+    """
 
     name, control = "meta", "meta"
 
-    def __init__(self) -> None:
-        self.space = spaces.Discrete(len(META_ACTIONS))
+    def __init__(self, lateral: bool = True, longitudinal: bool = True) -> None:
+        if not isinstance(lateral, bool) or not isinstance(longitudinal, bool):
+            raise UsageError("meta action options lateral and longitudinal take true or false")
+        if lateral and longitudinal:
+            self.names = META_ACTIONS
+        elif longitudinal:
+            self.names = ("SLOWER", "IDLE", "FASTER")
+        elif lateral:
+            self.names = ("LANE_LEFT", "IDLE", "LANE_RIGHT")
+        else:
+            raise UsageError("meta action needs lateral or longitudinal actions (both are false)")
+        self.table = np.array([META_ACTIONS.index(n) for n in self.names], dtype=np.int64)  # → META index
+        self.space = spaces.Discrete(len(self.names))
 
     def to_controls(self, actions) -> np.ndarray:
-        return _indices(actions, len(META_ACTIONS))
+        return self.table[_indices(actions, len(self.names))]
 
     def describe(self) -> str:
-        return "5 highway-env meta-actions (lane left, idle, lane right, faster, slower)"
+        if len(self.names) == len(META_ACTIONS):
+            return "5 highway-env meta-actions (lane left, idle, lane right, faster, slower)"
+        return f"{len(self.names)} highway-env meta-actions ({', '.join(n.lower() for n in self.names)})"
 
 
 @dataclass(frozen=True)

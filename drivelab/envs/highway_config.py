@@ -6,8 +6,8 @@
 - ``observation`` (``{"type": …, options}``) → a drivelab sensor: ``Kinematics`` → ``kinematics``
   (``vehicles_count``), ``LidarObservation`` → ``lidar`` (``cells`` beams, ``maximum_range``),
   ``TimeToCollision`` → ``ttc_grid``;
-- ``action`` → ``DiscreteMetaAction`` → ``meta``, ``ContinuousAction`` → ``continuous``,
-  ``DiscreteAction`` → ``grid``;
+- ``action`` → ``DiscreteMetaAction`` → ``meta`` (its ``lateral`` and ``longitudinal`` options),
+  ``ContinuousAction`` → ``continuous``, ``DiscreteAction`` → ``grid``;
 - reward weights (``collision_reward``, ``right_lane_reward``, ``high_speed_reward``) → the
   ``highway`` preset with those weights, normalised over [collision, high speed + right lane]
   as highway-env does; ``duration`` → ``duration_s``; ``offroad_terminal``;
@@ -57,7 +57,9 @@ def env_kwargs_from_config(config: dict[str, Any], **given: Any) -> dict[str, An
     if "observation" in rest:
         kwargs["obs"] = _observation(rest.pop("observation"))
     if "action" in rest:
-        kwargs["action"] = _action(rest.pop("action"))
+        kwargs["action"], options = _action(rest.pop("action"))
+        if options:
+            kwargs["action_options"] = options
     weights = {term: float(rest.pop(key)) for key, term in REWARD_WEIGHTS.items() if key in rest}
     if weights:  # highway-env normalises by [collision, high speed + right lane] with its weights
         weights = {**PRESETS["highway"].weights, **weights}
@@ -100,11 +102,13 @@ def _observation(spec: Any) -> str:
     return ":".join([sensor, *options])
 
 
-def _action(spec: Any) -> str:
+def _action(spec: Any) -> tuple[str, dict]:
+    """The action kind and its options: ``DiscreteMetaAction``'s ``lateral`` and ``longitudinal``."""
     if not isinstance(spec, dict) or spec.get("type") not in ACTIONS:
         raise UsageError(
             f"highway-env 'action' must be a dict with a type of {', '.join(ACTIONS)}, got {spec!r}"
         )
-    if set(spec) - {"type"}:
-        raise UsageError(f"highway-env action options {sorted(set(spec) - {'type'})} are not supported")
-    return ACTIONS[spec["type"]]
+    allowed = {"type", "lateral", "longitudinal"} if spec["type"] == "DiscreteMetaAction" else {"type"}
+    if set(spec) - allowed:
+        raise UsageError(f"highway-env action options {sorted(set(spec) - allowed)} are not supported")
+    return ACTIONS[spec["type"]], {key: value for key, value in spec.items() if key != "type"}

@@ -152,11 +152,12 @@ class VectorDriveEnv(VectorEnv):
             raise UsageError(f"num_envs must be an integer >= 1 (got {num_envs!r})")
         if config is not None:
             given = {"obs": obs, "action": action, "reward": reward, "duration_s": duration_s,
-                     "offroad_terminal": offroad_terminal, "backend_options": backend_options}  # fmt: skip
+                     "offroad_terminal": offroad_terminal, "action_options": action_options,
+                     "backend_options": backend_options}  # fmt: skip
             translated = env_kwargs_from_config(config, **{k: v for k, v in given.items() if v is not None})
-            obs, action, reward = (translated.get(key) for key in ("obs", "action", "reward"))
-            duration_s, offroad_terminal = translated.get("duration_s"), translated.get("offroad_terminal")
-            backend_options = translated.get("backend_options")
+            obs, action, reward, duration_s, offroad_terminal, action_options, backend_options = (
+                translated.get(key) for key in given
+            )
         obs = "kinematics" if obs is None else obs
         offroad_terminal = True if offroad_terminal is None else offroad_terminal
         _check_keywords(duration_s, offroad_terminal, action_options, backend_options)

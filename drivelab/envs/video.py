@@ -31,7 +31,7 @@ import numpy as np
 from drivelab.perception.birdeye import draw_birdeye
 from drivelab.perception.topdown import View
 from drivelab.world.batch import WorldBatch
-from drivelab.world.scenario import META_ACTIONS, Scenario
+from drivelab.world.scenario import Scenario
 
 STRIP_HEIGHT = 48  # the overlay strip under the scene, two lines of text
 STRIP_BACKGROUND = (24, 24, 28)
@@ -296,7 +296,7 @@ def action_text(adapter, action) -> str:
     """A short description of one world's ``action`` for the strip."""
     values = np.asarray(action).reshape(-1)
     if adapter.name == "meta":
-        return META_ACTIONS[int(values[0])]
+        return adapter.names[int(values[0])]
     table = getattr(adapter, "table", None)
     if table is not None:  # a discrete table of [acceleration, steering] rows
         accel, steer = table[int(values[0])]

@@ -59,3 +59,23 @@ def test_target_speed_needs_the_world():
         TargetSpeedAction().to_control([0.5, 0.0])
     with pytest.raises(UsageError, match="max_speed_mps > 0"):
         TargetSpeedAction(max_speed_mps=0)
+
+
+def test_meta_action_subsets_are_highway_envs():
+    from drivelab.errors import UsageError
+    from drivelab.world.scenario import META_ACTIONS
+
+    full = MetaAction()
+    assert full.space.n == 5
+    np.testing.assert_array_equal(full.to_controls([0, 1, 2, 3, 4]), [0, 1, 2, 3, 4])
+    speed = MetaAction(lateral=False)  # highway-env's ACTIONS_LONGI: slower, idle, faster
+    assert speed.space.n == 3
+    assert [META_ACTIONS[i] for i in speed.to_controls([0, 1, 2])] == ["SLOWER", "IDLE", "FASTER"]
+    lanes = MetaAction(longitudinal=False)  # ACTIONS_LAT
+    assert [META_ACTIONS[i] for i in lanes.to_controls([0, 1, 2])] == ["LANE_LEFT", "IDLE", "LANE_RIGHT"]
+    with pytest.raises(ValueError, match="outside Discrete"):
+        speed.to_controls([3])
+    with pytest.raises(UsageError, match="lateral or longitudinal"):
+        MetaAction(lateral=False, longitudinal=False)
+    with pytest.raises(UsageError, match="true or false"):
+        MetaAction(lateral="no")

@@ -32,6 +32,15 @@ def test_a_highway_env_config_builds_the_env_it_describes():
     np.testing.assert_array_equal(same.reset(seed=0)[0], obs)
 
 
+def test_the_intersections_longitudinal_meta_actions():
+    """highway-env's intersection config: DiscreteMetaAction without the lane changes."""
+    config = {"action": {"type": "DiscreteMetaAction", "lateral": False, "longitudinal": True}}
+    env = drivelab.make("intersection", config=config)
+    assert env.action_space.n == 3 and env.adapter.names == ("SLOWER", "IDLE", "FASTER")
+    given = drivelab.make("intersection", config=config, action_options={"lateral": True})
+    assert given.action_space.n == 5  # the keyword beside the config wins
+
+
 def test_keyword_arguments_beside_the_config_win():
     lidar = {"observation": {"type": "LidarObservation", "cells": 64}}
     assert env_kwargs_from_config(lidar, obs="kinematics")["obs"] == "kinematics"
@@ -44,6 +53,8 @@ def test_keyword_arguments_beside_the_config_win():
         ({"observation": {"type": "OccupancyGrid"}}, "type .OccupancyGrid. has no drivelab sensor"),
         ({"observation": {"type": "Kinematics", "absolute": True}}, "option 'absolute'"),
         ({"action": {"type": "MultiAgentAction"}}, "'action' must be a dict with a type"),
+        ({"action": {"type": "DiscreteMetaAction", "target_speeds": [0, 9]}}, r"options \['target_speeds'\]"),
+        ({"action": {"type": "ContinuousAction", "lateral": False}}, r"options \['lateral'\]"),
         ({"normalize_reward": False}, "'normalize_reward'"),
         ({"reward_speed_range": [10, 20]}, "'reward_speed_range'"),
         ("lanes_count=4", "config must be a dict"),

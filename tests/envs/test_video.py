@@ -6,6 +6,7 @@ import pytest
 from typer.testing import CliRunner
 
 from drivelab.cli import app
+from drivelab.envs.actions import MetaAction
 from drivelab.envs.core import DriveEnv
 from drivelab.envs.vector import VectorDriveEnv, evaluation_seeds
 from drivelab.envs.video import (
@@ -14,6 +15,7 @@ from drivelab.envs.video import (
     STRIP_HEIGHT,
     Caption,
     EpisodeRecorder,
+    action_text,
     camera_view,
     draw_strip,
     video_fps,
@@ -195,3 +197,9 @@ def test_the_map_camera_draws_its_road_once_and_moves_in_whole_pixels(scenario):
     # fixed-point vertices round differently from the two origins; a misplaced object would differ
     # by its full contrast over many pixels
     assert (differ > 0).mean() < 0.001 and differ.max() <= 64
+
+
+def test_the_strip_names_the_meta_action_each_action_space_means():
+    assert action_text(MetaAction(), 4) == "SLOWER"
+    assert action_text(MetaAction(lateral=False), 0) == "SLOWER"  # the intersection's three
+    assert action_text(MetaAction(lateral=False), 2) == "FASTER"
