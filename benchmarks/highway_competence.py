@@ -268,7 +268,8 @@ def main() -> None:
     except (ValueError, OSError):
         print(
             f"error: --env from {list(TARGETS)}, --recipe from {list(RECIPES)}, --seeds integers, "
-            "--episodes positive, --steps >= 0, --notes a readable file"
+            "--episodes positive, --steps >= 0, --notes a readable file",
+            file=sys.stderr,
         )
         raise SystemExit(2) from None
     steps = args.steps or RECIPES[args.recipe]["steps"]

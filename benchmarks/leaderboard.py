@@ -45,6 +45,10 @@ sys.path.insert(0, str(ROOT))
 from drivelab.training.nocrash import LEVELS  # noqa: E402
 from drivelab.training.stats import bootstrap_ci  # noqa: E402
 
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from town_competence import LEARNERS as TOWN_LEARNERS  # noqa: E402
+from town_competence import recipe as town_recipe  # noqa: E402
+
 RUNS = ROOT / "benchmarks" / "runs"
 REPORTS = RUNS / "leaderboard-eval"
 RESULTS = ROOT / "benchmarks" / "results"
@@ -82,15 +86,13 @@ def _args(text: str) -> tuple[str, ...]:
     return tuple(shlex.split(text))
 
 
-TOWN_DAGGER = (
-    "--algo dagger --env town --action target_speed --traffic regular --steps 20000 --n-envs 8 "
-    "--eval-every 5000 --eval-episodes 2 -H round_steps=2000 -H epochs=2 -H beta_decay=0.5"
-)
 OSX = (
     "--env blocks --traffic regular --backend fast -H gamma=0.99 --config benchmarks/seed003_osx.yaml "
     "--steps 5000 --eval-every 5000 --eval-episodes 1 --checkpoint-every 1666"
 )
-TOWN_TARGETS = {"privileged": (0.90, 0.75, 0.60), "image": (0.70, 0.50, 0.35)}
+TOWN_TARGETS = {
+    kind: tuple(targets[level] for level in LEVELS) for kind, (*_, targets) in TOWN_LEARNERS.items()
+}
 
 HIGHWAY_PPO = "--algo ppo --obs kinematics --action meta --traffic regular --n-envs 16 --steps 100000 "
 HIGHWAY_PPO += "--eval-every 50000 --eval-episodes 10"  # the zoo's recipe (benchmarks/zoo_build.py)
@@ -196,19 +198,15 @@ ENTRIES: tuple[Entry, ...] = (
             "town",
             f"dagger ({kind})",
             f"DAgger of the expert on {what}",
-            _args(f"{TOWN_DAGGER} --obs {obs}"),
+            _args(town_recipe(kind)),
             judge="nocrash",
             reuse=f"competence-{kind}-s{{seed}}",
             reused_by="benchmarks/town_competence.py",
             targets={"nocrash": TOWN_TARGETS[kind]},
         )
-        for kind, what, obs in (
-            ("privileged", "waypoints + measurements + affordances", "waypoints,measurements,affordances"),
-            (
-                "image",
-                "top-down image with lights + waypoints + measurements",
-                "topdown:lights=true,waypoints,measurements",
-            ),
+        for kind, what in (
+            ("privileged", "waypoints + measurements + affordances"),
+            ("image", "top-down image with lights + waypoints + measurements"),
         )
     ),
     Entry(

@@ -39,47 +39,39 @@ CAMERA_CHECK_DURATION_S = 20
 
 sys.path.insert(0, str(Path(__file__).parent))
 from leaderboard import UNTUNED_PPO  # noqa: E402
+from town_competence import recipe as town_recipe  # noqa: E402
 
 # highway-env's documented PPO values, pinned in the PPO recipes below: their agents were trained
 # before drivelab/hyperparams/ppo.yaml's scenario entries held drivelab's tuned values (their cards'
 # commands, recorded then, leave them out: the same values at the time)
 UNTUNED = shlex.split(UNTUNED_PPO)
 
-TOWN_DAGGER = [
-    "--algo", "dagger", "--env", "town", "--action", "target_speed", "--traffic", "regular",
-    "--steps", "20000", "--n-envs", "8", "--eval-every", "5000", "--eval-episodes", "2",
-    "-H", "round_steps=2000", "-H", "epochs=2", "-H", "beta_decay=0.5", "--seed", "0",
-]  # fmt: skip
 
-
-def town_measure(nocrash_episodes: int) -> list[tuple[str, list[str]]]:
-    """The evaluation set (100 episodes) and NoCrash on the test town (episodes per level)."""
-    return [
-        ("evaluation set", ["evaluate", "{name}", "--episodes", "100"]),
-        (
-            "nocrash",
-            ["benchmark", "nocrash", "{name}", "--town", "test", "--episodes", str(nocrash_episodes)],
-        ),
-    ]
+# the town agents' measurements: the evaluation set and NoCrash on the test town, 100 episodes each
+TOWN_MEASURE = [
+    ("evaluation set", ["evaluate", "{name}", "--episodes", "100"]),
+    ("nocrash", ["benchmark", "nocrash", "{name}", "--town", "test", "--episodes", "100"]),
+]
 
 
 AGENTS: dict[str, dict] = {
     "town-dagger": {
         "description": (
             "DAgger imitation of the town's rule-based expert on a non-privileged observation (top-down "
-            "image with the lights, route waypoints, measurements); the recipe of "
-            "benchmarks/results/imitation_town.md"
+            "image with the lights, route waypoints, measurements); seed 0 of "
+            "benchmarks/results/town_competence.md"
         ),
-        "train": [*TOWN_DAGGER[:6], "--obs", "topdown:lights=true,waypoints,measurements", *TOWN_DAGGER[6:]],
-        "measure": town_measure(100),
+        "train": [*shlex.split(town_recipe("image")), "--seed", "0"],
+        "measure": TOWN_MEASURE,
     },
     "town-dagger-privileged": {
         "description": (
             "DAgger imitation of the town's rule-based expert on the privileged observation the expert "
-            "itself reads (route waypoints, measurements, affordances: the light, the leader, pedestrians)"
+            "itself reads (route waypoints, measurements, affordances: the light, the leader, pedestrians); "
+            "seed 0 of benchmarks/results/town_competence.md"
         ),
-        "train": [*TOWN_DAGGER[:6], "--obs", "waypoints,measurements,affordances", *TOWN_DAGGER[6:]],
-        "measure": town_measure(25),
+        "train": [*shlex.split(town_recipe("privileged")), "--seed", "0"],
+        "measure": TOWN_MEASURE,
     },
     "highway-ppo": {
         "description": (
