@@ -65,6 +65,28 @@ def test_summary_of_evaluations(board):
     assert "| ppo | 0,1 | 20 | 60 [" in text and "highway / ppo: seeds [2]" in text
 
 
+def test_racetrack_counts_clean_episodes_of_a_lap(board):
+    """The racetrack's target is >= 1 lap clean: a clean episode shorter than a lap does not count."""
+    episodes = [
+        {"success": 1.0, "distance_km": 0.5, "off_road_events": 0},
+        {"success": 1.0, "distance_km": 0.3, "off_road_events": 0},  # clean, but short of a lap
+        {"success": 0.0, "distance_km": 0.9, "off_road_events": 0},
+        {"success": 1.0, "distance_km": board.LAP_M / 1000, "off_road_events": 0},
+    ]
+    report = {"env": "racetrack", "episodes": 4, "success_rate": 0.75, "crash_rate": 0.25,
+              "mean_speed_mps": 10.0, "mean_return": 1.0, "per_episode": episodes}  # fmt: skip
+    record = {"judge": "evaluate", "seeds": {0: {"steps": 10, "training": None, "report": report}}}
+    summary = board.summarise(record)
+    assert summary["lap_rate"]["rate"] == pytest.approx(2 / 4)
+    assert summary["success_rate"]["rate"] == pytest.approx(3 / 4)
+    assert board._target_verdict(summary, board.TARGETS["racetrack"]) == "not met"
+    record.update(scenario="racetrack", name="sac", what="w", command="c", trained_by="t", missing=[])
+    record["summary"] = summary
+    text = board.markdown({"command": "x", "machine": "m", "date": "d", "entries": [record]})
+    assert "| sac | 0 | 4 | 75 [" in text and "≥ 1 lap clean %" in text
+    assert board._metrics({**report, "env": "highway"})["lap_rate"] is None
+
+
 def test_nocrash_summary_per_level(board):
     level = {"episodes": 4, "success_rate": 0.75, "crash_rate": 0.25, "mean_speed_mps": 5.0}
     report = {"levels": {name: level for name in ("empty", "regular", "dense")}}
