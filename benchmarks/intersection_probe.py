@@ -62,10 +62,10 @@ def play(backend: str, brake_s: int, episodes: int) -> dict:
     return {"episodes": episodes, "success": arrived, "crash": crashed}
 
 
-def wilson_interval(count: int, n: int) -> tuple[float, float]:
-    """The 90 % Wilson interval of a rate ``count`` / ``n``."""
+def wilson_text(count: int, n: int) -> str:
+    """A rate ``count`` / ``n`` in % with its 90 % Wilson interval: ``42 [34, 50]``."""
     interval = binomtest(count, n).proportion_ci(confidence_level=0.9, method="wilson")
-    return float(interval.low), float(interval.high)
+    return f"{100 * count / n:.0f} [{100 * interval.low:.0f}, {100 * interval.high:.0f}]"
 
 
 def markdown(result: dict) -> str:
@@ -82,42 +82,42 @@ def markdown(result: dict) -> str:
         "|---|---|---|---|",
     ]
     for row in result["rows"]:
-        success, crash = (wilson_interval(row[key], row["episodes"]) for key in ("success", "crash"))
+        n = row["episodes"]
         lines.append(
-            f"| {row['plan']} | {row['backend']} | {100 * row['success'] / row['episodes']:.0f} "
-            f"[{100 * success[0]:.0f}, {100 * success[1]:.0f}] | {100 * row['crash'] / row['episodes']:.0f} "
-            f"[{100 * crash[0]:.0f}, {100 * crash[1]:.0f}] |"
+            f"| {row['plan']} | {row['backend']} | {wilson_text(row['success'], n)} | "
+            f"{wilson_text(row['crash'], n)} |"
         )
     return "\n".join(lines) + "\n"
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def run_probe(name: str, description: str, plans: dict, play, markdown, backends: str) -> None:
+    """A probe's command line: ``--episodes`` and ``--backends`` (default ``backends``), every
+    plan's value played on every backend (``play(backend, value, episodes)`` → its counts), the
+    rows written to ``benchmarks/results/<name>.{json,md}``; bad input: one ``error:`` line, exit 2."""
+    parser = argparse.ArgumentParser(description=description)
     parser.add_argument("--episodes", type=int, default=100)
-    parser.add_argument(
-        "--backends", default="fast,highway", help="fast (compiled core), highway (highway-env)"
-    )
+    parser.add_argument("--backends", default=backends, help="fast (compiled core), highway (highway-env)")
     args = parser.parse_args()
-    backends = args.backends.split(",")
-    if args.episodes < 1 or not set(backends) <= {"fast", "highway"}:
+    chosen = args.backends.split(",")
+    if args.episodes < 1 or not set(chosen) <= {"fast", "highway"}:
         print("error: --episodes must be >= 1 and --backends from fast, highway", file=sys.stderr)
         raise SystemExit(2)
     rows = []
-    for plan, brake_s in PLANS.items():
-        for backend in backends:
-            rows.append({"plan": plan, "backend": backend, **play(backend, brake_s, args.episodes)})
+    for plan, value in plans.items():
+        for backend in chosen:
+            rows.append({"plan": plan, "backend": backend, **play(backend, value, args.episodes)})
             print(rows[-1], flush=True)
     result = {
-        "command": ("python benchmarks/intersection_probe.py " + shlex.join(sys.argv[1:])).strip(),
+        "command": (f"python benchmarks/{name}.py " + shlex.join(sys.argv[1:])).strip(),
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "rows": rows,
     }
     RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "intersection_probe.json").write_text(json.dumps(result, indent=1))
-    (RESULTS / "intersection_probe.md").write_text(markdown(result))
+    (RESULTS / f"{name}.json").write_text(json.dumps(result, indent=1))
+    (RESULTS / f"{name}.md").write_text(markdown(result))
     print(markdown(result))
 
 
 if __name__ == "__main__":
-    main()
+    run_probe("intersection_probe", __doc__.split("\n\n")[0], PLANS, play, markdown, "fast,highway")

@@ -18,17 +18,10 @@ adds at least 382 m driven, the outer lane's lap (the inner lane's is 348 m). Wr
 
 from __future__ import annotations
 
-import argparse
-import json
-import os
-import platform
-import shlex
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import binomtest
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -38,7 +31,9 @@ from drivelab.envs.vector import evaluation_seeds  # noqa: E402
 from drivelab.perception.ego_state import CURVATURE_SCALE_M, MAX_ACCELERATION_MPS2  # noqa: E402
 from drivelab.world.geometry import FULL_LOCK_RAD  # noqa: E402
 
-RESULTS = ROOT / "benchmarks" / "results"
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from intersection_probe import run_probe, wilson_text  # noqa: E402
+
 LAP_M = 382.0  # the outer lane's lap (highway-env's racetrack; the inner lane's: 348 m)
 LANE_WIDTH_M = 5.0  # the racetrack's lanes
 VEHICLE_LENGTH_M = 5.0  # highway-env's Vehicle.LENGTH
@@ -109,8 +104,10 @@ def lane_keeper(
     return np.array([steering, acceleration / MAX_ACCELERATION_MPS2], dtype=np.float32).clip(-1, 1)
 
 
-def play(backend: str, cruise_mps: float, sees: str, episodes: int) -> dict:
-    """Counts of one plan over the first ``episodes`` evaluation episodes."""
+def play(backend: str, plan: tuple[float, str], episodes: int) -> dict:
+    """Counts of one plan (cruise speed, what it keeps a gap to) over the first ``episodes``
+    evaluation episodes."""
+    cruise_mps, sees = plan
     env = drivelab.make(
         "racetrack", obs="ego_state:features=10", action="continuous", traffic="regular", backend=backend
     )
@@ -139,11 +136,6 @@ def play(backend: str, cruise_mps: float, sees: str, episodes: int) -> dict:
     return {**counts, "mean_distance_m": float(np.mean(distances))}
 
 
-def wilson(count: int, n: int) -> str:
-    interval = binomtest(count, n).proportion_ci(confidence_level=0.9, method="wilson")
-    return f"{100 * count / n:.0f} [{100 * interval.low:.0f}, {100 * interval.high:.0f}]"
-
-
 def markdown(result: dict) -> str:
     lines = [
         "# Racetrack: a hand-written lane keeper on the 100 evaluation episodes",
@@ -160,38 +152,10 @@ def markdown(result: dict) -> str:
     ]
     for row in result["rows"]:
         n = row["episodes"]
-        lines.append(
-            f"| {row['plan']} | {row['backend']} | {wilson(row['success'], n)} | {wilson(row['lap'], n)} | "
-            f"{wilson(row['crash'], n)} | {wilson(row['off_road'], n)} | {row['mean_distance_m']:.0f} |"
-        )
+        rates = " | ".join(wilson_text(row[key], n) for key in ("success", "lap", "crash", "off_road"))
+        lines.append(f"| {row['plan']} | {row['backend']} | {rates} | {row['mean_distance_m']:.0f} |")
     return "\n".join(lines) + "\n"
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--episodes", type=int, default=100)
-    parser.add_argument("--backends", default="fast", help="fast (compiled core), highway (highway-env)")
-    args = parser.parse_args()
-    backends = args.backends.split(",")
-    if args.episodes < 1 or not set(backends) <= {"fast", "highway"}:
-        print("error: --episodes must be >= 1 and --backends from fast, highway", file=sys.stderr)
-        raise SystemExit(2)
-    rows = []
-    for plan, (cruise, sees) in PLANS.items():
-        for backend in backends:
-            rows.append({"plan": plan, "backend": backend, **play(backend, cruise, sees, args.episodes)})
-            print(rows[-1], flush=True)
-    result = {
-        "command": ("python benchmarks/racetrack_probe.py " + shlex.join(sys.argv[1:])).strip(),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
-        "date": time.strftime("%Y-%m-%d"),
-        "rows": rows,
-    }
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "racetrack_probe.json").write_text(json.dumps(result, indent=1))
-    (RESULTS / "racetrack_probe.md").write_text(markdown(result))
-    print(markdown(result))
-
-
 if __name__ == "__main__":
-    main()
+    run_probe("racetrack_probe", __doc__.split("\n\n")[0], PLANS, play, markdown, "fast")

@@ -59,6 +59,7 @@ def train_args(work: Path, *args: str) -> list[str]:
 
 RANDOM_BYTES = bytes(range(256)) * 8  # neither a torch file nor UTF-8 text
 
+EXPERT_ON_HIGHWAY = "--algo expert --env highway --obs waypoints,affordances --action target_speed".split()
 # (CLI options after `train`, files to create in the working folder, expected part of the message)
 TRAIN_CASES = {
     # tracebacks before
@@ -305,32 +306,12 @@ TRAIN_CASES = {
         "'dagger' needs batch_size, epochs and round_steps >= 1",
     ),
     "expert on highway": (
-        [
-            "--algo",
-            "expert",
-            "--env",
-            "highway",
-            "--obs",
-            "waypoints,affordances",
-            "--action",
-            "target_speed",
-        ],
+        EXPERT_ON_HIGHWAY,
         {},
         "expert drives only in the town scenario",
     ),
     "expert on highway in 2 worlds": (
-        [
-            "--algo",
-            "expert",
-            "--env",
-            "highway",
-            "--obs",
-            "waypoints,affordances",
-            "--action",
-            "target_speed",
-            "--n-envs",
-            "2",
-        ],
+        [*EXPERT_ON_HIGHWAY, "--n-envs", "2"],
         {},
         "expert drives only in the town scenario",
     ),
