@@ -229,7 +229,7 @@ TRAIN_CASES = {
     "bc on highway": (
         ["--algo", "bc", "--env", "highway", "--obs", "kinematics", "--action", "target_speed"],
         {},
-        "bc imitates the town's expert: --env town, not 'highway'",
+        "bc: the rule-based expert drives only in the town, racetrack and blocks scenarios",
     ),
     "bc meta actions": (
         ["--algo", "bc", "--env", "town", "--action", "meta"],
@@ -308,12 +308,22 @@ TRAIN_CASES = {
     "expert on highway": (
         EXPERT_ON_HIGHWAY,
         {},
-        "expert drives only in the town scenario",
+        "expert: the rule-based expert drives only in the town, racetrack and blocks scenarios",
     ),
     "expert on highway in 2 worlds": (
         [*EXPERT_ON_HIGHWAY, "--n-envs", "2"],
         {},
-        "expert drives only in the town scenario",
+        "expert: the rule-based expert drives only in the town, racetrack and blocks scenarios",
+    ),
+    "expert's speed unlike the action's": (
+        [*EXPERT_ON_HIGHWAY[:2], "--env", "racetrack", *EXPERT_ON_HIGHWAY[4:], "-H", "max_speed_mps=9"],
+        {},
+        "the target_speed action's max_speed_mps is 6 but the expert's is 9",
+    ),
+    "bc with a still expert": (
+        "--algo bc --env racetrack --obs lidar --action target_speed -H expert_cruise_speed_mps=0".split(),
+        {},
+        "'bc' needs a positive expert_cruise_speed_mps and expert_lateral_accel_mps2",
     ),
 }
 

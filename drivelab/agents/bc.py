@@ -1,5 +1,5 @@
-"""Behaviour cloning of the town's rule-based expert (``--algo bc``): supervised learning of the
-expert's actions from the learner's own observation.
+"""Behaviour cloning of the rule-based expert, in the town or on the racetrack (``--algo bc``):
+supervised learning of the expert's actions from the learner's own observation.
 
 The expert (``expert.py``) reads privileged sensors (route waypoints and affordances: the light's
 state, the distances to the leader, the stop line, pedestrians); the learner reads the run's
@@ -33,7 +33,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from torch import nn
 
 from drivelab.agents.base import OwnAgent, batch_of_one, observation_to_tensor
-from drivelab.agents.expert import SCENARIOS
+from drivelab.agents.expert import ExpertConfig, check_expert_env
 from drivelab.agents.imitation_data import Demonstrations, Teacher, action_agreement, collect, stack_steps
 from drivelab.agents.networks import TanhGaussianActorCritic, squashed_log_prob
 from drivelab.agents.worlds import Worlds, vector_env_of
@@ -55,6 +55,10 @@ class BCConfig:
     :param loss: "mse" (squared error of tanh μ) or "nll" (tanh-Gaussian negative log-likelihood).
     :param max_grad_norm: gradient clipping by global norm.
     :param log_std_init: initial log σ (σ ≈ 0.37: a PPO fine-tuning starts near the cloned policy).
+    :param expert_cruise_speed_mps: the teacher's ``cruise_speed_mps`` (``expert.ExpertConfig``).
+    :param expert_lateral_accel_mps2: the teacher's ``lateral_accel_mps2``.
+    :param expert_slip_aware: the teacher's ``slip_aware``; its ``max_speed_mps`` is the run's
+        target_speed action's.
     """
 
     learning_rate: float = 1e-3
@@ -65,6 +69,9 @@ class BCConfig:
     loss: str = "mse"
     max_grad_norm: float = 1.0
     log_std_init: float = -1.0
+    expert_cruise_speed_mps: float = ExpertConfig.cruise_speed_mps
+    expert_lateral_accel_mps2: float = ExpertConfig.lateral_accel_mps2
+    expert_slip_aware: bool = ExpertConfig.slip_aware
 
     def check(self, algo: str) -> None:
         if min(self.batch_size, self.epochs, self.round_steps) < 1:
@@ -75,6 +82,10 @@ class BCConfig:
             raise UsageError(f"{algo!r} needs 0 <= validation_fraction < 1")
         if self.loss not in LOSSES:
             raise UsageError(f"{algo!r} loss must be one of {', '.join(LOSSES)}, got {self.loss!r}")
+        if min(self.expert_cruise_speed_mps, self.expert_lateral_accel_mps2) <= 0:
+            raise UsageError(
+                f"{algo!r} needs a positive expert_cruise_speed_mps and expert_lateral_accel_mps2"
+            )
 
 
 def imitation_loss(
@@ -101,15 +112,20 @@ class BehaviourCloning(OwnAgent):
     def _build(self) -> None:
         if not isinstance(self.action_space, spaces.Box) or self.action_space.shape != (2,):
             raise UsageError(f"{self.algo} imitates the expert's --action target_speed")
+        teacher = {
+            "cruise_speed_mps": self.config.expert_cruise_speed_mps,
+            "lateral_accel_mps2": self.config.expert_lateral_accel_mps2,
+            "slip_aware": self.config.expert_slip_aware,
+        }
         if self.env is not None:
-            scenario = vector_env_of(self.env).scenario.name
-            if scenario not in SCENARIOS:
-                raise UsageError(f"{self.algo} imitates the town's expert: --env town, not {scenario!r}")
+            vector = vector_env_of(self.env)
+            teacher["max_speed_mps"] = getattr(vector.adapter, "max_speed_mps", ExpertConfig.max_speed_mps)
+            check_expert_env(vector, teacher["max_speed_mps"], self.algo)
         self.policy = TanhGaussianActorCritic(
             self.observation_space, 2, shared_encoder=True, log_std_init=self.config.log_std_init
         )
         self.optimizer = torch.optim.Adam(self.policy.parameters(), lr=self.config.learning_rate)
-        self.teacher = Teacher()
+        self.teacher = Teacher(teacher)
         self.replay_buffer = Demonstrations(
             self.observation_space, 2, self.config.validation_fraction, self.rng
         )

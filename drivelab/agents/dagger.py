@@ -1,4 +1,4 @@
-"""DAgger (Ross, Gordon & Bagnell, AISTATS 2011) with the town's rule-based expert (``--algo dagger``).
+"""DAgger (Ross, Gordon & Bagnell, AISTATS 2011) with the rule-based expert (``--algo dagger``).
 
 Behaviour cloning fails by compounding errors: once the learner drifts where the expert never
 drives (off the lane centre, too fast into a bend), it has no labels for those states. DAgger

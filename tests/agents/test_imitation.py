@@ -214,3 +214,23 @@ def test_evaluations_during_training_leave_the_learner_unchanged(tmp_path):
     assert every_round.keys() == at_the_end.keys()
     for name, tensor in every_round.items():
         torch.testing.assert_close(tensor, at_the_end[name], rtol=0, atol=0, msg=name)
+
+
+def test_dagger_on_the_racetrack_labels_with_its_teacher_at_the_actions_speed():
+    """On the racetrack the teacher is the expert with the run's rules (``expert_*``) and the
+    target_speed action's ``max_speed_mps``: its labels are that expert's actions."""
+    vector = VectorDriveEnv(2, scenario="racetrack", obs=PRIVILEGED, action="target_speed",
+                            action_options={"max_speed_mps": 20.0}, autoreset_mode="same_step")  # fmt: skip
+    env = SB3VecEnv(vector)
+    env.seed(3)
+    rules = {"expert_cruise_speed_mps": 15.0, "expert_lateral_accel_mps2": 6.0}
+    agent = DAgger(env.observation_space, env.action_space, 0, {**rules, "round_steps": 60, "epochs": 1}, env)
+    agent.learn(120)
+    data = agent.demonstrations
+    assert len(data) == 120 and agent._n_updates == 2
+    teacher = {"cruise_speed_mps": 15.0, "lateral_accel_mps2": 6.0, "max_speed_mps": 20.0}
+    expert = RuleBasedExpert(_expert_space(), ACTIONS, 0, teacher)
+    views = zip(data.observations["waypoints"], data.observations["affordances"], strict=True)
+    expected = np.stack([expert.predict({"waypoints": w, "affordances": a})[0] for w, a in views])
+    np.testing.assert_array_equal(expected, data.actions)
+    assert not np.array_equal(expected, _expert_labels(data.observations))  # the town's rules differ
