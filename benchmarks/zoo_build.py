@@ -38,7 +38,7 @@ CHECK_EPISODES = 3
 CAMERA_CHECK_DURATION_S = 20
 
 sys.path.insert(0, str(Path(__file__).parent))
-from leaderboard import UNTUNED_PPO  # noqa: E402
+from leaderboard import BLOCKS_DAGGER, RACETRACK_DAGGER, UNSEEN_MAPS, UNTUNED_PPO  # noqa: E402
 from town_competence import recipe as town_recipe  # noqa: E402
 
 # highway-env's documented PPO values, pinned in the PPO recipes below: their agents were trained
@@ -133,6 +133,16 @@ AGENTS: dict[str, dict] = {
         ],
         "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
     },
+    "racetrack-dagger": {
+        "description": (
+            "DAgger imitation of the rule-based expert on racetrack (its racetrack rules: cruise 15 m/s, "
+            "bends at 6 m/s², a gap to the other car along its route, from privileged waypoints and "
+            "affordances) onto LiDAR and the 10-number ego state; target-speed actions up to 20 m/s; "
+            "regular traffic (one other car); the leaderboard's racetrack dagger recipe, seed 0"
+        ),
+        "train": [*shlex.split(RACETRACK_DAGGER), "--seed", "0"],
+        "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+    },
     **{
         f"follow-{kind}-qlearning": {
             "description": (
@@ -150,6 +160,17 @@ AGENTS: dict[str, dict] = {
         for kind, state in (
             ("line", "yellow-line state (1296 states)"), ("lane", "lane-centre state (6 states)")
         )
+    },
+    "blocks-dagger": {
+        "description": (
+            "DAgger imitation of the rule-based expert on procedural block maps (cruise 15 m/s, pursuit "
+            "in the velocity's frame, the vehicle ahead on its route, from privileged waypoints and "
+            "affordances) onto LiDAR + measurements + waypoints; target-speed actions up to 20 m/s; "
+            "1000 training maps, regular traffic; the leaderboard's blocks-unseen dagger recipe, seed 0"
+        ),
+        "train": [*shlex.split(BLOCKS_DAGGER), "--seed", "0"],
+        # its evaluation set is its --eval-maps: the 100 unseen maps, one episode each
+        "measure": [("100 unseen maps", ["evaluate", "{name}", "--maps", UNSEEN_MAPS, "--episodes", "100"])],
     },
     "blocks-ppo": {
         "description": (
@@ -223,9 +244,10 @@ def measure(name: str, spec: dict, check_only: bool = False) -> None:
     for protocol, template in [] if check_only else spec["measure"]:
         arguments = [part.format(name=name) for part in template] + ["--out", str(out)]
         wall, cpu = drivelab(arguments)
-        report = json.loads(
-            (ROOT / out / ("nocrash.json" if protocol == "nocrash" else "eval.json")).read_text()
-        )
+        written = "nocrash.json" if protocol == "nocrash" else "eval.json"
+        if "--maps" in arguments:  # evaluate on block maps names its report after them
+            written = "eval-maps-{}-{}.json".format(*arguments[arguments.index("--maps") + 1].split(":"))
+        report = json.loads((ROOT / out / written).read_text())
         report.pop("run", None)
         per_episode = report.pop("per_episode", None)
         evaluation = {
@@ -296,7 +318,8 @@ def write_results() -> Path:
         )
     lines += [
         "",
-        "Evaluation set (the scenario's fixed evaluation episodes, `drivelab evaluate`):",
+        "Evaluation set (the scenario's fixed evaluation episodes, `drivelab evaluate`; a block-map agent "
+        "also on the 100 unseen maps, `--maps 1000:100`):",
         "",
         "| agent | episodes | success % | crash % | off-road per km | mean speed m/s | mean distance km "
         "| route completion % | return |",
@@ -304,10 +327,11 @@ def write_results() -> Path:
     ]
     for agent in agents:
         for evaluation in agent.card["evaluations"]:
-            if evaluation["protocol"] == "evaluation set":
+            if evaluation["protocol"] != "nocrash":
                 m = evaluation["metrics"]
+                label = "" if evaluation["protocol"] == "evaluation set" else f" ({evaluation['protocol']})"
                 lines.append(
-                    f"| {agent.name} | {m['episodes']} | {_percent(m['success_rate'])} | "
+                    f"| {agent.name}{label} | {m['episodes']} | {_percent(m['success_rate'])} | "
                     f"{_percent(m['crash_rate'])} | {_per_km(m['off_road_per_km'])} | "
                     f"{m['mean_speed_mps']:.1f} | {m['mean_distance_km']:.2f} | "
                     f"{_percent(m['route_completion'])} | {m['mean_return']:.1f} ± {m['std_return']:.1f} |"

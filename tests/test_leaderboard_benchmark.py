@@ -103,7 +103,10 @@ def test_every_entry_names_a_command_with_its_seed(board):
         assert entry.judge in ("evaluate", "nocrash", "maps")
 
 
-@pytest.mark.parametrize("arguments", [["--scenarios", "nowhere"], ["--episodes", "0"]])
+@pytest.mark.parametrize(
+    "arguments",
+    [["--scenarios", "nowhere"], ["--episodes", "0"], ["--scenarios", "racetrack", "--entries", "dqn"]],
+)
 def test_bad_input_is_one_error_line(arguments):
     results = SCRIPT.parent / "results" / "leaderboard.json"
     before = results.stat().st_mtime_ns if results.exists() else None
@@ -122,3 +125,20 @@ def test_target_verdict_reads_each_metrics_side(board):
     fast = {"crash_rate": met["crash_rate"], "mean_speed_mps": {"mean": 24.0, "low": 23.0, "high": 24.5}}
     assert board._target_verdict(fast, board.TARGETS["highway"]) == "not met"
     assert board._target_verdict(met, {}) == "–"
+
+
+def test_rows_without_runs_here_keep_their_committed_record_of_the_same_command(board):
+    fresh = {"scenario": "merge", "name": "dqn", "command": "drivelab train --algo dqn --seed S", "seeds": {},
+             "missing": [0, 1, 2], "measured": "2026-12-01"}  # fmt: skip
+    old = {**fresh, "seeds": {"0": {"steps": 10}}, "missing": [], "summary": {"seeds": ["0"]},
+           "measured": "2026-11-24"}  # fmt: skip
+    assert board.carry_over(fresh, old) is old
+    assert board.carry_over(fresh, None) is fresh
+    assert (
+        board.carry_over(fresh, {**old, "command": "drivelab train --algo dqn --steps 9 --seed S"}) is fresh
+    )
+    assert board.carry_over(fresh, {**old, "seeds": {}}) is fresh  # never measured: stays missing
+    result = {"date": "2026-12-01", "entries": [old, {**old, "measured": "2026-12-01"}, fresh]}
+    (note,) = board._carried_note(result)
+    assert "measured 2026-11-24)" in note
+    assert board._carried_note({**result, "entries": [fresh]}) == []

@@ -97,7 +97,7 @@ def headline(card: dict) -> str:
             )
         else:
             parts.append(
-                f"evaluation set: crash {100 * metrics['crash_rate']:.0f} %, success "
+                f"{evaluation['protocol']}: crash {100 * metrics['crash_rate']:.0f} %, success "
                 f"{100 * metrics['success_rate']:.0f} %, {metrics['mean_speed_mps']:.1f} m/s "
                 f"({metrics['episodes']} episodes)"
             )
