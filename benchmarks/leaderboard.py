@@ -688,7 +688,8 @@ def markdown(result: dict) -> str:
     lines = [
         "# Leaderboard: the best known configuration of each algorithm, per scenario",
         "",
-        f"Command: `{result['command']}`  ",
+        f"Command: `{result['command']}` (rows whose runs and reports exist are read, not made again; "
+        "each row's training command is in its table)  ",
         f"Machine: {result['machine']}; date {result['date']}; one thread per process.  ",
         *_carried_note(result),
         "Rates are % pooled over every seed's episodes with their 90 % Wilson interval; speeds and returns "

@@ -38,7 +38,7 @@ CHECK_EPISODES = 3
 CAMERA_CHECK_DURATION_S = 20
 
 sys.path.insert(0, str(Path(__file__).parent))
-from leaderboard import BLOCKS_DAGGER, RACETRACK_DAGGER, UNSEEN_MAPS, UNTUNED_PPO  # noqa: E402
+from leaderboard import BLOCKS_DAGGER, HIGHWAY_DQN, RACETRACK_DAGGER, UNSEEN_MAPS, UNTUNED_PPO  # noqa: E402
 from town_competence import recipe as town_recipe  # noqa: E402
 
 # highway-env's documented PPO values, pinned in the PPO recipes below: their agents were trained
@@ -100,6 +100,16 @@ AGENTS: dict[str, dict] = {
             "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
         }
         for scenario in ("merge", "roundabout", "intersection")
+    },
+    "merge-dqn": {
+        "description": (
+            "stable-baselines3 DQN on merge (kinematics, meta actions, highway's reward, regular traffic), "
+            "4 worlds, 100 k steps, highway-env's documented DQN values: seed 0 of the leaderboard's merge "
+            "dqn entry, the one that meets the merge target over 3 seeds"
+        ),
+        "train": [*shlex.split(HIGHWAY_DQN.format(env="merge", reward="highway", steps=100_000)),
+                  "--seed", "0"],
+        "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
     },
     "intersection-ppo-arrival": {
         "description": (
