@@ -68,13 +68,20 @@ def wilson_text(count: int, n: int) -> str:
     return f"{100 * count / n:.0f} [{100 * interval.low:.0f}, {100 * interval.high:.0f}]"
 
 
-def markdown(result: dict) -> str:
-    lines = [
-        "# Intersection: fixed plans on the 100 evaluation episodes",
+def header(title: str, result: dict) -> list[str]:
+    """A probe's results file's first lines: its title, command, machine and date."""
+    return [
+        f"# {title}",
         "",
         f"Command: `{result['command']}`  ",
         f"Machine: {result['machine']}; {result['date']}.",
         "",
+    ]
+
+
+def markdown(result: dict) -> str:
+    lines = [
+        *header("Intersection: fixed plans on the 100 evaluation episodes", result),
         "Action space: highway-env's intersection meta-actions (slower, idle, faster), one a second, 13 s",
         "episodes, regular traffic. Rates in %, with their 90 % Wilson interval.",
         "",

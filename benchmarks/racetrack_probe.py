@@ -32,7 +32,7 @@ from drivelab.perception.ego_state import CURVATURE_SCALE_M, MAX_ACCELERATION_MP
 from drivelab.world.geometry import FULL_LOCK_RAD  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
-from intersection_probe import run_probe, wilson_text  # noqa: E402
+from intersection_probe import header, run_probe, wilson_text  # noqa: E402
 
 LAP_M = 382.0  # the outer lane's lap (highway-env's racetrack; the inner lane's: 348 m)
 LANE_WIDTH_M = 5.0  # the racetrack's lanes
@@ -138,11 +138,7 @@ def play(backend: str, plan: tuple[float, str], episodes: int) -> dict:
 
 def markdown(result: dict) -> str:
     lines = [
-        "# Racetrack: a hand-written lane keeper on the 100 evaluation episodes",
-        "",
-        f"Command: `{result['command']}`  ",
-        f"Machine: {result['machine']}; {result['date']}.",
-        "",
+        *header("Racetrack: a hand-written lane keeper on the 100 evaluation episodes", result),
         "Observation: the 10-number ego state the learners read; continuous [steering, acceleration];",
         "regular traffic (one other vehicle); 60 s episodes. Rates in %, with their 90 % Wilson interval.",
         f'"≥ 1 lap clean": success and at least {LAP_M:.0f} m driven.',
