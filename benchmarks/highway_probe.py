@@ -5,17 +5,19 @@ episodes.
         .venv/bin/python benchmarks/highway_probe.py [--episodes 100] [--backends fast]
 
 The target asks for crashes in at most 5 % of the episodes at a mean speed of at least 25 m/s, in
-regular traffic whose vehicles drive 21-24 m/s (0.7-0.8 of the 30 m/s limit) on three lanes, all
-of them ahead of the ego at the start. The learners trade one for the other (PPO: 10 % at
-22.7 m/s, DQN: 68 % at 28.5 m/s). The driver here learns nothing and reads the world itself
-(privileged: every vehicle's position and speed): it follows the vehicle ahead in its lane at a
-time gap (speed = the leader's + gain × (gap − standstill − time gap × the leader's speed), capped
-at 30 m/s), and moves to an adjacent lane when that lane lets it drive faster and the gaps there
-are safe (the vehicle behind at least 8 m + 1.5 s of its closing speed away, the one ahead 12 m +
-2 s of the ego's). It steers by pure pursuit of the target lane's centre 25 m ahead, in the
-velocity's frame (the expert's ``slip_aware`` law), through the ``target_speed`` action (up to
-35 m/s). Rows differ in how closely it follows and whether it changes lanes. highway-env's
-highway is straight along x with lanes 4 m apart, which the driver's lane arithmetic assumes.
+regular traffic whose vehicles drive 21-24 m/s (0.7-0.8 of the 30 m/s limit) on three lanes, all of
+them ahead of the ego at the start. The learners trade one for the other (PPO: 10 % at 22.7 m/s,
+DQN: 68 % at 28.5 m/s). The driver here learns nothing and reads the world itself (privileged: every
+vehicle's position and speed): it follows the vehicle ahead in its lane at a time gap (speed = the
+leader's + gain × (gap − standstill − time gap × the leader's speed), capped at 30 m/s, and in some
+rows at the speed from which braking at a set deceleration reaches the leader's at the standstill
+gap; the ego brakes at 5 m/s² at most), and moves to an adjacent lane when that lane lets it drive
+faster and the gaps there are safe (the vehicle behind at least 8 m + 1.5 s of its closing speed
+away, the one ahead 12 m + 2 s of the ego's). It steers by pure pursuit of the target lane's centre
+25 m ahead, in the velocity's frame (the expert's ``slip_aware`` law), through the ``target_speed``
+action (up to 35 m/s). Rows differ in how closely it follows and whether it changes lanes.
+highway-env's highway is straight along x with lanes 4 m apart, which the driver's lane arithmetic
+assumes.
 Writes ``benchmarks/results/highway_probe.{json,md}``.
 """
 
@@ -52,6 +54,7 @@ PLANS = {
     "changes lanes, 0.5 s gap": (0.5, 4.0, 1.0, 0.0, True),
     "changes lanes, 0.4 s gap": (0.4, 3.0, 1.2, 0.0, True),
     "changes lanes, 0.4 s gap, braking cap 3 m/s²": (0.4, 3.0, 1.2, 3.0, True),
+    "changes lanes, 0.4 s gap, braking cap 4.5 m/s²": (0.4, 3.0, 1.2, 4.5, True),
 }
 
 
