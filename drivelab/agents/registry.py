@@ -111,12 +111,14 @@ ALGORITHMS: dict[str, AlgoSpec] = {
         AlgoSpec("qlearning", "tabular Q-learning over discrete states (seed 004): line, lane, ttc_grid",
                  ("seed_line", "seed_lane", "meta", "grid"), "drivelab.agents.qlearning:QLearning",
                  "qlearning", observation_kinds=("other",)),  # a Discrete state; the builder checks it
-        AlgoSpec("expert", "rule-based town driver on waypoints + privileged affordances (learns nothing)",
+        AlgoSpec("expert", "rule-based driver (town, racetrack, block maps) on waypoints + privileged "
+                 "affordances (learns nothing)",
                  ("target_speed",), "drivelab.agents.expert:RuleBasedExpert", "own", multi_env=True),
-        AlgoSpec("bc", "behaviour cloning of the town's expert on the learner's own --obs (tanh-Gaussian, "
-                 "seed 003's networks)", ("target_speed",), "drivelab.agents.bc:BehaviourCloning", "own",
-                 sb3_replay=True, observation_kinds=_READABLE, multi_env=True),
-        AlgoSpec("dagger", "DAgger: the learner drives (beta-mixture with the town's expert), the expert "
+        AlgoSpec("bc", "behaviour cloning of the rule-based expert on the learner's own --obs "
+                 "(tanh-Gaussian, seed 003's networks)", ("target_speed",),
+                 "drivelab.agents.bc:BehaviourCloning", "own", sb3_replay=True, observation_kinds=_READABLE,
+                 multi_env=True),
+        AlgoSpec("dagger", "DAgger: the learner drives (beta-mixture with the rule-based expert), the expert "
                  "labels, the data aggregate", ("target_speed",), "drivelab.agents.dagger:DAgger", "own",
                  sb3_replay=True, observation_kinds=_READABLE, multi_env=True),
     )

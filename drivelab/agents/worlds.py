@@ -31,7 +31,8 @@ def vector_env_of(env: Any):
     vector = getattr(base, "vector", None) or getattr(base, "vector_env", None)
     if not isinstance(vector, VectorDriveEnv):
         raise UsageError(
-            "the town's expert and its learners need drivelab's own environment (DriveEnv, VectorDriveEnv)"
+            "the rule-based expert and its learners need drivelab's own environment "
+            "(DriveEnv, VectorDriveEnv)"
         )
     return vector
 

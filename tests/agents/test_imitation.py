@@ -1,4 +1,4 @@
-"""Imitation of the town's expert: behaviour cloning learns the expert's actions, DAgger aggregates
+"""Imitation of the rule-based expert: behaviour cloning learns the expert's actions, DAgger aggregates
 the states its mixture policy visits (labelled by the expert), datasets and agents save safely."""
 
 import numpy as np
