@@ -118,8 +118,8 @@ HIGHWAY_DQN = (  # highway-env's DQN script trains one world; 4 here, as the dqn
 # The rule-based expert's racetrack rules (drivelab/agents/expert.py): cruise at 15 m/s, bends at
 # up to 6 m/s², a gap to the other car kept along its route; the target_speed action reaches 20 m/s
 # (benchmarks/racetrack_20mps.yaml). Chosen by driving episodes of seeds 0-39 (not evaluation
-# episodes): each a clean lap (the shortest 392 m, mean 438 m), where the town's rules (6 m/s,
-# 2 m/s²) drove 306 m and 12 m/s at 4 m/s² 398 m (10 episodes each).
+# episodes): each a clean lap (the shortest 392 m, mean 438 m), where cruising at 10 m/s with
+# the town's 2 m/s² bends drove 306 m and 12 m/s at 4 m/s² 398 m (10 episodes each).
 RACETRACK_EXPERT = (
     "--env racetrack --traffic regular --action target_speed --config benchmarks/racetrack_20mps.yaml"
 )
