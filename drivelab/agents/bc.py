@@ -1,5 +1,5 @@
-"""Behaviour cloning of the rule-based expert, in the town or on the racetrack (``--algo bc``):
-supervised learning of the expert's actions from the learner's own observation.
+"""Behaviour cloning of the rule-based expert, in the town, on the racetrack or the block maps
+(``--algo bc``): supervised learning of the expert's actions from the learner's own observation.
 
 The expert (``expert.py``) reads privileged sensors (route waypoints and affordances: the light's
 state, the distances to the leader, the stop line, pedestrians); the learner reads the run's

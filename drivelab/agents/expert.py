@@ -108,7 +108,7 @@ def check_expert_env(vector, max_speed_mps: float, algo: str) -> None:
 
 
 class RuleBasedExpert(OwnAgent):
-    """The town's rule-based driver (see the module docstring)."""
+    """The rule-based driver (see the module docstring)."""
 
     config_class = ExpertConfig
 
