@@ -46,7 +46,7 @@ os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 from drivelab.config import build_config  # noqa: E402
 from drivelab.errors import UsageError  # noqa: E402
 from drivelab.hyperparams import with_shipped_hyperparams  # noqa: E402
-from drivelab.training.evaluate import evaluate_run, load_run_config  # noqa: E402
+from drivelab.training.evaluate import evaluate_run, load_run_config, report_name  # noqa: E402
 from drivelab.training.run import resume, train  # noqa: E402
 from drivelab.training.stats import bootstrap_ci  # noqa: E402
 
@@ -137,7 +137,7 @@ def ensure_trained(maps: int, seed: int, steps: int) -> Path:
 
 def ensure_evaluated(run_dir: Path, maps: str, episodes: int) -> dict:
     """The run's ``eval-maps-START-COUNT.json`` (``drivelab evaluate --maps``), played if missing."""
-    path = run_dir / "eval-maps-{}-{}.json".format(*maps.split(":"))
+    path = run_dir / report_name(maps)
     if path.is_file():
         report = json.loads(path.read_text())
         if report["episodes"] == episodes:
@@ -457,7 +457,7 @@ def earlier_evaluations(run_dir: Path, maps: int, seed: int, steps: int) -> list
     ``steps-<budget>/`` when it was continued, and its present ones when it is complete at fewer
     steps (not continued). The CPU seconds are those evaluations' (and the training's, for a run
     that stops there)."""
-    names = ["eval-maps-{}-{}.json".format(*TEST_MAPS.split(":")), f"eval-maps-0-{maps}.json"]
+    names = [report_name(TEST_MAPS), report_name(f"0:{maps}")]
     found = []
     folders = [(int(a.name.removeprefix("steps-")), a, a / "timing.json") for a in run_dir.glob("steps-*")]
     if (run_dir / "model.zip").is_file() and load_run_config(run_dir).steps < steps:

@@ -32,9 +32,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import drivelab  # noqa: E402
+from drivelab.agents.expert import slip_aware_pursuit  # noqa: E402
 from drivelab.envs.vector import evaluation_seeds  # noqa: E402
 from drivelab.training.stats import bootstrap_ci  # noqa: E402
-from drivelab.world.geometry import FULL_LOCK_RAD  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from intersection_probe import header, run_probe, wilson_text  # noqa: E402
@@ -114,9 +114,8 @@ def drive(world, plan: tuple) -> np.ndarray:
     dy = LANE_M * target - y
     ahead_x = LOOKAHEAD_M * np.cos(heading) + dy * np.sin(heading)
     ahead_y = -LOOKAHEAD_M * np.sin(heading) + dy * np.cos(heading)
-    beta = np.arctan(LENGTH_M * ahead_y / (ahead_x**2 + ahead_y**2 + LENGTH_M * ahead_x))
-    steering = np.arctan(2.0 * np.tan(beta)) / FULL_LOCK_RAD
-    return np.array([speed_wanted / ACTION_MAX_MPS, np.clip(steering, -1.0, 1.0)], dtype=np.float32)
+    steering, _ = slip_aware_pursuit(ahead_x, ahead_y, LENGTH_M)
+    return np.array([speed_wanted / ACTION_MAX_MPS, steering], dtype=np.float32)
 
 
 def play(backend: str, plan: tuple, episodes: int) -> dict:

@@ -42,6 +42,7 @@ from scipy.stats import binomtest
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from drivelab.training.evaluate import report_name  # noqa: E402
 from drivelab.training.nocrash import LEVELS  # noqa: E402
 from drivelab.training.stats import bootstrap_ci  # noqa: E402
 
@@ -69,6 +70,7 @@ class Entry:
     reused_by: str | None = None  # that benchmark
     seeds: tuple[int, ...] | None = None  # only these seeds exist (a deterministic agent: one)
     targets: dict = field(default_factory=dict)  # issue 19's competence targets, for the verdict
+    judged: bool = True  # False: the rule-based expert, which teaches the learners the targets are for
 
     def run_dir(self, seed: int | str) -> Path:
         if self.reuse:
@@ -85,6 +87,12 @@ class Entry:
 
 def _args(text: str) -> tuple[str, ...]:
     return tuple(shlex.split(text))
+
+
+def _rules(rules: dict, prefix: str = "") -> str:
+    """``-H`` options setting the expert's ``rules`` (``prefix`` "expert_": its rules as bc's or
+    dagger's teacher)."""
+    return " ".join(f"-H {prefix}{key}={value}" for key, value in rules.items())
 
 
 OSX = (
@@ -128,8 +136,8 @@ RACETRACK_RULES = {"cruise_speed_mps": 15, "lateral_accel_mps2": 6}
 # screened at 50 k steps: 97, 95, 91 % clean laps for seeds 0, 1, 2; seed 2 at 100 k: 97 %)
 RACETRACK_DAGGER = (
     f"--algo dagger {RACETRACK_EXPERT} --obs lidar,ego_state:features=10 --n-envs 8 --steps 100000 "
-    "--eval-every 50000 --eval-episodes 5 -H round_steps=5000 -H epochs=3 -H beta_decay=0.5 "
-    + " ".join(f"-H expert_{key}={value}" for key, value in RACETRACK_RULES.items())
+    f"--eval-every 50000 --eval-episodes 5 -H round_steps=5000 -H epochs=3 -H beta_decay=0.5 "
+    f"{_rules(RACETRACK_RULES, 'expert_')}"
 )
 
 # The expert on procedural block maps: cruise at 15 m/s (bends at its 2 m/s²), pursuing its route
@@ -145,7 +153,7 @@ BLOCKS_RULES = {"cruise_speed_mps": 15, "slip_aware": "true"}
 BLOCKS_DAGGER = (  # one seed screened: 89 % success on the 100 unseen maps
     f"--algo dagger {BLOCKS_EXPERT} --obs lidar,measurements,waypoints --n-envs 8 --steps 100000 "
     f"--eval-maps {UNSEEN_MAPS} --eval-every 50000 --eval-episodes 1 -H round_steps=5000 -H epochs=3 "
-    "-H beta_decay=0.5 " + " ".join(f"-H expert_{key}={value}" for key, value in BLOCKS_RULES.items())
+    f"-H beta_decay=0.5 {_rules(BLOCKS_RULES, 'expert_')}"
 )
 
 JUNCTIONS = (  # scenario, training reward, what it is
@@ -263,10 +271,10 @@ ENTRIES: tuple[Entry, ...] = (
         "bends at 6 m/s², target speeds up to 20 m/s); learns nothing",
         _args(
             f"--algo expert --obs waypoints,affordances {RACETRACK_EXPERT} --steps 500 --eval-episodes 3 "
-            + " ".join(f"-H {key}={value}" for key, value in RACETRACK_RULES.items())
-            + " -H max_speed_mps=20"
+            f"{_rules(RACETRACK_RULES)} -H max_speed_mps=20"
         ),
         seeds=(0,),
+        judged=False,
     ),
     Entry(
         "racetrack",
@@ -422,11 +430,11 @@ ENTRIES: tuple[Entry, ...] = (
         "speeds up to 20 m/s; learns nothing",
         _args(
             f"--algo expert --obs waypoints,affordances {BLOCKS_EXPERT} --steps 500 --eval-episodes 1 "
-            + " ".join(f"-H {key}={value}" for key, value in BLOCKS_RULES.items())
-            + " -H max_speed_mps=20"
+            f"{_rules(BLOCKS_RULES)} -H max_speed_mps=20"
         ),
         judge="maps",
         seeds=(0,),
+        judged=False,
     ),
     Entry(
         "blocks-unseen",
@@ -485,8 +493,8 @@ def _report(entry: Entry, seed: int, episodes: int, make: bool = True) -> dict |
         arguments += ["--episodes", str(episodes)]
         size = "episodes_per_level"
     elif entry.judge == "maps":
-        start, count = UNSEEN_MAPS.split(":")
-        path = run / f"eval-maps-{start}-{count}.json"
+        count = UNSEEN_MAPS.split(":")[1]
+        path = run / report_name(UNSEEN_MAPS)
         arguments = ["evaluate", rel, "--maps", UNSEEN_MAPS, "--episodes", count]  # each map once
         size, episodes = "episodes", int(count)
     else:
@@ -760,8 +768,7 @@ def markdown(result: dict) -> str:
                 "|---|---|---|---|" + ("---|" if laps else "") + "---|---|---|---|---|---|---|",
             ]
             for r in measured:
-                # the targets are a learner's: the rule-based expert that teaches them is not judged
-                targets = TARGETS.get(scenario, {}) if r["name"] != "expert" else {}
+                targets = TARGETS.get(scenario, {}) if r.get("judged", True) else {}
                 s = r["summary"]
                 episodes = s["success_rate"]["episodes"] if s["success_rate"] else "–"
                 lines.append(
@@ -831,6 +838,7 @@ def main() -> None:
             record["summary"] = summarise(record)
         else:
             record = carry_over(record, previous.get((entry.scenario, entry.name)))
+        record["judged"] = entry.judged
         for seed_record in record["seeds"].values():  # the per-episode rows stay in the run's report
             seed_record["report"].pop("per_episode", None)
         if entry.targets:

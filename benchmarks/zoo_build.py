@@ -245,7 +245,7 @@ def capped_episodes(agent_dir: Path, episodes: int, duration_s: float) -> list[d
 def measure(name: str, spec: dict, check_only: bool = False) -> None:
     import torch
 
-    from drivelab.training.evaluate import aggregate
+    from drivelab.training.evaluate import aggregate, report_name
     from drivelab.training.zoo import ZOO_DIR, add_evaluation, enjoy
 
     torch.set_num_threads(1)
@@ -254,9 +254,8 @@ def measure(name: str, spec: dict, check_only: bool = False) -> None:
     for protocol, template in [] if check_only else spec["measure"]:
         arguments = [part.format(name=name) for part in template] + ["--out", str(out)]
         wall, cpu = drivelab(arguments)
-        written = "nocrash.json" if protocol == "nocrash" else "eval.json"
-        if "--maps" in arguments:  # evaluate on block maps names its report after them
-            written = "eval-maps-{}-{}.json".format(*arguments[arguments.index("--maps") + 1].split(":"))
+        maps = arguments[arguments.index("--maps") + 1] if "--maps" in arguments else None
+        written = "nocrash.json" if protocol == "nocrash" else report_name(maps)
         report = json.loads((ROOT / out / written).read_text())
         report.pop("run", None)
         per_episode = report.pop("per_episode", None)
@@ -328,8 +327,8 @@ def write_results() -> Path:
         )
     lines += [
         "",
-        "Evaluation set (the scenario's fixed evaluation episodes, `drivelab evaluate`; a block-map agent "
-        "also on the 100 unseen maps, `--maps 1000:100`):",
+        "Evaluation set (the scenario's fixed evaluation episodes, `drivelab evaluate`; a row naming "
+        "another protocol: the 100 unseen block maps, `--maps 1000:100`):",
         "",
         "| agent | episodes | success % | crash % | off-road per km | mean speed m/s | mean distance km "
         "| route completion % | return |",

@@ -192,7 +192,7 @@ def evaluate(
 ) -> None:
     """Evaluate a run's model: print the driving metrics and write eval.json."""
 
-    from drivelab.training.evaluate import evaluate_run
+    from drivelab.training.evaluate import evaluate_run, report_name
     from drivelab.training.zoo import report_dir, resolve
 
     _one_torch_thread()
@@ -209,7 +209,7 @@ def evaluate(
     _print_metrics(f"{name or report['algo']} on {report['env']}: {report['episodes']} episodes", report)
     if "video" in report:
         typer.echo(f"video: {report['video']}")
-    written = "eval.json" if maps is None else "eval-maps-{}-{}.json".format(*report["maps"].split(":"))
+    written = report_name(maps)
     typer.echo(
         f"run directory: {path}  ({written} written)"
         if out_dir is None

@@ -84,6 +84,10 @@ def test_racetrack_counts_clean_episodes_of_a_lap(board):
     record["summary"] = summary
     text = board.markdown({"command": "x", "machine": "m", "date": "d", "entries": [record]})
     assert "| sac | 0 | 4 | 75 [" in text and "≥ 1 lap clean %" in text
+    assert text.count("| not met |") == 1
+    expert = {**record, "name": "expert", "judged": False}  # the teacher: shown, never judged
+    text = board.markdown({"command": "x", "machine": "m", "date": "d", "entries": [record, expert]})
+    assert text.count("| not met |") == 1 and "| expert | 0 | 4 |" in text
     assert board._metrics({**report, "env": "highway"})["lap_rate"] is None
 
 

@@ -89,6 +89,20 @@ def stopping_speed(distance_m: float, brake_mps2: float) -> float:
     return float(np.sqrt(2.0 * brake_mps2 * max(distance_m, 0.0)))
 
 
+def slip_aware_pursuit(target_x: float, target_y: float, length_m: float) -> tuple[float, float]:
+    """(steering command in [-1, 1], path curvature) that brings highway-env's bicycle onto the point
+    (``target_x``, ``target_y``) of the ego's heading frame. The bicycle moves its centre along
+    heading + β, β = atan(tan δ / 2), and turns that direction at κ = 2 sin β / length. Pursuing in
+    the velocity's frame, κ = 2·y_v / L² with y_v = y cos β − x sin β, gives tan β = length·y /
+    (L² + length·x) in closed form; pursuing in the heading's frame (β off the path) steers too much
+    and cuts bends inside."""
+    target = np.array([target_x, target_y], dtype=float)
+    distance_sq = max(float(target @ target), 1e-6)
+    beta = np.arctan(length_m * target_y / (distance_sq + length_m * target_x))
+    steer = np.arctan(2.0 * np.tan(beta)) / FULL_LOCK_RAD
+    return float(np.clip(steer, -1.0, 1.0)), float(2.0 * np.sin(beta) / length_m)
+
+
 def check_expert_env(vector, max_speed_mps: float, algo: str) -> None:
     """UsageError unless ``vector`` (a ``VectorDriveEnv``) is a scenario the expert's rules were written
     for and its target_speed action means the speed the expert's ``max_speed_mps`` says."""
@@ -155,14 +169,7 @@ class RuleBasedExpert(OwnAgent):
         if not self.config.slip_aware:
             steer = np.arctan(self.config.wheelbase_m * curvature) / FULL_LOCK_RAD  # 1: full lock
             return float(np.clip(steer, -1.0, 1.0)), curvature
-        # highway-env's bicycle moves its centre along heading + β, β = atan(tan δ / 2), and turns
-        # that direction at κ = 2 sin β / length. Pursuing in the velocity's frame, κ = 2·y_v / L²
-        # with y_v = y cos β − x sin β, gives tan β = length·y / (L² + length·x) in closed form;
-        # pursuing in the heading's frame (β off the path) steers too much and cuts bends inside
-        length = self.config.wheelbase_m
-        beta = np.arctan(length * target[1] / (distance_sq + length * target[0]))
-        steer = np.arctan(2.0 * np.tan(beta)) / FULL_LOCK_RAD
-        return float(np.clip(steer, -1.0, 1.0)), 2.0 * np.sin(beta) / length
+        return slip_aware_pursuit(target[0], target[1], self.config.wheelbase_m)
 
     def _bend_ahead(self, waypoints: np.ndarray) -> float:
         """Speed that lets it slow down in time for the sharpest bend among the waypoints."""

@@ -125,6 +125,12 @@ def write_video(frames: list[np.ndarray], path: Path, fps: float) -> Path:
         return path.with_suffix(".gif")
 
 
+def report_name(maps: str | None = None) -> str:
+    """The file an evaluation writes: ``eval.json``, or ``eval-maps-START-COUNT.json`` on block maps
+    ``maps`` ("START:COUNT")."""
+    return "eval.json" if maps is None else "eval-maps-{}-{}.json".format(*parse_maps(maps))
+
+
 def load_run_config(run_dir: Path) -> RunConfig:
     """The resolved config of an existing run directory."""
     if not run_dir.is_dir():
@@ -165,10 +171,9 @@ def evaluate_run(
     config = load_run_config(run_dir)
     if episodes < 1:
         raise UsageError("--episodes must be >= 1")
-    name = "eval.json"
     if maps is not None:
         config = build_config({**config.to_dict(), "eval_maps": maps})  # checks START:COUNT, scenario
-        name = "eval-maps-{}-{}.json".format(*parse_maps(maps))
+    name = report_name(maps)
     if out_dir is None:
         out_dir = run_dir
         check_writable(out_dir, name)
