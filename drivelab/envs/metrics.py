@@ -4,14 +4,41 @@ reset by mask."""
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from drivelab.world.batch import COLLISION_PEDESTRIAN, WorldBatch
 
-_PEDESTRIAN_CODE = np.int8(COLLISION_PEDESTRIAN)  # compared with the int8 codes without a cast
 _ACCUMULATORS = (
     "episode_return", "length", "distance_m", "speed_sum_mps", "collisions", "pedestrian_collisions",
     "off_road_events", "red_lights", "blocked", "arrived",
 )  # fmt: skip
+
+
+_FLOAT_ROWS, _INT_ROWS, _FLAG_ROWS = 3, 6, 3
+
+
+@njit(cache=True)
+def _add_step(
+    floats, ints, flags, last_position, rewards, position, speed, collided, kind, off_road, red, blocked, won
+) -> None:
+    """One step of every world into the accumulators (rows as ``EpisodeMetrics._allocate`` names
+    them), then the step's position and flags kept as the last ones. The distance is
+    ``sqrt(dx² + dy²)``, np.linalg.norm's arithmetic on two components."""
+    for k in range(rewards.size):
+        dx, dy = position[k, 0] - last_position[k, 0], position[k, 1] - last_position[k, 1]
+        floats[0, k] += rewards[k]
+        floats[1, k] += np.sqrt(dx * dx + dy * dy)
+        floats[2, k] += speed[k]
+        new_collision = collided[k] and not flags[1, k]
+        ints[0, k] += 1
+        ints[1, k] += new_collision
+        ints[2, k] += new_collision and kind[k] == COLLISION_PEDESTRIAN
+        ints[3, k] += off_road[k] and not flags[2, k]
+        ints[4, k] += red[k]
+        ints[5, k] += blocked[k]
+        flags[0, k] |= won[k]
+        flags[1, k], flags[2, k] = collided[k], off_road[k]
+        last_position[k, 0], last_position[k, 1] = position[k, 0], position[k, 1]
 
 
 class EpisodeMetrics:
@@ -26,21 +53,18 @@ class EpisodeMetrics:
         self._allocate(0)
 
     def _allocate(self, count: int) -> None:
-        self.episode_return = np.zeros(count)
-        self.length = np.zeros(count, dtype=np.int64)
-        self.distance_m = np.zeros(count)
-        self.speed_sum_mps = np.zeros(count)
-        self.collisions = np.zeros(count, dtype=np.int64)
-        self.pedestrian_collisions = np.zeros(count, dtype=np.int64)
-        self.off_road_events = np.zeros(count, dtype=np.int64)
-        self.red_lights = np.zeros(count, dtype=np.int64)
-        self.blocked = np.zeros(count, dtype=np.int64)
-        self.arrived = np.zeros(count, dtype=bool)
+        # the accumulators are rows of three arrays (one compiled update adds a step to all of them)
+        self._floats = np.zeros((_FLOAT_ROWS, count))
+        self._ints = np.zeros((_INT_ROWS, count), dtype=np.int64)
+        self._flags = np.zeros((_FLAG_ROWS, count), dtype=bool)
+        self.episode_return, self.distance_m, self.speed_sum_mps = self._floats[:3]
+        self.length, self.collisions, self.pedestrian_collisions = self._ints[:3]
+        self.off_road_events, self.red_lights, self.blocked = self._ints[3:]
+        self.arrived = self._flags[0]
         self.start_progress_m = np.zeros(count)
         # the last world's ego position (K, 2), collision and off-road flags, and route
         self.last_position = np.zeros((count, 2))
-        self.last_collided = np.zeros(count, dtype=bool)
-        self.last_off_road = np.zeros(count, dtype=bool)
+        self.last_collided, self.last_off_road = self._flags[1:]
         self.last_progress_m = np.zeros(count)
         self.last_route_length_m = np.zeros(count)
 
@@ -67,20 +91,14 @@ class EpisodeMetrics:
 
     def update(self, batch: WorldBatch, rewards: np.ndarray) -> None:
         """Add the step of every world that led to ``batch``, with its ``rewards`` (K,)."""
-        events = batch.events
-        self.episode_return += rewards
-        self.length += 1
-        moved = batch.ego.position - self.last_position
-        self.distance_m += np.sqrt(np.add.reduce(moved * moved, axis=1))  # np.linalg.norm's arithmetic
-        self.speed_sum_mps += batch.ego.speed_mps
-        new_collision = events.collided & ~self.last_collided
-        self.collisions += new_collision
-        self.pedestrian_collisions += new_collision & (events.collision_kind == _PEDESTRIAN_CODE)
-        self.off_road_events += events.off_road & ~self.last_off_road
-        self.red_lights += events.red_light_crossed
-        self.blocked += events.blocked
-        self.arrived |= events.arrived
-        self._remember(batch, slice(None))
+        events, ego = batch.events, batch.ego
+        _add_step(
+            self._floats, self._ints, self._flags, self.last_position, np.asarray(rewards, dtype=float),
+            ego.position, ego.speed_mps, events.collided, events.collision_kind, events.off_road,
+            events.red_light_crossed, events.blocked, events.arrived,
+        )  # fmt: skip
+        self.last_progress_m[:] = batch.route.progress_m
+        self.last_route_length_m[:] = batch.route.length_m
 
     def summaries(
         self, mask: np.ndarray, has_goal: bool, timed_out: np.ndarray

@@ -228,6 +228,8 @@ class VectorDriveEnv(VectorEnv):
     # --- episodes ----------------------------------------------------------------------------
     def _draw_seeds(self, mask: np.ndarray) -> None:
         """The next episode seed of every world of ``mask``, from that world's generator."""
+        if not mask.any():
+            return
         for k in np.flatnonzero(mask):
             self.episode_seeds[k] = int(self.world_rngs[k].integers(TRAINING_SEED_LIMIT))
 
@@ -539,12 +541,15 @@ def _world_info(infos: dict, k: int) -> dict:
     """World ``k``'s entries of gymnasium-style vector infos, as one plain dict."""
     info = {}
     for key, value in infos.items():
-        if key.startswith("_") or key in ("final_obs", "final_info"):
+        if key[0] == "_" or key == "final_obs" or key == "final_info":
             continue
         if key == "reward_terms":
             info[key] = {name: float(v[k]) for name, v in value.items()}
-        elif infos.get(f"_{key}", None) is None or infos[f"_{key}"][k]:
-            info[key] = value[k].item() if isinstance(value[k], np.generic) else value[k]
+            continue
+        mask = infos.get("_" + key)
+        if mask is None or mask[k]:
+            item = value[k]
+            info[key] = item.item() if isinstance(item, np.generic) else item
     return info
 
 

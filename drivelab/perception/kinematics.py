@@ -62,7 +62,7 @@ class Kinematics(Sensor):
                 ego.speed_mps, np.cos(heading), np.sin(heading), self.perception_distance_m,
                 self.speed_scale_mps, rows,
             )  # fmt: skip
-        np.clip(rows, -1.0, 1.0, out=rows)
+        np.minimum(np.maximum(rows, -1.0, out=rows), 1.0, out=rows)  # np.clip, without its wrapper's cost
         out[...] = rows.reshape(batch.num_worlds, -1)
 
 

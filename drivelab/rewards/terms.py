@@ -354,8 +354,7 @@ def crossing_columns(
     else:
         lateral = batch_lateral_at_distances(batch, segments, distances, index)  # (K, D)
     columns = model.ground_columns(distances, lateral)  # nan where lateral is nan
-    with np.errstate(invalid="ignore"):
-        inside = (columns >= -0.5) & (columns <= model.width - 0.5)  # false for nan
+    inside = (columns >= -0.5) & (columns <= model.width - 0.5)  # false for nan (comparisons never warn)
     return np.where(inside, columns, np.nan)
 
 
@@ -412,7 +411,7 @@ def lane_keeping(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     columns = crossing_columns(batch, batch.route.polyline, LANE_CAMERA, LANE_ROWS_M)  # (K, D)
     seen = np.isfinite(columns)
     count = seen.sum(axis=1)
-    mean = np.nansum(columns, axis=1) / np.maximum(count, 1)  # C: the mean of the rows seen
+    mean = np.where(seen, columns, 0.0).sum(axis=1) / np.maximum(count, 1)  # C: the rows seen (np.nansum)
     offset_px = np.abs(mean - LANE_CAMERA.centre[0]) * 1024 / LANE_CAMERA.width
     value = np.where(
         count > 0,

@@ -377,6 +377,8 @@ class WorldBatch:
         traffic light whose stop line is ahead within ``max_distance_m``, in the ego's lane and
         facing its way (approach heading within 45°) — :meth:`WorldState.light_ahead` for K. The
         nearest at any distance is found once per batch; a nearer limit only filters it."""
+        if not self.traffic_lights.shape[1]:  # no lights in any world
+            return np.full(self.num_worlds, -1, dtype=np.int64), np.full(self.num_worlds, np.inf)
         if "light_ahead" not in self.cache:
             self.cache["light_ahead"] = self._nearest_light()
         state, distance = self.cache["light_ahead"]

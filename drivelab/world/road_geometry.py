@@ -50,6 +50,8 @@ def guide_segment_sets(batch: WorldBatch) -> np.ndarray:
         return guide_segments(roads[0])[None]
     # kept on the first map, with the maps it was made from (held, so their ids stay theirs)
     made = roads[0].derived_cache.get(_GUIDE_SETS)
+    if made is not None and made[0] is roads:  # the same tuple as the last batch's (the usual case)
+        return made[1]
     if (
         made is None
         or len(made[0]) != len(roads)

@@ -183,3 +183,25 @@ def test_batched_highway_set_up_is_the_one_world_set_up(traffic, control):
         assert simulator.count[k] == len(rows) and simulator.ego[k] == ego == 0
         np.testing.assert_array_equal(simulator.vehicles[k, : len(rows)], rows)
         assert not simulator.vehicles[k, len(rows) :].any()
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_continuous_commands_are_highway_envs_bits(dtype):
+    """The egos' commands are ContinuousAction.get_action's: clipped to [-1, 1], mapped onto
+    ±5 m/s² and ±45° in the controls' own float type, to the last bit (NaN kept)."""
+    from highway_env import utils as hw_utils
+
+    from drivelab.envs.backends.fast.simulator import (
+        ACCELERATION_RANGE,
+        STEERING_RANGE,
+        continuous_commands,
+    )
+
+    controls = np.random.default_rng(0).uniform(-1.5, 1.5, (512, 2)).astype(dtype)
+    controls[:4, 0] = [-1.0, 1.0, -0.0, np.nan]
+    clipped = np.clip(controls, -1, 1)
+    commands = continuous_commands(controls, len(controls))
+    assert commands.dtype == dtype and commands.shape == (512, 2)
+    np.testing.assert_array_equal(commands[:, 0], hw_utils.lmap(clipped[:, 0], [-1, 1], ACCELERATION_RANGE))
+    np.testing.assert_array_equal(commands[:, 1], hw_utils.lmap(clipped[:, 1], [-1, 1], STEERING_RANGE))
+    assert commands[0, 0] == -5.0 and commands[1, 0] == 5.0

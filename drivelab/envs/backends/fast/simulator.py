@@ -400,42 +400,79 @@ def clear_departed(
         count[k], ego[k] = kept, new_ego
 
 
+def continuous_commands(controls, num_worlds: int) -> np.ndarray:
+    """(K, 2) [acceleration m/s², steering rad] of normalised continuous controls: clipped to
+    [-1, 1], then mapped linearly onto ACCELERATION_RANGE and STEERING_RANGE as highway-env's
+    ``ContinuousAction.get_action`` does, in the controls' own float type (the ranges enter its
+    arithmetic as Python floats, i.e. rounded to that type), so both backends get the same bits."""
+    controls = np.asarray(controls).reshape(num_worlds, 2)
+    if controls.dtype.kind != "f":
+        controls = controls.astype(float)
+    low, span = _COMMAND_RANGES.get(controls.dtype) or _command_ranges(controls.dtype)
+    clipped = np.minimum(np.maximum(controls, -1), 1)  # np.clip's values, without its wrapper's cost
+    return low + (clipped + 1) * span / 2
+
+
+_KIND_OF_HIT = np.array([COLLISION_NONE, COLLISION_VEHICLE], dtype=np.int8)  # by the crashed flag
+_COMMAND_RANGES: dict[np.dtype, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _command_ranges(dtype: np.dtype) -> tuple[np.ndarray, np.ndarray]:
+    """The (low, span) of [acceleration, steering] in ``dtype``, made once per float type."""
+    low = np.array([ACCELERATION_RANGE[0], STEERING_RANGE[0]], dtype=dtype)
+    span = np.array([ACCELERATION_RANGE[1] - ACCELERATION_RANGE[0], STEERING_RANGE[1] - STEERING_RANGE[0]])
+    _COMMAND_RANGES[dtype] = low, span.astype(dtype)
+    return _COMMAND_RANGES[dtype]
+
+
+@njit(cache=True)
+def set_ego_controls(vehicles: np.ndarray, ego: np.ndarray, commands: np.ndarray) -> None:
+    """Each world's ego row gets its command (K, 2): acceleration (also the pedal of a pedal ego,
+    the circuits') and steering."""
+    for k in range(ego.size):
+        vehicles[k, ego[k], T.ACCEL] = commands[k, 0]
+        vehicles[k, ego[k], T.PEDAL] = commands[k, 0]
+        vehicles[k, ego[k], T.STEER] = commands[k, 1]
+
+
 @njit(cache=True)
 def project_routes(
-    x: np.ndarray,
-    y: np.ndarray,
+    vehicles: np.ndarray,
+    ego: np.ndarray,
     route: np.ndarray,
     starts: np.ndarray,
     segments: np.ndarray,
     lengths2: np.ndarray,
     segment_m: np.ndarray,
     stations: np.ndarray,
-    segment_count: np.ndarray,
+    point_count: np.ndarray,
     closed: np.ndarray,
     fresh: np.ndarray,
     update: np.ndarray,
     progress: np.ndarray,
 ) -> None:
-    """RouteTracker.project for K egos at (x[k], y[k]) on route ``route[k]`` of the padded route
-    table (R routes: ``starts`` / ``segments`` (R, S, 2), ``lengths2`` / ``segment_m`` /
-    ``stations`` (R, S + 1)); in place in ``progress`` (K,), for the worlds of ``update`` (a
+    """RouteTracker.project for K egos (world k's is row ``ego[k]`` of ``vehicles``) on route
+    ``route[k]`` of the padded route table (R routes of ``point_count`` points: ``starts`` /
+    ``segments`` (R, S, 2), ``lengths2`` / ``segment_m`` / ``stations`` (R, S + 1)); in place in
+    ``progress`` (K,), for the worlds of ``update`` (a
     projection is not idempotent to the last bit): the nearest point where ``fresh[k]``,
     else the nearest within SEARCH_WINDOW_M of the previous progress (unwrapped on a circuit).
     Same arithmetic in the same order as RouteTracker's numpy code. (Serial: well under a
     microsecond per world.)"""
-    for k in range(x.size):
+    for k in range(route.size):
         if not update[k]:
             continue
         r = route[k]
+        x, y = vehicles[k, ego[k], T.X], vehicles[k, ego[k], T.Y]
         previous = progress[k]
-        lap = stations[r, segment_count[r]]
+        lap = stations[r, point_count[r] - 1]
         best, best_distance = 0.0, np.inf
-        for i in range(segment_count[r]):
+        for i in range(point_count[r] - 1):
             sx, sy = starts[r, i, 0], starts[r, i, 1]
             gx, gy = segments[r, i, 0], segments[r, i, 1]
-            t = ((x[k] - sx) * gx + (y[k] - sy) * gy) / lengths2[r, i]
+            t = ((x - sx) * gx + (y - sy) * gy) / lengths2[r, i]
             t = min(max(t, 0.0), 1.0)
-            dx, dy = sx + t * gx - x[k], sy + t * gy - y[k]
+            dx, dy = sx + t * gx - x, sy + t * gy - y
             distance = np.sqrt(dx * dx + dy * dy)
             station = stations[r, i] + t * segment_m[r, i]
             if fresh[k]:
@@ -773,13 +810,7 @@ class FastSimulator:
             actions = np.asarray(controls).reshape(self.num_worlds).astype(np.int64)
             apply_meta(self.vehicles, self.count, self.ego, self.lanes, actions, self._road.target_speeds)
             return
-        # ContinuousAction.get_action, in the controls' own dtype as highway-env computes it
-        controls = np.clip(np.asarray(controls).reshape(self.num_worlds, 2), -1, 1)
-        worlds = np.arange(self.num_worlds)
-        acceleration = hw_utils.lmap(controls[:, 0], [-1, 1], ACCELERATION_RANGE)
-        self.vehicles[worlds, self.ego, T.ACCEL] = acceleration
-        self.vehicles[worlds, self.ego, T.PEDAL] = acceleration  # a pedal ego's command (the circuits)
-        self.vehicles[worlds, self.ego, T.STEER] = hw_utils.lmap(controls[:, 1], [-1, 1], STEERING_RANGE)
+        set_ego_controls(self.vehicles, self.ego, continuous_commands(controls, self.num_worlds))
 
     def _spawn_arrivals(self) -> None:
         """IntersectionEnv._spawn_vehicle in each world, from its own generator (its draws are
@@ -794,11 +825,9 @@ class FastSimulator:
                 self.count[k] = n + 1
 
     def _project(self, fresh: np.ndarray, update: np.ndarray) -> None:
-        ego = self.vehicles[np.arange(self.num_worlds), self.ego]
         project_routes(
-            ego[:, T.X].copy(), ego[:, T.Y].copy(), self.route_index, self.r_starts, self.r_segments,
-            self.r_lengths2, self.r_segment_m, self.r_stations, self.r_count - 1, self.r_closed,
-            fresh, update, self.progress_m,
+            self.vehicles, self.ego, self.route_index, self.r_starts, self.r_segments, self.r_lengths2,
+            self.r_segment_m, self.r_stations, self.r_count, self.r_closed, fresh, update, self.progress_m,
         )  # fmt: skip
 
     def _export_buffers(self) -> tuple[np.ndarray, ...]:
@@ -847,7 +876,7 @@ class FastSimulator:
             off_road = off_road | (ints[:, EX_LANE_ID] != self.start_lane_id)
         events = EventsBatch(
             collided=collided,
-            collision_kind=np.where(collided, COLLISION_VEHICLE, COLLISION_NONE).astype(np.int8),
+            collision_kind=_KIND_OF_HIT[collided.view(np.int8)],
             off_road=off_road,
             arrived=flags[:, EX_ARRIVED] if self.arrival != ARRIVE_ROUTE_END else self._route_ended(),
             red_light_crossed=no_event,  # the rules add blocked and off_route; no lights here
@@ -895,4 +924,4 @@ class FastSimulator:
 
     def _routes_stale(self) -> bool:
         """A world's route changed since the route arrays were last made."""
-        return self._route_cache is None or not np.array_equal(self._route_cache[0], self.route_index)
+        return self._route_cache is None or bool((self._route_cache[0] != self.route_index).any())
