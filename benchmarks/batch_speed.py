@@ -84,11 +84,14 @@ def threaded_rate(threads: int, worlds: int, steps: int, seed: int) -> float:
     return _subprocess_rate(argv, {"NUMBA_NUM_THREADS": str(threads), "OMP_NUM_THREADS": "1"})
 
 
-def baseline_rate(repo: str, steps: int, seed: int) -> float:
-    """One highway DriveEnv (kinematics) of the drivelab checked out at ``repo``."""
+def baseline_rate(
+    repo: str, steps: int, seed: int, scenario: str = "highway", env_kwargs: str = "obs='kinematics'"
+) -> float:
+    """One DriveEnv (highway, kinematics by default; ``env_kwargs`` as Python keyword arguments) of
+    the drivelab checked out at ``repo``, random actions, in a subprocess."""
     code = (
         "import sys, time; from drivelab.envs.core import DriveEnv\n"
-        f"env = DriveEnv('highway', obs='kinematics'); env.action_space.seed({seed})\n"
+        f"env = DriveEnv({scenario!r}, {env_kwargs}); env.action_space.seed({seed})\n"
         f"acts = [env.action_space.sample() for _ in range({steps})]; env.reset(seed={seed})\n"
         "for a in acts[:20]:\n    r = env.step(a)\n    (r[2] or r[3]) and env.reset()\n"
         "t = time.perf_counter()\n"

@@ -2,7 +2,7 @@
 three ways, in one run.
 
     OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1 .venv/bin/python benchmarks/circuit_speed.py \
-        [--steps 3000] [--repeats 5] [--worlds 64]
+        [--steps 3000] [--repeats 5] [--worlds 64] [--baseline-repo PATH]
 
 Per circuit, interleaved repeats of:
 
@@ -12,6 +12,9 @@ Per circuit, interleaved repeats of:
   ``backend_speed.py``), random actions, resets included;
 - ``--worlds`` K worlds in one VectorDriveEnv on the compiled core (every world's steps counted),
   against one highway-env DriveEnv.
+- with ``--baseline-repo`` (a checkout of an earlier drivelab, e.g. ``git worktree add /tmp/base
+  6b54828``): one compiled-core DriveEnv of that checkout and of this tree, each in a subprocess
+  with the same code and actions, so that how much faster one world got is a same-run ratio.
 
 Each ratio is the median of the per-repeat ratios. Writes ``benchmarks/results/circuit_speed.json``
 and ``.md``.
@@ -36,7 +39,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 from backend_speed import steps_per_second  # noqa: E402
-from batch_speed import vector_rate  # noqa: E402
+from batch_speed import _commit, baseline_rate, vector_rate  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 CIRCUITS = ("follow-line", "follow-lane")
@@ -64,7 +67,12 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=3000)
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--worlds", type=int, default=64)
+    parser.add_argument(
+        "--baseline-repo", default=None, help="an earlier drivelab checkout to time one world of"
+    )
     args = parser.parse_args()
+    here = str(Path(__file__).resolve().parent.parent)
+    fast_kwargs = "obs='kinematics', action='continuous', backend='fast'"
     from drivelab.envs.backends.fast.backend import FastBackend
     from drivelab.envs.backends.highway import HighwayBackend
     from drivelab.envs.core import DriveEnv
@@ -75,13 +83,18 @@ def main() -> None:
         fast_env, slow_env = make("fast"), make("highway")
         steps_per_second(fast_env, 50, seed=0)  # compile before timing
         vector_rate(name, "kinematics", 2, 20, 0)
-        rates = {key: [] for key in ("sim_fast", "sim_highway", "env_fast", "env_highway", "vector_fast")}
+        keys = ["sim_fast", "sim_highway", "env_fast", "env_highway", "vector_fast"]
+        keys += ["env_this_tree", "env_baseline"] if args.baseline_repo else []
+        rates = {key: [] for key in keys}
         for repeat in range(args.repeats):
             rates["sim_fast"].append(simulator_rate(FastBackend, name, args.steps))
             rates["sim_highway"].append(simulator_rate(HighwayBackend, name, args.steps // 5))
             rates["env_fast"].append(steps_per_second(fast_env, args.steps, repeat))
             rates["env_highway"].append(steps_per_second(slow_env, args.steps // 5, repeat))
             rates["vector_fast"].append(vector_rate(name, "kinematics", args.worlds, args.steps * 2, repeat))
+            if args.baseline_repo:
+                for key, repo in (("env_baseline", args.baseline_repo), ("env_this_tree", here)):
+                    rates[key].append(baseline_rate(repo, args.steps, repeat, name, fast_kwargs))
             print(name, repeat, {k: round(v[-1]) for k, v in rates.items()}, flush=True)
         ratio = lambda a, b, r=rates: statistics.median(x / y for x, y in zip(r[a], r[b], strict=True))  # noqa: E731
         rows.append(
@@ -91,6 +104,11 @@ def main() -> None:
                 "simulator_ratio": ratio("sim_fast", "sim_highway"),
                 "one_env_ratio": ratio("env_fast", "env_highway"),
                 "vector_vs_highway_env_ratio": ratio("vector_fast", "env_highway"),
+                **(
+                    {"one_env_vs_baseline_ratio": ratio("env_this_tree", "env_baseline")}
+                    if args.baseline_repo
+                    else {}
+                ),
             }
         )
     result = {
@@ -99,6 +117,7 @@ def main() -> None:
         "date": time.strftime("%Y-%m-%d"),
         "repeats": args.repeats,
         "worlds": args.worlds,
+        "baseline_repo_commit": _commit(args.baseline_repo) if args.baseline_repo else None,
         "rows": rows,
     }
     RESULTS.mkdir(exist_ok=True)
@@ -123,6 +142,20 @@ def main() -> None:
             f"{r['env_fast']:.0f} | {r['one_env_ratio']:.1f}x |",
             f"| {r['scenario']} | K = {args.worlds} VectorDriveEnv (fast) vs one highway-env DriveEnv | "
             f"{r['env_highway']:.0f} | {r['vector_fast']:.0f} | {r['vector_vs_highway_env_ratio']:.1f}x |",
+        ]
+    if args.baseline_repo:
+        lines += [
+            "",
+            f"One compiled-core DriveEnv, this tree against {result['baseline_repo_commit']} (each in a "
+            "subprocess, the same actions):",
+            "",
+            "| circuit | baseline steps/s | this tree steps/s | ratio |",
+            "|---|---|---|---|",
+            *[
+                f"| {r['scenario']} | {r['env_baseline']:.0f} | {r['env_this_tree']:.0f} | "
+                f"{r['one_env_vs_baseline_ratio']:.2f}x |"
+                for r in rows
+            ],
         ]
     (RESULTS / "circuit_speed.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
