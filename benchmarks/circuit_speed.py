@@ -12,6 +12,9 @@ Per circuit, interleaved repeats of:
   ``backend_speed.py``), random actions, resets included;
 - ``--worlds`` K worlds in one VectorDriveEnv on the compiled core (every world's steps counted),
   against one highway-env DriveEnv.
+- the parts of one compiled-core DriveEnv step, each called alone on a mid-episode world (µs per
+  call): the simulator's step, the rules, the reward, the metrics, the sensor and the infos. All
+  but the simulator are the per-step pipeline that both backends pay;
 - with ``--baseline-repo`` (a checkout of an earlier drivelab, e.g. ``git worktree add /tmp/base
   6b54828``): one compiled-core DriveEnv of that checkout and of this tree, each in a subprocess
   with the same code and actions, so that how much faster one world got is a same-run ratio.
@@ -29,6 +32,7 @@ import platform
 import statistics
 import sys
 import time
+import timeit
 from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -62,6 +66,35 @@ def simulator_rate(backend_class, name: str, steps: int) -> float:
     return steps / (time.perf_counter() - start)
 
 
+PARTS = ("simulator", "rules", "reward", "metrics", "sensor", "infos")
+
+
+def part_costs(env, calls: int) -> dict[str, float]:
+    """µs per call of each part of ``env``'s (a fast DriveEnv) step, timed on its current world
+    after a few straight steps (the simulator keeps stepping; the others see the same batch)."""
+    from drivelab.envs.vector import _world_info
+
+    vector, action = env.vector, np.array([[0.3, 0.0]], dtype=np.float32)
+    env.reset(seed=0)
+    for _ in range(5):
+        env.step(action[0])
+    batch, controls, keep = vector.batch, vector.adapter.controls_for(action, vector.batch), np.zeros(1, bool)
+    rewards, terms = vector.reward_shaper(batch, batch, controls)
+
+    def infos():
+        _world_info(vector._step_infos(batch, terms, keep, keep), 0)
+
+    parts = {
+        "simulator": lambda: vector.simulator.step(controls, keep, vector.episode_seeds),
+        "rules": lambda: vector.rules.apply(batch),
+        "reward": lambda: vector.reward_shaper(batch, batch, controls),
+        "metrics": lambda: vector.metrics.update(batch, rewards),
+        "sensor": lambda: vector._observe(batch),
+        "infos": infos,
+    }
+    return {name: timeit.timeit(call, number=calls) / calls * 1e6 for name, call in parts.items()}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=3000)
@@ -86,6 +119,7 @@ def main() -> None:
         keys = ["sim_fast", "sim_highway", "env_fast", "env_highway", "vector_fast"]
         keys += ["env_this_tree", "env_baseline"] if args.baseline_repo else []
         rates = {key: [] for key in keys}
+        costs = {part: [] for part in PARTS}
         for repeat in range(args.repeats):
             rates["sim_fast"].append(simulator_rate(FastBackend, name, args.steps))
             rates["sim_highway"].append(simulator_rate(HighwayBackend, name, args.steps // 5))
@@ -95,6 +129,8 @@ def main() -> None:
             if args.baseline_repo:
                 for key, repo in (("env_baseline", args.baseline_repo), ("env_this_tree", here)):
                     rates[key].append(baseline_rate(repo, args.steps, repeat, name, fast_kwargs))
+            for part, cost in part_costs(fast_env, args.steps // 3).items():
+                costs[part].append(cost)
             print(name, repeat, {k: round(v[-1]) for k, v in rates.items()}, flush=True)
         ratio = lambda a, b, r=rates: statistics.median(x / y for x, y in zip(r[a], r[b], strict=True))  # noqa: E731
         rows.append(
@@ -104,6 +140,7 @@ def main() -> None:
                 "simulator_ratio": ratio("sim_fast", "sim_highway"),
                 "one_env_ratio": ratio("env_fast", "env_highway"),
                 "vector_vs_highway_env_ratio": ratio("vector_fast", "env_highway"),
+                "part_us": {part: statistics.median(values) for part, values in costs.items()},
                 **(
                     {"one_env_vs_baseline_ratio": ratio("env_this_tree", "env_baseline")}
                     if args.baseline_repo
@@ -143,6 +180,23 @@ def main() -> None:
             f"| {r['scenario']} | K = {args.worlds} VectorDriveEnv (fast) vs one highway-env DriveEnv | "
             f"{r['env_highway']:.0f} | {r['vector_fast']:.0f} | {r['vector_vs_highway_env_ratio']:.1f}x |",
         ]
+    lines += [
+        "",
+        "The parts of one compiled-core DriveEnv step, µs per call (medians); P is every part but the",
+        "simulator (the pipeline both backends pay); the whole step is 1 / the one-DriveEnv rate above,",
+        "and the rest is the whole step less the parts: the vector env's and DriveEnv's own code and the",
+        "resets.",
+        "",
+        "| circuit | " + " | ".join(PARTS) + " | P | rest | whole step |",
+        "|---|" + "---|" * (len(PARTS) + 3),
+    ]
+    for r in rows:
+        cost, whole = r["part_us"], 1e6 / r["env_fast"]
+        pipeline = sum(cost[part] for part in PARTS[1:])
+        lines.append(
+            f"| {r['scenario']} | " + " | ".join(f"{cost[part]:.1f}" for part in PARTS) + " | "
+            f"{pipeline:.1f} | {whole - pipeline - cost['simulator']:.0f} | {whole:.0f} |"
+        )
     if args.baseline_repo:
         lines += [
             "",
