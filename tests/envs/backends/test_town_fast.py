@@ -184,6 +184,9 @@ def test_k_worlds_step_as_k_single_worlds():
             np.testing.assert_array_equal(got.traffic_lights, world.traffic_lights)
             np.testing.assert_array_equal(got.ego.position, world.ego.position)
             assert got.events == world.events and got.route.progress_m == world.route.progress_m
+            # the route rows rewritten in place at a restart hold the new route, whatever the width
+            np.testing.assert_array_equal(got.route.polyline, world.route.polyline)
+            np.testing.assert_array_equal(got.route.stations_m, world.route.stations_m)
 
 
 def test_the_town_runs_on_the_compiled_core_by_default():

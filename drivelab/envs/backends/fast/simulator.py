@@ -695,23 +695,33 @@ class FastSimulator:
     def _pad_routes(self) -> None:
         """The routes in use as padded arrays (R routes, S segments at most), last point repeated."""
         trackers = self._trackers
-        points = max(len(t.polyline) for t in trackers)
-        segments = points - 1
-
-        def pad(arrays, size):
-            return np.stack([np.concatenate([a, np.repeat(a[-1:], size - len(a), axis=0)]) for a in arrays])
-
-        self.r_polyline = pad([t.polyline for t in trackers], points)
-        self.r_stations = pad([t.stations for t in trackers], points)
-        self.r_starts = pad([t._starts for t in trackers], segments)
-        self.r_segments = pad([t._segments for t in trackers], segments)
-        self.r_lengths2 = pad([t._lengths2 for t in trackers], segments)
-        self.r_segment_m = np.sqrt(self.r_lengths2)
-        self.r_count = np.array([len(t.polyline) for t in trackers], dtype=np.int64)
-        self.r_length = np.array([t.length_m for t in trackers])
-        self.r_closed = np.array([t.closed for t in trackers], dtype=bool)
+        count, points = len(trackers), max(len(t.polyline) for t in trackers)
+        self.r_polyline, self.r_stations = np.zeros((count, points, 2)), np.zeros((count, points))
+        self.r_starts, self.r_segments = np.zeros((count, points - 1, 2)), np.zeros((count, points - 1, 2))
+        self.r_lengths2, self.r_segment_m = np.zeros((count, points - 1)), np.zeros((count, points - 1))
+        self.r_count, self.r_length = np.zeros(count, dtype=np.int64), np.zeros(count)
+        self.r_closed = np.zeros(count, dtype=bool)
+        for row in range(count):
+            self._pad_route(row)
         if self.scenario.guide_line:  # painted along the route: one whole lap, a road map per route
             self.roads = tuple(dataclasses.replace(self.road, guide_lines=(t.polyline,)) for t in trackers)
+
+    def _pad_route(self, row: int) -> None:
+        """Row ``row`` of the padded route arrays from its tracker, the last point repeated to the
+        arrays' width (which must hold it)."""
+        tracker = self._trackers[row]
+        for array, values in (
+            (self.r_polyline, tracker.polyline),
+            (self.r_stations, tracker.stations),
+            (self.r_starts, tracker._starts),
+            (self.r_segments, tracker._segments),
+            (self.r_lengths2, tracker._lengths2),
+        ):
+            array[row, : len(values)] = values
+            array[row, len(values) :] = values[-1]
+        self.r_segment_m[row] = np.sqrt(self.r_lengths2[row])
+        self.r_count[row], self.r_length[row] = len(tracker.polyline), tracker.length_m
+        self.r_closed[row] = tracker.closed
 
     # --- episodes -------------------------------------------------------------------------------
     def _episode(self, seed: int) -> tuple[np.ndarray, int, np.ndarray, np.random.Generator | None]:
