@@ -13,7 +13,8 @@ ratio is the median over interleaved repeats of (vector rate / single rate) meas
   subprocess (numba reads the variable at import).
 - ``--baseline-repo``: a checkout of an earlier drivelab (e.g. ``git worktree add /tmp/base
   57c1874``) whose single highway DriveEnv is timed in a subprocess in the same repeats, so that
-  "the single world did not get slower" is a same-run comparison.
+  "the single world did not get slower" is a same-run comparison; and K town worlds of it and of
+  this tree, each in a subprocess.
 """
 
 from __future__ import annotations
@@ -101,6 +102,22 @@ def baseline_rate(
     return _subprocess_rate([sys.executable, "-c", code], {"PYTHONPATH": repo}, cwd=repo)
 
 
+def repo_vector_rate(repo: str, scenario: str, worlds: int, steps: int, seed: int) -> float:
+    """:func:`vector_rate` (kinematics) of the drivelab checked out at ``repo``, in a subprocess."""
+    code = (
+        "import time; from drivelab.envs.vector import VectorDriveEnv\n"
+        f"env = VectorDriveEnv({worlds}, scenario={scenario!r}, obs='kinematics')\n"
+        f"env.action_space.seed({seed})\n"
+        f"acts = [env.action_space.sample() for _ in range({max(steps // worlds, 5)})]\n"
+        f"env.reset(seed={seed})\n"
+        "for a in acts[:3]:\n    env.step(a)\n"
+        "t = time.perf_counter()\n"
+        "for a in acts:\n    env.step(a)\n"
+        f"print(len(acts) * {worlds} / (time.perf_counter() - t))\n"
+    )
+    return _subprocess_rate([sys.executable, "-c", code], {"PYTHONPATH": repo}, cwd=repo)
+
+
 def _median_ratio(pairs: list[tuple[float, float]]) -> dict:
     return {
         "reference_steps_per_s": statistics.median(a for a, _ in pairs),
@@ -127,7 +144,8 @@ def main() -> None:
     cases = [("highway", name, spec) for name, spec in SENSORS.items()]
     cases += [(scenario, "kinematics", "kinematics") for scenario in SUPPORTED if scenario != "highway"]
     pairs: dict[tuple[str, str], list[tuple[float, float]]] = {(s, n): [] for s, n, _ in cases}
-    threads, baseline = [], []
+    threads, baseline, town_baseline = [], [], []
+    here = str(Path(__file__).resolve().parent.parent)
     for repeat in range(args.repeats):
         for scenario, name, spec in cases:
             steps = args.steps if name != "topdown 84x84" else args.steps // 4
@@ -145,6 +163,14 @@ def main() -> None:
             current = single_rate("highway", "kinematics", args.steps, repeat)
             baseline.append((baseline_rate(args.baseline_repo, args.steps, repeat), current))
             print(f"repeat {repeat} single highway: baseline {baseline[-1][0]:.0f}/s, now {current:.0f}/s")
+            town_baseline.append(
+                tuple(
+                    repo_vector_rate(repo, "town", args.worlds, args.steps * 2, repeat)
+                    for repo in (args.baseline_repo, here)
+                )
+            )
+            print(f"repeat {repeat} town K={args.worlds}: baseline {town_baseline[-1][0]:.0f}/s, now "
+                  f"{town_baseline[-1][1]:.0f}/s")  # fmt: skip
     rows = [{"scenario": s, "sensor": n, **_median_ratio(pairs[(s, n)])} for s, n, _ in cases]
     result = {
         "command": "OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1 python " + " ".join(sys.argv),
@@ -156,6 +182,7 @@ def main() -> None:
         "rows": rows,
         "threads_k256": _median_ratio(threads),
         "single_vs_baseline": _median_ratio(baseline) if baseline else None,
+        "town_vector_vs_baseline": _median_ratio(town_baseline) if town_baseline else None,
         "baseline_repo_commit": _commit(args.baseline_repo) if args.baseline_repo else None,
     }
     RESULTS.mkdir(exist_ok=True)
@@ -192,6 +219,13 @@ def main() -> None:
         lines += [
             f"One highway DriveEnv (kinematics), this tree against {result['baseline_repo_commit']}: "
             f"{b['steps_per_s']:.0f} vs {b['reference_steps_per_s']:.0f} steps/s ({b['ratio_median']:.2f}x).",
+            "",
+        ]
+        t = result["town_vector_vs_baseline"]
+        lines += [
+            f"The town, K = {args.worlds} worlds (kinematics), this tree against "
+            f"{result['baseline_repo_commit']}, each in a subprocess: {t['steps_per_s']:.0f} vs "
+            f"{t['reference_steps_per_s']:.0f} steps/s ({t['ratio_median']:.2f}x).",
             "",
         ]
     (RESULTS / "batch_speed.md").write_text("\n".join(lines))
