@@ -8,12 +8,6 @@ from numba import njit
 
 from drivelab.world.batch import COLLISION_PEDESTRIAN, WorldBatch
 
-_ACCUMULATORS = (
-    "episode_return", "length", "distance_m", "speed_sum_mps", "collisions", "pedestrian_collisions",
-    "off_road_events", "red_lights", "blocked", "arrived",
-)  # fmt: skip
-
-
 _FLOAT_ROWS, _INT_ROWS, _FLAG_ROWS = 3, 6, 3
 
 
@@ -76,12 +70,11 @@ class EpisodeMetrics:
             self._allocate(count)
             mask = np.ones(count, dtype=bool)
         mask = np.asarray(mask, dtype=bool)
-        for name in _ACCUMULATORS:
-            getattr(self, name)[mask] = 0
+        self._floats[:, mask], self._ints[:, mask], self.arrived[mask] = 0.0, 0, False  # last flags: below
         self.start_progress_m[mask] = batch.route.progress_m[mask]
         self._remember(batch, mask)
 
-    def _remember(self, batch: WorldBatch, mask: np.ndarray | slice) -> None:
+    def _remember(self, batch: WorldBatch, mask: np.ndarray) -> None:
         """Keep what the next update compares against: the worlds where ``mask`` of ``batch``."""
         self.last_position[mask] = batch.ego.position[mask]
         self.last_collided[mask] = batch.events.collided[mask]

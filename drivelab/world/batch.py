@@ -377,7 +377,7 @@ class WorldBatch:
         traffic light whose stop line is ahead within ``max_distance_m``, in the ego's lane and
         facing its way (approach heading within 45°) — :meth:`WorldState.light_ahead` for K. The
         nearest at any distance is found once per batch; a nearer limit only filters it."""
-        if not self.traffic_lights.shape[1]:  # no lights in any world
+        if not self.traffic_lights.shape[1]:  # no lights in any world: nothing to search or filter
             return np.full(self.num_worlds, -1, dtype=np.int64), np.full(self.num_worlds, np.inf)
         if "light_ahead" not in self.cache:
             self.cache["light_ahead"] = self._nearest_light()
@@ -388,8 +388,6 @@ class WorldBatch:
     def _nearest_light(self) -> tuple[np.ndarray, np.ndarray]:
         """``light_ahead`` without a distance limit."""
         lights, ego = self.traffic_lights, self.ego
-        if lights.shape[1] == 0:
-            return np.full(self.num_worlds, -1, dtype=np.int64), np.full(self.num_worlds, np.inf)
         cos_h, sin_h = np.cos(ego.heading)[:, None], np.sin(ego.heading)[:, None]
         delta = lights[..., :2] - ego.position[:, None, :]
         ahead = delta[..., 0] * cos_h + delta[..., 1] * sin_h

@@ -20,6 +20,7 @@ highway-env's ``np_random`` would go on.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -408,21 +409,20 @@ def continuous_commands(controls, num_worlds: int) -> np.ndarray:
     controls = np.asarray(controls).reshape(num_worlds, 2)
     if controls.dtype.kind != "f":
         controls = controls.astype(float)
-    low, span = _COMMAND_RANGES.get(controls.dtype) or _command_ranges(controls.dtype)
+    low, span = _command_ranges(controls.dtype)
     clipped = np.minimum(np.maximum(controls, -1), 1)  # np.clip's values, without its wrapper's cost
     return low + (clipped + 1) * span / 2
 
 
 _KIND_OF_HIT = np.array([COLLISION_NONE, COLLISION_VEHICLE], dtype=np.int8)  # by the crashed flag
-_COMMAND_RANGES: dict[np.dtype, tuple[np.ndarray, np.ndarray]] = {}
 
 
+@functools.cache
 def _command_ranges(dtype: np.dtype) -> tuple[np.ndarray, np.ndarray]:
     """The (low, span) of [acceleration, steering] in ``dtype``, made once per float type."""
     low = np.array([ACCELERATION_RANGE[0], STEERING_RANGE[0]], dtype=dtype)
     span = np.array([ACCELERATION_RANGE[1] - ACCELERATION_RANGE[0], STEERING_RANGE[1] - STEERING_RANGE[0]])
-    _COMMAND_RANGES[dtype] = low, span.astype(dtype)
-    return _COMMAND_RANGES[dtype]
+    return low, span.astype(dtype)
 
 
 @njit(cache=True)

@@ -159,7 +159,6 @@ class TownSimulator(FastSimulator):
         self.route_time_limit_s = np.full(k, np.inf)
         self.ego_routes: list[list[int]] = [[] for _ in range(k)]
         self.trackers: list[RouteTracker | None] = [None] * k
-        self._padded = False  # the padded route arrays exist (made at the first episodes)
         self.route_index = np.arange(k)
         cache = [town_frame_cache(n_max, p_max, len(self.lanes)) for _ in range(k)]
         self.coords = np.stack([c[0] for c in cache])
@@ -205,15 +204,14 @@ class TownSimulator(FastSimulator):
         """Every world's route as padded (K, S) arrays, last point repeated (``_pad_routes``): only
         the rows of the worlds ``changed`` are rewritten while their routes fit the arrays' width
         (a route's values do not depend on the width: readers stop at its point count)."""
+        width = self.r_polyline.shape[1] if self._trackers else 0  # no arrays before the first episodes
         started = next(t for t in self.trackers if t is not None)  # stands in for worlds not yet reset
         self._trackers = [t if t is not None else started for t in self.trackers]
-        width = self.r_polyline.shape[1] if self._padded else 0
         if all(len(self._trackers[k].polyline) <= width for k in changed):
             for k in changed:
                 self._pad_route(k)
             return
         self._pad_routes()
-        self._padded = True
 
     def _routes_stale(self) -> bool:
         """Every world keeps its own route row (route_index is constant): stale on any change."""
