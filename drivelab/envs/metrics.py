@@ -98,35 +98,35 @@ class EpisodeMetrics:
     ) -> list[dict[str, float | None]]:
         """The final numbers of each world where ``mask`` (K,), in order (``EpisodeMetrics.summary``
         for each; ``timed_out`` (K,) says whose episode reached its time limit)."""
-        crashed = self.collisions > 0
-        clean = ~crashed & (self.off_road_events == 0)
-        success = self.arrived if has_goal else (np.asarray(timed_out, dtype=bool) & clean)
-        finite = np.isfinite(self.last_route_length_m)
+        ended = np.flatnonzero(mask)  # only the worlds whose episode ends: a dict each
+        (episode_return, distance_m, speed_sum_mps), ints = self._floats[:, ended], self._ints[:, ended]
+        length, collisions, pedestrian_collisions, off_road_events, red_lights, blocked = ints
+        crashed = collisions > 0
+        clean = ~crashed & (off_road_events == 0)
+        success = self.arrived[ended] if has_goal else (np.asarray(timed_out, dtype=bool)[ended] & clean)
+        start_m, route_m = self.start_progress_m[ended], self.last_route_length_m[ended]
         with np.errstate(invalid="ignore"):
             completion = np.where(
-                finite,
-                (self.last_progress_m - self.start_progress_m)
-                / np.maximum(self.last_route_length_m - self.start_progress_m, 1e-6),
+                np.isfinite(route_m),
+                (self.last_progress_m[ended] - start_m) / np.maximum(route_m - start_m, 1e-6),
                 np.nan,
             )
-        completion = np.clip(completion, 0.0, 1.0)
-        mean_speed = self.speed_sum_mps / np.maximum(self.length, 1)
-        ended = np.flatnonzero(mask)  # only the worlds whose episode ends: a dict each
+        completion = np.minimum(np.maximum(completion, 0.0), 1.0)  # np.clip (NaN kept)
         columns = {
-            "return": self.episode_return[ended].astype(float).tolist(),
-            "length": self.length[ended].astype(int).tolist(),
-            "distance_km": (self.distance_m[ended] / 1000).astype(float).tolist(),
-            "mean_speed_mps": mean_speed[ended].astype(float).tolist(),
-            "success": success[ended].astype(float).tolist(),
-            "crashed": crashed[ended].astype(float).tolist(),
-            "collisions": self.collisions[ended].astype(int).tolist(),
-            "pedestrian_collisions": self.pedestrian_collisions[ended].astype(int).tolist(),
-            "off_road_events": self.off_road_events[ended].astype(int).tolist(),
-            "red_lights": self.red_lights[ended].astype(int).tolist(),
-            "blocked": self.blocked[ended].astype(int).tolist(),
+            "return": episode_return.tolist(),
+            "length": length.tolist(),
+            "distance_km": (distance_m / 1000).tolist(),
+            "mean_speed_mps": (speed_sum_mps / np.maximum(length, 1)).tolist(),
+            "success": success.astype(float).tolist(),
+            "crashed": crashed.astype(float).tolist(),
+            "collisions": collisions.tolist(),
+            "pedestrian_collisions": pedestrian_collisions.tolist(),
+            "off_road_events": off_road_events.tolist(),
+            "red_lights": red_lights.tolist(),
+            "blocked": blocked.tolist(),
             # a goal without a route of finite length (the merge's arrival line) has no completion
             "route_completion": [
-                value if has_goal and np.isfinite(value) else None for value in completion[ended].tolist()
+                value if has_goal and np.isfinite(value) else None for value in completion.tolist()
             ],
         }
         return [dict(zip(columns, values, strict=True)) for values in zip(*columns.values(), strict=True)]

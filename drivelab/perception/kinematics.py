@@ -55,33 +55,34 @@ class Kinematics(Sensor):
         rows[:, 0, 5], rows[:, 0, 6] = np.cos(relative_heading), np.sin(relative_heading)
         others = batch.vehicles  # (K, N, 6)
         if others.shape[1] and self.vehicles_count > 1:
-            # transcendental functions in numpy (its rounding everywhere), the selection compiled
-            heading = others[..., 2] - ego.heading[:, None]  # (K, N) relative to the ego
-            nearest_rows(
-                others, batch.vehicle_valid, ego.position, np.cos(ego.heading), np.sin(ego.heading),
-                ego.speed_mps, np.cos(heading), np.sin(heading), self.perception_distance_m,
-                self.speed_scale_mps, rows,
+            # the selection compiled, the transcendental functions in numpy (its rounding
+            # everywhere) on the selected vehicles' headings only
+            chosen, heading = nearest_rows(
+                others, batch.vehicle_valid, ego.position, ego.heading, np.cos(ego.heading),
+                np.sin(ego.heading), self.perception_distance_m, rows,
             )  # fmt: skip
+            cos_other, sin_other = np.cos(heading), np.sin(heading)
+            motion_rows(others, chosen, ego.speed_mps, cos_other, sin_other, self.speed_scale_mps, rows)
         np.minimum(np.maximum(rows, -1.0, out=rows), 1.0, out=rows)  # np.clip, without its wrapper's cost
         out[...] = rows.reshape(batch.num_worlds, -1)
 
 
 @njit(cache=True)
-def nearest_rows(
-    vehicles, valid, position, cos_h, sin_h, speed_mps, cos_other, sin_other, reach, speed_scale, rows
-):
-    """Rows 1… of every world: its nearest seen vehicles, nearest first (on ties highway-env's
-    order, as a stable sort gives), position and velocity relative to the ego in the ego frame
-    (``ego_frame``'s arithmetic), heading relative to the ego. The nearest are selected by
-    insertion into the few rows wanted (a strict comparison keeps the earlier vehicle first on
-    ties), not by sorting every slot."""
+def nearest_rows(vehicles, valid, position, heading, cos_h, sin_h, reach, rows):
+    """Presence and position of rows 1… of every world: its nearest seen vehicles, nearest first
+    (on ties highway-env's order, as a stable sort gives), relative to the ego in the ego frame
+    (``ego_frame``'s arithmetic). The nearest are selected by insertion into the few rows wanted
+    (a strict comparison keeps the earlier vehicle first on ties), not by sorting every slot.
+    Returns the chosen slots (K, rows - 1), -1 for none, and their headings relative to the
+    ego's (0 for none)."""
     num_worlds, slots = valid.shape
     wanted = min(rows.shape[1] - 1, slots)
-    chosen = np.empty(wanted, dtype=np.int64)
+    chosen = np.full((num_worlds, rows.shape[1] - 1), -1, dtype=np.int64)
+    relative = np.zeros((num_worlds, rows.shape[1] - 1))
     key = np.empty(slots)
     x, y = np.empty(slots), np.empty(slots)
     for k in range(num_worlds):
-        found = 0
+        found, pick = 0, chosen[k]
         for j in range(slots):
             if not valid[k, j]:
                 continue
@@ -92,19 +93,33 @@ def nearest_rows(
             if not distance <= reach:
                 continue
             key[j] = distance
-            if found == wanted and not distance < key[chosen[wanted - 1]]:
+            if found == wanted and not distance < key[pick[wanted - 1]]:
                 continue
             rank = min(found, wanted - 1)
-            while rank > 0 and distance < key[chosen[rank - 1]]:
-                chosen[rank] = chosen[rank - 1]
+            while rank > 0 and distance < key[pick[rank - 1]]:
+                pick[rank] = pick[rank - 1]
                 rank -= 1
-            chosen[rank] = j
+            pick[rank] = j
             found = min(found + 1, wanted)
         for r in range(found):
-            j = chosen[r]
-            speed, row = vehicles[k, j, 3], rows[k, 1 + r]
+            j = pick[r]
+            row = rows[k, 1 + r]
             row[0] = 1.0
             row[1], row[2] = x[j] / reach, y[j] / reach
-            row[3] = (speed * cos_other[k, j] - speed_mps[k]) / speed_scale
-            row[4] = speed * sin_other[k, j] / speed_scale
-            row[5], row[6] = cos_other[k, j], sin_other[k, j]
+            relative[k, r] = vehicles[k, j, 2] - heading[k]
+    return chosen, relative
+
+
+@njit(cache=True)
+def motion_rows(vehicles, chosen, speed_mps, cos_other, sin_other, speed_scale, rows):
+    """Velocity and heading of the rows ``nearest_rows`` chose: relative to the ego's velocity
+    in the ego frame, and the heading relative to the ego's (its cosine and sine given)."""
+    for k in range(chosen.shape[0]):
+        for r in range(chosen.shape[1]):
+            j = chosen[k, r]
+            if j < 0:
+                break
+            speed, row = vehicles[k, j, 3], rows[k, 1 + r]
+            row[3] = (speed * cos_other[k, r] - speed_mps[k]) / speed_scale
+            row[4] = speed * sin_other[k, r] / speed_scale
+            row[5], row[6] = cos_other[k, r], sin_other[k, r]

@@ -32,6 +32,7 @@ from drivelab.envs.backends.fast import lanes as L
 from drivelab.envs.backends.fast import pcg64
 from drivelab.envs.backends.fast import town_rows as R
 from drivelab.envs.backends.fast import traffic as T
+from drivelab.envs.backends.fast.borrow import borrowed
 from drivelab.envs.backends.fast.pedestrians import (
     clear_wrecks,
     hit_pedestrians,
@@ -66,6 +67,9 @@ def _simulate_town(
     end_junction, end_arm, light, street_lanes, routes, route_length, states, rng, frames, dt,
 ):  # fmt: skip
     """One policy step (``frames`` frames of ``dt``) of one world; returns (count, ego)."""
+    v, peds, lanes, p, coords, done, trig, states, rng = borrowed(
+        (v, peds, lanes, p, coords, done, trig, states, rng)
+    )  # its arrays without reference counts (``borrow``: 12 % of the frames' time at K = 64)
     for _ in range(frames):
         town_act(
             v, count, peds, pcount, lanes, p, coords, done, trig, junction, from_arm, to_arm, turn,

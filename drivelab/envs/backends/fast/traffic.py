@@ -17,6 +17,7 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from drivelab.envs.backends.fast.borrow import borrowed
 from drivelab.envs.backends.fast.lanes import (
     FIRST_OF_ROAD,
     FROM_NODE,
@@ -477,6 +478,7 @@ def act(
     v: np.ndarray, lanes: np.ndarray, p: np.ndarray, coords: np.ndarray, done: np.ndarray, trig: np.ndarray
 ) -> None:
     """Road.act: every vehicle decides its controls, in list order (``frame_cache`` arrays)."""
+    v, lanes, p, coords, done, trig = borrowed((v, lanes, p, coords, done, trig))
     start_frame(v, done, trig)
     own = np.empty(OWN_SIZE)
     for i in range(v.shape[0]):
@@ -758,6 +760,7 @@ def simulate(
         ``period`` road steps (0: a plain Road); the step count is updated in place.
     :param release_cap_mps: / ``prioritised_only``: ``enforce_road_rules``' options.
     """
+    v, lanes, p = borrowed((v, lanes, p))
     coords, done, trig = frame_cache(v, lanes)
     for _ in range(frames):
         act(v, lanes, p, coords, done, trig)
