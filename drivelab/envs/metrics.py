@@ -99,8 +99,11 @@ class EpisodeMetrics:
         """The final numbers of each world where ``mask`` (K,), in order (``EpisodeMetrics.summary``
         for each; ``timed_out`` (K,) says whose episode reached its time limit)."""
         ended = np.flatnonzero(mask)  # only the worlds whose episode ends: a dict each
-        (episode_return, distance_m, speed_sum_mps), ints = self._floats[:, ended], self._ints[:, ended]
-        length, collisions, pedestrian_collisions, off_road_events, red_lights, blocked = ints
+        length, collisions, off_road_events = (
+            self.length[ended],
+            self.collisions[ended],
+            self.off_road_events[ended],
+        )
         crashed = collisions > 0
         clean = ~crashed & (off_road_events == 0)
         success = self.arrived[ended] if has_goal else (np.asarray(timed_out, dtype=bool)[ended] & clean)
@@ -113,17 +116,17 @@ class EpisodeMetrics:
             )
         completion = np.minimum(np.maximum(completion, 0.0), 1.0)  # np.clip (NaN kept)
         columns = {
-            "return": episode_return.tolist(),
+            "return": self.episode_return[ended].tolist(),
             "length": length.tolist(),
-            "distance_km": (distance_m / 1000).tolist(),
-            "mean_speed_mps": (speed_sum_mps / np.maximum(length, 1)).tolist(),
+            "distance_km": (self.distance_m[ended] / 1000).tolist(),
+            "mean_speed_mps": (self.speed_sum_mps[ended] / np.maximum(length, 1)).tolist(),
             "success": success.astype(float).tolist(),
             "crashed": crashed.astype(float).tolist(),
             "collisions": collisions.tolist(),
-            "pedestrian_collisions": pedestrian_collisions.tolist(),
+            "pedestrian_collisions": self.pedestrian_collisions[ended].tolist(),
             "off_road_events": off_road_events.tolist(),
-            "red_lights": red_lights.tolist(),
-            "blocked": blocked.tolist(),
+            "red_lights": self.red_lights[ended].tolist(),
+            "blocked": self.blocked[ended].tolist(),
             # a goal without a route of finite length (the merge's arrival line) has no completion
             "route_completion": [
                 value if has_goal and np.isfinite(value) else None for value in completion.tolist()
