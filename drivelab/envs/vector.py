@@ -362,9 +362,12 @@ class VectorDriveEnv(VectorEnv):
             "crashed": events.collided.copy(),
             "off_road": events.off_road.copy(),
             "arrived": events.arrived.copy(),
+            "_reward_terms": every,
+            "_speed_mps": every,
+            "_crashed": every,
+            "_off_road": every,
+            "_arrived": every,
         }
-        infos.update({f"_{key}": every for key in list(infos)})
-        infos["_reward_terms"] = every
         if done.any():
             summaries = self.metrics.summaries(done, self.scenario.arrival != "none", truncated)
             metrics = np.empty(self.num_envs, dtype=object)

@@ -12,6 +12,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
+from numba import njit
 
 from drivelab.world.batch import WorldBatch
 from drivelab.world.geometry import FULL_LOCK_DEG, FULL_LOCK_RAD, ROACH_MAX_SPEED_MPS, ego_frame
@@ -336,6 +337,8 @@ LANE_BAND_EDGES_PX = np.array([15.0, 2 * 15, 3 * 20, 4 * 20])  # as extracted: 1
 LANE_BAND_VALUES = np.array([10.0, 5.0, 2.5, 1.0, -10.0])
 LANE_ALIGNED_DEG = 6.0  # the seed's ζ
 _LANE_ROWS_PX = LANE_CAMERA.row_of_distance(np.asarray(LANE_ROWS_M))  # image rows of the lane rows
+_LINE_CENTRE_PX, _LINE_WIDTH_PX = float(LINE_CAMERA.centre[0]), float(LINE_CAMERA.width)
+_LANE_CENTRE_PX, _LANE_WIDTH_PX = float(LANE_CAMERA.centre[0]), float(LANE_CAMERA.width)
 
 
 def crossing_columns(
@@ -353,9 +356,7 @@ def crossing_columns(
         lateral = polyline_crossings(batch.ego.position, batch.ego.heading, segments, distances)
     else:
         lateral = batch_lateral_at_distances(batch, segments, distances, index)  # (K, D)
-    columns = model.ground_columns(distances, lateral)  # nan where lateral is nan
-    inside = (columns >= -0.5) & (columns <= model.width - 0.5)  # false for nan (comparisons never warn)
-    return np.where(inside, columns, np.nan)
+    return model.visible_columns(distances, lateral)
 
 
 def _crossing_columns(
@@ -383,10 +384,21 @@ def line_centring(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     columns = crossing_columns(
         batch, guide_segment_sets(batch), LINE_CAMERA, LINE_ROWS_M, batch.road_index
     )  # (K, 4)
-    offset_px = np.abs(columns - LINE_CAMERA.centre[0]) * 640 / LINE_CAMERA.width
-    # numpy orders nan after every number: a row out of view falls in the last band (−100)
-    values = LINE_BAND_VALUES[np.searchsorted(LINE_BAND_EDGES_PX, offset_px, "right")]
-    return values.sum(axis=1)
+    out = np.empty(batch.num_worlds)
+    _line_centring(columns, out)
+    return out
+
+
+@njit(cache=True)
+def _line_centring(columns, out) -> None:
+    """:func:`line_centring`'s values from the line's columns (K, D) into ``out`` (K,)."""
+    for k in range(columns.shape[0]):
+        total = 0.0
+        for j in range(columns.shape[1]):
+            offset_px = abs(columns[k, j] - _LINE_CENTRE_PX) * 640 / _LINE_WIDTH_PX
+            # nan (the row out of view) sorts after every number, as in numpy: the last band (−100)
+            total += LINE_BAND_VALUES[np.searchsorted(LINE_BAND_EDGES_PX, offset_px, "right")]
+        out[k] = total
 
 
 @term
@@ -409,24 +421,30 @@ def lane_keeping(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     the action goes straight, halved when aligned but steering (the extracted text is garbled there;
     this is our reading of "higher reward when aligned and going straight")."""
     columns = crossing_columns(batch, batch.route.polyline, LANE_CAMERA, LANE_ROWS_M)  # (K, D)
-    seen = np.isfinite(columns)
-    count = seen.sum(axis=1)
-    mean = np.where(seen, columns, 0.0).sum(axis=1) / np.maximum(count, 1)  # C: the rows seen (np.nansum)
-    offset_px = np.abs(mean - LANE_CAMERA.centre[0]) * 1024 / LANE_CAMERA.width
-    value = np.where(
-        count > 0,
-        LANE_BAND_VALUES[np.searchsorted(LANE_BAND_EDGES_PX, offset_px, "right")],
-        LANE_BAND_VALUES[-1],
-    )
-    # g*: angle between the image vertical (p1 → p2) and the lane direction (p3 → p4), nearest and
-    # farthest rows where the centre is seen
-    rows = _LANE_ROWS_PX  # (D,)
-    worlds = np.arange(batch.num_worlds)
-    near = np.argmax(seen, axis=1)
-    far = seen.shape[1] - 1 - np.argmax(seen[:, ::-1], axis=1)
-    angle_deg = np.abs(
-        np.degrees(np.arctan2(columns[worlds, far] - columns[worlds, near], rows[near] - rows[far]))
-    )
-    aligned = (count >= 2) & (angle_deg <= LANE_ALIGNED_DEG)
-    straight = np.abs(_steering_deg(control, batch.num_worlds)) < 1e-6
-    return np.where(aligned, np.where(straight, 2.0 * value, value / 2.0), value)
+    out = np.empty(batch.num_worlds)
+    _lane_keeping(columns, _LANE_ROWS_PX, _steering_deg(control, batch.num_worlds), out)
+    return out
+
+
+@njit(cache=True)
+def _lane_keeping(columns, rows, steering_deg, out) -> None:
+    """:func:`lane_keeping`'s values from the lane centre's columns (K, D) at the image ``rows``
+    (D,), nearest first, and the commanded steering (K,) degrees, into ``out`` (K,). C is the mean
+    of the rows where the centre is seen (summed in row order, as numpy sums so few); g* the angle
+    between the image vertical and the line from the nearest to the farthest seen row."""
+    for k in range(columns.shape[0]):
+        count, total, near, far = 0, 0.0, -1, -1
+        for j in range(columns.shape[1]):
+            if np.isfinite(columns[k, j]):
+                count, total, far = count + 1, total + columns[k, j], j
+                near = j if near < 0 else near
+        if count == 0:
+            out[k] = LANE_BAND_VALUES[-1]
+            continue
+        offset_px = abs(total / count - _LANE_CENTRE_PX) * 1024 / _LANE_WIDTH_PX
+        value = LANE_BAND_VALUES[np.searchsorted(LANE_BAND_EDGES_PX, offset_px, "right")]
+        if count >= 2:
+            angle = np.arctan2(columns[k, far] - columns[k, near], rows[near] - rows[far])
+            if abs(np.degrees(angle)) <= LANE_ALIGNED_DEG:
+                value = 2.0 * value if abs(steering_deg[k]) < 1e-6 else value / 2.0
+        out[k] = value

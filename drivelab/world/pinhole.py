@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
+from numba import njit
 
 
 @dataclass(frozen=True)
@@ -91,13 +92,18 @@ class PinholeModel:
         pitch = np.radians(self.pitch_deg)
         return self.centre[0], self.focal_px, self.forward_m, np.cos(pitch), np.sin(pitch)
 
-    def ground_columns(self, distances_m: np.ndarray, lateral_m: np.ndarray) -> np.ndarray:
+    def visible_columns(self, distances_m: np.ndarray, lateral_m: np.ndarray) -> np.ndarray:
         """Image columns (K, D) of ground points ``distances_m`` (D,) ahead and ``lateral_m`` (K, D)
-        to the right of the ego centre: ``project_ground(...)[..., 0]`` with the same operations,
-        without building the 3-D points (the reward terms' hot path)."""
+        to the right of the ego centre, nan where the point falls outside the image (or ``lateral_m``
+        is nan): ``project_ground(...)[..., 0]`` with the same operations, without building the 3-D
+        points, in one compiled pass (the reward terms' hot path)."""
         cx, focal, forward_m, cos_p, sin_p = self._ground_terms
-        depth = np.maximum((distances_m - forward_m) * cos_p - (0.0 - self.height_m) * sin_p, 1e-6)
-        return cx + focal * lateral_m / depth
+        out = np.empty(np.shape(lateral_m))
+        _visible_columns(
+            np.asarray(distances_m, dtype=float), np.asarray(lateral_m, dtype=float),
+            (cx, focal, forward_m, cos_p, sin_p, float(self.height_m), float(self.width)), out,
+        )  # fmt: skip
+        return out
 
     def row_of_distance(self, distance_m: np.ndarray | float) -> np.ndarray:
         """Image row (float) of the ground straight ahead at ``distance_m`` ahead of the ego centre."""
@@ -112,6 +118,20 @@ class PinholeModel:
         along = np.cos(pitch) - slope * np.sin(pitch)
         with np.errstate(divide="ignore"):
             return np.where(falling > 1e-9, self.forward_m + self.height_m * along / falling, np.inf)
+
+
+@njit(cache=True)
+def _visible_columns(distances, lateral, terms, out) -> None:
+    """``PinholeModel.visible_columns`` into ``out`` (K, D): ``terms`` are (cx, focal, forward,
+    cos p, sin p, camera height, image width); numpy's operations in numpy's order (no fused
+    multiply-adds), so the columns are numpy's to the bit."""
+    cx, focal, forward_m, cos_p, sin_p, height_m, width = terms
+    for j in range(distances.shape[0]):
+        depth = max((distances[j] - forward_m) * cos_p - (0.0 - height_m) * sin_p, 1e-6)
+        for k in range(lateral.shape[0]):
+            column = cx + focal * lateral[k, j] / depth
+            # false for nan: comparisons with nan never hold
+            out[k, j] = column if column >= -0.5 and column <= width - 0.5 else np.nan
 
 
 # The follow-line and follow-lane cameras of seed 004 (their sensors and reward terms share them).

@@ -402,8 +402,9 @@ class BlocksSimulator(FastSimulator):
         )
         crossed = self.lanes[lane, L.FROM_NODE] == self.lanes[previous_lane, L.TO_NODE]
         self._red_light = ~restart & (light >= 0) & crossed & (state == LIGHT_RED)
-        self._start_episodes(np.flatnonzero(restart), seeds)
-        self._project(fresh=restart, update=np.ones(self.num_worlds, dtype=bool))
+        if restart.any():
+            self._start_episodes(np.flatnonzero(restart), seeds)
+        self._project(fresh=restart, update=self._every_world)
         self.batch = self._export()
         return self.batch
 

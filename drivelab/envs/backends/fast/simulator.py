@@ -406,33 +406,57 @@ def continuous_commands(controls, num_worlds: int) -> np.ndarray:
     [-1, 1], then mapped linearly onto ACCELERATION_RANGE and STEERING_RANGE as highway-env's
     ``ContinuousAction.get_action`` does, in the controls' own float type (the ranges enter its
     arithmetic as Python floats, i.e. rounded to that type), so both backends get the same bits."""
+    controls = _float_controls(controls, num_worlds)
+    commands = np.empty_like(controls)
+    _commands(controls, *_command_ranges(controls.dtype), commands)
+    return commands
+
+
+def _float_controls(controls, num_worlds: int) -> np.ndarray:
     controls = np.asarray(controls).reshape(num_worlds, 2)
-    if controls.dtype.kind != "f":
-        controls = controls.astype(float)
-    low, span = _command_ranges(controls.dtype)
-    clipped = np.minimum(np.maximum(controls, -1), 1)  # np.clip's values, without its wrapper's cost
-    return low + (clipped + 1) * span / 2
+    return controls if controls.dtype.kind == "f" else controls.astype(float)
+
+
+@functools.cache
+def _command_ranges(dtype: np.dtype) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The (low, span) of [acceleration, steering] and the constants (1, 2) in ``dtype``, made
+    once per float type."""
+    low = np.array([ACCELERATION_RANGE[0], STEERING_RANGE[0]], dtype=dtype)
+    span = np.array([ACCELERATION_RANGE[1] - ACCELERATION_RANGE[0], STEERING_RANGE[1] - STEERING_RANGE[0]])
+    return low, span.astype(dtype), np.array([1, 2], dtype=dtype)
+
+
+@njit(inline="always")
+def _command(control, low, span, constants):
+    """``low + (clip(control, -1, 1) + 1) * span / 2`` in the control's float type (numpy's order
+    of operations; a nan control stays nan, as under np.minimum / np.maximum)."""
+    one, two = constants[0], constants[1]
+    if control < -one:
+        control = -one
+    elif control > one:
+        control = one
+    return low + (control + one) * span / two
+
+
+@njit(cache=True)
+def _commands(controls, low, span, constants, out) -> None:
+    for k in range(controls.shape[0]):
+        for i in range(2):
+            out[k, i] = _command(controls[k, i], low[i], span[i], constants)
 
 
 _KIND_OF_HIT = np.array([COLLISION_NONE, COLLISION_VEHICLE], dtype=np.int8)  # by the crashed flag
 
 
-@functools.cache
-def _command_ranges(dtype: np.dtype) -> tuple[np.ndarray, np.ndarray]:
-    """The (low, span) of [acceleration, steering] in ``dtype``, made once per float type."""
-    low = np.array([ACCELERATION_RANGE[0], STEERING_RANGE[0]], dtype=dtype)
-    span = np.array([ACCELERATION_RANGE[1] - ACCELERATION_RANGE[0], STEERING_RANGE[1] - STEERING_RANGE[0]])
-    return low, span.astype(dtype)
-
-
 @njit(cache=True)
-def set_ego_controls(vehicles: np.ndarray, ego: np.ndarray, commands: np.ndarray) -> None:
-    """Each world's ego row gets its command (K, 2): acceleration (also the pedal of a pedal ego,
-    the circuits') and steering."""
+def set_ego_controls(vehicles, ego, controls, low, span, constants) -> None:
+    """Each world's ego row gets the command of its normalised control (K, 2) (``continuous_commands``'
+    arithmetic): acceleration (also the pedal of a pedal ego, the circuits') and steering."""
     for k in range(ego.size):
-        vehicles[k, ego[k], T.ACCEL] = commands[k, 0]
-        vehicles[k, ego[k], T.PEDAL] = commands[k, 0]
-        vehicles[k, ego[k], T.STEER] = commands[k, 1]
+        acceleration = _command(controls[k, 0], low[0], span[0], constants)
+        vehicles[k, ego[k], T.ACCEL] = acceleration
+        vehicles[k, ego[k], T.PEDAL] = acceleration
+        vehicles[k, ego[k], T.STEER] = _command(controls[k, 1], low[1], span[1], constants)
 
 
 @njit(cache=True)
@@ -614,6 +638,7 @@ class FastSimulator:
         if scenario.spawn is None:
             raise UsageError(f"the fast backend has no episode set-up for scenario {scenario.name!r}")
         self.scenario, self.control, self.num_worlds = scenario, control, num_worlds
+        self._every_world = np.ones(num_worlds, dtype=bool)  # every route projected each step
         road = self._road = self._load_road(scenario, traffic, control, overrides)
         self.table, self.lanes, self.road = road.table, road.table.rows, road.road_map
         self.roads: tuple[RoadMap, ...] = (self.road,)
@@ -796,8 +821,9 @@ class FastSimulator:
         if self.traffic_flow:  # IntersectionEnv.step: clear, then maybe spawn
             clear_departed(self.vehicles, self.count, self.ego, self.lanes, self._road.exit_lane)
             self._spawn_arrivals()
-        self._start_episodes(np.flatnonzero(restart), seeds)
-        self._project(fresh=restart, update=np.ones(self.num_worlds, dtype=bool))
+        if restart.any():
+            self._start_episodes(np.flatnonzero(restart), seeds)
+        self._project(fresh=restart, update=self._every_world)
         self.batch = self._export()
         return self.batch
 
@@ -820,7 +846,8 @@ class FastSimulator:
             actions = np.asarray(controls).reshape(self.num_worlds).astype(np.int64)
             apply_meta(self.vehicles, self.count, self.ego, self.lanes, actions, self._road.target_speeds)
             return
-        set_ego_controls(self.vehicles, self.ego, continuous_commands(controls, self.num_worlds))
+        controls = _float_controls(controls, self.num_worlds)
+        set_ego_controls(self.vehicles, self.ego, controls, *_command_ranges(controls.dtype))
 
     def _spawn_arrivals(self) -> None:
         """IntersectionEnv._spawn_vehicle in each world, from its own generator (its draws are
@@ -934,4 +961,5 @@ class FastSimulator:
 
     def _routes_stale(self) -> bool:
         """A world's route changed since the route arrays were last made."""
-        return self._route_cache is None or bool((self._route_cache[0] != self.route_index).any())
+        # equal bytes are equal indices (the same shape and type): cheaper than an elementwise test
+        return self._route_cache is None or self._route_cache[0].tobytes() != self.route_index.tobytes()
