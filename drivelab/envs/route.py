@@ -7,6 +7,7 @@ import numpy as np
 from drivelab.world.state import Route
 
 SEARCH_WINDOW_M = 60.0  # after the first projection, look no farther than this from the last one
+WINDOW_PENALTY_M = 1e3  # a point outside the window counts this much farther than it is
 CLOSED_GAP_M = 5.0  # a polyline whose ends are this close is a circuit
 
 
@@ -42,7 +43,7 @@ class RouteTracker:
         if self.closed:
             lap_m = self.stations[-1]
             gap = (gap + lap_m / 2) % lap_m - lap_m / 2
-        distance = distance + 1e3 * (np.abs(gap) > SEARCH_WINDOW_M)
+        distance = distance + WINDOW_PENALTY_M * (np.abs(gap) > SEARCH_WINDOW_M)
         return float(previous_m + gap[int(np.argmin(distance))])
 
     def at(self, progress_m: float) -> Route:

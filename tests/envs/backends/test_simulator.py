@@ -205,3 +205,78 @@ def test_continuous_commands_are_highway_envs_bits(dtype):
     np.testing.assert_array_equal(commands[:, 0], hw_utils.lmap(clipped[:, 0], [-1, 1], ACCELERATION_RANGE))
     np.testing.assert_array_equal(commands[:, 1], hw_utils.lmap(clipped[:, 1], [-1, 1], STEERING_RANGE))
     assert commands[0, 0] == -5.0 and commands[1, 0] == 5.0
+
+
+def _route_table(trackers):
+    """project_routes' padded arrays of ``trackers`` (the simulator's layout, last point repeated)."""
+    points = max(len(t.polyline) for t in trackers)
+    table = {name: [] for name in ("starts", "segments", "lengths2", "stations")}
+    for t in trackers:
+        for name, values in (
+            ("starts", t._starts),
+            ("segments", t._segments),
+            ("lengths2", t._lengths2),
+            ("stations", t.stations),
+        ):
+            width = points - (name != "stations")
+            table[name].append(np.concatenate([values, np.repeat(values[-1:], width - len(values), axis=0)]))
+    table = {name: np.stack(rows) for name, rows in table.items()}
+    table["segment_m"] = np.sqrt(table["lengths2"])
+    table["count"] = np.array([len(t.polyline) for t in trackers], dtype=np.int64)
+    table["closed"] = np.array([t.closed for t in trackers])
+    return table
+
+
+def test_windowed_route_projection_is_route_trackers():
+    """project_routes searches the window's segments first, yet gives RouteTracker.project's
+    progress to the bit: along a circuit whose window wraps round the lap both ways, on an open
+    route, far off the road (the whole search), and where the window finds nothing near."""
+    from drivelab.envs.backends.fast.simulator import project_routes
+    from drivelab.envs.route import RouteTracker
+
+    angles = np.linspace(0.0, 2 * np.pi, 181)
+    circle = np.stack([80 * np.cos(angles), 80 * np.sin(angles)], axis=1)  # 503 m lap, closed
+    zigzag = np.stack([np.arange(60) * 7.0, 5 * np.sin(np.arange(60))], axis=1)  # open, 413 m
+    hairpin = np.concatenate([np.stack([np.arange(40) * 5.0, np.zeros(40)], 1),
+                              np.stack([np.arange(39, -1, -1) * 5.0, np.full(40, 3.0)], 1)])  # fmt: skip
+    trackers = [RouteTracker(p, has_goal=True) for p in (circle, zigzag, hairpin)]
+    assert trackers[0].closed and not trackers[1].closed
+    table = _route_table(trackers)
+    rng = np.random.default_rng(0)
+    checked = 0
+    for trial in range(600):
+        r = trial % 3
+        tracker = trackers[r]
+        lap = tracker.stations[-1]
+        station = rng.uniform(-lap, 3 * lap) if tracker.closed else rng.uniform(-20, lap + 20)
+        anchor = tracker.polyline[rng.integers(len(tracker.polyline))]
+        scale = rng.choice([0.5, 5.0, 40.0, 2000.0])  # 2 km off: nothing near in the window
+        position = anchor + rng.normal(0, scale, 2)
+        fresh = bool(trial % 7 == 0)
+        expected = tracker.project(position, None if fresh else station)
+        vehicles = np.zeros((1, 1, T.VEHICLE_COLUMNS))
+        vehicles[0, 0, T.X], vehicles[0, 0, T.Y] = position
+        progress = np.array([station])
+        project_routes(
+            vehicles, np.zeros(1, np.int64), np.array([r]), table["starts"], table["segments"],
+            table["lengths2"], table["segment_m"], table["stations"], table["count"], table["closed"],
+            np.array([fresh]), np.array([True]), progress,
+        )  # fmt: skip
+        assert progress[0] == expected, (trial, r, station, position)
+        checked += 1
+    assert checked == 600
+    # exact ties, where the order of the search decides: (3, 3) is 3 m from three sides of a
+    # closed 128 x 6 m loop (every projection exact), two at the end of the lap and one at its start,
+    # all in the window
+    loop = RouteTracker(np.array([[0.0, 0], [128, 0], [128, 6], [0, 6], [0, 0]]), has_goal=True)
+    table = _route_table([loop])
+    vehicles = np.zeros((1, 1, T.VEHICLE_COLUMNS))
+    vehicles[0, 0, T.X], vehicles[0, 0, T.Y] = 3.0, 3.0
+    for station in (1.0, loop.stations[-1] - 1.0):  # the window wraps below the start, then above the end
+        progress = np.array([station])
+        project_routes(
+            vehicles, np.zeros(1, np.int64), np.zeros(1, np.int64), table["starts"], table["segments"],
+            table["lengths2"], table["segment_m"], table["stations"], table["count"], table["closed"],
+            np.array([False]), np.array([True]), progress,
+        )  # fmt: skip
+        assert progress[0] == loop.project(np.array([3.0, 3.0]), station)

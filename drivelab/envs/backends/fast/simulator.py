@@ -37,7 +37,7 @@ from drivelab.envs.backends.fast import lanes as L
 from drivelab.envs.backends.fast import traffic as T
 from drivelab.envs.backends.fast.spawn import LaneGeometry, all_shortest_paths
 from drivelab.envs.backends.highway import HighwayBackend, build_road_map, is_idm_class
-from drivelab.envs.route import SEARCH_WINDOW_M, RouteTracker
+from drivelab.envs.route import SEARCH_WINDOW_M, WINDOW_PENALTY_M, RouteTracker
 from drivelab.errors import UsageError
 from drivelab.world.batch import (
     COLLISION_NONE,
@@ -481,35 +481,94 @@ def project_routes(
     ``progress`` (K,), for the worlds of ``update`` (a
     projection is not idempotent to the last bit): the nearest point where ``fresh[k]``,
     else the nearest within SEARCH_WINDOW_M of the previous progress (unwrapped on a circuit).
-    Same arithmetic in the same order as RouteTracker's numpy code. (Serial: well under a
-    microsecond per world.)"""
+    Same arithmetic in the same order as RouteTracker's numpy code; after the first projection
+    the segments within reach of the window are searched first, and the rest only when none of
+    them scores under the window's penalty (the same answer, see ``_window_spans``)."""
     for k in range(route.size):
         if not update[k]:
             continue
         r = route[k]
+        n = point_count[r]
         x, y = vehicles[k, ego[k], T.X], vehicles[k, ego[k], T.Y]
-        previous = progress[k]
-        lap = stations[r, point_count[r] - 1]
+        previous, lap, circuit = progress[k], stations[r, n - 1], closed[r]
         best, best_distance = 0.0, np.inf
-        for i in range(point_count[r] - 1):
-            sx, sy = starts[r, i, 0], starts[r, i, 1]
-            gx, gy = segments[r, i, 0], segments[r, i, 1]
-            t = ((x - sx) * gx + (y - sy) * gy) / lengths2[r, i]
-            t = min(max(t, 0.0), 1.0)
-            dx, dy = sx + t * gx - x, sy + t * gy - y
-            distance = np.sqrt(dx * dx + dy * dy)
-            station = stations[r, i] + t * segment_m[r, i]
-            if fresh[k]:
-                value = station
-            else:
-                gap = station - previous
-                if closed[r]:
-                    gap = (gap + lap / 2) % lap - lap / 2
-                distance = distance + 1e3 * (np.abs(gap) > SEARCH_WINDOW_M)
-                value = previous + gap
+        if not fresh[k]:  # the segments the window can reach first (see _window_spans)
+            spans = _window_spans(stations[r, :n], previous, lap, circuit)
+            for first, end in ((spans[0], spans[1]), (spans[2], spans[3])):
+                for i in range(first, end):
+                    value, distance = _segment_projection(
+                        x, y, starts[r, i, 0], starts[r, i, 1], segments[r, i, 0], segments[r, i, 1],
+                        lengths2[r, i], stations[r, i], segment_m[r, i], previous, lap, circuit, False,
+                    )  # fmt: skip
+                    if distance < best_distance:
+                        best, best_distance = value, distance
+            if best_distance < WINDOW_PENALTY_M:
+                progress[k] = best
+                continue
+            best, best_distance = 0.0, np.inf
+        for i in range(n - 1):
+            value, distance = _segment_projection(
+                x, y, starts[r, i, 0], starts[r, i, 1], segments[r, i, 0], segments[r, i, 1],
+                lengths2[r, i], stations[r, i], segment_m[r, i], previous, lap, circuit, fresh[k],
+            )  # fmt: skip
             if distance < best_distance:
                 best, best_distance = value, distance
         progress[k] = best
+
+
+WINDOW_SLACK_M = 1.0  # segments this much beyond the window are searched too (rounding)
+
+
+@njit(inline="always")
+def _segment_projection(x, y, sx, sy, gx, gy, length2, station0, length, previous, lap, circuit, fresh):
+    """(progress value, distance) of (x, y) projected on the segment from (sx, sy) along (gx, gy),
+    RouteTracker.project's arithmetic for one segment (the window's penalty unless ``fresh``)."""
+    t = ((x - sx) * gx + (y - sy) * gy) / length2
+    t = min(max(t, 0.0), 1.0)
+    dx, dy = sx + t * gx - x, sy + t * gy - y
+    distance = np.sqrt(dx * dx + dy * dy)
+    station = station0 + t * length
+    if fresh:
+        return station, distance
+    gap = station - previous
+    if circuit:
+        gap = (gap + lap / 2) % lap - lap / 2
+    return previous + gap, distance + WINDOW_PENALTY_M * (np.abs(gap) > SEARCH_WINDOW_M)
+
+
+@njit(inline="always")
+def _window_spans(stations, previous, lap, circuit):
+    """Index spans [a0, a1) and [b0, b1), in ascending order, of the segments of a route with
+    point ``stations`` whose arc lengths come within SEARCH_WINDOW_M (plus a slack) of
+    ``previous`` (round the lap on a circuit). Every other segment is outside the window, so it
+    scores WINDOW_PENALTY_M or more: when a searched one scores less, the whole search's answer
+    (the first smallest score) is among the searched, found in the same order."""
+    count = stations.shape[0] - 1  # segments
+    reach = SEARCH_WINDOW_M + WINDOW_SLACK_M
+    if not circuit:
+        first, end = _span(stations, previous - reach, previous + reach, count)
+        return first, end, 0, 0
+    if 2 * reach >= lap:
+        return 0, count, 0, 0
+    centre = previous % lap
+    low, high = centre - reach, centre + reach
+    a0, a1 = _span(stations, max(low, 0.0), min(high, lap), count)
+    if low < 0:  # the window wraps below the start: its other part is at the end of the lap
+        b0, b1 = _span(stations, low + lap, lap, count)
+        return a0, a1, b0, b1
+    if high > lap:  # ... above the end: its other part is at the start, searched first
+        b0, b1 = _span(stations, 0.0, high - lap, count)
+        return b0, b1, a0, a1
+    return a0, a1, 0, 0
+
+
+@njit(inline="always")
+def _span(stations, low, high, count):
+    """[first, last + 1) of the segments i (of ``count``) with stations[i + 1] >= low and
+    stations[i] <= high."""
+    first = max(np.searchsorted(stations, low, "left") - 1, 0)
+    last = min(np.searchsorted(stations, high, "right") - 1, count - 1)
+    return first, max(last + 1, first)
 
 
 @njit(cache=True, inline="always")
