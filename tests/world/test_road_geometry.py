@@ -115,6 +115,23 @@ def test_compiled_crossings_equal_the_numpy_formulation():
     )
 
 
+def test_crossings_at_a_segments_very_end_are_found():
+    """The search passes over segments whose x range misses every ground line; one that ends
+    exactly on a line, or begins on it, still crosses it (t = 1, t = 0), from either side."""
+    distances = np.array([4.0, 13.0])
+    segments = np.array(
+        [
+            [[[0.0, 1.0], [4.0, 1.0]], [[13.0, -2.0], [20.0, -2.0]]],  # ends on 4 m; begins on 13 m
+            [[[4.0, 0.5], [-3.0, 0.5]], [[30.0, 2.5], [13.0, 2.5]]],  # the same, drawn backwards
+            [[[-9.0, 0.1], [3.999, 0.1]], [[13.001, 0.2], [40.0, 0.2]]],  # just short of both lines
+        ]
+    )
+    got = lateral_crossings(np.zeros((3, 2)), np.zeros(3), segments, distances)
+    np.testing.assert_array_equal(got[:2], [[1.0, -2.0], [0.5, 2.5]])
+    assert np.isnan(got[2]).all()
+    np.testing.assert_array_equal(got, _lateral_by_numpy(np.zeros((3, 2)), np.zeros(3), segments, distances))
+
+
 def test_guide_segment_sets_follow_the_batch_roads():
     line_a = np.array([[0.0, 1.0], [10.0, 1.0], [20.0, 1.0]])
     line_b = np.array([[0.0, -1.0], [10.0, -1.0]])
