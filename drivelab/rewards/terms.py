@@ -337,8 +337,6 @@ LANE_BAND_EDGES_PX = np.array([15.0, 2 * 15, 3 * 20, 4 * 20])  # as extracted: 1
 LANE_BAND_VALUES = np.array([10.0, 5.0, 2.5, 1.0, -10.0])
 LANE_ALIGNED_DEG = 6.0  # the seed's ζ
 _LANE_ROWS_PX = LANE_CAMERA.row_of_distance(np.asarray(LANE_ROWS_M))  # image rows of the lane rows
-_LINE_CENTRE_PX, _LINE_WIDTH_PX = float(LINE_CAMERA.centre[0]), float(LINE_CAMERA.width)
-_LANE_CENTRE_PX, _LANE_WIDTH_PX = float(LANE_CAMERA.centre[0]), float(LANE_CAMERA.width)
 
 
 def crossing_columns(
@@ -385,17 +383,18 @@ def line_centring(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
         batch, guide_segment_sets(batch), LINE_CAMERA, LINE_ROWS_M, batch.road_index
     )  # (K, 4)
     out = np.empty(batch.num_worlds)
-    _line_centring(columns, out)
+    _line_centring(columns, float(LINE_CAMERA.centre[0]), float(LINE_CAMERA.width), out)
     return out
 
 
 @njit(cache=True)
-def _line_centring(columns, out) -> None:
-    """:func:`line_centring`'s values from the line's columns (K, D) into ``out`` (K,)."""
+def _line_centring(columns, centre_px, width_px, out) -> None:
+    """:func:`line_centring`'s values from the line's columns (K, D) in an image ``width_px`` wide
+    centred on ``centre_px`` into ``out`` (K,)."""
     for k in range(columns.shape[0]):
         total = 0.0
         for j in range(columns.shape[1]):
-            offset_px = abs(columns[k, j] - _LINE_CENTRE_PX) * 640 / _LINE_WIDTH_PX
+            offset_px = abs(columns[k, j] - centre_px) * 640 / width_px
             # nan (the row out of view) sorts after every number, as in numpy: the last band (−100)
             total += LINE_BAND_VALUES[np.searchsorted(LINE_BAND_EDGES_PX, offset_px, "right")]
         out[k] = total
@@ -422,16 +421,19 @@ def lane_keeping(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     this is our reading of "higher reward when aligned and going straight")."""
     columns = crossing_columns(batch, batch.route.polyline, LANE_CAMERA, LANE_ROWS_M)  # (K, D)
     out = np.empty(batch.num_worlds)
-    _lane_keeping(columns, _LANE_ROWS_PX, _steering_deg(control, batch.num_worlds), out)
+    centre_px, width_px = float(LANE_CAMERA.centre[0]), float(LANE_CAMERA.width)
+    _lane_keeping(columns, _LANE_ROWS_PX, centre_px, width_px, _steering_deg(control, batch.num_worlds), out)
     return out
 
 
 @njit(cache=True)
-def _lane_keeping(columns, rows, steering_deg, out) -> None:
+def _lane_keeping(columns, rows, centre_px, width_px, steering_deg, out) -> None:
     """:func:`lane_keeping`'s values from the lane centre's columns (K, D) at the image ``rows``
     (D,), nearest first, and the commanded steering (K,) degrees, into ``out`` (K,). C is the mean
     of the rows where the centre is seen (summed in row order, as numpy sums so few); g* the angle
-    between the image vertical and the line from the nearest to the farthest seen row."""
+    between the image vertical and the line from the nearest to the farthest seen row (libm's
+    arctan2: where numpy dispatches an AVX-512 one, the angle can differ by an ulp, which moves
+    the value only for an angle within an ulp of ζ)."""
     for k in range(columns.shape[0]):
         count, total, near, far = 0, 0.0, -1, -1
         for j in range(columns.shape[1]):
@@ -441,7 +443,7 @@ def _lane_keeping(columns, rows, steering_deg, out) -> None:
         if count == 0:
             out[k] = LANE_BAND_VALUES[-1]
             continue
-        offset_px = abs(total / count - _LANE_CENTRE_PX) * 1024 / _LANE_WIDTH_PX
+        offset_px = abs(total / count - centre_px) * 1024 / width_px
         value = LANE_BAND_VALUES[np.searchsorted(LANE_BAND_EDGES_PX, offset_px, "right")]
         if count >= 2:
             angle = np.arctan2(columns[k, far] - columns[k, near], rows[near] - rows[far])

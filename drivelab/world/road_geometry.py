@@ -88,7 +88,8 @@ def _nearest_crossings(starts, ends, index, position, cos_h, sin_h, distances, o
     (K, D). The arithmetic is :func:`~drivelab.world.geometry.ego_frame`'s, operation for operation."""
     best_abs = np.empty(distances.shape[0])
     # a segment whose x range ends this far short of the nearest line (or starts beyond the
-    # farthest) crosses none: its t = (d - x0) / span is outside [0, 1] whatever the rounding
+    # farthest) crosses none: its t = (d - x0) / span is outside [0, 1] whatever the rounding,
+    # for coordinates well under 1e9 m (an ulp of them stays far below the margin)
     near, far = np.inf, -np.inf
     for j in range(distances.shape[0]):
         near, far = min(near, distances[j]), max(far, distances[j])

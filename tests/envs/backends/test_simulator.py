@@ -207,6 +207,16 @@ def test_continuous_commands_are_highway_envs_bits(dtype):
     assert commands[0, 0] == -5.0 and commands[1, 0] == 5.0
 
 
+@pytest.mark.parametrize("dtype", [np.float16, np.int64])
+def test_other_control_types_are_taken_as_float64(dtype):
+    from drivelab.envs.backends.fast.simulator import continuous_commands
+
+    controls = np.array([[0.5, -1.0], [2.0, 0.0]]).astype(dtype)
+    commands = continuous_commands(controls, 2)
+    assert commands.dtype == np.float64
+    np.testing.assert_array_equal(commands, continuous_commands(controls.astype(np.float64), 2))
+
+
 def _route_table(trackers):
     """project_routes' padded arrays of ``trackers`` (the simulator's layout, last point repeated)."""
     points = max(len(t.polyline) for t in trackers)

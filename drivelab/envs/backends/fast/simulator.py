@@ -405,7 +405,8 @@ def continuous_commands(controls, num_worlds: int) -> np.ndarray:
     """(K, 2) [acceleration m/s², steering rad] of normalised continuous controls: clipped to
     [-1, 1], then mapped linearly onto ACCELERATION_RANGE and STEERING_RANGE as highway-env's
     ``ContinuousAction.get_action`` does, in the controls' own float type (the ranges enter its
-    arithmetic as Python floats, i.e. rounded to that type), so both backends get the same bits."""
+    arithmetic as Python floats, i.e. rounded to that type), so both backends get the same bits;
+    controls neither float32 nor float64 are taken as float64."""
     controls = _float_controls(controls, num_worlds)
     commands = np.empty_like(controls)
     _commands(controls, *_command_ranges(controls.dtype), commands)
@@ -413,8 +414,13 @@ def continuous_commands(controls, num_worlds: int) -> np.ndarray:
 
 
 def _float_controls(controls, num_worlds: int) -> np.ndarray:
+    """(K, 2) controls in float32 or float64, the types the compiled arithmetic takes: those
+    stay as they are, anything else (ints, float16, long double) becomes float64."""
     controls = np.asarray(controls).reshape(num_worlds, 2)
-    return controls if controls.dtype.kind == "f" else controls.astype(float)
+    return controls if controls.dtype in _COMPILED_FLOATS else controls.astype(np.float64)
+
+
+_COMPILED_FLOATS = (np.dtype(np.float32), np.dtype(np.float64))
 
 
 @functools.cache
