@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit
 
 from drivelab.world.batch import WorldBatch
-from drivelab.world.geometry import FULL_LOCK_DEG, FULL_LOCK_RAD, ROACH_MAX_SPEED_MPS, ego_frame
+from drivelab.world.geometry import FULL_LOCK_DEG, FULL_LOCK_RAD, ROACH_MAX_SPEED_MPS
 from drivelab.world.pinhole import LANE_CAMERA, LANE_ROWS_M, LINE_CAMERA, LINE_ROWS_M, PinholeModel
 from drivelab.world.road_geometry import (
     batch_lateral_at_distances,
@@ -248,11 +248,6 @@ def sidewalk_crash(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
 ROACH_STEER_RAD = FULL_LOCK_RAD  # steering is compared as the normalised command (highway-env: ±45°)
 
 
-def _hazard_speed(distance_m: np.ndarray, stop_distance_m: float) -> np.ndarray:
-    """Roach: v_max · clip(d − d0, 0, 5) / 5, a speed that falls to 0 at d0 from the hazard."""
-    return ROACH_MAX_SPEED_MPS * np.clip(distance_m - stop_distance_m, 0.0, 5.0) / 5.0
-
-
 def roach_desired_speed(batch: WorldBatch | WorldState) -> np.ndarray:
     """(K,) v* = min(v_max, v_vehicle, v_pedestrian, v_light): slow for a vehicle within 9.5 m and
     ±45° ahead (d0 = 8 m), for a pedestrian in the ego's path (ahead, within a lane's half width of
@@ -261,26 +256,54 @@ def roach_desired_speed(batch: WorldBatch | WorldState) -> np.ndarray:
     if isinstance(batch, WorldState):
         return float(roach_desired_speed(WorldBatch.stack([batch]))[0])
     ego = batch.ego
-    desired = np.full(batch.num_worlds, ROACH_MAX_SPEED_MPS)
-    position, heading = ego.position[:, None, :], ego.heading[:, None]
-    local = ego_frame(batch.vehicles[..., :2], position, heading)  # (K, N, 2)
-    distance = np.hypot(local[..., 0], local[..., 1])
-    ahead = (
-        batch.vehicle_valid
-        & (distance < 9.5)
-        & (np.abs(np.arctan2(local[..., 1], local[..., 0])) <= np.pi / 4)
-    )
-    nearest = np.min(np.where(ahead, distance, np.inf), axis=1, initial=np.inf)
-    desired = np.where(ahead.any(axis=1), np.minimum(desired, _hazard_speed(nearest, 8.0)), desired)
-    local = ego_frame(batch.pedestrians[..., :2], position, heading)  # (K, P, 2)
-    in_path = (
-        batch.pedestrian_valid & (local[..., 0] > 0) & (np.abs(local[..., 1]) < ego.lane_width_m[:, None] / 2)
-    )
-    nearest = np.min(np.where(in_path, local[..., 0], np.inf), axis=1, initial=np.inf)
-    desired = np.where(in_path.any(axis=1), np.minimum(desired, _hazard_speed(nearest, 6.0)), desired)
     state, distance_m = batch.light_ahead(max_distance_m=np.inf)
-    stop = (state >= 0) & (state != LIGHT_GREEN)
-    return np.where(stop, np.minimum(desired, _hazard_speed(distance_m, 5.0)), desired)
+    desired = np.empty(batch.num_worlds)
+    _roach_desired_speed(
+        batch.vehicles, batch.vehicle_valid, batch.pedestrians, batch.pedestrian_valid, ego.position,
+        np.cos(ego.heading), np.sin(ego.heading), ego.lane_width_m, state, distance_m, desired,
+    )  # fmt: skip
+    return desired
+
+
+@njit(inline="always")
+def _hazard(distance_m, stop_distance_m):
+    """Roach: v_max · clip(d − d0, 0, 5) / 5, a speed that falls to 0 at d0 from the hazard."""
+    room = distance_m - stop_distance_m
+    room = 0.0 if room < 0.0 else (5.0 if room > 5.0 else room)
+    return ROACH_MAX_SPEED_MPS * room / 5.0
+
+
+@njit(cache=True)
+def _roach_desired_speed(
+    vehicles, vehicle_valid, pedestrians, pedestrian_valid, position, cos_h, sin_h, lane_width,
+    light_state, light_distance, out,
+) -> None:  # fmt: skip
+    """:func:`roach_desired_speed` into ``out`` (K,), the ego frame as ``ego_frame`` computes it
+    (``cos_h`` / ``sin_h`` from numpy); the light ahead's state and distance given. hypot and
+    arctan2 are libm's: where numpy dispatches AVX-512 ones they can differ by an ulp, which
+    moves the value only for a vehicle within an ulp of 9.5 m or of 45°."""
+    for k in range(out.shape[0]):
+        desired = ROACH_MAX_SPEED_MPS
+        nearest, seen = np.inf, False
+        for i in range(vehicles.shape[1]):
+            dx, dy = vehicles[k, i, 0] - position[k, 0], vehicles[k, i, 1] - position[k, 1]
+            x, y = dx * cos_h[k] + dy * sin_h[k], -dx * sin_h[k] + dy * cos_h[k]
+            distance = np.hypot(x, y)
+            if vehicle_valid[k, i] and distance < 9.5 and abs(np.arctan2(y, x)) <= np.pi / 4:
+                nearest, seen = min(nearest, distance), True
+        if seen:
+            desired = min(desired, _hazard(nearest, 8.0))
+        nearest, seen = np.inf, False
+        for i in range(pedestrians.shape[1]):
+            dx, dy = pedestrians[k, i, 0] - position[k, 0], pedestrians[k, i, 1] - position[k, 1]
+            x, y = dx * cos_h[k] + dy * sin_h[k], -dx * sin_h[k] + dy * cos_h[k]
+            if pedestrian_valid[k, i] and x > 0 and abs(y) < lane_width[k] / 2:
+                nearest, seen = min(nearest, x), True
+        if seen:
+            desired = min(desired, _hazard(nearest, 6.0))
+        if light_state[k] >= 0 and light_state[k] != LIGHT_GREEN:
+            desired = min(desired, _hazard(light_distance[k], 5.0))
+        out[k] = desired
 
 
 def _route_pose(batch: WorldBatch) -> tuple[np.ndarray, np.ndarray]:

@@ -25,8 +25,8 @@ import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
-from drivelab.world.geometry import wrap_to_pi
 from drivelab.world.state import Ego, Events, RoadMap, Route, WorldState
 
 # ``EventsBatch.collision_kind`` codes, and the names WorldState's Events use for them
@@ -149,24 +149,69 @@ class RouteBatch:
         distances = np.asarray(distances_m, dtype=float)
         single = distances.ndim == 1
         distances = distances.reshape(len(self.count), -1)
-        k = np.arange(len(self.count))
-        last = self.stations_m[k, self.count - 1][:, None]
-        lap = self.closed[:, None] & (last > 0)
-        distances = np.where(lap, np.mod(distances, np.where(lap, last, 1.0)), distances)
-        distances = np.clip(distances, 0.0, last)
-        # one searchsorted over all K routes: shift each world's stations past the previous world's
-        shift = (np.arange(len(k)) * (np.max(last, initial=0.0) + 1.0))[:, None]
-        flat = (self.stations_m + shift).ravel()
-        found = np.searchsorted(flat, (distances + shift).ravel(), side="right").reshape(distances.shape)
-        segment = found - 1 - (k * self.stations_m.shape[1])[:, None]
-        segment = np.clip(segment, 0, (self.count - 2)[:, None])
-        rows = k[:, None]
-        start, end = self.polyline[rows, segment], self.polyline[rows, segment + 1]
-        span = np.maximum(self.stations_m[rows, segment + 1] - self.stations_m[rows, segment], 1e-12)
-        fraction = ((distances - self.stations_m[rows, segment]) / span)[..., None]
-        delta = end - start
-        points, headings = start + fraction * delta, np.arctan2(delta[..., 1], delta[..., 0])
+        points, delta = np.empty(distances.shape + (2,)), np.empty(distances.shape + (2,))
+        _route_poses(self.polyline, self.stations_m, self.count, self.closed, distances, points, delta)
+        headings = np.arctan2(delta[..., 1], delta[..., 0])  # numpy's, whichever kernel it dispatches
         return (points[:, 0], headings[:, 0]) if single else (points, headings)
+
+
+@njit(cache=True)
+def _route_poses(polyline, stations, count, closed, distances, points, delta) -> None:
+    """``RouteBatch.poses_at``'s points into ``points`` (K, D, 2) and the segments' directions
+    into ``delta`` (K, D, 2), with the arithmetic of its first, numpy formulation: a distance
+    wrapped round the lap (np.mod) and clamped to the route, then found among the stations with
+    every world's stations and distances shifted by k · (the longest route + 1) as that code
+    shifted them to search all worlds at once (the shift's rounding can decide a segment),
+    then interpolated on its segment."""
+    worlds, width = stations.shape
+    longest = 0.0
+    for k in range(worlds):
+        longest = max(longest, stations[k, count[k] - 1])
+    for k in range(worlds):
+        last = stations[k, count[k] - 1]
+        shift = k * (longest + 1.0)
+        for j in range(distances.shape[1]):
+            d = distances[k, j]
+            if closed[k] and last > 0:
+                d = d % last  # Python's and np.mod's modulo of floats
+            if d < 0.0:  # np.clip's order; nan stays nan
+                d = 0.0
+            elif d > last:
+                d = last
+            # np.searchsorted(side="right") among the shifted stations: how many are <= the key
+            key, low, high = d + shift, 0, width
+            while low < high:
+                middle = (low + high) // 2
+                if stations[k, middle] + shift <= key:
+                    low = middle + 1
+                else:
+                    high = middle
+            if key != key:  # nan sorts after every station
+                low = width
+            segment = min(max(low - 1, 0), count[k] - 2)
+            span = max(stations[k, segment + 1] - stations[k, segment], 1e-12)
+            fraction = (d - stations[k, segment]) / span
+            for axis in range(2):
+                step = polyline[k, segment + 1, axis] - polyline[k, segment, axis]
+                delta[k, j, axis] = step
+                points[k, j, axis] = polyline[k, segment, axis] + fraction * step
+
+
+@njit(cache=True)
+def _nearest_lights(lights, valid, position, heading, cos_h, sin_h, lane_width, state, distance) -> None:
+    """Per world, the state (-1: none) and distance ahead (inf: none) of the nearest light whose
+    stop line is ahead (its x in the ego frame > 0), within half a lane of the ego's axis and
+    facing the ego's way (headings within 45°, wrapped as ``wrap_to_pi``): the first of equals."""
+    for k in range(lights.shape[0]):
+        state[k], distance[k] = -1, np.inf
+        for i in range(lights.shape[1]):
+            dx, dy = lights[k, i, 0] - position[k, 0], lights[k, i, 1] - position[k, 1]
+            ahead = dx * cos_h[k] + dy * sin_h[k]
+            beside = -dx * sin_h[k] + dy * cos_h[k]
+            turn = (lights[k, i, 2] - heading[k] + np.pi) % (2 * np.pi) - np.pi
+            mine = valid[k, i] and abs(turn) < np.pi / 4 and ahead > 0 and abs(beside) < lane_width[k] / 2
+            if mine and ahead < distance[k]:
+                state[k], distance[k] = np.int64(lights[k, i, 3]), ahead
 
 
 @dataclass(frozen=True)
@@ -316,7 +361,11 @@ class WorldBatch:
 
     def with_events(self, **flags: np.ndarray) -> WorldBatch:
         """The same batch with some event arrays replaced (``blocked=…``, ``off_route=…``)."""
-        return dataclasses.replace(self, events=dataclasses.replace(self.events, **flags))
+        # dataclasses.replace's result without re-running __init__ over all 17 fields (there is no
+        # __post_init__ to run): the same fields, these events, a fresh cache
+        batch = object.__new__(WorldBatch)
+        batch.__dict__.update(self.__dict__, events=dataclasses.replace(self.events, **flags), cache={})
+        return batch
 
     def where(self, mask: np.ndarray, other: WorldBatch) -> WorldBatch:
         """World k from ``other`` where ``mask[k]``, else from this batch (e.g. reset worlds
@@ -387,19 +436,13 @@ class WorldBatch:
 
     def _nearest_light(self) -> tuple[np.ndarray, np.ndarray]:
         """``light_ahead`` without a distance limit."""
-        lights, ego = self.traffic_lights, self.ego
-        cos_h, sin_h = np.cos(ego.heading)[:, None], np.sin(ego.heading)[:, None]
-        delta = lights[..., :2] - ego.position[:, None, :]
-        ahead = delta[..., 0] * cos_h + delta[..., 1] * sin_h
-        beside = -delta[..., 0] * sin_h + delta[..., 1] * cos_h
-        aligned = np.abs(wrap_to_pi(lights[..., 2] - ego.heading[:, None])) < np.pi / 4
-        mine = self.light_valid & aligned & (ahead > 0) & (np.abs(beside) < ego.lane_width_m[:, None] / 2)
-        distance = np.where(mine, ahead, np.inf)
-        nearest = np.argmin(distance, axis=1)
-        rows = np.arange(self.num_worlds)
-        found = mine[rows, nearest]
-        state = np.where(found, lights[rows, nearest, 3].astype(np.int64), -1)
-        return state, np.where(found, distance[rows, nearest], np.inf)
+        ego = self.ego
+        state, distance = np.empty(self.num_worlds, dtype=np.int64), np.empty(self.num_worlds)
+        _nearest_lights(
+            self.traffic_lights, self.light_valid, ego.position, ego.heading, np.cos(ego.heading),
+            np.sin(ego.heading), ego.lane_width_m, state, distance,
+        )  # fmt: skip
+        return state, distance
 
 
 _FIELDS_EGO = dataclasses.fields(EgoBatch)

@@ -93,3 +93,19 @@ def test_where_takes_the_masked_worlds_from_the_other_batch():
     _assert_same_world(merged[0], first[0])
     _assert_same_world(merged[1], second[1])
     _assert_same_world(merged[2], first[2])
+
+
+def test_with_events_replaces_only_the_events_and_starts_an_empty_cache():
+    batch = WorldBatch.stack(_worlds("highway", 2))
+    batch.cache["made"] = 1  # a value a reader derived from this batch
+    blocked = np.array([True, False])
+    changed = batch.with_events(blocked=blocked)
+    assert changed.events.blocked is blocked and changed.cache == {} and batch.cache
+    assert changed.events.collided is batch.events.collided and not batch.events.blocked.any()
+    for name in batch.__dataclass_fields__:
+        if name not in ("events", "cache"):
+            assert getattr(changed, name) is getattr(batch, name), name
+    for k in range(2):
+        assert changed[k].events == batch[k].events.__class__(
+            **{**batch[k].events.__dict__, "blocked": bool(blocked[k])}
+        )
