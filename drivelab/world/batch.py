@@ -361,10 +361,16 @@ class WorldBatch:
 
     def with_events(self, **flags: np.ndarray) -> WorldBatch:
         """The same batch with some event arrays replaced (``blocked=…``, ``off_route=…``)."""
-        # dataclasses.replace's result without re-running __init__ over all 17 fields (there is no
-        # __post_init__ to run): the same fields, these events, a fresh cache
+        return self.replaced(events=dataclasses.replace(self.events, **flags))
+
+    def replaced(self, **fields) -> WorldBatch:
+        """``dataclasses.replace(self, **fields)`` (a fresh cache) without re-running ``__init__``
+        over all its fields (there is no ``__post_init__`` to run): the per-step exports' way."""
+        unknown = fields.keys() - self.__dataclass_fields__.keys()
+        if unknown or "cache" in fields:
+            raise TypeError(f"WorldBatch has no field to replace named {sorted(unknown) or ['cache']}")
         batch = object.__new__(WorldBatch)
-        batch.__dict__.update(self.__dict__, events=dataclasses.replace(self.events, **flags), cache={})
+        batch.__dict__.update(self.__dict__, **fields, cache={})
         return batch
 
     def where(self, mask: np.ndarray, other: WorldBatch) -> WorldBatch:

@@ -109,3 +109,7 @@ def test_with_events_replaces_only_the_events_and_starts_an_empty_cache():
         assert changed[k].events == batch[k].events.__class__(
             **{**batch[k].events.__dict__, "blocked": bool(blocked[k])}
         )
+    with pytest.raises(TypeError, match="speed"):
+        batch.replaced(speed=1.0)
+    with pytest.raises(TypeError, match="cache"):
+        batch.replaced(cache={})

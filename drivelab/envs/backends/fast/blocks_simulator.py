@@ -447,4 +447,4 @@ class BlocksSimulator(FastSimulator):
         lights = np.concatenate([self.signal_xyh[rows], state[..., None]], axis=2)
         lights[~light_valid] = 0.0
         events = dataclasses.replace(batch.events, red_light_crossed=self._red_light.copy())
-        return dataclasses.replace(batch, events=events, traffic_lights=lights, light_valid=light_valid)
+        return batch.replaced(events=events, traffic_lights=lights, light_valid=light_valid)

@@ -307,15 +307,10 @@ class TownSimulator(FastSimulator):
             blocked=self._no_event,
             off_route=self._no_event,
         )
-        lights = np.concatenate(
-            [
-                np.broadcast_to(self.arrays.light_xyh, (k, *self.arrays.light_xyh.shape)),
-                self.light_state[..., None],
-            ],
-            axis=2,
-        )
-        return dataclasses.replace(
-            batch,
+        lights = np.empty((k, len(self.arrays.light_xyh), 4))  # every world's lights and their states
+        lights[..., :3] = self.arrays.light_xyh
+        lights[..., 3] = self.light_state
+        return batch.replaced(
             events=events,
             traffic_lights=lights,
             light_valid=self._light_valid,
