@@ -77,6 +77,9 @@ def batch_route_segments(batch: WorldBatch) -> np.ndarray:
     return np.stack([polyline[:, :-1], polyline[:, 1:]], axis=2)
 
 
+# a segment whose x range ends this far short of the nearest ground line (or starts beyond the
+# farthest) crosses none: its t = (d - x0) / span is outside [0, 1] whatever the rounding, for
+# coordinates well under 1e9 m (an ulp of them stays far below the margin)
 _CROSSING_MARGIN_M = 1e-3
 
 
@@ -87,9 +90,6 @@ def _nearest_crossings(starts, ends, index, position, cos_h, sin_h, distances, o
     nearest the ego's axis (the first such segment on ties; nan where none crosses) into ``out``
     (K, D). The arithmetic is :func:`~drivelab.world.geometry.ego_frame`'s, operation for operation."""
     best_abs = np.empty(distances.shape[0])
-    # a segment whose x range ends this far short of the nearest line (or starts beyond the
-    # farthest) crosses none: its t = (d - x0) / span is outside [0, 1] whatever the rounding,
-    # for coordinates well under 1e9 m (an ulp of them stays far below the margin)
     near, far = np.inf, -np.inf
     for j in range(distances.shape[0]):
         near, far = min(near, distances[j]), max(far, distances[j])
@@ -105,7 +105,8 @@ def _nearest_crossings(starts, ends, index, position, cos_h, sin_h, distances, o
             x0, y0 = dx0 * c + dy0 * s, -dx0 * s + dy0 * c
             x1, y1 = dx1 * c + dy1 * s, -dx1 * s + dy1 * c
             span = x1 - x0
-            if np.abs(span) < 1e-12 or max(x0, x1) < near or min(x0, x1) > far:  # false for nan
+            # (a nan segment, padding, crosses nothing whether or not it is skipped here)
+            if np.abs(span) < 1e-12 or max(x0, x1) < near or min(x0, x1) > far:
                 continue
             for j in range(distances.shape[0]):
                 t = (distances[j] - x0) / span

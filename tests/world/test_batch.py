@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -95,7 +97,7 @@ def test_where_takes_the_masked_worlds_from_the_other_batch():
     _assert_same_world(merged[2], first[2])
 
 
-def test_with_events_replaces_only_the_events_and_starts_an_empty_cache():
+def test_with_events_and_replaced_keep_the_other_fields_and_start_an_empty_cache():
     batch = WorldBatch.stack(_worlds("highway", 2))
     batch.cache["made"] = 1  # a value a reader derived from this batch
     blocked = np.array([True, False])
@@ -106,9 +108,7 @@ def test_with_events_replaces_only_the_events_and_starts_an_empty_cache():
         if name not in ("events", "cache"):
             assert getattr(changed, name) is getattr(batch, name), name
     for k in range(2):
-        assert changed[k].events == batch[k].events.__class__(
-            **{**batch[k].events.__dict__, "blocked": bool(blocked[k])}
-        )
+        assert changed[k].events == dataclasses.replace(batch[k].events, blocked=bool(blocked[k]))
     with pytest.raises(TypeError, match="speed"):
         batch.replaced(speed=1.0)
     with pytest.raises(TypeError, match="cache"):
