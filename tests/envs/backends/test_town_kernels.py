@@ -25,10 +25,12 @@ import numpy as np
 import pytest
 from highway_env.vehicle.behavior import IDMVehicle
 
+from drivelab.envs.backends.fast import lanes as L
 from drivelab.envs.backends.fast import pcg64
 from drivelab.envs.backends.fast import town_traffic as TT
 from drivelab.envs.backends.fast import traffic as T
 from drivelab.envs.backends.fast.simulator import idm_parameters
+from drivelab.envs.backends.fast.town_rows import P_CRASHED, P_X, P_Y, PEDESTRIAN_COLUMNS
 from drivelab.envs.town import approach_of
 from drivelab.envs.town_env import Pedestrian, TownVehicle
 from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW
@@ -83,7 +85,7 @@ class Kernels:
 
     def __init__(self, layout: str, vehicles: int, pedestrians: int) -> None:
         self.table, self.arrays = town_tables(layout)
-        self.road = TT.road_arrays_tuple(self.arrays)
+        self.road = TT.road_arrays_tuple(self.arrays, self.table.rows)
         self.p = idm_parameters()
         self.cache = TT.town_frame_cache(vehicles, pedestrians, self.table.rows.shape[0])
 
@@ -285,3 +287,65 @@ def test_without_avx512_dispatch_free_frames_agree_bit_for_bit():
         "print(max(free_run('train', 'dense', 0, 60), free_run('test', 'regular', 2, 60)))\n"
     )
     assert float(run_without_avx512(script).split()[-1]) == 0.0
+
+
+def _literal_front(v, peds, lanes, search, offset, size, i, lane) -> int:
+    """The leader as ``neighbour_vehicles_connected_lanes`` scans for it: each object in order
+    (vehicles, then pedestrians not crashed), placed on the first of the connected lanes it lies
+    on; the nearest at or ahead of vehicle i, the last of equals."""
+    count = len(v)
+    s = L.local_coordinates(lanes, lane, v[i, T.X], v[i, T.Y])[0]
+    front, s_front = -1, 0.0
+    for j in range(count + len(peds)):
+        if j == i or (j >= count and peds[j - count, P_CRASHED] > 0):
+            continue
+        x, y = (v[j, T.X], v[j, T.Y]) if j < count else (peds[j - count, P_X], peds[j - count, P_Y])
+        for k in range(size[lane]):
+            other = search[lane, k]
+            s_j, r_j = L.local_coordinates(lanes, other, x, y)
+            if L.on_lane(lanes, other, s_j, r_j, 1.0):
+                if s <= s_j + offset[lane, k] and (front < 0 or s_j + offset[lane, k] <= s_front):
+                    front, s_front = j, s_j + offset[lane, k]
+                break
+    return front
+
+
+@pytest.mark.parametrize("layout", ["train", "test"])
+def test_connected_front_is_the_literal_scan(layout):
+    """``connected_front`` reads per-lane object lists made once per frame (only objects inside a
+    lane's disc, and on a circular lane within its lateral reach, are measured); it must name the
+    leader the literal scan names, for every vehicle and each of its connected lanes: objects
+    scattered along and beside random lanes (many on two connected lanes at once), some at the
+    very same spot as another (exact ties), and a crashed pedestrian."""
+    table, arrays = town_tables(layout)
+    lanes = table.rows
+    search, offset, size, discs = TT.connected_lanes(lanes)
+    rng = np.random.default_rng(7)
+    checked = 0
+    for _ in range(20):
+        n, m = 16, 8
+        points = []
+        for _ in range(n + m):
+            lane = int(rng.integers(len(lanes)))
+            s = rng.uniform(-6.0, lanes[lane, L.LENGTH] + 6.0)
+            points.append((lane, *L.position(lanes, lane, s, rng.uniform(-3.0, 3.0))))
+        for a, b in rng.integers(n + m, size=(5, 2)):  # exact ties: one object where another is
+            points[a] = points[b]
+        v = np.zeros((n, T.TOWN_VEHICLE_COLUMNS))
+        v[:, T.LANE] = [lane for lane, _, _ in points[:n]]
+        v[:, T.X], v[:, T.Y] = [x for _, x, _ in points[:n]], [y for _, _, y in points[:n]]
+        peds = np.zeros((m, PEDESTRIAN_COLUMNS))
+        peds[:, P_X], peds[:, P_Y] = [x for _, x, _ in points[n:]], [y for _, _, y in points[n:]]
+        peds[0, P_CRASHED] = 1.0
+        coords = np.empty((len(lanes), n + m, 4))
+        coords[..., 2] = -1.0
+        near = np.empty((len(lanes), n + m), dtype=np.int64)
+        near_count = np.full(len(lanes), -1, dtype=np.int64)
+        for i in range(n):
+            for lane in search[int(v[i, T.LANE]), : size[int(v[i, T.LANE])]]:
+                got = TT.connected_front(
+                    v, peds, lanes, coords, near, near_count, search, offset, size, discs, i, int(lane)
+                )
+                assert got == _literal_front(v, peds, lanes, search, offset, size, i, int(lane))
+                checked += got >= 0
+    assert checked > 200  # most searches find a leader

@@ -12,6 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from drivelab.envs.backends.fast.borrow import borrowed
+
 STRAIGHT, SINE, CIRCLE = 0, 1, 2
 (
     KIND, START_X, START_Y, DIR_X, DIR_Y, HEADING, LENGTH, WIDTH, AMPLITUDE, PULSATION, PHASE,
@@ -211,6 +213,16 @@ def local_coordinates(lanes: np.ndarray, lane: int, x: float, y: float) -> tuple
 
 
 @njit(cache=True, inline="always")
+def circle_lateral(lanes: np.ndarray, lane: int, x: float, y: float) -> float:
+    """A circular lane's lateral coordinate of (x, y) as ``local_coordinates`` computes it (the
+    same operations, so the same bits) without its arctan2: a cheap exact test that a point is
+    too far to the side for the lane."""
+    row = lanes[lane]
+    dx, dy = x - row[CENTER_X], y - row[CENTER_Y]
+    return row[SENSE] * (row[RADIUS] - np.sqrt(dx * dx + dy * dy))
+
+
+@njit(cache=True, inline="always")
 def heading_at(lanes: np.ndarray, lane: int, longitudinal: float) -> float:
     row = lanes[lane]
     if row[KIND] == CIRCLE:
@@ -235,6 +247,7 @@ def on_lane(lanes: np.ndarray, lane: int, longitudinal: float, lateral: float, m
 @njit(cache=True)
 def distance(lanes: np.ndarray, lane: int, x: float, y: float) -> float:
     """AbstractLane.distance: lateral offset plus how far the point lies beyond either end."""
+    (lanes,) = borrowed((lanes,))
     s, r = local_coordinates(lanes, lane, x, y)
     return np.abs(r) + max(s - lanes[lane, LENGTH], 0.0) + max(0.0 - s, 0.0)
 
@@ -275,6 +288,8 @@ def closest_lane(lanes: np.ndarray, x: float, y: float, heading: float, hint: in
         outside = max(row[BOX_MIN_X] - x, x - row[BOX_MAX_X], row[BOX_MIN_Y] - y, y - row[BOX_MAX_Y])
         if outside > best_distance + BOX_MARGIN_M:
             continue  # its distance is at least this far: it cannot be the closest
+        if row[KIND] == CIRCLE and np.abs(circle_lateral(lanes, lane, x, y)) > best_distance:
+            continue  # |lateral| (the same bits as below) alone exceeds the best
         s, r = local_coordinates(lanes, lane, x, y)
         partial = np.abs(r) + max(s - lanes[lane, LENGTH], 0.0) + max(0.0 - s, 0.0)
         if partial > best_distance or (partial == best_distance and lane > best):
@@ -289,6 +304,7 @@ def closest_lane(lanes: np.ndarray, x: float, y: float, heading: float, hint: in
 @njit(cache=True)
 def position(lanes: np.ndarray, lane: int, longitudinal: float, lateral: float) -> tuple[float, float]:
     """World point at (longitudinal, lateral) of ``lane``."""
+    (lanes,) = borrowed((lanes,))
     row = lanes[lane]
     if row[KIND] == CIRCLE:
         phi = row[SENSE] * longitudinal / row[RADIUS] + row[START_PHASE]

@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from drivelab.envs.backends.fast.borrow import borrowed
 from drivelab.envs.backends.fast.pcg64 import standard_exponential_inv
 from drivelab.envs.backends.fast.town_rows import (
     P_ACROSS_X,
@@ -96,6 +97,7 @@ def gap_clear(peds: np.ndarray, i: int, v: np.ndarray, count: int) -> bool:
     """``Pedestrian._gap_clear`` of pedestrian ``i`` over vehicle rows 0..count-1 (ego included):
     no vehicle within CROSSING_CLEAR_M of the crossing's centre, none facing it within
     CROSSING_GAP_M + CROSSING_GAP_S·speed, nor within COURTESY_M."""
+    peds, v = borrowed((peds, v))
     cx, cy = peds[i, P_CENTRE_X], peds[i, P_CENTRE_Y]
     for j in range(count):
         dx, dy = cx - v[j, X], cy - v[j, Y]
@@ -119,6 +121,7 @@ def walk_pedestrians(
     turns to the far pavement at its pace; a walking one moves and, past PAVEMENT_M on the far
     side, stops there and draws its next wait, ``MEAN_WAIT_S * standard_exponential(method="inv")``
     from the world's generator ``rng_words`` (6,) (in pedestrian order, as the reference)."""
+    peds, v, rng_words = borrowed((peds, v, rng_words))
     for i in range(pcount):
         if peds[i, P_CRASHED] != 0.0:
             peds[i, P_SPEED] = 0.0
@@ -161,6 +164,7 @@ def hit_pedestrians(peds: np.ndarray, pcount: int, v: np.ndarray, count: int, eg
     gets highway-env's ``vehicle._is_colliding(pedestrian, 0)`` (its sphere check, then the exact
     box test); a hit marks both crashed, and the pedestrian HIT_EGO when the vehicle is row ``ego``.
     A pedestrian hit once is skipped for the later vehicles."""
+    peds, v = borrowed((peds, v))
     reach_vehicle = -1.0
     for j in range(count):
         if v[j, SPEED] > MOVING_MPS:
@@ -192,6 +196,7 @@ def clear_wrecks(v: np.ndarray, count: int, ego: int, dt: float) -> tuple[int, i
     reference's float sum: at dt 0.1 it reaches WRECK_CLEARED_S on the 101st frame) and is removed
     once WRECKED_S >= WRECK_CLEARED_S. Kept rows close up in order, freed rows become zeros.
     Returns the new (count, ego row)."""
+    (v,) = borrowed((v,))
     kept, new_ego = 0, ego
     for j in range(count):
         if j != ego and v[j, CRASHED] != 0.0:

@@ -64,7 +64,8 @@ from drivelab.world.state import LIGHT_RED
 @njit(cache=True)
 def _simulate_town(
     v, count, ego, peds, pcount, lanes, p, coords, done, trig, junction, from_arm, to_arm, turn,
-    end_junction, end_arm, light, street_lanes, routes, route_length, states, rng, frames, dt,
+    end_junction, end_arm, light, street_lanes, routes, route_length, search, search_offset, search_size,
+    discs, states, rng, frames, dt,
 ):  # fmt: skip
     """One policy step (``frames`` frames of ``dt``) of one world; returns (count, ego)."""
     v, peds, lanes, p, coords, done, trig, states, rng = borrowed(
@@ -73,7 +74,8 @@ def _simulate_town(
     for _ in range(frames):
         town_act(
             v, count, peds, pcount, lanes, p, coords, done, trig, junction, from_arm, to_arm, turn,
-            end_junction, end_arm, light, street_lanes, routes, route_length, states, rng,
+            end_junction, end_arm, light, street_lanes, routes, route_length, search, search_offset,
+            search_size, discs, states, rng,
         )  # fmt: skip
         walk_pedestrians(peds, pcount, v, count, dt, rng)
         town_step(v, count, lanes, dt)
@@ -95,14 +97,15 @@ def _light_states_worlds(light_junction, light_arm, offsets, timings, time_s, ac
 def _town_kernel(parallel: bool):
     def body(
         v, count, ego, peds, pcount, lanes, p, coords, done, trig, junction, from_arm, to_arm, turn,
-        end_junction, end_arm, light, street_lanes, routes, route_length, states, rng, frames, dt, active,
+        end_junction, end_arm, light, street_lanes, routes, route_length, search, search_offset, search_size,
+        discs, states, rng, frames, dt, active,
     ):  # fmt: skip
         for k in prange(v.shape[0]):
             if active[k]:
                 count[k], ego[k] = _simulate_town(
                     v[k], count[k], ego[k], peds[k], pcount[k], lanes, p, coords[k], done[k], trig[k],
                     junction, from_arm, to_arm, turn, end_junction, end_arm, light, street_lanes, routes,
-                    route_length, states[k], rng[k], frames, dt,
+                    route_length, search, search_offset, search_size, discs, states[k], rng[k], frames, dt,
                 )  # fmt: skip
 
     return njit(cache=True, parallel=parallel)(body)
@@ -145,7 +148,7 @@ class TownSimulator(FastSimulator):
         road, k = self._road, num_worlds
         self.setup = TownSetup.of(road)
         arrays = self.arrays = self.setup.arrays
-        self.road_args = road_arrays_tuple(arrays)
+        self.road_args = road_arrays_tuple(arrays, self.lanes)
         self.road = dataclasses.replace(self.road, crossings=arrays.crossings)
         self.roads = (self.road,)
         self.retarget = bool(road.config.get("retarget"))

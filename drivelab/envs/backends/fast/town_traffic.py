@@ -39,7 +39,8 @@ Arrays (one world):
   (``traffic.IDM_PARAMETERS``);
 - ``coords``, ``done``, ``trig``: the frame cache, ``town_frame_cache(N_max, P_max, L)``, made
   once per world (``town_act`` resets it; it must hold count + pcount objects);
-- the ``TownRoadArrays`` fields of ``road_arrays_tuple`` (in that order);
+- the road arrays of ``road_arrays_tuple`` (in that order): the ``TownRoadArrays`` fields and the
+  ``connected_lanes`` tables;
 - ``light_states`` (M,) int64: LIGHT_* of each light row at the step's end time;
 - ``rng_words`` (6,) uint64: the world's PCG64 state (``pcg64``), advanced in place.
 """
@@ -51,7 +52,9 @@ import math
 import numpy as np
 from numba import njit
 
+from drivelab.envs.backends.fast.borrow import borrowed
 from drivelab.envs.backends.fast.lanes import (
+    CIRCLE,
     FIRST_OF_ROAD,
     FROM_NODE,
     LANE_COUNT,
@@ -62,6 +65,7 @@ from drivelab.envs.backends.fast.lanes import (
     TO_NODE,
     VEHICLE_LENGTH,
     WIDTH,
+    circle_lateral,
     local_coordinates,
     on_lane,
     position,
@@ -144,10 +148,11 @@ def town_frame_cache(vehicles: int, pedestrians: int, lane_count: int):
     return np.empty((lane_count, size, 4)), np.full(lane_count, -1, dtype=np.int64), np.empty((size, 2))
 
 
-def road_arrays_tuple(arrays) -> tuple:
-    """The ``TownRoadArrays`` fields ``town_act`` takes, in its argument order: ``junction``,
-    ``from_arm``, ``to_arm``, ``turn``, ``end_junction``, ``end_arm``, ``light`` (each (L,) int64),
-    ``street_lanes`` (S,) int64, ``routes`` (L, S, W) int64, ``route_length`` (L, S) int64."""
+def road_arrays_tuple(arrays, lanes: np.ndarray) -> tuple:
+    """The road arrays ``town_act`` takes, in its argument order: the ``TownRoadArrays`` fields
+    ``junction``, ``from_arm``, ``to_arm``, ``turn``, ``end_junction``, ``end_arm``, ``light``
+    (each (L,) int64), ``street_lanes`` (S,) int64, ``routes`` (L, S, W) int64, ``route_length``
+    (L, S) int64; then ``connected_lanes(lanes)``."""
     return (
         np.ascontiguousarray(arrays.junction, dtype=np.int64),
         np.ascontiguousarray(arrays.from_arm, dtype=np.int64),
@@ -159,6 +164,7 @@ def road_arrays_tuple(arrays) -> tuple:
         np.ascontiguousarray(arrays.street_lanes, dtype=np.int64),
         np.ascontiguousarray(arrays.routes, dtype=np.int64),
         np.ascontiguousarray(arrays.route_length, dtype=np.int64),
+        *connected_lanes(lanes),
     )
 
 
@@ -188,6 +194,9 @@ def random_route(
     """town_env.random_route from lane row ``start`` into vehicle i's route entries: a goal drawn
     among the streets' end nodes other than ``start``'s (street order), up to ROUTE_GOAL_TRIES
     times until one is reachable; else the route is ``start`` alone."""
+    v, lanes, street_lanes, routes, route_length, rng_words = borrowed(
+        (v, lanes, street_lanes, routes, route_length, rng_words)
+    )
     end_node = lanes[start, TO_NODE]
     goals = 0
     for g in range(street_lanes.shape[0]):
@@ -239,19 +248,81 @@ def lane_s(
     return coords[lane, j, 0]
 
 
+def connected_lanes(lanes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The static tables ``connected_front`` searches, per lane row (made once per road):
+
+    - ``search`` (L, S) int64 and ``search_size`` (L,): the lanes
+      ``neighbour_vehicles_connected_lanes`` looks on, in order: the lane, its successor roads'
+      lanes, its predecessor roads' lanes (the network's order; the same lane index on each road,
+      else its lane 0);
+    - ``search_offset`` (L, S): what shifts a longitudinal coordinate on that lane into the lane's
+      frame (plus the lane's length for successors, minus their own for predecessors);
+    - ``discs`` (L, 3): x, y and squared radius of a disc holding every point ``on_lane`` counts as
+      on the lane (1 m margin). A point at (s, r) of a straight or circular lane lies |r| from the
+      centre line at s, which lies at most |s - length/2| from the lane's middle (a chord is no
+      longer than its arc), and on_lane bounds both; 1 m more absorbs rounding. Sine lanes get no
+      disc (infinite radius)."""
+    count = lanes.shape[0]
+    rows = np.arange(count)
+    first = lanes[:, FIRST_OF_ROAD] == rows
+    found: list[tuple[list[int], list[float]]] = []
+    for lane in range(count):
+        lane_id = lanes[lane, LANE_ID]
+        roads = rows[first & (lanes[:, FROM_NODE] == lanes[lane, TO_NODE])]
+        into = rows[first & (lanes[:, TO_NODE] == lanes[lane, FROM_NODE])]
+        pick = lambda road: int(road) + (int(lane_id) if lane_id < lanes[road, LANE_COUNT] else 0)  # noqa: E731,B023
+        search = [lane] + [pick(road) for road in roads] + [pick(road) for road in into]
+        offset = [0.0] + [lanes[lane, LENGTH]] * len(roads) + [-lanes[pick(road), LENGTH] for road in into]
+        found.append((search, offset))
+    width = max(len(search) for search, _ in found)
+    search = np.zeros((count, width), dtype=np.int64)
+    offset = np.zeros((count, width))
+    size = np.array([len(lanes_on) for lanes_on, _ in found], dtype=np.int64)
+    for lane, (lanes_on, shifts) in enumerate(found):
+        search[lane, : len(lanes_on)], offset[lane, : len(shifts)] = lanes_on, shifts
+    discs = np.empty((count, 3))
+    for lane in range(count):
+        half = lanes[lane, LENGTH] / 2
+        discs[lane, 0], discs[lane, 1] = position(lanes, lane, half, 0.0)
+        reach = half + VEHICLE_LENGTH + lanes[lane, WIDTH] / 2 + 1.0 + 1.0
+        discs[lane, 2] = np.inf if lanes[lane, LANE_KIND] == SINE else reach * reach
+    return search, offset, size, discs
+
+
 @njit(cache=True, inline="always")
-def lane_disc(lanes: np.ndarray, discs: np.ndarray, lane: int) -> None:
-    """``discs[lane]``: (x, y, squared radius) of a disc holding every point ``on_lane`` counts
-    as on the lane (1 m margin), made once per frame. A point at (s, r) of a straight or circular
-    lane lies |r| from the centre line at s, which lies at most |s - length/2| from the lane's
-    middle (a chord is no longer than its arc), and on_lane bounds both; 1 m more absorbs
-    rounding. Sine lanes get no disc (infinite radius)."""
-    if discs[lane, 2] >= 0:
+def lane_objects(
+    v: np.ndarray,
+    peds: np.ndarray,
+    lanes: np.ndarray,
+    coords: np.ndarray,
+    discs: np.ndarray,
+    near: np.ndarray,
+    near_count: np.ndarray,
+    lane: int,
+) -> None:
+    """``near[lane, :near_count[lane]]``: the objects on ``lane`` (``on_lane``, 1 m margin) in
+    scan order (vehicles, then pedestrians not crashed), listed once per frame: only those inside
+    the lane's disc (and, on a circular lane, within its lateral reach) are measured."""
+    if near_count[lane] >= 0:
         return
-    half = lanes[lane, LENGTH] / 2
-    discs[lane, 0], discs[lane, 1] = position(lanes, lane, half, 0.0)
-    reach = half + VEHICLE_LENGTH + lanes[lane, WIDTH] / 2 + 1.0 + 1.0
-    discs[lane, 2] = np.inf if lanes[lane, LANE_KIND] == SINE else reach * reach
+    count, n = v.shape[0], 0
+    cx, cy, reach2 = discs[lane, 0], discs[lane, 1], discs[lane, 2]
+    arc, half_width = lanes[lane, LANE_KIND] == CIRCLE, lanes[lane, WIDTH] / 2 + 1.0
+    for j in range(count + peds.shape[0]):
+        if j >= count and peds[j - count, P_CRASHED] > 0:
+            continue
+        if coords[lane, j, 2] < 0:  # not measured yet in this frame: off the lane outside its disc
+            x, y = object_xy(v, peds, j)
+            dx, dy = x - cx, y - cy
+            if dx * dx + dy * dy > reach2:
+                continue
+            if arc and not np.abs(circle_lateral(lanes, lane, x, y)) <= half_width:
+                continue  # on_lane's lateral test fails (the same bits), its arctan2 spared
+            lane_s(v, peds, lanes, coords, lane, j)
+        if coords[lane, j, 2] == 1.0:
+            near[lane, n] = j
+            n += 1
+    near_count[lane] = n
 
 
 @njit(cache=True)
@@ -260,61 +331,56 @@ def connected_front(
     peds: np.ndarray,
     lanes: np.ndarray,
     coords: np.ndarray,
-    discs: np.ndarray,
+    near: np.ndarray,
+    near_count: np.ndarray,
     search: np.ndarray,
-    offset: np.ndarray,
+    search_offset: np.ndarray,
+    search_size: np.ndarray,
+    discs: np.ndarray,
     i: int,
     lane: int,
 ) -> int:
     """Road.neighbour_vehicles(vehicle i, lane)[0] with ``neighbour_vehicles_connected_lanes``:
     the row of the leader (a vehicle j < count, or pedestrian k as count + k), -1 for none.
 
-    Each object is placed on the first of (the lane, its successor roads' lanes, its predecessor
-    roads' lanes, in the network's order) it lies on (``on_lane``, 1 m margin), its longitudinal
-    coordinate shifted into the lane's frame; the leader is the nearest at or ahead of vehicle i,
-    the last in scan order (vehicles, then pedestrians not crashed) among equals. ``search`` and
-    ``offset`` (L + 1,) are scratch."""
-    count = v.shape[0]
-    lane_id = lanes[lane, LANE_ID]
-    search[0], offset[0], size = lane, 0.0, 1
-    for road in range(lanes.shape[0]):  # successor roads, in graph order
-        if lanes[road, FIRST_OF_ROAD] == road and lanes[road, FROM_NODE] == lanes[lane, TO_NODE]:
-            search[size] = road + (int(lane_id) if lane_id < lanes[road, LANE_COUNT] else 0)
-            offset[size] = lanes[lane, LENGTH]
-            size += 1
-    for road in range(lanes.shape[0]):  # predecessor roads, in graph order
-        if lanes[road, FIRST_OF_ROAD] == road and lanes[road, TO_NODE] == lanes[lane, FROM_NODE]:
-            previous = road + (int(lane_id) if lane_id < lanes[road, LANE_COUNT] else 0)
-            search[size], offset[size] = previous, -lanes[previous, LENGTH]
-            size += 1
-    for k in range(size):
-        lane_disc(lanes, discs, search[k])
+    Each object is placed on the first of the lanes ``search[lane]`` (``connected_lanes``) it lies
+    on (``on_lane``, 1 m margin), its longitudinal coordinate shifted into the lane's frame; the
+    leader is the nearest at or ahead of vehicle i, the last in scan order (vehicles, then
+    pedestrians not crashed) among equals. The lanes are read in order from their per-frame object
+    lists (``near``, ``near_count``: ``lane_objects``); an object listed on an earlier one of them
+    was placed there."""
+    v, peds, lanes, coords, near, near_count, search, search_offset, search_size, discs = borrowed(
+        (v, peds, lanes, coords, near, near_count, search, search_offset, search_size, discs)
+    )
     s = lane_s(v, peds, lanes, coords, lane, i)
     front, s_front = -1, 0.0
-    for j in range(count + peds.shape[0]):
-        if j == i or (j >= count and peds[j - count, P_CRASHED] > 0):
-            continue
-        x, y = object_xy(v, peds, j)
-        for k in range(size):
-            other = search[k]
-            if coords[other, j, 2] < 0:  # not measured yet in this frame: outside its disc, off
-                dx, dy = x - discs[other, 0], y - discs[other, 1]
-                if dx * dx + dy * dy > discs[other, 2]:
-                    continue
-                lane_s(v, peds, lanes, coords, other, j)
-            if coords[other, j, 2] == 0.0:
+    for k in range(search_size[lane]):
+        other = search[lane, k]
+        lane_objects(v, peds, lanes, coords, discs, near, near_count, other)
+        for m in range(near_count[other]):
+            j = near[other, m]
+            if j == i:
                 continue
-            s_j = coords[other, j, 0] + offset[k]
-            if s <= s_j and (front < 0 or s_j <= s_front):
+            placed = False  # on an earlier lane of the search: its lists are made, so measured there
+            for earlier in range(k):
+                if coords[search[lane, earlier], j, 2] == 1.0:
+                    placed = True
+                    break
+            if placed:
+                continue
+            s_j = coords[other, j, 0] + search_offset[lane, k]
+            # the nearest, the last in scan order among equals
+            if s <= s_j and (front < 0 or s_j < s_front or (s_j == s_front and j > front)):
                 front, s_front = j, s_j
-            break
     return front
 
 
 @njit(cache=True)
 def left_turn_must_wait(
     v: np.ndarray,
+    peds: np.ndarray,
     lanes: np.ndarray,
+    coords: np.ndarray,
     i: int,
     turn_lane: int,
     junction: np.ndarray,
@@ -327,6 +393,9 @@ def left_turn_must_wait(
     """town_env.left_turn_must_wait: ``turn_lane`` is a left turn and another vehicle (the ego
     included) moving at MOVING_MPS or more is in the junction coming from the opposite arm (not
     leaving by it), or on the street to the opposite stop line within ONCOMING_WATCH_M of it."""
+    v, peds, lanes, coords, junction, from_arm, to_arm, turn, end_junction, end_arm = borrowed(
+        (v, peds, lanes, coords, junction, from_arm, to_arm, turn, end_junction, end_arm)
+    )
     if turn[turn_lane] != TURN_LEFT:
         return False
     j, opposite = junction[turn_lane], (from_arm[turn_lane] + 2) % 4
@@ -337,8 +406,7 @@ def left_turn_must_wait(
         if junction[lane] == j and from_arm[lane] == opposite and to_arm[lane] != opposite:
             return True
         if end_junction[lane] == j and end_arm[lane] == opposite:
-            s, _ = local_coordinates(lanes, lane, v[o, X], v[o, Y])
-            if lanes[lane, LENGTH] - s < ONCOMING_WATCH_M:
+            if lanes[lane, LENGTH] - lane_s(v, peds, lanes, coords, lane, o) < ONCOMING_WATCH_M:
                 return True
     return False
 
@@ -346,7 +414,9 @@ def left_turn_must_wait(
 @njit(cache=True)
 def stop_line_ahead(
     v: np.ndarray,
+    peds: np.ndarray,
     lanes: np.ndarray,
+    coords: np.ndarray,
     p: np.ndarray,
     i: int,
     junction: np.ndarray,
@@ -360,18 +430,20 @@ def stop_line_ahead(
 ) -> float:
     """TownVehicle.stop_line_ahead: metres from vehicle i's front bumper to the stop line it must
     stop at, else NO_STOP."""
+    v, peds, lanes, coords, p, light, light_states = borrowed(
+        (v, peds, lanes, coords, p, light, light_states)
+    )
     lane = int(v[i, LANE])
     if light[lane] < 0:
         return NO_STOP
     state = light_states[light[lane]]
-    s, _ = local_coordinates(lanes, lane, v[i, X], v[i, Y])
-    ahead_m = lanes[lane, LENGTH] - s - v[i, LEN] / 2
+    ahead_m = lanes[lane, LENGTH] - lane_s(v, peds, lanes, coords, lane, i) - v[i, LEN] / 2
     if ahead_m < 0:
         return NO_STOP
     if state == LIGHT_GREEN:
         turn_lane = planned_next(v, lanes, i)
         if turn_lane >= 0 and left_turn_must_wait(
-            v, lanes, i, turn_lane, junction, from_arm, to_arm, turn, end_junction, end_arm
+            v, peds, lanes, coords, i, turn_lane, junction, from_arm, to_arm, turn, end_junction, end_arm
         ):
             return ahead_m
         return NO_STOP
@@ -402,6 +474,7 @@ def town_acceleration(
 ) -> float:
     """TownVehicle.acceleration(self, front): IDM with the straight-line gap to ``front`` (a
     vehicle row, a pedestrian as count + k, or -1), then the stop line's virtual leader."""
+    v, peds, lanes, p, coords, done, trig = borrowed((v, peds, lanes, p, coords, done, trig))
     count = v.shape[0]
     acceleration = cached_idm_acceleration(v, lanes, p, coords, done, trig, i, i, -1)
     if front >= 0:
@@ -426,7 +499,20 @@ def town_acceleration(
         # IDMVehicle.acceleration squares with np.power(·, 2): numpy's square, x * x
         acceleration -= p[COMFORT_ACC_MAX] * (desired_gap / not_zero(gap_m)) ** 2
     ahead_m = stop_line_ahead(
-        v, lanes, p, i, junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states
+        v,
+        peds,
+        lanes,
+        coords,
+        p,
+        i,
+        junction,
+        from_arm,
+        to_arm,
+        turn,
+        end_junction,
+        end_arm,
+        light,
+        light_states,
     )
     if ahead_m == NO_STOP:
         return acceleration
@@ -461,17 +547,24 @@ def town_act(
     street_lanes: np.ndarray,
     routes: np.ndarray,
     route_length: np.ndarray,
+    search: np.ndarray,
+    search_offset: np.ndarray,
+    search_size: np.ndarray,
+    discs: np.ndarray,
     light_states: np.ndarray,
     rng_words: np.ndarray,
 ) -> None:
     """Road.act of one town world: rows ``0..count-1`` of ``v`` decide their controls in order
     (see the module docstring for the arrays); random routes draw on ``rng_words``."""
+    v, peds, lanes, p, coords, done, trig, light_states, rng_words = borrowed(
+        (v, peds, lanes, p, coords, done, trig, light_states, rng_words)
+    )  # no reference counts in the inlined helpers (``borrow``)
     w, q = v[:count], peds[:pcount]
     start_frame(w, done, trig)
     own = np.empty(OWN_SIZE)  # MOBIL's own-lane scratch row (traffic.own_lane)
     coords[:, : count + pcount, 2] = -1.0
-    discs = np.full((lanes.shape[0], 3), -1.0)
-    search, offset = np.empty(lanes.shape[0] + 1, dtype=np.int64), np.empty(lanes.shape[0] + 1)
+    near = np.empty((lanes.shape[0], count + pcount), dtype=np.int64)  # lane_objects' lists
+    near_count = np.full(lanes.shape[0], -1, dtype=np.int64)
     for k in range(pcount):
         trig[count + k, 0], trig[count + k, 1] = np.cos(q[k, P_HEADING]), np.sin(q[k, P_HEADING])
     for i in range(count):
@@ -488,8 +581,7 @@ def town_act(
             turn_lane = planned_next(w, lanes, i)
             if turn_lane >= 0:
                 next_limit = lanes[turn_lane, SPEED_LIMIT]
-                s, _ = local_coordinates(lanes, lane, w[i, X], w[i, Y])
-                ahead_m = lanes[lane, LENGTH] - s
+                ahead_m = lanes[lane, LENGTH] - lane_s(w, q, lanes, coords, lane, i)
                 braking = (py_square(w[i, SPEED]) - py_square(next_limit)) / (2 * -p[COMFORT_ACC_MIN])
                 if ahead_m < TURN_BRAKE_MARGIN_M + braking:
                     limit = min(limit, next_limit)
@@ -507,14 +599,18 @@ def town_act(
         if kind == CONTROLLED:
             w[i, ACCEL] = KP_A * (w[i, TARGET_SPEED] - w[i, SPEED])
             continue
-        front = connected_front(w, q, lanes, coords, discs, search, offset, i, lane)
+        front = connected_front(
+            w, q, lanes, coords, near, near_count, search, search_offset, search_size, discs, i, lane
+        )
         acceleration = town_acceleration(
             w, q, lanes, p, coords, done, trig, i, front,
             junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states,
         )  # fmt: skip
         target = int(w[i, TARGET_LANE])
         if lane != target:
-            front = connected_front(w, q, lanes, coords, discs, search, offset, i, target)
+            front = connected_front(
+                w, q, lanes, coords, near, near_count, search, search_offset, search_size, discs, i, target
+            )
             target_a = town_acceleration(
                 w, q, lanes, p, coords, done, trig, i, front,
                 junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states,
@@ -528,6 +624,7 @@ def town_step(v: np.ndarray, count: int, lanes: np.ndarray, dt: float) -> None:
     """Road.step's vehicle loop for rows ``0..count-1``: Vehicle.step (``traffic.step_vehicle``);
     a TOWN row first adds ``dt`` to its IDM timer and after the step does not reverse
     (``speed = max(speed, 0)``). The ego (not TOWN) is not clamped."""
+    v, lanes = borrowed((v, lanes))
     for i in range(count):
         kind = v[i, KIND]
         if kind == OBSTACLE:

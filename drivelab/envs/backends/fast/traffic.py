@@ -128,6 +128,7 @@ def frame_cache(v: np.ndarray, lanes: np.ndarray) -> tuple[np.ndarray, np.ndarra
 
 @njit(cache=True)
 def start_frame(v: np.ndarray, done: np.ndarray, trig: np.ndarray) -> None:
+    v, done, trig = borrowed((v, done, trig))
     done[:] = -1
     for j in range(v.shape[0]):
         trig[j, 0], trig[j, 1] = cos0(v[j, HEADING]), sin0(v[j, HEADING])
@@ -151,6 +152,7 @@ def fill_lane_coordinates(
     v: np.ndarray, lanes: np.ndarray, coords: np.ndarray, done: np.ndarray, lane: int
 ) -> None:
     """``lane_coordinates``' filling of ``coords[lane]`` and ``done[lane]``."""
+    v, lanes, coords, done = borrowed((v, lanes, coords, done))
     count = 0
     for j in range(v.shape[0]):
         s_j, r_j = local_coordinates(lanes, lane, v[j, X], v[j, Y])
@@ -422,6 +424,7 @@ def lane_on_next_road(
 ) -> tuple[int, float]:
     """RoadNetwork.next_lane_given_next_road: keep the lane id where the lane counts agree,
     else take the next road's lane closest to (x, y). Returns (lane row, its distance)."""
+    (lanes,) = borrowed((lanes,))
     count = int(lanes[next_road, LANE_COUNT])
     if lanes[lane, LANE_COUNT] == count:
         if next_id < 0:
@@ -440,6 +443,7 @@ def next_lane(v: np.ndarray, lanes: np.ndarray, i: int) -> int:
     """RoadNetwork.next_lane for vehicle i's target lane: the route's next road when it starts
     where this one ends (dropping a finished route step), else the successor road whose lane is
     closest; the same lane when the road leads nowhere."""
+    v, lanes = borrowed((v, lanes))
     lane = int(v[i, TARGET_LANE])
     road, end_node = int(lanes[lane, FIRST_OF_ROAD]), lanes[lane, TO_NODE]
     next_road, next_id = -1, -1
@@ -605,6 +609,7 @@ def polygons_intersecting(a, b, dax, day, dbx, dby):
 def handle_collisions(v: np.ndarray, dt: float) -> None:
     """Road.step's collision pass: each vehicle against the vehicles after it, then the obstacles
     (which sit after every vehicle), as RoadObject.handle_collisions."""
+    (v,) = borrowed((v,))
     n = v.shape[0]
     diagonals, polygon_i, polygon_j = np.empty(n), np.empty((5, 2)), np.empty((5, 2))
     for i in range(n):
