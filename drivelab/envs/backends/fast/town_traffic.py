@@ -265,15 +265,19 @@ def connected_lanes(lanes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
     count = lanes.shape[0]
     rows = np.arange(count)
     first = lanes[:, FIRST_OF_ROAD] == rows
+
+    def lane_on(road: int, lane_id: float) -> int:
+        return int(road) + (int(lane_id) if lane_id < lanes[road, LANE_COUNT] else 0)
+
     found: list[tuple[list[int], list[float]]] = []
     for lane in range(count):
         lane_id = lanes[lane, LANE_ID]
-        roads = rows[first & (lanes[:, FROM_NODE] == lanes[lane, TO_NODE])]
-        into = rows[first & (lanes[:, TO_NODE] == lanes[lane, FROM_NODE])]
-        pick = lambda road: int(road) + (int(lane_id) if lane_id < lanes[road, LANE_COUNT] else 0)  # noqa: E731,B023
-        search = [lane] + [pick(road) for road in roads] + [pick(road) for road in into]
-        offset = [0.0] + [lanes[lane, LENGTH]] * len(roads) + [-lanes[pick(road), LENGTH] for road in into]
-        found.append((search, offset))
+        leaving = rows[first & (lanes[:, FROM_NODE] == lanes[lane, TO_NODE])]  # successor roads
+        entering = rows[first & (lanes[:, TO_NODE] == lanes[lane, FROM_NODE])]  # predecessor roads
+        roads = [lane_on(road, lane_id) for road in leaving]
+        into = [lane_on(road, lane_id) for road in entering]
+        offset = [0.0] + [lanes[lane, LENGTH]] * len(roads) + [-lanes[previous, LENGTH] for previous in into]
+        found.append(([lane, *roads, *into], offset))
     width = max(len(search) for search, _ in found)
     search = np.zeros((count, width), dtype=np.int64)
     offset = np.zeros((count, width))
