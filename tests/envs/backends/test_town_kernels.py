@@ -349,3 +349,33 @@ def test_connected_front_is_the_literal_scan(layout):
                 assert got == _literal_front(v, peds, lanes, search, offset, size, i, int(lane))
                 checked += got >= 0
     assert checked > 200  # most searches find a leader
+
+
+def test_the_stop_line_reads_no_frame_cache():
+    """``blocks_traffic`` calls ``town_acceleration`` without a leader on ``traffic``'s frame
+    cache, whose per-object flags are not reset each frame (its ``done`` flags are per lane): the
+    stop line's distance must not come from the cache. Every town vehicle's acceleration with a
+    fresh cache equals the one with a cache full of stale values."""
+    env = town("train", "dense", 3)
+    env.time = 7.3
+    kernels = Kernels("train", len(env.road.vehicles), len(env.road.pedestrians))
+    v, peds, _ = kernels.rows(env)
+    lanes, states = kernels.table.rows, light_states(env)
+    coords, done, trig = (np.array(a, copy=True) for a in kernels.cache)
+    T.start_frame(v, done, trig)
+    stale = coords.copy()
+    stale[..., :2], stale[..., 2] = 1e3, 1.0  # "measured, on the lane, 1 km along"
+    coords[..., 2] = -1.0
+    stops = 0
+    for i in range(len(v)):
+        if v[i, T.KIND] != T.TOWN:
+            continue
+        fresh_a, stale_a = (
+            TT.town_acceleration(
+                v, peds, lanes, kernels.p, cache, done, trig, i, -1, *kernels.road[:7], states
+            )
+            for cache in (coords, stale)
+        )
+        assert fresh_a == stale_a
+        stops += TT.stop_line_ahead(v, lanes, kernels.p, i, *kernels.road[:7], states) != TT.NO_STOP
+    assert stops > 0  # some vehicles have a stop line to stop at

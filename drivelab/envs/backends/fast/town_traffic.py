@@ -382,9 +382,7 @@ def connected_front(
 @njit(cache=True)
 def left_turn_must_wait(
     v: np.ndarray,
-    peds: np.ndarray,
     lanes: np.ndarray,
-    coords: np.ndarray,
     i: int,
     turn_lane: int,
     junction: np.ndarray,
@@ -397,8 +395,8 @@ def left_turn_must_wait(
     """town_env.left_turn_must_wait: ``turn_lane`` is a left turn and another vehicle (the ego
     included) moving at MOVING_MPS or more is in the junction coming from the opposite arm (not
     leaving by it), or on the street to the opposite stop line within ONCOMING_WATCH_M of it."""
-    v, peds, lanes, coords, junction, from_arm, to_arm, turn, end_junction, end_arm = borrowed(
-        (v, peds, lanes, coords, junction, from_arm, to_arm, turn, end_junction, end_arm)
+    v, lanes, junction, from_arm, to_arm, turn, end_junction, end_arm = borrowed(
+        (v, lanes, junction, from_arm, to_arm, turn, end_junction, end_arm)
     )
     if turn[turn_lane] != TURN_LEFT:
         return False
@@ -410,7 +408,8 @@ def left_turn_must_wait(
         if junction[lane] == j and from_arm[lane] == opposite and to_arm[lane] != opposite:
             return True
         if end_junction[lane] == j and end_arm[lane] == opposite:
-            if lanes[lane, LENGTH] - lane_s(v, peds, lanes, coords, lane, o) < ONCOMING_WATCH_M:
+            s, _ = local_coordinates(lanes, lane, v[o, X], v[o, Y])
+            if lanes[lane, LENGTH] - s < ONCOMING_WATCH_M:
                 return True
     return False
 
@@ -418,9 +417,7 @@ def left_turn_must_wait(
 @njit(cache=True)
 def stop_line_ahead(
     v: np.ndarray,
-    peds: np.ndarray,
     lanes: np.ndarray,
-    coords: np.ndarray,
     p: np.ndarray,
     i: int,
     junction: np.ndarray,
@@ -433,21 +430,21 @@ def stop_line_ahead(
     light_states: np.ndarray,
 ) -> float:
     """TownVehicle.stop_line_ahead: metres from vehicle i's front bumper to the stop line it must
-    stop at, else NO_STOP."""
-    v, peds, lanes, coords, p, light, light_states = borrowed(
-        (v, peds, lanes, coords, p, light, light_states)
-    )
+    stop at, else NO_STOP. It reads no frame cache: ``blocks_traffic`` calls it (through
+    ``town_acceleration`` without a leader) with ``traffic``'s cache, whose flags are per lane."""
+    v, lanes, p, light, light_states = borrowed((v, lanes, p, light, light_states))
     lane = int(v[i, LANE])
     if light[lane] < 0:
         return NO_STOP
     state = light_states[light[lane]]
-    ahead_m = lanes[lane, LENGTH] - lane_s(v, peds, lanes, coords, lane, i) - v[i, LEN] / 2
+    s, _ = local_coordinates(lanes, lane, v[i, X], v[i, Y])
+    ahead_m = lanes[lane, LENGTH] - s - v[i, LEN] / 2
     if ahead_m < 0:
         return NO_STOP
     if state == LIGHT_GREEN:
         turn_lane = planned_next(v, lanes, i)
         if turn_lane >= 0 and left_turn_must_wait(
-            v, peds, lanes, coords, i, turn_lane, junction, from_arm, to_arm, turn, end_junction, end_arm
+            v, lanes, i, turn_lane, junction, from_arm, to_arm, turn, end_junction, end_arm
         ):
             return ahead_m
         return NO_STOP
@@ -503,20 +500,7 @@ def town_acceleration(
         # IDMVehicle.acceleration squares with np.power(·, 2): numpy's square, x * x
         acceleration -= p[COMFORT_ACC_MAX] * (desired_gap / not_zero(gap_m)) ** 2
     ahead_m = stop_line_ahead(
-        v,
-        peds,
-        lanes,
-        coords,
-        p,
-        i,
-        junction,
-        from_arm,
-        to_arm,
-        turn,
-        end_junction,
-        end_arm,
-        light,
-        light_states,
+        v, lanes, p, i, junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states
     )
     if ahead_m == NO_STOP:
         return acceleration
