@@ -19,8 +19,10 @@ from highway_env.road.lane import CircularLane, LineType, StraightLane
 from highway_env.road.road import RoadNetwork
 
 from drivelab.envs.backends.circuits import FollowLaneEnv, FollowLineEnv, build_circuit
+from drivelab.envs.backends.fast import lanes as L
 from drivelab.envs.backends.fast.lanes import LaneTable
 from drivelab.envs.backends.fast.town_rows import TURN_LEFT, TURN_RIGHT, TURN_STRAIGHT
+from drivelab.envs.backends.fast.town_traffic import connected_lanes
 from drivelab.envs.backends.highway import _lane_stations, build_road_map
 from drivelab.envs.backends.roads import blocks
 from drivelab.envs.backends.roads.highway_network import to_road_network
@@ -415,6 +417,25 @@ def test_connected_lanes_are_the_ones_highway_env_searches(name):
             )
         ]
         assert found == expected
+
+
+@pytest.mark.parametrize("name", sorted(ROADS))
+def test_the_town_kernels_search_table_is_the_descriptions(name):
+    """``town_traffic.connected_lanes`` derives the same search from the lane table alone: each
+    lane itself (offset 0), then the description's connected lanes in order, offset by the lane's
+    length for those it leads into and by minus their own length for those leading into it."""
+    desc, _ = ROADS[name]
+    lanes = LaneTable.from_description(desc).rows
+    search, offset, size, _ = connected_lanes(lanes)
+    offsets, rows, before = desc.connected_lanes
+    for row in range(len(lanes)):
+        connected = rows[offsets[row] : offsets[row + 1]]
+        shifts = np.where(
+            before[offsets[row] : offsets[row + 1]], -lanes[connected, L.LENGTH], lanes[row, L.LENGTH]
+        )
+        assert size[row] == 1 + len(connected)
+        assert search[row, : size[row]].tolist() == [row, *connected.tolist()]
+        np.testing.assert_array_equal(offset[row, : size[row]], [0.0, *shifts])
 
 
 @pytest.mark.parametrize(
