@@ -43,6 +43,7 @@ class EpisodeRules:
         self.offroad_terminal = bool(offroad_terminal)
         self.stopped_s = np.zeros(0)  # (K,) seconds each ego has stood still
         self.time_limit_s = np.zeros(0)  # (K,) each episode's time limit
+        self._truncate_at_s = np.zeros(0)  # (K,) the limit less 1e-9 s (set with it)
 
     def reset(self, mask: np.ndarray, time_limit_s: np.ndarray | float) -> None:
         """Start the episodes of the worlds where ``mask`` (K,): their stopped timers cleared, their
@@ -54,6 +55,7 @@ class EpisodeRules:
         limits = np.broadcast_to(np.asarray(time_limit_s, dtype=float), mask.shape)
         self.stopped_s[mask] = 0.0
         self.time_limit_s[mask] = limits[mask]
+        self._truncate_at_s = self.time_limit_s - 1e-9  # a step's time reaching it truncates
 
     def apply(self, batch: WorldBatch) -> tuple[WorldBatch, np.ndarray, np.ndarray]:
         """``(batch with its blocked / off_route events, terminated (K,), truncated (K,))`` for the
@@ -66,14 +68,11 @@ class EpisodeRules:
             batch = self._judge(batch)
         events = batch.events
         terminated = (
-            events.collided
-            | events.arrived
-            | events.red_light_crossed
-            | events.blocked
-            | events.off_route
-            | (self.offroad_terminal & events.off_road)
+            events.collided | events.arrived | events.red_light_crossed | events.blocked | events.off_route
         )
-        truncated = ~terminated & (batch.time_s >= self.time_limit_s - 1e-9)
+        if self.offroad_terminal:
+            terminated |= events.off_road
+        truncated = ~terminated & (batch.time_s >= self._truncate_at_s)
         return batch, terminated, truncated
 
     def _judge(self, batch: WorldBatch) -> WorldBatch:

@@ -228,7 +228,7 @@ class VectorDriveEnv(VectorEnv):
     # --- episodes ----------------------------------------------------------------------------
     def _draw_seeds(self, mask: np.ndarray) -> None:
         """The next episode seed of every world of ``mask``, from that world's generator."""
-        if not mask.any():
+        if not np.count_nonzero(mask):  # (ndarray.any's Python wrapper costs a microsecond a call)
             return
         for k in np.flatnonzero(mask):
             self.episode_seeds[k] = int(self.world_rngs[k].integers(TRAINING_SEED_LIMIT))
@@ -323,7 +323,7 @@ class VectorDriveEnv(VectorEnv):
         done = terminated | truncated
         infos = self._step_infos(batch, terms, done, truncated)
         self.batch = batch
-        if restarting.any():  # their values above judged no step of theirs: discarded
+        if np.count_nonzero(restarting):  # their values above judged no step of theirs: discarded
             if batch is not stepped:  # a restarted world starts with its simulator's events
                 self.batch = batch.where(restarting, stepped)
             self._start(restarting, self.batch)
@@ -336,7 +336,7 @@ class VectorDriveEnv(VectorEnv):
             infos["_episode_seed"] = restarting
         observations = self._observe(self.batch)
         infos["traffic_light"] = self.traffic_light_labels()
-        if self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
+        if self.autoreset_mode == AutoresetMode.SAME_STEP and np.count_nonzero(done):
             infos["final_obs"] = _rows_as_objects(observations, done)
             infos["final_info"] = _final_infos(infos, done)
             infos["_final_obs"] = infos["_final_info"] = done.copy()
@@ -368,7 +368,7 @@ class VectorDriveEnv(VectorEnv):
             "_off_road": every,
             "_arrived": every,
         }
-        if done.any():
+        if np.count_nonzero(done):
             summaries = self.metrics.summaries(done, self.scenario.arrival != "none", truncated)
             metrics = np.empty(self.num_envs, dtype=object)
             for k, summary in zip(np.flatnonzero(done), summaries, strict=True):
@@ -378,6 +378,8 @@ class VectorDriveEnv(VectorEnv):
 
     def traffic_light_labels(self) -> np.ndarray:
         """(K,) "none", "green" or "red_or_yellow": the light ahead within 18 m (RLAD's label)."""
+        if not self.batch.traffic_lights.shape[1]:  # no lights in any world: no search
+            return np.full(self.num_envs, _LABEL_OF_STATE[0], dtype=object)
         state, _ = self.batch.light_ahead(LIGHT_LABEL_DISTANCE_M)
         return _LABEL_OF_STATE[state + 1]
 
@@ -541,18 +543,22 @@ class SB3VecEnv(VecEnv):
 
 
 def _world_info(infos: dict, k: int) -> dict:
-    """World ``k``'s entries of gymnasium-style vector infos, as one plain dict."""
+    """World ``k``'s entries of gymnasium-style vector infos, as one plain dict (numbers as Python
+    numbers: ``ndarray.item(k)`` of the (K,) arrays, cheaper than indexing then converting)."""
     info = {}
     for key, value in infos.items():
         if key[0] == "_" or key == "final_obs" or key == "final_info":
             continue
         if key == "reward_terms":
-            info[key] = {name: float(v[k]) for name, v in value.items()}
+            info[key] = {name: v.item(k) for name, v in value.items()}
             continue
         mask = infos.get("_" + key)
         if mask is None or mask[k]:
-            item = value[k]
-            info[key] = item.item() if isinstance(item, np.generic) else item
+            if value.ndim == 1:
+                info[key] = value.item(k)
+            else:
+                item = value[k]
+                info[key] = item.item() if isinstance(item, np.generic) else item
     return info
 
 

@@ -233,6 +233,10 @@ class EventsBatch:
         kinds = np.array([COLLISION_NAMES.index(e.collision_with) for e in events], dtype=np.int8)
         return EventsBatch(collision_kind=kinds, **flags)
 
+    def replaced(self, **flags: np.ndarray) -> EventsBatch:
+        """``dataclasses.replace(self, **flags)`` without the frozen ``__init__`` (``assemble``)."""
+        return assemble(EventsBatch, **{**self.__dict__, **flags})
+
     def __getitem__(self, k: int) -> Events:
         flags = {name: bool(getattr(self, name)[k]) for name in EVENT_FLAGS}
         return Events(collision_with=COLLISION_NAMES[int(self.collision_kind[k])], **flags)
@@ -361,7 +365,7 @@ class WorldBatch:
 
     def with_events(self, **flags: np.ndarray) -> WorldBatch:
         """The same batch with some event arrays replaced (``blocked=…``, ``off_route=…``)."""
-        return self.replaced(events=dataclasses.replace(self.events, **flags))
+        return self.replaced(events=self.events.replaced(**flags))
 
     def replaced(self, **fields) -> WorldBatch:
         """``dataclasses.replace(self, **fields)`` (a fresh cache) without re-running ``__init__``
@@ -454,6 +458,35 @@ class WorldBatch:
 _FIELDS_EGO = dataclasses.fields(EgoBatch)
 _FIELDS_EVENTS = dataclasses.fields(EventsBatch)
 _FIELDS_ROUTE = [f for f in dataclasses.fields(RouteBatch) if f.init]
+# per batch class: its init fields' names, and the defaults of those that have one
+_INIT_NAMES = {
+    cls: frozenset(f.name for f in dataclasses.fields(cls) if f.init)
+    for cls in (EgoBatch, RouteBatch, EventsBatch, WorldBatch)
+}
+_DEFAULTS = {
+    cls: {
+        f.name: f.default for f in dataclasses.fields(cls) if f.init and f.default is not dataclasses.MISSING
+    }
+    for cls in _INIT_NAMES
+}
+
+
+def assemble(cls, /, **fields):
+    """``cls(**fields)`` for :class:`EgoBatch`, :class:`RouteBatch`, :class:`EventsBatch` or
+    :class:`WorldBatch` (``cache`` empty), without the frozen ``__init__``'s ``object.__setattr__``
+    per field (there is no ``__post_init__`` to run): a simulator's per-step export, where one
+    world's whole step is a few dozen microseconds. The same fields are required."""
+    defaults = _DEFAULTS[cls]
+    if defaults:
+        fields = defaults | fields
+    if fields.keys() != _INIT_NAMES[cls]:
+        wrong = sorted(fields.keys() ^ _INIT_NAMES[cls])
+        raise TypeError(f"{cls.__name__} needs exactly its fields: {wrong} missing or unknown")
+    if "cache" in cls.__dataclass_fields__:
+        fields["cache"] = {}
+    made = object.__new__(cls)
+    object.__setattr__(made, "__dict__", fields)  # **fields is this call's own dict
+    return made
 
 
 def _stations(polyline: np.ndarray) -> np.ndarray:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from drivelab.envs.core import DriveEnv
-from drivelab.world.batch import COLLISION_PEDESTRIAN, WorldBatch
+from drivelab.world.batch import COLLISION_PEDESTRIAN, EgoBatch, EventsBatch, RouteBatch, WorldBatch, assemble
 from drivelab.world.state import LIGHT_RED, Ego, Events, RoadMap, Route, WorldState
 
 
@@ -113,3 +113,35 @@ def test_with_events_and_replaced_keep_the_other_fields_and_start_an_empty_cache
         batch.replaced(speed=1.0)
     with pytest.raises(TypeError, match="cache"):
         batch.replaced(cache={})
+
+
+def test_assemble_is_the_constructor_without_its_frozen_init():
+    batch = WorldBatch.stack(_worlds("highway", 2))
+    for part in (batch.ego, batch.events, batch.route, batch):
+        cls = type(part)
+        fields = {f.name: getattr(part, f.name) for f in dataclasses.fields(cls) if f.init}
+        made, built = assemble(cls, **fields), cls(**fields)
+        assert type(made) is cls
+        for name in fields:
+            assert getattr(made, name) is getattr(built, name), name
+        if "cache" in cls.__dataclass_fields__:  # each value its own empty cache
+            assert made.cache == {} and made.cache is not assemble(cls, **fields).cache
+        with pytest.raises(dataclasses.FrozenInstanceError):
+            made.time_s = None  # still frozen
+    # WorldBatch's one default (slots) is filled in; a missing or unknown field is refused by name
+    fields = {f.name: getattr(batch, f.name) for f in dataclasses.fields(WorldBatch) if f.init}
+    del fields["slots"]
+    assert assemble(WorldBatch, **fields).slots is None
+    ego = {f.name: getattr(batch.ego, f.name) for f in dataclasses.fields(EgoBatch)}
+    del ego["heading"]
+    with pytest.raises(TypeError, match="heading"):
+        assemble(EgoBatch, **ego)
+    with pytest.raises(TypeError, match="wings"):
+        assemble(
+            RouteBatch,
+            wings=1,
+            **{f.name: getattr(batch.route, f.name) for f in dataclasses.fields(RouteBatch) if f.init},
+        )
+    events = batch.events.replaced(arrived=np.array([True, False]))
+    assert isinstance(events, EventsBatch) and events.arrived.tolist() == [True, False]
+    assert events.collided is batch.events.collided

@@ -32,8 +32,6 @@ any collision; the time limit is the route's (``blocks_spawn.route_time_limit_s`
 
 from __future__ import annotations
 
-import dataclasses
-
 import numba
 import numpy as np
 from numba import njit, prange
@@ -385,7 +383,7 @@ class BlocksSimulator(FastSimulator):
         worlds = np.arange(k)
         previous_lane = self.lane_start + self.vehicles[worlds, self.ego, T.LANE].astype(np.int64)
         self.apply_controls(controls)
-        self.time_s += 1 / self.policy_frequency_hz
+        np.add(self.time_s, self._dt_policy, out=self.time_s)
         self._update_lights(~restart)
         self.run_frames(lambda frames: simulate_map_worlds(
             self.vehicles, self.count, self.lanes, self.lane_start, self.lane_stop, self.idm, frames,
@@ -446,5 +444,5 @@ class BlocksSimulator(FastSimulator):
         state = np.take_along_axis(self.light_state, self.signal_light[rows], axis=1)
         lights = np.concatenate([self.signal_xyh[rows], state[..., None]], axis=2)
         lights[~light_valid] = 0.0
-        events = dataclasses.replace(batch.events, red_light_crossed=self._red_light.copy())
+        events = batch.events.replaced(red_light_crossed=self._red_light.copy())
         return batch.replaced(events=events, traffic_lights=lights, light_valid=light_valid)

@@ -46,6 +46,7 @@ from drivelab.world.batch import (
     EventsBatch,
     RouteBatch,
     WorldBatch,
+    assemble,
 )
 from drivelab.world.geometry import FULL_LOCK_RAD
 from drivelab.world.scenario import META_ACTIONS, Scenario
@@ -451,7 +452,7 @@ def _commands(controls, low, span, constants, out) -> None:
             out[k, i] = _command(controls[k, i], low[i], span[i], constants)
 
 
-_KIND_OF_HIT = np.array([COLLISION_NONE, COLLISION_VEHICLE], dtype=np.int8)  # by the crashed flag
+assert (COLLISION_NONE, COLLISION_VEHICLE) == (0, 1)  # a crashed flag as int8 is its collision kind
 
 
 @njit(cache=True)
@@ -708,6 +709,8 @@ class FastSimulator:
         self.table, self.lanes, self.road = road.table, road.table.rows, road.road_map
         self.roads: tuple[RoadMap, ...] = (self.road,)
         self.policy_frequency_hz, self.duration_s = road.policy_frequency_hz, road.duration_s
+        self._dt_policy_s = 1.0 / self.policy_frequency_hz
+        self._dt_policy = np.array(self._dt_policy_s)  # 0-d: added to time_s without a scalar's conversion
         self.frames, self.dt_s = road.frames, road.dt_s
         self.idm = road.idm
         self.arrival, self.arrival_threshold = ARRIVAL_RULES[scenario.arrival]
@@ -882,11 +885,11 @@ class FastSimulator:
         self.run_frames(lambda frames: T.simulate_worlds(
             self.vehicles, self.count, self.lanes, self.idm, frames, self.dt_s, self.regulation, ~restart
         ))  # fmt: skip
-        self.time_s += 1 / self.policy_frequency_hz
+        np.add(self.time_s, self._dt_policy, out=self.time_s)
         if self.traffic_flow:  # IntersectionEnv.step: clear, then maybe spawn
             clear_departed(self.vehicles, self.count, self.ego, self.lanes, self._road.exit_lane)
             self._spawn_arrivals()
-        if restart.any():
+        if np.count_nonzero(restart):  # ndarray.any's Python wrapper costs a microsecond
             self._start_episodes(np.flatnonzero(restart), seeds)
         self._project(fresh=restart, update=self._every_world)
         self.batch = self._export()
@@ -952,9 +955,11 @@ class FastSimulator:
         self, floats: np.ndarray, ints: np.ndarray, flags: np.ndarray, vehicles: np.ndarray, valid: np.ndarray
     ) -> WorldBatch:
         """The WorldBatch of ``export_worlds``' outputs (the town adds its lights and pedestrians)."""
-        # the old WorldState's formula, numpy's complex exp and angle, for the same last bits
-        curvature = np.angle(np.exp(1j * floats[:, EX_HEADING_CHANGE])) / 2.0
-        ego = EgoBatch(
+        # the old WorldState's formula, numpy's complex exp and angle (np.angle is this arctan2),
+        # for the same last bits
+        turn = np.exp(1j * floats[:, EX_HEADING_CHANGE])
+        ego = assemble(
+            EgoBatch,
             position=floats[:, EX_X : EX_Y + 1],  # (K, 2): the columns are adjacent
             heading=floats[:, EX_HEADING],
             speed_mps=floats[:, EX_SPEED],
@@ -968,27 +973,34 @@ class FastSimulator:
             lane_width_m=floats[:, EX_LANE_WIDTH],
             lateral_offset_m=floats[:, EX_LATERAL],
             lane_heading=floats[:, EX_LANE_HEADING],
-            lane_curvature=curvature,
+            lane_curvature=np.arctan2(turn.imag, turn.real) / 2.0,
             on_road=flags[:, EX_ON_ROAD],
             in_intersection=flags[:, EX_IN_JUNCTION],
         )
         collided, no_event = flags[:, EX_CRASHED], self._no_event
         off_road = ~flags[:, EX_ON_ROAD]
         if self.scenario.keep_lane:  # follow-lane: leaving the starting lane is leaving the road
-            off_road = off_road | (ints[:, EX_LANE_ID] != self.start_lane_id)
-        events = EventsBatch(
+            off_road |= ints[:, EX_LANE_ID] != self.start_lane_id
+        events = assemble(
+            EventsBatch,
             collided=collided,
-            collision_kind=_KIND_OF_HIT[collided.view(np.int8)],
+            collision_kind=collided.astype(np.int8),  # COLLISION_NONE 0, COLLISION_VEHICLE 1
             off_road=off_road,
             arrived=flags[:, EX_ARRIVED] if self.arrival != ARRIVE_ROUTE_END else self._route_ended(),
             red_light_crossed=no_event,  # the rules add blocked and off_route; no lights here
             blocked=no_event,
             off_route=no_event,
         )
-        route = RouteBatch(progress_m=self.progress_m.copy(), **self._routes())
-        return WorldBatch(
+        route = assemble(RouteBatch, progress_m=self.progress_m.copy(), **self._routes())
+        extra = (
+            self._empty
+            if not self.scenario.guide_line
+            else {**self._empty, "road_index": self.route_index.copy()}
+        )
+        return assemble(
+            WorldBatch,
             time_s=self.time_s.copy(),
-            dt_s=1.0 / self.policy_frequency_hz,
+            dt_s=self._dt_policy_s,
             ego=ego,
             vehicles=vehicles,
             vehicle_valid=valid,
@@ -996,11 +1008,7 @@ class FastSimulator:
             route=route,
             events=events,
             speed_limit_mps=floats[:, EX_SPEED_LIMIT],
-            **(
-                self._empty
-                if not self.scenario.guide_line
-                else {**self._empty, "road_index": self.route_index.copy()}
-            ),
+            **extra,
         )
 
     def _route_ended(self) -> np.ndarray:

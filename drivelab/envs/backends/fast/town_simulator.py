@@ -57,6 +57,7 @@ from drivelab.world.batch import (
     COLLISION_VEHICLE,
     EventsBatch,
     WorldBatch,
+    assemble,
 )
 from drivelab.world.state import LIGHT_RED
 
@@ -301,7 +302,8 @@ class TownSimulator(FastSimulator):
         batch = self._export_arrays(floats, ints, flags, vehicles, valid)
         collided = flags[:, EX_CRASHED]
         kind = np.where(hit_ego, COLLISION_PEDESTRIAN, COLLISION_VEHICLE)
-        events = EventsBatch(
+        events = assemble(
+            EventsBatch,
             collided=collided,
             collision_kind=np.where(collided, kind, COLLISION_NONE).astype(np.int8),
             off_road=~flags[:, EX_ON_ROAD],
