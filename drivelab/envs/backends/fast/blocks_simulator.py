@@ -400,7 +400,7 @@ class BlocksSimulator(FastSimulator):
         )
         crossed = self.lanes[lane, L.FROM_NODE] == self.lanes[previous_lane, L.TO_NODE]
         self._red_light = ~restart & (light >= 0) & crossed & (state == LIGHT_RED)
-        if restart.any():
+        if np.count_nonzero(restart):  # as FastSimulator.step (ndarray.any costs a microsecond)
             self._start_episodes(np.flatnonzero(restart), seeds)
         self._project(fresh=restart, update=self._every_world)
         self.batch = self._export()
