@@ -39,7 +39,7 @@ import numpy as np
 import torch
 from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList
-from stable_baselines3.common.logger import Logger, configure
+from stable_baselines3.common.logger import Logger
 
 from drivelab.agents.registry import algo_of
 from drivelab.agents.storage import (
@@ -155,7 +155,7 @@ class OwnAgent:
         self.rng = np.random.default_rng(self.seed)
         torch.manual_seed(self.seed)  # network initialisation
         self.generator = torch.Generator().manual_seed(self.seed)  # every torch draw while training
-        self.logger: Logger = configure(None, [])  # replaced by run.py through set_logger
+        self.logger: Logger = Logger(folder=None, output_formats=[])  # silent until run.py sets one
         self._build()
 
     # --- what subclasses provide ------------------------------------------------------------

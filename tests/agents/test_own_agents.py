@@ -53,6 +53,16 @@ def test_save_load_round_trip_gives_identical_actions(algo, tmp_path):
         obs, *_ = env.step(action)
 
 
+def test_an_agent_writes_nothing_until_a_run_gives_it_a_logger(tmp_path, monkeypatch):
+    """SB3's ``configure(None, ...)`` makes a folder under the temp directory: an agent built and
+    trained outside a run (tests, notebooks) must leave no such folder behind."""
+    monkeypatch.setattr("tempfile.tempdir", str(tmp_path))
+    monkeypatch.delenv("SB3_LOGDIR", raising=False)
+    agent, _ = _agent("a2c_own")
+    agent.learn(8)
+    assert sorted(p.name for p in tmp_path.glob("SB3-*")) == []
+
+
 @pytest.mark.parametrize("algo", ["dueling_ddqn", "ppo_own"])
 def test_same_seed_same_training(algo):
     first, _ = _agent(algo, seed=4)
