@@ -8,13 +8,46 @@ from pathlib import Path
 
 import typer
 import yaml
+from typer.core import TyperGroup
 
 from drivelab.agents.registry import ALGO_NAMES
 from drivelab.envs.scenarios import SCENARIOS
 from drivelab.errors import UsageError
 
+# click's exception classes, from wherever this typer takes click (newer typers carry their own copy)
+CLICK_ERRORS = {cls.__name__: cls for cls in typer.BadParameter.__mro__}
+
+
+class OneLineErrors(TyperGroup):
+    """The command line's own mistakes (an unknown command or option, a value of the wrong type, a
+    missing argument) as the one ``error:`` line and exit code 2 that every other bad input gets,
+    instead of click's usage box."""
+
+    def main(self, *args, standalone_mode: bool = True, **kwargs):
+        if not standalone_mode:
+            return super().main(*args, standalone_mode=False, **kwargs)
+        try:
+            code = super().main(*args, standalone_mode=False, **kwargs)
+        except CLICK_ERRORS["ClickException"] as exc:
+            if type(exc).__name__ == "NoArgsIsHelpError":  # the help is printed already
+                sys.exit(exc.exit_code)
+            message = " ".join(exc.format_message().split()).rstrip(".")
+            context = getattr(exc, "ctx", None)
+            if isinstance(exc, CLICK_ERRORS["UsageError"]) and context is not None:
+                message += f" (see `{context.command_path} --help`)"
+            typer.echo(f"error: {message[0].lower()}{message[1:]}", err=True)
+            sys.exit(2)
+        except typer.Abort:
+            typer.echo("Aborted!", err=True)
+            sys.exit(1)
+        sys.exit(code if isinstance(code, int) else 0)
+
+
 app = typer.Typer(
-    add_completion=False, no_args_is_help=True, help="Train, evaluate and compare RL driving agents."
+    cls=OneLineErrors,
+    add_completion=False,
+    no_args_is_help=True,
+    help="Train, evaluate and compare RL driving agents.",
 )
 
 
@@ -99,7 +132,9 @@ def train(
     n_envs: int | None = typer.Option(None, help="worlds stepped together (SB3 and own agents)"),
     eval_maps: str | None = typer.Option(None, help="blocks: evaluate on maps START:COUNT (unseen maps)"),
     hyperparams: list[str] = typer.Option([], "--hyperparams", "-H", help="algorithm override key=value"),
-    resume: Path | None = typer.Option(None, help="continue this run directory from its checkpoint"),
+    resume: Path | None = typer.Option(
+        None, help="continue this run directory from its checkpoint (none yet: train it again from 0)"
+    ),
     no_alix: bool = typer.Option(False, "--no-alix", help="rlad/drq: no A-LIX (-H alix=false)"),
     no_aux: bool = typer.Option(False, "--no-aux", help="rlad/drq: no traffic-light loss (-H aux=false)"),
     no_augment: bool = typer.Option(False, "--no-augment", help="rlad/drq: no DrQ shifts (-H augment=false)"),
@@ -133,10 +168,13 @@ def train(
                     name,
                     n_envs,
                     eval_maps,
+                    eval_every,
+                    eval_episodes,
+                    checkpoint_every,
                 )
                 if o is not None
             ]
-            if given or hyperparams or switches:
+            if given or hyperparams or switches or video:
                 raise UsageError("--resume takes the run's own config; only --steps may be given with it")
             run_dir = resume_run(resume, steps)
         else:
@@ -202,7 +240,7 @@ def evaluate(
         out_dir = report_dir(run_dir, out)
         report = evaluate_run(
             path, episodes=episodes, video=video, deterministic=not stochastic, out_dir=out_dir, maps=maps,
-            side_by_side=side_by_side,
+            side_by_side=side_by_side, progress=True,
         )  # fmt: skip
     except UsageError as exc:
         _fail(str(exc))
@@ -609,6 +647,8 @@ def maps(
     from drivelab.envs.maps_gallery import draw_gallery
 
     try:
+        if out.suffix.lower() != ".png" or out.is_dir():
+            raise UsageError(f"--out {str(out)!r} must name a .png file")
         start, count = _map_seeds(seeds)
         spec = int(map_spec) if map_spec.strip().isdigit() else map_spec
         config = {"map": spec, "start_seed": start, "num_scenarios": count}

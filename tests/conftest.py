@@ -12,3 +12,14 @@ def pytest_configure(config):
         import tempfile
 
         os.environ["SB3_LOGDIR"] = tempfile.mkdtemp(prefix="drivelab-tests-sb3-")
+        config.drivelab_sb3_logdir = os.environ["SB3_LOGDIR"]
+
+
+def pytest_unconfigure(config):
+    """The session's SB3 folder goes with the session (the process that made it removes it)."""
+    folder = getattr(config, "drivelab_sb3_logdir", None)
+    if folder is not None:
+        import shutil
+
+        shutil.rmtree(folder, ignore_errors=True)
+        del os.environ["SB3_LOGDIR"]

@@ -74,6 +74,22 @@ TRAIN_CASES = {
         "'stack' of 'topdown' must be an",
     ),
     "seed -1": (["--algo", "ppo", "--seed", "-1"], {}, "'seed' must be between 0 and"),
+    # click's own parsing errors, in click's box before
+    "seed abc": (["--algo", "ppo", "--seed", "abc"], {}, "invalid value for '--seed'"),
+    "unknown option": (["--algo", "ppo", "--bogus", "1"], {}, "no such option: --bogus"),
+    # a traceback after a partly written run directory before
+    "reward weight nan": (["--algo", "ppo", "--reward", "crash=nan"], {}, "'crash' needs a finite weight"),
+    "reward weight inf": (
+        ["--algo", "ppo", "--reward", "highway,collision=-inf"],
+        {},
+        "'collision' needs a finite weight",
+    ),
+    # torch's RuntimeError when the agent is built
+    "net_arch -1": (
+        ["--algo", "ppo", "-H", "policy_kwargs={net_arch: [-1]}"],
+        {},
+        "bad hyperparameters for 'ppo'",
+    ),
     "eval-maps without a count": (
         ["--algo", "ppo", "--env", "blocks", "--eval-maps", "5"],
         {},
@@ -389,6 +405,43 @@ def test_runs_dir_denied(work, monkeypatch):
     )
 
 
+def test_unknown_command_and_missing_argument(work):
+    assert_refused(work, ["bogus"], "no such command 'bogus' (see `")
+    assert_refused(work, ["evaluate"], "missing argument 'RUN_DIR|NAME'")
+    assert_refused(work, ["perception", "train-lane", "--bogus"], "no such option: --bogus")
+
+
+TINY_SWEEP = """
+base: {algo: ppo, env: highway, traffic: empty, steps: 32, hyperparams: {n_steps: 16, batch_size: 16}}
+grid: {seed: 1}
+eval_episodes: 0
+"""
+
+
+def test_sweep_and_ablate_check_hyperparameters_before_writing(work):
+    (work / "sweep.yaml").write_text(
+        TINY_SWEEP.replace("batch_size: 16", "batch_size: 16, learning_rate: -1")
+    )
+    assert_refused(work, ["sweep", "sweep.yaml", "--workers", "1"], "learning_rate")
+    ablate = ["ablate", "--algo", "ppo", "--drop-terms", "right_lane", "--seeds", "1", "--steps", "32"]
+    assert_refused(work, [*ablate, "-H", "learning_rate=-1"], "learning_rate")
+
+
+def test_zero_workers(work):
+    (work / "sweep.yaml").write_text(TINY_SWEEP)
+    assert_refused(work, ["sweep", "sweep.yaml", "--workers", "0"], "--workers must be >= 1, got 0")
+
+
+def test_maps_output_must_be_a_writable_png(work):
+    maps = ["maps", "--map", "3", "--seeds", "0:1"]
+    assert_refused(work, [*maps, "-o", "gallery"], "--out 'gallery' must name a .png file")
+    (work / "folder.png").mkdir()
+    assert_refused(work, [*maps, "-o", "folder.png"], "--out 'folder.png' must name a .png file")
+    (work / "file").write_text("a file, not a folder")
+    assert_refused(work, [*maps, "-o", "file/gallery.png"], "cannot write 'file/gallery.png'")
+    assert_refused(work, [*maps, "-o", "file/new/gallery.png"], "cannot write")  # mkdir refused
+
+
 # --- evaluate and compare: one tiny run, copied into each test ---------------------------------
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory) -> Path:
@@ -404,6 +457,12 @@ def trained(tmp_path_factory) -> Path:
 @pytest.fixture
 def run_dir(work, trained) -> Path:
     return Path(shutil.copytree(trained, work / "tiny"))
+
+
+def test_resume_takes_only_steps(work, run_dir):
+    for option in (["--eval-every", "7"], ["--eval-episodes", "2"], ["--checkpoint-every", "5"], ["--video"]):
+        args = ["train", "--resume", str(run_dir), "--steps", "40", *option]
+        assert_refused(work, args, "only --steps may be given with it")
 
 
 def test_evaluate_after_obs_edited(work, run_dir):

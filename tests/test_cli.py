@@ -97,6 +97,17 @@ def test_console_script_exit_code():
     )
 
 
+def test_console_script_usage_error_is_one_line():
+    """click's own parsing errors (a value of the wrong type) through the console script's path."""
+    result = subprocess.run(
+        [sys.executable, "-m", "drivelab.cli", "train", "--seed", "abc"], capture_output=True, text=True
+    )
+    assert result.returncode == 2 and result.stdout == ""
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: invalid value for '--seed'")
+    assert lines[0].endswith("train --help`)")
+
+
 def test_ctrl_c_saves_a_checkpoint_and_says_how_to_resume(tmp_path):
     import json
     import signal

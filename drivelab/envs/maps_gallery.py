@@ -4,6 +4,8 @@ road and its letter, the route, the spawn road (green) and the destination (red)
 
 from __future__ import annotations
 
+import contextlib
+import os
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -12,6 +14,7 @@ from matplotlib.figure import Figure
 
 from drivelab.envs.backends.roads.pg_map import PGMap, lane_samples
 from drivelab.envs.backends.roads.pg_roads import right_normal
+from drivelab.errors import UsageError
 
 BLOCK_COLOURS = ("#c6dbef", "#fdd0a2", "#c7e9c0", "#dadaeb", "#fcbba1", "#d9d9d9", "#fee391", "#ccebc5")
 
@@ -57,7 +60,9 @@ def draw_gallery(
     titles: Sequence[str] | None = None,
     dpi: int = 80,
 ) -> Path:
-    """Draw ``maps`` in a grid of ``columns`` to the PNG ``path``; returns the path."""
+    """Draw ``maps`` in a grid of ``columns`` to the PNG ``path`` (its missing folders created);
+    returns the path. A path that cannot be written is a one-line UsageError, and leaves neither
+    the file nor the folders made for it."""
     rows = int(np.ceil(len(maps) / columns))
     figure = Figure(figsize=(3.2 * columns, 3.2 * rows))
     for k, pg_map in enumerate(maps):
@@ -65,6 +70,17 @@ def draw_gallery(
         draw_map(ax, pg_map, titles[k] if titles else None)
     figure.tight_layout()
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(path, dpi=dpi)
+    missing = [folder for folder in path.parents if not folder.exists()]
+    partial = path.with_name(path.name + ".tmp")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        figure.savefig(partial, dpi=dpi, format="png")
+        os.replace(partial, path)
+    except OSError as exc:
+        with contextlib.suppress(OSError):  # absent, or its folder is not one
+            partial.unlink()
+        for folder in missing:  # innermost first
+            if folder.is_dir():
+                folder.rmdir()
+        raise UsageError(f"cannot write {str(path)!r}: {exc.strerror or exc}") from None
     return path

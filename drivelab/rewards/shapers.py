@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -123,6 +124,8 @@ def parse_reward(spec: str | dict | RewardSpec) -> RewardSpec:
             weight = float(value)
         except ValueError:
             raise UsageError(f"reward term {name!r} needs a numeric weight, got {value!r}") from None
+        if not math.isfinite(weight):
+            raise UsageError(f"reward term {name!r} needs a finite weight, got {value!r}")
         weights[name] = weight
     weights = {k: w for k, w in weights.items() if w != 0.0}
     if not weights:

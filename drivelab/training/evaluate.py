@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 from gymnasium import spaces
+from tqdm import tqdm
 
 from drivelab.config import RunConfig, build_config, parse_maps
 from drivelab.errors import UsageError
@@ -150,6 +151,7 @@ def evaluate_run(
     maps: str | None = None,
     side_by_side: bool | None = None,
     first: int = 0,
+    progress: bool = False,
 ) -> dict:
     """Evaluate the final model of ``run_dir`` (or its latest checkpoint); write eval.json (and
     the video) into ``out_dir`` (default: the run directory; created if missing).
@@ -162,6 +164,7 @@ def evaluate_run(
         when it has one.
     :param first: play evaluation episodes ``first`` … (``run_episodes``); the report says so
         (``first_episode``) when it is not 0.
+    :param progress: show a progress bar of the episodes (on stderr).
     """
     from drivelab.envs.core import DriveEnv
     from drivelab.envs.video import video_fps
@@ -184,9 +187,16 @@ def evaluate_run(
         out_dir = make_out_dir(Path(out_dir))
         check_writable(out_dir, name)
     policy = lambda obs: agent.predict(obs, deterministic=deterministic)[0]  # noqa: E731
-    results, frames = run_episodes(
-        policy, env, episodes, record_first=video, side_by_side=side_by_side, first=first
-    )
+    with tqdm(total=episodes, desc=f"evaluate {config.algo}", unit="episode", disable=not progress) as bar:
+        results, frames = run_episodes(
+            policy,
+            env,
+            episodes,
+            record_first=video,
+            side_by_side=side_by_side,
+            first=first,
+            on_episode=lambda _: bar.update(),
+        )
     report = {"run": str(run_dir), "algo": config.algo, "env": config.env, **aggregate(results)}
     if first:
         report["first_episode"] = first

@@ -26,6 +26,7 @@ import csv
 import gc
 import os
 import shutil
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -246,7 +247,7 @@ def _check_model(spec, config: RunConfig, probe) -> None:
         spec.build(config.algo, probe, config.seed, dict(config.hyperparams), None)
     except UsageError:
         raise
-    except (TypeError, ValueError, AssertionError) as exc:
+    except (TypeError, ValueError, AssertionError, RuntimeError) as exc:  # torch: RuntimeError
         raise UsageError(f"bad hyperparameters for {config.algo!r}: {exc}") from None
     finally:
         gc.collect()  # the throwaway agent's networks (on a GPU too) go before the real ones come
@@ -285,6 +286,24 @@ def _check_n_envs(config: RunConfig) -> None:
         )
 
 
+def check_config(config: RunConfig):
+    """Everything a run's config must pass before anything is written: the algorithm with its
+    action kind and number of worlds, the environment (scenario, sensors, reward, action) and the
+    agent, built once with its hyper-parameters on a probe environment. Returns the algorithm's
+    spec."""
+    from drivelab.envs.core import DriveEnv
+
+    check_combination(config.algo, config.action)
+    _check_n_envs(config)
+    probe = DriveEnv(**config.env_kwargs())  # validates scenario, sensors, reward, action
+    try:
+        spec = check_combination(config.algo, config.action, probe.observation_space)
+        _check_model(spec, config, probe)
+    finally:
+        probe.close()
+    return spec
+
+
 def train(
     config: RunConfig,
     runs_root: str | Path = "runs",
@@ -298,15 +317,8 @@ def train(
     :param eval_first: the periodic evaluations play evaluation episodes ``eval_first`` … (a tuning
         trial: the validation episodes, ``VALIDATION_START``).
     """
-    from drivelab.envs.core import DriveEnv
-
-    check_combination(config.algo, config.action)
-    _check_n_envs(config)
     run_dir = new_run_dir(config, Path(runs_root))
-    probe = DriveEnv(**config.env_kwargs())  # validates scenario, sensors, reward, action
-    spec = check_combination(config.algo, config.action, probe.observation_space)
-    _check_model(spec, config, probe)
-    probe.close()
+    spec = check_config(config)
     _create_run_dir(run_dir)
     try:
         save_yaml(config, run_dir / "config.yaml")
@@ -335,13 +347,21 @@ def resume(
     and evaluations.csv to the rows it had written, progress.csv to its step) and the results of
     the older model (eval.json, eval-maps-*.json, nocrash.json, learning_curve.png, model.zip) are
     removed.
+    A run killed before its first checkpoint (config and logs, no checkpoint, no model) has
+    nothing to continue from: it is trained again from step 0 in the same directory.
     ``on_evaluation``, ``eval_first``: as for ``train``.
     """
     run_dir = Path(run_dir)
     config = load_run_config(run_dir)
-    manifest = verify_checkpoint(run_dir, config)
     if steps is not None:
         config = build_config({**config.to_dict(), "steps": steps})
+    if _stopped_before_first_checkpoint(run_dir):
+        config = build_config({**config.to_dict(), "name": run_dir.name})
+        check_config(config)
+        sys.stderr.write(f"{run_dir}: stopped before its first checkpoint; training again from step 0\n")
+        shutil.rmtree(run_dir)
+        return train(config, run_dir.parent, on_evaluation, eval_first)
+    manifest = verify_checkpoint(run_dir, config)
     if manifest["steps"] >= config.steps:
         raise UsageError(
             f"run already has {manifest['steps']} steps (>= {config.steps}); pass a larger --steps"
@@ -361,6 +381,13 @@ def resume(
         restore(model, worlds, snapshot)
     _learn(model, run_dir, config, eval_env, worlds, on_evaluation, eval_first)
     return run_dir
+
+
+def _stopped_before_first_checkpoint(run_dir: Path) -> bool:
+    folder = run_dir / "checkpoints"
+    return not any(
+        path.exists() for path in (folder / "latest.json", folder / "latest.zip", run_dir / "model.zip")
+    )
 
 
 def _load_checkpoint(config: RunConfig, run_dir: Path, manifest: dict):

@@ -166,16 +166,17 @@ def load_sweep(path: str | Path, runs_dir: str | Path | None = None) -> Sweep:
 
 
 def _check_cells(sweep: Sweep) -> None:
-    """Fail before any run starts: impossible algorithm/action pairs, bad env options."""
-    from drivelab.agents.registry import check_combination
-    from drivelab.envs.core import DriveEnv
+    """Fail before any run starts or anything is written, as ``drivelab train`` does: impossible
+    algorithm/action pairs, bad env options, hyper-parameters the agent refuses (``check_config``,
+    once per distinct config but for its name, seed and step budget)."""
+    from drivelab.training.run import check_config
 
     checked: set[str] = set()
     for cell in sweep.cells:
-        check_combination(cell.config.algo, cell.config.action)
-        key = json.dumps(cell.config.env_kwargs(), sort_keys=True, default=str)
+        fields = {k: v for k, v in cell.config.to_dict().items() if k not in ("name", "seed", "steps")}
+        key = json.dumps(fields, sort_keys=True, default=str)
         if key not in checked:
-            DriveEnv(**cell.config.env_kwargs()).close()
+            check_config(cell.config)
             checked.add(key)
 
 
@@ -350,7 +351,8 @@ def check_workers(executor: str, workers: int | None, address: str | None) -> in
         raise UsageError(f"unknown executor {executor!r} (choose from {', '.join(EXECUTORS)})")
     if address and executor != "ray":
         raise UsageError("--address is for --executor ray")
-    workers = workers or os.cpu_count() or 1
+    if workers is None:
+        workers = os.cpu_count() or 1
     if workers < 1:
         raise UsageError(f"--workers must be >= 1, got {workers}")
     return workers

@@ -26,6 +26,8 @@ def test_parse_custom_terms_and_dict():
     [
         ("nope", "unknown reward preset"),
         ("speed=fast", "numeric weight"),
+        ("speed=nan", "finite weight"),
+        ({"crash": float("inf")}, "finite weight"),
         ("warp=1", "unknown reward term"),
         ("speed=0", "no term left"),
         ("", "empty"),

@@ -41,8 +41,12 @@ def played_maps(monkeypatch) -> list[int]:
 
     seeds, original = [], evaluate.run_episodes
 
-    def recording(policy, env, episodes, **kwargs):
-        record = lambda metrics: seeds.append(env.vector.simulator.map_of(0).pg.seed)  # noqa: E731
+    def recording(policy, env, episodes, on_episode=None, **kwargs):
+        def record(metrics):
+            seeds.append(env.vector.simulator.map_of(0).pg.seed)
+            if on_episode is not None:  # evaluate's progress bar
+                on_episode(metrics)
+
         return original(policy, env, episodes, on_episode=record, **kwargs)
 
     monkeypatch.setattr(evaluate, "run_episodes", recording)

@@ -34,7 +34,7 @@ def _config(**overrides):
     return build_config(values)
 
 
-def test_train_writes_a_complete_run_directory(tmp_path):
+def test_train_writes_a_complete_run_directory(tmp_path, capsys):
     run_dir = run_module.train(_config(), tmp_path)
     for name in (
         "config.yaml",
@@ -53,7 +53,10 @@ def test_train_writes_a_complete_run_directory(tmp_path):
     evaluations = (run_dir / "evaluations.csv").read_text().strip().splitlines()
     assert len(evaluations) == 3  # header + evaluations at 32 and 64 steps
 
-    report = evaluate_run(run_dir, episodes=2, video=True)
+    capsys.readouterr()
+    report = evaluate_run(run_dir, episodes=2, video=True, progress=True)
+    bar = capsys.readouterr().err  # the episodes' progress bar
+    assert "evaluate ppo: 100%" in bar and "2/2" in bar
     assert report["episodes"] == 2
     assert 0.0 <= report["success_rate"] <= 1.0 and 0.0 <= report["crash_rate"] <= 1.0
     saved = json.loads((run_dir / "eval.json").read_text())
@@ -111,6 +114,40 @@ def test_interrupt_saves_checkpoint_and_resume_continues(tmp_path, monkeypatch):
     assert not (run_dir / "eval.json").exists()  # it described the 96-step model
     steps = [int(line.split(",")[0]) for line in (run_dir / "evaluations.csv").read_text().splitlines()[1:]]
     assert steps == [32, 64, 96]  # once each, the next evaluation is due at 128
+
+
+def test_a_run_killed_before_its_first_checkpoint_trains_again_on_resume(tmp_path, monkeypatch):
+    """Killed (SIGKILL, power cut) before its first checkpoint, a run holds its config and logs
+    and nothing to continue from: resume trains it again from step 0, to the model of a run that
+    was never stopped."""
+    import torch
+
+    whole = run_module.train(_config(name="whole"), tmp_path)
+
+    class Killed(BaseException):
+        pass
+
+    def killed(*args, **kwargs):
+        raise Killed
+
+    monkeypatch.setattr(run_module, "save_checkpoint", killed)
+    with pytest.raises(Killed):
+        run_module.train(_config(), tmp_path)
+    monkeypatch.undo()
+    run_dir = tmp_path / "tiny"
+    assert (run_dir / "config.yaml").is_file() and (run_dir / "monitor.csv").is_file()
+    assert not (run_dir / "checkpoints" / "latest.json").exists() and not (run_dir / "model.zip").exists()
+
+    run_module.resume(run_dir)
+    assert json.loads((run_dir / "checkpoints/latest.json").read_text())["steps"] == 64
+    config = _config()
+    again = checkpoints.load_agent(run_dir, config).policy.state_dict()
+    reference = checkpoints.load_agent(whole, config).policy.state_dict()
+    assert again.keys() == reference.keys()
+    assert all(torch.equal(again[key], reference[key]) for key in reference)
+    assert (run_dir / "monitor.csv").read_text().count("\n") == (whole / "monitor.csv").read_text().count(
+        "\n"
+    )
 
 
 def test_corrupted_or_foreign_checkpoint_is_refused(tmp_path):

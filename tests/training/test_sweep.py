@@ -114,9 +114,27 @@ def test_rerun_skips_finished_resumes_interrupted_restarts_unstarted(tmp_path):
         plan(expand_sweep(other, runs))
 
 
-def test_failed_cell_is_reported_and_others_finish(tmp_path):
-    spec = tiny_spec(seeds=1, algo=["ppo", "a2c"])  # A2C has no batch_size: its cell fails
-    outcomes = run_sweep(expand_sweep(spec, tmp_path), workers=2)
+def test_hyperparameters_an_agent_refuses_stop_the_sweep_before_any_run(tmp_path):
+    spec = tiny_spec(seeds=1, algo=["ppo", "a2c"])  # A2C has no batch_size
+    with pytest.raises(UsageError, match="unknown hyperparameter 'batch_size' for 'a2c'"):
+        expand_sweep(spec, tmp_path / "runs")
+    spec = tiny_spec(seeds=1)
+    spec["base"]["hyperparams"] = {**TINY_PPO, "learning_rate": -1}
+    with pytest.raises(UsageError, match="learning_rate"):
+        expand_sweep(spec, tmp_path / "runs")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_failed_cell_is_reported_and_others_finish(tmp_path, monkeypatch):
+    """A cell that fails while it runs (a full disk, a diverging agent: here A2C's unknown
+    batch_size, let through the up-front check) is reported; the others finish."""
+    import drivelab.training.run
+
+    spec = tiny_spec(seeds=1, algo=["ppo", "a2c"])
+    monkeypatch.setattr(drivelab.training.run, "check_config", lambda config: None)
+    sweep = expand_sweep(spec, tmp_path)
+    monkeypatch.undo()
+    outcomes = run_sweep(sweep, workers=2)
     by_name = {o["name"]: o for o in outcomes}
     assert by_name["ppo-highway-s0"]["ok"] and (tmp_path / "ppo-highway-s0" / "model.zip").is_file()
     failed = by_name["a2c-highway-s0"]
