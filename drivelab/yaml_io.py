@@ -31,6 +31,8 @@ def parse_yaml(text: str):
 def load_yaml(path: str | Path) -> dict:
     """Read a YAML mapping, with a one-line error for a missing or malformed file."""
     path = Path(path)
+    if path.is_dir():
+        raise UsageError(f"config file {str(path)!r} is a folder, not a YAML file")
     if not path.is_file():
         raise UsageError(f"config file {str(path)!r} does not exist")
     try:

@@ -427,6 +427,17 @@ def test_sweep_and_ablate_check_hyperparameters_before_writing(work):
     assert_refused(work, [*ablate, "-H", "learning_rate=-1"], "learning_rate")
 
 
+def test_sweep_and_tune_folders_that_cannot_be_created(work):
+    (work / "sweep.yaml").write_text(TINY_SWEEP)
+    (work / "file").write_text("a file, not a folder")
+    args = ["sweep", "sweep.yaml", "--workers", "1", "--runs-dir", "file/runs"]
+    assert_refused(work, args, "cannot create runs folder")
+    (work / "study.yaml").write_text(TUNE_BASE + GAMMA)
+    args = ["tune", "study.yaml", "--workers", "1", "--study-dir", "file/below/study"]
+    assert_refused(work, args, "cannot create study folder")
+    assert_refused(work, ["sweep", "."], "config file '.' is a folder, not a YAML file")
+
+
 def test_zero_workers(work):
     (work / "sweep.yaml").write_text(TINY_SWEEP)
     assert_refused(work, ["sweep", "sweep.yaml", "--workers", "0"], "--workers must be >= 1, got 0")

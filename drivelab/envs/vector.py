@@ -328,6 +328,10 @@ class VectorDriveEnv(VectorEnv):
                 self.batch = batch.where(restarting, stepped)
             self._start(restarting, self.batch)
             rewards = np.where(restarting, 0.0, rewards)
+            infos["reward_terms"] = {
+                name: np.where(restarting, value.dtype.type(0), value)
+                for name, value in infos["reward_terms"].items()
+            }
             terminated, truncated = terminated & ~restarting, truncated & ~restarting
             done = terminated | truncated
             if "episode_metrics" in infos:

@@ -210,12 +210,17 @@ def evaluate_run(
     return report
 
 
-def make_out_dir(path: Path) -> Path:
-    """``path`` as a folder for reports, created if missing; a UsageError if it cannot be."""
+def make_out_dir(path: Path, what: str = "report folder") -> Path:
+    """``path`` as a folder (for reports, runs, a study), created if missing; a one-line
+    UsageError naming ``what`` if it cannot be, and then none of the folders above it is left."""
+    missing = [folder for folder in (path, *path.parents) if not folder.exists()]
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise UsageError(f"cannot create report folder {str(path)!r}: {exc.strerror or exc}") from None
+        for folder in missing:  # innermost first
+            if folder.is_dir():
+                folder.rmdir()
+        raise UsageError(f"cannot create {what} {str(path)!r}: {exc.strerror or exc}") from None
     return path
 
 

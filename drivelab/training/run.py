@@ -348,7 +348,8 @@ def resume(
     the older model (eval.json, eval-maps-*.json, nocrash.json, learning_curve.png, model.zip) are
     removed.
     A run killed before its first checkpoint (config and logs, no checkpoint, no model) has
-    nothing to continue from: it is trained again from step 0 in the same directory.
+    nothing to continue from: it is trained again from step 0 in the same directory. One stopped
+    between its final checkpoint and its model gets the checkpoint's model.
     ``on_evaluation``, ``eval_first``: as for ``train``.
     """
     run_dir = Path(run_dir)
@@ -362,6 +363,10 @@ def resume(
         shutil.rmtree(run_dir)
         return train(config, run_dir.parent, on_evaluation, eval_first)
     manifest = verify_checkpoint(run_dir, config)
+    if manifest["steps"] == config.steps and not (run_dir / "model.zip").is_file():
+        # stopped between its final checkpoint and the model: the model is the checkpoint's
+        _save_model(_load_checkpoint(config, run_dir, manifest, replay=False), run_dir)
+        return run_dir
     if manifest["steps"] >= config.steps:
         raise UsageError(
             f"run already has {manifest['steps']} steps (>= {config.steps}); pass a larger --steps"
@@ -390,9 +395,10 @@ def _stopped_before_first_checkpoint(run_dir: Path) -> bool:
     )
 
 
-def _load_checkpoint(config: RunConfig, run_dir: Path, manifest: dict):
-    """The checkpoint's model with its replay buffer, rebuilt on an unmonitored copy of the training
-    env (as many worlds; ``set_env`` later gives it the monitored one), so that nothing is written."""
+def _load_checkpoint(config: RunConfig, run_dir: Path, manifest: dict, replay: bool = True):
+    """The checkpoint's model with its replay buffer (unless not ``replay``), rebuilt on an
+    unmonitored copy of the training env (as many worlds; ``set_env`` later gives it the monitored
+    one), so that nothing is written."""
     from drivelab.envs.core import DriveEnv
 
     if config.n_envs == 1:
@@ -402,7 +408,7 @@ def _load_checkpoint(config: RunConfig, run_dir: Path, manifest: dict):
 
         env = SB3VecEnv(VectorDriveEnv(config.n_envs, autoreset_mode="same_step", **config.env_kwargs()))
     model = load_agent(run_dir, config, env, run_dir / "checkpoints" / "latest.zip")
-    if manifest.get("replay_buffer"):
+    if replay and manifest.get("replay_buffer"):
         load_replay(model, run_dir, manifest)
     return model
 
@@ -435,8 +441,13 @@ def _learn(model, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWo
                 raise StoppedByEvaluation(run_dir, callback.snapshot.steps)
             raise TrainingInterrupted(run_dir, callback.snapshot.steps)
         callback.checkpoint(take_snapshot(model, worlds, callback.rows()))
-    model.save(run_dir / "model.tmp.zip")
-    os.replace(run_dir / "model.tmp.zip", run_dir / "model.zip")
+    _save_model(model, run_dir)
+
+
+def _save_model(model, run_dir: Path) -> None:
+    """The trained model (``model.zip``, written whole or not at all) and the learning curve."""
     from drivelab.training.plots import plot_learning_curve
 
+    model.save(run_dir / "model.tmp.zip")
+    os.replace(run_dir / "model.tmp.zip", run_dir / "model.zip")
     plot_learning_curve(run_dir)

@@ -235,7 +235,8 @@ def run_cell(
         ``drivelab.training.tune``). It must pickle for the process pool and Ray.
     :param eval_first: the periodic and final evaluations play evaluation episodes ``eval_first``
         … (tuning's validation episodes).
-    :returns: ``{"name", "action", "ok", "seconds", "error", "stopped"}``; ``stopped``: the step at
+    :returns: ``{"name", "action", "ok", "seconds", "error", "stopped"}`` (and ``"interrupted":
+        True`` when Ctrl-C or SIGTERM stopped it); ``stopped``: the step at
         which ``on_evaluation`` stopped the run (no final evaluation then), else None.
     """
     import torch
@@ -266,6 +267,8 @@ def run_cell(
                 evaluate_run(run_dir, episodes=eval_episodes, first=eval_first)
         except run.StoppedByEvaluation as stop:
             outcome["stopped"] = stop.steps
+        except (KeyboardInterrupt, run.TrainingInterrupted) as exc:  # the driver stops (execute)
+            outcome.update(ok=False, error=f"{type(exc).__name__}: {exc}", interrupted=True)
         except BaseException as exc:  # noqa: BLE001 - reported to the driver, which goes on
             traceback.print_exc(file=log)
             outcome.update(ok=False, error=f"{type(exc).__name__}: {exc}")
@@ -295,10 +298,20 @@ def execute(
     if executor not in EXECUTORS:
         raise UsageError(f"unknown executor {executor!r} (choose from {', '.join(EXECUTORS)})")
     if executor == "ray":
-        return _ray(function, iter(jobs), workers, address, in_flight)
+        return _until_interrupted(_ray(function, iter(jobs), workers, address, in_flight))
     if workers == 1:  # one worker: run here, one after another (no process start-up)
-        return (function(**job) for job in jobs)
-    return _pool(function, iter(jobs), workers, in_flight)
+        return _until_interrupted(function(**job) for job in jobs)
+    return _until_interrupted(_pool(function, iter(jobs), workers, in_flight))
+
+
+def _until_interrupted(outcomes: Iterator[dict]) -> Iterator[dict]:
+    """``outcomes`` until one says its run was interrupted (Ctrl-C, SIGTERM: checkpointed, or
+    stopped in its final evaluation); then KeyboardInterrupt, as the driver's own Ctrl-C, so that
+    the command stops there and a re-run resumes that run instead of counting it as failed."""
+    for outcome in outcomes:
+        if outcome.get("interrupted"):
+            raise KeyboardInterrupt
+        yield outcome
 
 
 def _pool(function: Callable, jobs: Iterator[dict], workers: int, in_flight: int | None) -> Iterator[dict]:
@@ -375,8 +388,9 @@ def run_sweep(
     """
     workers = check_workers(executor, workers, address)
     steps = plan(sweep)
-    runs_dir = sweep.runs_dir.resolve()
-    runs_dir.mkdir(parents=True, exist_ok=True)
+    from drivelab.training.evaluate import make_out_dir
+
+    runs_dir = make_out_dir(sweep.runs_dir.resolve(), "runs folder")
     outcomes = [
         {"name": c.config.name, "action": "skip", "ok": True, "error": None, "seconds": 0.0, "stopped": None}
         for c, action in steps

@@ -396,10 +396,11 @@ def run_study(
     """
     from optuna.trial import TrialState
 
+    from drivelab.training.evaluate import make_out_dir
+
     workers = check_workers(executor, workers, address)
     _check_study_dir(study)
-    folder = study.study_dir.resolve()
-    folder.mkdir(parents=True, exist_ok=True)
+    folder = make_out_dir(study.study_dir.resolve(), "study folder")
     with _locked(folder):
         (folder / SPEC_FILE).write_text(
             yaml.safe_dump(json.loads(json.dumps(study.identity())), sort_keys=False)

@@ -62,6 +62,7 @@ def test_k_worlds_give_the_episodes_of_k_separate_envs(scenario, backend, mode, 
             if restarting[i]:  # NEXT_STEP: this step reset world i instead of stepping it
                 single_obs, info = env.reset()
                 assert (rewards[i], terminations[i], truncations[i]) == (0.0, False, False)
+                assert all(float(value[i]) == 0.0 for value in infos["reward_terms"].values())
                 assert infos["episode_seed"][i] == info["episode_seed"]
                 assert_same_observations(_row(observations, i), single_obs)
                 continue

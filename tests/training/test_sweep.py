@@ -114,6 +114,59 @@ def test_rerun_skips_finished_resumes_interrupted_restarts_unstarted(tmp_path):
         plan(expand_sweep(other, runs))
 
 
+def test_ctrl_c_stops_an_in_process_sweep_and_a_rerun_resumes_it(tmp_path, monkeypatch):
+    """Ctrl-C in the first cell (one worker: in this process) stops the sweep there, checkpointed,
+    instead of counting the cell as failed and going on; the re-run resumes it."""
+    import os
+    import signal
+
+    from drivelab.training import run as run_module
+
+    original = run_module.RunCallback._on_step
+
+    def interrupt_at_20(self):
+        if self.num_timesteps == 20:
+            os.kill(os.getpid(), signal.SIGINT)
+        return original(self)
+
+    runs = tmp_path / "runs"
+    sweep = expand_sweep(tiny_spec(steps=32), runs)
+    monkeypatch.setattr(run_module.RunCallback, "_on_step", interrupt_at_20)
+    with pytest.raises(KeyboardInterrupt):
+        run_sweep(sweep, workers=1)
+    monkeypatch.undo()
+    assert _manifest_steps(runs / "ppo-highway-s0") == 16  # PPO's rollouts: 16 steps
+    assert not (runs / "ppo-highway-s1").exists()
+    assert [action for _, action in plan(sweep)] == ["resume", "train"]
+    assert all(o["ok"] for o in run_sweep(sweep, workers=1))
+    assert [action for _, action in plan(sweep)] == ["skip", "skip"]
+
+
+def test_a_run_stopped_between_its_final_checkpoint_and_its_model_is_finished(tmp_path):
+    import shutil
+
+    import torch
+
+    from drivelab.training.checkpoints import load_agent
+    from drivelab.training.evaluate import load_run_config
+
+    runs = tmp_path / "runs"
+    sweep = expand_sweep(tiny_spec(steps=32, seeds=1), runs)
+    run_sweep(sweep, workers=1)
+    run_dir = runs / "ppo-highway-s0"
+    shutil.copy(run_dir / "model.zip", tmp_path / "first.zip")
+    for name in ("model.zip", "eval.json", "learning_curve.png"):
+        (run_dir / name).unlink()  # as if killed after the final checkpoint
+    assert [action for _, action in plan(sweep)] == ["resume"]
+    assert all(o["ok"] for o in run_sweep(sweep, workers=1))
+    assert (run_dir / "eval.json").is_file() and (run_dir / "learning_curve.png").is_file()
+    assert _manifest_steps(run_dir) == 32
+    config = load_run_config(run_dir)
+    again = load_agent(run_dir, config).policy.state_dict()
+    first = load_agent(run_dir, config, path=tmp_path / "first.zip").policy.state_dict()
+    assert again.keys() == first.keys() and all(torch.equal(again[k], first[k]) for k in first)
+
+
 def test_hyperparameters_an_agent_refuses_stop_the_sweep_before_any_run(tmp_path):
     spec = tiny_spec(seeds=1, algo=["ppo", "a2c"])  # A2C has no batch_size
     with pytest.raises(UsageError, match="unknown hyperparameter 'batch_size' for 'a2c'"):
