@@ -31,8 +31,10 @@ validation episodes (``VALIDATION_START`` on), never its first evaluation episod
 episodes of every report and of the leaderboard, so no tuned value is chosen on them. The study lives
 in ``<study_dir>/study.journal`` (Optuna's journal file): a killed study, run again, re-dispatches
 the trials that were running (their runs resume from their latest checkpoint) and then asks for
-the missing ones. When it ends it writes ``summary.md``, ``summary.json``, ``trials.csv`` and
-``best-hyperparams.yml`` (the best trial's values in RL Zoo's format).
+the missing ones; with a sampler seed, trial n's values are drawn with seed + n, so on one worker
+the continued study is the study that was never stopped. When it ends it writes ``summary.md``,
+``summary.json``, ``trials.csv`` and ``best-hyperparams.yml`` (the best trial's values in RL Zoo's
+format).
 """
 
 from __future__ import annotations
@@ -296,8 +298,7 @@ def _pruner(keywords: dict):
 
 def open_optuna_study(study: Study):
     """The study's Optuna study in ``<study_dir>/study.journal`` (created when new), with a TPE
-    sampler whose seed is the file's plus the trials the study already has: a continued study
-    does not draw its first trials' values again."""
+    sampler; with a seed, trial n draws its values with seed + n (``TrialSeededTPE``)."""
     import optuna
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)  # tune prints its own progress
@@ -309,10 +310,48 @@ def open_optuna_study(study: Study):
         load_if_exists=True,
     )
     keywords = dict(study.sampler)
-    if "seed" in keywords:
-        keywords["seed"] += len(optuna_study.get_trials(deepcopy=False))
-    optuna_study.sampler = optuna.samplers.TPESampler(**keywords)
+    seed = keywords.pop("seed", None)
+    if seed is None:
+        optuna_study.sampler = optuna.samplers.TPESampler(**keywords)
+    else:
+        optuna_study.sampler = trial_seeded_tpe(seed, keywords)
     return optuna_study
+
+
+def trial_seeded_tpe(seed: int, keywords: dict):
+    """A TPE sampler that draws trial n's values with its own seed, ``seed + n``, from the trials
+    finished before it. One TPESampler seeded once draws trial n from a random stream advanced
+    by every draw of the process before it, so a study killed and run again (a new process, a
+    new sampler) would ask other values than the study that was never stopped; with one seed per
+    trial it asks the same ones, given the same finished trials (one worker)."""
+    import optuna
+
+    class TrialSeededTPE(optuna.samplers.BaseSampler):
+        def __init__(self) -> None:
+            self.samplers: dict[int, optuna.samplers.TPESampler] = {}
+
+        def _of(self, trial) -> optuna.samplers.TPESampler:
+            if trial.number not in self.samplers:
+                self.samplers[trial.number] = optuna.samplers.TPESampler(seed=seed + trial.number, **keywords)
+            return self.samplers[trial.number]
+
+        def infer_relative_search_space(self, study, trial):
+            return self._of(trial).infer_relative_search_space(study, trial)
+
+        def sample_relative(self, study, trial, search_space):
+            return self._of(trial).sample_relative(study, trial, search_space)
+
+        def sample_independent(self, study, trial, param_name, param_distribution):
+            return self._of(trial).sample_independent(study, trial, param_name, param_distribution)
+
+        def before_trial(self, study, trial) -> None:
+            self._of(trial).before_trial(study, trial)
+
+        def after_trial(self, study, trial, state, values) -> None:
+            self._of(trial).after_trial(study, trial, state, values)
+            del self.samplers[trial.number]
+
+    return TrialSeededTPE()
 
 
 @dataclass(frozen=True)

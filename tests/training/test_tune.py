@@ -106,6 +106,13 @@ def test_an_interrupted_study_resumes_its_running_trial(tmp_path, monkeypatch):
     assert summary["states"] == {"complete": 2}
     assert (study.study_dir / "trial-0000" / "eval.json").is_file()
 
+    # the study that was never stopped: the same trials, values and results
+    whole = read_study({**TINY, "n_trials": 2, "checkpoint_every": 32}, tmp_path / "whole")
+    run_study(whole, workers=1)
+    resumed = pd.read_csv(study.study_dir / "trials.csv").drop(columns=["seconds", "run_dir"])
+    reference = pd.read_csv(whole.study_dir / "trials.csv").drop(columns=["seconds", "run_dir"])
+    pd.testing.assert_frame_equal(resumed, reference)
+
 
 def test_median_pruner_stops_a_trial_behind_the_others(tmp_path):
     """Deterministic intermediate values: a trial reporting below the median of the finished
