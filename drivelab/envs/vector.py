@@ -150,6 +150,8 @@ class VectorDriveEnv(VectorEnv):
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise UsageError(f"num_envs must be an integer >= 1 (got {num_envs!r})")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise UsageError(f"render_mode must be None or 'rgb_array' (got {render_mode!r})")
         if config is not None:
             given = {"obs": obs, "action": action, "reward": reward, "duration_s": duration_s,
                      "offroad_terminal": offroad_terminal, "action_options": action_options,

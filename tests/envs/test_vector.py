@@ -190,3 +190,9 @@ def test_sb3_adapter_needs_same_step_autoreset():
 def test_bad_num_envs(bad):
     with pytest.raises(UsageError, match="num_envs must be an integer >= 1"):
         VectorDriveEnv(bad, scenario="highway")
+
+
+@pytest.mark.parametrize("make", [VectorDriveEnv, lambda n, **kw: DriveEnv(**kw)])
+def test_unknown_render_mode(make):
+    with pytest.raises(UsageError, match="render_mode must be None or 'rgb_array' \\(got 'human'\\)"):
+        make(2, scenario="highway", render_mode="human")
