@@ -37,7 +37,8 @@ def save_checkpoint(model, run_dir: Path, config: RunConfig, save_replay: bool) 
 
     Every file is written under a temporary name first and renamed only when all are written: a
     failed write (disk full, read-only) removes the temporary files, keeps the previous checkpoint
-    valid and raises a one-line UsageError."""
+    valid and raises a one-line UsageError. A kill between the renames leaves the new manifest
+    beside the new model; ``verify_checkpoint`` finishes the renames (``_finish_renames``)."""
     folder = run_dir / "checkpoints"
     temporary = {folder / "latest.tmp.zip": folder / "latest.zip"}
     try:
@@ -64,6 +65,29 @@ def save_checkpoint(model, run_dir: Path, config: RunConfig, save_replay: bool) 
                 tmp.unlink(missing_ok=True)
         raise UsageError(f"cannot write checkpoint in {str(folder)!r}: {exc.strerror or exc}") from None
     return folder / "latest.zip"
+
+
+def _finish_renames(folder: Path) -> None:
+    """Finish a checkpoint whose renames a kill cut short (``save_checkpoint`` renames the model,
+    the replay, then the manifest): when the written manifest ``latest.tmp.json`` is the one of
+    the model already renamed, rename the replay and the manifest too. Every file was whole then,
+    so this changes no content; otherwise (killed before the first rename) nothing is done and the
+    previous checkpoint stands."""
+    pending, model = folder / "latest.tmp.json", folder / "latest.zip"
+    if not pending.is_file() or not model.is_file():
+        return
+    try:
+        manifest = json.loads(pending.read_text())
+        if manifest["sha256"] != file_sha256(model):
+            return
+        replay = folder / "replay.tmp.npz"
+        if manifest.get("replay_buffer") and replay.is_file():
+            if file_sha256(replay) != manifest.get("replay_sha256"):
+                return
+            os.replace(replay, folder / "replay.npz")
+        os.replace(pending, folder / "latest.json")
+    except (OSError, json.JSONDecodeError, KeyError, TypeError):
+        return  # verify_checkpoint then judges what is there
 
 
 def _replay_fits(model) -> bool:
@@ -93,6 +117,7 @@ def verify_checkpoint(run_dir: Path, config: RunConfig) -> dict:
     proves nothing against tampering (loading never executes code, whatever the file holds)."""
     folder = run_dir / "checkpoints"
     manifest_path, model_path = folder / "latest.json", folder / "latest.zip"
+    _finish_renames(folder)
     if not manifest_path.is_file() or not model_path.is_file():
         raise UsageError(f"no checkpoint in {str(run_dir)!r} (nothing to resume)")
     try:

@@ -150,6 +150,45 @@ def test_a_run_killed_before_its_first_checkpoint_trains_again_on_resume(tmp_pat
     )
 
 
+def test_a_checkpoint_killed_between_its_renames_is_finished_on_resume(tmp_path, monkeypatch):
+    """Killed after the new model was renamed over latest.zip but before the replay and the
+    manifest were (the old manifest then names another file's checksum): resume finishes the
+    renames, and the run, stopped after its last checkpoint, gets the model of a run never stopped."""
+    import torch
+
+    config = _config(steps=64, checkpoint_every=32, algo="dqn", action="meta",
+                     hyperparams={"learning_starts": 8, "buffer_size": 500})  # fmt: skip
+    whole = run_module.train(build_config({**config.to_dict(), "name": "whole"}), tmp_path)
+
+    class Killed(BaseException):
+        pass
+
+    real_replace, committed = os.replace, []
+
+    def replace(source, target):
+        if os.path.basename(source) == "replay.tmp.npz" and committed:
+            raise Killed  # the second checkpoint: latest.zip is new, replay and manifest are not
+        real_replace(source, target)
+        if os.path.basename(source) == "latest.tmp.json":
+            committed.append(target)
+
+    monkeypatch.setattr(os, "replace", replace)
+    with pytest.raises(Killed):
+        run_module.train(config, tmp_path)
+    monkeypatch.undo()
+    folder = tmp_path / "tiny" / "checkpoints"
+    assert json.loads((folder / "latest.json").read_text())["steps"] == 32
+    assert (folder / "latest.tmp.json").is_file() and (folder / "replay.tmp.npz").is_file()
+
+    run_module.resume(tmp_path / "tiny")
+    manifest = json.loads((folder / "latest.json").read_text())
+    assert manifest["steps"] == 64 and manifest["replay_buffer"]
+    assert not (folder / "latest.tmp.json").exists() and not (folder / "replay.tmp.npz").exists()
+    again = checkpoints.load_agent(tmp_path / "tiny", config).policy.state_dict()
+    reference = checkpoints.load_agent(whole, config).policy.state_dict()
+    assert all(torch.equal(again[key], reference[key]) for key in reference)
+
+
 def test_corrupted_or_foreign_checkpoint_is_refused(tmp_path):
     run_dir = run_module.train(_config(steps=32, eval_every=64), tmp_path)
     checkpoint = run_dir / "checkpoints/latest.zip"
