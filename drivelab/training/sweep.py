@@ -136,7 +136,7 @@ def expand_sweep(spec: dict, runs_dir: str | Path | None = None) -> Sweep:
     if not isinstance(eval_episodes, int) or isinstance(eval_episodes, bool) or eval_episodes < 0:
         raise UsageError(f"sweep 'eval_episodes' must be an integer >= 0, got {eval_episodes!r}")
     prefix = str(spec["name"]) + "-" if spec.get("name") else ""
-    cells, names = [], {}
+    cells, names, runs = [], {}, {}
     for combination in itertools.product(*axes.values()):
         grid_values = dict(zip(axes, combination, strict=True))
         values = _merge(base, grid_values, "sweep base/grid")
@@ -153,6 +153,9 @@ def expand_sweep(spec: dict, runs_dir: str | Path | None = None) -> Sweep:
             raise UsageError(f"sweep cells {names[name]} and {grid_values} both map to run {name!r}")
         names[name] = grid_values
         config = build_config(with_shipped_hyperparams({**values, "name": name}))
+        same = runs.setdefault((config.identity(), config.steps), grid_values)
+        if same is not grid_values:
+            raise UsageError(f"sweep cells {same} and {grid_values} are the same run (one config)")
         cells.append(Cell(config, grid_values))
     where = runs_dir if runs_dir is not None else spec.get("runs_dir", "runs")
     sweep = Sweep(tuple(cells), Path(where), eval_episodes)

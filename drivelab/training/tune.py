@@ -45,6 +45,7 @@ import json
 import math
 import shlex
 from dataclasses import dataclass, field
+from decimal import Decimal
 from pathlib import Path
 
 import yaml
@@ -193,6 +194,9 @@ def _param(name: str, entry) -> Param:
             raise UsageError(f"{where} cannot have both 'step' and a log scale")
         if _number(step, f"{where} 'step'") <= 0 or (kind == "int" and not float(step).is_integer()):
             raise UsageError(f"{where} 'step' must be a positive {'integer' if kind == 'int' else 'number'}")
+        # Optuna would narrow high to the last step below it, with only a warning
+        if (Decimal(str(high)) - Decimal(str(low))) % Decimal(str(step)) != 0:
+            raise UsageError(f"{where} 'step' {step!r} must divide high - low ({high!r} - {low!r})")
     kind = "float" if kind == "log" else kind
     return Param(name, kind, float(low) if kind == "float" else int(low),
                  float(high) if kind == "float" else int(high), log, step)  # fmt: skip

@@ -167,6 +167,12 @@ def test_a_run_stopped_between_its_final_checkpoint_and_its_model_is_finished(tm
     assert again.keys() == first.keys() and all(torch.equal(again[k], first[k]) for k in first)
 
 
+def test_two_cells_of_one_config_are_refused(tmp_path):
+    spec = tiny_spec(seeds=1, env=["highway", "drivelab/Highway-v0"])  # one scenario, two names
+    with pytest.raises(UsageError, match="are the same run"):
+        expand_sweep(spec, tmp_path / "runs")
+
+
 def test_hyperparameters_an_agent_refuses_stop_the_sweep_before_any_run(tmp_path):
     spec = tiny_spec(seeds=1, algo=["ppo", "a2c"])  # A2C has no batch_size
     with pytest.raises(UsageError, match="unknown hyperparameter 'batch_size' for 'a2c'"):

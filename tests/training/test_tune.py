@@ -172,6 +172,8 @@ def test_write_best_updates_one_entry_of_a_zoo_file(tmp_path):
         ({"space": {"gamma": {"type": "float", "low": 0.8}}}, "needs 'low' and 'high'"),
         ({"space": {"n_steps": {"type": "int", "low": 1.5, "high": 8}}}, "needs integer bounds"),
         ({"space": {"gamma": {"type": "log", "low": 0.1, "high": 0.9, "step": 0.1}}}, "both 'step'"),
+        ({"space": {"gamma": {"type": "float", "low": 0.5, "high": 0.9, "step": 0.3}}}, "must divide high"),
+        ({"space": {"n_epochs": {"type": "int", "low": 1, "high": 10, "step": 2}}}, "must divide high"),
         ({"sampler": {"seed": -1}}, "tune sampler 'seed' must be an integer >= 0"),
         ({"pruner": {"patience": 3}}, "unknown key 'patience'"),
         ({"direction": "up"}, "must be maximize or minimize"),
