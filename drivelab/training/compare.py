@@ -34,6 +34,7 @@ from drivelab.errors import UsageError
 from drivelab.hyperparams import shipped_hyperparams
 from drivelab.training.evaluate import load_run_config
 from drivelab.training.stats import CONFIDENCE, Summary, summarize
+from drivelab.training.stats import percent as percent_of
 
 GROUP_FIELDS = ("algo", "env", "obs", "reward", "action")
 HYPERPARAMS_FIELD = "hyperparams"  # CSV column of a group's changed hyper-parameters, ``key=value,…``
@@ -219,7 +220,7 @@ def _markdown(
     title: str,
     command: str | None,
 ) -> str:
-    percent = round(confidence * 100)
+    percent = percent_of(confidence)
     lines = [
         f"# {title}",
         "",

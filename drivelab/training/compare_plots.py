@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from drivelab.training.stats import bootstrap_ci
+from drivelab.training.stats import bootstrap_ci, percent
 
 BAR_METRICS = {
     "mean_return": "episode return",
@@ -30,14 +30,17 @@ def short_labels(keys: list[tuple[str, ...]]) -> list[str]:
 def aligned_curves(curves: list[list[tuple[int, float]]]) -> tuple[np.ndarray, np.ndarray]:
     """Put runs evaluated at different steps on one grid.
 
-    The grid is every evaluation step of any run up to the last step that all runs reached; each
-    run is linearly interpolated onto it. Returns (steps, values of shape runs × steps).
+    The grid is every evaluation step of any run between the first step that every run has
+    evaluated and the last step that all runs reached; each run is linearly interpolated onto it,
+    never extrapolated. Returns (steps, values of shape runs × steps).
     """
     curves = [c for c in curves if c]
     if not curves:
         return np.zeros(0, dtype=int), np.zeros((0, 0))
-    reach = min(c[-1][0] for c in curves)
-    steps = np.array(sorted({s for c in curves for s, _ in c if s <= reach}))
+    start, reach = max(c[0][0] for c in curves), min(c[-1][0] for c in curves)
+    steps = np.array(sorted({s for c in curves for s, _ in c if start <= s <= reach}), dtype=int)
+    if steps.size == 0:
+        return steps, np.zeros((len(curves), 0))
     values = np.array([np.interp(steps, [s for s, _ in c], [v for _, v in c]) for c in curves])
     return steps, values
 
@@ -61,7 +64,7 @@ def plot_learning_curves(groups: dict, path: Path, confidence: float) -> Path:
             ax.fill_between(steps, low, high, color=color, alpha=0.2)
     ax.set_xlabel("environment steps")
     ax.set_ylabel("evaluation return (mean over seeds)")
-    ax.set_title(f"learning curves, {round(confidence * 100)} % bootstrap bands")
+    ax.set_title(f"learning curves, {percent(confidence)} % bootstrap bands")
     ax.grid(alpha=0.3)
     if groups:
         ax.legend(loc="best", fontsize=7)
@@ -93,8 +96,7 @@ def plot_metric_bars(groups: dict, summaries: dict, path: Path, confidence: floa
         ax.set_xticks(positions, short_labels(keys), rotation=30, ha="right", fontsize=7)
         ax.grid(alpha=0.3, axis="y")
     fig.suptitle(
-        f"final evaluation: bar mean, whisker {round(confidence * 100)} % bootstrap CI, "
-        "diamond IQM, dots seeds",
+        f"final evaluation: bar mean, whisker {percent(confidence)} % bootstrap CI, diamond IQM, dots seeds",
         fontsize=9,
     )
     fig.tight_layout()

@@ -36,6 +36,11 @@ class Summary:
     iqm: float
 
 
+def percent(confidence: float) -> str:
+    """A confidence level as the percentage reports write, unrounded: 0.9 → "90", 0.995 → "99.5"."""
+    return f"{confidence * 100:g}"
+
+
 def interquartile_mean(values: Sequence[float]) -> float:
     """Mean of the values left after cutting ``floor(n / 4)`` from each end of the sorted list.
 

@@ -213,3 +213,22 @@ def test_pandas_reads_every_csv_column_for_column(runs, tmp_path):
     changed = summary[(summary["hyperparams"] != "shipped") & (summary["metric"] == "mean_return")]
     assert changed[["algo", "n", "mean"]].values.tolist() == [["ppo", 2, 4.0]]
     assert summary.groupby("metric").size().nunique() == 1 and len(summary) == 4 * len(compare_module.METRICS)
+
+
+def test_curves_are_aligned_where_every_run_has_been_evaluated():
+    """A run first evaluated later than another is not extrapolated back to the earlier steps."""
+    from drivelab.training.compare_plots import aligned_curves
+
+    early = [(1000, 0.0), (2000, 10.0), (3000, 20.0)]
+    late = [(2000, 100.0), (2500, 150.0), (3000, 200.0), (4000, 300.0)]
+    steps, values = aligned_curves([early, late])
+    assert steps.tolist() == [2000, 2500, 3000]
+    assert values.tolist() == [[10.0, 15.0, 20.0], [100.0, 150.0, 200.0]]
+    steps, values = aligned_curves([[(1, 0.0)], [(2, 1.0)]])  # no step both reached
+    assert steps.size == 0 and values.shape == (2, 0)
+
+
+def test_confidence_labels_are_not_rounded():
+    from drivelab.training.stats import percent
+
+    assert [percent(c) for c in (0.9, 0.95, 0.975, 0.995)] == ["90", "95", "97.5", "99.5"]
