@@ -105,8 +105,14 @@ class EpisodeMetrics:
             self.off_road_events[ended],
         )
         crashed = collisions > 0
+        # NoCrash's success (seed 000: "routes completed without collision"): the goal reached
+        # with no collision, one on the arrival step included; without a goal, the time limit
+        # reached with no collision and no off-road event
         clean = ~crashed & (off_road_events == 0)
-        success = self.arrived[ended] if has_goal else (np.asarray(timed_out, dtype=bool)[ended] & clean)
+        if has_goal:
+            success = self.arrived[ended] & ~crashed
+        else:
+            success = np.asarray(timed_out, dtype=bool)[ended] & clean
         start_m, route_m = self.start_progress_m[ended], self.last_route_length_m[ended]
         with np.errstate(invalid="ignore"):
             completion = np.where(

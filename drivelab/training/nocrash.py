@@ -4,8 +4,9 @@
 A run trained in the town is evaluated on a town layout (the smaller test town by default: NoCrash's
 "new town") at every traffic level, on the town's fixed list of routes, without new targets on
 arrival. Episodes use the same seeds for every run, so every agent drives the same routes in the
-same traffic. Success is reaching the target without a collision, a red light run, being blocked
-or leaving the route; infractions are counted per kilometre driven.
+same traffic. Success is reaching the target without a collision (seed 000: "routes completed
+without collision"; one on the arrival step fails too); a red light run, a block or leaving the
+route ends the episode short of it. Infractions are counted per kilometre driven.
 """
 
 from __future__ import annotations

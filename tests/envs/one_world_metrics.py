@@ -45,11 +45,11 @@ class OneWorldMetrics:
         self.last = world
 
     def summary(self, has_goal: bool, timed_out: bool) -> dict[str, float | None]:
-        """Final numbers. Success: the goal reached, or (no goal) the time limit reached cleanly.
-        Route completion is None for scenarios without a goal."""
+        """Final numbers. Success: the goal reached without a collision, or (no goal) the time limit
+        reached cleanly. Route completion is None for scenarios without a goal."""
         crashed = self.collisions > 0
         clean = not crashed and self.off_road_events == 0
-        success = self.arrived if has_goal else (timed_out and clean)
+        success = (self.arrived and not crashed) if has_goal else (timed_out and clean)
         route = self.last.route
         completion = (
             (route.progress_m - self.start_progress_m) / max(route.length_m - self.start_progress_m, 1e-6)

@@ -99,6 +99,26 @@ def test_counts_on_a_known_episode():
     assert second["mean_speed_mps"] == 20.0
 
 
+@pytest.mark.parametrize(
+    "events, success",
+    [({"collided": True}, 0.0), ({"red_light_crossed": True}, 1.0), ({"blocked": True}, 1.0), ({}, 1.0)],
+)
+def test_an_arrival_with_a_collision_on_its_step_is_no_success(events, success):
+    """NoCrash (seed 000): a success is a route completed without collision, so a collision on the
+    arrival step itself fails the episode, though both end it together; a red light run or a block
+    on that step is an infraction counted per km, not a failure."""
+    from tests.worlds import world
+
+    steps = [world(position=np.array([5.0 * i, 0.0]), speed_mps=5.0) for i in range(3)]
+    steps[2] = dataclasses.replace(steps[2], events=Events(arrived=True, **events))
+    metrics = EpisodeMetrics()
+    metrics.reset(WorldBatch.stack([steps[0]]))
+    for step in (1, 2):
+        metrics.update(WorldBatch.stack([steps[step]]), np.zeros(1))
+    (summary,) = metrics.summaries(np.array([True]), has_goal=True, timed_out=np.zeros(1, bool))
+    assert summary["success"] == success and summary["crashed"] == float("collided" in events)
+
+
 def test_a_goal_without_a_finite_route_has_no_completion():
     """The merge arrives at a line, not at a route's end: its episodes report no route completion
     (None, which evaluation's mean skips), never NaN."""
