@@ -285,7 +285,7 @@ def flatten_observation(obs: Any, space: spaces.Space) -> np.ndarray:
 
 def flatten_batch(batch: Any, space: spaces.Space) -> np.ndarray:
     """K observations (batched, a Dict key by key) as (K, flat size) float32, each row
-    ``flatten_observation`` of one."""
+    ``flatten_observation`` of one; for a float32 Box, a view of ``batch`` (write into a copy)."""
     if isinstance(space, spaces.Dict):
         parts = [np.asarray(batch[key], dtype=np.float32) for key in space.spaces]
         return np.concatenate([part.reshape(len(part), -1) for part in parts], axis=1)
@@ -420,7 +420,8 @@ class DuelingDoubleDQN(OwnAgent):
             # a time-limit end is not terminal: its target still bootstraps from the next state
             next_observations = flatten_batch(new_obs, self.observation_space)
             ended = terminated | truncated
-            if ended.any():
+            if ended.any():  # into a copy: new_obs holds the new episodes' first observations
+                next_observations = next_observations.copy()
                 next_observations[ended] = flatten_batch(final_obs, self.observation_space)[ended]
             self.replay_buffer.add_many(observations, actions, rewards, next_observations, terminated)
             self.episode_returns.extend(returns)

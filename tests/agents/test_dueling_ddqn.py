@@ -1,10 +1,13 @@
 """Dueling Double DQN pieces with known answers: sum tree, prioritised replay, dueling head, targets."""
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from gymnasium import spaces
 
 from drivelab.agents.dueling_ddqn import (
+    DuelingDoubleDQN,
     DuelingQNetwork,
     PrioritizedReplayBuffer,
     SumTree,
@@ -112,3 +115,36 @@ def test_linear_schedule():
     assert linear(1.0, 0.05, 0.0) == 1.0
     assert linear(1.0, 0.0, 0.25) == pytest.approx(0.75)
     assert linear(1.0, 0.05, 3.0) == pytest.approx(0.05)
+
+
+class Counter(gym.Env):
+    """The observation is [step of the episode, episode]: odd episodes terminate at step 3, the
+    others are truncated at step 5."""
+
+    observation_space = spaces.Box(-np.inf, np.inf, (2,), np.float32)
+    action_space = spaces.Discrete(2)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.episode, self.t = getattr(self, "episode", -1) + 1, 0
+        return np.array([0, self.episode], np.float32), {}
+
+    def step(self, action):
+        self.t += 1
+        odd = self.episode % 2 == 1
+        observation = np.array([self.t, self.episode], np.float32)
+        return observation, 0.0, odd and self.t == 3, not odd and self.t == 5, {}
+
+
+def test_replay_transitions_across_episode_ends():
+    """Each stored transition is (s, s') of one episode: an ended episode's s' is its final
+    observation, and the next transition starts from the new episode's first one (a float32 Box
+    observation, whose flattening is a view of the env's array)."""
+    env = Counter()
+    agent = DuelingDoubleDQN(env.observation_space, env.action_space, 0, {"learning_starts": 1000}, env)
+    agent.learn(14)
+    replay = agent.replay_buffer
+    expected = [(t, e, t + 1, e, float(e % 2 == 1 and t == 2)) for e, ends in ((0, 5), (1, 3), (2, 5), (3, 1))
+                for t in range(ends)]  # fmt: skip
+    stored = np.c_[replay.observations[:14], replay.next_observations[:14], replay.terminals[:14]]
+    assert stored.tolist() == [list(row) for row in expected]
