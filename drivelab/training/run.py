@@ -44,6 +44,7 @@ from drivelab.training.checkpoints import load_agent, load_replay, save_checkpoi
 from drivelab.training.evaluate import (
     aggregate,
     load_run_config,
+    make_out_dir,
     run_episodes,
     write_video,
 )
@@ -226,19 +227,6 @@ def new_run_dir(config: RunConfig, runs_root: Path) -> Path:
     return run_dir
 
 
-def _create_run_dir(run_dir: Path) -> None:
-    """Create ``run_dir`` and the missing folders above it; a refused write (read-only file
-    system, permissions) is a one-line UsageError and leaves no folder behind."""
-    missing = [p for p in (run_dir, *run_dir.parents) if not p.exists()]
-    try:
-        run_dir.mkdir(parents=True)
-    except OSError as exc:
-        for folder in missing[1:]:  # innermost first; mkdir failed, so run_dir itself is absent
-            if folder.is_dir():
-                folder.rmdir()
-        raise UsageError(f"cannot create run directory {str(run_dir)!r}: {exc.strerror}") from None
-
-
 def _check_model(spec, config: RunConfig, probe) -> None:
     """Build the agent once on the probe environment and throw it away, so that a hyper-parameter
     the algorithm rejects (SB3's or the agent's own checks) fails before any folder exists. The
@@ -319,7 +307,7 @@ def train(
     """
     run_dir = new_run_dir(config, Path(runs_root))
     spec = check_config(config)
-    _create_run_dir(run_dir)
+    make_out_dir(run_dir, "run directory")  # one error line, no folder left, if it cannot be
     try:
         save_yaml(config, run_dir / "config.yaml")
         train_env, eval_env, worlds = _make_envs(config, run_dir, resume=False)

@@ -498,9 +498,9 @@ def run_study(
         with tqdm(
             total=total, desc=f"tune {study.name} ({executor}, {workers} workers)", unit="trial"
         ) as bar:
+            # an interrupted trial's run raises KeyboardInterrupt here (``execute``): the trial stays
+            # running in the journal and the next run resumes it
             for outcome in execute(run_cell, jobs(), executor, workers, address, in_flight=workers):
-                if not outcome["ok"] and str(outcome["error"]).startswith("TrainingInterrupted"):
-                    raise KeyboardInterrupt  # the trial stays running: the next run resumes it
                 tell(by_name.pop(outcome["name"]), outcome)
                 bar.set_postfix_str(f"{outcome['name']}: {_state_word(outcome)}")
                 bar.update(1)
