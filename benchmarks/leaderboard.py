@@ -47,6 +47,10 @@ from drivelab.training.nocrash import LEVELS  # noqa: E402
 from drivelab.training.stats import bootstrap_ci  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
+from nocrash_town import SCENARIO as NOCRASH_SCENARIO  # noqa: E402
+from nocrash_town import agents as nocrash_agents  # noqa: E402
+from seed003_osx import DEFAULT_STEPS as OSX_STEPS  # noqa: E402
+from seed003_osx import recipe as osx_recipe  # noqa: E402
 from town_competence import LEARNERS as TOWN_LEARNERS  # noqa: E402
 from town_competence import recipe as town_recipe  # noqa: E402
 
@@ -95,10 +99,6 @@ def _rules(rules: dict, prefix: str = "") -> str:
     return " ".join(f"-H {prefix}{key}={value}" for key, value in rules.items())
 
 
-OSX = (
-    "--env blocks --traffic regular --backend fast -H gamma=0.99 --config benchmarks/seed003_osx.yaml "
-    "--steps 5000 --eval-every 5000 --eval-episodes 1 --checkpoint-every 1666"
-)
 TOWN_TARGETS = {
     kind: tuple(targets[level] for level in LEVELS) for kind, (*_, targets) in TOWN_LEARNERS.items()
 }
@@ -311,10 +311,7 @@ ENTRIES: tuple[Entry, ...] = (
         "town",
         "expert",
         "rule-based expert (privileged: waypoints + affordances); learns nothing",
-        _args(
-            "--algo expert --obs waypoints,affordances --steps 500 --eval-episodes 3 --env town "
-            "--action target_speed"
-        ),
+        (*nocrash_agents()["expert-town"], *NOCRASH_SCENARIO),
         judge="nocrash",
         reuse="expert-town",
         reused_by="benchmarks/nocrash_town.py",
@@ -339,11 +336,9 @@ ENTRIES: tuple[Entry, ...] = (
     Entry(
         "town",
         "ppo (privileged)",
-        "SB3 PPO on waypoints + measurements + affordances, 1 M steps, 32 worlds",
-        _args(
-            "--algo ppo --obs waypoints,measurements,affordances --steps 1000000 --n-envs 32 "
-            "--eval-episodes 5 --env town --action target_speed"
-        ),
+        "SB3 PPO on waypoints + measurements + affordances, Roach's reward, regular traffic, minibatches "
+        "of 256, 1 M steps, 32 worlds",
+        (*nocrash_agents()["ppo-town"], *NOCRASH_SCENARIO),
         judge="nocrash",
         reuse="ppo-town",
         reused_by="benchmarks/nocrash_town.py",
@@ -355,43 +350,17 @@ ENTRIES: tuple[Entry, ...] = (
             "blocks-osx",
             agent,
             what,
-            _args(f"{arguments} {OSX}"),
+            tuple(osx_recipe(agent, OSX_STEPS[agent])),
             reuse=f"seed003-{agent}-s{{seed}}",
             reused_by="benchmarks/seed003_osx.py",
         )
-        for agent, what, arguments in (
-            (
-                "sb3_dqn",
-                "SB3 DQN, LiDAR + ego state, grid actions, the safety table",
-                "--algo dqn --obs lidar,ego_state:features=10 --action grid --reward safety_dqn",
-            ),
-            (
-                "sb3_dqn_default",
-                "SB3 DQN as above, MetaDrive's reward",
-                "--algo dqn --obs lidar,ego_state:features=10 --action grid --reward metadrive",
-            ),
-            (
-                "dueling_ddqn",
-                "Dueling DDQN, LiDAR + ego state x 3 frames (750-D), 18 actions",
-                "--algo dueling_ddqn --obs lidar:stack=3,ego_state:features=10:stack=3 --action grid "
-                "--reward metadrive_course",
-            ),
-            (
-                "a2c_topdown",
-                "A2C (own), CNN on the 5x84x84 top-down image",
-                "--algo a2c_own --obs topdown --action continuous --reward metadrive",
-            ),
-            (
-                "ppo_topdown",
-                "PPO (own), CNN on the 5x84x84 top-down image",
-                "--algo ppo_own --obs topdown --action continuous --reward metadrive",
-            ),
-            (
-                "ppo_fusion",
-                "PPO (own), top-down image + ego state + LiDAR 120",
-                "--algo ppo_own --obs topdown,ego_state,lidar:beams=120 --action continuous "
-                "--reward metadrive",
-            ),
+        for agent, what in (
+            ("sb3_dqn", "SB3 DQN, LiDAR + ego state, grid actions, the safety table"),
+            ("sb3_dqn_default", "SB3 DQN as above, MetaDrive's reward"),
+            ("dueling_ddqn", "Dueling DDQN, LiDAR + ego state x 3 frames (750-D), 18 actions"),
+            ("a2c_topdown", "A2C (own), CNN on the 5x84x84 top-down image"),
+            ("ppo_topdown", "PPO (own), CNN on the 5x84x84 top-down image"),
+            ("ppo_fusion", "PPO (own), top-down image + ego state + LiDAR 120"),
         )
     ),
     *(
@@ -682,15 +651,27 @@ def _cost(summary: dict) -> str:
     return f"{steps} | {time_text}"
 
 
+# From this date an arrival on the step of a collision is no success (README, "An episode is a success")
+SUCCESS_RULE_DATE = "2026-11-27"
+
+
 def _carried_note(result: dict) -> list[str]:
-    """A line naming the dates of the rows carried over from earlier runs of this script."""
-    dates = sorted({r.get("measured") for r in result["entries"] if r["seeds"]} - {result["date"], None})
-    if not dates:
+    """Lines naming the rows carried over from earlier runs of this script, with their dates, and
+    whether they predate the success rule."""
+    carried = [r for r in result["entries"] if r["seeds"] and r.get("measured") not in (result["date"], None)]
+    if not carried:
         return []
-    return [
+    rows = ", ".join(f"{r['scenario']} / {r['name']} ({r['measured']})" for r in carried)
+    lines = [
         f"Rows whose runs are not on the machine of this run are carried over from the run of this script "
-        f"that measured them (same command; measured {', '.join(dates)}).  "
+        f"that measured them (same command; measured on the date given): {rows}.  "
     ]
+    if any(r["measured"] < SUCCESS_RULE_DATE for r in carried):
+        lines.append(
+            f"The rows measured before {SUCCESS_RULE_DATE} count an arrival on the step of a collision as a "
+            "success (and a crash); the others do not.  "
+        )
+    return lines
 
 
 def markdown(result: dict) -> str:

@@ -103,15 +103,20 @@ METRICS = (
 )  # fmt: skip
 
 
-def train_command(agent: str, seed: int, steps: int) -> list[str]:
-    """The ``drivelab train`` arguments of one run (after ``python -m drivelab.cli``)."""
-    name = f"seed003-{agent}-s{seed}"
+def recipe(agent: str, steps: int) -> list[str]:
+    """The ``drivelab train`` arguments of an agent's runs, without ``--seed``, ``--runs-dir`` and
+    ``--name`` (also the leaderboard's "OSX" rows)."""
     return [
-        "train", *AGENTS[agent][1], *COMMON, "--config", str(MAP_CONFIG.relative_to(ROOT.parent)),
-        "--steps", str(steps), "--seed", str(seed), "--runs-dir", str(RUNS.relative_to(ROOT.parent)),
-        "--name", name, "--eval-every", str(steps), "--eval-episodes", "1",
+        *AGENTS[agent][1], *COMMON, "--config", str(MAP_CONFIG.relative_to(ROOT.parent)),
+        "--steps", str(steps), "--eval-every", str(steps), "--eval-episodes", "1",
         "--checkpoint-every", str(max(steps // 3, 1)),
     ]  # fmt: skip
+
+
+def train_command(agent: str, seed: int, steps: int) -> list[str]:
+    """The ``drivelab train`` arguments of one run (after ``python -m drivelab.cli``)."""
+    where = ["--seed", str(seed), "--runs-dir", str(RUNS.relative_to(ROOT.parent))]
+    return ["train", *recipe(agent, steps), *where, "--name", f"seed003-{agent}-s{seed}"]
 
 
 def _children_cpu_s() -> float:

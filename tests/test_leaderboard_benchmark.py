@@ -143,6 +143,67 @@ def test_rows_without_runs_here_keep_their_committed_record_of_the_same_command(
     )
     assert board.carry_over(fresh, {**old, "seeds": {}}) is fresh  # never measured: stays missing
     result = {"date": "2026-12-01", "entries": [old, {**old, "measured": "2026-12-01"}, fresh]}
-    (note,) = board._carried_note(result)
-    assert "measured 2026-11-24)" in note
+    note, rule = board._carried_note(result)  # measured on 2026-11-24, before the success rule
+    assert note.count("merge / dqn (2026-11-24)") == 1 and "2026-12-01" not in note.split(": ", 1)[1]
+    assert "before 2026-11-27" in rule
     assert board._carried_note({**result, "entries": [fresh]}) == []
+    (note,) = board._carried_note({**result, "entries": [{**old, "measured": "2026-11-30"}]})
+    assert "(2026-11-30)" in note
+
+
+def _options(arguments) -> dict[str, list[str]]:
+    """A command's options: flag → its values, sorted (``-H`` is given many times)."""
+    assert arguments[0] == "train" and len(arguments) % 2 == 1
+    options: dict[str, list[str]] = {}
+    for flag, value in zip(arguments[1::2], arguments[2::2], strict=True):
+        assert flag.startswith("-") and not value.startswith("--"), (flag, value)
+        options.setdefault(flag, []).append(value)
+    return {flag: sorted(values) for flag, values in options.items()}
+
+
+def test_rows_of_runs_another_benchmark_trains_show_that_benchmarks_command(board):
+    """A row whose run another script trains names exactly the command that trained it (the town
+    PPO row once showed a command without its reward, traffic and minibatch size, and the OSX
+    Dueling DDQN row 5000 steps where its runs have 2500)."""
+    import generalisation
+    import highway_competence
+    import nocrash_town
+    import seed003_osx
+    import town_competence
+
+    checked = set()
+    for entry in (e for e in board.ENTRIES if e.reuse):
+        run = entry.run_dir(0).name
+        if entry.reused_by == "benchmarks/nocrash_town.py":
+            trainer = ["train", *nocrash_town.agents()[run], *nocrash_town.COMMON, "--name", run]
+        elif entry.reused_by == "benchmarks/seed003_osx.py":
+            trainer = seed003_osx.train_command(entry.name, 0, seed003_osx.DEFAULT_STEPS[entry.name])
+        elif entry.reused_by == "benchmarks/highway_competence.py":
+            recipe = run.removeprefix(f"competence-{entry.scenario}-").rsplit("-s", 1)[0]
+            steps = highway_competence.RECIPES[recipe]["steps"]
+            trainer = highway_competence.train_arguments(entry.scenario, recipe, steps, 0, run)
+        elif entry.reused_by == "benchmarks/town_competence.py":
+            trainer = town_competence.train_arguments(entry.name.split("(")[1].rstrip(")"), 0, run)
+        else:
+            assert entry.reused_by == "benchmarks/generalisation.py"
+            ours = _options(entry.command(0))
+            maps = int(ours["--config"][0].removeprefix("maps-").removesuffix(".yaml"))
+            values = generalisation.run_values(maps, 0, int(ours["--steps"][0]))
+            expected = {"--algo": values["algo"], "--env": values["env"], "--obs": values["obs"],
+                        "--action": values["action"], "--reward": values["reward"],
+                        "--n-envs": str(values["n_envs"]), "--eval-maps": values["eval_maps"],
+                        "--eval-every": str(values["eval_every"]), "--name": values["name"],
+                        "--eval-episodes": str(values["eval_episodes"])}  # fmt: skip
+            assert {flag: ours[flag][0] for flag in expected} == expected, entry.name
+            assert ours["--steps"] == ours["--eval-every"] and set(ours) - set(expected) == {
+                "--steps",
+                "--config",
+                "--seed",
+                "--runs-dir",
+            }
+            assert entry.run_dir(0) == generalisation.RUNS / values["name"]
+            checked.add(entry.reused_by)
+            continue
+        assert _options(entry.command(0)) == _options(trainer), (entry.scenario, entry.name)
+        checked.add(entry.reused_by)
+    assert len(checked) == 5
