@@ -32,7 +32,12 @@ import numpy as np  # noqa: E402
 from drivelab.envs.backends.fast import traffic as T  # noqa: E402
 from drivelab.envs.backends.fast.backend import FastBackend  # noqa: E402
 from drivelab.envs.backends.highway import HighwayBackend  # noqa: E402
-from drivelab.envs.scenarios import FAST_SCENARIOS as SUPPORTED  # noqa: E402
+from drivelab.envs.scenarios import FAST_SCENARIOS  # noqa: E402
+
+# highway-env's traffic scenarios: the town has its own (benchmarks/town_fidelity.py), the circuits
+# have no traffic, and the block maps no highway-env backend
+SUPPORTED = ("highway", "merge", "roundabout", "intersection", "racetrack")
+assert set(SUPPORTED) <= set(FAST_SCENARIOS)
 from drivelab.envs.scenarios import SCENARIOS  # noqa: E402
 from drivelab.world.state import WorldState  # noqa: E402
 
@@ -104,6 +109,11 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--scenarios", default=",".join(SUPPORTED))
     args = parser.parse_args()
+    unknown = [name for name in args.scenarios.split(",") if name not in SUPPORTED]
+    if unknown or args.episodes < 1:
+        problem = f"--scenarios from {', '.join(SUPPORTED)}" if unknown else "--episodes < 1"
+        print(f"error: {problem}", file=sys.stderr)
+        raise SystemExit(2)
     rows, timings = [], {}
     for name in args.scenarios.split(","):
         scenario = SCENARIOS[name]

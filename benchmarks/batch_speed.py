@@ -29,6 +29,9 @@ import sys
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import command_line  # noqa: E402
+
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
@@ -173,7 +176,7 @@ def main() -> None:
                   f"{town_baseline[-1][1]:.0f}/s")  # fmt: skip
     rows = [{"scenario": s, "sensor": n, **_median_ratio(pairs[(s, n)])} for s, n, _ in cases]
     result = {
-        "command": "OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1 python " + " ".join(sys.argv),
+        "command": command_line(),
         "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
         f"Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),

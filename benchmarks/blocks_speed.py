@@ -38,6 +38,9 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import command_line  # noqa: E402
+
 RESULTS = Path(__file__).parent / "results"
 OPTIONS = {"map": "OSX", "traffic_density": 0.1}  # MetaDrive's default density
 METADRIVE_FPS = "+1000 FPS (README), up to 1,500 (docs), +2,000 on a MacBook Pro"
@@ -92,7 +95,7 @@ def main() -> None:
         print(repeat, {key: round(values[-1]) for key, values in rates.items()}, flush=True)
     ratios = [k / one for k, one in zip(rates["k_worlds"], rates["one_world"], strict=True)]
     result = {
-        "command": "OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1 python " + " ".join(sys.argv),
+        "command": command_line(),
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "repeats": args.repeats,

@@ -45,6 +45,9 @@ sys.path.insert(0, str(Path(__file__).parent))
 from backend_speed import steps_per_second  # noqa: E402
 from batch_speed import _commit, baseline_rate, vector_rate  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import command_line  # noqa: E402
+
 RESULTS = Path(__file__).parent / "results"
 CIRCUITS = ("follow-line", "follow-lane")
 
@@ -149,7 +152,7 @@ def main() -> None:
             }
         )
     result = {
-        "command": "OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1 python " + " ".join(sys.argv),
+        "command": command_line(),
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "repeats": args.repeats,

@@ -6,7 +6,7 @@ DQN: MLP [256, 256], lr 5e-4, buffer 15k, batch 32, gamma 0.8, target update eve
 (drivelab's SB3 defaults, taken from highway-env's example). Each backend trains with the same
 seed, then its final model is evaluated on 50 episodes of the same backend. Wall time and the
 process's CPU time are both reported: on a shared machine the CPU time is the steadier figure
-(torch runs one thread: OMP_NUM_THREADS=1).
+(torch runs one thread: OMP_NUM_THREADS=1 unless the caller sets it; the results record it).
 """
 
 from __future__ import annotations
@@ -20,11 +20,15 @@ import sys
 import time
 from pathlib import Path
 
+os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 
 from drivelab.config import build_config  # noqa: E402
 from drivelab.training.evaluate import evaluate_run  # noqa: E402
 from drivelab.training.run import train  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import command_line  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 RUNS = Path(__file__).parent / "runs"
@@ -66,7 +70,7 @@ def main() -> None:
         rows.append(row)
         print(row, flush=True)
     result = {
-        "command": "python " + " ".join(sys.argv),
+        "command": command_line(),
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "steps": args.steps,

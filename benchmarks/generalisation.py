@@ -50,6 +50,9 @@ from drivelab.training.evaluate import evaluate_run, load_run_config, report_nam
 from drivelab.training.run import resume, train  # noqa: E402
 from drivelab.training.stats import bootstrap_ci  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import command_line  # noqa: E402
+
 RESULTS = Path(__file__).parent / "results"
 RUNS = Path(__file__).parent / "runs" / "generalisation"
 OBS = "lidar,measurements,waypoints"
@@ -318,7 +321,7 @@ def write_report(
     first = load_run_config(RUNS / f"ppo-maps{rows[0]['maps']}-s{rows[0]['seed']}")
     hyperparams = ", ".join(f"{k} {v}" for k, v in first.hyperparams.items())
     machine = f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
-    command = "OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1 python " + " ".join(sys.argv)
+    command = command_line()
     commands = {
         f"maps{r['maps']}-s{r['seed']}": train_command(r["maps"], r["seed"], args.steps) for r in rows
     }

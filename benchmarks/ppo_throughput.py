@@ -26,6 +26,9 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 import torch  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import command_line  # noqa: E402
+
 RESULTS = Path(__file__).parent / "results"
 ROLLOUT_STEPS = 2048
 
@@ -82,7 +85,7 @@ def main() -> None:
             print(runs[k][-1])
     rows = [{key: statistics.median(r[key] for r in runs[k]) for key in runs[k][0]} for k in args.n_envs]
     result = {
-        "command": "OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1 python " + " ".join(sys.argv),
+        "command": command_line(),
         "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
         f"Python {platform.python_version()}, torch {torch.__version__}",
         "date": time.strftime("%Y-%m-%d"),

@@ -78,6 +78,9 @@ from drivelab.training.stats import summarize
 from drivelab.training.sweep import Sweep, expand_sweep, plan, run_cell, run_dirs
 from drivelab.yaml_io import load_yaml
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import command_line  # noqa: E402
+
 HERE = Path(__file__).parent
 SWEEP = HERE / "sweeps" / "rlad-ablation.yaml"
 UNFINISHED = 3  # exit status of a slice that left runs to continue
@@ -344,7 +347,7 @@ def main() -> None:
         cells = tuple(c for c in sweep.cells if variant(c) in wanted)
         sweep = Sweep(cells, sweep.runs_dir, sweep.eval_episodes)
     directories = run_dirs(sweep)
-    command = "python " + " ".join(sys.argv)
+    command = command_line()
     if args.report_only:
         reports = {d: saved_nocrash(d) for d in directories}
         records = [load_run(d) for d in directories]

@@ -32,8 +32,11 @@ import numpy as np
 import torch
 
 from drivelab.agents.rlad.replay import FrameReplayBuffer
-from drivelab.agents.rlad.sac import RLAD
+from drivelab.agents.rlad.sac import REPLAY_FRAMES, RLAD
 from drivelab.envs.core import DriveEnv
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import command_line  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 SIZES = (84, 256)
@@ -113,6 +116,10 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--batch-size", type=int, default=256)
     parser.add_argument("--device", default="cpu", help="cpu or cuda: where the agent's networks run")
+    parser.add_argument(
+        "--replay-frames", default="auto", choices=REPLAY_FRAMES, help="where the replay keeps its frames "
+        "(RLAD's replay_frames: auto is the device's memory on CUDA, the host's otherwise)",
+    )  # fmt: skip
     parser.add_argument("--out", default="rlad_cost", help="result file name (JSON and md) in results/")
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -134,7 +141,8 @@ def main() -> None:
         env = DriveEnv("town", obs=camera_obs(size), action="target_speed", reward="roach", traffic="regular")
         add("environment step", size, *timed(stepper(env), args.steps, args.repeats))
         agent = RLAD(env.observation_space, env.action_space, 0, {"batch_size": args.batch_size,
-                     "buffer_size": 4 * args.batch_size, "device": args.device}, env)  # fmt: skip
+                     "buffer_size": 4 * args.batch_size, "device": args.device,
+                     "replay_frames": args.replay_frames}, env)  # fmt: skip
         agent.learn(2 * args.batch_size)  # warm-up steps only (learning_starts 1000): fills the replay
         obs, _ = env.reset(seed=1)
         add(
@@ -167,7 +175,7 @@ def main() -> None:
         ratios[f"training steps per second at {size} (wall)"] = 1e3 / total
         ratios[f"days for the paper's 10^6 steps at {size} (wall)"] = total * 1e6 / 1e3 / 86400
     result = {
-        "command": "OMP_NUM_THREADS=1 python " + " ".join(sys.argv),
+        "command": command_line(),
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, "
         f"Python {platform.python_version()}, torch {torch.__version__}, 1 torch thread, "
         + (torch.cuda.get_device_name() if args.device.startswith("cuda") else "networks on the CPU"),

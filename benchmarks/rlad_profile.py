@@ -27,6 +27,9 @@ from torch.profiler import ProfilerActivity, profile
 from drivelab.agents.rlad.sac import RLAD
 from drivelab.envs.core import DriveEnv
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import command_line  # noqa: E402
+
 RESULTS = Path(__file__).parent / "results"
 
 
@@ -102,7 +105,7 @@ def main() -> None:
     if cuda:
         tables["self CUDA time"] = averages.table(sort_by="self_cuda_time_total", row_limit=args.top)
     result = {
-        "command": "OMP_NUM_THREADS=1 python " + " ".join(sys.argv),
+        "command": command_line(),
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, "
         f"torch {torch.__version__}, 1 torch thread, "
         + (torch.cuda.get_device_name() if cuda else "networks on the CPU"),

@@ -47,6 +47,9 @@ from torch.profiler import ProfilerActivity, profile
 
 from drivelab.agents.rlad.sac import RLAD
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import command_line  # noqa: E402
+
 RESULTS = Path(__file__).parent / "results"
 VARIANTS = {
     "plain": {},
@@ -173,7 +176,7 @@ def main() -> None:
     where = "gpu" if cuda else "cpu"
     device_name = torch.cuda.get_device_name() if cuda else "networks on the CPU"
     result = {
-        "command": f"OMP_NUM_THREADS={os.environ.get('OMP_NUM_THREADS', '')} python " + " ".join(sys.argv),
+        "command": command_line(),
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, "
         f"torch {torch.__version__}, {device_name}",
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),

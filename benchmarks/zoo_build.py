@@ -42,8 +42,9 @@ from leaderboard import BLOCKS_DAGGER, HIGHWAY_DQN, RACETRACK_DAGGER, UNSEEN_MAP
 from town_competence import recipe as town_recipe  # noqa: E402
 
 # highway-env's documented PPO values, pinned in the PPO recipes below: their agents were trained
-# before drivelab/hyperparams/ppo.yaml's scenario entries held drivelab's tuned values (their cards'
-# commands, recorded then, leave them out: the same values at the time)
+# before drivelab/hyperparams/ppo.yaml's scenario entries held drivelab's tuned values (the shipped
+# values then, as each card's hyperparams record; the cards' commands carry the pins since
+# 2026-11-27, so that they still train the same model)
 UNTUNED = shlex.split(UNTUNED_PPO)
 
 

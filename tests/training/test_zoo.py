@@ -1,9 +1,12 @@
 """Shipped agents: packing, listing, loading without unpickling, ``enjoy`` and zoo names elsewhere."""
 
 import fnmatch
+import importlib.util
 import json
 import math
 import pickle
+import shlex
+import sys
 import tomllib
 import zipfile
 from pathlib import Path
@@ -11,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+import yaml
 from typer.testing import CliRunner
 
 from drivelab.agents.storage import PICKLED_MEMBERS
@@ -290,3 +294,26 @@ def test_shipped_agents_reproduce_their_recorded_check(agent):
             assert measured[key] == value, key
         else:
             assert math.isclose(measured[key], value, rel_tol=1e-3, abs_tol=1e-6), key
+
+
+def test_every_cards_training_command_is_its_build_recipe():
+    """A card's command trains its agent today: benchmarks/zoo_build.py's recipe, with the values
+    pinned that drivelab's shipped hyper-parameters no longer give (the PPO cards once left out
+    highway-env's values, which the tuned merge and roundabout entries have since replaced). The
+    pinned values are the card's own hyper-parameters (or SB3's defaults where it has none)."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    spec = importlib.util.spec_from_file_location("zoo_build", ROOT / "benchmarks" / "zoo_build.py")
+    build = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(build)
+    sb3_ppo_defaults = {"gae_lambda": 0.95, "ent_coef": 0.0, "clip_range": 0.2}
+    assert set(build.AGENTS) == {agent.name for agent in SHIPPED}
+    for name, recipe in build.AGENTS.items():
+        card = json.loads((zoo.ZOO_DIR / name / "card.json").read_text())
+        arguments = ["train", *recipe["train"], "--runs-dir", str(build.RUNS), "--name", name]
+        assert card["training"]["command"] == "drivelab " + shlex.join(arguments), name
+        pins = recipe["train"]
+        for flag, value in zip(pins, pins[1:], strict=False):
+            if flag == "-H" and name.endswith("-ppo"):
+                key, text = value.split("=", 1)
+                pinned = yaml.safe_load(text)
+                assert card["hyperparams"].get(key, sb3_ppo_defaults.get(key)) == pinned, (name, key)
