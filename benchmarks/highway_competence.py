@@ -51,6 +51,7 @@ from drivelab.training.stats import bootstrap_ci  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 from leaderboard import UNTUNED_PPO  # noqa: E402
+from provenance import check_reuse  # noqa: E402
 
 RUNS = ROOT / "benchmarks" / "runs"
 RESULTS = ROOT / "benchmarks" / "results"
@@ -117,6 +118,8 @@ def measure(env: str, recipe: str, seed: int, steps: int, episodes: int) -> dict
     evaluate = ["evaluate", f"benchmarks/runs/{name}", "--episodes", str(episodes)]
     timing_file = run_dir / "competence_timing.json"
     timings = json.loads(timing_file.read_text()) if timing_file.is_file() else {}
+    if (run_dir / "config.yaml").is_file():
+        check_reuse(run_dir, train, ROOT)
     if not (run_dir / "model.zip").is_file():
         if run_dir.is_dir():  # stopped: continue from its last checkpoint
             add(timings, "train", run(["train", "--resume", f"benchmarks/runs/{name}"]))

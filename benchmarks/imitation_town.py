@@ -25,6 +25,10 @@ import sys
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from nocrash_town import agents as nocrash_agents  # noqa: E402
+from provenance import check_reuse  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 RUNS = ROOT / "benchmarks" / "runs"
 RESULTS = ROOT / "benchmarks" / "results"
@@ -39,9 +43,7 @@ def agents(steps: int, n_envs: int) -> dict[str, list[str]]:
                  "--eval-every", str(max(steps // 4, 1)), "--eval-episodes", "2",
                  "-H", "round_steps=2000", "-H", "epochs=2"]  # fmt: skip
     return {
-        "expert-town": [
-            "--algo", "expert", "--obs", "waypoints,affordances", "--steps", "500", "--eval-episodes", "3",
-        ],
+        "expert-town": nocrash_agents()["expert-town"],  # the same run as benchmarks/nocrash_town.py's
         "bc-town": ["--algo", "bc", *imitation],
         "dagger-town": ["--algo", "dagger", *imitation, "-H", "beta_decay=0.5"],
     }  # fmt: skip
@@ -83,6 +85,8 @@ def main() -> None:
         evaluate = ["benchmark", "nocrash", str(run_dir.relative_to(ROOT)), "--town", "test",
                     "--episodes", str(args.episodes)]  # fmt: skip
         commands[name] = ["drivelab " + shlex.join(train), "drivelab " + shlex.join(evaluate)]
+        if (run_dir / "config.yaml").is_file():
+            check_reuse(run_dir, train, ROOT)
         if not (run_dir / "model.zip").is_file():
             wall, cpu = run(train)
             timings[name] = {"train_wall_s": wall, "train_cpu_s": cpu}

@@ -49,6 +49,7 @@ from drivelab.training.stats import bootstrap_ci  # noqa: E402
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from nocrash_town import SCENARIO as NOCRASH_SCENARIO  # noqa: E402
 from nocrash_town import agents as nocrash_agents  # noqa: E402
+from provenance import check_reuse  # noqa: E402
 from seed003_osx import DEFAULT_STEPS as OSX_STEPS  # noqa: E402
 from seed003_osx import recipe as osx_recipe  # noqa: E402
 from town_competence import LEARNERS as TOWN_LEARNERS  # noqa: E402
@@ -510,6 +511,9 @@ def measure(entry: Entry, seeds: list[int], episodes: int, train: bool, evaluate
               "seeds": {}, "missing": []}  # fmt: skip
     for seed in seeds:
         run = entry.run_dir(seed)
+        # generalisation.py trains from its own values (checked there against each run's config)
+        if (run / "config.yaml").is_file() and entry.reused_by != "benchmarks/generalisation.py":
+            check_reuse(run, entry.command(seed), ROOT)
         if not (run / "model.zip").exists():
             if not train or entry.reuse:
                 record["missing"].append(seed)

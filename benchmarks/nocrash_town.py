@@ -29,6 +29,9 @@ import sys
 import time
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import check_reuse  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 RUNS = ROOT / "benchmarks" / "runs"
 RESULTS = ROOT / "benchmarks" / "results"
@@ -79,6 +82,8 @@ def main() -> None:
         evaluate = ["benchmark", "nocrash", str(run_dir.relative_to(ROOT)), "--town", "test",
                     "--episodes", str(args.episodes), "--level", args.level]  # fmt: skip
         commands[name] = ["drivelab " + shlex.join(train), "drivelab " + shlex.join(evaluate)]
+        if (run_dir / "config.yaml").is_file():
+            check_reuse(run_dir, train, ROOT)
         if not (run_dir / "model.zip").is_file():
             wall, cpu = run(train)
             timings[name] = {"train_wall_s": wall, "train_cpu_s": cpu}

@@ -38,6 +38,9 @@ sys.path.insert(0, str(ROOT))
 from drivelab.training.nocrash import LEVELS  # noqa: E402
 from drivelab.training.stats import bootstrap_ci  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import check_reuse  # noqa: E402
+
 RUNS = ROOT / "benchmarks" / "runs"
 RESULTS = ROOT / "benchmarks" / "results"
 # (observation, demonstration steps, success targets) per learner. The recipe was chosen by the
@@ -101,6 +104,8 @@ def measure(learner: str, seed: int, episodes: int) -> dict:
         str(episodes),
     ]
     timing_file = run_dir / "competence_timing.json"
+    if (run_dir / "config.yaml").is_file():
+        check_reuse(run_dir, train, ROOT)
     if not (run_dir / "model.zip").is_file():
         timing = run(train)  # drivelab train makes the run directory
         timing_file.write_text(json.dumps({"train": timing}))

@@ -39,6 +39,7 @@ CAMERA_CHECK_DURATION_S = 20
 
 sys.path.insert(0, str(Path(__file__).parent))
 from leaderboard import BLOCKS_DAGGER, HIGHWAY_DQN, RACETRACK_DAGGER, UNSEEN_MAPS, UNTUNED_PPO  # noqa: E402
+from provenance import check_reuse  # noqa: E402
 from town_competence import recipe as town_recipe  # noqa: E402
 
 # highway-env's documented PPO values, pinned in the PPO recipes below: their agents were trained
@@ -221,6 +222,8 @@ def train_and_pack(name: str, spec: dict, retrain: bool) -> None:
     run_dir = ROOT / RUNS / name
     arguments = ["train", *spec["train"], "--runs-dir", str(RUNS), "--name", name]
     timing = None
+    if not retrain and (run_dir / "model.zip").is_file():
+        check_reuse(run_dir, arguments, ROOT)  # the card names this command
     if retrain or not (run_dir / "model.zip").is_file():
         if run_dir.exists():
             raise SystemExit(f"{run_dir} exists without a final model: remove it or finish it first")

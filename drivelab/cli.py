@@ -107,6 +107,45 @@ def _rlad_switches(no_alix: bool, no_aux: bool, no_augment: bool, waypoint_encod
     return {key: value for key, value in switches.items() if value is not None}
 
 
+def _new_run_config(config: Path | None, cli: dict, video: bool, hyperparams: list[str], switches: dict):
+    """The config of a new run: the ``--config`` file's fields, the options given over them, and
+    drivelab's shipped hyper-parameters under the ``-H`` ones."""
+    from drivelab.config import build_config
+    from drivelab.hyperparams import with_shipped_hyperparams
+    from drivelab.yaml_io import load_yaml
+
+    values = load_yaml(config) if config is not None else {}
+    values.update({k: v for k, v in cli.items() if v is not None})
+    if video:
+        values["eval_video"] = True
+    if hyperparams or switches:
+        values["hyperparams"] = {
+            **values.get("hyperparams", {}),
+            **_parse_pairs(hyperparams, "--hyperparams"),
+            **switches,
+        }
+    return build_config(with_shipped_hyperparams(values))
+
+
+def train_config(arguments: list[str]):
+    """The config ``drivelab train ARGUMENTS`` would train, without training: for a script that
+    reuses a run only when it is the run those arguments make (paths as from the current folder).
+    A ``--resume`` command has no config of its own: refused."""
+    command = typer.main.get_command(app).get_command(None, "train")  # type: ignore[attr-defined]
+    with command.make_context("train", list(arguments)) as context:
+        given = context.params
+    if given["resume"] is not None:
+        raise UsageError("train_config: --resume trains the run's own config")
+    switches = _rlad_switches(
+        given["no_alix"], given["no_aux"], given["no_augment"], given["waypoint_encoder"]
+    )
+    cli = {key: given[key] for key in (
+        "algo", "env", "obs", "action", "reward", "steps", "seed", "traffic", "backend", "name", "eval_every",
+        "eval_episodes", "checkpoint_every", "n_envs", "eval_maps",
+    )}  # fmt: skip
+    return _new_run_config(given["config"], cli, given["video"], given["hyperparams"], switches)
+
+
 @app.command()
 def train(
     algo: str | None = typer.Option(None, help=", ".join(ALGO_NAMES)),
@@ -143,12 +182,9 @@ def train(
     ),
 ) -> None:
     """Train an agent and write a run directory."""
-    from drivelab.config import build_config
-    from drivelab.hyperparams import with_shipped_hyperparams
     from drivelab.training.run import TrainingInterrupted
     from drivelab.training.run import resume as resume_run
     from drivelab.training.run import train as train_run
-    from drivelab.yaml_io import load_yaml
 
     switches = _rlad_switches(no_alix, no_aux, no_augment, waypoint_encoder)
     try:
@@ -178,23 +214,13 @@ def train(
                 raise UsageError("--resume takes the run's own config; only --steps may be given with it")
             run_dir = resume_run(resume, steps)
         else:
-            values = load_yaml(config) if config is not None else {}
             cli = {
                 "algo": algo, "env": env, "obs": obs, "action": action, "reward": reward,
                 "steps": steps, "seed": seed, "traffic": traffic, "backend": backend, "name": name,
                 "eval_every": eval_every, "eval_episodes": eval_episodes,
                 "checkpoint_every": checkpoint_every, "n_envs": n_envs, "eval_maps": eval_maps,
             }  # fmt: skip
-            values.update({k: v for k, v in cli.items() if v is not None})
-            if video:
-                values["eval_video"] = True
-            if hyperparams or switches:
-                values["hyperparams"] = {
-                    **values.get("hyperparams", {}),
-                    **_parse_pairs(hyperparams, "--hyperparams"),
-                    **switches,
-                }
-            run_dir = train_run(build_config(with_shipped_hyperparams(values)), runs_dir)
+            run_dir = train_run(_new_run_config(config, cli, video, hyperparams, switches), runs_dir)
     except UsageError as exc:
         _fail(str(exc))
     except TrainingInterrupted as stop:

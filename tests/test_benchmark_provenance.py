@@ -3,6 +3,9 @@
 import importlib.util
 from pathlib import Path
 
+import pytest
+import yaml
+
 SCRIPT = Path(__file__).parents[1] / "benchmarks" / "provenance.py"
 
 
@@ -27,3 +30,24 @@ def test_the_thread_settings_are_the_environments_and_the_arguments_are_quoted(m
     assert provenance.command_line(argv[:1]) == (
         "OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=2 python benchmarks/rlad_ablation.py"
     )
+
+
+def test_a_run_is_reused_only_when_the_command_trains_its_config(tmp_path, capsys):
+    """A benchmark that finds a finished run lists its command beside the run's numbers: a run of
+    another config (here fewer steps, or other shipped hyper-parameters) stops it in one line."""
+
+    from drivelab.cli import train_config
+
+    provenance = _provenance()
+    arguments = ["train", "--algo", "ppo", "--env", "merge", "--obs", "kinematics", "--steps", "2048",
+                 "-H", "gamma=0.9", "--seed", "1", "--runs-dir", "runs", "--name", "r"]  # fmt: skip
+    run = tmp_path / "runs" / "r"
+    run.mkdir(parents=True)
+    (run / "config.yaml").write_text(yaml.safe_dump(train_config(arguments[1:]).to_dict()))
+    provenance.check_reuse(run, arguments, tmp_path)  # the same run: reused
+    for changed in (["--steps", "4096"], ["-H", "n_steps=64"]):
+        with pytest.raises(SystemExit) as stop:
+            provenance.check_reuse(run, [*arguments, *changed], tmp_path)
+        error = capsys.readouterr().err
+        assert stop.value.code == 2 and error.startswith("error: ") and len(error.splitlines()) == 1
+        assert ("steps differ" in error) if changed[0] == "--steps" else ("hyperparams differ" in error)
