@@ -655,8 +655,10 @@ def _cost(summary: dict) -> str:
     return f"{steps} | {time_text}"
 
 
-# From this date an arrival on the step of a collision is no success (README, "An episode is a success")
+# From this date an arrival on the step of a collision is no success (README, "An episode is a success");
+# it changes only the tables whose success is an arrival
 SUCCESS_RULE_DATE = "2026-11-27"
+ARRIVAL_TABLES = ("merge", "roundabout", "intersection", "town", "blocks-osx", "blocks-unseen")
 
 
 def _carried_note(result: dict) -> list[str]:
@@ -670,10 +672,12 @@ def _carried_note(result: dict) -> list[str]:
         f"Rows whose runs are not on the machine of this run are carried over from the run of this script "
         f"that measured them (same command; measured on the date given): {rows}.  "
     ]
-    if any(r["measured"] < SUCCESS_RULE_DATE for r in carried):
+    before = [r for r in carried if r["measured"] < SUCCESS_RULE_DATE and r["scenario"] in ARRIVAL_TABLES]
+    if before:
+        rows = ", ".join(f"{r['scenario']} / {r['name']}" for r in before)
         lines.append(
-            f"The rows measured before {SUCCESS_RULE_DATE} count an arrival on the step of a collision as a "
-            "success (and a crash); the others do not.  "
+            f"Of these, {rows} count an arrival on the step of a collision as a success (and a crash): they "
+            f"were measured before {SUCCESS_RULE_DATE}, when that was the rule.  "
         )
     return lines
 
