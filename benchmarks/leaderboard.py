@@ -676,8 +676,8 @@ def _carried_note(result: dict) -> list[str]:
     if before:
         rows = ", ".join(f"{r['scenario']} / {r['name']}" for r in before)
         lines.append(
-            f"Of these, {rows} count an arrival on the step of a collision as a success (and a crash): they "
-            f"were measured before {SUCCESS_RULE_DATE}, when that was the rule.  "
+            f"Of these, measured before {SUCCESS_RULE_DATE} under the old rule (an arrival on the step of a "
+            f"collision counted as a success and a crash): {rows}.  "
         )
     return lines
 

@@ -145,7 +145,7 @@ def test_rows_without_runs_here_keep_their_committed_record_of_the_same_command(
     result = {"date": "2026-12-01", "entries": [old, {**old, "measured": "2026-12-01"}, fresh]}
     note, rule = board._carried_note(result)  # measured on 2026-11-24, before the success rule
     assert note.count("merge / dqn (2026-11-24)") == 1 and "2026-12-01" not in note.split(": ", 1)[1]
-    assert "merge / dqn count" in rule and "before 2026-11-27" in rule
+    assert rule.endswith("merge / dqn.  ") and "before 2026-11-27" in rule
     assert board._carried_note({**result, "entries": [fresh]}) == []
     (note,) = board._carried_note({**result, "entries": [{**old, "measured": "2026-11-30"}]})
     assert "(2026-11-30)" in note
