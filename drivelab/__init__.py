@@ -4,7 +4,11 @@ from __future__ import annotations
 
 __version__ = "0.1.0"
 
-import drivelab.envs  # noqa: F401  (registers the gymnasium ids)
+from drivelab import _numba_cache
+
+_numba_cache.configure()  # before any kernel is decorated: numba's cache per version of the sources
+
+import drivelab.envs  # noqa: E402, F401  (registers the gymnasium ids)
 
 
 def make(scenario: str, **kwargs):

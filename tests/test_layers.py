@@ -40,8 +40,9 @@ class Layer:
 # DESIGN.md's layers mapped onto today's package layout, bottom to top.
 LAYERS = (
     # world/: WorldBatch, WorldState, RoadMap, geometry; plus the modules that import nothing of
-    # drivelab (errors, the YAML loader that perception's sensor specs and the run config share)
-    Layer("base", 0, ("drivelab.errors", "drivelab.world", "drivelab.yaml_io")),
+    # drivelab (errors, the YAML loader that perception's sensor specs and the run config share,
+    # numba's cache folder that the package sets before any kernel is compiled)
+    Layer("base", 0, ("drivelab.errors", "drivelab.world", "drivelab.yaml_io", "drivelab._numba_cache")),
     # the simulators (compiled core and the highway-env reference) and route tracking
     Layer("sim", 1, ("drivelab.envs.backends", "drivelab.envs.route")),
     # scenario definitions: the presets, the town's road and traffic, the circuits. circuits.py is

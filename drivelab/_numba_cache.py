@@ -1,0 +1,70 @@
+"""One numba cache folder per version of drivelab's sources.
+
+numba's ``cache=True`` keys a kernel's cached machine code on its own file only: an edit to a jitted
+function it calls from another module leaves the cache in place, and the kernel keeps running the
+old code (numba's documented limitation, "cache invalidation fails to recognize changes in symbols
+defined in another file"). drivelab's kernels call each other across modules, so the cache lives in
+a folder named after a hash of every source file of the package: any edit starts a fresh cache.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parent
+PREFIX = "drivelab-numba-"
+STALE_S = 86_400  # another version's folder unused this long is removed
+
+
+def source_digest(root: Path = PACKAGE) -> str:
+    """A hash of every ``.py`` file under ``root``: their paths and contents."""
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob("*.py")):
+        digest.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    return digest.hexdigest()[:16]
+
+
+def cache_folder(digest: str, environ: dict[str, str] | None = None) -> Path:
+    """Where this version's kernels are cached: under ``NUMBA_CACHE_DIR`` when the user set one
+    (a child process inherits the folder itself and keeps it), else beside the sources, else in the
+    temporary folder (a read-only install)."""
+    environ = os.environ if environ is None else environ
+    given = environ.get("NUMBA_CACHE_DIR")
+    if given:
+        base = Path(given)
+        if base.name.startswith(PREFIX):  # set by drivelab in a parent process
+            base = base.parent
+    elif os.access(PACKAGE / "__pycache__", os.W_OK) or os.access(PACKAGE, os.W_OK):
+        base = PACKAGE / "__pycache__"
+    else:
+        base = Path(tempfile.gettempdir())
+    return base / f"{PREFIX}{digest}"
+
+
+def _remove_stale(folder: Path) -> None:
+    """Other versions' folders beside ``folder`` unused for a day (an edited tree leaves one per
+    version it ran)."""
+    try:
+        siblings = [p for p in folder.parent.glob(f"{PREFIX}*") if p != folder and p.is_dir()]
+        for old in siblings:
+            if time.time() - old.stat().st_mtime > STALE_S:
+                shutil.rmtree(old, ignore_errors=True)
+    except OSError:
+        pass
+
+
+def configure() -> Path:
+    """Point numba's cache at this version's folder (before any drivelab kernel is decorated)."""
+    folder = cache_folder(source_digest())
+    os.environ["NUMBA_CACHE_DIR"] = str(folder)
+    numba = sys.modules.get("numba")
+    if numba is not None:  # imported before drivelab: its config has read the environment already
+        numba.config.CACHE_DIR = str(folder)
+    _remove_stale(folder)
+    return folder

@@ -1,0 +1,49 @@
+"""drivelab/_numba_cache.py: numba's cache folder follows the version of the sources."""
+
+import os
+import time
+
+import numba
+
+import drivelab  # noqa: F401  (configures the cache folder)
+from drivelab import _numba_cache
+
+
+def _tree(root, text):
+    (root / "sub").mkdir(parents=True, exist_ok=True)
+    (root / "a.py").write_text("x = 1\n")
+    (root / "sub" / "b.py").write_text(text)
+    return root
+
+
+def test_an_edit_in_any_module_gives_another_folder(tmp_path):
+    """numba would keep a kernel's cache after an edit to a function it calls from another file;
+    the folder's name changes with every file's content instead."""
+    before = _numba_cache.source_digest(_tree(tmp_path, "def f():\n    return 1\n"))
+    assert _numba_cache.source_digest(tmp_path) == before
+    after = _numba_cache.source_digest(_tree(tmp_path, "def f():\n    return 2\n"))
+    assert after != before
+    assert _numba_cache.cache_folder(after, {}) != _numba_cache.cache_folder(before, {})
+
+
+def test_the_folder_sits_under_the_users_cache_and_is_inherited_as_it_is(tmp_path):
+    folder = _numba_cache.cache_folder("abc", {"NUMBA_CACHE_DIR": str(tmp_path)})
+    assert folder == tmp_path / "drivelab-numba-abc"
+    # a child process sees the parent's folder in NUMBA_CACHE_DIR and keeps it
+    assert _numba_cache.cache_folder("abc", {"NUMBA_CACHE_DIR": str(folder)}) == folder
+    assert _numba_cache.cache_folder("abc", {}).name == "drivelab-numba-abc"
+
+
+def test_numba_caches_this_versions_kernels_in_its_folder():
+    expected = _numba_cache.cache_folder(_numba_cache.source_digest())
+    assert numba.config.CACHE_DIR == str(expected) == os.environ["NUMBA_CACHE_DIR"]
+
+
+def test_other_versions_folders_unused_for_a_day_are_removed(tmp_path):
+    current, recent, stale = (tmp_path / f"drivelab-numba-{n}" for n in ("now", "recent", "old"))
+    for folder in (current, recent, stale):
+        folder.mkdir()
+    old = time.time() - 2 * _numba_cache.STALE_S
+    os.utime(stale, (old, old))
+    _numba_cache._remove_stale(current)
+    assert current.is_dir() and recent.is_dir() and not stale.exists()
