@@ -9,7 +9,7 @@ hyper-parameters; the equivalent command is written into the results):
 
     drivelab train --algo ppo --env blocks --obs lidar,measurements,waypoints --action continuous \\
         --reward metadrive --n-envs 8 --steps STEPS --seed SEED --eval-maps 1000:100 \\
-        --config maps-N.yaml   # env_options: {backend_options: {map: 3, start_seed: 0, num_scenarios: N}}
+        --config benchmarks/maps-N.yaml   # N = 1, 10, 100: env_options of N maps
 
 then evaluated as ``drivelab evaluate RUN --episodes 100 --maps 1000:100`` (the unseen maps, one
 episode on each) and ``drivelab evaluate RUN --episodes 100 --maps 0:N`` (its training maps: each
@@ -34,6 +34,7 @@ import json
 import math
 import os
 import platform
+import shlex
 import shutil
 import sys
 import time
@@ -73,20 +74,30 @@ def run_values(maps: int, seed: int, steps: int) -> dict:
     }  # fmt: skip
 
 
+def train_arguments(maps: int, seed: int, steps: int) -> list[str]:
+    """The ``drivelab train`` arguments of a run of ``steps`` steps evaluated at its end, paths from
+    the repository root (``benchmarks/maps-N.yaml`` holds the maps' ``env_options``): the config
+    ``run_values`` makes."""
+    name, root = f"ppo-maps{maps}-s{seed}", Path(__file__).resolve().parents[1]
+    return [
+        "train", "--algo", "ppo", "--env", "blocks", "--obs", OBS, "--action", "continuous",
+        "--reward", "metadrive", "--n-envs", str(N_ENVS), "--steps", str(steps), "--seed", str(seed),
+        "--eval-maps", TEST_MAPS, "--eval-every", str(steps), "--eval-episodes", "1", "--name", name,
+        "--runs-dir", str(RUNS.resolve().relative_to(root)),
+        "--config", str((Path(__file__).resolve().parent / f"maps-{maps}.yaml").relative_to(root)),
+    ]  # fmt: skip
+
+
 def train_command(maps: int, seed: int, steps: int) -> str:
-    """The ``drivelab train`` command(s) of a run: trained to its ``eval_every`` (the first budget),
-    then continued to ``steps`` when that is larger."""
-    name, runs = f"ppo-maps{maps}-s{seed}", os.path.relpath(RUNS)
-    first = load_run_config(RUNS / name).eval_every
-    command = (
-        f"drivelab train --algo ppo --env blocks --obs {OBS} --action continuous --reward metadrive "
-        f"--n-envs {N_ENVS} --steps {first} --seed {seed} --eval-maps {TEST_MAPS} --eval-every {first} "
-        f"--eval-episodes 1 --name {name} --runs-dir {runs} --config maps-{maps}.yaml"
-    )
+    """The ``drivelab train`` command(s) of a run, from the repository root: trained to its
+    ``eval_every`` (the first budget), then continued to ``steps`` when that is larger."""
+    run_dir = RUNS / f"ppo-maps{maps}-s{seed}"
+    first = load_run_config(run_dir).eval_every
+    command = "drivelab " + shlex.join(train_arguments(maps, seed, first))
     if steps > first:
-        command += f" && drivelab train --resume {runs}/{name} --steps {steps}"
-    yaml = f"{{backend_options: {{map: {BLOCKS}, start_seed: 0, num_scenarios: {maps}}}}}"
-    return f"{command}  # maps-{maps}.yaml: env_options: {yaml}"
+        root = Path(__file__).resolve().parents[1]
+        command += f" && drivelab train --resume {run_dir.resolve().relative_to(root)} --steps {steps}"
+    return command
 
 
 def ensure_trained(maps: int, seed: int, steps: int) -> Path:

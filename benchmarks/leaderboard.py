@@ -372,7 +372,7 @@ ENTRIES: tuple[Entry, ...] = (
             _args(
                 f"--algo ppo --env blocks --obs lidar,measurements,waypoints --action continuous "
                 f"--reward metadrive --n-envs 8 --steps 81920 --eval-maps {UNSEEN_MAPS} "
-                f"--eval-every 81920 --eval-episodes 1 --config maps-{maps}.yaml"
+                f"--eval-every 81920 --eval-episodes 1 --config benchmarks/maps-{maps}.yaml"
             ),
             judge="maps",
             reuse=f"generalisation/ppo-maps{maps}-s{{seed}}",
@@ -511,8 +511,7 @@ def measure(entry: Entry, seeds: list[int], episodes: int, train: bool, evaluate
               "seeds": {}, "missing": []}  # fmt: skip
     for seed in seeds:
         run = entry.run_dir(seed)
-        # generalisation.py trains from its own values (checked there against each run's config)
-        if (run / "config.yaml").is_file() and entry.reused_by != "benchmarks/generalisation.py":
+        if (run / "config.yaml").is_file():
             check_reuse(run, entry.command(seed), ROOT)
         if not (run / "model.zip").exists():
             if not train or entry.reuse:

@@ -61,3 +61,18 @@ def test_rows_and_groups(bench):
     assert 0.1 <= low <= 0.2 <= high <= 0.3  # the bootstrap over two seeds stays within their values
     single = bench.group_row(10, rows[:1])
     assert math.isnan(single["gap_ci90_seeds"][0])
+
+
+def test_the_listed_command_trains_the_runs_config(bench, monkeypatch):
+    """The command the report lists (with benchmarks/maps-N.yaml) makes the config the script
+    trains from its own values: a reader who pastes it gets the same run."""
+    from drivelab.cli import train_config
+    from drivelab.config import build_config
+    from drivelab.hyperparams import with_shipped_hyperparams
+
+    monkeypatch.chdir(SCRIPT.parents[1])
+    for maps in (1, 10, 100):
+        arguments = bench.train_arguments(maps, 2, 4096)
+        assert arguments[0] == "train"
+        expected = build_config(with_shipped_hyperparams(bench.run_values(maps, 2, 4096)))
+        assert train_config(arguments[1:]) == expected
