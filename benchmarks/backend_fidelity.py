@@ -111,7 +111,10 @@ def main() -> None:
     args = parser.parse_args()
     unknown = [name for name in args.scenarios.split(",") if name not in SUPPORTED]
     if unknown or args.episodes < 1:
-        problem = f"--scenarios from {', '.join(SUPPORTED)}" if unknown else "--episodes < 1"
+        if unknown:
+            problem = f"--scenarios: unknown {unknown[0]!r} (choose from {', '.join(SUPPORTED)})"
+        else:
+            problem = "--episodes < 1"
         print(f"error: {problem}", file=sys.stderr)
         raise SystemExit(2)
     rows, timings = [], {}

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import inspect
 import os
 import shlex
 import sys
@@ -19,22 +20,45 @@ def command_line(argv: list[str] | None = None) -> str:
     return " ".join([*settings, "python", shlex.join(sys.argv if argv is None else argv)])
 
 
+def _effective(config):
+    """``config`` with the hyper-parameters that only restate the agent class's own defaults dropped
+    (a recipe pinning SB3's ``clip_range=0.2`` trains the run that left it out)."""
+    from drivelab.agents.registry import ALGORITHMS
+
+    spec = ALGORITHMS.get(config.algo)
+    try:
+        parameters = inspect.signature(spec.agent_class().__init__).parameters if spec else {}
+    except (TypeError, ValueError, ImportError):
+        parameters = {}
+    defaults = {k: p.default for k, p in parameters.items() if p.default is not inspect.Parameter.empty}
+    kept = {k: v for k, v in (config.hyperparams or {}).items() if k not in defaults or defaults[k] != v}
+    return dataclasses.replace(config, hyperparams=kept)
+
+
+def _stop(message: str) -> None:
+    print(f"error: {message}", file=sys.stderr)
+    raise SystemExit(2)
+
+
 def check_reuse(run_dir: Path, arguments: list[str], root: Path) -> None:
     """Stop the benchmark (one ``error:`` line, exit 2) when the finished run it would reuse is not
     the run ``drivelab ARGUMENTS`` trains today (``arguments`` start with ``train``; paths in them
-    from ``root``): a table must not list one command beside the numbers of another."""
+    from ``root``): a table must not list one command beside the numbers of another. Values equal
+    to the agent's own defaults count as given or not alike."""
     from drivelab.cli import train_config
+    from drivelab.errors import UsageError
     from drivelab.training.evaluate import load_run_config
 
-    with contextlib.chdir(root):
-        wanted = train_config(arguments[1:])
-    have = load_run_config(run_dir)
+    try:
+        with contextlib.chdir(root):
+            wanted = _effective(train_config(arguments[1:]))
+        have = _effective(load_run_config(run_dir))
+    except UsageError as exc:
+        _stop(f"{run_dir}: {exc}")
     if have != wanted:
         names = [field.name for field in dataclasses.fields(have)]
         differ = [name for name in names if getattr(have, name) != getattr(wanted, name)]
-        print(
-            f"error: {run_dir} is not the run of `drivelab {shlex.join(arguments)}` ({', '.join(differ)} "
-            "differ): remove it to train it again",
-            file=sys.stderr,
+        _stop(
+            f"{run_dir} is not the run of `drivelab {shlex.join(arguments)}` ({', '.join(differ)} differ): "
+            "remove it to train it again"
         )
-        raise SystemExit(2)

@@ -5,6 +5,8 @@ function it calls from another module leaves the cache in place, and the kernel 
 old code (numba's documented limitation, "cache invalidation fails to recognize changes in symbols
 defined in another file"). drivelab's kernels call each other across modules, so the cache lives in
 a folder named after a hash of every source file of the package: any edit starts a fresh cache.
+The folder is set through ``NUMBA_CACHE_DIR`` (numba reads it again when it compiles, and child
+processes inherit it), so other libraries' cached kernels in the same process land there too.
 """
 
 from __future__ import annotations
@@ -13,27 +15,32 @@ import hashlib
 import os
 import shutil
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parent
 PREFIX = "drivelab-numba-"
-STALE_S = 86_400  # another version's folder unused this long is removed
+STALE_S = 7 * 86_400  # another version's folder not imported for this long is removed
 
 
 def source_digest(root: Path = PACKAGE) -> str:
     """A hash of every ``.py`` file under ``root``: their paths and contents."""
     digest = hashlib.sha256()
     for path in sorted(root.rglob("*.py")):
-        digest.update(path.relative_to(root).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+        relative = path.relative_to(root)
+        if any(part.startswith(".") for part in relative.parts) or not path.is_file():
+            continue  # an editor's lock link (.#cli.py) or a broken link is no source
+        try:
+            digest.update(relative.as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+        except OSError:
+            continue
     return digest.hexdigest()[:16]
 
 
 def cache_folder(digest: str, environ: dict[str, str] | None = None) -> Path:
     """Where this version's kernels are cached: under ``NUMBA_CACHE_DIR`` when the user set one
     (a child process inherits the folder itself and keeps it), else beside the sources, else in the
-    temporary folder (a read-only install)."""
+    user's own cache folder (a read-only install; never a folder other users can write)."""
     environ = os.environ if environ is None else environ
     given = environ.get("NUMBA_CACHE_DIR")
     if given:
@@ -43,13 +50,13 @@ def cache_folder(digest: str, environ: dict[str, str] | None = None) -> Path:
     elif os.access(PACKAGE / "__pycache__", os.W_OK) or os.access(PACKAGE, os.W_OK):
         base = PACKAGE / "__pycache__"
     else:
-        base = Path(tempfile.gettempdir())
+        base = Path(environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "drivelab"
     return base / f"{PREFIX}{digest}"
 
 
 def _remove_stale(folder: Path) -> None:
-    """Other versions' folders beside ``folder`` unused for a day (an edited tree leaves one per
-    version it ran)."""
+    """Other versions' folders beside ``folder`` that no process has imported for ``STALE_S`` (an
+    edited tree leaves one per version it ran; ``configure`` touches its own on every import)."""
     try:
         siblings = [p for p in folder.parent.glob(f"{PREFIX}*") if p != folder and p.is_dir()]
         for old in siblings:
@@ -62,6 +69,11 @@ def _remove_stale(folder: Path) -> None:
 def configure() -> Path:
     """Point numba's cache at this version's folder (before any drivelab kernel is decorated)."""
     folder = cache_folder(source_digest())
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        os.utime(folder)  # in use: another version's configure leaves it alone
+    except OSError:
+        pass  # numba says so itself if it cannot write there
     os.environ["NUMBA_CACHE_DIR"] = str(folder)
     numba = sys.modules.get("numba")
     if numba is not None:  # imported before drivelab: its config has read the environment already

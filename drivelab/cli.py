@@ -119,11 +119,10 @@ def _new_run_config(config: Path | None, cli: dict, video: bool, hyperparams: li
     if video:
         values["eval_video"] = True
     if hyperparams or switches:
-        values["hyperparams"] = {
-            **values.get("hyperparams", {}),
-            **_parse_pairs(hyperparams, "--hyperparams"),
-            **switches,
-        }
+        given = values.get("hyperparams") or {}
+        if not isinstance(given, dict):
+            raise UsageError(f"config field 'hyperparams' must be a mapping, got {type(given).__name__}")
+        values["hyperparams"] = {**given, **_parse_pairs(hyperparams, "--hyperparams"), **switches}
     return build_config(with_shipped_hyperparams(values))
 
 

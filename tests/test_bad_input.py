@@ -341,6 +341,11 @@ TRAIN_CASES = {
         {},
         "'bc' needs a positive expert_cruise_speed_mps and expert_lateral_accel_mps2",
     ),
+    "config file's hyperparams a list, with -H": (
+        ["--config", "h.yaml", "-H", "gamma=0.9"],
+        {"h.yaml": b"algo: ppo\nhyperparams: [gamma]\n"},
+        "config field 'hyperparams' must be a mapping, got list",
+    ),
 }
 
 

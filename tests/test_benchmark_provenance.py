@@ -51,3 +51,26 @@ def test_a_run_is_reused_only_when_the_command_trains_its_config(tmp_path, capsy
         error = capsys.readouterr().err
         assert stop.value.code == 2 and error.startswith("error: ") and len(error.splitlines()) == 1
         assert ("steps differ" in error) if changed[0] == "--steps" else ("hyperparams differ" in error)
+
+
+def test_pinning_an_agents_own_defaults_trains_the_same_run(tmp_path, capsys):
+    """A recipe that pins SB3's defaults (clip_range 0.2, as the zoo's PPO cards do) names the run
+    trained without them; a broken run config is one error line."""
+    from drivelab.cli import train_config
+
+    provenance = _provenance()
+    arguments = ["train", "--algo", "ppo", "--env", "highway", "--obs", "kinematics", "--steps", "2048",
+                 "-H", "n_steps=256", "--seed", "1", "--runs-dir", "runs", "--name", "r"]  # fmt: skip
+    run = tmp_path / "runs" / "r"
+    run.mkdir(parents=True)
+    (run / "config.yaml").write_text(yaml.safe_dump(train_config(arguments[1:]).to_dict()))
+    assert "clip_range" not in train_config(arguments[1:]).hyperparams  # highway's entry leaves it out
+    provenance.check_reuse(run, [*arguments, "-H", "clip_range=0.2", "-H", "ent_coef=0.0"], tmp_path)
+    with pytest.raises(SystemExit):
+        provenance.check_reuse(run, [*arguments, "-H", "clip_range=0.3"], tmp_path)
+    capsys.readouterr()
+    (run / "config.yaml").write_text("algo: ppo\nold_field: 1\n")
+    with pytest.raises(SystemExit) as stop:
+        provenance.check_reuse(run, arguments, tmp_path)
+    error = capsys.readouterr().err
+    assert stop.value.code == 2 and error.startswith("error: ") and len(error.splitlines()) == 1

@@ -47,3 +47,32 @@ def test_other_versions_folders_unused_for_a_day_are_removed(tmp_path):
     os.utime(stale, (old, old))
     _numba_cache._remove_stale(current)
     assert current.is_dir() and recent.is_dir() and not stale.exists()
+
+
+def test_editor_lock_links_and_broken_links_are_no_source(tmp_path):
+    """Emacs leaves ``.#file.py`` links to nowhere while a file has unsaved edits: importing
+    drivelab must not fail on them, and they do not change the folder."""
+    clean = _numba_cache.source_digest(_tree(tmp_path, "def f():\n    return 1\n"))
+    (tmp_path / ".#a.py").symlink_to("user@host.1234:1")
+    (tmp_path / "sub" / "gone.py").symlink_to(tmp_path / "missing.py")
+    assert _numba_cache.source_digest(tmp_path) == clean
+
+
+def test_a_read_only_install_caches_in_the_users_own_folder(tmp_path, monkeypatch):
+    monkeypatch.setattr(_numba_cache.os, "access", lambda path, mode: False)
+    folder = _numba_cache.cache_folder("abc", {"XDG_CACHE_HOME": str(tmp_path)})
+    assert folder == tmp_path / "drivelab" / "drivelab-numba-abc"
+
+
+def test_configure_marks_its_folder_in_use(tmp_path, monkeypatch):
+    before = numba.config.CACHE_DIR
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))  # restored after the test
+    old = time.time() - 2 * _numba_cache.STALE_S
+    folder = _numba_cache.cache_folder(_numba_cache.source_digest(), dict(os.environ))
+    folder.mkdir()
+    os.utime(folder, (old, old))
+    try:
+        assert _numba_cache.configure() == folder
+        assert time.time() - folder.stat().st_mtime < 60  # another version would keep it
+    finally:
+        numba.config.CACHE_DIR = before
