@@ -32,18 +32,24 @@ def test_the_thread_settings_are_the_environments_and_the_arguments_are_quoted(m
     )
 
 
+def _run_of(root, env: str, option: str):
+    """``drivelab train`` arguments of a small PPO run on ``env`` and its run folder under ``root``,
+    holding the config those arguments make (as a finished run's)."""
+    from drivelab.cli import train_config
+
+    arguments = ["train", "--algo", "ppo", "--env", env, "--obs", "kinematics", "--steps", "2048",
+                 "-H", option, "--seed", "1", "--runs-dir", "runs", "--name", "r"]  # fmt: skip
+    run = root / "runs" / "r"
+    run.mkdir(parents=True)
+    (run / "config.yaml").write_text(yaml.safe_dump(train_config(arguments[1:]).to_dict()))
+    return arguments, run
+
+
 def test_a_run_is_reused_only_when_the_command_trains_its_config(tmp_path, capsys):
     """A benchmark that finds a finished run lists its command beside the run's numbers: a run of
     another config (here fewer steps, or other shipped hyper-parameters) stops it in one line."""
-
-    from drivelab.cli import train_config
-
     provenance = _provenance()
-    arguments = ["train", "--algo", "ppo", "--env", "merge", "--obs", "kinematics", "--steps", "2048",
-                 "-H", "gamma=0.9", "--seed", "1", "--runs-dir", "runs", "--name", "r"]  # fmt: skip
-    run = tmp_path / "runs" / "r"
-    run.mkdir(parents=True)
-    (run / "config.yaml").write_text(yaml.safe_dump(train_config(arguments[1:]).to_dict()))
+    arguments, run = _run_of(tmp_path, "merge", "gamma=0.9")
     provenance.check_reuse(run, arguments, tmp_path)  # the same run: reused
     for changed in (["--steps", "4096"], ["-H", "n_steps=64"]):
         with pytest.raises(SystemExit) as stop:
@@ -56,15 +62,9 @@ def test_a_run_is_reused_only_when_the_command_trains_its_config(tmp_path, capsy
 def test_pinning_an_agents_own_defaults_trains_the_same_run(tmp_path, capsys):
     """A recipe that pins SB3's defaults (clip_range 0.2, as the zoo's PPO cards do) names the run
     trained without them; a broken run config is one error line."""
-    from drivelab.cli import train_config
-
     provenance = _provenance()
-    arguments = ["train", "--algo", "ppo", "--env", "highway", "--obs", "kinematics", "--steps", "2048",
-                 "-H", "n_steps=256", "--seed", "1", "--runs-dir", "runs", "--name", "r"]  # fmt: skip
-    run = tmp_path / "runs" / "r"
-    run.mkdir(parents=True)
-    (run / "config.yaml").write_text(yaml.safe_dump(train_config(arguments[1:]).to_dict()))
-    assert "clip_range" not in train_config(arguments[1:]).hyperparams  # highway's entry leaves it out
+    arguments, run = _run_of(tmp_path, "highway", "n_steps=256")
+    assert "clip_range" not in yaml.safe_load((run / "config.yaml").read_text())["hyperparams"]
     provenance.check_reuse(run, [*arguments, "-H", "clip_range=0.2", "-H", "ent_coef=0.0"], tmp_path)
     with pytest.raises(SystemExit):
         provenance.check_reuse(run, [*arguments, "-H", "clip_range=0.3"], tmp_path)
