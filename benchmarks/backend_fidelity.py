@@ -34,6 +34,9 @@ from drivelab.envs.backends.fast.backend import FastBackend  # noqa: E402
 from drivelab.envs.backends.highway import HighwayBackend  # noqa: E402
 from drivelab.envs.scenarios import FAST_SCENARIOS  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import stop  # noqa: E402
+
 # highway-env's traffic scenarios: the town has its own (benchmarks/town_fidelity.py), the circuits
 # have no traffic, and the block maps no highway-env backend
 SUPPORTED = ("highway", "merge", "roundabout", "intersection", "racetrack")
@@ -110,13 +113,10 @@ def main() -> None:
     parser.add_argument("--scenarios", default=",".join(SUPPORTED))
     args = parser.parse_args()
     unknown = [name for name in args.scenarios.split(",") if name not in SUPPORTED]
-    if unknown or args.episodes < 1:
-        if unknown:
-            problem = f"--scenarios: unknown {unknown[0]!r} (choose from {', '.join(SUPPORTED)})"
-        else:
-            problem = "--episodes < 1"
-        print(f"error: {problem}", file=sys.stderr)
-        raise SystemExit(2)
+    if unknown:
+        stop(f"--scenarios: unknown {unknown[0]!r} (choose from {', '.join(SUPPORTED)})")
+    if args.episodes < 1:
+        stop("--episodes < 1")
     rows, timings = [], {}
     for name in args.scenarios.split(","):
         scenario = SCENARIOS[name]

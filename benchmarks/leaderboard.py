@@ -49,7 +49,7 @@ from drivelab.training.stats import bootstrap_ci  # noqa: E402
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from nocrash_town import SCENARIO as NOCRASH_SCENARIO  # noqa: E402
 from nocrash_town import agents as nocrash_agents  # noqa: E402
-from provenance import check_reuse  # noqa: E402
+from provenance import check_reuse, stop  # noqa: E402
 from seed003_osx import DEFAULT_STEPS as OSX_STEPS  # noqa: E402
 from seed003_osx import recipe as osx_recipe  # noqa: E402
 from town_competence import LEARNERS as TOWN_LEARNERS  # noqa: E402
@@ -801,15 +801,12 @@ def main() -> None:
     unknown = [s for s in wanted if s not in scenarios]
     rows = args.entries.split(",") if args.entries else None
     unknown_rows = [r for r in rows or [] if r not in {e.name for e in ENTRIES if e.scenario in wanted}]
-    if unknown or unknown_rows or args.episodes < 1:
-        if unknown:
-            problem = f"unknown scenario {unknown[0]!r} (known: {', '.join(scenarios)})"
-        elif unknown_rows:
-            problem = f"no entry {unknown_rows[0]!r} in {', '.join(wanted)}"
-        else:
-            problem = "--episodes < 1"
-        print(f"error: {problem}", file=sys.stderr)
-        raise SystemExit(2)
+    if unknown:
+        stop(f"unknown scenario {unknown[0]!r} (known: {', '.join(scenarios)})")
+    if unknown_rows:
+        stop(f"no entry {unknown_rows[0]!r} in {', '.join(wanted)}")
+    if args.episodes < 1:
+        stop("--episodes < 1")
     seeds = [int(s) for s in args.seeds.split(",")]
     if args.list:
         for entry in (e for e in ENTRIES if e.scenario in wanted):

@@ -35,7 +35,8 @@ def _effective(config):
     return dataclasses.replace(config, hyperparams=kept)
 
 
-def _stop(message: str) -> None:
+def stop(message: str) -> None:
+    """A benchmark's bad input: one ``error:`` line, exit 2, before anything is written."""
     print(f"error: {message}", file=sys.stderr)
     raise SystemExit(2)
 
@@ -54,11 +55,11 @@ def check_reuse(run_dir: Path, arguments: list[str], root: Path) -> None:
             wanted = _effective(train_config(arguments[1:]))
         have = _effective(load_run_config(run_dir))
     except UsageError as exc:
-        _stop(f"{run_dir}: {exc}")
+        stop(f"{run_dir}: {exc}")
     if have != wanted:
         names = [field.name for field in dataclasses.fields(have)]
         differ = [name for name in names if getattr(have, name) != getattr(wanted, name)]
-        _stop(
+        stop(
             f"{run_dir} is not the run of `drivelab {shlex.join(arguments)}` ({', '.join(differ)} differ): "
             "remove it to train it again"
         )
