@@ -1,6 +1,7 @@
 """Train, pack and measure the shipped agents (``drivelab/zoo/``) from their recorded commands.
 
     .venv/bin/python benchmarks/zoo_build.py [NAME ...] [--retrain] [--measure-only | --check-only]
+    .venv/bin/python benchmarks/zoo_build.py [NAME ...] --verify
 
 For each agent of ``AGENTS`` (all by default): ``drivelab train`` with its recorded arguments into
 ``benchmarks/runs/zoo/<name>`` (skipped when that run already has its final model, unless
@@ -13,6 +14,12 @@ the numbers ``tests/training/test_zoo.py`` reproduces (for the camera agents, it
 ``CAMERA_CHECK_DURATION_S``, as the card records). Every command runs with one thread
 (``OMP_NUM_THREADS=1``). ``--measure-only`` re-measures the agents already in the zoo,
 ``--check-only`` records only their check. Writes ``benchmarks/results/zoo.md`` from the cards.
+
+``--verify`` checks that the shipped agents are what their commands train today: each recipe is
+trained afresh into ``benchmarks/runs/zoo-verify/<name>`` and packed into a scratch zoo, and its
+model is compared with the shipped one, value for value (``zoo.model_differences``); the zoo is
+left as it is. Writes ``benchmarks/results/zoo_verify.md`` (and ``.json``; an agent verified again
+replaces its row).
 """
 
 from __future__ import annotations
@@ -22,14 +29,18 @@ import json
 import os
 import platform
 import shlex
+import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 RUNS = Path("benchmarks/runs/zoo")
 REPORTS = Path("benchmarks/runs/zoo-eval")
+VERIFY_RUNS = Path("benchmarks/runs/zoo-verify")
+VERIFY_RESULTS = ROOT / "benchmarks" / "results" / "zoo_verify"
 DRIVELAB = [sys.executable, "-m", "drivelab.cli"]
 CHECK_EPISODES = 3
 # The camera-perception agents (follow-line/lane, ~25 ms a step) play their 3 check episodes cut
@@ -39,7 +50,7 @@ CAMERA_CHECK_DURATION_S = 20
 
 sys.path.insert(0, str(Path(__file__).parent))
 from leaderboard import BLOCKS_DAGGER, HIGHWAY_DQN, RACETRACK_DAGGER, UNSEEN_MAPS, UNTUNED_PPO  # noqa: E402
-from provenance import check_reuse  # noqa: E402
+from provenance import check_reuse, command_line  # noqa: E402
 from town_competence import recipe as town_recipe  # noqa: E402
 
 # highway-env's documented PPO values, pinned in the PPO recipes below: their agents were trained
@@ -233,6 +244,81 @@ def train_and_pack(name: str, spec: dict, retrain: bool) -> None:
     pack(run_dir, name, spec["description"], "drivelab " + shlex.join(arguments), timing)
 
 
+def tree() -> str:
+    """The commit of the tree these scripts run from, marked when tracked files have changed."""
+
+    def git(*arguments: str) -> str:
+        return subprocess.run(["git", "-C", str(ROOT), *arguments], capture_output=True, text=True).stdout
+
+    changed = git("status", "--porcelain", "--untracked-files=no").strip()
+    return git("rev-parse", "--short", "HEAD").strip() + (" with uncommitted changes" if changed else "")
+
+
+def verify(name: str, spec: dict, zoo_dir: Path | None = None) -> dict:
+    """Train ``name``'s recipe afresh (into ``VERIFY_RUNS/name``, replacing an earlier check's run),
+    pack it into a scratch zoo as ``train_and_pack`` would, and compare its model with the one in
+    ``zoo_dir`` (default: the package's zoo); the zoo is not touched. Returns the check's record."""
+    from drivelab.training.zoo import ZOO_DIR, model_differences, pack
+
+    shipped = (ZOO_DIR if zoo_dir is None else zoo_dir) / name
+    run_dir = ROOT / VERIFY_RUNS / name
+    if run_dir.exists():
+        shutil.rmtree(run_dir)
+    arguments = ["train", *spec["train"], "--runs-dir", str(VERIFY_RUNS), "--name", name]
+    wall, cpu = drivelab(arguments)
+    with tempfile.TemporaryDirectory() as scratch:
+        packed = pack(
+            run_dir, name, spec["description"], "drivelab " + shlex.join(arguments), zoo_dir=Path(scratch)
+        )
+        differences = model_differences(shipped / "model.zip", packed / "model.zip")
+    card = json.loads((shipped / "card.json").read_text())
+    return {
+        "name": name,
+        "identical": not differences,
+        "differences": differences,
+        "shipped_command": card["training"]["command"],
+        "command": "drivelab " + shlex.join(arguments),
+        "tree": tree(),
+        "date": time.strftime("%Y-%m-%d"),
+        "machine": machine(),
+        "train_wall_s": round(wall, 1),
+        "train_cpu_s": round(cpu, 1),
+    }
+
+
+def write_verification(records: list[dict], invocation: str, path: Path = VERIFY_RESULTS) -> Path:
+    """Merge ``records`` into ``path``.json (by agent; the others are kept) and write ``path``.md."""
+    json_path, md_path = path.with_suffix(".json"), path.with_suffix(".md")
+    known = json.loads(json_path.read_text())["agents"] if json_path.is_file() else {}
+    known.update({record["name"]: {**record, "invocation": invocation} for record in records})
+    json_path.write_text(json.dumps({"agents": dict(sorted(known.items()))}, indent=2) + "\n")
+    lines = [
+        "# Shipped agents against their commands",
+        "",
+        "Each agent's recorded command, run afresh, trains the model the zoo ships: written by "
+        "`python benchmarks/zoo_build.py [NAME ...] --verify`, which trains each recipe into "
+        "`benchmarks/runs/zoo-verify/<name>`, packs it (float16 weights, no optimizer moments) into a "
+        "scratch zoo and compares every member of its `model.zip` with the shipped one, value for value. "
+        "The runs differ from the cards' commands only in `--runs-dir`.",
+        "",
+        "| agent | same model | what differs | tree | date | train min wall / CPU |",
+        "|---|---|---|---|---|---|",
+    ]
+    for name, record in sorted(known.items()):
+        differs = "; ".join(f"{member}: {how}" for member, how in record["differences"].items()) or "nothing"
+        lines.append(
+            f"| {name} | {'yes' if record['identical'] else 'no'} | {differs} | {record['tree']} | "
+            f"{record['date']} | {record['train_wall_s'] / 60:.1f} / {record['train_cpu_s'] / 60:.1f} |"
+        )
+    lines += ["", "Commands (each agent's row was measured by the first; `machine` per row):", ""]
+    for name, record in sorted(known.items()):
+        lines.append(
+            f"- {name}: `{record['invocation']}` ({record['machine']}); trained `{record['command']}`"
+        )
+    md_path.write_text("\n".join(lines) + "\n")
+    return md_path
+
+
 def capped_episodes(agent_dir: Path, episodes: int, duration_s: float) -> list[dict]:
     """The per-episode metrics of ``drivelab enjoy`` on the agent in ``agent_dir`` (the scenario's
     fixed evaluation episodes, greedy), with every episode cut at ``duration_s`` seconds."""
@@ -383,12 +469,27 @@ def main() -> None:
     parser.add_argument("--retrain", action="store_true", help="train again even if the run has its model")
     parser.add_argument("--measure-only", action="store_true", help="only re-measure the packed agents")
     parser.add_argument("--check-only", action="store_true", help="only record the packed agents' check")
+    parser.add_argument("--verify", action="store_true", help="retrain and compare with the shipped models")
     args = parser.parse_args()
     unknown = [name for name in args.names if name not in AGENTS]
     if unknown:
         parser.error(f"unknown agent {unknown[0]!r} (known: {', '.join(AGENTS)})")
+    if args.verify and (args.retrain or args.measure_only or args.check_only):
+        parser.error(
+            "--verify leaves the zoo as it is: it takes no --retrain, --measure-only or --check-only"
+        )
     sys.path.insert(0, str(ROOT))
     os.chdir(ROOT)
+    if args.verify:
+        invocation = command_line()
+        for name in args.names or AGENTS:
+            record = verify(name, AGENTS[name])
+            print(
+                f"{name}: {'the shipped model' if record['identical'] else record['differences']}", flush=True
+            )
+            path = write_verification([record], invocation)
+        print(f"wrote {path}")
+        return
     for name in args.names or AGENTS:
         if not (args.measure_only or args.check_only):
             train_and_pack(name, AGENTS[name], args.retrain)

@@ -19,10 +19,12 @@ recorded commands.
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import shutil
 import tempfile
+import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -144,8 +146,6 @@ def _store_half_precision(path: Path) -> None:
     loaders copy them into the float32 networks (``load_state_dict`` casts), so a model loads as
     before, in half the bytes; its actions change in the last digits (the card's numbers are
     measured on the shipped weights)."""
-    import zipfile
-
     from drivelab.agents.storage import tensors_from_bytes, tensors_to_bytes
 
     with zipfile.ZipFile(path) as archive:
@@ -228,6 +228,91 @@ def pack(
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     return target
+
+
+def model_differences(first: str | Path, second: str | Path) -> dict[str, str]:
+    """How the model zips ``first`` and ``second`` differ, member by member, in the values they
+    hold: {} when every member holds the same values (tensors and arrays element for element, bit
+    for bit, JSON as parsed, less the wall-clock time of SB3's episode records, ``t``). A differing
+    member's entry says how: missing from one, other keys, other shapes, or the largest absolute
+    difference of its numbers. Read like every model: no unpickling."""
+    with zipfile.ZipFile(first) as one, zipfile.ZipFile(second) as two:
+        left = {name: one.read(name) for name in one.namelist()}
+        right = {name: two.read(name) for name in two.namelist()}
+    differences = {}
+    for name in sorted(set(left) | set(right)):
+        if name not in right or name not in left:
+            differences[name] = f"only in {str(first if name in left else second)!r}"
+        elif left[name] != right[name]:
+            difference = _member_difference(name, left[name], right[name])
+            if difference is not None:
+                differences[name] = difference
+    return differences
+
+
+def _member_difference(name: str, left: bytes, right: bytes) -> str | None:
+    """How two versions of one model-zip member differ in their values (None: they do not)."""
+    from drivelab.agents.storage import read_arrays, tensors_from_bytes
+
+    if name.endswith(".json"):
+        a, b = _without_clock(json.loads(left)), _without_clock(json.loads(right))
+        if a == b:
+            return None
+        if isinstance(a, dict) and isinstance(b, dict):
+            keys = sorted(k for k in set(a) | set(b) if a.get(k, b) != b.get(k, a))
+            return "other values of " + ", ".join(map(str, keys))
+        return "other values"
+    if name.endswith(".pt"):
+        a, b = _leaves(tensors_from_bytes(left)), _leaves(tensors_from_bytes(right))
+    elif name.endswith(".npz"):
+        a, b = read_arrays(left), read_arrays(right)
+    elif name.endswith(".npy"):
+        a, b = (
+            {"": np.load(io.BytesIO(left), allow_pickle=False)},
+            {"": np.load(io.BytesIO(right), allow_pickle=False)},
+        )
+    else:
+        return "other bytes"
+    if set(a) != set(b):
+        return "other entries: " + ", ".join(sorted(set(a) ^ set(b)))
+    largest, shapes = 0.0, []
+    for key in sorted(a):
+        x, y = np.asarray(a[key]), np.asarray(b[key])
+        if x.shape != y.shape:
+            shapes.append(key)
+        elif not np.array_equal(x, y, equal_nan=x.dtype.kind in "fc"):
+            largest = max(largest, float(np.max(np.abs(x.astype(np.float64) - y.astype(np.float64)))))
+    if shapes:
+        return "other shapes: " + ", ".join(shapes)
+    return None if largest == 0.0 else f"max |difference| {largest:.3g}"
+
+
+def _without_clock(state):
+    """A model's JSON without the wall-clock seconds of SB3's episode records (``t`` of each entry
+    of ``ep_info_buffer``: when the Monitor saw the episode end, which no two runs share)."""
+    if not isinstance(state, dict) or not isinstance(state.get("ep_info_buffer"), list):
+        return state
+    records = [
+        {k: v for k, v in e.items() if k != "t"} if isinstance(e, dict) else e
+        for e in state["ep_info_buffer"]
+    ]
+    return {**state, "ep_info_buffer": records}
+
+
+def _leaves(state, prefix: str = "") -> dict[str, np.ndarray]:
+    """Every tensor and number of nested dicts/lists of them, as arrays keyed by their paths."""
+    import torch
+
+    if isinstance(state, dict):
+        items = state.items()
+    elif isinstance(state, (list, tuple)):
+        items = enumerate(state)
+    else:
+        if not isinstance(state, torch.Tensor):
+            return {prefix: np.asarray(state)}
+        tensor = state.detach()  # numpy has no bfloat16; float32 holds its every value
+        return {prefix: (tensor.float() if tensor.dtype == torch.bfloat16 else tensor).numpy()}
+    return {path: leaf for key, value in items for path, leaf in _leaves(value, f"{prefix}/{key}").items()}
 
 
 def add_evaluation(name: str, evaluation: dict, zoo_dir: Path | None = None) -> dict:

@@ -317,3 +317,86 @@ def test_every_cards_training_command_is_its_build_recipe():
                 key, text = value.split("=", 1)
                 pinned = yaml.safe_load(text)
                 assert card["hyperparams"].get(key, sb3_ppo_defaults.get(key)) == pinned, (name, key)
+
+
+def _rewrite_member(path: Path, member: str, change) -> None:
+    """Replace ``member`` of the zip ``path`` by ``change(its bytes)`` (None: drop it)."""
+    with zipfile.ZipFile(path) as archive:
+        members = {name: archive.read(name) for name in archive.namelist()}
+    members[member] = change(members[member])
+    with zipfile.ZipFile(path, "w") as archive:
+        for name, data in members.items():
+            if data is not None:
+                archive.writestr(name, data)
+
+
+def test_model_differences_compares_values_member_by_member(tiny_zoo, tmp_path):
+    from drivelab.agents.storage import tensors_from_bytes, tensors_to_bytes
+
+    shipped = tiny_zoo / "tiny" / "model.zip"
+    copy = tmp_path / "copy.zip"
+    copy.write_bytes(shipped.read_bytes())
+
+    def reclock(data: bytes) -> bytes:  # the same values in other bytes, the episodes' clock moved
+        state = json.loads(data)
+        state["ep_info_buffer"] = [{**e, "t": e["t"] + 1.0} for e in state["ep_info_buffer"]]
+        return json.dumps(state, indent=1).encode()
+
+    assert json.loads(zipfile.ZipFile(shipped).read("sb3.json"))["ep_info_buffer"]  # the clock is there
+    _rewrite_member(copy, "sb3.json", reclock)
+    assert copy.read_bytes() != shipped.read_bytes() and zoo.model_differences(shipped, copy) == {}
+
+    def nudge(data: bytes) -> bytes:
+        state = tensors_from_bytes(data)
+        policy = state["state_dicts"]["policy"]
+        key = next(k for k, v in policy.items() if v.dtype == torch.float16)
+        policy[key] = policy[key].clone()
+        policy[key].view(-1)[0] += 0.5
+        return tensors_to_bytes(state)
+
+    _rewrite_member(copy, "parameters.pt", nudge)
+    (member, how), *others = zoo.model_differences(shipped, copy).items()
+    assert member == "parameters.pt" and not others
+    assert (
+        how.startswith("max |difference| ") and abs(float(how.split()[-1]) - 0.5) < 0.01
+    )  # float16's rounding
+
+    copy.write_bytes(shipped.read_bytes())
+    _rewrite_member(
+        copy, "sb3.json", lambda data: json.dumps({**json.loads(data), "num_timesteps": 1}).encode()
+    )
+    assert zoo.model_differences(shipped, copy) == {"sb3.json": "other values of num_timesteps"}
+    _rewrite_member(copy, "sb3.json", lambda data: None)
+    assert zoo.model_differences(shipped, copy) == {"sb3.json": f"only in {str(shipped)!r}"}
+
+
+def test_verify_retrains_a_recipe_and_finds_the_shipped_model(tmp_path, monkeypatch):
+    """zoo_build --verify: a recipe trained again packs the model a zoo holds, bit for bit, and
+    one trained otherwise (another seed) is told apart; the zoo is left as it was."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    spec = importlib.util.spec_from_file_location("zoo_build", ROOT / "benchmarks" / "zoo_build.py")
+    build = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(build)
+    monkeypatch.setattr(build, "VERIFY_RUNS", tmp_path / "verify")
+    recipe = shlex.split(
+        "--algo ppo --env highway --obs kinematics --action meta --traffic empty --steps 32 --n-envs 1 "
+        "-H n_steps=32 -H batch_size=16 -H n_epochs=1 --eval-every 32 --eval-episodes 1 --seed 0"
+    )
+    build.drivelab(["train", *recipe, "--runs-dir", str(tmp_path / "runs"), "--name", "tiny"])
+    zoo_dir = tmp_path / "zoo"
+    zoo.pack(tmp_path / "runs" / "tiny", "tiny", "a test agent", "drivelab train ...", zoo_dir=zoo_dir)
+    before = (zoo_dir / "tiny" / "model.zip").read_bytes()
+    record = build.verify("tiny", {"train": recipe, "description": "a test agent"}, zoo_dir)
+    assert record["identical"] and record["differences"] == {}
+    assert record["command"].endswith(f"--runs-dir {tmp_path / 'verify'} --name tiny")
+    other = build.verify("tiny", {"train": [*recipe[:-1], "1"], "description": "another seed"}, zoo_dir)
+    assert not other["identical"] and "parameters.pt" in other["differences"]
+    assert (zoo_dir / "tiny" / "model.zip").read_bytes() == before
+    assert sorted(p.name for p in (tmp_path / "verify").iterdir()) == ["tiny"]
+    written = build.write_verification(
+        [record, {**other, "name": "other"}], "python zoo_build.py --verify", tmp_path / "v"
+    )
+    table = (tmp_path / "v.md").read_text()
+    assert "| tiny | yes | nothing |" in table and "| other | no | parameters.pt: max |difference|" in table
+    assert written == tmp_path / "v.md"
+    assert set(json.loads((tmp_path / "v.json").read_text())["agents"]) == {"other", "tiny"}
