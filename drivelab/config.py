@@ -8,10 +8,9 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import yaml
-
 from drivelab.envs.scenarios import SCENARIOS, scenario_name
 from drivelab.errors import UsageError
+from drivelab.yaml_io import dump_yaml
 
 
 @dataclass(frozen=True)
@@ -192,4 +191,4 @@ def build_config(values: dict) -> RunConfig:
 
 
 def save_yaml(config: RunConfig, path: Path) -> None:
-    path.write_text(yaml.safe_dump(config.to_dict(), sort_keys=False))
+    path.write_text(dump_yaml(config.to_dict()))

@@ -18,14 +18,27 @@ class YamlLoader(yaml.SafeLoader):
     """PyYAML's safe loader, reading ``1e-3`` as the number it is (YAML 1.2) instead of a string."""
 
 
-YamlLoader.add_implicit_resolver(
-    "tag:yaml.org,2002:float", re.compile(r"^[-+]?(?:\d+\.?\d*|\.\d+)[eE][-+]?\d+$"), list("-+0123456789.")
-)
+class YamlDumper(yaml.SafeDumper):
+    """PyYAML's safe dumper, quoting the strings that ``YamlLoader`` would read as numbers (``"1e5"``),
+    so that what it writes reads back as it was, with either loader."""
+
+
+for _resolving in (YamlLoader, YamlDumper):
+    _resolving.add_implicit_resolver(
+        "tag:yaml.org,2002:float",
+        re.compile(r"^[-+]?(?:\d+\.?\d*|\.\d+)[eE][-+]?\d+$"),
+        list("-+0123456789."),
+    )
 
 
 def parse_yaml(text: str):
     """``text`` as YAML, with ``YamlLoader``."""
     return yaml.load(text, Loader=YamlLoader)
+
+
+def dump_yaml(data) -> str:
+    """``data`` (plain containers, strings, numbers) as YAML that ``parse_yaml`` reads back equal."""
+    return yaml.dump(data, Dumper=YamlDumper, sort_keys=False)
 
 
 def load_yaml(path: str | Path) -> dict:

@@ -85,3 +85,24 @@ def test_exponent_numbers_are_numbers_in_yaml_and_on_the_command_line(tmp_path):
         "learning_rate": 0.001, "gamma": 0.99, "name": "1e"
     }  # fmt: skip
     assert parse_yaml("3e2") == 300.0 and isinstance(parse_yaml("12"), int)
+
+
+def test_a_saved_config_reads_back_as_it_was_even_strings_that_look_like_exponents(tmp_path):
+    """The run directory's config.yaml is written for drivelab's loader, which reads 1e5 as a
+    number (YAML 1.2): a run named "1e5" or a string hyper-parameter "2e-3" stays a string, and
+    the numbers stay numbers, for drivelab's loader and YAML 1.1's (RL Zoo's yaml.safe_load)."""
+    import yaml
+
+    from drivelab.config import save_yaml
+    from drivelab.yaml_io import dump_yaml, parse_yaml
+
+    config = build_config(
+        {"algo": "ppo", "name": "1e5", "steps": 100,
+         "hyperparams": {"tag": "2e-3", "learning_rate": 3e-4, "note": "+1E+2", "big": 1e300, "n_steps": 64}}
+    )  # fmt: skip
+    save_yaml(config, tmp_path / "config.yaml")
+    text = (tmp_path / "config.yaml").read_text()
+    assert "name: '1e5'" in text and "tag: '2e-3'" in text
+    assert build_config(load_yaml(tmp_path / "config.yaml")) == config
+    data = {"a": ["1e5", 1e5, ".5e1", 0.5, "-3E-2", "e5", "5e", "yes", 7, "7", float("inf")]}
+    assert parse_yaml(dump_yaml(data)) == data and yaml.safe_load(dump_yaml(data)) == data
