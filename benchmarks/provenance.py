@@ -20,17 +20,22 @@ def command_line(argv: list[str] | None = None) -> str:
     return " ".join([*settings, "python", shlex.join(sys.argv if argv is None else argv)])
 
 
-def _effective(config):
-    """``config`` with the hyper-parameters that only restate the agent class's own defaults dropped
-    (a recipe pinning SB3's ``clip_range=0.2`` trains the run that left it out)."""
+def agent_defaults(algo: str) -> dict:
+    """The keyword defaults of ``algo``'s agent class (SB3's own for the SB3 agents): {} when unknown."""
     from drivelab.agents.registry import ALGORITHMS
 
-    spec = ALGORITHMS.get(config.algo)
+    spec = ALGORITHMS.get(algo)
     try:
         parameters = inspect.signature(spec.agent_class().__init__).parameters if spec else {}
     except (TypeError, ValueError, ImportError):
         parameters = {}
-    defaults = {k: p.default for k, p in parameters.items() if p.default is not inspect.Parameter.empty}
+    return {k: p.default for k, p in parameters.items() if p.default is not inspect.Parameter.empty}
+
+
+def _effective(config):
+    """``config`` with the hyper-parameters that only restate the agent class's own defaults dropped
+    (a recipe pinning SB3's ``clip_range=0.2`` trains the run that left it out)."""
+    defaults = agent_defaults(config.algo)
     kept = {k: v for k, v in (config.hyperparams or {}).items() if k not in defaults or defaults[k] != v}
     return dataclasses.replace(config, hyperparams=kept)
 

@@ -50,7 +50,7 @@ CAMERA_CHECK_DURATION_S = 20
 
 sys.path.insert(0, str(Path(__file__).parent))
 from leaderboard import BLOCKS_DAGGER, HIGHWAY_DQN, RACETRACK_DAGGER, UNSEEN_MAPS, UNTUNED_PPO  # noqa: E402
-from provenance import check_reuse, command_line  # noqa: E402
+from provenance import agent_defaults, check_reuse, command_line  # noqa: E402
 from town_competence import recipe as town_recipe  # noqa: E402
 
 # highway-env's documented PPO values, pinned in the PPO recipes below: their agents were trained
@@ -271,11 +271,13 @@ def verify(name: str, spec: dict, zoo_dir: Path | None = None) -> dict:
             run_dir, name, spec["description"], "drivelab " + shlex.join(arguments), zoo_dir=Path(scratch)
         )
         differences = model_differences(shipped / "model.zip", packed / "model.zip")
+        pinned = pinned_defaults(shipped / "model.zip", packed / "model.zip", differences)
     card = json.loads((shipped / "card.json").read_text())
     return {
         "name": name,
-        "identical": not differences,
+        "identical": not differences or pinned is not None,
         "differences": differences,
+        "pinned_defaults": pinned,
         "shipped_command": card["training"]["command"],
         "command": "drivelab " + shlex.join(arguments),
         "tree": tree(),
@@ -284,6 +286,25 @@ def verify(name: str, spec: dict, zoo_dir: Path | None = None) -> dict:
         "train_wall_s": round(wall, 1),
         "train_cpu_s": round(cpu, 1),
     }
+
+
+def pinned_defaults(shipped: Path, packed: Path, differences: dict) -> dict | None:
+    """When the two models differ only in the hyper-parameters their SB3 record lists, and those
+    that one lists and the other does not are the agent's own defaults (a recipe pinning SB3's
+    ``clip_range=0.2`` trains the model of one that leaves it out): those values; else None."""
+    import zipfile
+
+    if differences != {"sb3.json": "other values of hyperparams"}:
+        return None
+    records = [json.loads(zipfile.ZipFile(path).read("sb3.json")) for path in (shipped, packed)]
+    one, two = (record["hyperparams"] for record in records)
+    defaults = agent_defaults(records[0]["algo"])
+    extra = {k: one.get(k, two.get(k)) for k in set(one) ^ set(two)}
+    if any(one[k] != two[k] for k in set(one) & set(two)) or any(
+        k not in defaults or defaults[k] != v for k, v in extra.items()
+    ):
+        return None
+    return dict(sorted(extra.items()))
 
 
 def write_verification(records: list[dict], invocation: str, path: Path = VERIFY_RESULTS) -> Path:
@@ -299,13 +320,22 @@ def write_verification(records: list[dict], invocation: str, path: Path = VERIFY
         "`python benchmarks/zoo_build.py [NAME ...] --verify`, which trains each recipe into "
         "`benchmarks/runs/zoo-verify/<name>`, packs it (float16 weights, no optimizer moments) into a "
         "scratch zoo and compares every member of its `model.zip` with the shipped one, value for value. "
-        "The runs differ from the cards' commands only in `--runs-dir`.",
+        "The runs differ from the cards' commands only in `--runs-dir`. A model counts as the same when "
+        "every member holds the same values, less the wall-clock time of SB3's episode records, or when "
+        "the only difference is that one SB3 record lists hyper-parameters at the algorithm's own "
+        "defaults (the PPO cards' commands pin highway-env's values since 2026-11-27, the runs that "
+        "trained the shipped models left SB3's defaults unnamed).",
         "",
         "| agent | same model | what differs | tree | date | train min wall / CPU |",
         "|---|---|---|---|---|---|",
     ]
     for name, record in sorted(known.items()):
         differs = "; ".join(f"{member}: {how}" for member, how in record["differences"].items()) or "nothing"
+        if record.get("pinned_defaults"):
+            values = ", ".join(f"{k} {v}" for k, v in record["pinned_defaults"].items())
+            differs = (
+                f"the SB3 record of one lists {values}, the algorithm's defaults, which the other leaves out"
+            )
         lines.append(
             f"| {name} | {'yes' if record['identical'] else 'no'} | {differs} | {record['tree']} | "
             f"{record['date']} | {record['train_wall_s'] / 60:.1f} / {record['train_cpu_s'] / 60:.1f} |"

@@ -387,16 +387,25 @@ def test_verify_retrains_a_recipe_and_finds_the_shipped_model(tmp_path, monkeypa
     zoo.pack(tmp_path / "runs" / "tiny", "tiny", "a test agent", "drivelab train ...", zoo_dir=zoo_dir)
     before = (zoo_dir / "tiny" / "model.zip").read_bytes()
     record = build.verify("tiny", {"train": recipe, "description": "a test agent"}, zoo_dir)
-    assert record["identical"] and record["differences"] == {}
+    assert record["identical"] and record["differences"] == {} and record["pinned_defaults"] is None
+    pinned = build.verify(
+        "tiny", {"train": [*recipe, "-H", "clip_range=0.2"], "description": "SB3's own"}, zoo_dir
+    )
+    assert pinned["differences"] == {"sb3.json": "other values of hyperparams"}  # the record names it
+    assert pinned["identical"] and pinned["pinned_defaults"] == {"clip_range": 0.2}  # the same model
     assert record["command"].endswith(f"--runs-dir {tmp_path / 'verify'} --name tiny")
     other = build.verify("tiny", {"train": [*recipe[:-1], "1"], "description": "another seed"}, zoo_dir)
-    assert not other["identical"] and "parameters.pt" in other["differences"]
+    assert (
+        not other["identical"]
+        and "parameters.pt" in other["differences"]
+        and other["pinned_defaults"] is None
+    )
     assert (zoo_dir / "tiny" / "model.zip").read_bytes() == before
     assert sorted(p.name for p in (tmp_path / "verify").iterdir()) == ["tiny"]
-    written = build.write_verification(
-        [record, {**other, "name": "other"}], "python zoo_build.py --verify", tmp_path / "v"
-    )
+    records = [record, {**other, "name": "other"}, {**pinned, "name": "pinned"}]
+    written = build.write_verification(records, "python zoo_build.py --verify", tmp_path / "v")
     table = (tmp_path / "v.md").read_text()
     assert "| tiny | yes | nothing |" in table and "| other | no | parameters.pt: max |difference|" in table
     assert written == tmp_path / "v.md"
-    assert set(json.loads((tmp_path / "v.json").read_text())["agents"]) == {"other", "tiny"}
+    assert "| pinned | yes | the SB3 record of one lists clip_range 0.2, the algorithm's defaults" in table
+    assert set(json.loads((tmp_path / "v.json").read_text())["agents"]) == {"other", "pinned", "tiny"}
