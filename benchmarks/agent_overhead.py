@@ -11,7 +11,6 @@ the ratio is the median over repeats. Writes ``results/agent_overhead.{json,md}`
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -27,6 +26,7 @@ import torch  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 from own_vs_sb3 import PAIRS  # noqa: E402
+from provenance import Parser  # noqa: E402
 
 from drivelab.agents.registry import get_algo  # noqa: E402
 from drivelab.envs.core import DriveEnv  # noqa: E402
@@ -63,7 +63,7 @@ def steps_per_s(algo: str, hyperparams: dict, env: gym.Env, steps: int) -> float
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=1024, help="timed steps; keep a multiple of 256")
     parser.add_argument("--repeats", type=int, default=3)
     args = parser.parse_args()

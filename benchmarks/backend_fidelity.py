@@ -17,7 +17,6 @@ much) while events stay identical, so the machine line records numpy's SIMD disp
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -35,7 +34,7 @@ from drivelab.envs.backends.highway import HighwayBackend  # noqa: E402
 from drivelab.envs.scenarios import FAST_SCENARIOS  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import stop  # noqa: E402
+from provenance import Parser, stop  # noqa: E402
 
 # highway-env's traffic scenarios: the town has its own (benchmarks/town_fidelity.py), the circuits
 # have no traffic, and the block maps no highway-env backend
@@ -108,7 +107,7 @@ def simd_dispatch() -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=200)
     parser.add_argument("--scenarios", default=",".join(SUPPORTED))
     args = parser.parse_args()

@@ -11,7 +11,6 @@ worlds stepped together are measured by ``benchmarks/batch_speed.py``.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -29,6 +28,9 @@ from drivelab.envs.core import (
 )
 from drivelab.envs.scenarios import FAST_SCENARIOS as SUPPORTED  # noqa: E402
 from drivelab.envs.scenarios import SCENARIOS  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import Parser  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 RLAD_OBS = "camera:stack=3,waypoints,measurements:stack=3"  # RLAD's observation (seed 000)
@@ -48,7 +50,7 @@ def steps_per_second(env: DriveEnv, steps: int, seed: int) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=600)
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()

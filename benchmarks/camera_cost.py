@@ -12,7 +12,6 @@ Targets (issue 4): 84 x 84 ≤ 1 ms, 256 x 256 ≤ 4 ms.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -30,6 +29,9 @@ from drivelab.envs.core import DriveEnv  # noqa: E402
 from drivelab.perception.camera import PinholeModel, render_camera, render_masks  # noqa: E402
 from drivelab.perception.lane import LANE_CAMERA, LaneState, classical_lane_masks  # noqa: E402
 from drivelab.perception.line import LineState  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import Parser  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 SCENES = {
@@ -68,7 +70,7 @@ def per_frame_ms(function, inputs: list, repeats: int) -> tuple[float, float]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--states", type=int, default=60)
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()

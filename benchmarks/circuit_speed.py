@@ -25,7 +25,6 @@ and ``.md``.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -46,7 +45,7 @@ from backend_speed import steps_per_second  # noqa: E402
 from batch_speed import _commit, baseline_rate, vector_rate  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import command_line  # noqa: E402
+from provenance import Parser, command_line  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 CIRCUITS = ("follow-line", "follow-lane")
@@ -99,7 +98,7 @@ def part_costs(env, calls: int) -> dict[str, float]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=3000)
     parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--worlds", type=int, default=64)

@@ -11,7 +11,6 @@ process's CPU time are both reported: on a shared machine the CPU time is the st
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -28,14 +27,14 @@ from drivelab.training.evaluate import evaluate_run  # noqa: E402
 from drivelab.training.run import train  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import command_line  # noqa: E402
+from provenance import Parser, command_line  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 RUNS = Path(__file__).parent / "runs"
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=20_000)
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--backends", default="fast,highway")

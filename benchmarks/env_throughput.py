@@ -9,7 +9,6 @@ median of the per-repeat ratios, so machine noise hits both sides alike.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -26,6 +25,9 @@ import numpy as np  # noqa: E402
 
 from drivelab.envs.core import DriveEnv  # noqa: E402
 from drivelab.perception.sensors import make_sensor  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import Parser  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 
@@ -60,7 +62,7 @@ def sensor_costs_ms(worlds: list, repeats: int) -> dict[str, float]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()

@@ -29,7 +29,6 @@ per number of maps, the mean over the seeds with a 90 % percentile bootstrap ove
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import os
@@ -52,7 +51,7 @@ from drivelab.training.run import resume, train  # noqa: E402
 from drivelab.training.stats import bootstrap_ci  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import command_line  # noqa: E402
+from provenance import Parser, command_line  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 RUNS = Path(__file__).parent / "runs" / "generalisation"
@@ -492,7 +491,7 @@ def earlier_evaluations(run_dir: Path, maps: int, seed: int, steps: int) -> list
 
 def main() -> None:
     global RUNS
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=50_000)
     parser.add_argument("--seeds", default="0,1,2")
     parser.add_argument("--maps", default="1,10,100")

@@ -51,7 +51,7 @@ from drivelab.training.stats import bootstrap_ci  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 from leaderboard import UNTUNED_PPO  # noqa: E402
-from provenance import check_reuse  # noqa: E402
+from provenance import Parser, check_reuse  # noqa: E402
 
 RUNS = ROOT / "benchmarks" / "runs"
 RESULTS = ROOT / "benchmarks" / "results"
@@ -253,9 +253,7 @@ def markdown(result: dict) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    parser = Parser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--env", default="highway", help=f"scenario: {', '.join(TARGETS)}")
     parser.add_argument("--recipe", default="ppo-default", help=f"training recipe: {', '.join(RECIPES)}")
     parser.add_argument("--seeds", default="0,1,2", help="training seeds, comma-separated")

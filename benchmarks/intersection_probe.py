@@ -15,7 +15,6 @@ at the exit, crash any collision: the evaluation metric of the leaderboard. Writ
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -31,6 +30,9 @@ sys.path.insert(0, str(ROOT))
 
 import drivelab  # noqa: E402
 from drivelab.envs.vector import evaluation_seeds  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import Parser  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results"
 SLOWER, IDLE, FASTER = 0, 1, 2  # highway-env's ACTIONS_LONGI
@@ -101,7 +103,7 @@ def run_probe(name: str, description: str, plans: dict, play, markdown, backends
     """A probe's command line: ``--episodes`` and ``--backends`` (default ``backends``), every
     plan's value played on every backend (``play(backend, value, episodes)`` → its counts), the
     rows written to ``benchmarks/results/<name>.{json,md}``; bad input: one ``error:`` line, exit 2."""
-    parser = argparse.ArgumentParser(description=description)
+    parser = Parser(description=description)
     parser.add_argument("--episodes", type=int, default=100)
     parser.add_argument("--backends", default=backends, help="fast (compiled core), highway (highway-env)")
     args = parser.parse_args()

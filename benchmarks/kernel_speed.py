@@ -12,14 +12,18 @@ projection and the WorldBatch export) with the resets.
 
 from __future__ import annotations
 
-import argparse
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
 from drivelab.envs.backends.fast import simulator as S
 from drivelab.envs.backends.fast import traffic as T
 from drivelab.envs.scenarios import SCENARIOS
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import Parser  # noqa: E402
 
 
 def measure(
@@ -56,7 +60,7 @@ def measure(
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser()
+    parser = Parser()
     parser.add_argument("--scenario", default="highway")
     parser.add_argument("--traffic", default="regular")
     parser.add_argument("--worlds", default="1,64")

@@ -12,7 +12,6 @@ one computed from the true masks.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -30,6 +29,9 @@ from drivelab.perception.lane import LaneState, classical_lane_masks, lane_centr
 from drivelab.perception.lane_cnn import iou, load_lane_cnn  # noqa: E402
 from drivelab.training.lane_dataset import generate_lane_frames  # noqa: E402
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import Parser  # noqa: E402
+
 RESULTS = Path(__file__).parent / "results"
 
 
@@ -39,7 +41,7 @@ def lane_state(masks: np.ndarray, sensor: LaneState) -> int:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=300)
     parser.add_argument("--seed", type=int, default=12345)
     args = parser.parse_args()

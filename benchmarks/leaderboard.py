@@ -25,7 +25,6 @@ seed's episodes (Wilson), speeds and returns as the mean over seeds (percentile 
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -49,7 +48,7 @@ from drivelab.training.stats import bootstrap_ci  # noqa: E402
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from nocrash_town import SCENARIO as NOCRASH_SCENARIO  # noqa: E402
 from nocrash_town import agents as nocrash_agents  # noqa: E402
-from provenance import check_reuse, stop  # noqa: E402
+from provenance import Parser, check_reuse, stop  # noqa: E402
 from seed003_osx import DEFAULT_STEPS as OSX_STEPS  # noqa: E402
 from seed003_osx import recipe as osx_recipe  # noqa: E402
 from town_competence import LEARNERS as TOWN_LEARNERS  # noqa: E402
@@ -782,7 +781,7 @@ def markdown(result: dict) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = Parser(description=__doc__.split("\n\n")[0])
     parser.add_argument(
         "--scenarios", default=None, help="comma-separated tables to train and evaluate (default: all); "
         "the other tables are made from the runs and reports already there",

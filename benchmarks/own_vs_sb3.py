@@ -13,7 +13,6 @@ learning-curve plot per pair (training episode returns, mean over seeds with a m
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import os
@@ -35,6 +34,9 @@ import torch  # noqa: E402
 from drivelab.config import build_config  # noqa: E402
 from drivelab.training.evaluate import evaluate_run  # noqa: E402
 from drivelab.training.run import train  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import Parser  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 RUNS = Path(__file__).parent / "runs"
@@ -216,7 +218,7 @@ def write_markdown(result: dict, path: Path) -> None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--pairs", default=",".join(PAIRS))
     parser.add_argument("--seeds", default="0,1,2")
     parser.add_argument("--steps", default="", help="pair=steps overrides, comma separated")

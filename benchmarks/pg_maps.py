@@ -8,12 +8,15 @@ Writes ``results/pg_maps.json`` / ``.md`` (median milliseconds to generate one 5
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
+import sys
 import time
 from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import Parser  # noqa: E402
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
@@ -24,7 +27,7 @@ def main() -> None:
     from drivelab.envs.backends.roads.pg_map import generate_map
     from drivelab.envs.maps_gallery import draw_gallery
 
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=50)
     args = parser.parse_args()
     generate_map(5, 0)

@@ -12,7 +12,6 @@ buffer, callbacks) and the update (``train``). Repeats interleave the K values; 
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -27,7 +26,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 import torch  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import command_line  # noqa: E402
+from provenance import Parser, command_line  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 ROLLOUT_STEPS = 2048
@@ -73,7 +72,7 @@ def measure(n_envs: int, timesteps: int, seed: int) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--n-envs", type=int, nargs="+", default=[64, 8])
     parser.add_argument("--timesteps", type=int, default=32768)
     parser.add_argument("--repeats", type=int, default=3)

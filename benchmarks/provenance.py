@@ -3,6 +3,7 @@ environment's, so that the line is true whoever set them) and the arguments, quo
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import dataclasses
 import inspect
@@ -44,6 +45,14 @@ def stop(message: str) -> None:
     """A benchmark's bad input: one ``error:`` line, exit 2, before anything is written."""
     print(f"error: {message}", file=sys.stderr)
     raise SystemExit(2)
+
+
+class Parser(argparse.ArgumentParser):
+    """A benchmark's argument parser: a bad argument is one ``error:`` line and exit 2, as in every
+    drivelab command (argparse's own prints the usage block first; ``--help`` still shows it)."""
+
+    def error(self, message: str) -> None:
+        stop(message)
 
 
 def check_reuse(run_dir: Path, arguments: list[str], root: Path) -> None:

@@ -18,7 +18,6 @@ episodes).
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -35,6 +34,9 @@ import torch  # noqa: E402
 from drivelab.agents.qlearning import QLearning  # noqa: E402
 from drivelab.agents.qlearning_plots import plot_qlearning  # noqa: E402
 from drivelab.envs.core import DriveEnv  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import Parser  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 SETUPS = {
@@ -92,7 +94,7 @@ def evaluate(agent: QLearning, env: DriveEnv, episodes: int, seed: int) -> dict:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", choices=list(SETUPS), default="follow-line")
     parser.add_argument("--seeds", default="0,1,2")
     parser.add_argument("--steps", type=int, default=20_000)

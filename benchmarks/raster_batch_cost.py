@@ -12,7 +12,6 @@ less disturbed by other jobs on a shared machine than wall time).
 
 from __future__ import annotations
 
-import argparse
 import json
 import statistics
 import sys
@@ -26,6 +25,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from drivelab.perception.sensors import make_sensor  # noqa: E402
 from drivelab.world.batch import WorldBatch  # noqa: E402
 from tests.batch_worlds import world_sequences  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import Parser  # noqa: E402
 
 CASES = {"topdown": ("highway", "topdown"), "camera": ("town", "camera")}
 
@@ -57,7 +59,7 @@ def per_world_step_us(sensor_spec: str, sequence, worlds: int, mode: str, repeat
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--worlds", type=int, default=32)
     parser.add_argument("--steps", type=int, default=6)
     parser.add_argument("--repeats", type=int, default=5)

@@ -57,7 +57,6 @@ the runs finish, and state the budget reached.
 
 from __future__ import annotations
 
-import argparse
 import json
 import multiprocessing
 import os
@@ -79,7 +78,7 @@ from drivelab.training.sweep import Sweep, expand_sweep, plan, run_cell, run_dir
 from drivelab.yaml_io import load_yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import command_line  # noqa: E402
+from provenance import Parser, command_line  # noqa: E402
 
 HERE = Path(__file__).parent
 SWEEP = HERE / "sweeps" / "rlad-ablation.yaml"
@@ -288,7 +287,7 @@ def run_slice(
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument(
         "--steps", type=int, default=None, help="training steps per run (default: the file's)"
     )

@@ -20,7 +20,6 @@ machine is shared: CPU time is the steadier one), one torch thread.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -36,7 +35,7 @@ from drivelab.agents.rlad.sac import REPLAY_FRAMES, RLAD
 from drivelab.envs.core import DriveEnv
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import command_line  # noqa: E402
+from provenance import Parser, command_line  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 SIZES = (84, 256)
@@ -110,7 +109,7 @@ def row_markdown(row: dict) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=40, help="environment steps / policy calls per repeat")
     parser.add_argument("--updates", type=int, default=2, help="updates per repeat")
     parser.add_argument("--repeats", type=int, default=3)

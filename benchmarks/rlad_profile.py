@@ -12,7 +12,6 @@ under torch.profiler. Writes ``results/rlad_profile_<gpu|cpu>_<size>_<host|devic
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -28,7 +27,7 @@ from drivelab.agents.rlad.sac import RLAD
 from drivelab.envs.core import DriveEnv
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import command_line  # noqa: E402
+from provenance import Parser, command_line  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 
@@ -48,7 +47,7 @@ def timed_ms(function, calls: int, repeats: int, sync) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--device", default="cpu", help="cpu or cuda: where the agent's networks run")
     parser.add_argument("--size", type=int, default=84, help="camera width and height")
     parser.add_argument("--batch-size", type=int, default=256)

@@ -32,7 +32,6 @@ Writes ``results/<out>.json`` and ``.md`` (``--out``, default ``rlad_update_<cpu
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -48,7 +47,7 @@ from torch.profiler import ProfilerActivity, profile
 from drivelab.agents.rlad.sac import RLAD
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import command_line  # noqa: E402
+from provenance import Parser, command_line  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 VARIANTS = {
@@ -114,7 +113,7 @@ def profile_table(update, calls: int, cuda: bool, sync, top: int) -> dict[str, s
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--device", default="cpu", help="cpu or cuda")
     parser.add_argument("--size", type=int, nargs="+", default=[84], help="camera sizes (px)")
     parser.add_argument("--batch-size", type=int, default=256)

@@ -20,7 +20,6 @@ and ``results/seed003_osx_curves.png`` (training-episode returns against steps).
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import os
@@ -40,6 +39,9 @@ import matplotlib  # noqa: E402
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import Parser  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent
 RESULTS = ROOT / "results"
@@ -380,7 +382,7 @@ def write_outputs(result: dict) -> None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--agents", default=",".join(AGENTS))
     parser.add_argument("--seeds", default="0,1,2")
     parser.add_argument("--steps", default="", help="agent=steps overrides, comma separated")

@@ -39,7 +39,7 @@ from drivelab.training.nocrash import LEVELS  # noqa: E402
 from drivelab.training.stats import bootstrap_ci  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import check_reuse  # noqa: E402
+from provenance import Parser, check_reuse  # noqa: E402
 
 RUNS = ROOT / "benchmarks" / "runs"
 RESULTS = ROOT / "benchmarks" / "results"
@@ -191,9 +191,7 @@ def markdown(result: dict) -> str:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
+    parser = Parser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--seeds", default="0,1,2", help="training seeds, comma-separated")
     parser.add_argument("--episodes", type=int, default=100, help="NoCrash episodes per traffic level")
     parser.add_argument("--learners", default=",".join(LEARNERS), help="which learners, comma-separated")

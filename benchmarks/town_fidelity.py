@@ -17,7 +17,6 @@ Writes ``benchmarks/results/town_fidelity.json`` and ``.md``.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import platform
@@ -34,6 +33,9 @@ from drivelab.envs.core import DriveEnv  # noqa: E402
 from drivelab.training.evaluate import aggregate  # noqa: E402
 from drivelab.training.nocrash import INFRACTIONS, LEVELS, NOCRASH_SEED  # noqa: E402
 from drivelab.world.state import LIGHT_GREEN  # noqa: E402
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from provenance import Parser  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 BACKENDS = ("highway", "fast")
@@ -124,7 +126,7 @@ def interval(results: list[dict], key: str, rng: np.random.Generator, resamples:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--episodes", type=int, default=25)
     args = parser.parse_args()
     rows, traffic, seconds = {}, {}, {}

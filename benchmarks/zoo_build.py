@@ -50,7 +50,7 @@ CAMERA_CHECK_DURATION_S = 20
 
 sys.path.insert(0, str(Path(__file__).parent))
 from leaderboard import BLOCKS_DAGGER, HIGHWAY_DQN, RACETRACK_DAGGER, UNSEEN_MAPS, UNTUNED_PPO  # noqa: E402
-from provenance import agent_defaults, check_reuse, command_line  # noqa: E402
+from provenance import Parser, agent_defaults, check_reuse, command_line  # noqa: E402
 from town_competence import recipe as town_recipe  # noqa: E402
 
 # highway-env's documented PPO values, pinned in the PPO recipes below: their agents were trained
@@ -494,7 +494,7 @@ def write_results() -> Path:
 
 def main() -> None:
     formatter = argparse.RawDescriptionHelpFormatter
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=formatter)
+    parser = Parser(description=__doc__, formatter_class=formatter)
     parser.add_argument("names", nargs="*", help=f"agents to build (default: all of {', '.join(AGENTS)})")
     parser.add_argument("--retrain", action="store_true", help="train again even if the run has its model")
     parser.add_argument("--measure-only", action="store_true", help="only re-measure the packed agents")

@@ -74,3 +74,49 @@ def test_pinning_an_agents_own_defaults_trains_the_same_run(tmp_path, capsys):
         provenance.check_reuse(run, arguments, tmp_path)
     error = capsys.readouterr().err
     assert stop.value.code == 2 and error.startswith("error: ") and len(error.splitlines()) == 1
+
+
+BENCHMARKS = SCRIPT.parent
+
+
+def test_every_benchmark_parses_its_arguments_with_the_one_line_parser():
+    """No benchmark builds argparse's own parser (a usage block before its error line)."""
+    import ast
+
+    parsers = {}
+    for script in sorted(BENCHMARKS.glob("*.py")):
+        calls = [n for n in ast.walk(ast.parse(script.read_text())) if isinstance(n, ast.Call)]
+        names = {ast.unparse(call.func) for call in calls}
+        assert "argparse.ArgumentParser" not in names and "ArgumentParser" not in names, script.name
+        parsers[script.name] = "Parser" in names
+    assert sum(parsers.values()) >= 30  # the scripts that take arguments
+
+
+def test_a_bad_argument_is_one_error_line_and_exit_2(capsys):
+    parser = _provenance().Parser(description="a benchmark")
+    parser.add_argument("--steps", type=int, default=3)
+    for argv, message in (
+        (["--steps", "many"], "error: argument --steps: invalid int value: 'many'"),
+        (["--bogus"], "error: unrecognized arguments: --bogus"),
+    ):
+        with pytest.raises(SystemExit) as stopped:
+            parser.parse_args(argv)
+        assert stopped.value.code == 2
+        assert capsys.readouterr().err == message + "\n"
+    assert parser.parse_args(["--steps", "5"]).steps == 5
+
+
+@pytest.mark.parametrize("script", ["zoo_build.py", "pg_maps.py"])
+def test_a_benchmark_script_refuses_bad_input_in_one_line(script, tmp_path):
+    import subprocess
+    import sys
+
+    done = subprocess.run(
+        [sys.executable, str(BENCHMARKS / script), "--no-such-option"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+    )
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr == "error: unrecognized arguments: --no-such-option\n"
+    assert list(tmp_path.iterdir()) == []
