@@ -26,7 +26,7 @@ import torch  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 from own_vs_sb3 import PAIRS  # noqa: E402
-from provenance import Parser  # noqa: E402
+from provenance import Parser, whole  # noqa: E402
 
 from drivelab.agents.registry import get_algo  # noqa: E402
 from drivelab.envs.core import DriveEnv  # noqa: E402
@@ -64,8 +64,8 @@ def steps_per_s(algo: str, hyperparams: dict, env: gym.Env, steps: int) -> float
 
 def main() -> None:
     parser = Parser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=1024, help="timed steps; keep a multiple of 256")
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--steps", type=whole(), default=1024, help="timed steps; keep a multiple of 256")
+    parser.add_argument("--repeats", type=whole(), default=3)
     args = parser.parse_args()
     torch.set_num_threads(1)
     rows = []

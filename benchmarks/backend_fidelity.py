@@ -34,7 +34,7 @@ from drivelab.envs.backends.highway import HighwayBackend  # noqa: E402
 from drivelab.envs.scenarios import FAST_SCENARIOS  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, stop  # noqa: E402
+from provenance import Parser, names, whole  # noqa: E402
 
 # highway-env's traffic scenarios: the town has its own (benchmarks/town_fidelity.py), the circuits
 # have no traffic, and the block maps no highway-env backend
@@ -108,16 +108,11 @@ def simd_dispatch() -> str:
 
 def main() -> None:
     parser = Parser(description=__doc__.splitlines()[0])
-    parser.add_argument("--episodes", type=int, default=200)
-    parser.add_argument("--scenarios", default=",".join(SUPPORTED))
+    parser.add_argument("--episodes", type=whole(), default=200)
+    parser.add_argument("--scenarios", type=names(SUPPORTED), default=",".join(SUPPORTED))
     args = parser.parse_args()
-    unknown = [name for name in args.scenarios.split(",") if name not in SUPPORTED]
-    if unknown:
-        stop(f"--scenarios: unknown {unknown[0]!r} (choose from {', '.join(SUPPORTED)})")
-    if args.episodes < 1:
-        stop("--episodes < 1")
     rows, timings = [], {}
-    for name in args.scenarios.split(","):
+    for name in args.scenarios:
         scenario = SCENARIOS[name]
         control = "meta" if "meta" in scenario.action_kinds else "continuous"
         results = {}

@@ -30,7 +30,7 @@ from drivelab.envs.scenarios import FAST_SCENARIOS as SUPPORTED  # noqa: E402
 from drivelab.envs.scenarios import SCENARIOS  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser  # noqa: E402
+from provenance import Parser, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 RLAD_OBS = "camera:stack=3,waypoints,measurements:stack=3"  # RLAD's observation (seed 000)
@@ -51,8 +51,8 @@ def steps_per_second(env: DriveEnv, steps: int, seed: int) -> float:
 
 def main() -> None:
     parser = Parser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=600)
-    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--steps", type=whole(5), default=600)
+    parser.add_argument("--repeats", type=whole(), default=5)
     args = parser.parse_args()
     rows = []
     # every scenario with a highway-env reference (the block maps run on the compiled core only)

@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, command_line  # noqa: E402
+from provenance import Parser, command_line, whole  # noqa: E402
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
@@ -131,11 +131,11 @@ def _median_ratio(pairs: list[tuple[float, float]]) -> dict:
 
 def main() -> None:
     parser = Parser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=3000, help="env steps per measurement")
-    parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--worlds", type=int, default=64)
+    parser.add_argument("--steps", type=whole(4), default=3000, help="env steps per measurement")
+    parser.add_argument("--repeats", type=whole(), default=5)
+    parser.add_argument("--worlds", type=whole(), default=64)
     parser.add_argument("--baseline-repo", default=None)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seed", type=whole(0), default=0)
     parser.add_argument("--worker", choices=["vector"], default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:

@@ -38,7 +38,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, command_line  # noqa: E402
+from provenance import Parser, command_line, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 OPTIONS = {"map": "OSX", "traffic_density": 0.1}  # MetaDrive's default density
@@ -81,9 +81,9 @@ def vector_rate(worlds: int, steps: int, seed: int) -> float:
 
 def main() -> None:
     parser = Parser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=3000)
-    parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--worlds", type=int, default=64)
+    parser.add_argument("--steps", type=whole(), default=3000)
+    parser.add_argument("--repeats", type=whole(), default=5)
+    parser.add_argument("--worlds", type=whole(), default=64)
     args = parser.parse_args()
     simulator_rate(50, 0), vector_rate(1, 50, 0), vector_rate(2, 50, 0)  # compile before timing
     rates = {"simulator": [], "one_world": [], "k_worlds": []}

@@ -31,7 +31,7 @@ from drivelab.perception.lane import LANE_CAMERA, LaneState, classical_lane_mask
 from drivelab.perception.line import LineState  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser  # noqa: E402
+from provenance import Parser, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 SCENES = {
@@ -71,8 +71,8 @@ def per_frame_ms(function, inputs: list, repeats: int) -> tuple[float, float]:
 
 def main() -> None:
     parser = Parser(description=__doc__.splitlines()[0])
-    parser.add_argument("--states", type=int, default=60)
-    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--states", type=whole(), default=60)
+    parser.add_argument("--repeats", type=whole(), default=5)
     args = parser.parse_args()
     torch.set_num_threads(1)
     rows = []

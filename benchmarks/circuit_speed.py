@@ -45,7 +45,7 @@ from backend_speed import steps_per_second  # noqa: E402
 from batch_speed import _commit, baseline_rate, vector_rate  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, command_line  # noqa: E402
+from provenance import Parser, command_line, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 CIRCUITS = ("follow-line", "follow-lane")
@@ -99,9 +99,9 @@ def part_costs(env, calls: int) -> dict[str, float]:
 
 def main() -> None:
     parser = Parser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=3000)
-    parser.add_argument("--repeats", type=int, default=5)
-    parser.add_argument("--worlds", type=int, default=64)
+    parser.add_argument("--steps", type=whole(5), default=3000)
+    parser.add_argument("--repeats", type=whole(), default=5)
+    parser.add_argument("--worlds", type=whole(), default=64)
     parser.add_argument(
         "--baseline-repo", default=None, help="an earlier drivelab checkout to time one world of"
     )
@@ -193,11 +193,11 @@ def main() -> None:
         "|---|" + "---|" * (len(PARTS) + 3),
     ]
     for r in rows:
-        cost, whole = r["part_us"], 1e6 / r["env_fast"]
+        cost, step_us = r["part_us"], 1e6 / r["env_fast"]
         pipeline = sum(cost[part] for part in PARTS[1:])
         lines.append(
             f"| {r['scenario']} | " + " | ".join(f"{cost[part]:.1f}" for part in PARTS) + " | "
-            f"{pipeline:.1f} | {whole - pipeline - cost['simulator']:.0f} | {whole:.0f} |"
+            f"{pipeline:.1f} | {step_us - pipeline - cost['simulator']:.0f} | {step_us:.0f} |"
         )
     if args.baseline_repo:
         lines += [

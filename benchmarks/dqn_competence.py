@@ -27,7 +27,7 @@ from drivelab.training.evaluate import evaluate_run  # noqa: E402
 from drivelab.training.run import train  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, command_line  # noqa: E402
+from provenance import Parser, command_line, names, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 RUNS = Path(__file__).parent / "runs"
@@ -35,13 +35,13 @@ RUNS = Path(__file__).parent / "runs"
 
 def main() -> None:
     parser = Parser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=20_000)
-    parser.add_argument("--episodes", type=int, default=50)
-    parser.add_argument("--backends", default="fast,highway")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--steps", type=whole(), default=20_000)
+    parser.add_argument("--episodes", type=whole(), default=50)
+    parser.add_argument("--backends", type=names(("fast", "highway")), default="fast,highway")
+    parser.add_argument("--seed", type=whole(0), default=0)
     args = parser.parse_args()
     rows = []
-    for backend in args.backends.split(","):
+    for backend in args.backends:
         name = f"dqn-competence-{backend}-s{args.seed}"
         shutil.rmtree(RUNS / name, ignore_errors=True)
         config = build_config(

@@ -27,7 +27,7 @@ from drivelab.envs.core import DriveEnv  # noqa: E402
 from drivelab.perception.sensors import make_sensor  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser  # noqa: E402
+from provenance import Parser, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 
@@ -63,8 +63,8 @@ def sensor_costs_ms(worlds: list, repeats: int) -> dict[str, float]:
 
 def main() -> None:
     parser = Parser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=300)
-    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--steps", type=whole(), default=300)
+    parser.add_argument("--repeats", type=whole(), default=5)
     args = parser.parse_args()
     actions = np.random.default_rng(0).integers(0, 5, size=args.steps)
 

@@ -51,7 +51,7 @@ from drivelab.training.run import resume, train  # noqa: E402
 from drivelab.training.stats import bootstrap_ci  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, command_line  # noqa: E402
+from provenance import Parser, command_line, whole, wholes  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 RUNS = Path(__file__).parent / "runs" / "generalisation"
@@ -492,16 +492,14 @@ def earlier_evaluations(run_dir: Path, maps: int, seed: int, steps: int) -> list
 def main() -> None:
     global RUNS
     parser = Parser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=50_000)
-    parser.add_argument("--seeds", default="0,1,2")
-    parser.add_argument("--maps", default="1,10,100")
-    parser.add_argument("--test-episodes", type=int, default=100)
-    parser.add_argument("--train-episodes", type=int, default=100)
+    parser.add_argument("--steps", type=whole(), default=50_000)
+    parser.add_argument("--seeds", type=wholes(), default="0,1,2")
+    parser.add_argument("--maps", type=wholes(1), default="1,10,100")
+    parser.add_argument("--test-episodes", type=whole(), default=100)
+    parser.add_argument("--train-episodes", type=whole(), default=100)
     parser.add_argument("--runs-dir", type=Path, default=RUNS)
     parser.add_argument("--report-only", action="store_true", help="write the report from what is there")
     args = parser.parse_args()
-    args.seeds = [int(s) for s in args.seeds.split(",")]
-    args.maps = [int(m) for m in args.maps.split(",")]
     RUNS = args.runs_dir
     rows, times, skipped, earlier, earlier_cpu_s = [], {}, [], {}, 0.0
     for seed in args.seeds:  # seed-major: an unfinished budget still leaves whole seeds

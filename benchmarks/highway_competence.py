@@ -51,7 +51,7 @@ from drivelab.training.stats import bootstrap_ci  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 from leaderboard import UNTUNED_PPO  # noqa: E402
-from provenance import Parser, check_reuse  # noqa: E402
+from provenance import Parser, check_reuse, readable, whole, wholes  # noqa: E402
 
 RUNS = ROOT / "benchmarks" / "runs"
 RESULTS = ROOT / "benchmarks" / "results"
@@ -254,25 +254,14 @@ def markdown(result: dict) -> str:
 
 def main() -> None:
     parser = Parser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--env", default="highway", help=f"scenario: {', '.join(TARGETS)}")
-    parser.add_argument("--recipe", default="ppo-default", help=f"training recipe: {', '.join(RECIPES)}")
-    parser.add_argument("--seeds", default="0,1,2", help="training seeds, comma-separated")
-    parser.add_argument("--episodes", type=int, default=100, help="evaluation episodes per seed")
-    parser.add_argument("--steps", type=int, default=0, help="training steps (0: the recipe's budget)")
-    parser.add_argument("--notes", type=Path, default=None, help="a Markdown file appended as notes")
+    parser.add_argument("--env", choices=list(TARGETS), default="highway", help="scenario")
+    parser.add_argument("--recipe", choices=list(RECIPES), default="ppo-default", help="training recipe")
+    parser.add_argument("--seeds", type=wholes(), default="0,1,2", help="training seeds, comma-separated")
+    parser.add_argument("--episodes", type=whole(), default=100, help="evaluation episodes per seed")
+    parser.add_argument("--steps", type=whole(0), default=0, help="training steps (0: the recipe's budget)")
+    parser.add_argument("--notes", type=readable, default=None, help="a Markdown file appended as notes")
     args = parser.parse_args()
-    try:
-        seeds = [int(s) for s in args.seeds.split(",")]
-        if args.episodes < 1 or args.steps < 0 or args.env not in TARGETS or args.recipe not in RECIPES:
-            raise ValueError
-        notes = args.notes.read_text() if args.notes is not None else ""
-    except (ValueError, OSError):
-        print(
-            f"error: --env from {list(TARGETS)}, --recipe from {list(RECIPES)}, --seeds integers, "
-            "--episodes positive, --steps >= 0, --notes a readable file",
-            file=sys.stderr,
-        )
-        raise SystemExit(2) from None
+    seeds, notes = args.seeds, args.notes or ""
     steps = args.steps or RECIPES[args.recipe]["steps"]
     records = [measure(args.env, args.recipe, seed, steps, args.episodes) for seed in seeds]
     result = {

@@ -27,7 +27,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from nocrash_town import agents as nocrash_agents  # noqa: E402
-from provenance import Parser, check_reuse  # noqa: E402
+from provenance import Parser, check_reuse, whole  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 RUNS = ROOT / "benchmarks" / "runs"
@@ -73,9 +73,9 @@ def imitation_metrics(run_dir: Path) -> dict | None:
 def main() -> None:
     formatter = argparse.RawDescriptionHelpFormatter
     parser = Parser(description=__doc__, formatter_class=formatter)
-    parser.add_argument("--steps", type=int, default=20_000, help="demonstration steps of bc and dagger")
-    parser.add_argument("--n-envs", type=int, default=8, help="town worlds stepped together")
-    parser.add_argument("--episodes", type=int, default=10, help="NoCrash episodes per traffic level")
+    parser.add_argument("--steps", type=whole(), default=20_000, help="demonstration steps of bc and dagger")
+    parser.add_argument("--n-envs", type=whole(), default=8, help="town worlds stepped together")
+    parser.add_argument("--episodes", type=whole(), default=10, help="NoCrash episodes per traffic level")
     args = parser.parse_args()
 
     reports, commands, timings, imitation = {}, {}, {}, {}

@@ -32,7 +32,7 @@ import drivelab  # noqa: E402
 from drivelab.envs.vector import evaluation_seeds  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser  # noqa: E402
+from provenance import Parser, names, whole  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results"
 SLOWER, IDLE, FASTER = 0, 1, 2  # highway-env's ACTIONS_LONGI
@@ -104,13 +104,15 @@ def run_probe(name: str, description: str, plans: dict, play, markdown, backends
     plan's value played on every backend (``play(backend, value, episodes)`` → its counts), the
     rows written to ``benchmarks/results/<name>.{json,md}``; bad input: one ``error:`` line, exit 2."""
     parser = Parser(description=description)
-    parser.add_argument("--episodes", type=int, default=100)
-    parser.add_argument("--backends", default=backends, help="fast (compiled core), highway (highway-env)")
+    parser.add_argument("--episodes", type=whole(), default=100)
+    parser.add_argument(
+        "--backends",
+        type=names(("fast", "highway")),
+        default=backends,
+        help="fast (compiled core), highway (highway-env)",
+    )
     args = parser.parse_args()
-    chosen = args.backends.split(",")
-    if args.episodes < 1 or not set(chosen) <= {"fast", "highway"}:
-        print("error: --episodes must be >= 1 and --backends from fast, highway", file=sys.stderr)
-        raise SystemExit(2)
+    chosen = args.backends
     rows = []
     for plan, value in plans.items():
         for backend in chosen:

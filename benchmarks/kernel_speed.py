@@ -23,7 +23,11 @@ from drivelab.envs.backends.fast import traffic as T
 from drivelab.envs.scenarios import SCENARIOS
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser  # noqa: E402
+from provenance import Parser, whole, wholes  # noqa: E402
+
+# the scenarios FastSimulator steps with meta-actions (the others have their own simulators or
+# continuous egos)
+METAACTION_SCENARIOS = ("highway", "merge", "roundabout", "intersection")
 
 
 def measure(
@@ -61,14 +65,14 @@ def measure(
 
 def main() -> None:
     parser = Parser()
-    parser.add_argument("--scenario", default="highway")
-    parser.add_argument("--traffic", default="regular")
-    parser.add_argument("--worlds", default="1,64")
-    parser.add_argument("--steps", type=int, default=200)
+    parser.add_argument("--scenario", choices=METAACTION_SCENARIOS, default="highway")
+    parser.add_argument("--traffic", choices=("empty", "regular", "dense"), default="regular")
+    parser.add_argument("--worlds", type=wholes(1), default="1,64")
+    parser.add_argument("--steps", type=whole(), default=200)
     parser.add_argument("--wall", action="store_true", help="wall-clock time (to compare thread counts)")
     args = parser.parse_args()
     clock = time.perf_counter if args.wall else time.process_time
-    for worlds in (int(k) for k in args.worlds.split(",")):
+    for worlds in args.worlds:
         kernel, total = measure(args.scenario, args.traffic, worlds, args.steps, clock)
         print(f"K={worlds}: kernel {kernel:.1f} us/world-step, whole step {total:.1f} us/world-step")
 

@@ -30,7 +30,7 @@ from drivelab.perception.lane_cnn import iou, load_lane_cnn  # noqa: E402
 from drivelab.training.lane_dataset import generate_lane_frames  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser  # noqa: E402
+from provenance import Parser, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 
@@ -42,8 +42,8 @@ def lane_state(masks: np.ndarray, sensor: LaneState) -> int:
 
 def main() -> None:
     parser = Parser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, default=300)
-    parser.add_argument("--seed", type=int, default=12345)
+    parser.add_argument("--frames", type=whole(), default=300)
+    parser.add_argument("--seed", type=whole(0), default=12345)
     args = parser.parse_args()
     torch.set_num_threads(1)
     images, truth = generate_lane_frames(args.frames, args.seed)

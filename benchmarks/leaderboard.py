@@ -48,7 +48,7 @@ from drivelab.training.stats import bootstrap_ci  # noqa: E402
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from nocrash_town import SCENARIO as NOCRASH_SCENARIO  # noqa: E402
 from nocrash_town import agents as nocrash_agents  # noqa: E402
-from provenance import Parser, check_reuse, stop  # noqa: E402
+from provenance import Parser, check_reuse, stop, whole, wholes  # noqa: E402
 from seed003_osx import DEFAULT_STEPS as OSX_STEPS  # noqa: E402
 from seed003_osx import recipe as osx_recipe  # noqa: E402
 from town_competence import LEARNERS as TOWN_LEARNERS  # noqa: E402
@@ -786,8 +786,8 @@ def main() -> None:
         "--scenarios", default=None, help="comma-separated tables to train and evaluate (default: all); "
         "the other tables are made from the runs and reports already there",
     )  # fmt: skip
-    parser.add_argument("--seeds", default="0,1,2")
-    parser.add_argument("--episodes", type=int, default=100)
+    parser.add_argument("--seeds", type=wholes(), default="0,1,2")
+    parser.add_argument("--episodes", type=whole(), default=100)
     parser.add_argument(
         "--entries", default=None, help="comma-separated rows (e.g. dagger,expert): only these of the chosen "
         "tables are trained and evaluated",
@@ -804,9 +804,7 @@ def main() -> None:
         stop(f"unknown scenario {unknown[0]!r} (known: {', '.join(scenarios)})")
     if unknown_rows:
         stop(f"no entry {unknown_rows[0]!r} in {', '.join(wanted)}")
-    if args.episodes < 1:
-        stop("--episodes < 1")
-    seeds = [int(s) for s in args.seeds.split(",")]
+    seeds = args.seeds
     if args.list:
         for entry in (e for e in ENTRIES if e.scenario in wanted):
             print(f"{entry.scenario:14} {entry.name:22} drivelab {shlex.join(entry.command(seeds[0]))}")

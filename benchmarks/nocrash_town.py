@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, check_reuse  # noqa: E402
+from provenance import Parser, check_reuse, whole  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 RUNS = ROOT / "benchmarks" / "runs"
@@ -69,10 +69,15 @@ def run(arguments: list[str]) -> tuple[float, float]:
 def main() -> None:
     formatter = argparse.RawDescriptionHelpFormatter
     parser = Parser(description=__doc__, formatter_class=formatter)
-    parser.add_argument("--ppo-steps", type=int, default=PPO_STEPS)
-    parser.add_argument("--n-envs", type=int, default=N_ENVS, help="town worlds PPO trains on together")
-    parser.add_argument("--episodes", type=int, default=25)
-    parser.add_argument("--level", default="regular", help="traffic level of the infraction table")
+    parser.add_argument("--ppo-steps", type=whole(), default=PPO_STEPS)
+    parser.add_argument("--n-envs", type=whole(), default=N_ENVS, help="town worlds PPO trains on together")
+    parser.add_argument("--episodes", type=whole(), default=25)
+    parser.add_argument(
+        "--level",
+        choices=("empty", "regular", "dense"),
+        default="regular",
+        help="traffic level of the infraction table",
+    )
     args = parser.parse_args()
 
     reports, commands, timings = {}, {}, {}

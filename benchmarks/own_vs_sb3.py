@@ -36,7 +36,7 @@ from drivelab.training.evaluate import evaluate_run  # noqa: E402
 from drivelab.training.run import train  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser  # noqa: E402
+from provenance import Parser, names, step_overrides, whole, wholes  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 RUNS = Path(__file__).parent / "runs"
@@ -219,10 +219,12 @@ def write_markdown(result: dict, path: Path) -> None:
 
 def main() -> None:
     parser = Parser(description=__doc__.splitlines()[0])
-    parser.add_argument("--pairs", default=",".join(PAIRS))
-    parser.add_argument("--seeds", default="0,1,2")
-    parser.add_argument("--steps", default="", help="pair=steps overrides, comma separated")
-    parser.add_argument("--episodes", type=int, default=10)
+    parser.add_argument("--pairs", type=names(PAIRS), default=",".join(PAIRS))
+    parser.add_argument("--seeds", type=wholes(), default="0,1,2")
+    parser.add_argument(
+        "--steps", type=step_overrides(PAIRS), default="", help="pair=steps overrides, comma separated"
+    )
+    parser.add_argument("--episodes", type=whole(), default=10)
     parser.add_argument("--tag", default="own_vs_sb3", help="results file name")
     parser.add_argument("--report", action="store_true", help="only rewrite Markdown and plots from the JSON")
     args = parser.parse_args()
@@ -236,11 +238,8 @@ def main() -> None:
             plot_pair(pair, rows, RESULTS / f"{args.tag}_{pair}.png")
         return
     torch.set_num_threads(1)
-    steps = dict(DEFAULT_STEPS)
-    for item in filter(None, args.steps.split(",")):
-        key, _, value = item.partition("=")
-        steps[key] = int(value)
-    pairs, seeds = args.pairs.split(","), [int(s) for s in args.seeds.split(",")]
+    steps = {**DEFAULT_STEPS, **args.steps}
+    pairs, seeds = args.pairs, args.seeds
     RESULTS.mkdir(exist_ok=True)
     runs: list[dict] = []
     result = {

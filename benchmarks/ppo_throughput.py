@@ -26,7 +26,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 import torch  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, command_line  # noqa: E402
+from provenance import Parser, command_line, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 ROLLOUT_STEPS = 2048
@@ -73,9 +73,9 @@ def measure(n_envs: int, timesteps: int, seed: int) -> dict:
 
 def main() -> None:
     parser = Parser(description=__doc__.splitlines()[0])
-    parser.add_argument("--n-envs", type=int, nargs="+", default=[64, 8])
-    parser.add_argument("--timesteps", type=int, default=32768)
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--n-envs", type=whole(), nargs="+", default=[64, 8])
+    parser.add_argument("--timesteps", type=whole(), default=32768)
+    parser.add_argument("--repeats", type=whole(), default=3)
     args = parser.parse_args()
     runs: dict[int, list[dict]] = {k: [] for k in args.n_envs}
     for repeat in range(args.repeats):

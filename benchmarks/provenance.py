@@ -7,9 +7,13 @@ import argparse
 import contextlib
 import dataclasses
 import inspect
+import json
+import math
 import os
+import re
 import shlex
 import sys
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "NUMBA_NUM_THREADS")
@@ -53,6 +57,112 @@ class Parser(argparse.ArgumentParser):
 
     def error(self, message: str) -> None:
         stop(message)
+
+
+# --- argument types: a bad value is argparse's one line, "argument --steps: 0 is below 1" ------------
+def whole(minimum: int = 1) -> Callable[[str], int]:
+    """A whole number of at least ``minimum``."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+        if value < minimum:
+            raise argparse.ArgumentTypeError(f"{value} is below {minimum}")
+        return value
+
+    return parse
+
+
+def wholes(minimum: int = 0) -> Callable[[str], list[int]]:
+    """Comma-separated whole numbers of at least ``minimum``, none twice (seeds, map counts)."""
+
+    def parse(text: str) -> list[int]:
+        values = [whole(minimum)(part) for part in text.split(",")]
+        if len(set(values)) != len(values):
+            raise argparse.ArgumentTypeError(f"{text!r} names a value twice")
+        return values
+
+    return parse
+
+
+def positive(text: str) -> float:
+    """A finite number above zero (seconds, durations)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a finite number above 0")
+    return value
+
+
+def names(choices: Iterable[str]) -> Callable[[str], list[str]]:
+    """Comma-separated names out of ``choices``, none twice."""
+    known = list(choices)
+
+    def parse(text: str) -> list[str]:
+        chosen = text.split(",")
+        unknown = [name for name in chosen if name not in known]
+        if unknown:
+            raise argparse.ArgumentTypeError(f"unknown {unknown[0]!r} (known: {', '.join(known)})")
+        if len(set(chosen)) != len(chosen):
+            raise argparse.ArgumentTypeError(f"{text!r} names one twice")
+        return chosen
+
+    return parse
+
+
+def step_overrides(choices: Iterable[str]) -> Callable[[str], dict[str, int]]:
+    """``NAME=STEPS,…`` with each NAME out of ``choices`` and STEPS a whole number above 0."""
+    known = list(choices)
+
+    def parse(text: str) -> dict[str, int]:
+        steps = {}
+        for item in filter(None, text.split(",")):
+            name, equals, value = item.partition("=")
+            if not equals or name not in known:
+                raise argparse.ArgumentTypeError(
+                    f"{item!r} is not NAME=STEPS, NAME one of {', '.join(known)}"
+                )
+            steps[name] = whole(1)(value)
+        return steps
+
+    return parse
+
+
+def mapping(text: str) -> dict:
+    """A JSON object (extra hyper-parameters)."""
+    try:
+        value = json.loads(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"not JSON ({exc.msg} at character {exc.pos})") from None
+    if not isinstance(value, dict):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a JSON object")
+    return value
+
+
+def readable(text: str) -> str:
+    """The text of a readable UTF-8 file (notes appended to a report)."""
+    try:
+        return Path(text).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise argparse.ArgumentTypeError(
+            f"cannot read {text!r} ({getattr(exc, 'strerror', None) or exc})"
+        ) from None
+
+
+def device(text: str) -> str:
+    """``cpu`` or ``cuda[:N]``, the latter only where torch sees a CUDA device."""
+    if text != "cpu" and not re.fullmatch(r"cuda(:\d+)?", text):
+        raise argparse.ArgumentTypeError(f"{text!r} is not cpu or cuda[:N]")
+    if text != "cpu":
+        import torch
+
+        if not torch.cuda.is_available():
+            raise argparse.ArgumentTypeError(f"{text!r}: torch sees no CUDA device here")
+    return text
 
 
 def check_reuse(run_dir: Path, arguments: list[str], root: Path) -> None:

@@ -36,7 +36,7 @@ from drivelab.agents.qlearning_plots import plot_qlearning  # noqa: E402
 from drivelab.envs.core import DriveEnv  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser  # noqa: E402
+from provenance import Parser, whole, wholes  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 SETUPS = {
@@ -96,14 +96,14 @@ def evaluate(agent: QLearning, env: DriveEnv, episodes: int, seed: int) -> dict:
 def main() -> None:
     parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", choices=list(SETUPS), default="follow-line")
-    parser.add_argument("--seeds", default="0,1,2")
-    parser.add_argument("--steps", type=int, default=20_000)
-    parser.add_argument("--eval-episodes", type=int, default=5)
+    parser.add_argument("--seeds", type=wholes(), default="0,1,2")
+    parser.add_argument("--steps", type=whole(), default=20_000)
+    parser.add_argument("--eval-episodes", type=whole(), default=5)
     args = parser.parse_args()
     torch.set_num_threads(1)
     setup = SETUPS[args.scenario]
     rows = []
-    for seed in (int(s) for s in args.seeds.split(",")):
+    for seed in args.seeds:
         env = DriveEnv(args.scenario, traffic=TRAFFIC[args.scenario], backend=BACKEND[args.scenario], **setup)
         env.reset(seed=seed)
         agent = QLearning(env, seed)

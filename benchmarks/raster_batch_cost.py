@@ -27,7 +27,7 @@ from drivelab.world.batch import WorldBatch  # noqa: E402
 from tests.batch_worlds import world_sequences  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser  # noqa: E402
+from provenance import Parser, whole  # noqa: E402
 
 CASES = {"topdown": ("highway", "topdown"), "camera": ("town", "camera")}
 
@@ -60,9 +60,9 @@ def per_world_step_us(sensor_spec: str, sequence, worlds: int, mode: str, repeat
 
 def main() -> None:
     parser = Parser(description=__doc__.splitlines()[0])
-    parser.add_argument("--worlds", type=int, default=32)
-    parser.add_argument("--steps", type=int, default=6)
-    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--worlds", type=whole(), default=32)
+    parser.add_argument("--steps", type=whole(), default=6)
+    parser.add_argument("--repeats", type=whole(), default=5)
     parser.add_argument("--mode", choices=("batched", "single"), default="batched")
     args = parser.parse_args()
     results = {}

@@ -78,7 +78,7 @@ from drivelab.training.sweep import Sweep, expand_sweep, plan, run_cell, run_dir
 from drivelab.yaml_io import load_yaml
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, command_line  # noqa: E402
+from provenance import Parser, command_line, mapping, positive, whole  # noqa: E402
 
 HERE = Path(__file__).parent
 SWEEP = HERE / "sweeps" / "rlad-ablation.yaml"
@@ -289,16 +289,21 @@ def run_slice(
 def main() -> None:
     parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument(
-        "--steps", type=int, default=None, help="training steps per run (default: the file's)"
+        "--steps", type=whole(), default=None, help="training steps per run (default: the file's)"
     )
-    parser.add_argument("--eval-every", type=int, default=None, help="steps between periodic evaluations")
-    parser.add_argument("--episodes", type=int, default=25, help="NoCrash episodes per traffic level")
+    parser.add_argument("--eval-every", type=whole(), default=None, help="steps between periodic evaluations")
+    parser.add_argument("--episodes", type=whole(), default=25, help="NoCrash episodes per traffic level")
     parser.add_argument(
-        "--workers", type=int, default=1, help="parallel runs and NoCrash evaluations (one per core at most)"
+        "--workers",
+        type=whole(),
+        default=1,
+        help="parallel runs and NoCrash evaluations (one per core at most)",
     )
-    parser.add_argument("--hyperparams", default=None, help="JSON of extra hyper-parameters for every run")
     parser.add_argument(
-        "--duration-s", type=float, default=None, help="episode time limit (default: the town's)"
+        "--hyperparams", type=mapping, default=None, help="JSON of extra hyper-parameters for every run"
+    )
+    parser.add_argument(
+        "--duration-s", type=positive, default=None, help="episode time limit (default: the town's)"
     )
     parser.add_argument("--out", type=Path, default=None, help="report directory")
     parser.add_argument(
@@ -307,14 +312,16 @@ def main() -> None:
         help="rewrite nocrash.md from the runs' nocrash.json (no training, no evaluation)",
     )
     parser.add_argument("--runs-dir", type=Path, default=None, help="where the run directories go")
-    parser.add_argument("--seeds", type=int, default=None, help="seeds per variant (default: the file's 3)")
-    parser.add_argument("--checkpoint-every", type=int, default=None, help="steps between checkpoints")
     parser.add_argument(
-        "--time-limit-s", type=float, default=None,
+        "--seeds", type=whole(), default=None, help="seeds per variant (default: the file's 3)"
+    )
+    parser.add_argument("--checkpoint-every", type=whole(), default=None, help="steps between checkpoints")
+    parser.add_argument(
+        "--time-limit-s", type=positive, default=None,
         help="stop every run this many seconds after the start, with a checkpoint; exit 3 if unfinished",
     )  # fmt: skip
     parser.add_argument(
-        "--stop-after-steps", type=int, default=None,
+        "--stop-after-steps", type=whole(), default=None,
         help="train each unfinished run at most this many more steps; exit 3 if unfinished",
     )  # fmt: skip
     parser.add_argument(
@@ -336,7 +343,7 @@ def main() -> None:
     if args.checkpoint_every is not None:
         spec["base"] = {**spec["base"], "checkpoint_every": args.checkpoint_every}
     if args.hyperparams:
-        spec["base"] = {**spec["base"], "hyperparams": json.loads(args.hyperparams)}
+        spec["base"] = {**spec["base"], "hyperparams": args.hyperparams}
     if args.duration_s is not None:
         spec["base"] = {**spec["base"], "env_options": {"duration_s": args.duration_s}}
     out = args.out or HERE / "results" / ("rlad-ablation" + (f"-{args.steps}steps" if tiny else ""))

@@ -35,7 +35,7 @@ from drivelab.agents.rlad.sac import REPLAY_FRAMES, RLAD
 from drivelab.envs.core import DriveEnv
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, command_line  # noqa: E402
+from provenance import Parser, command_line, device, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 SIZES = (84, 256)
@@ -110,11 +110,15 @@ def row_markdown(row: dict) -> str:
 
 def main() -> None:
     parser = Parser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=40, help="environment steps / policy calls per repeat")
-    parser.add_argument("--updates", type=int, default=2, help="updates per repeat")
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--batch-size", type=int, default=256)
-    parser.add_argument("--device", default="cpu", help="cpu or cuda: where the agent's networks run")
+    parser.add_argument(
+        "--steps", type=whole(), default=40, help="environment steps / policy calls per repeat"
+    )
+    parser.add_argument("--updates", type=whole(), default=2, help="updates per repeat")
+    parser.add_argument("--repeats", type=whole(), default=3)
+    parser.add_argument("--batch-size", type=whole(), default=256)
+    parser.add_argument(
+        "--device", type=device, default="cpu", help="cpu or cuda: where the agent's networks run"
+    )
     parser.add_argument(
         "--replay-frames", default="auto", choices=REPLAY_FRAMES, help="where the replay keeps its frames "
         "(RLAD's replay_frames: auto is the device's memory on CUDA, the host's otherwise)",

@@ -27,7 +27,7 @@ from drivelab.agents.rlad.sac import RLAD
 from drivelab.envs.core import DriveEnv
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, command_line  # noqa: E402
+from provenance import Parser, command_line, device, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 
@@ -48,13 +48,20 @@ def timed_ms(function, calls: int, repeats: int, sync) -> float:
 
 def main() -> None:
     parser = Parser(description=__doc__.splitlines()[0])
-    parser.add_argument("--device", default="cpu", help="cpu or cuda: where the agent's networks run")
-    parser.add_argument("--size", type=int, default=84, help="camera width and height")
-    parser.add_argument("--batch-size", type=int, default=256)
-    parser.add_argument("--updates", type=int, default=10, help="calls per repeat, and updates profiled")
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--top", type=int, default=15, help="operators listed per table")
-    parser.add_argument("--replay-frames", default="auto", help="auto, host or device (RLAD's replay_frames)")
+    parser.add_argument(
+        "--device", type=device, default="cpu", help="cpu or cuda: where the agent's networks run"
+    )
+    parser.add_argument("--size", type=whole(), default=84, help="camera width and height")
+    parser.add_argument("--batch-size", type=whole(), default=256)
+    parser.add_argument("--updates", type=whole(), default=10, help="calls per repeat, and updates profiled")
+    parser.add_argument("--repeats", type=whole(), default=3)
+    parser.add_argument("--top", type=whole(), default=15, help="operators listed per table")
+    parser.add_argument(
+        "--replay-frames",
+        choices=("auto", "host", "device"),
+        default="auto",
+        help="auto, host or device (RLAD's replay_frames)",
+    )
     parser.add_argument(
         "--hyperparams", default="{}", help='JSON of more RLAD hyper-parameters, e.g. {"fast_update": true}'
     )

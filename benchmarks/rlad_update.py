@@ -47,7 +47,7 @@ from torch.profiler import ProfilerActivity, profile
 from drivelab.agents.rlad.sac import RLAD
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, command_line  # noqa: E402
+from provenance import Parser, command_line, device, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 VARIANTS = {
@@ -114,18 +114,18 @@ def profile_table(update, calls: int, cuda: bool, sync, top: int) -> dict[str, s
 
 def main() -> None:
     parser = Parser(description=__doc__.splitlines()[0])
-    parser.add_argument("--device", default="cpu", help="cpu or cuda")
-    parser.add_argument("--size", type=int, nargs="+", default=[84], help="camera sizes (px)")
-    parser.add_argument("--batch-size", type=int, default=256)
-    parser.add_argument("--threads", type=int, nargs="+", default=[1], help="torch thread counts")
+    parser.add_argument("--device", type=device, default="cpu", help="cpu or cuda")
+    parser.add_argument("--size", type=whole(), nargs="+", default=[84], help="camera sizes (px)")
+    parser.add_argument("--batch-size", type=whole(), default=256)
+    parser.add_argument("--threads", type=whole(), nargs="+", default=[1], help="torch thread counts")
     parser.add_argument(
         "--variants", nargs="+", choices=list(VARIANTS), default=["plain", "fast", "compiled"]
     )
-    parser.add_argument("--updates", type=int, default=1, help="updates per repeat")
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--updates", type=whole(), default=1, help="updates per repeat")
+    parser.add_argument("--repeats", type=whole(), default=3)
     parser.add_argument("--profile", action="store_true", help="torch.profiler tables of each variant")
-    parser.add_argument("--profile-updates", type=int, default=3)
-    parser.add_argument("--top", type=int, default=15, help="operators per profiler table")
+    parser.add_argument("--profile-updates", type=whole(), default=3)
+    parser.add_argument("--top", type=whole(), default=15, help="operators per profiler table")
     parser.add_argument("--out", default=None, help="result file name in results/ (no suffix)")
     args = parser.parse_args()
     cuda = args.device.startswith("cuda")

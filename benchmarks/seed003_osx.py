@@ -41,7 +41,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser  # noqa: E402
+from provenance import Parser, names, readable, step_overrides, whole, wholes  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent
 RESULTS = ROOT / "results"
@@ -383,14 +383,16 @@ def write_outputs(result: dict) -> None:
 
 def main() -> None:
     parser = Parser(description=__doc__.splitlines()[0])
-    parser.add_argument("--agents", default=",".join(AGENTS))
-    parser.add_argument("--seeds", default="0,1,2")
-    parser.add_argument("--steps", default="", help="agent=steps overrides, comma separated")
-    parser.add_argument("--episodes", type=int, default=20)
-    parser.add_argument("--findings", type=Path, help="a Markdown file appended to the results")
+    parser.add_argument("--agents", type=names(AGENTS), default=",".join(AGENTS))
+    parser.add_argument("--seeds", type=wholes(), default="0,1,2")
+    parser.add_argument(
+        "--steps", type=step_overrides(AGENTS), default="", help="agent=steps overrides, comma separated"
+    )
+    parser.add_argument("--episodes", type=whole(), default=20)
+    parser.add_argument("--findings", type=readable, help="a Markdown file appended to the results")
     parser.add_argument("--report", action="store_true", help="only rewrite Markdown and plot from the JSON")
     args = parser.parse_args()
-    findings = args.findings.read_text() if args.findings else None
+    findings = args.findings
     if args.report:
         result = json.loads((RESULTS / "seed003_osx.json").read_text())
         result["findings"] = findings or result.get("findings")
@@ -399,11 +401,8 @@ def main() -> None:
     import torch
 
     torch.set_num_threads(1)
-    steps = dict(DEFAULT_STEPS)
-    for item in filter(None, args.steps.split(",")):
-        key, _, value = item.partition("=")
-        steps[key] = int(value)
-    agents, seeds = args.agents.split(","), [int(s) for s in args.seeds.split(",")]
+    steps = {**DEFAULT_STEPS, **args.steps}
+    agents, seeds = args.agents, args.seeds
     RESULTS.mkdir(exist_ok=True)
     result = {
         "command": "python " + shlex.join(sys.argv),

@@ -19,7 +19,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser  # noqa: E402
+from provenance import Parser, whole  # noqa: E402
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
@@ -44,7 +44,7 @@ def setup_ms(scenario: str, control: str, seeds: int) -> float:
 
 def main() -> None:
     parser = Parser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, default=100)
+    parser.add_argument("--seeds", type=whole(), default=100)
     parser.add_argument("--no-save", action="store_true", help="print only (e.g. for an older checkout)")
     args = parser.parse_args()
     rows = [

@@ -39,7 +39,7 @@ from drivelab.training.nocrash import LEVELS  # noqa: E402
 from drivelab.training.stats import bootstrap_ci  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, check_reuse  # noqa: E402
+from provenance import Parser, check_reuse, names, readable, whole, wholes  # noqa: E402
 
 RUNS = ROOT / "benchmarks" / "runs"
 RESULTS = ROOT / "benchmarks" / "results"
@@ -192,24 +192,14 @@ def markdown(result: dict) -> str:
 
 def main() -> None:
     parser = Parser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--seeds", default="0,1,2", help="training seeds, comma-separated")
-    parser.add_argument("--episodes", type=int, default=100, help="NoCrash episodes per traffic level")
-    parser.add_argument("--learners", default=",".join(LEARNERS), help="which learners, comma-separated")
-    parser.add_argument("--notes", type=Path, default=None, help="a Markdown file appended as notes")
+    parser.add_argument("--seeds", type=wholes(), default="0,1,2", help="training seeds, comma-separated")
+    parser.add_argument("--episodes", type=whole(), default=100, help="NoCrash episodes per traffic level")
+    parser.add_argument(
+        "--learners", type=names(LEARNERS), default=",".join(LEARNERS), help="which learners, comma-separated"
+    )
+    parser.add_argument("--notes", type=readable, default=None, help="a Markdown file appended as notes")
     args = parser.parse_args()
-    try:
-        seeds = [int(s) for s in args.seeds.split(",")]
-        learners = args.learners.split(",")
-        if args.episodes < 1 or not set(learners) <= set(LEARNERS):
-            raise ValueError
-        notes = args.notes.read_text() if args.notes is not None else ""
-    except (ValueError, OSError):
-        print(
-            f"error: --seeds takes integers, --episodes positive, --learners from {list(LEARNERS)}, "
-            "--notes a readable file",
-            file=sys.stderr,
-        )
-        raise SystemExit(2) from None
+    seeds, learners, notes = args.seeds, args.learners, args.notes or ""
 
     records = [measure(learner, seed, args.episodes) for learner in learners for seed in seeds]
     result = {

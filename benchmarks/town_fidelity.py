@@ -35,7 +35,7 @@ from drivelab.training.nocrash import INFRACTIONS, LEVELS, NOCRASH_SEED  # noqa:
 from drivelab.world.state import LIGHT_GREEN  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser  # noqa: E402
+from provenance import Parser, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 BACKENDS = ("highway", "fast")
@@ -127,7 +127,7 @@ def interval(results: list[dict], key: str, rng: np.random.Generator, resamples:
 
 def main() -> None:
     parser = Parser(description=__doc__.splitlines()[0])
-    parser.add_argument("--episodes", type=int, default=25)
+    parser.add_argument("--episodes", type=whole(), default=25)
     args = parser.parse_args()
     rows, traffic, seconds = {}, {}, {}
     for backend in BACKENDS:

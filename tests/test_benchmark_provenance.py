@@ -79,8 +79,9 @@ def test_pinning_an_agents_own_defaults_trains_the_same_run(tmp_path, capsys):
 BENCHMARKS = SCRIPT.parent
 
 
-def test_every_benchmark_parses_its_arguments_with_the_one_line_parser():
-    """No benchmark builds argparse's own parser (a usage block before its error line)."""
+def test_every_benchmark_parses_its_arguments_with_the_one_line_parser_and_checked_types():
+    """No benchmark builds argparse's own parser (a usage block before its error line), and no
+    option is a bare int or float (a count of 0 or -1 ran, and wrote results of nothing)."""
     import ast
 
     parsers = {}
@@ -89,6 +90,9 @@ def test_every_benchmark_parses_its_arguments_with_the_one_line_parser():
         names = {ast.unparse(call.func) for call in calls}
         assert "argparse.ArgumentParser" not in names and "ArgumentParser" not in names, script.name
         parsers[script.name] = "Parser" in names
+        for call in (c for c in calls if ast.unparse(c.func).endswith("add_argument")):
+            types = [ast.unparse(k.value) for k in call.keywords if k.arg == "type"]
+            assert types not in (["int"], ["float"]), (script.name, ast.unparse(call))
     assert sum(parsers.values()) >= 30  # the scripts that take arguments
 
 
@@ -106,6 +110,53 @@ def test_a_bad_argument_is_one_error_line_and_exit_2(capsys):
     assert parser.parse_args(["--steps", "5"]).steps == 5
 
 
+def test_the_argument_types_refuse_what_makes_no_sense(tmp_path, capsys):
+    provenance = _provenance()
+    parser = provenance.Parser()
+    parser.add_argument("--steps", type=provenance.whole(), default=3)
+    parser.add_argument("--offset", type=provenance.whole(0), default=0)
+    parser.add_argument("--seeds", type=provenance.wholes(), default="0,1,2")
+    parser.add_argument("--agents", type=provenance.names(("ppo", "dqn")), default="ppo,dqn")
+    parser.add_argument("--steps-of", type=provenance.step_overrides(("ppo", "dqn")), default="")
+    parser.add_argument("--duration-s", type=provenance.positive)
+    parser.add_argument("--hyperparams", type=provenance.mapping)
+    parser.add_argument("--notes", type=provenance.readable)
+    parser.add_argument("--device", type=provenance.device, default="cpu")
+    (tmp_path / "notes.md").write_text("seen")
+    args = parser.parse_args(
+        ["--seeds", "4,0", "--steps-of", "dqn=5", "--duration-s", "2.5", "--hyperparams", '{"a": 1}',
+         "--notes", str(tmp_path / "notes.md")]
+    )  # fmt: skip
+    assert (args.steps, args.offset, args.seeds, args.agents) == (3, 0, [4, 0], ["ppo", "dqn"])
+    assert (args.steps_of, args.duration_s, args.hyperparams, args.notes) == (
+        {"dqn": 5},
+        2.5,
+        {"a": 1},
+        "seen",
+    )
+    for argv, message in (
+        (["--steps", "0"], "argument --steps: 0 is below 1"),
+        (["--steps", "2.5"], "argument --steps: '2.5' is not a whole number"),
+        (["--offset", "-1"], "argument --offset: -1 is below 0"),
+        (["--seeds", "0,abc"], "argument --seeds: 'abc' is not a whole number"),
+        (["--seeds", "1,1"], "argument --seeds: '1,1' names a value twice"),
+        (["--agents", "ppo,sac"], "argument --agents: unknown 'sac' (known: ppo, dqn)"),
+        (["--steps-of", "sac=5"], "argument --steps-of: 'sac=5' is not NAME=STEPS, NAME one of ppo, dqn"),
+        (["--steps-of", "ppo=0"], "argument --steps-of: 0 is below 1"),
+        (["--duration-s", "nan"], "argument --duration-s: 'nan' is not a finite number above 0"),
+        (["--duration-s", "0"], "argument --duration-s: '0' is not a finite number above 0"),
+        (["--hyperparams", "{bad"], "argument --hyperparams: not JSON (Expecting property name enclosed in "
+         "double quotes at character 1)"),
+        (["--hyperparams", "[1]"], "argument --hyperparams: '[1]' is not a JSON object"),
+        (["--notes", str(tmp_path / "none.md")], f"argument --notes: cannot read '{tmp_path / 'none.md'}' "
+         "(No such file or directory)"),
+        (["--device", "gpu"], "argument --device: 'gpu' is not cpu or cuda[:N]"),
+    ):  # fmt: skip
+        with pytest.raises(SystemExit) as stopped:
+            parser.parse_args(argv)
+        assert stopped.value.code == 2 and capsys.readouterr().err == f"error: {message}\n", argv
+
+
 @pytest.mark.parametrize("script", ["zoo_build.py", "pg_maps.py"])
 def test_a_benchmark_script_refuses_bad_input_in_one_line(script, tmp_path):
     import subprocess
@@ -120,3 +171,17 @@ def test_a_benchmark_script_refuses_bad_input_in_one_line(script, tmp_path):
     assert done.returncode == 2 and done.stdout == ""
     assert done.stderr == "error: unrecognized arguments: --no-such-option\n"
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_nonsensical_count_stops_a_benchmark_before_it_writes(tmp_path):
+    """pg_maps.py --seeds 0 once overwrote its committed results with a mean of nothing."""
+    import subprocess
+    import sys
+
+    results = BENCHMARKS / "results" / "pg_maps.json"
+    before = results.read_bytes()
+    done = subprocess.run(
+        [sys.executable, str(BENCHMARKS / "pg_maps.py"), "--seeds", "0"], capture_output=True, text=True
+    )
+    assert (done.returncode, done.stdout, done.stderr) == (2, "", "error: argument --seeds: 0 is below 1\n")
+    assert results.read_bytes() == before
