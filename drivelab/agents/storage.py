@@ -13,6 +13,7 @@ from __future__ import annotations
 import io
 import json
 import pickle  # only for its exception type: nothing here unpickles
+import warnings
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -43,7 +44,11 @@ def tensors_to_bytes(state: Any) -> bytes:
 def tensors_from_bytes(data: bytes) -> Any:
     """The inverse of ``tensors_to_bytes``; refuses anything but tensors and plain containers."""
     try:
-        return torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
+        with warnings.catch_warnings():
+            # a file pickled with another protocol than torch's own (a foreign or crafted file) makes
+            # torch warn before it refuses or reads it: the refusal below, or the tensors, say enough
+            warnings.filterwarnings("ignore", message="Detected pickle protocol", category=UserWarning)
+            return torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
     except pickle.UnpicklingError:
         raise ValueError("the tensor file holds objects other than tensors (refused)") from None
 
