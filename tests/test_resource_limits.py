@@ -7,6 +7,7 @@ import warnings
 import zipfile
 from pathlib import Path
 
+import pytest
 import torch
 from typer.testing import CliRunner
 
@@ -14,6 +15,8 @@ from drivelab.agents.registry import get_algo
 from drivelab.cli import app
 from drivelab.config import build_config, save_yaml
 from drivelab.envs.core import DriveEnv
+from drivelab.errors import UsageError
+from drivelab.training import checkpoints
 
 runner = CliRunner()
 FAST = {"duration_s": 6}
@@ -29,16 +32,27 @@ def _config(algo: str):
     return build_config({"algo": algo, "action": "meta", **HIGHWAY, "name": algo, "hyperparams": SMALL[algo]})
 
 
+def _built(algo: str):
+    config = _config(algo)
+    env = DriveEnv(**config.env_kwargs())
+    return config, get_algo(algo).build(algo, env, config.seed, dict(config.hyperparams), None)
+
+
 def _saved_run(tmp_path: Path, algo: str) -> Path:
     """A run directory with its config and a freshly built (untrained) model.zip."""
-    config = _config(algo)
+    config, model = _built(algo)
     run_dir = tmp_path / "runs" / config.name
     run_dir.mkdir(parents=True)
     save_yaml(config, run_dir / "config.yaml")
-    env = DriveEnv(**config.env_kwargs())
-    model = get_algo(algo).build(algo, env, config.seed, dict(config.hyperparams), None)
     model.save(run_dir / "model.zip")
     return run_dir
+
+
+def _poison(model) -> None:
+    """Make the model's first weight nan, as a diverged training run leaves it."""
+    network = model.policy if hasattr(model, "policy") else model.q_network
+    with torch.no_grad():
+        next(network.parameters()).view(-1)[0] = float("nan")
 
 
 def _rewrite_member(path: Path, member: str, data: bytes) -> None:
@@ -70,4 +84,42 @@ def test_a_protocol_4_tensor_file_is_refused_without_torch_warnings(tmp_path):
         result = runner.invoke(app, ["evaluate", str(run_dir), "--episodes", "1"])
     _assert_one_error_line(result, "cannot load model", "objects other than tensors")
     assert [str(w.message) for w in caught if "pickle protocol" in str(w.message)] == []
+    assert not (run_dir / "eval.json").exists()
+
+
+# --- diverged models ----------------------------------------------------------------------------
+@pytest.mark.parametrize("algo", ["dqn", "dueling_ddqn"])
+def test_a_model_with_nan_weights_is_not_saved(tmp_path, algo):
+    config, model = _built(algo)
+    _poison(model)
+    with pytest.raises(UsageError, match="not saved: the model's tensors hold nan or inf"):
+        model.save(tmp_path / "model.zip")
+    assert not (tmp_path / "model.zip").exists()
+
+
+def test_a_checkpoint_with_nan_weights_keeps_the_previous_one(tmp_path):
+    config, model = _built("dueling_ddqn")
+    run_dir = tmp_path / "run"
+    run_dir.mkdir()
+    checkpoints.save_checkpoint(model, run_dir, config, save_replay=False)
+    before = {path.name: path.read_bytes() for path in (run_dir / "checkpoints").iterdir()}
+    _poison(model)
+    with pytest.raises(UsageError, match="not saved: the model's tensors hold nan"):
+        checkpoints.save_checkpoint(model, run_dir, config, save_replay=False)
+    after = {path.name: path.read_bytes() for path in (run_dir / "checkpoints").iterdir()}
+    assert after == before  # no temporary file left, the previous checkpoint whole
+
+
+@pytest.mark.parametrize(("algo", "member"), [("dqn", "parameters.pt"), ("dueling_ddqn", "state.pt")])
+def test_a_model_with_nan_weights_is_not_evaluated(tmp_path, algo, member):
+    run_dir = _saved_run(tmp_path, algo)
+    with zipfile.ZipFile(run_dir / "model.zip") as archive:
+        state = torch.load(io.BytesIO(archive.read(member)), weights_only=True)
+    tensors = state["state_dicts"]["policy"] if algo == "dqn" else state["q_network"]
+    next(iter(tensors.values())).view(-1)[0] = float("inf")
+    corrupted = io.BytesIO()
+    torch.save(state, corrupted)  # written around the guard, as a diverged run's file would be
+    _rewrite_member(run_dir / "model.zip", member, corrupted.getvalue())
+    result = runner.invoke(app, ["evaluate", str(run_dir), "--episodes", "1"])
+    _assert_one_error_line(result, "cannot load model", "nan or inf")
     assert not (run_dir / "eval.json").exists()

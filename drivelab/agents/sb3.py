@@ -71,9 +71,10 @@ class SafeSave:
             "ep_info_buffer": list(self.ep_info_buffer or []),
             "ep_success_buffer": [bool(value) for value in self.ep_success_buffer or []],
         }
+        tensors = tensors_to_bytes(parameters)  # before the file is opened: a refusal writes nothing
         with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as archive:
             archive.writestr("sb3.json", json.dumps(meta, default=_json_number))
-            archive.writestr("parameters.pt", tensors_to_bytes(parameters))
+            archive.writestr("parameters.pt", tensors)
 
     def save_replay_buffer(self, path: str | Path) -> None:
         """The replay buffer's arrays (dict observations key by key) and position as ``.npz``."""
