@@ -123,3 +123,41 @@ def test_a_model_with_nan_weights_is_not_evaluated(tmp_path, algo, member):
     result = runner.invoke(app, ["evaluate", str(run_dir), "--episodes", "1"])
     _assert_one_error_line(result, "cannot load model", "nan or inf")
     assert not (run_dir / "eval.json").exists()
+
+
+# --- sensor sizes -------------------------------------------------------------------------------
+OVERSIZED_SENSORS = [
+    ("lidar:beams=100000000", "'beams' of 'lidar' must be <= 100000"),
+    ("topdown:size=1000000", "'size' of 'topdown' must be <= 1024"),
+    ("topdown:history=1000000000", "'history' of 'topdown' must be <= 10000"),
+    ("birdeye:size=1000000", "'size' of 'birdeye' must be <= 2048"),
+    ("kinematics:stack=1000000000", "'stack' of 'kinematics' must be <= 16777216"),
+    ("kinematics:vehicles_count=1000000000", "'vehicles_count' of 'kinematics' must be <= 10000"),
+    ("waypoints:count=1000000000", "'count' of 'waypoints' must be <= 100000"),
+    ("camera:width=1000000", "'width' of 'camera' must be <= 2048"),
+    ("camera:height=1000000", "'height' of 'camera' must be <= 2048"),
+    ("line:strips=1000", "'strips' of 'line' must be <= 40"),
+    ("lidar:beams=100000:stack=200", "gives 20000000 values per observation, more than 16777216"),
+]
+
+
+@pytest.mark.parametrize(("spec", "message"), OVERSIZED_SENSORS)
+def test_oversized_sensors_are_refused_before_they_are_built(spec, message):
+    from drivelab.perception.sensors import make_sensor
+
+    with pytest.raises(UsageError, match=message.replace("(", r"\(")):
+        make_sensor(spec)
+
+
+def test_the_largest_allowed_sizes_build():
+    from drivelab.perception.sensors import make_sensor
+
+    assert make_sensor("lidar:beams=100000").space.shape == (100_000,)
+    assert make_sensor("kinematics:vehicles_count=10000:stack=2").space.shape == (140_000,)
+
+
+def test_an_oversized_sensor_is_one_error_line_and_no_run(tmp_path):
+    result = runner.invoke(app, ["train", "--algo", "ppo", "--steps", "64", "--obs", "lidar:beams=100000000",
+                                 "--runs-dir", str(tmp_path / "runs")])  # fmt: skip
+    _assert_one_error_line(result, "'beams' of 'lidar' must be <= 100000")
+    assert not (tmp_path / "runs").exists()
