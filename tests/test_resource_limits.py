@@ -7,6 +7,7 @@ import warnings
 import zipfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 from typer.testing import CliRunner
@@ -161,3 +162,52 @@ def test_an_oversized_sensor_is_one_error_line_and_no_run(tmp_path):
                                  "--runs-dir", str(tmp_path / "runs")])  # fmt: skip
     _assert_one_error_line(result, "'beams' of 'lidar' must be <= 100000")
     assert not (tmp_path / "runs").exists()
+
+
+# --- buffer and rollout sizes -------------------------------------------------------------------
+HUGE = "1000000000000"  # 10^12 entries: hundreds of TiB, more than any machine's memory
+
+
+@pytest.mark.parametrize(
+    ("algo", "setting", "message"),
+    [
+        ("dqn", f"buffer_size={HUGE}", "'buffer_size' of 'dqn' asks for a replay buffer"),
+        ("dqn", f"batch_size={HUGE}", "'batch_size' of 'dqn' asks for a training batch"),
+        ("dueling_ddqn", f"buffer_size={HUGE}", "'buffer_size' of 'dueling_ddqn' asks for a replay buffer"),
+        ("dueling_ddqn", f"batch_size={HUGE}", "'batch_size' of 'dueling_ddqn' asks for a training batch"),
+        ("ppo", f"n_steps={HUGE}", "'n_steps' of 'ppo' asks for a rollout"),
+        ("ppo_own", f"n_steps={HUGE}", "'n_steps' of 'ppo_own' asks for a rollout"),
+        ("a2c_own", f"n_steps={HUGE}", "'n_steps' of 'a2c_own' asks for a rollout"),
+    ],
+)
+def test_buffers_larger_than_the_machine_are_one_error_line_and_no_run(tmp_path, algo, setting, message):
+    action = "continuous" if algo.endswith("_own") else "meta"
+    result = runner.invoke(app, ["train", "--algo", algo, "--action", action, "--steps", "64", "--traffic",
+                                 "empty", "-H", setting, "--runs-dir", str(tmp_path / "runs")])  # fmt: skip
+    _assert_one_error_line(result, message, "GiB, more than this machine's")
+    assert not (tmp_path / "runs").exists()
+
+
+def test_rlad_refuses_a_replay_larger_than_the_machine():
+    from gymnasium import spaces
+
+    from drivelab.agents.rlad.sac import RLAD
+
+    observations = spaces.Dict({
+        "camera": spaces.Box(0, 255, (84, 84, 9), dtype=np.uint8),
+        "waypoints": spaces.Box(-50.0, 50.0, (10, 2), dtype=np.float32),
+        "measurements": spaces.Box(-1.0, 1.0, (6,), dtype=np.float32),
+    })  # fmt: skip
+    actions = spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
+    with pytest.raises(UsageError, match="'buffer_size' of 'rlad' asks for a replay buffer"):
+        RLAD(observations, actions, 0, {"buffer_size": int(HUGE)})
+    with pytest.raises(UsageError, match="'batch_size' of 'rlad' asks for a training batch"):
+        RLAD(observations, actions, 0, {"batch_size": int(HUGE)})
+
+
+def test_ordinary_buffer_sizes_are_accepted():
+    from drivelab.agents.buffer_memory import check_buffer_memory
+
+    check_buffer_memory(
+        "dqn", "buffer_size", 1_000_000, 2 * 4 * 35
+    )  # SB3's default size, kinematics: 0.3 GiB

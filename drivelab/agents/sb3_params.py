@@ -15,6 +15,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from drivelab.agents.buffer_memory import check_buffer_memory, observation_bytes
 from drivelab.agents.registry import get_algo
 from drivelab.errors import UsageError
 
@@ -223,3 +224,37 @@ def check_sb3_hyperparams(algo: str, hyperparams: dict) -> dict:
             known = sorted([*declared, *special, "features_extractor"])
             raise UsageError(f"unknown hyperparameter {key!r} for {algo!r} (known: {', '.join(known)})")
     return checked
+
+
+def _given_or_default(algo: str, hyperparams: dict, key: str):
+    """``hyperparams[key]``, else the default of ``algo``'s SB3 constructor."""
+    if key in hyperparams:
+        return hyperparams[key]
+    return inspect.signature(get_algo(algo).agent_class().__init__).parameters[key].default
+
+
+def check_sb3_memory(algo: str, hyperparams: dict, observation_space, n_envs: int = 1) -> None:
+    """Refuse sizes whose buffers this machine cannot hold (``buffer_memory``), from checked
+    ``hyperparams`` and the observation space: the replay buffer of DQN and SAC (``buffer_size``
+    transitions, each observation kept twice unless ``optimize_memory_usage``) and its training
+    batches (``batch_size``, float32 tensors of both observations); the rollout of PPO and A2C
+    (``n_steps`` × ``n_envs`` entries, observations stored as float32)."""
+    if "buffer_size" in PARAMS[algo]:
+        copies = 1 if _given_or_default(algo, hyperparams, "optimize_memory_usage") else 2
+        stored = copies * observation_bytes(observation_space)
+        check_buffer_memory(
+            algo, "buffer_size", _given_or_default(algo, hyperparams, "buffer_size"), stored, "replay buffer"
+        )
+        batch = 2 * observation_bytes(observation_space, itemsize=4)
+        check_buffer_memory(
+            algo, "batch_size", _given_or_default(algo, hyperparams, "batch_size"), batch, "training batch"
+        )
+    else:
+        entries = _given_or_default(algo, hyperparams, "n_steps") * n_envs
+        check_buffer_memory(
+            algo,
+            "n_steps",
+            entries,
+            observation_bytes(observation_space, itemsize=4),
+            "rollout (n_steps × n_envs)",
+        )
