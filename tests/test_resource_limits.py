@@ -211,3 +211,48 @@ def test_ordinary_buffer_sizes_are_accepted():
     check_buffer_memory(
         "dqn", "buffer_size", 1_000_000, 2 * 4 * 35
     )  # SB3's default size, kinematics: 0.3 GiB
+
+
+# --- settings that train nothing ----------------------------------------------------------------
+@pytest.mark.parametrize("algo", ["dqn", "sac"])
+def test_zero_gradient_steps_are_refused(algo):
+    from drivelab.agents.sb3_params import check_sb3_hyperparams
+
+    with pytest.raises(UsageError, match=f"'gradient_steps' of '{algo}' must be -1 .* or >= 1, got 0"):
+        check_sb3_hyperparams(algo, {"gradient_steps": 0})
+    assert check_sb3_hyperparams(algo, {"gradient_steps": -1}) == {"gradient_steps": -1}
+    assert check_sb3_hyperparams(algo, {"gradient_steps": 2.0}) == {"gradient_steps": 2}
+
+
+@pytest.mark.parametrize(
+    ("algo", "net_arch"),
+    [("ppo", [0]), ("ppo", [64, -1]), ("a2c", {"pi": [64], "vf": [0]}), ("dqn", [32, 0]),
+     ("sac", {"pi": [64], "qf": [64, 0]}), ("ppo", [64.5]), ("ppo", {"pi": 64})],
+)  # fmt: skip
+def test_non_positive_layer_widths_are_refused(algo, net_arch):
+    from drivelab.agents.sb3_params import check_sb3_hyperparams
+
+    with pytest.raises(
+        UsageError, match=f"policy_kwargs net_arch of '{algo}' must be a list of layer widths"
+    ):
+        check_sb3_hyperparams(algo, {"policy_kwargs": {"net_arch": net_arch}})
+
+
+def test_positive_layer_widths_are_accepted():
+    from drivelab.agents.sb3_params import check_sb3_hyperparams
+
+    for net_arch in ([], [64, 64], {"pi": [32], "vf": [64, 64]}):
+        kwargs = {"policy_kwargs": {"net_arch": net_arch}}
+        assert check_sb3_hyperparams("ppo", kwargs) == kwargs
+
+
+@pytest.mark.parametrize(
+    ("algo", "setting", "message"),
+    [("dqn", "gradient_steps=0", "'gradient_steps' of 'dqn'"),
+     ("ppo", "policy_kwargs={net_arch: [0]}", "net_arch of 'ppo' must be a list of layer widths >= 1")],
+)  # fmt: skip
+def test_settings_that_train_nothing_are_one_error_line_and_no_run(tmp_path, algo, setting, message):
+    arguments = ["--algo", algo, "--steps", "64", "--traffic", "empty", "-H", setting]
+    result = runner.invoke(app, ["train", *arguments, "--runs-dir", str(tmp_path / "runs")])
+    _assert_one_error_line(result, message)
+    assert not (tmp_path / "runs").exists()

@@ -69,7 +69,9 @@ _OFF_POLICY = {
     "learning_starts": NON_NEGATIVE_INT,
     "batch_size": COUNT,
     "tau": Param("float", 0, 1, open_low=True),
-    "gradient_steps": Param("int", -1),  # -1: as many gradient steps as environment steps
+    "gradient_steps": Param(
+        "int", -1
+    ),  # -1: as many as environment steps; 0 is refused (_check_gradient_steps)
     "optimize_memory_usage": FLAG,
     "n_steps": COUNT,
     "target_update_interval": COUNT,
@@ -155,9 +157,42 @@ def _is_positive_number(text: str) -> bool:
         return False
 
 
+def _check_gradient_steps(algo: str, value) -> int:
+    """-1 (as many gradient steps as environment steps) or >= 1: 0 would train nothing."""
+    value = _check_value(algo, "gradient_steps", value, Param("int", -1))
+    if value == 0:
+        raise UsageError(
+            f"hyperparameter 'gradient_steps' of {algo!r} must be -1 (one per environment step) or >= 1, "
+            f"got 0 (no gradient step: the agent would not learn)"
+        )
+    return value
+
+
+def _check_policy_kwargs(algo: str, value) -> dict:
+    """A mapping whose ``net_arch``, when given, has positive integer layer widths: a list, or a
+    mapping of lists (``pi`` / ``vf`` / ``qf``), as SB3 takes it."""
+    value = _check_value(algo, "policy_kwargs", value, MAPPING)
+    net_arch = value.get("net_arch")
+    if net_arch is None:
+        return value
+    wrong = (
+        f"policy_kwargs net_arch of {algo!r} must be a list of layer widths >= 1 (or pi/vf/qf lists of them)"
+    )
+    layers = net_arch.values() if isinstance(net_arch, dict) else [net_arch]
+    for widths in layers:
+        if not isinstance(widths, (list, tuple)):
+            raise UsageError(f"{wrong}, got {net_arch!r}")
+        for width in widths:
+            if isinstance(width, bool) or not isinstance(width, int) or width < 1:
+                raise UsageError(f"{wrong}, got {net_arch!r}")
+    return value
+
+
 SPECIAL: dict[str, Callable] = {
     "device": lambda algo, key, value: _check_device(algo, value),
     "train_freq": lambda algo, key, value: _check_train_freq(algo, value),
+    "gradient_steps": lambda algo, key, value: _check_gradient_steps(algo, value),
+    "policy_kwargs": lambda algo, key, value: _check_policy_kwargs(algo, value),
 }
 SAC_SPECIAL: dict[str, Callable] = {
     "ent_coef": lambda algo, key, value: _check_sac_coefficient(algo, key, value, POSITIVE),
