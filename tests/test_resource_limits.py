@@ -256,3 +256,32 @@ def test_settings_that_train_nothing_are_one_error_line_and_no_run(tmp_path, alg
     result = runner.invoke(app, ["train", *arguments, "--runs-dir", str(tmp_path / "runs")])
     _assert_one_error_line(result, message)
     assert not (tmp_path / "runs").exists()
+
+
+# --- sensors that need a road's paint ------------------------------------------------------------
+@pytest.mark.parametrize(
+    ("scenario", "obs", "message"),
+    [("highway", "line", "only the follow-line circuit has painted"),
+     ("follow-lane", "line", "only the follow-line circuit has painted"),
+     ("town", "kinematics,line", "only the follow-line circuit has painted"),
+     ("highway", "lane:detector=classical", "calibrated to the 3.5 m lanes of the follow-lane circuit"),
+     ("follow-line", "lane:detector=classical", "calibrated to the 3.5 m lanes of the follow-lane circuit")],
+)  # fmt: skip
+def test_line_and_lane_sensors_are_refused_off_their_circuits(scenario, obs, message):
+    sensor = obs.split(",")[-1].split(":")[0]
+    with pytest.raises(
+        UsageError, match=f"sensor '{sensor}' cannot observe scenario '{scenario}': .*{message}"
+    ):
+        DriveEnv(scenario, obs=obs)
+
+
+def test_line_and_lane_sensors_build_on_their_circuits():
+    assert DriveEnv("follow-line", obs="line").observation_space.n == 1296
+    assert DriveEnv("follow-lane", obs="lane:detector=classical").observation_space.n == 6
+
+
+def test_a_line_sensor_on_the_highway_is_one_error_line_and_no_run(tmp_path):
+    arguments = ["--algo", "dqn", "--obs", "line", "--steps", "64", "--runs-dir", str(tmp_path / "runs")]
+    result = runner.invoke(app, ["train", *arguments])
+    _assert_one_error_line(result, "sensor 'line' cannot observe scenario 'highway'")
+    assert not (tmp_path / "runs").exists()

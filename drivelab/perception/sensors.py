@@ -75,6 +75,9 @@ class FrameStack(Sensor):
     def space(self) -> spaces.Box:
         return self._space
 
+    def scenario_problem(self, scenario) -> str | None:
+        return self.sensor.scenario_problem(scenario)
+
     def reset(self, batch, rngs, mask=None) -> None:
         super().reset(batch, rngs, mask)
         self.sensor.reset(batch, rngs, mask)
@@ -186,6 +189,15 @@ def make_sensor(spec: str | dict) -> Sensor:
             f"{MAX_OBSERVATION_VALUES} (fewer frames or a smaller sensor)"
         )
     return FrameStack(sensor, stack) if stack > 1 else sensor
+
+
+def check_sensors_for(scenario, sensors: list[Sensor]) -> None:
+    """Fail when one of ``sensors`` cannot observe ``scenario`` (a ``Scenario``): it would give a
+    constant or meaningless observation (``Sensor.scenario_problem``)."""
+    for sensor in sensors:
+        problem = sensor.scenario_problem(scenario)
+        if problem is not None:
+            raise UsageError(f"sensor {sensor.name!r} cannot observe scenario {scenario.name!r}: {problem}")
 
 
 def split_sensor_list(obs: str | list | tuple) -> list:
