@@ -28,6 +28,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from torch import nn
 
 from drivelab.agents.base import OwnAgent
+from drivelab.agents.buffer_memory import check_buffer_memory
 from drivelab.agents.storage import assign_arrays
 from drivelab.agents.worlds import Worlds
 from drivelab.errors import UsageError
@@ -308,6 +309,9 @@ class DuelingDoubleDQN(OwnAgent):
             raise ValueError("dueling_ddqn needs discrete actions")
         config = self.config
         self.observation_size = spaces.flatdim(self.observation_space)
+        transition_bytes = 2 * 4 * self.observation_size  # observation and next one, float32
+        check_buffer_memory(self.algo, "buffer_size", config.buffer_size, transition_bytes, "replay buffer")
+        check_buffer_memory(self.algo, "batch_size", config.batch_size, transition_bytes, "training batch")
         self.q_network = DuelingQNetwork(self.observation_size, int(self.action_space.n), config.stream_norm)
         self.target_network = DuelingQNetwork(
             self.observation_size, int(self.action_space.n), config.stream_norm

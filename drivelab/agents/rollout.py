@@ -16,6 +16,7 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 
 from drivelab.agents.base import OwnAgent, batch_of_one, observation_to_tensor
+from drivelab.agents.buffer_memory import check_buffer_memory, observation_bytes
 from drivelab.agents.networks import TanhGaussianActorCritic
 from drivelab.agents.worlds import Worlds
 
@@ -77,6 +78,12 @@ class OnPolicyAgent(OwnAgent):
     def _build(self) -> None:
         if not isinstance(self.action_space, spaces.Box):
             raise ValueError(f"{self.algo} needs continuous actions")
+        # a rollout keeps n_steps observations of each world, as they come and as float32 tensors
+        worlds = getattr(self.env, "num_envs", 1)
+        observation = observation_bytes(self.observation_space) + observation_bytes(self.observation_space, 4)
+        check_buffer_memory(
+            self.algo, "n_steps", self.config.n_steps * worlds, observation, "rollout (n_steps × worlds)"
+        )
         self.policy = TanhGaussianActorCritic(
             self.observation_space,
             self.action_space.shape[0],

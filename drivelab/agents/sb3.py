@@ -29,7 +29,7 @@ from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.utils import get_device
 
 from drivelab.agents.registry import algo_of, get_algo
-from drivelab.agents.sb3_params import check_sb3_hyperparams
+from drivelab.agents.sb3_params import check_sb3_hyperparams, check_sb3_memory
 from drivelab.agents.storage import (
     check_spaces,
     read_arrays,
@@ -71,9 +71,10 @@ class SafeSave:
             "ep_info_buffer": list(self.ep_info_buffer or []),
             "ep_success_buffer": [bool(value) for value in self.ep_success_buffer or []],
         }
+        tensors = tensors_to_bytes(parameters)  # before the file is opened: a refusal writes nothing
         with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as archive:
             archive.writestr("sb3.json", json.dumps(meta, default=_json_number))
-            archive.writestr("parameters.pt", tensors_to_bytes(parameters))
+            archive.writestr("parameters.pt", tensors)
 
     def save_replay_buffer(self, path: str | Path) -> None:
         """The replay buffer's arrays (dict observations key by key) and position as ``.npz``."""
@@ -177,6 +178,7 @@ def build_sb3(algo: str, env: gym.Env, seed: int, hyperparams: dict, log_dir: Pa
     saved = json.loads(json.dumps(dict(hyperparams)))  # saved with the model, as given
     # a copy: SB3 fills some values in place (A2C puts its optimizer class into policy_kwargs)
     kwargs = check_sb3_hyperparams(algo, copy.deepcopy({"device": "cpu", **defaults, **hyperparams}))
+    check_sb3_memory(algo, kwargs, env.observation_space, getattr(env, "num_envs", 1))
     extractor = kwargs.pop("features_extractor", "sb3")
     if extractor == "seed":
         kwargs["policy_kwargs"] = {**seed_network_kwargs(algo, env.observation_space),

@@ -15,6 +15,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from drivelab.agents.buffer_memory import check_buffer_memory, observation_bytes
 from drivelab.agents.registry import get_algo
 from drivelab.errors import UsageError
 
@@ -68,7 +69,9 @@ _OFF_POLICY = {
     "learning_starts": NON_NEGATIVE_INT,
     "batch_size": COUNT,
     "tau": Param("float", 0, 1, open_low=True),
-    "gradient_steps": Param("int", -1),  # -1: as many gradient steps as environment steps
+    "gradient_steps": Param(
+        "int", -1
+    ),  # -1: as many as environment steps; 0 is refused (_check_gradient_steps)
     "optimize_memory_usage": FLAG,
     "n_steps": COUNT,
     "target_update_interval": COUNT,
@@ -154,9 +157,42 @@ def _is_positive_number(text: str) -> bool:
         return False
 
 
+def _check_gradient_steps(algo: str, value) -> int:
+    """-1 (as many gradient steps as environment steps) or >= 1: 0 would train nothing."""
+    value = _check_value(algo, "gradient_steps", value, Param("int", -1))
+    if value == 0:
+        raise UsageError(
+            f"hyperparameter 'gradient_steps' of {algo!r} must be -1 (one per environment step) or >= 1, "
+            f"got 0 (no gradient step: the agent would not learn)"
+        )
+    return value
+
+
+def _check_policy_kwargs(algo: str, value) -> dict:
+    """A mapping whose ``net_arch``, when given, has positive integer layer widths: a list, or a
+    mapping of lists (``pi`` / ``vf`` / ``qf``), as SB3 takes it."""
+    value = _check_value(algo, "policy_kwargs", value, MAPPING)
+    net_arch = value.get("net_arch")
+    if net_arch is None:
+        return value
+    wrong = (
+        f"policy_kwargs net_arch of {algo!r} must be a list of layer widths >= 1 (or pi/vf/qf lists of them)"
+    )
+    layers = net_arch.values() if isinstance(net_arch, dict) else [net_arch]
+    for widths in layers:
+        if not isinstance(widths, (list, tuple)):
+            raise UsageError(f"{wrong}, got {net_arch!r}")
+        for width in widths:
+            if isinstance(width, bool) or not isinstance(width, int) or width < 1:
+                raise UsageError(f"{wrong}, got {net_arch!r}")
+    return value
+
+
 SPECIAL: dict[str, Callable] = {
     "device": lambda algo, key, value: _check_device(algo, value),
     "train_freq": lambda algo, key, value: _check_train_freq(algo, value),
+    "gradient_steps": lambda algo, key, value: _check_gradient_steps(algo, value),
+    "policy_kwargs": lambda algo, key, value: _check_policy_kwargs(algo, value),
 }
 SAC_SPECIAL: dict[str, Callable] = {
     "ent_coef": lambda algo, key, value: _check_sac_coefficient(algo, key, value, POSITIVE),
@@ -223,3 +259,37 @@ def check_sb3_hyperparams(algo: str, hyperparams: dict) -> dict:
             known = sorted([*declared, *special, "features_extractor"])
             raise UsageError(f"unknown hyperparameter {key!r} for {algo!r} (known: {', '.join(known)})")
     return checked
+
+
+def _given_or_default(algo: str, hyperparams: dict, key: str):
+    """``hyperparams[key]``, else the default of ``algo``'s SB3 constructor."""
+    if key in hyperparams:
+        return hyperparams[key]
+    return inspect.signature(get_algo(algo).agent_class().__init__).parameters[key].default
+
+
+def check_sb3_memory(algo: str, hyperparams: dict, observation_space, n_envs: int = 1) -> None:
+    """Refuse sizes whose buffers this machine cannot hold (``buffer_memory``), from checked
+    ``hyperparams`` and the observation space: the replay buffer of DQN and SAC (``buffer_size``
+    transitions, each observation kept twice unless ``optimize_memory_usage``) and its training
+    batches (``batch_size``, float32 tensors of both observations); the rollout of PPO and A2C
+    (``n_steps`` × ``n_envs`` entries, observations stored as float32)."""
+    if "buffer_size" in PARAMS[algo]:
+        copies = 1 if _given_or_default(algo, hyperparams, "optimize_memory_usage") else 2
+        stored = copies * observation_bytes(observation_space)
+        check_buffer_memory(
+            algo, "buffer_size", _given_or_default(algo, hyperparams, "buffer_size"), stored, "replay buffer"
+        )
+        batch = 2 * observation_bytes(observation_space, itemsize=4)
+        check_buffer_memory(
+            algo, "batch_size", _given_or_default(algo, hyperparams, "batch_size"), batch, "training batch"
+        )
+    else:
+        entries = _given_or_default(algo, hyperparams, "n_steps") * n_envs
+        check_buffer_memory(
+            algo,
+            "n_steps",
+            entries,
+            observation_bytes(observation_space, itemsize=4),
+            "rollout (n_steps × n_envs)",
+        )

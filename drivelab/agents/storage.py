@@ -13,6 +13,7 @@ from __future__ import annotations
 import io
 import json
 import pickle  # only for its exception type: nothing here unpickles
+import warnings
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -20,6 +21,8 @@ from typing import Any
 import numpy as np
 import torch
 from gymnasium import spaces
+
+from drivelab.errors import UsageError
 
 PICKLED_MEMBERS = ("data", "spaces.pkl", "pytorch_variables.pth")  # SB3's and drivelab's old zips
 
@@ -32,20 +35,59 @@ class OldFormatError(ValueError):
         self.path = Path(path)
 
 
+class NonFiniteParametersError(UsageError):
+    """A model whose tensors hold nan or inf (training diverged): it is neither saved nor loaded,
+    as every action or evaluation computed from it would be meaningless."""
+
+
 # --- tensors -----------------------------------------------------------------------------------
+def non_finite_tensors(state: Any, name: str = "") -> list[str]:
+    """The dotted names of the floating-point tensors in nested dicts/lists ``state`` that hold a
+    nan or an inf (``["q_network.value.0.weight", ...]``)."""
+    if isinstance(state, torch.Tensor):
+        floating = state.is_floating_point() or state.is_complex()
+        return [name or "tensor"] if floating and not bool(torch.isfinite(state).all()) else []
+    if isinstance(state, dict):
+        items = state.items()
+    elif isinstance(state, (list, tuple)):
+        items = enumerate(state)
+    else:
+        return []
+    return [found for key, value in items for found in non_finite_tensors(value, f"{name}.{key}".lstrip("."))]
+
+
+def _check_finite(state: Any, prefix: str = "") -> None:
+    names = non_finite_tensors(state)
+    if names:
+        shown = ", ".join(names[:3]) + (f" and {len(names) - 3} more" if len(names) > 3 else "")
+        raise NonFiniteParametersError(
+            f"{prefix}the model's tensors hold nan or inf ({shown}): training diverged "
+            f"(a learning rate too large?) and the model cannot act"
+        )
+
+
 def tensors_to_bytes(state: Any) -> bytes:
-    """Nested dicts/lists of tensors and numbers (state dicts, optimizer states) as torch bytes."""
+    """Nested dicts/lists of tensors and numbers (state dicts, optimizer states) as torch bytes;
+    a tensor holding nan or inf is refused (``NonFiniteParametersError``)."""
+    _check_finite(state, "not saved: ")
     buffer = io.BytesIO()
     torch.save(state, buffer)
     return buffer.getvalue()
 
 
 def tensors_from_bytes(data: bytes) -> Any:
-    """The inverse of ``tensors_to_bytes``; refuses anything but tensors and plain containers."""
+    """The inverse of ``tensors_to_bytes``; refuses anything but tensors and plain containers, and
+    tensors holding nan or inf (``NonFiniteParametersError``)."""
     try:
-        return torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
+        with warnings.catch_warnings():
+            # a file pickled with another protocol than torch's own (a foreign or crafted file) makes
+            # torch warn before it refuses or reads it: the refusal below, or the tensors, say enough
+            warnings.filterwarnings("ignore", message="Detected pickle protocol", category=UserWarning)
+            state = torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
     except pickle.UnpicklingError:
         raise ValueError("the tensor file holds objects other than tensors (refused)") from None
+    _check_finite(state)
+    return state
 
 
 # --- arrays ------------------------------------------------------------------------------------

@@ -31,7 +31,7 @@ from drivelab.envs.rules import EpisodeRules
 from drivelab.envs.scenarios import check_traffic, get_scenario
 from drivelab.errors import UsageError
 from drivelab.perception.birdeye import render_birdeye
-from drivelab.perception.sensors import make_sensor, split_sensor_list
+from drivelab.perception.sensors import check_sensors_for, make_sensor, split_sensor_list
 from drivelab.rewards.shapers import RewardShaper
 from drivelab.world.batch import WorldBatch
 from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW
@@ -180,6 +180,7 @@ class VectorDriveEnv(VectorEnv):
         names = [s.name for s in self.sensors]
         if len(set(names)) != len(names):
             raise UsageError(f"sensor listed twice in {names}")
+        check_sensors_for(self.scenario, self.sensors)
         self.reward_shaper = RewardShaper(reward)
         self.num_envs = int(num_envs)
         self.simulator = make_simulator(

@@ -59,6 +59,11 @@ class Sensor(ABC):
             self.rngs[k] = rngs[k]
         self._reset(batch, np.asarray(mask, dtype=bool))
 
+    def scenario_problem(self, scenario) -> str | None:
+        """Why this sensor reads nothing meaningful in ``scenario`` (a ``Scenario``), e.g. paint the
+        road does not have; None (the default) where it can observe it."""
+        return None
+
     def _reset(self, batch: WorldBatch, mask: np.ndarray) -> None:
         """Clear the ``(K, …)`` history of the worlds where ``mask`` (sensors without history: nothing)."""
         return None

@@ -109,6 +109,14 @@ class LaneState(Sensor):
         self.centres = np.full((0, len(LANE_ROWS_M)), np.nan)
         self.frames = np.zeros((0, self.model.height, self.model.width, 3), dtype=np.uint8)
 
+    def scenario_problem(self, scenario) -> str | None:
+        """Its strips and its one-line fallback (half of ``LANE_WIDTH_M``) are calibrated to the
+        3.5 m lanes of seed 004's follow-lane circuit (``scenario.keep_lane``); on other roads
+        (4 m highway lanes, follow-line's single 7 m lane) its states mean something else."""
+        if not scenario.keep_lane:
+            return "its states are calibrated to the 3.5 m lanes of the follow-lane circuit"
+        return None
+
     @property
     def space(self) -> spaces.Discrete:
         return self._space

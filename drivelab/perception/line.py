@@ -85,6 +85,13 @@ class LineState(Sensor):
     def space(self) -> spaces.Discrete:
         return self._space
 
+    def scenario_problem(self, scenario) -> str | None:
+        """It looks for the yellow guide line, painted only where ``scenario.guide_line``
+        (follow-line); elsewhere every frame is the constant "lost" state."""
+        if not scenario.guide_line:
+            return "it reads the yellow guide line, which only the follow-line circuit has painted"
+        return None
+
     @property
     def lost_state(self) -> int:
         return self._space.n - 1

@@ -34,6 +34,24 @@ SENSORS: dict[str, type[Sensor]] = {
 }
 SENSOR_HELP = {name: cls.help for name, cls in SENSORS.items()}  # one line each, from the class
 
+# One world's observation may hold at most this many values (after frame stacking): 16.8 M, 64 MiB as
+# float32, already more than a replay buffer can keep many of (a 2048 × 2048 RGB image is 12.6 M);
+# larger ones end in a MemoryError traceback when the sensor, its (K, …) buffers or a stack are built.
+MAX_OBSERVATION_VALUES = 2**24
+# The largest value of each size option: far above any use in the seeds and the literature, and
+# small enough that one world's observation stays under MAX_OBSERVATION_VALUES.
+SIZE_LIMITS = {
+    "lidar": {"beams": 100_000},  # spinning lidars give ~360-4000 beams a ring; this is 0.0036° apart
+    "topdown": {"size": 1024, "history": 10_000},  # 6 × 1024² values; 10 000 past positions: 17 min
+    "birdeye": {"size": 2048},  # 2048² RGB
+    "camera": {"width": 2048, "height": 2048},  # 2048² RGB
+    "kinematics": {"vehicles_count": 10_000},  # a highway scene has tens of vehicles
+    "waypoints": {"count": 100_000},  # 200 km of route at the default 2 m spacing
+    # the state has (strips + 1)^4 values, the Q-table that many rows: 41^4 = 2.8 M; wider kernels
+    # than the 160 × 120 camera frame erase every line
+    "line": {"strips": 40, "kernel_px": 120},
+}
+
 
 class FrameStack(Sensor):
     """The last ``frames`` observations of ``sensor`` concatenated along its channel axis; the
@@ -56,6 +74,9 @@ class FrameStack(Sensor):
     @property
     def space(self) -> spaces.Box:
         return self._space
+
+    def scenario_problem(self, scenario) -> str | None:
+        return self.sensor.scenario_problem(scenario)
 
     def reset(self, batch, rngs, mask=None) -> None:
         super().reset(batch, rngs, mask)
@@ -124,7 +145,7 @@ def _typed_option(sensor: str, key: str, value, default):
 
 def check_sensor_options(name: str, options: dict) -> tuple[int, dict]:
     """(stack, the sensor's keyword options) with every value of the type the sensor declares;
-    an unknown option, a wrong type or ``stack`` < 1 is a UsageError."""
+    an unknown option, a wrong type, a size over ``SIZE_LIMITS`` or ``stack`` < 1 is a UsageError."""
     defaults = {
         key: parameter.default
         for key, parameter in inspect.signature(SENSORS[name].__init__).parameters.items()
@@ -136,9 +157,16 @@ def check_sensor_options(name: str, options: dict) -> tuple[int, dict]:
             known = ", ".join([*defaults, "stack"])
             raise UsageError(f"unknown option {key!r} for sensor {name!r} (known: {known})")
         checked[key] = _typed_option(name, key, value, defaults.get(key, 1))
+    for key, limit in SIZE_LIMITS.get(name, {}).items():
+        if key in checked and checked[key] > limit:
+            raise UsageError(f"sensor option {key!r} of {name!r} must be <= {limit}, got {checked[key]}")
     stack = checked.pop("stack", 1)
     if stack < 1:
         raise UsageError(f"sensor option 'stack' of {name!r} must be >= 1, got {stack}")
+    if stack > MAX_OBSERVATION_VALUES:  # the whole stack is checked once the sensor is built
+        raise UsageError(
+            f"sensor option 'stack' of {name!r} must be <= {MAX_OBSERVATION_VALUES}, got {stack}"
+        )
     return stack, checked
 
 
@@ -154,7 +182,22 @@ def make_sensor(spec: str | dict) -> Sensor:
         raise UsageError(f"bad option for sensor {name!r}: {exc}") from None
     if stack > 1 and not isinstance(sensor.space, spaces.Box):
         raise UsageError(f"sensor {name!r} gives a discrete state, which cannot be frame-stacked")
+    values = stack * math.prod(sensor.space.shape)
+    if values > MAX_OBSERVATION_VALUES:
+        raise UsageError(
+            f"sensor {name!r} with stack={stack} gives {values} values per observation, more than "
+            f"{MAX_OBSERVATION_VALUES} (fewer frames or a smaller sensor)"
+        )
     return FrameStack(sensor, stack) if stack > 1 else sensor
+
+
+def check_sensors_for(scenario, sensors: list[Sensor]) -> None:
+    """Fail when one of ``sensors`` cannot observe ``scenario`` (a ``Scenario``): it would give a
+    constant or meaningless observation (``Sensor.scenario_problem``)."""
+    for sensor in sensors:
+        problem = sensor.scenario_problem(scenario)
+        if problem is not None:
+            raise UsageError(f"sensor {sensor.name!r} cannot observe scenario {scenario.name!r}: {problem}")
 
 
 def split_sensor_list(obs: str | list | tuple) -> list:

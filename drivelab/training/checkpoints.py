@@ -16,7 +16,7 @@ import zipfile
 from pathlib import Path
 
 from drivelab.agents.registry import get_algo
-from drivelab.agents.storage import OldFormatError, is_old_format
+from drivelab.agents.storage import NonFiniteParametersError, OldFormatError, is_old_format
 from drivelab.config import RunConfig
 from drivelab.errors import UsageError
 
@@ -59,10 +59,12 @@ def save_checkpoint(model, run_dir: Path, config: RunConfig, save_replay: bool) 
         (folder / "latest.tmp.json").write_text(json.dumps(manifest, indent=2))
         for tmp, final in temporary.items():
             os.replace(tmp, final)
-    except OSError as exc:
+    except (OSError, NonFiniteParametersError) as exc:  # nan weights: the previous checkpoint stands
         for tmp in temporary:
             with contextlib.suppress(OSError):  # on a read-only disk there may be nothing to remove
                 tmp.unlink(missing_ok=True)
+        if isinstance(exc, NonFiniteParametersError):
+            raise UsageError(f"checkpoint in {str(folder)!r} {exc}") from None
         raise UsageError(f"cannot write checkpoint in {str(folder)!r}: {exc.strerror or exc}") from None
     return folder / "latest.zip"
 
@@ -155,6 +157,8 @@ def load_agent(run_dir: Path, config: RunConfig, env=None, path: Path | None = N
         return spec.load(config.algo, path, env, dict(config.hyperparams), config.seed)
     except OldFormatError:
         raise old_format_error(run_dir) from None
+    except NonFiniteParametersError as exc:  # a model that diverged: no evaluation of it means anything
+        raise UsageError(f"cannot load model {str(path)!r}: {exc}") from None
     except UsageError:
         raise
     except Exception as exc:  # a broken zip, a model of another algorithm or config

@@ -33,6 +33,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from torch import nn
 
 from drivelab.agents.base import OwnAgent
+from drivelab.agents.buffer_memory import check_buffer_memory, observation_bytes
 from drivelab.agents.rlad.augmentation import default_pad, random_shift
 from drivelab.agents.rlad.fast import COMPILE_MODES, compile_unavailable, draw_update_noise
 from drivelab.agents.rlad.memory import DeviceMemoryLedger, cuda_free_bytes, device_key
@@ -185,6 +186,7 @@ class RLAD(OwnAgent):
         if not isinstance(self.action_space, spaces.Box) or len(self.action_space.shape) != 1:
             raise UsageError(f"{self.algo} needs a continuous action space")
         config, space = self.config, self.observation_space
+        self._check_memory()
         actions = self.action_space.shape[0]
         automatic = "cuda" if torch.cuda.is_available() else "cpu"
         self.device = torch.device(automatic if config.device == "auto" else config.device)
@@ -225,6 +227,17 @@ class RLAD(OwnAgent):
         self.low, self.high = self.action_space.low, self.action_space.high
         self._last_obs = None
         self.episode_returns: deque[float] = deque(maxlen=100)
+
+    def _check_memory(self) -> None:
+        """Refuse a replay (one RGB frame a transition, its records' slack, waypoints, measurements and
+        the stack's record numbers) or a batch (both observations as float32) this machine cannot hold."""
+        camera, waypoints, measurements = (self.observation_space[key] for key in OBSERVATION_KEYS)
+        height, width, channels = camera.shape
+        frame = 3 * height * width * (1 + RECORD_SLACK) + 8 * (channels // 3)
+        stored = frame + observation_bytes(waypoints) + observation_bytes(measurements)
+        check_buffer_memory(self.algo, "buffer_size", self.config.buffer_size, stored, "replay buffer")
+        batch = 2 * observation_bytes(self.observation_space, 4)
+        check_buffer_memory(self.algo, "batch_size", self.config.batch_size, batch, "training batch")
 
     def _frame_device(self, frame_shape: tuple[int, ...]) -> torch.device | None:
         """Where the replay keeps its frames (``replay_frames``); None for the host."""
