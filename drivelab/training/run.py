@@ -336,7 +336,8 @@ def resume(
     the older model (eval.json, eval-maps-*.json, nocrash.json, learning_curve.png, model.zip) are
     removed.
     A run killed before its first checkpoint (config and logs, no checkpoint, no model) has
-    nothing to continue from: it is trained again from step 0 in the same directory. One stopped
+    nothing to continue from: its files (``UNSTARTED_FILES``) are removed and it is trained again
+    from step 0 in the same directory; a folder holding anything else is refused. One stopped
     between its final checkpoint and its model gets the checkpoint's model.
     ``on_evaluation``, ``eval_first``: as for ``train``.
     """
@@ -346,9 +347,10 @@ def resume(
         config = build_config({**config.to_dict(), "steps": steps})
     if _stopped_before_first_checkpoint(run_dir):
         config = build_config({**config.to_dict(), "name": run_dir.name})
+        written = unstarted_run_files(run_dir)  # a folder holding anything else is refused
         check_config(config)
         sys.stderr.write(f"{run_dir}: stopped before its first checkpoint; training again from step 0\n")
-        shutil.rmtree(run_dir)
+        _remove_run_files(run_dir, written)
         return train(config, run_dir.parent, on_evaluation, eval_first)
     manifest = verify_checkpoint(run_dir, config)
     if manifest["steps"] == config.steps and not (run_dir / "model.zip").is_file():
@@ -381,6 +383,71 @@ def _stopped_before_first_checkpoint(run_dir: Path) -> bool:
     return not any(
         path.exists() for path in (folder / "latest.json", folder / "latest.zip", run_dir / "model.zip")
     )
+
+
+# What a run writes before its first checkpoint (the layout above): the files a resume that finds
+# no checkpoint may remove. The checkpoint's own files appear when one was being written.
+UNSTARTED_FILES = ("config.yaml", "monitor.csv", "progress.csv", "evaluations.csv", "events.out.tfevents.*")
+UNSTARTED_FOLDERS = {
+    "checkpoints": ("resume-*.json", "resume-*.npz", "resume.tmp.json", "resume.tmp.npz",
+                    "latest.tmp.zip", "latest.tmp.json", "replay.tmp.npz"),
+    "videos": ("eval-*.mp4", "eval-*.gif"),
+}  # fmt: skip
+
+
+def unstarted_run_files(run_dir: Path) -> list[Path]:
+    """The files in ``run_dir``, a run stopped before its first checkpoint, that its run wrote
+    (``UNSTARTED_FILES``, ``UNSTARTED_FOLDERS``). A UsageError, naming them, when it holds anything
+    else, or has no monitor.csv of SB3's (written as training starts): then it is not such a run,
+    and nothing in it may be removed."""
+    written: list[Path] = []
+    foreign: list[str] = []
+    for path in sorted(run_dir.iterdir()):
+        if path.is_dir() and not path.is_symlink() and path.name in UNSTARTED_FOLDERS:
+            for inner in sorted(path.iterdir()):
+                if _plain_file(inner) and any(inner.match(p) for p in UNSTARTED_FOLDERS[path.name]):
+                    written.append(inner)
+                else:
+                    foreign.append(f"{path.name}/{inner.name}")
+        elif _plain_file(path) and any(path.match(pattern) for pattern in UNSTARTED_FILES):
+            written.append(path)
+        else:
+            foreign.append(path.name + ("/" if path.is_dir() else ""))
+    if foreign:
+        shown = ", ".join(foreign[:5]) + (f" and {len(foreign) - 5} more" if len(foreign) > 5 else "")
+        raise UsageError(
+            f"{str(run_dir)!r} has no checkpoint to resume from and holds files a drivelab run does not "
+            f"write ({shown}); nothing was changed (train a new run elsewhere, or move them out)"
+        )
+    if not _is_monitor_log(run_dir / "monitor.csv"):
+        raise UsageError(
+            f"{str(run_dir)!r} has no checkpoint to resume from and no monitor.csv of a run that started "
+            "training; nothing was changed (train a new run with --runs-dir and --name instead)"
+        )
+    return written
+
+
+def _plain_file(path: Path) -> bool:
+    return path.is_file() and not path.is_symlink()
+
+
+def _is_monitor_log(path: Path) -> bool:
+    """Whether ``path`` starts as SB3's Monitor writes it: ``#{"t_start": ...}``."""
+    try:
+        with path.open("rb") as handle:
+            return handle.read(11) == b'#{"t_start"'
+    except OSError:
+        return False
+
+
+def _remove_run_files(run_dir: Path, files: list[Path]) -> None:
+    """Remove ``files`` (``unstarted_run_files``), then the folders they leave empty and ``run_dir``."""
+    for path in files:
+        path.unlink(missing_ok=True)
+    for name in UNSTARTED_FOLDERS:
+        if (run_dir / name).is_dir():
+            (run_dir / name).rmdir()
+    run_dir.rmdir()
 
 
 def _load_checkpoint(config: RunConfig, run_dir: Path, manifest: dict, replay: bool = True):

