@@ -56,11 +56,13 @@ from drivelab.training.resume_state import (
     TrainingWorlds,
     apply_to_model,
     apply_truncation,
+    check_restore,
     count_rows,
     plan_truncation,
     prune_states,
     read_state,
     restore,
+    state_path,
     take_snapshot,
     warn_inexact,
     write_state,
@@ -241,14 +243,15 @@ def _check_model(spec, config: RunConfig, probe) -> None:
         gc.collect()  # the throwaway agent's networks (on a GPU too) go before the real ones come
 
 
-def _make_envs(config: RunConfig, run_dir: Path, resume: bool):
+def _make_envs(config: RunConfig, run_dir: Path | None, resume: bool):
     """(training env, evaluation env, the training env's ``TrainingWorlds``). The training env has
     ``n_envs`` worlds (an SB3 VecEnv when more than one), logs its episodes to monitor.csv (appending
-    on a resume) and records them for the checkpoints' resume state; it is seeded with the run's
-    seed (an exact resume then replays its checkpoint's episodes over that)."""
+    on a resume; ``run_dir`` None: to no file) and records them for the checkpoints' resume state;
+    it is seeded with the run's seed (an exact resume then replays its checkpoint's episodes over
+    that)."""
     from drivelab.envs.core import DriveEnv
 
-    monitor = str(run_dir / "monitor.csv")
+    monitor = None if run_dir is None else str(run_dir / "monitor.csv")
     if config.n_envs == 1:
         recorder = RecordEpisodes(DriveEnv(**config.env_kwargs()))
         train_env = Monitor(recorder, filename=monitor, override_existing=not resume)
@@ -260,11 +263,26 @@ def _make_envs(config: RunConfig, run_dir: Path, resume: bool):
             SB3VecEnv(VectorDriveEnv(config.n_envs, autoreset_mode="same_step", **config.env_kwargs()))
         )
         train_env = VecMonitor(recorder)
-        train_env.results_writer = ResultsWriter(
-            monitor, header={"t_start": train_env.t_start, "env_id": config.env}, override_existing=not resume
-        )
+        if monitor is not None:
+            train_env.results_writer = ResultsWriter(
+                monitor,
+                header={"t_start": train_env.t_start, "env_id": config.env},
+                override_existing=not resume,
+            )
         train_env.seed(config.seed)
     return train_env, DriveEnv(**config.eval_env_kwargs()), TrainingWorlds.of(train_env, recorder)
+
+
+def _check_snapshot(model, config: RunConfig, snapshot: Snapshot, path: Path) -> None:
+    """Restore ``snapshot`` into ``model`` and a training env that writes no file
+    (``check_restore``): a damaged resume state is found before the run directory changes."""
+    check_env, check_eval_env, check_worlds = _make_envs(config, None, resume=True)
+    try:
+        model.set_env(check_env)
+        check_restore(model, check_worlds, snapshot, path)
+    finally:
+        check_env.close()
+        check_eval_env.close()
 
 
 def _check_n_envs(config: RunConfig) -> None:
@@ -335,6 +353,8 @@ def resume(
     and evaluations.csv to the rows it had written, progress.csv to its step) and the results of
     the older model (eval.json, eval-maps-*.json, nocrash.json, learning_curve.png, model.zip) are
     removed.
+    A damaged resume state is found before that: it is parsed and restored into the loaded model
+    and a training env that writes no file.
     A run killed before its first checkpoint (config and logs, no checkpoint, no model) has
     nothing to continue from: its files (``UNSTARTED_FILES``) are removed and it is trained again
     from step 0 in the same directory; a folder holding anything else is refused. One stopped
@@ -365,6 +385,8 @@ def resume(
     snapshot = read_state(folder, manifest["steps"])
     changes = plan_truncation(run_dir, manifest["steps"], snapshot)
     model = _load_checkpoint(config, run_dir, manifest)
+    if snapshot is not None:
+        _check_snapshot(model, config, snapshot, state_path(folder, manifest["steps"]))
     # everything checked: from here on the run directory changes
     apply_truncation(run_dir, changes, manifest["steps"])
     save_yaml(config, run_dir / "config.yaml")

@@ -86,3 +86,28 @@ def test_resume_of_a_run_stopped_before_its_first_checkpoint_trains_it_again(fin
     assert (run_dir / "model.zip").is_file()
     assert json.loads((run_dir / "checkpoints/latest.json").read_text())["steps"] == 128
     assert not (run_dir / "checkpoints" / "latest.tmp.zip").exists()
+
+
+# --- 2. a damaged resume state ---------------------------------------------------------------------
+DAMAGE = {
+    "python generator": lambda state: state["rng"].__setitem__("python", [3, [1, 2], None]),
+    "world start": lambda state: state["worlds"][0].__setitem__("start", "garbage"),
+    "monitor time": lambda state: state["monitor"].__setitem__("elapsed_s", "x"),
+    "rows": lambda state: state.__setitem__("rows", {}),
+    "negative rows": lambda state: state.__setitem__("rows", {"monitor": -5, "evaluations": 0}),
+    "not a mapping": lambda state: state.clear() or state.update(format=1, steps=128),
+}
+
+
+@pytest.mark.parametrize("damage", list(DAMAGE))
+def test_a_damaged_resume_state_is_one_error_and_changes_nothing(finished_run, tmp_path, damage):
+    run_dir = tmp_path / "r"
+    shutil.copytree(finished_run, run_dir)
+    path = run_dir / "checkpoints" / "resume-128.json"
+    state = json.loads(path.read_text())
+    DAMAGE[damage](state)
+    path.write_text(json.dumps(state))
+    before = tree(run_dir)
+    with pytest.raises(UsageError, match=f"resume state '{path}'"):
+        run_module.resume(run_dir, 192)
+    assert tree(run_dir) == before
