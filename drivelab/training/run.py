@@ -78,6 +78,21 @@ class TrainingInterrupted(KeyboardInterrupt):
         self.run_dir, self.steps = run_dir, steps
 
 
+class TrainingDiverged(UsageError):
+    """The network's weights (or the action distribution they give) became NaN or infinite:
+    training cannot go on. No checkpoint is written from such a model; the run keeps those before."""
+
+    def __init__(self, config: RunConfig, steps: int, run_dir: Path, checkpoint_steps: int) -> None:
+        if (run_dir / "checkpoints" / "latest.json").is_file():
+            kept = f"{str(run_dir)!r} keeps its checkpoint of step {checkpoint_steps}"
+        else:
+            kept = "no checkpoint was written, so the run directory is removed"
+        super().__init__(
+            f"training of {config.algo!r} diverged at step {steps}: the network's weights or outputs "
+            f"became NaN or infinite (lower learning_rate, or limit max_grad_norm); {kept}"
+        )
+
+
 class StoppedByEvaluation(Exception):
     """``on_evaluation`` returned False (a pruned tuning trial): the run stopped and was
     checkpointed at ``steps``, as after SIGINT, and can be resumed."""
@@ -168,6 +183,8 @@ class RunCallback(BaseCallback):
     def checkpoint(self, snapshot: Snapshot) -> None:
         """The model's checkpoint and the resume state of ``snapshot`` (taken at the model's
         present state), the resume state first: the manifest, written last, commits both."""
+        if not weights_finite(self.model):  # keep the last finite checkpoint as the latest
+            raise TrainingDiverged(self.config, snapshot.steps, self.run_dir, self.checkpoint_steps)
         folder = self.run_dir / "checkpoints"
         folder.mkdir(exist_ok=True)
         write_state(folder, snapshot)
@@ -207,6 +224,26 @@ class RunCallback(BaseCallback):
         return summary
 
 
+def weights_finite(model) -> bool:
+    """Whether every network weight of ``model`` (its torch modules and tensors) is finite."""
+    import torch
+
+    tensors = []
+    for value in vars(model).values():
+        if isinstance(value, torch.nn.Module):
+            tensors.extend(value.parameters())
+        elif isinstance(value, torch.Tensor) and value.is_floating_point():
+            tensors.append(value)
+    return all(bool(torch.isfinite(tensor).all()) for tensor in tensors)
+
+
+def _diverged(model, exc: Exception) -> bool:
+    """Whether ``exc``, raised while learning, comes from non-finite numbers: weights that are no
+    longer finite, or torch's check of a distribution's parameters (NaN logits from overflowing
+    weights) that found invalid values."""
+    return not weights_finite(model) or isinstance(exc, ValueError) and "found invalid values" in str(exc)
+
+
 def _next_multiple(value: int, every: int) -> int:
     return (value // every + 1) * every
 
@@ -239,6 +276,8 @@ def _check_model(spec, config: RunConfig, probe) -> None:
         raise
     except (TypeError, ValueError, AssertionError, RuntimeError) as exc:  # torch: RuntimeError
         raise UsageError(f"bad hyperparameters for {config.algo!r}: {exc}") from None
+    except MemoryError:  # a replay buffer too large to allocate
+        raise UsageError(_out_of_memory(config)) from None
     finally:
         gc.collect()  # the throwaway agent's networks (on a GPU too) go before the real ones come
 
@@ -322,21 +361,54 @@ def train(
         stops the run there, checkpointed, with ``StoppedByEvaluation`` (a pruned tuning trial).
     :param eval_first: the periodic evaluations play evaluation episodes ``eval_first`` … (a tuning
         trial: the validation episodes, ``VALIDATION_START``).
+
+    A run that fails before its first checkpoint (training diverged to NaN: ``TrainingDiverged``,
+    memory ran out, a bug) could not be resumed: its directory, and any folder above it that this
+    call created, are removed. One that fails later keeps its checkpoints (the last one finite).
     """
     run_dir = new_run_dir(config, Path(runs_root))
     spec = check_config(config)
+    created = [folder for folder in (run_dir, *run_dir.parents) if not folder.exists()]
     make_out_dir(run_dir, "run directory")  # one error line, no folder left, if it cannot be
     try:
         save_yaml(config, run_dir / "config.yaml")
         train_env, eval_env, worlds = _make_envs(config, run_dir, resume=False)
         model = spec.build(config.algo, train_env, config.seed, dict(config.hyperparams), run_dir)
     except Exception as exc:
-        shutil.rmtree(run_dir, ignore_errors=True)  # bad hyperparameters: leave nothing behind
+        _remove_created(created)  # bad hyperparameters, too little memory: leave nothing behind
+        if isinstance(exc, MemoryError):
+            raise UsageError(_out_of_memory(config)) from None
         if isinstance(exc, (TypeError, ValueError)) and not isinstance(exc, UsageError):
             raise UsageError(f"bad hyperparameters for {config.algo!r}: {exc}") from None
         raise
-    _learn(model, run_dir, config, eval_env, worlds, on_evaluation, eval_first)
+    try:
+        _learn(model, run_dir, config, eval_env, worlds, on_evaluation, eval_first)
+    except Exception as exc:
+        # a run that failed before its first checkpoint cannot be resumed: it leaves nothing behind
+        if not (run_dir / "checkpoints" / "latest.json").is_file():
+            _remove_created(created)
+        if isinstance(exc, MemoryError):
+            raise UsageError(_out_of_memory(config)) from None
+        raise
     return run_dir
+
+
+def _remove_created(created: list[Path]) -> None:
+    """Remove the run directory ``created[0]`` and the folders above it that ``train`` created
+    (innermost first), those only while empty."""
+    shutil.rmtree(created[0], ignore_errors=True)
+    for folder in created[1:]:
+        try:
+            folder.rmdir()
+        except OSError:
+            break
+
+
+def _out_of_memory(config: RunConfig) -> str:
+    return (
+        f"not enough memory for this run of {config.algo!r} (n_envs={config.n_envs}): use fewer worlds "
+        "(--n-envs) or smaller buffers (-H buffer_size, n_steps)"
+    )
 
 
 def resume(
@@ -511,6 +583,14 @@ def _learn(model, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWo
         except KeyboardInterrupt:
             callback._on_training_end()
             raise TrainingInterrupted(run_dir, callback.checkpoint_steps) from None
+        except TrainingDiverged:
+            callback._on_training_end()
+            raise
+        except (ValueError, RuntimeError, FloatingPointError) as exc:
+            callback._on_training_end()
+            if isinstance(exc, UsageError) or not _diverged(model, exc):
+                raise
+            raise TrainingDiverged(config, model.num_timesteps, run_dir, callback.checkpoint_steps) from None
         if callback.stopped:
             apply_to_model(model, callback.snapshot)
             callback.checkpoint(callback.snapshot)

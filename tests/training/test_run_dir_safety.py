@@ -11,8 +11,16 @@ import shutil
 from pathlib import Path
 
 import pytest
+import torch
 from typer.testing import CliRunner
 
+from drivelab.agents.a2c import A2CConfig
+from drivelab.agents.base import parse_hyperparams
+from drivelab.agents.bc import BCConfig
+from drivelab.agents.dueling_ddqn import DuelingDDQNConfig
+from drivelab.agents.ppo import PPOConfig
+from drivelab.agents.rlad.sac import RLADConfig
+from drivelab.agents.sb3_params import check_sb3_hyperparams
 from drivelab.cli import app
 from drivelab.config import build_config
 from drivelab.errors import UsageError
@@ -111,3 +119,83 @@ def test_a_damaged_resume_state_is_one_error_and_changes_nothing(finished_run, t
     with pytest.raises(UsageError, match=f"resume state '{path}'"):
         run_module.resume(run_dir, 192)
     assert tree(run_dir) == before
+
+
+# --- 3. failures after the run directory exists ----------------------------------------------------
+@pytest.mark.parametrize("algo", ["ppo", "a2c", "dqn", "sac"])
+def test_sb3_learning_rates_above_one_are_refused(algo):
+    assert check_sb3_hyperparams(algo, {"learning_rate": 1})["learning_rate"] == 1.0
+    with pytest.raises(UsageError, match=r"'learning_rate' of .* must be a number in \(0, 1.0\]"):
+        check_sb3_hyperparams(algo, {"learning_rate": 1e30})
+
+
+@pytest.mark.parametrize(
+    ("config_class", "algo", "key"),
+    [
+        (PPOConfig, "ppo_own", "learning_rate"),
+        (A2CConfig, "a2c_own", "learning_rate"),
+        (BCConfig, "bc", "learning_rate"),
+        (DuelingDDQNConfig, "dueling_ddqn", "learning_rate"),
+        (DuelingDDQNConfig, "dueling_ddqn", "final_learning_rate"),
+        (RLADConfig, "rlad", "learning_rate"),
+        (RLADConfig, "rlad", "alix_learning_rate"),
+    ],
+)
+def test_own_agents_learning_rates_above_one_are_refused(config_class, algo, key):
+    assert getattr(parse_hyperparams(config_class, algo, {key: 1.0}), key) == 1.0
+    with pytest.raises(UsageError, match=key):
+        parse_hyperparams(config_class, algo, {key: 1e30})
+
+
+def test_a_huge_learning_rate_is_refused_before_any_folder_exists(tmp_path):
+    with pytest.raises(UsageError, match="learning_rate"):
+        run_module.train(_config(hyperparams={**TINY, "learning_rate": 1e30}), tmp_path / "runs")
+    assert tree(tmp_path) == {}
+
+
+def _poison_weights_at(monkeypatch, step: int) -> None:
+    """Training diverges at ``step``: every weight of the model becomes NaN."""
+    on_step = run_module.RunCallback._on_step
+
+    def poisoned(callback):
+        if callback.num_timesteps == step:
+            with torch.no_grad():
+                for parameter in callback.model.policy.parameters():
+                    parameter.fill_(float("nan"))
+        return on_step(callback)
+
+    monkeypatch.setattr(run_module.RunCallback, "_on_step", poisoned)
+
+
+def test_divergence_before_the_first_checkpoint_leaves_no_folder(tmp_path, monkeypatch):
+    _poison_weights_at(monkeypatch, 10)
+    with pytest.raises(UsageError, match="diverged at step .*no checkpoint was written"):
+        run_module.train(_config(), tmp_path / "runs")
+    assert tree(tmp_path) == {}
+
+
+def test_divergence_keeps_the_checkpoints_written_before_it(tmp_path, monkeypatch):
+    _poison_weights_at(monkeypatch, 100)
+    with pytest.raises(UsageError, match="diverged at step .*keeps its checkpoint of step 64"):
+        run_module.train(_config(), tmp_path)
+    manifest = json.loads((tmp_path / "r" / "checkpoints" / "latest.json").read_text())
+    assert manifest["steps"] == 64 and not (tmp_path / "r" / "model.zip").exists()
+
+
+def test_running_out_of_memory_is_one_error_and_leaves_no_folder(tmp_path, monkeypatch):
+    def no_memory(*args, **kwargs):
+        raise MemoryError
+
+    monkeypatch.setattr(run_module, "_make_envs", no_memory)
+    with pytest.raises(UsageError, match=r"not enough memory .*n_envs=1"):
+        run_module.train(_config(), tmp_path / "runs" / "x")
+    assert tree(tmp_path) == {}
+
+
+def test_a_model_too_large_to_build_is_one_error():
+    class Spec:
+        def build(self, *args):
+            raise MemoryError
+
+    with pytest.raises(UsageError, match="not enough memory"):
+        run_module._check_model(Spec(), _config(), probe=None)
