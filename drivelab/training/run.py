@@ -254,11 +254,15 @@ def new_run_dir(config: RunConfig, runs_root: Path) -> Path:
     exists, or when ``runs_root`` is not a directory that this process can create folders in."""
     name = config.name or f"{config.algo}-{config.env}-s{config.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
     run_dir = runs_root / name
-    if run_dir.exists():
+    try:
+        exists = run_dir.exists()
+        existing = next(p for p in (runs_root, *runs_root.absolute().parents) if p.exists())
+    except OSError as exc:  # a name too long (ENAMETOOLONG) for this file system
+        raise UsageError(f"cannot create run directory {str(run_dir)!r}: {exc.strerror or exc}") from None
+    if exists:
         raise UsageError(
             f"run directory {str(run_dir)!r} already exists (choose another --name, or --resume it)"
         )
-    existing = next(p for p in (runs_root, *runs_root.absolute().parents) if p.exists())
     if not existing.is_dir():
         raise UsageError(f"--runs-dir {str(runs_root)!r}: {str(existing)!r} is not a directory")
     if not os.access(existing, os.W_OK | os.X_OK):

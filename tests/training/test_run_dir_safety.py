@@ -22,9 +22,10 @@ from drivelab.agents.ppo import PPOConfig
 from drivelab.agents.rlad.sac import RLADConfig
 from drivelab.agents.sb3_params import check_sb3_hyperparams
 from drivelab.cli import app
-from drivelab.config import build_config
+from drivelab.config import build_config, check_run_name
 from drivelab.errors import UsageError
 from drivelab.training import run as run_module
+from drivelab.training.evaluate import make_out_dir
 
 TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1, "policy_kwargs": {"net_arch": [16]}}
 
@@ -199,3 +200,29 @@ def test_a_model_too_large_to_build_is_one_error():
 
     with pytest.raises(UsageError, match="not enough memory"):
         run_module._check_model(Spec(), _config(), probe=None)
+
+
+# --- 4. run names and folders the file system cannot hold ------------------------------------------
+def test_run_names_too_long_or_with_control_characters_are_refused():
+    assert check_run_name("a" * 255) == "a" * 255
+    for name in ("a" * 256, "é" * 128, "a\nb", "tab\there"):
+        with pytest.raises(UsageError, match="run name"):
+            check_run_name(name)
+
+
+def test_a_run_name_too_long_is_one_error_line_and_creates_nothing(tmp_path):
+    result = CliRunner().invoke(
+        app,
+        ["train", "--algo", "ppo", "--steps", "64", "--runs-dir", str(tmp_path / "y"), "--name", "a" * 300],
+    )
+    assert result.exit_code == 2, result.output
+    assert result.output.startswith("error: run name") and "300 bytes" in result.output
+    assert tree(tmp_path) == {}
+
+
+def test_a_runs_dir_too_long_for_the_file_system_creates_nothing(tmp_path):
+    with pytest.raises(UsageError, match="File name too long"):
+        run_module.train(_config(), tmp_path / "y" / ("b" * 300))
+    with pytest.raises(UsageError, match="File name too long"):
+        make_out_dir(tmp_path / "z" / ("b" * 300) / "c", "report folder")
+    assert tree(tmp_path) == {}
