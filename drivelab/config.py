@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -156,12 +157,21 @@ def _check_type(name: str, value):
     return value
 
 
+MAX_NAME_BYTES = 255  # the longest file name of Linux, macOS and Windows file systems
+
+
 def check_run_name(name: str) -> str:
     """``name`` if it is one path component (the run directory inside ``--runs-dir``): not empty,
     not ``.`` or ``..``, without ``/``, ``\\`` or NUL, so a run never lands outside ``--runs-dir``
-    or makes ``--runs-dir`` itself the run."""
+    or makes ``--runs-dir`` itself the run; at most ``MAX_NAME_BYTES`` in UTF-8 and without control
+    characters (a newline), so that every file system can hold it and every log line shows it."""
     if not name or name in (".", "..") or any(char in name for char in "/\\\0"):
         raise UsageError(f"run name {name!r} must be a single directory name (no '/', not '.' or '..')")
+    if any(unicodedata.category(char) == "Cc" for char in name):
+        raise UsageError(f"run name {name!r} must not contain control characters (a newline, a tab)")
+    size = len(name.encode("utf-8", errors="surrogatepass"))
+    if size > MAX_NAME_BYTES:
+        raise UsageError(f"run name {name[:20]!r}... is {size} bytes long (at most {MAX_NAME_BYTES} bytes)")
     return name
 
 

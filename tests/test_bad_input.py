@@ -147,7 +147,7 @@ TRAIN_CASES = {
     "ppo learning_rate=-1": (
         ["--algo", "ppo", "-H", "learning_rate=-1"],
         {},
-        "'learning_rate' of 'ppo' must be a number > 0",
+        "'learning_rate' of 'ppo' must be a number in (0, 1.0]",
     ),
     "ppo nonexistent=3": (
         ["--algo", "ppo", "-H", "nonexistent=3"],

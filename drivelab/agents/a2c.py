@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
+from drivelab.agents.base import MAX_LEARNING_RATE
 from drivelab.agents.rollout import OnPolicyAgent, Rollout
 from drivelab.errors import UsageError
 
@@ -52,8 +53,10 @@ class A2CConfig:
     def check(self, algo: str) -> None:
         if self.n_steps < 1 or not 0 < self.gamma <= 1 or not 0 <= self.gae_lambda <= 1:
             raise UsageError(f"{algo!r} needs n_steps >= 1, 0 < gamma <= 1 and 0 <= gae_lambda <= 1")
-        if self.learning_rate <= 0 or self.max_grad_norm <= 0:
-            raise UsageError(f"{algo!r} needs a positive learning_rate and max_grad_norm")
+        if not 0 < self.learning_rate <= MAX_LEARNING_RATE or self.max_grad_norm <= 0:
+            raise UsageError(
+                f"{algo!r} needs 0 < learning_rate <= {MAX_LEARNING_RATE:g} and max_grad_norm > 0"
+            )
         if self.entropy_coef < 0 or self.value_coef < 0:
             raise UsageError(f"{algo!r} needs entropy_coef >= 0 and value_coef >= 0")
 

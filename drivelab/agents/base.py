@@ -55,6 +55,11 @@ from drivelab.agents.storage import (
 from drivelab.errors import UsageError
 
 FORMAT = "drivelab-agent-2"
+# The largest learning rate of every agent, SB3's and drivelab's (and of Q-learning's α). Adam and
+# RMSprop move each weight by about the learning rate per update, and networks start with weights
+# of order 1/sqrt(width): a rate above 1 wipes the initialisation out in one update and overflows
+# to NaN within a few. Published rates lie in 1e-5 … 1e-2, and SB3's tuning ranges stay below 1.
+MAX_LEARNING_RATE = 1.0
 
 
 class Agent(Protocol):

@@ -32,7 +32,7 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from torch import nn
 
-from drivelab.agents.base import OwnAgent, batch_of_one, observation_to_tensor
+from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent, batch_of_one, observation_to_tensor
 from drivelab.agents.expert import ExpertConfig, check_expert_env
 from drivelab.agents.imitation_data import Demonstrations, Teacher, action_agreement, collect, stack_steps
 from drivelab.agents.networks import TanhGaussianActorCritic, squashed_log_prob
@@ -76,8 +76,10 @@ class BCConfig:
     def check(self, algo: str) -> None:
         if min(self.batch_size, self.epochs, self.round_steps) < 1:
             raise UsageError(f"{algo!r} needs batch_size, epochs and round_steps >= 1")
-        if self.learning_rate <= 0 or self.max_grad_norm <= 0:
-            raise UsageError(f"{algo!r} needs a positive learning_rate and max_grad_norm")
+        if not 0 < self.learning_rate <= MAX_LEARNING_RATE or self.max_grad_norm <= 0:
+            raise UsageError(
+                f"{algo!r} needs 0 < learning_rate <= {MAX_LEARNING_RATE:g} and max_grad_norm > 0"
+            )
         if not 0 <= self.validation_fraction < 1:
             raise UsageError(f"{algo!r} needs 0 <= validation_fraction < 1")
         if self.loss not in LOSSES:

@@ -27,7 +27,7 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from torch import nn
 
-from drivelab.agents.base import OwnAgent
+from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent
 from drivelab.agents.buffer_memory import check_buffer_memory
 from drivelab.agents.storage import assign_arrays
 from drivelab.agents.worlds import Worlds
@@ -88,8 +88,14 @@ class DuelingDDQNConfig:
             raise UsageError(f"{algo!r} needs batch_size >= 2, learning_starts >= 0 and log_interval >= 1")
         if not 0 < self.tau <= 1 or not 0 < self.gamma <= 1 or not 0 <= self.beta_start <= 1:
             raise UsageError(f"{algo!r} needs 0 < tau <= 1, 0 < gamma <= 1 and 0 <= beta_start <= 1")
-        if self.alpha < 0 or self.learning_rate <= 0 or self.final_learning_rate < 0:
-            raise UsageError(f"{algo!r} needs alpha >= 0 and non-negative learning rates")
+        if self.alpha < 0:
+            raise UsageError(f"{algo!r} needs alpha >= 0")
+        highest = MAX_LEARNING_RATE
+        if not 0 < self.learning_rate <= highest or not 0 <= self.final_learning_rate <= highest:
+            raise UsageError(
+                f"{algo!r} needs 0 < learning_rate <= {MAX_LEARNING_RATE:g} "
+                f"and 0 <= final_learning_rate <= {MAX_LEARNING_RATE:g}"
+            )
         exploration = (self.exploration_initial_eps, self.exploration_final_eps, self.exploration_fraction)
         if not all(0 <= value <= 1 for value in exploration):
             raise UsageError(f"{algo!r} needs exploration_initial_eps, _final_eps and _fraction in [0, 1]")

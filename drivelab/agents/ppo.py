@@ -15,6 +15,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from drivelab.agents.base import MAX_LEARNING_RATE
 from drivelab.agents.rollout import OnPolicyAgent, Rollout
 from drivelab.errors import UsageError
 
@@ -61,10 +62,10 @@ class PPOConfig:
             raise UsageError(f"{algo!r} needs n_steps, batch_size and n_epochs >= 1")
         if not 0 < self.gamma <= 1 or not 0 <= self.gae_lambda <= 1 or self.clip_range <= 0:
             raise UsageError(f"{algo!r} needs 0 < gamma <= 1, 0 <= gae_lambda <= 1 and clip_range > 0")
-        if self.learning_rate <= 0 or self.max_grad_norm <= 0 or self.clip_range_value < 0:
-            raise UsageError(
-                f"{algo!r} needs a positive learning_rate, max_grad_norm and clip_range_value >= 0"
-            )
+        if not 0 < self.learning_rate <= MAX_LEARNING_RATE:
+            raise UsageError(f"{algo!r} needs 0 < learning_rate <= {MAX_LEARNING_RATE:g}")
+        if self.max_grad_norm <= 0 or self.clip_range_value < 0:
+            raise UsageError(f"{algo!r} needs a positive max_grad_norm and clip_range_value >= 0")
         if min(self.entropy_coef, self.value_coef, self.target_kl) < 0:
             raise UsageError(f"{algo!r} needs entropy_coef, value_coef and target_kl >= 0")
 

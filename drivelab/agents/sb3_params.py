@@ -15,6 +15,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+from drivelab.agents.base import MAX_LEARNING_RATE
 from drivelab.agents.buffer_memory import check_buffer_memory, observation_bytes
 from drivelab.agents.registry import get_algo
 from drivelab.errors import UsageError
@@ -51,6 +52,7 @@ class Param:
 
 
 POSITIVE = Param("float", 0, open_low=True)
+LEARNING_RATE = Param("float", 0, MAX_LEARNING_RATE, open_low=True)
 FRACTION = Param("float", 0, 1)
 COUNT = Param("int", 1)
 NON_NEGATIVE_INT = Param("int", 0)
@@ -59,7 +61,7 @@ FLAG = Param("bool")
 MAPPING = Param("dict")
 
 _COMMON = {
-    "learning_rate": POSITIVE,
+    "learning_rate": LEARNING_RATE,
     "gamma": FRACTION,
     "stats_window_size": COUNT,
     "policy_kwargs": MAPPING,

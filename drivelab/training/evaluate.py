@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -213,15 +214,23 @@ def evaluate_run(
 def make_out_dir(path: Path, what: str = "report folder") -> Path:
     """``path`` as a folder (for reports, runs, a study), created if missing; a one-line
     UsageError naming ``what`` if it cannot be, and then none of the folders above it is left."""
-    missing = [folder for folder in (path, *path.parents) if not folder.exists()]
+    missing = [folder for folder in (path, *path.parents) if not _exists(folder)]
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        for folder in missing:  # innermost first
-            if folder.is_dir():
+        for folder in missing:  # innermost first; one that could not be made raises, as it is not there
+            with contextlib.suppress(OSError):
                 folder.rmdir()
         raise UsageError(f"cannot create {what} {str(path)!r}: {exc.strerror or exc}") from None
     return path
+
+
+def _exists(path: Path) -> bool:
+    """``path.exists()``, False where the name cannot be looked up (too long: ENAMETOOLONG)."""
+    try:
+        return path.exists()
+    except OSError:
+        return False
 
 
 def check_writable(run_dir: Path, name: str) -> None:

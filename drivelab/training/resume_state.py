@@ -400,6 +400,11 @@ def restore(model, worlds: TrainingWorlds, snapshot: Snapshot) -> None:
 
 
 # --- files -----------------------------------------------------------------------------------------
+def state_path(folder: Path, steps: int) -> Path:
+    """The JSON file of the resume state of the checkpoint at ``steps``."""
+    return _paths(folder, steps)[0]
+
+
 def _paths(folder: Path, steps: int) -> tuple[Path, Path]:
     return folder / f"resume-{steps}.json", folder / f"resume-{steps}.npz"
 
@@ -435,8 +440,9 @@ def read_state(folder: Path, steps: int) -> Snapshot | None:
         return None
     try:
         meta = json.loads(json_path.read_text())
-        if meta.get("format") != FORMAT or meta["steps"] != steps:
+        if not isinstance(meta, dict) or meta.get("format") != FORMAT or meta["steps"] != steps:
             raise ValueError("format or steps")
+        _check_meta(meta)
         if hashlib.sha256(npz_path.read_bytes()).hexdigest() != meta["npz_sha256"]:
             raise ValueError("checksum")
         with np.load(npz_path, allow_pickle=False) as data:
@@ -445,9 +451,55 @@ def read_state(folder: Path, steps: int) -> Snapshot | None:
         for index, world in enumerate(meta.pop("worlds")):
             actions = list(arrays.pop(f"world_{index}_actions"))
             worlds.append((world["start"], actions, len(actions)))
-    except (OSError, ValueError, KeyError, TypeError) as exc:
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, IndexError) as exc:
         raise UsageError(f"resume state {str(json_path)!r} is damaged ({exc})") from None
     return Snapshot(steps, meta, arrays, worlds)
+
+
+def _check_meta(meta: dict) -> None:
+    """A ValueError naming the first part of a resume state's JSON that is not as ``take_snapshot``
+    and ``write_state`` write it. What only a restore can check (generator states, the episodes'
+    replay) is checked by restoring (``check_restore``)."""
+
+    def need(ok: bool, what: str) -> None:
+        if not ok:
+            raise ValueError(f"{what} is malformed")
+
+    def counts(value: Any) -> bool:
+        return isinstance(value, int) and not isinstance(value, bool) and value >= 0
+
+    rows, monitor, rng = meta.get("rows"), meta.get("monitor"), meta.get("rng")
+    need(isinstance(rows, dict) and all(counts(rows.get(key)) for key in ("monitor", "evaluations")), "rows")
+    need(isinstance(monitor, dict) and _is_number(monitor.get("elapsed_s")), "monitor")
+    rewards = monitor.get("rewards", [])
+    need(isinstance(rewards, list) and all(_is_number(reward) for reward in rewards), "monitor rewards")
+    need(isinstance(rng, dict) and {"python", "numpy", "action_space", "agent_rng"} <= set(rng), "rng")
+    python = rng["python"]
+    need(isinstance(python, list) and len(python) == 3 and isinstance(python[1], list), "rng python")
+    need(counts(rng.get("torch_cuda")), "rng torch_cuda")
+    need(isinstance(meta.get("counters"), dict) and isinstance(meta.get("buffers"), dict), "counters")
+    need(all(isinstance(values, list) for values in meta["buffers"].values()), "buffers")
+    need(meta.get("last_obs") in (None, "array") or isinstance(meta["last_obs"], list), "last_obs")
+    worlds = meta.get("worlds")
+    need(isinstance(worlds, list) and len(worlds) > 0, "worlds")
+    need(all(isinstance(world, dict) and isinstance(world.get("start"), dict) for world in worlds), "worlds")
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
+
+
+def check_restore(model, worlds: TrainingWorlds, snapshot: Snapshot, path: Path) -> None:
+    """``restore`` into ``model`` and a training env built only for this check (``worlds``, writing
+    no file), before anything of the run changes: a state that parses but does not restore (a
+    generator state of the wrong size, an episode that does not replay) is a UsageError naming
+    ``path``. Restoring sets states only, so the real ``restore`` that follows gives the same."""
+    try:
+        restore(model, worlds, snapshot)
+    except UsageError as exc:
+        raise UsageError(f"resume state {str(path)!r}: {exc}") from None
+    except (ValueError, TypeError, KeyError, IndexError, AttributeError, RuntimeError, OverflowError) as exc:
+        raise UsageError(f"resume state {str(path)!r} is damaged ({type(exc).__name__}: {exc})") from None
 
 
 def prune_states(folder: Path, keep_steps: int) -> None:

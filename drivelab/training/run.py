@@ -56,11 +56,13 @@ from drivelab.training.resume_state import (
     TrainingWorlds,
     apply_to_model,
     apply_truncation,
+    check_restore,
     count_rows,
     plan_truncation,
     prune_states,
     read_state,
     restore,
+    state_path,
     take_snapshot,
     warn_inexact,
     write_state,
@@ -74,6 +76,21 @@ class TrainingInterrupted(KeyboardInterrupt):
     def __init__(self, run_dir: Path, steps: int) -> None:
         super().__init__(f"interrupted at step {steps}")
         self.run_dir, self.steps = run_dir, steps
+
+
+class TrainingDiverged(UsageError):
+    """The network's weights (or the action distribution they give) became NaN or infinite:
+    training cannot go on. No checkpoint is written from such a model; the run keeps those before."""
+
+    def __init__(self, config: RunConfig, steps: int, run_dir: Path, checkpoint_steps: int) -> None:
+        if (run_dir / "checkpoints" / "latest.json").is_file():
+            kept = f"{str(run_dir)!r} keeps its checkpoint of step {checkpoint_steps}"
+        else:
+            kept = "no checkpoint was written, so the run directory is removed"
+        super().__init__(
+            f"training of {config.algo!r} diverged at step {steps}: the network's weights or outputs "
+            f"became NaN or infinite (lower learning_rate, or limit max_grad_norm); {kept}"
+        )
 
 
 class StoppedByEvaluation(Exception):
@@ -166,6 +183,8 @@ class RunCallback(BaseCallback):
     def checkpoint(self, snapshot: Snapshot) -> None:
         """The model's checkpoint and the resume state of ``snapshot`` (taken at the model's
         present state), the resume state first: the manifest, written last, commits both."""
+        if not weights_finite(self.model):  # keep the last finite checkpoint as the latest
+            raise TrainingDiverged(self.config, snapshot.steps, self.run_dir, self.checkpoint_steps)
         folder = self.run_dir / "checkpoints"
         folder.mkdir(exist_ok=True)
         write_state(folder, snapshot)
@@ -205,6 +224,26 @@ class RunCallback(BaseCallback):
         return summary
 
 
+def weights_finite(model) -> bool:
+    """Whether every network weight of ``model`` (its torch modules and tensors) is finite."""
+    import torch
+
+    tensors = []
+    for value in vars(model).values():
+        if isinstance(value, torch.nn.Module):
+            tensors.extend(value.parameters())
+        elif isinstance(value, torch.Tensor) and value.is_floating_point():
+            tensors.append(value)
+    return all(bool(torch.isfinite(tensor).all()) for tensor in tensors)
+
+
+def _diverged(model, exc: Exception) -> bool:
+    """Whether ``exc``, raised while learning, comes from non-finite numbers: weights that are no
+    longer finite, or torch's check of a distribution's parameters (NaN logits from overflowing
+    weights) that found invalid values."""
+    return not weights_finite(model) or isinstance(exc, ValueError) and "found invalid values" in str(exc)
+
+
 def _next_multiple(value: int, every: int) -> int:
     return (value // every + 1) * every
 
@@ -215,11 +254,15 @@ def new_run_dir(config: RunConfig, runs_root: Path) -> Path:
     exists, or when ``runs_root`` is not a directory that this process can create folders in."""
     name = config.name or f"{config.algo}-{config.env}-s{config.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
     run_dir = runs_root / name
-    if run_dir.exists():
+    try:
+        exists = run_dir.exists()
+        existing = next(p for p in (runs_root, *runs_root.absolute().parents) if p.exists())
+    except OSError as exc:  # a name too long (ENAMETOOLONG) for this file system
+        raise UsageError(f"cannot create run directory {str(run_dir)!r}: {exc.strerror or exc}") from None
+    if exists:
         raise UsageError(
             f"run directory {str(run_dir)!r} already exists (choose another --name, or --resume it)"
         )
-    existing = next(p for p in (runs_root, *runs_root.absolute().parents) if p.exists())
     if not existing.is_dir():
         raise UsageError(f"--runs-dir {str(runs_root)!r}: {str(existing)!r} is not a directory")
     if not os.access(existing, os.W_OK | os.X_OK):
@@ -237,18 +280,21 @@ def _check_model(spec, config: RunConfig, probe) -> None:
         raise
     except (TypeError, ValueError, AssertionError, RuntimeError) as exc:  # torch: RuntimeError
         raise UsageError(f"bad hyperparameters for {config.algo!r}: {exc}") from None
+    except MemoryError:  # a replay buffer too large to allocate
+        raise UsageError(_out_of_memory(config)) from None
     finally:
         gc.collect()  # the throwaway agent's networks (on a GPU too) go before the real ones come
 
 
-def _make_envs(config: RunConfig, run_dir: Path, resume: bool):
+def _make_envs(config: RunConfig, run_dir: Path | None, resume: bool):
     """(training env, evaluation env, the training env's ``TrainingWorlds``). The training env has
     ``n_envs`` worlds (an SB3 VecEnv when more than one), logs its episodes to monitor.csv (appending
-    on a resume) and records them for the checkpoints' resume state; it is seeded with the run's
-    seed (an exact resume then replays its checkpoint's episodes over that)."""
+    on a resume; ``run_dir`` None: to no file) and records them for the checkpoints' resume state;
+    it is seeded with the run's seed (an exact resume then replays its checkpoint's episodes over
+    that)."""
     from drivelab.envs.core import DriveEnv
 
-    monitor = str(run_dir / "monitor.csv")
+    monitor = None if run_dir is None else str(run_dir / "monitor.csv")
     if config.n_envs == 1:
         recorder = RecordEpisodes(DriveEnv(**config.env_kwargs()))
         train_env = Monitor(recorder, filename=monitor, override_existing=not resume)
@@ -260,11 +306,26 @@ def _make_envs(config: RunConfig, run_dir: Path, resume: bool):
             SB3VecEnv(VectorDriveEnv(config.n_envs, autoreset_mode="same_step", **config.env_kwargs()))
         )
         train_env = VecMonitor(recorder)
-        train_env.results_writer = ResultsWriter(
-            monitor, header={"t_start": train_env.t_start, "env_id": config.env}, override_existing=not resume
-        )
+        if monitor is not None:
+            train_env.results_writer = ResultsWriter(
+                monitor,
+                header={"t_start": train_env.t_start, "env_id": config.env},
+                override_existing=not resume,
+            )
         train_env.seed(config.seed)
     return train_env, DriveEnv(**config.eval_env_kwargs()), TrainingWorlds.of(train_env, recorder)
+
+
+def _check_snapshot(model, config: RunConfig, snapshot: Snapshot, path: Path) -> None:
+    """Restore ``snapshot`` into ``model`` and a training env that writes no file
+    (``check_restore``): a damaged resume state is found before the run directory changes."""
+    check_env, check_eval_env, check_worlds = _make_envs(config, None, resume=True)
+    try:
+        model.set_env(check_env)
+        check_restore(model, check_worlds, snapshot, path)
+    finally:
+        check_env.close()
+        check_eval_env.close()
 
 
 def _check_n_envs(config: RunConfig) -> None:
@@ -304,21 +365,54 @@ def train(
         stops the run there, checkpointed, with ``StoppedByEvaluation`` (a pruned tuning trial).
     :param eval_first: the periodic evaluations play evaluation episodes ``eval_first`` … (a tuning
         trial: the validation episodes, ``VALIDATION_START``).
+
+    A run that fails before its first checkpoint (training diverged to NaN: ``TrainingDiverged``,
+    memory ran out, a bug) could not be resumed: its directory, and any folder above it that this
+    call created, are removed. One that fails later keeps its checkpoints (the last one finite).
     """
     run_dir = new_run_dir(config, Path(runs_root))
     spec = check_config(config)
+    created = [folder for folder in (run_dir, *run_dir.parents) if not folder.exists()]
     make_out_dir(run_dir, "run directory")  # one error line, no folder left, if it cannot be
     try:
         save_yaml(config, run_dir / "config.yaml")
         train_env, eval_env, worlds = _make_envs(config, run_dir, resume=False)
         model = spec.build(config.algo, train_env, config.seed, dict(config.hyperparams), run_dir)
     except Exception as exc:
-        shutil.rmtree(run_dir, ignore_errors=True)  # bad hyperparameters: leave nothing behind
+        _remove_created(created)  # bad hyperparameters, too little memory: leave nothing behind
+        if isinstance(exc, MemoryError):
+            raise UsageError(_out_of_memory(config)) from None
         if isinstance(exc, (TypeError, ValueError)) and not isinstance(exc, UsageError):
             raise UsageError(f"bad hyperparameters for {config.algo!r}: {exc}") from None
         raise
-    _learn(model, run_dir, config, eval_env, worlds, on_evaluation, eval_first)
+    try:
+        _learn(model, run_dir, config, eval_env, worlds, on_evaluation, eval_first)
+    except Exception as exc:
+        # a run that failed before its first checkpoint cannot be resumed: it leaves nothing behind
+        if not (run_dir / "checkpoints" / "latest.json").is_file():
+            _remove_created(created)
+        if isinstance(exc, MemoryError):
+            raise UsageError(_out_of_memory(config)) from None
+        raise
     return run_dir
+
+
+def _remove_created(created: list[Path]) -> None:
+    """Remove the run directory ``created[0]`` and the folders above it that ``train`` created
+    (innermost first), those only while empty."""
+    shutil.rmtree(created[0], ignore_errors=True)
+    for folder in created[1:]:
+        try:
+            folder.rmdir()
+        except OSError:
+            break
+
+
+def _out_of_memory(config: RunConfig) -> str:
+    return (
+        f"not enough memory for this run of {config.algo!r} (n_envs={config.n_envs}): use fewer worlds "
+        "(--n-envs) or smaller buffers (-H buffer_size, n_steps)"
+    )
 
 
 def resume(
@@ -335,8 +429,11 @@ def resume(
     and evaluations.csv to the rows it had written, progress.csv to its step) and the results of
     the older model (eval.json, eval-maps-*.json, nocrash.json, learning_curve.png, model.zip) are
     removed.
+    A damaged resume state is found before that: it is parsed and restored into the loaded model
+    and a training env that writes no file.
     A run killed before its first checkpoint (config and logs, no checkpoint, no model) has
-    nothing to continue from: it is trained again from step 0 in the same directory. One stopped
+    nothing to continue from: its files (``UNSTARTED_FILES``) are removed and it is trained again
+    from step 0 in the same directory; a folder holding anything else is refused. One stopped
     between its final checkpoint and its model gets the checkpoint's model.
     ``on_evaluation``, ``eval_first``: as for ``train``.
     """
@@ -346,9 +443,10 @@ def resume(
         config = build_config({**config.to_dict(), "steps": steps})
     if _stopped_before_first_checkpoint(run_dir):
         config = build_config({**config.to_dict(), "name": run_dir.name})
+        written = unstarted_run_files(run_dir)  # a folder holding anything else is refused
         check_config(config)
         sys.stderr.write(f"{run_dir}: stopped before its first checkpoint; training again from step 0\n")
-        shutil.rmtree(run_dir)
+        _remove_run_files(run_dir, written)
         return train(config, run_dir.parent, on_evaluation, eval_first)
     manifest = verify_checkpoint(run_dir, config)
     if manifest["steps"] == config.steps and not (run_dir / "model.zip").is_file():
@@ -363,6 +461,8 @@ def resume(
     snapshot = read_state(folder, manifest["steps"])
     changes = plan_truncation(run_dir, manifest["steps"], snapshot)
     model = _load_checkpoint(config, run_dir, manifest)
+    if snapshot is not None:
+        _check_snapshot(model, config, snapshot, state_path(folder, manifest["steps"]))
     # everything checked: from here on the run directory changes
     apply_truncation(run_dir, changes, manifest["steps"])
     save_yaml(config, run_dir / "config.yaml")
@@ -381,6 +481,71 @@ def _stopped_before_first_checkpoint(run_dir: Path) -> bool:
     return not any(
         path.exists() for path in (folder / "latest.json", folder / "latest.zip", run_dir / "model.zip")
     )
+
+
+# What a run writes before its first checkpoint (the layout above): the files a resume that finds
+# no checkpoint may remove. The checkpoint's own files appear when one was being written.
+UNSTARTED_FILES = ("config.yaml", "monitor.csv", "progress.csv", "evaluations.csv", "events.out.tfevents.*")
+UNSTARTED_FOLDERS = {
+    "checkpoints": ("resume-*.json", "resume-*.npz", "resume.tmp.json", "resume.tmp.npz",
+                    "latest.tmp.zip", "latest.tmp.json", "replay.tmp.npz"),
+    "videos": ("eval-*.mp4", "eval-*.gif"),
+}  # fmt: skip
+
+
+def unstarted_run_files(run_dir: Path) -> list[Path]:
+    """The files in ``run_dir``, a run stopped before its first checkpoint, that its run wrote
+    (``UNSTARTED_FILES``, ``UNSTARTED_FOLDERS``). A UsageError, naming them, when it holds anything
+    else, or has no monitor.csv of SB3's (written as training starts): then it is not such a run,
+    and nothing in it may be removed."""
+    written: list[Path] = []
+    foreign: list[str] = []
+    for path in sorted(run_dir.iterdir()):
+        if path.is_dir() and not path.is_symlink() and path.name in UNSTARTED_FOLDERS:
+            for inner in sorted(path.iterdir()):
+                if _plain_file(inner) and any(inner.match(p) for p in UNSTARTED_FOLDERS[path.name]):
+                    written.append(inner)
+                else:
+                    foreign.append(f"{path.name}/{inner.name}")
+        elif _plain_file(path) and any(path.match(pattern) for pattern in UNSTARTED_FILES):
+            written.append(path)
+        else:
+            foreign.append(path.name + ("/" if path.is_dir() else ""))
+    if foreign:
+        shown = ", ".join(foreign[:5]) + (f" and {len(foreign) - 5} more" if len(foreign) > 5 else "")
+        raise UsageError(
+            f"{str(run_dir)!r} has no checkpoint to resume from and holds files a drivelab run does not "
+            f"write ({shown}); nothing was changed (train a new run elsewhere, or move them out)"
+        )
+    if not _is_monitor_log(run_dir / "monitor.csv"):
+        raise UsageError(
+            f"{str(run_dir)!r} has no checkpoint to resume from and no monitor.csv of a run that started "
+            "training; nothing was changed (train a new run with --runs-dir and --name instead)"
+        )
+    return written
+
+
+def _plain_file(path: Path) -> bool:
+    return path.is_file() and not path.is_symlink()
+
+
+def _is_monitor_log(path: Path) -> bool:
+    """Whether ``path`` starts as SB3's Monitor writes it: ``#{"t_start": ...}``."""
+    try:
+        with path.open("rb") as handle:
+            return handle.read(11) == b'#{"t_start"'
+    except OSError:
+        return False
+
+
+def _remove_run_files(run_dir: Path, files: list[Path]) -> None:
+    """Remove ``files`` (``unstarted_run_files``), then the folders they leave empty and ``run_dir``."""
+    for path in files:
+        path.unlink(missing_ok=True)
+    for name in UNSTARTED_FOLDERS:
+        if (run_dir / name).is_dir():
+            (run_dir / name).rmdir()
+    run_dir.rmdir()
 
 
 def _load_checkpoint(config: RunConfig, run_dir: Path, manifest: dict, replay: bool = True):
@@ -422,6 +587,14 @@ def _learn(model, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWo
         except KeyboardInterrupt:
             callback._on_training_end()
             raise TrainingInterrupted(run_dir, callback.checkpoint_steps) from None
+        except TrainingDiverged:
+            callback._on_training_end()
+            raise
+        except (ValueError, RuntimeError, FloatingPointError) as exc:
+            callback._on_training_end()
+            if isinstance(exc, UsageError) or not _diverged(model, exc):
+                raise
+            raise TrainingDiverged(config, model.num_timesteps, run_dir, callback.checkpoint_steps) from None
         if callback.stopped:
             apply_to_model(model, callback.snapshot)
             callback.checkpoint(callback.snapshot)

@@ -32,7 +32,7 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from torch import nn
 
-from drivelab.agents.base import OwnAgent
+from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent
 from drivelab.agents.buffer_memory import check_buffer_memory, observation_bytes
 from drivelab.agents.rlad.augmentation import default_pad, random_shift
 from drivelab.agents.rlad.fast import COMPILE_MODES, compile_unavailable, draw_update_noise
@@ -121,8 +121,12 @@ class RLADConfig:
             raise UsageError(f"{algo!r} needs learning_starts >= 0, augment_pad >= 0 and hidden_size >= 1")
         if not 0 < self.gamma <= 1 or not 0 < self.tau <= 1 or not 0 <= self.alix_init <= 1:
             raise UsageError(f"{algo!r} needs 0 < gamma <= 1, 0 < tau <= 1 and 0 <= alix_init <= 1")
-        if min(self.learning_rate, self.alix_learning_rate, self.init_temperature) <= 0:
-            raise UsageError(f"{algo!r} needs positive learning rates and init_temperature")
+        if not all(0 < rate <= MAX_LEARNING_RATE for rate in (self.learning_rate, self.alix_learning_rate)):
+            raise UsageError(
+                f"{algo!r} needs learning_rate and alix_learning_rate in (0, {MAX_LEARNING_RATE:g}]"
+            )
+        if self.init_temperature <= 0:
+            raise UsageError(f"{algo!r} needs a positive init_temperature")
         if self.log_std_min >= self.log_std_max:
             raise UsageError(f"{algo!r} needs log_std_min < log_std_max")
         if self.aux_weight < 0 or self.alix_target <= 0:
