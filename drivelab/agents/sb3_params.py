@@ -71,9 +71,8 @@ _OFF_POLICY = {
     "learning_starts": NON_NEGATIVE_INT,
     "batch_size": COUNT,
     "tau": Param("float", 0, 1, open_low=True),
-    "gradient_steps": Param(
-        "int", -1
-    ),  # -1: as many as environment steps; 0 is refused (_check_gradient_steps)
+    # -1: as many gradient steps as environment steps; 0 is refused (_check_gradient_steps)
+    "gradient_steps": Param("int", -1),
     "optimize_memory_usage": FLAG,
     "n_steps": COUNT,
     "target_update_interval": COUNT,
