@@ -107,6 +107,15 @@ def _rlad_switches(no_alix: bool, no_aux: bool, no_augment: bool, waypoint_encod
     return {key: value for key, value in switches.items() if value is not None}
 
 
+def _with_hyperparams(values: dict, hyperparams: list[str], switches: dict | None = None) -> dict:
+    """The ``--config`` file's ``hyperparams`` (none or empty: {}) updated with the ``-H`` pairs
+    and the switches; a one-line error when the file's field is not a mapping."""
+    given = values.get("hyperparams") or {}
+    if not isinstance(given, dict):
+        raise UsageError(f"config field 'hyperparams' must be a mapping, got {type(given).__name__}")
+    return {**given, **_parse_pairs(hyperparams, "--hyperparams"), **(switches or {})}
+
+
 def _new_run_config(config: Path | None, cli: dict, video: bool, hyperparams: list[str], switches: dict):
     """The config of a new run: the ``--config`` file's fields, the options given over them, and
     drivelab's shipped hyper-parameters under the ``-H`` ones."""
@@ -119,10 +128,7 @@ def _new_run_config(config: Path | None, cli: dict, video: bool, hyperparams: li
     if video:
         values["eval_video"] = True
     if hyperparams or switches:
-        given = values.get("hyperparams") or {}
-        if not isinstance(given, dict):
-            raise UsageError(f"config field 'hyperparams' must be a mapping, got {type(given).__name__}")
-        values["hyperparams"] = {**given, **_parse_pairs(hyperparams, "--hyperparams"), **switches}
+        values["hyperparams"] = _with_hyperparams(values, hyperparams, switches)
     return build_config(with_shipped_hyperparams(values))
 
 
@@ -553,10 +559,7 @@ def ablate(
         given = {"obs": obs, "action": action, "traffic": traffic, "backend": backend}
         base.update({k: v for k, v in given.items() if v is not None})
         if hyperparams:
-            base["hyperparams"] = {
-                **base.get("hyperparams", {}),
-                **_parse_pairs(hyperparams, "--hyperparams"),
-            }
+            base["hyperparams"] = _with_hyperparams(base, hyperparams)
         for key in ("algo", "env", "steps", "seed", "reward", "name"):
             if key in base:
                 raise UsageError(f"--config may not set {key!r} for an ablation (use the options)")

@@ -1,0 +1,66 @@
+"""More bad input of the command line: each is one ``error:`` line and exit code 2, no traceback,
+and the working folder exactly as it was (CliRunner, in-process)."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from drivelab.cli import app
+
+runner = CliRunner()
+
+
+def snapshot(root: Path) -> dict[str, str]:
+    """Every path under ``root`` → "dir" or its bytes' SHA-256."""
+    return {
+        str(path.relative_to(root)): "dir" if path.is_dir() else hashlib.sha256(path.read_bytes()).hexdigest()
+        for path in sorted(root.rglob("*"))
+    }
+
+
+def assert_refused(root: Path, args: list[str], line: str) -> None:
+    """``drivelab ARGS``: exit 2, exactly the one line ``line``, nothing under ``root`` changed."""
+    before = snapshot(root)
+    result = runner.invoke(app, [str(arg) for arg in args])
+    assert result.exit_code == 2, result.output
+    assert result.output.splitlines() == [line]
+    assert snapshot(root) == before
+
+
+@pytest.fixture
+def work(tmp_path, monkeypatch) -> Path:
+    """An empty working folder that is the current directory."""
+    folder = tmp_path / "work"
+    folder.mkdir()
+    monkeypatch.chdir(folder)
+    return folder
+
+
+ABLATE = ["ablate", "--algo", "ppo", "--drop-terms", "right_lane", "--seeds", "1", "--steps", "64"]
+
+
+@pytest.mark.parametrize(("text", "kind"), [("hyperparams: [1, 2]\n", "list"), ("hyperparams: 3\n", "int")])
+def test_ablate_config_hyperparams_not_a_mapping(work, text, kind):
+    (work / "a.yaml").write_text(text)
+    args = [*ABLATE, "--config", "a.yaml", "-H", "gamma=0.9", "--runs-dir", "runs"]
+    assert_refused(work, args, f"error: config field 'hyperparams' must be a mapping, got {kind}")
+
+
+def test_ablate_config_hyperparams_null_takes_the_h_values(work, monkeypatch):
+    from drivelab.training import ablate
+
+    given = {}
+
+    def fake_ablate(env, algo, base, **_):
+        given.update(base)
+        return work / "report", []
+
+    monkeypatch.setattr(ablate, "ablate", fake_ablate)
+    (work / "a.yaml").write_text("hyperparams:\n")
+    result = runner.invoke(app, [*ABLATE, "--config", "a.yaml", "-H", "gamma=0.9", "--runs-dir", "runs"])
+    assert result.exit_code == 0, result.output
+    assert given == {"hyperparams": {"gamma": 0.9}}
