@@ -640,12 +640,13 @@ def train_lane(
     from drivelab.perception.lane_cnn import WEIGHTS_PATH
     from drivelab.training.lane_dataset import train_lane_detector
 
-    if frames < 1 or epochs < 1:
-        _fail("--frames and --epochs must be >= 1")
     torch.set_num_threads(min(2, torch.get_num_threads()))
-    summary = train_lane_detector(
-        frames=frames, epochs=epochs, seed=seed, out=out or WEIGHTS_PATH, log=typer.echo
-    )
+    try:
+        summary = train_lane_detector(
+            frames=frames, epochs=epochs, seed=seed, out=out or WEIGHTS_PATH, log=typer.echo
+        )
+    except UsageError as exc:
+        _fail(str(exc))
     size_kib, seconds = summary["bytes"] / 1024, summary["seconds"]
     typer.echo(f"weights: {summary['weights']} ({size_kib:.0f} KiB, trained in {seconds:.0f} s)")
 

@@ -64,3 +64,44 @@ def test_ablate_config_hyperparams_null_takes_the_h_values(work, monkeypatch):
     result = runner.invoke(app, [*ABLATE, "--config", "a.yaml", "-H", "gamma=0.9", "--runs-dir", "runs"])
     assert result.exit_code == 0, result.output
     assert given == {"hyperparams": {"gamma": 0.9}}
+
+
+@pytest.fixture
+def no_lane_training(monkeypatch):
+    """train-lane must refuse before it generates a frame."""
+    from drivelab.training import lane_dataset
+
+    monkeypatch.setattr(lane_dataset, "generate_lane_frames", lambda *_: pytest.fail("frames generated"))
+    monkeypatch.setattr(lane_dataset, "available_memory_bytes", lambda: 16 * 2**30, raising=False)
+
+
+@pytest.mark.parametrize(
+    ("args", "line"),
+    [
+        (["--out", "weights"], "error: --out 'weights' must name a .pt file (the lane CNN's weights)"),
+        (["--out", "w.txt"], "error: --out 'w.txt' must name a .pt file (the lane CNN's weights)"),
+        (["--out", "missing/x/w.pt"], "error: --out 'missing/x/w.pt': folder 'missing/x' does not exist"),
+        (["--seed", "-1"], "error: --seed must be >= 0, got -1"),
+        (["--frames", "0"], "error: --frames and --epochs must be >= 1"),
+        (
+            ["--frames", "1000000000000"],
+            "error: --frames 1000000000000 needs about 500679016.1 GiB of memory to train on, "
+            "16.0 GiB is available; use fewer frames",
+        ),
+    ],
+)
+def test_train_lane_checks_its_arguments_before_training(work, no_lane_training, args, line):
+    (work / "weights").mkdir()
+    assert_refused(work, ["perception", "train-lane", "--frames", "1", "--epochs", "1", *args], line)
+
+
+def test_train_lane_writes_only_the_weights_file(work):
+    result = runner.invoke(
+        app, ["perception", "train-lane", "--frames", "2", "--epochs", "1", "--out", "w.pt"]
+    )
+    assert result.exit_code == 0, result.output
+    assert sorted(snapshot(work)) == ["w.pt"]
+
+    from drivelab.perception.lane_cnn import load_lane_cnn
+
+    load_lane_cnn(work / "w.pt")
