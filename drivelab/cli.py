@@ -18,7 +18,19 @@ from drivelab.errors import UsageError
 CLICK_ERRORS = {cls.__name__: cls for cls in typer.BadParameter.__mro__}
 
 
-class OneLineErrors(TyperGroup):
+class NeedsCommand(TyperGroup):
+    """A command group given no command: one ``error:`` line naming the commands it has (exit 2),
+    not the help box with exit 2 that ``no_args_is_help`` prints; ``--help`` shows the help."""
+
+    def parse_args(self, ctx, args: list[str]) -> list[str]:
+        if not args and not ctx.resilient_parsing:
+            commands = ", ".join(self.list_commands(ctx))
+            what = "a command" if ctx.parent is None else "a subcommand"
+            raise CLICK_ERRORS["UsageError"](f"{ctx.info_name} needs {what}: {commands}", ctx=ctx)
+        return super().parse_args(ctx, args)
+
+
+class OneLineErrors(NeedsCommand):
     """The command line's own mistakes (an unknown command or option, a value of the wrong type, a
     missing argument) as the one ``error:`` line and exit code 2 that every other bad input gets,
     instead of click's usage box."""
@@ -29,8 +41,6 @@ class OneLineErrors(TyperGroup):
         try:
             code = super().main(*args, standalone_mode=False, **kwargs)
         except CLICK_ERRORS["ClickException"] as exc:
-            if type(exc).__name__ == "NoArgsIsHelpError":  # the help is printed already
-                sys.exit(exc.exit_code)
             message = " ".join(exc.format_message().split()).rstrip(".")
             context = getattr(exc, "ctx", None)
             if isinstance(exc, CLICK_ERRORS["UsageError"]) and context is not None:
@@ -46,7 +56,6 @@ class OneLineErrors(TyperGroup):
 app = typer.Typer(
     cls=OneLineErrors,
     add_completion=False,
-    no_args_is_help=True,
     help="Train, evaluate and compare RL driving agents.",
 )
 
@@ -596,7 +605,7 @@ def convert_run(
     typer.echo(f"run directory: {run_dir}  ({'converted' if written else 'already in the safe format'})")
 
 
-benchmark_app = typer.Typer(no_args_is_help=True, help="Driving benchmarks of trained runs.")
+benchmark_app = typer.Typer(cls=NeedsCommand, help="Driving benchmarks of trained runs.")
 app.add_typer(benchmark_app, name="benchmark")
 
 
@@ -623,7 +632,7 @@ def benchmark_nocrash(
     typer.echo(report_markdown(report))
 
 
-perception_app = typer.Typer(no_args_is_help=True, help="Perception models: train the lane CNN.")
+perception_app = typer.Typer(cls=NeedsCommand, help="Perception models: train the lane CNN.")
 app.add_typer(perception_app, name="perception")
 
 

@@ -105,3 +105,33 @@ def test_train_lane_writes_only_the_weights_file(work):
     from drivelab.perception.lane_cnn import load_lane_cnn
 
     load_lane_cnn(work / "w.pt")
+
+
+COMMANDS = (
+    "envs, train, evaluate, zoo, enjoy, compare, sweep, tune, ablate, convert-run, maps, "
+    + "benchmark, perception"
+)
+
+
+@pytest.mark.parametrize(
+    ("args", "line"),
+    [
+        (["benchmark"], "error: benchmark needs a subcommand: nocrash (see `drivelab benchmark --help`)"),
+        (
+            ["perception"],
+            "error: perception needs a subcommand: train-lane (see `drivelab perception --help`)",
+        ),
+        ([], f"error: drivelab needs a command: {COMMANDS} (see `drivelab --help`)"),
+    ],
+)
+def test_a_missing_command_is_one_error_line(args, line):
+    result = runner.invoke(app, args, prog_name="drivelab")
+    assert result.exit_code == 2, result.output
+    assert result.output.splitlines() == [line]
+
+
+@pytest.mark.parametrize("args", [["--help"], ["benchmark", "--help"], ["perception", "--help"]])
+def test_help_still_shows_the_help(args):
+    result = runner.invoke(app, args, prog_name="drivelab")
+    assert result.exit_code == 0, result.output
+    assert "Usage: drivelab" in result.output and "Commands" in result.output
