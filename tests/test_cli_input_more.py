@@ -135,3 +135,23 @@ def test_help_still_shows_the_help(args):
     result = runner.invoke(app, args, prog_name="drivelab")
     assert result.exit_code == 0, result.output
     assert "Usage: drivelab" in result.output and "Commands" in result.output
+
+
+@pytest.mark.parametrize(
+    ("command", "text", "line"),
+    [
+        (["train", "--config"], "algo: ppo\nsteps: 64\nalgo: dqn\n", "line 3: duplicate key 'algo'"),
+        (["train", "--config"], "hyperparams: {gamma: 0.9, gamma: 0.8}\n", "line 1: duplicate key 'gamma'"),
+        (["sweep"], "grid: {seed: 1}\nbase: {algo: ppo}\ngrid: {seed: 2}\n", "line 3: duplicate key 'grid'"),
+    ],
+)  # fmt: skip
+def test_a_yaml_file_that_repeats_a_key_is_refused(work, command, text, line):
+    (work / "dup.yaml").write_text(text)
+    assert_refused(work, [*command, "dup.yaml"], f"error: malformed YAML in 'dup.yaml' at {line}")
+
+
+def test_yaml_merge_keys_may_still_be_overridden():
+    from drivelab.yaml_io import parse_yaml
+
+    text = "base: &b {algo: ppo, steps: 8}\nrun: {<<: *b, algo: dqn}\n"
+    assert parse_yaml(text)["run"] == {"algo": "dqn", "steps": 8}
