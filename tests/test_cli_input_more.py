@@ -155,3 +155,23 @@ def test_yaml_merge_keys_may_still_be_overridden():
 
     text = "base: &b {algo: ppo, steps: 8}\nrun: {<<: *b, algo: dqn}\n"
     assert parse_yaml(text)["run"] == {"algo": "dqn", "steps": 8}
+
+
+@pytest.mark.parametrize(
+    ("reward", "term"), [("crash=1,crash=-5", "crash"), ("highway,right_lane=1,right_lane=2", "right_lane")]
+)
+def test_a_reward_that_gives_a_term_twice_is_refused(work, reward, term):
+    line = f"error: reward {reward!r} gives the term {term!r} twice"
+    assert_refused(
+        work, ["train", "--algo", "ppo", "--reward", reward, "--steps", "16", "--runs-dir", "runs"], line
+    )
+
+
+def test_dropping_a_term_the_ablated_reward_weighs_itself():
+    from drivelab.training.ablate import reward_variants
+
+    assert reward_variants(None, ["right_lane", "collision"], "highway,right_lane=0.5") == [
+        "highway,right_lane=0.5",
+        "highway,right_lane=0",
+        "highway,right_lane=0.5,collision=0",
+    ]
