@@ -175,3 +175,20 @@ def test_dropping_a_term_the_ablated_reward_weighs_itself():
         "highway,right_lane=0",
         "highway,right_lane=0.5,collision=0",
     ]
+
+
+def test_compare_refuses_two_copies_of_one_run(work):
+    import shutil
+
+    from drivelab.config import build_config, save_yaml
+
+    run = work / "runs" / "ppo-s0"
+    run.mkdir(parents=True)
+    save_yaml(build_config({"algo": "ppo", "seed": 0, "steps": 20, "name": "ppo-s0"}), run / "config.yaml")
+    (run / "eval.json").write_text('{"episodes": 1, "mean_return": 1.0, "success_rate": 1.0}')
+    shutil.copytree(run, work / "runs" / "copy")
+    line = (
+        "error: runs 'runs/copy' and 'runs/ppo-s0' are the same run (one config, seed 0, 20 steps): "
+        "a seed counts once in a group; compare one of them"
+    )
+    assert_refused(work, ["compare", "runs/copy", "runs/ppo-s0", "-o", "report"], line)
