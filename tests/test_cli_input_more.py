@@ -192,3 +192,46 @@ def test_compare_refuses_two_copies_of_one_run(work):
         "a seed counts once in a group; compare one of them"
     )
     assert_refused(work, ["compare", "runs/copy", "runs/ppo-s0", "-o", "report"], line)
+
+
+def _zip(path: Path) -> bytes:
+    import zipfile
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr("data", "a model")
+    return path.read_bytes()
+
+
+NOT_A_ZIP = "is not a model zip of either format (truncated or corrupted)"
+MANIFEST = "checkpoints/latest.json)"
+
+
+@pytest.mark.parametrize(
+    ("damage", "problem"),
+    [
+        ("garbage model", "model.zip " + NOT_A_ZIP),
+        ("truncated checkpoint", "checkpoints/latest.zip " + NOT_A_ZIP),
+        ("checksum", "checkpoints/latest.zip is truncated or corrupted (checksum mismatch with " + MANIFEST),
+        ("manifest", "its checkpoint manifest checkpoints/latest.json is missing or corrupted"),
+    ],
+)  # fmt: skip
+def test_convert_run_says_what_is_damaged(work, damage, problem):
+    from drivelab.config import build_config, save_yaml
+
+    run = work / "run"
+    run.mkdir()
+    save_yaml(build_config({"algo": "ppo", "seed": 0, "steps": 20, "name": "run"}), run / "config.yaml")
+    whole = _zip(run / "checkpoints" / "latest.zip")
+    (run / "checkpoints" / "latest.json").write_text(
+        f'{{"steps": 20, "sha256": "{hashlib.sha256(whole).hexdigest()}"}}'
+    )
+    if damage == "garbage model":
+        (run / "model.zip").write_bytes(bytes(range(256)))
+    elif damage == "truncated checkpoint":
+        (run / "checkpoints" / "latest.zip").write_bytes(whole[: len(whole) // 2])
+    elif damage == "checksum":
+        (run / "checkpoints" / "latest.json").write_text('{"steps": 20, "sha256": "0"}')
+    else:
+        (run / "checkpoints" / "latest.json").write_text("{corrupt")
+    assert_refused(work, ["convert-run", "run"], f"error: cannot convert 'run': {problem}")
