@@ -235,3 +235,9 @@ def test_convert_run_says_what_is_damaged(work, damage, problem):
     else:
         (run / "checkpoints" / "latest.json").write_text("{corrupt")
     assert_refused(work, ["convert-run", "run"], f"error: cannot convert 'run': {problem}")
+
+
+@pytest.mark.parametrize("command", [["convert-run"], ["train", "--resume"]])
+def test_a_file_given_as_a_run_directory(work, command):
+    (work / "notes.txt").write_text("mine")
+    assert_refused(work, [*command, "notes.txt"], "error: 'notes.txt' is a file, not a run directory")
