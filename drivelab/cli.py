@@ -18,7 +18,19 @@ from drivelab.errors import UsageError
 CLICK_ERRORS = {cls.__name__: cls for cls in typer.BadParameter.__mro__}
 
 
-class OneLineErrors(TyperGroup):
+class NeedsCommand(TyperGroup):
+    """A command group given no command: one ``error:`` line naming the commands it has (exit 2),
+    not the help box with exit 2 that ``no_args_is_help`` prints; ``--help`` shows the help."""
+
+    def parse_args(self, ctx, args: list[str]) -> list[str]:
+        if not args and not ctx.resilient_parsing:
+            commands = ", ".join(self.list_commands(ctx))
+            what = "a command" if ctx.parent is None else "a subcommand"
+            raise CLICK_ERRORS["UsageError"](f"{ctx.info_name} needs {what}: {commands}", ctx=ctx)
+        return super().parse_args(ctx, args)
+
+
+class OneLineErrors(NeedsCommand):
     """The command line's own mistakes (an unknown command or option, a value of the wrong type, a
     missing argument) as the one ``error:`` line and exit code 2 that every other bad input gets,
     instead of click's usage box."""
@@ -29,8 +41,6 @@ class OneLineErrors(TyperGroup):
         try:
             code = super().main(*args, standalone_mode=False, **kwargs)
         except CLICK_ERRORS["ClickException"] as exc:
-            if type(exc).__name__ == "NoArgsIsHelpError":  # the help is printed already
-                sys.exit(exc.exit_code)
             message = " ".join(exc.format_message().split()).rstrip(".")
             context = getattr(exc, "ctx", None)
             if isinstance(exc, CLICK_ERRORS["UsageError"]) and context is not None:
@@ -46,7 +56,6 @@ class OneLineErrors(TyperGroup):
 app = typer.Typer(
     cls=OneLineErrors,
     add_completion=False,
-    no_args_is_help=True,
     help="Train, evaluate and compare RL driving agents.",
 )
 
@@ -69,6 +78,14 @@ def _parse_pairs(pairs: list[str], what: str) -> dict:
         except yaml.YAMLError:
             raise UsageError(f"{what} {pair!r} has a value that is not valid YAML") from None
     return values
+
+
+def _not_a_file(run_dir: Path) -> Path:
+    """``run_dir``, or a one-line error when it is a file (a run directory's checks would say it
+    does not exist)."""
+    if run_dir.exists() and not run_dir.is_dir():
+        raise UsageError(f"{str(run_dir)!r} is a file, not a run directory")
+    return run_dir
 
 
 def _command_line() -> str | None:
@@ -107,6 +124,15 @@ def _rlad_switches(no_alix: bool, no_aux: bool, no_augment: bool, waypoint_encod
     return {key: value for key, value in switches.items() if value is not None}
 
 
+def _with_hyperparams(values: dict, hyperparams: list[str], switches: dict | None = None) -> dict:
+    """The ``--config`` file's ``hyperparams`` (none or empty: {}) updated with the ``-H`` pairs
+    and the switches; a one-line error when the file's field is not a mapping."""
+    given = values.get("hyperparams") or {}
+    if not isinstance(given, dict):
+        raise UsageError(f"config field 'hyperparams' must be a mapping, got {type(given).__name__}")
+    return {**given, **_parse_pairs(hyperparams, "--hyperparams"), **(switches or {})}
+
+
 def _new_run_config(config: Path | None, cli: dict, video: bool, hyperparams: list[str], switches: dict):
     """The config of a new run: the ``--config`` file's fields, the options given over them, and
     drivelab's shipped hyper-parameters under the ``-H`` ones."""
@@ -119,10 +145,7 @@ def _new_run_config(config: Path | None, cli: dict, video: bool, hyperparams: li
     if video:
         values["eval_video"] = True
     if hyperparams or switches:
-        given = values.get("hyperparams") or {}
-        if not isinstance(given, dict):
-            raise UsageError(f"config field 'hyperparams' must be a mapping, got {type(given).__name__}")
-        values["hyperparams"] = {**given, **_parse_pairs(hyperparams, "--hyperparams"), **switches}
+        values["hyperparams"] = _with_hyperparams(values, hyperparams, switches)
     return build_config(with_shipped_hyperparams(values))
 
 
@@ -211,7 +234,7 @@ def train(
             ]
             if given or hyperparams or switches or video:
                 raise UsageError("--resume takes the run's own config; only --steps may be given with it")
-            run_dir = resume_run(resume, steps)
+            run_dir = resume_run(_not_a_file(resume), steps)
         else:
             cli = {
                 "algo": algo, "env": env, "obs": obs, "action": action, "reward": reward,
@@ -553,10 +576,7 @@ def ablate(
         given = {"obs": obs, "action": action, "traffic": traffic, "backend": backend}
         base.update({k: v for k, v in given.items() if v is not None})
         if hyperparams:
-            base["hyperparams"] = {
-                **base.get("hyperparams", {}),
-                **_parse_pairs(hyperparams, "--hyperparams"),
-            }
+            base["hyperparams"] = _with_hyperparams(base, hyperparams)
         for key in ("algo", "env", "steps", "seed", "reward", "name"):
             if key in base:
                 raise UsageError(f"--config may not set {key!r} for an ablation (use the options)")
@@ -585,7 +605,7 @@ def convert_run(
     from drivelab.training.convert import convert_run as convert
 
     try:
-        written = convert(run_dir)
+        written = convert(_not_a_file(run_dir))
     except UsageError as exc:
         _fail(str(exc))
     for path in written:
@@ -593,7 +613,7 @@ def convert_run(
     typer.echo(f"run directory: {run_dir}  ({'converted' if written else 'already in the safe format'})")
 
 
-benchmark_app = typer.Typer(no_args_is_help=True, help="Driving benchmarks of trained runs.")
+benchmark_app = typer.Typer(cls=NeedsCommand, help="Driving benchmarks of trained runs.")
 app.add_typer(benchmark_app, name="benchmark")
 
 
@@ -620,7 +640,7 @@ def benchmark_nocrash(
     typer.echo(report_markdown(report))
 
 
-perception_app = typer.Typer(no_args_is_help=True, help="Perception models: train the lane CNN.")
+perception_app = typer.Typer(cls=NeedsCommand, help="Perception models: train the lane CNN.")
 app.add_typer(perception_app, name="perception")
 
 
@@ -637,12 +657,13 @@ def train_lane(
     from drivelab.perception.lane_cnn import WEIGHTS_PATH
     from drivelab.training.lane_dataset import train_lane_detector
 
-    if frames < 1 or epochs < 1:
-        _fail("--frames and --epochs must be >= 1")
     torch.set_num_threads(min(2, torch.get_num_threads()))
-    summary = train_lane_detector(
-        frames=frames, epochs=epochs, seed=seed, out=out or WEIGHTS_PATH, log=typer.echo
-    )
+    try:
+        summary = train_lane_detector(
+            frames=frames, epochs=epochs, seed=seed, out=out or WEIGHTS_PATH, log=typer.echo
+        )
+    except UsageError as exc:
+        _fail(str(exc))
     size_kib, seconds = summary["bytes"] / 1024, summary["seconds"]
     typer.echo(f"weights: {summary['weights']} ({size_kib:.0f} KiB, trained in {seconds:.0f} s)")
 

@@ -98,7 +98,7 @@ PRESETS: dict[str, RewardSpec] = {
 def parse_reward(spec: str | dict | RewardSpec) -> RewardSpec:
     """Resolve a preset name, ``"term=w,term=w"``, ``"preset,term=w"`` (override) or a dict.
 
-    A weight of 0 drops a term. Unknown presets or terms raise UsageError.
+    A weight of 0 drops a term. Unknown presets or terms, and a term given twice, raise UsageError.
     """
     if isinstance(spec, RewardSpec):
         return spec
@@ -114,12 +114,15 @@ def parse_reward(spec: str | dict | RewardSpec) -> RewardSpec:
         if name not in PRESETS:
             raise UsageError(f"unknown reward preset {name!r} (choose from {', '.join(PRESETS)})")
         base = PRESETS[name]
-    weights = dict(base.weights)
+    weights, given = dict(base.weights), set()
     for item in items:
         name, _, value = item.partition("=")
         name = name.strip()
         if name not in TERMS:
             raise UsageError(f"unknown reward term {name!r} (known: {', '.join(sorted(TERMS))})")
+        if name in given:
+            raise UsageError(f"reward {spec!r} gives the term {name!r} twice")
+        given.add(name)
         try:
             weight = float(value)
         except ValueError:

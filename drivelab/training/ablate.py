@@ -16,7 +16,8 @@ def reward_variants(rewards: list[str] | None, drop_terms: list[str] | None, bas
 
     :param rewards: explicit reward specs (presets or ``term=weight`` lists), used as given.
     :param drop_terms: terms of ``base_reward`` to drop one at a time; the variants are
-        ``base_reward`` itself followed by ``"<base_reward>,<term>=0"`` for each term.
+        ``base_reward`` itself followed by ``"<base_reward>,<term>=0"`` for each term (the term's
+        own weight in ``base_reward``, if it gives one, left out).
     :param base_reward: the reward that ``drop_terms`` refers to.
     """
     if bool(rewards) == bool(drop_terms):
@@ -35,10 +36,18 @@ def reward_variants(rewards: list[str] | None, drop_terms: list[str] | None, bas
             )
     if len(set(drop_terms)) != len(drop_terms):
         raise UsageError("--drop-terms lists a term twice")
-    variants = [base_reward] + [f"{base_reward},{term}=0" for term in drop_terms]
+    variants = [base_reward] + [_dropped(base_reward, term) for term in drop_terms]
     for variant in variants[1:]:
         parse_reward(variant)  # dropping the only term leaves no reward
     return variants
+
+
+def _dropped(reward: str, term: str) -> str:
+    """``"<reward>,<term>=0"``, without the weight ``reward`` itself gives ``term`` (a term given
+    twice is refused)."""
+    items = [item.strip() for item in reward.split(",") if item.strip()]
+    kept = [item for item in items if "=" not in item or item.partition("=")[0].strip() != term]
+    return ",".join([*kept, f"{term}=0"]) if len(kept) < len(items) else f"{reward},{term}=0"
 
 
 def ablation_spec(

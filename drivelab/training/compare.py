@@ -178,9 +178,22 @@ def load_run(run_dir: str | Path) -> RunRecord:
 
 
 def group_runs(records: Sequence[RunRecord]) -> dict[tuple[str, ...], list[RunRecord]]:
-    """Runs grouped by ``group_key``, groups in order of first appearance, runs sorted by seed."""
+    """Runs grouped by ``group_key``, groups in order of first appearance, runs sorted by seed.
+
+    Two runs of one config, seed and step budget (a copied run directory, one run named by two
+    paths) are one sample of a deterministic run, not two: a UsageError naming them. Runs of one
+    seed that differ elsewhere (steps, traffic …) share a group, with a warning in the report."""
     groups: dict[tuple[str, ...], list[RunRecord]] = {}
+    seen: dict[tuple[str, int], RunRecord] = {}
     for record in records:
+        config = record.config
+        same = seen.setdefault((config.identity(), config.steps), record)  # the identity has the seed
+        if same is not record:
+            raise UsageError(
+                f"runs {str(same.run_dir)!r} and {str(record.run_dir)!r} are the same run (one config, "
+                f"seed {config.seed}, {config.steps} steps): a seed counts once in a group; "
+                "compare one of them"
+            )
         groups.setdefault(record.group, []).append(record)
     return {key: sorted(runs, key=lambda r: (r.config.seed, str(r.run_dir))) for key, runs in groups.items()}
 

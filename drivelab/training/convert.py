@@ -68,6 +68,35 @@ def _save(save, path: Path) -> None:
         tmp.unlink(missing_ok=True)
 
 
+def _check_whole(run_dir: Path) -> None:
+    """A UsageError, before anything is converted, when the model or the checkpoint is not a whole
+    file of either format (truncated, corrupted), so that none is called "already safe"."""
+    from drivelab.training.checkpoints import file_sha256
+
+    folder = run_dir / "checkpoints"
+    for path in (run_dir / "model.zip", folder / "latest.zip"):
+        if path.exists() and not zipfile.is_zipfile(path):
+            relative = path.relative_to(run_dir).as_posix()
+            raise UsageError(
+                f"cannot convert {str(run_dir)!r}: {relative} is not a model zip of either format "
+                "(truncated or corrupted)"
+            )
+    if not (folder / "latest.zip").exists():
+        return
+    try:
+        expected = json.loads((folder / "latest.json").read_text())["sha256"]
+    except (OSError, ValueError, KeyError, TypeError):
+        raise UsageError(
+            f"cannot convert {str(run_dir)!r}: its checkpoint manifest checkpoints/latest.json "
+            "is missing or corrupted"
+        ) from None
+    if file_sha256(folder / "latest.zip") != expected:
+        raise UsageError(
+            f"cannot convert {str(run_dir)!r}: checkpoints/latest.zip is truncated or corrupted "
+            "(checksum mismatch with checkpoints/latest.json)"
+        )
+
+
 def convert_run(run_dir: str | Path) -> list[Path]:
     """Rewrite the old-format model, checkpoint and replay of ``run_dir``; the files rewritten."""
     from drivelab.training.checkpoints import file_sha256, load_agent
@@ -81,6 +110,7 @@ def convert_run(run_dir: str | Path) -> list[Path]:
     load_old = _old_own if family == "own" else _old_sb3
     folder, written = run_dir / "checkpoints", []
     checkpoint, replay = folder / "latest.zip", folder / "replay.pkl"
+    _check_whole(run_dir)
     try:
         if (run_dir / "model.zip").is_file() and is_old_format(run_dir / "model.zip"):
             _save(load_old(config, run_dir / "model.zip").save, run_dir / "model.zip")

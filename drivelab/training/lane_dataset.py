@@ -7,13 +7,17 @@ circuit); ``perception/lane_cnn.py`` only defines the network and trains it on g
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from drivelab.envs.backends.highway import HighwayBackend
 from drivelab.envs.scenarios import get_scenario
+from drivelab.errors import UsageError
 from drivelab.perception.camera import render_camera, render_masks
 from drivelab.perception.lane import LANE_CAMERA
 from drivelab.perception.lane_cnn import WEIGHTS_PATH, train_lane_cnn
@@ -21,6 +25,9 @@ from drivelab.perception.lane_cnn import WEIGHTS_PATH, train_lane_cnn
 MAX_LATERAL_M = 1.2  # training poses: offset from the lane centre, uniform in ±this
 HEADING_STD_DEG = 4.0  # and heading error, normal
 FRAMES_PER_EPISODE = 40  # poses drawn on one reset's lane before the next
+# bytes per pixel held at once while training on a frame: the frame (3) and masks (2) as uint8,
+# train_lane_cnn's channels-first copy (3) and the float32 inputs (12) and targets (8) made from them
+TRAINING_BYTES_PER_PIXEL = 3 + 2 + 3 + 12 + 8
 
 
 def generate_lane_frames(count: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -53,10 +60,68 @@ def generate_lane_frames(count: int, seed: int) -> tuple[np.ndarray, np.ndarray]
     return images, masks
 
 
+def training_memory_bytes(frames: int) -> int:
+    """Memory that ``train_lane_detector`` holds for ``frames`` frames (all are kept for every epoch)."""
+    return frames * LANE_CAMERA.width * LANE_CAMERA.height * TRAINING_BYTES_PER_PIXEL
+
+
+def available_memory_bytes() -> int | None:
+    """Memory this machine can give a process now (Linux's MemAvailable, else its physical memory;
+    None when neither is known)."""
+    with contextlib.suppress(OSError, ValueError, IndexError):
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    with contextlib.suppress(AttributeError, OSError, ValueError):
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    return None
+
+
+def check_lane_training(frames: int, epochs: int, seed: int, out: str | Path) -> Path:
+    """The checks of ``train_lane_detector``'s arguments, before anything is generated or written:
+    counts and seed in range, the frames fit in memory, and ``out`` names a ``.pt`` file (what
+    ``load_lane_cnn`` and the lane sensor's ``weights`` option read) in an existing folder that can
+    be written. Returns ``out`` as a Path; a one-line UsageError otherwise."""
+    if frames < 1 or epochs < 1:
+        raise UsageError("--frames and --epochs must be >= 1")
+    if seed < 0:
+        raise UsageError(f"--seed must be >= 0, got {seed}")
+    needed, available = training_memory_bytes(frames), available_memory_bytes()
+    if available is not None and needed > available:
+        raise UsageError(
+            f"--frames {frames} needs about {needed / 2**30:.1f} GiB of memory to train on, "
+            f"{available / 2**30:.1f} GiB is available; use fewer frames"
+        )
+    out = Path(out)
+    if out.suffix != ".pt" or out.is_dir():
+        raise UsageError(f"--out {str(out)!r} must name a .pt file (the lane CNN's weights)")
+    folder = out.parent
+    if not folder.is_dir():
+        raise UsageError(f"--out {str(out)!r}: folder {str(folder)!r} does not exist")
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as exc:
+        raise UsageError(f"--out {str(out)!r}: cannot write in {str(folder)!r}: {exc.strerror}") from None
+    return out
+
+
 def train_lane_detector(
     frames: int = 1500, epochs: int = 15, seed: int = 0, out: str | Path = WEIGHTS_PATH, log=print
 ) -> dict:
     """Generate ``frames`` frames with ``seed``, train the lane CNN on them (``train_lane_cnn``),
-    save its weights to ``out`` and return the training summary."""
+    save its weights to ``out`` and return the training summary.
+
+    Every argument is checked first (``check_lane_training``); the weights are written under a
+    temporary name and renamed, so ``out`` is either the old file or the whole new one."""
+    out = check_lane_training(frames, epochs, seed, out)
     images, masks = generate_lane_frames(frames, seed)
-    return train_lane_cnn(images, masks, epochs=epochs, seed=seed, out=out, log=log)
+    partial = out.with_name(out.name + ".tmp")
+    try:
+        summary = train_lane_cnn(images, masks, epochs=epochs, seed=seed, out=partial, log=log)
+        os.replace(partial, out)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            partial.unlink()
+        raise
+    return {**summary, "weights": str(out)}

@@ -17,7 +17,9 @@ A sweep file::
 
 Each cell's run directory is named from its grid values, so a re-run finds it: a finished run is
 skipped, an interrupted one resumes from its checkpoint, and one that never reached a checkpoint
-starts again. A run directory made with a different config is refused before anything runs.
+starts again (only the files such a run writes are removed). A run directory made with a different
+config, a damaged run (a checkpoint or model without a readable manifest) and a folder holding
+anything a run does not write are refused before anything runs.
 """
 
 from __future__ import annotations
@@ -28,12 +30,12 @@ import json
 import multiprocessing
 import os
 import re
-import shutil
 import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
+from fnmatch import fnmatchcase
 from pathlib import Path
 
 from tqdm import tqdm
@@ -184,33 +186,116 @@ def _check_cells(sweep: Sweep) -> None:
 
 
 # --- what each cell needs --------------------------------------------------------------------
+# What a run writes in its directory before its first checkpoint (run.py's layout), with the
+# temporary files of a save cut short: all that a restart removes. Anything else there is not the
+# run's, and the cell is refused instead of deleted with it.
+UNSTARTED_RUN_FILES = (
+    "config.yaml", "monitor.csv", "evaluations.csv", "progress.csv", "progress-*.csv",
+    "events.out.tfevents.*", "learning_curve.png", "videos/eval-*.mp4", "videos/eval-*.gif",
+    "checkpoints/latest.tmp.zip", "checkpoints/latest.tmp.json", "checkpoints/replay.tmp.npz",
+    "checkpoints/resume-*.json", "checkpoints/resume-*.npz",
+)  # fmt: skip
+UNSTARTED_RUN_FOLDERS = ("checkpoints", "videos")
+
+
 def cell_action(run_dir: Path, config: RunConfig, eval_episodes: int) -> str:
     """What a re-run must do for this cell: "train", "restart", "resume", "evaluate" or "skip".
 
-    Raises UsageError when ``run_dir`` holds a run with a different config.
+    "restart" is for a run stopped before its first checkpoint (no checkpoint, no model: nothing
+    to continue from), whose directory holds only what such a run writes. Raises UsageError when
+    ``run_dir`` is not that cell's run (a file, a folder of something else, a run with a different
+    config) or is a damaged run (a checkpoint or model without a readable manifest): nothing in
+    it is replaced or deleted.
     """
     from drivelab.training.evaluate import load_run_config
 
-    if not run_dir.exists():
+    if not run_dir.exists() and not run_dir.is_symlink():
         return "train"
+    if not run_dir.is_dir():
+        raise UsageError(f"{str(run_dir)!r} is a file, not a run directory; move it away or rename the sweep")
     existing = load_run_config(run_dir)
     if existing.identity() != config.identity():
         raise UsageError(
             f"run directory {str(run_dir)!r} holds a run with a different config; "
             "remove it or rename the sweep"
         )
-    manifest_path = run_dir / "checkpoints" / "latest.json"
-    if not manifest_path.is_file():
+    folder = run_dir / "checkpoints"
+    manifest_path = folder / "latest.json"
+    if not manifest_path.exists():
+        if (folder / "latest.tmp.json").is_file() and (folder / "latest.zip").is_file():
+            return "resume"  # killed between a checkpoint's renames: resuming finishes them
+        saved = [path for path in (run_dir / "model.zip", folder / "latest.zip") if path.exists()]
+        if saved:
+            _damaged(run_dir, f"{saved[0].relative_to(run_dir).as_posix()} but no checkpoint manifest")
+        unstarted_run_files(run_dir)  # refused if it holds anything else
         return "restart"  # stopped before its first checkpoint
-    try:
-        steps = int(json.loads(manifest_path.read_text())["steps"])
-    except (json.JSONDecodeError, KeyError, TypeError, ValueError):
-        return "restart"
+    steps = _manifest_steps(run_dir, manifest_path)
     if steps < config.steps or not (run_dir / "model.zip").is_file():
         return "resume"
     if eval_episodes and not (run_dir / "eval.json").is_file():
         return "evaluate"
     return "skip"
+
+
+def _damaged(run_dir: Path, what: str) -> None:
+    raise UsageError(
+        f"run directory {str(run_dir)!r} is damaged ({what}); the sweep will not replace it: "
+        "move it away or remove it, then re-run"
+    )
+
+
+def _manifest_steps(run_dir: Path, manifest_path: Path) -> int:
+    """The step count of a run's checkpoint manifest; a damaged run when it cannot be read."""
+    finished = " beside a finished model.zip" if (run_dir / "model.zip").is_file() else ""
+    try:
+        manifest = json.loads(manifest_path.read_text())
+    except OSError as exc:
+        _damaged(run_dir, f"checkpoint manifest checkpoints/latest.json cannot be read: {exc.strerror}")
+    except (json.JSONDecodeError, UnicodeDecodeError):
+        manifest = None
+    steps = manifest.get("steps") if isinstance(manifest, dict) else None
+    if not isinstance(steps, int) or isinstance(steps, bool) or steps < 0:
+        _damaged(run_dir, f"checkpoint manifest checkpoints/latest.json is corrupted{finished}")
+    return steps
+
+
+def unstarted_run_files(run_dir: Path) -> list[Path]:
+    """The files of a run directory stopped before its first checkpoint, which a restart removes.
+
+    Raises UsageError naming the first entry that such a run does not write (a user's file or
+    folder at the run's path, a link): nothing of it may be deleted.
+    """
+    if run_dir.is_symlink():
+        raise UsageError(f"run directory {str(run_dir)!r} is a link; the sweep will not delete through it")
+    files, folders = [], [run_dir]
+    while folders:
+        folder = folders.pop()
+        for path in sorted(folder.iterdir()):
+            relative = path.relative_to(run_dir).as_posix()
+            if path.is_symlink():
+                pass  # a link: what it points at is not the run's
+            elif path.is_dir() and relative in UNSTARTED_RUN_FOLDERS:
+                folders.append(path)
+                continue
+            elif path.is_file() and any(fnmatchcase(relative, pattern) for pattern in UNSTARTED_RUN_FILES):
+                files.append(path)
+                continue
+            raise UsageError(
+                f"run directory {str(run_dir)!r} has no checkpoint, so the sweep would train it again, "
+                f"but it holds {relative!r}, which a run does not write; move that away, then re-run"
+            )
+    return files
+
+
+def _remove_unstarted_run(run_dir: Path) -> None:
+    """Delete a run stopped before its first checkpoint: its own files (checked again, as the
+    folder may have changed since the plan), then its folders, which must then be empty."""
+    for path in unstarted_run_files(run_dir):
+        path.unlink()
+    for name in UNSTARTED_RUN_FOLDERS:
+        if (run_dir / name).is_dir():
+            (run_dir / name).rmdir()
+    run_dir.rmdir()
 
 
 def plan(sweep: Sweep) -> list[tuple[Cell, str]]:
@@ -261,7 +346,7 @@ def run_cell(
     ):
         try:
             if action == "restart":
-                shutil.rmtree(run_dir)
+                _remove_unstarted_run(run_dir)
             if action in ("train", "restart"):
                 run.train(config, root, on_evaluation=on_evaluation, eval_first=eval_first)
             elif action == "resume":

@@ -163,7 +163,10 @@ def test_cli_compare(runs, tmp_path):
 
 
 def test_repeated_seed_is_flagged(runs, tmp_path):
-    fake_run(runs, "ppo-s0-again", seed=0, final_return=0.0)
+    # the same seed with another step budget (a copy of the same run is refused: test_cli_input_more.py)
+    again = fake_run(runs, "ppo-s0-again", seed=0, final_return=0.0)
+    config = load_run(again).config
+    save_yaml(build_config({**config.to_dict(), "steps": 40}), again / "config.yaml")
     text = (compare([str(runs / "ppo-s*")], tmp_path / "report") / "report.md").read_text()
     assert (
         "**Warning:** group ppo · highway · kinematics · highway · meta has several runs with the same seed"

@@ -1,6 +1,7 @@
 """Sweeps: grid expansion, per-cell overrides, skip/resume/restart on re-run, pool and Ray."""
 
 import json
+import shutil
 
 import pytest
 import yaml
@@ -94,7 +95,11 @@ def test_rerun_skips_finished_resumes_interrupted_restarts_unstarted(tmp_path):
     assert (s0 / "model.zip").stat().st_mtime_ns == stamp
 
     longer = expand_sweep(tiny_spec(steps=48), runs)  # a larger budget: same config identity
-    (s1 / "checkpoints" / "latest.json").unlink()  # as if s1 stopped before its first checkpoint
+    # as if s1 stopped before its first checkpoint (no manifest only, beside the model and the
+    # checkpoint, is a damaged run: refused, test_sweep_safety.py)
+    shutil.rmtree(s1 / "checkpoints")
+    (s1 / "model.zip").unlink()
+    (s1 / "eval.json").unlink()
     assert [action for _, action in plan(longer)] == ["resume", "restart"]
     before = json.loads((s0 / "eval.json").read_text())["run"]
     (s0 / "eval.json").write_text(json.dumps({"run": before, "stale": True}))

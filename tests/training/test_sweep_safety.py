@@ -1,0 +1,185 @@
+"""Sweeps never delete what is not theirs: a damaged run (a checkpoint or model without a readable
+manifest) or a folder holding files a run does not write is refused, one line and exit 2, before
+any cell runs (``--dry-run`` too), and a restart removes only the files of a run stopped before
+its first checkpoint. The run directories are made by hand: nothing is trained."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from drivelab.cli import app
+from drivelab.config import save_yaml
+from drivelab.errors import UsageError
+from drivelab.training.sweep import expand_sweep, plan, run_cell
+
+runner = CliRunner()
+SPEC = {
+    "base": {
+        "algo": "ppo",
+        "traffic": "empty",
+        "steps": 64,
+        "hyperparams": {"n_steps": 32, "batch_size": 32},
+    },
+    "grid": {"seed": 1},
+    "eval_episodes": 1,
+}
+RUN = "ppo-highway-s0"
+
+
+def snapshot(root: Path) -> dict[str, str]:
+    """Every path under ``root`` → "dir" or its bytes' SHA-256."""
+    return {
+        str(path.relative_to(root)): "dir" if path.is_dir() else hashlib.sha256(path.read_bytes()).hexdigest()
+        for path in sorted(root.rglob("*"))
+    }
+
+
+@pytest.fixture
+def sweep_file(tmp_path) -> Path:
+    path = tmp_path / "sweep.yaml"
+    path.write_text(yaml.safe_dump(SPEC))
+    return path
+
+
+def make_run(runs: Path, files: dict[str, str]) -> Path:
+    """The sweep's one run directory with its config.yaml and ``files`` (path → text)."""
+    (cell,) = expand_sweep(SPEC, runs).cells
+    run_dir = runs / RUN
+    run_dir.mkdir(parents=True)
+    save_yaml(cell.config, run_dir / "config.yaml")
+    for name, text in files.items():
+        (run_dir / name).parent.mkdir(parents=True, exist_ok=True)
+        (run_dir / name).write_text(text)
+    return run_dir
+
+
+def assert_sweep_refused(tmp_path: Path, sweep_file: Path, message: str) -> None:
+    """``sweep`` and ``sweep --dry-run``: exit 2, exactly ``error: MESSAGE``, nothing changed."""
+    runs = tmp_path / "runs"
+    before = snapshot(tmp_path)
+    for extra in ([], ["--dry-run"]):
+        result = runner.invoke(
+            app, ["sweep", str(sweep_file), "--workers", "1", "--runs-dir", str(runs), *extra]
+        )
+        assert result.exit_code == 2, result.output
+        assert result.output.splitlines() == [f"error: {message}"]
+        assert snapshot(tmp_path) == before
+
+
+MANIFEST = "checkpoints/latest.json"
+CORRUPT = "checkpoint manifest checkpoints/latest.json is corrupted"
+BESIDE_MODEL = CORRUPT + " beside a finished model.zip"
+
+
+@pytest.mark.parametrize(
+    ("files", "damage"),
+    [
+        ({MANIFEST: "{corrupt", "checkpoints/latest.zip": "z"}, CORRUPT),
+        (
+            {MANIFEST: "{corrupt", "checkpoints/latest.zip": "z", "model.zip": "m", "eval.json": "{}"},
+            BESIDE_MODEL,
+        ),
+        ({MANIFEST: '{"sha256": "x"}', "model.zip": "m"}, BESIDE_MODEL),
+        ({MANIFEST: '["steps", 64]'}, CORRUPT),
+        ({"checkpoints/latest.zip": "z", "model.zip": "m"}, "model.zip but no checkpoint manifest"),
+        ({"model.zip": "m"}, "model.zip but no checkpoint manifest"),
+        ({"checkpoints/latest.zip": "z"}, "checkpoints/latest.zip but no checkpoint manifest"),
+    ],
+)  # fmt: skip
+def test_a_damaged_run_is_refused_not_retrained(tmp_path, sweep_file, files, damage):
+    run_dir = make_run(tmp_path / "runs", files)
+    assert_sweep_refused(
+        tmp_path,
+        sweep_file,
+        f"run directory {str(run_dir)!r} is damaged ({damage}); the sweep will not replace it: "
+        "move it away or remove it, then re-run",
+    )
+
+
+@pytest.mark.parametrize("stray", ["notes.txt", "data/points.csv", "checkpoints/mine.bin", "videos/trip.mp4"])
+def test_a_folder_with_files_no_run_writes_is_not_restarted(tmp_path, sweep_file, stray):
+    run_dir = make_run(tmp_path / "runs", {"monitor.csv": "m", "progress.csv": "p", stray: "mine"})
+    first = stray.split("/")[0] if stray.startswith("data/") else stray
+    assert_sweep_refused(
+        tmp_path,
+        sweep_file,
+        f"run directory {str(run_dir)!r} has no checkpoint, so the sweep would train it again, "
+        f"but it holds {first!r}, which a run does not write; move that away, then re-run",
+    )
+
+
+def test_a_file_at_the_run_path_is_refused(tmp_path, sweep_file):
+    (tmp_path / "runs").mkdir()
+    (tmp_path / "runs" / RUN).write_text("my notes")
+    path = str(tmp_path / "runs" / RUN)
+    assert_sweep_refused(
+        tmp_path, sweep_file, f"{path!r} is a file, not a run directory; move it away or rename the sweep"
+    )
+
+
+UNSTARTED = {
+    "monitor.csv": "m", "progress.csv": "p", "events.out.tfevents.1.host.1.0": "e", "evaluations.csv": "v",
+    "videos/eval-32.mp4": "v", "checkpoints/latest.tmp.zip": "t", "checkpoints/resume-32.json": "{}",
+    "checkpoints/resume-32.npz": "n",
+}  # fmt: skip
+
+
+def test_a_run_stopped_before_its_first_checkpoint_is_restarted_and_only_its_files_go(tmp_path, monkeypatch):
+    from drivelab.training import run
+
+    trained = []
+    monkeypatch.setattr(run, "train", lambda config, root, **_: trained.append(sorted(root.iterdir())))
+    runs = tmp_path / "runs"
+    run_dir = make_run(runs, UNSTARTED)
+    (cell,) = expand_sweep(SPEC, runs).cells
+    assert [action for _, action in plan(expand_sweep(SPEC, runs))] == ["restart"]
+    outcome = run_cell(cell.config.to_dict(), str(runs), "restart", 0)
+    assert outcome["ok"], outcome
+    assert trained == [[runs / ".sweep-logs"]] and not run_dir.exists()
+
+
+def test_a_restart_keeps_a_file_that_appeared_after_the_plan(tmp_path):
+    """The worker checks again: a file put there since the plan fails the cell and stays."""
+    runs = tmp_path / "runs"
+    run_dir = make_run(runs, UNSTARTED)
+    (cell,) = expand_sweep(SPEC, runs).cells
+    assert [action for _, action in plan(expand_sweep(SPEC, runs))] == ["restart"]
+    (run_dir / "notes.txt").write_text("mine")
+    before = snapshot(run_dir)
+    outcome = run_cell(cell.config.to_dict(), str(runs), "restart", 0)
+    assert not outcome["ok"] and "'notes.txt', which a run does not write" in outcome["error"]
+    assert snapshot(run_dir) == before
+
+
+def test_a_readable_manifest_still_resumes_and_skips(tmp_path):
+    runs = tmp_path / "runs"
+    run_dir = make_run(
+        runs, {MANIFEST: json.dumps({"steps": 32, "sha256": "x"}), "checkpoints/latest.zip": "z"}
+    )
+    sweep = expand_sweep(SPEC, runs)
+    assert [action for _, action in plan(sweep)] == ["resume"]
+    (run_dir / MANIFEST).write_text(json.dumps({"steps": 64, "sha256": "x"}))
+    (run_dir / "model.zip").write_text("m")
+    assert [action for _, action in plan(sweep)] == ["evaluate"]
+    (run_dir / "eval.json").write_text("{}")
+    assert [action for _, action in plan(sweep)] == ["skip"]
+
+
+def test_a_checkpoint_cut_between_its_renames_resumes(tmp_path):
+    """Killed after latest.zip was renamed, before latest.tmp.json was: resume finishes it."""
+    runs = tmp_path / "runs"
+    make_run(runs, {"checkpoints/latest.tmp.json": "{}", "checkpoints/latest.zip": "z"})
+    assert [action for _, action in plan(expand_sweep(SPEC, runs))] == ["resume"]
+
+
+def test_a_damaged_run_fails_the_plan(tmp_path):
+    runs = tmp_path / "runs"
+    make_run(runs, {MANIFEST: "{corrupt", "model.zip": "m"})
+    with pytest.raises(UsageError, match="is damaged"):
+        plan(expand_sweep(SPEC, runs))
