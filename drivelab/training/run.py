@@ -485,7 +485,10 @@ def _stopped_before_first_checkpoint(run_dir: Path) -> bool:
 
 # What a run writes before its first checkpoint (the layout above): the files a resume that finds
 # no checkpoint may remove. The checkpoint's own files appear when one was being written.
-UNSTARTED_FILES = ("config.yaml", "monitor.csv", "progress.csv", "evaluations.csv", "events.out.tfevents.*")
+UNSTARTED_FILES = (
+    "config.yaml", "monitor.csv", "progress.csv", "progress-*.csv", "evaluations.csv",
+    "events.out.tfevents.*", "learning_curve.png",
+)  # fmt: skip
 UNSTARTED_FOLDERS = {
     "checkpoints": ("resume-*.json", "resume-*.npz", "resume.tmp.json", "resume.tmp.npz",
                     "latest.tmp.zip", "latest.tmp.json", "replay.tmp.npz"),
@@ -498,6 +501,8 @@ def unstarted_run_files(run_dir: Path) -> list[Path]:
     (``UNSTARTED_FILES``, ``UNSTARTED_FOLDERS``). A UsageError, naming them, when it holds anything
     else, or has no monitor.csv of SB3's (written as training starts): then it is not such a run,
     and nothing in it may be removed."""
+    if run_dir.is_symlink():
+        raise UsageError(f"run directory {str(run_dir)!r} is a link; nothing is removed through it")
     written: list[Path] = []
     foreign: list[str] = []
     for path in sorted(run_dir.iterdir()):
@@ -536,6 +541,13 @@ def _is_monitor_log(path: Path) -> bool:
             return handle.read(11) == b'#{"t_start"'
     except OSError:
         return False
+
+
+def remove_unstarted_run(run_dir: Path) -> None:
+    """Remove ``run_dir``, a run stopped before its first checkpoint: its own files, checked again
+    (``unstarted_run_files``: the folder may have changed since it was last looked at), then the
+    folders they leave empty. Anything else there is refused, and nothing removed."""
+    _remove_run_files(run_dir, unstarted_run_files(run_dir))
 
 
 def _remove_run_files(run_dir: Path, files: list[Path]) -> None:

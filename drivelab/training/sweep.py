@@ -35,7 +35,6 @@ import traceback
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
-from fnmatch import fnmatchcase
 from pathlib import Path
 
 from tqdm import tqdm
@@ -186,18 +185,6 @@ def _check_cells(sweep: Sweep) -> None:
 
 
 # --- what each cell needs --------------------------------------------------------------------
-# What a run writes in its directory before its first checkpoint (run.py's layout), with the
-# temporary files of a save cut short: all that a restart removes. Anything else there is not the
-# run's, and the cell is refused instead of deleted with it.
-UNSTARTED_RUN_FILES = (
-    "config.yaml", "monitor.csv", "evaluations.csv", "progress.csv", "progress-*.csv",
-    "events.out.tfevents.*", "learning_curve.png", "videos/eval-*.mp4", "videos/eval-*.gif",
-    "checkpoints/latest.tmp.zip", "checkpoints/latest.tmp.json", "checkpoints/replay.tmp.npz",
-    "checkpoints/resume-*.json", "checkpoints/resume-*.npz",
-)  # fmt: skip
-UNSTARTED_RUN_FOLDERS = ("checkpoints", "videos")
-
-
 def cell_action(run_dir: Path, config: RunConfig, eval_episodes: int) -> str:
     """What a re-run must do for this cell: "train", "restart", "resume", "evaluate" or "skip".
 
@@ -227,6 +214,8 @@ def cell_action(run_dir: Path, config: RunConfig, eval_episodes: int) -> str:
         saved = [path for path in (run_dir / "model.zip", folder / "latest.zip") if path.exists()]
         if saved:
             _damaged(run_dir, f"{saved[0].relative_to(run_dir).as_posix()} but no checkpoint manifest")
+        from drivelab.training.run import unstarted_run_files
+
         unstarted_run_files(run_dir)  # refused if it holds anything else
         return "restart"  # stopped before its first checkpoint
     steps = _manifest_steps(run_dir, manifest_path)
@@ -257,45 +246,6 @@ def _manifest_steps(run_dir: Path, manifest_path: Path) -> int:
     if not isinstance(steps, int) or isinstance(steps, bool) or steps < 0:
         _damaged(run_dir, f"checkpoint manifest checkpoints/latest.json is corrupted{finished}")
     return steps
-
-
-def unstarted_run_files(run_dir: Path) -> list[Path]:
-    """The files of a run directory stopped before its first checkpoint, which a restart removes.
-
-    Raises UsageError naming the first entry that such a run does not write (a user's file or
-    folder at the run's path, a link): nothing of it may be deleted.
-    """
-    if run_dir.is_symlink():
-        raise UsageError(f"run directory {str(run_dir)!r} is a link; the sweep will not delete through it")
-    files, folders = [], [run_dir]
-    while folders:
-        folder = folders.pop()
-        for path in sorted(folder.iterdir()):
-            relative = path.relative_to(run_dir).as_posix()
-            if path.is_symlink():
-                pass  # a link: what it points at is not the run's
-            elif path.is_dir() and relative in UNSTARTED_RUN_FOLDERS:
-                folders.append(path)
-                continue
-            elif path.is_file() and any(fnmatchcase(relative, pattern) for pattern in UNSTARTED_RUN_FILES):
-                files.append(path)
-                continue
-            raise UsageError(
-                f"run directory {str(run_dir)!r} has no checkpoint, so the sweep would train it again, "
-                f"but it holds {relative!r}, which a run does not write; move that away, then re-run"
-            )
-    return files
-
-
-def _remove_unstarted_run(run_dir: Path) -> None:
-    """Delete a run stopped before its first checkpoint: its own files (checked again, as the
-    folder may have changed since the plan), then its folders, which must then be empty."""
-    for path in unstarted_run_files(run_dir):
-        path.unlink()
-    for name in UNSTARTED_RUN_FOLDERS:
-        if (run_dir / name).is_dir():
-            (run_dir / name).rmdir()
-    run_dir.rmdir()
 
 
 def plan(sweep: Sweep) -> list[tuple[Cell, str]]:
@@ -346,7 +296,7 @@ def run_cell(
     ):
         try:
             if action == "restart":
-                _remove_unstarted_run(run_dir)
+                run.remove_unstarted_run(run_dir)
             if action in ("train", "restart"):
                 run.train(config, root, on_evaluation=on_evaluation, eval_first=eval_first)
             elif action == "resume":

@@ -104,13 +104,13 @@ def test_a_damaged_run_is_refused_not_retrained(tmp_path, sweep_file, files, dam
 
 @pytest.mark.parametrize("stray", ["notes.txt", "data/points.csv", "checkpoints/mine.bin", "videos/trip.mp4"])
 def test_a_folder_with_files_no_run_writes_is_not_restarted(tmp_path, sweep_file, stray):
-    run_dir = make_run(tmp_path / "runs", {"monitor.csv": "m", "progress.csv": "p", stray: "mine"})
-    first = stray.split("/")[0] if stray.startswith("data/") else stray
+    run_dir = make_run(tmp_path / "runs", {"monitor.csv": MONITOR, "progress.csv": "p", stray: "mine"})
+    first = "data/" if stray.startswith("data/") else stray
     assert_sweep_refused(
         tmp_path,
         sweep_file,
-        f"run directory {str(run_dir)!r} has no checkpoint, so the sweep would train it again, "
-        f"but it holds {first!r}, which a run does not write; move that away, then re-run",
+        f"{str(run_dir)!r} has no checkpoint to resume from and holds files a drivelab run does not write "
+        f"({first}); nothing was changed (train a new run elsewhere, or move them out)",
     )
 
 
@@ -123,10 +123,11 @@ def test_a_file_at_the_run_path_is_refused(tmp_path, sweep_file):
     )
 
 
+MONITOR = '#{"t_start": 1.0, "env_id": "highway"}\nr,l,t\n'  # as SB3's Monitor starts it
 UNSTARTED = {
-    "monitor.csv": "m", "progress.csv": "p", "events.out.tfevents.1.host.1.0": "e", "evaluations.csv": "v",
-    "videos/eval-32.mp4": "v", "checkpoints/latest.tmp.zip": "t", "checkpoints/resume-32.json": "{}",
-    "checkpoints/resume-32.npz": "n",
+    "monitor.csv": MONITOR, "progress.csv": "p", "events.out.tfevents.1.host.1.0": "e",
+    "evaluations.csv": "v", "videos/eval-32.mp4": "v", "checkpoints/latest.tmp.zip": "t",
+    "checkpoints/resume-32.json": "{}", "checkpoints/resume-32.npz": "n",
 }  # fmt: skip
 
 
@@ -153,7 +154,7 @@ def test_a_restart_keeps_a_file_that_appeared_after_the_plan(tmp_path):
     (run_dir / "notes.txt").write_text("mine")
     before = snapshot(run_dir)
     outcome = run_cell(cell.config.to_dict(), str(runs), "restart", 0)
-    assert not outcome["ok"] and "'notes.txt', which a run does not write" in outcome["error"]
+    assert not outcome["ok"] and "files a drivelab run does not write (notes.txt)" in outcome["error"]
     assert snapshot(run_dir) == before
 
 
