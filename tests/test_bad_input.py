@@ -84,11 +84,11 @@ TRAIN_CASES = {
         {},
         "'collision' needs a finite weight",
     ),
-    # torch's RuntimeError when the agent is built
+    # torch's RuntimeError when the agent was built, before the widths were checked
     "net_arch -1": (
         ["--algo", "ppo", "-H", "policy_kwargs={net_arch: [-1]}"],
         {},
-        "bad hyperparameters for 'ppo'",
+        "policy_kwargs net_arch of 'ppo' must be a list of layer widths >= 1",
     ),
     "eval-maps without a count": (
         ["--algo", "ppo", "--env", "blocks", "--eval-maps", "5"],

@@ -8,13 +8,21 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 from drivelab.envs.core import DriveEnv
 from drivelab.envs.scenarios import SCENARIOS
+from drivelab.errors import UsageError
 from drivelab.perception.sensors import SENSORS
 
 
 @pytest.mark.parametrize("sensor", sorted(SENSORS))
 @pytest.mark.parametrize("scenario", sorted(SCENARIOS))
 def test_scenario_sensor_passes_checkers(scenario, sensor):
+    """... and a sensor that cannot observe the scenario (the line and lane perception off their
+    circuits: ``Sensor.scenario_problem``) is refused when the environment is built."""
     action = SCENARIOS[scenario].action_kinds[0]
+    own_circuit = {"line": "follow-line", "lane": "follow-lane"}.get(sensor, scenario)
+    if own_circuit != scenario:
+        with pytest.raises(UsageError, match=f"sensor {sensor!r} cannot observe scenario {scenario!r}"):
+            DriveEnv(scenario, obs=sensor, action=action, traffic="regular", duration_s=4)
+        return
     env = DriveEnv(scenario, obs=sensor, action=action, traffic="regular", duration_s=4)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
