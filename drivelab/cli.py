@@ -668,6 +668,11 @@ def train_lane(
     typer.echo(f"weights: {summary['weights']} ({size_kib:.0f} KiB, trained in {seconds:.0f} s)")
 
 
+# a gallery's map is 256 pixels a side (3.2 inches at 80 dpi, maps_gallery.draw_gallery) and
+# matplotlib's Agg draws images of at most 2**16 pixels a side
+GALLERY_MAX_SIDE_MAPS = 2**16 // 256
+
+
 def _map_seeds(text: str) -> tuple[int, int]:
     """``start:count`` as (start, count), checked."""
     start, sep, count = text.partition(":")
@@ -701,6 +706,12 @@ def maps(
         map_set = MapSet.from_config({**config, "lane_count": lane_count or None})
         if columns < 1:
             raise UsageError("--columns must be >= 1")
+        rows = -(-count // columns)
+        if max(rows, columns) > GALLERY_MAX_SIDE_MAPS:
+            raise UsageError(
+                f"--seeds {seeds!r} with --columns {columns} draws a gallery of {rows} x {columns} maps: at "
+                f"most {GALLERY_MAX_SIDE_MAPS} a side fit in one PNG (matplotlib's 65,536 pixels)"
+            )
         path = draw_gallery([map_set.generate(seed) for seed in range(start, start + count)], out, columns)
     except UsageError as exc:
         _fail(str(exc))

@@ -241,3 +241,16 @@ def test_convert_run_says_what_is_damaged(work, damage, problem):
 def test_a_file_given_as_a_run_directory(work, command):
     (work / "notes.txt").write_text("mine")
     assert_refused(work, [*command, "notes.txt"], "error: 'notes.txt' is a file, not a run directory")
+
+
+@pytest.mark.parametrize(
+    "seeds, columns, shape",
+    [("0:100000000", "4", "25000000 x 4"), ("0:1025", "4", "257 x 4"), ("3:2", "257", "1 x 257")],
+)
+def test_a_gallery_too_large_for_one_png_is_refused_before_any_map(work, seeds, columns, shape):
+    assert_refused(
+        work,
+        ["maps", "--seeds", seeds, "--columns", columns, "--out", "g.png"],
+        f"error: --seeds {seeds!r} with --columns {columns} draws a gallery of {shape} maps: at most 256 "
+        "a side fit in one PNG (matplotlib's 65,536 pixels)",
+    )
