@@ -73,6 +73,8 @@ def _parse_pairs(pairs: list[str], what: str) -> dict:
         key, sep, value = pair.partition("=")
         if not sep or not key:
             raise UsageError(f"{what} {pair!r} must look like key=value")
+        if key.strip() in values:
+            raise UsageError(f"{what} gives {key.strip()!r} twice")
         try:
             values[key.strip()] = parse_yaml(value)
         except yaml.YAMLError:

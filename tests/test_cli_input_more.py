@@ -254,3 +254,14 @@ def test_a_gallery_too_large_for_one_png_is_refused_before_any_map(work, seeds, 
         f"error: --seeds {seeds!r} with --columns {columns} draws a gallery of {shape} maps: at most 256 "
         "a side fit in one PNG (matplotlib's 65,536 pixels)",
     )
+
+
+@pytest.mark.parametrize(
+    "args, line",
+    [
+        (["-H", "gamma=0.9", "-H", "gamma=0.8"], "error: --hyperparams gives 'gamma' twice"),
+        (["--obs", "lidar:beams=8:beams=16"], "error: sensor 'lidar' gives option 'beams' twice"),
+    ],
+)
+def test_a_value_given_twice_is_refused_not_overwritten(work, args, line):
+    assert_refused(work, ["train", "--algo", "ppo", "--steps", "64", *args], line)

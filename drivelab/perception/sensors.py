@@ -114,6 +114,8 @@ def parse_sensor_spec(spec: str | dict) -> tuple[str, dict]:
         key, sep, value = pair.partition("=")
         if not sep:
             raise UsageError(f"sensor option {pair!r} of {name!r} must look like key=value")
+        if key.strip() in options:
+            raise UsageError(f"sensor {name!r} gives option {key.strip()!r} twice")
         try:
             options[key.strip()] = yaml.load(value, Loader=YamlLoader)
         except yaml.YAMLError:
