@@ -265,3 +265,9 @@ def test_a_gallery_too_large_for_one_png_is_refused_before_any_map(work, seeds, 
 )
 def test_a_value_given_twice_is_refused_not_overwritten(work, args, line):
     assert_refused(work, ["train", "--algo", "ppo", "--steps", "64", *args], line)
+
+
+@pytest.mark.parametrize("command", [["evaluate"], ["benchmark", "nocrash"]])
+def test_a_file_given_to_evaluate_is_not_said_to_be_missing(work, command):
+    (work / "notes.txt").write_text("mine")
+    assert_refused(work, [*command, "notes.txt"], "error: 'notes.txt' is a file, not a run directory")

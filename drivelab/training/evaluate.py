@@ -135,6 +135,8 @@ def report_name(maps: str | None = None) -> str:
 
 def load_run_config(run_dir: Path) -> RunConfig:
     """The resolved config of an existing run directory."""
+    if run_dir.exists() and not run_dir.is_dir():
+        raise UsageError(f"{str(run_dir)!r} is a file, not a run directory")
     if not run_dir.is_dir():
         raise UsageError(f"run directory {str(run_dir)!r} does not exist")
     config_path = run_dir / "config.yaml"

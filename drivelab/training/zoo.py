@@ -68,6 +68,8 @@ def resolve(target: str | Path, zoo_dir: Path | None = None) -> tuple[Path, str 
     agents = {agent.name: agent for agent in shipped_agents(zoo_dir)}
     if str(target) in agents:
         return agents[str(target)].path, str(target)
+    if path.exists():
+        raise UsageError(f"{str(target)!r} is a file, not a run directory")
     names = ", ".join(agents) or "none"
     raise UsageError(
         f"run directory or shipped agent {str(target)!r} does not exist (`drivelab zoo` lists: {names})"
