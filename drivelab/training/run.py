@@ -378,7 +378,7 @@ def train(
         save_yaml(config, run_dir / "config.yaml")
         train_env, eval_env, worlds = _make_envs(config, run_dir, resume=False)
         model = spec.build(config.algo, train_env, config.seed, dict(config.hyperparams), run_dir)
-    except Exception as exc:
+    except BaseException as exc:  # Ctrl-C too: a folder of a config alone could not be resumed
         _remove_created(created)  # bad hyperparameters, too little memory: leave nothing behind
         if isinstance(exc, MemoryError):
             raise UsageError(_out_of_memory(config)) from None

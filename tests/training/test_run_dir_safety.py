@@ -226,3 +226,16 @@ def test_a_runs_dir_too_long_for_the_file_system_creates_nothing(tmp_path):
     with pytest.raises(UsageError, match="File name too long"):
         make_out_dir(tmp_path / "z" / ("b" * 300) / "c", "report folder")
     assert tree(tmp_path) == {}
+
+
+def test_ctrl_c_while_a_run_is_set_up_leaves_no_folder(tmp_path, monkeypatch):
+    """A run interrupted before training starts (its config written, its worlds being built) would
+    leave a folder that neither --resume nor a new run of that name could use."""
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(run_module, "_make_envs", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        run_module.train(_config(name="r"), tmp_path / "runs")
+    assert list(tmp_path.iterdir()) == []
