@@ -18,20 +18,21 @@ class YamlLoader(yaml.SafeLoader):
     """PyYAML's safe loader, reading ``1e-3`` as the number it is (YAML 1.2) instead of a string,
     and refusing a mapping that repeats a key (YAML forbids it; PyYAML would keep the last value)."""
 
-    def construct_mapping(self, node, deep=False):
-        if isinstance(node, yaml.MappingNode):
-            seen = []
-            for key_node, _ in node.value:
-                if key_node.tag == "tag:yaml.org,2002:merge":
-                    continue  # ``<<: *base``: its keys may be given again, overriding them
-                key = self.construct_object(key_node, deep=True)
-                if key in seen:
-                    raise yaml.constructor.ConstructorError(
-                        "while constructing a mapping", node.start_mark, f"duplicate key {key!r}",
-                        key_node.start_mark,
-                    )  # fmt: skip
-                seen.append(key)
-        return super().construct_mapping(node, deep)
+    def compose_mapping_node(self, anchor):
+        # checked as composed, before the constructor flattens merge keys (``<<: *base``) into the
+        # mappings that use them, in place: a merged key given again overrides it, as YAML means
+        node = super().compose_mapping_node(anchor)
+        seen = set()
+        for key_node, _ in node.value:
+            if not isinstance(key_node, yaml.ScalarNode) or key_node.tag == "tag:yaml.org,2002:merge":
+                continue
+            if (key_node.tag, key_node.value) in seen:
+                raise yaml.composer.ComposerError(
+                    "while composing a mapping", node.start_mark, f"duplicate key {key_node.value!r}",
+                    key_node.start_mark,
+                )  # fmt: skip
+            seen.add((key_node.tag, key_node.value))
+        return node
 
 
 class YamlDumper(yaml.SafeDumper):

@@ -7,6 +7,7 @@ import hashlib
 from pathlib import Path
 
 import pytest
+import yaml
 from typer.testing import CliRunner
 
 from drivelab.cli import app
@@ -155,6 +156,9 @@ def test_yaml_merge_keys_may_still_be_overridden():
 
     text = "base: &b {algo: ppo, steps: 8}\nrun: {<<: *b, algo: dqn}\n"
     assert parse_yaml(text)["run"] == {"algo": "dqn", "steps": 8}
+    # a merging mapping that is itself merged later (PyYAML flattens it in place, early)
+    nested = "a: &a\n  x: 1\nb:\n  c: &c\n    <<: *a\n    x: 2\nd:\n  <<: *c\n"
+    assert parse_yaml(nested)["b"] == {"c": {"x": 2}} and yaml.safe_load(nested) == parse_yaml(nested)
 
 
 @pytest.mark.parametrize(
