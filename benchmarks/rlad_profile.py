@@ -27,7 +27,7 @@ from drivelab.agents.rlad.sac import RLAD
 from drivelab.envs.core import DriveEnv
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, command_line, device, whole  # noqa: E402
+from provenance import Parser, command_line, device, mapping, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 
@@ -63,7 +63,10 @@ def main() -> None:
         help="auto, host or device (RLAD's replay_frames)",
     )
     parser.add_argument(
-        "--hyperparams", default="{}", help='JSON of more RLAD hyper-parameters, e.g. {"fast_update": true}'
+        "--hyperparams",
+        type=mapping,
+        default="{}",
+        help='JSON of more RLAD hyper-parameters, e.g. {"fast_update": true}',
     )
     args = parser.parse_args()
     torch.set_num_threads(1)
@@ -85,7 +88,7 @@ def main() -> None:
             "buffer_size": 4 * args.batch_size,
             "device": args.device,
             "replay_frames": args.replay_frames,
-            **json.loads(args.hyperparams),
+            **args.hyperparams,
         },
         env,
     )
@@ -119,7 +122,7 @@ def main() -> None:
         "size": args.size,
         "batch_size": args.batch_size,
         "replay_frames": frames_on,
-        "hyperparams": json.loads(args.hyperparams),
+        "hyperparams": args.hyperparams,
         "ms": rows,
     }
     RESULTS.mkdir(exist_ok=True)

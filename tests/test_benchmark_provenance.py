@@ -90,6 +90,10 @@ def test_every_benchmark_parses_its_arguments_with_the_one_line_parser_and_check
         names = {ast.unparse(call.func) for call in calls}
         assert "argparse.ArgumentParser" not in names and "ArgumentParser" not in names, script.name
         parsers[script.name] = "Parser" in names
+        parsed_late = [
+            ast.unparse(c) for c in calls if ast.unparse(c).startswith(("json.loads(args.", "int(args."))
+        ]
+        assert not parsed_late, (script.name, parsed_late)  # a type= checks it before any work
         for call in (c for c in calls if ast.unparse(c.func).endswith("add_argument")):
             types = [ast.unparse(k.value) for k in call.keywords if k.arg == "type"]
             assert types not in (["int"], ["float"]), (script.name, ast.unparse(call))
