@@ -202,7 +202,7 @@ def test_rlad_refuses_a_replay_larger_than_the_machine():
     with pytest.raises(UsageError, match="'buffer_size' of 'rlad' asks for a replay buffer"):
         RLAD(observations, actions, 0, {"buffer_size": int(HUGE)})
     with pytest.raises(UsageError, match="'batch_size' of 'rlad' asks for a training batch"):
-        RLAD(observations, actions, 0, {"batch_size": int(HUGE)})
+        RLAD(observations, actions, 0, {"buffer_size": 1000, "batch_size": int(HUGE)})
 
 
 def test_ordinary_buffer_sizes_are_accepted():
