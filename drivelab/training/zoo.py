@@ -138,6 +138,12 @@ def _halve(state, converted: dict):
             state.stride(),
         )
         if view not in converted:
+            largest = float(state.abs().max()) if state.numel() else 0.0
+            if largest > torch.finfo(torch.float16).max:
+                raise UsageError(
+                    f"a weight of magnitude {largest:.3g} does not fit float16 (at most 65504): the model "
+                    "cannot be shipped in half precision"
+                )
             converted[view] = state.half()
         return converted[view]
     return state
@@ -277,15 +283,26 @@ def _member_difference(name: str, left: bytes, right: bytes) -> str | None:
         return "other bytes"
     if set(a) != set(b):
         return "other entries: " + ", ".join(sorted(set(a) ^ set(b)))
-    largest, shapes = 0.0, []
+    largest, nan_against_number, shapes = 0.0, False, []
     for key in sorted(a):
         x, y = np.asarray(a[key]), np.asarray(b[key])
         if x.shape != y.shape:
             shapes.append(key)
-        elif not np.array_equal(x, y, equal_nan=x.dtype.kind in "fc"):
-            largest = max(largest, float(np.max(np.abs(x.astype(np.float64) - y.astype(np.float64)))))
+            continue
+        floating = x.dtype.kind in "fc" or y.dtype.kind in "fc"
+        differ = (x != y) & ~(np.isnan(x) & np.isnan(y)) if floating else x != y
+        if differ.any() and not floating:  # whole numbers: exactly (a float64 rounds 2**53 + 1)
+            largest = max(
+                largest, float(max(abs(int(p) - int(q)) for p, q in zip(x[differ], y[differ], strict=True)))
+            )
+        elif differ.any():  # gaps: nan where one side is nan; > 0 elsewhere
+            gaps = np.abs(x[differ].astype(np.float64) - y[differ].astype(np.float64))
+            nan_against_number |= bool(np.isnan(gaps).any())
+            largest = max(largest, float(np.max(gaps, initial=0.0, where=~np.isnan(gaps))))
     if shapes:
         return "other shapes: " + ", ".join(shapes)
+    if nan_against_number:
+        return "nan against a number" + (f"; max |difference| elsewhere {largest:.3g}" if largest else "")
     return None if largest == 0.0 else f"max |difference| {largest:.3g}"
 
 

@@ -409,3 +409,32 @@ def test_verify_retrains_a_recipe_and_finds_the_shipped_model(tmp_path, monkeypa
     assert written == tmp_path / "v.md"
     assert "| pinned | yes | the SB3 record of one lists clip_range 0.2, the algorithm's defaults" in table
     assert set(json.loads((tmp_path / "v.json").read_text())["agents"]) == {"other", "pinned", "tiny"}
+
+
+def test_model_differences_sees_nans_and_whole_numbers_exactly(tmp_path):
+    import io
+
+    def model(name: str, table) -> Path:
+        buffer = io.BytesIO()
+        np.save(buffer, np.asarray(table))
+        with zipfile.ZipFile(tmp_path / name, "w") as archive:
+            archive.writestr("q_table.npy", buffer.getvalue())
+        return tmp_path / name
+
+    nan, other = model("nan.zip", [1.0, np.nan]), model("number.zip", [3.0, 2.0])
+    assert zoo.model_differences(nan, other) == {
+        "q_table.npy": "nan against a number; max |difference| elsewhere 2"
+    }
+    assert zoo.model_differences(nan, model("nan2.zip", [1.0, np.nan])) == {}
+    big, bigger = model("big.zip", [2**60, 1]), model("bigger.zip", [2**60 + 1, 1])  # equal as float64
+    assert zoo.model_differences(big, bigger) == {"q_table.npy": "max |difference| 1"}
+
+
+def test_a_weight_beyond_float16_is_refused_when_packing(tmp_path):
+    from drivelab.agents.storage import tensors_to_bytes
+
+    path = tmp_path / "model.zip"
+    with zipfile.ZipFile(path, "w") as archive:
+        archive.writestr("parameters.pt", tensors_to_bytes({"policy": {"w": torch.tensor([1.0, -1e6])}}))
+    with pytest.raises(UsageError, match="a weight of magnitude 1e\\+06 does not fit float16"):
+        zoo._store_half_precision(path)
