@@ -1,4 +1,7 @@
 import os
+from pathlib import Path
+
+import pytest
 
 os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 os.environ.setdefault("MPLBACKEND", "Agg")
@@ -23,3 +26,12 @@ def pytest_unconfigure(config):
 
         shutil.rmtree(folder, ignore_errors=True)
         del os.environ["SB3_LOGDIR"]
+
+
+@pytest.fixture
+def work(tmp_path, monkeypatch) -> Path:
+    """An empty working folder that is the current directory (``-o .`` and relative paths)."""
+    folder = tmp_path / "work"
+    folder.mkdir()
+    monkeypatch.chdir(folder)
+    return folder

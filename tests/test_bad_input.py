@@ -44,15 +44,6 @@ def assert_refused(root: Path, args: list[str], message: str) -> None:
     assert snapshot(root) == before
 
 
-@pytest.fixture
-def work(tmp_path, monkeypatch) -> Path:
-    """An empty working folder that is the current directory (``-o .`` and relative paths)."""
-    folder = tmp_path / "work"
-    folder.mkdir()
-    monkeypatch.chdir(folder)
-    return folder
-
-
 def train_args(work: Path, *args: str) -> list[str]:
     return ["train", *args, "--runs-dir", str(work / "runs"), "--steps", "20"]
 

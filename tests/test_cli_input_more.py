@@ -11,16 +11,9 @@ import yaml
 from typer.testing import CliRunner
 
 from drivelab.cli import app
+from tests.test_bad_input import snapshot
 
 runner = CliRunner()
-
-
-def snapshot(root: Path) -> dict[str, str]:
-    """Every path under ``root`` → "dir" or its bytes' SHA-256."""
-    return {
-        str(path.relative_to(root)): "dir" if path.is_dir() else hashlib.sha256(path.read_bytes()).hexdigest()
-        for path in sorted(root.rglob("*"))
-    }
 
 
 def assert_refused(root: Path, args: list[str], line: str) -> None:
@@ -30,15 +23,6 @@ def assert_refused(root: Path, args: list[str], line: str) -> None:
     assert result.exit_code == 2, result.output
     assert result.output.splitlines() == [line]
     assert snapshot(root) == before
-
-
-@pytest.fixture
-def work(tmp_path, monkeypatch) -> Path:
-    """An empty working folder that is the current directory."""
-    folder = tmp_path / "work"
-    folder.mkdir()
-    monkeypatch.chdir(folder)
-    return folder
 
 
 ABLATE = ["ablate", "--algo", "ppo", "--drop-terms", "right_lane", "--seeds", "1", "--steps", "64"]
@@ -81,7 +65,7 @@ def no_lane_training(monkeypatch):
     [
         (["--out", "weights"], "error: --out 'weights' must name a .pt file (the lane CNN's weights)"),
         (["--out", "w.txt"], "error: --out 'w.txt' must name a .pt file (the lane CNN's weights)"),
-        (["--out", "missing/x/w.pt"], "error: --out 'missing/x/w.pt': folder 'missing/x' does not exist"),
+        (["--out", "missing/x/w.pt"], "error: cannot write --out 'missing/x/w.pt': folder 'missing/x' does not exist"),
         (["--seed", "-1"], "error: --seed must be >= 0, got -1"),
         (["--frames", "0"], "error: --frames and --epochs must be >= 1"),
         (

@@ -18,15 +18,9 @@ from drivelab.config import build_config, save_yaml
 from drivelab.envs.core import DriveEnv
 from drivelab.errors import UsageError
 from drivelab.training import checkpoints
+from tests.test_untrusted_files import HIGHWAY, SMALL
 
 runner = CliRunner()
-FAST = {"duration_s": 6}
-HIGHWAY = {"env": "highway", "obs": "kinematics", "traffic": "empty", "steps": 400, "seed": 1,
-           "eval_every": 200, "eval_episodes": 1, "env_options": FAST}  # fmt: skip
-SMALL = {
-    "dqn": {"learning_starts": 20, "buffer_size": 500, "batch_size": 8, "target_update_interval": 10},
-    "dueling_ddqn": {"learning_starts": 20, "batch_size": 8, "buffer_size": 500, "log_interval": 20},
-}
 
 
 def _config(algo: str):

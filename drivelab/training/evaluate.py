@@ -241,11 +241,31 @@ def check_writable(run_dir: Path, name: str) -> None:
     (removed at once), as permission bits say nothing on a read-only mount or for root."""
     if (run_dir / name).is_dir():
         raise UsageError(f"cannot write {name} in {str(run_dir)!r}: it is a directory")
+    problem = _cannot_create_in(run_dir)
+    if problem is not None:
+        raise UsageError(f"cannot write {name} in {str(run_dir)!r}: {problem}")
+
+
+def check_output_file(path: Path, option: str) -> None:
+    """A UsageError unless the file ``path`` (given as ``option``) can be written: its folder exists
+    and takes a new file (probed with a real one, removed at once; permission bits say nothing on
+    a read-only mount or for root). Checked before the work that makes the file."""
+    folder = path.parent
+    if not folder.is_dir():
+        raise UsageError(f"cannot write {option} {str(path)!r}: folder {str(folder)!r} does not exist")
+    problem = _cannot_create_in(folder)
+    if problem is not None:
+        raise UsageError(f"cannot write {option} {str(path)!r}: {problem}")
+
+
+def _cannot_create_in(folder: Path) -> str | None:
+    """Why no file can be created in ``folder`` (None: one can), from a real probe file removed at
+    once: permission bits say nothing on a read-only mount or for root."""
     try:
-        with tempfile.TemporaryFile(dir=run_dir):
-            pass
+        with tempfile.TemporaryFile(dir=folder):
+            return None
     except OSError as exc:
-        raise UsageError(f"cannot write {name} in {str(run_dir)!r}: {exc.strerror}") from None
+        return exc.strerror or str(exc)
 
 
 def _shape(space: spaces.Space) -> str:

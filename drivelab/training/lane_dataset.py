@@ -10,7 +10,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -95,14 +94,9 @@ def check_lane_training(frames: int, epochs: int, seed: int, out: str | Path) ->
     out = Path(out)
     if out.suffix != ".pt" or out.is_dir():
         raise UsageError(f"--out {str(out)!r} must name a .pt file (the lane CNN's weights)")
-    folder = out.parent
-    if not folder.is_dir():
-        raise UsageError(f"--out {str(out)!r}: folder {str(folder)!r} does not exist")
-    try:
-        with tempfile.TemporaryFile(dir=folder):
-            pass
-    except OSError as exc:
-        raise UsageError(f"--out {str(out)!r}: cannot write in {str(folder)!r}: {exc.strerror}") from None
+    from drivelab.training.evaluate import check_output_file
+
+    check_output_file(out, "--out")
     return out
 
 

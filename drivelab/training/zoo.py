@@ -362,14 +362,9 @@ def check_video_path(path: Path) -> None:
             ) from None
     if path.is_dir():
         raise UsageError(f"--video {str(path)!r} is a directory")
-    folder = path.parent
-    if not folder.is_dir():
-        raise UsageError(f"cannot write --video {str(path)!r}: folder {str(folder)!r} does not exist")
-    try:
-        with tempfile.TemporaryFile(dir=folder):
-            pass
-    except OSError as exc:
-        raise UsageError(f"cannot write --video {str(path)!r}: {exc.strerror}") from None
+    from drivelab.training.evaluate import check_output_file
+
+    check_output_file(path, "--video")
 
 
 class VideoFile:
