@@ -65,7 +65,10 @@ def no_lane_training(monkeypatch):
     [
         (["--out", "weights"], "error: --out 'weights' must name a .pt file (the lane CNN's weights)"),
         (["--out", "w.txt"], "error: --out 'w.txt' must name a .pt file (the lane CNN's weights)"),
-        (["--out", "missing/x/w.pt"], "error: cannot write --out 'missing/x/w.pt': folder 'missing/x' does not exist"),
+        (
+            ["--out", "missing/x/w.pt"],
+            "error: cannot write --out 'missing/x/w.pt': folder 'missing/x' does not exist",
+        ),
         (["--seed", "-1"], "error: --seed must be >= 0, got -1"),
         (["--frames", "0"], "error: --frames and --epochs must be >= 1"),
         (
