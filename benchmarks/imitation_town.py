@@ -27,7 +27,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from nocrash_town import agents as nocrash_agents  # noqa: E402
-from provenance import Parser, check_reuse, whole  # noqa: E402
+from provenance import Parser, check_reuse, training_command, whole  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 RUNS = ROOT / "benchmarks" / "runs"
@@ -88,9 +88,11 @@ def main() -> None:
         if (run_dir / "config.yaml").is_file():
             check_reuse(run_dir, train, ROOT)
         if not (run_dir / "model.zip").is_file():
-            wall, cpu = run(train)
-            timings[name] = {"train_wall_s": wall, "train_cpu_s": cpu}
-            (run_dir / "train_timing.json").write_text(json.dumps(timings[name]))
+            command, resumed = training_command(run_dir, train, ROOT)
+            wall, cpu = run(command)
+            if not resumed:  # a resumed run's time is its last part's only
+                timings[name] = {"train_wall_s": wall, "train_cpu_s": cpu}
+                (run_dir / "train_timing.json").write_text(json.dumps(timings[name]))
         elif (run_dir / "train_timing.json").is_file():
             timings[name] = json.loads((run_dir / "train_timing.json").read_text())
         saved = run_dir / "nocrash.json"

@@ -48,7 +48,7 @@ from drivelab.training.stats import bootstrap_ci  # noqa: E402
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from nocrash_town import SCENARIO as NOCRASH_SCENARIO  # noqa: E402
 from nocrash_town import agents as nocrash_agents  # noqa: E402
-from provenance import Parser, check_reuse, stop, whole, wholes  # noqa: E402
+from provenance import Parser, check_reuse, stop, training_command, whole, wholes  # noqa: E402
 from seed003_osx import DEFAULT_STEPS as OSX_STEPS  # noqa: E402
 from seed003_osx import recipe as osx_recipe  # noqa: E402
 from town_competence import LEARNERS as TOWN_LEARNERS  # noqa: E402
@@ -516,8 +516,10 @@ def measure(entry: Entry, seeds: list[int], episodes: int, train: bool, evaluate
             if not train or entry.reuse:
                 record["missing"].append(seed)
                 continue
-            timing = _run(entry.command(seed))
-            (run / "leaderboard_timing.json").write_text(json.dumps(timing))
+            command, resumed = training_command(run, entry.command(seed), ROOT)
+            timing = _run(command)
+            if not resumed:  # a resumed run's time is its last part's only
+                (run / "leaderboard_timing.json").write_text(json.dumps(timing))
         report = _report(entry, seed, episodes, make=evaluate)
         if report is None:
             record["missing"].append(seed)

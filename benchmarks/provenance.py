@@ -165,6 +165,17 @@ def device(text: str) -> str:
     return text
 
 
+def training_command(run_dir: Path, arguments: list[str], root: Path) -> tuple[list[str], bool]:
+    """The ``drivelab`` command that brings the run in ``run_dir`` (no final model yet) to its end,
+    and whether it continues one: ``arguments``, its ``train`` command, for a run not started;
+    ``train --resume RUN`` for one a killed benchmark left (its config matched by ``check_reuse``
+    first), so that the benchmark loses only the work since the run's last checkpoint. A resumed
+    run's training time is that of its last part only: the benchmarks record none for it."""
+    if (run_dir / "config.yaml").is_file():
+        return ["train", "--resume", os.path.relpath(run_dir, root)], True
+    return arguments, False
+
+
 def check_reuse(run_dir: Path, arguments: list[str], root: Path) -> None:
     """Stop the benchmark (one ``error:`` line, exit 2) when the finished run it would reuse is not
     the run ``drivelab ARGUMENTS`` trains today (``arguments`` start with ``train``; paths in them

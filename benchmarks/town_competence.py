@@ -39,7 +39,7 @@ from drivelab.training.nocrash import LEVELS  # noqa: E402
 from drivelab.training.stats import bootstrap_ci  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, check_reuse, names, readable, whole, wholes  # noqa: E402
+from provenance import Parser, check_reuse, names, readable, training_command, whole, wholes  # noqa: E402
 
 RUNS = ROOT / "benchmarks" / "runs"
 RESULTS = ROOT / "benchmarks" / "results"
@@ -107,8 +107,9 @@ def measure(learner: str, seed: int, episodes: int) -> dict:
     if (run_dir / "config.yaml").is_file():
         check_reuse(run_dir, train, ROOT)
     if not (run_dir / "model.zip").is_file():
-        timing = run(train)  # drivelab train makes the run directory
-        timing_file.write_text(json.dumps({"train": timing}))
+        command, resumed = training_command(run_dir, train, ROOT)
+        timing = run(command)  # drivelab train makes the run directory
+        timing_file.write_text(json.dumps({} if resumed else {"train": timing}))  # resumed: the last part's
     timings = json.loads(timing_file.read_text()) if timing_file.is_file() else {}
     report_file = run_dir / "nocrash.json"
     if not report_file.is_file() or json.loads(report_file.read_text())["episodes_per_level"] != episodes:

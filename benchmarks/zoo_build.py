@@ -50,7 +50,7 @@ CAMERA_CHECK_DURATION_S = 20
 
 sys.path.insert(0, str(Path(__file__).parent))
 from leaderboard import BLOCKS_DAGGER, HIGHWAY_DQN, RACETRACK_DAGGER, UNSEEN_MAPS, UNTUNED_PPO  # noqa: E402
-from provenance import Parser, agent_defaults, check_reuse, command_line  # noqa: E402
+from provenance import Parser, agent_defaults, check_reuse, command_line, stop, training_command  # noqa: E402
 from town_competence import recipe as town_recipe  # noqa: E402
 
 # highway-env's documented PPO values, pinned in the PPO recipes below: their agents were trained
@@ -235,12 +235,14 @@ def train_and_pack(name: str, spec: dict, retrain: bool) -> None:
     timing = None
     if not retrain and (run_dir / "model.zip").is_file():
         check_reuse(run_dir, arguments, ROOT)  # the card names this command
+    if retrain and run_dir.exists():
+        stop(f"--retrain: {run_dir} exists; remove it first (a retrained agent starts from nothing)")
     if retrain or not (run_dir / "model.zip").is_file():
-        if run_dir.exists():
-            raise SystemExit(f"{run_dir} exists without a final model: remove it or finish it first")
-        wall, cpu = drivelab(arguments)
-        timing = {"train_wall_s": round(wall, 1), "train_cpu_s": round(cpu, 1), "machine": machine()}
-        (run_dir / "train_timing.json").write_text(json.dumps(timing))
+        command, resumed = training_command(run_dir, arguments, ROOT)
+        wall, cpu = drivelab(command)
+        if not resumed:  # a resumed run's time is its last part's only: the card records none
+            timing = {"train_wall_s": round(wall, 1), "train_cpu_s": round(cpu, 1), "machine": machine()}
+            (run_dir / "train_timing.json").write_text(json.dumps(timing))
     pack(run_dir, name, spec["description"], "drivelab " + shlex.join(arguments), timing)
 
 

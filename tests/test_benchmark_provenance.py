@@ -189,3 +189,12 @@ def test_a_nonsensical_count_stops_a_benchmark_before_it_writes(tmp_path):
     )
     assert (done.returncode, done.stdout, done.stderr) == (2, "", "error: argument --seeds: 0 is below 1\n")
     assert results.read_bytes() == before
+
+
+def test_a_benchmark_continues_a_run_a_kill_left_unfinished(tmp_path):
+    provenance = _provenance()
+    run_dir, train = tmp_path / "runs" / "r", ["train", "--algo", "ppo", "--name", "r"]
+    assert provenance.training_command(run_dir, train, tmp_path) == (train, False)
+    run_dir.mkdir(parents=True)
+    (run_dir / "config.yaml").write_text("algo: ppo\n")  # started: drivelab train --resume continues it
+    assert provenance.training_command(run_dir, train, tmp_path) == (["train", "--resume", "runs/r"], True)

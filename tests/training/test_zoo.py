@@ -438,3 +438,28 @@ def test_a_weight_beyond_float16_is_refused_when_packing(tmp_path):
         archive.writestr("parameters.pt", tensors_to_bytes({"policy": {"w": torch.tensor([1.0, -1e6])}}))
     with pytest.raises(UsageError, match="a weight of magnitude 1e\\+06 does not fit float16"):
         zoo._store_half_precision(path)
+
+
+def test_zoo_build_finishes_a_run_a_kill_left_without_its_model(tmp_path, monkeypatch):
+    """A build killed after the run's last checkpoint, before its model: building again resumes
+    the run (no "already exists") and packs the model the run would have had."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    spec = importlib.util.spec_from_file_location("zoo_build", ROOT / "benchmarks" / "zoo_build.py")
+    build = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(build)
+    monkeypatch.setattr(build, "RUNS", tmp_path / "runs")
+    monkeypatch.setattr(zoo, "ZOO_DIR", tmp_path / "zoo")
+    recipe = shlex.split(
+        "--algo ppo --env highway --obs kinematics --action meta --traffic empty --steps 32 --n-envs 1 "
+        "-H n_steps=32 -H batch_size=16 -H n_epochs=1 --eval-every 32 --eval-episodes 1 --seed 0"
+    )
+    build.drivelab(["train", *recipe, "--runs-dir", str(tmp_path / "whole"), "--name", "tiny"])
+    build.drivelab(["train", *recipe, "--runs-dir", str(tmp_path / "runs"), "--name", "tiny"])
+    (tmp_path / "runs" / "tiny" / "model.zip").unlink()  # killed between its checkpoint and its model
+    build.train_and_pack("tiny", {"train": recipe, "description": "a test agent"}, retrain=False)
+    assert (tmp_path / "runs" / "tiny" / "model.zip").is_file()
+    assert "train_wall_s" not in json.loads((tmp_path / "zoo" / "tiny" / "card.json").read_text())["training"]
+    differences = zoo.model_differences(
+        tmp_path / "whole" / "tiny" / "model.zip", tmp_path / "runs" / "tiny" / "model.zip"
+    )
+    assert set(differences) <= {"sb3.json"}  # the same weights (the record's clock and counters aside)
