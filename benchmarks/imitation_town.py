@@ -6,7 +6,8 @@ town against the expert itself.
 
 Each agent is trained with ``drivelab train`` into ``benchmarks/runs/<name>`` (the expert only
 drives) and evaluated with ``drivelab benchmark nocrash``; a run that already has its model (or
-its ``nocrash.json`` for the same number of episodes) is reused. The imitation runs' last
+its ``nocrash.json`` for the same number of episodes) is reused, and one a kill left without its
+model is resumed from its last checkpoint (its training time then goes unrecorded). The imitation runs' last
 validation loss and action agreement (every action component within 0.1 of the expert's, on the
 held-out ~10 % of the demonstrations) come from their progress.csv. Writes
 ``benchmarks/results/imitation_town.json`` and ``.md``.

@@ -7,7 +7,8 @@ evaluated on the test town at every traffic level (RLAD's Tables III and IV, see
 Each agent is trained with ``drivelab train`` (the expert only drives: it learns nothing) into
 ``benchmarks/runs/<name>`` and evaluated with ``drivelab benchmark nocrash``; a run that already
 has its model (or its ``nocrash.json`` for the same number of episodes) is reused, so the script
-can assemble results of runs made earlier with the same commands. Writes
+can assemble results of runs made earlier with the same commands; a run a kill left without its
+model is resumed from its last checkpoint (its training time then goes unrecorded). Writes
 ``benchmarks/results/nocrash_town.json`` and ``.md``.
 
 PPO reads ``waypoints``, ``measurements`` and the privileged ``affordances`` (like Roach, a

@@ -13,7 +13,8 @@ Two learners, each trained with ``drivelab train --algo dagger`` (the recipe of 
   70 / 50 / 35 %).
 
 A run with its model (and its ``nocrash.json`` for the same number of episodes) is reused, so a
-stopped benchmark continues where it was. Intervals (90 %): the pooled success rate over every
+stopped benchmark continues where it was (a run without its model is resumed from its last
+checkpoint; its training time then goes unrecorded). Intervals (90 %): the pooled success rate over every
 seed's episodes (Wilson), and the mean over seeds (percentile bootstrap, as ``drivelab compare``).
 Writes ``benchmarks/results/town_competence.json`` and ``.md``.
 """
