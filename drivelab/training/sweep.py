@@ -30,6 +30,7 @@ import json
 import multiprocessing
 import os
 import re
+import threading
 import time
 import traceback
 from collections.abc import Callable, Iterable, Iterator
@@ -352,9 +353,25 @@ def _until_interrupted(outcomes: Iterator[dict]) -> Iterator[dict]:
         yield outcome
 
 
+def _exit_with_parent(parent: int) -> None:
+    """A pool worker's start: a daemon thread ends the worker once its parent is gone. A killed
+    sweep (SIGKILL: no cleanup) would otherwise leave its workers training their cells, then idle
+    for ever, orphans writing into the run directories that a re-run's workers resume. Each run
+    keeps its last checkpoint (written whole, the manifest last), as after any kill."""
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
+
+
 def _pool(function: Callable, jobs: Iterator[dict], workers: int, in_flight: int | None) -> Iterator[dict]:
     context = multiprocessing.get_context("spawn")  # fresh interpreters: no forked torch/numba state
-    with ProcessPoolExecutor(max_workers=workers, mp_context=context) as pool:
+    with ProcessPoolExecutor(
+        max_workers=workers, mp_context=context, initializer=_exit_with_parent, initargs=(os.getpid(),)
+    ) as pool:
         pending = set()
         try:
             pending.update(pool.submit(function, **job) for job in itertools.islice(jobs, in_flight))

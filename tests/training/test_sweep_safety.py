@@ -184,3 +184,52 @@ def test_a_damaged_run_fails_the_plan(tmp_path):
     make_run(runs, {MANIFEST: "{corrupt", "model.zip": "m"})
     with pytest.raises(UsageError, match="is damaged"):
         plan(expand_sweep(SPEC, runs))
+
+
+def _children(pid: int) -> set[int]:
+    """The live processes whose parent is ``pid`` (from /proc)."""
+    found = set()
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == pid and fields[0] != "Z":
+            found.add(int(stat.parent.name))
+    return found
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads processes from /proc")
+def test_a_killed_sweep_leaves_no_workers_behind(tmp_path):
+    """SIGKILL of the sweep (no cleanup): its pool workers end too, instead of training on and
+    idling for ever beside the workers of a re-run."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    (tmp_path / "sweep.yaml").write_text(
+        "base: {algo: ppo, traffic: empty, steps: 200000, checkpoint_every: 100000, eval_every: 200000,\n"
+        "       hyperparams: {n_steps: 64, batch_size: 64, n_epochs: 1}}\ngrid: {seed: [1, 2]}\n"
+    )
+    sweep = subprocess.Popen(
+        [sys.executable, "-m", "drivelab.cli", "sweep", "sweep.yaml", "--workers", "2", "--runs-dir", "runs"],
+        cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )  # fmt: skip
+    deadline = time.monotonic() + 120
+    while len(workers := _children(sweep.pid)) < 2 and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert len(workers) >= 2, "the sweep started no pool"
+    while not list((tmp_path / "runs").glob("*/config.yaml")) and time.monotonic() < deadline:
+        time.sleep(0.2)  # the workers train
+    sweep.send_signal(signal.SIGKILL)
+    sweep.wait()
+    deadline = time.monotonic() + 20
+    while (
+        alive := {pid for pid in workers if Path(f"/proc/{pid}").exists()}
+    ) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    for pid in alive:  # leave nothing running if the test fails
+        os.kill(pid, signal.SIGKILL)
+    assert not alive, "the sweep's workers outlived it"
