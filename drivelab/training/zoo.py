@@ -241,7 +241,7 @@ def pack(
 def model_differences(first: str | Path, second: str | Path) -> dict[str, str]:
     """How the model zips ``first`` and ``second`` differ, member by member, in the values they
     hold: {} when every member holds the same values (tensors and arrays element for element, bit
-    for bit, JSON as parsed, less the wall-clock time of SB3's episode records, ``t``). A differing
+    for bit, JSON as parsed, less SB3's bookkeeping of when it learned: ``_without_clock``). A differing
     member's entry says how: missing from one, other keys, other shapes, or the largest absolute
     difference of its numbers. Read like every model: no unpickling."""
     with zipfile.ZipFile(first) as one, zipfile.ZipFile(second) as two:
@@ -307,15 +307,22 @@ def _member_difference(name: str, left: bytes, right: bytes) -> str | None:
 
 
 def _without_clock(state):
-    """A model's JSON without the wall-clock seconds of SB3's episode records (``t`` of each entry
-    of ``ep_info_buffer``: when the Monitor saw the episode end, which no two runs share)."""
-    if not isinstance(state, dict) or not isinstance(state.get("ep_info_buffer"), list):
+    """A model's JSON without what says when, not what, it learned: the wall-clock seconds of SB3's
+    episode records (``t`` of each entry of ``ep_info_buffer``: when the Monitor saw the episode
+    end, which no two runs share) and SB3's ``_num_timesteps_at_start`` (where the last ``learn``
+    call began, for its steps-per-second log: a resumed run's checkpoint step, 0 in one never
+    stopped)."""
+    if not isinstance(state, dict):
         return state
-    records = [
-        {k: v for k, v in e.items() if k != "t"} if isinstance(e, dict) else e
-        for e in state["ep_info_buffer"]
-    ]
-    return {**state, "ep_info_buffer": records}
+    state = dict(state)
+    if isinstance(state.get("ep_info_buffer"), list):
+        state["ep_info_buffer"] = [
+            {k: v for k, v in e.items() if k != "t"} if isinstance(e, dict) else e
+            for e in state["ep_info_buffer"]
+        ]
+    if isinstance(state.get("counters"), dict):
+        state["counters"] = {k: v for k, v in state["counters"].items() if k != "_num_timesteps_at_start"}
+    return state
 
 
 def _leaves(state, prefix: str = "") -> dict[str, np.ndarray]:

@@ -462,4 +462,26 @@ def test_zoo_build_finishes_a_run_a_kill_left_without_its_model(tmp_path, monkey
     differences = zoo.model_differences(
         tmp_path / "whole" / "tiny" / "model.zip", tmp_path / "runs" / "tiny" / "model.zip"
     )
-    assert set(differences) <= {"sb3.json"}  # the same weights (the record's clock and counters aside)
+    assert differences == {}  # the model an uninterrupted run packs
+
+
+def test_model_differences_leaves_out_when_sb3_learned(tiny_zoo, tmp_path):
+    """A resumed SB3 run records where its last learn() began (_num_timesteps_at_start, for the
+    steps-per-second log), one never stopped 0: the same model."""
+    shipped = tiny_zoo / "tiny" / "model.zip"
+    copy = tmp_path / "copy.zip"
+    copy.write_bytes(shipped.read_bytes())
+
+    def resumed_at(step: int):
+        def change(data: bytes) -> bytes:
+            state = json.loads(data)
+            return json.dumps(
+                {**state, "counters": {**state["counters"], "_num_timesteps_at_start": step}}
+            ).encode()
+
+        return change
+
+    _rewrite_member(copy, "sb3.json", resumed_at(8))
+    assert zoo.model_differences(shipped, copy) == {}
+    _rewrite_member(copy, "sb3.json", lambda data: json.dumps({**json.loads(data), "counters": {}}).encode())
+    assert zoo.model_differences(shipped, copy) == {"sb3.json": "other values of counters"}
