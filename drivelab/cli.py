@@ -82,14 +82,6 @@ def _parse_pairs(pairs: list[str], what: str) -> dict:
     return values
 
 
-def _not_a_file(run_dir: Path) -> Path:
-    """``run_dir``, or a one-line error when it is a file (a run directory's checks would say it
-    does not exist)."""
-    if run_dir.exists() and not run_dir.is_dir():
-        raise UsageError(f"{str(run_dir)!r} is a file, not a run directory")
-    return run_dir
-
-
 def _command_line() -> str | None:
     """The command as typed, for reports (None when not called as the ``drivelab`` script)."""
     if Path(sys.argv[0]).name != "drivelab":
@@ -236,7 +228,7 @@ def train(
             ]
             if given or hyperparams or switches or video:
                 raise UsageError("--resume takes the run's own config; only --steps may be given with it")
-            run_dir = resume_run(_not_a_file(resume), steps)
+            run_dir = resume_run(resume, steps)
         else:
             cli = {
                 "algo": algo, "env": env, "obs": obs, "action": action, "reward": reward,
@@ -607,7 +599,7 @@ def convert_run(
     from drivelab.training.convert import convert_run as convert
 
     try:
-        written = convert(_not_a_file(run_dir))
+        written = convert(run_dir)
     except UsageError as exc:
         _fail(str(exc))
     for path in written:

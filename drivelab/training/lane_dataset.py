@@ -71,9 +71,9 @@ def available_memory_bytes() -> int | None:
         for line in Path("/proc/meminfo").read_text().splitlines():
             if line.startswith("MemAvailable:"):
                 return int(line.split()[1]) * 1024
-    with contextlib.suppress(AttributeError, OSError, ValueError):
-        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    return None
+    from drivelab.agents.buffer_memory import physical_memory_bytes
+
+    return physical_memory_bytes()
 
 
 def check_lane_training(frames: int, epochs: int, seed: int, out: str | Path) -> Path:

@@ -228,13 +228,14 @@ def weights_finite(model) -> bool:
     """Whether every network weight of ``model`` (its torch modules and tensors) is finite."""
     import torch
 
-    tensors = []
-    for value in vars(model).values():
-        if isinstance(value, torch.nn.Module):
-            tensors.extend(value.parameters())
-        elif isinstance(value, torch.Tensor) and value.is_floating_point():
-            tensors.append(value)
-    return all(bool(torch.isfinite(tensor).all()) for tensor in tensors)
+    from drivelab.agents.storage import non_finite_tensors
+
+    tensors = [
+        list(value.parameters()) if isinstance(value, torch.nn.Module) else value
+        for value in vars(model).values()
+        if isinstance(value, (torch.nn.Module, torch.Tensor))
+    ]
+    return not non_finite_tensors(tensors)
 
 
 def _diverged(model, exc: Exception) -> bool:
