@@ -29,6 +29,11 @@ def _agent(seed=0, **hyperparams):
     return RLAD(SPACE, ACTIONS, seed, {**SMALL, **hyperparams})
 
 
+def _host(x):
+    """A numpy copy of frames kept on the host or in torch memory (the GPU's included)."""
+    return x.cpu().numpy() if isinstance(x, torch.Tensor) else np.asarray(x)
+
+
 def _batch(seed=0, size=16):
     """A fixed batch whose traffic-light label is written in the image (a bright square's place)."""
     rng = np.random.default_rng(seed)
@@ -74,14 +79,14 @@ def test_the_critic_sees_augmented_pixels():
     next_seen, seen = _encoder_inputs(agent, batch)
     assert seen.requires_grad is False and seen.dtype == torch.uint8
     for shown, raw in ((seen, batch["images"]), (next_seen, batch["next_images"])):
-        shown = shown.numpy()
+        shown = _host(shown)
         assert (shown != raw).any(axis=(1, 2, 3)).mean() > 0.5  # most samples shifted
         assert all(_is_a_shift(shown[i], raw[i], agent.pad) for i in range(len(raw)))
     # and the critic's input h is the encoding of those shifted pixels
     plain = _agent(augment=False)
     next_seen, seen = _encoder_inputs(plain, batch)
-    np.testing.assert_array_equal(seen.numpy(), batch["images"])
-    np.testing.assert_array_equal(next_seen.numpy(), batch["next_images"])
+    np.testing.assert_array_equal(_host(seen), batch["images"])
+    np.testing.assert_array_equal(_host(next_seen), batch["next_images"])
 
 
 def test_auxiliary_loss_decreases_on_a_fixed_labelled_batch():
@@ -95,13 +100,16 @@ def test_auxiliary_loss_decreases_on_a_fixed_labelled_batch():
 
 
 def test_one_update_is_deterministic_under_a_seed():
-    first, second = _agent(seed=5), _agent(seed=5)
+    """On the CPU. Not on a GPU: there cuDNN's backward convolutions and the replicate padding's
+    backward sum with atomic adds in an order that varies between calls, and two agents of one
+    seed differed after one update (an H100, benchmarks/results/rlad_update_gpu.md)."""
+    first, second = _agent(seed=5, device="cpu"), _agent(seed=5, device="cpu")
     assert first.train_step(_batch()) == second.train_step(_batch())
     for a, b in zip(first.encoder.parameters(), second.encoder.parameters(), strict=True):
         assert torch.equal(a, b)
     for a, b in zip(first.actor.parameters(), second.actor.parameters(), strict=True):
         assert torch.equal(a, b)
-    third = _agent(seed=6)
+    third = _agent(seed=6, device="cpu")
     assert third.train_step(_batch()) != first.train_step(_batch())
 
 
@@ -229,8 +237,7 @@ def test_a_checkpointed_replay_loads_where_the_loading_agent_keeps_frames(tmp_pa
         agent = _agent(replay_frames=choice)
         agent.load_replay_buffer(tmp_path / "replay.npz")
         assert isinstance(agent.replay_buffer.frames, kind), choice
-        frames = np.asarray(agent.replay_buffer.frames)
-        np.testing.assert_array_equal(frames, saved.replay_buffer.frames.numpy())
+        np.testing.assert_array_equal(_host(agent.replay_buffer.frames), _host(saved.replay_buffer.frames))
 
 
 def test_checkpoints_keep_the_replay_of_a_long_run(monkeypatch):

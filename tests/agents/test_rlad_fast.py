@@ -23,7 +23,10 @@ import torch
 
 from drivelab.agents.rlad import alix, sac
 from drivelab.errors import UsageError
-from tests.agents.test_rlad import _agent, _batch
+from tests.agents.test_rlad import _agent as _any_device_agent
+from tests.agents.test_rlad import _batch
+
+CUDA = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA GPU")
 
 LR, STRENGTH_LR, TAU = 1e-3, 2e-3, 0.01  # RLADConfig's learning_rate, alix_learning_rate, tau
 MODULES = ("encoder", "actor", "critic", "critic_target", "traffic_light_head")
@@ -36,6 +39,22 @@ def one_thread():
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(threads)
+
+
+def _agent(seed=0, device="cpu", **hyperparams):
+    """The tolerances above are the CPU's: an agent there unless a test says otherwise."""
+    return _any_device_agent(seed, device=device, **hyperparams)
+
+
+@pytest.fixture
+def float32_on_the_gpu():
+    """cuDNN's default TF32 rounds convolution inputs to 10 mantissa bits: inputs that differ at
+    float32 rounding (the device-side A-LIX shift) would then differ at ~1e-3. Off, a GPU sums in
+    float32 as the CPU does, and the CPU's tolerances apply."""
+    before = torch.backends.cudnn.allow_tf32, torch.backends.cuda.matmul.allow_tf32
+    torch.backends.cudnn.allow_tf32 = torch.backends.cuda.matmul.allow_tf32 = False
+    yield
+    torch.backends.cudnn.allow_tf32, torch.backends.cuda.matmul.allow_tf32 = before
 
 
 def _named(agent, module):
@@ -61,7 +80,9 @@ def _assert_same_update(plain, fast, batch):
         for name, p in _named(plain, module).items():
             q = _named(fast, module)[name]
             if module == "critic_target":  # EMA of the critics: τ times their difference
-                np.testing.assert_allclose(q.detach(), p.detach(), atol=2 * LR * TAU, err_msg=name)
+                np.testing.assert_allclose(
+                    q.detach().cpu(), p.detach().cpu(), atol=2 * LR * TAU, err_msg=name
+                )
                 continue
             if q.grad is None:
                 assert torch.equal(q, before[module][name]) and torch.equal(p, q), (module, name)
@@ -71,8 +92,10 @@ def _assert_same_update(plain, fast, batch):
             assert moved.max().item() <= lr * (1 + 1e-4), (module, name)  # one Adam step
             clear = _named(fast, module)[name].grad.abs() >= 1e-6
             assert clear.any() or p.numel() == 1, (module, name)
-            np.testing.assert_allclose(q.detach()[clear], p.detach()[clear], atol=1e-6, err_msg=name)
-            np.testing.assert_allclose(q.detach(), p.detach(), atol=2 * lr, err_msg=name)
+            np.testing.assert_allclose(
+                q.detach()[clear].cpu(), p.detach()[clear].cpu(), atol=1e-6, err_msg=name
+            )
+            np.testing.assert_allclose(q.detach().cpu(), p.detach().cpu(), atol=2 * lr, err_msg=name)
 
 
 @pytest.mark.parametrize("hyperparams", [{}, {"channels_last": True}, {"alix": False, "aux": False}])
@@ -163,3 +186,30 @@ def test_bf16_autocast_changes_the_losses_only_slightly():
 def test_bad_fast_update_options_are_usage_errors(hyperparams, message):
     with pytest.raises(UsageError, match=message):
         _agent(**hyperparams)
+
+
+@CUDA
+@pytest.mark.parametrize(
+    "hyperparams",
+    [{}, {"channels_last": True}, {"compile": "reduce-overhead"}],
+    ids=["eager", "nhwc", "graphs"],
+)
+def test_on_a_gpu_the_fast_update_equals_the_plain_update(hyperparams, float32_on_the_gpu):
+    """On CUDA: eager, channels-last, and inductor with CUDA graphs (compiled on the first update,
+    recorded on the next ones), against the plain update on the same GPU, over three updates."""
+    plain = _agent(seed=3, device="cuda")
+    fast = _agent(seed=3, device="cuda", fast_update=True, **hyperparams)
+    _assert_same_update(plain, fast, _batch(seed=2))
+    for seed in (4, 5):  # the graphs are recorded and replayed with the streams still in step
+        expected, got = plain.train_step(_batch(seed=seed)), fast.train_step(_batch(seed=seed))
+        assert got == pytest.approx(expected, rel=1e-4, abs=1e-6)
+
+
+@CUDA
+def test_on_a_gpu_bf16_with_cuda_graphs_changes_the_losses_only_slightly():
+    expected = _agent(seed=3, device="cuda").train_step(_batch(seed=2))
+    fast = _agent(seed=3, device="cuda", fast_update=True, compile="reduce-overhead", bf16=True)
+    got = fast.train_step(_batch(seed=2))
+    assert all(np.isfinite(v) for v in got.values())
+    for key in ("critic_loss", "aux_loss", "actor_loss"):
+        assert got[key] == pytest.approx(expected[key], rel=0.1), key
