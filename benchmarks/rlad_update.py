@@ -132,28 +132,43 @@ def main() -> None:
     sync = torch.cuda.synchronize if cuda else (lambda: None)
     load_before = os.getloadavg()
     rows, profiles = [], {}
+    failures: list[dict] = []  # a variant that fails is reported and the others go on
+
+    def failed(size: int, name: str, exc: Exception) -> None:
+        message = f"{type(exc).__name__}: {str(exc).strip().splitlines()[0] if str(exc).strip() else ''}"
+        failures.append({"size": size, "variant": name, "error": message})
+        print(f"{size} px {name}: failed: {message}", flush=True)
+
     for size in args.size:
         agents, first = {}, {}
         for name in args.variants:
             torch.set_num_threads(args.threads[0])
-            agent = make_agent(size, args.batch_size, args.device, VARIANTS[name])
-            update = updater(agent)
-            sync()
-            start = time.perf_counter()
-            update()
-            sync()
-            first[name] = time.perf_counter() - start
-            for _ in range(2 if agent.config.compile != "none" else 0):  # CUDA graphs record, then replay
+            try:
+                agent = make_agent(size, args.batch_size, args.device, VARIANTS[name])
+                update = updater(agent)
+                sync()
+                start = time.perf_counter()
                 update()
+                sync()
+                first[name] = time.perf_counter() - start
+                for _ in range(2 if agent.config.compile != "none" else 0):  # CUDA graphs record, then replay
+                    update()
+            except Exception as exc:  # noqa: BLE001 - reported in the results
+                failed(size, name, exc)
+                continue
             agents[name] = agent
             print(f"{size} px {name}: first update {first[name]:.1f} s", flush=True)
         for threads in args.threads:
             torch.set_num_threads(threads)
-            samples: dict[str, list[float]] = {name: [] for name in args.variants}
+            samples: dict[str, list[float]] = {name: [] for name in agents}
             for _ in range(args.repeats):
-                for name in args.variants:  # interleaved
-                    samples[name].append(timed_ms(updater(agents[name]), args.updates, sync))
-            for name in args.variants:
+                for name in list(agents):  # interleaved
+                    try:
+                        samples[name].append(timed_ms(updater(agents[name]), args.updates, sync))
+                    except Exception as exc:  # noqa: BLE001 - reported in the results
+                        failed(size, name, exc)
+                        del agents[name], samples[name]
+            for name in samples:
                 row = {
                     "size": size, "threads": threads, "variant": name, "hyperparams": VARIANTS[name],
                     "median_ms": float(np.median(samples[name])), "samples_ms": samples[name],
@@ -162,12 +177,22 @@ def main() -> None:
                 rows.append(row)
                 print(f"{size} px, {threads} threads, {name}: {row['median_ms']:.1f} ms", flush=True)
             if args.profile:
-                for name in args.variants:
+                for name in agents:
                     key = f"{name}, {size} px, {threads} threads"
-                    profiles[key] = profile_table(
-                        updater(agents[name]), args.profile_updates, cuda, sync, args.top
-                    )
+                    try:
+                        profiles[key] = profile_table(
+                            updater(agents[name]), args.profile_updates, cuda, sync, args.top
+                        )
+                    except Exception as exc:  # noqa: BLE001 - reported in the results
+                        failed(size, f"{name} (profiler)", exc)
         del agents
+        write_results(args, rows, profiles, failures, load_before, cuda)  # each size as soon as it is done
+
+
+def write_results(
+    args, rows: list[dict], profiles: dict, failures: list[dict], load_before, cuda: bool
+) -> None:
+    """``results/<out>.json`` and ``.md`` of the rows measured so far."""
     plain = {(r["size"], r["threads"]): r["median_ms"] for r in rows if r["variant"] == "plain"}
     for row in rows:
         base = plain.get((row["size"], row["threads"]))
@@ -181,7 +206,7 @@ def main() -> None:
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         "load_average_1min_before_after": [load_before[0], os.getloadavg()[0]],
         "batch_size": args.batch_size, "repeats": args.repeats, "updates_per_repeat": args.updates,
-        "rows": rows, "profiles": profiles,
+        "rows": rows, "failures": failures, "profiles": profiles,
     }  # fmt: skip
     RESULTS.mkdir(exist_ok=True)
     name = args.out or f"rlad_update_{where}"
@@ -208,6 +233,9 @@ def main() -> None:
         ],
         "",
     ]
+    if failures:
+        lines += ["Variants that failed (not timed):", "", "| camera | variant | error |", "|---|---|---|"]
+        lines += [f"| {f['size']}x{f['size']} | {f['variant']} | {f['error']} |" for f in failures] + [""]
     for key, tables in profiles.items():
         for title, table in tables.items():
             lines += [f"torch.profiler, {key}, {args.profile_updates} updates, by {title}:", "", "```", table,
