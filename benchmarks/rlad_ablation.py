@@ -26,17 +26,12 @@ finished, evaluates and reports). ``--variants`` restricts a slice to some varia
 DrQ first, as the issue's priorities).
 
 The experiment on a GPU machine (H100, 16 cores; camera 84x84, Table II's batch 256 and replay
-100 k, ≥ 100 k steps). Nothing on that machine outlives a session (30 minutes of device time at
-most; the machine goes back 30 s after a command unless the next one comes): the run directories,
-whose replays take 2.2 GB each at 100 k × 84x84, cannot be brought back (64 MiB), so runs continue
-across the ≤ 10-minute commands of one session, not across sessions. First measure the update
-(about 2 minutes)::
-
-    python benchmarks/rlad_update.py --device cuda --size 84 256 \
-        --variants plain fast compiled cuda-graphs cuda-graphs-bf16 --profile
-
-then, in the same session, the same command until it exits with 0, each within a minute of the
-last (a slice stops itself after 8 minutes, leaving time for the checkpoints)::
+100 k, >= 100 k steps). Nothing on that machine outlives a session, and the run directories, whose
+replays take 2.2 GB each at 100 k x 84x84, cannot be brought back (64 MiB), so runs continue across
+the <= 10-minute commands of one session, not across sessions. First the checks and the update
+(``benchmarks/gpu_checks.sh``), then, in the same session, the same command until it exits with 0,
+each within 30 s of the last (a slice stops itself after 8 minutes, leaving time for the
+checkpoints)::
 
     OMP_NUM_THREADS=1 python benchmarks/rlad_ablation.py --variants rlad drq --workers 6 \
         --time-limit-s 480 --checkpoint-every 10000 \
@@ -47,12 +42,12 @@ the same command without ``--variants``). Six processes share the GPU; ``replay_
 puts the frames of as many of them on the GPU as fit in half its free memory
 (``drivelab.agents.rlad.memory``), the others keep theirs on the host. Every checkpoint writes the
 run's replay (2.2 GB, twice while it is replaced): a slice's own stop writes one, so periodic
-checkpoints are rare; 15 runs' replays (33 GB) fit the 64 GB disk. Budget: six runs of 100 k
-steps are 600 k updates; at the issue's target of 10 ms per update that is 100 minutes of GPU time,
-more than a session holds. Within one session's ~25 minutes of training they reach about
-25 min / (6 × update time) steps each (25 k at 10 ms, 100 k at 2.5 ms): pass ``--steps`` to what
-the measured update allows (with ``--eval-every`` a tenth of it, for the learning curves) so that
-the runs finish, and state the budget reached.
+checkpoints are rare; 15 runs' replays (33 GB) fit the 64 GB disk. Budget, measured
+(``benchmarks/results/rlad_gpu_training.md``, H100): six such runs at once train at 23.4 steps/s
+each once updating (the GPU busy ~100 %), so 100 k steps each take about 71 minutes of one machine.
+A session lent 15 minutes of GPU time reaches about 15 k steps per run: pass ``--steps`` to what the
+session allows (with ``--eval-every`` a tenth of it, for the learning curves) so that the runs
+finish, and state the budget reached.
 """
 
 from __future__ import annotations
