@@ -187,13 +187,16 @@ def _check_cells(sweep: Sweep) -> None:
 
 # --- what each cell needs --------------------------------------------------------------------
 def cell_action(run_dir: Path, config: RunConfig, eval_episodes: int) -> str:
-    """What a re-run must do for this cell: "train", "restart", "resume", "evaluate" or "skip".
+    """What a re-run must do for this cell: "train", "restart", "resume", "finish", "evaluate" or
+    "skip".
 
     "restart" is for a run stopped before its first checkpoint (no checkpoint, no model: nothing
-    to continue from), whose directory holds only what such a run writes. Raises UsageError when
-    ``run_dir`` is not that cell's run (a file, a folder of something else, a run with a different
-    config) or is a damaged run (a checkpoint or model without a readable manifest): nothing in
-    it is replaced or deleted.
+    to continue from), whose directory holds only what such a run writes. "finish" is for a run
+    killed after its model was saved, before its learning curve was drawn: the curve is drawn (and
+    the run evaluated if it has no eval.json yet), as the run that was never stopped has it.
+    Raises UsageError when ``run_dir`` is not that cell's run (a file, a folder of something else,
+    a run with a different config) or is a damaged run (a checkpoint or model without a readable
+    manifest): nothing in it is replaced or deleted.
     """
     from drivelab.training.evaluate import load_run_config
 
@@ -222,6 +225,8 @@ def cell_action(run_dir: Path, config: RunConfig, eval_episodes: int) -> str:
     steps = _manifest_steps(run_dir, manifest_path)
     if steps < config.steps or not (run_dir / "model.zip").is_file():
         return "resume"
+    if not (run_dir / "learning_curve.png").is_file():
+        return "finish"  # killed between model.zip and its learning curve (run._save_model)
     if eval_episodes and not (run_dir / "eval.json").is_file():
         return "evaluate"
     return "skip"
@@ -302,7 +307,12 @@ def run_cell(
                 run.train(config, root, on_evaluation=on_evaluation, eval_first=eval_first)
             elif action == "resume":
                 run.resume(run_dir, config.steps, on_evaluation=on_evaluation, eval_first=eval_first)
-            if eval_episodes and action != "skip":
+            elif action == "finish":
+                from drivelab.training.plots import plot_learning_curve
+
+                plot_learning_curve(run_dir)
+            evaluated = action == "finish" and (run_dir / "eval.json").is_file()
+            if eval_episodes and action != "skip" and not evaluated:
                 evaluate_run(run_dir, episodes=eval_episodes, first=eval_first)
         except run.StoppedByEvaluation as stop:
             outcome["stopped"] = stop.steps

@@ -172,6 +172,27 @@ def test_a_run_stopped_between_its_final_checkpoint_and_its_model_is_finished(tm
     assert again.keys() == first.keys() and all(torch.equal(again[k], first[k]) for k in first)
 
 
+def test_a_run_killed_between_its_model_and_its_learning_curve_is_finished(tmp_path):
+    """Killed after model.zip was saved, before learning_curve.png was drawn (found by SIGKILL of a
+    sweep's process group): the re-run draws the curve and evaluates the run, without training it
+    again, instead of skipping it as finished without the curve that the run never stopped has."""
+    runs = tmp_path / "runs"
+    sweep = expand_sweep(tiny_spec(steps=32, seeds=1), runs)
+    run_sweep(sweep, workers=1)
+    run_dir = runs / "ppo-highway-s0"
+    evaluation = json.loads((run_dir / "eval.json").read_text())["per_episode"]
+    model = (run_dir / "model.zip").stat().st_mtime_ns
+    (run_dir / "learning_curve.png").unlink()
+    (run_dir / "eval.json").unlink()  # the sweep evaluates after the curve: none yet either
+    assert [action for _, action in plan(sweep)] == ["finish"]
+    assert [(o["action"], o["ok"]) for o in run_sweep(sweep, workers=1)] == [("finish", True)]
+    assert (run_dir / "learning_curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not (run_dir / "learning_curve.tmp.png").exists()  # drawn beside it, then renamed
+    assert json.loads((run_dir / "eval.json").read_text())["per_episode"] == evaluation
+    assert (run_dir / "model.zip").stat().st_mtime_ns == model
+    assert [action for _, action in plan(sweep)] == ["skip"]
+
+
 def test_two_cells_of_one_config_are_refused(tmp_path):
     spec = tiny_spec(seeds=1, env=["highway", "drivelab/Highway-v0"])  # one scenario, two names
     with pytest.raises(UsageError, match="are the same run"):

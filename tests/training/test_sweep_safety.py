@@ -167,6 +167,8 @@ def test_a_readable_manifest_still_resumes_and_skips(tmp_path):
     assert [action for _, action in plan(sweep)] == ["resume"]
     (run_dir / MANIFEST).write_text(json.dumps({"steps": 64, "sha256": "x"}))
     (run_dir / "model.zip").write_text("m")
+    assert [action for _, action in plan(sweep)] == ["finish"]  # killed before its learning curve
+    (run_dir / "learning_curve.png").write_text("png")
     assert [action for _, action in plan(sweep)] == ["evaluate"]
     (run_dir / "eval.json").write_text("{}")
     assert [action for _, action in plan(sweep)] == ["skip"]
