@@ -25,6 +25,9 @@ anything a run does not write are refused before anything runs.
 from __future__ import annotations
 
 import contextlib
+import errno
+import fcntl
+import hashlib
 import itertools
 import json
 import multiprocessing
@@ -49,6 +52,7 @@ SWEEP_KEYS = ("name", "runs_dir", "eval_episodes", "base", "grid", "overrides")
 MERGED_FIELDS = ("hyperparams", "env_options")  # dict fields merged key by key, not replaced
 EXECUTORS = ("pool", "ray")
 LOG_FOLDER = ".sweep-logs"  # per-run stdout/stderr of the workers, beside the run directories
+LOCK_FILE = ".sweep.lock"  # the runs a command is running now (``claim_runs``), beside them
 
 
 @dataclass(frozen=True)
@@ -423,6 +427,38 @@ def _ray(function: Callable, jobs: Iterator[dict], workers: int, address: str | 
             ray.shutdown()
 
 
+@contextlib.contextmanager
+def claim_runs(runs_dir: Path, names: Iterable[str]) -> Iterator[None]:
+    """Hold the run directories ``names`` of ``runs_dir`` for this process: a second command that
+    would run one of them (the same sweep started twice, a double click) is refused with one
+    UsageError line instead of training into the same directories at once, which mixes their logs
+    and results. Commands running other runs of the same folder go on side by side.
+
+    One byte-range lock (``fcntl.lockf``) per run in ``runs_dir/.sweep.lock``, at an offset drawn
+    from its name; the locks go with the process, so a killed command leaves none behind. On a file
+    system without locks (some network mounts) runs are not claimed."""
+    path = runs_dir / LOCK_FILE
+    try:
+        handle = path.open("a")
+    except OSError as exc:
+        raise UsageError(
+            f"cannot write in the runs folder {str(runs_dir)!r}: {exc.strerror or exc}"
+        ) from None
+    with handle:
+        for name in names:
+            offset = int.from_bytes(hashlib.sha256(name.encode()).digest()[:7], "big")
+            try:
+                fcntl.lockf(handle, fcntl.LOCK_EX | fcntl.LOCK_NB, 1, offset)
+            except OSError as exc:
+                if exc.errno not in (errno.EACCES, errno.EAGAIN):
+                    break  # no locks on this file system
+                raise UsageError(
+                    f"run {str(runs_dir / name)!r} is being run by another drivelab command (the same "
+                    "sweep or ablation started twice?); wait for it to end, or stop it, then re-run"
+                ) from None
+        yield
+
+
 def check_workers(executor: str, workers: int | None, address: str | None) -> int:
     """The number of parallel runs (default: one per core), checked with the executor choice."""
     if executor not in EXECUTORS:
@@ -452,31 +488,39 @@ def run_sweep(
         installed on its nodes and ``runs_dir`` on storage they share.
     """
     workers = check_workers(executor, workers, address)
-    steps = plan(sweep)
+    if all(action == "skip" for _, action in plan(sweep)):  # every cell checked before anything is written
+        return [_skipped(cell) for cell in sweep.cells]  # nothing to run: no lock taken
     from drivelab.training.evaluate import make_out_dir
 
     runs_dir = make_out_dir(sweep.runs_dir.resolve(), "runs folder")
-    outcomes = [
-        {"name": c.config.name, "action": "skip", "ok": True, "error": None, "seconds": 0.0, "stopped": None}
-        for c, action in steps
-        if action == "skip"
-    ]
-    jobs = [
-        {"config_values": c.config.to_dict(), "runs_dir": str(runs_dir), "action": action,
-         "eval_episodes": sweep.eval_episodes}
-        for c, action in steps
-        if action != "skip"
-    ]  # fmt: skip
-    if not jobs:
-        return outcomes
-    results = execute(run_cell, jobs, executor, workers, address)
-    with tqdm(total=len(jobs), desc=f"sweep ({executor}, {workers} workers)", unit="run") as bar:
-        for outcome in results:
-            outcomes.append(outcome)
-            bar.set_postfix_str(f"{outcome['name']}: {'ok' if outcome['ok'] else 'FAILED'}")
-            bar.update(1)
+    with claim_runs(runs_dir, [cell.config.name for cell in sweep.cells]):
+        steps = plan(sweep)  # again, now that no other command can change them
+        outcomes = [_skipped(cell) for cell, action in steps if action == "skip"]
+        jobs = [
+            {"config_values": c.config.to_dict(), "runs_dir": str(runs_dir), "action": action,
+             "eval_episodes": sweep.eval_episodes}
+            for c, action in steps
+            if action != "skip"
+        ]  # fmt: skip
+        results = execute(run_cell, jobs, executor, workers, address)
+        with tqdm(total=len(jobs), desc=f"sweep ({executor}, {workers} workers)", unit="run") as bar:
+            for outcome in results:
+                outcomes.append(outcome)
+                bar.set_postfix_str(f"{outcome['name']}: {'ok' if outcome['ok'] else 'FAILED'}")
+                bar.update(1)
     order = {c.config.name: i for i, c in enumerate(sweep.cells)}
     return sorted(outcomes, key=lambda o: order[o["name"]])
+
+
+def _skipped(cell: Cell) -> dict:
+    return {
+        "name": cell.config.name,
+        "action": "skip",
+        "ok": True,
+        "error": None,
+        "seconds": 0.0,
+        "stopped": None,
+    }
 
 
 def run_dirs(sweep: Sweep) -> list[Path]:
