@@ -30,12 +30,15 @@ import fcntl
 import hashlib
 import itertools
 import json
+import logging
 import multiprocessing
 import os
 import re
+import socket
 import threading
 import time
 import traceback
+import warnings
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
@@ -53,6 +56,7 @@ MERGED_FIELDS = ("hyperparams", "env_options")  # dict fields merged key by key,
 EXECUTORS = ("pool", "ray")
 LOG_FOLDER = ".sweep-logs"  # per-run stdout/stderr of the workers, beside the run directories
 LOCK_FILE = ".sweep.lock"  # the runs a command is running now (``claim_runs``), beside them
+RAY_CONNECT_TIMEOUT_S = 10  # --address: how long the cluster's port may take to answer
 
 
 @dataclass(frozen=True)
@@ -399,22 +403,71 @@ def _pool(function: Callable, jobs: Iterator[dict], workers: int, in_flight: int
             raise
 
 
-def _ray(function: Callable, jobs: Iterator[dict], workers: int, address: str | None,
-         in_flight: int | None) -> Iterator[dict]:  # fmt: skip
+def _ray_init(workers: int, address: str | None) -> bool:
+    """Start a local Ray cluster of ``workers`` CPUs, or join the one at ``address``, unless Ray is
+    running in this process already; True when this call started it (then shut it down).
+
+    A cluster that cannot be joined is one UsageError line, within ``RAY_CONNECT_TIMEOUT_S`` where
+    nothing answers at its host and port (Ray itself would retry for minutes), without Ray's
+    messages about the failed attempt."""
     try:
         import ray
     except ImportError:
         raise UsageError("--executor ray needs Ray: pip install 'drivelab[ray]'") from None
-    started = not ray.is_initialized()
-    if started:
-        if address:
-            try:
-                ray.init(address=address, include_dashboard=False, log_to_driver=False)
-            except (ConnectionError, ValueError, RuntimeError) as exc:
-                raise UsageError(f"cannot join the Ray cluster at {address!r}: {exc}") from None
-        else:
-            # "local": always a fresh cluster of our own, never someone else's running one
-            ray.init(address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False)
+    if ray.is_initialized():
+        return False
+    if not address:
+        # "local": always a fresh cluster of our own, never someone else's running one
+        ray.init(address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False)
+        return True
+    _check_answers(address)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the Ray client's "connection timed out" warning
+            ray.init(
+                address=address, include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING
+            )
+    except (ConnectionError, ValueError, RuntimeError) as exc:
+        raise UsageError(f"cannot join the Ray cluster at {address!r}: {exc}") from None
+    return True
+
+
+def _check_answers(address: str) -> None:
+    """A UsageError when nothing answers at the host and port of ``address`` (``ray://host:port``
+    or ``host:port``; others, such as ``auto``, are left to Ray)."""
+    match = re.fullmatch(r"(?:ray://)?\[?([^\[\]/]+?)\]?:(\d+)", address)
+    if match is None:
+        return
+    host, port = match.group(1), int(match.group(2))
+    try:
+        socket.create_connection((host, port), timeout=RAY_CONNECT_TIMEOUT_S).close()
+    except (OSError, ValueError, OverflowError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc) or type(exc).__name__
+        raise UsageError(
+            f"cannot join the Ray cluster at {address!r}: nothing answers at {host}:{port} ({reason})"
+        ) from None
+
+
+@contextlib.contextmanager
+def executor_ready(executor: str, workers: int, address: str | None) -> Iterator[None]:
+    """With ``executor`` "ray": Ray started (or its cluster joined) for the block, so that a cluster
+    that cannot be joined stops a command before it writes anything or draws a progress bar; shut
+    down after the block if started here. The process pool starts with its first job."""
+    started = executor == "ray" and _ray_init(workers, address)
+    try:
+        yield
+    finally:
+        if started:
+            import ray
+
+            ray.shutdown()
+
+
+def _ray(function: Callable, jobs: Iterator[dict], workers: int, address: str | None,
+         in_flight: int | None) -> Iterator[dict]:  # fmt: skip
+    import ray
+
+    started = _ray_init(workers, address)
     try:
         remote = ray.remote(num_cpus=1, max_retries=0)(function)
         pending = [remote.remote(**job) for job in itertools.islice(jobs, in_flight)]
@@ -489,25 +542,26 @@ def run_sweep(
     """
     workers = check_workers(executor, workers, address)
     if all(action == "skip" for _, action in plan(sweep)):  # every cell checked before anything is written
-        return [_skipped(cell) for cell in sweep.cells]  # nothing to run: no lock taken
+        return [_skipped(cell) for cell in sweep.cells]  # nothing to run: no Ray started, no lock taken
     from drivelab.training.evaluate import make_out_dir
 
-    runs_dir = make_out_dir(sweep.runs_dir.resolve(), "runs folder")
-    with claim_runs(runs_dir, [cell.config.name for cell in sweep.cells]):
-        steps = plan(sweep)  # again, now that no other command can change them
-        outcomes = [_skipped(cell) for cell, action in steps if action == "skip"]
-        jobs = [
-            {"config_values": c.config.to_dict(), "runs_dir": str(runs_dir), "action": action,
-             "eval_episodes": sweep.eval_episodes}
-            for c, action in steps
-            if action != "skip"
-        ]  # fmt: skip
-        results = execute(run_cell, jobs, executor, workers, address)
-        with tqdm(total=len(jobs), desc=f"sweep ({executor}, {workers} workers)", unit="run") as bar:
-            for outcome in results:
-                outcomes.append(outcome)
-                bar.set_postfix_str(f"{outcome['name']}: {'ok' if outcome['ok'] else 'FAILED'}")
-                bar.update(1)
+    with executor_ready(executor, workers, address):
+        runs_dir = make_out_dir(sweep.runs_dir.resolve(), "runs folder")
+        with claim_runs(runs_dir, [cell.config.name for cell in sweep.cells]):
+            steps = plan(sweep)  # again, now that no other command can change them
+            outcomes = [_skipped(cell) for cell, action in steps if action == "skip"]
+            jobs = [
+                {"config_values": c.config.to_dict(), "runs_dir": str(runs_dir), "action": action,
+                 "eval_episodes": sweep.eval_episodes}
+                for c, action in steps
+                if action != "skip"
+            ]  # fmt: skip
+            results = execute(run_cell, jobs, executor, workers, address)
+            with tqdm(total=len(jobs), desc=f"sweep ({executor}, {workers} workers)", unit="run") as bar:
+                for outcome in results:
+                    outcomes.append(outcome)
+                    bar.set_postfix_str(f"{outcome['name']}: {'ok' if outcome['ok'] else 'FAILED'}")
+                    bar.update(1)
     order = {c.config.name: i for i, c in enumerate(sweep.cells)}
     return sorted(outcomes, key=lambda o: order[o["name"]])
 

@@ -251,6 +251,39 @@ def test_two_run_grid_through_ray_matches_local_runs(tmp_path):
     assert [o["action"] for o in run_sweep(expand_sweep(spec, ray_runs), executor="ray")] == ["skip", "skip"]
 
 
+@pytest.mark.parametrize("command", ["sweep", "tune"])
+@pytest.mark.parametrize("address", ["127.0.0.1:{port}", "ray://127.0.0.1:{port}", "bogus"])
+def test_a_ray_cluster_that_cannot_be_joined_is_one_line_and_writes_nothing(tmp_path, command, address):
+    """Ray retried an address where nothing answers for minutes (host:port) or 30 s (ray://), and
+    any failure to join came after the runs folder was made and the progress bar drawn, with Ray's
+    messages: now one error line, at once, and nothing written."""
+    import socket
+
+    from typer.testing import CliRunner
+
+    from drivelab.cli import app
+
+    pytest.importorskip("ray")
+    with socket.socket() as probe:  # a port nothing listens on once it is closed
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    address = address.format(port=port)
+    if command == "sweep":
+        (tmp_path / "sweep.yaml").write_text(yaml.safe_dump(tiny_spec()))
+        args = ["sweep", str(tmp_path / "sweep.yaml"), "--runs-dir", str(tmp_path / "out")]
+    else:
+        study = {**tiny_spec()["base"], "space": {"gamma": {"type": "float", "low": 0.8, "high": 0.9}}}
+        (tmp_path / "study.yaml").write_text(yaml.safe_dump({**study, "n_trials": 1}))
+        args = ["tune", str(tmp_path / "study.yaml"), "--study-dir", str(tmp_path / "out")]
+    result = CliRunner().invoke(app, [*args, "--executor", "ray", "--workers", "1", "--address", address])
+    assert result.exit_code == 2, result.output
+    (line,) = result.output.splitlines()
+    assert line.startswith(f"error: cannot join the Ray cluster at {address!r}: "), line
+    if address != "bogus":
+        assert "nothing answers at 127.0.0.1" in line
+    assert not (tmp_path / "out").exists()
+
+
 def test_cli_sweep_bad_file_and_dry_run(tmp_path):
     from typer.testing import CliRunner
 
