@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import fcntl
 import glob
 import json
 import math
@@ -332,6 +333,34 @@ def _write_csvs(folder: Path, groups, summaries) -> None:
 
 MANIFEST = "report-manifest.json"  # the files a report directory's drivelab report consists of
 LEGACY_REPORT_FILES = ("report.md", "summary.csv", "runs.csv", "learning_curves.png", "metrics.png")
+TMP_PREFIX = ".report.tmp-"  # the folder a report is written into before its files are moved out
+
+
+def _tmp_folders(out_dir: Path) -> list[Path]:
+    """The folders in ``out_dir`` that ``publish_dir`` writes reports into: of a report being
+    written now (locked), or left by one killed while it wrote (SIGKILL: no cleanup)."""
+    return sorted(
+        p for p in out_dir.iterdir() if p.name.startswith(TMP_PREFIX) and p.is_dir() and not p.is_symlink()
+    )
+
+
+def _remove_stale_tmp_folders(out_dir: Path, keep: Path) -> None:
+    """Remove the temporary folders of reports killed while they were written; a folder that
+    another process is writing a report into holds a lock (``publish_dir``) and stays."""
+    for folder in _tmp_folders(out_dir):
+        if folder == keep:
+            continue
+        try:
+            handle = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+        except OSError:
+            continue  # gone meanwhile
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            shutil.rmtree(folder, ignore_errors=True)
+        except BlockingIOError:
+            pass  # a report being written now
+        finally:
+            os.close(handle)
 
 
 def previous_report_files(out_dir: Path) -> list[str] | None:
@@ -365,7 +394,8 @@ def _check_out_dir(out_dir: Path) -> list[str]:
     if not out_dir.is_dir():
         raise UsageError(f"--out {str(out_dir)!r} is a file, not a directory")
     previous = previous_report_files(out_dir)
-    if previous is None and any(out_dir.iterdir()):
+    ours = set(_tmp_folders(out_dir))  # a report killed while it was written left one: not the user's
+    if previous is None and any(p not in ours for p in out_dir.iterdir()):
         raise UsageError(
             f"--out {str(out_dir)!r} is not empty and holds no drivelab report; choose another --out "
             "(compare never deletes or overwrites files it did not write)"
@@ -379,17 +409,22 @@ def publish_dir(out_dir: Path, fill) -> Path:
 
     A failure while filling leaves ``out_dir`` as it was. Of a previous report only the files its
     manifest lists are replaced or removed; other files in ``out_dir`` are never touched, and a
-    non-empty ``out_dir`` without a report is refused.
+    non-empty ``out_dir`` without a report is refused. The temporary folder of a report killed
+    while it was written (SIGKILL: no cleanup) is not the user's: it does not make ``out_dir``
+    foreign, and the next report removes it.
     """
     out_dir = Path(out_dir)
     previous = _check_out_dir(out_dir)
     created = [p for p in (out_dir, *out_dir.parents) if not p.exists()]
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=".report.tmp-", dir=out_dir))
+        tmp = Path(tempfile.mkdtemp(prefix=TMP_PREFIX, dir=out_dir))
     except OSError as exc:
         _remove_empty(created)
         raise UsageError(f"cannot write a report in {str(out_dir)!r}: {exc.strerror}") from None
+    # locked while in use: a later report removes it only if this process was killed meanwhile
+    lock = os.open(tmp, os.O_RDONLY | os.O_DIRECTORY)
+    fcntl.flock(lock, fcntl.LOCK_EX)
     try:
         fill(tmp)
         written = sorted(p.name for p in tmp.iterdir())
@@ -406,7 +441,10 @@ def publish_dir(out_dir: Path, fill) -> Path:
         shutil.rmtree(tmp, ignore_errors=True)
         _remove_empty(created)
         raise
+    finally:
+        os.close(lock)
     shutil.rmtree(tmp, ignore_errors=True)
+    _remove_stale_tmp_folders(out_dir, keep=tmp)
     return out_dir
 
 

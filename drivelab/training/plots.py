@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import os
 from pathlib import Path
 
 import numpy as np
@@ -45,5 +46,9 @@ def plot_learning_curve(run_dir: str | Path) -> Path:
         ax.legend(loc="best", fontsize=8)
     path = run_dir / "learning_curve.png"
     fig.tight_layout()
-    fig.savefig(path)
+    # written whole or not at all: a run killed while drawing it has none, and a sweep's re-run
+    # draws it (``sweep.cell_action``: "finish"), instead of keeping a cut-off image
+    tmp = run_dir / "learning_curve.tmp.png"
+    fig.savefig(tmp)
+    os.replace(tmp, path)
     return path

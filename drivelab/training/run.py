@@ -488,7 +488,7 @@ def _stopped_before_first_checkpoint(run_dir: Path) -> bool:
 # no checkpoint may remove. The checkpoint's own files appear when one was being written.
 UNSTARTED_FILES = (
     "config.yaml", "monitor.csv", "progress.csv", "progress-*.csv", "evaluations.csv",
-    "events.out.tfevents.*", "learning_curve.png",
+    "events.out.tfevents.*", "learning_curve.png", "learning_curve.tmp.png",
 )  # fmt: skip
 UNSTARTED_FOLDERS = {
     "checkpoints": ("resume-*.json", "resume-*.npz", "resume.tmp.json", "resume.tmp.npz",

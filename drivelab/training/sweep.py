@@ -25,14 +25,20 @@ anything a run does not write are refused before anything runs.
 from __future__ import annotations
 
 import contextlib
+import errno
+import fcntl
+import hashlib
 import itertools
 import json
+import logging
 import multiprocessing
 import os
 import re
+import socket
 import threading
 import time
 import traceback
+import warnings
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass
@@ -49,6 +55,8 @@ SWEEP_KEYS = ("name", "runs_dir", "eval_episodes", "base", "grid", "overrides")
 MERGED_FIELDS = ("hyperparams", "env_options")  # dict fields merged key by key, not replaced
 EXECUTORS = ("pool", "ray")
 LOG_FOLDER = ".sweep-logs"  # per-run stdout/stderr of the workers, beside the run directories
+LOCK_FILE = ".sweep.lock"  # the runs a command is running now (``claim_runs``), beside them
+RAY_CONNECT_TIMEOUT_S = 10  # --address: how long the cluster's port may take to answer
 
 
 @dataclass(frozen=True)
@@ -187,13 +195,16 @@ def _check_cells(sweep: Sweep) -> None:
 
 # --- what each cell needs --------------------------------------------------------------------
 def cell_action(run_dir: Path, config: RunConfig, eval_episodes: int) -> str:
-    """What a re-run must do for this cell: "train", "restart", "resume", "evaluate" or "skip".
+    """What a re-run must do for this cell: "train", "restart", "resume", "finish", "evaluate" or
+    "skip".
 
     "restart" is for a run stopped before its first checkpoint (no checkpoint, no model: nothing
-    to continue from), whose directory holds only what such a run writes. Raises UsageError when
-    ``run_dir`` is not that cell's run (a file, a folder of something else, a run with a different
-    config) or is a damaged run (a checkpoint or model without a readable manifest): nothing in
-    it is replaced or deleted.
+    to continue from), whose directory holds only what such a run writes. "finish" is for a run
+    killed after its model was saved, before its learning curve was drawn: the curve is drawn (and
+    the run evaluated if it has no eval.json yet), as the run that was never stopped has it.
+    Raises UsageError when ``run_dir`` is not that cell's run (a file, a folder of something else,
+    a run with a different config) or is a damaged run (a checkpoint or model without a readable
+    manifest): nothing in it is replaced or deleted.
     """
     from drivelab.training.evaluate import load_run_config
 
@@ -222,6 +233,8 @@ def cell_action(run_dir: Path, config: RunConfig, eval_episodes: int) -> str:
     steps = _manifest_steps(run_dir, manifest_path)
     if steps < config.steps or not (run_dir / "model.zip").is_file():
         return "resume"
+    if not (run_dir / "learning_curve.png").is_file():
+        return "finish"  # killed between model.zip and its learning curve (run._save_model)
     if eval_episodes and not (run_dir / "eval.json").is_file():
         return "evaluate"
     return "skip"
@@ -302,7 +315,12 @@ def run_cell(
                 run.train(config, root, on_evaluation=on_evaluation, eval_first=eval_first)
             elif action == "resume":
                 run.resume(run_dir, config.steps, on_evaluation=on_evaluation, eval_first=eval_first)
-            if eval_episodes and action != "skip":
+            elif action == "finish":
+                from drivelab.training.plots import plot_learning_curve
+
+                plot_learning_curve(run_dir)
+            evaluated = action == "finish" and (run_dir / "eval.json").is_file()
+            if eval_episodes and action != "skip" and not evaluated:
                 evaluate_run(run_dir, episodes=eval_episodes, first=eval_first)
         except run.StoppedByEvaluation as stop:
             outcome["stopped"] = stop.steps
@@ -385,22 +403,71 @@ def _pool(function: Callable, jobs: Iterator[dict], workers: int, in_flight: int
             raise
 
 
-def _ray(function: Callable, jobs: Iterator[dict], workers: int, address: str | None,
-         in_flight: int | None) -> Iterator[dict]:  # fmt: skip
+def _ray_init(workers: int, address: str | None) -> bool:
+    """Start a local Ray cluster of ``workers`` CPUs, or join the one at ``address``, unless Ray is
+    running in this process already; True when this call started it (then shut it down).
+
+    A cluster that cannot be joined is one UsageError line, within ``RAY_CONNECT_TIMEOUT_S`` where
+    nothing answers at its host and port (Ray itself would retry for minutes), without Ray's
+    messages about the failed attempt."""
     try:
         import ray
     except ImportError:
         raise UsageError("--executor ray needs Ray: pip install 'drivelab[ray]'") from None
-    started = not ray.is_initialized()
-    if started:
-        if address:
-            try:
-                ray.init(address=address, include_dashboard=False, log_to_driver=False)
-            except (ConnectionError, ValueError, RuntimeError) as exc:
-                raise UsageError(f"cannot join the Ray cluster at {address!r}: {exc}") from None
-        else:
-            # "local": always a fresh cluster of our own, never someone else's running one
-            ray.init(address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False)
+    if ray.is_initialized():
+        return False
+    if not address:
+        # "local": always a fresh cluster of our own, never someone else's running one
+        ray.init(address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False)
+        return True
+    _check_answers(address)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the Ray client's "connection timed out" warning
+            ray.init(
+                address=address, include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING
+            )
+    except (ConnectionError, ValueError, RuntimeError) as exc:
+        raise UsageError(f"cannot join the Ray cluster at {address!r}: {exc}") from None
+    return True
+
+
+def _check_answers(address: str) -> None:
+    """A UsageError when nothing answers at the host and port of ``address`` (``ray://host:port``
+    or ``host:port``; others, such as ``auto``, are left to Ray)."""
+    match = re.fullmatch(r"(?:ray://)?\[?([^\[\]/]+?)\]?:(\d+)", address)
+    if match is None:
+        return
+    host, port = match.group(1), int(match.group(2))
+    try:
+        socket.create_connection((host, port), timeout=RAY_CONNECT_TIMEOUT_S).close()
+    except (OSError, ValueError, OverflowError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc) or type(exc).__name__
+        raise UsageError(
+            f"cannot join the Ray cluster at {address!r}: nothing answers at {host}:{port} ({reason})"
+        ) from None
+
+
+@contextlib.contextmanager
+def executor_ready(executor: str, workers: int, address: str | None) -> Iterator[None]:
+    """With ``executor`` "ray": Ray started (or its cluster joined) for the block, so that a cluster
+    that cannot be joined stops a command before it writes anything or draws a progress bar; shut
+    down after the block if started here. The process pool starts with its first job."""
+    started = executor == "ray" and _ray_init(workers, address)
+    try:
+        yield
+    finally:
+        if started:
+            import ray
+
+            ray.shutdown()
+
+
+def _ray(function: Callable, jobs: Iterator[dict], workers: int, address: str | None,
+         in_flight: int | None) -> Iterator[dict]:  # fmt: skip
+    import ray
+
+    started = _ray_init(workers, address)
     try:
         remote = ray.remote(num_cpus=1, max_retries=0)(function)
         pending = [remote.remote(**job) for job in itertools.islice(jobs, in_flight)]
@@ -411,6 +478,38 @@ def _ray(function: Callable, jobs: Iterator[dict], workers: int, address: str | 
     finally:
         if started:
             ray.shutdown()
+
+
+@contextlib.contextmanager
+def claim_runs(runs_dir: Path, names: Iterable[str]) -> Iterator[None]:
+    """Hold the run directories ``names`` of ``runs_dir`` for this process: a second command that
+    would run one of them (the same sweep started twice, a double click) is refused with one
+    UsageError line instead of training into the same directories at once, which mixes their logs
+    and results. Commands running other runs of the same folder go on side by side.
+
+    One byte-range lock (``fcntl.lockf``) per run in ``runs_dir/.sweep.lock``, at an offset drawn
+    from its name; the locks go with the process, so a killed command leaves none behind. On a file
+    system without locks (some network mounts) runs are not claimed."""
+    path = runs_dir / LOCK_FILE
+    try:
+        handle = path.open("a")
+    except OSError as exc:
+        raise UsageError(
+            f"cannot write in the runs folder {str(runs_dir)!r}: {exc.strerror or exc}"
+        ) from None
+    with handle:
+        for name in names:
+            offset = int.from_bytes(hashlib.sha256(name.encode()).digest()[:7], "big")
+            try:
+                fcntl.lockf(handle, fcntl.LOCK_EX | fcntl.LOCK_NB, 1, offset)
+            except OSError as exc:
+                if exc.errno not in (errno.EACCES, errno.EAGAIN):
+                    break  # no locks on this file system
+                raise UsageError(
+                    f"run {str(runs_dir / name)!r} is being run by another drivelab command (the same "
+                    "sweep or ablation started twice?); wait for it to end, or stop it, then re-run"
+                ) from None
+        yield
 
 
 def check_workers(executor: str, workers: int | None, address: str | None) -> int:
@@ -442,31 +541,40 @@ def run_sweep(
         installed on its nodes and ``runs_dir`` on storage they share.
     """
     workers = check_workers(executor, workers, address)
-    steps = plan(sweep)
+    if all(action == "skip" for _, action in plan(sweep)):  # every cell checked before anything is written
+        return [_skipped(cell) for cell in sweep.cells]  # nothing to run: no Ray started, no lock taken
     from drivelab.training.evaluate import make_out_dir
 
-    runs_dir = make_out_dir(sweep.runs_dir.resolve(), "runs folder")
-    outcomes = [
-        {"name": c.config.name, "action": "skip", "ok": True, "error": None, "seconds": 0.0, "stopped": None}
-        for c, action in steps
-        if action == "skip"
-    ]
-    jobs = [
-        {"config_values": c.config.to_dict(), "runs_dir": str(runs_dir), "action": action,
-         "eval_episodes": sweep.eval_episodes}
-        for c, action in steps
-        if action != "skip"
-    ]  # fmt: skip
-    if not jobs:
-        return outcomes
-    results = execute(run_cell, jobs, executor, workers, address)
-    with tqdm(total=len(jobs), desc=f"sweep ({executor}, {workers} workers)", unit="run") as bar:
-        for outcome in results:
-            outcomes.append(outcome)
-            bar.set_postfix_str(f"{outcome['name']}: {'ok' if outcome['ok'] else 'FAILED'}")
-            bar.update(1)
+    with executor_ready(executor, workers, address):
+        runs_dir = make_out_dir(sweep.runs_dir.resolve(), "runs folder")
+        with claim_runs(runs_dir, [cell.config.name for cell in sweep.cells]):
+            steps = plan(sweep)  # again, now that no other command can change them
+            outcomes = [_skipped(cell) for cell, action in steps if action == "skip"]
+            jobs = [
+                {"config_values": c.config.to_dict(), "runs_dir": str(runs_dir), "action": action,
+                 "eval_episodes": sweep.eval_episodes}
+                for c, action in steps
+                if action != "skip"
+            ]  # fmt: skip
+            results = execute(run_cell, jobs, executor, workers, address)
+            with tqdm(total=len(jobs), desc=f"sweep ({executor}, {workers} workers)", unit="run") as bar:
+                for outcome in results:
+                    outcomes.append(outcome)
+                    bar.set_postfix_str(f"{outcome['name']}: {'ok' if outcome['ok'] else 'FAILED'}")
+                    bar.update(1)
     order = {c.config.name: i for i, c in enumerate(sweep.cells)}
     return sorted(outcomes, key=lambda o: order[o["name"]])
+
+
+def _skipped(cell: Cell) -> dict:
+    return {
+        "name": cell.config.name,
+        "action": "skip",
+        "ok": True,
+        "error": None,
+        "seconds": 0.0,
+        "stopped": None,
+    }
 
 
 def run_dirs(sweep: Sweep) -> list[Path]:

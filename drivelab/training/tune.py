@@ -54,7 +54,7 @@ from tqdm import tqdm
 from drivelab.config import FIELDS, RunConfig, build_config
 from drivelab.errors import UsageError
 from drivelab.hyperparams import with_shipped_hyperparams, zoo_yaml
-from drivelab.training.sweep import cell_action, check_workers, execute, run_cell
+from drivelab.training.sweep import cell_action, check_workers, execute, executor_ready, run_cell
 from drivelab.yaml_io import load_yaml
 
 STUDY_KEYS = ("name", "study_dir", "n_trials", "metric", "direction", "space", "sampler", "pruner",
@@ -443,8 +443,11 @@ def run_study(
 
     workers = check_workers(executor, workers, address)
     _check_study_dir(study)
-    folder = make_out_dir(study.study_dir.resolve(), "study folder")
-    with _locked(folder):
+    with contextlib.ExitStack() as held:
+        # Ray first: a cluster that cannot be joined stops the study before it writes anything
+        held.enter_context(executor_ready(executor, workers, address))
+        folder = make_out_dir(study.study_dir.resolve(), "study folder")
+        held.enter_context(_locked(folder))
         (folder / SPEC_FILE).write_text(
             yaml.safe_dump(json.loads(json.dumps(study.identity())), sort_keys=False)
         )

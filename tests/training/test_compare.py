@@ -130,6 +130,31 @@ def test_failure_midway_leaves_nothing(runs, tmp_path, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["runs"]
 
 
+def test_a_report_killed_while_written_does_not_block_the_next(runs, tmp_path):
+    """A report killed while it was written (SIGKILL of ``drivelab sweep --report`` or ``ablate``)
+    leaves its temporary folder: the next report into that folder is written, not refused as a
+    folder of the user's, and removes it; the folder of a report being written now stays."""
+    import fcntl
+    import os
+
+    out = tmp_path / "report"
+    stale = out / ".report.tmp-killed"
+    stale.mkdir(parents=True)
+    (stale / "report.md").write_text("half a report")
+    live = out / ".report.tmp-live"
+    live.mkdir()
+    lock = os.open(live, os.O_RDONLY | os.O_DIRECTORY)
+    fcntl.flock(lock, fcntl.LOCK_EX)  # as publish_dir holds its own
+    try:
+        compare([str(runs / "ppo-s*")], out)
+    finally:
+        os.close(lock)
+    assert (out / "report.md").is_file() and "ppo" in (out / "summary.csv").read_text()
+    assert not stale.exists() and live.is_dir()
+    compare([str(runs / "dqn-s*")], out)  # a report again: the live one is left over now
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []
+
+
 def test_foreign_output_folder_is_refused(runs, tmp_path):
     (tmp_path / "mine").mkdir()
     (tmp_path / "mine" / "notes.txt").write_text("keep")

@@ -172,6 +172,27 @@ def test_a_run_stopped_between_its_final_checkpoint_and_its_model_is_finished(tm
     assert again.keys() == first.keys() and all(torch.equal(again[k], first[k]) for k in first)
 
 
+def test_a_run_killed_between_its_model_and_its_learning_curve_is_finished(tmp_path):
+    """Killed after model.zip was saved, before learning_curve.png was drawn (found by SIGKILL of a
+    sweep's process group): the re-run draws the curve and evaluates the run, without training it
+    again, instead of skipping it as finished without the curve that the run never stopped has."""
+    runs = tmp_path / "runs"
+    sweep = expand_sweep(tiny_spec(steps=32, seeds=1), runs)
+    run_sweep(sweep, workers=1)
+    run_dir = runs / "ppo-highway-s0"
+    evaluation = json.loads((run_dir / "eval.json").read_text())["per_episode"]
+    model = (run_dir / "model.zip").stat().st_mtime_ns
+    (run_dir / "learning_curve.png").unlink()
+    (run_dir / "eval.json").unlink()  # the sweep evaluates after the curve: none yet either
+    assert [action for _, action in plan(sweep)] == ["finish"]
+    assert [(o["action"], o["ok"]) for o in run_sweep(sweep, workers=1)] == [("finish", True)]
+    assert (run_dir / "learning_curve.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not (run_dir / "learning_curve.tmp.png").exists()  # drawn beside it, then renamed
+    assert json.loads((run_dir / "eval.json").read_text())["per_episode"] == evaluation
+    assert (run_dir / "model.zip").stat().st_mtime_ns == model
+    assert [action for _, action in plan(sweep)] == ["skip"]
+
+
 def test_two_cells_of_one_config_are_refused(tmp_path):
     spec = tiny_spec(seeds=1, env=["highway", "drivelab/Highway-v0"])  # one scenario, two names
     with pytest.raises(UsageError, match="are the same run"):
@@ -228,6 +249,39 @@ def test_two_run_grid_through_ray_matches_local_runs(tmp_path):
         pool_eval = json.loads((pool_dir / "eval.json").read_text())
         assert ray_eval["per_episode"] == pool_eval["per_episode"]
     assert [o["action"] for o in run_sweep(expand_sweep(spec, ray_runs), executor="ray")] == ["skip", "skip"]
+
+
+@pytest.mark.parametrize("command", ["sweep", "tune"])
+@pytest.mark.parametrize("address", ["127.0.0.1:{port}", "ray://127.0.0.1:{port}", "bogus"])
+def test_a_ray_cluster_that_cannot_be_joined_is_one_line_and_writes_nothing(tmp_path, command, address):
+    """Ray retried an address where nothing answers for minutes (host:port) or 30 s (ray://), and
+    any failure to join came after the runs folder was made and the progress bar drawn, with Ray's
+    messages: now one error line, at once, and nothing written."""
+    import socket
+
+    from typer.testing import CliRunner
+
+    from drivelab.cli import app
+
+    pytest.importorskip("ray")
+    with socket.socket() as probe:  # a port nothing listens on once it is closed
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    address = address.format(port=port)
+    if command == "sweep":
+        (tmp_path / "sweep.yaml").write_text(yaml.safe_dump(tiny_spec()))
+        args = ["sweep", str(tmp_path / "sweep.yaml"), "--runs-dir", str(tmp_path / "out")]
+    else:
+        study = {**tiny_spec()["base"], "space": {"gamma": {"type": "float", "low": 0.8, "high": 0.9}}}
+        (tmp_path / "study.yaml").write_text(yaml.safe_dump({**study, "n_trials": 1}))
+        args = ["tune", str(tmp_path / "study.yaml"), "--study-dir", str(tmp_path / "out")]
+    result = CliRunner().invoke(app, [*args, "--executor", "ray", "--workers", "1", "--address", address])
+    assert result.exit_code == 2, result.output
+    (line,) = result.output.splitlines()
+    assert line.startswith(f"error: cannot join the Ray cluster at {address!r}: "), line
+    if address != "bogus":
+        assert "nothing answers at 127.0.0.1" in line
+    assert not (tmp_path / "out").exists()
 
 
 def test_cli_sweep_bad_file_and_dry_run(tmp_path):

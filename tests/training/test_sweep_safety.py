@@ -167,6 +167,8 @@ def test_a_readable_manifest_still_resumes_and_skips(tmp_path):
     assert [action for _, action in plan(sweep)] == ["resume"]
     (run_dir / MANIFEST).write_text(json.dumps({"steps": 64, "sha256": "x"}))
     (run_dir / "model.zip").write_text("m")
+    assert [action for _, action in plan(sweep)] == ["finish"]  # killed before its learning curve
+    (run_dir / "learning_curve.png").write_text("png")
     assert [action for _, action in plan(sweep)] == ["evaluate"]
     (run_dir / "eval.json").write_text("{}")
     assert [action for _, action in plan(sweep)] == ["skip"]
@@ -233,3 +235,68 @@ def test_a_killed_sweep_leaves_no_workers_behind(tmp_path):
     for pid in alive:  # leave nothing running if the test fails
         os.kill(pid, signal.SIGKILL)
     assert not alive, "the sweep's workers outlived it"
+
+
+HOLD = """
+import sys
+from pathlib import Path
+from drivelab.training.sweep import claim_runs
+with claim_runs(Path(sys.argv[1]), sys.argv[2:]):
+    print("held", flush=True)
+    sys.stdin.read()
+"""
+
+
+def hold_runs(runs: Path, *names: str):
+    """Another process that holds ``names`` of ``runs`` as a running sweep does, until its stdin
+    closes (a context manager)."""
+    import contextlib
+    import subprocess
+    import sys
+
+    @contextlib.contextmanager
+    def holding():
+        holder = subprocess.Popen(
+            [sys.executable, "-c", HOLD, str(runs), *names],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        try:
+            assert holder.stdout.readline() == "held\n"
+            yield
+        finally:
+            holder.stdin.close()
+            holder.wait(timeout=30)
+
+    return holding()
+
+
+def test_a_sweep_whose_runs_another_command_is_running_is_refused(tmp_path, sweep_file):
+    """The same sweep started twice at once (a double click) trained the same runs in both and
+    mixed their logs (monitor.csv rows, evaluations.csv) without an error: the second is refused,
+    one line, exit 2, nothing changed."""
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    with hold_runs(runs, RUN):
+        before = snapshot(tmp_path)
+        result = runner.invoke(app, ["sweep", str(sweep_file), "--workers", "1", "--runs-dir", str(runs)])
+        assert result.exit_code == 2, result.output
+        assert result.output.splitlines() == [
+            f"error: run {str(runs / RUN)!r} is being run by another drivelab command (the same sweep or "
+            "ablation started twice?); wait for it to end, or stop it, then re-run"
+        ]
+        assert snapshot(tmp_path) == before
+
+
+def test_commands_running_other_runs_of_one_folder_go_on_side_by_side(tmp_path):
+    from drivelab.training.sweep import claim_runs
+
+    with hold_runs(tmp_path, "ppo-highway-s0", "ppo-highway-s1"):
+        with claim_runs(tmp_path, ["ppo-highway-s2", "dqn-highway-s0"]):
+            pass
+        with pytest.raises(UsageError, match="ppo-highway-s1' is being run by another drivelab command"):
+            with claim_runs(tmp_path, ["ppo-highway-s2", "ppo-highway-s1"]):
+                pass
+    with claim_runs(tmp_path, ["ppo-highway-s0", "ppo-highway-s1"]):  # its locks went with it
+        pass
