@@ -356,11 +356,42 @@ def _remove_stale_tmp_folders(out_dir: Path, keep: Path) -> None:
             continue  # gone meanwhile
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            # BlockingIOError: a report being written now. Any other error: a file system without
+            # locks (on NFS an exclusive flock needs a descriptor open for writing, which a folder's
+            # cannot be): whether it is in use cannot be told, so it stays (it blocks no report)
+            os.close(handle)
+            continue
+        try:
             shutil.rmtree(folder, ignore_errors=True)
-        except BlockingIOError:
-            pass  # a report being written now
         finally:
             os.close(handle)
+
+
+def _new_tmp_folder(out_dir: Path) -> tuple[Path, int]:
+    """A new temporary folder in ``out_dir`` for ``publish_dir``, and a descriptor of it holding its
+    lock, so that another report's ``_remove_stale_tmp_folders`` leaves it alone. A folder that such
+    a cleanup removed between its creation and its lock is replaced by a new one. On a file system
+    without locks the folder is not locked (and no cleanup removes it)."""
+    while True:
+        tmp = Path(tempfile.mkdtemp(prefix=TMP_PREFIX, dir=out_dir))
+        try:
+            handle = os.open(tmp, os.O_RDONLY | os.O_DIRECTORY)
+        except FileNotFoundError:
+            continue  # removed before it was opened
+        except OSError:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX)
+        except OSError:
+            return tmp, handle  # no locks on this file system
+        try:
+            if os.path.samestat(os.fstat(handle), os.stat(tmp)):
+                return tmp, handle
+        except FileNotFoundError:
+            pass
+        os.close(handle)  # removed before it was locked
 
 
 def previous_report_files(out_dir: Path) -> list[str] | None:
@@ -418,13 +449,11 @@ def publish_dir(out_dir: Path, fill) -> Path:
     created = [p for p in (out_dir, *out_dir.parents) if not p.exists()]
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=TMP_PREFIX, dir=out_dir))
+        # locked while in use: a later report removes it only if this process was killed meanwhile
+        tmp, lock = _new_tmp_folder(out_dir)
     except OSError as exc:
         _remove_empty(created)
         raise UsageError(f"cannot write a report in {str(out_dir)!r}: {exc.strerror}") from None
-    # locked while in use: a later report removes it only if this process was killed meanwhile
-    lock = os.open(tmp, os.O_RDONLY | os.O_DIRECTORY)
-    fcntl.flock(lock, fcntl.LOCK_EX)
     try:
         fill(tmp)
         written = sorted(p.name for p in tmp.iterdir())

@@ -155,6 +155,48 @@ def test_a_report_killed_while_written_does_not_block_the_next(runs, tmp_path):
     assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []
 
 
+def test_a_report_on_a_file_system_without_locks_is_written(runs, tmp_path, monkeypatch):
+    """On NFS an exclusive flock needs a descriptor open for writing, which a folder's cannot be
+    (flock(2), "NFS details"), and some file systems have no locks: the report folder's lock failed
+    with a traceback, leaving its temporary folder. Now the report is written unlocked, and a
+    leftover folder whose use cannot be told stays (it blocks no report)."""
+    import errno
+    import fcntl
+
+    def no_locks(fd, operation):
+        raise OSError(errno.EBADF, "Bad file descriptor")
+
+    out = tmp_path / "report"
+    stale = out / ".report.tmp-killed"
+    stale.mkdir(parents=True)
+    monkeypatch.setattr(fcntl, "flock", no_locks)
+    compare([str(runs / "ppo-s*")], out)
+    assert (out / "report.md").is_file() and "ppo" in (out / "summary.csv").read_text()
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == [stale.name]
+
+
+def test_a_report_folder_removed_before_it_was_locked_is_made_again(runs, tmp_path, monkeypatch):
+    """Another report into the same folder, ending between this one's mkdtemp and its lock, took the
+    new folder for one left by a killed report and removed it: FileNotFoundError, a traceback."""
+    import tempfile
+
+    out = tmp_path / "report"
+    made = []
+
+    def raced(*args, **kwargs):
+        path = real(*args, **kwargs)
+        if not made:  # the other report's cleanup runs now, before this one locks its folder
+            compare_module._remove_stale_tmp_folders(out, keep=out / "theirs")
+        made.append(path)
+        return path
+
+    real = tempfile.mkdtemp
+    monkeypatch.setattr(tempfile, "mkdtemp", raced)
+    compare([str(runs / "ppo-s*")], out)
+    assert len(made) == 2 and (out / "report.md").is_file()
+    assert [p.name for p in out.iterdir() if p.name.startswith(".")] == []
+
+
 def test_foreign_output_folder_is_refused(runs, tmp_path):
     (tmp_path / "mine").mkdir()
     (tmp_path / "mine" / "notes.txt").write_text("keep")
