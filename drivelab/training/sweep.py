@@ -481,7 +481,7 @@ def _ray(function: Callable, jobs: Iterator[dict], workers: int, address: str | 
 
 
 @contextlib.contextmanager
-def claim_runs(runs_dir: Path, names: Iterable[str]) -> Iterator[None]:
+def claim_runs(runs_dir: Path, names: Iterable[str], create: bool = True) -> Iterator[None]:
     """Hold the run directories ``names`` of ``runs_dir`` for this process: a second command that
     would run one of them (the same sweep started twice, a double click) is refused with one
     UsageError line instead of training into the same directories at once, which mixes their logs
@@ -489,14 +489,20 @@ def claim_runs(runs_dir: Path, names: Iterable[str]) -> Iterator[None]:
 
     One byte-range lock (``fcntl.lockf``) per run in ``runs_dir/.sweep.lock``, at an offset drawn
     from its name; the locks go with the process, so a killed command leaves none behind. On a file
-    system without locks (some network mounts) runs are not claimed."""
+    system without locks (some network mounts) runs are not claimed. With ``create`` False nothing
+    is written: without a lock file no run is claimed (a check that none is running elsewhere)."""
     path = runs_dir / LOCK_FILE
     try:
-        handle = path.open("a")
+        handle = path.open("a") if create else os.fdopen(os.open(path, os.O_WRONLY | os.O_APPEND), "a")
     except OSError as exc:
-        raise UsageError(
-            f"cannot write in the runs folder {str(runs_dir)!r}: {exc.strerror or exc}"
-        ) from None
+        if create:
+            raise UsageError(
+                f"cannot write in the runs folder {str(runs_dir)!r}: {exc.strerror or exc}"
+            ) from None
+        handle = None  # no lock file (or none that can be locked): no command claims a run here
+    if handle is None:
+        yield
+        return
     with handle:
         for name in names:
             offset = int.from_bytes(hashlib.sha256(name.encode()).digest()[:7], "big")
@@ -541,7 +547,16 @@ def run_sweep(
         installed on its nodes and ``runs_dir`` on storage they share.
     """
     workers = check_workers(executor, workers, address)
-    if all(action == "skip" for _, action in plan(sweep)):  # every cell checked before anything is written
+    try:
+        steps = plan(sweep)  # every cell checked before anything is written
+    except UsageError:
+        # a run that another command is running now can look half-made (a folder with only its
+        # config.yaml while its envs start): say that, not that the folder is not a run
+        names = [cell.config.name for cell in sweep.cells]
+        with claim_runs(sweep.runs_dir.resolve(), names, create=False):
+            pass
+        raise
+    if all(action == "skip" for _, action in steps):
         return [_skipped(cell) for cell in sweep.cells]  # nothing to run: no Ray started, no lock taken
     from drivelab.training.evaluate import make_out_dir
 

@@ -300,3 +300,27 @@ def test_commands_running_other_runs_of_one_folder_go_on_side_by_side(tmp_path):
                 pass
     with claim_runs(tmp_path, ["ppo-highway-s0", "ppo-highway-s1"]):  # its locks went with it
         pass
+
+
+def test_a_run_that_another_command_has_just_started_is_refused_as_such(tmp_path, sweep_file):
+    """The same sweep started twice: the second one's plan, made before it claims the runs, found the
+    first one's run as ``run.train`` has it while its envs start (config.yaml, no monitor.csv yet)
+    and refused it as a folder that is not a run ("train a new run with --runs-dir and --name
+    instead"). It says that another command is running it."""
+    runs = tmp_path / "runs"
+    make_run(runs, {})
+    with hold_runs(runs, RUN):
+        before = snapshot(tmp_path)
+        result = runner.invoke(app, ["sweep", str(sweep_file), "--workers", "1", "--runs-dir", str(runs)])
+        assert result.exit_code == 2, result.output
+        assert result.output.splitlines() == [
+            f"error: run {str(runs / RUN)!r} is being run by another drivelab command (the same sweep or "
+            "ablation started twice?); wait for it to end, or stop it, then re-run"
+        ]
+        assert snapshot(tmp_path) == before
+    result = runner.invoke(app, ["sweep", str(sweep_file), "--workers", "1", "--runs-dir", str(runs)])
+    assert result.exit_code == 2 and "no monitor.csv of a run that started training" in result.output
+    (runs / ".sweep.lock").unlink()  # nor when no command ever claimed a run there
+    result = runner.invoke(app, ["sweep", str(sweep_file), "--workers", "1", "--runs-dir", str(runs)])
+    assert result.exit_code == 2 and "no monitor.csv of a run that started training" in result.output
+    assert not (runs / ".sweep.lock").exists()
