@@ -186,7 +186,11 @@ def main() -> None:
                     except Exception as exc:  # noqa: BLE001 - reported in the results
                         failed(size, f"{name} (profiler)", exc)
         del agents
-        write_results(args, rows, profiles, failures, load_before, cuda)  # each size as soon as it is done
+        if rows:  # each size as soon as it is done; never a results file without a timing
+            write_results(args, rows, profiles, failures, load_before, cuda)
+    if not rows:
+        print(f"error: every variant failed ({len(failures)}); no results written", file=sys.stderr)
+        raise SystemExit(1)
 
 
 def write_results(

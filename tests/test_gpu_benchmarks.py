@@ -54,6 +54,22 @@ def test_rlad_update_reports_a_failing_variant_and_times_the_others(tmp_path, mo
     assert "36 px fast: failed: RuntimeError" in capsys.readouterr().out
 
 
+def test_rlad_update_writes_nothing_when_every_variant_fails(tmp_path, monkeypatch, capsys):
+    """A GPU that fails every variant must not overwrite the committed results with a table of none."""
+    update = _script("rlad_update")
+
+    def failing(size, batch, device, hyperparams, seed=0):
+        raise RuntimeError("CUDA error: no kernel image is available")
+
+    monkeypatch.setattr(update, "make_agent", failing)
+    monkeypatch.setattr(update, "RESULTS", tmp_path)
+    monkeypatch.setattr(sys, "argv", "rlad_update.py --size 36 --variants plain fast --out x".split())
+    with pytest.raises(SystemExit) as stopped:
+        update.main()
+    assert stopped.value.code == 1 and list(tmp_path.iterdir()) == []
+    assert capsys.readouterr().err == "error: every variant failed (2); no results written\n"
+
+
 def test_a_runs_rate_counts_only_the_steps_after_the_updates_begin(tmp_path):
     training = _script("rlad_gpu_training")
     run = tmp_path / "rlad-0"
