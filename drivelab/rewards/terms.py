@@ -401,7 +401,8 @@ def _steering_deg(control, num_worlds: int) -> np.ndarray:
 @term
 def line_centring(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """Σ_j f(C_j) over the 4 line rows: 15 … 1 as the line's centre moves away from the image centre
-    in 38 px bands (of 640), −100 for a row where the line is out of view (seed 004, eq. 2)."""
+    (in pixels of 640: 15 under 38, 12 under 76, 10 under 114, 3 under 190, 1 under 228), −100 farther
+    out or for a row where the line is out of view (seed 004, eq. 2; ``LINE_BAND_EDGES_PX``)."""
     columns = crossing_columns(
         batch, guide_segment_sets(batch), LINE_CAMERA, LINE_ROWS_M, batch.road_index
     )  # (K, 4)
