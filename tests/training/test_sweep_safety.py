@@ -272,12 +272,8 @@ def hold_runs(runs: Path, *names: str):
     return holding()
 
 
-def test_a_sweep_whose_runs_another_command_is_running_is_refused(tmp_path, sweep_file):
-    """The same sweep started twice at once (a double click) trained the same runs in both and
-    mixed their logs (monitor.csv rows, evaluations.csv) without an error: the second is refused,
-    one line, exit 2, nothing changed."""
-    runs = tmp_path / "runs"
-    runs.mkdir()
+def _assert_refused_while_held(tmp_path, runs, sweep_file):
+    """While another process holds the run, the sweep is one line, exit 2, and nothing changes."""
     with hold_runs(runs, RUN):
         before = snapshot(tmp_path)
         result = runner.invoke(app, ["sweep", str(sweep_file), "--workers", "1", "--runs-dir", str(runs)])
@@ -287,6 +283,15 @@ def test_a_sweep_whose_runs_another_command_is_running_is_refused(tmp_path, swee
             "ablation started twice?); wait for it to end, or stop it, then re-run"
         ]
         assert snapshot(tmp_path) == before
+
+
+def test_a_sweep_whose_runs_another_command_is_running_is_refused(tmp_path, sweep_file):
+    """The same sweep started twice at once (a double click) trained the same runs in both and
+    mixed their logs (monitor.csv rows, evaluations.csv) without an error: the second is refused,
+    one line, exit 2, nothing changed."""
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    _assert_refused_while_held(tmp_path, runs, sweep_file)
 
 
 def test_commands_running_other_runs_of_one_folder_go_on_side_by_side(tmp_path):
@@ -309,15 +314,7 @@ def test_a_run_that_another_command_has_just_started_is_refused_as_such(tmp_path
     instead"). It says that another command is running it."""
     runs = tmp_path / "runs"
     make_run(runs, {})
-    with hold_runs(runs, RUN):
-        before = snapshot(tmp_path)
-        result = runner.invoke(app, ["sweep", str(sweep_file), "--workers", "1", "--runs-dir", str(runs)])
-        assert result.exit_code == 2, result.output
-        assert result.output.splitlines() == [
-            f"error: run {str(runs / RUN)!r} is being run by another drivelab command (the same sweep or "
-            "ablation started twice?); wait for it to end, or stop it, then re-run"
-        ]
-        assert snapshot(tmp_path) == before
+    _assert_refused_while_held(tmp_path, runs, sweep_file)
     result = runner.invoke(app, ["sweep", str(sweep_file), "--workers", "1", "--runs-dir", str(runs)])
     assert result.exit_code == 2 and "no monitor.csv of a run that started training" in result.output
     (runs / ".sweep.lock").unlink()  # nor when no command ever claimed a run there
