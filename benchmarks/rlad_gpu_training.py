@@ -176,16 +176,28 @@ def main() -> None:
         "gpu_utilisation_percent_once_updating": [s["utilisation"] for s in samples[busy:]],
         "gpu_memory_used_mib_max": max((s["memory_mib"] for s in samples), default=None),
     }
-    RESULTS.mkdir(exist_ok=True)
-    (RESULTS / f"{args.out}.json").write_text(json.dumps(result, indent=2) + "\n")
-    text = markdown(result)
-    (RESULTS / f"{args.out}.md").write_text(text)
-    print(text)
     for name in processes:  # a run that never reached its updates: the end of what it printed
         if not any(r["run"] == name and r["steps_per_s_updating"] for r in rows):
             tail = (runs / f"{name}.log").read_text(errors="replace").splitlines()[-5:]
             print(f"{name} has no rate; the end of its output:", *tail, sep="\n  ")
     shutil.rmtree(runs, ignore_errors=True)
+    write_results(result, args.out)
+
+
+def write_results(result: dict, out: str) -> None:
+    """``results/<out>.json`` and ``.md``; none when no run reached its updates (a rate-less table
+    would replace the committed one): an ``error:`` line and exit 1."""
+    if not any(r["steps_per_s_updating"] for r in result["runs"]):
+        print(
+            f"error: no run reached its updates in {result['seconds']:g} s; no results written",
+            file=sys.stderr,
+        )
+        raise SystemExit(1)
+    RESULTS.mkdir(exist_ok=True)
+    (RESULTS / f"{out}.json").write_text(json.dumps(result, indent=2) + "\n")
+    text = markdown(result)
+    (RESULTS / f"{out}.md").write_text(text)
+    print(text)
 
 
 if __name__ == "__main__":

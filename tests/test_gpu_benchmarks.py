@@ -88,6 +88,29 @@ def test_a_runs_rate_counts_only_the_steps_after_the_updates_begin(tmp_path):
     assert training.run_rate(run / "monitor.csv")["steps_per_s_updating"] is None  # one end after 1,000
 
 
+def test_rlad_gpu_training_writes_nothing_when_no_run_reached_its_updates(tmp_path, monkeypatch, capsys):
+    training = _script("rlad_gpu_training")
+    monkeypatch.setattr(training, "RESULTS", tmp_path)
+    run = {"run": "rlad-0", "episodes": 3, "steps": 600, "seconds": 40.0, "steps_per_s_updating": None}
+    result = {"seconds": 160, "runs": [run], "gpu_utilisation_percent_once_updating": []}
+    with pytest.raises(SystemExit) as stopped:
+        training.write_results(result, "x")
+    assert stopped.value.code == 1 and list(tmp_path.iterdir()) == []
+    assert capsys.readouterr().err == "error: no run reached its updates in 160 s; no results written\n"
+    rated = {**run, "steps_per_s_updating": 20.0}
+    result = {
+        **result,
+        "command": "c",
+        "machine": "m",
+        "date": "d",
+        "runs": [rated],
+        "gpu_memory_used_mib_max": 1,
+    }
+    training.write_results(result, "x")
+    assert json.loads((tmp_path / "x.json").read_text())["runs"] == [rated]
+    assert "| rlad-0 | 3 | 600 | 40 | 20.0 |" in (tmp_path / "x.md").read_text()
+
+
 def test_nvidia_smis_samples_are_read():
     training = _script("rlad_gpu_training")
     text = (
