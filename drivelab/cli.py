@@ -180,7 +180,9 @@ def train(
     config: Path | None = typer.Option(None, help="YAML file of run fields (CLI options win)"),
     name: str | None = typer.Option(None, help="run directory name"),
     runs_dir: Path = typer.Option(Path("runs"), help="where run directories are created"),
-    eval_every: int | None = typer.Option(None, help="steps between evaluations (0: 5 per run)"),
+    eval_every: int | None = typer.Option(
+        None, help="steps between evaluations, at most --steps (0: 5 per run)"
+    ),
     eval_episodes: int | None = typer.Option(None),
     video: bool = typer.Option(False, "--video", help="record a video at each periodic evaluation"),
     checkpoint_every: int | None = typer.Option(None, help="steps between checkpoints (0: 10 per run)"),

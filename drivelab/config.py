@@ -200,5 +200,17 @@ def build_config(values: dict) -> RunConfig:
     return config
 
 
+def check_eval_every(config: RunConfig) -> None:
+    """A UsageError when ``eval_every`` is larger than ``steps``: a new run would never evaluate
+    (0, five evaluations over the run, and ``eval_every == steps``, one at the end, pass). Checked
+    for new runs only, not when an existing run's config.yaml is read: a run made before this check
+    with such a schedule stays readable and can be resumed to more steps."""
+    if config.eval_every > config.steps:
+        raise UsageError(
+            f"config field 'eval_every' ({config.eval_every}) is larger than 'steps' ({config.steps}): "
+            f"no periodic evaluation would run; give at most {config.steps}, or 0 for five over the run"
+        )
+
+
 def save_yaml(config: RunConfig, path: Path) -> None:
     path.write_text(dump_yaml(config.to_dict()))

@@ -332,6 +332,17 @@ TRAIN_CASES = {
         {},
         "'bc' needs a positive expert_cruise_speed_mps and expert_lateral_accel_mps2",
     ),
+    "eval-every above steps": (
+        ["--algo", "ppo", "--eval-every", "21"],
+        {},
+        "config field 'eval_every' (21) is larger than 'steps' (20): no periodic evaluation would run; "
+        "give at most 20, or 0 for five over the run",
+    ),
+    "config file's eval_every above steps": (
+        ["--config", "run.yaml"],
+        {"run.yaml": b"algo: ppo\neval_every: 1000\n"},
+        "config field 'eval_every' (1000) is larger than 'steps' (20)",
+    ),
     "config file's hyperparams a list, with -H": (
         ["--config", "h.yaml", "-H", "gamma=0.9"],
         {"h.yaml": b"algo: ppo\nhyperparams: [gamma]\n"},
@@ -432,6 +443,16 @@ def test_sweep_and_tune_folders_that_cannot_be_created(work):
     args = ["tune", "study.yaml", "--workers", "1", "--study-dir", "file/below/study"]
     assert_refused(work, args, "cannot create study folder")
     assert_refused(work, ["sweep", "."], "config file '.' is a folder, not a YAML file")
+
+
+def test_sweep_cells_with_eval_every_above_their_steps_are_refused(work):
+    """Every cell is checked, also one whose config differs from a checked one only in ``steps``
+    (the agent check runs once per config but for name, seed and steps); ``--dry-run`` too."""
+    text = TINY_SWEEP.replace("steps: 32,", "eval_every: 32,")
+    (work / "sweep.yaml").write_text(text.replace("grid: {seed: 1}", "grid: {steps: [32, 16]}"))
+    message = "config field 'eval_every' (32) is larger than 'steps' (16)"
+    assert_refused(work, ["sweep", "sweep.yaml", "--workers", "1"], message)
+    assert_refused(work, ["sweep", "sweep.yaml", "--dry-run"], message)
 
 
 def test_zero_workers(work):
@@ -671,6 +692,11 @@ TUNE_CASES = {
         TUNE_BASE.replace("batch_size: 16", "batch_size: -1") + GAMMA,
         [],
         "'batch_size' of 'ppo'",
+    ),
+    "eval_every above steps": (
+        TUNE_BASE + GAMMA + "eval_every: 128\n",
+        [],
+        "config field 'eval_every' (128) is larger than 'steps' (64)",
     ),
     "bad executor": (TUNE_BASE + GAMMA, ["--executor", "slurm"], "unknown executor 'slurm'"),
     "write-best not YAML": (

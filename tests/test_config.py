@@ -1,6 +1,6 @@
 import pytest
 
-from drivelab.config import RunConfig, build_config
+from drivelab.config import RunConfig, build_config, check_eval_every
 from drivelab.errors import UsageError
 from drivelab.yaml_io import load_yaml
 
@@ -9,6 +9,18 @@ def test_build_config_coerces_obs_list():
     config = build_config({"algo": "ppo", "obs": "lidar, topdown", "steps": 100})
     assert config.obs == ("lidar", "topdown")
     assert config.resolved_eval_every == 20 and config.resolved_checkpoint_every == 10
+
+
+def test_eval_every_may_not_exceed_steps():
+    """0 (five over the run) and eval_every == steps (one, at the end) pass; one step more would
+    never evaluate."""
+    for eval_every in (0, 1, 99, 100):
+        check_eval_every(build_config({"algo": "ppo", "steps": 100, "eval_every": eval_every}))
+    message = r"^config field 'eval_every' \(101\) is larger than 'steps' \(100\)"
+    with pytest.raises(UsageError, match=message):
+        check_eval_every(build_config({"algo": "ppo", "steps": 100, "eval_every": 101}))
+    for steps in (1, 4, 5, 7, 100):  # what 0 resolves to always runs
+        assert 1 <= build_config({"algo": "ppo", "steps": steps}).resolved_eval_every <= steps
 
 
 def test_sensor_dicts_in_yaml_become_specs():

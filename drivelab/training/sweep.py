@@ -46,7 +46,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from drivelab.config import FIELDS, RunConfig, build_config
+from drivelab.config import FIELDS, RunConfig, build_config, check_eval_every
 from drivelab.errors import UsageError
 from drivelab.hyperparams import with_shipped_hyperparams
 from drivelab.yaml_io import load_yaml
@@ -179,13 +179,15 @@ def load_sweep(path: str | Path, runs_dir: str | Path | None = None) -> Sweep:
 
 
 def _check_cells(sweep: Sweep) -> None:
-    """Fail before any run starts or anything is written, as ``drivelab train`` does: impossible
-    algorithm/action pairs, bad env options, hyper-parameters the agent refuses (``check_config``,
-    once per distinct config but for its name, seed and step budget)."""
+    """Fail before any run starts or anything is written, as ``drivelab train`` does: an
+    ``eval_every`` larger than a cell's ``steps`` (every cell), impossible algorithm/action pairs,
+    bad env options, hyper-parameters the agent refuses (``check_config``, once per distinct config
+    but for its name, seed and step budget)."""
     from drivelab.training.run import check_config
 
     checked: set[str] = set()
     for cell in sweep.cells:
+        check_eval_every(cell.config)  # depends on the step budget, which the key below leaves out
         fields = {k: v for k, v in cell.config.to_dict().items() if k not in ("name", "seed", "steps")}
         key = json.dumps(fields, sort_keys=True, default=str)
         if key not in checked:

@@ -51,7 +51,7 @@ from pathlib import Path
 import yaml
 from tqdm import tqdm
 
-from drivelab.config import FIELDS, RunConfig, build_config
+from drivelab.config import FIELDS, RunConfig, build_config, check_eval_every
 from drivelab.errors import UsageError
 from drivelab.hyperparams import with_shipped_hyperparams, zoo_yaml
 from drivelab.training.sweep import cell_action, check_workers, execute, executor_ready, run_cell
@@ -276,6 +276,7 @@ def check_study(study: Study) -> None:
         {**low, p.name: choice} for p in study.space if p.kind == "categorical" for choice in p.choices
     ]
     first = study.trial_config(0, low)
+    check_eval_every(first)  # the pruner reads the periodic evaluations: at least one must run
     check_combination(first.algo, first.action)
     env = DriveEnv(**first.env_kwargs())  # validates scenario, sensors, reward, action
     try:

@@ -190,7 +190,7 @@ def test_a_checkpoint_killed_between_its_renames_is_finished_on_resume(tmp_path,
 
 
 def test_corrupted_or_foreign_checkpoint_is_refused(tmp_path):
-    run_dir = run_module.train(_config(steps=32, eval_every=64), tmp_path)
+    run_dir = run_module.train(_config(steps=32), tmp_path)
     checkpoint = run_dir / "checkpoints/latest.zip"
     data = checkpoint.read_bytes()
     checkpoint.write_bytes(data[: len(data) // 2])
