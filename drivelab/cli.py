@@ -441,12 +441,12 @@ def sweep(
 ) -> None:
     """Run a grid of runs; a re-run skips finished runs and resumes interrupted ones."""
     from drivelab.training.compare import load_run, write_report
-    from drivelab.training.sweep import load_sweep, plan, run_dirs, run_sweep
+    from drivelab.training.sweep import load_sweep, preview, run_dirs, run_sweep
 
     try:
         spec = load_sweep(sweep_file, runs_dir)
         if dry_run:
-            for cell, action in plan(spec):
+            for cell, action in preview(spec):
                 typer.echo(f"{action:<8} {spec.runs_dir / cell.config.name}")
             return
         outcomes = run_sweep(spec, executor=executor, workers=workers, address=address)

@@ -272,6 +272,37 @@ def plan(sweep: Sweep) -> list[tuple[Cell, str]]:
     ]
 
 
+def preview(sweep: Sweep) -> list[tuple[Cell, str]]:
+    """What ``run_sweep`` would do with each cell (``--dry-run``), or the UsageError it would
+    give, with nothing written: ``plan``, and, as ``run_sweep`` claims the runs unless it has
+    nothing to run, the refusal of a run that another command is running now (``check_unclaimed``)."""
+    steps = plan_unclaimed(sweep)
+    if not all(action == "skip" for _, action in steps):
+        check_unclaimed(sweep)
+    return steps
+
+
+def plan_unclaimed(sweep: Sweep) -> list[tuple[Cell, str]]:
+    """``plan`` by a command that holds none of the sweep's runs (``run_sweep`` before it claims
+    them, ``preview``). A run that another command is running now can look half-made (a folder
+    with only its config.yaml while its envs start): when a cell's check fails, and one of the runs
+    is held elsewhere, the UsageError says that, not that the folder is not a run."""
+    try:
+        return plan(sweep)
+    except UsageError:
+        check_unclaimed(sweep)
+        raise
+
+
+def check_unclaimed(sweep: Sweep) -> None:
+    """A UsageError when another command is running one of the sweep's runs now: their locks
+    (``claim_runs`` without creating the lock file) are taken and let go at once; nothing is
+    written. Never call it while this process holds the claim: closing another handle of the lock
+    file would drop this process's locks (``fcntl.lockf``)."""
+    with claim_runs(sweep.runs_dir.resolve(), [cell.config.name for cell in sweep.cells], create=False):
+        pass
+
+
 def run_cell(
     config_values: dict,
     runs_dir: str,
@@ -549,15 +580,7 @@ def run_sweep(
         installed on its nodes and ``runs_dir`` on storage they share.
     """
     workers = check_workers(executor, workers, address)
-    try:
-        steps = plan(sweep)  # every cell checked before anything is written
-    except UsageError:
-        # a run that another command is running now can look half-made (a folder with only its
-        # config.yaml while its envs start): say that, not that the folder is not a run
-        names = [cell.config.name for cell in sweep.cells]
-        with claim_runs(sweep.runs_dir.resolve(), names, create=False):
-            pass
-        raise
+    steps = plan_unclaimed(sweep)  # every cell checked before anything is written
     if all(action == "skip" for _, action in steps):
         return [_skipped(cell) for cell in sweep.cells]  # nothing to run: no Ray started, no lock taken
     from drivelab.training.evaluate import make_out_dir

@@ -273,16 +273,20 @@ def hold_runs(runs: Path, *names: str):
 
 
 def _assert_refused_while_held(tmp_path, runs, sweep_file):
-    """While another process holds the run, the sweep is one line, exit 2, and nothing changes."""
+    """While another process holds the run, the sweep and its ``--dry-run`` are one line, exit 2,
+    and nothing changes; the dry run lets the locks go at once (the holder's run is not held up)."""
     with hold_runs(runs, RUN):
         before = snapshot(tmp_path)
-        result = runner.invoke(app, ["sweep", str(sweep_file), "--workers", "1", "--runs-dir", str(runs)])
-        assert result.exit_code == 2, result.output
-        assert result.output.splitlines() == [
-            f"error: run {str(runs / RUN)!r} is being run by another drivelab command (the same sweep or "
-            "ablation started twice?); wait for it to end, or stop it, then re-run"
-        ]
-        assert snapshot(tmp_path) == before
+        for extra in ([], ["--dry-run"]):
+            result = runner.invoke(
+                app, ["sweep", str(sweep_file), "--workers", "1", "--runs-dir", str(runs), *extra]
+            )
+            assert result.exit_code == 2, (extra, result.output)
+            assert result.output.splitlines() == [
+                f"error: run {str(runs / RUN)!r} is being run by another drivelab command (the same sweep "
+                "or ablation started twice?); wait for it to end, or stop it, then re-run"
+            ], extra
+            assert snapshot(tmp_path) == before
 
 
 def test_a_sweep_whose_runs_another_command_is_running_is_refused(tmp_path, sweep_file):
@@ -311,13 +315,35 @@ def test_a_run_that_another_command_has_just_started_is_refused_as_such(tmp_path
     """The same sweep started twice: the second one's plan, made before it claims the runs, found the
     first one's run as ``run.train`` has it while its envs start (config.yaml, no monitor.csv yet)
     and refused it as a folder that is not a run ("train a new run with --runs-dir and --name
-    instead"). It says that another command is running it."""
+    instead"). It says that another command is running it, and so does ``--dry-run``."""
     runs = tmp_path / "runs"
     make_run(runs, {})
     _assert_refused_while_held(tmp_path, runs, sweep_file)
     result = runner.invoke(app, ["sweep", str(sweep_file), "--workers", "1", "--runs-dir", str(runs)])
     assert result.exit_code == 2 and "no monitor.csv of a run that started training" in result.output
-    (runs / ".sweep.lock").unlink()  # nor when no command ever claimed a run there
-    result = runner.invoke(app, ["sweep", str(sweep_file), "--workers", "1", "--runs-dir", str(runs)])
+    result = runner.invoke(app, ["sweep", str(sweep_file), "--runs-dir", str(runs), "--dry-run"])
     assert result.exit_code == 2 and "no monitor.csv of a run that started training" in result.output
+    (runs / ".sweep.lock").unlink()  # nor when no command ever claimed a run there
+    for extra in ([], ["--dry-run"]):
+        result = runner.invoke(
+            app, ["sweep", str(sweep_file), "--workers", "1", "--runs-dir", str(runs), *extra]
+        )
+        assert result.exit_code == 2 and "no monitor.csv of a run that started training" in result.output
+        assert not (runs / ".sweep.lock").exists()
+
+
+def test_a_dry_run_lists_the_runs_again_once_their_command_has_ended(tmp_path, sweep_file):
+    """The dry run's check takes no lock it keeps, and creates no lock file."""
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    result = runner.invoke(app, ["sweep", str(sweep_file), "--runs-dir", str(runs), "--dry-run"])
+    assert result.exit_code == 0 and result.output.splitlines() == [f"train    {runs / RUN}"]
     assert not (runs / ".sweep.lock").exists()
+    with hold_runs(runs, "ppo-highway-s1"):  # another run of the folder: not this sweep's
+        result = runner.invoke(app, ["sweep", str(sweep_file), "--runs-dir", str(runs), "--dry-run"])
+        assert result.exit_code == 0 and result.output.splitlines() == [f"train    {runs / RUN}"]
+    with hold_runs(runs, RUN):
+        result = runner.invoke(app, ["sweep", str(sweep_file), "--runs-dir", str(runs), "--dry-run"])
+        assert result.exit_code == 2
+    result = runner.invoke(app, ["sweep", str(sweep_file), "--runs-dir", str(runs), "--dry-run"])
+    assert result.exit_code == 0 and result.output.splitlines() == [f"train    {runs / RUN}"]
