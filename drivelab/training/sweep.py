@@ -33,8 +33,11 @@ import json
 import logging
 import multiprocessing
 import os
+import pwd
 import re
+import shlex
 import socket
+import stat
 import threading
 import time
 import traceback
@@ -523,11 +526,18 @@ def claim_runs(runs_dir: Path, names: Iterable[str], create: bool = True) -> Ite
     One byte-range lock (``fcntl.lockf``) per run in ``runs_dir/.sweep.lock``, at an offset drawn
     from its name; the locks go with the process, so a killed command leaves none behind. On a file
     system without locks (some network mounts) runs are not claimed. With ``create`` False nothing
-    is written: without a lock file no run is claimed (a check that none is running elsewhere)."""
+    is written: without a lock file no run is claimed (a check that none is running elsewhere).
+
+    Every user who runs sweeps in a shared runs folder must open the lock file for writing: it is
+    made as writable for the folder's group and others as the folder is (``_share_like_folder``),
+    and one that this user cannot write is one UsageError line that says so."""
     path = runs_dir / LOCK_FILE
     try:
-        handle = path.open("a") if create else os.fdopen(os.open(path, os.O_WRONLY | os.O_APPEND), "a")
+        handle = _open_lock_file(path, create)
     except OSError as exc:
+        owner = _owner(path)
+        if isinstance(exc, PermissionError) and owner is not None:  # the file refused, not the folder
+            raise UsageError(_lock_file_denied(path, owner, exc)) from None
         if create:
             raise UsageError(
                 f"cannot write in the runs folder {str(runs_dir)!r}: {exc.strerror or exc}"
@@ -549,6 +559,64 @@ def claim_runs(runs_dir: Path, names: Iterable[str], create: bool = True) -> Ite
                     "sweep or ablation started twice?); wait for it to end, or stop it, then re-run"
                 ) from None
         yield
+
+
+def _open_lock_file(path: Path, create: bool):
+    """``path``, the lock file, opened for appending (a lock needs a handle open for writing;
+    nothing is ever written). A new one (``create``) is made with mode 0o666, so that the umask
+    decides, then shared as the folder is (``_share_like_folder``). OSError when it cannot be
+    opened (FileNotFoundError when it is missing and not ``create``)."""
+    flags = os.O_WRONLY | os.O_APPEND
+    if create:
+        try:
+            descriptor = os.open(path, flags | os.O_CREAT | os.O_EXCL, 0o666)
+        except FileExistsError:
+            pass  # made before, by this user or another: opened as it is
+        else:
+            _share_like_folder(descriptor, path.parent)
+            return os.fdopen(descriptor, "a")
+    return os.fdopen(os.open(path, flags), "a")
+
+
+def _share_like_folder(descriptor: int, folder: Path) -> None:
+    """Let the group and others read and write the new file ``descriptor`` where ``folder`` lets
+    them write (the group only where the file has the folder's group: a setgid folder, or the
+    user's own group), whatever the umask: in a runs folder shared by a group (``chmod g+ws``), a
+    umask of 022 would leave the lock file writable by its maker alone, and every other user's
+    sweep refused. A file system that refuses the change keeps the file as it was made."""
+    folder_stat, file_stat = os.stat(folder), os.fstat(descriptor)
+    shared = 0o006 if folder_stat.st_mode & stat.S_IWOTH else 0
+    if folder_stat.st_mode & stat.S_IWGRP and file_stat.st_gid == folder_stat.st_gid:
+        shared |= 0o060
+    if shared & ~file_stat.st_mode:
+        with contextlib.suppress(OSError):
+            os.fchmod(descriptor, stat.S_IMODE(file_stat.st_mode) | shared)
+
+
+def _owner(path: Path) -> int | None:
+    """The user id of the file ``path``; None when it is no file or cannot be looked at."""
+    try:
+        info = path.stat()
+    except OSError:
+        return None
+    return info.st_uid if stat.S_ISREG(info.st_mode) else None
+
+
+def _lock_file_denied(path: Path, owner: int, exc: OSError) -> str:
+    """The one-line error for a lock file, of user ``owner``, that this user may not write."""
+    quoted = shlex.quote(str(path))
+    if owner == os.geteuid():
+        fix = f"`chmod u+w {quoted}`"
+    else:
+        try:
+            name = pwd.getpwuid(owner).pw_name
+        except KeyError:
+            name = f"uid {owner}"
+        fix = f"its owner ({name}) can let the folder's group write it: `chmod g+w {quoted}`"
+    return (
+        f"cannot open the runs folder's lock file {str(path)!r} for writing ({exc.strerror}), which every "
+        f"sweep or ablation there needs; {fix}"
+    )
 
 
 def check_workers(executor: str, workers: int | None, address: str | None) -> int:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -30,6 +31,7 @@ SPEC = {
     "eval_episodes": 1,
 }
 RUN = "ppo-highway-s0"
+AS_ROOT = os.geteuid() == 0  # root writes through chmod 0o444
 
 
 def snapshot(root: Path) -> dict[str, str]:
@@ -347,3 +349,78 @@ def test_a_dry_run_lists_the_runs_again_once_their_command_has_ended(tmp_path, s
         assert result.exit_code == 2
     result = runner.invoke(app, ["sweep", str(sweep_file), "--runs-dir", str(runs), "--dry-run"])
     assert result.exit_code == 0 and result.output.splitlines() == [f"train    {runs / RUN}"]
+
+
+@pytest.mark.parametrize(
+    ("folder_mode", "umask", "lock_mode"),
+    [
+        (0o2775, 0o022, 0o664),  # a folder shared by its group (setgid): the group writes the lock too
+        (0o775, 0o022, 0o664),
+        (0o777, 0o022, 0o666),
+        (0o755, 0o022, 0o644),  # a folder of one user: the umask decides
+        (0o775, 0o002, 0o664),
+        (0o700, 0o077, 0o600),
+    ],
+    ids=["setgid-group", "group", "everyone", "own", "own-umask-002", "private"],
+)
+def test_the_lock_file_is_as_writable_as_its_folder(tmp_path, folder_mode, umask, lock_mode):
+    """A second user's sweep in a runs folder shared by a group was refused ("Permission denied")
+    when the first user's umask (022) had left .sweep.lock writable by its maker alone."""
+    import stat
+
+    from drivelab.training.sweep import claim_runs
+
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    runs.chmod(folder_mode)
+    before = os.umask(umask)
+    try:
+        with claim_runs(runs, [RUN]):
+            pass
+    finally:
+        os.umask(before)
+    assert stat.S_IMODE((runs / ".sweep.lock").stat().st_mode) == lock_mode
+    assert (runs / ".sweep.lock").read_bytes() == b""
+
+
+def test_a_lock_file_that_cannot_be_written_is_one_error_line(tmp_path, sweep_file, monkeypatch):
+    """A lock file this user may not open for writing (another user's, or made read-only): the
+    sweep and its dry run are one line that names the file and the fix, exit 2, nothing changed.
+    chmod 0o444 where it binds; as root (which writes through it) the refusal is simulated."""
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    lock = runs / ".sweep.lock"
+    lock.write_bytes(b"")
+    lock.chmod(0o444)
+    if AS_ROOT:
+        real_open = os.open
+
+        def refuse(path, flags, *args, **kwargs):
+            if Path(path) == lock and flags & (os.O_WRONLY | os.O_RDWR):
+                raise PermissionError(13, "Permission denied", str(path))
+            return real_open(path, flags, *args, **kwargs)
+
+        monkeypatch.setattr(os, "open", refuse)
+    assert_sweep_refused(
+        tmp_path,
+        sweep_file,
+        f"cannot open the runs folder's lock file {str(lock)!r} for writing (Permission denied), which "
+        f"every sweep or ablation there needs; `chmod u+w {lock}`",
+    )
+
+
+def test_the_error_for_another_users_lock_file_says_who_can_share_it(tmp_path):
+    import pwd
+
+    from drivelab.training.sweep import _lock_file_denied
+
+    lock = tmp_path / ".sweep.lock"
+    for owner in (os.geteuid() + 1, 2**31 - 7):
+        try:
+            name = pwd.getpwuid(owner).pw_name
+        except KeyError:
+            name = f"uid {owner}"
+        message = _lock_file_denied(lock, owner, PermissionError(13, "Permission denied"))
+        assert message.endswith(
+            f"; its owner ({name}) can let the folder's group write it: `chmod g+w {lock}`"
+        )
