@@ -336,11 +336,16 @@ def run_cell(
     config = build_config(config_values)
     root = Path(runs_dir)
     run_dir = root / config.name
-    (root / LOG_FOLDER).mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     outcome = {"name": config.name, "action": action, "ok": True, "error": None, "stopped": None}
+    try:
+        log_file = (logs_folder(root) / f"{config.name}.log").open("a")
+    except OSError as exc:  # another user's log of this run, say: reported, as any failure of a run
+        where = str(root / LOG_FOLDER / f"{config.name}.log")
+        outcome.update(ok=False, error=f"cannot write its log {where!r}: {exc.strerror or exc}", seconds=0.0)
+        return outcome
     with (
-        (root / LOG_FOLDER / f"{config.name}.log").open("a") as log,
+        log_file as log,
         contextlib.redirect_stderr(log),
         contextlib.redirect_stdout(log),
     ):
@@ -579,18 +584,55 @@ def _open_lock_file(path: Path, create: bool):
 
 
 def _share_like_folder(descriptor: int, folder: Path) -> None:
-    """Let the group and others read and write the new file ``descriptor`` where ``folder`` lets
-    them write (the group only where the file has the folder's group: a setgid folder, or the
-    user's own group), whatever the umask: in a runs folder shared by a group (``chmod g+ws``), a
-    umask of 022 would leave the lock file writable by its maker alone, and every other user's
-    sweep refused. A file system that refuses the change keeps the file as it was made."""
-    folder_stat, file_stat = os.stat(folder), os.fstat(descriptor)
-    shared = 0o006 if folder_stat.st_mode & stat.S_IWOTH else 0
-    if folder_stat.st_mode & stat.S_IWGRP and file_stat.st_gid == folder_stat.st_gid:
-        shared |= 0o060
-    if shared & ~file_stat.st_mode:
-        with contextlib.suppress(OSError):
+    """Let the group and others read and write the new file or folder ``descriptor`` (and enter
+    the folder) where ``folder`` lets them write (the group only where it has the folder's group: a
+    setgid folder, or the user's own group), whatever the umask: in a runs folder shared by a group
+    (``chmod g+ws``), a umask of 022 would leave the lock file and the logs folder writable by their
+    maker alone, and every other user's sweep refused. A file system that refuses the change keeps
+    them as they were made."""
+    with contextlib.suppress(OSError):
+        folder_stat, file_stat = os.stat(folder), os.fstat(descriptor)
+        every = 0o007 if stat.S_ISDIR(file_stat.st_mode) else 0o006  # read, write (and enter a folder)
+        shared = every if folder_stat.st_mode & stat.S_IWOTH else 0
+        if folder_stat.st_mode & stat.S_IWGRP and file_stat.st_gid == folder_stat.st_gid:
+            shared |= every << 3
+        if shared & ~file_stat.st_mode:
             os.fchmod(descriptor, stat.S_IMODE(file_stat.st_mode) | shared)
+
+
+def logs_folder(runs_dir: Path) -> Path:
+    """``runs_dir/.sweep-logs``, made when missing (``runs_dir`` too) and then shared as
+    ``runs_dir`` is (``_share_like_folder``): each user of a group-shared runs folder writes the
+    logs of their runs in it."""
+    folder = runs_dir / LOG_FOLDER
+    runs_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        folder.mkdir()
+    except FileExistsError:
+        return folder
+    descriptor = os.open(folder, os.O_RDONLY)
+    try:
+        _share_like_folder(descriptor, runs_dir)
+    finally:
+        os.close(descriptor)
+    return folder
+
+
+def _check_logs_folder(runs_dir: Path) -> None:
+    """``logs_folder``, and a UsageError line when this user cannot write in it (made by another
+    user of a shared runs folder before it was shared), before any run starts."""
+    try:
+        folder = logs_folder(runs_dir)
+    except OSError as exc:
+        raise UsageError(
+            f"cannot write the sweep logs in {str(runs_dir / LOG_FOLDER)!r}: {exc.strerror or exc}"
+        ) from None
+    if not os.access(folder, os.W_OK | os.X_OK):
+        owner = folder.stat().st_uid
+        raise UsageError(
+            f"cannot write the sweep logs in {str(folder)!r} (permission denied), which every sweep or "
+            f"ablation there needs; {_chmod_fix(folder, owner)}"
+        )
 
 
 def _owner(path: Path) -> int | None:
@@ -602,20 +644,23 @@ def _owner(path: Path) -> int | None:
     return info.st_uid if stat.S_ISREG(info.st_mode) else None
 
 
-def _lock_file_denied(path: Path, owner: int, exc: OSError) -> str:
-    """The one-line error for a lock file, of user ``owner``, that this user may not write."""
+def _chmod_fix(path: Path, owner: int) -> str:
+    """How the file or folder ``path`` of user ``owner`` becomes writable for this user."""
     quoted = shlex.quote(str(path))
     if owner == os.geteuid():
-        fix = f"`chmod u+w {quoted}`"
-    else:
-        try:
-            name = pwd.getpwuid(owner).pw_name
-        except KeyError:
-            name = f"uid {owner}"
-        fix = f"its owner ({name}) can let the folder's group write it: `chmod g+w {quoted}`"
+        return f"`chmod u+w {quoted}`"
+    try:
+        name = pwd.getpwuid(owner).pw_name
+    except KeyError:
+        name = f"uid {owner}"
+    return f"its owner ({name}) can let the folder's group write it: `chmod g+w {quoted}`"
+
+
+def _lock_file_denied(path: Path, owner: int, exc: OSError) -> str:
+    """The one-line error for a lock file, of user ``owner``, that this user may not write."""
     return (
         f"cannot open the runs folder's lock file {str(path)!r} for writing ({exc.strerror}), which every "
-        f"sweep or ablation there needs; {fix}"
+        f"sweep or ablation there needs; {_chmod_fix(path, owner)}"
     )
 
 
@@ -657,6 +702,7 @@ def run_sweep(
         runs_dir = make_out_dir(sweep.runs_dir.resolve(), "runs folder")
         with claim_runs(runs_dir, [cell.config.name for cell in sweep.cells]):
             steps = plan(sweep)  # again, now that no other command can change them
+            _check_logs_folder(runs_dir)
             outcomes = [_skipped(cell) for cell, action in steps if action == "skip"]
             jobs = [
                 {"config_values": c.config.to_dict(), "runs_dir": str(runs_dir), "action": action,

@@ -424,3 +424,59 @@ def test_the_error_for_another_users_lock_file_says_who_can_share_it(tmp_path):
         assert message.endswith(
             f"; its owner ({name}) can let the folder's group write it: `chmod g+w {lock}`"
         )
+
+
+@pytest.mark.parametrize(
+    ("folder_mode", "logs_mode"),
+    [(0o2775, 0o775), (0o777, 0o777), (0o755, 0o755)],
+    ids=["group", "everyone", "own"],
+)
+def test_the_logs_folder_is_as_writable_as_its_runs_folder(tmp_path, folder_mode, logs_mode):
+    """After the lock file, a second user's sweep in a group-shared runs folder failed on
+    .sweep-logs, made by the first user with a umask of 022 (a traceback from the worker)."""
+    import stat
+
+    from drivelab.training.sweep import logs_folder
+
+    runs = tmp_path / "runs"
+    runs.mkdir()
+    runs.chmod(folder_mode)
+    before = os.umask(0o022)
+    try:
+        folder = logs_folder(runs)
+    finally:
+        os.umask(before)
+    assert folder == runs / ".sweep-logs" and stat.S_IMODE(folder.stat().st_mode) & 0o777 == logs_mode
+    assert logs_folder(runs) == folder  # made once, then left as it is
+
+
+def test_a_logs_folder_that_cannot_be_written_is_one_error_line(tmp_path, sweep_file, monkeypatch):
+    """Checked before any run starts (os.access answering no: root writes through chmod)."""
+    runs = tmp_path / "runs"
+    (runs / ".sweep-logs").mkdir(parents=True)
+    (runs / ".sweep.lock").write_bytes(b"")
+    real_access = os.access
+    monkeypatch.setattr(
+        os, "access", lambda path, mode, **kw: Path(path).name != ".sweep-logs" and real_access(path, mode)
+    )
+    before = snapshot(tmp_path)
+    result = runner.invoke(app, ["sweep", str(sweep_file), "--workers", "1", "--runs-dir", str(runs)])
+    assert result.exit_code == 2, result.output
+    logs = runs / ".sweep-logs"
+    assert result.output.splitlines() == [
+        f"error: cannot write the sweep logs in {str(logs)!r} (permission denied), which every sweep or "
+        f"ablation there needs; `chmod u+w {logs}`"
+    ]
+    assert snapshot(tmp_path) == before
+
+
+def test_a_run_whose_log_cannot_be_written_fails_as_a_run_not_the_sweep(tmp_path):
+    """run_cell never raises: a log it cannot open (another user's log of that run) is the run's
+    failure, reported to the driver, not a traceback that ends the sweep."""
+    (cell,) = expand_sweep(SPEC, tmp_path).cells
+    (tmp_path / ".sweep-logs" / f"{RUN}.log").mkdir(parents=True)
+    outcome = run_cell(cell.config.to_dict(), str(tmp_path), "train", 1)
+    assert not outcome["ok"] and outcome["error"].startswith(
+        f"cannot write its log {str(tmp_path / '.sweep-logs' / (RUN + '.log'))!r}: "
+    )
+    assert not (tmp_path / RUN).exists()
