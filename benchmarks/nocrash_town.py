@@ -52,7 +52,7 @@ def agents(ppo_steps: int = PPO_STEPS, n_envs: int = N_ENVS) -> dict[str, list[s
             "--algo", "ppo", "--obs", "waypoints,measurements,affordances", "--reward", "roach",
             "--traffic", "regular", "--steps", str(ppo_steps), "--n-envs", str(n_envs),
             "-H", "batch_size=256",
-            "--eval-every", str(max(10_000, ppo_steps // 10)), "--eval-episodes", "2",
+            "--eval-every", str(min(ppo_steps, max(10_000, ppo_steps // 10))), "--eval-episodes", "2",
         ],
     }  # fmt: skip
 

@@ -38,7 +38,7 @@ def train_command(algo: str, seed: int, steps: int, runs: Path) -> list[str]:
     return [
         sys.executable, "-m", "drivelab.cli", "train", "--algo", algo, "--env", "town", "--obs", OBS,
         "--action", "target_speed", "--reward", "roach", "--traffic", "regular", "--steps", str(steps),
-        "--eval-every", str(10 * steps), "--seed", str(seed), "--name", f"{algo}-{seed}",
+        "--eval-every", str(steps), "--seed", str(seed), "--name", f"{algo}-{seed}",
         "--runs-dir", str(runs),
         "-H", "device=cuda", "-H", "fast_update=true", "-H", "compile=reduce-overhead",
     ]  # fmt: skip

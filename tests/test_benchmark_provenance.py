@@ -1,6 +1,7 @@
 """benchmarks/provenance.py: the command line a benchmark records is the one that ran."""
 
 import importlib.util
+import sys
 from pathlib import Path
 
 import pytest
@@ -198,3 +199,35 @@ def test_a_benchmark_continues_a_run_a_kill_left_unfinished(tmp_path):
     run_dir.mkdir(parents=True)
     (run_dir / "config.yaml").write_text("algo: ppo\n")  # started: drivelab train --resume continues it
     assert provenance.training_command(run_dir, train, tmp_path) == (["train", "--resume", "runs/r"], True)
+
+
+def _benchmark(name):
+    folder = str(SCRIPT.parent)
+    sys.path.insert(0, folder)
+    try:
+        spec = importlib.util.spec_from_file_location(name, SCRIPT.parent / f"{name}.py")
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+    finally:
+        sys.path.remove(folder)
+    return module
+
+
+def _option(arguments: list[str], name: str) -> int:
+    return int(arguments[arguments.index(name) + 1])
+
+
+@pytest.mark.parametrize("steps", [500, 5_000, 1_000_000])
+def test_the_benchmarks_train_commands_evaluate_within_their_budget(steps):
+    """``drivelab train`` refuses an ``--eval-every`` above ``--steps``: the town benchmarks' and
+    the GPU training's commands stay within it at any budget (nocrash_town asked for at least
+    10 000 steps between evaluations, rlad_gpu_training for ten budgets)."""
+    commands = [
+        *_benchmark("nocrash_town").agents(steps, 8).values(),
+        *_benchmark("imitation_town").agents(steps, 8).values(),
+        _benchmark("rlad_gpu_training").train_command("rlad", 0, steps, Path("runs")),
+    ]
+    for arguments in commands:
+        if "--eval-every" not in arguments:  # the expert's run: the default schedule
+            continue
+        assert 0 <= _option(arguments, "--eval-every") <= _option(arguments, "--steps")
