@@ -41,6 +41,13 @@ from drivelab.agents.registry import check_combination, get_algo
 from drivelab.config import RunConfig, build_config, check_eval_every, save_yaml
 from drivelab.errors import UsageError
 from drivelab.training.checkpoints import load_agent, load_replay, save_checkpoint, verify_checkpoint
+from drivelab.training.divergence import (
+    CHECK_EVERY_STEPS,
+    TrainingDiverged,
+    non_finite_weights,
+    raised_by_divergence,
+    remedy,
+)
 from drivelab.training.evaluate import (
     aggregate,
     load_run_config,
@@ -78,21 +85,6 @@ class TrainingInterrupted(KeyboardInterrupt):
         self.run_dir, self.steps = run_dir, steps
 
 
-class TrainingDiverged(UsageError):
-    """The network's weights (or the action distribution they give) became NaN or infinite:
-    training cannot go on. No checkpoint is written from such a model; the run keeps those before."""
-
-    def __init__(self, config: RunConfig, steps: int, run_dir: Path, checkpoint_steps: int) -> None:
-        if (run_dir / "checkpoints" / "latest.json").is_file():
-            kept = f"{str(run_dir)!r} keeps its checkpoint of step {checkpoint_steps}"
-        else:
-            kept = "no checkpoint was written, so the run directory is removed"
-        super().__init__(
-            f"training of {config.algo!r} diverged at step {steps}: the network's weights or outputs "
-            f"became NaN or infinite (lower learning_rate, or limit max_grad_norm); {kept}"
-        )
-
-
 class StoppedByEvaluation(Exception):
     """``on_evaluation`` returned False (a pruned tuning trial): the run stopped and was
     checkpointed at ``steps``, as after SIGINT, and can be resumed."""
@@ -104,7 +96,10 @@ class StoppedByEvaluation(Exception):
 
 # --- callbacks -------------------------------------------------------------------------------
 class RunCallback(BaseCallback):
-    """Progress bar, periodic evaluation (CSV + logger + optional video), checkpoints, stopping.
+    """Progress bar, periodic evaluation (CSV + logger + optional video), checkpoints, stopping,
+    and divergence: the weights are checked at safe points (at most once per ``CHECK_EVERY_STEPS``
+    steps) and before every evaluation and checkpoint, and ``TrainingDiverged`` stops the run at
+    the first NaN or infinity (``divergence.py``).
 
     Evaluations run in ``on_step``; ``on_evaluation(step, summary)``, when given, is called after
     each, and returning False stops the run as a stop request does (``StoppedByEvaluation``).
@@ -140,6 +135,7 @@ class RunCallback(BaseCallback):
         self.next_eval = _next_multiple(self.num_timesteps, self.config.resolved_eval_every)
         self.next_checkpoint = _next_multiple(self.num_timesteps, self.config.resolved_checkpoint_every)
         self.checkpoint_steps = self.num_timesteps  # a resumed run starts at its checkpoint
+        self.next_divergence_check = _next_multiple(self.num_timesteps, CHECK_EVERY_STEPS)
         self.bar = tqdm(
             total=self.config.steps,
             initial=self.num_timesteps,
@@ -158,7 +154,11 @@ class RunCallback(BaseCallback):
         self.safe_point()
 
     def safe_point(self) -> None:
-        """Take the snapshot; write the periodic checkpoint when one is due."""
+        """Look for divergence when a check is due; take the snapshot; write the periodic checkpoint
+        when one is due."""
+        if self.num_timesteps >= self.next_divergence_check:
+            self.check_weights(self.num_timesteps)
+            self.next_divergence_check = _next_multiple(self.num_timesteps, CHECK_EVERY_STEPS)
         self.snapshot = take_snapshot(self.model, self.worlds, self.rows())
         if self.num_timesteps >= self.next_checkpoint:
             self.checkpoint(self.snapshot)
@@ -167,6 +167,7 @@ class RunCallback(BaseCallback):
     def _on_step(self) -> bool:
         self.bar.update(self.model.num_timesteps - self.bar.n)
         if self.num_timesteps >= self.next_eval:
+            self.check_weights(self.num_timesteps)  # no evaluation row from a diverged model
             summary = self.evaluate()
             self.next_eval += self.config.resolved_eval_every
             if self.on_evaluation is not None and self.on_evaluation(self.num_timesteps, summary) is False:
@@ -183,14 +184,21 @@ class RunCallback(BaseCallback):
     def checkpoint(self, snapshot: Snapshot) -> None:
         """The model's checkpoint and the resume state of ``snapshot`` (taken at the model's
         present state), the resume state first: the manifest, written last, commits both."""
-        if not weights_finite(self.model):  # keep the last finite checkpoint as the latest
-            raise TrainingDiverged(self.config, snapshot.steps, self.run_dir, self.checkpoint_steps)
+        self.check_weights(snapshot.steps)  # keep the last finite checkpoint as the latest
         folder = self.run_dir / "checkpoints"
         folder.mkdir(exist_ok=True)
         write_state(folder, snapshot)
         save_checkpoint(self.model, self.run_dir, self.config, self.save_replay)
         prune_states(folder, snapshot.steps)
         self.checkpoint_steps = snapshot.steps
+
+    def check_weights(self, steps: int) -> None:
+        """``TrainingDiverged`` (found at ``steps``) when a weight of the model is NaN or infinite."""
+        found = non_finite_weights(self.model)
+        if found:
+            raise TrainingDiverged(
+                self.config, steps, self.run_dir, self.checkpoint_steps, found, remedy(self.model)
+            )
 
     def evaluate(self) -> dict:
         policy = lambda obs: self.model.predict(obs, deterministic=True)[0]  # noqa: E731
@@ -222,27 +230,6 @@ class RunCallback(BaseCallback):
                 video_fps(self.eval_env),  # run_episodes' frames: one per simulation frame
             )
         return summary
-
-
-def weights_finite(model) -> bool:
-    """Whether every network weight of ``model`` (its torch modules and tensors) is finite."""
-    import torch
-
-    from drivelab.agents.storage import non_finite_tensors
-
-    tensors = [
-        list(value.parameters()) if isinstance(value, torch.nn.Module) else value
-        for value in vars(model).values()
-        if isinstance(value, (torch.nn.Module, torch.Tensor))
-    ]
-    return not non_finite_tensors(tensors)
-
-
-def _diverged(model, exc: Exception) -> bool:
-    """Whether ``exc``, raised while learning, comes from non-finite numbers: weights that are no
-    longer finite, or torch's check of a distribution's parameters (NaN logits from overflowing
-    weights) that found invalid values."""
-    return not weights_finite(model) or isinstance(exc, ValueError) and "found invalid values" in str(exc)
 
 
 def _next_multiple(value: int, every: int) -> int:
@@ -606,9 +593,12 @@ def _learn(model, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWo
             raise
         except (ValueError, RuntimeError, FloatingPointError) as exc:
             callback._on_training_end()
-            if isinstance(exc, UsageError) or not _diverged(model, exc):
+            if isinstance(exc, UsageError) or not raised_by_divergence(model, exc):
                 raise
-            raise TrainingDiverged(config, model.num_timesteps, run_dir, callback.checkpoint_steps) from None
+            raise TrainingDiverged(
+                config, model.num_timesteps, run_dir, callback.checkpoint_steps,
+                non_finite_weights(model), remedy(model),
+            ) from None  # fmt: skip
         if callback.stopped:
             apply_to_model(model, callback.snapshot)
             callback.checkpoint(callback.snapshot)

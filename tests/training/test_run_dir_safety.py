@@ -177,7 +177,7 @@ def test_divergence_before_the_first_checkpoint_leaves_no_folder(tmp_path, monke
 
 def test_divergence_keeps_the_checkpoints_written_before_it(tmp_path, monkeypatch):
     _poison_weights_at(monkeypatch, 100)
-    with pytest.raises(UsageError, match="diverged at step .*keeps its checkpoint of step 64"):
+    with pytest.raises(UsageError, match="diverged at step .*keeps its last finite checkpoint, of step 64"):
         run_module.train(_config(), tmp_path)
     manifest = json.loads((tmp_path / "r" / "checkpoints" / "latest.json").read_text())
     assert manifest["steps"] == 64 and not (tmp_path / "r" / "model.zip").exists()
