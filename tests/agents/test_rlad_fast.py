@@ -33,14 +33,6 @@ MODULES = ("encoder", "actor", "critic", "critic_target", "traffic_light_head")
 WITH_OWN_GRADIENTS = ("encoder", "actor", "traffic_light_head")  # the critics' also hold the actor loss's
 
 
-@pytest.fixture(autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
-
-
 def _agent(seed=0, device="cpu", **hyperparams):
     """The tolerances above are the CPU's: an agent there unless a test says otherwise."""
     return _any_device_agent(seed, device=device, **hyperparams)

@@ -24,6 +24,7 @@ from drivelab.training import run as run_module
 from drivelab.training.divergence import CHECK_EVERY_STEPS, non_finite_weights, remedy
 
 CHECKPOINT, STEPS = 200, 400  # the checkpoint before the divergence; the next would be at STEPS
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 NET = {"policy_kwargs": {"net_arch": [16]}}
 TOWN = {"env": "town", "action": "target_speed", "reward": "roach", "env_options": {"duration_s": 3}}
 SETUPS = {  # each updates its weights between steps 200 and 220: the first update after the checkpoint
@@ -45,14 +46,6 @@ SETUPS = {  # each updates its weights between steps 200 and 220: the first upda
 }  # fmt: skip
 SILENT = ("dqn", "dueling_ddqn")  # act on NaN Q-values without an error: only the check finds them
 ERROR = re.compile(r"error: training of '(\w+)' diverged at step (\d+): (.*)")
-
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
 
 
 class AbsurdLearningRate:
@@ -79,7 +72,7 @@ def absurd_learning_rate():
 def _train_command(tmp_path: Path, setup: str) -> list[str]:
     values = {
         "env": "highway", "obs": "kinematics", "action": "meta", "traffic": "empty", "steps": STEPS,
-        "seed": 2, "name": setup, "eval_every": 10_000, "eval_episodes": 1, "checkpoint_every": CHECKPOINT,
+        "seed": 2, "name": setup, "eval_every": STEPS, "eval_episodes": 1, "checkpoint_every": CHECKPOINT,
         "env_options": {"duration_s": 10}, **SETUPS[setup],
     }  # fmt: skip
     path = tmp_path / f"{setup}.yaml"
@@ -214,8 +207,9 @@ def test_weights_are_checked_at_most_once_per_check_interval(tmp_path, monkeypat
 
     monkeypatch.setattr(run_module.RunCallback, "check_weights", counted)
     values = {**SETUPS["dqn"], "env": "highway", "obs": "kinematics", "action": "meta", "traffic": "empty",
-              "steps": 450, "seed": 2, "name": "r", "eval_every": 10_000, "checkpoint_every": 10_000,
+              "steps": 450, "seed": 2, "name": "r", "eval_every": 450, "checkpoint_every": 450,
               "env_options": {"duration_s": 10}}  # fmt: skip
     run_module.train(build_config(values), tmp_path)
-    # DQN (train_freq 1) has a safe point at every step: checks at 100, 200, ... and the final checkpoint
-    assert steps_checked == [100, 200, 300, 400, 450]
+    # DQN (train_freq 1) has a safe point at every step: checks at 100, 200, ..., and at 450 those of
+    # the one evaluation (eval_every = steps) and of the final checkpoint
+    assert steps_checked == [100, 200, 300, 400, 450, 450]

@@ -22,6 +22,7 @@ from drivelab.training import checkpoints
 from drivelab.training import run as run_module
 from drivelab.training.evaluate import evaluate_run
 
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 SMALL_NET = {"policy_kwargs": {"net_arch": [32, 32]}}
 SETUPS = {
     "dqn": {"algo": "dqn", "action": "meta", "steps": 300,
@@ -55,14 +56,6 @@ SETUPS = {
                         "action": "target_speed", "steps": 200,
                         "hyperparams": {"round_steps": 40, "epochs": 2, "batch_size": 16}},
 }  # fmt: skip
-
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
 
 
 def _config(setup: str, name: str, **overrides):

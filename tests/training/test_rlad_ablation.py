@@ -12,6 +12,7 @@ from drivelab.training import checkpoints
 from drivelab.training.evaluate import load_run_config
 from drivelab.training.sweep import expand_sweep
 
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
 SCRIPT = Path(__file__).parents[2] / "benchmarks" / "rlad_ablation.py"
 STEPS = 40
 
@@ -22,14 +23,6 @@ def ablation():
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
-
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
 
 
 BASE = {
