@@ -183,14 +183,25 @@ def load_sweep(path: str | Path, runs_dir: str | Path | None = None) -> Sweep:
 
 def _check_cells(sweep: Sweep) -> None:
     """Fail before any run starts or anything is written, as ``drivelab train`` does: an
-    ``eval_every`` larger than a cell's ``steps`` (every cell), impossible algorithm/action pairs,
+    ``eval_every`` larger than a new cell's ``steps`` (every cell whose run does not exist yet,
+    unless the sweep was begun before that check: see below), impossible algorithm/action pairs,
     bad env options, hyper-parameters the agent refuses (``check_config``, once per distinct config
     but for its name, seed and step budget)."""
     from drivelab.training.run import check_config
 
+    begun = [os.path.lexists(sweep.runs_dir / cell.config.name) for cell in sweep.cells]
+    # A run that exists goes on with its own schedule, as `drivelab train --resume` does. One made
+    # before the check with eval_every > steps shows that the sweep was: its other cells share that
+    # schedule (eval_every is part of a run's identity), and refusing them would leave the sweep
+    # neither continuable nor fixable in its file.
+    before_the_check = any(
+        exists and cell.config.eval_every > cell.config.steps
+        for cell, exists in zip(sweep.cells, begun, strict=True)
+    )
     checked: set[str] = set()
-    for cell in sweep.cells:
-        check_eval_every(cell.config)  # depends on the step budget, which the key below leaves out
+    for cell, exists in zip(sweep.cells, begun, strict=True):
+        if not exists and not before_the_check:
+            check_eval_every(cell.config)  # depends on the step budget, which the key below leaves out
         fields = {k: v for k, v in cell.config.to_dict().items() if k not in ("name", "seed", "steps")}
         key = json.dumps(fields, sort_keys=True, default=str)
         if key not in checked:

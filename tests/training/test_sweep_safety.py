@@ -15,7 +15,7 @@ import yaml
 from typer.testing import CliRunner
 
 from drivelab.cli import app
-from drivelab.config import save_yaml
+from drivelab.config import build_config, save_yaml
 from drivelab.errors import UsageError
 from drivelab.training.sweep import expand_sweep, plan, run_cell
 
@@ -480,3 +480,23 @@ def test_a_run_whose_log_cannot_be_written_fails_as_a_run_not_the_sweep(tmp_path
         f"cannot write its log {str(tmp_path / '.sweep-logs' / (RUN + '.log'))!r}: "
     )
     assert not (tmp_path / RUN).exists()
+
+
+def test_a_sweep_begun_before_the_eval_every_check_goes_on(tmp_path):
+    """A sweep with eval_every > steps whose runs were made before sweeps refused that: its finished
+    run is skipped and its other cell trained, as before; changing eval_every in the file is no way
+    out (it is part of a run's identity). A new sweep with that schedule is refused."""
+    spec = {**SPEC, "base": {**SPEC["base"], "eval_every": 100}, "grid": {"seed": [0, 1]}}
+    runs = tmp_path / "runs"
+    with pytest.raises(UsageError, match=r"'eval_every' \(100\) is larger than 'steps' \(64\)"):
+        expand_sweep(spec, runs)
+    run_dir = runs / RUN
+    run_dir.mkdir(parents=True)
+    made = expand_sweep({**spec, "base": {**spec["base"], "eval_every": 64}}, runs).cells[0].config
+    save_yaml(build_config({**made.to_dict(), "eval_every": 100}), run_dir / "config.yaml")
+    for name, text in {MANIFEST: '{"steps": 64}', "model.zip": "m", "learning_curve.png": "p",
+                       "eval.json": "{}"}.items():  # fmt: skip
+        (run_dir / name).parent.mkdir(parents=True, exist_ok=True)
+        (run_dir / name).write_text(text)
+    actions = [action for _, action in plan(expand_sweep(spec, runs))]
+    assert actions == ["skip", "train"]
