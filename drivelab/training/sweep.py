@@ -58,6 +58,10 @@ SWEEP_KEYS = ("name", "runs_dir", "eval_episodes", "base", "grid", "overrides")
 MERGED_FIELDS = ("hyperparams", "env_options")  # dict fields merged key by key, not replaced
 EXECUTORS = ("pool", "ray")
 LOG_FOLDER = ".sweep-logs"  # per-run stdout/stderr of the workers, beside the run directories
+# How long the lock file or logs folder that this user may not write is looked at again before
+# that is an error: another user's command that has just made it shares it (``_share_like_folder``)
+# a moment after it appears, with the mode of its umask in between.
+SHARE_WAIT_S = 0.5
 LOCK_FILE = ".sweep.lock"  # the runs a command is running now (``claim_runs``), beside them
 RAY_CONNECT_TIMEOUT_S = 10  # --address: how long the cluster's port may take to answer
 
@@ -591,7 +595,14 @@ def _open_lock_file(path: Path, create: bool):
         else:
             _share_like_folder(descriptor, path.parent)
             return os.fdopen(descriptor, "a")
-    return os.fdopen(os.open(path, flags), "a")
+    deadline = time.monotonic() + SHARE_WAIT_S
+    while True:
+        try:
+            return os.fdopen(os.open(path, flags), "a")
+        except PermissionError:
+            if time.monotonic() >= deadline:  # not one being shared by its maker now
+                raise
+            time.sleep(0.02)
 
 
 def _share_like_folder(descriptor: int, folder: Path) -> None:
@@ -638,6 +649,9 @@ def _check_logs_folder(runs_dir: Path) -> None:
         raise UsageError(
             f"cannot write the sweep logs in {str(runs_dir / LOG_FOLDER)!r}: {exc.strerror or exc}"
         ) from None
+    deadline = time.monotonic() + SHARE_WAIT_S  # one that another user has just made and shares
+    while not os.access(folder, os.W_OK | os.X_OK) and time.monotonic() < deadline:
+        time.sleep(0.02)
     if not os.access(folder, os.W_OK | os.X_OK):
         owner = folder.stat().st_uid
         raise UsageError(

@@ -500,3 +500,39 @@ def test_a_sweep_begun_before_the_eval_every_check_goes_on(tmp_path):
         (run_dir / name).write_text(text)
     actions = [action for _, action in plan(expand_sweep(spec, runs))]
     assert actions == ["skip", "train"]
+
+
+def test_a_lock_file_or_logs_folder_being_shared_by_its_maker_is_waited_for(tmp_path, monkeypatch):
+    """Two users' sweeps starting at once in a new group-shared runs folder: the second opened the
+    lock file (and looked at the logs folder) between the first one's creating it, with its umask's
+    mode, and its sharing it: refused, telling the owner to run a chmod that was already done.
+    Simulated for any user: the lock file and logs folder refuse this user for 0.1 s."""
+    import threading
+
+    from drivelab.training import sweep as sweep_module
+
+    runs = tmp_path / "runs"
+    (runs / ".sweep-logs").mkdir(parents=True)
+    lock = runs / ".sweep.lock"
+    lock.write_bytes(b"")
+    shared = threading.Event()
+    threading.Timer(0.1, shared.set).start()
+    real_open, real_access = os.open, os.access
+
+    def not_yet_open(path, flags, *args, **kwargs):
+        if Path(path) == lock and not shared.is_set() and not flags & os.O_CREAT:
+            raise PermissionError(13, "Permission denied", str(path))
+        return real_open(path, flags, *args, **kwargs)
+
+    def not_yet_access(path, mode, **kwargs):
+        return (shared.is_set() or Path(path).name != ".sweep-logs") and real_access(path, mode, **kwargs)
+
+    monkeypatch.setattr(os, "open", not_yet_open)
+    monkeypatch.setattr(os, "access", not_yet_access)
+    with sweep_module.claim_runs(runs, ["a"]):
+        assert shared.is_set()
+        sweep_module._check_logs_folder(runs)
+    shared.clear()
+    threading.Timer(0.1, shared.set).start()
+    sweep_module._check_logs_folder(runs)
+    assert shared.is_set()
