@@ -200,6 +200,7 @@ def train(
     ),
 ) -> None:
     """Train an agent and write a run directory."""
+    from drivelab.config import check_eval_every
     from drivelab.training.run import TrainingInterrupted
     from drivelab.training.run import resume as resume_run
     from drivelab.training.run import train as train_run
@@ -238,7 +239,9 @@ def train(
                 "eval_every": eval_every, "eval_episodes": eval_episodes,
                 "checkpoint_every": checkpoint_every, "n_envs": n_envs, "eval_maps": eval_maps,
             }  # fmt: skip
-            run_dir = train_run(_new_run_config(config, cli, video, hyperparams, switches), runs_dir)
+            new_config = _new_run_config(config, cli, video, hyperparams, switches)
+            check_eval_every(new_config)
+            run_dir = train_run(new_config, runs_dir)
     except UsageError as exc:
         _fail(str(exc))
     except TrainingInterrupted as stop:

@@ -38,7 +38,7 @@ from stable_baselines3.common.vec_env import VecMonitor
 from tqdm import tqdm
 
 from drivelab.agents.registry import check_combination, get_algo
-from drivelab.config import RunConfig, build_config, check_eval_every, save_yaml
+from drivelab.config import RunConfig, build_config, save_yaml
 from drivelab.errors import UsageError
 from drivelab.training.checkpoints import load_agent, load_replay, save_checkpoint, verify_checkpoint
 from drivelab.training.divergence import (
@@ -324,13 +324,15 @@ def _check_n_envs(config: RunConfig) -> None:
 
 
 def check_config(config: RunConfig):
-    """Everything a run's config must pass before anything is written: its evaluation schedule
-    (``check_eval_every``), the algorithm with its action kind and number of worlds, the
-    environment (scenario, sensors, reward, action) and the agent, built once with its
-    hyper-parameters on a probe environment. Returns the algorithm's spec."""
+    """Everything a run's config must pass before anything is written: the algorithm with its
+    action kind and number of worlds, the environment (scenario, sensors, reward, action) and the
+    agent, built once with its hyper-parameters on a probe environment. Returns the algorithm's
+    spec. Not the evaluation schedule (``check_eval_every``): the commands check that for new runs
+    only, as it may not hold for a run made before the check (trained again from step 0 when it
+    stopped before its first checkpoint) or for a slice of a run (``benchmarks/rlad_ablation.py``
+    trains a new run to fewer steps than its ``eval_every``, then resumes it)."""
     from drivelab.envs.core import DriveEnv
 
-    check_eval_every(config)
     check_combination(config.algo, config.action)
     _check_n_envs(config)
     probe = DriveEnv(**config.env_kwargs())  # validates scenario, sensors, reward, action

@@ -58,6 +58,10 @@ SWEEP_KEYS = ("name", "runs_dir", "eval_episodes", "base", "grid", "overrides")
 MERGED_FIELDS = ("hyperparams", "env_options")  # dict fields merged key by key, not replaced
 EXECUTORS = ("pool", "ray")
 LOG_FOLDER = ".sweep-logs"  # per-run stdout/stderr of the workers, beside the run directories
+# How long the lock file or logs folder that this user may not write is looked at again before
+# that is an error: another user's command that has just made it shares it (``_share_like_folder``)
+# a moment after it appears, with the mode of its umask in between.
+SHARE_WAIT_S = 0.5
 LOCK_FILE = ".sweep.lock"  # the runs a command is running now (``claim_runs``), beside them
 RAY_CONNECT_TIMEOUT_S = 10  # --address: how long the cluster's port may take to answer
 
@@ -183,14 +187,25 @@ def load_sweep(path: str | Path, runs_dir: str | Path | None = None) -> Sweep:
 
 def _check_cells(sweep: Sweep) -> None:
     """Fail before any run starts or anything is written, as ``drivelab train`` does: an
-    ``eval_every`` larger than a cell's ``steps`` (every cell), impossible algorithm/action pairs,
+    ``eval_every`` larger than a new cell's ``steps`` (every cell whose run does not exist yet,
+    unless the sweep was begun before that check: see below), impossible algorithm/action pairs,
     bad env options, hyper-parameters the agent refuses (``check_config``, once per distinct config
     but for its name, seed and step budget)."""
     from drivelab.training.run import check_config
 
+    begun = [os.path.lexists(sweep.runs_dir / cell.config.name) for cell in sweep.cells]
+    # A run that exists goes on with its own schedule, as `drivelab train --resume` does. One made
+    # before the check with eval_every > steps shows that the sweep was: its other cells share that
+    # schedule (eval_every is part of a run's identity), and refusing them would leave the sweep
+    # neither continuable nor fixable in its file.
+    before_the_check = any(
+        exists and cell.config.eval_every > cell.config.steps
+        for cell, exists in zip(sweep.cells, begun, strict=True)
+    )
     checked: set[str] = set()
-    for cell in sweep.cells:
-        check_eval_every(cell.config)  # depends on the step budget, which the key below leaves out
+    for cell, exists in zip(sweep.cells, begun, strict=True):
+        if not exists and not before_the_check:
+            check_eval_every(cell.config)  # depends on the step budget, which the key below leaves out
         fields = {k: v for k, v in cell.config.to_dict().items() if k not in ("name", "seed", "steps")}
         key = json.dumps(fields, sort_keys=True, default=str)
         if key not in checked:
@@ -580,7 +595,14 @@ def _open_lock_file(path: Path, create: bool):
         else:
             _share_like_folder(descriptor, path.parent)
             return os.fdopen(descriptor, "a")
-    return os.fdopen(os.open(path, flags), "a")
+    deadline = time.monotonic() + SHARE_WAIT_S
+    while True:
+        try:
+            return os.fdopen(os.open(path, flags), "a")
+        except PermissionError:
+            if time.monotonic() >= deadline:  # not one being shared by its maker now
+                raise
+            time.sleep(0.02)
 
 
 def _share_like_folder(descriptor: int, folder: Path) -> None:
@@ -627,6 +649,9 @@ def _check_logs_folder(runs_dir: Path) -> None:
         raise UsageError(
             f"cannot write the sweep logs in {str(runs_dir / LOG_FOLDER)!r}: {exc.strerror or exc}"
         ) from None
+    deadline = time.monotonic() + SHARE_WAIT_S  # one that another user has just made and shares
+    while not os.access(folder, os.W_OK | os.X_OK) and time.monotonic() < deadline:
+        time.sleep(0.02)
     if not os.access(folder, os.W_OK | os.X_OK):
         owner = folder.stat().st_uid
         raise UsageError(

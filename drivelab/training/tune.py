@@ -276,7 +276,8 @@ def check_study(study: Study) -> None:
         {**low, p.name: choice} for p in study.space if p.kind == "categorical" for choice in p.choices
     ]
     first = study.trial_config(0, low)
-    check_eval_every(first)  # the pruner reads the periodic evaluations: at least one must run
+    if not _continued(study):  # a study begun before this check goes on as it was made
+        check_eval_every(first)  # the pruner reads the periodic evaluations: at least one must run
     check_combination(first.algo, first.action)
     env = DriveEnv(**first.env_kwargs())  # validates scenario, sensors, reward, action
     try:
@@ -413,6 +414,16 @@ def _check_study_dir(study: Study) -> None:
             )
     elif folder.is_dir() and any(folder.iterdir()):
         raise UsageError(f"study directory {str(folder)!r} is not empty and holds no drivelab study")
+
+
+def _continued(study: Study) -> bool:
+    """Whether the study directory holds this very study already (its study.yaml; ``run_study``
+    refuses any other)."""
+    try:
+        saved = yaml.safe_load((study.study_dir / SPEC_FILE).read_text())
+    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        return False
+    return saved == json.loads(json.dumps(study.identity()))
 
 
 def _trial_value(run_dir: Path, metric: str) -> float:

@@ -93,3 +93,14 @@ def test_stopped_runs_continue_as_the_straight_runs(tmp_path, ablation):
     second = ablation.run_slice(sweep, workers=1)
     assert sorted(second["finished"]) == names
     _assert_same_runs(sweep, straight.runs_dir)
+
+
+def test_a_slice_shorter_than_eval_every_trains_and_stops(tmp_path, ablation):
+    """``--stop-after-steps`` below the runs' eval_every (5000 in the real sweep): the new runs train
+    that slice (a run of fewer steps than its eval_every, resumed later), they are not refused."""
+    spec = {"runs_dir": str(tmp_path / "runs"), "eval_episodes": 1, "base": BASE, "grid": {"seed": 1}}
+    sweep = expand_sweep(spec)
+    (name,) = [c.config.name for c in sweep.cells]
+    status = ablation.run_slice(sweep, workers=1, stop_after_steps=15)  # eval_every is 20
+    assert status == {"finished": [], "stopped": [name], "failed": []}
+    assert ablation.checkpoint_steps(sweep.runs_dir / name) == 15

@@ -239,3 +239,18 @@ def test_ctrl_c_while_a_run_is_set_up_leaves_no_folder(tmp_path, monkeypatch):
     with pytest.raises(KeyboardInterrupt):
         run_module.train(_config(name="r"), tmp_path / "runs")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_run_made_before_the_eval_every_check_trains_again_from_step_0(tmp_path, monkeypatch):
+    """A run with eval_every > steps (made before ``train`` refused that), stopped before its first
+    checkpoint: ``train --resume`` trains it again from step 0 with its own config, as it did
+    before, instead of refusing the schedule it cannot change (``--resume`` takes no --eval-every)."""
+    run_dir = tmp_path / "r"
+    run_dir.mkdir()
+    config = _config(steps=64, eval_every=100)
+    run_module.save_yaml(config, run_dir / "config.yaml")
+    (run_dir / "monitor.csv").write_text('#{"t_start": 1.0, "env_id": "highway"}\nr,l,t\n')
+    trained = []
+    monkeypatch.setattr(run_module, "train", lambda config, root, *args: trained.append(config) or root)
+    run_module.resume(run_dir)
+    assert [(c.steps, c.eval_every) for c in trained] == [(64, 100)]

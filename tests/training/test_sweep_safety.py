@@ -15,7 +15,7 @@ import yaml
 from typer.testing import CliRunner
 
 from drivelab.cli import app
-from drivelab.config import save_yaml
+from drivelab.config import build_config, save_yaml
 from drivelab.errors import UsageError
 from drivelab.training.sweep import expand_sweep, plan, run_cell
 
@@ -480,3 +480,59 @@ def test_a_run_whose_log_cannot_be_written_fails_as_a_run_not_the_sweep(tmp_path
         f"cannot write its log {str(tmp_path / '.sweep-logs' / (RUN + '.log'))!r}: "
     )
     assert not (tmp_path / RUN).exists()
+
+
+def test_a_sweep_begun_before_the_eval_every_check_goes_on(tmp_path):
+    """A sweep with eval_every > steps whose runs were made before sweeps refused that: its finished
+    run is skipped and its other cell trained, as before; changing eval_every in the file is no way
+    out (it is part of a run's identity). A new sweep with that schedule is refused."""
+    spec = {**SPEC, "base": {**SPEC["base"], "eval_every": 100}, "grid": {"seed": [0, 1]}}
+    runs = tmp_path / "runs"
+    with pytest.raises(UsageError, match=r"'eval_every' \(100\) is larger than 'steps' \(64\)"):
+        expand_sweep(spec, runs)
+    run_dir = runs / RUN
+    run_dir.mkdir(parents=True)
+    made = expand_sweep({**spec, "base": {**spec["base"], "eval_every": 64}}, runs).cells[0].config
+    save_yaml(build_config({**made.to_dict(), "eval_every": 100}), run_dir / "config.yaml")
+    for name, text in {MANIFEST: '{"steps": 64}', "model.zip": "m", "learning_curve.png": "p",
+                       "eval.json": "{}"}.items():  # fmt: skip
+        (run_dir / name).parent.mkdir(parents=True, exist_ok=True)
+        (run_dir / name).write_text(text)
+    actions = [action for _, action in plan(expand_sweep(spec, runs))]
+    assert actions == ["skip", "train"]
+
+
+def test_a_lock_file_or_logs_folder_being_shared_by_its_maker_is_waited_for(tmp_path, monkeypatch):
+    """Two users' sweeps starting at once in a new group-shared runs folder: the second opened the
+    lock file (and looked at the logs folder) between the first one's creating it, with its umask's
+    mode, and its sharing it: refused, telling the owner to run a chmod that was already done.
+    Simulated for any user: the lock file and logs folder refuse this user for 0.1 s."""
+    import threading
+
+    from drivelab.training import sweep as sweep_module
+
+    runs = tmp_path / "runs"
+    (runs / ".sweep-logs").mkdir(parents=True)
+    lock = runs / ".sweep.lock"
+    lock.write_bytes(b"")
+    shared = threading.Event()
+    threading.Timer(0.1, shared.set).start()
+    real_open, real_access = os.open, os.access
+
+    def not_yet_open(path, flags, *args, **kwargs):
+        if Path(path) == lock and not shared.is_set() and not flags & os.O_CREAT:
+            raise PermissionError(13, "Permission denied", str(path))
+        return real_open(path, flags, *args, **kwargs)
+
+    def not_yet_access(path, mode, **kwargs):
+        return (shared.is_set() or Path(path).name != ".sweep-logs") and real_access(path, mode, **kwargs)
+
+    monkeypatch.setattr(os, "open", not_yet_open)
+    monkeypatch.setattr(os, "access", not_yet_access)
+    with sweep_module.claim_runs(runs, ["a"]):
+        assert shared.is_set()
+        sweep_module._check_logs_folder(runs)
+    shared.clear()
+    threading.Timer(0.1, shared.set).start()
+    sweep_module._check_logs_folder(runs)
+    assert shared.is_set()

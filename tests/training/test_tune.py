@@ -205,3 +205,16 @@ def test_the_committed_study_files_are_valid(name):
     assert (study.name, study.run["algo"], study.run["env"]) == (name, algo, env)
     assert study.n_trials >= 10 and study.run["steps"] >= 40_000 and study.final_eval_episodes in (20, 100)
     assert {p.name for p in study.space} >= {"learning_rate", "gamma"}
+
+
+def test_a_study_begun_before_the_eval_every_check_goes_on(tmp_path):
+    """A study with eval_every > steps made before tune refused that: continued (its study.yaml is
+    this study's), not refused for a schedule that cannot change (it is the study's identity); a
+    new study with it is refused."""
+    path, folder = study_file(tmp_path, eval_every=128), tmp_path / "study"
+    with pytest.raises(UsageError, match=r"'eval_every' \(128\) is larger than 'steps' \(64\)"):
+        tune.load_study(path, folder)
+    folder.mkdir()
+    identity = read_study(yaml.safe_load(path.read_text()), folder).identity()
+    (folder / tune.SPEC_FILE).write_text(yaml.safe_dump(json.loads(json.dumps(identity)), sort_keys=False))
+    assert tune.load_study(path, folder).run["eval_every"] == 128
