@@ -149,7 +149,13 @@ TRAIN_CASES = {
     "qlearning camera": (
         ["--algo", "qlearning", "--env", "follow-line", "--obs", "camera"],
         {},
-        "qlearning needs a discrete observation",
+        "'qlearning' needs a discrete observation (--obs line on follow-line",
+    ),
+    "qlearning on the default sensor": (  # said "cannot read 'vector' observations (it reads other)"
+        ["--algo", "qlearning", "--env", "follow-line"],
+        {},
+        "'qlearning' needs a discrete observation (--obs line on follow-line, lane on follow-lane, or "
+        "ttc_grid), got Box",
     ),
     "expert without affordances": (
         ["--algo", "expert", "--env", "town", "--obs", "waypoints", "--action", "target_speed"],

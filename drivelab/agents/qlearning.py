@@ -65,6 +65,17 @@ class QLearningConfig:
             raise UsageError(f"{algo} needs log_interval >= 1 and a finite initial_q")
 
 
+def observation_error(space: spaces.Space) -> str | None:
+    """Why Q-learning cannot read ``space`` (None when it can): its table is indexed by a discrete
+    state, which the ``line``, ``lane`` and ``ttc_grid`` sensors give."""
+    if isinstance(space, spaces.Discrete):
+        return None
+    return (
+        "needs a discrete observation (--obs line on follow-line, lane on follow-lane, or ttc_grid), "
+        f"got {type(space).__name__}{getattr(space, 'shape', '')}"
+    )
+
+
 def _discrete_size(space: spaces.Space, what: str) -> int:
     if not isinstance(space, spaces.Discrete):
         raise UsageError(

@@ -110,7 +110,7 @@ ALGORITHMS: dict[str, AlgoSpec] = {
                  observation_check=_RLAD_CHECK),
         AlgoSpec("qlearning", "tabular Q-learning over discrete states (seed 004): line, lane, ttc_grid",
                  ("seed_line", "seed_lane", "meta", "grid"), "drivelab.agents.qlearning:QLearning",
-                 "qlearning", observation_kinds=("other",)),  # a Discrete state; the builder checks it
+                 "qlearning", observation_check="drivelab.agents.qlearning:observation_error"),
         AlgoSpec("expert", "rule-based driver (town, racetrack, block maps) on waypoints + privileged "
                  "affordances (learns nothing)",
                  ("target_speed",), "drivelab.agents.expert:RuleBasedExpert", "own", multi_env=True),

@@ -135,6 +135,6 @@ def test_qlearning_on_camera_pixels_fails_before_training(tmp_path):
     config = build_config(
         {"algo": "qlearning", "env": "follow-line", "obs": "camera", "action": "seed_line", "steps": 10}
     )
-    with pytest.raises(UsageError, match="^qlearning needs a discrete observation"):
+    with pytest.raises(UsageError, match=r"^algorithm 'qlearning' needs a discrete observation \(--obs line"):
         train(config, tmp_path)
     assert not any(tmp_path.iterdir())
