@@ -284,7 +284,9 @@ TRAIN_CASES = {
     "bc birdeye": (
         ["--algo", "bc", "--env", "town", "--obs", "birdeye", "--action", "target_speed"],
         {},
-        "algorithm 'bc' cannot read 'other' observations",
+        "algorithm 'bc' cannot read the observation Box(0, 255, (128, 128, 3), uint8); it reads vectors "
+        "(--obs kinematics, lidar, ego_state, waypoints,measurements, ...), one channels-first image (--obs "
+        "topdown) or one channels-first image with vectors (--obs topdown,measurements)",
     ),
     "dagger beta_decay=1.5": (
         [

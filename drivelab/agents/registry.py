@@ -82,6 +82,13 @@ def load_own(algo: str, path, env, hyperparams: dict | None = None, seed: int | 
 
 _DISCRETE, _CONTINUOUS = ("meta", "grid"), ("continuous", "target_speed")
 _READABLE = ("vector", "image", "image+vector")
+# what each observation kind is, by the sensors that give it (an error names those it reads)
+_KIND_EXAMPLES = {
+    "vector": "vectors (--obs kinematics, lidar, ego_state, waypoints,measurements, ...)",
+    "image": "one channels-first image (--obs topdown)",
+    "image+vector": "one channels-first image with vectors (--obs topdown,measurements)",
+    "other": "any other observation",
+}
 _RLAD_CHECK = "drivelab.agents.rlad.sac:observation_error"
 
 ALGORITHMS: dict[str, AlgoSpec] = {
@@ -161,10 +168,10 @@ def check_combination(algo: str, action: str, observation_space=None) -> AlgoSpe
 
         kind = observation_kind(observation_space)
         if kind not in spec.observation_kinds:
-            raise UsageError(
-                f"algorithm {algo!r} cannot read {kind!r} observations "
-                f"(it reads {', '.join(spec.observation_kinds)})"
-            )
+            readable = [_KIND_EXAMPLES[k] for k in spec.observation_kinds]
+            readable = ", ".join(readable[:-1]) + " or " + readable[-1] if len(readable) > 1 else readable[0]
+            what = f"the observation {observation_space}" if kind == "other" else f"{kind!r} observations"
+            raise UsageError(f"algorithm {algo!r} cannot read {what}; it reads {readable}")
         check = load_entry_point(spec.observation_check) if spec.observation_check else None
         problem = check(observation_space) if check else None
         if problem is not None:

@@ -140,8 +140,8 @@ def test_run_directory_resume_and_evaluation(algo, tmp_path):
 @pytest.mark.parametrize(
     "algo, obs, action, hyperparams, message",
     [
-        ("dueling_ddqn", "topdown", "grid", {}, "cannot read 'image'"),
-        ("ppo_own", "birdeye", "continuous", {}, "cannot read 'other'"),
+        ("dueling_ddqn", "topdown", "grid", {}, r"cannot read 'image' observations; it reads vectors \("),
+        ("ppo_own", "birdeye", "continuous", {}, r"cannot read the observation Box\(.*3\), uint8\)"),
         ("a2c_own", "topdown", "meta", {}, "cannot take 'meta'"),
         ("ppo_own", "kinematics", "continuous", {"clip_range": -1}, "clip_range > 0"),
         ("ppo_own", "kinematics", "continuous", {"n_epoch": 3}, "unknown hyperparameter 'n_epoch'"),
