@@ -178,14 +178,42 @@ def load_run(run_dir: str | Path) -> RunRecord:
     return RunRecord(run_dir, config, final, source, tuple(curve))
 
 
+def conditions(config: RunConfig) -> dict[str, str]:
+    """What a run was trained and evaluated on beside its scenario: the traffic level, the
+    simulator, each environment option and the evaluation maps, as printable values."""
+    return {
+        "traffic": config.traffic,
+        "backend": config.backend,
+        **{name: str(value) for name, value in sorted(config.env_options.items())},
+        "eval_maps": str(config.eval_maps) if config.eval_maps is not None else "the training maps",
+    }
+
+
+def _scenario_labels(records: Sequence[RunRecord]) -> list[str]:
+    """Each run's scenario as its group shows it: the name, followed by the ``conditions`` that
+    differ among ``records`` (``highway (traffic=dense)``), so that runs of different traffic,
+    options or simulators are different groups and say how; the scenario alone where all agree."""
+    values = [conditions(record.config) for record in records]
+    names = dict.fromkeys(name for value in values for name in value)
+    varying = [name for name in names if len({value.get(name, "default") for value in values}) > 1]
+    labels = []
+    for record, value in zip(records, values, strict=True):
+        parts = ", ".join(f"{name}={value.get(name, 'default')}" for name in varying)
+        labels.append(f"{record.config.env} ({parts})" if parts else record.config.env)
+    return labels
+
+
 def group_runs(records: Sequence[RunRecord]) -> dict[tuple[str, ...], list[RunRecord]]:
     """Runs grouped by ``group_key``, groups in order of first appearance, runs sorted by seed.
+    Runs whose ``conditions`` differ (traffic, environment options, simulator, evaluation maps)
+    are different groups, their scenario labelled with them (``_scenario_labels``).
 
     Two runs of one config, seed and step budget (a copied run directory, one run named by two
     paths) are one sample of a deterministic run, not two: a UsageError naming them. Runs of one
-    seed that differ elsewhere (steps, traffic …) share a group, with a warning in the report."""
+    seed that differ otherwise (steps) share a group, with a warning in the report."""
     groups: dict[tuple[str, ...], list[RunRecord]] = {}
     seen: dict[tuple[str, int], RunRecord] = {}
+    scenarios = dict(zip((id(record) for record in records), _scenario_labels(records), strict=True))
     for record in records:
         config = record.config
         same = seen.setdefault((config.identity(), config.steps), record)  # the identity has the seed
@@ -195,7 +223,8 @@ def group_runs(records: Sequence[RunRecord]) -> dict[tuple[str, ...], list[RunRe
                 f"seed {config.seed}, {config.steps} steps): a seed counts once in a group; "
                 "compare one of them"
             )
-        groups.setdefault(record.group, []).append(record)
+        key = record.group
+        groups.setdefault((key[0], scenarios[id(record)], *key[2:]), []).append(record)
     return {key: sorted(runs, key=lambda r: (r.config.seed, str(r.run_dir))) for key, runs in groups.items()}
 
 

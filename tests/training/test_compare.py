@@ -28,11 +28,13 @@ def fake_run(
     final_return=None,
     curve=((10, 0.0), (20, 1.0)),
     hyperparams=None,
+    **fields,
 ):
-    """A run directory as drivelab train writes it, with chosen evaluation returns."""
+    """A run directory as drivelab train writes it, with chosen evaluation returns (``fields``: other
+    config fields)."""
     run_dir = root / name
     run_dir.mkdir(parents=True)
-    values = {"algo": algo, "seed": seed, "reward": reward, "steps": 20, "name": name}
+    values = {"algo": algo, "seed": seed, "reward": reward, "steps": 20, "name": name, **fields}
     config = build_config({**values, "hyperparams": hyperparams or {}})
     save_yaml(config, run_dir / "config.yaml")
     with (run_dir / "evaluations.csv").open("w", newline="") as handle:
@@ -67,6 +69,24 @@ def test_grouping_over_seeds(runs):
     }
     sources = {r.run_dir.name: r.source for r in records}
     assert sources["dqn-s0"] == "evaluations.csv" and sources["ppo-s0"] == "eval.json"
+
+
+def test_runs_of_different_traffic_or_options_are_different_groups_labelled_by_them(tmp_path):
+    """They used to share a group, their values pooled as if seeds of one config (with no word
+    when the seeds differed). Conditions all runs share stay out of the labels."""
+    root = tmp_path / "runs"
+    fake_run(root, "empty-s0", seed=0, traffic="empty")
+    fake_run(root, "empty-s1", seed=1, traffic="empty")
+    fake_run(root, "dense-s2", seed=2, traffic="dense")
+    fake_run(root, "dense-short-s3", seed=3, traffic="dense", env_options={"duration_s": 10})
+    groups = group_runs([load_run(p) for p in find_runs([str(root / "*")])])
+    assert {key[1]: [r.run_dir.name for r in rs] for key, rs in groups.items()} == {
+        "highway (traffic=dense, duration_s=default)": ["dense-s2"],
+        "highway (traffic=dense, duration_s=10)": ["dense-short-s3"],
+        "highway (traffic=empty, duration_s=default)": ["empty-s0", "empty-s1"],
+    }
+    same = group_runs([load_run(p) for p in find_runs([str(root / "empty-*")])])
+    assert list(same) == [("ppo", "highway", "kinematics", "highway", "meta")]
 
 
 def test_report_numbers_and_files(runs, tmp_path):
