@@ -31,6 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from drivelab.config import RunConfig
+from drivelab.envs.scenarios import SCENARIOS
 from drivelab.errors import UsageError
 from drivelab.hyperparams import shipped_hyperparams
 from drivelab.training.evaluate import load_run_config
@@ -180,10 +181,14 @@ def load_run(run_dir: str | Path) -> RunRecord:
 
 def conditions(config: RunConfig) -> dict[str, str]:
     """What a run was trained and evaluated on beside its scenario: the traffic level, the
-    simulator, each environment option and the evaluation maps, as printable values."""
+    simulator ("auto" read as the one it picks), each environment option and the evaluation maps,
+    as printable values."""
+    backend = config.backend
+    if backend == "auto" and config.env in SCENARIOS:
+        backend = "fast" if SCENARIOS[config.env].fast_backend else "highway"
     return {
         "traffic": config.traffic,
-        "backend": config.backend,
+        "backend": backend,
         **{name: str(value) for name, value in sorted(config.env_options.items())},
         "eval_maps": str(config.eval_maps) if config.eval_maps is not None else "the training maps",
     }
