@@ -27,6 +27,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import fcntl
+import grp
 import hashlib
 import itertools
 import json
@@ -678,7 +679,24 @@ def _chmod_fix(path: Path, owner: int) -> str:
         name = pwd.getpwuid(owner).pw_name
     except KeyError:
         name = f"uid {owner}"
-    return f"its owner ({name}) can let the folder's group write it: `chmod g+w {quoted}`"
+    return f"its owner ({name}) can let the folder's group write it: `{_regroup(path)}chmod g+w {quoted}`"
+
+
+def _regroup(path: Path) -> str:
+    """``chgrp GROUP PATH && `` when ``path`` is not of its folder's group GROUP (in a folder
+    without setgid it gets its maker's group, which a ``chmod g+w`` alone lets write, not the
+    folder's); empty when it is, or when either cannot be looked at."""
+    try:
+        gid, folder_gid = path.stat().st_gid, path.parent.stat().st_gid
+    except OSError:
+        return ""
+    if gid == folder_gid:
+        return ""
+    try:
+        group = grp.getgrgid(folder_gid).gr_name
+    except KeyError:
+        group = str(folder_gid)
+    return f"chgrp {shlex.quote(group)} {shlex.quote(str(path))} && "
 
 
 def _lock_file_denied(path: Path, owner: int, exc: OSError) -> str:

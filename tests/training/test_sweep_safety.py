@@ -426,6 +426,35 @@ def test_the_error_for_another_users_lock_file_says_who_can_share_it(tmp_path):
         )
 
 
+@pytest.mark.skipif(not AS_ROOT, reason="giving a file another group needs root")
+def test_the_error_for_a_lock_file_of_another_group_says_to_give_it_the_folders(tmp_path):
+    """In a folder without setgid the lock file gets its maker's group: `chmod g+w` alone would let
+    that group write it, not the folder's."""
+    import grp
+    import pwd
+
+    from drivelab.training.sweep import _lock_file_denied
+
+    lock = tmp_path / ".sweep.lock"
+    lock.touch()
+    folder_gid = tmp_path.stat().st_gid
+    os.chown(lock, -1, folder_gid + 1)
+    try:
+        group = grp.getgrgid(folder_gid).gr_name
+    except KeyError:
+        group = str(folder_gid)
+    owner = os.geteuid() + 1
+    try:
+        name = pwd.getpwuid(owner).pw_name
+    except KeyError:
+        name = f"uid {owner}"
+    message = _lock_file_denied(lock, owner, PermissionError(13, "Permission denied"))
+    assert message.endswith(
+        f"; its owner ({name}) can let the folder's group write it: "
+        f"`chgrp {group} {lock} && chmod g+w {lock}`"
+    )
+
+
 @pytest.mark.parametrize(
     ("folder_mode", "logs_mode"),
     [(0o2775, 0o775), (0o777, 0o777), (0o755, 0o755)],
