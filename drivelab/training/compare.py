@@ -290,6 +290,14 @@ def _markdown(
             " compare returns across rewards with care; the driving metrics (success, crashes, speed,"
             " distance) do not depend on the reward.",
         ]
+    scenarios = list(dict.fromkeys(runs[0].config.env for runs in groups.values()))
+    if len(scenarios) > 1:
+        lines += [
+            "",
+            f"The groups drive different scenarios ({', '.join(scenarios)}), each evaluated on its own"
+            " scenario's episodes: a metric compares how each agent does at its own task, not the"
+            " agents at one task.",
+        ]
     repeated = [key for key, runs in groups.items() if len({r.config.seed for r in runs}) < len(runs)]
     for key in repeated:
         lines += [

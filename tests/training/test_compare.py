@@ -89,6 +89,16 @@ def test_runs_of_different_traffic_or_options_are_different_groups_labelled_by_t
     assert list(same) == [("ppo", "highway", "kinematics", "highway", "meta")]
 
 
+def test_a_report_of_several_scenarios_says_each_is_evaluated_on_its_own(tmp_path):
+    root = tmp_path / "runs"
+    fake_run(root, "highway-s0", final_return=1.0)
+    fake_run(root, "merge-s0", final_return=2.0, env="merge")
+    text = (compare([str(root / "*")], tmp_path / "both") / "report.md").read_text()
+    assert "The groups drive different scenarios (highway, merge), each evaluated on its own" in text
+    text = (compare([str(root / "highway-*")], tmp_path / "one") / "report.md").read_text()
+    assert "different scenarios" not in text
+
+
 def test_report_numbers_and_files(runs, tmp_path):
     out = compare([str(runs / "*")], tmp_path / "report", command="drivelab compare --runs 'runs/*'")
     for name in ("report.md", "summary.csv", "runs.csv", "learning_curves.png", "metrics.png"):
