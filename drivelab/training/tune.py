@@ -406,8 +406,7 @@ def _check_study_dir(study: Study) -> None:
     if folder.exists() and not folder.is_dir():
         raise UsageError(f"study directory {str(folder)!r} is a file")
     if (folder / SPEC_FILE).is_file():
-        saved = yaml.safe_load((folder / SPEC_FILE).read_text())
-        if saved != json.loads(json.dumps(study.identity())):
+        if _saved_spec(study) != _spec(study):
             raise UsageError(
                 f"study directory {str(folder)!r} holds another study (its {SPEC_FILE} differs); "
                 "remove it or choose another --study-dir"
@@ -416,14 +415,22 @@ def _check_study_dir(study: Study) -> None:
         raise UsageError(f"study directory {str(folder)!r} is not empty and holds no drivelab study")
 
 
-def _continued(study: Study) -> bool:
-    """Whether the study directory holds this very study already (its study.yaml; ``run_study``
-    refuses any other)."""
+def _spec(study: Study):
+    """The study's identity as its study.yaml holds it (plain YAML values)."""
+    return json.loads(json.dumps(study.identity()))
+
+
+def _saved_spec(study: Study):
+    """The study.yaml of the study directory, read; None when there is none to read."""
     try:
-        saved = yaml.safe_load((study.study_dir / SPEC_FILE).read_text())
+        return yaml.safe_load((study.study_dir / SPEC_FILE).read_text())
     except (OSError, UnicodeDecodeError, yaml.YAMLError):
-        return False
-    return saved == json.loads(json.dumps(study.identity()))
+        return None
+
+
+def _continued(study: Study) -> bool:
+    """Whether the study directory holds this very study already (``run_study`` refuses any other)."""
+    return _saved_spec(study) == _spec(study)
 
 
 def _trial_value(run_dir: Path, metric: str) -> float:
@@ -460,9 +467,7 @@ def run_study(
         held.enter_context(executor_ready(executor, workers, address))
         folder = make_out_dir(study.study_dir.resolve(), "study folder")
         held.enter_context(_locked(folder))
-        (folder / SPEC_FILE).write_text(
-            yaml.safe_dump(json.loads(json.dumps(study.identity())), sort_keys=False)
-        )
+        (folder / SPEC_FILE).write_text(yaml.safe_dump(_spec(study), sort_keys=False))
         optuna_study = open_optuna_study(study)
         trials = optuna_study.get_trials(deepcopy=False)
         stale = [t for t in trials if t.state == TrialState.RUNNING]  # its driver was killed

@@ -409,20 +409,24 @@ def test_a_lock_file_that_cannot_be_written_is_one_error_line(tmp_path, sweep_fi
     )
 
 
-def test_the_error_for_another_users_lock_file_says_who_can_share_it(tmp_path):
+def _user_name(uid: int) -> str:
+    """How the error lines name user ``uid``."""
     import pwd
 
+    try:
+        return pwd.getpwuid(uid).pw_name
+    except KeyError:
+        return f"uid {uid}"
+
+
+def test_the_error_for_another_users_lock_file_says_who_can_share_it(tmp_path):
     from drivelab.training.sweep import _lock_file_denied
 
     lock = tmp_path / ".sweep.lock"
     for owner in (os.geteuid() + 1, 2**31 - 7):
-        try:
-            name = pwd.getpwuid(owner).pw_name
-        except KeyError:
-            name = f"uid {owner}"
         message = _lock_file_denied(lock, owner, PermissionError(13, "Permission denied"))
         assert message.endswith(
-            f"; its owner ({name}) can let the folder's group write it: `chmod g+w {lock}`"
+            f"; its owner ({_user_name(owner)}) can let the folder's group write it: `chmod g+w {lock}`"
         )
 
 
@@ -431,7 +435,6 @@ def test_the_error_for_a_lock_file_of_another_group_says_to_give_it_the_folders(
     """In a folder without setgid the lock file gets its maker's group: `chmod g+w` alone would let
     that group write it, not the folder's."""
     import grp
-    import pwd
 
     from drivelab.training.sweep import _lock_file_denied
 
@@ -444,13 +447,9 @@ def test_the_error_for_a_lock_file_of_another_group_says_to_give_it_the_folders(
     except KeyError:
         group = str(folder_gid)
     owner = os.geteuid() + 1
-    try:
-        name = pwd.getpwuid(owner).pw_name
-    except KeyError:
-        name = f"uid {owner}"
     message = _lock_file_denied(lock, owner, PermissionError(13, "Permission denied"))
     assert message.endswith(
-        f"; its owner ({name}) can let the folder's group write it: "
+        f"; its owner ({_user_name(owner)}) can let the folder's group write it: "
         f"`chgrp {group} {lock} && chmod g+w {lock}`"
     )
 
