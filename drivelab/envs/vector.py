@@ -211,6 +211,7 @@ class VectorDriveEnv(VectorEnv):
         self.observations: np.ndarray | dict[str, np.ndarray] | None = None  # the last ones returned
         self.episode_seeds = np.zeros(self.num_envs, dtype=np.int64)
         self.pending_reset = np.zeros(self.num_envs, dtype=bool)  # NEXT_STEP: reset on the next step
+        self._no_light_labels = np.full(self.num_envs, _LABEL_OF_STATE[0], dtype=object)
 
     # --- observations ------------------------------------------------------------------------
     def _observe(self, batch: WorldBatch) -> np.ndarray | dict[str, np.ndarray]:
@@ -318,7 +319,9 @@ class VectorDriveEnv(VectorEnv):
         prev = self.batch
         controls = self.adapter.controls_for(actions, prev)
         restarting = self.pending_reset.copy()  # NEXT_STEP: these worlds begin a new episode now
-        self._draw_seeds(restarting)
+        any_restarting = bool(np.count_nonzero(restarting))  # (ndarray.any costs a microsecond)
+        if any_restarting:
+            self._draw_seeds(restarting)
         stepped = self.simulator.step(controls, restarting, self.episode_seeds)
         batch, terminated, truncated = self.rules.apply(stepped)
         rewards, terms = self.reward_shaper(prev, batch, controls)
@@ -326,7 +329,7 @@ class VectorDriveEnv(VectorEnv):
         done = terminated | truncated
         infos = self._step_infos(batch, terms, done, truncated)
         self.batch = batch
-        if np.count_nonzero(restarting):  # their values above judged no step of theirs: discarded
+        if any_restarting:  # their values above judged no step of theirs: discarded
             if batch is not stepped:  # a restarted world starts with its simulator's events
                 self.batch = batch.where(restarting, stepped)
             self._start(restarting, self.batch)
@@ -386,7 +389,7 @@ class VectorDriveEnv(VectorEnv):
     def traffic_light_labels(self) -> np.ndarray:
         """(K,) "none", "green" or "red_or_yellow": the light ahead within 18 m (RLAD's label)."""
         if not self.batch.traffic_lights.shape[1]:  # no lights in any world: no search
-            return np.full(self.num_envs, _LABEL_OF_STATE[0], dtype=object)
+            return self._no_light_labels.copy()
         state, _ = self.batch.light_ahead(LIGHT_LABEL_DISTANCE_M)
         return _LABEL_OF_STATE[state + 1]
 

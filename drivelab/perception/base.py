@@ -85,7 +85,10 @@ class Sensor(ABC):
 
     def empty(self, num_worlds: int) -> np.ndarray:
         """A zeroed ``(num_worlds, *space.shape)`` buffer of the space's dtype."""
-        return np.zeros((num_worlds, *self.space.shape), dtype=self.space.dtype)
+        layout = self.__dict__.get("_buffer_layout")  # (shape, dtype): the space is fixed
+        if layout is None:
+            layout = self.__dict__["_buffer_layout"] = (tuple(self.space.shape), self.space.dtype)
+        return np.zeros((num_worlds, *layout[0]), dtype=layout[1])
 
 
 ZEBRA_STRIPE_M = (0.5, 1.0)  # stripe width, and stripe-to-stripe pitch across the road

@@ -50,21 +50,39 @@ class Kinematics(Sensor):
         ego = batch.ego
         rows = np.zeros((batch.num_worlds, self.vehicles_count, len(FEATURES)))  # (K, rows, 7)
         relative_heading = ego.heading - ego.lane_heading
-        rows[:, 0, 0] = 1.0
-        rows[:, 0, 3] = ego.speed_mps / self.speed_scale_mps
-        rows[:, 0, 5], rows[:, 0, 6] = np.cos(relative_heading), np.sin(relative_heading)
         others = batch.vehicles  # (K, N, 6)
         if others.shape[1] and self.vehicles_count > 1:
             # the selection compiled, the transcendental functions in numpy (its rounding
             # everywhere) on the selected vehicles' headings only
+            cos_h, sin_h = batch.heading_cos_sin()
             chosen, heading = nearest_rows(
-                others, batch.vehicle_valid, ego.position, ego.heading, np.cos(ego.heading),
-                np.sin(ego.heading), self.perception_distance_m, rows,
+                others, batch.vehicle_valid, ego.position, ego.heading, cos_h, sin_h,
+                self.perception_distance_m, rows,
             )  # fmt: skip
             cos_other, sin_other = np.cos(heading), np.sin(heading)
             motion_rows(others, chosen, ego.speed_mps, cos_other, sin_other, self.speed_scale_mps, rows)
-        np.minimum(np.maximum(rows, -1.0, out=rows), 1.0, out=rows)  # np.clip, without its wrapper's cost
-        out[...] = rows.reshape(batch.num_worlds, -1)
+        ego_rows_into(
+            rows, ego.speed_mps, np.cos(relative_heading), np.sin(relative_heading), self.speed_scale_mps, out
+        )
+
+
+@njit(cache=True)
+def ego_rows_into(rows, speed_mps, cos_relative, sin_relative, speed_scale, out):
+    """Row 0 of every world (the ego: presence 1, speed / scale, cos and sin of its heading
+    relative to its lane) into ``rows`` (K, rows, 7), then every value clipped to [-1, 1] (nan
+    kept, as np.clip keeps it) into ``out`` (K, rows · 7) in ``out``'s float type."""
+    for k in range(rows.shape[0]):
+        row = rows[k, 0]
+        row[0], row[3] = 1.0, speed_mps[k] / speed_scale
+        row[5], row[6] = cos_relative[k], sin_relative[k]
+        flat = rows[k].ravel()
+        for i in range(flat.size):
+            value = flat[i]
+            if value < -1.0:
+                value = -1.0
+            elif value > 1.0:
+                value = 1.0
+            out[k, i] = value
 
 
 @njit(cache=True)

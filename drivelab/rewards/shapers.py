@@ -142,6 +142,7 @@ class RewardShaper:
     def __init__(self, spec: str | dict | RewardSpec) -> None:
         self.spec = parse_reward(spec)
         self.terms = {name: TERMS[name] for name in self.spec.weights}
+        self._weighted = [(name, weight, TERMS[name]) for name, weight in self.spec.weights.items()]
 
     def __call__(self, prev: WorldBatch | WorldState, batch: WorldBatch | WorldState, control) -> tuple:
         """``(rewards (K,), {term: weight · value (K,)})`` for the step prev → batch, ``control``
@@ -151,13 +152,10 @@ class RewardShaper:
             control = None if control is None else np.asarray(control)[None]
             rewards, contributions = self(WorldBatch.stack([prev]), WorldBatch.stack([batch]), control)
             return float(rewards[0]), {name: float(value[0]) for name, value in contributions.items()}
-        contributions = {
-            name: self.spec.weights[name] * np.asarray(fn(prev, batch, control), dtype=float)
-            for name, fn in self.terms.items()
-        }
-        rewards = np.zeros(batch.num_worlds)
-        for value in contributions.values():  # in the spec's order, as the single-world sum was
-            rewards = rewards + value
+        contributions, rewards = {}, np.zeros(batch.num_worlds)
+        for name, weight, fn in self._weighted:  # summed in the spec's order, as one world's sum was
+            value = contributions[name] = weight * np.asarray(fn(prev, batch, control), dtype=float)
+            np.add(rewards, value, out=rewards)
         if self.spec.normalize is not None:
             low, high = self.spec.normalize
             rewards = (rewards - low) / (high - low)

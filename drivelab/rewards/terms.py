@@ -9,6 +9,7 @@ that do not read it accept None. All arithmetic is over the K worlds at once.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 import numpy as np
@@ -17,11 +18,7 @@ from numba import njit
 from drivelab.world.batch import WorldBatch
 from drivelab.world.geometry import FULL_LOCK_DEG, FULL_LOCK_RAD, ROACH_MAX_SPEED_MPS
 from drivelab.world.pinhole import LANE_CAMERA, LANE_ROWS_M, LINE_CAMERA, LINE_ROWS_M, PinholeModel
-from drivelab.world.road_geometry import (
-    batch_lateral_at_distances,
-    guide_segment_sets,
-    polyline_crossings,
-)
+from drivelab.world.road_geometry import guide_segment_sets, segment_columns_into
 from drivelab.world.state import LIGHT_GREEN, WorldState
 
 Term = Callable[[WorldBatch, WorldBatch, np.ndarray | None], np.ndarray]
@@ -359,25 +356,41 @@ STEERING_BASE = 1.02  # the seed's λ
 LANE_BAND_EDGES_PX = np.array([15.0, 2 * 15, 3 * 20, 4 * 20])  # as extracted: 15, 30, 60, 80
 LANE_BAND_VALUES = np.array([10.0, 5.0, 2.5, 1.0, -10.0])
 LANE_ALIGNED_DEG = 6.0  # the seed's ζ
-_LANE_ROWS_PX = LANE_CAMERA.row_of_distance(np.asarray(LANE_ROWS_M))  # image rows of the lane rows
+_LINE_ROWS, _LANE_ROWS = np.array(LINE_ROWS_M), np.array(LANE_ROWS_M)  # ground rows ahead (m)
+_LANE_ROWS_PX = LANE_CAMERA.row_of_distance(_LANE_ROWS)  # image rows of the lane rows
 
 
 def crossing_columns(
     batch: WorldBatch,
     segments: np.ndarray,
     model: PinholeModel,
-    distances_m: tuple[float, ...],
+    distances_m: np.ndarray,
     index: np.ndarray | None = None,
 ) -> np.ndarray:
     """(K, D) image columns where each world's ``segments`` (K, M, 2, 2) cross the ground rows
     ``distances_m`` (D,) ahead of its ego (nan: not in view); with ``index`` (K,), world k's
-    segments are ``segments[index[k]]``; ``segments`` (K, P, 2) are polylines."""
+    segments are ``segments[index[k]]``; ``segments`` (K, P, 2) are polylines. One compiled call
+    (``segment_columns_into``)."""
     distances = np.asarray(distances_m, dtype=float)
-    if segments.ndim == 3:  # polylines (K, P, 2)
-        lateral = polyline_crossings(batch.ego.position, batch.ego.heading, segments, distances)
+    if segments.ndim == 3:  # polylines (K, P, 2): the segments between consecutive points
+        starts, ends = segments[:, :-1], segments[:, 1:]
     else:
-        lateral = batch_lateral_at_distances(batch, segments, distances, index)  # (K, D)
-    return model.visible_columns(distances, lateral)
+        starts, ends = segments[:, :, 0], segments[:, :, 1]
+    if index is None:
+        index = _world_indices(batch.num_worlds)
+    cos_h, sin_h = batch.heading_cos_sin()
+    out = np.empty((batch.num_worlds, len(distances)))
+    position, terms = batch.ego.position, model.ground_terms
+    segment_columns_into(starts, ends, index, position, cos_h, sin_h, distances, terms, out)
+    return out
+
+
+@functools.cache
+def _world_indices(count: int) -> np.ndarray:
+    """0 … count − 1 (int64, read-only), made once per count."""
+    indices = np.arange(count, dtype=np.int64)
+    indices.setflags(write=False)
+    return indices
 
 
 def _crossing_columns(
@@ -403,9 +416,7 @@ def line_centring(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """Σ_j f(C_j) over the 4 line rows: 15 … 1 as the line's centre moves away from the image centre
     (in pixels of 640: 15 under 38, 12 under 76, 10 under 114, 3 under 190, 1 under 228), −100 farther
     out or for a row where the line is out of view (seed 004, eq. 2; ``LINE_BAND_EDGES_PX``)."""
-    columns = crossing_columns(
-        batch, guide_segment_sets(batch), LINE_CAMERA, LINE_ROWS_M, batch.road_index
-    )  # (K, 4)
+    columns = crossing_columns(batch, guide_segment_sets(batch), LINE_CAMERA, _LINE_ROWS, batch.road_index)
     out = np.empty(batch.num_worlds)
     _line_centring(columns, float(LINE_CAMERA.centre[0]), float(LINE_CAMERA.width), out)
     return out
@@ -443,7 +454,7 @@ def lane_keeping(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     bands 15/30/60/80 px of 1024), doubled when the lane is within ζ = 6° of the image vertical and
     the action goes straight, halved when aligned but steering (the extracted text is garbled there;
     this is our reading of "higher reward when aligned and going straight")."""
-    columns = crossing_columns(batch, batch.route.polyline, LANE_CAMERA, LANE_ROWS_M)  # (K, D)
+    columns = crossing_columns(batch, batch.route.polyline, LANE_CAMERA, _LANE_ROWS)  # (K, D)
     out = np.empty(batch.num_worlds)
     centre_px, width_px = float(LANE_CAMERA.centre[0]), float(LANE_CAMERA.width)
     _lane_keeping(columns, _LANE_ROWS_PX, centre_px, width_px, _steering_deg(control, batch.num_worlds), out)

@@ -431,6 +431,15 @@ class WorldBatch:
         users = np.concatenate([self.vehicles, self.pedestrians], axis=1)
         return users, np.concatenate([self.vehicle_valid, self.pedestrian_valid], axis=1)
 
+    def heading_cos_sin(self) -> tuple[np.ndarray, np.ndarray]:
+        """(K,) cosines and (K,) sines of the egos' headings (numpy's), made once per batch for
+        every reader that turns world points into the ego frame."""
+        made = self.cache.get("heading_cos_sin")
+        if made is None:
+            heading = self.ego.heading
+            made = self.cache["heading_cos_sin"] = (np.cos(heading), np.sin(heading))
+        return made
+
     def light_ahead(self, max_distance_m: float) -> tuple[np.ndarray, np.ndarray]:
         """Per world, the LIGHT_* state (``-1``: none) and distance (m, ``inf``: none) of the nearest
         traffic light whose stop line is ahead within ``max_distance_m``, in the ego's lane and
@@ -446,11 +455,11 @@ class WorldBatch:
 
     def _nearest_light(self) -> tuple[np.ndarray, np.ndarray]:
         """``light_ahead`` without a distance limit."""
-        ego = self.ego
+        ego, (cos_h, sin_h) = self.ego, self.heading_cos_sin()
         state, distance = np.empty(self.num_worlds, dtype=np.int64), np.empty(self.num_worlds)
         _nearest_lights(
-            self.traffic_lights, self.light_valid, ego.position, ego.heading, np.cos(ego.heading),
-            np.sin(ego.heading), ego.lane_width_m, state, distance,
+            self.traffic_lights, self.light_valid, ego.position, ego.heading, cos_h, sin_h,
+            ego.lane_width_m, state, distance,
         )  # fmt: skip
         return state, distance
 

@@ -87,22 +87,24 @@ class PinholeModel:
         return self.project(np.concatenate([points, np.zeros(points.shape[:-1] + (1,))], axis=-1))
 
     @cached_property
-    def _ground_terms(self) -> tuple[float, float, float, float, float]:
-        """(cx, focal, forward, cos p, sin p) as ``project`` computes them, made once."""
+    def ground_terms(self) -> np.ndarray:
+        """(cx, focal, forward, cos p, sin p, camera height, image width) as ``project`` computes
+        them, made once: the ``terms`` of the compiled :func:`visible_columns_into`."""
         pitch = np.radians(self.pitch_deg)
-        return self.centre[0], self.focal_px, self.forward_m, np.cos(pitch), np.sin(pitch)
+        cx, focal = self.centre[0], self.focal_px
+        terms = np.array([cx, focal, self.forward_m, np.cos(pitch), np.sin(pitch), self.height_m, self.width])
+        terms.setflags(write=False)
+        return terms
 
     def visible_columns(self, distances_m: np.ndarray, lateral_m: np.ndarray) -> np.ndarray:
         """Image columns (K, D) of ground points ``distances_m`` (D,) ahead and ``lateral_m`` (K, D)
         to the right of the ego centre, nan where the point falls outside the image (or ``lateral_m``
         is nan): ``project_ground(...)[..., 0]`` with the same operations, without building the 3-D
         points, in one compiled pass (the reward terms' hot path)."""
-        cx, focal, forward_m, cos_p, sin_p = self._ground_terms
         out = np.empty(np.shape(lateral_m))
-        _visible_columns(
-            np.asarray(distances_m, dtype=float), np.asarray(lateral_m, dtype=float),
-            (cx, focal, forward_m, cos_p, sin_p, float(self.height_m), float(self.width)), out,
-        )  # fmt: skip
+        visible_columns_into(
+            np.asarray(distances_m, dtype=float), np.asarray(lateral_m, dtype=float), self.ground_terms, out
+        )
         return out
 
     def row_of_distance(self, distance_m: np.ndarray | float) -> np.ndarray:
@@ -121,11 +123,12 @@ class PinholeModel:
 
 
 @njit(cache=True)
-def _visible_columns(distances, lateral, terms, out) -> None:
-    """``PinholeModel.visible_columns`` into ``out`` (K, D): ``terms`` are (cx, focal, forward,
-    cos p, sin p, camera height, image width); numpy's operations in numpy's order (no fused
-    multiply-adds), so the columns are numpy's to the bit."""
-    cx, focal, forward_m, cos_p, sin_p, height_m, width = terms
+def visible_columns_into(distances, lateral, terms, out) -> None:
+    """``PinholeModel.visible_columns`` into ``out`` (K, D): ``terms`` (7,) are the model's
+    ``ground_terms`` (cx, focal, forward, cos p, sin p, camera height, image width); numpy's
+    operations in numpy's order (no fused multiply-adds), so the columns are numpy's to the bit."""
+    cx, focal, forward_m, cos_p, sin_p = terms[0], terms[1], terms[2], terms[3], terms[4]
+    height_m, width = terms[5], terms[6]
     for j in range(distances.shape[0]):
         depth = max((distances[j] - forward_m) * cos_p - (0.0 - height_m) * sin_p, 1e-6)
         for k in range(lateral.shape[0]):

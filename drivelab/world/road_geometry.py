@@ -13,6 +13,7 @@ from numba import njit
 
 from drivelab.world.batch import WorldBatch
 from drivelab.world.geometry import ego_frame
+from drivelab.world.pinhole import visible_columns_into
 from drivelab.world.state import RoadMap, WorldState
 
 
@@ -114,6 +115,18 @@ def _nearest_crossings(starts, ends, index, position, cos_h, sin_h, distances, o
                     y = y0 + t * (y1 - y0)
                     if np.abs(y) < best_abs[j]:
                         best_abs[j], out[k, j] = np.abs(y), y
+
+
+@njit(cache=True)
+def segment_columns_into(starts, ends, index, position, cos_h, sin_h, distances, camera_terms, out) -> None:
+    """Image columns (K, D) into ``out`` where world k's segments (``starts[index[k]]`` to
+    ``ends[index[k]]``) cross the ground rows ``distances`` (D,) ahead of its ego, nan where none
+    crosses or the crossing is out of view: :func:`_nearest_crossings` then
+    :func:`~drivelab.world.pinhole.visible_columns_into` (a camera's ``ground_terms``), in one
+    compiled call (the seed 004 reward terms' hot path)."""
+    lateral = np.empty(out.shape)
+    _nearest_crossings(starts, ends, index, position, cos_h, sin_h, distances, lateral)
+    visible_columns_into(distances, lateral, camera_terms, out)
 
 
 def lateral_crossings(

@@ -115,6 +115,16 @@ def test_with_events_and_replaced_keep_the_other_fields_and_start_an_empty_cache
         batch.replaced(cache={})
 
 
+def test_heading_cos_sin_is_numpys_made_once_per_batch():
+    batch = WorldBatch.stack(_worlds("highway", 3))
+    cos_h, sin_h = batch.heading_cos_sin()
+    np.testing.assert_array_equal(cos_h, np.cos(batch.ego.heading))
+    np.testing.assert_array_equal(sin_h, np.sin(batch.ego.heading))
+    assert batch.heading_cos_sin()[0] is cos_h  # kept in the batch's cache
+    changed = batch.with_events(blocked=np.ones(3, dtype=bool))  # another batch: its own values
+    assert changed.heading_cos_sin()[0] is not cos_h
+
+
 def test_assemble_is_the_constructor_without_its_frozen_init():
     batch = WorldBatch.stack(_worlds("highway", 2))
     for part in (batch.ego, batch.events, batch.route, batch):

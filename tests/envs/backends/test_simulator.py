@@ -290,3 +290,37 @@ def test_windowed_route_projection_is_route_trackers():
             np.array([False]), np.array([True]), progress,
         )  # fmt: skip
         assert progress[0] == loop.project(np.array([3.0, 3.0]), station)
+
+
+class _OneCall(FastSimulator):
+    _one_call = True  # every step in one compiled call (advance_worlds), whatever the threads
+
+
+class _KernelByKernel(FastSimulator):
+    _one_call = False  # every step's kernels called one by one from Python
+
+
+@pytest.mark.parametrize(
+    "scenario, traffic, control",
+    [case for case in CASES if not SCENARIOS[case[0]].traffic_flow]
+    + [("follow-line", "empty", "continuous"), ("follow-lane", "empty", "continuous")],
+)
+def test_one_call_step_is_the_kernel_by_kernel_step(scenario, traffic, control):
+    """A step in one compiled call gives the batch and state, bit for bit, of the same kernels
+    called one by one, on every scenario that takes it; steps that restart worlds (and the
+    intersection's arriving traffic) keep the kernel-by-kernel path."""
+    worlds = 3
+    one, split = (cls(SCENARIOS[scenario], traffic, control, worlds) for cls in (_OneCall, _KernelByKernel))
+    rng = np.random.default_rng(3)
+    for simulator in (one, split):
+        simulator.reset_where(np.ones(worlds, dtype=bool), np.arange(worlds) + 5)
+    for t in range(25):
+        controls = _controls(control, rng, worlds)
+        restart = np.array([t % 11 == 10 and k == 1 for k in range(worlds)])
+        seeds = rng.integers(1000, size=worlds)
+        got, expected = one.step(controls, restart, seeds), split.step(controls, restart, seeds)
+        assert_same(got, expected, f"{scenario} step {t}")
+        for k in range(worlds):
+            assert _state(one, k)[1:] == _state(split, k)[1:]
+            np.testing.assert_array_equal(one.vehicles[k], split.vehicles[k])
+    assert not FastSimulator(SCENARIOS["intersection"], "dense", "meta", 1)._one_call  # traffic arrives

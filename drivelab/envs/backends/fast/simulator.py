@@ -21,9 +21,11 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 from highway_env import utils as hw_utils
 from highway_env.road.regulation import RegulatedRoad
@@ -70,12 +72,14 @@ ARRIVAL_RULES = {
     "route_end": (ARRIVE_ROUTE_END, 2.0),
 }
 
-# Columns of the export kernel's float, int and flag outputs
+# Columns of the export kernel's float, int and flag outputs. The lane's turn over the 2 m around
+# the ego is exported as its cosine and sine (the complex exponential highway-env's export takes
+# the angle of), so that the curvature is one arctan2 of two columns.
 (
     EX_X, EX_Y, EX_HEADING, EX_SPEED, EX_STEER, EX_ACCEL, EX_LEN, EX_WID, EX_LANE_WIDTH, EX_LATERAL,
-    EX_LANE_HEADING, EX_SPEED_LIMIT, EX_HEADING_CHANGE,
-) = range(13)  # fmt: skip
-EX_FLOATS = 13
+    EX_LANE_HEADING, EX_SPEED_LIMIT, EX_TURN_COS, EX_TURN_SIN,
+) = range(14)  # fmt: skip
+EX_FLOATS = 14
 EX_LANE_ID, EX_LANE_COUNT, EX_TARGET_LANE_ID = range(3)
 EX_ON_ROAD, EX_IN_JUNCTION, EX_CRASHED, EX_ARRIVED = range(4)
 EXPORTED_COLUMNS = np.array([T.X, T.Y, T.HEADING, T.SPEED, T.LEN, T.WID])  # WorldState.vehicles
@@ -617,7 +621,9 @@ def export_world(
     out[EX_LANE_WIDTH], out[EX_LATERAL] = lanes[lane, L.WIDTH], lateral
     out[EX_LANE_HEADING] = L.heading_at(lanes, lane, s)
     out[EX_SPEED_LIMIT] = 30.0 if np.isnan(limit) else limit
-    out[EX_HEADING_CHANGE] = L.heading_at(lanes, lane, s + 1.0) - L.heading_at(lanes, lane, s - 1.0)
+    turn = L.heading_at(lanes, lane, s + 1.0) - L.heading_at(lanes, lane, s - 1.0)
+    # libm's cos and sin: the parts of numpy's exp(1j * turn), to the bit
+    out[EX_TURN_COS], out[EX_TURN_SIN] = math.cos(turn), math.sin(turn)
     ints[EX_LANE_ID], ints[EX_LANE_COUNT] = lanes[lane, L.LANE_ID], lanes[lane, L.LANE_COUNT]
     ints[EX_TARGET_LANE_ID] = lanes[target, L.LANE_ID]
     flags[EX_ON_ROAD] = L.on_lane(lanes, lane, s, lateral, 0.0)
@@ -661,6 +667,31 @@ def export_worlds(
             v[k, : count[k]], ego[k], lanes, in_junction, exit_lane, arrival, arrival_threshold,
             floats[k], ints[k], flags[k], vehicles[k], valid[k],
         )  # fmt: skip
+
+
+@njit(cache=True)
+def advance_worlds(
+    v, count, ego, lanes, idm, frames, dt, regulation, time_s, dt_policy, route, starts, segments,
+    lengths2, segment_m, stations, point_count, closed, progress, in_junction, exit_lane, arrival,
+    arrival_threshold, floats, ints, flags, vehicles, valid,
+) -> None:  # fmt: skip
+    """A policy step of all K worlds (none restarting) after their controls are set, in one
+    compiled call: the simulation frames (``simulate_worlds``' serial loop), the clocks, every
+    route projected (``project_routes``) and the export (``export_worlds``). The kernels that
+    ``FastSimulator.step`` otherwise calls one by one, in its order, so the same bits; one call
+    saves the others' dispatch, most of one world's simulator step."""
+    every, fresh = np.ones(v.shape[0], dtype=np.bool_), np.zeros(v.shape[0], dtype=np.bool_)
+    T._simulate_worlds_serial(v, count, lanes, idm, frames, dt, regulation, every)
+    for k in range(time_s.size):
+        time_s[k] += dt_policy
+    project_routes(
+        v, ego, route, starts, segments, lengths2, segment_m, stations, point_count, closed, fresh, every,
+        progress,
+    )  # fmt: skip
+    export_worlds(
+        v, count, ego, lanes, in_junction, exit_lane, arrival, arrival_threshold, floats, ints, flags,
+        vehicles, valid,
+    )  # fmt: skip
 
 
 # --- the simulator ------------------------------------------------------------------------------
@@ -882,6 +913,9 @@ class FastSimulator:
             restart = np.zeros(self.num_worlds, dtype=bool)
         restart = np.asarray(restart, dtype=bool)
         self.apply_controls(controls)
+        if self._one_call and not np.count_nonzero(restart):
+            self.batch = self._advance()
+            return self.batch
         self.run_frames(lambda frames: T.simulate_worlds(
             self.vehicles, self.count, self.lanes, self.idm, frames, self.dt_s, self.regulation, ~restart
         ))  # fmt: skip
@@ -894,6 +928,27 @@ class FastSimulator:
         self._project(fresh=restart, update=self._every_world)
         self.batch = self._export()
         return self.batch
+
+    @property
+    def _one_call(self) -> bool:
+        """The step is one compiled call (``advance_worlds``): not recording frames, no traffic
+        arriving between steps, and the worlds simulated one after another (one world, or one
+        numba thread)."""
+        serial = self.num_worlds == 1 or numba.get_num_threads() == 1
+        return self.on_frame is None and not self.traffic_flow and serial
+
+    def _advance(self) -> WorldBatch:
+        """``advance_worlds`` then the WorldBatch of its export (see ``step``)."""
+        floats, ints, flags, vehicles, valid = self._export_buffers()
+        road = self._road
+        advance_worlds(
+            self.vehicles, self.count, self.ego, self.lanes, self.idm, self.frames, self.dt_s,
+            self.regulation, self.time_s, self._dt_policy_s, self.route_index, self.r_starts,
+            self.r_segments, self.r_lengths2, self.r_segment_m, self.r_stations, self.r_count,
+            self.r_closed, self.progress_m, road.in_junction, road.exit_lane, self.arrival,
+            self.arrival_threshold, floats, ints, flags, vehicles, valid,
+        )  # fmt: skip
+        return self._export_arrays(floats, ints, flags, vehicles, valid)
 
     def run_frames(self, simulate: Callable[[int], None]) -> None:
         """The step's simulation frames: one compiled call ``simulate(frames)``; while recording
@@ -936,10 +991,12 @@ class FastSimulator:
         )  # fmt: skip
 
     def _export_buffers(self) -> tuple[np.ndarray, ...]:
-        """Zeroed (floats, ints, flags, vehicles, valid) arrays the export kernels fill."""
+        """Zeroed (floats, ints, flags, vehicles, valid) arrays the export kernels fill. The first
+        three are (K, columns) in column-major order, so that each column (one WorldBatch field)
+        is a contiguous (K,) array of its own."""
         k, slots = self.num_worlds, max(self.vehicles.shape[1] - 1, 0)
-        floats, ints = np.zeros((k, EX_FLOATS)), np.zeros((k, 3), dtype=np.int64)
-        flags = np.zeros((k, 4), dtype=bool)
+        floats, ints = np.zeros((EX_FLOATS, k)).T, np.zeros((3, k), dtype=np.int64).T
+        flags = np.zeros((4, k), dtype=bool).T
         return floats, ints, flags, np.zeros((k, slots, 6)), np.zeros((k, slots), dtype=bool)
 
     def _export(self) -> WorldBatch:
@@ -954,39 +1011,46 @@ class FastSimulator:
     def _export_arrays(
         self, floats: np.ndarray, ints: np.ndarray, flags: np.ndarray, vehicles: np.ndarray, valid: np.ndarray
     ) -> WorldBatch:
-        """The WorldBatch of ``export_worlds``' outputs (the town adds its lights and pedestrians)."""
-        # the old WorldState's formula, numpy's complex exp and angle (np.angle is this arctan2),
-        # for the same last bits
-        turn = np.exp(1j * floats[:, EX_HEADING_CHANGE])
+        """The WorldBatch of ``export_worlds``' outputs (``_export_buffers``' column-major arrays;
+        the town adds its lights and pedestrians)."""
+        (
+            _, _, heading, speed, steering, acceleration, length, width, lane_width, lateral,
+            lane_heading, speed_limit, turn_cos, turn_sin,
+        ) = floats.T  # fmt: skip
+        lane_id, lane_count, target_lane_id = ints.T
+        on_road, in_junction, collided, arrived = flags.T
+        # highway-env's export: angle(exp(1j * turn)) / 2, numpy's arctan2 of the kernel's parts
+        curvature = np.arctan2(turn_sin, turn_cos)
+        curvature *= 0.5
         ego = assemble(
             EgoBatch,
-            position=floats[:, EX_X : EX_Y + 1],  # (K, 2): the columns are adjacent
-            heading=floats[:, EX_HEADING],
-            speed_mps=floats[:, EX_SPEED],
-            steering=floats[:, EX_STEER],
-            acceleration_mps2=floats[:, EX_ACCEL],
-            length_m=floats[:, EX_LEN],
-            width_m=floats[:, EX_WID],
-            lane_id=ints[:, EX_LANE_ID],
-            lane_count=ints[:, EX_LANE_COUNT],
-            target_lane_id=ints[:, EX_TARGET_LANE_ID],
-            lane_width_m=floats[:, EX_LANE_WIDTH],
-            lateral_offset_m=floats[:, EX_LATERAL],
-            lane_heading=floats[:, EX_LANE_HEADING],
-            lane_curvature=np.arctan2(turn.imag, turn.real) / 2.0,
-            on_road=flags[:, EX_ON_ROAD],
-            in_intersection=flags[:, EX_IN_JUNCTION],
+            position=np.ascontiguousarray(floats[:, EX_X : EX_Y + 1]),  # (K, 2): a view for K = 1
+            heading=heading,
+            speed_mps=speed,
+            steering=steering,
+            acceleration_mps2=acceleration,
+            length_m=length,
+            width_m=width,
+            lane_id=lane_id,
+            lane_count=lane_count,
+            target_lane_id=target_lane_id,
+            lane_width_m=lane_width,
+            lateral_offset_m=lateral,
+            lane_heading=lane_heading,
+            lane_curvature=curvature,
+            on_road=on_road,
+            in_intersection=in_junction,
         )
-        collided, no_event = flags[:, EX_CRASHED], self._no_event
-        off_road = ~flags[:, EX_ON_ROAD]
+        no_event = self._no_event
+        off_road = ~on_road
         if self.scenario.keep_lane:  # follow-lane: leaving the starting lane is leaving the road
-            off_road |= ints[:, EX_LANE_ID] != self.start_lane_id
+            off_road |= lane_id != self.start_lane_id
         events = assemble(
             EventsBatch,
             collided=collided,
-            collision_kind=collided.astype(np.int8),  # COLLISION_NONE 0, COLLISION_VEHICLE 1
+            collision_kind=collided.view(np.int8),  # COLLISION_NONE 0, COLLISION_VEHICLE 1
             off_road=off_road,
-            arrived=flags[:, EX_ARRIVED] if self.arrival != ARRIVE_ROUTE_END else self._route_ended(),
+            arrived=arrived if self.arrival != ARRIVE_ROUTE_END else self._route_ended(),
             red_light_crossed=no_event,  # the rules add blocked and off_route; no lights here
             blocked=no_event,
             off_route=no_event,
@@ -1007,7 +1071,7 @@ class FastSimulator:
             roads=self.roads,
             route=route,
             events=events,
-            speed_limit_mps=floats[:, EX_SPEED_LIMIT],
+            speed_limit_mps=speed_limit,
             **extra,
         )
 

@@ -41,7 +41,6 @@ from drivelab.envs.backends.fast.pedestrians import (
 )
 from drivelab.envs.backends.fast.simulator import (
     EX_CRASHED,
-    EX_FLOATS,
     EX_ON_ROAD,
     FastSimulator,
     export_worlds,
@@ -287,10 +286,7 @@ class TownSimulator(FastSimulator):
     # --- export ---------------------------------------------------------------------------------
     def _export(self) -> WorldBatch:
         k = self.num_worlds
-        floats, ints = np.zeros((k, EX_FLOATS)), np.zeros((k, 3), dtype=np.int64)
-        flags = np.zeros((k, 4), dtype=bool)
-        slots = max(self.vehicles.shape[1] - 1, 0)
-        vehicles, valid = np.zeros((k, slots, 6)), np.zeros((k, slots), dtype=bool)
+        floats, ints, flags, vehicles, valid = self._export_buffers()
         export_worlds(
             self.vehicles, self.count, self.ego, self.lanes, self.in_junction, self._road.exit_lane,
             0, 0.0, floats, ints, flags, vehicles, valid,
