@@ -60,8 +60,14 @@ app = typer.Typer(
 )
 
 
+def error_line(message: str) -> str:
+    """``error: message`` as one line: a line break in the message (a folder's name can hold one)
+    is written ``\\n`` (``\\r``)."""
+    return "error: " + message.replace("\r", "\\r").replace("\n", "\\n")
+
+
 def _fail(message: str) -> None:
-    typer.echo(f"error: {message}", err=True)
+    typer.echo(error_line(message), err=True)
     raise typer.Exit(2)
 
 
@@ -415,8 +421,10 @@ def _print_outcomes(outcomes: list[dict], runs_dir: Path) -> None:
     failed = [o["name"] for o in outcomes if not o["ok"]]
     if failed:
         typer.echo(
-            f"error: {len(failed)} run(s) failed; see {runs_dir / '.sweep-logs'}/<run>.log, "
-            "then re-run the same command to finish them",
+            error_line(
+                f"{len(failed)} run(s) failed; see {runs_dir / '.sweep-logs'}/<run>.log, "
+                "then re-run the same command to finish them"
+            ),
             err=True,
         )
         raise typer.Exit(1)
@@ -515,8 +523,10 @@ def tune(
     failed = [o["name"] for o in summary["outcomes"] if not o["ok"]]
     if failed:
         typer.echo(
-            f"error: {len(failed)} trial(s) failed; see {study.study_dir / '.sweep-logs'}/<trial>.log; "
-            "re-running the command replaces them",
+            error_line(
+                f"{len(failed)} trial(s) failed; see {study.study_dir / '.sweep-logs'}/<trial>.log; "
+                "re-running the command replaces them"
+            ),
             err=True,
         )
         raise typer.Exit(1)
@@ -722,7 +732,7 @@ def main() -> None:
     try:
         app()
     except UsageError as exc:  # raised outside a command's own handler
-        typer.echo(f"error: {exc}", err=True)
+        typer.echo(error_line(str(exc)), err=True)
         sys.exit(2)
 
 

@@ -670,9 +670,36 @@ def _owner(path: Path) -> int | None:
     return info.st_uid if stat.S_ISREG(info.st_mode) else None
 
 
+def shell_word(text: str) -> str:
+    """``text`` as one shell word on one line: ``shlex.quote``'s, or where ``text`` holds a control
+    character (a newline in a folder's name), bash's ``$'…'`` with that character escaped, so that
+    an error line quoting a command stays one line and the command still names the path."""
+    if text.isprintable():
+        return shlex.quote(text)
+    return "$'" + "".join(_ansi_c(character) for character in text) + "'"
+
+
+_ANSI_C = {"\\": "\\\\", "'": "\\'", "\n": "\\n", "\t": "\\t", "\r": "\\r"}
+
+
+def _ansi_c(character: str) -> str:
+    """One character inside bash's ``$'…'``: itself when printable, else its escape (a byte that
+    was not UTF-8, kept by Python as a surrogate, as that byte)."""
+    code = ord(character)
+    if character in _ANSI_C:
+        return _ANSI_C[character]
+    if character.isprintable():
+        return character
+    if code < 0x80:
+        return f"\\x{code:02x}"
+    if 0xDC80 <= code <= 0xDCFF:  # os.fsdecode's surrogateescape of an undecodable byte
+        return f"\\x{code - 0xDC00:02x}"
+    return f"\\u{code:04x}" if code < 0x10000 else f"\\U{code:08x}"
+
+
 def _chmod_fix(path: Path, owner: int) -> str:
     """How the file or folder ``path`` of user ``owner`` becomes writable for this user."""
-    quoted = shlex.quote(str(path))
+    quoted = shell_word(str(path))
     if owner == os.geteuid():
         return f"`chmod u+w {quoted}`"
     try:
@@ -696,7 +723,7 @@ def _regroup(path: Path) -> str:
         group = grp.getgrgid(folder_gid).gr_name
     except KeyError:
         group = str(folder_gid)
-    return f"chgrp {shlex.quote(group)} {shlex.quote(str(path))} && "
+    return f"chgrp {shell_word(group)} {shell_word(str(path))} && "
 
 
 def _lock_file_denied(path: Path, owner: int, exc: OSError) -> str:

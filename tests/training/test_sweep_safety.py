@@ -498,6 +498,39 @@ def test_a_logs_folder_that_cannot_be_written_is_one_error_line(tmp_path, sweep_
     assert snapshot(tmp_path) == before
 
 
+def test_a_newline_in_a_folder_name_keeps_the_error_one_line_and_its_command_right(
+    tmp_path, sweep_file, monkeypatch
+):
+    """shlex.quote keeps a newline: the chmod in the error line is bash's $'…' word instead, so
+    the line stays one line, and run as it is printed, it changes that folder."""
+    import stat
+    import subprocess
+
+    runs = tmp_path / "runs\nof B"
+    logs = runs / ".sweep-logs"
+    logs.mkdir(parents=True)
+    (runs / ".sweep.lock").write_bytes(b"")
+    logs.chmod(0o555)
+    real_access = os.access
+    monkeypatch.setattr(
+        os, "access", lambda path, mode, **kw: Path(path).name != ".sweep-logs" and real_access(path, mode)
+    )
+    result = runner.invoke(app, ["sweep", str(sweep_file), "--workers", "1", "--runs-dir", str(runs)])
+    assert result.exit_code == 2, result.output
+    [line] = result.output.splitlines()
+    assert line.startswith("error: cannot write the sweep logs in ") and "\\n" in line
+    command = line.rsplit("`", 2)[1]
+    assert command.startswith("chmod u+w $'") and command.endswith("of B/.sweep-logs'")
+    subprocess.run(["bash", "-c", command], check=True)
+    assert stat.S_IMODE(logs.stat().st_mode) & stat.S_IWUSR
+
+
+def test_error_lines_write_a_line_break_in_a_message_as_an_escape():
+    from drivelab.cli import error_line
+
+    assert error_line("no run in 'a\nb'\r") == "error: no run in 'a\\nb'\\r"
+
+
 def test_a_run_whose_log_cannot_be_written_fails_as_a_run_not_the_sweep(tmp_path):
     """run_cell never raises: a log it cannot open (another user's log of that run) is the run's
     failure, reported to the driver, not a traceback that ends the sweep."""
