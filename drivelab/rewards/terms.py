@@ -252,12 +252,12 @@ def roach_desired_speed(batch: WorldBatch | WorldState) -> np.ndarray:
     (d0 = 5 m). A WorldState gives its one value as a float."""
     if isinstance(batch, WorldState):
         return float(roach_desired_speed(WorldBatch.stack([batch]))[0])
-    ego = batch.ego
+    ego, (cos_h, sin_h) = batch.ego, batch.heading_cos_sin()
     state, distance_m = batch.light_ahead(max_distance_m=np.inf)
     desired = np.empty(batch.num_worlds)
     _roach_desired_speed(
         batch.vehicles, batch.vehicle_valid, batch.pedestrians, batch.pedestrian_valid, ego.position,
-        np.cos(ego.heading), np.sin(ego.heading), ego.lane_width_m, state, distance_m, desired,
+        cos_h, sin_h, ego.lane_width_m, state, distance_m, desired,
     )  # fmt: skip
     return desired
 
