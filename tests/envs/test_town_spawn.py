@@ -2,15 +2,15 @@
 bit for bit: the same vehicle rows, pedestrian rows, light offsets, ego route, NoCrash time limit
 and generator state after ``TownEnv._reset`` (design memo §3, L2).
 
-Every float is compared exactly (``array_equal``), on any CPU: the set-up makes highway-env's own
-numpy calls on the same values (``LaneGeometry``'s lane formulas, ``np.cos``/``np.sin`` of a
-crossing's heading, the route polyline and ``RouteTracker``), and the NPC spacing check is the
-reference's scalar ``math.sqrt(dx * dx + dy * dy)`` (numpy's element-wise operations, each
-correctly rounded); so where numpy's AVX-512 kernels round differently, both sides round alike.
-Checked both ways: on an AVX-512 CPU (AMD EPYC), and with its AVX-512 dispatch off
-(``test_fast.run_without_avx512``, dense traffic, both layouts, route modes and controls, 3
-seeds), every array equal; no subprocess test is kept: the set-up has no compiled arithmetic
-of its own (``LaneGeometry.closest_lane`` only shortlists lanes for numpy to decide).
+Every float is compared exactly (``array_equal``), on any CPU. The set-up's compiled part
+(``_town_rows``) makes its floats with +, -, *, /, sqrt and % only, on the reference's operands in
+the reference's order (every street is straight), and each of these is correctly rounded, so numba
+and numpy (SIMD or not) give the same bits. The transcendental values come from numpy, as the
+reference calls it: a crossing's cos / sin (``TownSetup.across``), and the route polyline and
+``RouteTracker`` of the NoCrash time limit. Checked both ways: on this AVX-512 CPU, and with its
+AVX-512 dispatch off (``test_fast.run_without_avx512``, regular and dense traffic, both layouts,
+route modes and controls, 3 seeds), every array equal. A closest lane is shortlisted by compiled
+distances and decided by numpy's wherever two lanes are within 1e-6.
 """
 
 from __future__ import annotations
@@ -171,3 +171,33 @@ def test_a_pedestrians_next_wait_is_the_inverse_transform_exponential():
         u = float(pcg64.next_uint64(words) >> np.uint64(11)) * 2.0**-53
         assert walker.wait_s == MEAN_WAIT_S * -math.log1p(-u)
         np.testing.assert_array_equal(pcg64.state_of(rng), words)
+
+
+def test_lanes_within_a_micrometre_are_decided_by_numpy(monkeypatch):
+    """Where the compiled distances put another lane within 1e-6 of the closest, the set-up asks
+    ``LaneGeometry.closest_lane`` (numpy's distances, the reference's) for that row: with every
+    row marked so, the episode is still the reference's; and ``_place`` marks a point equally far
+    from two lanes."""
+    from drivelab.envs.backends.fast import lanes as L
+    from drivelab.envs.backends.fast import town_spawn
+
+    calls = []
+    compiled = town_spawn._town_rows
+
+    def every_row_ambiguous(*args):
+        count, size = compiled(*args)
+        args[-1][:count] = True
+        calls.append(count)
+        return count, size
+
+    monkeypatch.setattr(town_spawn, "_town_rows", every_row_ambiguous)
+    compare_setups("train", "regular", "meta", False, seeds=(0, 1))
+    assert calls and all(count > 1 for count in calls)
+
+    twins = np.zeros((2, L.LANE_COLUMNS))
+    twins[:, L.KIND], twins[:, L.LENGTH], twins[:, L.WIDTH] = L.STRAIGHT, 50.0, 4.0
+    twins[:, L.DIR_X], twins[1, L.START_Y] = 1.0, 2.0  # two parallel lanes, 2 m apart
+    row = np.zeros(T.TOWN_VEHICLE_COLUMNS)
+    assert town_spawn._place(row, twins, 10.0, 1.0, 0.0, 5.0, 4.0)  # midway: both 1 m off
+    assert row[T.LANE] == 0
+    assert not town_spawn._place(row, twins, 10.0, 0.5, 0.0, 5.0, 4.0)

@@ -45,7 +45,7 @@ from drivelab.envs.backends.fast.simulator import (
     FastSimulator,
     export_worlds,
 )
-from drivelab.envs.backends.fast.town_spawn import TownSetup, route_polyline
+from drivelab.envs.backends.fast.town_spawn import TownSetup, route_tracker
 from drivelab.envs.backends.fast.town_traffic import road_arrays_tuple, town_act, town_frame_cache, town_step
 from drivelab.envs.backends.roads.town_rules import PEDESTRIAN_SIZE_M, LightTimings
 from drivelab.envs.route import RouteTracker
@@ -202,9 +202,7 @@ class TownSimulator(FastSimulator):
     def _set_route(self, k: int) -> None:
         """World k's route polyline from its planned lanes (``HighwayBackend.route_for``); the
         padded arrays follow with ``_pad_world_routes``."""
-        self.trackers[k] = RouteTracker(
-            route_polyline(self.setup.geometry, self.ego_routes[k]), has_goal=True
-        )
+        self.trackers[k] = route_tracker(self.setup, self.ego_routes[k])
         self._route_version += 1
 
     def _pad_world_routes(self, changed) -> None:

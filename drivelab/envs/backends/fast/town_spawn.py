@@ -4,11 +4,13 @@
 The reference (``backend="highway"``) builds the road, lights, pedestrians and traffic as
 highway-env objects (``drivelab.envs.town_env``). ``town_episode`` sets up the same episode from a
 seed as arrays, without any highway-env object: it draws the numbers ``TownEnv._reset`` draws,
-from a generator seeded as gymnasium seeds ``env.np_random`` (``PCG64(SeedSequence(seed))``), in
-the same order, and computes positions with highway-env's lane formulas call for call
-(``fast.spawn.LaneGeometry``), so a seed gives bit for bit the reference's vehicle rows,
-pedestrian rows, light offsets, ego route, NoCrash time limit and generator state (tested in
-``tests/envs/test_town_spawn.py``). The draws, in order:
+from a generator seeded as gymnasium seeds ``env.np_random`` (``PCG64(SeedSequence(seed))``, its
+words made by ``pcg64``), in the same order, and computes positions with highway-env's lane
+formulas operation for operation, in one compiled call (``_town_rows``). Every street is a
+straight lane, so those formulas are +, -, *, /, sqrt and % (each correctly rounded: the same bits in numba
+as in numpy); the crossings' cos / sin come from numpy once per road. So a seed gives bit for bit
+the reference's vehicle rows, pedestrian rows, light offsets, ego route, NoCrash time limit and
+generator state (tested in ``tests/envs/test_town_spawn.py``). The draws, in order:
 
 1. light offsets ``uniform(0, cycle, size=J)``, every junction (corners included);
 2. the ego: a fixed route ``integers(25)`` (``fixed_routes``) or a street ``integers(S)`` and a
@@ -28,17 +30,24 @@ start lane alone (length 1), so no node name is read.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
-from typing import NamedTuple
 
 import numpy as np
 from gymnasium.utils import seeding
+from numba import njit
 
 from drivelab.envs.backends.fast import lanes as L
 from drivelab.envs.backends.fast import pcg64
 from drivelab.envs.backends.fast import town_rows as R
 from drivelab.envs.backends.fast import traffic as T
-from drivelab.envs.backends.fast.spawn import DELTA_RANGE, LaneGeometry, ego_kind, vehicle_row
+from drivelab.envs.backends.fast.spawn import (
+    DELTA_RANGE,
+    LaneGeometry,
+    _lane_distances,
+    ego_kind,
+    mdp_target_speed,
+)
 from drivelab.envs.backends.roads.town_arrays import TownRoadArrays
 from drivelab.envs.backends.roads.town_rules import (
     FIXED_ROUTE_COUNT,
@@ -54,7 +63,8 @@ NPC_SPACING_M = 12.0  # an NPC is placed more than this from every vehicle alrea
 ROUTE_TIMEOUT_EXTRA_S = 10.0  # NoCrash's time limit: the route at ROUTE_TIMEOUT_MPS, plus this
 
 
-class TownEpisode(NamedTuple):
+@dataclass(frozen=True)
+class TownEpisode:
     """One town episode as set up from its seed (``town_episode``).
 
     :param vehicles: (N, TOWN_VEHICLE_COLUMNS) the ego then the NPCs (KIND TOWN), as
@@ -65,9 +75,8 @@ class TownEpisode(NamedTuple):
     :param ego_route: (R,) int64 lane rows of the ego's planned route (``TownEnv.ego_route``).
     :param route_time_limit_s: the NoCrash time limit with fixed routes, else inf (what
         ``HighwayBackend.route_time_limit_s`` is; inf where it is None).
-    :param rng: the episode's generator after the set-up (``env.np_random``): the frames' draws
-        go on from it.
-    :param rng_state: (6,) uint64 ``pcg64.state_of(rng)``, for the compiled kernels.
+    :param rng_state: (6,) uint64 PCG64 words of the episode's generator after the set-up
+        (``env.np_random``; ``pcg64``): the frames' draws go on from them.
     """
 
     vehicles: np.ndarray
@@ -76,8 +85,15 @@ class TownEpisode(NamedTuple):
     light_offsets_s: np.ndarray
     ego_route: np.ndarray
     route_time_limit_s: float
-    rng: np.random.Generator
     rng_state: np.ndarray
+
+    @property
+    def rng(self) -> np.random.Generator:
+        """A numpy Generator in the state ``rng_state`` (made on demand: the compiled core reads
+        the words)."""
+        generator = np.random.Generator(np.random.PCG64())
+        pcg64.set_state(generator, self.rng_state)
+        return generator
 
 
 @dataclass
@@ -113,8 +129,20 @@ class TownSetup:
     _fixed: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
-        self.street_list = [int(lane) for lane in self.arrays.street_lanes]  # Python ints: cheap to index
-        self.lengths = [float(length) for length in self.table.rows[:, L.LENGTH]]
+        rows, streets = self.table.rows, self.arrays.street_lanes
+        if np.any(rows[streets, L.KIND] != L.STRAIGHT):
+            raise NotImplementedError("the town's set-up places vehicles on straight streets only")
+        crossings = self.arrays.crossings
+        # a pedestrian's walking direction, per crossing: the reference's np.cos / np.sin calls
+        self.across = np.array([[np.cos(c[2]), np.sin(c[2])] for c in crossings]).reshape(-1, 2)
+        self._polylines: dict[int, np.ndarray] = {}
+        self._trackers: dict[tuple[int, ...], RouteTracker] = {}
+
+    @functools.cached_property
+    def ego_target_speed(self) -> float:
+        """A meta-action ego's first target speed (MDPVehicle's: the allowed speed nearest its start
+        speed)."""
+        return float(mdp_target_speed(self.ego_start_speed, self.target_speeds))
 
     @classmethod
     def of(cls, road) -> TownSetup:
@@ -185,136 +213,234 @@ class TownSetup:
         return self._fixed
 
 
-def route_polyline(geometry: LaneGeometry, lanes) -> np.ndarray:
+def route_polyline(geometry: LaneGeometry, lanes, parts: dict | None = None) -> np.ndarray:
     """(K, 2) the centre line of ``lanes`` (lane rows), sampled as ``HighwayBackend.route_for``
     samples it: a straight lane's two ends, a curved one every <= 2 m (``np.linspace``), with the
-    lane formulas' own bits."""
+    lane formulas' own bits. ``parts``: a cache of each lane's samples (a lane's do not depend on
+    the route it is in)."""
     from drivelab.envs.backends.highway import SAMPLE_SPACING_M  # the reference's sampling
 
-    parts = []
+    parts = {} if parts is None else parts
     for lane in lanes:
         lane = int(lane)
+        if lane in parts:
+            continue
         length = geometry.length(lane)
         if int(geometry.lanes[lane, L.KIND]) == L.STRAIGHT:
             stations = np.array([0.0, length])
         else:
             stations = np.linspace(0.0, length, max(int(np.ceil(length / SAMPLE_SPACING_M)), 1) + 1)
         lateral = np.float64(0.0)
-        parts.append(np.array([geometry.position(lane, s, lateral) for s in stations]))
-    return np.concatenate(parts)
+        parts[lane] = np.array([geometry.position(lane, s, lateral) for s in stations])
+    return np.concatenate([parts[int(lane)] for lane in lanes])
 
 
-def _write_route(row: np.ndarray, route: np.ndarray) -> None:
-    """A planned route into a vehicle row: roads (one lane each: the road row is the lane row),
-    lane id 0, ROUTED."""
-    capacity = (row.size - T.ROUTE) // 2
-    if route.size > capacity:
-        raise NotImplementedError(f"the town's vehicle rows keep routes of at most {capacity} roads")
-    row[T.ROUTED], row[T.ROUTE_START], row[T.ROUTE_END] = 1.0, 0.0, route.size
-    row[T.ROUTE : T.ROUTE + 2 * route.size : 2] = route
-    row[T.ROUTE + 1 : T.ROUTE + 2 * route.size : 2] = 0.0
-
-
-def _nearest(x: np.ndarray, y: np.ndarray, px: float, py: float) -> float:
-    """``min(town_env._distance(v, p) for v in vehicles)`` over points (x, y) (n,): the same
-    sqrt(dx * dx + dy * dy), dx = x - p_x, as numpy element-wise operations (each correctly
-    rounded, as a scalar's: the same bits whatever SIMD numpy uses)."""
-    dx, dy = x - px, y - py
-    return float(np.sqrt(dx * dx + dy * dy).min())
+def route_tracker(setup: TownSetup, lanes) -> RouteTracker:
+    """The RouteTracker of the route along ``lanes`` (``route_polyline``), made once per route:
+    a tracker is read-only, so the episodes that drive the same route share it."""
+    key = tuple(int(lane) for lane in lanes)
+    tracker = setup._trackers.get(key)
+    if tracker is None:
+        if len(setup._trackers) >= TRACKER_CACHE_SIZE:
+            setup._trackers.clear()
+        tracker = setup._trackers[key] = RouteTracker(
+            route_polyline(setup.geometry, key, setup._polylines), has_goal=True
+        )
+    return tracker
 
 
 def town_episode(seed: int, setup: TownSetup, control: str) -> TownEpisode:
     """``TownEnv._reset`` of seed ``seed`` (the reference's ``HighwayBackend.reset(seed)``) as
-    arrays: see the module docstring for the draws.
+    arrays: see the module docstring for the draws, made by ``_town_rows`` in one compiled call.
 
     :param setup: the road's TownSetup.
     :param control: "meta" (an MDPVehicle ego: CONTROLLED, routed) or "continuous" (a kinematic
         Vehicle: PLAIN, no route).
     """
-    rng, _ = seeding.np_random(int(seed))
+    seed = int(seed)
+    if 0 <= seed < 2**63:  # gymnasium's PCG64(SeedSequence(seed)), its words made compiled
+        words = pcg64.seeded_states(seed)[0]
+    else:  # gymnasium's own error for a bad seed, or a seed too wide for the compiled words
+        words = pcg64.state_of(seeding.np_random(seed)[0])
     arrays, geometry = setup.arrays, setup.geometry
-    streets = arrays.street_lanes
-    offsets = rng.uniform(0.0, setup.cycle_s, size=arrays.junction_count)
-
-    # the ego (TownEnv._make_vehicles): its route, then its place on the start street
-    if setup.fixed_routes:
-        start_street, goal = setup.fixed[int(rng.integers(FIXED_ROUTE_COUNT))]
-        start = int(streets[start_street])
-        ego_route = setup.route(start, int(goal))
-    else:
-        start = int(streets[rng.integers(len(streets))])
-        ego_route = setup.random_route(start, rng)
-    length = geometry.length(start)
-    longitudinal = rng.uniform(5.0, max(length - 20.0, 5.0))
     kind = ego_kind(control)
     vehicles = np.zeros((1 + setup.vehicles_count, T.TOWN_VEHICLE_COLUMNS))
-    x, y = np.zeros(len(vehicles)), np.zeros(len(vehicles))  # the placed vehicles' positions
-    ego = vehicles[0]
-    ego[: T.ROUTE] = vehicle_row(
-        setup,
-        geometry.position(start, longitudinal, 0.0),
-        geometry.heading_at(start, longitudinal),
-        setup.ego_start_speed,
-        kind,
-    )[: T.ROUTE]
-    if kind == T.CONTROLLED:  # a meta-action ego follows the planned route itself
-        _write_route(ego, ego_route)
-    x[0], y[0] = ego[T.X], ego[T.Y]
-    count = 1
-
-    street_list, lengths = setup.street_list, setup.lengths
-    for _ in range(setup.vehicles_count):
-        for _ in range(PLACEMENT_TRIES):
-            lane = street_list[rng.integers(len(street_list))]
-            position = geometry.position(lane, rng.uniform(5.0, lengths[lane] - 5.0), 0.0)
-            if _nearest(x[:count], y[:count], position[0], position[1]) > NPC_SPACING_M:
-                break
-        else:
-            continue
-        s = geometry.local_coordinates(lane, position)[0]
-        row = vehicles[count]
-        speed = rng.uniform(4.0, 8.0)
-        row[: T.ROUTE] = vehicle_row(setup, position, geometry.heading_at(lane, s), speed, T.IDM)[: T.ROUTE]
-        row[T.KIND], row[T.TARGET_LANE] = T.TOWN, lane
-        row[T.TARGET_SPEED] = geometry.speed_limit(lane)
-        _write_route(row, setup.random_route(lane, rng))
-        row[T.DELTA] = rng.uniform(low=DELTA_RANGE[0], high=DELTA_RANGE[1])  # randomize_behavior
-        x[count], y[count] = row[T.X], row[T.Y]
-        count += 1
-
     pedestrians = np.zeros((setup.pedestrians_count, R.PEDESTRIAN_COLUMNS))
-    for walker in pedestrians:  # TownEnv._make_pedestrians and Pedestrian.__init__
-        c = int(rng.integers(len(arrays.crossings)))
-        crossing = arrays.crossings[c]
-        side = int(rng.choice([-1, 1]))
-        centre = np.asarray(crossing[:2], dtype=float)
-        across = np.array([np.cos(crossing[2]), np.sin(crossing[2])])
-        along = np.array([-across[1], across[0]]) * rng.uniform(-0.4, 0.4) * crossing[4]
-        walker[R.P_PACE] = float(rng.uniform(1.0, 1.6))
-        walker[R.P_X : R.P_Y + 1] = centre + along + side * PAVEMENT_M * across
-        walker[R.P_HEADING], walker[R.P_SIDE] = crossing[2], side
-        walker[R.P_WAIT_S] = float(rng.uniform(0.0, 2 * MEAN_WAIT_S))
-        walker[R.P_CENTRE_X : R.P_CENTRE_Y + 1] = centre
-        walker[R.P_ACROSS_X : R.P_ACROSS_Y + 1] = across
-        walker[R.P_CROSSING] = c
+    offsets = np.empty(arrays.junction_count)
+    ego_route = np.empty(arrays.routes.shape[2] + 1, dtype=np.int64)
+    ambiguous = np.zeros(len(vehicles), dtype=bool)
+    target_speed = setup.ego_target_speed if kind == T.CONTROLLED else 0.0
+    count, route_size = _town_rows(
+        words, setup.table.rows, arrays.street_lanes, setup.fixed if setup.fixed_routes else _NO_FIXED,
+        arrays.routes, arrays.route_length, arrays.crossings, setup.across, setup.cycle_s, kind,
+        setup.ego_start_speed, target_speed, setup.ego_length, setup.ego_width,
+        setup.npc_length, setup.npc_width, setup.lane_change_delay, setup.idm_delta,
+        vehicles, pedestrians, offsets, ego_route, ambiguous,
+    )  # fmt: skip
+    for row in np.flatnonzero(ambiguous[:count]):  # lanes within 1e-6: numpy's distances decide
+        lane = geometry.closest_lane(vehicles[row, T.X : T.Y + 1].copy(), vehicles[row, T.HEADING])
+        vehicles[row, T.LANE] = lane
+        if row == 0:
+            vehicles[row, T.TARGET_LANE] = lane
+    ego_route = ego_route[:route_size].copy()
 
     limit = np.inf
     if setup.fixed_routes:  # HighwayBackend.reset: (route length - progress) at 10 km/h, + 10 s
         from drivelab.envs.backends.highway import ROUTE_TIMEOUT_MPS
 
-        route = RouteTracker(route_polyline(geometry, ego_route), has_goal=True)
-        progress = route.project(ego[T.X : T.Y + 1])
+        route = route_tracker(setup, ego_route)
+        progress = route.project(vehicles[0, T.X : T.Y + 1])
         limit = (route.length_m - progress) / ROUTE_TIMEOUT_MPS + ROUTE_TIMEOUT_EXTRA_S
     return TownEpisode(
         vehicles=vehicles[:count],
         ego=0,
         pedestrians=pedestrians,
         light_offsets_s=offsets,
-        ego_route=np.asarray(ego_route, dtype=np.int64),
+        ego_route=ego_route,
         route_time_limit_s=float(limit),
-        rng=rng,
-        rng_state=pcg64.state_of(rng),
+        rng_state=words,
     )
+
+
+TRACKER_CACHE_SIZE = 4096  # routes whose trackers a set-up keeps (a retargeted ego's grow without end)
+_NO_FIXED = np.zeros((0, 2), dtype=np.int64)
+
+
+@njit(cache=True)
+def _random_route(words, start, routes, route_length, out) -> int:
+    """``TownSetup.random_route`` into ``out``: its length."""
+    goals = 0
+    for g in range(route_length.shape[1]):
+        if route_length[start, g] != 1:
+            goals += 1
+    if goals == 0:
+        raise ValueError("a town street has no other street to route to")
+    for _ in range(ROUTE_GOAL_TRIES):
+        pick = pcg64.bounded_int(words, goals)
+        goal = -1
+        for g in range(route_length.shape[1]):
+            if route_length[start, g] != 1:
+                if pick == 0:
+                    goal = g
+                    break
+                pick -= 1
+        n = route_length[start, goal]
+        if n > 0:
+            out[:n] = routes[start, goal, :n]
+            return n
+    out[0] = start
+    return 1
+
+
+@njit(cache=True)
+def _street_point(lanes, lane, longitudinal):
+    """LaneGeometry.position(lane, longitudinal, 0.0) of a straight lane, in numpy's order:
+    start + longitudinal * direction + 0.0 * lateral direction."""
+    lateral = 0.0
+    x = lanes[lane, L.START_X] + longitudinal * lanes[lane, L.DIR_X] + lateral * -lanes[lane, L.DIR_Y]
+    y = lanes[lane, L.START_Y] + longitudinal * lanes[lane, L.DIR_Y] + lateral * lanes[lane, L.DIR_X]
+    return x, y
+
+
+@njit(cache=True)
+def _place(row, lanes, x, y, heading, speed, idm_delta) -> bool:
+    """``vehicle_row``'s common part: pose, speed, the closest lane (compiled distances; True when
+    another lane is within 1e-6 of it, for numpy's distances to decide), DELTA, collisions."""
+    row[T.X], row[T.Y], row[T.HEADING], row[T.SPEED] = x, y, heading, speed
+    distances = _lane_distances(lanes, x, y, heading)
+    best = int(np.argmin(distances))
+    near = 0
+    for lane in range(distances.shape[0]):
+        if distances[lane] <= distances[best] + 1e-6:
+            near += 1
+    row[T.LANE] = row[T.TARGET_LANE] = best
+    row[T.DELTA], row[T.CHECK_COLLISIONS] = idm_delta, 1.0
+    return near > 1
+
+
+@njit(cache=True)
+def _write_route_rows(row, route, n) -> None:
+    """A planned route into a vehicle row: roads (one lane each: the road row is the lane row),
+    lane id 0, ROUTED."""
+    if n > (row.shape[0] - T.ROUTE) // 2:
+        raise ValueError("a town route is longer than the vehicle row's route capacity")
+    row[T.ROUTED], row[T.ROUTE_START], row[T.ROUTE_END] = 1.0, 0.0, n
+    for k in range(n):
+        row[T.ROUTE + 2 * k], row[T.ROUTE + 2 * k + 1] = route[k], 0.0
+
+
+@njit(cache=True)
+def _town_rows(
+    words, lanes, streets, fixed, routes, route_length, crossings, across, cycle_s, kind, ego_speed,
+    ego_target_speed, ego_length, ego_width, npc_length, npc_width, delay, idm_delta,
+    vehicles, peds, offsets, ego_route, ambiguous,
+):  # fmt: skip
+    """``town_episode``'s draws and rows (see the module docstring), on the PCG64 ``words``:
+    fills the zeroed ``vehicles`` (ego, then NPCs), ``peds``, ``offsets`` and ``ego_route``;
+    ``ambiguous[i]``: row i's closest lane is to be decided by numpy. Returns (vehicle count,
+    ego route length). ``fixed``: NoCrash's routes, or (0, 2) for random ones.
+
+    Every street is straight, so every float is made by +, -, *, / and sqrt of the reference's
+    operands in its order (each correctly rounded: the same bits as numpy on any CPU); the one
+    transcendental, a crossing's cos / sin, comes in ``across``, made by numpy."""
+    for j in range(offsets.shape[0]):
+        offsets[j] = pcg64.uniform(words, 0.0, cycle_s)
+    if fixed.shape[0]:
+        pick = pcg64.bounded_int(words, fixed.shape[0])
+        start = streets[fixed[pick, 0]]
+        route_size = route_length[start, fixed[pick, 1]]
+        ego_route[:route_size] = routes[start, fixed[pick, 1], :route_size]
+    else:
+        start = streets[pcg64.bounded_int(words, streets.shape[0])]
+        route_size = _random_route(words, start, routes, route_length, ego_route)
+    longitudinal = pcg64.uniform(words, 5.0, max(lanes[start, L.LENGTH] - 20.0, 5.0))
+    ego = vehicles[0]
+    x, y = _street_point(lanes, start, longitudinal)
+    ambiguous[0] = _place(ego, lanes, x, y, lanes[start, L.HEADING], ego_speed, idm_delta)
+    ego[T.KIND], ego[T.LEN], ego[T.WID] = kind, ego_length, ego_width
+    if kind == T.CONTROLLED:  # an MDPVehicle: the allowed speed nearest its own; its route
+        ego[T.TARGET_SPEED] = ego_target_speed
+        _write_route_rows(ego, ego_route, route_size)
+    count = 1
+    route = np.empty(routes.shape[2] + 1, dtype=np.int64)
+    for _ in range(vehicles.shape[0] - 1):
+        placed = False
+        for _ in range(PLACEMENT_TRIES):
+            lane = streets[pcg64.bounded_int(words, streets.shape[0])]
+            x, y = _street_point(lanes, lane, pcg64.uniform(words, 5.0, lanes[lane, L.LENGTH] - 5.0))
+            nearest = np.inf
+            for other in range(count):
+                dx, dy = vehicles[other, T.X] - x, vehicles[other, T.Y] - y
+                nearest = min(nearest, np.sqrt(dx * dx + dy * dy))
+            if nearest > NPC_SPACING_M:
+                placed = True
+                break
+        if not placed:
+            continue
+        row = vehicles[count]
+        speed = pcg64.uniform(words, 4.0, 8.0)
+        ambiguous[count] = _place(row, lanes, x, y, lanes[lane, L.HEADING], speed, idm_delta)
+        row[T.TIMER] = ((x + y) * np.pi) % delay  # IDMVehicle: (np.sum(position) * pi) % delay
+        row[T.LEN], row[T.WID] = npc_length, npc_width
+        row[T.KIND], row[T.TARGET_LANE], row[T.TARGET_SPEED] = T.TOWN, lane, lanes[lane, L.SPEED_LIMIT]
+        _write_route_rows(row, route, _random_route(words, lane, routes, route_length, route))
+        row[T.DELTA] = pcg64.uniform(words, DELTA_RANGE[0], DELTA_RANGE[1])  # randomize_behavior
+        count += 1
+
+    for walker in peds:  # TownEnv._make_pedestrians and Pedestrian.__init__
+        c = pcg64.bounded_int(words, crossings.shape[0])
+        side = -1.0 if pcg64.bounded_int(words, 2) == 0 else 1.0  # choice([-1, 1])
+        u = pcg64.uniform(words, -0.4, 0.4)
+        along_x, along_y = -across[c, 1] * u * crossings[c, 4], across[c, 0] * u * crossings[c, 4]
+        walker[R.P_PACE] = pcg64.uniform(words, 1.0, 1.6)
+        walker[R.P_X] = crossings[c, 0] + along_x + side * PAVEMENT_M * across[c, 0]
+        walker[R.P_Y] = crossings[c, 1] + along_y + side * PAVEMENT_M * across[c, 1]
+        walker[R.P_HEADING], walker[R.P_SIDE] = crossings[c, 2], side
+        walker[R.P_WAIT_S] = pcg64.uniform(words, 0.0, 2 * MEAN_WAIT_S)
+        walker[R.P_CENTRE_X], walker[R.P_CENTRE_Y] = crossings[c, 0], crossings[c, 1]
+        walker[R.P_ACROSS_X], walker[R.P_ACROSS_Y] = across[c, 0], across[c, 1]
+        walker[R.P_CROSSING] = c
+    return count, route_size
 
 
 def spawn_town(seed: int, road, control: str) -> tuple[np.ndarray, int, np.ndarray, TownEpisode]:
