@@ -338,13 +338,13 @@ def test_connected_front_is_the_literal_scan(layout):
         peds[:, P_X], peds[:, P_Y] = [x for _, x, _ in points[n:]], [y for _, _, y in points[n:]]
         peds[0, P_CRASHED] = 1.0
         coords = np.empty((len(lanes), n + m, 4))
-        coords[..., 2] = -1.0
+        seen = np.full((len(lanes), n + m), -1, dtype=np.int8)
         near = np.empty((len(lanes), n + m), dtype=np.int64)
         near_count = np.full(len(lanes), -1, dtype=np.int64)
         for i in range(n):
             for lane in search[int(v[i, T.LANE]), : size[int(v[i, T.LANE])]]:
                 got = TT.connected_front(
-                    v, peds, lanes, coords, near, near_count, search, offset, size, discs, i, int(lane)
+                    v, peds, lanes, coords, seen, near, near_count, search, offset, size, discs, i, int(lane)
                 )
                 assert got == _literal_front(v, peds, lanes, search, offset, size, i, int(lane))
                 checked += got >= 0
@@ -366,15 +366,19 @@ def test_the_stop_line_reads_no_frame_cache():
     stale = coords.copy()
     stale[..., :2], stale[..., 2] = 1e3, 1.0  # "measured, on the lane, 1 km along"
     coords[..., 2] = -1.0
+    seen = {
+        "fresh": np.full(coords.shape[:2], -1, dtype=np.int8),
+        "stale": np.ones(coords.shape[:2], np.int8),
+    }
     stops = 0
     for i in range(len(v)):
         if v[i, T.KIND] != T.TOWN:
             continue
         fresh_a, stale_a = (
             TT.town_acceleration(
-                v, peds, lanes, kernels.p, cache, done, trig, i, -1, *kernels.road[:7], states
+                v, peds, lanes, kernels.p, cache, done, trig, seen[name], i, -1, *kernels.road[:7], states
             )
-            for cache in (coords, stale)
+            for name, cache in (("fresh", coords), ("stale", stale))
         )
         assert fresh_a == stale_a
         stops += TT.stop_line_ahead(v, lanes, kernels.p, i, *kernels.road[:7], states) != TT.NO_STOP

@@ -315,6 +315,7 @@ def blocks_act(
 ) -> None:  # fmt: skip
     """``traffic.act`` with the procedural maps' traffic rules (see the module docstring)."""
     T.start_frame(v, done, trig)
+    not_seen = np.zeros((0, 0), dtype=np.int8)  # town_acceleration's lane_s flags: no leader, none read
     for i in range(v.shape[0]):
         kind = v[i, T.KIND]
         if kind == T.PLAIN or kind == T.PEDAL_KIND or kind == T.OBSTACLE:
@@ -345,8 +346,8 @@ def blocks_act(
             acceleration = min(
                 acceleration,
                 town_acceleration(
-                    v, _NO_PEDESTRIANS, lanes, p, coords, done, trig, i, -1, junction, from_arm, to_arm,
-                    turn, end_junction, end_arm, light, light_states,
+                    v, _NO_PEDESTRIANS, lanes, p, coords, done, trig, not_seen, i, -1, junction, from_arm,
+                    to_arm, turn, end_junction, end_arm, light, light_states,
                 ),
             )  # fmt: skip
         v[i, T.ACCEL] = T._clip(acceleration, -p[T.ACC_MAX], p[T.ACC_MAX])

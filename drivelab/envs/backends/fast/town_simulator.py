@@ -71,6 +71,12 @@ def _simulate_town(
     v, peds, lanes, p, coords, done, trig, states, rng = borrowed(
         (v, peds, lanes, p, coords, done, trig, states, rng)
     )  # its arrays without reference counts (``borrow``: 12 % of the frames' time at K = 64)
+    junction, from_arm, to_arm, turn, end_junction, end_arm, light = borrowed(
+        (junction, from_arm, to_arm, turn, end_junction, end_arm, light)
+    )
+    street_lanes, routes, route_length, search, search_offset, search_size, discs = borrowed(
+        (street_lanes, routes, route_length, search, search_offset, search_size, discs)
+    )
     for _ in range(frames):
         town_act(
             v, count, peds, pcount, lanes, p, coords, done, trig, junction, from_arm, to_arm, turn,

@@ -38,7 +38,7 @@ Arrays (one world):
 - ``lanes`` (L, LANE_COLUMNS) the lane table; ``p`` (9,) the IDM parameters
   (``traffic.IDM_PARAMETERS``);
 - ``coords``, ``done``, ``trig``: the frame cache, ``town_frame_cache(N_max, P_max, L)``, made
-  once per world (``town_act`` resets it; it must hold count + pcount objects);
+  once per world (``town_act`` refills it; it must hold count + pcount objects);
 - the road arrays of ``road_arrays_tuple`` (in that order): the ``TownRoadArrays`` fields and the
   ``connected_lanes`` tables;
 - ``light_states`` (M,) int64: LIGHT_* of each light row at the step's end time;
@@ -138,12 +138,12 @@ def py_square(x: float) -> float:
 def town_frame_cache(vehicles: int, pedestrians: int, lane_count: int):
     """Scratch arrays of one frame's ``town_act`` for up to ``vehicles`` vehicle rows and
     ``pedestrians`` pedestrian rows on ``lane_count`` lanes: ``coords`` (L, N+P, 4), ``done``
-    (L,) int64, ``trig`` (N+P, 2). ``coords[lane, j, :3]`` is (longitudinal, lateral, on the lane
-    within 1 m: 1.0 / 0.0, -1.0 until computed in this frame) of vehicle j < count, and of
-    pedestrian k at j = count + k; ``coords[..., 3]`` and ``done`` are ``traffic``'s (its sorted
-    vehicle rows per lane, and -1 or the count of vehicles on the lane once it filled it).
+    (L,) int64, ``trig`` (N+P, 2). ``coords[lane, j, :2]`` is (longitudinal, lateral) of vehicle
+    j < count, and of pedestrian k at j = count + k, once measured in this frame (``town_act``'s
+    ``seen`` says which are); ``coords[..., 2:]`` and ``done`` are ``traffic``'s (its flags, its
+    sorted vehicle rows per lane, and -1 or the count of vehicles on the lane once it filled it).
     ``trig`` holds the cosine and sine of the headings, vehicles then pedestrians. Allocate once
-    per world and reuse every frame (``town_act`` resets the flags)."""
+    per world and reuse every frame (``town_act`` refills what it reads)."""
     size = vehicles + pedestrians
     return np.empty((lane_count, size, 4)), np.full(lane_count, -1, dtype=np.int64), np.empty((size, 2))
 
@@ -237,14 +237,21 @@ def object_xy(v: np.ndarray, peds: np.ndarray, j: int) -> tuple[float, float]:
 
 @njit(cache=True, inline="always")
 def lane_s(
-    v: np.ndarray, peds: np.ndarray, lanes: np.ndarray, coords: np.ndarray, lane: int, j: int
+    v: np.ndarray,
+    peds: np.ndarray,
+    lanes: np.ndarray,
+    coords: np.ndarray,
+    seen: np.ndarray,
+    lane: int,
+    j: int,
 ) -> float:
-    """Object j's longitudinal coordinate in ``lane`` (computed once per frame: the same bits)."""
-    if coords[lane, j, 2] < 0:
+    """Object j's longitudinal coordinate in ``lane`` (computed once per frame: the same bits);
+    ``seen[lane, j]`` becomes 1 if it is on the lane (``on_lane``, 1 m margin), else 0."""
+    if seen[lane, j] < 0:
         x, y = object_xy(v, peds, j)
         s, r = local_coordinates(lanes, lane, x, y)
         coords[lane, j, 0], coords[lane, j, 1] = s, r
-        coords[lane, j, 2] = 1.0 if on_lane(lanes, lane, s, r, 1.0) else 0.0
+        seen[lane, j] = 1 if on_lane(lanes, lane, s, r, 1.0) else 0
     return coords[lane, j, 0]
 
 
@@ -299,6 +306,7 @@ def lane_objects(
     peds: np.ndarray,
     lanes: np.ndarray,
     coords: np.ndarray,
+    seen: np.ndarray,
     discs: np.ndarray,
     near: np.ndarray,
     near_count: np.ndarray,
@@ -315,15 +323,15 @@ def lane_objects(
     for j in range(count + peds.shape[0]):
         if j >= count and peds[j - count, P_CRASHED] > 0:
             continue
-        if coords[lane, j, 2] < 0:  # not measured yet in this frame: off the lane outside its disc
+        if seen[lane, j] < 0:  # not measured yet in this frame: off the lane outside its disc
             x, y = object_xy(v, peds, j)
             dx, dy = x - cx, y - cy
             if dx * dx + dy * dy > reach2:
                 continue
             if arc and not np.abs(circle_lateral(lanes, lane, x, y)) <= half_width:
                 continue  # on_lane's lateral test fails (the same bits), its arctan2 spared
-            lane_s(v, peds, lanes, coords, lane, j)
-        if coords[lane, j, 2] == 1.0:
+            lane_s(v, peds, lanes, coords, seen, lane, j)
+        if seen[lane, j] == 1:
             near[lane, n] = j
             n += 1
     near_count[lane] = n
@@ -335,6 +343,7 @@ def connected_front(
     peds: np.ndarray,
     lanes: np.ndarray,
     coords: np.ndarray,
+    seen: np.ndarray,
     near: np.ndarray,
     near_count: np.ndarray,
     search: np.ndarray,
@@ -353,21 +362,21 @@ def connected_front(
     pedestrians not crashed) among equals. The lanes are read in order from their per-frame object
     lists (``near``, ``near_count``: ``lane_objects``); an object listed on an earlier one of them
     was placed there."""
-    v, peds, lanes, coords, near, near_count, search, search_offset, search_size, discs = borrowed(
-        (v, peds, lanes, coords, near, near_count, search, search_offset, search_size, discs)
+    v, peds, lanes, coords, seen, near, near_count, search, search_offset, search_size, discs = borrowed(
+        (v, peds, lanes, coords, seen, near, near_count, search, search_offset, search_size, discs)
     )
-    s = lane_s(v, peds, lanes, coords, lane, i)
+    s = lane_s(v, peds, lanes, coords, seen, lane, i)
     front, s_front = -1, 0.0
     for k in range(search_size[lane]):
         other = search[lane, k]
-        lane_objects(v, peds, lanes, coords, discs, near, near_count, other)
+        lane_objects(v, peds, lanes, coords, seen, discs, near, near_count, other)
         for m in range(near_count[other]):
             j = near[other, m]
             if j == i:
                 continue
             placed = False  # on an earlier lane of the search: its lists are made, so measured there
             for earlier in range(k):
-                if coords[search[lane, earlier], j, 2] == 1.0:
+                if seen[search[lane, earlier], j] == 1:
                     placed = True
                     break
             if placed:
@@ -462,6 +471,7 @@ def town_acceleration(
     coords: np.ndarray,
     done: np.ndarray,
     trig: np.ndarray,
+    seen: np.ndarray,
     i: int,
     front: int,
     junction: np.ndarray,
@@ -474,8 +484,9 @@ def town_acceleration(
     light_states: np.ndarray,
 ) -> float:
     """TownVehicle.acceleration(self, front): IDM with the straight-line gap to ``front`` (a
-    vehicle row, a pedestrian as count + k, or -1), then the stop line's virtual leader."""
-    v, peds, lanes, p, coords, done, trig = borrowed((v, peds, lanes, p, coords, done, trig))
+    vehicle row, a pedestrian as count + k, or -1), then the stop line's virtual leader.
+    ``coords`` and ``seen`` (``town_act``'s) are read only with a front."""
+    v, peds, lanes, p, coords, done, trig, seen = borrowed((v, peds, lanes, p, coords, done, trig, seen))
     count = v.shape[0]
     acceleration = cached_idm_acceleration(v, lanes, p, coords, done, trig, i, i, -1)
     if front >= 0:
@@ -494,7 +505,9 @@ def town_acceleration(
                 p[DISTANCE_WANTED] + v[i, SPEED] * p[TIME_WANTED] + v[i, SPEED] * dv / (2 * np.sqrt(ab))
             )
         lane = int(v[i, LANE])
-        along = lane_s(v, peds, lanes, coords, lane, front) - lane_s(v, peds, lanes, coords, lane, i)
+        along = lane_s(v, peds, lanes, coords, seen, lane, front) - lane_s(
+            v, peds, lanes, coords, seen, lane, i
+        )
         dx, dy = fx - v[i, X], fy - v[i, Y]
         gap_m = math.copysign(math.sqrt(dx * dx + dy * dy), along)
         # IDMVehicle.acceleration squares with np.power(·, 2): numpy's square, x * x
@@ -543,16 +556,67 @@ def town_act(
     rng_words: np.ndarray,
 ) -> None:
     """Road.act of one town world: rows ``0..count-1`` of ``v`` decide their controls in order
-    (see the module docstring for the arrays); random routes draw on ``rng_words``."""
+    (see the module docstring for the arrays); random routes draw on ``rng_words``. The frame's
+    scratch is made here, and ``_act_rows`` borrows it with the arguments (``borrow``): ``own``,
+    MOBIL's own-lane row (``traffic.own_lane``); ``near`` and ``near_count``, ``lane_objects``'
+    lists; ``seen``, which objects ``lane_s`` measured on which lane (-1: not yet)."""
+    size = count + pcount
+    own = np.empty(OWN_SIZE)
+    near = np.empty((lanes.shape[0], size), dtype=np.int64)
+    near_count = np.full(lanes.shape[0], -1, dtype=np.int64)
+    seen = np.full((lanes.shape[0], size), -1, dtype=np.int8)
+    _act_rows(
+        v, count, peds, pcount, lanes, p, coords, done, trig, junction, from_arm, to_arm, turn,
+        end_junction, end_arm, light, street_lanes, routes, route_length, search, search_offset,
+        search_size, discs, light_states, rng_words, own, near, near_count, seen,
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def _act_rows(
+    v: np.ndarray,
+    count: int,
+    peds: np.ndarray,
+    pcount: int,
+    lanes: np.ndarray,
+    p: np.ndarray,
+    coords: np.ndarray,
+    done: np.ndarray,
+    trig: np.ndarray,
+    junction: np.ndarray,
+    from_arm: np.ndarray,
+    to_arm: np.ndarray,
+    turn: np.ndarray,
+    end_junction: np.ndarray,
+    end_arm: np.ndarray,
+    light: np.ndarray,
+    street_lanes: np.ndarray,
+    routes: np.ndarray,
+    route_length: np.ndarray,
+    search: np.ndarray,
+    search_offset: np.ndarray,
+    search_size: np.ndarray,
+    discs: np.ndarray,
+    light_states: np.ndarray,
+    rng_words: np.ndarray,
+    own: np.ndarray,
+    near: np.ndarray,
+    near_count: np.ndarray,
+    seen: np.ndarray,
+) -> None:
+    """``town_act``'s loop over the rows, every array borrowed."""
     v, peds, lanes, p, coords, done, trig, light_states, rng_words = borrowed(
         (v, peds, lanes, p, coords, done, trig, light_states, rng_words)
     )  # no reference counts in the inlined helpers (``borrow``)
+    own, near, near_count, seen = borrowed((own, near, near_count, seen))
+    junction, from_arm, to_arm, turn, end_junction, end_arm, light = borrowed(
+        (junction, from_arm, to_arm, turn, end_junction, end_arm, light)
+    )
+    street_lanes, routes, route_length, search, search_offset, search_size, discs = borrowed(
+        (street_lanes, routes, route_length, search, search_offset, search_size, discs)
+    )
     w, q = v[:count], peds[:pcount]
     start_frame(w, done, trig)
-    own = np.empty(OWN_SIZE)  # MOBIL's own-lane scratch row (traffic.own_lane)
-    coords[:, : count + pcount, 2] = -1.0
-    near = np.empty((lanes.shape[0], count + pcount), dtype=np.int64)  # lane_objects' lists
-    near_count = np.full(lanes.shape[0], -1, dtype=np.int64)
     for k in range(pcount):
         trig[count + k, 0], trig[count + k, 1] = np.cos(q[k, P_HEADING]), np.sin(q[k, P_HEADING])
     for i in range(count):
@@ -569,7 +633,7 @@ def town_act(
             turn_lane = planned_next(w, lanes, i)
             if turn_lane >= 0:
                 next_limit = lanes[turn_lane, SPEED_LIMIT]
-                ahead_m = lanes[lane, LENGTH] - lane_s(w, q, lanes, coords, lane, i)
+                ahead_m = lanes[lane, LENGTH] - lane_s(w, q, lanes, coords, seen, lane, i)
                 braking = (py_square(w[i, SPEED]) - py_square(next_limit)) / (2 * -p[COMFORT_ACC_MIN])
                 if ahead_m < TURN_BRAKE_MARGIN_M + braking:
                     limit = min(limit, next_limit)
@@ -588,19 +652,20 @@ def town_act(
             w[i, ACCEL] = KP_A * (w[i, TARGET_SPEED] - w[i, SPEED])
             continue
         front = connected_front(
-            w, q, lanes, coords, near, near_count, search, search_offset, search_size, discs, i, lane
+            w, q, lanes, coords, seen, near, near_count, search, search_offset, search_size, discs, i, lane
         )
         acceleration = town_acceleration(
-            w, q, lanes, p, coords, done, trig, i, front,
+            w, q, lanes, p, coords, done, trig, seen, i, front,
             junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states,
         )  # fmt: skip
         target = int(w[i, TARGET_LANE])
         if lane != target:
             front = connected_front(
-                w, q, lanes, coords, near, near_count, search, search_offset, search_size, discs, i, target
-            )
+                w, q, lanes, coords, seen, near, near_count, search, search_offset, search_size, discs, i,
+                target,
+            )  # fmt: skip
             target_a = town_acceleration(
-                w, q, lanes, p, coords, done, trig, i, front,
+                w, q, lanes, p, coords, done, trig, seen, i, front,
                 junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states,
             )  # fmt: skip
             acceleration = min(acceleration, target_a)
