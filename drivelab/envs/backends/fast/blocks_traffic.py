@@ -40,6 +40,7 @@ import numpy as np
 from numba import njit
 
 from drivelab.envs.backends.fast import traffic as T
+from drivelab.envs.backends.fast.borrow import borrowed
 from drivelab.envs.backends.fast.lanes import (
     FIRST_OF_ROAD,
     LANE_COUNT,
@@ -64,6 +65,7 @@ def route_feasible(
     """Whether vehicle i's route entries ``first`` … ROUTE_END − 1 (roads) can be driven from lane
     row ``lane``, each step a lane continuing the one before it (depth-first over the
     continuations; a route holds at most a dozen roads and few lanes branch)."""
+    v, lanes, successor_start, successors = borrowed((v, lanes, successor_start, successors))
     n = int(v[i, T.ROUTE_END]) - first
     if n <= 0:
         return True
@@ -108,6 +110,7 @@ def blocks_follow_road(
     """At the end of vehicle i's target lane (as ``ControlledVehicle.follow_road``: within half a
     vehicle length of it), target the next lane (see the module docstring); the finished route
     entry is dropped."""
+    v, lanes, successor_start, successors = borrowed((v, lanes, successor_start, successors))
     target = int(v[i, T.TARGET_LANE])
     s, _ = local_coordinates(lanes, target, v[i, T.X], v[i, T.Y])
     if s <= lanes[target, LENGTH] - VEHICLE_LENGTH / 2:
@@ -149,6 +152,9 @@ def rear_across(
     """The vehicle behind vehicle i on ``lane`` (``traffic.cached_neighbours``' rear), else the one
     nearest the end of a lane that ``lane`` continues (it comes onto ``lane`` next; highway-env's
     neighbour search, which looks at the lane alone, misses it at a road's start), else -1."""
+    v, lanes, coords, done, successor_start, successors = borrowed(
+        (v, lanes, coords, done, successor_start, successors)
+    )
     _, rear = T.cached_neighbours(v, lanes, coords, done, i, lane)
     if rear >= 0:
         return rear
@@ -177,6 +183,9 @@ def blocks_mobil(
     LANE_CHANGE_MAX_BRAKING_IMPOSED) and worth it (the politeness-weighted acceleration gain
     reaches LANE_CHANGE_MIN_ACC_GAIN). The route is checked by ``route_feasible`` instead; the new
     follower may come from the lane before ``lane`` (``rear_across``)."""
+    v, lanes, p, coords, done, trig, successor_start, successors = borrowed(
+        (v, lanes, p, coords, done, trig, successor_start, successors)
+    )
     new_preceding, _ = T.cached_neighbours(v, lanes, coords, done, i, lane)
     new_following = rear_across(v, lanes, coords, done, i, lane, successor_start, successors)
     new_following_a = T.cached_idm_acceleration(
@@ -209,6 +218,9 @@ def merge_safe(
     behind vehicle i nor vehicle i behind its new leader brakes harder than
     LANE_CHANGE_MAX_BRAKING_IMPOSED (``traffic.mobil_side``'s branch for a lane the route asks
     for; the new follower as ``blocks_mobil`` finds it)."""
+    v, lanes, p, coords, done, trig, successor_start, successors = borrowed(
+        (v, lanes, p, coords, done, trig, successor_start, successors)
+    )
     new_preceding, _ = T.cached_neighbours(v, lanes, coords, done, i, lane)
     new_following = rear_across(v, lanes, coords, done, i, lane, successor_start, successors)
     new_following_pred_a = T.cached_idm_acceleration(v, lanes, p, coords, done, trig, i, new_following, i)
@@ -252,6 +264,9 @@ def blocks_change_lane_policy(
     """``IDMVehicle.change_lane_policy`` (``traffic.change_lane_policy``: abort a change into a lane
     someone else is entering; every LANE_CHANGE_DELAY seconds ask MOBIL about each side lane, the
     right one last) on ``changeable`` lanes, to side lanes from which the route goes on."""
+    v, lanes, p, coords, done, trig, changeable, ending, successor_start, successors = borrowed(
+        (v, lanes, p, coords, done, trig, changeable, ending, successor_start, successors)
+    )
     lane, target = int(v[i, T.LANE]), int(v[i, T.TARGET_LANE])
     if lane != target:
         if lanes[lane, FIRST_OF_ROAD] == lanes[target, FIRST_OF_ROAD]:
@@ -314,6 +329,12 @@ def blocks_act(
     changeable, ending, successor_start, successors, light_states,
 ) -> None:  # fmt: skip
     """``traffic.act`` with the procedural maps' traffic rules (see the module docstring)."""
+    v, lanes, p, coords, done, trig, changeable, ending, successor_start, successors = borrowed(
+        (v, lanes, p, coords, done, trig, changeable, ending, successor_start, successors)
+    )  # no reference counts in the inlined helpers (``borrow``)
+    junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states = borrowed(
+        (junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states)
+    )
     T.start_frame(v, done, trig)
     not_seen = np.zeros((0, 0), dtype=np.int8)  # town_acceleration's lane_s flags: no leader, none read
     for i in range(v.shape[0]):
@@ -365,6 +386,12 @@ def blocks_simulate(
     (every row but the traffic's) go no faster than ``ego_max_speed_mps``: above it their
     acceleration is clipped as ``Vehicle.clip_actions`` clips at MAX_SPEED (MetaDrive's ego tops
     out at 80 km/h, highway-env's at 40 m/s)."""
+    v, lanes, p, regulation, changeable, ending, successor_start, successors = borrowed(
+        (v, lanes, p, regulation, changeable, ending, successor_start, successors)
+    )
+    junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states = borrowed(
+        (junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states)
+    )
     coords, done, trig = T.frame_cache(v, lanes)
     for _ in range(frames):
         blocks_act(

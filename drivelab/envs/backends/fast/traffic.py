@@ -326,6 +326,7 @@ def mobil_side(  # its body (5 IDM terms, a neighbour search) inlined made numba
     """IDMVehicle.mobil: is a change to ``lane`` safe for the new follower, and worth it?
     (``own``: vehicle i's row of ``own_lane``; the same arithmetic as highway-env's, each value
     computed once.)"""
+    v, lanes, p, coords, done, trig, own = borrowed((v, lanes, p, coords, done, trig, own))
     new_preceding, new_following = cached_neighbours(v, lanes, coords, done, i, lane)
     new_following_free = idm_free_road(v, lanes, p, i, new_following)
     new_following_a = idm_behind(
@@ -479,12 +480,18 @@ def follow_road(v: np.ndarray, lanes: np.ndarray, i: int) -> None:
 
 @njit(cache=True)
 def act(
-    v: np.ndarray, lanes: np.ndarray, p: np.ndarray, coords: np.ndarray, done: np.ndarray, trig: np.ndarray
+    v: np.ndarray,
+    lanes: np.ndarray,
+    p: np.ndarray,
+    coords: np.ndarray,
+    done: np.ndarray,
+    trig: np.ndarray,
+    own: np.ndarray,
 ) -> None:
-    """Road.act: every vehicle decides its controls, in list order (``frame_cache`` arrays)."""
-    v, lanes, p, coords, done, trig = borrowed((v, lanes, p, coords, done, trig))
+    """Road.act: every vehicle decides its controls, in list order (``frame_cache`` arrays;
+    ``own`` (OWN_SIZE,) scratch, the caller's, so that it is borrowed here as well)."""
+    v, lanes, p, coords, done, trig, own = borrowed((v, lanes, p, coords, done, trig, own))
     start_frame(v, done, trig)
-    own = np.empty(OWN_SIZE)
     for i in range(v.shape[0]):
         kind = v[i, KIND]
         if kind == PLAIN or kind == PEDAL_KIND or kind == OBSTACLE:
@@ -767,8 +774,9 @@ def simulate(
     """
     v, lanes, p = borrowed((v, lanes, p))
     coords, done, trig = frame_cache(v, lanes)
+    own = np.empty(OWN_SIZE)  # act's scratch, borrowed there
     for _ in range(frames):
-        act(v, lanes, p, coords, done, trig)
+        act(v, lanes, p, coords, done, trig, own)
         if regulation[0] > 0:
             regulation[1] += 1
             if regulation[1] % regulation[0] == 0:
