@@ -6,7 +6,8 @@
 Regular traffic; meta-actions (continuous control on the racetrack, whose meta-action ego
 highway-env cannot place). Each row is the mean over ``--seeds`` set-ups after one untimed
 set-up (compilation). Run against an older checkout with ``PYTHONPATH`` (the script uses only
-``FastSimulator``, ``SCENARIOS`` and ``_episode``, which older trees have too) to compare.
+``fast_simulator``, ``SCENARIOS`` and ``_episode``, which older trees have too) to compare. The
+town's set-up is its ``TownEpisode`` (vehicles, pedestrians, lights, the ego's route).
 """
 
 from __future__ import annotations
@@ -26,15 +27,15 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 RESULTS = Path(__file__).parent / "results"
 CASES = (("highway", "meta"), ("merge", "meta"), ("roundabout", "meta"), ("intersection", "meta"))
-CASES += (("racetrack", "continuous"),)
+CASES += (("racetrack", "continuous"), ("town", "meta"))
 
 
 def setup_ms(scenario: str, control: str, seeds: int) -> float:
     """Mean milliseconds of one episode set-up of ``scenario`` (regular traffic)."""
-    from drivelab.envs.backends.fast.simulator import FastSimulator
+    from drivelab.envs.backends.fast.backend import fast_simulator
     from drivelab.envs.scenarios import SCENARIOS
 
-    simulator = FastSimulator(SCENARIOS[scenario], "regular", control, 1)
+    simulator = fast_simulator(SCENARIOS[scenario], "regular", control, 1)
     simulator._episode(0)
     start = time.perf_counter()
     for seed in range(seeds):
