@@ -109,7 +109,7 @@ class LaneGeometry:
         """RoadNetwork.get_closest_lane_index: the first lane of least distance_with_heading. The
         compiled distances pick the candidates (within 1e-6 of the least: they differ from
         numpy's by ULPs at most), numpy's decide among them, as highway-env would."""
-        distances = _lane_distances(self.lanes, float(position[0]), float(position[1]), float(heading))
+        distances = lane_distances(self.lanes, float(position[0]), float(position[1]), float(heading))
         near = np.flatnonzero(distances <= distances.min() + 1e-6)
         if near.size == 1:
             return int(near[0])
@@ -123,8 +123,9 @@ def _wrap_to_pi(x: float) -> float:
 
 
 @njit(cache=True)
-def _lane_distances(lanes: np.ndarray, x: float, y: float, heading: float) -> np.ndarray:
-    """(L,) every lane's distance_with_heading to (x, y, heading), compiled (candidates only)."""
+def lane_distances(lanes: np.ndarray, x: float, y: float, heading: float) -> np.ndarray:
+    """(L,) every lane's distance_with_heading to (x, y, heading), compiled: it shortlists the closest
+    lanes; where two are within 1e-6, numpy's distances decide (``LaneGeometry.closest_lane``)."""
     out = np.empty(lanes.shape[0])
     for lane in range(lanes.shape[0]):
         s, r = L.local_coordinates(lanes, lane, x, y)

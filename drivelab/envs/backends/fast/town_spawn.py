@@ -44,8 +44,8 @@ from drivelab.envs.backends.fast import traffic as T
 from drivelab.envs.backends.fast.spawn import (
     DELTA_RANGE,
     LaneGeometry,
-    _lane_distances,
     ego_kind,
+    lane_distances,
     mdp_target_speed,
 )
 from drivelab.envs.backends.roads.town_arrays import TownRoadArrays
@@ -347,7 +347,7 @@ def _place(row, lanes, x, y, heading, speed, idm_delta) -> bool:
     """``vehicle_row``'s common part: pose, speed, the closest lane (compiled distances; True when
     another lane is within 1e-6 of it, for numpy's distances to decide), DELTA, collisions."""
     row[T.X], row[T.Y], row[T.HEADING], row[T.SPEED] = x, y, heading, speed
-    distances = _lane_distances(lanes, x, y, heading)
+    distances = lane_distances(lanes, x, y, heading)
     best = int(np.argmin(distances))
     near = 0
     for lane in range(distances.shape[0]):
