@@ -201,3 +201,9 @@ def test_lanes_within_a_micrometre_are_decided_by_numpy(monkeypatch):
     assert town_spawn._place(row, twins, 10.0, 1.0, 0.0, 5.0, 4.0)  # midway: both 1 m off
     assert row[T.LANE] == 0
     assert not town_spawn._place(row, twins, 10.0, 0.5, 0.0, 5.0, 4.0)
+
+
+def test_seeds_wider_than_the_compiled_words_give_the_reference_episode():
+    """Seeds below 2**63 are hashed into PCG64 words by compiled code (``pcg64.seeded_states``);
+    wider ones go through gymnasium's own seeding: both give the reference's episode."""
+    compare_setups("train", "regular", "meta", False, seeds=(2**63 - 1, 2**63, 2**70 + 5))
