@@ -246,6 +246,14 @@ def route_tracker(setup: TownSetup, lanes) -> RouteTracker:
         tracker = setup._trackers[key] = RouteTracker(
             route_polyline(setup.geometry, key, setup._polylines), has_goal=True
         )
+        for array in (
+            tracker.polyline,
+            tracker.stations,
+            tracker._starts,
+            tracker._segments,
+            tracker._lengths2,
+        ):
+            array.setflags(write=False)  # shared by every episode on the route
     return tracker
 
 
