@@ -29,7 +29,6 @@ import numpy as np
 from numba import njit, prange
 
 from drivelab.envs.backends.fast import lanes as L
-from drivelab.envs.backends.fast import pcg64
 from drivelab.envs.backends.fast import town_rows as R
 from drivelab.envs.backends.fast import traffic as T
 from drivelab.envs.backends.fast.borrow import borrowed
@@ -46,7 +45,13 @@ from drivelab.envs.backends.fast.simulator import (
     export_worlds,
 )
 from drivelab.envs.backends.fast.town_spawn import TownSetup, route_tracker
-from drivelab.envs.backends.fast.town_traffic import road_arrays_tuple, town_act, town_frame_cache, town_step
+from drivelab.envs.backends.fast.town_traffic import (
+    random_goal,
+    road_arrays_tuple,
+    town_act,
+    town_frame_cache,
+    town_step,
+)
 from drivelab.envs.backends.roads.town_rules import PEDESTRIAN_SIZE_M, LightTimings
 from drivelab.envs.route import RouteTracker
 from drivelab.errors import UsageError
@@ -177,7 +182,6 @@ class TownSimulator(FastSimulator):
         self.coords = np.stack([c[0] for c in cache])
         self.done = np.stack([c[1] for c in cache])
         self.trig = np.stack([c[2] for c in cache])
-        self._scratch_rng = np.random.default_rng(0)  # draws a retarget from a world's words
         self._light_valid = np.ones((k, len(arrays.light_junction)), dtype=bool)
         self._light_valid.setflags(write=False)
         self._max_speed = self._empty["max_speed_mps"]
@@ -273,10 +277,11 @@ class TownSimulator(FastSimulator):
         """TownEnv.extend_route in every world that arrived: a random route on from the end of
         the ego's, drawn from the world's generator after its frames; the meta-action ego's
         planned lanes grow by it; the progress is projected on the longer route."""
+        arrays = self.arrays
         for k in np.flatnonzero(active & self._route_ended()):
-            pcg64.set_state(self._scratch_rng, self.rng_words[k])
-            more = self.setup.random_route(self.ego_routes[k][-1], self._scratch_rng)[1:]
-            self.rng_words[k] = pcg64.state_of(self._scratch_rng)
+            start = self.ego_routes[k][-1]
+            goal = random_goal(self.lanes, start, arrays.street_lanes, arrays.route_length, self.rng_words[k])
+            more = arrays.routes[start, goal, 1 : arrays.route_length[start, goal]] if goal >= 0 else []
             self.ego_routes[k] = self.ego_routes[k] + [int(lane) for lane in more]
             row = self.vehicles[k, self.ego[k]]
             if row[T.KIND] == T.CONTROLLED:

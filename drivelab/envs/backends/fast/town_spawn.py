@@ -23,9 +23,9 @@ generator state (tested in ``tests/envs/test_town_spawn.py``). The draws, in ord
    crossing ``uniform(-0.4, 0.4)``, pace ``uniform(1, 1.6)``, first wait ``uniform(0, 40)``.
 
 Routes come from the road's route table (``TownRoadArrays.routes``: the reference's breadth-first
-``shortest_route`` from every lane to every street's stop line). A random route's goals are the
-streets that do not end where the start lane ends: exactly those whose table route is not the
-start lane alone (length 1), so no node name is read.
+``shortest_route`` from every lane to every street's stop line); a random route's goal is drawn
+as the kernels draw it (``town_traffic.random_goal``), among the streets that do not end where
+the start lane ends.
 """
 
 from __future__ import annotations
@@ -48,12 +48,12 @@ from drivelab.envs.backends.fast.spawn import (
     lane_distances,
     mdp_target_speed,
 )
+from drivelab.envs.backends.fast.town_traffic import random_goal, random_route
 from drivelab.envs.backends.roads.town_arrays import TownRoadArrays
 from drivelab.envs.backends.roads.town_rules import (
     FIXED_ROUTE_COUNT,
     MEAN_WAIT_S,
     PAVEMENT_M,
-    ROUTE_GOAL_TRIES,
     LightTimings,
 )
 from drivelab.envs.route import RouteTracker
@@ -125,7 +125,6 @@ class TownSetup:
     npc_width: float
     lane_change_delay: float
     idm_delta: float
-    _goals: dict = field(default_factory=dict, repr=False)
     _fixed: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
@@ -172,29 +171,6 @@ class TownSetup:
                 idm_delta=float(road.idm_delta),
             )
         return setup
-
-    def goals(self, start: int) -> np.ndarray:
-        """Street indices (into ``arrays.street_lanes``) a random route from lane ``start`` may
-        aim at, in ``street_lanes`` order: every street not ending where ``start`` ends."""
-        goals = self._goals.get(start)
-        if goals is None:
-            goals = self._goals[start] = np.flatnonzero(self.arrays.route_length[start] != 1)
-        return goals
-
-    def route(self, start: int, street: int) -> np.ndarray:
-        """(R,) lane rows of the shortest route from lane ``start`` to street ``street``'s stop
-        line (empty when there is none)."""
-        return self.arrays.routes[start, street, : self.arrays.route_length[start, street]]
-
-    def random_route(self, start: int, rng: np.random.Generator) -> np.ndarray:
-        """``town_env.random_route`` from lane ``start``: a shortest route to a random other
-        street's stop line (at most ROUTE_GOAL_TRIES goals drawn), else the start lane alone."""
-        goals = self.goals(start)
-        for _ in range(ROUTE_GOAL_TRIES):
-            route = self.route(start, int(goals[rng.integers(len(goals))]))
-            if route.size:
-                return route
-        return np.array([start], dtype=np.int64)
 
     @property
     def fixed(self) -> np.ndarray:
@@ -315,32 +291,6 @@ _NO_FIXED = np.zeros((0, 2), dtype=np.int64)
 
 
 @njit(cache=True)
-def _random_route(words, start, routes, route_length, out) -> int:
-    """``TownSetup.random_route`` into ``out``: its length."""
-    goals = 0
-    for g in range(route_length.shape[1]):
-        if route_length[start, g] != 1:
-            goals += 1
-    if goals == 0:
-        raise ValueError("a town street has no other street to route to")
-    for _ in range(ROUTE_GOAL_TRIES):
-        pick = pcg64.bounded_int(words, goals)
-        goal = -1
-        for g in range(route_length.shape[1]):
-            if route_length[start, g] != 1:
-                if pick == 0:
-                    goal = g
-                    break
-                pick -= 1
-        n = route_length[start, goal]
-        if n > 0:
-            out[:n] = routes[start, goal, :n]
-            return n
-    out[0] = start
-    return 1
-
-
-@njit(cache=True)
 def _street_point(lanes, lane, longitudinal):
     """LaneGeometry.position(lane, longitudinal, 0.0) of a straight lane, in numpy's order:
     start + longitudinal * direction + 0.0 * lateral direction."""
@@ -395,12 +345,15 @@ def _town_rows(
         offsets[j] = pcg64.uniform(words, 0.0, cycle_s)
     if fixed.shape[0]:
         pick = pcg64.bounded_int(words, fixed.shape[0])
-        start = streets[fixed[pick, 0]]
-        route_size = route_length[start, fixed[pick, 1]]
-        ego_route[:route_size] = routes[start, fixed[pick, 1], :route_size]
+        start, goal = streets[fixed[pick, 0]], fixed[pick, 1]
     else:
         start = streets[pcg64.bounded_int(words, streets.shape[0])]
-        route_size = _random_route(words, start, routes, route_length, ego_route)
+        goal = random_goal(lanes, start, streets, route_length, words)
+    route_size = route_length[start, goal] if goal >= 0 else 1
+    if goal >= 0:
+        ego_route[:route_size] = routes[start, goal, :route_size]
+    else:
+        ego_route[0] = start
     longitudinal = pcg64.uniform(words, 5.0, max(lanes[start, L.LENGTH] - 20.0, 5.0))
     ego = vehicles[0]
     x, y = _street_point(lanes, start, longitudinal)
@@ -410,7 +363,6 @@ def _town_rows(
         ego[T.TARGET_SPEED] = ego_target_speed
         _write_route_rows(ego, ego_route, route_size)
     count = 1
-    route = np.empty(routes.shape[2] + 1, dtype=np.int64)
     for _ in range(vehicles.shape[0] - 1):
         placed = False
         for _ in range(PLACEMENT_TRIES):
@@ -431,7 +383,7 @@ def _town_rows(
         row[T.TIMER] = ((x + y) * np.pi) % delay  # IDMVehicle: (np.sum(position) * pi) % delay
         row[T.LEN], row[T.WID] = npc_length, npc_width
         row[T.KIND], row[T.TARGET_LANE], row[T.TARGET_SPEED] = T.TOWN, lane, lanes[lane, L.SPEED_LIMIT]
-        _write_route_rows(row, route, _random_route(words, lane, routes, route_length, route))
+        random_route(vehicles, lanes, count, lane, streets, routes, route_length, words)
         row[T.DELTA] = pcg64.uniform(words, DELTA_RANGE[0], DELTA_RANGE[1])  # randomize_behavior
         count += 1
 

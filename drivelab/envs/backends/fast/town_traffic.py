@@ -181,6 +181,36 @@ def planned_next(v: np.ndarray, lanes: np.ndarray, i: int) -> int:
 
 
 @njit(cache=True)
+def random_goal(
+    lanes: np.ndarray, start: int, street_lanes: np.ndarray, route_length: np.ndarray, rng_words: np.ndarray
+) -> int:
+    """town_env.random_route's goal from lane row ``start``: a street (its index in
+    ``street_lanes``) drawn among those whose end node is not ``start``'s (street order), up to
+    ROUTE_GOAL_TRIES times until one is reachable; -1 when none was (the route is then ``start``
+    alone). The draws are ``integers(goals)`` on the PCG64 ``rng_words``."""
+    lanes, street_lanes, route_length, rng_words = borrowed((lanes, street_lanes, route_length, rng_words))
+    end_node = lanes[start, TO_NODE]
+    goals = 0
+    for g in range(street_lanes.shape[0]):
+        if lanes[street_lanes[g], TO_NODE] != end_node:
+            goals += 1
+    if goals == 0:
+        raise ValueError("a town street has no other street to route to")
+    for _ in range(ROUTE_GOAL_TRIES):
+        pick = bounded_int(rng_words, goals)
+        street = -1
+        for g in range(street_lanes.shape[0]):
+            if lanes[street_lanes[g], TO_NODE] != end_node:
+                if pick == 0:
+                    street = g
+                    break
+                pick -= 1
+        if route_length[start, street] > 0:
+            return street
+    return -1
+
+
+@njit(cache=True)
 def random_route(
     v: np.ndarray,
     lanes: np.ndarray,
@@ -191,37 +221,20 @@ def random_route(
     route_length: np.ndarray,
     rng_words: np.ndarray,
 ) -> None:
-    """town_env.random_route from lane row ``start`` into vehicle i's route entries: a goal drawn
-    among the streets' end nodes other than ``start``'s (street order), up to ROUTE_GOAL_TRIES
-    times until one is reachable; else the route is ``start`` alone."""
-    v, lanes, street_lanes, routes, route_length, rng_words = borrowed(
-        (v, lanes, street_lanes, routes, route_length, rng_words)
-    )
-    end_node = lanes[start, TO_NODE]
-    goals = 0
-    for g in range(street_lanes.shape[0]):
-        if lanes[street_lanes[g], TO_NODE] != end_node:
-            goals += 1
-    capacity = (v.shape[1] - ROUTE) // 2
-    for _ in range(ROUTE_GOAL_TRIES):
-        pick = bounded_int(rng_words, goals)
-        street = -1
-        for g in range(street_lanes.shape[0]):
-            if lanes[street_lanes[g], TO_NODE] != end_node:
-                if pick == 0:
-                    street = g
-                    break
-                pick -= 1
+    """town_env.random_route from lane row ``start`` into vehicle i's route entries: the route to
+    ``random_goal``'s street, else ``start`` alone."""
+    v, lanes, routes, route_length = borrowed((v, lanes, routes, route_length))
+    street = random_goal(lanes, start, street_lanes, route_length, rng_words)
+    if street >= 0:
         n = route_length[start, street]
-        if n > 0:
-            if n > capacity:
-                raise ValueError("a town route is longer than the vehicle row's route capacity")
-            for k in range(n):
-                row = routes[start, street, k]
-                v[i, ROUTE + 2 * k] = lanes[row, FIRST_OF_ROAD]
-                v[i, ROUTE + 2 * k + 1] = lanes[row, LANE_ID]
-            v[i, ROUTE_START], v[i, ROUTE_END], v[i, ROUTED] = 0.0, n, 1.0
-            return
+        if n > (v.shape[1] - ROUTE) // 2:
+            raise ValueError("a town route is longer than the vehicle row's route capacity")
+        for k in range(n):
+            row = routes[start, street, k]
+            v[i, ROUTE + 2 * k] = lanes[row, FIRST_OF_ROAD]
+            v[i, ROUTE + 2 * k + 1] = lanes[row, LANE_ID]
+        v[i, ROUTE_START], v[i, ROUTE_END], v[i, ROUTED] = 0.0, n, 1.0
+        return
     v[i, ROUTE] = lanes[start, FIRST_OF_ROAD]
     v[i, ROUTE + 1] = lanes[start, LANE_ID]
     v[i, ROUTE_START], v[i, ROUTE_END], v[i, ROUTED] = 0.0, 1.0, 1.0
