@@ -13,8 +13,9 @@ Per circuit, interleaved repeats of:
 - ``--worlds`` K worlds in one VectorDriveEnv on the compiled core (every world's steps counted),
   against one highway-env DriveEnv.
 - the parts of one compiled-core DriveEnv step, each called alone on a mid-episode world (µs per
-  call): the simulator's step, the rules, the reward, the metrics, the sensor and the infos. All
-  but the simulator are the per-step pipeline that both backends pay;
+  call): the circuits' compiled step (``CircuitStep.step``, what one DriveEnv runs), and the parts
+  of the pipeline it replaces (the simulator's step, the rules, the reward, the metrics, the sensor
+  and the infos), which every configuration it does not cover still runs;
 - with ``--baseline-repo`` (a checkout of an earlier drivelab, e.g. ``git worktree add /tmp/base
   6b54828``): one compiled-core DriveEnv of that checkout and of this tree, each in a subprocess
   with the same code and actions, so that how much faster one world got is a same-run ratio.
@@ -69,6 +70,7 @@ def simulator_rate(backend_class, name: str, steps: int) -> float:
 
 
 PARTS = ("simulator", "rules", "reward", "metrics", "sensor", "infos")
+PIPELINE_PARTS = PARTS[1:]
 
 
 def part_costs(env, calls: int) -> dict[str, float]:
@@ -84,9 +86,18 @@ def part_costs(env, calls: int) -> dict[str, float]:
     rewards, terms = vector.reward_shaper(batch, batch, controls)
 
     def infos():
-        _world_info(vector._step_infos(batch, terms, keep, keep), 0)
+        events = batch.events
+        arrays = (
+            batch.ego.speed_mps.copy(),
+            events.collided.copy(),
+            events.off_road.copy(),
+            events.arrived.copy(),
+        )
+        _world_info(vector._step_infos(terms, *arrays, keep, keep), 0)
 
+    fused_controls = vector.adapter.to_controls(action)
     parts = {
+        "compiled": lambda: vector._fused.step(fused_controls),
         "simulator": lambda: vector.simulator.step(controls, keep, vector.episode_seeds),
         "rules": lambda: vector.rules.apply(batch),
         "reward": lambda: vector.reward_shaper(batch, batch, controls),
@@ -121,7 +132,7 @@ def main() -> None:
         keys = ["sim_fast", "sim_highway", "env_fast", "env_highway", "vector_fast"]
         keys += ["env_this_tree", "env_baseline"] if args.baseline_repo else []
         rates = {key: [] for key in keys}
-        costs = {part: [] for part in PARTS}
+        costs = {part: [] for part in ("compiled", *PARTS)}
         for repeat in range(args.repeats):
             rates["sim_fast"].append(simulator_rate(FastBackend, name, args.steps))
             rates["sim_highway"].append(simulator_rate(HighwayBackend, name, args.steps // 5))
@@ -184,20 +195,23 @@ def main() -> None:
         ]
     lines += [
         "",
-        "The parts of one compiled-core DriveEnv step, µs per call (medians); P is every part but the",
-        "simulator (the pipeline both backends pay); the whole step is 1 / the one-DriveEnv rate above,",
-        "and the rest is the whole step less the parts: the vector env's and DriveEnv's own code and the",
-        "resets.",
+        "One compiled-core DriveEnv step takes the circuits' compiled step (envs/fused.py): the",
+        "simulator, rules, reward terms, metrics and kinematics sensor in one compiled call. Below, µs",
+        "per call (medians): `compiled` is that call with its Python side (`CircuitStep.step`); the",
+        "other columns are the parts of the pipeline it replaces, each called alone (P: all but the",
+        "simulator), which every other configuration still runs. The whole step is 1 / the one-DriveEnv",
+        "rate above, resets included.",
         "",
-        "| circuit | " + " | ".join(PARTS) + " | P | rest | whole step |",
+        "| circuit | compiled | " + " | ".join(PARTS) + " | P | whole step |",
         "|---|" + "---|" * (len(PARTS) + 3),
     ]
     for r in rows:
         cost, step_us = r["part_us"], 1e6 / r["env_fast"]
-        pipeline = sum(cost[part] for part in PARTS[1:])
+        pipeline = sum(cost[part] for part in PIPELINE_PARTS)
         lines.append(
-            f"| {r['scenario']} | " + " | ".join(f"{cost[part]:.1f}" for part in PARTS) + " | "
-            f"{pipeline:.1f} | {step_us - pipeline - cost['simulator']:.0f} | {step_us:.0f} |"
+            f"| {r['scenario']} | {cost['compiled']:.1f} | "
+            + " | ".join(f"{cost[part]:.1f}" for part in PARTS)
+            + f" | {pipeline:.1f} | {step_us:.1f} |"
         )
     if args.baseline_repo:
         lines += [

@@ -121,8 +121,11 @@ class DriveEnv(gym.Env):
         return _first(observations), _world_info(infos, 0)
 
     def step(self, action: Any):
-        if self.vector.batch is None:
+        vector = self.vector
+        if not vector.started:
             raise RuntimeError("call reset() before step()")
+        if vector._fused is not None and vector._fused.ready():  # the circuits: one compiled call
+            return vector.step_one(action)
         observations, rewards, terminated, truncated, infos = self.vector.step(np.asarray(action)[None])
         self.vector.pending_reset[:] = False  # one world: the caller resets it
         return (

@@ -207,11 +207,33 @@ class VectorDriveEnv(VectorEnv):
         # each world's generator of episode seeds (a DriveEnv's ``np_random``)
         self.world_rngs: list[np.random.Generator] = [seeding.np_random()[0] for _ in range(self.num_envs)]
         self.world_seeds: list[int | None] = [None] * self.num_envs
-        self.batch: WorldBatch | None = None
+        self._batch: WorldBatch | None = None
+        self._batch_deferred = False  # the last step's batch is the simulator's, made when read
         self.observations: np.ndarray | dict[str, np.ndarray] | None = None  # the last ones returned
         self.episode_seeds = np.zeros(self.num_envs, dtype=np.int64)
         self.pending_reset = np.zeros(self.num_envs, dtype=bool)  # NEXT_STEP: reset on the next step
         self._no_light_labels = np.full(self.num_envs, _LABEL_OF_STATE[0], dtype=object)
+        self._fused = None  # the whole step as one compiled call, where one covers this configuration
+        if self.scenario.circuit:
+            from drivelab.envs.fused import CircuitStep
+
+            self._fused = CircuitStep.of(self)
+
+    @property
+    def batch(self) -> WorldBatch | None:
+        """The worlds after the last reset or step (None before the first reset)."""
+        if self._batch_deferred:  # a compiled step's (envs/fused.py): made now, from its export
+            self._batch, self._batch_deferred = self.simulator.batch, False
+        return self._batch
+
+    @batch.setter
+    def batch(self, batch: WorldBatch | None) -> None:
+        self._batch, self._batch_deferred = batch, False
+
+    @property
+    def started(self) -> bool:
+        """The worlds have been reset (a batch exists, or is made when read)."""
+        return self._batch_deferred or self._batch is not None
 
     # --- observations ------------------------------------------------------------------------
     def _observe(self, batch: WorldBatch) -> np.ndarray | dict[str, np.ndarray]:
@@ -314,12 +336,14 @@ class VectorDriveEnv(VectorEnv):
 
     def step(self, actions: Any):
         """One policy step of every world (see the module docstring for autoreset)."""
-        if self.batch is None:
+        if not self.started:
             raise RuntimeError("call reset() before step()")
-        prev = self.batch
-        controls = self.adapter.controls_for(actions, prev)
         restarting = self.pending_reset.copy()  # NEXT_STEP: these worlds begin a new episode now
         any_restarting = bool(np.count_nonzero(restarting))  # (ndarray.any costs a microsecond)
+        if not any_restarting and self._fused is not None and self._fused.ready():
+            return self._fused_step(actions, restarting)
+        prev = self.batch
+        controls = self.adapter.controls_for(actions, prev)
         if any_restarting:
             self._draw_seeds(restarting)
         stepped = self.simulator.step(controls, restarting, self.episode_seeds)
@@ -327,7 +351,11 @@ class VectorDriveEnv(VectorEnv):
         rewards, terms = self.reward_shaper(prev, batch, controls)
         self.metrics.update(batch, rewards)
         done = terminated | truncated
-        infos = self._step_infos(batch, terms, done, truncated)
+        events = batch.events
+        infos = self._step_infos(
+            terms, batch.ego.speed_mps.copy(), events.collided.copy(), events.off_road.copy(),
+            events.arrived.copy(), done, truncated,
+        )  # fmt: skip
         self.batch = batch
         if any_restarting:  # their values above judged no step of theirs: discarded
             if batch is not stepped:  # a restarted world starts with its simulator's events
@@ -346,6 +374,41 @@ class VectorDriveEnv(VectorEnv):
             infos["_episode_seed"] = restarting
         observations = self._observe(self.batch)
         infos["traffic_light"] = self.traffic_light_labels()
+        return self._finish_step(observations, rewards, terminated, truncated, done, infos, restarting)
+
+    def _fused_step(self, actions, restarting: np.ndarray):
+        """``step`` as one compiled call (``envs/fused.py``; no world restarting): the batch is the
+        simulator's, made when read."""
+        fused = self._fused
+        observations, out, flags = fused.step(self.adapter.to_controls(actions))
+        self._batch, self._batch_deferred = None, True
+        terminated, truncated = fused.ends(flags)
+        done = terminated | truncated
+        infos = self._step_infos(fused.terms(out), *fused.events(out, flags), done, truncated)
+        infos["traffic_light"] = self._no_light_labels.copy()  # the circuits have no lights
+        return self._finish_step(
+            observations, fused.rewards(out), terminated, truncated, done, infos, restarting
+        )
+
+    def step_one(self, action):
+        """DriveEnv's step of its one world through the compiled step (``_fused`` ready, no
+        autoreset): ``(observation, reward, terminated, truncated, info)`` as DriveEnv returns them
+        from ``step``, the world's info made directly (``_world_info`` of the infos ``step`` gives)."""
+        fused = self._fused
+        observations, out, flags = fused.step(self.adapter.to_controls(np.asarray(action)[None]))
+        self._batch, self._batch_deferred = None, True
+        self.observations = observations
+        info = fused.world_info(out, flags)
+        terminated, truncated = info.pop("terminated"), info.pop("truncated")
+        if terminated or truncated:
+            done = np.array([True])
+            has_goal = self.scenario.arrival != "none"
+            info["episode_metrics"] = self.metrics.summaries(done, has_goal, np.array([truncated]))[0]
+        info["traffic_light"] = _LABEL_OF_STATE[0]
+        return observations[0], info.pop("reward"), terminated, truncated, info
+
+    def _finish_step(self, observations, rewards, terminated, truncated, done, infos, restarting):
+        """The end of a step: SAME_STEP's resets of the finished worlds, or NEXT_STEP's pending ones."""
         if self.autoreset_mode == AutoresetMode.SAME_STEP and np.count_nonzero(done):
             infos["final_obs"] = _rows_as_objects(observations, done)
             infos["final_info"] = _final_infos(infos, done)
@@ -363,15 +426,18 @@ class VectorDriveEnv(VectorEnv):
         self.observations = observations
         return observations, rewards, terminated, truncated, infos
 
-    def _step_infos(self, batch: WorldBatch, terms: dict[str, np.ndarray], done, truncated) -> dict:
-        """Per-world arrays: reward terms, speed, events, and the finished worlds' episode metrics."""
-        events, every = batch.events, np.ones(self.num_envs, dtype=bool)
+    def _step_infos(
+        self, terms: dict[str, np.ndarray], speed, crashed, off_road, arrived, done, truncated
+    ) -> dict:
+        """Per-world arrays: reward terms, speed, events (the arrays given are the infos' own), and
+        the finished worlds' episode metrics."""
+        every = np.ones(self.num_envs, dtype=bool)
         infos = {
             "reward_terms": dict(terms),
-            "speed_mps": batch.ego.speed_mps.copy(),
-            "crashed": events.collided.copy(),
-            "off_road": events.off_road.copy(),
-            "arrived": events.arrived.copy(),
+            "speed_mps": speed,
+            "crashed": crashed,
+            "off_road": off_road,
+            "arrived": arrived,
             "_reward_terms": every,
             "_speed_mps": every,
             "_crashed": every,

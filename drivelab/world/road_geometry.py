@@ -46,7 +46,11 @@ _GUIDE_SETS = "guide segment sets"
 def guide_segment_sets(batch: WorldBatch) -> np.ndarray:
     """The guide-line segments of each of the batch's distinct roads (R, M, 2, 2), padded with NaN
     segments; world k's are ``[batch.road_index[k]]``. One road: its own array, not copied."""
-    roads = batch.roads
+    return guide_segment_sets_of(batch.roads)
+
+
+def guide_segment_sets_of(roads: tuple[RoadMap, ...]) -> np.ndarray:
+    """:func:`guide_segment_sets` of the road maps ``roads`` (a batch's ``roads``)."""
     if len(roads) == 1:
         return guide_segments(roads[0])[None]
     # kept on the first map, with the maps it was made from (held, so their ids stay theirs)

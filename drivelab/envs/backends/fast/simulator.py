@@ -780,7 +780,34 @@ class FastSimulator:
         self._route_version = 0  # counts route changes that keep route_index (the town's)
         self._route_of_lane: dict[int, int] = {}
         self._trackers: list[RouteTracker] = []
-        self.batch: WorldBatch | None = None
+        self._batch: WorldBatch | None = None
+        # the last step's export, when its batch is made on first read (``defer_batch``)
+        self._deferred: Callable[[], tuple] | None = None
+
+    @property
+    def batch(self) -> WorldBatch | None:
+        """The WorldBatch of the last reset or step (None before the first reset)."""
+        if self._deferred is not None:
+            parts, self._deferred = self._deferred, None
+            self._batch = self._export_arrays(*parts())
+        return self._batch
+
+    @batch.setter
+    def batch(self, batch: WorldBatch | None) -> None:
+        self._batch, self._deferred = batch, None
+
+    @property
+    def started(self) -> bool:
+        """A reset has been made (the batch exists or is deferred)."""
+        return self._batch is not None or self._deferred is not None
+
+    def defer_batch(self, parts: Callable[[], tuple]) -> None:
+        """The step just made leaves its WorldBatch to be made when ``batch`` is read, from
+        ``parts()``: ``_export_arrays``' arguments, its ``state`` included (the step's own
+        clocks, progress and routes, so that it is this step's batch whenever it is made). An
+        episode's start replaces it: ``reset_where`` sets the batch, and a restarting step reads
+        it first."""
+        self._batch, self._deferred = None, parts
 
     @staticmethod
     def _load_road(scenario: Scenario, traffic: str, control: str, overrides: dict | None) -> _Road:
@@ -908,7 +935,7 @@ class FastSimulator:
         :param restart: (K,) bool: these worlds start a new episode from ``seeds[k]`` instead of
             stepping (gymnasium's NEXT_STEP autoreset), as ``reset_where`` would start it.
         """
-        if self.batch is None:
+        if not self.started:
             raise UsageError("FastSimulator.step before reset_where")
         if restart is None:
             restart = np.zeros(self.num_worlds, dtype=bool)
@@ -1010,10 +1037,20 @@ class FastSimulator:
         return self._export_arrays(floats, ints, flags, vehicles, valid)
 
     def _export_arrays(
-        self, floats: np.ndarray, ints: np.ndarray, flags: np.ndarray, vehicles: np.ndarray, valid: np.ndarray
+        self,
+        floats: np.ndarray,
+        ints: np.ndarray,
+        flags: np.ndarray,
+        vehicles: np.ndarray,
+        valid: np.ndarray,
+        state: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     ) -> WorldBatch:
         """The WorldBatch of ``export_worlds``' outputs (``_export_buffers``' column-major arrays;
-        the town adds its lights and pedestrians)."""
+        the town adds its lights and pedestrians). ``state``: copies of the clocks, progress and
+        route indices of the step that filled them (``defer_batch``); default the current ones."""
+        if state is None:
+            state = (self.time_s.copy(), self.progress_m.copy(), self.route_index)
+        time_s, progress_m, route_index = state
         (
             _, _, heading, speed, steering, acceleration, length, width, lane_width, lateral,
             lane_heading, speed_limit, turn_cos, turn_sin,
@@ -1051,20 +1088,20 @@ class FastSimulator:
             collided=collided,
             collision_kind=collided.view(np.int8),  # COLLISION_NONE 0, COLLISION_VEHICLE 1
             off_road=off_road,
-            arrived=arrived if self.arrival != ARRIVE_ROUTE_END else self._route_ended(),
+            arrived=arrived
+            if self.arrival != ARRIVE_ROUTE_END
+            else self._route_ended(route_index, progress_m),
             red_light_crossed=no_event,  # the rules add blocked and off_route; no lights here
             blocked=no_event,
             off_route=no_event,
         )
-        route = assemble(RouteBatch, progress_m=self.progress_m.copy(), **self._routes())
+        route = assemble(RouteBatch, progress_m=progress_m, **self._routes(route_index))
         extra = (
-            self._empty
-            if not self.scenario.guide_line
-            else {**self._empty, "road_index": self.route_index.copy()}
+            self._empty if not self.scenario.guide_line else {**self._empty, "road_index": route_index.copy()}
         )
         return assemble(
             WorldBatch,
-            time_s=self.time_s.copy(),
+            time_s=time_s,
             dt_s=self._dt_policy_s,
             ego=ego,
             vehicles=vehicles,
@@ -1076,15 +1113,19 @@ class FastSimulator:
             **extra,
         )
 
-    def _route_ended(self) -> np.ndarray:
-        """(K,) less than the arrival threshold of the ego's route is left."""
-        return self.r_length[self.route_index] - self.progress_m < self.arrival_threshold
+    def _route_ended(
+        self, route_index: np.ndarray | None = None, progress_m: np.ndarray | None = None
+    ) -> np.ndarray:
+        """(K,) less than the arrival threshold of the ego's route is left (default: now)."""
+        route_index = self.route_index if route_index is None else route_index
+        progress_m = self.progress_m if progress_m is None else progress_m
+        return self.r_length[route_index] - progress_m < self.arrival_threshold
 
-    def _routes(self) -> dict[str, np.ndarray]:
-        """Every world's route arrays for RouteBatch, remade only when a world's route changed
-        (read-only: consecutive batches share them)."""
-        if self._routes_stale():
-            r = self.route_index.copy()
+    def _routes(self, route_index: np.ndarray) -> dict[str, np.ndarray]:
+        """Every world's route arrays for RouteBatch of the route indices ``route_index`` (K,),
+        remade only when a world's route changed (read-only: consecutive batches share them)."""
+        if self._routes_stale(route_index):
+            r = route_index.copy()
             arrays = {
                 "polyline": self.r_polyline[r],
                 "stations_m": self.r_stations[r],
@@ -1097,7 +1138,7 @@ class FastSimulator:
             self._route_cache = (r, arrays, self._route_version)
         return self._route_cache[1]
 
-    def _routes_stale(self) -> bool:
+    def _routes_stale(self, route_index: np.ndarray) -> bool:
         """A world's route changed since the route arrays were last made."""
         # equal bytes are equal indices (the same shape and type): cheaper than an elementwise test
-        return self._route_cache is None or self._route_cache[0].tobytes() != self.route_index.tobytes()
+        return self._route_cache is None or self._route_cache[0].tobytes() != route_index.tobytes()

@@ -228,7 +228,7 @@ class TownSimulator(FastSimulator):
             return
         self._pad_routes()
 
-    def _routes_stale(self) -> bool:
+    def _routes_stale(self, route_index: np.ndarray) -> bool:
         """Every world keeps its own route row (route_index is constant): stale on any change."""
         return self._route_cache is None or self._route_cache[2] != self._route_version
 
