@@ -270,6 +270,11 @@ class CircuitStep:
         self._observation_shape = (sim.num_worlds, *self.sensor.space.shape)
         self._key: tuple | None = None  # what ``_held``'s arrays were taken from
         self._arrays: tuple = ()
+        self._held_object: _Held | None = None
+
+    def __getstate__(self) -> dict:
+        """Pickled without the numba object of ``_held`` (it is made again at the next step)."""
+        return {**self.__dict__, "_key": None, "_arrays": (), "_held_object": None}
 
     def ready(self) -> bool:
         """The simulator steps in one call now (not recording frames; one world or one thread)."""

@@ -12,6 +12,8 @@ A value of magnitude ≤ 1e3 built from a handful of such operations is within 1
 
 from __future__ import annotations
 
+import pickle
+
 import numpy as np
 import pytest
 
@@ -184,3 +186,15 @@ def test_recording_frames_steps_through_the_pipeline():
 
 def test_other_scenarios_have_no_compiled_step():
     assert VectorDriveEnv(1, "highway")._fused is None
+
+
+def test_a_stepped_env_pickles_and_goes_on_as_the_original():
+    env = DriveEnv("follow-lane", action="continuous")
+    env.reset(seed=8)
+    action = np.array([0.05, 0.5], dtype=np.float32)
+    env.step(action)
+    copy = pickle.loads(pickle.dumps(env))
+    for _ in range(5):
+        obs_a, reward_a, *ends_a, _ = env.step(action)
+        obs_b, reward_b, *ends_b, _ = copy.step(action)
+        assert np.array_equal(obs_a, obs_b) and reward_a == reward_b and ends_a == ends_b
