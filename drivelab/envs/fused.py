@@ -307,7 +307,9 @@ class CircuitStep:
         key = (sim.vehicles, sim.r_polyline, sim.roads, rules._truncate_at_s, metrics._floats)
         # the batch's road_index: each world's route where a guide line is painted along it
         road_index = sim.route_index if sim.scenario.guide_line else sim._empty["road_index"]
-        slots = max(sim.vehicles.shape[1] - 1, 0)  # the export's other vehicles (none on a circuit)
+        slots = max(sim.vehicles.shape[1] - 1, 0)  # the export's other vehicles
+        if slots:  # (their arrays below are shared by every step's batch: empty ones only)
+            raise NotImplementedError("the compiled circuit step drives the ego alone")
         k = sim.num_worlds
         arrays = (
             _command_rows(self._control_type), sim.vehicles, sim.count, sim.ego, sim.lanes, sim.idm,
@@ -340,8 +342,7 @@ class CircuitStep:
         out_flags, observations = np.zeros((8, k), dtype=bool), np.empty(self._observation_shape, np.float32)
         held = self._held()
         circuit_step(controls, out, out_flags, ints.T, observations, self._held_object)
-        # the export's other vehicles are empty on a circuit: shared by every batch
-        vehicles, valid = held[-8], held[-7]
+        vehicles, valid = held[-8], held[-7]  # empty: shared by every batch
         self.simulator.defer_batch(functools.partial(_export_parts, out, ints, out_flags, vehicles, valid))
         return observations, out, out_flags
 
@@ -354,22 +355,19 @@ class CircuitStep:
         speed, crashed = out[EX_SPEED].copy(), out_flags[EX_CRASHED].copy()  # (the batch's: copied)
         return speed, crashed, out_flags[OUT_OFF_ROAD], out_flags[OUT_ARRIVED]
 
-    def world_info(self, out: np.ndarray, out_flags: np.ndarray) -> dict:
-        """World 0's step info (``VectorDriveEnv``'s ``reward_terms``, ``speed_mps``, ``crashed``,
-        ``off_road``, ``arrived``) as Python numbers, with its ``reward``, ``terminated`` and
-        ``truncated``."""
+    def world_step(self, out: np.ndarray, out_flags: np.ndarray) -> tuple[dict, float, bool, bool]:
+        """World 0's ``(info, reward, terminated, truncated)`` as Python values; the info holds
+        ``VectorDriveEnv``'s ``reward_terms``, ``speed_mps``, ``crashed``, ``off_road`` and ``arrived``."""
         values = out[EX_FLOATS : self._rewards_row, 0].tolist()
         flags = out_flags[:, 0].tolist()
-        return {
+        info = {
             "reward_terms": dict(zip(self.names, values, strict=True)),
             "speed_mps": out[EX_SPEED, 0].item(),
             "crashed": flags[EX_CRASHED],
             "off_road": flags[OUT_OFF_ROAD],
             "arrived": flags[OUT_ARRIVED],
-            "reward": out[self._rewards_row, 0].item(),
-            "terminated": flags[OUT_TERMINATED],
-            "truncated": flags[OUT_TRUNCATED],
         }
+        return info, out[self._rewards_row, 0].item(), flags[OUT_TERMINATED], flags[OUT_TRUNCATED]
 
     def rewards(self, out: np.ndarray) -> np.ndarray:
         return out[self._rewards_row]

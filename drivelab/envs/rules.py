@@ -56,7 +56,10 @@ class EpisodeRules:
         limits = np.broadcast_to(np.asarray(time_limit_s, dtype=float), mask.shape)
         self.stopped_s[mask] = 0.0
         self.time_limit_s[mask] = limits[mask]
-        self._truncate_at_s = self.time_limit_s - 1e-9  # a step's time reaching it truncates
+        # a step's time reaching it truncates (written in place: the compiled circuit step holds it)
+        if self._truncate_at_s.shape != self.time_limit_s.shape:
+            self._truncate_at_s = np.empty_like(self.time_limit_s)
+        np.subtract(self.time_limit_s, 1e-9, out=self._truncate_at_s)
 
     def apply(self, batch: WorldBatch) -> tuple[WorldBatch, np.ndarray, np.ndarray]:
         """``(batch with its blocked / off_route events, terminated (K,), truncated (K,))`` for the

@@ -398,14 +398,13 @@ class VectorDriveEnv(VectorEnv):
         observations, out, flags = fused.step(self.adapter.to_controls(np.asarray(action)[None]))
         self._batch, self._batch_deferred = None, True
         self.observations = observations
-        info = fused.world_info(out, flags)
-        terminated, truncated = info.pop("terminated"), info.pop("truncated")
+        info, reward, terminated, truncated = fused.world_step(out, flags)
         if terminated or truncated:
             done = np.array([True])
             has_goal = self.scenario.arrival != "none"
             info["episode_metrics"] = self.metrics.summaries(done, has_goal, np.array([truncated]))[0]
         info["traffic_light"] = _LABEL_OF_STATE[0]
-        return observations[0], info.pop("reward"), terminated, truncated, info
+        return observations[0], reward, terminated, truncated, info
 
     def _finish_step(self, observations, rewards, terminated, truncated, done, infos, restarting):
         """The end of a step: SAME_STEP's resets of the finished worlds, or NEXT_STEP's pending ones."""

@@ -26,9 +26,10 @@ OBS_ATOL = 1e-6  # float32 observations: one float32 ulp of a value in [-1, 1] i
 
 
 def _pair(make):
+    """Two envs of ``make`` (DriveEnvs or VectorDriveEnvs): the compiled step's, the pipeline's."""
     fused, pipeline = make(), make()
-    assert fused.vector._fused is not None if hasattr(fused, "vector") else fused._fused is not None
-    (pipeline.vector if hasattr(pipeline, "vector") else pipeline)._fused = None
+    assert getattr(fused, "vector", fused)._fused is not None
+    getattr(pipeline, "vector", pipeline)._fused = None
     return fused, pipeline
 
 
