@@ -52,7 +52,7 @@ PINNED_ISA_TEXT = "drivelab.isa.PINNED_ISA (AVX2 code paths, one thread)"
 
 sys.path.insert(0, str(Path(__file__).parent))
 from leaderboard import BLOCKS_DAGGER, HIGHWAY_DQN, RACETRACK_DAGGER, UNSEEN_MAPS, UNTUNED_PPO  # noqa: E402
-from provenance import Parser, agent_defaults, check_reuse, command_line, stop, training_command  # noqa: E402
+from provenance import Parser, agent_defaults, check_reuse, command_line, cpu_isa, stop, training_command  # noqa: E402
 from town_competence import recipe as town_recipe  # noqa: E402
 
 # highway-env's documented PPO values, pinned in the PPO recipes below: their agents were trained
@@ -215,7 +215,7 @@ AGENTS: dict[str, dict] = {
 
 
 def machine() -> str:
-    return f"{platform.machine()}, {os.cpu_count()} cores (shared), Python {platform.python_version()}"
+    return f"{cpu_isa()}, {os.cpu_count()} cores (shared), Python {platform.python_version()}"
 
 
 def drivelab(arguments: list[str]) -> tuple[float, float]:
