@@ -197,7 +197,27 @@ def build_config(values: dict) -> RunConfig:
     config = RunConfig(**{k: _check_type(k, v) for k, v in values.items()})
     if config.eval_maps is not None and config.env in SCENARIOS and not SCENARIOS[config.env].procedural_maps:
         raise UsageError(f"eval_maps is for procedural maps (blocks); {config.env!r} has one road")
+    _check_scenario_options(config)
     return config
+
+
+def _check_scenario_options(config: RunConfig) -> None:
+    """The run's scenario options (``env_options.backend_options``, and the road and traffic keys
+    of a highway-env ``env_options.config``) checked against the scenario's declarations, before
+    anything is written; the env checks them again when it is built."""
+    scenario = SCENARIOS.get(config.env)
+    options = config.env_options.get("backend_options")
+    highway_config = config.env_options.get("config")
+    if scenario is None or (options is not None and not isinstance(options, dict)):
+        return  # an unknown scenario or a malformed mapping is reported when the env is built
+    from drivelab.envs.actions import ACTIONS
+    from drivelab.envs.highway_config import env_kwargs_from_config
+    from drivelab.envs.scenarios.options import check_backend_options
+
+    if isinstance(highway_config, dict):
+        options = {**env_kwargs_from_config(highway_config).get("backend_options", {}), **(options or {})}
+    control = getattr(ACTIONS.get(config.action), "control", "continuous")
+    check_backend_options(scenario, options, config.traffic, control)
 
 
 def check_eval_every(config: RunConfig) -> None:

@@ -44,7 +44,9 @@ class DriveEnv(gym.Env):
         the route's NoCrash limit; a given duration caps it).
     :param offroad_terminal: end the episode when the ego leaves the road.
     :param action_options: keyword options of the action adapter (e.g. ``steer_levels``).
-    :param backend_options: extra highway-env config keys.
+    :param backend_options: the scenario's options (``Scenario.options``: road, traffic and
+        timing keys, highway-env's names); an unknown key, a bad value or a contradiction is a
+        UsageError.
     :param config: a highway-env config dict, as highway-env's users write it
         (``envs/highway_config.py``); the keyword arguments given beside it win.
     """

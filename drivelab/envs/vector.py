@@ -29,6 +29,7 @@ from drivelab.envs.highway_config import env_kwargs_from_config
 from drivelab.envs.metrics import EpisodeMetrics
 from drivelab.envs.rules import EpisodeRules
 from drivelab.envs.scenarios import check_traffic, get_scenario
+from drivelab.envs.scenarios.options import check_backend_options
 from drivelab.errors import UsageError
 from drivelab.perception.birdeye import render_birdeye
 from drivelab.perception.sensors import check_sensors_for, make_sensor, split_sensor_list
@@ -121,7 +122,9 @@ class VectorDriveEnv(VectorEnv):
         the route's NoCrash limit; a given duration caps it).
     :param offroad_terminal: end the episode when the ego leaves the road.
     :param action_options: keyword options of the action adapter (e.g. ``steer_levels``).
-    :param backend_options: extra highway-env config keys.
+    :param backend_options: the scenario's options (``Scenario.options``: road, traffic and
+        timing keys, highway-env's names); an unknown key, a bad value or a contradiction is a
+        UsageError.
     :param render_mode: "rgb_array" for ``render()``.
     :param autoreset_mode: gymnasium's ``AutoresetMode`` (or its value): NEXT_STEP (default) or
         SAME_STEP.
@@ -176,6 +179,7 @@ class VectorDriveEnv(VectorEnv):
                 f"scenario {scenario!r} cannot take action {self.adapter.name!r} "
                 f"(it takes {', '.join(self.scenario.action_kinds)})"
             )
+        check_backend_options(self.scenario, backend_options, traffic, self.adapter.control)
         self.sensors = [make_sensor(spec) for spec in split_sensor_list(obs)]
         names = [s.name for s in self.sensors]
         if len(set(names)) != len(names):
