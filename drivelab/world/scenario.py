@@ -5,10 +5,8 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:
-    from drivelab.envs.scenarios.options import Option
+from drivelab.world.options import Option
 
 META_ACTIONS = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")  # highway-env's meta-actions
 
@@ -55,7 +53,7 @@ class Scenario:
         highway-env config the scenario's environment gets: scenario, traffic level and backend
         options merged); None: the road is highway-env's (converted from its network).
     :param options: the config keys a user may set (``backend_options``), declared with their
-        type, range, default and meaning (``drivelab.envs.scenarios.options``); any other key is
+        type, range, default and meaning (``drivelab.world.options``); any other key is
         refused.
     :param check_options: the scenario's own cross-checks of its options, given every declared
         option's value (the user's over the defaults); raises a UsageError.
