@@ -184,7 +184,7 @@ def _sensor_dict_to_spec(entry) -> str:
 
 def build_config(values: dict) -> RunConfig:
     """A RunConfig from a dict, rejecting unknown fields and wrong types with a one-line error."""
-    unknown = sorted(set(values) - set(FIELDS))
+    unknown = sorted(set(values) - set(FIELDS), key=str)  # a YAML key may be a number
     if unknown:
         raise UsageError(f"unknown config field {unknown[0]!r} (known: {', '.join(FIELDS)})")
     if "algo" not in values:

@@ -49,6 +49,14 @@ def train_args(work: Path, *args: str) -> list[str]:
 
 
 RANDOM_BYTES = bytes(range(256)) * 8  # neither a torch file nor UTF-8 text
+# issue 47: 332 bytes of YAML whose anchors expand to 10^9 sensor names (the 10^8 of the probe took
+# 85 s and 1.2 GB before its error), and brackets nested 20,000 deep (a RecursionError before)
+ALIAS_BOMB = (
+    "algo: ppo\nx0: &a0 [lidar,lidar,lidar,lidar,lidar,lidar,lidar,lidar,lidar,lidar]\n"
+    + "".join(f"x{i}: &a{i} [{','.join([f'*a{i - 1}'] * 10)}]\n" for i in range(1, 9))
+    + "obs: *a8\n"
+).encode()
+DEEP_YAML = b"algo: ppo\nobs: " + b"[" * 20_000 + b"]" * 20_000 + b"\n"
 
 EXPERT_ON_HIGHWAY = "--algo expert --env highway --obs waypoints,affordances --action target_speed".split()
 # (CLI options after `train`, files to create in the working folder, expected part of the message)
@@ -356,6 +364,32 @@ TRAIN_CASES = {
         {"h.yaml": b"algo: ppo\nhyperparams: [gamma]\n"},
         "config field 'hyperparams' must be a mapping, got list",
     ),
+    # issue 47: resource exhaustion and tracebacks before
+    "YAML aliases expanding to 10^9 values": (
+        ["--config", "run.yaml"],
+        {"run.yaml": ALIAS_BOMB},
+        "malformed YAML in 'run.yaml' at line 6: holds more than 100000 values once its aliases are expanded",
+    ),
+    "YAML nested 20,000 deep": (
+        ["--config", "run.yaml"],
+        {"run.yaml": DEEP_YAML},
+        "at line 2: nested more than 64 levels deep",
+    ),
+    "YAML alias inside its own anchor": (
+        ["--config", "run.yaml"],
+        {"run.yaml": b"algo: ppo\nobs: &loop [kinematics, *loop]\n"},
+        "alias *loop is inside the node it names (a recursive structure)",
+    ),
+    "YAML of int and str unknown keys": (  # sorting the unknown keys raised TypeError
+        ["--config", "run.yaml"],
+        {"run.yaml": b"algo: ppo\n1: one\nbogus: two\n"},
+        "at line 2: key '1' is not a string (quote it)",
+    ),
+    "YAML file over 1 MiB": (
+        ["--config", "run.yaml"],
+        {"run.yaml": b"algo: ppo\n" + b"#" * (1 << 20) + b"\n"},
+        "config file 'run.yaml' is larger than 1 MiB",
+    ),
 }
 
 
@@ -366,6 +400,15 @@ def test_train_refuses(work, case):
         (work / name).write_bytes(content)
     assert_refused(work, train_args(work, *args), message)
     assert not (work / "runs").exists()
+
+
+def test_build_config_names_unknown_keys_of_any_type():
+    """The Python API's dict may mix int and str keys (sorting them raised TypeError)."""
+    from drivelab.config import build_config
+    from drivelab.errors import UsageError
+
+    with pytest.raises(UsageError, match="unknown config field 1 "):
+        build_config({"algo": "ppo", 1: "one", "bogus": 2})
 
 
 @pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has CUDA: device=cuda is valid here")
@@ -541,6 +584,53 @@ def test_evaluate_read_only_run_directory(work, run_dir, monkeypatch):
         run_dir.chmod(0o755)
 
 
+def _with_member(path: Path, member: str, data: bytes) -> None:
+    """Rewrite the zip ``path`` with ``member`` replaced by ``data`` (deflated)."""
+    import zipfile
+
+    with zipfile.ZipFile(path) as archive:
+        members = {name: archive.read(name) for name in archive.namelist()}
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:
+        for name, value in {**members, member: data}.items():
+            archive.writestr(name, value)
+
+
+@pytest.mark.parametrize(
+    ("member", "data"),
+    [("parameters.pt", b"\0" * (64 << 20)), ("sb3.json", b" " * (17 << 20))],
+    ids=["parameters.pt", "sb3.json"],
+)
+def test_evaluate_refuses_a_model_member_that_inflates_past_what_the_model_takes(work, run_dir, member, data):
+    """A zip bomb (the probe's: 3.1 MB inflating to 3 GiB, 4.6 GB resident before a MemoryError),
+    here 64 KiB inflating to 64 MiB: refused from the member's declared size, before it is read.
+    The tensor file's bound is the model's own (its fresh weights, four times, plus a MiB)."""
+    _with_member(run_dir / "model.zip", member, data)
+    assert (run_dir / "model.zip").stat().st_size < 1 << 20
+    assert_refused(
+        work, ["evaluate", str(run_dir), "--episodes", "1"], f"{member} declares {len(data)} bytes, more"
+    )
+
+
+def test_a_model_member_whose_header_lies_is_read_no_further(work, run_dir):
+    """The same member with its declared size patched to 1000 bytes: the reader stops there, and
+    the truncated member fails its checksum."""
+    import struct
+    import zipfile
+
+    path = run_dir / "model.zip"
+    _with_member(path, "parameters.pt", b"\0" * (64 << 20))
+    data = bytearray(path.read_bytes())
+    with zipfile.ZipFile(path) as archive:
+        info = archive.getinfo("parameters.pt")
+    data[info.header_offset + 22 : info.header_offset + 26] = struct.pack("<I", 1000)  # local header
+    central = data.index(b"PK\x01\x02")  # the central directory's entries, until this member's
+    while not data[central + 46 :].startswith(b"parameters.pt"):
+        central = data.index(b"PK\x01\x02", central + 4)
+    data[central + 24 : central + 28] = struct.pack("<I", 1000)  # central directory
+    path.write_bytes(bytes(data))
+    assert_refused(work, ["evaluate", str(run_dir), "--episodes", "1"], "Bad CRC-32 for file 'parameters.pt'")
+
+
 @pytest.mark.parametrize(
     "content",
     [RANDOM_BYTES, b"step,mean_return\n20,abc\n", b"hello\nworld\n", b"step,mean_return\n20\n"],
@@ -712,6 +802,12 @@ TUNE_CASES = {
         ["--write-best", "notes.txt"],
         "is not a YAML hyper-parameter file",
     ),
+    "write-best /dev/null": (TUNE_BASE + GAMMA, ["--write-best", "/dev/null"], "is not a regular file"),
+    "write-best of aliases expanding to 10^9 values": (
+        TUNE_BASE + GAMMA,
+        ["--write-best", "bomb.yml"],
+        "--write-best 'bomb.yml' is not a YAML hyper-parameter file",
+    ),
 }
 
 
@@ -720,6 +816,7 @@ def test_tune_refuses(work, case):
     text, options, message = TUNE_CASES[case]
     (work / "study.yaml").write_text(text)
     (work / "notes.txt").write_text("a: [b\n")
+    (work / "bomb.yml").write_bytes(ALIAS_BOMB)
     assert_refused(work, ["tune", "study.yaml", "--study-dir", "study", "--workers", "1", *options], message)
     assert not (work / "study").exists()
 
