@@ -390,6 +390,60 @@ TRAIN_CASES = {
         {"run.yaml": b"algo: ppo\n" + b"#" * (1 << 20) + b"\n"},
         "config file 'run.yaml' is larger than 1 MiB",
     ),
+    # issue 47: nonsense accepted, results written before
+    "ppo rollout of 64 worlds above the steps": (
+        ["--algo", "ppo", "--n-envs", "64"],
+        {},
+        "config field 'steps' (20) is fewer than 'ppo' trains at once, one rollout of n_steps 256 x "
+        "n_envs 64 = 16384 steps: give steps >= 16384, or fewer worlds (n_envs) or a shorter rollout "
+        "(n_steps)",
+    ),
+    "a2c_own rollout above the steps": (
+        ["--algo", "a2c_own", "--action", "continuous", "-H", "n_steps=32"],
+        {},
+        "'steps' (20) is fewer than 'a2c_own' trains at once, one rollout of n_steps 32 x n_envs 1 = 32",
+    ),
+    "lidar range_m=1e-300": (
+        ["--algo", "ppo", "--obs", "lidar:range_m=1e-300"],
+        {},
+        "sensor option 'range_m' of 'lidar' must lie in [1, 1000], got 1e-300",
+    ),
+    "lidar noise_std=1e300": (
+        ["--algo", "ppo", "--obs", "lidar:noise_std=1e300"],
+        {},
+        "sensor option 'noise_std' of 'lidar' must lie in [0, 1], got 1e+300",
+    ),
+    "topdown pixels_per_meter=1e-9": (
+        ["--algo", "ppo", "--obs", "topdown:pixels_per_meter=1e-9"],
+        {},
+        "sensor option 'pixels_per_meter' of 'topdown' must lie in [0.05, 100]",
+    ),
+    "eval-maps of 10^14 maps": (
+        ["--algo", "ppo", "--env", "blocks", "--eval-maps", "0:100000000000000"],
+        {},
+        "eval_maps '0:100000000000000' names map seeds up to 99999999999999: map seeds, as run seeds, are at "
+        "most 2147483647",
+    ),
+    "n-envs 100000": (
+        ["--algo", "ppo", "--n-envs", "100000"],
+        {},
+        "config field 'n_envs' must be at most 65,536, got 100,000",
+    ),
+    "name with a right-to-left override": (
+        ["--algo", "ppo", "--name", "run\u202egpj.exe"],
+        {},
+        "not U+202E (RIGHT-TO-LEFT OVERRIDE): a control, format (bidirectional, zero-width)",
+    ),
+    "name with a zero-width space": (
+        ["--algo", "ppo", "--name", "ppo\u200b-s0"],
+        {},
+        "must hold only visible characters, not U+200B (ZERO WIDTH SPACE)",
+    ),
+    "name with a line separator": (
+        ["--algo", "ppo", "--name", "a\u2028b"],
+        {},
+        "not U+2028 (LINE SEPARATOR)",
+    ),
 }
 
 
@@ -399,6 +453,42 @@ def test_train_refuses(work, case):
     for name, content in files.items():
         (work / name).write_bytes(content)
     assert_refused(work, train_args(work, *args), message)
+    assert not (work / "runs").exists()
+
+
+# (the whole `drivelab train` command after `train`, files, expected part of the message): the step
+# budget, which train_args fixes at 20
+STEPS_CASES = {
+    "--steps 100 --n-envs 64 (16,384 steps trained before)": (
+        ["--algo", "ppo", "--steps", "100", "--n-envs", "64"],
+        {},
+        "config field 'steps' (100) is fewer than 'ppo' trains at once, one rollout of n_steps 256 x "
+        "n_envs 64 = 16384 steps",
+    ),
+    "--steps 10^23": (
+        ["--algo", "ppo", "--steps", str(10**23)],
+        {},
+        "config field 'steps' must be at most 1,000,000,000,000, got 100,000,000,000,000,000,000,000",
+    ),
+    "YAML steps: .inf": (
+        ["--config", "run.yaml"],
+        {"run.yaml": b"algo: ppo\nsteps: .inf\n"},
+        "'steps' must be int",
+    ),
+    "--n-envs 100000 with steps for its rollout": (
+        ["--algo", "ppo", "--n-envs", "100000", "--steps", str(256 * 100_000)],
+        {},
+        "config field 'n_envs' must be at most 65,536",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(STEPS_CASES))
+def test_train_refuses_step_budgets(work, case):
+    args, files, message = STEPS_CASES[case]
+    for name, content in files.items():
+        (work / name).write_bytes(content)
+    assert_refused(work, ["train", *args, "--runs-dir", str(work / "runs")], message)
     assert not (work / "runs").exists()
 
 
@@ -458,8 +548,8 @@ def test_runs_dir_denied(work, monkeypatch):
         raise PermissionError(13, "Permission denied", str(self))
 
     monkeypatch.setattr(Path, "mkdir", refuse)
-    assert_refused(
-        work, ["train", "--algo", "ppo", "--runs-dir", "runs", "--steps", "20"], "Permission denied"
+    assert_refused(  # PPO's shipped rollout, 256 steps: the run passes every check but the folder's
+        work, ["train", "--algo", "ppo", "--runs-dir", "runs", "--steps", "256"], "Permission denied"
     )
 
 
@@ -807,6 +897,11 @@ TUNE_CASES = {
         TUNE_BASE + GAMMA,
         ["--write-best", "bomb.yml"],
         "--write-best 'bomb.yml' is not a YAML hyper-parameter file",
+    ),
+    "n_steps searched above the steps": (
+        TUNE_BASE + "space: {n_steps: {type: int, low: 16, high: 128}}\n",
+        [],
+        "config field 'steps' (64) is fewer than 'ppo' trains at once, one rollout of n_steps 128 x n_envs 1",
     ),
 }
 

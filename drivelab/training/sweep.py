@@ -50,7 +50,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from drivelab.config import FIELDS, RunConfig, build_config, check_eval_every
+from drivelab.config import FIELDS, RunConfig, build_config, check_eval_every, check_steps
 from drivelab.errors import UsageError
 from drivelab.hyperparams import with_shipped_hyperparams
 from drivelab.yaml_io import load_yaml
@@ -191,7 +191,8 @@ def _check_cells(sweep: Sweep) -> None:
     ``eval_every`` larger than a new cell's ``steps`` (every cell whose run does not exist yet,
     unless the sweep was begun before that check: see below), impossible algorithm/action pairs,
     bad env options, hyper-parameters the agent refuses (``check_config``, once per distinct config
-    but for its name, seed and step budget)."""
+    but for its name, seed and step budget), and a new cell's ``steps`` fewer than one rollout
+    (``check_steps``)."""
     from drivelab.training.run import check_config
 
     begun = [os.path.lexists(sweep.runs_dir / cell.config.name) for cell in sweep.cells]
@@ -212,6 +213,8 @@ def _check_cells(sweep: Sweep) -> None:
         if key not in checked:
             check_config(cell.config)
             checked.add(key)
+        if not exists:
+            check_steps(cell.config)  # the step budget against a rollout: after the agent's own checks
 
 
 # --- what each cell needs --------------------------------------------------------------------

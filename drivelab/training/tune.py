@@ -51,7 +51,7 @@ from pathlib import Path
 import yaml
 from tqdm import tqdm
 
-from drivelab.config import FIELDS, RunConfig, build_config, check_eval_every
+from drivelab.config import FIELDS, RunConfig, build_config, check_eval_every, check_steps
 from drivelab.errors import UsageError
 from drivelab.hyperparams import with_shipped_hyperparams, zoo_yaml
 from drivelab.training.sweep import cell_action, check_workers, execute, executor_ready, run_cell
@@ -276,14 +276,18 @@ def check_study(study: Study) -> None:
         {**low, p.name: choice} for p in study.space if p.kind == "categorical" for choice in p.choices
     ]
     first = study.trial_config(0, low)
-    if not _continued(study):  # a study begun before this check goes on as it was made
+    new = not _continued(study)  # a study begun before these checks goes on as it was made
+    if new:
         check_eval_every(first)  # the pruner reads the periodic evaluations: at least one must run
     check_combination(first.algo, first.action)
     env = DriveEnv(**first.env_kwargs())  # validates scenario, sensors, reward, action
     try:
         spec = check_combination(first.algo, first.action, env.observation_space)
         for params in probes:
-            _check_model(spec, study.trial_config(0, params), env)
+            config = study.trial_config(0, params)
+            _check_model(spec, config, env)
+            if new:
+                check_steps(config)  # a searched n_steps at its high corner: a rollout within the budget
     finally:
         env.close()
 
