@@ -596,6 +596,45 @@ def test_sweep_cells_with_eval_every_above_their_steps_are_refused(work):
     assert_refused(work, ["sweep", "sweep.yaml", "--dry-run"], message)
 
 
+def test_sweep_file_errors_of_issue_47(work):
+    (work / "sweep.yaml").write_text(TINY_SWEEP + "runs_dir: 123\n")
+    assert_refused(
+        work, ["sweep", "sweep.yaml", "--dry-run"], "sweep 'runs_dir' must be a folder path, got 123"
+    )
+    (work / "sweep.yaml").write_text(TINY_SWEEP + "1: one\nbogus: two\n")
+    assert_refused(work, ["sweep", "sweep.yaml", "--dry-run"], "key '1' is not a string")
+
+
+def test_a_ray_head_that_requires_a_token_is_one_error_line(work, monkeypatch):
+    """Ray's AuthenticationError (RAY_AUTH_MODE=token without a token) at ``ray.init``: one line,
+    and whatever the failed start left is shut down."""
+    ray = pytest.importorskip("ray")
+    from ray.exceptions import AuthenticationError
+
+    def refuse(*args, **kwargs):
+        raise AuthenticationError(
+            "Token authentication is enabled but no token was found.\nSet RAY_AUTH_TOKEN"
+        )
+
+    shutdowns = []
+    monkeypatch.setattr(ray, "init", refuse)
+    monkeypatch.setattr(ray, "shutdown", lambda: shutdowns.append(1))
+    (work / "sweep.yaml").write_text(TINY_SWEEP)
+    assert_refused(
+        work,
+        ["sweep", "sweep.yaml", "--executor", "ray", "--workers", "1"],
+        "cannot start a local Ray cluster: Token authentication is enabled but no token was found.",
+    )
+    assert shutdowns
+
+
+def test_ablate_refuses_zero_evaluation_episodes(work):
+    ablate = ["ablate", "--algo", "ppo", "--drop-terms", "right_lane", "--seeds", "1", "--steps", "32"]
+    assert_refused(
+        work, [*ablate, "--eval-episodes", "0"], "--eval-episodes must be >= 1 (the report compares"
+    )
+
+
 def test_zero_workers(work):
     (work / "sweep.yaml").write_text(TINY_SWEEP)
     assert_refused(work, ["sweep", "sweep.yaml", "--workers", "0"], "--workers must be >= 1, got 0")
@@ -738,6 +777,52 @@ def test_compare_garbage_eval_json(work, run_dir):
     )
     (run_dir / "eval.json").write_text("[1, 2]")
     assert_refused(work, ["compare", str(run_dir), "-o", "report"], "is not an eval.json")
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ('{"mean_return": NaN}', "metric 'mean_return' is not a finite number: nan"),
+        ('{"mean_return": 1.0, "crash_rate": Infinity}', "metric 'crash_rate' is not a finite number: inf"),
+        (
+            '{"mean_return": 1.0, "success_rate": 1.5}',
+            "metric 'success_rate' is a rate, which lies in [0, 1], not 1.5",
+        ),
+        ('{"mean_return": 1.0, "route_completion": -0.25}', "metric 'route_completion' is a rate"),
+        ('{"mean_return": 1.0, "mean_length": -3}', "metric 'mean_length' cannot be negative: -3"),
+    ],
+)
+def test_compare_refuses_impossible_eval_json_values(work, run_dir, text, message):
+    (run_dir / "eval.json").write_text(text)
+    assert_refused(
+        work, ["compare", str(run_dir), "-o", "report"], f"{str(run_dir / 'eval.json')!r}: {message}"
+    )
+
+
+@pytest.mark.parametrize("value", ["inf", "-inf", "nan"])
+def test_compare_refuses_a_non_finite_evaluation_return(work, run_dir, value):
+    path = run_dir / "evaluations.csv"
+    header, row = path.read_text().splitlines()[:2]
+    columns = header.split(",")
+    cells = row.split(",")
+    cells[columns.index("mean_return")] = value
+    path.write_text(f"{header}\n{','.join(cells)}\n")
+    assert_refused(
+        work,
+        ["compare", str(run_dir), "-o", "report"],
+        "(row 1): 'mean_return' is not a finite number of an evaluation",
+    )
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "field"), [("algo: dqn", "algo: bogus", "algo"), ("env: highway", "env: moon", "env")]
+)
+def test_compare_refuses_a_config_of_unknown_names(work, run_dir, old, new, field):
+    config = run_dir / "config.yaml"
+    config.write_text(config.read_text().replace(old, new))
+    what = "algorithm" if field == "algo" else "scenario"
+    message = f"{str(config)!r}: field {field!r} names no drivelab {what}"
+    assert_refused(work, ["compare", str(run_dir), "-o", "report"], message)
 
 
 def test_compare_into_a_folder_that_is_not_a_report(work, run_dir):

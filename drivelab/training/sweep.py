@@ -176,6 +176,8 @@ def expand_sweep(spec: dict, runs_dir: str | Path | None = None) -> Sweep:
             raise UsageError(f"sweep cells {same} and {grid_values} are the same run (one config)")
         cells.append(Cell(config, grid_values))
     where = runs_dir if runs_dir is not None else spec.get("runs_dir", "runs")
+    if not isinstance(where, (str, Path)) or not str(where):
+        raise UsageError(f"sweep 'runs_dir' must be a folder path, got {where!r}")
     sweep = Sweep(tuple(cells), Path(where), eval_episodes)
     _check_cells(sweep)
     return sweep
@@ -467,28 +469,30 @@ def _ray_init(workers: int, address: str | None) -> bool:
     """Start a local Ray cluster of ``workers`` CPUs, or join the one at ``address``, unless Ray is
     running in this process already; True when this call started it (then shut it down).
 
-    A cluster that cannot be joined is one UsageError line, within ``RAY_CONNECT_TIMEOUT_S`` where
-    nothing answers at its host and port (Ray itself would retry for minutes), without Ray's
-    messages about the failed attempt."""
+    A cluster that cannot be started or joined (nothing answers, a token is required) is one
+    UsageError line, within ``RAY_CONNECT_TIMEOUT_S`` where nothing answers at its host and port
+    (Ray itself would retry for minutes), without Ray's messages about the failed attempt."""
     try:
         import ray
     except ImportError:
         raise UsageError("--executor ray needs Ray: pip install 'drivelab[ray]'") from None
     if ray.is_initialized():
         return False
-    if not address:
-        # "local": always a fresh cluster of our own, never someone else's running one
-        ray.init(address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False)
-        return True
-    _check_answers(address)
+    if address:
+        _check_answers(address)
+    # "local": always a fresh cluster of our own, never someone else's running one
+    where = f"join the Ray cluster at {address!r}" if address else "start a local Ray cluster"
+    keywords = {"address": address} if address else {"address": "local", "num_cpus": workers}
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the Ray client's "connection timed out" warning
-            ray.init(
-                address=address, include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING
-            )
-    except (ConnectionError, ValueError, RuntimeError) as exc:
-        raise UsageError(f"cannot join the Ray cluster at {address!r}: {exc}") from None
+            ray.init(**keywords, include_dashboard=False, log_to_driver=False, logging_level=logging.ERROR)
+    except (ConnectionError, ValueError, RuntimeError, ray.exceptions.RayError) as exc:
+        # e.g. a head that requires a token (RAY_AUTH_MODE=token) and none given: Ray's
+        # AuthenticationError, several lines long; the first says what is wrong
+        ray.shutdown()  # whatever the failed call started
+        reason = next((line.strip() for line in str(exc).splitlines() if line.strip()), type(exc).__name__)
+        raise UsageError(f"cannot {where}: {reason}") from None
     return True
 
 
