@@ -316,6 +316,7 @@ class VectorDriveEnv(VectorEnv):
         (e.g. :func:`evaluation_seeds`) instead of drawing the next ones from the worlds'
         generators, which it leaves as they are. Infos: ``episode_seed`` and ``traffic_light``
         per world."""
+        check_reset_options(options)
         self._seed_worlds(seed)
         mask = np.ones(self.num_envs, dtype=bool)
         if options and options.get("reset_mask") is not None and self.batch is not None:
@@ -641,11 +642,31 @@ def _world_info(infos: dict, k: int) -> dict:
     return info
 
 
+def check_reset_options(options) -> None:
+    """A TypeError naming what ``reset``'s ``options`` must be (gymnasium's: a dict or None)."""
+    if options is not None and not isinstance(options, dict):
+        raise TypeError(
+            f"reset options must be a dict (e.g. {{'episode_seed': 3}}) or None, "
+            f"got {type(options).__name__} {options!r}"
+        )
+
+
 def _episode_seeds(options: dict | None, count: int) -> np.ndarray | None:
-    """``options["episode_seeds"]`` as (K,) int64, checked; None when not given."""
+    """``options["episode_seeds"]`` as (K,) int64, checked; None when not given. Each must lie in
+    [0, 2**63): an episode seed is an int64 (the simulators' and the infos' arrays), so a wider one
+    would wrap to a negative number, another episode than the one asked for."""
     if not options or options.get("episode_seeds") is None:
         return None
     seeds = np.asarray(options["episode_seeds"])
-    if seeds.shape != (count,) or not np.issubdtype(seeds.dtype, np.integer) or (seeds < 0).any():
-        raise UsageError(f"episode_seeds must be {count} integers >= 0, got {options['episode_seeds']!r}")
+    integers = np.issubdtype(seeds.dtype, np.integer)
+    if (
+        seeds.shape != (count,)
+        or not integers
+        or (seeds < 0).any()
+        or (seeds.dtype.kind == "u" and (seeds > np.iinfo(np.int64).max).any())
+    ):
+        raise UsageError(
+            f"episode seeds must be integers in [0, 2**63), one per world ({count}), "
+            f"got {options['episode_seeds']!r}"
+        )
     return seeds.astype(np.int64)

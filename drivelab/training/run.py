@@ -38,7 +38,7 @@ from stable_baselines3.common.vec_env import VecMonitor
 from tqdm import tqdm
 
 from drivelab.agents.registry import check_combination, get_algo
-from drivelab.config import RunConfig, build_config, save_yaml
+from drivelab.config import RunConfig, build_config, check_steps, save_yaml
 from drivelab.errors import UsageError
 from drivelab.training.checkpoints import load_agent, load_replay, save_checkpoint, verify_checkpoint
 from drivelab.training.divergence import (
@@ -363,6 +363,7 @@ def train(
     """
     run_dir = new_run_dir(config, Path(runs_root))
     spec = check_config(config)
+    check_steps(config)
     created = [folder for folder in (run_dir, *run_dir.parents) if not folder.exists()]
     make_out_dir(run_dir, "run directory")  # one error line, no folder left, if it cannot be
     try:
