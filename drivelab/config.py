@@ -264,19 +264,38 @@ def check_eval_every(config: RunConfig) -> None:
 
 def check_steps(config: RunConfig) -> None:
     """A UsageError when ``steps`` is fewer than the algorithm trains in one go
-    (``registry.steps_per_update``: a PPO rollout of ``n_steps`` × ``n_envs``): the run would train
+    (``steps_per_update``: a PPO rollout of ``n_steps`` × ``n_envs``): the run would train
     more steps than its config.yaml says, and evaluate at every step of a schedule made for fewer.
     Refused rather than raised to the true count, which would change the budget the user wrote
     (and every schedule derived from it) behind their back. Checked for new runs, as
     ``check_eval_every``."""
-    from drivelab.agents.registry import steps_per_update
-
     fewest, what = steps_per_update(config.algo, config.hyperparams, config.n_envs)
     if config.steps < fewest:
         raise UsageError(
             f"config field 'steps' ({config.steps}) is fewer than {config.algo!r} trains at once, {what} = "
             f"{fewest} steps: give steps >= {fewest}, or fewer worlds (n_envs) or a shorter rollout (n_steps)"
         )
+
+
+def steps_per_update(algo: str, hyperparams: dict, n_envs: int) -> tuple[int, str]:
+    """(the fewest environment steps a run of ``algo`` in ``n_envs`` worlds takes, what they are).
+
+    An on-policy algorithm collects a whole rollout, ``n_steps`` from every world, before it looks
+    at the budget: SB3's ``learn(total_timesteps)`` (and RL Zoo's ``n_timesteps``) is a lower bound
+    that ends at the end of a rollout, so a smaller budget trains a whole rollout all the same. The
+    others step every world at once: ``n_envs`` steps."""
+    from drivelab.agents.registry import get_algo
+    from drivelab.agents.sb3_params import _given_or_default
+
+    spec = get_algo(algo)
+    if not spec.on_policy:
+        return n_envs, f"one step of each of its {n_envs} worlds"
+    if spec.family == "sb3":
+        n_steps = _given_or_default(algo, hyperparams, "n_steps")
+    else:
+        n_steps = hyperparams.get("n_steps", spec.agent_class().config_class.n_steps)
+    n_steps = int(n_steps)
+    return n_steps * n_envs, f"one rollout of n_steps {n_steps} x n_envs {n_envs}"
 
 
 def save_yaml(config: RunConfig, path: Path) -> None:

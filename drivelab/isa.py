@@ -13,7 +13,7 @@ checked under it is the same on either kind of CPU: on an AVX-512 EPYC, ``town-d
 under it gives 32.96262951516252, the value an AVX2 EPYC measures natively, bit for bit. The
 variables are read when each library loads, so the pin applies to a fresh process only:
 ``call_pinned`` runs a function in one and returns its JSON result. On an AVX2 machine the pin
-changes nothing but the thread counts.
+changes no result.
 
     python -m drivelab.isa MODULE:FUNCTION [ARG ...]   # prints the function's result as JSON
 """
@@ -25,6 +25,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 from typing import Any
 
 PINNED_ISA = {
@@ -35,6 +36,9 @@ PINNED_ISA = {
     "ONEDNN_MAX_CPU_ISA": "AVX2",  # torch's convolutions (oneDNN)
     "MKL_ENABLE_INSTRUCTIONS": "AVX2",  # torch's matrix products (MKL)
     "NUMBA_CPU_NAME": "haswell",  # drivelab's compiled kernels
+    # torch.compile's kernels in a cache of their own: inductor's cache key misses these pins, and
+    # a native process that loads kernels compiled under them aborts (RLAD's fast update did)
+    "TORCHINDUCTOR_CACHE_DIR": os.path.join(tempfile.gettempdir(), f"torchinductor_{os.getuid()}_avx2"),
     "OMP_NUM_THREADS": "1",
     "MKL_NUM_THREADS": "1",
     "NUMBA_NUM_THREADS": "1",

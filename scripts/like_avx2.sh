@@ -12,4 +12,5 @@ export ATEN_CPU_CAPABILITY=avx2
 export ONEDNN_MAX_CPU_ISA=AVX2
 export MKL_ENABLE_INSTRUCTIONS=AVX2
 export NUMBA_CPU_NAME=haswell
+export TORCHINDUCTOR_CACHE_DIR="${TMPDIR:-/tmp}/torchinductor_$(id -u)_avx2"
 exec "$@"

@@ -46,7 +46,7 @@ class AlgoSpec:
     :param observation_check: entry point of a function: observation space → why the agent cannot
         read it (None: it can), for agents that need particular sensors.
     :param on_policy: it collects a whole rollout, ``n_steps`` from each world, before it looks at
-        the step budget again (``steps_per_update``).
+        the step budget again (``config.steps_per_update``).
     """
 
     name: str
@@ -182,23 +182,3 @@ def check_combination(algo: str, action: str, observation_space=None) -> AlgoSpe
         if problem is not None:
             raise UsageError(f"algorithm {algo!r} {problem}")
     return spec
-
-
-def steps_per_update(algo: str, hyperparams: dict, n_envs: int) -> tuple[int, str]:
-    """(the fewest environment steps a run of ``algo`` in ``n_envs`` worlds takes, what they are).
-
-    An on-policy algorithm collects a whole rollout, ``n_steps`` from every world, before it looks
-    at the budget: SB3's ``learn(total_timesteps)`` (and RL Zoo's ``n_timesteps``) is a lower bound
-    that ends at the end of a rollout, so a smaller budget trains a whole rollout all the same. The
-    others step every world at once: ``n_envs`` steps."""
-    spec = get_algo(algo)
-    if not spec.on_policy:
-        return n_envs, f"one step of each of its {n_envs} worlds"
-    if spec.family == "sb3":
-        from drivelab.agents.sb3_params import _given_or_default
-
-        n_steps = _given_or_default(algo, hyperparams, "n_steps")
-    else:
-        n_steps = hyperparams.get("n_steps", spec.agent_class().config_class.n_steps)
-    n_steps = int(n_steps)
-    return n_steps * n_envs, f"one rollout of n_steps {n_steps} x n_envs {n_envs}"

@@ -666,7 +666,7 @@ def _episode_seeds(options: dict | None, count: int) -> np.ndarray | None:
         or (seeds.dtype.kind == "u" and (seeds > np.iinfo(np.int64).max).any())
     ):
         raise UsageError(
-            f"episode seeds must be integers in [0, 2**63), one per world ({count}), "
+            f"reset option episode_seeds must be integers in [0, 2**63), one per world ({count}), "
             f"got {options['episode_seeds']!r}"
         )
     return seeds.astype(np.int64)

@@ -114,7 +114,7 @@ def test_reset_options_must_be_a_dict(options):
 def test_episode_seeds_outside_int64_are_refused_not_wrapped():
     env = DriveEnv("highway", traffic="empty")
     for seed in (2**63, 2**64 + 1, -1, 2.5, True):
-        with pytest.raises(UsageError, match=r"episode seeds must be integers in \[0, 2\*\*63\)"):
+        with pytest.raises(UsageError, match=r"episode_seeds must be integers in \[0, 2\*\*63\)"):
             env.reset(options={"episode_seed": seed})
     _, info = env.reset(options={"episode_seed": 2**63 - 1})
     assert info["episode_seed"] == 2**63 - 1
