@@ -26,7 +26,7 @@ import torch  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 from own_vs_sb3 import PAIRS  # noqa: E402
-from provenance import Parser, whole  # noqa: E402
+from provenance import Parser, cpu_isa, whole  # noqa: E402
 
 from drivelab.agents.registry import get_algo  # noqa: E402
 from drivelab.envs.core import DriveEnv  # noqa: E402
@@ -90,7 +90,7 @@ def main() -> None:
         print(row, flush=True)
     result = {
         "command": "python " + " ".join(sys.argv),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores (shared), "
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores (shared), "
         f"Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "steps": args.steps,

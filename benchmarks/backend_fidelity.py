@@ -34,7 +34,7 @@ from drivelab.envs.backends.highway import HighwayBackend  # noqa: E402
 from drivelab.envs.scenarios import FAST_SCENARIOS  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, names, whole  # noqa: E402
+from provenance import Parser, cpu_isa, names, whole  # noqa: E402
 
 # highway-env's traffic scenarios: the town has its own (benchmarks/town_fidelity.py), the circuits
 # have no traffic, and the block maps no highway-env backend
@@ -140,7 +140,7 @@ def main() -> None:
             print(rows[-1], flush=True)
     result = {
         "command": "python " + " ".join(sys.argv),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()},"
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores, Python {platform.python_version()},"
         f" numpy SIMD dispatch {simd_dispatch()}",
         "date": time.strftime("%Y-%m-%d"),
         "episodes": args.episodes,

@@ -30,7 +30,7 @@ from drivelab.envs.scenarios import FAST_SCENARIOS as SUPPORTED  # noqa: E402
 from drivelab.envs.scenarios import SCENARIOS  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, whole  # noqa: E402
+from provenance import Parser, cpu_isa, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 RLAD_OBS = "camera:stack=3,waypoints,measurements:stack=3"  # RLAD's observation (seed 000)
@@ -84,7 +84,7 @@ def main() -> None:
         print(row)
     result = {
         "command": "python " + " ".join(sys.argv),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "repeats": args.repeats,
         "rows": rows,

@@ -30,7 +30,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, command_line, whole  # noqa: E402
+from provenance import Parser, command_line, cpu_isa, whole  # noqa: E402
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
@@ -177,7 +177,7 @@ def main() -> None:
     rows = [{"scenario": s, "sensor": n, **_median_ratio(pairs[(s, n)])} for s, n, _ in cases]
     result = {
         "command": command_line(),
-        "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores, "
         f"Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "repeats": args.repeats,

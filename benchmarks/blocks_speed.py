@@ -38,7 +38,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, command_line, whole  # noqa: E402
+from provenance import Parser, command_line, cpu_isa, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 OPTIONS = {"map": "OSX", "traffic_density": 0.1}  # MetaDrive's default density
@@ -95,7 +95,7 @@ def main() -> None:
     ratios = [k / one for k, one in zip(rates["k_worlds"], rates["one_world"], strict=True)]
     result = {
         "command": command_line(),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "repeats": args.repeats,
         "worlds": args.worlds,

@@ -31,7 +31,7 @@ from drivelab.perception.lane import LANE_CAMERA, LaneState, classical_lane_mask
 from drivelab.perception.line import LineState  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, whole  # noqa: E402
+from provenance import Parser, cpu_isa, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 SCENES = {
@@ -103,7 +103,7 @@ def main() -> None:
             )
     result = {
         "command": "python " + " ".join(sys.argv),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores (shared with other jobs), "
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores (shared with other jobs), "
         f"Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         "load_average_1min_before_after": [load_before[0], os.getloadavg()[0]],

@@ -46,7 +46,7 @@ from backend_speed import steps_per_second  # noqa: E402
 from batch_speed import _commit, baseline_rate, vector_rate  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, command_line, whole  # noqa: E402
+from provenance import Parser, command_line, cpu_isa, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 CIRCUITS = ("follow-line", "follow-lane")
@@ -163,7 +163,7 @@ def main() -> None:
         )
     result = {
         "command": command_line(),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "repeats": args.repeats,
         "worlds": args.worlds,

@@ -28,7 +28,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
-from provenance import Parser, command_line, names, whole  # noqa: E402
+from provenance import Parser, command_line, cpu_isa, names, whole  # noqa: E402
 
 from drivelab.agents.registry import get_algo  # noqa: E402
 from drivelab.config import build_config  # noqa: E402
@@ -136,7 +136,7 @@ def main() -> None:
             print(json.dumps(row), flush=True)
     result = {
         "command": command_line(),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores (shared), "
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores (shared), "
         f"Python {platform.python_version()}, torch {torch.__version__} on 1 thread",
         "date": time.strftime("%Y-%m-%d"),
         "check_every_steps": CHECK_EVERY_STEPS,

@@ -27,7 +27,7 @@ from drivelab.training.evaluate import evaluate_run  # noqa: E402
 from drivelab.training.run import train  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, command_line, names, whole  # noqa: E402
+from provenance import Parser, command_line, cpu_isa, names, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 RUNS = Path(__file__).parent / "runs"
@@ -70,7 +70,7 @@ def main() -> None:
         print(row, flush=True)
     result = {
         "command": command_line(),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "steps": args.steps,
         "seed": args.seed,

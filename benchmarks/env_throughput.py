@@ -27,7 +27,7 @@ from drivelab.envs.core import DriveEnv  # noqa: E402
 from drivelab.perception.sensors import make_sensor  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, whole  # noqa: E402
+from provenance import Parser, cpu_isa, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 
@@ -92,7 +92,7 @@ def main() -> None:
 
     result = {
         "command": "python " + " ".join(sys.argv),
-        "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores, "
         f"Python {platform.python_version()}, numpy {np.__version__}",
         "date": time.strftime("%Y-%m-%d"),
         "steps_per_repeat": args.steps,

@@ -51,7 +51,7 @@ from drivelab.training.run import resume, train  # noqa: E402
 from drivelab.training.stats import bootstrap_ci  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, command_line, whole, wholes  # noqa: E402
+from provenance import Parser, command_line, cpu_isa, whole, wholes  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 RUNS = Path(__file__).parent / "runs" / "generalisation"
@@ -330,7 +330,7 @@ def write_report(
     test_start, test_count = (int(v) for v in TEST_MAPS.split(":"))
     first = load_run_config(RUNS / f"ppo-maps{rows[0]['maps']}-s{rows[0]['seed']}")
     hyperparams = ", ".join(f"{k} {v}" for k, v in first.hyperparams.items())
-    machine = f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+    machine = f"{cpu_isa()}, {os.cpu_count()} cores, Python {platform.python_version()}"
     command = command_line()
     commands = {
         f"maps{r['maps']}-s{r['seed']}": train_command(r["maps"], r["seed"], args.steps) for r in rows

@@ -51,7 +51,7 @@ from drivelab.training.stats import bootstrap_ci  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 from leaderboard import UNTUNED_PPO  # noqa: E402
-from provenance import Parser, check_reuse, readable, whole, wholes  # noqa: E402
+from provenance import Parser, check_reuse, cpu_isa, readable, whole, wholes  # noqa: E402
 
 RUNS = ROOT / "benchmarks" / "runs"
 RESULTS = ROOT / "benchmarks" / "results"
@@ -266,7 +266,7 @@ def main() -> None:
     records = [measure(args.env, args.recipe, seed, steps, args.episodes) for seed in seeds]
     result = {
         "script": "python benchmarks/highway_competence.py " + shlex.join(sys.argv[1:]),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores (shared), "
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores (shared), "
         f"Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "env": args.env,

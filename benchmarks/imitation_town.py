@@ -28,7 +28,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from nocrash_town import agents as nocrash_agents  # noqa: E402
-from provenance import Parser, check_reuse, training_command, whole  # noqa: E402
+from provenance import Parser, check_reuse, cpu_isa, training_command, whole  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 RUNS = ROOT / "benchmarks" / "runs"
@@ -104,7 +104,7 @@ def main() -> None:
 
     result = {
         "script": "python benchmarks/imitation_town.py " + shlex.join(sys.argv[1:]),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores (shared with other jobs), "
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores (shared with other jobs), "
         f"Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "commands": commands,

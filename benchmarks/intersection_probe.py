@@ -32,7 +32,7 @@ import drivelab  # noqa: E402
 from drivelab.envs.vector import evaluation_seeds  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, names, whole  # noqa: E402
+from provenance import Parser, cpu_isa, names, whole  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results"
 SLOWER, IDLE, FASTER = 0, 1, 2  # highway-env's ACTIONS_LONGI
@@ -120,7 +120,7 @@ def run_probe(name: str, description: str, plans: dict, play, markdown, backends
             print(rows[-1], flush=True)
     result = {
         "command": (f"python benchmarks/{name}.py " + shlex.join(sys.argv[1:])).strip(),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "rows": rows,
     }

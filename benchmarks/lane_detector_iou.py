@@ -30,7 +30,7 @@ from drivelab.perception.lane_cnn import iou, load_lane_cnn  # noqa: E402
 from drivelab.training.lane_dataset import generate_lane_frames  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, whole  # noqa: E402
+from provenance import Parser, cpu_isa, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 
@@ -71,7 +71,7 @@ def main() -> None:
         print(rows[-1], flush=True)
     result = {
         "command": "python " + " ".join(sys.argv),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         "frames": args.frames,
         "seed": args.seed,

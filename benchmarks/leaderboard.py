@@ -48,7 +48,7 @@ from drivelab.training.stats import bootstrap_ci  # noqa: E402
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from nocrash_town import SCENARIO as NOCRASH_SCENARIO  # noqa: E402
 from nocrash_town import agents as nocrash_agents  # noqa: E402
-from provenance import Parser, check_reuse, stop, training_command, whole, wholes  # noqa: E402
+from provenance import Parser, check_reuse, cpu_isa, stop, training_command, whole, wholes  # noqa: E402
 from seed003_osx import DEFAULT_STEPS as OSX_STEPS  # noqa: E402
 from seed003_osx import recipe as osx_recipe  # noqa: E402
 from town_competence import LEARNERS as TOWN_LEARNERS  # noqa: E402
@@ -830,7 +830,7 @@ def main() -> None:
         records.append(record)
     result = {
         "command": ("python benchmarks/leaderboard.py " + shlex.join(sys.argv[1:])).strip(),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "episodes": args.episodes,
         "entries": records,

@@ -31,7 +31,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, check_reuse, training_command, whole  # noqa: E402
+from provenance import Parser, check_reuse, cpu_isa, training_command, whole  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 RUNS = ROOT / "benchmarks" / "runs"
@@ -105,7 +105,7 @@ def main() -> None:
 
     result = {
         "script": "python benchmarks/nocrash_town.py " + shlex.join(sys.argv[1:]),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores (shared), "
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores (shared), "
         f"Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "commands": commands,

@@ -36,7 +36,7 @@ from drivelab.training.evaluate import evaluate_run  # noqa: E402
 from drivelab.training.run import train  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, names, step_overrides, whole, wholes  # noqa: E402
+from provenance import Parser, cpu_isa, names, step_overrides, whole, wholes  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 RUNS = Path(__file__).parent / "runs"
@@ -244,7 +244,7 @@ def main() -> None:
     runs: list[dict] = []
     result = {
         "command": "python " + " ".join(sys.argv),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores (shared), "
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores (shared), "
         f"Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "episodes": args.episodes,

@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, whole  # noqa: E402
+from provenance import Parser, cpu_isa, whole  # noqa: E402
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
@@ -46,7 +46,7 @@ def main() -> None:
     maps = [generate_map("OSX", 0)] + [generate_map(5, seed) for seed in range(12)]
     draw_gallery(maps, RESULTS / "pg_maps_gallery.png", columns=5, dpi=80)
     command = f"OMP_NUM_THREADS=1 python benchmarks/pg_maps.py --seeds {args.seeds}"
-    machine = f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+    machine = f"{cpu_isa()}, {os.cpu_count()} cores, Python {platform.python_version()}"
     (RESULTS / "pg_maps.json").write_text(
         json.dumps({"command": command, "machine": machine, **row}, indent=2) + "\n"
     )

@@ -26,7 +26,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 import torch  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, command_line, whole  # noqa: E402
+from provenance import Parser, command_line, cpu_isa, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 ROLLOUT_STEPS = 2048
@@ -85,7 +85,7 @@ def main() -> None:
     rows = [{key: statistics.median(r[key] for r in runs[k]) for key in runs[k][0]} for k in args.n_envs]
     result = {
         "command": command_line(),
-        "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores, "
         f"Python {platform.python_version()}, torch {torch.__version__}",
         "date": time.strftime("%Y-%m-%d"),
         "repeats": args.repeats,

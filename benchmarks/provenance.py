@@ -10,6 +10,7 @@ import inspect
 import json
 import math
 import os
+import platform
 import re
 import shlex
 import sys
@@ -17,6 +18,15 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 
 THREAD_VARIABLES = ("OMP_NUM_THREADS", "NUMBA_NUM_THREADS")
+
+
+def cpu_isa() -> str:
+    """The architecture and the vector code this process runs (``drivelab.isa.code_paths``), for
+    a results file's machine line: numpy, torch and numba round differently on AVX-512 and AVX2."""
+    from drivelab.isa import code_paths
+
+    paths = code_paths()
+    return f"{platform.machine()} (numpy {paths['numpy']}, torch {paths['torch']}, numba {paths['numba']})"
 
 
 def command_line(argv: list[str] | None = None) -> str:

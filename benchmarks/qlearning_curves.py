@@ -36,7 +36,7 @@ from drivelab.agents.qlearning_plots import plot_qlearning  # noqa: E402
 from drivelab.envs.core import DriveEnv  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, whole, wholes  # noqa: E402
+from provenance import Parser, cpu_isa, whole, wholes  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 SETUPS = {
@@ -137,7 +137,7 @@ def main() -> None:
         print(json.dumps(row), flush=True)
     result = {
         "command": "python " + " ".join(sys.argv),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores (shared), "
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores (shared), "
         f"Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "scenario": args.scenario,

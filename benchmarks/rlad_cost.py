@@ -35,7 +35,7 @@ from drivelab.agents.rlad.sac import REPLAY_FRAMES, RLAD
 from drivelab.envs.core import DriveEnv
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, command_line, device, whole  # noqa: E402
+from provenance import Parser, command_line, cpu_isa, device, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 SIZES = (84, 256)
@@ -179,7 +179,7 @@ def main() -> None:
         ratios[f"days for the paper's 10^6 steps at {size} (wall)"] = total * 1e6 / 1e3 / 86400
     result = {
         "command": command_line(),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores, "
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores, "
         f"Python {platform.python_version()}, torch {torch.__version__}, 1 torch thread, "
         + (torch.cuda.get_device_name() if args.device.startswith("cuda") else "networks on the CPU"),
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),

@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, command_line, positive, stop, whole  # noqa: E402
+from provenance import Parser, command_line, cpu_isa, positive, stop, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 LEARNING_STARTS = 1000  # RLAD's default (Table II)
@@ -168,7 +168,7 @@ def main() -> None:
     busy = next((i for i, s in enumerate(samples) if s["utilisation"] > 50), len(samples))
     result = {
         "command": command_line(),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, "
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores, Python {platform.python_version()}, "
         f"torch {torch.__version__}, {torch.cuda.get_device_name()}",
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         "seconds": args.seconds,

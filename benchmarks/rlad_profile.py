@@ -27,7 +27,7 @@ from drivelab.agents.rlad.sac import RLAD
 from drivelab.envs.core import DriveEnv
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, command_line, device, mapping, whole  # noqa: E402
+from provenance import Parser, command_line, cpu_isa, device, mapping, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 
@@ -115,7 +115,7 @@ def main() -> None:
         tables["self CUDA time"] = averages.table(sort_by="self_cuda_time_total", row_limit=args.top)
     result = {
         "command": command_line(),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, "
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores, Python {platform.python_version()}, "
         f"torch {torch.__version__}, 1 torch thread, "
         + (torch.cuda.get_device_name() if cuda else "networks on the CPU"),
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),

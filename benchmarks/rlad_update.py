@@ -47,7 +47,7 @@ from torch.profiler import ProfilerActivity, profile
 from drivelab.agents.rlad.sac import RLAD
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, command_line, device, whole  # noqa: E402
+from provenance import Parser, command_line, cpu_isa, device, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 VARIANTS = {
@@ -205,7 +205,7 @@ def write_results(
     device_name = torch.cuda.get_device_name() if cuda else "networks on the CPU"
     result = {
         "command": command_line(),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}, "
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores, Python {platform.python_version()}, "
         f"torch {torch.__version__}, {device_name}",
         "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
         "load_average_1min_before_after": [load_before[0], os.getloadavg()[0]],

@@ -41,7 +41,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, names, readable, step_overrides, whole, wholes  # noqa: E402
+from provenance import Parser, cpu_isa, names, readable, step_overrides, whole, wholes  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent
 RESULTS = ROOT / "results"
@@ -406,7 +406,7 @@ def main() -> None:
     RESULTS.mkdir(exist_ok=True)
     result = {
         "command": "python " + shlex.join(sys.argv),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores (shared with other jobs), "
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores (shared with other jobs), "
         f"Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "episodes": args.episodes,

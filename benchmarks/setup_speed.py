@@ -20,7 +20,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, whole  # noqa: E402
+from provenance import Parser, cpu_isa, whole  # noqa: E402
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
@@ -57,7 +57,7 @@ def main() -> None:
     if args.no_save:
         return
     command = f"OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1 python benchmarks/setup_speed.py --seeds {args.seeds}"
-    machine = f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+    machine = f"{cpu_isa()}, {os.cpu_count()} cores, Python {platform.python_version()}"
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "setup_speed.json").write_text(
         json.dumps({"command": command, "machine": machine, "rows": rows}, indent=2) + "\n"

@@ -40,7 +40,7 @@ from drivelab.training.nocrash import LEVELS  # noqa: E402
 from drivelab.training.stats import bootstrap_ci  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, check_reuse, names, readable, training_command, whole, wholes  # noqa: E402
+from provenance import Parser, check_reuse, cpu_isa, names, readable, training_command, whole, wholes  # noqa: E402
 
 RUNS = ROOT / "benchmarks" / "runs"
 RESULTS = ROOT / "benchmarks" / "results"
@@ -206,7 +206,7 @@ def main() -> None:
     records = [measure(learner, seed, args.episodes) for learner in learners for seed in seeds]
     result = {
         "script": "python benchmarks/town_competence.py " + shlex.join(sys.argv[1:]),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores (shared), "
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores (shared), "
         f"Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "episodes": args.episodes,

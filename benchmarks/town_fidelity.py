@@ -35,7 +35,7 @@ from drivelab.training.nocrash import INFRACTIONS, LEVELS, NOCRASH_SEED  # noqa:
 from drivelab.world.state import LIGHT_GREEN  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from provenance import Parser, whole  # noqa: E402
+from provenance import Parser, cpu_isa, whole  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
 BACKENDS = ("highway", "fast")
@@ -160,7 +160,7 @@ def main() -> None:
     }
     result = {
         "command": "python " + " ".join(sys.argv),
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores, Python {platform.python_version()}",
+        "machine": f"{cpu_isa()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "episodes_per_level": args.episodes,
         "rows": {f"{b}/{lv}": v for (b, lv), v in rows.items()},

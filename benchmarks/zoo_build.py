@@ -9,9 +9,10 @@ For each agent of ``AGENTS`` (all by default): ``drivelab train`` with its recor
 the optimizer's moments, card), then every recorded measurement on the packed agent
 (``drivelab evaluate NAME``, ``drivelab benchmark nocrash NAME``), whose reports go to
 ``benchmarks/runs/zoo-eval/<name>`` and whose numbers, episode counts, commands, machine and CPU
-time go into the card; finally ``drivelab enjoy NAME --episodes 3`` gives the card's ``check``,
-the numbers ``tests/training/test_zoo.py`` reproduces (for the camera agents, its episodes cut at
-``CAMERA_CHECK_DURATION_S``, as the card records). Every command runs with one thread
+time go into the card; finally ``drivelab enjoy NAME --episodes 3``, played in a fresh process
+under ``drivelab.isa.PINNED_ISA`` (AVX2 code paths, one thread), gives the card's ``check``, the
+numbers ``tests/training/test_zoo.py`` reproduces on any x86-64 CPU (for the camera agents, its
+episodes cut at ``CAMERA_CHECK_DURATION_S``, as the card records). Every command runs with one thread
 (``OMP_NUM_THREADS=1``). ``--measure-only`` re-measures the agents already in the zoo,
 ``--check-only`` records only their check. Writes ``benchmarks/results/zoo.md`` from the cards.
 
@@ -47,10 +48,11 @@ CHECK_EPISODES = 3
 # at 20 s of the 60 s (100 steps each) so that tests/training/test_zoo.py stays fast; the card
 # records the cap, and the 100-episode evaluation is uncut.
 CAMERA_CHECK_DURATION_S = 20
+PINNED_ISA_TEXT = "drivelab.isa.PINNED_ISA (AVX2 code paths, one thread)"
 
 sys.path.insert(0, str(Path(__file__).parent))
 from leaderboard import BLOCKS_DAGGER, HIGHWAY_DQN, RACETRACK_DAGGER, UNSEEN_MAPS, UNTUNED_PPO  # noqa: E402
-from provenance import Parser, agent_defaults, check_reuse, command_line, stop, training_command  # noqa: E402
+from provenance import Parser, agent_defaults, check_reuse, command_line, cpu_isa, stop, training_command  # noqa: E402
 from town_competence import recipe as town_recipe  # noqa: E402
 
 # highway-env's documented PPO values, pinned in the PPO recipes below: their agents were trained
@@ -213,7 +215,7 @@ AGENTS: dict[str, dict] = {
 
 
 def machine() -> str:
-    return f"{platform.machine()}, {os.cpu_count()} cores (shared), Python {platform.python_version()}"
+    return f"{cpu_isa()}, {os.cpu_count()} cores (shared), Python {platform.python_version()}"
 
 
 def drivelab(arguments: list[str]) -> tuple[float, float]:
@@ -351,24 +353,11 @@ def write_verification(records: list[dict], invocation: str, path: Path = VERIFY
     return md_path
 
 
-def capped_episodes(agent_dir: Path, episodes: int, duration_s: float) -> list[dict]:
-    """The per-episode metrics of ``drivelab enjoy`` on the agent in ``agent_dir`` (the scenario's
-    fixed evaluation episodes, greedy), with every episode cut at ``duration_s`` seconds."""
-    from drivelab.envs.core import DriveEnv
-    from drivelab.training.checkpoints import load_agent
-    from drivelab.training.evaluate import load_run_config, run_episodes
-
-    config = load_run_config(agent_dir)
-    env = DriveEnv(**{**config.eval_env_kwargs(), "duration_s": duration_s})
-    agent = load_agent(agent_dir, config)
-    return run_episodes(lambda obs: agent.predict(obs, deterministic=True)[0], env, episodes)[0]
-
-
 def measure(name: str, spec: dict, check_only: bool = False) -> None:
     import torch
 
-    from drivelab.training.evaluate import aggregate, report_name
-    from drivelab.training.zoo import ZOO_DIR, add_evaluation, enjoy
+    from drivelab.training.evaluate import report_name
+    from drivelab.training.zoo import ZOO_DIR, add_evaluation, pinned_check_metrics
 
     torch.set_num_threads(1)
 
@@ -396,23 +385,19 @@ def measure(name: str, spec: dict, check_only: bool = False) -> None:
             evaluation["crashes"] = int(sum(bool(e["crashed"]) for e in per_episode))
         add_evaluation(name, evaluation)
     duration_s = spec.get("check_duration_s")
-    if duration_s is None:
-        per_episode = enjoy(name, episodes=CHECK_EPISODES)["per_episode"]
-        check = {"episodes": CHECK_EPISODES, "command": f"drivelab enjoy {name} --episodes {CHECK_EPISODES}"}
-    else:
-        per_episode = capped_episodes(ZOO_DIR / name, CHECK_EPISODES, duration_s)
-        check = {
-            "episodes": CHECK_EPISODES,
-            "duration_s": duration_s,
-            "command": (
-                f"the first {CHECK_EPISODES} episodes of `drivelab enjoy {name}`, each cut at {duration_s} s "
-                "(tests/training/test_zoo.py)"
-            ),
-        }
-    check["metrics"] = aggregate(per_episode)
+    check = {"episodes": CHECK_EPISODES, "command": f"drivelab enjoy {name} --episodes {CHECK_EPISODES}"}
+    if duration_s is not None:
+        check["duration_s"] = duration_s
+        check["command"] = (
+            f"the first {CHECK_EPISODES} episodes of `drivelab enjoy {name}`, each cut at {duration_s} s "
+            "(tests/training/test_zoo.py)"
+        )
+    check["isa"] = PINNED_ISA_TEXT
     path = ZOO_DIR / name / "card.json"
     card = json.loads(path.read_text())
-    card["check"] = check
+    card["check"] = check  # what check_metrics plays
+    path.write_text(json.dumps(card, indent=2) + "\n")
+    card["check"]["metrics"] = pinned_check_metrics(name)
     path.write_text(json.dumps(card, indent=2) + "\n")
 
 

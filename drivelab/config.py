@@ -108,11 +108,23 @@ class RunConfig:
 
 FIELDS = {f.name: f for f in dataclasses.fields(RunConfig)}
 MAX_SEED = 2**31 - 1  # plus evaluation offsets and episode numbers, still below numpy's 2**32 limit
+# Budgets no run can reach. Steps: the fastest drivelab's worlds step is about 190 k steps/s (64
+# follow-line worlds, random actions, no agent: benchmarks/results/batch_speed.md), so 10^12 steps
+# take two months of stepping alone, beyond the 10^5 to 10^6 steps of the seeds' runs by a factor of
+# a million. Worlds: 2^16 already make one vector step take a second on that machine, and an
+# SB3 rollout of their shipped 256 steps each 17 M transitions.
+MAXIMA = {
+    "steps": (10**12, "more steps than any machine trains in months (the fastest world steps ~2e5 a second)"),
+    "n_envs": (2**16, "more worlds than one process steps (one vector step of 65,536 worlds takes ~1 s)"),
+    "eval_episodes": (100_000, "more evaluation episodes than any report uses (the leaderboard's: 100)"),
+}
 _TYPES = {"int": int, "str": str, "bool": bool, "dict": dict}
 
 
 def parse_maps(value: str) -> tuple[int, int]:
-    """``"START:COUNT"`` → (start, count): integers, start >= 0, count >= 1."""
+    """``"START:COUNT"`` → (start, count): integers, start >= 0, count >= 1, and every map seed
+    START … START + COUNT − 1 at most ``MAX_SEED``, as a run's seed (a set of 10^14 maps, of which
+    an evaluation plays a handful, is a typing slip, not a map set)."""
     start, colon, count = str(value).partition(":")
     try:
         start_seed, number = int(start), int(count)
@@ -120,6 +132,11 @@ def parse_maps(value: str) -> tuple[int, int]:
         start_seed, number = -1, 0
     if not colon or start_seed < 0 or number < 1:
         raise UsageError(f"eval_maps must be START:COUNT (start >= 0, count >= 1), got {value!r}")
+    if start_seed + number - 1 > MAX_SEED:
+        raise UsageError(
+            f"eval_maps {value!r} names map seeds up to {start_seed + number - 1}: map seeds, as run seeds, "
+            f"are at most {MAX_SEED}"
+        )
     return start_seed, number
 
 
@@ -152,23 +169,36 @@ def _check_type(name: str, value):
         check_env_options(value)
     if name in ("steps", "eval_episodes", "n_envs") and value < 1:
         raise UsageError(f"config field {name!r} must be >= 1, got {value}")
+    if name in MAXIMA and value > MAXIMA[name][0]:
+        limit, why = MAXIMA[name]
+        raise UsageError(f"config field {name!r} must be at most {limit:,}, got {value:,}: {why}")
     if name in ("eval_every", "checkpoint_every") and value < 0:
         raise UsageError(f"config field {name!r} must be >= 0, got {value}")
     return value
 
 
 MAX_NAME_BYTES = 255  # the longest file name of Linux, macOS and Windows file systems
+# Unicode categories a run name may not hold: controls (a newline), formats (right-to-left marks and
+# overrides, zero-width spaces and joiners: a folder that displays as another name), line and
+# paragraph separators, and surrogates (bytes of the command line that were not UTF-8).
+UNSEEN_CATEGORIES = ("Cc", "Cf", "Zl", "Zp", "Cs")
 
 
 def check_run_name(name: str) -> str:
     """``name`` if it is one path component (the run directory inside ``--runs-dir``): not empty,
     not ``.`` or ``..``, without ``/``, ``\\`` or NUL, so a run never lands outside ``--runs-dir``
-    or makes ``--runs-dir`` itself the run; at most ``MAX_NAME_BYTES`` in UTF-8 and without control
-    characters (a newline), so that every file system can hold it and every log line shows it."""
+    or makes ``--runs-dir`` itself the run; at most ``MAX_NAME_BYTES`` in UTF-8 and without
+    characters of ``UNSEEN_CATEGORIES`` (a newline, a right-to-left override, a zero-width space),
+    so that every file system can hold it and every log line and listing shows it as it is."""
     if not name or name in (".", "..") or any(char in name for char in "/\\\0"):
         raise UsageError(f"run name {name!r} must be a single directory name (no '/', not '.' or '..')")
-    if any(unicodedata.category(char) == "Cc" for char in name):
-        raise UsageError(f"run name {name!r} must not contain control characters (a newline, a tab)")
+    hidden = next((char for char in name if unicodedata.category(char) in UNSEEN_CATEGORIES), None)
+    if hidden is not None:
+        raise UsageError(
+            f"run name {name!r} must hold only visible characters, not U+{ord(hidden):04X} "
+            f"({unicodedata.name(hidden, unicodedata.category(hidden))}): a control, format (bidirectional, "
+            "zero-width), line or paragraph separator, or a byte that is not UTF-8"
+        )
     size = len(name.encode("utf-8", errors="surrogatepass"))
     if size > MAX_NAME_BYTES:
         raise UsageError(f"run name {name[:20]!r}... is {size} bytes long (at most {MAX_NAME_BYTES} bytes)")
@@ -184,7 +214,7 @@ def _sensor_dict_to_spec(entry) -> str:
 
 def build_config(values: dict) -> RunConfig:
     """A RunConfig from a dict, rejecting unknown fields and wrong types with a one-line error."""
-    unknown = sorted(set(values) - set(FIELDS))
+    unknown = sorted(set(values) - set(FIELDS), key=str)  # a YAML key may be a number
     if unknown:
         raise UsageError(f"unknown config field {unknown[0]!r} (known: {', '.join(FIELDS)})")
     if "algo" not in values:
@@ -197,7 +227,27 @@ def build_config(values: dict) -> RunConfig:
     config = RunConfig(**{k: _check_type(k, v) for k, v in values.items()})
     if config.eval_maps is not None and config.env in SCENARIOS and not SCENARIOS[config.env].procedural_maps:
         raise UsageError(f"eval_maps is for procedural maps (blocks); {config.env!r} has one road")
+    _check_scenario_options(config)
     return config
+
+
+def _check_scenario_options(config: RunConfig) -> None:
+    """The run's scenario options (``env_options.backend_options``, and the road and traffic keys
+    of a highway-env ``env_options.config``) checked against the scenario's declarations, before
+    anything is written; the env checks them again when it is built."""
+    scenario = SCENARIOS.get(config.env)
+    options = config.env_options.get("backend_options")
+    highway_config = config.env_options.get("config")
+    if scenario is None or (options is not None and not isinstance(options, dict)):
+        return  # an unknown scenario or a malformed mapping is reported when the env is built
+    from drivelab.envs.actions import ACTIONS
+    from drivelab.envs.highway_config import env_kwargs_from_config
+    from drivelab.envs.scenarios.options import check_backend_options
+
+    if isinstance(highway_config, dict):
+        options = {**env_kwargs_from_config(highway_config).get("backend_options", {}), **(options or {})}
+    control = getattr(ACTIONS.get(config.action), "control", "continuous")
+    check_backend_options(scenario, options, config.traffic, control)
 
 
 def check_eval_every(config: RunConfig) -> None:
@@ -209,6 +259,23 @@ def check_eval_every(config: RunConfig) -> None:
         raise UsageError(
             f"config field 'eval_every' ({config.eval_every}) is larger than 'steps' ({config.steps}): "
             f"no periodic evaluation would run; give at most {config.steps}, or 0 for five over the run"
+        )
+
+
+def check_steps(config: RunConfig) -> None:
+    """A UsageError when ``steps`` is fewer than the algorithm trains in one go
+    (``registry.steps_per_update``: a PPO rollout of ``n_steps`` × ``n_envs``): the run would train
+    more steps than its config.yaml says, and evaluate at every step of a schedule made for fewer.
+    Refused rather than raised to the true count, which would change the budget the user wrote
+    (and every schedule derived from it) behind their back. Checked for new runs, as
+    ``check_eval_every``."""
+    from drivelab.agents.registry import steps_per_update
+
+    fewest, what = steps_per_update(config.algo, config.hyperparams, config.n_envs)
+    if config.steps < fewest:
+        raise UsageError(
+            f"config field 'steps' ({config.steps}) is fewer than {config.algo!r} trains at once, {what} = "
+            f"{fewest} steps: give steps >= {fewest}, or fewer worlds (n_envs) or a shorter rollout (n_steps)"
         )
 
 

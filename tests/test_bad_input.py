@@ -49,6 +49,14 @@ def train_args(work: Path, *args: str) -> list[str]:
 
 
 RANDOM_BYTES = bytes(range(256)) * 8  # neither a torch file nor UTF-8 text
+# issue 47: 332 bytes of YAML whose anchors expand to 10^9 sensor names (the 10^8 of the probe took
+# 85 s and 1.2 GB before its error), and brackets nested 20,000 deep (a RecursionError before)
+ALIAS_BOMB = (
+    "algo: ppo\nx0: &a0 [lidar,lidar,lidar,lidar,lidar,lidar,lidar,lidar,lidar,lidar]\n"
+    + "".join(f"x{i}: &a{i} [{','.join([f'*a{i - 1}'] * 10)}]\n" for i in range(1, 9))
+    + "obs: *a8\n"
+).encode()
+DEEP_YAML = b"algo: ppo\nobs: " + b"[" * 20_000 + b"]" * 20_000 + b"\n"
 
 EXPERT_ON_HIGHWAY = "--algo expert --env highway --obs waypoints,affordances --action target_speed".split()
 # (CLI options after `train`, files to create in the working folder, expected part of the message)
@@ -356,6 +364,86 @@ TRAIN_CASES = {
         {"h.yaml": b"algo: ppo\nhyperparams: [gamma]\n"},
         "config field 'hyperparams' must be a mapping, got list",
     ),
+    # issue 47: resource exhaustion and tracebacks before
+    "YAML aliases expanding to 10^9 values": (
+        ["--config", "run.yaml"],
+        {"run.yaml": ALIAS_BOMB},
+        "malformed YAML in 'run.yaml' at line 6: holds more than 100000 values once its aliases are expanded",
+    ),
+    "YAML nested 20,000 deep": (
+        ["--config", "run.yaml"],
+        {"run.yaml": DEEP_YAML},
+        "at line 2: nested more than 64 levels deep",
+    ),
+    "YAML alias inside its own anchor": (
+        ["--config", "run.yaml"],
+        {"run.yaml": b"algo: ppo\nobs: &loop [kinematics, *loop]\n"},
+        "alias *loop is inside the node it names (a recursive structure)",
+    ),
+    "YAML of int and str unknown keys": (  # sorting the unknown keys raised TypeError
+        ["--config", "run.yaml"],
+        {"run.yaml": b"algo: ppo\n1: one\nbogus: two\n"},
+        "at line 2: key '1' is not a string (quote it)",
+    ),
+    "YAML file over 1 MiB": (
+        ["--config", "run.yaml"],
+        {"run.yaml": b"algo: ppo\n" + b"#" * (1 << 20) + b"\n"},
+        "config file 'run.yaml' is larger than 1 MiB",
+    ),
+    # issue 47: nonsense accepted, results written before
+    "ppo rollout of 64 worlds above the steps": (
+        ["--algo", "ppo", "--n-envs", "64"],
+        {},
+        "config field 'steps' (20) is fewer than 'ppo' trains at once, one rollout of n_steps 256 x "
+        "n_envs 64 = 16384 steps: give steps >= 16384, or fewer worlds (n_envs) or a shorter rollout "
+        "(n_steps)",
+    ),
+    "a2c_own rollout above the steps": (
+        ["--algo", "a2c_own", "--action", "continuous", "-H", "n_steps=32"],
+        {},
+        "'steps' (20) is fewer than 'a2c_own' trains at once, one rollout of n_steps 32 x n_envs 1 = 32",
+    ),
+    "lidar range_m=1e-300": (
+        ["--algo", "ppo", "--obs", "lidar:range_m=1e-300"],
+        {},
+        "sensor option 'range_m' of 'lidar' must lie in [1, 1000], got 1e-300",
+    ),
+    "lidar noise_std=1e300": (
+        ["--algo", "ppo", "--obs", "lidar:noise_std=1e300"],
+        {},
+        "sensor option 'noise_std' of 'lidar' must lie in [0, 1], got 1e+300",
+    ),
+    "topdown pixels_per_meter=1e-9": (
+        ["--algo", "ppo", "--obs", "topdown:pixels_per_meter=1e-9"],
+        {},
+        "sensor option 'pixels_per_meter' of 'topdown' must lie in [0.05, 100]",
+    ),
+    "eval-maps of 10^14 maps": (
+        ["--algo", "ppo", "--env", "blocks", "--eval-maps", "0:100000000000000"],
+        {},
+        "eval_maps '0:100000000000000' names map seeds up to 99999999999999: map seeds, as run seeds, are at "
+        "most 2147483647",
+    ),
+    "n-envs 100000": (
+        ["--algo", "ppo", "--n-envs", "100000"],
+        {},
+        "config field 'n_envs' must be at most 65,536, got 100,000",
+    ),
+    "name with a right-to-left override": (
+        ["--algo", "ppo", "--name", "run\u202egpj.exe"],
+        {},
+        "not U+202E (RIGHT-TO-LEFT OVERRIDE): a control, format (bidirectional, zero-width)",
+    ),
+    "name with a zero-width space": (
+        ["--algo", "ppo", "--name", "ppo\u200b-s0"],
+        {},
+        "must hold only visible characters, not U+200B (ZERO WIDTH SPACE)",
+    ),
+    "name with a line separator": (
+        ["--algo", "ppo", "--name", "a\u2028b"],
+        {},
+        "not U+2028 (LINE SEPARATOR)",
+    ),
 }
 
 
@@ -366,6 +454,51 @@ def test_train_refuses(work, case):
         (work / name).write_bytes(content)
     assert_refused(work, train_args(work, *args), message)
     assert not (work / "runs").exists()
+
+
+# (the whole `drivelab train` command after `train`, files, expected part of the message): the step
+# budget, which train_args fixes at 20
+STEPS_CASES = {
+    "--steps 100 --n-envs 64 (16,384 steps trained before)": (
+        ["--algo", "ppo", "--steps", "100", "--n-envs", "64"],
+        {},
+        "config field 'steps' (100) is fewer than 'ppo' trains at once, one rollout of n_steps 256 x "
+        "n_envs 64 = 16384 steps",
+    ),
+    "--steps 10^23": (
+        ["--algo", "ppo", "--steps", str(10**23)],
+        {},
+        "config field 'steps' must be at most 1,000,000,000,000, got 100,000,000,000,000,000,000,000",
+    ),
+    "YAML steps: .inf": (
+        ["--config", "run.yaml"],
+        {"run.yaml": b"algo: ppo\nsteps: .inf\n"},
+        "'steps' must be int",
+    ),
+    "--n-envs 100000 with steps for its rollout": (
+        ["--algo", "ppo", "--n-envs", "100000", "--steps", str(256 * 100_000)],
+        {},
+        "config field 'n_envs' must be at most 65,536",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(STEPS_CASES))
+def test_train_refuses_step_budgets(work, case):
+    args, files, message = STEPS_CASES[case]
+    for name, content in files.items():
+        (work / name).write_bytes(content)
+    assert_refused(work, ["train", *args, "--runs-dir", str(work / "runs")], message)
+    assert not (work / "runs").exists()
+
+
+def test_build_config_names_unknown_keys_of_any_type():
+    """The Python API's dict may mix int and str keys (sorting them raised TypeError)."""
+    from drivelab.config import build_config
+    from drivelab.errors import UsageError
+
+    with pytest.raises(UsageError, match="unknown config field 1 "):
+        build_config({"algo": "ppo", 1: "one", "bogus": 2})
 
 
 @pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has CUDA: device=cuda is valid here")
@@ -415,8 +548,8 @@ def test_runs_dir_denied(work, monkeypatch):
         raise PermissionError(13, "Permission denied", str(self))
 
     monkeypatch.setattr(Path, "mkdir", refuse)
-    assert_refused(
-        work, ["train", "--algo", "ppo", "--runs-dir", "runs", "--steps", "20"], "Permission denied"
+    assert_refused(  # PPO's shipped rollout, 256 steps: the run passes every check but the folder's
+        work, ["train", "--algo", "ppo", "--runs-dir", "runs", "--steps", "256"], "Permission denied"
     )
 
 
@@ -461,6 +594,45 @@ def test_sweep_cells_with_eval_every_above_their_steps_are_refused(work):
     message = "config field 'eval_every' (32) is larger than 'steps' (16)"
     assert_refused(work, ["sweep", "sweep.yaml", "--workers", "1"], message)
     assert_refused(work, ["sweep", "sweep.yaml", "--dry-run"], message)
+
+
+def test_sweep_file_errors_of_issue_47(work):
+    (work / "sweep.yaml").write_text(TINY_SWEEP + "runs_dir: 123\n")
+    assert_refused(
+        work, ["sweep", "sweep.yaml", "--dry-run"], "sweep 'runs_dir' must be a folder path, got 123"
+    )
+    (work / "sweep.yaml").write_text(TINY_SWEEP + "1: one\nbogus: two\n")
+    assert_refused(work, ["sweep", "sweep.yaml", "--dry-run"], "key '1' is not a string")
+
+
+def test_a_ray_head_that_requires_a_token_is_one_error_line(work, monkeypatch):
+    """Ray's AuthenticationError (RAY_AUTH_MODE=token without a token) at ``ray.init``: one line,
+    and whatever the failed start left is shut down."""
+    ray = pytest.importorskip("ray")
+    from ray.exceptions import AuthenticationError
+
+    def refuse(*args, **kwargs):
+        raise AuthenticationError(
+            "Token authentication is enabled but no token was found.\nSet RAY_AUTH_TOKEN"
+        )
+
+    shutdowns = []
+    monkeypatch.setattr(ray, "init", refuse)
+    monkeypatch.setattr(ray, "shutdown", lambda: shutdowns.append(1))
+    (work / "sweep.yaml").write_text(TINY_SWEEP)
+    assert_refused(
+        work,
+        ["sweep", "sweep.yaml", "--executor", "ray", "--workers", "1"],
+        "cannot start a local Ray cluster: Token authentication is enabled but no token was found.",
+    )
+    assert shutdowns
+
+
+def test_ablate_refuses_zero_evaluation_episodes(work):
+    ablate = ["ablate", "--algo", "ppo", "--drop-terms", "right_lane", "--seeds", "1", "--steps", "32"]
+    assert_refused(
+        work, [*ablate, "--eval-episodes", "0"], "--eval-episodes must be >= 1 (the report compares"
+    )
 
 
 def test_zero_workers(work):
@@ -541,6 +713,53 @@ def test_evaluate_read_only_run_directory(work, run_dir, monkeypatch):
         run_dir.chmod(0o755)
 
 
+def _with_member(path: Path, member: str, data: bytes) -> None:
+    """Rewrite the zip ``path`` with ``member`` replaced by ``data`` (deflated)."""
+    import zipfile
+
+    with zipfile.ZipFile(path) as archive:
+        members = {name: archive.read(name) for name in archive.namelist()}
+    with zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as archive:
+        for name, value in {**members, member: data}.items():
+            archive.writestr(name, value)
+
+
+@pytest.mark.parametrize(
+    ("member", "data"),
+    [("parameters.pt", b"\0" * (64 << 20)), ("sb3.json", b" " * (17 << 20))],
+    ids=["parameters.pt", "sb3.json"],
+)
+def test_evaluate_refuses_a_model_member_that_inflates_past_what_the_model_takes(work, run_dir, member, data):
+    """A zip bomb (the probe's: 3.1 MB inflating to 3 GiB, 4.6 GB resident before a MemoryError),
+    here 64 KiB inflating to 64 MiB: refused from the member's declared size, before it is read.
+    The tensor file's bound is the model's own (its fresh weights, four times, plus a MiB)."""
+    _with_member(run_dir / "model.zip", member, data)
+    assert (run_dir / "model.zip").stat().st_size < 1 << 20
+    assert_refused(
+        work, ["evaluate", str(run_dir), "--episodes", "1"], f"{member} declares {len(data)} bytes, more"
+    )
+
+
+def test_a_model_member_whose_header_lies_is_read_no_further(work, run_dir):
+    """The same member with its declared size patched to 1000 bytes: the reader stops there, and
+    the truncated member fails its checksum."""
+    import struct
+    import zipfile
+
+    path = run_dir / "model.zip"
+    _with_member(path, "parameters.pt", b"\0" * (64 << 20))
+    data = bytearray(path.read_bytes())
+    with zipfile.ZipFile(path) as archive:
+        info = archive.getinfo("parameters.pt")
+    data[info.header_offset + 22 : info.header_offset + 26] = struct.pack("<I", 1000)  # local header
+    central = data.index(b"PK\x01\x02")  # the central directory's entries, until this member's
+    while not data[central + 46 :].startswith(b"parameters.pt"):
+        central = data.index(b"PK\x01\x02", central + 4)
+    data[central + 24 : central + 28] = struct.pack("<I", 1000)  # central directory
+    path.write_bytes(bytes(data))
+    assert_refused(work, ["evaluate", str(run_dir), "--episodes", "1"], "Bad CRC-32 for file 'parameters.pt'")
+
+
 @pytest.mark.parametrize(
     "content",
     [RANDOM_BYTES, b"step,mean_return\n20,abc\n", b"hello\nworld\n", b"step,mean_return\n20\n"],
@@ -558,6 +777,52 @@ def test_compare_garbage_eval_json(work, run_dir):
     )
     (run_dir / "eval.json").write_text("[1, 2]")
     assert_refused(work, ["compare", str(run_dir), "-o", "report"], "is not an eval.json")
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ('{"mean_return": NaN}', "metric 'mean_return' is not a finite number: nan"),
+        ('{"mean_return": 1.0, "crash_rate": Infinity}', "metric 'crash_rate' is not a finite number: inf"),
+        (
+            '{"mean_return": 1.0, "success_rate": 1.5}',
+            "metric 'success_rate' is a rate, which lies in [0, 1], not 1.5",
+        ),
+        ('{"mean_return": 1.0, "route_completion": -0.25}', "metric 'route_completion' is a rate"),
+        ('{"mean_return": 1.0, "mean_length": -3}', "metric 'mean_length' cannot be negative: -3"),
+    ],
+)
+def test_compare_refuses_impossible_eval_json_values(work, run_dir, text, message):
+    (run_dir / "eval.json").write_text(text)
+    assert_refused(
+        work, ["compare", str(run_dir), "-o", "report"], f"{str(run_dir / 'eval.json')!r}: {message}"
+    )
+
+
+@pytest.mark.parametrize("value", ["inf", "-inf", "nan"])
+def test_compare_refuses_a_non_finite_evaluation_return(work, run_dir, value):
+    path = run_dir / "evaluations.csv"
+    header, row = path.read_text().splitlines()[:2]
+    columns = header.split(",")
+    cells = row.split(",")
+    cells[columns.index("mean_return")] = value
+    path.write_text(f"{header}\n{','.join(cells)}\n")
+    assert_refused(
+        work,
+        ["compare", str(run_dir), "-o", "report"],
+        "(row 1): 'mean_return' is not a finite number of an evaluation",
+    )
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "field"), [("algo: dqn", "algo: bogus", "algo"), ("env: highway", "env: moon", "env")]
+)
+def test_compare_refuses_a_config_of_unknown_names(work, run_dir, old, new, field):
+    config = run_dir / "config.yaml"
+    config.write_text(config.read_text().replace(old, new))
+    what = "algorithm" if field == "algo" else "scenario"
+    message = f"{str(config)!r}: field {field!r} names no drivelab {what}"
+    assert_refused(work, ["compare", str(run_dir), "-o", "report"], message)
 
 
 def test_compare_into_a_folder_that_is_not_a_report(work, run_dir):
@@ -712,6 +977,17 @@ TUNE_CASES = {
         ["--write-best", "notes.txt"],
         "is not a YAML hyper-parameter file",
     ),
+    "write-best /dev/null": (TUNE_BASE + GAMMA, ["--write-best", "/dev/null"], "is not a regular file"),
+    "write-best of aliases expanding to 10^9 values": (
+        TUNE_BASE + GAMMA,
+        ["--write-best", "bomb.yml"],
+        "--write-best 'bomb.yml' is not a YAML hyper-parameter file",
+    ),
+    "n_steps searched above the steps": (
+        TUNE_BASE + "space: {n_steps: {type: int, low: 16, high: 128}}\n",
+        [],
+        "config field 'steps' (64) is fewer than 'ppo' trains at once, one rollout of n_steps 128 x n_envs 1",
+    ),
 }
 
 
@@ -720,6 +996,7 @@ def test_tune_refuses(work, case):
     text, options, message = TUNE_CASES[case]
     (work / "study.yaml").write_text(text)
     (work / "notes.txt").write_text("a: [b\n")
+    (work / "bomb.yml").write_bytes(ALIAS_BOMB)
     assert_refused(work, ["tune", "study.yaml", "--study-dir", "study", "--workers", "1", *options], message)
     assert not (work / "study").exists()
 

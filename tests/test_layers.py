@@ -41,8 +41,13 @@ class Layer:
 LAYERS = (
     # world/: WorldBatch, WorldState, RoadMap, geometry; plus the modules that import nothing of
     # drivelab (errors, the YAML loader that perception's sensor specs and the run config share,
-    # numba's cache folder that the package sets before any kernel is compiled)
-    Layer("base", 0, ("drivelab.errors", "drivelab.world", "drivelab.yaml_io", "drivelab._numba_cache")),
+    # numba's cache folder that the package sets before any kernel is compiled, the pinned
+    # instruction set that recorded numbers are computed under)
+    Layer(
+        "base",
+        0,
+        ("drivelab.errors", "drivelab.world", "drivelab.yaml_io", "drivelab._numba_cache", "drivelab.isa"),
+    ),
     # the simulators (compiled core and the highway-env reference) and route tracking
     Layer("sim", 1, ("drivelab.envs.backends", "drivelab.envs.route")),
     # scenario definitions: the presets, the town's road and traffic, the circuits. circuits.py is

@@ -45,9 +45,11 @@ from drivelab.agents.registry import algo_of
 from drivelab.agents.storage import (
     check_spaces,
     read_arrays,
+    read_member,
     read_zip,
     space_from_json,
     space_to_json,
+    state_limit,
     tensors_from_bytes,
     tensors_to_bytes,
     write_arrays,
@@ -244,19 +246,21 @@ class OwnAgent:
         and ``seed`` (the run's config, optional) must be those it was saved with."""
         meta, archive = read_zip(path, "agent.json")
         with archive:
-            # CPU first: an agent saved on a GPU loads anywhere; ``_set_state`` copies onto its device
-            state = tensors_from_bytes(archive.read("state.pt"))
-        if meta.get("format") != FORMAT or meta.get("algo") != cls.algo:
-            raise ValueError(f"the file holds a {meta.get('algo')!r} agent, not {cls.algo!r}")
-        if hyperparams is not None and json.loads(json.dumps(dict(hyperparams))) != meta["hyperparams"]:
-            raise ValueError("the model was saved with other hyperparameters than the run's config")
-        if seed is not None and int(seed) != meta["seed"]:
-            raise ValueError("the model was saved with another seed than the run's config")
-        if env is not None:
-            check_spaces(meta, env.observation_space, env.action_space)
-        observation_space = space_from_json(meta["observation_space"])
-        action_space = space_from_json(meta["action_space"])
-        agent = cls(observation_space, action_space, meta["seed"], meta["hyperparams"], env)
+            if meta.get("format") != FORMAT or meta.get("algo") != cls.algo:
+                raise ValueError(f"the file holds a {meta.get('algo')!r} agent, not {cls.algo!r}")
+            if hyperparams is not None and json.loads(json.dumps(dict(hyperparams))) != meta["hyperparams"]:
+                raise ValueError("the model was saved with other hyperparameters than the run's config")
+            if seed is not None and int(seed) != meta["seed"]:
+                raise ValueError("the model was saved with another seed than the run's config")
+            if env is not None:
+                check_spaces(meta, env.observation_space, env.action_space)
+            observation_space = space_from_json(meta["observation_space"])
+            action_space = space_from_json(meta["action_space"])
+            agent = cls(observation_space, action_space, meta["seed"], meta["hyperparams"], env)
+            # CPU first: an agent saved on a GPU loads anywhere; ``_set_state`` copies onto its
+            # device. The fresh agent's size bounds the file's: a crafted one cannot inflate past it.
+            limit = state_limit(agent._state())
+            state = tensors_from_bytes(read_member(archive, "state.pt", limit))
         agent.num_timesteps = int(meta["num_timesteps"])
         agent.rng.bit_generator.state = meta["rng"]
         agent.generator.set_state(state.pop("generator"))

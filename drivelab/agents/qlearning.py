@@ -24,7 +24,7 @@ from gymnasium import spaces
 from stable_baselines3.common.logger import Logger
 
 from drivelab.agents.base import parse_hyperparams
-from drivelab.agents.storage import read_arrays
+from drivelab.agents.storage import MAX_META_BYTES, STATE_OVERHEAD_BYTES, read_arrays, read_member
 from drivelab.agents.worlds import Worlds
 from drivelab.errors import UsageError
 
@@ -74,6 +74,11 @@ def observation_error(space: spaces.Space) -> str | None:
         "needs a discrete observation (--obs line on follow-line, lane on follow-lane, or ttc_grid), "
         f"got {type(space).__name__}{getattr(space, 'shape', '')}"
     )
+
+
+# The largest Q-table a discrete sensor and action give: the line state at its most strips (41^4
+# states, perception/sensors.py's SIZE_LIMITS) by the 18 grid actions.
+MAX_TABLE_CELLS = 41**4 * 18
 
 
 def _discrete_size(space: spaces.Space, what: str) -> int:
@@ -239,11 +244,22 @@ class QLearning:
         """An agent saved by ``save``; training continues exactly (same ε, counters, generator).
         Only JSON and numeric arrays are read: an object array (a pickle) is refused."""
         with zipfile.ZipFile(path) as archive:
-            state = json.loads(archive.read("state.json"))
-            if state.get("format") != FORMAT:
+            state = json.loads(read_member(archive, "state.json", MAX_META_BYTES))
+            if not isinstance(state, dict) or state.get("format") != FORMAT:
                 raise ValueError(f"{path} is not a drivelab Q-learning model")
-            q_table = np.load(io.BytesIO(archive.read("q_table.npy")), allow_pickle=False)
-            episodes = read_arrays(archive.read("episodes.npz"))
+            # bounded by what the table and the episode log can be (8-byte numbers; every episode
+            # at least one step), plus a header and a MiB of zip structure
+            if env is None:
+                cells = MAX_TABLE_CELLS
+            else:
+                cells = _discrete_size(env.observation_space, "observation") * _discrete_size(
+                    env.action_space, "action"
+                )
+            table = read_member(archive, "q_table.npy", 8 * cells + STATE_OVERHEAD_BYTES)
+            q_table = np.load(io.BytesIO(table), allow_pickle=False)
+            steps = state.get("num_timesteps")
+            log_limit = 16 * (steps if isinstance(steps, int) and steps >= 0 else 0) + STATE_OVERHEAD_BYTES
+            episodes = read_arrays(read_member(archive, "episodes.npz", log_limit))
         known = {f.name for f in fields(QLearningConfig)}
         config = QLearningConfig(**{k: v for k, v in state["config"].items() if k in known})
         agent = cls(None, state["seed"], config, n_states=q_table.shape[0], n_actions=q_table.shape[1],

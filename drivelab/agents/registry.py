@@ -45,6 +45,8 @@ class AlgoSpec:
     :param multi_env: it trains on a vector env of several worlds (``n_envs`` > 1).
     :param observation_check: entry point of a function: observation space → why the agent cannot
         read it (None: it can), for agents that need particular sensors.
+    :param on_policy: it collects a whole rollout, ``n_steps`` from each world, before it looks at
+        the step budget again (``steps_per_update``).
     """
 
     name: str
@@ -56,6 +58,7 @@ class AlgoSpec:
     observation_kinds: tuple[str, ...] = ("vector", "image", "image+vector", "other")
     multi_env: bool = False
     observation_check: str | None = None
+    on_policy: bool = False
 
     def agent_class(self) -> type:
         """The class of its agents (importing its module)."""
@@ -97,18 +100,20 @@ ALGORITHMS: dict[str, AlgoSpec] = {
         AlgoSpec("dqn", "stable-baselines3 DQN", _DISCRETE, "drivelab.agents.sb3:DrivelabDQN", "sb3",
                  sb3_replay=True, multi_env=True),
         AlgoSpec("ppo", "stable-baselines3 PPO", _DISCRETE + _CONTINUOUS, "drivelab.agents.sb3:DrivelabPPO",
-                 "sb3", multi_env=True),
+                 "sb3", multi_env=True, on_policy=True),
         AlgoSpec("a2c", "stable-baselines3 A2C", _DISCRETE + _CONTINUOUS, "drivelab.agents.sb3:DrivelabA2C",
-                 "sb3", multi_env=True),
+                 "sb3", multi_env=True, on_policy=True),
         AlgoSpec("sac", "stable-baselines3 SAC", _CONTINUOUS, "drivelab.agents.sb3:DrivelabSAC", "sb3",
                  sb3_replay=True, multi_env=True),
         AlgoSpec("dueling_ddqn", "drivelab's Dueling Double DQN, prioritised replay (seed 003)", _DISCRETE,
                  "drivelab.agents.dueling_ddqn:DuelingDoubleDQN", "own", sb3_replay=True,
                  observation_kinds=("vector",), multi_env=True),
         AlgoSpec("a2c_own", "drivelab's A2C, tanh-Gaussian, seed 003's CNN / fusion network", ("continuous",),
-                 "drivelab.agents.a2c:OwnA2C", "own", observation_kinds=_READABLE, multi_env=True),
+                 "drivelab.agents.a2c:OwnA2C", "own", observation_kinds=_READABLE, multi_env=True,
+                 on_policy=True),
         AlgoSpec("ppo_own", "drivelab's PPO, tanh-Gaussian, seed 003's CNN / fusion network", ("continuous",),
-                 "drivelab.agents.ppo:OwnPPO", "own", observation_kinds=_READABLE, multi_env=True),
+                 "drivelab.agents.ppo:OwnPPO", "own", observation_kinds=_READABLE, multi_env=True,
+                 on_policy=True),
         AlgoSpec("rlad", "drivelab's RLAD: SAC from pixels, A-LIX, DrQ shifts, WayConv1D, traffic-light loss "
                  "(seed 000)", _CONTINUOUS, "drivelab.agents.rlad.sac:RLAD", "own", sb3_replay=True,
                  observation_check=_RLAD_CHECK),
@@ -177,3 +182,23 @@ def check_combination(algo: str, action: str, observation_space=None) -> AlgoSpe
         if problem is not None:
             raise UsageError(f"algorithm {algo!r} {problem}")
     return spec
+
+
+def steps_per_update(algo: str, hyperparams: dict, n_envs: int) -> tuple[int, str]:
+    """(the fewest environment steps a run of ``algo`` in ``n_envs`` worlds takes, what they are).
+
+    An on-policy algorithm collects a whole rollout, ``n_steps`` from every world, before it looks
+    at the budget: SB3's ``learn(total_timesteps)`` (and RL Zoo's ``n_timesteps``) is a lower bound
+    that ends at the end of a rollout, so a smaller budget trains a whole rollout all the same. The
+    others step every world at once: ``n_envs`` steps."""
+    spec = get_algo(algo)
+    if not spec.on_policy:
+        return n_envs, f"one step of each of its {n_envs} worlds"
+    if spec.family == "sb3":
+        from drivelab.agents.sb3_params import _given_or_default
+
+        n_steps = _given_or_default(algo, hyperparams, "n_steps")
+    else:
+        n_steps = hyperparams.get("n_steps", spec.agent_class().config_class.n_steps)
+    n_steps = int(n_steps)
+    return n_steps * n_envs, f"one rollout of n_steps {n_steps} x n_envs {n_envs}"

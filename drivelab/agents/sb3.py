@@ -34,9 +34,11 @@ from drivelab.agents.sb3_params import check_sb3_hyperparams, check_sb3_memory
 from drivelab.agents.storage import (
     check_spaces,
     read_arrays,
+    read_member,
     read_zip,
     space_to_json,
     split_meta,
+    state_limit,
     tensors_from_bytes,
     tensors_to_bytes,
     write_arrays,
@@ -200,18 +202,20 @@ def load_sb3(algo: str, path: Path, env: gym.Env | None, hyperparams: dict | Non
     file's own when None, and they must agree), then its parameters and counters restored."""
     meta, archive = read_zip(path, "sb3.json")
     with archive:
-        parameters = tensors_from_bytes(archive.read("parameters.pt"))
-    if meta.get("format") != FORMAT or meta.get("algo") != algo:
-        raise ValueError(f"the file holds a {meta.get('algo')!r} model, not {algo!r}")
-    counters = check_counters(meta["counters"])  # set as attributes: only counters, each of its kind
-    hyperparams = meta["hyperparams"] if hyperparams is None else json.loads(json.dumps(dict(hyperparams)))
-    seed = meta["seed"] if seed is None else int(seed)
-    if (hyperparams, seed) != (meta["hyperparams"], meta["seed"]):
-        raise ValueError("the model was saved with other hyperparameters or seed than the run's config")
-    if env is None:
-        raise ValueError("an SB3 model is rebuilt on its environment: give one")
-    check_spaces(meta, env.observation_space, env.action_space)
-    model = build_sb3(algo, env, seed, hyperparams, None)
+        if meta.get("format") != FORMAT or meta.get("algo") != algo:
+            raise ValueError(f"the file holds a {meta.get('algo')!r} model, not {algo!r}")
+        counters = check_counters(meta["counters"])  # set as attributes: only counters, each of its kind
+        given = meta["hyperparams"] if hyperparams is None else json.loads(json.dumps(dict(hyperparams)))
+        seed = meta["seed"] if seed is None else int(seed)
+        if (given, seed) != (meta["hyperparams"], meta["seed"]):
+            raise ValueError("the model was saved with other hyperparameters or seed than the run's config")
+        if env is None:
+            raise ValueError("an SB3 model is rebuilt on its environment: give one")
+        check_spaces(meta, env.observation_space, env.action_space)
+        model = build_sb3(algo, env, seed, given, None)
+        # the model's own size bounds the file's: a crafted one cannot inflate past it
+        limit = state_limit(model.get_parameters())
+        parameters = tensors_from_bytes(read_member(archive, "parameters.pt", limit))
     model.set_parameters(parameters["state_dicts"], exact_match=True, device=get_device(model.device))
     for name, value in parameters["variables"].items():
         _attribute(model, name).data.copy_(value)

@@ -99,8 +99,20 @@ def arrays_to_bytes(arrays: dict[str, np.ndarray]) -> bytes:
 
 
 def read_arrays(source: str | Path | bytes) -> dict[str, np.ndarray]:
-    """Every array of an ``.npz`` file or its bytes; object arrays are refused (ValueError)."""
+    """Every array of an ``.npz`` file or its bytes; object arrays are refused (ValueError), and so
+    are compressed members: drivelab writes its arrays uncompressed (``np.savez``), so that none
+    reads larger than the file, where a compressed one could inflate to gigabytes."""
     handle = io.BytesIO(source) if isinstance(source, bytes) else source
+    try:
+        with zipfile.ZipFile(handle) as members:
+            infos = members.infolist()
+    except zipfile.BadZipFile:
+        raise ValueError("not an .npz file of arrays (truncated or corrupted)") from None
+    packed = next((info.filename for info in infos if info.compress_type != zipfile.ZIP_STORED), None)
+    if packed is not None:
+        raise ValueError(f"array {packed!r} is compressed: not an array file drivelab wrote")
+    if isinstance(handle, io.BytesIO):
+        handle.seek(0)
     with np.load(handle, allow_pickle=False) as archive:
         return {key: archive[key] for key in archive.files}
 
@@ -199,9 +211,55 @@ def check_spaces(saved: dict, observation_space: spaces.Space, action_space: spa
 
 
 # --- zips --------------------------------------------------------------------------------------
+# A model zip's members are read whole, so each is bounded before it is inflated: a few MB of zip can
+# declare, or inflate to, gigabytes. The JSON metadata holds hyper-parameters, counters and the last
+# 100 episodes' returns: kilobytes. A tensor file holds the networks (target networks included) and
+# their optimizers' moments, at most three more copies of the weights (Adam keeps two, RMSprop with
+# momentum and centring three), plus the torch file's own structure, generator states and counters.
+MAX_META_BYTES = 16 << 20
+STATE_COPIES = 4
+STATE_OVERHEAD_BYTES = 1 << 20
+
+
+def tensor_bytes(state: Any) -> int:
+    """Bytes of the tensors in nested dicts/lists ``state`` (a state dict, an optimizer's state)."""
+    if isinstance(state, torch.Tensor):
+        return state.numel() * state.element_size()
+    if isinstance(state, dict):
+        return sum(tensor_bytes(value) for value in state.values())
+    if isinstance(state, (list, tuple)):
+        return sum(tensor_bytes(value) for value in state)
+    return 0
+
+
+def state_limit(weights: Any) -> int:
+    """The most bytes a saved state of a model with these fresh tensors (``weights``: its state
+    dicts, optimizers without moments yet) can take, trained to any step."""
+    return STATE_COPIES * tensor_bytes(weights) + STATE_OVERHEAD_BYTES
+
+
+def read_member(archive: zipfile.ZipFile, name: str, limit: int) -> bytes:
+    """The bytes of member ``name``, at most ``limit``: a ValueError when its header declares more
+    or, the header lying, it inflates to more (read no further than ``limit`` + 1 bytes)."""
+    try:
+        info = archive.getinfo(name)
+    except KeyError:
+        raise ValueError(f"the model zip has no {name}") from None
+    if info.file_size > limit:
+        raise ValueError(
+            f"{name} declares {info.file_size} bytes, more than a model of this config takes ({limit})"
+        )
+    with archive.open(info) as handle:
+        data = handle.read(limit + 1)
+    if len(data) > limit:
+        raise ValueError(f"{name} inflates to more bytes than a model of this config takes ({limit})")
+    return data
+
+
 def read_zip(path: str | Path, meta_name: str) -> tuple[dict, zipfile.ZipFile]:
     """(JSON metadata ``meta_name``, open archive) of a model zip; an old pickled zip raises
-    ``OldFormatError`` before anything inside it is read."""
+    ``OldFormatError`` before anything inside it is read, metadata over ``MAX_META_BYTES`` a
+    ValueError."""
     archive = zipfile.ZipFile(path)
     names = set(archive.namelist())
     if names & set(PICKLED_MEMBERS) or meta_name not in names:
@@ -209,7 +267,15 @@ def read_zip(path: str | Path, meta_name: str) -> tuple[dict, zipfile.ZipFile]:
         if names & set(PICKLED_MEMBERS):
             raise OldFormatError(path)
         raise ValueError(f"{str(path)!r} has no {meta_name}")
-    return json.loads(archive.read(meta_name)), archive
+    try:
+        meta = json.loads(read_member(archive, meta_name, MAX_META_BYTES))
+    except BaseException:
+        archive.close()
+        raise
+    if not isinstance(meta, dict):
+        archive.close()
+        raise ValueError(f"{meta_name} is not a mapping")
+    return meta, archive
 
 
 def is_old_format(path: str | Path) -> bool:

@@ -21,12 +21,24 @@ from drivelab.world.state import WorldState
 
 
 def _indices(actions, size: int) -> np.ndarray:
-    """(K,) integer actions of a Discrete(size) space, checked."""
-    indices = np.asarray(actions).reshape(-1).astype(np.int64)
+    """(K,) integer actions of a Discrete(size) space, checked: integers (as gymnasium's
+    ``Discrete.contains`` takes them, and a bool not, which is a flag, not an index) in [0, size)."""
+    values = np.asarray(actions).reshape(-1)
+    if values.dtype.kind not in "iu":  # 2.7 would truncate to 2, True to 1, nan to a huge index
+        raise ValueError(
+            f"action {values[0].item()!r} of Discrete({size}) is not an integer ({values.dtype} actions)"
+        )
+    indices = values.astype(np.int64, copy=False)
     wrong = (indices < 0) | (indices >= size)
     if wrong.any():
         raise ValueError(f"action {int(indices[wrong][0])} is outside Discrete({size})")
     return indices
+
+
+def _non_finite(rows: np.ndarray) -> ValueError:
+    """The error for continuous actions (K, 2) of which one is NaN or infinite."""
+    row = rows[~np.isfinite(rows).all(axis=1)][0]
+    return ValueError(f"continuous action {row.tolist()} is not finite (NaN or infinite)")
 
 
 class ActionAdapter:
@@ -142,7 +154,8 @@ class ContinuousAction(ActionAdapter):
     def to_controls(self, actions) -> np.ndarray:
         rows = np.asarray(actions, dtype=np.float32).reshape(-1, 2)
         controls = np.empty_like(rows)
-        _clipped_swapped(rows, controls)
+        if not _clipped_swapped(rows, controls):
+            raise _non_finite(rows)
         return controls
 
     def describe(self) -> str:
@@ -150,17 +163,32 @@ class ContinuousAction(ActionAdapter):
 
 
 @njit(cache=True)
-def _clipped_swapped(rows, out) -> None:
-    """``[steering, acceleration]`` rows (K, 2) clipped to [-1, 1] (nan kept, as np.clip keeps
-    it) and swapped into ``out`` as ``[acceleration, steering]``, highway-env's order."""
+def _clipped_swapped(rows, out) -> bool:
+    """``[steering, acceleration]`` rows (K, 2) clipped to [-1, 1] and swapped into ``out`` as
+    ``[acceleration, steering]``, highway-env's order; False when a value is NaN or infinite (an
+    infinity would clip to a valid control, hiding a broken policy), checked in the same pass."""
+    finite = True
     for k in range(rows.shape[0]):
         for column in range(2):
             value = rows[k, column]
+            finite &= np.isfinite(value)
             if value < -1.0:
                 value = -1.0
             elif value > 1.0:
                 value = 1.0
             out[k, 1 - column] = value
+    return finite
+
+
+@njit(cache=True)
+def _all_finite(rows) -> bool:
+    """Whether no value of ``rows`` (K, 2) is NaN or infinite (a third of np.isfinite(...).all()'s
+    cost per step, which is mostly its Python wrappers)."""
+    for k in range(rows.shape[0]):
+        for column in range(rows.shape[1]):
+            if not np.isfinite(rows[k, column]):
+                return False
+    return True
 
 
 class TargetSpeedAction(ActionAdapter):
@@ -204,7 +232,10 @@ class TargetSpeedAction(ActionAdapter):
         return np.clip(self.kp * error + self.ki * self.integral + self.kd * derivative, -1.0, 1.0)
 
     def controls_for(self, actions, batch: WorldBatch) -> np.ndarray:
-        rows = np.clip(np.asarray(actions, dtype=np.float32).reshape(-1, 2), [0.0, -1.0], 1.0)
+        rows = np.asarray(actions, dtype=np.float32).reshape(-1, 2)
+        if not _all_finite(rows):
+            raise _non_finite(rows)
+        rows = np.clip(rows, [0.0, -1.0], 1.0)
         accel = self.pid(rows[:, 0].astype(float) * self.max_speed_mps, batch.ego.speed_mps, batch.dt_s)
         return np.stack([accel, rows[:, 1]], axis=1).astype(np.float32)  # highway-env's order
 

@@ -18,6 +18,7 @@ from drivelab.envs.vector import (  # noqa: F401  (re-exported: the options of D
     _world_info,
     autoreset_mode_of,
     check_env_options,
+    check_reset_options,
     env_option_names,
 )
 from drivelab.world.state import WorldState
@@ -44,7 +45,9 @@ class DriveEnv(gym.Env):
         the route's NoCrash limit; a given duration caps it).
     :param offroad_terminal: end the episode when the ego leaves the road.
     :param action_options: keyword options of the action adapter (e.g. ``steer_levels``).
-    :param backend_options: extra highway-env config keys.
+    :param backend_options: the scenario's options (``Scenario.options``: road, traffic and
+        timing keys, highway-env's names); an unknown key, a bad value or a contradiction is a
+        UsageError.
     :param config: a highway-env config dict, as highway-env's users write it
         (``envs/highway_config.py``); the keyword arguments given beside it win.
     """
@@ -90,6 +93,7 @@ class DriveEnv(gym.Env):
         self.metadata = {**self.metadata, "render_fps": vector.metadata["render_fps"]}
         self.action_space = vector.single_action_space
         self.observation_space = vector.single_observation_space
+        self.episode_over = False  # the last step ended the episode: reset before the next step
         if seed is not None:
             self.reset(seed=seed)
 
@@ -113,28 +117,43 @@ class DriveEnv(gym.Env):
         return float(self.vector.rules.time_limit_s[0])
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Start an episode. ``options={"episode_seed": s}`` plays episode ``s`` (an integer in
+        [0, 2**63)) instead of the next one drawn from ``np_random``."""
+        check_reset_options(options)
         super().reset(seed=seed)
         self.vector.world_rngs[0] = self.np_random  # the episode seed is drawn from np_random
         if options and options.get("episode_seed") is not None:  # this episode, not the next drawn
             options = {**options, "episode_seeds": [options["episode_seed"]]}
         observations, infos = self.vector.reset(options=options)
+        self.episode_over = False
         return _first(observations), _world_info(infos, 0)
 
     def step(self, action: Any):
+        """One step of the episode. After one that returned ``terminated`` or ``truncated`` the
+        episode is over and ``reset`` must come first (gymnasium's contract: stepping on would be
+        undefined): ``gymnasium.error.ResetNeeded``, as ``OrderEnforcing`` raises before the first
+        reset. VectorDriveEnv resets its finished worlds itself (autoreset)."""
         vector = self.vector
         if not vector.started:
             raise RuntimeError("call reset() before step()")
+        if self.episode_over:
+            raise gym.error.ResetNeeded(
+                "the episode is over (terminated or truncated): call reset() before step()"
+            )
         if vector._fused is not None and vector._fused.ready():  # the circuits: one compiled call
-            return vector.step_one(action)
-        observations, rewards, terminated, truncated, infos = self.vector.step(np.asarray(action)[None])
-        self.vector.pending_reset[:] = False  # one world: the caller resets it
-        return (
-            _first(observations),
-            float(rewards[0]),
-            bool(terminated[0]),
-            bool(truncated[0]),
-            _world_info(infos, 0),
-        )
+            result = vector.step_one(action)
+        else:
+            observations, rewards, terminated, truncated, infos = vector.step(np.asarray(action)[None])
+            vector.pending_reset[:] = False  # one world: the caller resets it
+            result = (
+                _first(observations),
+                float(rewards[0]),
+                bool(terminated[0]),
+                bool(truncated[0]),
+                _world_info(infos, 0),
+            )
+        self.episode_over = result[2] or result[3]
+        return result
 
     def traffic_light_label(self) -> str:
         """ "none", "green" or "red_or_yellow": the light ahead within 18 m (RLAD's auxiliary label)."""

@@ -29,6 +29,7 @@ from drivelab.envs.highway_config import env_kwargs_from_config
 from drivelab.envs.metrics import EpisodeMetrics
 from drivelab.envs.rules import EpisodeRules
 from drivelab.envs.scenarios import check_traffic, get_scenario
+from drivelab.envs.scenarios.options import check_backend_options
 from drivelab.errors import UsageError
 from drivelab.perception.birdeye import render_birdeye
 from drivelab.perception.sensors import check_sensors_for, make_sensor, split_sensor_list
@@ -121,7 +122,9 @@ class VectorDriveEnv(VectorEnv):
         the route's NoCrash limit; a given duration caps it).
     :param offroad_terminal: end the episode when the ego leaves the road.
     :param action_options: keyword options of the action adapter (e.g. ``steer_levels``).
-    :param backend_options: extra highway-env config keys.
+    :param backend_options: the scenario's options (``Scenario.options``: road, traffic and
+        timing keys, highway-env's names); an unknown key, a bad value or a contradiction is a
+        UsageError.
     :param render_mode: "rgb_array" for ``render()``.
     :param autoreset_mode: gymnasium's ``AutoresetMode`` (or its value): NEXT_STEP (default) or
         SAME_STEP.
@@ -176,6 +179,7 @@ class VectorDriveEnv(VectorEnv):
                 f"scenario {scenario!r} cannot take action {self.adapter.name!r} "
                 f"(it takes {', '.join(self.scenario.action_kinds)})"
             )
+        check_backend_options(self.scenario, backend_options, traffic, self.adapter.control)
         self.sensors = [make_sensor(spec) for spec in split_sensor_list(obs)]
         names = [s.name for s in self.sensors]
         if len(set(names)) != len(names):
@@ -312,6 +316,7 @@ class VectorDriveEnv(VectorEnv):
         (e.g. :func:`evaluation_seeds`) instead of drawing the next ones from the worlds'
         generators, which it leaves as they are. Infos: ``episode_seed`` and ``traffic_light``
         per world."""
+        check_reset_options(options)
         self._seed_worlds(seed)
         mask = np.ones(self.num_envs, dtype=bool)
         if options and options.get("reset_mask") is not None and self.batch is not None:
@@ -637,11 +642,31 @@ def _world_info(infos: dict, k: int) -> dict:
     return info
 
 
+def check_reset_options(options) -> None:
+    """A TypeError naming what ``reset``'s ``options`` must be (gymnasium's: a dict or None)."""
+    if options is not None and not isinstance(options, dict):
+        raise TypeError(
+            f"reset options must be a dict (e.g. {{'episode_seed': 3}}) or None, "
+            f"got {type(options).__name__} {options!r}"
+        )
+
+
 def _episode_seeds(options: dict | None, count: int) -> np.ndarray | None:
-    """``options["episode_seeds"]`` as (K,) int64, checked; None when not given."""
+    """``options["episode_seeds"]`` as (K,) int64, checked; None when not given. Each must lie in
+    [0, 2**63): an episode seed is an int64 (the simulators' and the infos' arrays), so a wider one
+    would wrap to a negative number, another episode than the one asked for."""
     if not options or options.get("episode_seeds") is None:
         return None
     seeds = np.asarray(options["episode_seeds"])
-    if seeds.shape != (count,) or not np.issubdtype(seeds.dtype, np.integer) or (seeds < 0).any():
-        raise UsageError(f"episode_seeds must be {count} integers >= 0, got {options['episode_seeds']!r}")
+    integers = np.issubdtype(seeds.dtype, np.integer)
+    if (
+        seeds.shape != (count,)
+        or not integers
+        or (seeds < 0).any()
+        or (seeds.dtype.kind == "u" and (seeds > np.iinfo(np.int64).max).any())
+    ):
+        raise UsageError(
+            f"episode seeds must be integers in [0, 2**63), one per world ({count}), "
+            f"got {options['episode_seeds']!r}"
+        )
     return seeds.astype(np.int64)

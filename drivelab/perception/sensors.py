@@ -52,6 +52,24 @@ SIZE_LIMITS = {
     "line": {"strips": 40, "kernel_px": 120},
 }
 
+# The range of each real-valued option, closed: a distance of 1e-300 m or a noise of 1e300 builds a
+# sensor whose every observation is the same (or NaN), and a training run on it learns nothing.
+# Distances from a metre (the length of a bumper) to a kilometre (beyond any road sensor's reach:
+# automotive lidars and cameras see 100-300 m); scales in pixels per metre from a 1.7 km wide 84-pixel
+# image to centimetre pixels; lidar noise in its normalised distances, which are clipped to [0, 1]
+# (a standard deviation of 1 is all noise).
+VALUE_RANGES = {
+    "kinematics": {"perception_distance_m": (1.0, 1000.0), "speed_scale_mps": (1.0, 1000.0)},
+    "lidar": {"range_m": (1.0, 1000.0), "noise_std": (0.0, 1.0)},
+    "topdown": {"pixels_per_meter": (0.05, 100.0)},
+    "birdeye": {"pixels_per_meter": (0.05, 100.0)},
+    "ego_state": {"range_m": (1.0, 1000.0)},
+    "waypoints": {"spacing_m": (0.1, 100.0)},
+    # fov_deg and pitch_deg: the pinhole model's own ranges (world/pinhole.py)
+    "camera": {"height_m": (0.1, 100.0), "forward_m": (-100.0, 100.0), "max_range_m": (1.0, 1000.0)},
+    "affordances": {"range_m": (1.0, 1000.0)},
+}
+
 
 class FrameStack(Sensor):
     """The last ``frames`` observations of ``sensor`` concatenated along its channel axis; the
@@ -147,7 +165,8 @@ def _typed_option(sensor: str, key: str, value, default):
 
 def check_sensor_options(name: str, options: dict) -> tuple[int, dict]:
     """(stack, the sensor's keyword options) with every value of the type the sensor declares;
-    an unknown option, a wrong type, a size over ``SIZE_LIMITS`` or ``stack`` < 1 is a UsageError."""
+    an unknown option, a wrong type, a size over ``SIZE_LIMITS``, a value outside ``VALUE_RANGES``
+    or ``stack`` < 1 is a UsageError."""
     defaults = {
         key: parameter.default
         for key, parameter in inspect.signature(SENSORS[name].__init__).parameters.items()
@@ -162,6 +181,11 @@ def check_sensor_options(name: str, options: dict) -> tuple[int, dict]:
     for key, limit in SIZE_LIMITS.get(name, {}).items():
         if key in checked and checked[key] > limit:
             raise UsageError(f"sensor option {key!r} of {name!r} must be <= {limit}, got {checked[key]}")
+    for key, (low, high) in VALUE_RANGES.get(name, {}).items():
+        if key in checked and not low <= checked[key] <= high:
+            raise UsageError(
+                f"sensor option {key!r} of {name!r} must lie in [{low:g}, {high:g}], got {checked[key]!r}"
+            )
     stack = checked.pop("stack", 1)
     if stack < 1:
         raise UsageError(f"sensor option 'stack' of {name!r} must be >= 1, got {stack}")

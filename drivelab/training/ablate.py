@@ -66,6 +66,10 @@ def ablation_spec(
     """
     if seeds < 1:
         raise UsageError(f"--seeds must be >= 1, got {seeds}")
+    if eval_episodes < 1:  # a sweep's 0 skips the final evaluation, which is what the report compares
+        raise UsageError(
+            f"--eval-episodes must be >= 1 (the report compares the final evaluations), got {eval_episodes}"
+        )
     return {
         "name": "ablate",
         "base": {**(base or {}), "algo": algo, "env": env, "steps": steps},

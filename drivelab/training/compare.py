@@ -127,14 +127,28 @@ def _float_or_none(value) -> float | None:
     return float(value)
 
 
+RATES = ("success_rate", "crash_rate", "route_completion")  # fractions of episodes or of a route
+SIGNED = ("mean_return", "mean_speed_mps")  # any finite value; the other metrics count or measure, >= 0
+
+
 def _final_metrics(values: dict, path: Path) -> dict:
-    """The ``METRICS`` of ``values`` (a row or eval.json) as floats or None, or a UsageError."""
+    """The ``METRICS`` of ``values`` (a row or eval.json) as floats or None, or a UsageError naming
+    the file and the metric: text, NaN or an infinity (JSON's ``NaN``, ``Infinity``), a rate outside
+    [0, 1] or a negative count, none of which an evaluation writes."""
     final = {}
     for key in METRICS:
+        given = values.get(key)
         try:
-            final[key] = _float_or_none(values.get(key))
+            value = _float_or_none(given)
         except ValueError:
-            raise UsageError(f"{str(path)!r}: metric {key!r} is not a number: {values.get(key)!r}") from None
+            raise UsageError(f"{str(path)!r}: metric {key!r} is not a number: {given!r}") from None
+        if value is not None and not math.isfinite(value):
+            raise UsageError(f"{str(path)!r}: metric {key!r} is not a finite number: {given!r}")
+        if value is not None and key in RATES and not 0.0 <= value <= 1.0:
+            raise UsageError(f"{str(path)!r}: metric {key!r} is a rate, which lies in [0, 1], not {given!r}")
+        if value is not None and key not in SIGNED and value < 0:
+            raise UsageError(f"{str(path)!r}: metric {key!r} cannot be negative: {given!r}")
+        final[key] = value
     return final
 
 
@@ -148,6 +162,14 @@ def read_evaluations(path: Path) -> tuple[list[tuple[int, float]], dict]:
             for row in csv.DictReader(handle):
                 curve.append((int(row["step"]), float(row["mean_return"])))
                 last_row = row
+                if not math.isfinite(curve[-1][1]) or curve[-1][0] < 0:
+                    field = "step" if curve[-1][0] < 0 else "mean_return"
+                    raise UsageError(
+                        f"{str(path)!r} (row {len(curve)}): {field!r} is not a finite number of an "
+                        f"evaluation: {row[field]!r}"
+                    )
+    except UsageError:
+        raise
     except (KeyError, TypeError, ValueError, csv.Error) as exc:  # UnicodeDecodeError is a ValueError
         line = f" (row {len(curve) + 1})" if curve or not isinstance(exc, KeyError) else ""
         raise UsageError(
@@ -156,10 +178,22 @@ def read_evaluations(path: Path) -> tuple[list[tuple[int, float]], dict]:
     return curve, last_row
 
 
+def _check_names(config: RunConfig, path: Path) -> None:
+    """A UsageError when a run's config names an algorithm or a scenario drivelab does not have
+    (an edited or foreign config.yaml): its group would be a label of nothing."""
+    from drivelab.agents.registry import ALGORITHMS
+
+    if config.algo not in ALGORITHMS:
+        raise UsageError(f"{str(path)!r}: field 'algo' names no drivelab algorithm: {config.algo!r}")
+    if config.env not in SCENARIOS:
+        raise UsageError(f"{str(path)!r}: field 'env' names no drivelab scenario: {config.env!r}")
+
+
 def load_run(run_dir: str | Path) -> RunRecord:
     """Read a run's config, final metrics and evaluation curve."""
     run_dir = Path(run_dir)
     config = load_run_config(run_dir)
+    _check_names(config, run_dir / "config.yaml")
     curve: list[tuple[int, float]] = []
     last_row: dict = {}
     evaluations = run_dir / "evaluations.csv"

@@ -43,7 +43,7 @@ from stable_baselines3.common.vec_env import VecMonitor
 from tqdm import tqdm
 
 from drivelab.agents.registry import check_combination, get_algo
-from drivelab.config import RunConfig, build_config
+from drivelab.config import RunConfig, build_config, check_steps
 from drivelab.errors import UsageError
 from drivelab.training.checkpoints import load_agent, load_replay, save_checkpoint, verify_checkpoint
 from drivelab.training.divergence import (
@@ -378,6 +378,7 @@ def train(
     """
     run_dir = new_run_dir(config, Path(runs_root))
     spec = check_config(config)
+    check_steps(config)
     created = _make_run_dir(run_dir)
     with locked_run(run_dir):
         try:

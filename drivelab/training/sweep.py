@@ -50,7 +50,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from drivelab.config import FIELDS, RunConfig, build_config, check_eval_every
+from drivelab.config import FIELDS, RunConfig, build_config, check_eval_every, check_steps
 from drivelab.errors import UsageError
 from drivelab.hyperparams import with_shipped_hyperparams
 from drivelab.yaml_io import load_yaml
@@ -130,7 +130,7 @@ def expand_sweep(spec: dict, runs_dir: str | Path | None = None) -> Sweep:
     """
     if not isinstance(spec, dict):
         raise UsageError("a sweep file must be a mapping with a 'grid'")
-    unknown = sorted(set(spec) - set(SWEEP_KEYS))
+    unknown = sorted(set(spec) - set(SWEEP_KEYS), key=str)
     if unknown:
         raise UsageError(f"unknown sweep key {unknown[0]!r} (known: {', '.join(SWEEP_KEYS)})")
     base, grid, overrides = spec.get("base") or {}, spec.get("grid"), spec.get("overrides") or []
@@ -147,7 +147,7 @@ def expand_sweep(spec: dict, runs_dir: str | Path | None = None) -> Sweep:
     for i, override in enumerate(overrides):
         if set(override) - {"match", "set"} or not isinstance(override.get("set"), dict):
             raise UsageError(f"sweep override {i + 1} must have 'set' (a mapping) and optional 'match'")
-        stray = sorted(set(override.get("match") or {}) - set(axes))
+        stray = sorted(set(override.get("match") or {}) - set(axes), key=str)
         if stray:
             raise UsageError(f"sweep override {i + 1} matches {stray[0]!r}, which is not a grid axis")
     eval_episodes = spec.get("eval_episodes", 10)
@@ -176,6 +176,8 @@ def expand_sweep(spec: dict, runs_dir: str | Path | None = None) -> Sweep:
             raise UsageError(f"sweep cells {same} and {grid_values} are the same run (one config)")
         cells.append(Cell(config, grid_values))
     where = runs_dir if runs_dir is not None else spec.get("runs_dir", "runs")
+    if not isinstance(where, (str, Path)) or not str(where):
+        raise UsageError(f"sweep 'runs_dir' must be a folder path, got {where!r}")
     sweep = Sweep(tuple(cells), Path(where), eval_episodes)
     _check_cells(sweep)
     return sweep
@@ -191,7 +193,8 @@ def _check_cells(sweep: Sweep) -> None:
     ``eval_every`` larger than a new cell's ``steps`` (every cell whose run does not exist yet,
     unless the sweep was begun before that check: see below), impossible algorithm/action pairs,
     bad env options, hyper-parameters the agent refuses (``check_config``, once per distinct config
-    but for its name, seed and step budget)."""
+    but for its name, seed and step budget), and a new cell's ``steps`` fewer than one rollout
+    (``check_steps``)."""
     from drivelab.training.run import check_config
 
     begun = [os.path.lexists(sweep.runs_dir / cell.config.name) for cell in sweep.cells]
@@ -212,6 +215,8 @@ def _check_cells(sweep: Sweep) -> None:
         if key not in checked:
             check_config(cell.config)
             checked.add(key)
+        if not exists:
+            check_steps(cell.config)  # the step budget against a rollout: after the agent's own checks
 
 
 # --- what each cell needs --------------------------------------------------------------------
@@ -466,28 +471,30 @@ def _ray_init(workers: int, address: str | None) -> bool:
     """Start a local Ray cluster of ``workers`` CPUs, or join the one at ``address``, unless Ray is
     running in this process already; True when this call started it (then shut it down).
 
-    A cluster that cannot be joined is one UsageError line, within ``RAY_CONNECT_TIMEOUT_S`` where
-    nothing answers at its host and port (Ray itself would retry for minutes), without Ray's
-    messages about the failed attempt."""
+    A cluster that cannot be started or joined (nothing answers, a token is required) is one
+    UsageError line, within ``RAY_CONNECT_TIMEOUT_S`` where nothing answers at its host and port
+    (Ray itself would retry for minutes), without Ray's messages about the failed attempt."""
     try:
         import ray
     except ImportError:
         raise UsageError("--executor ray needs Ray: pip install 'drivelab[ray]'") from None
     if ray.is_initialized():
         return False
-    if not address:
-        # "local": always a fresh cluster of our own, never someone else's running one
-        ray.init(address="local", num_cpus=workers, include_dashboard=False, log_to_driver=False)
-        return True
-    _check_answers(address)
+    if address:
+        _check_answers(address)
+    # "local": always a fresh cluster of our own, never someone else's running one
+    where = f"join the Ray cluster at {address!r}" if address else "start a local Ray cluster"
+    keywords = {"address": address} if address else {"address": "local", "num_cpus": workers}
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the Ray client's "connection timed out" warning
-            ray.init(
-                address=address, include_dashboard=False, log_to_driver=False, logging_level=logging.WARNING
-            )
-    except (ConnectionError, ValueError, RuntimeError) as exc:
-        raise UsageError(f"cannot join the Ray cluster at {address!r}: {exc}") from None
+            ray.init(**keywords, include_dashboard=False, log_to_driver=False, logging_level=logging.ERROR)
+    except (ConnectionError, ValueError, RuntimeError, ray.exceptions.RayError) as exc:
+        # e.g. a head that requires a token (RAY_AUTH_MODE=token) and none given: Ray's
+        # AuthenticationError, several lines long; the first says what is wrong
+        ray.shutdown()  # whatever the failed call started
+        reason = next((line.strip() for line in str(exc).splitlines() if line.strip()), type(exc).__name__)
+        raise UsageError(f"cannot {where}: {reason}") from None
     return True
 
 

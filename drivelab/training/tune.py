@@ -51,11 +51,11 @@ from pathlib import Path
 import yaml
 from tqdm import tqdm
 
-from drivelab.config import FIELDS, RunConfig, build_config, check_eval_every
+from drivelab.config import FIELDS, RunConfig, build_config, check_eval_every, check_steps
 from drivelab.errors import UsageError
 from drivelab.hyperparams import with_shipped_hyperparams, zoo_yaml
 from drivelab.training.sweep import cell_action, check_workers, execute, executor_ready, run_cell
-from drivelab.yaml_io import load_yaml
+from drivelab.yaml_io import load_yaml, parse_yaml_1_1, read_text_bounded
 
 STUDY_KEYS = ("name", "study_dir", "n_trials", "metric", "direction", "space", "sampler", "pruner",
               "final_eval_episodes")  # fmt: skip
@@ -168,7 +168,7 @@ def _param(name: str, entry) -> Param:
     if kind not in PARAM_TYPES:
         raise UsageError(f"{where} has unknown type {kind!r} (choose from {', '.join(PARAM_TYPES)})")
     allowed = {"type", "choices"} if kind == "categorical" else {"type", "low", "high", "log", "step"}
-    stray = sorted(set(entry) - allowed)
+    stray = sorted(set(entry) - allowed, key=str)
     if stray:
         raise UsageError(f"{where} of type {kind!r} has unknown key {stray[0]!r}")
     if kind == "categorical":
@@ -206,7 +206,7 @@ def _keywords(value, what: str, keys: tuple[str, ...]) -> dict:
     value = value or {}
     if not isinstance(value, dict):
         raise UsageError(f"tune '{what}' must be a mapping of {', '.join(keys)}")
-    stray = sorted(set(value) - set(keys))
+    stray = sorted(set(value) - set(keys), key=str)
     if stray:
         raise UsageError(f"tune '{what}' has unknown key {stray[0]!r} (known: {', '.join(keys)})")
     for key, number in value.items():
@@ -222,7 +222,7 @@ def read_study(spec: dict, study_dir: str | Path | None = None, n_trials: int | 
     """
     if not isinstance(spec, dict):
         raise UsageError("a tune file must be a mapping")
-    stray = sorted(set(spec) - set(STUDY_KEYS) - set(RUN_KEYS))
+    stray = sorted(set(spec) - set(STUDY_KEYS) - set(RUN_KEYS), key=str)
     if stray:
         known = ", ".join([*STUDY_KEYS, *RUN_KEYS])
         raise UsageError(f"unknown tune key {stray[0]!r} (known: {known})")
@@ -276,14 +276,18 @@ def check_study(study: Study) -> None:
         {**low, p.name: choice} for p in study.space if p.kind == "categorical" for choice in p.choices
     ]
     first = study.trial_config(0, low)
-    if not _continued(study):  # a study begun before this check goes on as it was made
+    new = not _continued(study)  # a study begun before these checks goes on as it was made
+    if new:
         check_eval_every(first)  # the pruner reads the periodic evaluations: at least one must run
     check_combination(first.algo, first.action)
     env = DriveEnv(**first.env_kwargs())  # validates scenario, sensors, reward, action
     try:
         spec = check_combination(first.algo, first.action, env.observation_space)
         for params in probes:
-            _check_model(spec, study.trial_config(0, params), env)
+            config = study.trial_config(0, params)
+            _check_model(spec, config, env)
+            if new:
+                check_steps(config)  # a searched n_steps at its high corner: a rollout within the budget
     finally:
         env.close()
 
@@ -423,8 +427,8 @@ def _spec(study: Study):
 def _saved_spec(study: Study):
     """The study.yaml of the study directory, read; None when there is none to read."""
     try:
-        return yaml.safe_load((study.study_dir / SPEC_FILE).read_text())
-    except (OSError, UnicodeDecodeError, yaml.YAMLError):
+        return parse_yaml_1_1(read_text_bounded(study.study_dir / SPEC_FILE))
+    except (OSError, UsageError, yaml.YAMLError):
         return None
 
 
@@ -655,9 +659,11 @@ def check_zoo_file(path: Path) -> dict:
         if not path.parent.is_dir():
             raise UsageError(f"--write-best {str(path)!r}: folder {str(path.parent)!r} does not exist")
         return {}
+    if not path.is_file():  # /dev/null, a pipe: reads as empty, and the best values would vanish
+        raise UsageError(f"--write-best {str(path)!r} is not a regular file")
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (UnicodeDecodeError, yaml.YAMLError):
+        data = parse_yaml_1_1(read_text_bounded(path, "--write-best"))
+    except (UsageError, yaml.YAMLError):
         raise UsageError(f"--write-best {str(path)!r} is not a YAML hyper-parameter file") from None
     if data is None:
         return {}

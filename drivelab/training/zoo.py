@@ -458,3 +458,31 @@ def enjoy(
         report["video_frames"] = writer.frames
     report["per_episode"] = results
     return report
+
+
+def check_metrics(name: str, zoo_dir: str | None = None) -> dict:
+    """The metrics of agent ``name``'s card check, played in this process: its ``episodes`` first
+    evaluation episodes, greedy (``enjoy``'s), each cut at the check's ``duration_s`` where it
+    has one. Recorded and compared under ``drivelab.isa.PINNED_ISA`` (``pinned_check_metrics``),
+    so that every x86-64 CPU gives the same numbers."""
+    from drivelab.envs.core import DriveEnv
+    from drivelab.training.checkpoints import load_agent
+    from drivelab.training.evaluate import aggregate, load_run_config, run_episodes
+
+    agents = {agent.name: agent for agent in shipped_agents(None if zoo_dir is None else Path(zoo_dir))}
+    if name not in agents:
+        raise UsageError(f"shipped agent {name!r} does not exist (`drivelab zoo` lists: {', '.join(agents)})")
+    run_dir, check = agents[name].path, agents[name].card["check"]
+    config = load_run_config(run_dir)
+    limit = {"duration_s": check["duration_s"]} if "duration_s" in check else {}
+    env = DriveEnv(**{**config.eval_env_kwargs(), **limit})
+    agent = load_agent(run_dir, config)
+    policy = lambda obs: agent.predict(obs, deterministic=True)[0]  # noqa: E731
+    return aggregate(run_episodes(policy, env, check["episodes"])[0])
+
+
+def pinned_check_metrics(name: str, zoo_dir: Path | None = None) -> dict:
+    """``check_metrics`` in a fresh process under ``drivelab.isa.PINNED_ISA``."""
+    from drivelab.isa import call_pinned
+
+    return call_pinned(f"{__name__}:check_metrics", name, *([] if zoo_dir is None else [str(zoo_dir)]))

@@ -6,6 +6,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+from drivelab.world.options import Option
+
 META_ACTIONS = ("LANE_LEFT", "IDLE", "LANE_RIGHT", "FASTER", "SLOWER")  # highway-env's meta-actions
 
 
@@ -50,6 +52,11 @@ class Scenario:
     :param road: ``road(config)``: the scenario's ``RoadDescription`` from its config (the
         highway-env config the scenario's environment gets: scenario, traffic level and backend
         options merged); None: the road is highway-env's (converted from its network).
+    :param options: the config keys a user may set (``backend_options``), declared with their
+        type, range, default and meaning (``drivelab.world.options``); any other key is
+        refused.
+    :param check_options: the scenario's own cross-checks of its options, given every declared
+        option's value (the user's over the defaults); raises a UsageError.
     """
 
     name: str
@@ -80,6 +87,8 @@ class Scenario:
     spawn_many: Callable | None = field(default=None, repr=False)
     arrivals: Callable | None = field(default=None, repr=False)
     road: Callable[[dict], object] | None = field(default=None, repr=False)
+    options: tuple[Option, ...] = field(default=(), repr=False)
+    check_options: Callable[[dict], None] | None = field(default=None, repr=False)
 
     def in_junction(self, lane_index: tuple) -> bool:
         """Whether highway-env lane (from, to, id) is junction area: it leaves a junction node

@@ -50,7 +50,9 @@ def test_save_load_round_trip_gives_identical_actions(algo, tmp_path):
     for _ in range(5):
         action, _ = agent.predict(obs, deterministic=True)
         np.testing.assert_array_equal(action, loaded.predict(obs, deterministic=True)[0])
-        obs, *_ = env.step(action)
+        obs, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:  # an ended episode is reset before the next step
+            obs, _ = env.reset()
 
 
 def test_an_agent_writes_nothing_until_a_run_gives_it_a_logger(tmp_path, monkeypatch):

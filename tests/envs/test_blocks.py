@@ -73,11 +73,12 @@ def test_blocks_runs_on_the_compiled_core_only():
     [
         ({"map": "OSQ"}, "unknown block letter"),
         ({"map": 0}, "at least 1 block"),
-        ({"num_scenarios": 0}, "num_scenarios must be an integer >= 1"),
-        ({"start_seed": -1}, "start_seed must be an integer >= 0"),
-        ({"lane_count": 9}, "lane_count must be 1 to"),
-        ({"traffic_density": 2}, "traffic_density must be a number in"),
-        ({"lane_width": "wide"}, "lane_width must be metres"),
+        ({"map": 2.5}, "'map' of scenario 'blocks' must be a block string such as 'OSX' or a block count"),
+        ({"num_scenarios": 0}, "'num_scenarios' of scenario 'blocks' must be an integer >= 1"),
+        ({"start_seed": -1}, "'start_seed' of scenario 'blocks' must be an integer >= 0"),
+        ({"lane_count": 9}, "'lane_count' of scenario 'blocks' must be an integer in \\[1, 5\\] or null"),
+        ({"traffic_density": 2}, "'traffic_density' of scenario 'blocks' must be a number in \\[0, 1\\]"),
+        ({"lane_width": "wide"}, "'lane_width' of scenario 'blocks' must be a number in \\[2, 6\\] or null"),
     ],
 )
 def test_bad_map_options_are_usage_errors(options, message):

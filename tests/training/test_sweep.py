@@ -25,7 +25,8 @@ def tiny_spec(steps=32, seeds=2, **grid):
 
 
 def test_grid_expands_with_overrides_and_shipped_hyperparams(tmp_path):
-    spec = tiny_spec(algo=["ppo", "a2c"], reward=["highway", "highway,right_lane=0"])
+    # 256 steps: one rollout of the shipped PPO's n_steps, the fewest a PPO cell may have
+    spec = tiny_spec(steps=256, algo=["ppo", "a2c"], reward=["highway", "highway,right_lane=0"])
     spec["name"] = "abl"
     spec["overrides"] = [
         {"match": {"algo": "a2c"}, "set": {"hyperparams": {"n_steps": 8}}},
@@ -41,14 +42,14 @@ def test_grid_expands_with_overrides_and_shipped_hyperparams(tmp_path):
         "abl-a2c-highway-highway_right_lane_0-s0", "abl-a2c-highway-highway_right_lane_0-s1",
     ]  # fmt: skip
     ppo, a2c = configs["abl-ppo-highway-highway-s1"], configs["abl-a2c-highway-highway-s0"]
-    assert ppo.seed == 1 and ppo.reward == "highway" and ppo.steps == 32
+    assert ppo.seed == 1 and ppo.reward == "highway" and ppo.steps == 256
     # shipped ppo.yaml (gamma 0.8, n_steps 256) under the base's learning_rate
     assert ppo.hyperparams["gamma"] == 0.8 and ppo.hyperparams["n_steps"] == 256
     assert ppo.hyperparams["learning_rate"] == 1e-3
     # shipped a2c.yaml's highway entry (tuned) under the base's learning_rate and the override
     shipped = shipped_hyperparams("a2c", "highway")
     assert a2c.hyperparams == {**shipped, "n_steps": 8, "learning_rate": 1e-3} and a2c.steps == 64
-    assert configs["abl-a2c-highway-highway_right_lane_0-s0"].steps == 32
+    assert configs["abl-a2c-highway-highway_right_lane_0-s0"].steps == 256
     assert configs["abl-a2c-highway-highway_right_lane_0-s0"].env_options == {"duration_s": 8}
 
 

@@ -149,10 +149,12 @@ class HighwayBackend:
         scenario: Scenario, traffic: str, control: str, overrides: dict | None
     ) -> tuple[dict, bool, int]:
         """(highway-env config keys given to the env, keep_npcs, extra_vehicles): the scenario's
-        config, its traffic level, the control's action type, then ``overrides``."""
+        config, its traffic level, the control's action type, then ``overrides`` (drivelab's
+        keep_npcs and extra_vehicles among them too)."""
         config = {**scenario.config, **scenario.traffic.get(traffic, {})}
-        keep_npcs = config.pop("keep_npcs", True)
-        extra_vehicles = config.pop("extra_vehicles", 0)
+        overrides = dict(overrides or {})
+        keep_npcs = overrides.pop("keep_npcs", config.pop("keep_npcs", True))
+        extra_vehicles = overrides.pop("extra_vehicles", config.pop("extra_vehicles", 0))
         if control == "meta":
             config["action"] = {"type": "DiscreteMetaAction"}
             if scenario.meta_target_speeds:
@@ -160,7 +162,7 @@ class HighwayBackend:
         else:
             config["action"] = {"type": "ContinuousAction", "longitudinal": True, "lateral": True}
             config["policy_frequency"] = scenario.continuous_policy_frequency_hz
-        config.update(overrides or {})
+        config.update(overrides)
         return config, keep_npcs, extra_vehicles
 
     # --- timing -------------------------------------------------------------------------------

@@ -16,11 +16,9 @@ from drivelab.envs.scenarios import (
     town,
 )
 from drivelab.envs.scenarios.circuits import SEED_TABLES
+from drivelab.envs.scenarios.options import TRAFFIC_LEVELS, check_traffic, option_rows
 from drivelab.errors import UsageError
 from drivelab.world.scenario import Scenario
-
-TRAFFIC_LEVELS = ("empty", "regular", "dense")
-
 
 SCENARIOS: dict[str, Scenario] = {
     s.name: s
@@ -39,7 +37,7 @@ SCENARIOS: dict[str, Scenario] = {
 
 __all__ = [
     "SCENARIOS", "FAST_SCENARIOS", "REFERENCE_SCENARIOS", "SEED_TABLES", "TRAFFIC_LEVELS", "check_traffic",
-    "get_scenario", "gym_id", "scenario_name",
+    "get_scenario", "gym_id", "options_table", "scenario_name",
 ]  # fmt: skip
 
 
@@ -74,7 +72,7 @@ def get_scenario(name: str) -> Scenario:
     return SCENARIOS[name]
 
 
-def check_traffic(level: str) -> str:
-    if level not in TRAFFIC_LEVELS:
-        raise UsageError(f"unknown traffic level {level!r} (choose from {', '.join(TRAFFIC_LEVELS)})")
-    return level
+def options_table(name: str) -> list[dict]:
+    """The options of scenario ``name`` (or its gymnasium id) as rows for a table: name, type,
+    range, default, the traffic levels' values and what it does (``options.option_rows``)."""
+    return option_rows(get_scenario(name))

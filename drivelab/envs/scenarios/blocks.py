@@ -26,6 +26,8 @@ from drivelab.envs.backends.fast.blocks_spawn import (
     traffic_density,
 )
 from drivelab.envs.backends.roads.description import RoadDescription
+from drivelab.envs.backends.roads.pg_map import MAX_LANES, parse_spec
+from drivelab.envs.scenarios.options import Option, timing_options
 from drivelab.world.scenario import Scenario
 
 DENSITIES = {"empty": 0.0, "regular": 0.1, "dense": 0.2}
@@ -49,6 +51,42 @@ def spawn_blocks(seed: int, bmap: BlocksMap, control: str):
     return spawn_blocks_episode(seed, bmap, control, traffic_density(bmap.road.config))
 
 
+# MetaDrive's map and traffic keys (``MapSet.from_config`` and ``traffic_density`` read them)
+OPTIONS = (
+    Option(
+        "map", (str, int), MAP_DEFAULTS["map"],
+        "the blocks after the spawn road: a block string such as OSX, or a number of random blocks",
+        expected="a block string such as 'OSX' or a block count", check=parse_spec,  # parse_spec: >= 1
+    ),
+    Option("start_seed", int, MAP_DEFAULTS["start_seed"], "the seed of the set's first map", minimum=0),
+    Option(
+        "num_scenarios", int, MAP_DEFAULTS["num_scenarios"],
+        "maps in the set (seeds start_seed …); each episode drives the map its seed picks", minimum=1,
+    ),
+    Option(
+        "lane_count", int, MAP_DEFAULTS["lane_count"], "lanes per direction; null: 2 or 3 per map",
+        minimum=1, maximum=MAX_LANES, nullable=True,
+    ),
+    Option(
+        "lane_width", float, MAP_DEFAULTS["lane_width"], "lane width, m; null: U[3, 4.5] per map",
+        minimum=2, maximum=6, nullable=True,
+    ),
+    Option(
+        "signalised", bool, MAP_DEFAULTS["signalised"],
+        "traffic lights at every X and T intersection (NPCs stop at red; running one is an event)",
+    ),
+    Option(
+        "traffic_density", float, DENSITIES["regular"],
+        "MetaDrive's traffic density: vehicles per 10 m of a block's lanes", minimum=0, maximum=1,
+        traffic=True,
+    ),
+    # the blocks' junctions are regulated: right of way every simulation_frequency // 2 frames
+    *timing_options(
+        SIMULATION_FREQUENCY_HZ, POLICY_FREQUENCY_HZ, POLICY_FREQUENCY_HZ, minimum_simulation_hz=2
+    ),
+)  # fmt: skip
+
+
 SCENARIO = Scenario(
     "blocks",
     "highway_env.envs.common.abstract.AbstractEnv",  # only its default config is read
@@ -70,4 +108,5 @@ SCENARIO = Scenario(
     reference_backend=False,
     spawn=spawn_blocks,
     road=blocks_road,
+    options=OPTIONS,
 )

@@ -12,6 +12,7 @@ from drivelab.envs.backends.fast.spawn import finish, make_on_lane, random_lane_
 from drivelab.envs.backends.roads.blocks import circuit
 from drivelab.envs.backends.roads.description import RoadDescription
 from drivelab.envs.backends.roads.tracks import FOLLOW_LANE_ROAD, FOLLOW_LINE_ROAD
+from drivelab.envs.scenarios.options import Option, timing_options
 from drivelab.world.scenario import Scenario
 
 SEED_TABLES = ("seed_line", "seed_lane")  # seed 004's two 5-action (throttle, steering) tables
@@ -44,6 +45,21 @@ def follow_lane_road(config: dict) -> RoadDescription:
     return _circuit_road(config, FOLLOW_LANE_ROAD, guide_line=False)
 
 
+def circuit_options(road: dict) -> tuple[Option, ...]:
+    """A circuit's options, defaults from its environment's road config (``tracks``); its track
+    is seed 004's (a track must close exactly: it is not an option)."""
+    return (
+        Option("lanes_count", int, road["lanes_count"], "parallel lanes around the circuit", minimum=1),
+        Option("lane_width", float, road["lane_width"], "lane width, m", minimum=2),
+        Option(
+            "speed_limit", float, road["speed_limit"], "the lanes' speed limit, m/s",
+            minimum=0, exclusive_minimum=True,
+        ),
+        Option("initial_speed", float, 5.0, "the ego's speed at the start, m/s", minimum=0),
+        *timing_options(10, 5, 5),
+    )  # fmt: skip
+
+
 FOLLOW_LINE = Scenario(
     "follow-line",
     "drivelab.envs.backends.circuits.FollowLineEnv",
@@ -56,6 +72,7 @@ FOLLOW_LINE = Scenario(
     guide_line=True,
     spawn=spawn_circuit,
     road=follow_line_road,
+    options=circuit_options(FOLLOW_LINE_ROAD),
 )
 
 FOLLOW_LANE = Scenario(
@@ -70,4 +87,5 @@ FOLLOW_LANE = Scenario(
     keep_lane=True,
     spawn=spawn_circuit,
     road=follow_lane_road,
+    options=circuit_options(FOLLOW_LANE_ROAD),
 )

@@ -16,6 +16,8 @@ from drivelab.envs.backends.fast import lanes as L
 from drivelab.envs.backends.fast import pcg64
 from drivelab.envs.backends.fast import traffic as T
 from drivelab.envs.backends.fast.spawn import DELTA_RANGE
+from drivelab.envs.scenarios.options import Option, timing_options
+from drivelab.errors import UsageError
 from drivelab.world.scenario import Scenario
 
 
@@ -139,6 +141,38 @@ def spawn_highway(seed: int, road, control: str):
     return rows[0], 0, np.zeros(2), None
 
 
+# highway-env's HighwayEnvFast keys, as both backends read them (``_create_vehicles``, above)
+OPTIONS = (
+    Option("lanes_count", int, 3, "lanes of the straight road", minimum=1),
+    Option(
+        "vehicles_count", int, 20, "vehicles besides the ego, placed ahead of it", minimum=0, traffic=True
+    ),
+    Option(
+        "vehicles_density", float, 1.0,
+        "traffic density: the gaps between the vehicles shrink as 1 / vehicles_density",
+        minimum=0, exclusive_minimum=True, traffic=True,
+    ),
+    Option(
+        "ego_spacing", float, 1.5, "spacing factor of the ego's place ahead of the road's start",
+        minimum=0, exclusive_minimum=True,
+    ),
+    Option(
+        "initial_lane_id", int, None, "the ego's starting lane (0: the leftmost); null: a random lane",
+        minimum=0, nullable=True,
+    ),
+    *timing_options(5, 1, 5),
+)  # fmt: skip
+
+
+def check_highway_options(config: dict) -> None:
+    """The ego's starting lane must be one of the road's lanes."""
+    lane, lanes = config["initial_lane_id"], config["lanes_count"]
+    if lane is not None and lane >= lanes:
+        raise UsageError(
+            f"option 'initial_lane_id' ({lane}) of scenario 'highway' must be below lanes_count ({lanes})"
+        )
+
+
 SCENARIO = Scenario(
     "highway",
     "highway_env.envs.highway_env.HighwayEnvFast",
@@ -151,4 +185,6 @@ SCENARIO = Scenario(
     },
     spawn=spawn_highway,
     spawn_many=spawn_highway_worlds,
+    options=OPTIONS,
+    check_options=check_highway_options,
 )

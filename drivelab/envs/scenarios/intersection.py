@@ -28,6 +28,7 @@ from drivelab.envs.backends.fast.spawn import (
     too_close,
     vehicle_row,
 )
+from drivelab.envs.scenarios.options import Option, arranged_traffic_options, timing_options
 from drivelab.world.scenario import Scenario
 
 WARM_UP_STEPS = 3  # seconds of traffic before the ego is placed (``simulation_steps``)
@@ -140,6 +141,24 @@ def spawn_intersection(
     return finish(road, vehicles), ego_index, regulation, rng
 
 
+OPTIONS = (
+    Option(
+        "initial_vehicle_count", int, 10,
+        "vehicles arriving at the entries before the ego is placed (after 3 s of traffic, those "
+        "within 20 m of it leave)",
+        minimum=0, traffic=True,
+    ),
+    Option(
+        "spawn_probability", float, 0.6,
+        "chance that a vehicle arrives at a random entry at each policy step",
+        minimum=0, maximum=1, traffic=True,
+    ),
+    *arranged_traffic_options(),
+    # a RegulatedRoad: right of way enforced every simulation_frequency // 2 frames
+    *timing_options(15, 1, 5, minimum_simulation_hz=2),
+)  # fmt: skip
+
+
 SCENARIO = Scenario(
     "intersection",
     "highway_env.envs.intersection_env.IntersectionEnv",
@@ -163,4 +182,5 @@ SCENARIO = Scenario(
     meta_target_speeds=(0, 4.5, 9),
     spawn=spawn_intersection,
     arrivals=IntersectionTraffic.of,
+    options=OPTIONS,
 )

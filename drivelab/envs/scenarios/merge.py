@@ -8,6 +8,7 @@ from gymnasium.utils import seeding
 
 from drivelab.envs.backends.fast import traffic as T
 from drivelab.envs.backends.fast.spawn import arrange_traffic, ego_kind, finish, vehicle_row
+from drivelab.envs.scenarios.options import arranged_traffic_options, timing_options
 from drivelab.world.scenario import Scenario
 
 # (longitudinal m, speed m/s) of the three highway vehicles MergeEnv places around the ego
@@ -36,6 +37,10 @@ def spawn_merge(seed: int, road, control: str) -> tuple[np.ndarray, int, np.ndar
     return finish(road, vehicles), ego, np.zeros(2), None
 
 
+# MergeEnv reads no road or traffic key of its own: the traffic levels' and the timing's
+OPTIONS = (*arranged_traffic_options(), *timing_options(15, 1, 5))
+
+
 SCENARIO = Scenario(
     "merge",
     "highway_env.envs.merge_env.MergeEnv",
@@ -49,4 +54,5 @@ SCENARIO = Scenario(
     arrival="merge_end",
     arrival_x_m=370.0,
     spawn=spawn_merge,
+    options=OPTIONS,
 )

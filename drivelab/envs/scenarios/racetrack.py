@@ -14,6 +14,7 @@ from drivelab.envs.backends.fast.spawn import (
     random_lane_index,
     too_close,
 )
+from drivelab.envs.scenarios.options import Option, timing_options
 from drivelab.world.scenario import Scenario
 
 
@@ -50,6 +51,18 @@ def spawn_racetrack(seed: int, road, control: str) -> tuple[np.ndarray, int, np.
     return finish(road, vehicles), ego, np.zeros(2), None
 
 
+# RacetrackEnv's road is fixed (its speed_limit key is RacetrackEnvLarge's): traffic and timing
+OPTIONS = (
+    Option(
+        "other_vehicles", int, 1,
+        "with at least 1: a vehicle on the first curve, then up to other_vehicles - 1 more on random "
+        "lanes (each at least 20 m from the others)",
+        minimum=0, traffic=True,
+    ),
+    *timing_options(15, 5, 5),
+)  # fmt: skip
+
+
 SCENARIO = Scenario(
     "racetrack",
     "highway_env.envs.racetrack_env.RacetrackEnv",
@@ -63,4 +76,5 @@ SCENARIO = Scenario(
     },
     action_kinds=("grid", "continuous", "target_speed"),  # highway-env's racetrack: no meta-actions
     spawn=spawn_racetrack,
+    options=OPTIONS,
 )

@@ -15,6 +15,7 @@ from drivelab.envs.backends.fast.spawn import (
     randomize_behavior,
     vehicle_row,
 )
+from drivelab.envs.scenarios.options import Option, arranged_traffic_options, timing_options
 from drivelab.world.scenario import Scenario
 
 RING = ("se", "ex", "ee", "nx", "ne", "wx", "we", "sx")  # the nodes around the ring
@@ -69,6 +70,17 @@ def spawn_roundabout(seed: int, road, control: str) -> tuple[np.ndarray, int, np
     return finish(road, vehicles), ego_index, np.zeros(2), None
 
 
+OPTIONS = (
+    Option(
+        "incoming_vehicle_destination", int, None,
+        f"the exit of the vehicle entering from the west (0, 1, 2: {', '.join(DESTINATIONS)}); null: random",
+        minimum=0, maximum=len(DESTINATIONS) - 1, nullable=True,
+    ),
+    *arranged_traffic_options(),
+    *timing_options(15, 1, 5),
+)  # fmt: skip
+
+
 SCENARIO = Scenario(
     "roundabout",
     "highway_env.envs.roundabout_env.RoundaboutEnv",
@@ -84,4 +96,5 @@ SCENARIO = Scenario(
     meta_target_speeds=(0, 8, 16),
     spawn=spawn_roundabout,
     junction_needs_both_ends=True,
+    options=OPTIONS,
 )

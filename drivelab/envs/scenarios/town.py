@@ -6,9 +6,17 @@ simulator."""
 
 from __future__ import annotations
 
+import difflib
+
 from drivelab.envs.backends.fast.town_spawn import spawn_town
 from drivelab.envs.backends.roads.description import RoadDescription
+from drivelab.envs.backends.roads.town_rules import LightTimings
+from drivelab.envs.scenarios.options import Option, timing_options
+from drivelab.errors import UsageError
 from drivelab.world.scenario import Scenario
+
+LAYOUT_NAMES = ("train", "test")  # drivelab.envs.town.LAYOUTS (imported with the town's road)
+PHASES = ("green_s", "yellow_s", "all_red_s")  # LightTimings' fields: a cycle's phases per axis
 
 
 def town_road(config: dict) -> RoadDescription:
@@ -16,6 +24,39 @@ def town_road(config: dict) -> RoadDescription:
     from drivelab.envs.town import LAYOUTS, road_description
 
     return road_description(LAYOUTS[config.get("layout", "train")])
+
+
+def check_light_timings(timings: dict) -> None:
+    """``light_timings``: seconds of some of LightTimings' phases (the others keep their
+    defaults), green above 0, yellow and all-red at least 0, all finite."""
+    for key, value in timings.items():
+        if key not in PHASES:
+            close = difflib.get_close_matches(str(key), PHASES, n=1)
+            hint = f"did you mean {close[0]!r}?" if close else f"its phases: {', '.join(PHASES)}"
+            raise UsageError(f"option 'light_timings' has no phase {key!r} ({hint})")
+        number = isinstance(value, (int, float)) and not isinstance(value, bool)
+        if not number or not 0 <= value < float("inf") or (key == "green_s" and value == 0):
+            least = "> 0" if key == "green_s" else ">= 0"
+            raise UsageError(f"option 'light_timings' phase {key!r} must be seconds {least}, got {value!r}")
+
+
+OPTIONS = (
+    Option("layout", str, "train", "the town: train (3 x 3 junctions) or test (3 x 2)", choices=LAYOUT_NAMES),
+    Option("vehicles_count", int, 15, "town vehicles on random routes", minimum=0, traffic=True),
+    Option(
+        "pedestrians_count", int, 10, "pedestrians on the pavements and crossings", minimum=0, traffic=True
+    ),
+    Option(
+        "light_timings", dict, dict(vars(LightTimings())),
+        "seconds of each light phase per axis (green_s, yellow_s, all_red_s; a phase left out keeps "
+        "its default)",
+        expected="a mapping of phases to seconds", check=check_light_timings,
+    ),
+    Option("ego_start_speed", float, 0.0, "the ego's speed at the start, m/s", minimum=0),
+    Option("retarget", bool, True, "a new random target each time one is reached (evaluation: false)"),
+    Option("fixed_routes", bool, False, "the 25 NoCrash evaluation routes with their time limits"),
+    *timing_options(10, 5, 5),
+)  # fmt: skip
 
 
 SCENARIO = Scenario(
@@ -37,4 +78,5 @@ SCENARIO = Scenario(
     blocked_after_s=90.0,
     spawn=spawn_town,
     road=town_road,
+    options=OPTIONS,
 )

@@ -1,0 +1,96 @@
+"""One instruction set for numbers that must agree across x86-64 machines.
+
+numpy, OpenBLAS, oneDNN, torch's own kernels and numba each pick their vector code at run time:
+AVX-512 where the CPU has it, AVX2 elsewhere. The two round differently (another order of the
+same sums, other polynomial kernels), so a shipped agent driving its check episodes on an
+AVX-512 machine acts a few float32 ulps apart from the same agent on an AVX2 machine, and a
+3-episode mean moves by about 1e-3 (``town-dagger``'s ``std_return``: 32.9196 on AVX-512,
+32.9626 on an AVX2 EPYC).
+
+``PINNED_ISA`` caps every one of them at AVX2 (plus one thread each, so that no reduction is split
+differently), which every x86-64 machine that runs drivelab's CI has. A number recorded and
+checked under it is the same on either kind of CPU: on an AVX-512 EPYC, ``town-dagger``'s check
+under it gives 32.96262951516252, the value an AVX2 EPYC measures natively, bit for bit. The
+variables are read when each library loads, so the pin applies to a fresh process only:
+``call_pinned`` runs a function in one and returns its JSON result. On an AVX2 machine the pin
+changes nothing but the thread counts.
+
+    python -m drivelab.isa MODULE:FUNCTION [ARG ...]   # prints the function's result as JSON
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import os
+import subprocess
+import sys
+from typing import Any
+
+PINNED_ISA = {
+    # numpy's SIMD dispatch (features this CPU lacks are ignored by numpy)
+    "NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR",
+    "OPENBLAS_CORETYPE": "Haswell",  # numpy's OpenBLAS
+    "ATEN_CPU_CAPABILITY": "avx2",  # torch's own vectorised kernels
+    "ONEDNN_MAX_CPU_ISA": "AVX2",  # torch's convolutions (oneDNN)
+    "MKL_ENABLE_INSTRUCTIONS": "AVX2",  # torch's matrix products (MKL)
+    "NUMBA_CPU_NAME": "haswell",  # drivelab's compiled kernels
+    "OMP_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+    "NUMBA_NUM_THREADS": "1",
+}
+
+
+def pinned_environ(environ: dict[str, str] | None = None) -> dict[str, str]:
+    """``environ`` (default: this process's) with ``PINNED_ISA`` over it."""
+    return {**(os.environ if environ is None else environ), **PINNED_ISA}
+
+
+def code_paths() -> dict[str, str]:
+    """The vector code each library of this process runs: numpy's widest dispatched feature
+    enabled, torch's kernels' capability, numba's target CPU (``"x86-64 AVX-512"`` machines read
+    ``X86_V4``, ``AVX512``, a ``znver4``-like name; under ``PINNED_ISA``, ``X86_V3``, ``AVX2``,
+    ``haswell``)."""
+    import llvmlite.binding
+    import torch
+    from numba.core import config
+    from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+
+    enabled = [feature for feature in __cpu_dispatch__ if __cpu_features__.get(feature)]
+    return {
+        "numpy": enabled[-1] if enabled else "baseline",
+        "torch": torch.backends.cpu.get_cpu_capability(),
+        "numba": config.CPU_NAME or llvmlite.binding.get_host_cpu_name(),
+    }
+
+
+def call_pinned(target: str, *args: str, timeout_s: float | None = None) -> Any:
+    """``MODULE:FUNCTION(*args)`` in a fresh Python under ``PINNED_ISA``; its JSON result.
+
+    :param target: e.g. ``"drivelab.training.zoo:check_metrics"``; the function takes strings and
+        returns something ``json.dumps`` writes.
+    :raises RuntimeError: the child failed (its last lines of stderr in the message).
+    """
+    child = subprocess.run(
+        [sys.executable, "-m", "drivelab.isa", target, *args],
+        env=pinned_environ(),
+        capture_output=True,
+        text=True,
+        timeout=timeout_s,
+        check=False,
+    )
+    lines = child.stdout.strip().splitlines()
+    if child.returncode != 0 or not lines:
+        tail = "\n".join(child.stderr.strip().splitlines()[-15:])
+        raise RuntimeError(f"{target}{args} under the pinned ISA exited {child.returncode}:\n{tail}")
+    return json.loads(lines[-1])
+
+
+def main(argv: list[str]) -> None:
+    module, _, function = argv[0].partition(":")
+    result = getattr(importlib.import_module(module), function)(*argv[1:])
+    print(json.dumps(result))
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
