@@ -452,6 +452,7 @@ def enjoy(
             writer.discard()
         raise
     report = {"agent": name or str(run_dir), "algo": config.algo, "env": config.env, **aggregate(results)}
+    report["model_steps"] = int(agent.num_timesteps)  # as evaluate's report
     report["seed"] = seed
     if writer is not None:
         report["video"] = str(writer.close())
