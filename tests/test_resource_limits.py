@@ -19,6 +19,7 @@ from drivelab.envs.core import DriveEnv
 from drivelab.errors import UsageError
 from drivelab.training import checkpoints
 from tests.test_untrusted_files import HIGHWAY, SMALL
+from tests.training.tiny_runs import rewrite_member
 
 runner = CliRunner()
 
@@ -50,15 +51,6 @@ def _poison(model) -> None:
         next(network.parameters()).view(-1)[0] = float("nan")
 
 
-def _rewrite_member(path: Path, member: str, data: bytes) -> None:
-    with zipfile.ZipFile(path) as archive:
-        members = {name: archive.read(name) for name in archive.namelist()}
-    members[member] = data
-    with zipfile.ZipFile(path, "w") as archive:
-        for name, value in members.items():
-            archive.writestr(name, value)
-
-
 def _assert_one_error_line(result, *fragments) -> str:
     assert result.exit_code == 2, result.output
     lines = result.output.strip().splitlines()
@@ -73,7 +65,7 @@ def test_a_protocol_4_tensor_file_is_refused_without_torch_warnings(tmp_path):
     run_dir = _saved_run(tmp_path, "dqn")
     foreign = io.BytesIO()  # torch's legacy format pickled with protocol 4: torch warns, then refuses it
     torch.save({"state_dicts": {}}, foreign, _use_new_zipfile_serialization=False, pickle_protocol=4)
-    _rewrite_member(run_dir / "model.zip", "parameters.pt", foreign.getvalue())
+    rewrite_member(run_dir / "model.zip", "parameters.pt", foreign.getvalue())
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         result = runner.invoke(app, ["evaluate", str(run_dir), "--episodes", "1"])
@@ -114,7 +106,7 @@ def test_a_model_with_nan_weights_is_not_evaluated(tmp_path, algo, member):
     next(iter(tensors.values())).view(-1)[0] = float("inf")
     corrupted = io.BytesIO()
     torch.save(state, corrupted)  # written around the guard, as a diverged run's file would be
-    _rewrite_member(run_dir / "model.zip", member, corrupted.getvalue())
+    rewrite_member(run_dir / "model.zip", member, corrupted.getvalue())
     result = runner.invoke(app, ["evaluate", str(run_dir), "--episodes", "1"])
     _assert_one_error_line(result, "cannot load model", "nan or inf")
     assert not (run_dir / "eval.json").exists()

@@ -314,7 +314,8 @@ def test_a_failed_checkpoint_write_leaves_the_previous_checkpoint_and_no_debris(
         raise OSError(errno.ENOSPC, "No space left on device")
 
     model.save_replay_buffer = disk_full
-    with pytest.raises(UsageError, match="cannot write checkpoint in .*: No space left on device$"):
+    full = r"cannot write checkpoint in .*: no space left on device \(the disk is full\)"
+    with pytest.raises(UsageError, match=full):
         checkpoints.save_checkpoint(model, run_dir, config, save_replay=True)
     after = {path.name: path.read_bytes() for path in (run_dir / "checkpoints").iterdir()}
     assert after == before  # no *.tmp* file, the old checkpoint untouched

@@ -28,6 +28,7 @@ from stable_baselines3 import A2C, DQN, PPO, SAC
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.utils import get_device
 
+from drivelab.agents.counters import check_counters
 from drivelab.agents.registry import algo_of, get_algo
 from drivelab.agents.sb3_params import check_sb3_hyperparams, check_sb3_memory
 from drivelab.agents.storage import (
@@ -203,6 +204,7 @@ def load_sb3(algo: str, path: Path, env: gym.Env | None, hyperparams: dict | Non
     with archive:
         if meta.get("format") != FORMAT or meta.get("algo") != algo:
             raise ValueError(f"the file holds a {meta.get('algo')!r} model, not {algo!r}")
+        counters = check_counters(meta["counters"])  # set as attributes: only counters, each of its kind
         given = meta["hyperparams"] if hyperparams is None else json.loads(json.dumps(dict(hyperparams)))
         seed = meta["seed"] if seed is None else int(seed)
         if (given, seed) != (meta["hyperparams"], meta["seed"]):
@@ -217,7 +219,7 @@ def load_sb3(algo: str, path: Path, env: gym.Env | None, hyperparams: dict | Non
     model.set_parameters(parameters["state_dicts"], exact_match=True, device=get_device(model.device))
     for name, value in parameters["variables"].items():
         _attribute(model, name).data.copy_(value)
-    for name, value in meta["counters"].items():
+    for name, value in counters.items():
         setattr(model, name, value)
     model.ep_info_buffer = deque(meta["ep_info_buffer"], maxlen=model._stats_window_size)
     model.ep_success_buffer = deque(meta["ep_success_buffer"], maxlen=model._stats_window_size)

@@ -15,10 +15,12 @@ import time
 import zipfile
 from pathlib import Path
 
+from drivelab.agents.counters import is_count
 from drivelab.agents.registry import get_algo
 from drivelab.agents.storage import NonFiniteParametersError, OldFormatError, is_old_format
 from drivelab.config import RunConfig
 from drivelab.errors import UsageError
+from drivelab.training.safe_files import WriteError, make_folder, temporary_file, write_failure
 
 REPLAY_LIMIT_BYTES = 512 * 2**20  # larger replay buffers are not checkpointed (resume refills)
 
@@ -35,37 +37,49 @@ def file_sha256(path: Path) -> str:
 def save_checkpoint(model, run_dir: Path, config: RunConfig, save_replay: bool) -> Path:
     """Write checkpoints/latest.zip (and replay.npz) with a manifest that lets resume verify them.
 
-    Every file is written under a temporary name first and renamed only when all are written: a
-    failed write (disk full, read-only) removes the temporary files, keeps the previous checkpoint
-    valid and raises a one-line UsageError. A kill between the renames leaves the new manifest
-    beside the new model; ``verify_checkpoint`` finishes the renames (``_finish_renames``)."""
+    Every file is written into a temporary created for it (``safe_files.temporary_file``: never
+    through a link) and renamed only when all are written, the manifest last: a failed write (disk
+    full, read-only) removes the temporary files, keeps the previous checkpoint valid and raises a
+    one-line UsageError. A kill between the renames leaves the new manifest beside the new model;
+    ``verify_checkpoint`` finishes the renames (``_finish_renames``)."""
     folder = run_dir / "checkpoints"
-    temporary = {folder / "latest.tmp.zip": folder / "latest.zip"}
+    what = f"checkpoint in {str(folder)!r}"
+    renames = {folder / "latest.tmp.zip": folder / "latest.zip"}
     try:
-        folder.mkdir(exist_ok=True)
-        model.save(folder / "latest.tmp.zip")
-        manifest = {
-            "steps": int(model.num_timesteps),
-            "sha256": file_sha256(folder / "latest.tmp.zip"),
-            "config_identity": config.identity(),
-            "replay_buffer": False,
-            "saved_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
-        }
-        if save_replay and _replay_fits(model):
-            temporary[folder / "replay.tmp.npz"] = folder / "replay.npz"
-            model.save_replay_buffer(folder / "replay.tmp.npz")
-            manifest.update(replay_buffer=True, replay_sha256=file_sha256(folder / "replay.tmp.npz"))
-        temporary[folder / "latest.tmp.json"] = folder / "latest.json"  # renamed last: the commit
-        (folder / "latest.tmp.json").write_text(json.dumps(manifest, indent=2))
-        for tmp, final in temporary.items():
+        make_folder(folder)
+        with contextlib.ExitStack() as written:  # every temporary removed if one fails
+            model_tmp = written.enter_context(temporary_file(folder / "latest.tmp.zip"))
+            model.save(model_tmp)
+            manifest = {
+                "steps": int(model.num_timesteps),
+                "sha256": file_sha256(model_tmp),
+                "config_identity": config.identity(),
+                "replay_buffer": False,
+                "saved_at": time.strftime("%Y-%m-%dT%H:%M:%S"),
+            }
+            if save_replay and _replay_fits(model):
+                replay_tmp = written.enter_context(temporary_file(folder / "replay.tmp.npz"))
+                renames[replay_tmp] = folder / "replay.npz"
+                model.save_replay_buffer(replay_tmp)
+                manifest.update(replay_buffer=True, replay_sha256=file_sha256(replay_tmp))
+            manifest_tmp = written.enter_context(temporary_file(folder / "latest.tmp.json"))
+            renames[manifest_tmp] = folder / "latest.json"  # renamed last: the commit
+            manifest_tmp.write_text(json.dumps(manifest, indent=2))
+    except NonFiniteParametersError as exc:  # nan weights: the previous checkpoint stands
+        raise UsageError(f"checkpoint in {str(folder)!r} {exc}") from None
+    except WriteError as exc:
+        raise WriteError(what, exc.reason, exc.disk_full) from None
+    renamed = 0
+    try:
+        for tmp, final in renames.items():
             os.replace(tmp, final)
-    except (OSError, NonFiniteParametersError) as exc:  # nan weights: the previous checkpoint stands
-        for tmp in temporary:
-            with contextlib.suppress(OSError):  # on a read-only disk there may be nothing to remove
-                tmp.unlink(missing_ok=True)
-        if isinstance(exc, NonFiniteParametersError):
-            raise UsageError(f"checkpoint in {str(folder)!r} {exc}") from None
-        raise UsageError(f"cannot write checkpoint in {str(folder)!r}: {exc.strerror or exc}") from None
+            renamed += 1
+    except OSError as exc:  # after the first rename the rest is left to ``_finish_renames``
+        if renamed == 0:
+            for tmp in renames:
+                with contextlib.suppress(OSError):
+                    tmp.unlink(missing_ok=True)
+        raise write_failure(exc, folder, what=what) from None
     return folder / "latest.zip"
 
 
@@ -125,7 +139,9 @@ def verify_checkpoint(run_dir: Path, config: RunConfig) -> dict:
     try:
         manifest = json.loads(manifest_path.read_text())
         expected = manifest["sha256"]
-    except (json.JSONDecodeError, KeyError, TypeError):
+        if not is_count(manifest["steps"]):  # a resume cuts the logs back to it
+            raise TypeError("steps")
+    except (json.JSONDecodeError, KeyError, TypeError, UnicodeDecodeError):
         raise UsageError(f"checkpoint manifest {str(manifest_path)!r} is corrupted") from None
     if file_sha256(model_path) != expected or not zipfile.is_zipfile(model_path):
         raise UsageError(f"checkpoint {str(model_path)!r} is truncated or corrupted (checksum mismatch)")
@@ -134,6 +150,24 @@ def verify_checkpoint(run_dir: Path, config: RunConfig) -> dict:
     if manifest.get("config_identity") != config.identity():
         raise UsageError(f"checkpoint in {str(run_dir)!r} was made with a different config")
     return manifest
+
+
+def check_trained_config(run_dir: Path, config: RunConfig) -> None:
+    """A UsageError when ``config`` (the run's config.yaml) is not the config its checkpoint
+    manifest records (``config_identity``, written while it trained): config.yaml was edited after
+    training (traffic, n_envs, sensors), and an evaluation would run under settings the model was
+    not trained or reported with. A run without a readable manifest (a shipped agent, a packed
+    model) has nothing to be checked against. Like the sha256, this finds edits and accidents;
+    someone rewriting the manifest too is not stopped."""
+    try:
+        recorded = json.loads((run_dir / "checkpoints" / "latest.json").read_text())["config_identity"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return
+    if recorded != config.identity():
+        raise UsageError(
+            f"config.yaml of {str(run_dir)!r} is not the config the run was trained with (its checkpoint "
+            "records another): it was edited after training; put it back to evaluate the run"
+        )
 
 
 def model_path(run_dir: Path, config: RunConfig) -> Path:

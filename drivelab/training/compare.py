@@ -15,6 +15,7 @@ from the last row of its ``evaluations.csv``.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import fcntl
@@ -35,6 +36,7 @@ from drivelab.envs.scenarios import SCENARIOS
 from drivelab.errors import UsageError
 from drivelab.hyperparams import shipped_hyperparams
 from drivelab.training.evaluate import load_run_config
+from drivelab.training.safe_files import remove_file, write_failure
 from drivelab.training.stats import CONFIDENCE, Summary, summarize
 from drivelab.training.stats import percent as percent_of
 
@@ -205,6 +207,13 @@ def load_run(run_dir: str | Path) -> RunRecord:
             raise UsageError(f"{str(eval_json)!r} is not valid JSON") from None
         if not isinstance(report, dict):
             raise UsageError(f"{str(eval_json)!r} is not an eval.json written by drivelab evaluate")
+        steps = report.get("model_steps", config.steps)  # an eval.json of an older drivelab has none
+        if not isinstance(steps, int) or isinstance(steps, bool) or steps < config.steps:
+            raise UsageError(
+                f"{str(eval_json)!r} evaluated the model of step {steps!r}, not the run's final one of "
+                f"{config.steps} steps (evaluated before its training ended); evaluate the finished run "
+                "again, or remove it to compare the run's periodic evaluations"
+            )
         final, source = _final_metrics(report, eval_json), "eval.json"
     elif last_row:
         final, source = _final_metrics(last_row, evaluations), "evaluations.csv"
@@ -408,26 +417,40 @@ def _write_csvs(folder: Path, groups, summaries) -> None:
 
 
 MANIFEST = "report-manifest.json"  # the files a report directory's drivelab report consists of
-LEGACY_REPORT_FILES = ("report.md", "summary.csv", "runs.csv", "learning_curves.png", "metrics.png")
+REPORT_FILES = ("report.md", "summary.csv", "runs.csv", "learning_curves.png", "metrics.png")
 TMP_PREFIX = ".report.tmp-"  # the folder a report is written into before its files are moved out
+
+
+def _is_report_tmp(folder: Path) -> bool:
+    """Whether ``folder`` is one that ``publish_dir`` writes a report into: a folder (not a link)
+    named ``TMP_PREFIX…`` holding nothing but files of a report. A user's folder of that name
+    holding anything else is not."""
+    if not folder.name.startswith(TMP_PREFIX) or folder.is_symlink() or not folder.is_dir():
+        return False
+    try:
+        return all(
+            p.name in (*REPORT_FILES, MANIFEST) and p.is_file() and not p.is_symlink()
+            for p in folder.iterdir()
+        )
+    except OSError:
+        return False
 
 
 def _tmp_folders(out_dir: Path) -> list[Path]:
     """The folders in ``out_dir`` that ``publish_dir`` writes reports into: of a report being
     written now (locked), or left by one killed while it wrote (SIGKILL: no cleanup)."""
-    return sorted(
-        p for p in out_dir.iterdir() if p.name.startswith(TMP_PREFIX) and p.is_dir() and not p.is_symlink()
-    )
+    return sorted(p for p in out_dir.iterdir() if _is_report_tmp(p))
 
 
 def _remove_stale_tmp_folders(out_dir: Path, keep: Path) -> None:
-    """Remove the temporary folders of reports killed while they were written; a folder that
-    another process is writing a report into holds a lock (``publish_dir``) and stays."""
+    """Remove the temporary folders of reports killed while they were written: their report files,
+    then the folder once empty. A folder that another process is writing a report into holds a
+    lock (``publish_dir``) and stays, as does one that holds anything else."""
     for folder in _tmp_folders(out_dir):
         if folder == keep:
             continue
         try:
-            handle = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+            handle = os.open(folder, os.O_RDONLY | os.O_DIRECTORY | os.O_NOFOLLOW)
         except OSError:
             continue  # gone meanwhile
         try:
@@ -439,7 +462,11 @@ def _remove_stale_tmp_folders(out_dir: Path, keep: Path) -> None:
             os.close(handle)
             continue
         try:
-            shutil.rmtree(folder, ignore_errors=True)
+            for name in (*REPORT_FILES, MANIFEST):
+                with contextlib.suppress(OSError):
+                    remove_file(folder / name)
+            with contextlib.suppress(OSError):
+                folder.rmdir()  # refused when something else is in it now: it stays
         finally:
             os.close(handle)
 
@@ -473,24 +500,26 @@ def _new_tmp_folder(out_dir: Path) -> tuple[Path, int]:
 def previous_report_files(out_dir: Path) -> list[str] | None:
     """The names of the files a previous drivelab report wrote into ``out_dir`` (its manifest
     included), None when ``out_dir`` holds no drivelab report. A report from before the manifest
-    existed is recognised by its report.md and owns only the files every report had."""
+    existed is recognised by its report.md and owns only the files every report had. A manifest
+    naming anything but a report's files is not drivelab's: a UsageError, nothing is removed."""
     manifest = out_dir / MANIFEST
     if manifest.is_file():
         try:
             files = json.loads(manifest.read_text(encoding="utf-8"))["files"]
         except (ValueError, KeyError, TypeError):
             raise UsageError(f"{str(manifest)!r} is corrupted; move the report away by hand") from None
-        if not isinstance(files, list) or not all(_plain_name(name) for name in files):
+        if not isinstance(files, list) or not all(isinstance(name, str) for name in files):
             raise UsageError(f"{str(manifest)!r} is corrupted; move the report away by hand")
+        foreign = [name for name in files if name not in REPORT_FILES]
+        if foreign:
+            raise UsageError(
+                f"{str(manifest)!r} lists {foreign[0]!r}, which no drivelab report writes: it is not a "
+                "manifest of drivelab's, and compare deletes nothing by it; choose another --out"
+            )
         return [*files, MANIFEST]
     if (out_dir / "report.md").is_file():
-        return [name for name in LEGACY_REPORT_FILES if (out_dir / name).exists()]
+        return [name for name in REPORT_FILES if (out_dir / name).exists()]
     return None
-
-
-def _plain_name(name) -> bool:
-    """A file name in the report directory itself (no folder part, not . or ..)."""
-    return isinstance(name, str) and name not in ("", ".", "..") and "/" not in name and "\\" not in name
 
 
 def _check_out_dir(out_dir: Path) -> list[str]:
@@ -507,6 +536,12 @@ def _check_out_dir(out_dir: Path) -> list[str]:
             f"--out {str(out_dir)!r} is not empty and holds no drivelab report; choose another --out "
             "(compare never deletes or overwrites files it did not write)"
         )
+    for name in previous or []:
+        if (out_dir / name).is_dir() and not (out_dir / name).is_symlink():
+            raise UsageError(
+                f"{str(out_dir / name)!r} is a folder, not a file of a drivelab report; choose another --out "
+                "(compare never deletes or overwrites files it did not write)"
+            )
     return previous or []
 
 
@@ -514,11 +549,12 @@ def publish_dir(out_dir: Path, fill) -> Path:
     """Write a report with ``fill(folder)`` into a temporary folder inside ``out_dir``, then move
     its files into ``out_dir`` and list them in ``report-manifest.json``.
 
-    A failure while filling leaves ``out_dir`` as it was. Of a previous report only the files its
-    manifest lists are replaced or removed; other files in ``out_dir`` are never touched, and a
-    non-empty ``out_dir`` without a report is refused. The temporary folder of a report killed
-    while it was written (SIGKILL: no cleanup) is not the user's: it does not make ``out_dir``
-    foreign, and the next report removes it.
+    A failure while filling leaves ``out_dir`` as it was; a failed write (a full disk) is one
+    line. Of a previous report only the files its manifest lists, all files a report writes, are
+    replaced or removed; other files in ``out_dir`` are never touched, and a non-empty ``out_dir``
+    without a report is refused. The temporary folder of a report killed while it was written
+    (SIGKILL: no cleanup) is not the user's: it does not make ``out_dir`` foreign, and the next
+    report removes its files and then it.
     """
     out_dir = Path(out_dir)
     previous = _check_out_dir(out_dir)
@@ -529,35 +565,30 @@ def publish_dir(out_dir: Path, fill) -> Path:
         tmp, lock = _new_tmp_folder(out_dir)
     except OSError as exc:
         _remove_empty(created)
-        raise UsageError(f"cannot write a report in {str(out_dir)!r}: {exc.strerror}") from None
+        raise write_failure(exc, out_dir, what=f"a report in {str(out_dir)!r}") from None
     try:
         fill(tmp)
         written = sorted(p.name for p in tmp.iterdir())
-        clashes = [name for name in written if (out_dir / name).exists() and name not in previous]
+        clashes = [name for name in written if os.path.lexists(out_dir / name) and name not in previous]
         if clashes:
             raise UsageError(f"{str(out_dir / clashes[0])!r} exists and is not from a drivelab report")
         for name in previous:
-            _remove(out_dir / name)
+            (out_dir / name).unlink(missing_ok=True)  # a file (``_check_out_dir``), or a link itself
         for name in written:
             os.replace(tmp / name, out_dir / name)
         (tmp / MANIFEST).write_text(json.dumps({"files": written}, indent=2) + "\n")
         os.replace(tmp / MANIFEST, out_dir / MANIFEST)
-    except BaseException:
+    except BaseException as exc:
         shutil.rmtree(tmp, ignore_errors=True)
         _remove_empty(created)
+        if isinstance(exc, OSError):  # a full disk, most often
+            raise write_failure(exc, out_dir, what=f"a report in {str(out_dir)!r}") from None
         raise
     finally:
         os.close(lock)
     shutil.rmtree(tmp, ignore_errors=True)
     _remove_stale_tmp_folders(out_dir, keep=tmp)
     return out_dir
-
-
-def _remove(path: Path) -> None:
-    if path.is_dir() and not path.is_symlink():
-        shutil.rmtree(path)
-    elif path.exists() or path.is_symlink():
-        path.unlink()
 
 
 def _remove_empty(folders: list[Path]) -> None:

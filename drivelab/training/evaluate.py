@@ -5,7 +5,6 @@ from __future__ import annotations
 import contextlib
 import json
 import math
-import os
 import tempfile
 from collections.abc import Callable
 from pathlib import Path
@@ -16,6 +15,16 @@ from tqdm import tqdm
 
 from drivelab.config import RunConfig, build_config, parse_maps
 from drivelab.errors import UsageError
+from drivelab.training.safe_files import (
+    check_folder,
+    check_replaceable,
+    locked_run,
+    make_folder,
+    remove_file,
+    replacing,
+    write_failure,
+    write_file,
+)
 from drivelab.yaml_io import load_yaml
 
 
@@ -113,18 +122,42 @@ def aggregate(results: list[dict]) -> dict[str, float]:
     }
 
 
+def has_mp4_encoder() -> bool:
+    """Whether imageio-ffmpeg and its ffmpeg are installed (mp4 videos; else gif, with Pillow)."""
+    try:
+        import imageio_ffmpeg
+
+        imageio_ffmpeg.get_ffmpeg_exe()
+    except (ImportError, RuntimeError):
+        return False
+    return True
+
+
 def write_video(frames: list[np.ndarray], path: Path, fps: float) -> Path:
-    """Write frames as mp4 (imageio-ffmpeg), falling back to a gif; ``fps``: ``video_fps(env)``
-    for ``run_episodes``' frames."""
+    """Write frames as mp4 (imageio-ffmpeg), or as a gif where no mp4 encoder is installed;
+    ``fps``: ``video_fps(env)`` for ``run_episodes``' frames. The video is written whole into a
+    temporary in its folder (``safe_files.replacing``; the folder made if missing, never a link):
+    a failed write leaves nothing and is one line, naming a full disk."""
     import imageio.v2 as imageio
 
-    path.parent.mkdir(parents=True, exist_ok=True)
+    made = not path.parent.exists()
+    make_folder(path.parent)
+    mp4 = has_mp4_encoder()
+    final = path.with_suffix(".mp4" if mp4 else ".gif")
     try:
-        imageio.mimwrite(path.with_suffix(".mp4"), frames, fps=max(fps, 1), macro_block_size=1)
-        return path.with_suffix(".mp4")
-    except Exception:  # no ffmpeg backend: gif needs nothing beyond Pillow
-        imageio.mimwrite(path.with_suffix(".gif"), frames, duration=1000 / max(fps, 1))
-        return path.with_suffix(".gif")
+        with replacing(final, final.with_name(f"{final.stem}.tmp{final.suffix}")) as temporary:
+            if mp4:
+                # ffmpeg says nothing: a failure (a full disk) is this function's one line
+                quiet = {"macro_block_size": 1, "ffmpeg_log_level": "quiet"}
+                imageio.mimwrite(temporary, frames, fps=max(fps, 1), **quiet)
+            else:
+                imageio.mimwrite(temporary, frames, duration=1000 / max(fps, 1))
+    except Exception as exc:  # ffmpeg's failures (a full disk too) come as its own errors
+        if made:
+            with contextlib.suppress(OSError):
+                path.parent.rmdir()
+        raise exc if isinstance(exc, UsageError) else write_failure(exc, final) from None
+    return final
 
 
 def report_name(maps: str | None = None) -> str:
@@ -169,26 +202,37 @@ def evaluate_run(
         (``first_episode``) when it is not 0.
     :param progress: show a progress bar of the episodes (on stderr).
     """
-    from drivelab.envs.core import DriveEnv
-    from drivelab.envs.video import video_fps
-    from drivelab.training.checkpoints import load_agent
-
-    run_dir = Path(run_dir)
-    config = load_run_config(run_dir)
     if episodes < 1:
         raise UsageError("--episodes must be >= 1")
+    run_dir = Path(run_dir)
+    with locked_run(run_dir, writes=out_dir is None):  # no evaluation of a run that trains now
+        return _evaluate_locked(run_dir, episodes, video, deterministic, out_dir, maps, side_by_side, first,
+                                progress)  # fmt: skip
+
+
+def _evaluate_locked(run_dir: Path, episodes: int, video: bool, deterministic: bool,
+                     out_dir: str | Path | None, maps: str | None, side_by_side: bool | None, first: int,
+                     progress: bool) -> dict:  # fmt: skip
+    """``evaluate_run`` while it holds ``run_dir``."""
+    from drivelab.envs.core import DriveEnv
+    from drivelab.envs.video import video_fps
+    from drivelab.training.checkpoints import check_trained_config, load_agent
+
+    config = load_run_config(run_dir)
+    trained = config
     if maps is not None:
         config = build_config({**config.to_dict(), "eval_maps": maps})  # checks START:COUNT, scenario
     name = report_name(maps)
     if out_dir is None:
         out_dir = run_dir
-        check_writable(out_dir, name)
+        check_writable(out_dir, name, video)
     env = DriveEnv(**config.eval_env_kwargs())
     agent = load_agent(run_dir, config)
     check_spaces(agent, env, run_dir)
+    check_trained_config(run_dir, trained)  # edits that leave the spaces as they were: traffic, n_envs
     if out_dir is not run_dir:  # created only once the model has loaded
         out_dir = make_out_dir(Path(out_dir))
-        check_writable(out_dir, name)
+        check_writable(out_dir, name, video)
     policy = lambda obs: agent.predict(obs, deterministic=deterministic)[0]  # noqa: E731
     with tqdm(total=episodes, desc=f"evaluate {config.algo}", unit="episode", disable=not progress) as bar:
         results, frames = run_episodes(
@@ -201,15 +245,23 @@ def evaluate_run(
             on_episode=lambda _: bar.update(),
         )
     report = {"run": str(run_dir), "algo": config.algo, "env": config.env, **aggregate(results)}
+    report["model_steps"] = int(agent.num_timesteps)  # compare: an eval.json of this model only
     if first:
         report["first_episode"] = first
     if maps is not None:
         report["maps"] = config.eval_maps
+    made = not (out_dir / "videos").exists()
     if video:
         report["video"] = str(write_video(frames, out_dir / "videos" / "evaluate", video_fps(env)))
-    tmp = out_dir / f"{name}.tmp"
-    tmp.write_text(json.dumps({**report, "per_episode": results}, indent=2))
-    os.replace(tmp, out_dir / name)
+    try:
+        write_file(out_dir / name, json.dumps({**report, "per_episode": results}, indent=2))
+    except UsageError:  # a full disk: the report and its video are written together or not at all
+        if video:
+            remove_file(Path(report["video"]))
+            if made:
+                with contextlib.suppress(OSError):
+                    (out_dir / "videos").rmdir()
+        raise
     return report
 
 
@@ -235,12 +287,17 @@ def _exists(path: Path) -> bool:
         return False
 
 
-def check_writable(run_dir: Path, name: str) -> None:
-    """A UsageError unless a file can be created in ``run_dir`` and ``name`` there is not a
-    folder: checked before an evaluation, not after its episodes. The probe is a real file
-    (removed at once), as permission bits say nothing on a read-only mount or for root."""
+def check_writable(run_dir: Path, name: str, video: bool = False) -> None:
+    """A UsageError unless a file can be created in ``run_dir``, ``name`` there is not a folder
+    and its temporary is nothing but a file (``safe_files.check_replaceable``), and with ``video``,
+    ``videos`` there is a folder or missing: checked before an evaluation, not after its episodes.
+    The probe is a real file (removed at once), as permission bits say nothing on a read-only mount
+    or for root."""
     if (run_dir / name).is_dir():
         raise UsageError(f"cannot write {name} in {str(run_dir)!r}: it is a directory")
+    check_replaceable(run_dir / name)
+    if video:
+        check_folder(run_dir / "videos")
     problem = _cannot_create_in(run_dir)
     if problem is not None:
         raise UsageError(f"cannot write {name} in {str(run_dir)!r}: {problem}")

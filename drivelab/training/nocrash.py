@@ -12,13 +12,13 @@ route ends the episode short of it. Infractions are counted per kilometre driven
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 from tqdm import tqdm
 
 from drivelab.errors import UsageError
 from drivelab.training.evaluate import aggregate, load_run_config, run_episodes
+from drivelab.training.safe_files import locked_run, write_file
 
 LEVELS = ("empty", "regular", "dense")
 NOCRASH_SEED = 20_000  # the same episodes for every run
@@ -47,13 +47,22 @@ def nocrash(
     :param episodes: episodes per traffic level.
     :param infraction_level: the traffic level of the infraction table.
     """
+    run_dir = Path(run_dir)
+    with locked_run(run_dir, writes=out_dir is None):  # no evaluation of a run that trains now
+        return _nocrash(run_dir, town, episodes, infraction_level, out_dir)
+
+
+def _nocrash(
+    run_dir: Path, town: str, episodes: int, infraction_level: str, out_dir: str | Path | None
+) -> dict:
+    """``nocrash`` while it holds ``run_dir``."""
     from drivelab.envs.core import DriveEnv
     from drivelab.envs.town import LAYOUTS
-    from drivelab.training.checkpoints import file_sha256, load_agent, model_path
+    from drivelab.training.checkpoints import check_trained_config, file_sha256, load_agent, model_path
     from drivelab.training.evaluate import check_writable, make_out_dir
 
-    run_dir = Path(run_dir)
     config = load_run_config(run_dir)
+    check_trained_config(run_dir, config)
     if config.env != "town":
         raise UsageError(f"NoCrash evaluates town runs; {str(run_dir)!r} was trained on {config.env!r}")
     if town not in LAYOUTS:
@@ -88,8 +97,8 @@ def nocrash(
         "levels": levels,
         "infraction_level": infraction_level,
     }
-    _write(out_dir / "nocrash.json", json.dumps(report, indent=2))
-    _write(out_dir / "nocrash.md", report_markdown(report))
+    write_file(out_dir / "nocrash.json", json.dumps(report, indent=2))
+    write_file(out_dir / "nocrash.md", report_markdown(report))
     return report
 
 
@@ -127,9 +136,3 @@ def report_markdown(report: dict) -> str:
         "",
     ]
     return "\n".join(lines)
-
-
-def _write(path: Path, text: str) -> None:
-    temporary = path.with_suffix(path.suffix + ".tmp")
-    temporary.write_text(text)
-    os.replace(temporary, path)

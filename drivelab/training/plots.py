@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import csv
-import os
 from pathlib import Path
 
 import numpy as np
 from matplotlib.figure import Figure
+
+from drivelab.training.safe_files import replacing
 
 
 def _read_csv(path: Path, skip_comment: bool = False) -> list[dict]:
@@ -48,7 +49,6 @@ def plot_learning_curve(run_dir: str | Path) -> Path:
     fig.tight_layout()
     # written whole or not at all: a run killed while drawing it has none, and a sweep's re-run
     # draws it (``sweep.cell_action``: "finish"), instead of keeping a cut-off image
-    tmp = run_dir / "learning_curve.tmp.png"
-    fig.savefig(tmp)
-    os.replace(tmp, path)
+    with replacing(path, run_dir / "learning_curve.tmp.png") as temporary:
+        fig.savefig(temporary)
     return path

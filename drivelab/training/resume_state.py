@@ -42,6 +42,7 @@ import hashlib
 import json
 import os
 import random
+import re
 import signal
 import sys
 import time
@@ -56,7 +57,9 @@ import torch
 from gymnasium.utils import seeding
 from stable_baselines3.common.vec_env import VecEnvWrapper
 
+from drivelab.agents.counters import check_counters
 from drivelab.errors import UsageError
+from drivelab.training.safe_files import remove_file, replacing, write_file
 
 FORMAT = 1
 # what the learning loops keep between steps: SB3's (BaseAlgorithm, OffPolicyAlgorithm, DQN) and ours
@@ -66,6 +69,7 @@ COUNTERS = (
     "epsilon", "_obs", "_episode_return", "_episode_length",  # Q-learning's
 )  # fmt: skip
 EPISODE_BUFFERS = ("ep_info_buffer", "ep_success_buffer", "episode_returns")  # logged means only
+STATE_NAME = re.compile(r"resume-\d+\.(json|npz)")  # ``write_state``'s files
 STALE_RESULTS = ("eval.json", "nocrash.json", "learning_curve.png", "model.zip")
 
 
@@ -416,20 +420,18 @@ def _json_default(value: Any) -> Any:
 
 
 def write_state(folder: Path, snapshot: Snapshot) -> None:
-    """``resume-<steps>.json`` + ``.npz``, each written to a temporary name then renamed."""
+    """``resume-<steps>.json`` + ``.npz``, each written whole (``safe_files.replacing``)."""
     json_path, npz_path = _paths(folder, snapshot.steps)
     arrays = dict(snapshot.arrays)
     for index, actions in enumerate(snapshot.world_actions()):
         arrays[f"world_{index}_actions"] = actions
-    tmp_npz = folder / "resume.tmp.npz"
-    with tmp_npz.open("wb") as handle:
-        np.savez(handle, **arrays)
+    with replacing(npz_path, folder / "resume.tmp.npz") as tmp_npz:
+        with tmp_npz.open("wb") as handle:
+            np.savez(handle, **arrays)
+        npz_sha256 = hashlib.sha256(tmp_npz.read_bytes()).hexdigest()
     meta = {**snapshot.meta, "worlds": [{"start": start} for start, _, _ in snapshot.worlds],
-            "npz_sha256": hashlib.sha256(tmp_npz.read_bytes()).hexdigest()}  # fmt: skip
-    os.replace(tmp_npz, npz_path)
-    tmp_json = folder / "resume.tmp.json"
-    tmp_json.write_text(json.dumps(meta, default=_json_default))
-    os.replace(tmp_json, json_path)
+            "npz_sha256": npz_sha256}  # fmt: skip
+    write_file(json_path, json.dumps(meta, default=_json_default), folder / "resume.tmp.json")
 
 
 def read_state(folder: Path, steps: int) -> Snapshot | None:
@@ -478,6 +480,8 @@ def _check_meta(meta: dict) -> None:
     need(isinstance(python, list) and len(python) == 3 and isinstance(python[1], list), "rng python")
     need(counts(rng.get("torch_cuda")), "rng torch_cuda")
     need(isinstance(meta.get("counters"), dict) and isinstance(meta.get("buffers"), dict), "counters")
+    check_counters(meta["counters"])  # set on the model as attributes: only counters, each of its kind
+    need(meta["counters"].get("num_timesteps", meta["steps"]) == meta["steps"], "counter num_timesteps")
     need(all(isinstance(values, list) for values in meta["buffers"].values()), "buffers")
     need(meta.get("last_obs") in (None, "array") or isinstance(meta["last_obs"], list), "last_obs")
     worlds = meta.get("worlds")
@@ -503,11 +507,12 @@ def check_restore(model, worlds: TrainingWorlds, snapshot: Snapshot, path: Path)
 
 
 def prune_states(folder: Path, keep_steps: int) -> None:
-    """Remove the resume states of earlier checkpoints (after the manifest moved on)."""
+    """Remove the resume states of earlier checkpoints (after the manifest moved on): the files
+    named as ``write_state`` names them, no other."""
     keep = set(_paths(folder, keep_steps))
-    for path in folder.glob("resume-*.*"):
-        if path not in keep:
-            path.unlink(missing_ok=True)
+    for path in folder.iterdir():
+        if STATE_NAME.fullmatch(path.name) and path not in keep:
+            remove_file(path)
 
 
 # --- logs back to the checkpoint -------------------------------------------------------------------
@@ -582,19 +587,19 @@ def plan_truncation(run_dir: Path, steps: int, snapshot: Snapshot | None) -> dic
 
 
 def apply_truncation(run_dir: Path, changes: dict[Path, str | None], steps: int) -> None:
-    """Write ``plan_truncation``'s changes, then set the remaining progress.csv aside as
+    """Write ``plan_truncation``'s changes, the rewrites first (a full disk fails one of them
+    before anything is deleted), then set the remaining progress.csv aside as
     ``progress-<steps>.csv`` (the logger starts a new progress.csv)."""
     for path, text in changes.items():
+        if text is not None:
+            write_file(path, text)
+    for path, text in changes.items():
         if text is None:
-            path.unlink(missing_ok=True)
-        else:
-            tmp = path.with_name(path.name + ".tmp")
-            tmp.write_text(text)
-            os.replace(tmp, path)
+            remove_file(path)
     progress = run_dir / "progress.csv"
     if progress.exists():
         target, suffix = run_dir / f"progress-{steps}.csv", 1
-        while target.exists():
+        while os.path.lexists(target):
             target, suffix = run_dir / f"progress-{steps}-{suffix}.csv", suffix + 1
         os.replace(progress, target)
 

@@ -13,20 +13,25 @@ Run directory layout::
     model.zip              final model: tensors (``torch.load(weights_only=True)``) and JSON
     learning_curve.png     training returns and evaluation returns against steps
     videos/                periodic-evaluation videos (when asked)
+    .in-use.pid            the pid of the command using the run, while it runs
 
 Nothing in a run directory is unpickled (``agents/storage.py``): a run from elsewhere cannot run
-code when it is evaluated or resumed. The manifest's sha256 only detects a truncated or corrupted
-checkpoint; stored beside the file, it proves nothing against deliberate tampering. Checkpoints
-and the final model are written, verified and loaded by ``checkpoints.py``.
+code when it is evaluated or resumed. Nor can it make drivelab write outside it: a run holding a
+symbolic link is refused, files are written through temporaries created exclusively, and one
+command at a time uses it, under a lock (``safe_files.py``). The manifest's sha256 only detects a
+truncated or corrupted checkpoint; stored beside the file, it proves nothing against deliberate
+tampering. Checkpoints and the final model are written, verified and loaded by ``checkpoints.py``.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import gc
 import os
 import shutil
 import sys
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -38,7 +43,7 @@ from stable_baselines3.common.vec_env import VecMonitor
 from tqdm import tqdm
 
 from drivelab.agents.registry import check_combination, get_algo
-from drivelab.config import RunConfig, build_config, check_steps, save_yaml
+from drivelab.config import RunConfig, build_config, check_steps
 from drivelab.errors import UsageError
 from drivelab.training.checkpoints import load_agent, load_replay, save_checkpoint, verify_checkpoint
 from drivelab.training.divergence import (
@@ -74,6 +79,19 @@ from drivelab.training.resume_state import (
     warn_inexact,
     write_state,
 )
+from drivelab.training.safe_files import (
+    AGAIN,
+    DISK_FULL,
+    IN_USE,
+    WriteError,
+    locked_run,
+    make_folder,
+    remove_file,
+    replacing,
+    write_failure,
+    write_file,
+)
+from drivelab.yaml_io import dump_yaml
 
 
 class TrainingInterrupted(KeyboardInterrupt):
@@ -185,8 +203,7 @@ class RunCallback(BaseCallback):
         """The model's checkpoint and the resume state of ``snapshot`` (taken at the model's
         present state), the resume state first: the manifest, written last, commits both."""
         self.check_weights(snapshot.steps)  # keep the last finite checkpoint as the latest
-        folder = self.run_dir / "checkpoints"
-        folder.mkdir(exist_ok=True)
+        folder = make_folder(self.run_dir / "checkpoints")
         write_state(folder, snapshot)
         save_checkpoint(self.model, self.run_dir, self.config, self.save_replay)
         prune_states(folder, snapshot.steps)
@@ -248,9 +265,7 @@ def new_run_dir(config: RunConfig, runs_root: Path) -> Path:
     except OSError as exc:  # a name too long (ENAMETOOLONG) for this file system
         raise UsageError(f"cannot create run directory {str(run_dir)!r}: {exc.strerror or exc}") from None
     if exists:
-        raise UsageError(
-            f"run directory {str(run_dir)!r} already exists (choose another --name, or --resume it)"
-        )
+        raise _exists(run_dir)
     if not existing.is_dir():
         raise UsageError(f"--runs-dir {str(runs_root)!r}: {str(existing)!r} is not a directory")
     if not os.access(existing, os.W_OK | os.X_OK):
@@ -364,36 +379,80 @@ def train(
     run_dir = new_run_dir(config, Path(runs_root))
     spec = check_config(config)
     check_steps(config)
-    created = [folder for folder in (run_dir, *run_dir.parents) if not folder.exists()]
-    make_out_dir(run_dir, "run directory")  # one error line, no folder left, if it cannot be
-    try:
-        save_yaml(config, run_dir / "config.yaml")
-        train_env, eval_env, worlds = _make_envs(config, run_dir, resume=False)
-        model = spec.build(config.algo, train_env, config.seed, dict(config.hyperparams), run_dir)
-    except BaseException as exc:  # Ctrl-C too: a folder of a config alone could not be resumed
-        _remove_created(created)  # bad hyperparameters, too little memory: leave nothing behind
-        if isinstance(exc, MemoryError):
-            raise UsageError(_out_of_memory(config)) from None
-        if isinstance(exc, (TypeError, ValueError)) and not isinstance(exc, UsageError):
-            raise UsageError(f"bad hyperparameters for {config.algo!r}: {exc}") from None
-        raise
-    try:
-        _learn(model, run_dir, config, eval_env, worlds, on_evaluation, eval_first)
-    except Exception as exc:
-        # a run that failed before its first checkpoint cannot be resumed: it leaves nothing behind
-        if not (run_dir / "checkpoints" / "latest.json").is_file():
-            _remove_created(created)
-        if isinstance(exc, MemoryError):
-            raise UsageError(_out_of_memory(config)) from None
-        raise
+    created = _make_run_dir(run_dir)
+    with locked_run(run_dir):
+        try:
+            write_file(run_dir / "config.yaml", dump_yaml(config.to_dict()))
+            train_env, eval_env, worlds = _make_envs(config, run_dir, resume=False)
+            model = spec.build(config.algo, train_env, config.seed, dict(config.hyperparams), run_dir)
+        except BaseException as exc:  # Ctrl-C too: a folder of a config alone could not be resumed
+            _remove_created(created)  # bad hyperparameters, too little memory: leave nothing behind
+            if isinstance(exc, MemoryError):
+                raise UsageError(_out_of_memory(config)) from None
+            if isinstance(exc, OSError):  # a full disk
+                raise _write_failed(exc, run_dir, AGAIN) from None
+            if isinstance(exc, (TypeError, ValueError)) and not isinstance(exc, UsageError):
+                raise UsageError(f"bad hyperparameters for {config.algo!r}: {exc}") from None
+            raise
+        try:
+            _learn(model, run_dir, config, eval_env, worlds, on_evaluation, eval_first)
+        except Exception as exc:
+            # a run that failed before its first checkpoint cannot be resumed: it leaves nothing behind
+            if not (run_dir / "checkpoints" / "latest.json").is_file():
+                _remove_created(created)
+            if isinstance(exc, MemoryError):
+                raise UsageError(_out_of_memory(config)) from None
+            raise
     return run_dir
+
+
+def _make_run_dir(run_dir: Path) -> list[Path]:
+    """Make ``run_dir`` and the folders above it that are missing; the folders made (innermost
+    first). Its own ``mkdir`` is exclusive: when another command made it since ``new_run_dir``
+    looked (the same run started twice at once), a UsageError, and nothing of theirs is touched."""
+    created = [folder for folder in (run_dir, *run_dir.parents) if not folder.exists()]
+    make_out_dir(run_dir.parent, "runs folder")  # one error line, no folder left, if it cannot be
+    try:
+        run_dir.mkdir()
+    except FileExistsError:
+        raise _exists(run_dir) from None
+    except OSError as exc:
+        _remove_empty(created[1:])
+        raise UsageError(f"cannot create run directory {str(run_dir)!r}: {exc.strerror or exc}") from None
+    return created
+
+
+def _exists(run_dir: Path) -> UsageError:
+    return UsageError(
+        f"run directory {str(run_dir)!r} already exists (choose another --name, or --resume it)"
+    )
+
+
+def _write_failed(exc: OSError | WriteError, run_dir: Path, then: str) -> WriteError:
+    """``write_failure`` of a write in ``run_dir`` (the file the error names, if any)."""
+    if isinstance(exc, OSError) and isinstance(exc.filename, str):
+        return write_failure(exc, Path(exc.filename), then)
+    return write_failure(exc, run_dir, then, what=f"in {str(run_dir)!r}")
+
+
+def _resume_hint(run_dir: Path) -> str:
+    """What to do after a failure (a full disk) that left ``run_dir`` with a checkpoint, or
+    without (then the run was removed, or never changed: the command can run again)."""
+    if (run_dir / "checkpoints" / "latest.json").is_file():
+        return f"continue with `drivelab train --resume {run_dir}`"
+    return AGAIN
 
 
 def _remove_created(created: list[Path]) -> None:
     """Remove the run directory ``created[0]`` and the folders above it that ``train`` created
     (innermost first), those only while empty."""
     shutil.rmtree(created[0], ignore_errors=True)
-    for folder in created[1:]:
+    _remove_empty(created[1:])
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove ``folders`` (innermost first) while they are empty."""
+    for folder in folders:
         try:
             folder.rmdir()
         except OSError:
@@ -430,21 +489,28 @@ def resume(
     ``on_evaluation``, ``eval_first``: as for ``train``.
     """
     run_dir = Path(run_dir)
-    config = load_run_config(run_dir)
-    if steps is not None:
-        config = build_config({**config.to_dict(), "steps": steps})
-    if _stopped_before_first_checkpoint(run_dir):
+    with locked_run(run_dir):  # one command at a time; no link in it (``safe_files``)
+        config = load_run_config(run_dir)
+        if steps is not None:
+            config = build_config({**config.to_dict(), "steps": steps})
+        if not _stopped_before_first_checkpoint(run_dir):
+            _continue(run_dir, config, on_evaluation, eval_first)
+            return run_dir
         config = build_config({**config.to_dict(), "name": run_dir.name})
         written = unstarted_run_files(run_dir)  # a folder holding anything else is refused
         check_config(config)
         sys.stderr.write(f"{run_dir}: stopped before its first checkpoint; training again from step 0\n")
         _remove_run_files(run_dir, written)
-        return train(config, run_dir.parent, on_evaluation, eval_first)
+    return train(config, run_dir.parent, on_evaluation, eval_first)
+
+
+def _continue(run_dir: Path, config: RunConfig, on_evaluation, eval_first: int) -> None:
+    """``resume`` of a run with a checkpoint, while it holds ``run_dir``."""
     manifest = verify_checkpoint(run_dir, config)
     if manifest["steps"] == config.steps and not (run_dir / "model.zip").is_file():
         # stopped between its final checkpoint and the model: the model is the checkpoint's
         _save_model(_load_checkpoint(config, run_dir, manifest, replay=False), run_dir)
-        return run_dir
+        return
     if manifest["steps"] >= config.steps:
         raise UsageError(
             f"run already has {manifest['steps']} steps (>= {config.steps}); pass a larger --steps"
@@ -456,16 +522,18 @@ def resume(
     if snapshot is not None:
         _check_snapshot(model, config, snapshot, state_path(folder, manifest["steps"]))
     # everything checked: from here on the run directory changes
-    apply_truncation(run_dir, changes, manifest["steps"])
-    save_yaml(config, run_dir / "config.yaml")
-    train_env, eval_env, worlds = _make_envs(config, run_dir, resume=True)
+    try:
+        write_file(run_dir / "config.yaml", dump_yaml(config.to_dict()))
+        apply_truncation(run_dir, changes, manifest["steps"])
+        train_env, eval_env, worlds = _make_envs(config, run_dir, resume=True)
+    except (OSError, WriteError) as exc:  # a full disk: the checkpoint stands, resuming again works
+        raise _write_failed(exc, run_dir, _resume_hint(run_dir)) from None
     model.set_env(train_env)
     if snapshot is None:
         warn_inexact()
     else:
         restore(model, worlds, snapshot)
     _learn(model, run_dir, config, eval_env, worlds, on_evaluation, eval_first)
-    return run_dir
 
 
 def _stopped_before_first_checkpoint(run_dir: Path) -> bool:
@@ -478,13 +546,13 @@ def _stopped_before_first_checkpoint(run_dir: Path) -> bool:
 # What a run writes before its first checkpoint (the layout above): the files a resume that finds
 # no checkpoint may remove. The checkpoint's own files appear when one was being written.
 UNSTARTED_FILES = (
-    "config.yaml", "monitor.csv", "progress.csv", "progress-*.csv", "evaluations.csv",
-    "events.out.tfevents.*", "learning_curve.png", "learning_curve.tmp.png",
+    "config.yaml", "config.yaml.tmp", "monitor.csv", "progress.csv", "progress-*.csv", "evaluations.csv",
+    "events.out.tfevents.*", "learning_curve.png", "learning_curve.tmp.png", IN_USE, IN_USE + ".tmp",
 )  # fmt: skip
 UNSTARTED_FOLDERS = {
     "checkpoints": ("resume-*.json", "resume-*.npz", "resume.tmp.json", "resume.tmp.npz",
                     "latest.tmp.zip", "latest.tmp.json", "replay.tmp.npz"),
-    "videos": ("eval-*.mp4", "eval-*.gif"),
+    "videos": ("eval-*.mp4", "eval-*.gif"),  # the temporaries too: eval-<step>.tmp.mp4
 }  # fmt: skip
 
 
@@ -539,13 +607,14 @@ def remove_unstarted_run(run_dir: Path) -> None:
     """Remove ``run_dir``, a run stopped before its first checkpoint: its own files, checked again
     (``unstarted_run_files``: the folder may have changed since it was last looked at), then the
     folders they leave empty. Anything else there is refused, and nothing removed."""
-    _remove_run_files(run_dir, unstarted_run_files(run_dir))
+    with locked_run(run_dir):
+        _remove_run_files(run_dir, unstarted_run_files(run_dir))
 
 
 def _remove_run_files(run_dir: Path, files: list[Path]) -> None:
     """Remove ``files`` (``unstarted_run_files``), then the folders they leave empty and ``run_dir``."""
     for path in files:
-        path.unlink(missing_ok=True)
+        remove_file(path)
     for name in UNSTARTED_FOLDERS:
         if (run_dir / name).is_dir():
             (run_dir / name).rmdir()
@@ -564,9 +633,15 @@ def _load_checkpoint(config: RunConfig, run_dir: Path, manifest: dict, replay: b
         from drivelab.envs.vector import SB3VecEnv, VectorDriveEnv
 
         env = SB3VecEnv(VectorDriveEnv(config.n_envs, autoreset_mode="same_step", **config.env_kwargs()))
-    model = load_agent(run_dir, config, env, run_dir / "checkpoints" / "latest.zip")
+    path = run_dir / "checkpoints" / "latest.zip"
+    model = load_agent(run_dir, config, env, path)
     if replay and manifest.get("replay_buffer"):
         load_replay(model, run_dir, manifest)
+    if model.num_timesteps != manifest["steps"]:  # the logs are cut back to the manifest's step
+        raise UsageError(
+            f"checkpoint {str(path)!r} holds a model of {model.num_timesteps} steps, but its manifest "
+            f"says {manifest['steps']}: one of them was edited; nothing was changed"
+        )
     return model
 
 
@@ -580,6 +655,36 @@ def _learn(model, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWo
     checkpoint (the state may be half-updated); the run then resumes from the previous one.
     """
     model.set_logger(configure(str(run_dir), ["csv", "tensorboard"]))
+    with _full_disk_reported_once():
+        try:
+            _learn_logged(model, run_dir, config, eval_env, worlds, on_evaluation, eval_first)
+        except (OSError, WriteError) as exc:  # a full disk, most often: one line, the logs closed
+            _close_logs(model)
+            raise _write_failed(exc, run_dir, _resume_hint(run_dir)) from None
+
+
+@contextlib.contextmanager
+def _full_disk_reported_once():
+    """TensorBoard writes its event file from a thread of its own, which printed a traceback when
+    the disk was full; its error comes again in the training loop (at TensorBoard's next write),
+    which reports it as one line. Other errors of threads are printed as before."""
+    previous = threading.excepthook
+
+    def report(args) -> None:
+        if not (isinstance(args.exc_value, OSError) and args.exc_value.errno in DISK_FULL):
+            previous(args)
+
+    threading.excepthook = report
+    try:
+        yield
+    finally:
+        threading.excepthook = previous
+
+
+def _learn_logged(model, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWorlds,
+                  on_evaluation: Callable[[int, dict], bool | None] | None,
+                  eval_first: int) -> None:  # fmt: skip
+    """``_learn`` once the logger is set."""
     with StopRequest() as stop:
         callback = RunCallback(run_dir, config, eval_env, worlds, stop, on_evaluation, eval_first)
         try:
@@ -591,7 +696,7 @@ def _learn(model, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWo
         except KeyboardInterrupt:
             callback._on_training_end()
             raise TrainingInterrupted(run_dir, callback.checkpoint_steps) from None
-        except TrainingDiverged:
+        except (TrainingDiverged, OSError, WriteError):
             callback._on_training_end()
             raise
         except (ValueError, RuntimeError, FloatingPointError) as exc:
@@ -612,10 +717,25 @@ def _learn(model, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWo
     _save_model(model, run_dir)
 
 
+def _close_logs(model) -> None:
+    """Close the run's logs (SB3's logger, the training env's monitor) after a failed write: left
+    open, their buffers would be written again as the process exits, each failure printed."""
+    with contextlib.suppress(Exception):
+        model.logger.close()
+    with contextlib.suppress(Exception):
+        model.get_env().close()
+
+
 def _save_model(model, run_dir: Path) -> None:
-    """The trained model (``model.zip``, written whole or not at all) and the learning curve."""
+    """The trained model (``model.zip``, written whole or not at all) and the learning curve; when
+    the curve fails (a full disk), the model is removed too, so that a resume writes both from the
+    final checkpoint (a run stopped between its final checkpoint and its model)."""
     from drivelab.training.plots import plot_learning_curve
 
-    model.save(run_dir / "model.tmp.zip")
-    os.replace(run_dir / "model.tmp.zip", run_dir / "model.zip")
-    plot_learning_curve(run_dir)
+    with replacing(run_dir / "model.zip", run_dir / "model.tmp.zip") as temporary:
+        model.save(temporary)
+    try:
+        plot_learning_curve(run_dir)
+    except BaseException:
+        remove_file(run_dir / "model.zip")
+        raise

@@ -379,8 +379,10 @@ def run_cell(
                 run.resume(run_dir, config.steps, on_evaluation=on_evaluation, eval_first=eval_first)
             elif action == "finish":
                 from drivelab.training.plots import plot_learning_curve
+                from drivelab.training.safe_files import locked_run
 
-                plot_learning_curve(run_dir)
+                with locked_run(run_dir):
+                    plot_learning_curve(run_dir)
             evaluated = action == "finish" and (run_dir / "eval.json").is_file()
             if eval_episodes and action != "skip" and not evaluated:
                 evaluate_run(run_dir, episodes=eval_episodes, first=eval_first)

@@ -358,18 +358,12 @@ def check_video_path(path: Path) -> None:
     .mp4, an existing writable folder, not a folder itself (checked before any episode)."""
     if path.suffix.lower() not in VIDEO_SUFFIXES:
         raise UsageError(f"--video {str(path)!r} must end in .mp4 or .gif")
-    if path.suffix.lower() == ".mp4":
-        try:
-            import imageio_ffmpeg
+    from drivelab.training.evaluate import check_output_file, has_mp4_encoder
 
-            imageio_ffmpeg.get_ffmpeg_exe()
-        except (ImportError, RuntimeError):
-            raise UsageError(
-                "no mp4 encoder (imageio-ffmpeg's ffmpeg) is installed: use a .gif path"
-            ) from None
+    if path.suffix.lower() == ".mp4" and not has_mp4_encoder():
+        raise UsageError("no mp4 encoder (imageio-ffmpeg's ffmpeg) is installed: use a .gif path")
     if path.is_dir():
         raise UsageError(f"--video {str(path)!r} is a directory")
-    from drivelab.training.evaluate import check_output_file
 
     check_output_file(path, "--video")
 
@@ -458,6 +452,7 @@ def enjoy(
             writer.discard()
         raise
     report = {"agent": name or str(run_dir), "algo": config.algo, "env": config.env, **aggregate(results)}
+    report["model_steps"] = int(agent.num_timesteps)  # as evaluate's report
     report["seed"] = seed
     if writer is not None:
         report["video"] = str(writer.close())

@@ -5,7 +5,6 @@ after the run directory exists), ``config.check_run_name``, ``evaluate.make_out_
 learning-rate bound of every agent. Runs are tiny (PPO, at most 192 steps on an empty road).
 """
 
-import hashlib
 import json
 import shutil
 from pathlib import Path
@@ -22,42 +21,17 @@ from drivelab.agents.ppo import PPOConfig
 from drivelab.agents.rlad.sac import RLADConfig
 from drivelab.agents.sb3_params import check_sb3_hyperparams
 from drivelab.cli import app
-from drivelab.config import build_config, check_run_name
+from drivelab.config import check_run_name, save_yaml
 from drivelab.errors import UsageError
 from drivelab.training import run as run_module
 from drivelab.training.evaluate import make_out_dir
-
-TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1, "policy_kwargs": {"net_arch": [16]}}
-
-
-def _config(**overrides):
-    values = {
-        "algo": "ppo",
-        "traffic": "empty",
-        "steps": 128,
-        "seed": 1,
-        "name": "r",
-        "eval_every": 128,
-        "eval_episodes": 1,
-        "checkpoint_every": 64,
-        "hyperparams": TINY,
-        "env_options": {"duration_s": 8},
-    }
-    return build_config({**values, **overrides})
-
-
-def tree(root: Path) -> dict[str, str]:
-    """Every file and folder under ``root``: relative path → sha256 of the file ("dir" for a folder)."""
-    return {
-        str(path.relative_to(root)): "dir" if path.is_dir() else hashlib.sha256(path.read_bytes()).hexdigest()
-        for path in sorted(root.rglob("*"))
-    }
+from tests.training.tiny_runs import TINY, tiny_config, tree
 
 
 @pytest.fixture(scope="module")
 def finished_run(tmp_path_factory) -> Path:
     """A finished tiny PPO run with checkpoints (and a resume state) at step 128."""
-    return run_module.train(_config(), tmp_path_factory.mktemp("runs"))
+    return run_module.train(tiny_config(), tmp_path_factory.mktemp("runs"))
 
 
 # --- 1. resume of a folder without a checkpoint ------------------------------------------------
@@ -76,7 +50,7 @@ def test_resume_refuses_a_folder_holding_user_files_and_changes_nothing(tmp_path
     assert tree(tmp_path) == before
 
 
-def test_resume_refuses_a_folder_whose_only_file_is_a_config(tmp_path):
+def test_resume_refuses_a_folder_whose_only_file_is_atiny_config(tmp_path):
     (tmp_path / "config.yaml").write_text("algo: ppo\nsteps: 64\ntraffic: empty\n")
     before = tree(tmp_path)
     with pytest.raises(UsageError, match="no monitor.csv"):
@@ -150,7 +124,7 @@ def test_own_agents_learning_rates_above_one_are_refused(config_class, algo, key
 
 def test_a_huge_learning_rate_is_refused_before_any_folder_exists(tmp_path):
     with pytest.raises(UsageError, match="learning_rate"):
-        run_module.train(_config(hyperparams={**TINY, "learning_rate": 1e30}), tmp_path / "runs")
+        run_module.train(tiny_config(hyperparams={**TINY, "learning_rate": 1e30}), tmp_path / "runs")
     assert tree(tmp_path) == {}
 
 
@@ -171,14 +145,14 @@ def _poison_weights_at(monkeypatch, step: int) -> None:
 def test_divergence_before_the_first_checkpoint_leaves_no_folder(tmp_path, monkeypatch):
     _poison_weights_at(monkeypatch, 10)
     with pytest.raises(UsageError, match="diverged at step .*no checkpoint was written"):
-        run_module.train(_config(), tmp_path / "runs")
+        run_module.train(tiny_config(), tmp_path / "runs")
     assert tree(tmp_path) == {}
 
 
 def test_divergence_keeps_the_checkpoints_written_before_it(tmp_path, monkeypatch):
     _poison_weights_at(monkeypatch, 100)
     with pytest.raises(UsageError, match="diverged at step .*keeps its last finite checkpoint, of step 64"):
-        run_module.train(_config(), tmp_path)
+        run_module.train(tiny_config(), tmp_path)
     manifest = json.loads((tmp_path / "r" / "checkpoints" / "latest.json").read_text())
     assert manifest["steps"] == 64 and not (tmp_path / "r" / "model.zip").exists()
 
@@ -189,7 +163,7 @@ def test_running_out_of_memory_is_one_error_and_leaves_no_folder(tmp_path, monke
 
     monkeypatch.setattr(run_module, "_make_envs", no_memory)
     with pytest.raises(UsageError, match=r"not enough memory .*n_envs=1"):
-        run_module.train(_config(), tmp_path / "runs" / "x")
+        run_module.train(tiny_config(), tmp_path / "runs" / "x")
     assert tree(tmp_path) == {}
 
 
@@ -199,7 +173,7 @@ def test_a_model_too_large_to_build_is_one_error():
             raise MemoryError
 
     with pytest.raises(UsageError, match="not enough memory"):
-        run_module._check_model(Spec(), _config(), probe=None)
+        run_module._check_model(Spec(), tiny_config(), probe=None)
 
 
 # --- 4. run names and folders the file system cannot hold ------------------------------------------
@@ -222,7 +196,7 @@ def test_a_run_name_too_long_is_one_error_line_and_creates_nothing(tmp_path):
 
 def test_a_runs_dir_too_long_for_the_file_system_creates_nothing(tmp_path):
     with pytest.raises(UsageError, match="File name too long"):
-        run_module.train(_config(), tmp_path / "y" / ("b" * 300))
+        run_module.train(tiny_config(), tmp_path / "y" / ("b" * 300))
     with pytest.raises(UsageError, match="File name too long"):
         make_out_dir(tmp_path / "z" / ("b" * 300) / "c", "report folder")
     assert tree(tmp_path) == {}
@@ -237,7 +211,7 @@ def test_ctrl_c_while_a_run_is_set_up_leaves_no_folder(tmp_path, monkeypatch):
 
     monkeypatch.setattr(run_module, "_make_envs", interrupted)
     with pytest.raises(KeyboardInterrupt):
-        run_module.train(_config(name="r"), tmp_path / "runs")
+        run_module.train(tiny_config(name="r"), tmp_path / "runs")
     assert list(tmp_path.iterdir()) == []
 
 
@@ -247,8 +221,8 @@ def test_a_run_made_before_the_eval_every_check_trains_again_from_step_0(tmp_pat
     before, instead of refusing the schedule it cannot change (``--resume`` takes no --eval-every)."""
     run_dir = tmp_path / "r"
     run_dir.mkdir()
-    config = _config(steps=64, eval_every=100)
-    run_module.save_yaml(config, run_dir / "config.yaml")
+    config = tiny_config(steps=64, eval_every=100)
+    save_yaml(config, run_dir / "config.yaml")
     (run_dir / "monitor.csv").write_text('#{"t_start": 1.0, "env_id": "highway"}\nr,l,t\n')
     trained = []
     monkeypatch.setattr(run_module, "train", lambda config, root, *args: trained.append(config) or root)

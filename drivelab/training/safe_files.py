@@ -1,0 +1,315 @@
+"""Writing in a run directory: never through a link, each file whole or not at all, one command at
+a time, and a failed write (a full disk) as one line.
+
+A run directory may come from someone else (downloaded, shared): it is data, and nothing drivelab
+writes may land outside it.
+
+- ``locked_run``: a command that writes in a run directory holds an exclusive ``flock`` on it (one
+  that only reads it, a shared one): a second command is refused with one line naming the first
+  one's pid, written in ``IN_USE`` while the lock is held. The kernel lets go of the lock when its
+  process dies, so a killed run resumes normally.
+- ``check_run_members``: under the lock, and before anything is written, a run directory holding a
+  symbolic link (at its top, in ``checkpoints/`` or ``videos/``), or a folder where drivelab writes
+  a file, is refused with one line.
+- ``replacing`` / ``write_file``: a file is written into a temporary created exclusively
+  (``O_CREAT | O_EXCL | O_NOFOLLOW``: never an existing file, never a link's target), then renamed
+  over its name; a rename replaces a link instead of writing where it points. A failed write
+  removes the temporary.
+- ``remove_file``: deletes a regular file only, never a folder or what a link points to.
+- ``write_failure``: the one-line UsageError of a failed write, naming a full disk as such.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import fcntl
+import os
+import shutil
+import stat
+from collections.abc import Iterator
+from fnmatch import fnmatch
+from pathlib import Path
+
+from drivelab.errors import UsageError
+
+IN_USE = ".in-use.pid"  # the pid of the command holding the run's lock, while it holds it
+OWN_FOLDERS = ("checkpoints", "videos")  # folders of files drivelab writes, nothing else
+# names drivelab writes as files at the top of a run directory (temporaries included): a folder there
+# is in the way, and refused before anything is written
+FILE_NAMES = (
+    "config.yaml", "monitor.csv", "progress*.csv", "evaluations.csv", "events.out.tfevents.*",
+    "eval.json*", "eval-maps-*.json*", "nocrash.json*", "nocrash.md*", "learning_curve*.png",
+    "model*.zip", "q_table.*", "qlearning_curves.png", IN_USE + "*",
+)  # fmt: skip
+_CREATE = os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW | os.O_CLOEXEC
+DISK_FULL = (errno.ENOSPC, errno.EDQUOT)
+NEARLY_FULL_BYTES = 1 << 20  # free space below which a write that failed without an errno was a full disk
+
+
+# --- failures --------------------------------------------------------------------------------
+AGAIN = "run the command again"
+
+
+class WriteError(UsageError):
+    """A write that failed, as one line: ``what`` (a quoted path, or words naming one), ``reason``,
+    and when ``disk_full``, what to do once space is freed (``then``)."""
+
+    def __init__(self, what: str, reason: str, disk_full: bool, then: str = AGAIN) -> None:
+        self.what, self.reason, self.disk_full = what, reason, disk_full
+        advice = f"; free some space, then {then}" if disk_full else ""
+        super().__init__(f"cannot write {what}: {reason}{advice}")
+
+    def advising(self, then: str) -> WriteError:
+        """The same failure with another ``then``."""
+        return WriteError(self.what, self.reason, self.disk_full, then)
+
+
+def write_failure(exc: BaseException, path: Path, then: str = AGAIN, what: str | None = None) -> WriteError:
+    """The ``WriteError`` of a write to ``path`` (described as ``what``, default the quoted path)
+    that failed with ``exc``: a full disk is named as such, anything else by its reason."""
+    if isinstance(exc, WriteError):
+        return exc.advising(then)
+    what = repr(str(path)) if what is None else what
+    if _disk_full(exc, path):
+        return WriteError(what, "no space left on device (the disk is full)", True, then)
+    if isinstance(exc, OSError) and exc.strerror:
+        reason = exc.strerror
+    else:
+        reason = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+    return WriteError(what, reason, False, then)
+
+
+def _disk_full(exc: BaseException, path: Path) -> bool:
+    """Whether ``exc`` says the disk is full; a writer that reports failures without an errno
+    (ffmpeg, writing through a pipe) is judged by the free space left where it wrote."""
+    if isinstance(exc, OSError) and exc.errno is not None:
+        return exc.errno in DISK_FULL
+    folder = next((p for p in (path, *path.parents) if p.is_dir()), None)
+    try:
+        return folder is not None and shutil.disk_usage(folder).free < NEARLY_FULL_BYTES
+    except OSError:
+        return False
+
+
+# --- members ---------------------------------------------------------------------------------
+def _kind(path: Path) -> str | None:
+    """What ``path`` is, its link not followed: "a symbolic link", "a folder", "a file" or "a
+    special file" (a fifo, a socket, a device); None when nothing is there."""
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        return None
+    if stat.S_ISLNK(mode):
+        return "a symbolic link"
+    if stat.S_ISDIR(mode):
+        return "a folder"
+    return "a file" if stat.S_ISREG(mode) else "a special file"
+
+
+def _refuse(path: Path, kind: str, want: str) -> UsageError:
+    """The one line refusing ``path``, which is ``kind`` (``_kind``) where drivelab ``want``s."""
+    if kind == "a symbolic link":
+        return UsageError(
+            f"{str(path)!r} is a symbolic link: drivelab neither writes nor deletes through links (a run "
+            "directory is data); put what it points to in its place, or move it away (nothing was changed)"
+        )
+    if want == "writes a file":
+        where = f"{path.name} in {str(path.parent)!r}"
+        return UsageError(f"cannot write {where}: it is {kind}; move it away (nothing was changed)")
+    return UsageError(f"{str(path)!r} is {kind}, where drivelab {want}; move it away (nothing was changed)")
+
+
+def check_run_members(run_dir: Path) -> None:
+    """A UsageError naming the first member of ``run_dir`` that drivelab could write or delete
+    through, or that is in the way of a file it writes: a symbolic link at its top or in its
+    ``OWN_FOLDERS``, one of those folders that is not a folder, anything but a file inside them,
+    a folder of a name drivelab writes as a file (``FILE_NAMES``)."""
+    for path in sorted(run_dir.iterdir()):
+        kind = _kind(path)
+        if kind == "a symbolic link":
+            raise _refuse(path, kind, "keeps its own files")
+        if path.name in OWN_FOLDERS:
+            check_folder(path)
+            for inner in sorted(path.iterdir()):
+                if _kind(inner) != "a file":
+                    raise _refuse(inner, _kind(inner), "keeps its own files")
+        elif kind != "a file" and any(fnmatch(path.name, pattern) for pattern in FILE_NAMES):
+            raise _refuse(path, kind, "writes a file")
+
+
+def check_replaceable(path: Path, temporary: Path | None = None) -> None:
+    """A UsageError when ``replacing(path, temporary)`` could not write: ``path`` is a folder, or
+    its temporary's name holds anything but a file (a leftover file is replaced)."""
+    temporary = temporary_of(path) if temporary is None else temporary
+    if _kind(path) == "a folder":
+        raise _refuse(path, "a folder", "writes a file")
+    if _kind(temporary) not in (None, "a file"):
+        raise _refuse(temporary, _kind(temporary), "writes a file")
+
+
+# --- writing -------------------------------------------------------------------------------------
+def temporary_of(path: Path) -> Path:
+    """The temporary that ``path`` is written into: ``NAME.tmp`` beside it."""
+    return path.with_name(path.name + ".tmp")
+
+
+def _create(temporary: Path) -> int:
+    """A descriptor of ``temporary``, created now (``_CREATE``). A file there, left by a command
+    killed while it wrote it, is replaced; anything else there (a link, a folder) is a UsageError."""
+    try:
+        return os.open(temporary, _CREATE, 0o666)
+    except FileExistsError:
+        pass
+    except OSError as exc:
+        raise write_failure(exc, temporary) from None
+    kind = _kind(temporary)
+    if kind not in (None, "a file"):
+        raise _refuse(temporary, kind, "writes a file")
+    try:
+        temporary.unlink(missing_ok=True)
+        return os.open(temporary, _CREATE, 0o666)
+    except OSError as exc:
+        raise write_failure(exc, temporary) from None
+
+
+def _still(descriptor: int, temporary: Path) -> bool:
+    """Whether ``temporary`` is still the file ``descriptor`` created (not replaced meanwhile)."""
+    try:
+        return os.path.samestat(os.fstat(descriptor), os.lstat(temporary))
+    except OSError:
+        return False
+
+
+@contextlib.contextmanager
+def temporary_file(temporary: Path, final: Path | None = None) -> Iterator[Path]:
+    """Yield ``temporary``, a file created now (``_create``: never an existing file, never through
+    a link), for the caller to write by its path (``model.save``, ``savefig``) and later rename to
+    ``final``. When the block fails it is removed, and an OSError becomes ``write_failure``'s one
+    line about ``final``; when it ends, it is kept, checked to be still the file created."""
+    descriptor = _create(temporary)
+    try:
+        yield temporary
+        if not _still(descriptor, temporary):
+            raise UsageError(f"{str(temporary)!r} was replaced while drivelab wrote it; nothing was written")
+    except BaseException as exc:
+        if _still(descriptor, temporary):
+            with contextlib.suppress(OSError):
+                temporary.unlink()
+        if isinstance(exc, OSError):
+            raise write_failure(exc, temporary if final is None else final) from None
+        raise
+    finally:
+        os.close(descriptor)
+
+
+@contextlib.contextmanager
+def replacing(path: Path, temporary: Path | None = None) -> Iterator[Path]:
+    """Yield a new empty file, ``temporary`` (default ``temporary_of(path)``), for the caller to
+    write by its path; when the block ends, rename it over ``path`` (``temporary_file``).
+
+    Nothing is written into an existing file or through a link; the rename replaces whatever
+    ``path`` was (a link too) without following it. When the block or the rename fails the
+    temporary is removed; an OSError becomes ``write_failure``'s one line."""
+    temporary = temporary_of(path) if temporary is None else temporary
+    with temporary_file(temporary, path):
+        yield temporary
+    try:
+        os.replace(temporary, path)
+    except BaseException as exc:
+        with contextlib.suppress(OSError):
+            temporary.unlink()
+        if isinstance(exc, OSError):
+            raise write_failure(exc, path) from None
+        raise
+
+
+def write_file(path: Path, data: str | bytes, temporary: Path | None = None) -> None:
+    """Write ``data`` (text is UTF-8) as the whole of ``path`` (``replacing``)."""
+    with replacing(path, temporary) as tmp, open(tmp, "wb") as handle:
+        handle.write(data.encode() if isinstance(data, str) else data)
+
+
+def remove_file(path: Path) -> None:
+    """Delete ``path`` when it is a file (nothing when it is missing); a link or a folder there is a
+    UsageError: what it points to, or holds, is not drivelab's."""
+    kind = _kind(path)
+    if kind is None:
+        return
+    if kind != "a file":
+        raise _refuse(path, kind, "deletes a file of its own")
+    path.unlink(missing_ok=True)
+
+
+def check_folder(path: Path) -> None:
+    """A UsageError unless ``path``, a folder of drivelab's own (``checkpoints/``, ``videos/``), is a
+    folder or missing (a link, even to a folder, is refused)."""
+    kind = _kind(path)
+    if kind not in (None, "a folder"):
+        raise _refuse(path, kind, "keeps a folder of its own files")
+
+
+def make_folder(path: Path) -> Path:
+    """``path`` as a folder of drivelab's own (``check_folder``), made if missing."""
+    check_folder(path)
+    try:
+        path.mkdir(exist_ok=True)
+    except OSError as exc:
+        raise write_failure(exc, path) from None
+    check_folder(path)  # not made a link meanwhile
+    return path
+
+
+# --- one command at a time -------------------------------------------------------------------------
+def _holder(run_dir: Path) -> str:
+    """`` (pid N)`` from ``IN_USE`` when it holds a pid, else ""."""
+    try:
+        descriptor = os.open(run_dir / IN_USE, os.O_RDONLY | os.O_NOFOLLOW | os.O_CLOEXEC)
+    except OSError:
+        return ""
+    try:
+        text = os.read(descriptor, 32).decode("ascii", "replace").strip()
+    except OSError:
+        return ""
+    finally:
+        os.close(descriptor)
+    return f" (pid {text})" if text.isdigit() else ""
+
+
+@contextlib.contextmanager
+def locked_run(run_dir: Path, writes: bool = True) -> Iterator[None]:
+    """Hold ``run_dir`` for this command: exclusively when it ``writes`` there (then its members
+    are checked, ``check_run_members``, and ``IN_USE`` holds this process's pid until the block
+    ends), shared when it only reads it. Another command holding it is a UsageError naming its pid.
+    On a file system without locks (some network mounts) nothing is held."""
+    if run_dir.exists() and not run_dir.is_dir():
+        raise UsageError(f"{str(run_dir)!r} is a file, not a run directory")
+    if not run_dir.is_dir():
+        raise UsageError(f"run directory {str(run_dir)!r} does not exist")
+    try:
+        descriptor = os.open(run_dir, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
+    except OSError as exc:
+        raise UsageError(f"cannot open run directory {str(run_dir)!r}: {exc.strerror or exc}") from None
+    try:
+        try:
+            fcntl.flock(descriptor, (fcntl.LOCK_EX if writes else fcntl.LOCK_SH) | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise UsageError(
+                f"run {str(run_dir)!r} is in use by another drivelab process{_holder(run_dir)} "
+                "(training, resuming or evaluating it); wait for it to end"
+            ) from None
+        except OSError:
+            pass  # no locks on this file system: whether another command uses it cannot be told
+        if not writes:
+            yield
+            return
+        check_run_members(run_dir)
+        with contextlib.suppress(UsageError):  # a read-only or full disk: the pid is only a courtesy
+            write_file(run_dir / IN_USE, f"{os.getpid()}\n")
+        try:
+            yield
+        finally:
+            with contextlib.suppress(UsageError, OSError):
+                remove_file(run_dir / IN_USE)
+    finally:
+        os.close(descriptor)

@@ -1,0 +1,63 @@
+"""Tiny runs for the run-directory tests: a PPO config on an empty road that trains in seconds,
+a fingerprint of a folder tree, a zip member rewritten, and the check of a refusal's one
+``error:`` line."""
+
+import hashlib
+import os
+import zipfile
+from pathlib import Path
+
+from drivelab.config import RunConfig, build_config
+
+TINY = {"n_steps": 64, "batch_size": 32, "n_epochs": 1, "policy_kwargs": {"net_arch": [16]}}
+
+
+def tiny_config(**overrides) -> RunConfig:
+    """PPO on an empty road: 128 steps, checkpoints every 64, one evaluation episode at 128."""
+    values = {
+        "algo": "ppo",
+        "traffic": "empty",
+        "steps": 128,
+        "seed": 1,
+        "name": "r",
+        "eval_every": 128,
+        "eval_episodes": 1,
+        "checkpoint_every": 64,
+        "hyperparams": TINY,
+        "env_options": {"duration_s": 8},
+    }
+    return build_config({**values, **overrides})
+
+
+def tree(root: Path) -> dict[str, str]:
+    """Every file, folder and link under ``root``: relative path → sha256 of the file ("dir" for a
+    folder, "link to TARGET" for a symbolic link, not followed)."""
+    found = {}
+    for path in sorted(root.rglob("*")):
+        if path.is_symlink():
+            found[str(path.relative_to(root))] = f"link to {os.readlink(path)}"
+        elif path.is_dir():
+            found[str(path.relative_to(root))] = "dir"
+        else:
+            found[str(path.relative_to(root))] = hashlib.sha256(path.read_bytes()).hexdigest()
+    return found
+
+
+def error_line(output: str, *fragments: str) -> str:
+    """The one line of ``output``, an ``error:`` line holding every fragment (AssertionError else)."""
+    lines = output.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), output
+    assert "Traceback" not in output
+    for fragment in fragments:
+        assert fragment in lines[0], lines[0]
+    return lines[0]
+
+
+def rewrite_member(path: Path, member: str, data: bytes) -> None:
+    """Replace (or add) ``member`` of the zip file ``path`` with ``data``."""
+    with zipfile.ZipFile(path) as archive:
+        members = {name: archive.read(name) for name in archive.namelist()}
+    members[member] = data
+    with zipfile.ZipFile(path, "w") as archive:
+        for name, value in members.items():
+            archive.writestr(name, value)
