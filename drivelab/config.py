@@ -290,8 +290,10 @@ def steps_per_update(algo: str, hyperparams: dict, n_envs: int) -> tuple[int, st
     spec = get_algo(algo)
     if not spec.on_policy:
         return n_envs, f"one step of each of its {n_envs} worlds"
-    if spec.family == "sb3":
-        n_steps = _given_or_default(algo, hyperparams, "n_steps")
+    if spec.family == "sb3":  # the values build_sb3 gives the model: the shipped default entry's
+        from drivelab.hyperparams import shipped_hyperparams
+
+        n_steps = _given_or_default(algo, {**shipped_hyperparams(algo, "default"), **hyperparams}, "n_steps")
     else:
         n_steps = hyperparams.get("n_steps", spec.agent_class().config_class.n_steps)
     n_steps = int(n_steps)

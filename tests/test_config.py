@@ -118,3 +118,13 @@ def test_a_saved_config_reads_back_as_it_was_even_strings_that_look_like_exponen
     assert build_config(load_yaml(tmp_path / "config.yaml")) == config
     data = {"a": ["1e5", 1e5, ".5e1", 0.5, "-3E-2", "e5", "5e", "yes", 7, "7", float("inf")]}
     assert parse_yaml(dump_yaml(data)) == data and yaml.safe_load(dump_yaml(data)) == data
+
+
+def test_the_step_budget_is_checked_against_the_rollout_the_model_gets():
+    """Without hyper-parameters an SB3 PPO run builds its model from the shipped default entry
+    (n_steps 256), and its budget is checked against that rollout, not SB3's own 2048."""
+    from drivelab.config import check_steps
+
+    check_steps(build_config({"algo": "ppo", "env": "highway", "steps": 256}))
+    with pytest.raises(UsageError, match=r"one rollout of n_steps 256 x n_envs 2 = 512 steps"):
+        check_steps(build_config({"algo": "ppo", "env": "highway", "steps": 511, "n_envs": 2}))
