@@ -105,6 +105,11 @@ TOWN_TARGETS = {
 
 HIGHWAY_PPO = "--algo ppo --obs kinematics --action meta --traffic regular --n-envs 16 --steps 100000 "
 HIGHWAY_PPO += "--eval-every 50000 --eval-episodes 10"  # the zoo's recipe (benchmarks/zoo_build.py)
+FAST_PPO = (  # drivelab's own PPO (agents/onpolicy.py) on 64 worlds, the SB3 rows' budget and evaluations
+    "--algo ppo_own --obs kinematics --action meta --traffic regular --n-envs 64 --steps 100000 "
+    "--eval-every 50000 --eval-episodes 10 -H gamma=0.8 -H learning_rate=0.0005 -H n_steps=32 "
+    "-H batch_size=256 -H n_epochs=10"
+)
 # highway-env's documented PPO values (drivelab/hyperparams/ppo.yaml's default entry) and SB3's
 # defaults for the other values tuning sets: the runs trained before the scenario entries held
 # drivelab's tuned values (benchmarks/results/tune/), pinned so that their commands still make them
@@ -263,6 +268,18 @@ ENTRIES: tuple[Entry, ...] = (
                 f"--env {scenario} {HIGHWAY_PPO.replace('--algo ppo', '--algo a2c')} --reward {reward}",
             ),
         )  # fmt: skip
+    ),
+    *(
+        Entry(
+            scenario,
+            "ppo_own",
+            f"drivelab's PPO on the fast on-policy trainer, kinematics, meta actions, {what}, gamma 0.8 and "
+            "learning rate 5e-4 as the SB3 rows, rollouts of 32 steps x 64 worlds, minibatch 256, 10 epochs, "
+            "one 64x64 encoder, 100 k steps on 64 worlds",
+            _args(f"--env {scenario} {FAST_PPO} --reward {reward}"),
+        )
+        for scenario, reward, what in JUNCTIONS
+        if scenario != "intersection"
     ),
     Entry(
         "racetrack",

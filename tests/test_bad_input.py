@@ -198,7 +198,22 @@ TRAIN_CASES = {
     "ppo_own entropy_coef=-1": (
         ["--algo", "ppo_own", "--action", "continuous", "--obs", "kinematics", "-H", "entropy_coef=-1"],
         {},
-        "entropy_coef, value_coef and target_kl >= 0",
+        "'ppo_own' needs entropy_coef >= 0 and value_coef >= 0",
+    ),
+    "ppo_own target_kl=-1": (
+        ["--algo", "ppo_own", "--action", "meta", "--obs", "kinematics", "-H", "target_kl=-1"],
+        {},
+        "'ppo_own' needs clip_range > 0, clip_range_value >= 0 and target_kl >= 0",
+    ),
+    "a2c_own distribution=beta on meta": (
+        ["--algo", "a2c_own", "--action", "meta", "--obs", "kinematics", "-H", "distribution=beta"],
+        {},
+        "'a2c_own': discrete actions take the categorical distribution, not 'beta'",
+    ),
+    "ppo_own net_arch=0": (
+        ["--algo", "ppo_own", "--action", "meta", "--obs", "kinematics", "-H", "net_arch=0,64"],
+        {},
+        "'ppo_own' net_arch must be layer widths between 1 and 65536",
     ),
     "sac ent_coef=fast": (
         ["--algo", "sac", "--action", "continuous", "-H", "ent_coef=fast"],

@@ -107,16 +107,17 @@ class FusionEncoder(nn.Module):
 
 
 class MlpEncoder(nn.Module):
-    """Two tanh layers of 64 for vector observations (SB3's default MLP), Dicts concatenated."""
+    """Tanh layers (two of 64 by default, SB3's MLP) for vector observations, Dicts concatenated."""
 
-    def __init__(self, space: spaces.Space, features: int = 64) -> None:
+    def __init__(self, space: spaces.Space, hidden: tuple[int, ...] = (64, 64)) -> None:
         super().__init__()
         self.keys = list(space.spaces) if isinstance(space, spaces.Dict) else None
-        size = spaces.flatdim(space)
-        self.net = nn.Sequential(
-            nn.Linear(size, features), nn.Tanh(), nn.Linear(features, features), nn.Tanh()
-        )
-        self.features = features
+        layers, size = [], spaces.flatdim(space)
+        for width in hidden:
+            layers += [nn.Linear(size, width), nn.Tanh()]
+            size = width
+        self.net = nn.Sequential(*layers)
+        self.features = size
 
     def forward(self, obs) -> torch.Tensor:
         if self.keys is not None:
@@ -124,15 +125,16 @@ class MlpEncoder(nn.Module):
         return self.net(obs.flatten(1))
 
 
-def make_encoder(space: spaces.Space) -> nn.Module:
-    """SeedCnn for an image, FusionEncoder for image + vectors, MlpEncoder for vectors."""
+def make_encoder(space: spaces.Space, hidden: tuple[int, ...] = (64, 64)) -> nn.Module:
+    """SeedCnn for an image, FusionEncoder for image + vectors, MlpEncoder (layers ``hidden``) for
+    vectors."""
     kind = observation_kind(space)
     if kind == "image":
         return SeedCnn(space)
     if kind == "image+vector":
         return FusionEncoder(space)
     if kind == "vector":
-        return MlpEncoder(space)
+        return MlpEncoder(space, hidden)
     raise ValueError(f"no encoder for observation space {space}")
 
 

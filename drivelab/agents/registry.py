@@ -108,10 +108,12 @@ ALGORITHMS: dict[str, AlgoSpec] = {
         AlgoSpec("dueling_ddqn", "drivelab's Dueling Double DQN, prioritised replay (seed 003)", _DISCRETE,
                  "drivelab.agents.dueling_ddqn:DuelingDoubleDQN", "own", sb3_replay=True,
                  observation_kinds=("vector",), multi_env=True),
-        AlgoSpec("a2c_own", "drivelab's A2C, tanh-Gaussian, seed 003's CNN / fusion network", ("continuous",),
+        AlgoSpec("a2c_own", "drivelab's A2C on the fast on-policy trainer (categorical, tanh-Gaussian or "
+                 "Beta; MLP, seed 003's CNN / fusion network)", _DISCRETE + _CONTINUOUS,
                  "drivelab.agents.a2c:OwnA2C", "own", observation_kinds=_READABLE, multi_env=True,
                  on_policy=True),
-        AlgoSpec("ppo_own", "drivelab's PPO, tanh-Gaussian, seed 003's CNN / fusion network", ("continuous",),
+        AlgoSpec("ppo_own", "drivelab's PPO on the fast on-policy trainer (categorical, tanh-Gaussian or "
+                 "Beta; MLP, seed 003's CNN / fusion network)", _DISCRETE + _CONTINUOUS,
                  "drivelab.agents.ppo:OwnPPO", "own", observation_kinds=_READABLE, multi_env=True,
                  on_policy=True),
         AlgoSpec("rlad", "drivelab's RLAD: SAC from pixels, A-LIX, DrQ shifts, WayConv1D, traffic-light loss "

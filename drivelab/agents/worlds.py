@@ -38,17 +38,36 @@ def vector_env_of(env: Any):
 
 
 class Worlds:
-    """The training env as K worlds: a gymnasium env (K = 1, reset here when its episode ends) or
-    an SB3 ``VecEnv`` (K = ``num_envs``, resetting a finished world itself). Observations come and
-    go batched (K, ...), dicts key by key; a finished world has started again when ``step`` returns,
-    so ``batch`` always holds the state of the observations last returned."""
+    """The training env as K worlds: a gymnasium env (K = 1, reset here when its episode ends), an
+    SB3 ``VecEnv`` (K = ``num_envs``, resetting a finished world itself) or a ``VectorDriveEnv``
+    with ``autoreset_mode="same_step"``. Observations come and go batched (K, ...), dicts key by
+    key; a finished world has started again when ``step`` returns, so ``batch`` always holds the
+    state of the observations last returned.
+
+    A VectorDriveEnv, and a VecEnv whose whole wrapper chain has ``step_arrays`` (``SB3VecEnv``
+    under ``RecordVecEpisodes`` and ``ArrayVecMonitor``, how ``drivelab train`` builds it), are
+    stepped as arrays: no info dict per world is made (``infos`` makes them when read)."""
 
     def __init__(self, env) -> None:
+        from drivelab.envs.vector import VectorDriveEnv
+
         self.env = env
-        self.vector = isinstance(env, VecEnv)
+        self.direct = isinstance(env, VectorDriveEnv)
+        if self.direct and env.autoreset_mode.value != "SameStep":
+            raise UsageError("training on a VectorDriveEnv needs autoreset_mode='same_step'")
+        self.vector = self.direct or isinstance(env, VecEnv)
+        self.arrays = self.direct or _has_step_arrays(env)
         self.count = env.num_envs if self.vector else 1
-        self.infos: list[dict] = [{} for _ in range(self.count)]  # the last step's, one per world
+        self._infos: list[dict] | dict = [{} for _ in range(self.count)]  # the last step's
         self.reset_infos: list[dict] = [{} for _ in range(self.count)]  # the latest reset's (see step)
+        self._returns = np.zeros(self.count)  # a VectorDriveEnv's episodes so far (no monitor)
+
+    @property
+    def infos(self) -> list[dict]:
+        """The last step's info of every world (of the step that ended it, for a finished world)."""
+        if isinstance(self._infos, dict):
+            self._infos = _listed_infos(self._infos, self.count)
+        return self._infos
 
     @property
     def batch(self):
@@ -65,6 +84,11 @@ class Worlds:
 
     def reset(self) -> Any:
         """Start every world; the batched observations (K, ...)."""
+        if self.direct:
+            obs, infos = self.env.reset()
+            self.reset_infos = _listed_infos(infos, self.count)
+            self._returns[:] = 0.0
+            return obs
         if self.vector:
             obs = self.env.reset()
             self.reset_infos = list(getattr(self.env, "reset_infos", self.reset_infos))
@@ -80,9 +104,11 @@ class Worlds:
         step that ended it, for a finished world); with one world, ``reset_infos`` the reset's when
         it started again (a VecEnv's ``reset_infos`` are its last ``reset``'s: SB3VecEnv does not
         give the infos of the resets inside ``step``)."""
+        if self.arrays:
+            return self._step_arrays(actions)
         if self.vector:
             new_obs, rewards, dones, infos = self.env.step(actions)
-            self.infos = infos
+            self._infos = infos
             truncated = np.array([bool(info.get("TimeLimit.truncated", False)) for info in infos])
             terminated = np.asarray(dones, dtype=bool) & ~truncated
             final = None
@@ -93,7 +119,7 @@ class Worlds:
             returns = [float(info["episode"]["r"]) for info in infos if "episode" in info]
             return new_obs, np.asarray(rewards, dtype=np.float64), terminated, truncated, final, returns
         new_obs, reward, terminated, truncated, info = self.env.step(actions[0])
-        self.infos = [info]
+        self._infos = [info]
         final = batch_of_one(new_obs)
         returns = [float(info["episode"]["r"])] if "episode" in info else []
         if terminated or truncated:
@@ -103,6 +129,62 @@ class Worlds:
             batch_of_one(new_obs), np.array([float(reward)]), np.array([terminated]), np.array([truncated]),
             final, returns,
         )  # fmt: skip
+
+    def _step_arrays(self, actions: np.ndarray):
+        """``step`` through ``step_arrays`` (or a VectorDriveEnv's own step): arrays only, Python
+        per finished world. Rewards are rounded to float32 as SB3's VecEnvs give them, so that
+        both ways of stepping train alike."""
+        if self.direct:
+            new_obs, rewards, terminated, truncated, infos = self.env.step(actions)
+        else:
+            new_obs, rewards, terminated, truncated, infos = self.env.step_arrays(actions)
+        self._infos = infos
+        rewards = rewards.astype(np.float32).astype(np.float64)
+        done = terminated | truncated
+        final, returns = None, []
+        if np.count_nonzero(done):
+            final = _copy(new_obs)
+            final_obs = infos["final_obs"]
+            finished = np.flatnonzero(done)
+            for k in finished:
+                _set_row(final, k, final_obs[k])
+            if self.direct:
+                self._returns += rewards
+                returns = [float(self._returns[k]) for k in finished]
+                self._returns[finished] = 0.0
+            elif "episode" in infos:
+                returns = [float(infos["episode"][k]["r"]) for k in finished]
+        elif self.direct:
+            self._returns += rewards
+        truncated = truncated & ~terminated
+        return new_obs, rewards, terminated, truncated, final, returns
+
+
+def _has_step_arrays(env) -> bool:
+    """Every VecEnv of the chain under ``env`` steps as arrays (``step_arrays``)."""
+    while env is not None:
+        if not callable(getattr(type(env), "step_arrays", None)):
+            return False
+        env = getattr(env, "venv", None)
+    return True
+
+
+def _listed_infos(infos: dict, count: int) -> list[dict]:
+    """Gymnasium-style vector infos (arrays of K) as SB3's list of K dicts, finished worlds' from
+    their ``final_info`` with ``terminal_observation`` (and ``episode`` where a monitor gave one)."""
+    from drivelab.envs.vector import _world_info
+
+    listed = []
+    for k in range(count):
+        if "_final_info" in infos and infos["_final_info"][k]:
+            info = dict(infos["final_info"][k])
+            info["terminal_observation"] = infos["final_obs"][k]
+        else:
+            info = _world_info(infos, k)
+        if "_episode" in infos and infos["_episode"][k]:
+            info["episode"] = infos["episode"][k]
+        listed.append(info)
+    return listed
 
 
 def row(batch: Any, k: int) -> Any:

@@ -595,6 +595,14 @@ class SB3VecEnv(VecEnv):
             listed.append(info)
         return obs, rewards.astype(np.float32), dones, listed
 
+    def step_arrays(self, actions: np.ndarray):
+        """``step`` without the per-world info dicts: the VectorDriveEnv's own ``(observations,
+        rewards, terminated, truncated, infos)``, arrays of K worlds (finished worlds already
+        started again, their last observations in ``infos["final_obs"]``). Array-aware wrappers
+        (``RecordVecEpisodes``, ``ArrayVecMonitor``) pass it through; ``agents/worlds.py`` steps
+        by it when the whole chain has it."""
+        return self.vector_env.step(actions)
+
     def seed(self, seed: int | None = None):
         self._seed = seed
         return [None if seed is None else seed + i for i in range(self.num_envs)]

@@ -55,7 +55,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 from gymnasium.utils import seeding
-from stable_baselines3.common.vec_env import VecEnvWrapper
+from stable_baselines3.common.vec_env import VecEnvWrapper, VecMonitor
 
 from drivelab.agents.counters import check_counters
 from drivelab.errors import UsageError
@@ -187,6 +187,48 @@ class RecordVecEpisodes(VecEnvWrapper):
             else:
                 self.log.stepped(index, self._actions[index])
         return obs, rewards, dones, infos
+
+
+    def step_arrays(self, actions: np.ndarray):
+        """``SB3VecEnv.step_arrays`` with the episodes logged, as ``step_wait`` logs them."""
+        before = self._generators()
+        obs, rewards, terminated, truncated, infos = self.venv.step_arrays(actions)
+        done = terminated | truncated
+        for index in range(len(done)):
+            if done[index]:
+                self.log.started(index, before[index][1])
+            else:
+                self.log.stepped(index, actions[index])
+        return obs, rewards, terminated, truncated, infos
+
+
+class ArrayVecMonitor(VecMonitor):
+    """SB3's ``VecMonitor`` (monitor.csv, episode returns and lengths) that also passes
+    ``step_arrays`` through: the finished episodes' ``{"r", "l", "t"}`` go into the infos as
+    ``episode`` (one dict per finished world) with the mask ``_episode``, and into monitor.csv, as
+    ``step_wait`` writes them."""
+
+    def step_arrays(self, actions: np.ndarray):
+        obs, rewards, terminated, truncated, infos = self.venv.step_arrays(actions)
+        done = terminated | truncated
+        self.episode_returns += rewards.astype(np.float32)
+        self.episode_lengths += 1
+        if np.count_nonzero(done):
+            episodes = np.empty(len(done), dtype=object)
+            for index in np.flatnonzero(done):
+                episode = {
+                    "r": self.episode_returns[index],
+                    "l": self.episode_lengths[index],
+                    "t": round(time.time() - self.t_start, 6),
+                }
+                episodes[index] = episode
+                self.episode_count += 1
+                self.episode_returns[index] = 0
+                self.episode_lengths[index] = 0
+                if self.results_writer:
+                    self.results_writer.write_row(episode)
+            infos["episode"], infos["_episode"] = episodes, done.copy()
+        return obs, rewards, terminated, truncated, infos
 
 
 @dataclass

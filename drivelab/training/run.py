@@ -39,7 +39,6 @@ from pathlib import Path
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import configure
 from stable_baselines3.common.monitor import Monitor, ResultsWriter
-from stable_baselines3.common.vec_env import VecMonitor
 from tqdm import tqdm
 
 from drivelab.agents.registry import check_combination, get_algo
@@ -61,6 +60,7 @@ from drivelab.training.evaluate import (
     write_video,
 )
 from drivelab.training.resume_state import (
+    ArrayVecMonitor,
     RecordEpisodes,
     RecordVecEpisodes,
     Snapshot,
@@ -308,7 +308,7 @@ def _make_envs(config: RunConfig, run_dir: Path | None, resume: bool):
         recorder = RecordVecEpisodes(
             SB3VecEnv(VectorDriveEnv(config.n_envs, autoreset_mode="same_step", **config.env_kwargs()))
         )
-        train_env = VecMonitor(recorder)
+        train_env = ArrayVecMonitor(recorder)
         if monitor is not None:
             train_env.results_writer = ResultsWriter(
                 monitor,

@@ -144,7 +144,10 @@ def test_run_directory_resume_and_evaluation(algo, tmp_path):
     [
         ("dueling_ddqn", "topdown", "grid", {}, r"cannot read 'image' observations; it reads vectors \("),
         ("ppo_own", "birdeye", "continuous", {}, r"cannot read the observation Box\(.*3\), uint8\)"),
-        ("a2c_own", "topdown", "meta", {}, "cannot take 'meta'"),
+        ("a2c_own", "topdown", "seed_line", {}, "cannot take 'seed_line'"),
+        ("ppo_own", "kinematics", "meta", {"distribution": "beta"}, "discrete actions take the categorical"),
+        ("a2c_own", "kinematics", "continuous", {"distribution": "gauss"}, "distribution must be one of"),
+        ("ppo_own", "kinematics", "meta", {"net_arch": "64,wide"}, "net_arch must be layer widths"),
         ("ppo_own", "kinematics", "continuous", {"clip_range": -1}, "clip_range > 0"),
         ("ppo_own", "kinematics", "continuous", {"n_epoch": 3}, "unknown hyperparameter 'n_epoch'"),
         ("dueling_ddqn", "kinematics", "meta", {"batch_size": "big"}, "must be a number"),

@@ -8,8 +8,8 @@ import torch
 
 from drivelab.agents.a2c import a2c_loss
 from drivelab.agents.networks import squashed_log_prob
+from drivelab.agents.onpolicy import compute_gae
 from drivelab.agents.ppo import clipped_policy_loss, value_loss
-from drivelab.agents.rollout import compute_gae
 
 
 def test_gae_against_a_hand_computation():

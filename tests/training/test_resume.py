@@ -41,6 +41,14 @@ SETUPS = {
                               "hyperparams": {"learning_starts": 30, "buffer_size": 500, "batch_size": 16}},
     "ppo_own-4-worlds": {"algo": "ppo_own", "action": "continuous", "steps": 256, "n_envs": 4,
                          "hyperparams": {"n_steps": 8, "batch_size": 16, "n_epochs": 2}},
+    # the array path (monitored VecEnv stepped by step_arrays) with every running statistic
+    "ppo_own-4-worlds-normalised": {"algo": "ppo_own", "action": "meta", "steps": 256, "n_envs": 4,
+                                    "hyperparams": {"n_steps": 8, "batch_size": 16, "n_epochs": 2,
+                                                    "normalize_observations": True,
+                                                    "normalize_rewards": True}},
+    "a2c_own-3-worlds-beta": {"algo": "a2c_own", "action": "continuous", "steps": 240, "n_envs": 3,
+                              "hyperparams": {"n_steps": 16, "distribution": "beta",
+                                              "normalize_observations": True}},
     # pixel SAC: the replay (frames, stacks, the open episode) is part of the checkpoint
     **{name: {"algo": algo, "env": "town", "obs": ["camera:width=24:height=24:stack=3", "waypoints",
                                                      "measurements:stack=3"],
@@ -123,6 +131,8 @@ def _assert_same_run(reference, resumed, config) -> None:
         ("ppo_own", 75, signal.SIGINT, 64),
         ("a2c_own", 75, signal.SIGTERM, 64),
         ("ppo_own-4-worlds", 100, signal.SIGINT, 96),  # rollouts of 8 steps x 4 worlds
+        ("ppo_own-4-worlds-normalised", 100, signal.SIGTERM, 96),
+        ("a2c_own-3-worlds-beta", 100, signal.SIGINT, 96),  # rollouts of 16 steps x 3 worlds
         ("dueling_ddqn-3-worlds", 77, signal.SIGTERM, 75),  # safe points every 3 steps
         ("rlad", 47, signal.SIGTERM, 46),  # mid-episode, the replay half full
         ("drq", 47, signal.SIGINT, 46),

@@ -1,0 +1,242 @@
+"""The actor-critic of drivelab's on-policy trainer: an encoder, an action distribution, a value head,
+and the running statistics that normalise its input.
+
+- ``ActorCritic``: the shared encoders of ``networks.py`` (MLP, seed 003's CNN, fusion) feed an
+  action head and a value head (one encoder for both, or one each).
+- The action head is one of three distributions, chosen by the action space and ``distribution``:
+  ``categorical`` (Discrete: meta, grid, the line and lane tables), ``tanh_gaussian`` (Box:
+  a = tanh(u) clipped into the box, u ~ N(μ(s), σ²), σ a trained state-independent vector, as
+  seed 003 and behaviour cloning, whose weights it loads) and
+  ``beta`` (Box: a ~ Beta(α(s), β(s)) on [low, high], α, β = 1 + softplus(·) > 1, Roach's choice
+  for driving: bounded and unimodal, no probability mass piled up at the bounds).
+- ``RunningNorm``: the running mean and variance of the observation's vectors (images are scaled by
+  1/255 instead), SB3 ``VecNormalize``'s statistics; buffers of the module, so they are saved with
+  the weights and applied by ``predict``.
+
+What a rollout stores of an action is the distribution's own variable (the class index, the
+pre-tanh u, the Beta's x in (0, 1)), so that log π is computed again without inverting anything.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+from gymnasium import spaces
+from torch import nn
+
+from drivelab.agents.networks import make_encoder, squashed_log_prob
+
+DISTRIBUTIONS = ("auto", "categorical", "tanh_gaussian", "beta")
+BETA_EPSILON = 1e-6  # a Beta sample is kept inside (ε, 1 − ε), where its log-density is finite
+NORM_CLIP = 10.0  # normalised observations and rewards are clipped to ±this (SB3 VecNormalize's)
+NORM_EPSILON = 1e-8
+
+
+def distribution_of(action_space: spaces.Space, distribution: str) -> str:
+    """The distribution an action space gets: ``categorical`` for Discrete, the given one (or
+    ``tanh_gaussian`` for "auto") for Box; a ValueError for a combination that cannot be."""
+    if isinstance(action_space, spaces.Discrete):
+        if distribution not in ("auto", "categorical"):
+            raise ValueError(f"discrete actions take the categorical distribution, not {distribution!r}")
+        return "categorical"
+    if isinstance(action_space, spaces.Box) and len(action_space.shape) == 1:
+        if distribution == "categorical":
+            raise ValueError("continuous actions take distribution tanh_gaussian or beta, not 'categorical'")
+        if not (np.all(np.isfinite(action_space.low)) and np.all(np.isfinite(action_space.high))):
+            raise ValueError("continuous actions need finite bounds")
+        return "tanh_gaussian" if distribution == "auto" else distribution
+    raise ValueError(f"no action distribution for {action_space}")
+
+
+class RunningNorm(nn.Module):
+    """Running mean and variance of each float observation part (Chan et al.'s parallel update),
+    applied as clip((x − mean) / sqrt(var + ε), ±10); uint8 images are scaled to [0, 1] instead.
+
+    :param space: the observation space (Box or Dict).
+    :param enabled: normalise the float parts (else only images are scaled).
+    """
+
+    def __init__(self, space: spaces.Space, enabled: bool) -> None:
+        super().__init__()
+        parts = space.spaces if isinstance(space, spaces.Dict) else {"": space}
+        self.keys = list(parts) if isinstance(space, spaces.Dict) else None
+        self.images = {key for key, sub in parts.items() if sub.dtype == np.uint8}
+        self.enabled = enabled
+        self.normalised = [key for key in parts if key not in self.images] if enabled else []
+        for key in self.normalised:
+            shape = parts[key].shape
+            self.register_buffer(_name("mean", key), torch.zeros(shape, dtype=torch.float64))
+            self.register_buffer(_name("var", key), torch.ones(shape, dtype=torch.float64))
+        self.register_buffer("count", torch.zeros((), dtype=torch.float64))
+
+    def _part(self, obs, key: str) -> torch.Tensor:
+        return obs if self.keys is None else obs[key]
+
+    def forward(self, obs):
+        """Float tensors (B, ...) ready for the encoder, from stored observations of any dtype."""
+        if self.keys is None:
+            return self._one(obs, "")
+        return {key: self._one(obs[key], key) for key in self.keys}
+
+    def _one(self, value: torch.Tensor, key: str) -> torch.Tensor:
+        if key in self.images:
+            return value.float() / 255.0
+        value = value.float()
+        if key not in self.normalised or self.count <= 0:
+            return value
+        mean, var = getattr(self, _name("mean", key)), getattr(self, _name("var", key))
+        scaled = (value - mean.float()) / torch.sqrt(var.float() + NORM_EPSILON)
+        return scaled.clamp(-NORM_CLIP, NORM_CLIP)
+
+    @torch.no_grad()
+    def update(self, obs) -> None:
+        """Merge a batch (N, ...) of raw observations into the statistics."""
+        if not self.normalised:
+            return
+        count = None
+        for key in self.normalised:
+            batch = self._part(obs, key).double().reshape(-1, *getattr(self, _name("mean", key)).shape)
+            count = batch.shape[0]
+            mean, var = getattr(self, _name("mean", key)), getattr(self, _name("var", key))
+            batch_mean, batch_var = batch.mean(0), batch.var(0, unbiased=False)
+            total = self.count + count
+            delta = batch_mean - mean
+            merged = var * self.count + batch_var * count + delta**2 * self.count * count / total
+            mean += delta * count / total
+            var.copy_(merged / total)
+        self.count += count
+
+
+def _name(kind: str, key: str) -> str:
+    return f"{kind}_{key}" if key else kind
+
+
+class ActorCritic(nn.Module):
+    """π(a|s) and V(s) over one of ``networks.make_encoder``'s encoders.
+
+    :param space: the observation space.
+    :param action_space: Discrete or a 1-D Box with finite bounds.
+    :param distribution: "auto", "categorical", "tanh_gaussian" or "beta" (``distribution_of``).
+    :param shared_encoder: one encoder for actor and critic, or one each.
+    :param log_std_init: initial log σ of the tanh-Gaussian.
+    :param hidden: widths of the MLP encoder's layers (vector observations).
+    :param normalize_observations: keep running statistics of the float observations and
+        normalise with them.
+    """
+
+    def __init__(
+        self,
+        space: spaces.Space,
+        action_space: spaces.Space,
+        distribution: str = "auto",
+        shared_encoder: bool = True,
+        log_std_init: float = 0.0,
+        hidden: tuple[int, ...] = (64, 64),
+        normalize_observations: bool = False,
+    ) -> None:
+        super().__init__()
+        self.kind = distribution_of(action_space, distribution)
+        self.norm = RunningNorm(space, normalize_observations)
+        self.actor_encoder = make_encoder(space, hidden)
+        self.critic_encoder = self.actor_encoder if shared_encoder else make_encoder(space, hidden)
+        if self.kind == "categorical":
+            outputs = int(action_space.n)
+        else:
+            size = action_space.shape[0]
+            outputs = 2 * size if self.kind == "beta" else size
+            low = torch.as_tensor(action_space.low, dtype=torch.float32)
+            high = torch.as_tensor(action_space.high, dtype=torch.float32)
+            self.register_buffer("low", low, persistent=False)
+            self.register_buffer("span", high - low, persistent=False)
+            self.register_buffer("high", high, persistent=False)
+        self.head = nn.Linear(self.actor_encoder.features, outputs)
+        if self.kind == "tanh_gaussian":
+            self.log_std = nn.Parameter(torch.full((outputs,), float(log_std_init)))
+        self.value = nn.Linear(self.critic_encoder.features, 1)
+        nn.init.orthogonal_(self.head.weight, gain=0.01)  # start near the uniform / zero action
+        nn.init.zeros_(self.head.bias)
+
+    def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):
+        """Also weights saved before this class by the tanh-Gaussian networks (``mean`` for
+        ``head``, no input statistics), such as behaviour cloning's ``TanhGaussianActorCritic``."""
+        state_dict = dict(state_dict)
+        for suffix in ("weight", "bias"):
+            if f"mean.{suffix}" in state_dict and f"head.{suffix}" not in state_dict:
+                state_dict[f"head.{suffix}"] = state_dict.pop(f"mean.{suffix}")
+        state_dict.setdefault("norm.count", torch.zeros((), dtype=torch.float64))
+        return super().load_state_dict(state_dict, strict, assign)
+
+    def forward(self, obs) -> tuple[torch.Tensor, torch.Tensor]:
+        """(the head's output, V) for a batch of stored observations."""
+        obs = self.norm(obs)
+        features = self.actor_encoder(obs)
+        shared = self.critic_encoder is self.actor_encoder
+        value = self.value(features if shared else self.critic_encoder(obs)).squeeze(-1)
+        return self.head(features), value
+
+    def values(self, obs) -> torch.Tensor:
+        """V alone (the critic's encoder only, when it has its own)."""
+        obs = self.norm(obs)
+        return self.value(self.critic_encoder(obs)).squeeze(-1)
+
+    # --- the distributions ----------------------------------------------------------------------
+    def _beta(self, out: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        alpha, beta = (1.0 + nn.functional.softplus(out)).chunk(2, dim=-1)
+        return alpha, beta
+
+    def sample(
+        self,
+        out: torch.Tensor,
+        deterministic: bool,
+        generator: torch.Generator,
+        rng: np.random.Generator,
+    ) -> torch.Tensor:
+        """The distribution's variable for a batch of head outputs: drawn (from ``generator``, or
+        ``rng`` for the Beta, which torch samples without a generator), or the mode (categorical),
+        μ (Gaussian) or the mean (Beta) when ``deterministic``: nothing is drawn then."""
+        if self.kind == "categorical":
+            if deterministic:
+                return out.argmax(-1)
+            uniform = torch.rand(out.shape, generator=generator).clamp_(min=1e-20)
+            return (out - torch.log(-torch.log(uniform))).argmax(-1)  # Gumbel-max: a draw of softmax(out)
+        if self.kind == "tanh_gaussian":
+            if deterministic:
+                return out
+            return out + self.log_std.exp() * torch.randn(out.shape, generator=generator)
+        alpha, beta = self._beta(out)
+        if deterministic:
+            x = alpha / (alpha + beta)
+        else:
+            x = torch.from_numpy(rng.beta(alpha.double().numpy(), beta.double().numpy())).float()
+        return x.clamp(BETA_EPSILON, 1.0 - BETA_EPSILON)
+
+    def log_prob_entropy(self, out: torch.Tensor, stored: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(log π of stored variables, entropy) per row; the Gaussian's entropy is before squashing."""
+        if self.kind == "categorical":
+            log_softmax = out.log_softmax(-1)
+            log_prob = log_softmax.gather(-1, stored.long().unsqueeze(-1)).squeeze(-1)
+            return log_prob, -(log_softmax.exp() * log_softmax).sum(-1)
+        if self.kind == "tanh_gaussian":
+            normal = torch.distributions.Normal(out, self.log_std.exp().expand_as(out))
+            return squashed_log_prob(normal, stored), normal.entropy().sum(-1)
+        alpha, beta = self._beta(out)
+        distribution = torch.distributions.Beta(alpha, beta)
+        return distribution.log_prob(stored).sum(-1), distribution.entropy().sum(-1)
+
+    def to_env(self, stored: torch.Tensor) -> np.ndarray:
+        """The environment's actions for stored variables: class indices, or Box values in bounds."""
+        if self.kind == "categorical":
+            return stored.numpy()
+        if self.kind == "tanh_gaussian":  # tanh(u) clipped into the box, as behaviour cloning acts
+            return torch.minimum(torch.maximum(torch.tanh(stored), self.low), self.high).numpy()
+        return (self.low + stored * self.span).numpy()
+
+    def stored_shape(self) -> tuple[int, ...]:
+        """The shape of one stored variable: () for a class, (action size,) for a Box."""
+        return () if self.kind == "categorical" else (self.span.shape[0],)
+
+    def std(self) -> float:
+        """The Gaussian's mean σ, or the Beta's / categorical's nothing (NaN)."""
+        return self.log_std.exp().mean().item() if self.kind == "tanh_gaussian" else math.nan

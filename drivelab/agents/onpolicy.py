@@ -1,0 +1,383 @@
+"""drivelab's on-policy trainer: one collect loop over K worlds' arrays, shared by PPO and A2C.
+
+CleanRL's shape at the simulator's speed. Each iteration fills preallocated ``(n_steps, K, ...)``
+tensors from the worlds' batched arrays (``worlds.Worlds``: a VectorDriveEnv, or ``drivelab
+train``'s monitored chain stepped by ``step_arrays``; no info dict per world), computes GAE over
+the whole ``(n_steps, K)`` block, then hands the flattened batch to the algorithm's ``update``
+(``ppo.py``, ``a2c.py``: one file each, all that differs between them).
+
+What SB3 and CleanRL users expect, in ``OnPolicyConfig``: a time-limit end bootstraps from the
+final observation (γ·V(s_final) added to the reward; only a crash or an arrival ends the value),
+advantage normalisation, optional observation and reward normalisation (running statistics saved
+with the model), learning-rate and entropy annealing, gradient clipping, seeded draws.
+
+Every statistic the run keeps (input statistics, the reward scale, each world's running discounted
+return) changes only between a rollout's last step and the next rollout's start, the safe points
+where ``drivelab train`` checkpoints, so that a resumed run equals an uninterrupted one.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import torch
+from gymnasium import spaces
+from stable_baselines3.common.callbacks import BaseCallback
+
+from drivelab.agents.actor_critic import DISTRIBUTIONS, NORM_CLIP, NORM_EPSILON, ActorCritic
+from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent, batch_of_one
+from drivelab.agents.buffer_memory import check_buffer_memory, observation_bytes
+from drivelab.agents.worlds import Worlds
+from drivelab.errors import UsageError
+
+
+@dataclass(frozen=True)
+class OnPolicyConfig:
+    """What PPO and A2C share (``-H key=value``).
+
+    :param learning_rate: Adam step size (annealed linearly to 0 over the run when ``linear_lr``).
+    :param n_steps: steps of every world per rollout (a rollout is n_steps × K transitions).
+    :param gamma: discount.
+    :param gae_lambda: GAE λ (1.0: plain n-step returns).
+    :param entropy_coef: weight of the entropy bonus (annealed to 0 when ``linear_entropy``).
+    :param value_coef: weight of the value loss.
+    :param max_grad_norm: gradient clipping by global norm.
+    :param normalize_advantages: standardise the advantages (per minibatch).
+    :param normalize_observations: normalise the float observations with running statistics.
+    :param normalize_rewards: scale rewards by the running std of the discounted return (SB3's
+        ``VecNormalize(norm_reward=True)``), clipped to ±10.
+    :param distribution: "auto" (categorical for discrete actions, tanh_gaussian for continuous),
+        "tanh_gaussian" or "beta".
+    :param net_arch: widths of the MLP's tanh layers for vector observations, e.g. "256,256".
+    :param shared_encoder: actor and critic share the encoder.
+    :param log_std_init: initial log σ of the tanh-Gaussian.
+    :param linear_lr: anneal the learning rate linearly to 0.
+    :param linear_entropy: anneal the entropy coefficient linearly to 0.
+    """
+
+    learning_rate: float = 3e-4
+    n_steps: int = 128
+    gamma: float = 0.8
+    gae_lambda: float = 0.95
+    entropy_coef: float = 0.0
+    value_coef: float = 0.5
+    max_grad_norm: float = 0.5
+    normalize_advantages: bool = True
+    normalize_observations: bool = False
+    normalize_rewards: bool = False
+    distribution: str = "auto"
+    net_arch: str = "64,64"
+    shared_encoder: bool = True
+    log_std_init: float = 0.0
+    linear_lr: bool = False
+    linear_entropy: bool = False
+
+    def check(self, algo: str) -> None:
+        if self.n_steps < 1 or not 0 < self.gamma <= 1 or not 0 <= self.gae_lambda <= 1:
+            raise UsageError(f"{algo!r} needs n_steps >= 1, 0 < gamma <= 1 and 0 <= gae_lambda <= 1")
+        if not 0 < self.learning_rate <= MAX_LEARNING_RATE or self.max_grad_norm <= 0:
+            raise UsageError(
+                f"{algo!r} needs 0 < learning_rate <= {MAX_LEARNING_RATE:g} and max_grad_norm > 0"
+            )
+        if self.entropy_coef < 0 or self.value_coef < 0:
+            raise UsageError(f"{algo!r} needs entropy_coef >= 0 and value_coef >= 0")
+        if self.distribution not in DISTRIBUTIONS:
+            raise UsageError(f"{algo!r} distribution must be one of {', '.join(DISTRIBUTIONS)}")
+        self.hidden(algo)
+
+    def hidden(self, algo: str) -> tuple[int, ...]:
+        """``net_arch`` as layer widths."""
+        try:
+            widths = tuple(int(part) for part in str(self.net_arch).split(","))
+        except ValueError:
+            widths = ()
+        if not widths or min(widths) < 1 or max(widths) > 65536:
+            raise UsageError(
+                f"{algo!r} net_arch must be layer widths between 1 and 65536 separated by commas "
+                f"(e.g. 256,256), got {self.net_arch!r}"
+            )
+        return widths
+
+
+def compute_gae(
+    rewards: np.ndarray,
+    values: np.ndarray,
+    episode_ends: np.ndarray,
+    last_value: float | np.ndarray,
+    gamma: float,
+    gae_lambda: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Generalised advantage estimation (Schulman et al. 2016, eq. 11-16), backwards in time.
+
+    δ_t = r_t + γ·V(s_{t+1})·(1 − end_t) − V(s_t);  A_t = δ_t + γλ·(1 − end_t)·A_{t+1}.
+    ``episode_ends[t]`` is 1 when the episode ended at step t (a time-limit end is bootstrapped by
+    the caller, who adds γ·V(final observation) to its reward). Returns (advantages, returns = A + V)
+    as float32, shaped like ``rewards``.
+
+    :param rewards: (T,) rewards, or (T, K) for K worlds stepped together.
+    :param values: V(s_t), shaped like ``rewards``.
+    :param episode_ends: 1.0 where the episode ended after step t, shaped like ``rewards``.
+    :param last_value: V of the observation after the last step (K,) (a float for (T,)).
+    """
+    rewards = np.asarray(rewards, dtype=np.float64)
+    advantages = np.zeros(rewards.shape, dtype=np.float32)
+    next_advantage = np.zeros(rewards.shape[1:])
+    next_value = np.asarray(last_value, dtype=np.float64)
+    for t in reversed(range(len(rewards))):
+        not_end = 1.0 - np.asarray(episode_ends[t], dtype=np.float64)
+        delta = rewards[t] + gamma * next_value * not_end - values[t]
+        next_advantage = delta + gamma * gae_lambda * not_end * next_advantage
+        advantages[t] = next_advantage
+        next_value = np.asarray(values[t], dtype=np.float64)
+    return advantages, advantages + np.asarray(values, dtype=np.float32)
+
+
+@dataclass
+class Rollout:
+    """One batch of on-policy experience, flattened time-major to (n_steps·K, ...), for the update."""
+
+    observations: Any  # tensor or dict of tensors, stored dtype (uint8 images stay uint8)
+    actions: torch.Tensor  # the distribution's variables (class, pre-tanh u, Beta x)
+    log_probs: torch.Tensor
+    values: torch.Tensor
+    advantages: torch.Tensor
+    returns: torch.Tensor
+
+
+class Storage:
+    """Preallocated (n_steps, K, ...) tensors of one rollout; observations in their own dtype."""
+
+    def __init__(self, space: spaces.Space, steps: int, worlds: int, action_shape: tuple, discrete: bool):
+        def block(sub: spaces.Box) -> torch.Tensor:
+            dtype = torch.uint8 if sub.dtype == np.uint8 else torch.float32
+            return torch.zeros((steps, worlds, *sub.shape), dtype=dtype)
+
+        self.keys = list(space.spaces) if isinstance(space, spaces.Dict) else None
+        self.obs = {k: block(s) for k, s in space.spaces.items()} if self.keys else block(space)
+        action_dtype = torch.int64 if discrete else torch.float32
+        self.actions = torch.zeros((steps, worlds, *action_shape), dtype=action_dtype)
+        self.log_probs = torch.zeros((steps, worlds))
+        self.values = torch.zeros((steps, worlds))
+        self.rewards = np.zeros((steps, worlds))
+        self.bootstrap = np.zeros((steps, worlds))  # γ·V(final observation) of time-limit ends
+        self.ends = np.zeros((steps, worlds))
+        self.steps, self.worlds = steps, worlds
+
+    def put(self, t: int, obs: Any) -> Any:
+        """Store step ``t``'s observations (K, ...); the stored tensors."""
+        if self.keys:
+            for key in self.keys:
+                self.obs[key][t].copy_(torch.from_numpy(np.asarray(obs[key])))
+            return {key: self.obs[key][t] for key in self.keys}
+        self.obs[t].copy_(torch.from_numpy(np.asarray(obs)))
+        return self.obs[t]
+
+    def flat_obs(self, steps: int) -> Any:
+        """The first ``steps`` steps' observations as (steps·K, ...)."""
+        if self.keys:
+            return {key: value[:steps].flatten(0, 1) for key, value in self.obs.items()}
+        return self.obs[:steps].flatten(0, 1)
+
+
+def to_tensor(obs: Any) -> Any:
+    """A batch of raw observations (numpy) as tensors of their own dtype (no copy where possible)."""
+    if isinstance(obs, dict):
+        return {key: torch.from_numpy(np.ascontiguousarray(value)) for key, value in obs.items()}
+    return torch.from_numpy(np.ascontiguousarray(obs))
+
+
+class OnPolicyAgent(OwnAgent):
+    """The actor-critic and its collect loop; subclasses implement ``update`` (one readable file each)."""
+
+    def _build(self) -> None:
+        config = self.config
+        self.hidden = config.hidden(self.algo)
+        worlds = getattr(self.env, "num_envs", 1)
+        observation = observation_bytes(self.observation_space)
+        check_buffer_memory(
+            self.algo, "n_steps", config.n_steps * worlds, observation, "rollout (n_steps × worlds)"
+        )
+        try:
+            self.policy = ActorCritic(
+                self.observation_space,
+                self.action_space,
+                distribution=config.distribution,
+                shared_encoder=config.shared_encoder,
+                log_std_init=config.log_std_init,
+                hidden=self.hidden,
+                normalize_observations=config.normalize_observations,
+            )
+        except ValueError as exc:
+            raise UsageError(f"{self.algo!r}: {exc}") from None
+        self.optimizer = torch.optim.Adam(
+            self.policy.parameters(), lr=config.learning_rate, eps=1e-5, foreach=True
+        )
+        # the reward scale: running mean/var of the discounted return, and each world's return so far
+        self.return_stats = torch.tensor([0.0, 1.0, 0.0], dtype=torch.float64)  # mean, var, count
+        self.running_returns = torch.zeros(worlds, dtype=torch.float64)
+        self.learning_rate, self.entropy_coef = config.learning_rate, config.entropy_coef  # annealed in learn
+        self._last_obs = None
+        self._storage: Storage | None = None
+        self.episode_returns: deque[float] = deque(maxlen=100)
+
+    def _state(self) -> dict[str, Any]:
+        return {
+            "policy": self.policy.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "return_stats": self.return_stats,
+            "running_returns": self.running_returns,
+        }
+
+    def _set_state(self, state: dict[str, Any]) -> None:
+        self.policy.load_state_dict(state["policy"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        if "return_stats" in state:  # (files saved before reward normalisation have none)
+            self.return_stats = state["return_stats"].clone()
+            self.running_returns = state["running_returns"].clone()
+
+    # --- acting ---------------------------------------------------------------------------------
+    def act(self, obs: Any, deterministic: bool) -> np.ndarray:
+        """The environment's actions for a batch of observations (K, ...)."""
+        with torch.no_grad():
+            out, _ = self.policy(to_tensor(obs))
+            stored = self.policy.sample(out, deterministic, self.generator, self.rng)
+        return self.policy.to_env(stored)
+
+    def predict(self, obs: Any, state=None, episode_start=None, deterministic: bool = True):
+        """(action, None) for one observation; the mode / mean when deterministic (nothing drawn)."""
+        return self.act(batch_of_one(obs), deterministic)[0], None
+
+    def _values(self, batch: Any) -> np.ndarray:
+        """V of a batch of observations (K, ...) as float64 (K,)."""
+        with torch.no_grad():
+            return self.policy.values(to_tensor(batch)).double().numpy()
+
+    # --- collecting -----------------------------------------------------------------------------
+    def _storage_for(self, worlds: int) -> Storage:
+        storage = self._storage
+        if storage is None or storage.worlds != worlds or storage.steps != self.config.n_steps:
+            discrete = self.policy.kind == "categorical"
+            storage = Storage(
+                self.observation_space, self.config.n_steps, worlds, self.policy.stored_shape(), discrete
+            )
+            self._storage = storage
+        return storage
+
+    def collect(self, worlds: Worlds, callback: BaseCallback) -> Rollout | None:
+        """``n_steps`` steps of each of the K worlds (fewer at the step budget), then advantages;
+        None when the callback stops training. The hot loop is one forward pass and one batched
+        step per K transitions."""
+        config, count, policy = self.config, worlds.count, self.policy
+        storage = self._storage_for(count)
+        steps = min(config.n_steps, -(-(self._target - self.num_timesteps) // count))
+        obs = self._last_obs
+        for t in range(steps):
+            with torch.no_grad():
+                out, value = policy(storage.put(t, obs))
+                stored = policy.sample(out, False, self.generator, self.rng)
+                log_prob, _ = policy.log_prob_entropy(out, stored)
+            new_obs, reward, terminated, truncated, final_obs, returns = worlds.step(policy.to_env(stored))
+            self.num_timesteps += count
+            storage.actions[t] = stored
+            storage.log_probs[t] = log_prob
+            storage.values[t] = value
+            storage.rewards[t] = reward
+            storage.ends[t] = terminated | truncated
+            if np.count_nonzero(truncated):  # a time limit: the value goes on from where it stopped
+                storage.bootstrap[t] = np.where(truncated, config.gamma * self._values(final_obs), 0.0)
+            else:
+                storage.bootstrap[t] = 0.0
+            self.episode_returns.extend(returns)
+            self._last_obs = obs = new_obs
+            callback.update_locals(locals())
+            if not callback.on_step():
+                return None
+        rewards = self._scaled_rewards(storage.rewards[:steps], storage.ends[:steps])
+        advantages, returns = compute_gae(
+            rewards + storage.bootstrap[:steps], storage.values[:steps].double().numpy(),
+            storage.ends[:steps], self._values(obs), config.gamma, config.gae_lambda,
+        )  # fmt: skip
+        rollout = Rollout(
+            storage.flat_obs(steps),
+            storage.actions[:steps].flatten(0, 1),
+            storage.log_probs[:steps].flatten(),
+            storage.values[:steps].flatten(),
+            torch.from_numpy(advantages.reshape(-1)),
+            torch.from_numpy(returns.reshape(-1)),
+        )
+        return rollout
+
+    def _scaled_rewards(self, rewards: np.ndarray, ends: np.ndarray) -> np.ndarray:
+        """The rollout's rewards (T, K), divided by the running std of the discounted return when
+        ``normalize_rewards`` (the statistics updated with this rollout's returns first)."""
+        if not self.config.normalize_rewards:
+            return rewards
+        returns = np.empty_like(rewards)
+        running = self.running_returns.numpy().copy()
+        for t in range(len(rewards)):
+            running = running * self.config.gamma + rewards[t]
+            returns[t] = running
+            running = running * (1.0 - ends[t])
+        self.running_returns = torch.from_numpy(running)
+        mean, var, count = self.return_stats.tolist()
+        batch = returns.reshape(-1)
+        batch_count, batch_mean, batch_var = len(batch), float(batch.mean()), float(batch.var())
+        total = count + batch_count
+        delta = batch_mean - mean
+        var = (var * count + batch_var * batch_count + delta**2 * count * batch_count / total) / total
+        mean += delta * batch_count / total
+        self.return_stats = torch.tensor([mean, var, total], dtype=torch.float64)
+        return np.clip(rewards / np.sqrt(var + NORM_EPSILON), -NORM_CLIP, NORM_CLIP)
+
+    def update(self, rollout: Rollout) -> dict[str, float]:
+        """One policy update from a rollout; returns the metrics to log (``train/...``)."""
+        raise NotImplementedError
+
+    # --- the loop -------------------------------------------------------------------------------
+    def learn(
+        self,
+        total_timesteps: int,
+        callback: BaseCallback | None = None,
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> OnPolicyAgent:
+        """Collect and update until ``total_timesteps`` more steps were taken (see the contract in base)."""
+        started = self._start_learning(total_timesteps, reset_num_timesteps)
+        self._target, self._start_steps, start_time = started
+        worlds = Worlds(self.env)
+        if worlds.count != len(self.running_returns):
+            self.running_returns = torch.zeros(worlds.count, dtype=torch.float64)
+        self._last_obs = worlds.start(self._last_obs, self.observation_space)
+        if self.config.normalize_observations and self.policy.norm.count <= 0:
+            self.policy.norm.update(to_tensor(self._last_obs))  # the statistics start from the first batch
+        callback = self._start_callback(callback)
+        callback.on_training_start(locals(), globals())
+        while self.num_timesteps < self._target:
+            callback.on_rollout_start()
+            rollout = self.collect(worlds, callback)
+            if rollout is None:
+                break
+            callback.on_rollout_end()
+            fraction_left = 1.0 - self.num_timesteps / max(self._target, 1)
+            config = self.config
+            self.learning_rate = config.learning_rate * (fraction_left if config.linear_lr else 1.0)
+            self.entropy_coef = config.entropy_coef * (fraction_left if config.linear_entropy else 1.0)
+            for group in self.optimizer.param_groups:
+                group["lr"] = self.learning_rate
+            metrics = self.update(rollout)
+            self.policy.norm.update(rollout.observations)
+            metrics.update(learning_rate=self.learning_rate, entropy_coef=self.entropy_coef)
+            if self.policy.kind == "tanh_gaussian":
+                metrics["std"] = self.policy.std()
+            self._log_progress(metrics, self._start_steps, start_time)
+        callback.on_training_end()
+        return self
+
+
+def explained_variance(values: torch.Tensor, returns: torch.Tensor) -> float:
+    """1 − Var(R − V) / Var(R) (0 when the returns do not vary)."""
+    variance = float(returns.var()) if len(returns) > 1 else 0.0
+    return 1.0 - float((returns - values).var()) / variance if variance > 0 else 0.0
