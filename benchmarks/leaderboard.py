@@ -192,6 +192,17 @@ ENTRIES: tuple[Entry, ...] = (
     ),
     Entry(
         "highway",
+        "ppo_own",
+        "drivelab's PPO on the fast on-policy trainer, kinematics, meta actions, training reward "
+        "highway_fast, gamma 0.95 and learning rate 5e-4 as the ppo row, rollouts of 128 steps x 64 worlds, "
+        "minibatch 2048, 4 epochs, one 64x64 encoder, 500 k steps on 64 worlds",
+        _args(
+            f"{HIGHWAY_FAST.replace('--algo ppo', '--algo ppo_own').replace('--n-envs 16', '--n-envs 64')} "
+            "-H gamma=0.95 -H learning_rate=0.0005 -H n_steps=128 -H batch_size=2048 -H n_epochs=4"
+        ),
+    ),
+    Entry(
+        "highway",
         "ppo-tuned",
         f"SB3 PPO as above with {_tuned('ppo-highway')}, not shipped, 500 k steps on 16 worlds",
         _args(f"{HIGHWAY_FAST} {_study_pins('ppo-highway')}"),
