@@ -211,6 +211,9 @@ class VectorDriveEnv(VectorEnv):
         # each world's generator of episode seeds (a DriveEnv's ``np_random``)
         self.world_rngs: list[np.random.Generator] = [seeding.np_random()[0] for _ in range(self.num_envs)]
         self.world_seeds: list[int | None] = [None] * self.num_envs
+        # each world's generator state before its latest episode-seed draw (what an episode started
+        # from: training's episode log records it, resume_state.py)
+        self.draw_states: list[dict | None] = [None] * self.num_envs
         self._batch: WorldBatch | None = None
         self._batch_deferred = False  # the last step's batch is the simulator's, made when read
         self.observations: np.ndarray | dict[str, np.ndarray] | None = None  # the last ones returned
@@ -261,7 +264,9 @@ class VectorDriveEnv(VectorEnv):
         if not np.count_nonzero(mask):  # (ndarray.any's Python wrapper costs a microsecond a call)
             return
         for k in np.flatnonzero(mask):
-            self.episode_seeds[k] = int(self.world_rngs[k].integers(TRAINING_SEED_LIMIT))
+            generator = self.world_rngs[k]
+            self.draw_states[k] = generator.bit_generator.state
+            self.episode_seeds[k] = int(generator.integers(TRAINING_SEED_LIMIT))
 
     def _start(
         self, mask: np.ndarray, batch: WorldBatch | None = None, episode_seeds: np.ndarray | None = None

@@ -176,30 +176,30 @@ class RecordVecEpisodes(VecEnvWrapper):
         return obs
 
     def step_async(self, actions: np.ndarray) -> None:
-        self._actions, self._before = actions, self._generators()  # a step draws only when it resets
+        self._actions = actions
         self.venv.step_async(actions)
 
     def step_wait(self):
         obs, rewards, dones, infos = self.venv.step_wait()
-        for index, done in enumerate(dones):
-            if done:
-                self.log.started(index, self._before[index][1])
-            else:
-                self.log.stepped(index, self._actions[index])
+        self._log_step(self._actions, dones)
         return obs, rewards, dones, infos
-
 
     def step_arrays(self, actions: np.ndarray):
         """``SB3VecEnv.step_arrays`` with the episodes logged, as ``step_wait`` logs them."""
-        before = self._generators()
         obs, rewards, terminated, truncated, infos = self.venv.step_arrays(actions)
-        done = terminated | truncated
-        for index in range(len(done)):
-            if done[index]:
-                self.log.started(index, before[index][1])
-            else:
-                self.log.stepped(index, actions[index])
+        self._log_step(actions, terminated | truncated)
         return obs, rewards, terminated, truncated, infos
+
+    def _log_step(self, actions: np.ndarray, dones: np.ndarray) -> None:
+        """A finished world started its next episode inside the step, from the generator state its
+        seed draw recorded (``VectorDriveEnv.draw_states``: a world's generator draws only then);
+        every other world took its action (one copy of the step's actions, a row each)."""
+        actions = np.array(actions, copy=True)
+        for index, done in enumerate(dones):
+            if done:
+                self.log.started(index, self.vector.draw_states[index])
+            else:
+                self.log.actions[index].append(actions[index])
 
 
 class ArrayVecMonitor(VecMonitor):
