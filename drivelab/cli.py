@@ -11,6 +11,7 @@ import yaml
 from typer.core import TyperGroup
 
 from drivelab.agents.registry import ALGO_NAMES
+from drivelab.envs.actions import ACTIONS
 from drivelab.envs.scenarios import SCENARIOS
 from drivelab.errors import UsageError
 
@@ -99,8 +100,7 @@ def _command_line() -> str | None:
 def envs() -> None:
     """List scenarios, sensors, action kinds, reward presets and algorithms, one per line."""
     from drivelab.agents.registry import ALGORITHMS
-    from drivelab.envs.actions import ACTIONS, make_action
-    from drivelab.envs.scenarios import SCENARIOS
+    from drivelab.envs.actions import make_action
     from drivelab.perception.sensors import SENSOR_HELP
     from drivelab.rewards.shapers import PRESETS
 
@@ -173,9 +173,7 @@ def train(
     algo: str | None = typer.Option(None, help=", ".join(ALGO_NAMES)),
     env: str | None = typer.Option(None, help="scenario: " + ", ".join(SCENARIOS)),
     obs: str | None = typer.Option(None, help="sensor or comma list, e.g. lidar,topdown or lidar:beams=120"),
-    action: str | None = typer.Option(
-        None, help="meta, grid, continuous, target_speed, seed_line or seed_lane"
-    ),
+    action: str | None = typer.Option(None, help=", ".join(ACTIONS)),
     reward: str | None = typer.Option(None, help="preset, term=weight list, or preset,term=weight"),
     steps: int | None = typer.Option(None, help="total environment steps"),
     seed: int | None = typer.Option(None),
@@ -562,7 +560,7 @@ def ablate(
     seeds: int = typer.Option(3, help="seeds per reward (0..N-1)"),
     steps: int = typer.Option(10_000, help="training steps per run"),
     obs: str | None = typer.Option(None, help="sensors"),
-    action: str | None = typer.Option(None, help="meta, grid or continuous"),
+    action: str | None = typer.Option(None, help=", ".join(ACTIONS)),
     traffic: str | None = typer.Option(None, help="empty, regular or dense"),
     backend: str | None = typer.Option(None, help="simulation backend: highway or fast"),
     config: Path | None = typer.Option(None, help="YAML of further run fields shared by every run"),

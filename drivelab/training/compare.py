@@ -36,6 +36,8 @@ from drivelab.envs.scenarios import SCENARIOS
 from drivelab.errors import UsageError
 from drivelab.hyperparams import shipped_hyperparams
 from drivelab.training.evaluate import load_run_config
+from drivelab.training.metrics import METRICS as REGISTRY
+from drivelab.training.metrics import labels
 from drivelab.training.safe_files import remove_file, write_failure
 from drivelab.training.stats import CONFIDENCE, Summary, summarize
 from drivelab.training.stats import percent as percent_of
@@ -47,17 +49,11 @@ HYPERPARAMS_FIELD = "hyperparams"  # CSV column of a group's changed hyper-param
 SHIPPED = "shipped"
 SUMMARY_FIELDS = tuple(f.name for f in dataclasses.fields(Summary))  # summary.csv's numbers
 
-METRICS: dict[str, str] = {
-    "mean_return": "episode return",
-    "success_rate": "success rate",
-    "crash_rate": "crash rate",
-    "mean_distance_km": "distance per episode (km)",
-    "mean_speed_mps": "mean speed (m/s)",
-    "mean_length": "episode length (steps)",
-    "collisions_per_km": "collisions per km",
-    "off_road_per_km": "off-road events per km",
-    "route_completion": "route completion",
-}
+# the metrics a comparison reads, checks, tabulates and plots (labels: ``metrics.py``)
+METRICS: dict[str, str] = labels(
+    ("mean_return", "success_rate", "crash_rate", "mean_distance_km", "mean_speed_mps", "mean_length",
+     "collisions_per_km", "off_road_per_km", "route_completion")
+)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -127,8 +123,6 @@ def _float_or_none(value) -> float | None:
     return float(value)
 
 
-RATES = ("success_rate", "crash_rate", "route_completion")  # fractions of episodes or of a route
-SIGNED = ("mean_return", "mean_speed_mps")  # any finite value; the other metrics count or measure, >= 0
 
 
 def _final_metrics(values: dict, path: Path) -> dict:
@@ -144,9 +138,9 @@ def _final_metrics(values: dict, path: Path) -> dict:
             raise UsageError(f"{str(path)!r}: metric {key!r} is not a number: {given!r}") from None
         if value is not None and not math.isfinite(value):
             raise UsageError(f"{str(path)!r}: metric {key!r} is not a finite number: {given!r}")
-        if value is not None and key in RATES and not 0.0 <= value <= 1.0:
+        if value is not None and REGISTRY[key].values == "rate" and not 0.0 <= value <= 1.0:
             raise UsageError(f"{str(path)!r}: metric {key!r} is a rate, which lies in [0, 1], not {given!r}")
-        if value is not None and key not in SIGNED and value < 0:
+        if value is not None and REGISTRY[key].values != "signed" and value < 0:
             raise UsageError(f"{str(path)!r}: metric {key!r} cannot be negative: {given!r}")
         final[key] = value
     return final

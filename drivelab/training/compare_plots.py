@@ -8,16 +8,12 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
+from drivelab.training.metrics import labels
 from drivelab.training.stats import bootstrap_ci, percent
 
-BAR_METRICS = {
-    "mean_return": "episode return",
-    "success_rate": "success rate",
-    "crash_rate": "crash rate",
-    "mean_speed_mps": "mean speed (m/s)",
-    "mean_distance_km": "distance per episode (km)",
-    "collisions_per_km": "collisions per km",
-}
+BAR_METRICS = labels(
+    ("mean_return", "success_rate", "crash_rate", "mean_speed_mps", "mean_distance_km", "collisions_per_km")
+)
 CURVE_RESAMPLES = 2_000  # per evaluation step; enough for a drawn band
 
 

@@ -15,6 +15,7 @@ from tqdm import tqdm
 
 from drivelab.config import RunConfig, build_config, parse_maps
 from drivelab.errors import UsageError
+from drivelab.training.metrics import labels
 from drivelab.training.safe_files import (
     check_folder,
     check_replaceable,
@@ -368,18 +369,11 @@ def check_spaces(agent, env, run_dir: Path) -> None:
         )
 
 
-METRIC_LABELS = {
-    "mean_return": "return (mean ± std)",
-    "success_rate": "success rate",
-    "crash_rate": "crash rate",
-    "mean_distance_km": "distance per episode (km)",
-    "mean_speed_mps": "mean speed (m/s)",
-    "collisions_per_km": "collisions per km",
-    "off_road_per_km": "off-road per km",
-    "red_lights_per_km": "red lights run per km",
-    "blocked_per_km": "blocked per km",
-    "route_completion": "route completion",
-}
+METRIC_LABELS = labels(
+    ("mean_return", "success_rate", "crash_rate", "mean_distance_km", "mean_speed_mps", "collisions_per_km",
+     "off_road_per_km", "red_lights_per_km", "blocked_per_km", "route_completion")
+)  # fmt: skip
+METRIC_LABELS["mean_return"] += " (mean ± std)"
 
 
 def metrics_rows(report: dict) -> list[tuple[str, str]]:

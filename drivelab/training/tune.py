@@ -54,6 +54,7 @@ from tqdm import tqdm
 from drivelab.config import FIELDS, RunConfig, build_config, check_eval_every, check_steps
 from drivelab.errors import UsageError
 from drivelab.hyperparams import with_shipped_hyperparams, zoo_yaml
+from drivelab.training.metrics import METRICS as REGISTRY
 from drivelab.training.sweep import cell_action, check_workers, execute, executor_ready, run_cell
 from drivelab.yaml_io import load_yaml, parse_yaml_1_1, read_text_bounded
 
@@ -62,14 +63,8 @@ STUDY_KEYS = ("name", "study_dir", "n_trials", "metric", "direction", "space", "
 RUN_KEYS = tuple(key for key in FIELDS if key != "name")
 # metrics of an evaluation (``evaluate.aggregate``) that are numbers for every scenario, and the
 # direction a study takes on them unless told
-METRICS = {
-    "mean_return": "maximize",
-    "success_rate": "maximize",
-    "crash_rate": "minimize",
-    "mean_speed_mps": "maximize",
-    "mean_distance_km": "maximize",
-    "mean_length": "maximize",
-}
+TUNABLE = ("mean_return", "success_rate", "crash_rate", "mean_speed_mps", "mean_distance_km", "mean_length")
+METRICS = {name: REGISTRY[name].better for name in TUNABLE}
 PARAM_TYPES = ("float", "int", "log", "categorical")  # log: a float searched on a log scale
 JOURNAL, SPEC_FILE, LOCK_FILE = "study.journal", "study.yaml", ".study.lock"
 BEST_FILE = "best-hyperparams.yml"
