@@ -1,4 +1,5 @@
-"""drivelab's layering (DESIGN.md): every import points down a layer, and no files import each other.
+"""drivelab's layering (docs/architecture.md): every import points down a layer, and no files import
+each other.
 
 The checker reads every module of ``drivelab/`` with ``ast`` (nothing is imported): ``import x``
 and ``from x import y`` at module level and inside functions, relative imports resolved, ``from
@@ -9,7 +10,7 @@ imported; an edge is allowed inside a layer and to the layers below (or to those
 Not counted: the parent packages Python runs first. Importing any ``drivelab.envs.*`` module runs
 ``drivelab/envs/__init__.py`` (gymnasium registration, which reads the scenarios), so at run time
 the simulators still load the top of ``envs/``; moving ``backends/`` and the scenarios out of
-``envs/`` (DESIGN.md's ``sim/`` and ``scenarios/``) ends that.
+``envs/`` (docs/architecture.md's next step: ``sim/`` and ``scenarios/``) ends that.
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ class Layer:
     may_import: frozenset[str] | None = None
 
 
-# DESIGN.md's layers mapped onto today's package layout, bottom to top.
+# docs/architecture.md's layers on today's package layout, bottom to top.
 LAYERS = (
     # world/: WorldBatch, WorldState, RoadMap, geometry; plus the modules that import nothing of
     # drivelab (errors, the YAML loader that perception's sensor specs and the run config share,
@@ -65,7 +66,7 @@ LAYERS = (
         ),
     ),
     # sensors and reward terms read the WorldBatch only: not the simulators or scenarios below
-    # them (DESIGN.md: shared geometry lives in the bottom layer), and not each other
+    # them (shared geometry lives in the bottom layer), and not each other
     Layer("perception", 3, ("drivelab.perception",), may_import=frozenset({"base"})),
     Layer("rewards", 3, ("drivelab.rewards",), may_import=frozenset({"base"})),
     # the environments; ``drivelab`` itself (``drivelab/__init__.py``: importing it registers the

@@ -1,6 +1,6 @@
 """VectorDriveEnv: K worlds of one scenario stepped, sensed, rewarded and judged as arrays.
 
-The product of drivelab's environment layer (DESIGN.md v2). One ``step`` maps the K actions to
+The product of drivelab's environment layer (docs/architecture.md). One ``step`` maps the K actions to
 controls, steps the simulator once for all K worlds (a WorldBatch out), applies the episode rules,
 the reward terms and the metrics to (K,) arrays, and writes each sensor's (K, …) observations.
 ``DriveEnv`` (envs/core.py) is its K = 1 view; ``SB3VecEnv`` puts it behind stable-baselines3's
