@@ -22,7 +22,8 @@ pipeline.
 compiled core, the kinematics sensor alone (no frame stack), a reward of the terms below (any
 weights, normalised or not, no gate), no rule that needs the history (blocked, off the route), and
 at step time the simulator's one-call step (no frame recording, one world or one numba thread).
-Elsewhere, and for a step in which a world restarts, the pipeline runs as before.
+Elsewhere, and for a step in which a world restarts, ``VectorDriveEnv.step`` runs the stages one by
+one.
 """
 
 from __future__ import annotations

@@ -667,7 +667,7 @@ def _learn(model, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWo
 def _full_disk_reported_once():
     """TensorBoard writes its event file from a thread of its own, which printed a traceback when
     the disk was full; its error comes again in the training loop (at TensorBoard's next write),
-    which reports it as one line. Other errors of threads are printed as before."""
+    which reports it as one line. Other errors of threads go to the previous hook."""
     previous = threading.excepthook
 
     def report(args) -> None:

@@ -111,7 +111,7 @@ def headline(card: dict) -> str:
 # --- packing -----------------------------------------------------------------------------------
 def _drop_optimizer_moments(agent) -> None:
     """Empty the state (Adam's moments) of every optimizer the agent holds, directly or in its
-    SB3 policy: a fresh optimizer's, so the model loads as before and acts identically."""
+    SB3 policy: a fresh optimizer's, so the model loads and acts as with them."""
     import torch
 
     holders = [agent, getattr(agent, "policy", None)]
