@@ -76,7 +76,7 @@ PIPELINE_PARTS = PARTS[1:]
 def part_costs(env, calls: int) -> dict[str, float]:
     """µs per call of each part of ``env``'s (a fast DriveEnv) step, timed on its current world
     after a few straight steps (the simulator keeps stepping; the others see the same batch)."""
-    from drivelab.envs.vector import _world_info
+    from drivelab.envs.vector import world_info
 
     vector, action = env.vector, np.array([[0.3, 0.0]], dtype=np.float32)
     env.reset(seed=0)
@@ -93,7 +93,7 @@ def part_costs(env, calls: int) -> dict[str, float]:
             events.off_road.copy(),
             events.arrived.copy(),
         )
-        _world_info(vector._step_infos(terms, *arrays, keep, keep), 0)
+        world_info(vector._step_infos(terms, *arrays, keep, keep), 0)
 
     fused_controls = vector.adapter.to_controls(action)
     parts = {

@@ -35,7 +35,8 @@ ROLLOUT_STEPS = 2048
 def measure(n_envs: int, timesteps: int, seed: int) -> dict:
     from stable_baselines3 import PPO
 
-    from drivelab.envs.vector import SB3VecEnv, VectorDriveEnv
+    from drivelab.agents.sb3_env import SB3VecEnv
+    from drivelab.envs.vector import VectorDriveEnv
 
     torch.set_num_threads(1)
     venv = SB3VecEnv(VectorDriveEnv(n_envs, scenario="highway", obs="kinematics", autoreset_mode="same_step"))

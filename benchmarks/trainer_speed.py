@@ -94,7 +94,7 @@ def sb3(case: tuple, hyperparams: dict, rollouts: int) -> float:
     from stable_baselines3 import PPO
 
     from drivelab.agents.networks import SeedCnnExtractor
-    from drivelab.envs.vector import SB3VecEnv
+    from drivelab.agents.sb3_env import SB3VecEnv
 
     scenario, obs, action = case[:3]
     venv = SB3VecEnv(make_env(scenario, obs, action))

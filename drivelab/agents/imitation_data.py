@@ -310,7 +310,8 @@ def generate_demonstrations(
 
     :param env_kwargs: further ``VectorDriveEnv`` keywords (``backend``, ``duration_s``, ...).
     """
-    from drivelab.envs.vector import SB3VecEnv, VectorDriveEnv
+    from drivelab.agents.sb3_env import SB3VecEnv
+    from drivelab.envs.vector import VectorDriveEnv
 
     if steps < 1 or num_worlds < 1:
         raise UsageError("generate_demonstrations needs steps >= 1 and num_worlds >= 1")

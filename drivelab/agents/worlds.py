@@ -172,7 +172,7 @@ def _has_step_arrays(env) -> bool:
 def _listed_infos(infos: dict, count: int) -> list[dict]:
     """Gymnasium-style vector infos (arrays of K) as SB3's list of K dicts, finished worlds' from
     their ``final_info`` with ``terminal_observation`` (and ``episode`` where a monitor gave one)."""
-    from drivelab.envs.vector import _world_info
+    from drivelab.envs.vector import world_info
 
     listed = []
     for k in range(count):
@@ -180,7 +180,7 @@ def _listed_infos(infos: dict, count: int) -> list[dict]:
             info = dict(infos["final_info"][k])
             info["terminal_observation"] = infos["final_obs"][k]
         else:
-            info = _world_info(infos, k)
+            info = world_info(infos, k)
         if "_episode" in infos and infos["_episode"][k]:
             info["episode"] = infos["episode"][k]
         listed.append(info)

@@ -15,11 +15,11 @@ from drivelab.envs.vector import (  # noqa: F401  (re-exported: the options of D
     BACKENDS,
     LIGHT_LABEL_DISTANCE_M,
     VectorDriveEnv,
-    _world_info,
     autoreset_mode_of,
     check_env_options,
     check_reset_options,
     env_option_names,
+    world_info,
 )
 from drivelab.world.state import WorldState
 
@@ -126,7 +126,7 @@ class DriveEnv(gym.Env):
             options = {**options, "episode_seeds": [options["episode_seed"]]}
         observations, infos = self.vector.reset(options=options)
         self.episode_over = False
-        return _first(observations), _world_info(infos, 0)
+        return _first(observations), world_info(infos, 0)
 
     def step(self, action: Any):
         """One step of the episode. After one that returned ``terminated`` or ``truncated`` the
@@ -150,7 +150,7 @@ class DriveEnv(gym.Env):
                 float(rewards[0]),
                 bool(terminated[0]),
                 bool(truncated[0]),
-                _world_info(infos, 0),
+                world_info(infos, 0),
             )
         self.episode_over = result[2] or result[3]
         return result

@@ -1,10 +1,10 @@
 """VectorDriveEnv: K worlds of one scenario stepped, sensed, rewarded and judged as arrays.
 
-The product of drivelab's environment layer (docs/architecture.md). One ``step`` maps the K actions to
-controls, steps the simulator once for all K worlds (a WorldBatch out), applies the episode rules,
-the reward terms and the metrics to (K,) arrays, and writes each sensor's (K, …) observations.
-``DriveEnv`` (envs/core.py) is its K = 1 view; ``SB3VecEnv`` puts it behind stable-baselines3's
-``VecEnv`` API.
+The product of drivelab's environment layer (docs/architecture.md). One ``step`` maps the K
+actions to controls, steps the simulator once for all K worlds (a WorldBatch out), applies the
+episode rules, the reward terms and the metrics to (K,) arrays, and writes each sensor's (K, …)
+observations. ``DriveEnv`` (envs/core.py) is its K = 1 view; ``SB3VecEnv`` (agents/sb3_env.py)
+puts it behind stable-baselines3's ``VecEnv`` API.
 
 Autoreset: gymnasium's NEXT_STEP by default (a finished world is reset by the step after the one
 that ended it, as gymnasium's vector wrappers expect), or SAME_STEP (reset inside the ending step;
@@ -22,7 +22,6 @@ from gymnasium import spaces
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
-from stable_baselines3.common.vec_env import VecEnv
 
 from drivelab.envs.actions import ActionAdapter, make_action
 from drivelab.envs.highway_config import env_kwargs_from_config
@@ -403,7 +402,7 @@ class VectorDriveEnv(VectorEnv):
     def step_one(self, action):
         """DriveEnv's step of its one world through the compiled step (``_fused`` ready, no
         autoreset): ``(observation, reward, terminated, truncated, info)`` as DriveEnv returns them
-        from ``step``, the world's info made directly (``_world_info`` of the infos ``step`` gives)."""
+        from ``step``, the world's info made directly (``world_info`` of the infos ``step`` gives)."""
         fused = self._fused
         observations, out, flags = fused.step(self.adapter.to_controls(np.asarray(action)[None]))
         self._batch, self._batch_deferred = None, True
@@ -562,80 +561,7 @@ def check_env_options(options: dict) -> None:
             raise UsageError(f"unknown env_options key {key!r} (known: {', '.join(known)})")
 
 
-class SB3VecEnv(VecEnv):
-    """A VectorDriveEnv behind stable-baselines3's VecEnv API (dones, list infos with
-    ``terminal_observation`` and ``TimeLimit.truncated``); the env autoresets in the same step."""
-
-    def __init__(self, vector_env: VectorDriveEnv) -> None:
-        if vector_env.autoreset_mode != AutoresetMode.SAME_STEP:
-            raise ValueError("SB3VecEnv needs a VectorDriveEnv with autoreset_mode=SAME_STEP")
-        self.vector_env = vector_env
-        super().__init__(
-            vector_env.num_envs, vector_env.single_observation_space, vector_env.single_action_space
-        )
-        self.render_mode = "rgb_array"
-        self._actions: Any = None
-        self._seed: int | None = None
-
-    def reset(self):
-        obs, infos = self.vector_env.reset(seed=self._seed)
-        self._seed = None
-        self.reset_infos = [{"episode_seed": int(seed)} for seed in infos["episode_seed"]]
-        return obs
-
-    def step_async(self, actions: np.ndarray) -> None:
-        self._actions = actions
-
-    def step_wait(self):
-        obs, rewards, terminations, truncations, infos = self.vector_env.step(self._actions)
-        dones = terminations | truncations
-        listed = []
-        for k in range(self.num_envs):
-            if dones[k]:  # SB3 wants the last episode's info, with its final observation
-                info = dict(infos["final_info"][k])
-                info["terminal_observation"] = infos["final_obs"][k]
-                info["TimeLimit.truncated"] = bool(truncations[k] and not terminations[k])
-            else:
-                info = _world_info(infos, k)
-            listed.append(info)
-        return obs, rewards.astype(np.float32), dones, listed
-
-    def step_arrays(self, actions: np.ndarray):
-        """``step`` without the per-world info dicts: the VectorDriveEnv's own ``(observations,
-        rewards, terminated, truncated, infos)``, arrays of K worlds (finished worlds already
-        started again, their last observations in ``infos["final_obs"]``). Array-aware wrappers
-        (``RecordVecEpisodes``, ``ArrayVecMonitor``) pass it through; ``agents/worlds.py`` steps
-        by it when the whole chain has it."""
-        return self.vector_env.step(actions)
-
-    def seed(self, seed: int | None = None):
-        self._seed = seed
-        return [None if seed is None else seed + i for i in range(self.num_envs)]
-
-    def close(self) -> None:
-        self.vector_env.close()
-
-    def get_images(self) -> list[np.ndarray]:
-        """Each world's bird's-eye frame (SB3's ``VecVideoRecorder`` tiles them)."""
-        if self.vector_env.batch is None:
-            return [None] * self.num_envs
-        return [self.vector_env.render_world(k) for k in range(self.num_envs)]
-
-    def get_attr(self, attr_name: str, indices=None) -> list:
-        return [getattr(self.vector_env, attr_name) for _ in self._get_indices(indices)]
-
-    def set_attr(self, attr_name: str, value: Any, indices=None) -> None:
-        setattr(self.vector_env, attr_name, value)
-
-    def env_method(self, method_name: str, *method_args, indices=None, **method_kwargs) -> list:
-        method = getattr(self.vector_env, method_name)
-        return [method(*method_args, **method_kwargs) for _ in self._get_indices(indices)]
-
-    def env_is_wrapped(self, wrapper_class, indices=None) -> list[bool]:
-        return [False for _ in self._get_indices(indices)]
-
-
-def _world_info(infos: dict, k: int) -> dict:
+def world_info(infos: dict, k: int) -> dict:
     """World ``k``'s entries of gymnasium-style vector infos, as one plain dict (numbers as Python
     numbers: ``ndarray.item(k)`` of the (K,) arrays, cheaper than indexing then converting)."""
     info = {}

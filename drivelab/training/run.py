@@ -303,7 +303,8 @@ def _make_envs(config: RunConfig, run_dir: Path | None, resume: bool):
         train_env = Monitor(recorder, filename=monitor, override_existing=not resume)
         train_env.reset(seed=config.seed)
     else:
-        from drivelab.envs.vector import SB3VecEnv, VectorDriveEnv
+        from drivelab.agents.sb3_env import SB3VecEnv
+        from drivelab.envs.vector import VectorDriveEnv
 
         recorder = RecordVecEpisodes(
             SB3VecEnv(VectorDriveEnv(config.n_envs, autoreset_mode="same_step", **config.env_kwargs()))
@@ -630,7 +631,8 @@ def _load_checkpoint(config: RunConfig, run_dir: Path, manifest: dict, replay: b
     if config.n_envs == 1:
         env = DriveEnv(**config.env_kwargs())
     else:
-        from drivelab.envs.vector import SB3VecEnv, VectorDriveEnv
+        from drivelab.agents.sb3_env import SB3VecEnv
+        from drivelab.envs.vector import VectorDriveEnv
 
         env = SB3VecEnv(VectorDriveEnv(config.n_envs, autoreset_mode="same_step", **config.env_kwargs()))
     path = run_dir / "checkpoints" / "latest.zip"

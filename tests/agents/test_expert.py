@@ -94,7 +94,8 @@ def test_drives_k_worlds_each_from_its_own_observation():
     """``--n-envs K``: every step, the rules act in each of K worlds on that world's observation."""
     from stable_baselines3.common.vec_env import VecEnvWrapper
 
-    from drivelab.envs.vector import SB3VecEnv, VectorDriveEnv
+    from drivelab.agents.sb3_env import SB3VecEnv
+    from drivelab.envs.vector import VectorDriveEnv
 
     class Record(VecEnvWrapper):
         def __init__(self, venv):

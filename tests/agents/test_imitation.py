@@ -11,10 +11,11 @@ from drivelab.agents.dagger import DAgger
 from drivelab.agents.expert import RuleBasedExpert
 from drivelab.agents.imitation_data import Demonstrations, action_agreement, generate_demonstrations
 from drivelab.agents.registry import get_algo
+from drivelab.agents.sb3_env import SB3VecEnv
 from drivelab.agents.storage import read_arrays
 from drivelab.envs.actions import make_action
 from drivelab.envs.core import DriveEnv
-from drivelab.envs.vector import SB3VecEnv, VectorDriveEnv
+from drivelab.envs.vector import VectorDriveEnv
 
 # the learner sees the expert's own inputs here (a privileged learner, cloned in seconds by an
 # MLP); the expert's waypoints and affordances are among them, so its labels can be re-derived

@@ -170,7 +170,8 @@ def test_the_array_path_steps_and_monitors_as_the_vecenv_path(tmp_path):
     observations, rewards, ends, final observations, episode returns and monitor.csv rows."""
     from stable_baselines3.common.monitor import ResultsWriter
 
-    from drivelab.envs.vector import SB3VecEnv, VectorDriveEnv
+    from drivelab.agents.sb3_env import SB3VecEnv
+    from drivelab.envs.vector import VectorDriveEnv
     from drivelab.training.resume_state import ArrayVecMonitor, RecordVecEpisodes
 
     def chain(name):

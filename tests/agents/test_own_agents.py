@@ -191,7 +191,8 @@ def test_on_policy_agents_collect_from_k_worlds(algo, monkeypatch):
     transitions, and the steps of all worlds count."""
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from drivelab.envs.vector import SB3VecEnv, VectorDriveEnv
+    from drivelab.agents.sb3_env import SB3VecEnv
+    from drivelab.envs.vector import VectorDriveEnv
 
     obs, action, hyperparams = CASES[algo]
     vector = VectorDriveEnv(4, "highway", obs=obs, action=action, autoreset_mode="same_step", **ENV)
@@ -218,7 +219,8 @@ def test_on_policy_agents_collect_from_k_worlds(algo, monkeypatch):
 def test_dueling_ddqn_acts_in_k_worlds_at_one_worlds_updates_per_transition(monkeypatch):
     from stable_baselines3.common.vec_env import VecMonitor
 
-    from drivelab.envs.vector import SB3VecEnv, VectorDriveEnv
+    from drivelab.agents.sb3_env import SB3VecEnv
+    from drivelab.envs.vector import VectorDriveEnv
 
     obs, action, hyperparams = CASES["dueling_ddqn"]
     vector = VectorDriveEnv(3, "highway", obs=obs, action=action, autoreset_mode="same_step", **ENV)

@@ -8,9 +8,10 @@ from gymnasium.utils.env_checker import data_equivalence
 from gymnasium.vector import AutoresetMode
 from stable_baselines3 import PPO
 
+from drivelab.agents.sb3_env import SB3VecEnv
 from drivelab.envs import gym_id
 from drivelab.envs.core import DriveEnv, make_vec
-from drivelab.envs.vector import SB3VecEnv, VectorDriveEnv
+from drivelab.envs.vector import VectorDriveEnv
 from drivelab.errors import UsageError
 from tests.batch_worlds import assert_same_observations
 
