@@ -61,6 +61,23 @@ app = typer.Typer(
 )
 
 
+def _print_version(given: bool) -> None:
+    if given:
+        from drivelab import __version__
+
+        typer.echo(f"drivelab {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _options(
+    version: bool = typer.Option(
+        False, "--version", callback=_print_version, is_eager=True, help="Print drivelab's version and exit."
+    ),
+) -> None:
+    """Train, evaluate and compare RL driving agents."""
+
+
 def error_line(message: str) -> str:
     """``error: message`` as one line: a line break in the message (a folder's name can hold one)
     is written ``\\n`` (``\\r``)."""

@@ -135,3 +135,21 @@ def test_ctrl_c_saves_a_checkpoint_and_says_how_to_resume(tmp_path):
     assert manifest["steps"] % 256 == 0 and manifest["steps"] < 1_000_000
     assert (run_dir / "checkpoints" / f"resume-{manifest['steps']}.json").is_file()
     assert f"drivelab train --resume {run_dir}" in stderr.strip().splitlines()[-1]
+
+
+def test_version_through_the_script_and_python_dash_m():
+    """``drivelab --version`` and ``python -m drivelab --version`` print the package's version, the
+    one pyproject.toml declares; the licence is declared there and shipped as LICENSE."""
+    import tomllib
+    from pathlib import Path
+
+    import drivelab
+
+    root = Path(__file__).resolve().parents[1]
+    expected = f"drivelab {drivelab.__version__}"
+    assert runner.invoke(app, ["--version"]).output.strip() == expected
+    done = subprocess.run([sys.executable, "-m", "drivelab", "--version"], capture_output=True, text=True)
+    assert done.returncode == 0 and done.stdout.strip() == expected
+    project = tomllib.loads((root / "pyproject.toml").read_text())["project"]
+    assert project["version"] == drivelab.__version__
+    assert project["license"] == "MIT" and (root / "LICENSE").read_text().startswith("MIT License")

@@ -1,0 +1,5 @@
+"""``python -m drivelab``: the ``drivelab`` command."""
+
+from drivelab.cli import main
+
+main()
