@@ -77,7 +77,8 @@ LAYERS = (
     # runs, evaluation, comparisons; RunConfig is a training run's config (it checks the env's
     # options through envs/, and nothing below a run reads it)
     Layer("training", 6, ("drivelab.training", "drivelab.config")),
-    Layer("cli", 7, ("drivelab.cli",)),
+    # the command line: ``drivelab`` (cli.py) and ``python -m drivelab`` (__main__.py, which calls it)
+    Layer("cli", 7, ("drivelab.cli", "drivelab.__main__")),
 )
 
 # (importer, imported) edges the test tolerates while a re-layering is under way, each with its
@@ -227,6 +228,7 @@ def test_layer_table_places_the_modules_it_names():
     assert placed["drivelab.envs.town_env"] == "scenarios" and placed["drivelab.envs.town"] == "scenarios"
     assert placed["drivelab.envs.core"] == "envs" and placed["drivelab"] == "envs"
     assert placed["drivelab.training.run"] == "training" and placed["drivelab.cli"] == "cli"
+    assert placed["drivelab.__main__"] == "cli"
 
 
 # --- the checker on synthetic packages: it can fail -------------------------------------------------
