@@ -300,7 +300,7 @@ def _make_envs(config: RunConfig, run_dir: Path | None, resume: bool):
     monitor = None if run_dir is None else str(run_dir / "monitor.csv")
     if config.n_envs == 1:
         recorder = RecordEpisodes(DriveEnv(**config.env_kwargs()))
-        train_env = Monitor(recorder, filename=monitor, override_existing=not resume)
+        train_env = Monitor(recorder)
         train_env.reset(seed=config.seed)
     else:
         from drivelab.agents.sb3_env import SB3VecEnv
@@ -310,13 +310,11 @@ def _make_envs(config: RunConfig, run_dir: Path | None, resume: bool):
             SB3VecEnv(VectorDriveEnv(config.n_envs, autoreset_mode="same_step", **config.env_kwargs()))
         )
         train_env = ArrayVecMonitor(recorder)
-        if monitor is not None:
-            train_env.results_writer = ResultsWriter(
-                monitor,
-                header={"t_start": train_env.t_start, "env_id": config.env},
-                override_existing=not resume,
-            )
         train_env.seed(config.seed)
+    if monitor is not None:  # the scenario's name in the header (SB3's would read the env's spec: None)
+        train_env.results_writer = ResultsWriter(
+            monitor, header={"t_start": train_env.t_start, "env_id": config.env}, override_existing=not resume
+        )
     return train_env, DriveEnv(**config.eval_env_kwargs()), TrainingWorlds.of(train_env, recorder)
 
 

@@ -52,6 +52,8 @@ def test_train_writes_a_complete_run_directory(tmp_path, capsys):
     assert manifest["steps"] == 64
     evaluations = (run_dir / "evaluations.csv").read_text().strip().splitlines()
     assert len(evaluations) == 3  # header + evaluations at 32 and 64 steps
+    header = json.loads((run_dir / "monitor.csv").read_text().splitlines()[0][1:])
+    assert header["env_id"] == "highway"  # the scenario (SB3's Monitor wrote "None": no env spec)
 
     capsys.readouterr()
     report = evaluate_run(run_dir, episodes=2, video=True, progress=True)
