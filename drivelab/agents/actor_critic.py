@@ -19,8 +19,6 @@ pre-tanh u, the Beta's x in (0, 1)), so that log π is computed again without in
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import torch
 from gymnasium import spaces
@@ -63,7 +61,6 @@ class RunningNorm(nn.Module):
         parts = space.spaces if isinstance(space, spaces.Dict) else {"": space}
         self.keys = list(parts) if isinstance(space, spaces.Dict) else None
         self.images = {key for key, sub in parts.items() if sub.dtype == np.uint8}
-        self.enabled = enabled
         self.normalised = [key for key in parts if key not in self.images] if enabled else []
         for key in self.normalised:
             shape = parts[key].shape
@@ -97,16 +94,24 @@ class RunningNorm(nn.Module):
             return
         count = None
         for key in self.normalised:
-            batch = self._part(obs, key).double().reshape(-1, *getattr(self, _name("mean", key)).shape)
-            count = batch.shape[0]
             mean, var = getattr(self, _name("mean", key)), getattr(self, _name("var", key))
-            batch_mean, batch_var = batch.mean(0), batch.var(0, unbiased=False)
-            total = self.count + count
-            delta = batch_mean - mean
-            merged = var * self.count + batch_var * count + delta**2 * self.count * count / total
-            mean += delta * count / total
-            var.copy_(merged / total)
+            batch = self._part(obs, key).double().reshape(-1, *mean.shape)
+            count = batch.shape[0]
+            merged_mean, merged_var = merge_moments(
+                mean, var, self.count, batch.mean(0), batch.var(0, unbiased=False), count
+            )
+            mean.copy_(merged_mean)
+            var.copy_(merged_var)
         self.count += count
+
+
+def merge_moments(mean, var, count, batch_mean, batch_var, batch_count):
+    """(mean, variance) of two samples merged from each one's mean, variance and size (Chan et
+    al.'s parallel update; numbers or tensors)."""
+    total = count + batch_count
+    delta = batch_mean - mean
+    merged_var = (var * count + batch_var * batch_count + delta**2 * count * batch_count / total) / total
+    return mean + delta * batch_count / total, merged_var
 
 
 def _name(kind: str, key: str) -> str:
@@ -212,25 +217,29 @@ class ActorCritic(nn.Module):
             x = torch.from_numpy(rng.beta(alpha.double().numpy(), beta.double().numpy())).float()
         return x.clamp(BETA_EPSILON, 1.0 - BETA_EPSILON)
 
-    def log_prob_entropy(self, out: torch.Tensor, stored: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(log π of stored variables, entropy) per row; the Gaussian's entropy is before squashing."""
+    def log_prob_entropy(
+        self, out: torch.Tensor, stored: torch.Tensor, entropy: bool = True
+    ) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """(log π of stored variables, entropy, or None without ``entropy``) per row; the
+        Gaussian's entropy is before squashing."""
         if self.kind == "categorical":
             log_softmax = out.log_softmax(-1)
             log_prob = log_softmax.gather(-1, stored.long().unsqueeze(-1)).squeeze(-1)
-            return log_prob, -(log_softmax.exp() * log_softmax).sum(-1)
+            return log_prob, -(log_softmax.exp() * log_softmax).sum(-1) if entropy else None
         if self.kind == "tanh_gaussian":
-            normal = torch.distributions.Normal(out, self.log_std.exp().expand_as(out))
-            return squashed_log_prob(normal, stored), normal.entropy().sum(-1)
-        alpha, beta = self._beta(out)
-        distribution = torch.distributions.Beta(alpha, beta)
-        return distribution.log_prob(stored).sum(-1), distribution.entropy().sum(-1)
+            distribution = torch.distributions.Normal(out, self.log_std.exp().expand_as(out))
+            log_prob = squashed_log_prob(distribution, stored)
+        else:
+            distribution = torch.distributions.Beta(*self._beta(out))
+            log_prob = distribution.log_prob(stored).sum(-1)
+        return log_prob, distribution.entropy().sum(-1) if entropy else None
 
     def to_env(self, stored: torch.Tensor) -> np.ndarray:
         """The environment's actions for stored variables: class indices, or Box values in bounds."""
         if self.kind == "categorical":
             return stored.numpy()
         if self.kind == "tanh_gaussian":  # tanh(u) clipped into the box, as behaviour cloning acts
-            return torch.minimum(torch.maximum(torch.tanh(stored), self.low), self.high).numpy()
+            return torch.clamp(torch.tanh(stored), self.low, self.high).numpy()
         return (self.low + stored * self.span).numpy()
 
     def stored_shape(self) -> tuple[int, ...]:
@@ -238,5 +247,5 @@ class ActorCritic(nn.Module):
         return () if self.kind == "categorical" else (self.span.shape[0],)
 
     def std(self) -> float:
-        """The Gaussian's mean σ, or the Beta's / categorical's nothing (NaN)."""
-        return self.log_std.exp().mean().item() if self.kind == "tanh_gaussian" else math.nan
+        """The tanh-Gaussian's mean σ."""
+        return self.log_std.exp().mean().item()

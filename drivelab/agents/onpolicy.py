@@ -27,7 +27,7 @@ import torch
 from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 
-from drivelab.agents.actor_critic import DISTRIBUTIONS, NORM_CLIP, NORM_EPSILON, ActorCritic
+from drivelab.agents.actor_critic import DISTRIBUTIONS, NORM_CLIP, NORM_EPSILON, ActorCritic, merge_moments
 from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent, batch_of_one
 from drivelab.agents.buffer_memory import check_buffer_memory, observation_bytes
 from drivelab.agents.worlds import Worlds
@@ -194,7 +194,6 @@ class OnPolicyAgent(OwnAgent):
 
     def _build(self) -> None:
         config = self.config
-        self.hidden = config.hidden(self.algo)
         worlds = getattr(self.env, "num_envs", 1)
         observation = observation_bytes(self.observation_space)
         check_buffer_memory(
@@ -207,7 +206,7 @@ class OnPolicyAgent(OwnAgent):
                 distribution=config.distribution,
                 shared_encoder=config.shared_encoder,
                 log_std_init=config.log_std_init,
-                hidden=self.hidden,
+                hidden=config.hidden(self.algo),
                 normalize_observations=config.normalize_observations,
             )
         except ValueError as exc:
@@ -278,7 +277,7 @@ class OnPolicyAgent(OwnAgent):
             with torch.no_grad():
                 out, value = policy(storage.put(t, obs))
                 stored = policy.sample(out, False, self.generator, self.rng)
-                log_prob, _ = policy.log_prob_entropy(out, stored)
+                log_prob, _ = policy.log_prob_entropy(out, stored, entropy=False)
             new_obs, reward, terminated, truncated, final_obs, returns = worlds.step(policy.to_env(stored))
             self.num_timesteps += count
             storage.actions[t] = stored
@@ -323,13 +322,8 @@ class OnPolicyAgent(OwnAgent):
             running = running * (1.0 - ends[t])
         self.running_returns = torch.from_numpy(running)
         mean, var, count = self.return_stats.tolist()
-        batch = returns.reshape(-1)
-        batch_count, batch_mean, batch_var = len(batch), float(batch.mean()), float(batch.var())
-        total = count + batch_count
-        delta = batch_mean - mean
-        var = (var * count + batch_var * batch_count + delta**2 * count * batch_count / total) / total
-        mean += delta * batch_count / total
-        self.return_stats = torch.tensor([mean, var, total], dtype=torch.float64)
+        mean, var = merge_moments(mean, var, count, float(returns.mean()), float(returns.var()), returns.size)
+        self.return_stats = torch.tensor([mean, var, count + returns.size], dtype=torch.float64)
         return np.clip(rewards / np.sqrt(var + NORM_EPSILON), -NORM_CLIP, NORM_CLIP)
 
     def update(self, rollout: Rollout) -> dict[str, float]:

@@ -49,11 +49,13 @@ class Worlds:
     stepped as arrays: no info dict per world is made (``infos`` makes them when read)."""
 
     def __init__(self, env) -> None:
+        from gymnasium.vector import AutoresetMode
+
         from drivelab.envs.vector import VectorDriveEnv
 
         self.env = env
         self.direct = isinstance(env, VectorDriveEnv)
-        if self.direct and env.autoreset_mode.value != "SameStep":
+        if self.direct and env.autoreset_mode != AutoresetMode.SAME_STEP:
             raise UsageError("training on a VectorDriveEnv needs autoreset_mode='same_step'")
         self.vector = self.direct or isinstance(env, VecEnv)
         self.arrays = self.direct or _has_step_arrays(env)

@@ -373,7 +373,7 @@ METRIC_LABELS = labels(
     ("mean_return", "success_rate", "crash_rate", "mean_distance_km", "mean_speed_mps", "collisions_per_km",
      "off_road_per_km", "red_lights_per_km", "blocked_per_km", "route_completion")
 )  # fmt: skip
-METRIC_LABELS["mean_return"] += " (mean ± std)"
+METRIC_LABELS["mean_return"] += " (mean ± std)"  # printed as mean ± std (metrics_rows)
 
 
 def metrics_rows(report: dict) -> list[tuple[str, str]]:
