@@ -11,7 +11,7 @@ crashed. Agreement: means within 5 %
 or 95 % confidence intervals overlapping.
 
 The two backends agree bit for bit only where numpy's and OpenBLAS's kernels round like libm (no
-AVX-512 dispatch); elsewhere positions drift by rounding (tests/envs/backends/test_fast.py says how
+AVX-512 dispatch); elsewhere positions drift by rounding (tests/sim/test_fast.py says how
 much) while events stay identical, so the machine line records numpy's SIMD dispatch.
 """
 
@@ -28,10 +28,10 @@ os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")
 
 import numpy as np  # noqa: E402
 
-from drivelab.envs.backends.fast import traffic as T  # noqa: E402
-from drivelab.envs.backends.fast.backend import FastBackend  # noqa: E402
-from drivelab.envs.backends.highway import HighwayBackend  # noqa: E402
-from drivelab.envs.scenarios import FAST_SCENARIOS  # noqa: E402
+from drivelab.scenarios import FAST_SCENARIOS  # noqa: E402
+from drivelab.sim.core import traffic as T  # noqa: E402
+from drivelab.sim.core.backend import FastBackend  # noqa: E402
+from drivelab.sim.reference.highway import HighwayBackend  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from provenance import Parser, cpu_isa, names, whole  # noqa: E402
@@ -40,7 +40,7 @@ from provenance import Parser, cpu_isa, names, whole  # noqa: E402
 # have no traffic, and the block maps no highway-env backend
 SUPPORTED = ("highway", "merge", "roundabout", "intersection", "racetrack")
 assert set(SUPPORTED) <= set(FAST_SCENARIOS)
-from drivelab.envs.scenarios import SCENARIOS  # noqa: E402
+from drivelab.scenarios import SCENARIOS  # noqa: E402
 from drivelab.world.state import WorldState  # noqa: E402
 
 RESULTS = Path(__file__).parent / "results"
@@ -158,7 +158,7 @@ def main() -> None:
         "seeds 0..N-1, default traffic; scripted ego cycling IDLE x4, LANE_LEFT, IDLE x4, LANE_RIGHT",
         "(racetrack: a proportional lane keeper). The fast backend does highway-env's arithmetic step",
         "for step: bit for bit where numpy and OpenBLAS round like libm (no AVX-512 kernels), else up to",
-        "rounding (1e-3 m within 30 steps, identical events; tests/envs/backends/test_fast.py), so equal",
+        "rounding (1e-3 m within 30 steps, identical events; tests/sim/test_fast.py), so equal",
         "statistics are the expected result.",
         "",
         "| scenario | metric | highway-env mean [95 % CI] | fast mean [95 % CI] | agree |",

@@ -26,8 +26,8 @@ import numpy as np  # noqa: E402
 from drivelab.envs.core import (
     DriveEnv,  # noqa: E402
 )
-from drivelab.envs.scenarios import FAST_SCENARIOS as SUPPORTED  # noqa: E402
-from drivelab.envs.scenarios import SCENARIOS  # noqa: E402
+from drivelab.scenarios import FAST_SCENARIOS as SUPPORTED  # noqa: E402
+from drivelab.scenarios import SCENARIOS  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from provenance import Parser, cpu_isa, whole  # noqa: E402

@@ -142,7 +142,7 @@ def main() -> None:
         print(vector_rate("highway", "kinematics", args.worlds, args.steps, args.seed))
         return
 
-    from drivelab.envs.scenarios import FAST_SCENARIOS as SUPPORTED
+    from drivelab.scenarios import FAST_SCENARIOS as SUPPORTED
 
     cases = [("highway", name, spec) for name, spec in SENSORS.items()]
     cases += [(scenario, "kinematics", "kinematics") for scenario in SUPPORTED if scenario != "highway"]

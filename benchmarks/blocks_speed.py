@@ -48,8 +48,8 @@ THROTTLE = np.array([0.0, 1.0], dtype=np.float32)  # [steering, acceleration]: p
 
 def simulator_rate(steps: int, seed: int) -> float:
     """Steps/s of ``BlocksSimulator.step`` alone, one world, full throttle, reset off the road."""
-    from drivelab.envs.backends.fast.backend import fast_simulator
-    from drivelab.envs.scenarios import get_scenario
+    from drivelab.scenarios import get_scenario
+    from drivelab.sim.core.backend import fast_simulator
 
     simulator = fast_simulator(get_scenario("blocks"), "regular", "continuous", 1, OPTIONS)
     one = np.ones(1, dtype=bool)

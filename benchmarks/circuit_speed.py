@@ -54,7 +54,7 @@ CIRCUITS = ("follow-line", "follow-lane")
 
 def simulator_rate(backend_class, name: str, steps: int) -> float:
     """Steps/s of one backend's ``step`` alone, 40 % throttle, straight wheel, reset off the road."""
-    from drivelab.envs.scenarios import SCENARIOS
+    from drivelab.scenarios import SCENARIOS
 
     backend = backend_class(SCENARIOS[name], "empty", "continuous")
     backend.reset(0)
@@ -119,9 +119,9 @@ def main() -> None:
     args = parser.parse_args()
     here = str(Path(__file__).resolve().parent.parent)
     fast_kwargs = "obs='kinematics', action='continuous', backend='fast'"
-    from drivelab.envs.backends.fast.backend import FastBackend
-    from drivelab.envs.backends.highway import HighwayBackend
     from drivelab.envs.core import DriveEnv
+    from drivelab.sim.core.backend import FastBackend
+    from drivelab.sim.reference.highway import HighwayBackend
 
     rows = []
     for name in CIRCUITS:

@@ -18,9 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from drivelab.envs.backends.fast import simulator as S
-from drivelab.envs.backends.fast import traffic as T
-from drivelab.envs.scenarios import SCENARIOS
+from drivelab.scenarios import SCENARIOS
+from drivelab.sim.core import simulator as S
+from drivelab.sim.core import traffic as T
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from provenance import Parser, whole, wholes  # noqa: E402

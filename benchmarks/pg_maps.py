@@ -24,8 +24,8 @@ RESULTS = Path(__file__).parent / "results"
 
 
 def main() -> None:
-    from drivelab.envs.backends.roads.pg_map import generate_map
-    from drivelab.envs.maps_gallery import draw_gallery
+    from drivelab.scenarios.blocks.gallery import draw_gallery
+    from drivelab.scenarios.blocks.pg_map import generate_map
 
     parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=whole(), default=50)

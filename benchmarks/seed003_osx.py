@@ -162,8 +162,8 @@ def evaluate(run_dir: Path, episodes: int) -> dict:
     """Play the final model on the fixed evaluation episodes; driving metrics and, per block of the
     map (``I`` spawn road, ``O`` roundabout, ``S`` straight, ``X`` intersection), the ego's speed,
     front-wheel angle and steps there, and the block where each failed episode ended."""
-    from drivelab.envs.backends.fast.lanes import closest_lane
     from drivelab.envs.core import DriveEnv
+    from drivelab.sim.core.lanes import closest_lane
     from drivelab.training.checkpoints import load_agent
     from drivelab.training.evaluate import aggregate, check_spaces, load_run_config, run_episodes
 

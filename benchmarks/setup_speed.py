@@ -32,8 +32,8 @@ CASES += (("racetrack", "continuous"), ("town", "meta"))
 
 def setup_ms(scenario: str, control: str, seeds: int) -> float:
     """Mean milliseconds of one episode set-up of ``scenario`` (regular traffic)."""
-    from drivelab.envs.backends.fast.backend import fast_simulator
-    from drivelab.envs.scenarios import SCENARIOS
+    from drivelab.scenarios import SCENARIOS
+    from drivelab.sim.core.backend import fast_simulator
 
     simulator = fast_simulator(SCENARIOS[scenario], "regular", control, 1)
     simulator._episode(0)

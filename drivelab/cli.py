@@ -12,8 +12,8 @@ from typer.core import TyperGroup
 
 from drivelab.agents.registry import ALGO_NAMES
 from drivelab.envs.actions import ACTIONS
-from drivelab.envs.scenarios import SCENARIOS
 from drivelab.errors import UsageError
+from drivelab.scenarios import SCENARIOS
 
 # click's exception classes, from wherever this typer takes click (newer typers carry their own copy)
 CLICK_ERRORS = {cls.__name__: cls for cls in typer.BadParameter.__mro__}
@@ -718,8 +718,8 @@ def maps(
     out: Path = typer.Option(Path("maps.png"), "--out", "-o", help="PNG to write"),
 ) -> None:
     """Draw a gallery of procedural maps (the blocks scenario's) to a PNG."""
-    from drivelab.envs.backends.fast.blocks_spawn import MapSet
-    from drivelab.envs.maps_gallery import draw_gallery
+    from drivelab.scenarios.blocks.gallery import draw_gallery
+    from drivelab.scenarios.blocks.spawn import MapSet
 
     try:
         if out.suffix.lower() != ".png" or out.is_dir():

@@ -9,8 +9,8 @@ import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from drivelab.envs.scenarios import SCENARIOS, scenario_name
 from drivelab.errors import UsageError
+from drivelab.scenarios import SCENARIOS, scenario_name
 from drivelab.yaml_io import dump_yaml
 
 
@@ -242,7 +242,7 @@ def _check_scenario_options(config: RunConfig) -> None:
         return  # an unknown scenario or a malformed mapping is reported when the env is built
     from drivelab.envs.actions import ACTIONS
     from drivelab.envs.highway_config import env_kwargs_from_config
-    from drivelab.envs.scenarios.options import check_backend_options
+    from drivelab.scenarios.options import check_backend_options
 
     if isinstance(highway_config, dict):
         options = {**env_kwargs_from_config(highway_config).get("backend_options", {}), **(options or {})}

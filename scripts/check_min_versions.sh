@@ -38,4 +38,4 @@ PYEOF
 "$PY" -m pip freeze | grep -iE "^(torch|typer|click|gymnasium|stable.baselines3|numpy|scipy|numba|pandas|highway.env|matplotlib|opencv)" | sed 's/^/installed: /'
 MPLBACKEND=Agg PYGAME_HIDE_SUPPORT_PROMPT=1 "$PY" -m pytest -p no:cacheprovider \
   tests/training/test_stats.py tests/training/test_compare.py tests/envs/test_vector.py \
-  tests/envs/test_pickle.py tests/test_config.py "tests/envs/backends/test_fast.py::test_whole_traffic_matches_highway_env"
+  tests/envs/test_pickle.py tests/test_config.py "tests/sim/test_fast.py::test_whole_traffic_matches_highway_env"

@@ -11,7 +11,7 @@ import functools
 import numpy as np
 
 from drivelab.envs.actions import make_action
-from drivelab.envs.scenarios import SCENARIOS, get_scenario
+from drivelab.scenarios import SCENARIOS, get_scenario
 from drivelab.world.batch import WorldBatch
 from drivelab.world.state import WorldState
 
@@ -21,9 +21,9 @@ ALL_SCENARIOS = tuple(SCENARIOS)
 def _backend(scenario_name: str, traffic: str, control: str):
     scenario = get_scenario(scenario_name)
     if scenario.fast_backend:
-        from drivelab.envs.backends.fast.backend import FastBackend as backend_class
+        from drivelab.sim.core.backend import FastBackend as backend_class
     else:
-        from drivelab.envs.backends.highway import HighwayBackend as backend_class
+        from drivelab.sim.reference.highway import HighwayBackend as backend_class
     return backend_class(scenario, traffic, control, None)
 
 

@@ -155,7 +155,7 @@ def _zoo_model(algo: str, env_id: str, entry: dict):
 def test_rl_zoo_reads_the_files(algo):
     from drivelab.agents.sb3 import policy_for
     from drivelab.envs import gym_id
-    from drivelab.envs.scenarios import SCENARIOS
+    from drivelab.scenarios import SCENARIOS
     from drivelab.yaml_io import YamlLoader
 
     text = (resources.files("drivelab.hyperparams") / f"{algo}.yaml").read_text()

@@ -7,10 +7,10 @@ package import module`` counted as an import of that module. An import is an edg
 imported; an edge is allowed inside a layer and to the layers below (or to those a layer names in
 ``may_import``), and the edges must not form a cycle between files.
 
-Not counted: the parent packages Python runs first. Importing any ``drivelab.envs.*`` module runs
-``drivelab/envs/__init__.py`` (gymnasium registration, which reads the scenarios), so at run time
-the simulators still load the top of ``envs/``; moving ``backends/`` and the scenarios out of
-``envs/`` (docs/architecture.md's next step: ``sim/`` and ``scenarios/``) ends that.
+Layers are folders: each layer is one package of ``drivelab/`` (the bottom one also holds the
+single modules that import nothing of drivelab), and ``test_every_folder_is_a_layer`` fails on a
+package that is no layer's. Not counted: the parent packages Python runs first (importing
+``drivelab.sim.core.simulator`` runs ``drivelab/__init__.py``, which registers the gymnasium ids).
 """
 
 from __future__ import annotations
@@ -49,22 +49,12 @@ LAYERS = (
         0,
         ("drivelab.errors", "drivelab.world", "drivelab.yaml_io", "drivelab._numba_cache", "drivelab.isa"),
     ),
-    # the simulators (compiled core and the highway-env reference) and route tracking
-    Layer("sim", 1, ("drivelab.envs.backends", "drivelab.envs.route")),
-    # scenario definitions: the presets, the town's road and traffic, the circuits. circuits.py is
-    # a scenario, not a simulator: it builds the follow-line / follow-lane roads and their vehicle
-    # for highway-env (as town_env.py does the town's), is named by the presets in scenarios.py,
-    # and imports nothing of drivelab; it only lives in backends/ because it subclasses highway-env
-    Layer(
-        "scenarios",
-        2,
-        (
-            "drivelab.envs.scenarios",
-            "drivelab.envs.town",
-            "drivelab.envs.town_env",
-            "drivelab.envs.backends.circuits",
-        ),
-    ),
+    # sim/: the compiled core, signalised junctions (lights, pedestrians, vehicles on routes), roads
+    # from blocks, route tracking, and the highway-env reference; it knows no scenario by name
+    Layer("sim", 1, ("drivelab.sim",)),
+    # scenarios/: one folder per scenario (preset, spawn, its road, its simulator subclass, its
+    # highway-env reference env) and the registry that lists them
+    Layer("scenarios", 2, ("drivelab.scenarios",)),
     # sensors and reward terms read the WorldBatch only: not the simulators or scenarios below
     # them (shared geometry lives in the bottom layer), and not each other
     Layer("perception", 3, ("drivelab.perception",), may_import=frozenset({"base"})),
@@ -223,12 +213,22 @@ def test_drivelab_imports_point_down_and_form_no_cycle():
 def test_layer_table_places_the_modules_it_names():
     placed = {module: layer_of(module, LAYERS).name for module in module_sources(PACKAGE_DIR)}
     assert placed["drivelab.world.batch"] == "base"
-    assert placed["drivelab.envs.backends.fast.traffic"] == "sim"
-    assert placed["drivelab.envs.backends.circuits"] == "scenarios"
-    assert placed["drivelab.envs.town_env"] == "scenarios" and placed["drivelab.envs.town"] == "scenarios"
+    assert placed["drivelab.sim.core.traffic"] == "sim" and placed["drivelab.sim.junctions.rules"] == "sim"
+    assert placed["drivelab.scenarios.circuits.reference_env"] == "scenarios"
+    assert placed["drivelab.scenarios.town.simulator"] == "scenarios"
     assert placed["drivelab.envs.core"] == "envs" and placed["drivelab"] == "envs"
     assert placed["drivelab.training.run"] == "training" and placed["drivelab.cli"] == "cli"
     assert placed["drivelab.__main__"] == "cli"
+
+
+def test_every_folder_is_a_layer():
+    """Each package folder of ``drivelab/`` belongs to exactly one layer, named by its folder (a
+    layer is a folder; the bottom layer also holds single modules)."""
+    folders = sorted(path.name for path in PACKAGE_DIR.iterdir() if (path / "__init__.py").is_file())
+    owners = {folder: [L.name for L in LAYERS if f"drivelab.{folder}" in L.prefixes] for folder in folders}
+    assert all(len(names) == 1 for names in owners.values()), owners
+    for layer in LAYERS:  # no layer reaches into another folder by a deeper prefix
+        assert all(prefix.count(".") <= 1 for prefix in layer.prefixes), layer
 
 
 # --- the checker on synthetic packages: it can fail -------------------------------------------------

@@ -1,6 +1,6 @@
 """Issue 47: a scenario option misspelled, of the wrong type or range, or contradicting the traffic
 level, in a run's YAML or beside ``--traffic``, is one ``error:`` line, exit code 2, and nothing
-written (``envs/scenarios/options.py``, checked by ``build_config``)."""
+written (``scenarios/options.py``, checked by ``build_config``)."""
 
 from __future__ import annotations
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import gymnasium
 
-from drivelab.envs.scenarios import SCENARIOS, gym_id
+from drivelab.scenarios import SCENARIOS, gym_id
 
 for _name in SCENARIOS:
     if gym_id(_name) not in gymnasium.registry:

@@ -256,7 +256,7 @@ class SeedTable(ActionAdapter):
 
     Throttle ``t`` becomes the normalised acceleration command ``t`` (a 5·t m/s² pedal; the
     follow-line/lane ego adds a speed drag so that a constant throttle levels off, see
-    ``backends/circuits.py``); steering ``s`` (CARLA's [-1, 1], negative left) becomes the
+    ``scenarios/circuits/reference_env.py``); steering ``s`` (CARLA's [-1, 1], negative left) becomes the
     normalised steering ``s``, i.e. ``s``·45° at the front wheels (highway-env's full lock).
 
     :param table: ``"line"`` (follow-line, section 3.2) or ``"lane"`` (follow-lane, section 4.2).

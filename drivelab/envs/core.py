@@ -10,7 +10,6 @@ import gymnasium as gym
 import numpy as np
 
 from drivelab.envs.actions import ActionAdapter
-from drivelab.envs.scenarios import get_scenario
 from drivelab.envs.vector import (  # noqa: F401  (re-exported: the options of DriveEnv)
     BACKENDS,
     LIGHT_LABEL_DISTANCE_M,
@@ -21,13 +20,14 @@ from drivelab.envs.vector import (  # noqa: F401  (re-exported: the options of D
     env_option_names,
     world_info,
 )
+from drivelab.scenarios import get_scenario
 from drivelab.world.state import WorldState
 
 
 class DriveEnv(gym.Env):
     """One driving scenario seen through drivelab's sensors and rewarded by its shapers.
 
-    :param scenario: a name of ``drivelab.envs.scenarios.SCENARIOS`` (highway, merge, roundabout,
+    :param scenario: a name of ``drivelab.scenarios.SCENARIOS`` (highway, merge, roundabout,
         intersection, racetrack, town, follow-line, follow-lane).
     :param obs: a sensor spec (``"lidar"``, ``"lidar:beams=120:stack=3"``), a comma list, or a
         list of specs. One sensor gives its Box; several give a Dict keyed by sensor name.

@@ -37,7 +37,18 @@ from numba.core import types
 from numba.experimental import structref
 
 from drivelab.envs.actions import ActionAdapter
-from drivelab.envs.backends.fast.simulator import (
+from drivelab.envs.metrics import _add_step
+from drivelab.envs.rules import _episode_ends
+from drivelab.perception.kinematics import Kinematics, ego_rows_into
+from drivelab.rewards.terms import (
+    _LANE_ROWS,
+    _LANE_ROWS_PX,
+    _LINE_ROWS,
+    STEERING_BASE,
+    _lane_keeping,
+    _line_centring,
+)
+from drivelab.sim.core.simulator import (
     ARRIVE_ROUTE_END,
     EX_ARRIVED,
     EX_CRASHED,
@@ -54,17 +65,6 @@ from drivelab.envs.backends.fast.simulator import (
     _float_controls,
     advance_worlds,
     set_ego_controls,
-)
-from drivelab.envs.metrics import _add_step
-from drivelab.envs.rules import _episode_ends
-from drivelab.perception.kinematics import Kinematics, ego_rows_into
-from drivelab.rewards.terms import (
-    _LANE_ROWS,
-    _LANE_ROWS_PX,
-    _LINE_ROWS,
-    STEERING_BASE,
-    _lane_keeping,
-    _line_centring,
 )
 from drivelab.world.geometry import FULL_LOCK_DEG
 from drivelab.world.pinhole import LANE_CAMERA, LINE_CAMERA

@@ -27,12 +27,12 @@ from drivelab.envs.actions import ActionAdapter, make_action
 from drivelab.envs.highway_config import env_kwargs_from_config
 from drivelab.envs.metrics import EpisodeMetrics
 from drivelab.envs.rules import EpisodeRules
-from drivelab.envs.scenarios import check_traffic, get_scenario
-from drivelab.envs.scenarios.options import check_backend_options
 from drivelab.errors import UsageError
 from drivelab.perception.birdeye import render_birdeye
 from drivelab.perception.sensors import check_sensors_for, make_sensor, split_sensor_list
 from drivelab.rewards.shapers import RewardShaper
+from drivelab.scenarios import check_traffic, get_scenario
+from drivelab.scenarios.options import check_backend_options
 from drivelab.world.batch import WorldBatch
 from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW
 
@@ -93,11 +93,11 @@ def make_simulator(backend: str, scenario, traffic: str, control: str, num_world
     if backend == "highway" and not scenario.reference_backend:
         raise UsageError(f"scenario {scenario.name!r} runs on the compiled core only (backend fast or auto)")
     if backend == "fast":
-        from drivelab.envs.backends.fast.backend import fast_simulator
+        from drivelab.sim.core.backend import fast_simulator
 
         return fast_simulator(scenario, traffic, control, num_worlds, overrides)
-    from drivelab.envs.backends.highway import HighwayBackend
-    from drivelab.envs.backends.reference import PerWorldSimulator
+    from drivelab.sim.reference.highway import HighwayBackend
+    from drivelab.sim.reference.per_world import PerWorldSimulator
 
     return PerWorldSimulator(HighwayBackend, scenario, traffic, control, num_worlds, overrides)
 
@@ -107,7 +107,7 @@ class VectorDriveEnv(VectorEnv):
     by its shapers, stepped together as arrays.
 
     :param num_envs: K, the number of worlds.
-    :param scenario: a name of ``drivelab.envs.scenarios.SCENARIOS``.
+    :param scenario: a name of ``drivelab.scenarios.SCENARIOS``.
     :param obs: a sensor spec (``"lidar"``, ``"lidar:beams=120:stack=3"``), a comma list, or a
         list of specs. One sensor gives its Box; several give a Dict keyed by sensor name.
     :param action: an action kind (``drivelab.envs.actions.ACTIONS``) or an ActionAdapter; default

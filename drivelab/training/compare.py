@@ -32,9 +32,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from drivelab.config import RunConfig
-from drivelab.envs.scenarios import SCENARIOS
 from drivelab.errors import UsageError
 from drivelab.hyperparams import shipped_hyperparams
+from drivelab.scenarios import SCENARIOS
 from drivelab.training.evaluate import load_run_config
 from drivelab.training.metrics import METRICS as REGISTRY
 from drivelab.training.metrics import labels

@@ -14,12 +14,12 @@ from pathlib import Path
 
 import numpy as np
 
-from drivelab.envs.backends.highway import HighwayBackend
-from drivelab.envs.scenarios import get_scenario
 from drivelab.errors import UsageError
 from drivelab.perception.camera import render_camera, render_masks
 from drivelab.perception.lane import LANE_CAMERA
 from drivelab.perception.lane_cnn import WEIGHTS_PATH, train_lane_cnn
+from drivelab.scenarios import get_scenario
+from drivelab.sim.reference.highway import HighwayBackend
 
 MAX_LATERAL_M = 1.2  # training poses: offset from the lane centre, uniform in ±this
 HEADING_STD_DEG = 4.0  # and heading error, normal

@@ -57,7 +57,7 @@ def _nocrash(
 ) -> dict:
     """``nocrash`` while it holds ``run_dir``."""
     from drivelab.envs.core import DriveEnv
-    from drivelab.envs.town import LAYOUTS
+    from drivelab.scenarios.town.road import LAYOUTS
     from drivelab.training.checkpoints import check_trained_config, file_sha256, load_agent, model_path
     from drivelab.training.evaluate import check_writable, make_out_dir
 

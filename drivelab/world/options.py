@@ -1,5 +1,5 @@
 """A scenario option's declaration: its type, range, default and meaning, and the check of a
-value (``drivelab.envs.scenarios.options`` checks a user's options against a scenario's)."""
+value (``drivelab.scenarios.options`` checks a user's options against a scenario's)."""
 
 from __future__ import annotations
 

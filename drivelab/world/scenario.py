@@ -1,4 +1,4 @@
-"""What a scenario declares (the presets live in ``drivelab.envs.scenarios``): the simulators and
+"""What a scenario declares (the presets live in ``drivelab.scenarios``): the simulators and
 the rules read a Scenario handed to them and never look presets up themselves."""
 
 from __future__ import annotations
@@ -28,6 +28,9 @@ class Scenario:
     :param meta_target_speeds: the speeds FASTER / SLOWER step through (None: highway-env's
         default 20, 25, 30 m/s), as in highway-env's own config of the scenario.
     :param fast_backend: drivelab's fast backend runs it (the "auto" backend then picks it).
+    :param simulator: dotted path of the compiled core's simulator class that runs it:
+        ``FastSimulator`` (drivelab.sim), or the scenario's own subclass in its folder (the town's
+        ``TownSimulator``, the blocks' ``BlocksSimulator``), imported when a world is built.
     :param route_deviation_m: the episode fails when the ego is farther than this from its route.
     :param blocked_after_s: the episode fails when the ego stays below 0.1 m/s this long.
     :param default_reward: the reward preset a run gets when it names none.
@@ -72,6 +75,7 @@ class Scenario:
     continuous_policy_frequency_hz: int = 5
     meta_target_speeds: tuple[float, ...] | None = None
     fast_backend: bool = True
+    simulator: str = "drivelab.sim.core.simulator.FastSimulator"
     route_deviation_m: float | None = None
     blocked_after_s: float | None = None
     action_kinds: tuple[str, ...] = ("meta", "grid", "continuous", "target_speed")

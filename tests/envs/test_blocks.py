@@ -7,23 +7,23 @@ import pytest
 from typer.testing import CliRunner
 
 from drivelab.cli import app
-from drivelab.envs.backends.fast import lanes as L
-from drivelab.envs.backends.fast import traffic as T
-from drivelab.envs.backends.fast.backend import FastBackend, fast_simulator
-from drivelab.envs.backends.fast.blocks_spawn import (
+from drivelab.envs.vector import VectorDriveEnv
+from drivelab.errors import UsageError
+from drivelab.perception.sensors import make_sensor
+from drivelab.rewards.shapers import RewardShaper
+from drivelab.scenarios import get_scenario
+from drivelab.scenarios.blocks.pg_map import generate_map
+from drivelab.scenarios.blocks.spawn import (
     EGO_SPAWN_S_M,
     ROUTE_PACE_MPS,
     ROUTE_START_S,
     SPAWN_CLEARANCE_M,
     MapSet,
 )
-from drivelab.envs.backends.highway import HighwayBackend
-from drivelab.envs.backends.roads.pg_map import generate_map
-from drivelab.envs.scenarios import get_scenario
-from drivelab.envs.vector import VectorDriveEnv
-from drivelab.errors import UsageError
-from drivelab.perception.sensors import make_sensor
-from drivelab.rewards.shapers import RewardShaper
+from drivelab.sim.core import lanes as L
+from drivelab.sim.core import traffic as T
+from drivelab.sim.core.backend import FastBackend, fast_simulator
+from drivelab.sim.reference.highway import HighwayBackend
 from drivelab.world.batch import WorldBatch
 from drivelab.world.state import Events
 from tests.perception.test_batched_sensors import SPECS, _run

@@ -5,13 +5,13 @@ MOBIL lane changes where a road's lanes run side by side."""
 import numpy as np
 import pytest
 
-from drivelab.envs.backends.fast import lanes as L
-from drivelab.envs.backends.fast import traffic as T
-from drivelab.envs.backends.fast.backend import FastBackend, fast_simulator
-from drivelab.envs.backends.fast.blocks_spawn import TRAFFIC_SPEED_MPS, _traffic_rows
-from drivelab.envs.backends.roads.town_rules import LightTimings, light_state
-from drivelab.envs.scenarios import get_scenario
 from drivelab.envs.vector import VectorDriveEnv
+from drivelab.scenarios import get_scenario
+from drivelab.scenarios.blocks.spawn import TRAFFIC_SPEED_MPS, _traffic_rows
+from drivelab.sim.core import lanes as L
+from drivelab.sim.core import traffic as T
+from drivelab.sim.core.backend import FastBackend, fast_simulator
+from drivelab.sim.junctions.rules import LightTimings, light_state
 from drivelab.world.batch import WorldBatch
 from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW
 

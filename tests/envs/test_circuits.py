@@ -5,9 +5,9 @@ import pytest
 
 from drivelab.agents.qlearning import build_qlearning
 from drivelab.envs.actions import make_action
-from drivelab.envs.backends.circuits import DRAG_PER_S, FOLLOW_LINE_TRACK, PedalVehicle
 from drivelab.envs.core import DriveEnv
 from drivelab.errors import UsageError
+from drivelab.scenarios.circuits.reference_env import DRAG_PER_S, FOLLOW_LINE_TRACK, PedalVehicle
 
 
 def _track_length(track):

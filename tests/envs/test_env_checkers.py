@@ -7,9 +7,9 @@ from gymnasium.utils.env_checker import check_env as gym_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 from drivelab.envs.core import DriveEnv
-from drivelab.envs.scenarios import SCENARIOS
 from drivelab.errors import UsageError
 from drivelab.perception.sensors import SENSORS
+from drivelab.scenarios import SCENARIOS
 
 
 @pytest.mark.parametrize("sensor", sorted(SENSORS))

@@ -11,9 +11,9 @@ import pytest
 
 from drivelab.envs.actions import ContinuousAction, GridAction, MetaAction, SeedTable
 from drivelab.envs.core import DriveEnv
-from drivelab.envs.scenarios import SCENARIOS
 from drivelab.envs.vector import VectorDriveEnv
 from drivelab.errors import UsageError
+from drivelab.scenarios import SCENARIOS
 
 NOT_FINITE = [[np.nan, 0.0], [0.0, np.inf], [-np.inf, 0.5]]
 NOT_AN_INDEX = [2.7, True, np.True_, np.float32(1.0), np.array([1.0, 2.0]), np.nan]

@@ -1,4 +1,4 @@
-"""The map gallery (``envs/maps_gallery.py``) draws procedural maps to a PNG; the roads package
+"""The map gallery (``scenarios/blocks/gallery.py``) draws procedural maps to a PNG; the roads package
 it draws from does not need matplotlib."""
 
 from __future__ import annotations
@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
-from drivelab.envs.backends.roads.pg_map import generate_map
-from drivelab.envs.maps_gallery import draw_gallery, draw_map
+from drivelab.scenarios.blocks.gallery import draw_gallery, draw_map
+from drivelab.scenarios.blocks.pg_map import generate_map
 
-ROADS_DIR = Path(__file__).resolve().parents[2] / "drivelab" / "envs" / "backends" / "roads"
+PACKAGE = Path(__file__).resolve().parents[2] / "drivelab"
 
 
 def test_the_gallery_writes_a_png_of_every_map(tmp_path):
@@ -32,6 +32,10 @@ def test_a_drawn_map_shows_its_letters_and_spans_its_lanes():
     assert ax.get_ylim()[0] > ax.get_ylim()[1]  # y grows downwards, as on the simulators' screens
 
 
-def test_the_roads_package_does_not_import_matplotlib():
-    for path in ROADS_DIR.glob("*.py"):
-        assert "matplotlib" not in path.read_text(encoding="utf-8"), path.name
+def test_the_simulator_and_the_scenarios_do_not_import_matplotlib():
+    """Only the gallery draws: the roads, the maps and the simulators never load matplotlib."""
+    paths = [*(PACKAGE / "sim").rglob("*.py"), *(PACKAGE / "scenarios").rglob("*.py")]
+    assert len(paths) > 30
+    for path in paths:
+        if path.name != "gallery.py":
+            assert "matplotlib" not in path.read_text(encoding="utf-8"), path

@@ -7,9 +7,9 @@ import gymnasium
 import numpy as np
 import pytest
 
-from drivelab.envs.scenarios import FAST_SCENARIOS as SUPPORTED
-from drivelab.envs.scenarios import REFERENCE_SCENARIOS, SCENARIOS
 from drivelab.envs.vector import VectorDriveEnv
+from drivelab.scenarios import FAST_SCENARIOS as SUPPORTED
+from drivelab.scenarios import REFERENCE_SCENARIOS, SCENARIOS
 from tests.batch_worlds import assert_same_observations
 
 ENV_IDS = sorted(env_id for env_id in gymnasium.registry if env_id.startswith("drivelab/"))

@@ -1,5 +1,5 @@
 """Issue 47: every scenario declares its options; a misspelled key, a bad value or a contradiction
-is one UsageError naming the key, from every Python entry point (``envs/scenarios/options.py``)."""
+is one UsageError naming the key, from every Python entry point (``scenarios/options.py``)."""
 
 from __future__ import annotations
 
@@ -9,11 +9,11 @@ import pytest
 
 import drivelab
 from drivelab.config import build_config
-from drivelab.envs.backends.fast.simulator import described_config
-from drivelab.envs.scenarios import SCENARIOS, TRAFFIC_LEVELS, options_table
-from drivelab.envs.scenarios.options import Option, check_backend_options, declared_config
 from drivelab.envs.vector import VectorDriveEnv
 from drivelab.errors import UsageError
+from drivelab.scenarios import SCENARIOS, TRAFFIC_LEVELS, options_table
+from drivelab.scenarios.options import Option, check_backend_options, declared_config
+from drivelab.sim.core.simulator import described_config
 
 INF, NAN = float("inf"), float("nan")
 
@@ -239,8 +239,8 @@ def test_every_declared_default_passes_its_own_check():
 
 
 def test_the_town_declares_its_layouts():
-    from drivelab.envs.scenarios.town import LAYOUT_NAMES
-    from drivelab.envs.town import LAYOUTS
+    from drivelab.scenarios.town import LAYOUT_NAMES
+    from drivelab.scenarios.town.road import LAYOUTS
 
     assert LAYOUT_NAMES == tuple(LAYOUTS)
 

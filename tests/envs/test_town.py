@@ -7,10 +7,17 @@ import numpy as np
 import pytest
 from highway_env.road.road import Road
 
-from drivelab.envs.backends.highway import HighwayBackend
 from drivelab.envs.core import DriveEnv
-from drivelab.envs.scenarios import SCENARIOS
-from drivelab.envs.town import (
+from drivelab.scenarios import SCENARIOS
+from drivelab.scenarios.town.reference_env import (
+    PAVEMENT_M,
+    Pedestrian,
+    TownRoad,
+    TownVehicle,
+    left_turn_must_wait,
+    random_route,
+)
+from drivelab.scenarios.town.road import (
     LAYOUTS,
     LightTimings,
     TownLights,
@@ -19,14 +26,7 @@ from drivelab.envs.town import (
     stop_line,
     street_crossings,
 )
-from drivelab.envs.town_env import (
-    PAVEMENT_M,
-    Pedestrian,
-    TownRoad,
-    TownVehicle,
-    left_turn_must_wait,
-    random_route,
-)
+from drivelab.sim.reference.highway import HighwayBackend
 from drivelab.world.batch import WorldBatch
 from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW
 
@@ -241,7 +241,7 @@ def test_training_retargets_on_arrival_and_evaluation_uses_fixed_routes():
     _, _, terminated, _, _ = plain.step(1)
     assert terminated and plain.world.events.arrived
     # fixed routes: drawn from the town's list of 25, the same list every time
-    from drivelab.envs.town_env import FIXED_ROUTE_COUNT, fixed_routes
+    from drivelab.scenarios.town.reference_env import FIXED_ROUTE_COUNT, fixed_routes
 
     network = plain.backend.env.road.network
     assert fixed_routes(network) == fixed_routes(network) and len(fixed_routes(network)) == FIXED_ROUTE_COUNT

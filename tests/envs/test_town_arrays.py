@@ -5,10 +5,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drivelab.envs.backends.fast.lanes import LaneTable
-from drivelab.envs.backends.fast.town_rows import TURN_LEFT, TURN_RIGHT, TURN_STRAIGHT
-from drivelab.envs.town import LAYOUTS, TownLights, approach_of, build_network, road_arrays, shortest_route
-from drivelab.envs.town_env import street_lanes
+from drivelab.scenarios.town.reference_env import street_lanes
+from drivelab.scenarios.town.road import (
+    LAYOUTS,
+    TownLights,
+    approach_of,
+    build_network,
+    road_arrays,
+    shortest_route,
+)
+from drivelab.sim.core.lanes import LaneTable
+from drivelab.sim.junctions.rows import TURN_LEFT, TURN_RIGHT, TURN_STRAIGHT
 
 
 @pytest.mark.parametrize("name", sorted(LAYOUTS))

@@ -21,12 +21,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from drivelab.envs.backends.fast import pcg64
-from drivelab.envs.backends.fast import traffic as T
-from drivelab.envs.backends.fast.spawn import LaneGeometry
-from drivelab.envs.backends.fast.town_spawn import TownSetup, spawn_town, town_episode
-from drivelab.envs.scenarios import SCENARIOS
-from drivelab.envs.town_env import fixed_routes
+from drivelab.scenarios import SCENARIOS
+from drivelab.scenarios.town.reference_env import fixed_routes
+from drivelab.scenarios.town.spawn import TownSetup, spawn_town, town_episode
+from drivelab.sim.core import pcg64
+from drivelab.sim.core import traffic as T
+from drivelab.sim.core.spawn import LaneGeometry
 from tests.envs.town_reference import reference_town, town_rows, town_tables
 
 SEEDS = (0, 1, 2, 3)
@@ -119,8 +119,8 @@ def test_dense_test_town_skips_npcs_without_a_free_spot():
 @pytest.mark.parametrize("layout", LAYOUTS)
 def test_fixed_routes_are_the_references(layout):
     """The 25 NoCrash routes from the route table equal ``town_env.fixed_routes`` of the network."""
-    from drivelab.envs.town import LAYOUTS as TOWN_LAYOUTS
-    from drivelab.envs.town import build_network
+    from drivelab.scenarios.town.road import LAYOUTS as TOWN_LAYOUTS
+    from drivelab.scenarios.town.road import build_network
 
     backend = reference_town(layout, "empty", 0, "meta", fixed_routes=True, retarget=False)
     setup = TownSetup.of(town_road(backend, layout))
@@ -154,9 +154,9 @@ def test_a_pedestrians_next_wait_is_the_inverse_transform_exponential():
     """The reference's wait on reaching the far pavement is MEAN_WAIT_S * -log1p(-U) of the next
     53-bit double U of its generator (``standard_exponential(method="inv")``): one draw, which
     the compiled kernels reproduce from the PCG64 words (note log1p: ``-log(1 - U)`` differs)."""
-    from drivelab.envs.town import LAYOUTS as TOWN_LAYOUTS
-    from drivelab.envs.town import build_network, street_crossings
-    from drivelab.envs.town_env import MEAN_WAIT_S, PAVEMENT_M, Pedestrian, TownRoad
+    from drivelab.scenarios.town.reference_env import MEAN_WAIT_S, PAVEMENT_M, Pedestrian, TownRoad
+    from drivelab.scenarios.town.road import LAYOUTS as TOWN_LAYOUTS
+    from drivelab.scenarios.town.road import build_network, street_crossings
 
     layout = TOWN_LAYOUTS["test"]
     road = TownRoad(network=build_network(layout), np_random=np.random.default_rng(0), record_history=False)
@@ -178,8 +178,8 @@ def test_lanes_within_a_micrometre_are_decided_by_numpy(monkeypatch):
     ``LaneGeometry.closest_lane`` (numpy's distances, the reference's) for that row: with every
     row marked so, the episode is still the reference's; and ``_place`` marks a point equally far
     from two lanes."""
-    from drivelab.envs.backends.fast import lanes as L
-    from drivelab.envs.backends.fast import town_spawn
+    from drivelab.scenarios.town import spawn as town_spawn
+    from drivelab.sim.core import lanes as L
 
     calls = []
     compiled = town_spawn._town_rows

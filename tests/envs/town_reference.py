@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from drivelab.envs.backends.fast import town_rows as R
-from drivelab.envs.backends.fast.lanes import LaneTable
-from drivelab.envs.backends.fast.simulator import vehicles_to_array
-from drivelab.envs.backends.highway import HighwayBackend
-from drivelab.envs.scenarios import SCENARIOS
-from drivelab.envs.town import LAYOUTS, road_arrays
-from drivelab.envs.town_env import TownEnv, TownVehicle
+from drivelab.scenarios import SCENARIOS
+from drivelab.scenarios.town.reference_env import TownEnv, TownVehicle
+from drivelab.scenarios.town.road import LAYOUTS, road_arrays
+from drivelab.sim.core.lanes import LaneTable
+from drivelab.sim.core.simulator import vehicles_to_array
+from drivelab.sim.junctions import rows as R
+from drivelab.sim.reference.highway import HighwayBackend
 
 
 def reference_town(
@@ -29,7 +29,7 @@ def reference_town(
 
 def town_tables(layout: str) -> tuple:
     """(LaneTable, TownRoadArrays) of a layout: the compiled core's view of its road."""
-    from drivelab.envs.town import build_network
+    from drivelab.scenarios.town.road import build_network
 
     return LaneTable.from_network(build_network(LAYOUTS[layout])), road_arrays(LAYOUTS[layout])
 

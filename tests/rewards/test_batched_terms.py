@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from drivelab.envs.actions import make_action
-from drivelab.envs.scenarios import get_scenario
 from drivelab.rewards.shapers import PRESETS, RewardShaper
 from drivelab.rewards.terms import TERMS
+from drivelab.scenarios import get_scenario
 from drivelab.world.batch import EVENT_FLAGS, WorldBatch
 from drivelab.world.state import Events
 from tests.batch_worlds import ALL_SCENARIOS, world_sequences

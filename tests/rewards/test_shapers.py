@@ -1,10 +1,10 @@
 import numpy as np
 import pytest
 
-from drivelab.envs.backends.highway import HighwayBackend
-from drivelab.envs.scenarios import SCENARIOS
 from drivelab.errors import UsageError
 from drivelab.rewards.shapers import PRESETS, RewardShaper, parse_reward
+from drivelab.scenarios import SCENARIOS
+from drivelab.sim.reference.highway import HighwayBackend
 from drivelab.world.state import Events
 from tests.worlds import world
 

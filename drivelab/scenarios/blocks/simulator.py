@@ -1,0 +1,448 @@
+"""K worlds of procedural block maps on the compiled core, each world on its own map.
+
+``BlocksSimulator`` is ``FastSimulator`` (same API: ``reset_where``, ``step`` with NEXT_STEP
+restarts, ``batch``) for a scenario whose maps come from seeds (``Scenario.procedural_maps``):
+an episode's seed picks its map from the scenario's set (``MapSet.seed_of``), and the K worlds
+of a batch may drive K different maps.
+
+Every map is converted once (``BlocksMap``: its own LaneTable with lane rows local to it) and
+the tables of the maps loaded so far are stacked into one ``(L_total, LANE_COLUMNS)`` array;
+world k reads the rows ``[lane_start[k], lane_stop[k])`` of its map. The compiled kernels
+(``blocks_traffic.blocks_simulate``: highway-env's frames with MOBIL lane changes where lanes run
+side by side and the town's stop lines; ``export_world``, ``meta_action``) are called per world on
+that slice of rows (and of the stacked per-lane arrays), a view in which the world's lane indices
+are the map's own: one compiled call steps all K worlds, with no Python loop over worlds or
+vehicles. Each world's RoadMap (for the sensors and renderers) is its map's: ``WorldBatch.roads``
+holds the maps the K worlds drive (at most K, however many the set has) and ``road_index`` each
+world's.
+
+Signalised maps (``signalised: true``) run the town's lights: the maps' light rows are stacked
+like the lanes (world k's are ``[light_start[k], light_stop[k])``), each world draws its
+intersections' cycle offsets ``(K, J_max)`` at its episode's start, and every step the states
+``(K, M_max)`` are those at the step's end time (``pedestrians.light_states``, the town's). The
+batch exports them as ``traffic_lights`` (stop point x, y, approach heading, state) with
+``light_valid``, one row per lane ending at a light (a block's arm has several lanes, the town's
+one), and the ego's red-light runs as ``red_light_crossed`` (judged as the town's).
+
+Episode rules (MetaDrive's, ``metadrive/envs/metadrive_env.py``): arrival within 5 m of the
+route's end (the destination road's end), out of road when not on a lane or when the ego's body
+crosses a solid line (the centre line or the road's edge: ``on_continuous_line_done``), crash on
+any collision; the time limit is the route's (``blocks_spawn.route_time_limit_s``).
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+from numba import njit, prange
+
+from drivelab.errors import UsageError
+from drivelab.scenarios.blocks.spawn import (
+    TRAFFIC_SPEED_MPS,
+    BlocksMap,
+    MapSet,
+    blocks_map,
+    route_time_limit_s,
+)
+from drivelab.scenarios.blocks.traffic import blocks_simulate
+from drivelab.sim.core import lanes as L
+from drivelab.sim.core import traffic as T
+from drivelab.sim.core.simulator import (
+    ARRIVE_NEVER,
+    EX_LANE_WIDTH,
+    EX_LATERAL,
+    EX_ON_ROAD,
+    EX_WID,
+    FastSimulator,
+    export_world,
+    meta_action,
+)
+from drivelab.sim.junctions.pedestrians import light_states
+from drivelab.world.batch import WorldBatch
+from drivelab.world.state import LIGHT_RED, RoadMap
+
+ARRIVAL_WINDOW_M = 5.0  # MetaDrive's arrive_dest: within 5 m of the final road's end
+# MetaDrive's ego tops out at 80 km/h (metadrive/component/vehicle/vehicle_type.py, max_speed_km_h;
+# its default reward's speed term divides by it too)
+EGO_MAX_SPEED_MPS = 80.0 / 3.6
+
+
+def _world_kernel(parallel: bool):
+    def body(
+        v, count, lanes, start, stop, p, frames, dt, regulation, active, cap, junction, from_arm, to_arm,
+        turn, end_junction, end_arm, light, changeable, ending, successor_start, successors, light_start,
+        light_stop, light_states, ego_max_speed_mps,
+    ):  # fmt: skip
+        for k in prange(v.shape[0]):
+            if active[k]:
+                a, b = start[k], stop[k]
+                blocks_simulate(
+                    v[k, : count[k]], lanes[a:b], p, frames, dt, regulation[k], cap, junction[a:b],
+                    from_arm[a:b], to_arm[a:b], turn[a:b], end_junction[a:b], end_arm[a:b], light[a:b],
+                    changeable[a:b], ending[a:b], successor_start[a : b + 1], successors,
+                    light_states[k, : light_stop[k] - light_start[k]], ego_max_speed_mps,
+                )  # fmt: skip
+
+    return njit(cache=True, parallel=parallel)(body)
+
+
+_SERIAL, _PARALLEL = _world_kernel(False), _world_kernel(True)
+
+
+def simulate_map_worlds(
+    v: np.ndarray,
+    count: np.ndarray,
+    lanes: np.ndarray,
+    start: np.ndarray,
+    stop: np.ndarray,
+    p: np.ndarray,
+    frames: int,
+    dt: float,
+    regulation: np.ndarray,
+    active: np.ndarray,
+    release_cap_mps: float,
+    road: tuple[np.ndarray, ...],
+    light_start: np.ndarray,
+    light_stop: np.ndarray,
+    light_states: np.ndarray,
+    ego_max_speed_mps: float,
+) -> None:
+    """``blocks_traffic.blocks_simulate`` of world k's vehicles ``v[k, :count[k]]`` (K, N_max,
+    VEHICLE_COLUMNS) on its map's lane rows ``lanes[start[k]:stop[k]]`` for the worlds of
+    ``active`` (K,); one numba thread per world where numba has several (``traffic.simulate_worlds``'
+    rule). Right of way is enforced at the junctions only (``enforce_road_rules``'
+    ``prioritised_only``), and a vehicle that yielded cruises on at ``release_cap_mps``.
+
+    :param road: the stacked per-lane arrays (L_total,) of every loaded map, in
+        ``blocks_simulate``'s order: junction, from_arm, to_arm, turn, end_junction, end_arm, light
+        (int64, local to each map), changeable, ending (bool), then the continuations' CSR: starts
+        (L_total + 1,) into successors (E_total,) of local lane rows.
+    :param light_start: / ``light_stop`` (K,): world k's lights, the rows of its map in the stacked
+        light table; ``light_states`` (K, M_max) their LIGHT_* states (world k's first
+        ``light_stop[k] - light_start[k]``).
+    :param ego_max_speed_mps: the egos' top speed.
+    """
+    parallel = v.shape[0] > 1 and numba.get_num_threads() > 1
+    kernel = _PARALLEL if parallel else _SERIAL
+    kernel(
+        v, count, lanes, start, stop, p, frames, dt, regulation, active, release_cap_mps, *road, light_start,
+        light_stop, light_states, ego_max_speed_mps,
+    )  # fmt: skip
+
+
+@njit(cache=True)
+def light_states_map_worlds(light_junction, light_arm, start, stop, offsets, timings, time_s, active, out):
+    """``pedestrians.light_states`` of world k's lights (rows ``start[k]:stop[k]`` of the stacked
+    ``light_junction`` / ``light_arm``, junctions local to its map) with its offsets ``offsets[k]``
+    (K, J_max) at ``time_s[k]``, into ``out[k]`` (K, M_max), for the worlds of ``active``;
+    ``timings``: (green, yellow, all red) seconds."""
+    for k in range(out.shape[0]):
+        if active[k]:
+            a, b = start[k], stop[k]
+            light_states(
+                light_junction[a:b], light_arm[a:b], offsets[k], timings[0], timings[1], timings[2],
+                time_s[k], out[k, : b - a],
+            )  # fmt: skip
+
+
+@njit(cache=True)
+def apply_meta_map_worlds(v, count, ego, lanes, start, stop, actions, speeds) -> None:
+    """``meta_action`` of each world's ego on its map's lane rows."""
+    for k in range(v.shape[0]):
+        meta_action(v[k, : count[k]], ego[k], lanes[start[k] : stop[k]], actions[k], speeds)
+
+
+@njit(cache=True)
+def export_map_worlds(
+    v, count, ego, lanes, start, stop, in_junction, dead_end, solid, floats, ints, flags, vehicles, valid
+) -> None:
+    """``export_world`` of each world on its map's lane rows (arrival is judged on the route),
+    then MetaDrive's out of road: off every lane, or the ego's body across a solid line of its
+    lane (``solid`` (L_total, 2): left, right; lateral offsets grow to the right)."""
+    for k in range(v.shape[0]):
+        a, b = start[k], stop[k]
+        export_world(
+            v[k, : count[k]], ego[k], lanes[a:b], in_junction[a:b], dead_end[a:b], ARRIVE_NEVER, 0.0,
+            floats[k], ints[k], flags[k], vehicles[k], valid[k],
+        )  # fmt: skip
+        lane = a + int(v[k, ego[k], T.LANE])
+        half_body, half_lane, lateral = (
+            floats[k, EX_WID] / 2,
+            floats[k, EX_LANE_WIDTH] / 2,
+            floats[k, EX_LATERAL],
+        )
+        if (solid[lane, 0] and lateral - half_body < -half_lane) or (
+            solid[lane, 1] and lateral + half_body > half_lane
+        ):
+            flags[k, EX_ON_ROAD] = False
+
+
+@njit(cache=True)
+def clear_dead_ends(v, count, ego, lanes, start, stop, dead_end) -> None:
+    """Drop, in every world, the traffic vehicles within a vehicle length of the end of a lane that
+    leads nowhere (they leave the map; MetaDrive recycles them too); the kept rows close up in
+    order, the freed rows become zeros, ``count`` and ``ego`` follow."""
+    for k in range(v.shape[0]):
+        lanes_k, dead_k = lanes[start[k] : stop[k]], dead_end[start[k] : stop[k]]
+        kept, new_ego = 0, ego[k]
+        for j in range(count[k]):
+            row = v[k, j]
+            lane = int(row[T.LANE])
+            leaving = False
+            if j != ego[k] and dead_k[lane]:
+                s, _ = L.local_coordinates(lanes_k, lane, row[T.X], row[T.Y])
+                leaving = s > lanes_k[lane, L.LENGTH] - row[T.LEN]
+            if not leaving:
+                if j == ego[k]:
+                    new_ego = kept
+                if kept != j:
+                    v[k, kept] = v[k, j]
+                kept += 1
+        v[k, kept : count[k]] = 0.0
+        count[k], ego[k] = kept, new_ego
+
+
+class BlocksSimulator(FastSimulator):
+    """K worlds of a procedural-maps scenario on the compiled core (see the module docstring).
+
+    :param scenario: a scenario with ``procedural_maps`` (its ``spawn(seed, blocks_map, control)``).
+    :param traffic: "empty", "regular" or "dense".
+    :param control: "meta" or "continuous".
+    :param num_worlds: K.
+    :param overrides: config keys: the map set's (``map``, ``start_seed``, ``num_scenarios``,
+        ``lane_count``, ``lane_width``, ``signalised``), ``traffic_density``, highway-env's.
+    """
+
+    def __init__(self, scenario, traffic: str, control: str, num_worlds: int, overrides: dict | None = None):
+        if not scenario.procedural_maps:
+            raise UsageError(f"scenario {scenario.name!r} has no procedural maps")
+        super().__init__(scenario, traffic, control, num_worlds, overrides)
+        k = num_worlds
+        self.map_set = MapSet.from_config(self._road.config)
+        self.maps: list[BlocksMap] = []
+        self._slot_of: dict[int, int] = {}  # map seed → slot in ``maps``
+        self.lanes = np.zeros((0, L.LANE_COLUMNS))  # every loaded map's rows, stacked
+        self.in_junction = np.zeros(0, dtype=bool)
+        self.dead_end = np.zeros(0, dtype=bool)
+        self.solid = np.zeros((0, 2), dtype=bool)
+        # blocks_traffic's per-lane arrays of every loaded map, stacked: junction, from_arm, to_arm,
+        # turn, end_junction, end_arm, light, changeable, ending; then the continuations' CSR
+        self.road_arrays: tuple[np.ndarray, ...] = (
+            *(np.zeros(0, dtype=np.int64) for _ in range(7)),
+            np.zeros(0, dtype=bool),
+            np.zeros(0, dtype=bool),
+            np.zeros(1, dtype=np.int64),
+            np.zeros(0, dtype=np.int64),
+        )
+        self.light_junction = np.zeros(0, dtype=np.int64)  # every loaded map's lights, stacked
+        self.light_arm = np.zeros(0, dtype=np.int64)
+        self.signal_xyh = np.zeros((0, 3))  # every loaded map's exported lights (one per lane), stacked
+        self.signal_light = np.zeros(0, dtype=np.int64)  # their light rows (local to their maps)
+        self.map_signal_start = np.zeros(0, dtype=np.int64)
+        self.signal_start = np.zeros(k, dtype=np.int64)  # world k's: [signal_start, signal_stop)
+        self.signal_stop = np.zeros(k, dtype=np.int64)
+        self.map_light_start = np.zeros(0, dtype=np.int64)  # first stacked light of each map
+        self.light_start = np.zeros(k, dtype=np.int64)  # world k's lights: [light_start, light_stop)
+        self.light_stop = np.zeros(k, dtype=np.int64)
+        self.offsets = np.zeros((k, 0))  # (K, J_max) world k's cycle offset of each intersection
+        self.light_state = np.zeros((k, 0), dtype=np.int64)  # (K, M_max) LIGHT_* of world k's lights
+        self._red_light = np.zeros(k, dtype=bool)
+        self._lights_of: np.ndarray | None = None  # the world_map the light gather was made for
+        self._light_gather = (np.zeros((k, 0), dtype=np.int64), np.zeros((k, 0), dtype=bool))
+        self.timings = np.zeros(3)  # the lights' (green, yellow, all red) seconds: the maps' own
+        self.map_start = np.zeros(0, dtype=np.int64)  # first stacked row of each map
+        self.map_roads: tuple[RoadMap, ...] = ()  # every loaded map's RoadMap, by slot
+        self.roads: tuple[RoadMap, ...] = ()  # the maps the worlds drive now (a batch's roads)
+        self._road_index = np.zeros(k, dtype=np.int64)
+        self._roads_of: np.ndarray | None = None  # the world_map the two above were made for
+        self.world_map = np.zeros(k, dtype=np.int64)
+        self.lane_start = np.zeros(k, dtype=np.int64)
+        self.lane_stop = np.zeros(k, dtype=np.int64)
+        self.route_time_limit_s = np.full(k, np.inf)
+        self._route_of: dict[tuple[int, int], int] = {}  # (map slot, spawn lane) → route index
+        self.arrival_threshold = ARRIVAL_WINDOW_M
+        top_speed = np.full(k, EGO_MAX_SPEED_MPS)  # the sensors' speed scale (ego_state, measurements)
+        top_speed.setflags(write=False)
+        self._empty = {**self._empty, "max_speed_mps": top_speed}
+        self._slot(self.map_set.start_seed)  # the first map: the road the base class converted
+
+    # --- maps -------------------------------------------------------------------------------------
+    def _slot(self, seed: int) -> int:
+        """The slot of map ``seed`` in ``maps``, converting and stacking it at its first use."""
+        slot = self._slot_of.get(seed)
+        if slot is not None:
+            return slot
+        converted = self._road.cache.setdefault("blocks_maps", {})  # shared by this config's simulators
+        bmap = converted.get(seed)
+        if bmap is None:
+            bmap = converted[seed] = blocks_map(self.map_set.generate(seed), self._road)
+        slot = self._slot_of[seed] = len(self.maps)
+        self.maps.append(bmap)
+        self.map_start = np.append(self.map_start, len(self.lanes))
+        self.lanes = np.concatenate([self.lanes, bmap.table.rows])
+        self.in_junction = np.concatenate([self.in_junction, bmap.in_junction])
+        self.dead_end = np.concatenate([self.dead_end, bmap.dead_end])
+        self.solid = np.concatenate([self.solid, bmap.solid])
+        *lane_arrays, changeable, ending, successor_start, successors = self.road_arrays
+        self.road_arrays = (
+            *(np.concatenate([a, b]) for a, b in zip(lane_arrays, bmap.junction_arrays, strict=True)),
+            np.concatenate([changeable, bmap.changeable]),
+            np.concatenate([ending, bmap.ending]),
+            np.concatenate([successor_start[:-1], bmap.successor_start + len(successors)]),
+            np.concatenate([successors, bmap.successors]),
+        )
+        self.map_light_start = np.append(self.map_light_start, len(self.light_arm))
+        self.light_junction = np.concatenate([self.light_junction, bmap.light_junction])
+        self.light_arm = np.concatenate([self.light_arm, bmap.light_arm])
+        self.map_signal_start = np.append(self.map_signal_start, len(self.signal_light))
+        self.signal_xyh = np.concatenate([self.signal_xyh, bmap.signal_xyh])
+        self.signal_light = np.concatenate([self.signal_light, bmap.signal_light])
+        timings = bmap.pg.description.timings
+        self.timings = np.array([timings.green_s, timings.yellow_s, timings.all_red_s])
+        k = self.num_worlds
+        if bmap.junction_count > self.offsets.shape[1]:
+            self.offsets = np.concatenate(
+                [self.offsets, np.zeros((k, bmap.junction_count - self.offsets.shape[1]))], axis=1
+            )
+        if len(bmap.light_arm) > self.light_state.shape[1]:
+            grow = len(bmap.light_arm) - self.light_state.shape[1]
+            self.light_state = np.concatenate([self.light_state, np.zeros((k, grow), dtype=np.int64)], axis=1)
+        self.map_roads = (*self.map_roads, bmap.road.road_map)
+        return slot
+
+    def map_of(self, k: int) -> BlocksMap:
+        """World k's map."""
+        return self.maps[int(self.world_map[k])]
+
+    def _route(self, slot: int, lane: int) -> int:
+        """The route index of the ego route from spawn lane ``lane`` of map ``slot``."""
+        key = (slot, lane)
+        if key not in self._route_of:
+            tracker = self.maps[slot].routes.get(lane)
+            if tracker is None:
+                raise NotImplementedError(f"no ego route from lane {lane} of map {slot}")
+            self._route_of[key] = len(self._trackers)
+            self._trackers.append(tracker)
+            self._pad_routes()
+        return self._route_of[key]
+
+    # --- episodes -------------------------------------------------------------------------------
+    def _start_episodes(self, worlds: np.ndarray, seeds: np.ndarray) -> None:
+        """New episodes in ``worlds``: each seed's map, then the scenario's set-up on it (one call
+        per world started: the vehicles of each are made by one compiled call)."""
+        for k in worlds:
+            seed = int(seeds[k])
+            slot = self._slot(self.map_set.seed_of(seed))
+            bmap = self.maps[slot]
+            rows, ego, regulation, offsets = self.scenario.spawn(seed, bmap, self.control)
+            self._fit(len(rows))
+            self.vehicles[k] = 0.0
+            self.vehicles[k, : len(rows)] = rows
+            self.count[k], self.ego[k], self.regulation[k] = len(rows), ego, regulation
+            self.world_map[k] = slot
+            self.lane_start[k] = self.map_start[slot]
+            self.lane_stop[k] = self.map_start[slot] + len(bmap.table.rows)
+            lane = int(rows[ego, T.LANE])
+            self.route_index[k] = self._route(slot, lane)
+            self.route_time_limit_s[k] = route_time_limit_s(self._trackers[self.route_index[k]])
+            self.start_lane_id[k] = bmap.table.rows[lane, L.LANE_ID]
+            self.light_start[k] = self.map_light_start[slot]
+            self.light_stop[k] = self.map_light_start[slot] + len(bmap.light_arm)
+            self.signal_start[k] = self.map_signal_start[slot]
+            self.signal_stop[k] = self.map_signal_start[slot] + len(bmap.signal_light)
+            self.offsets[k] = 0.0
+            self.offsets[k, : len(offsets)] = offsets
+            self.light_state[k] = 0
+        self.time_s[worlds] = 0.0
+        if len(worlds):
+            self._update_lights(np.isin(np.arange(self.num_worlds), worlds))
+
+    def _update_lights(self, active: np.ndarray) -> None:
+        """The light states of the ``active`` worlds at their time (``light_states_map_worlds``)."""
+        if self.light_state.shape[1]:
+            light_states_map_worlds(
+                self.light_junction, self.light_arm, self.light_start, self.light_stop, self.offsets,
+                self.timings, self.time_s, active, self.light_state,
+            )  # fmt: skip
+
+    # --- stepping -------------------------------------------------------------------------------
+    def reset_where(self, mask: np.ndarray, seeds: np.ndarray) -> WorldBatch:
+        self._red_light = np.zeros(self.num_worlds, dtype=bool)
+        return super().reset_where(mask, seeds)
+
+    def step(
+        self, controls: np.ndarray, restart: np.ndarray | None = None, seeds: np.ndarray | None = None
+    ) -> WorldBatch:
+        """One policy step of every world (see ``FastSimulator.step``); traffic at a dead end leaves.
+        The lights take their states at the step's end time (as the town's), and the ego runs a red
+        light when it leaves a lane whose light is red for one starting where that lane ends."""
+        if self.batch is None:
+            raise UsageError("BlocksSimulator.step before reset_where")
+        k = self.num_worlds
+        restart = np.zeros(k, dtype=bool) if restart is None else np.asarray(restart, dtype=bool)
+        worlds = np.arange(k)
+        previous_lane = self.lane_start + self.vehicles[worlds, self.ego, T.LANE].astype(np.int64)
+        self.apply_controls(controls)
+        np.add(self.time_s, self._dt_policy, out=self.time_s)
+        self._update_lights(~restart)
+        self.run_frames(lambda frames: simulate_map_worlds(
+            self.vehicles, self.count, self.lanes, self.lane_start, self.lane_stop, self.idm, frames,
+            self.dt_s, self.regulation, ~restart, TRAFFIC_SPEED_MPS, self.road_arrays, self.light_start,
+            self.light_stop, self.light_state, EGO_MAX_SPEED_MPS,
+        ))  # fmt: skip
+        clear_dead_ends(
+            self.vehicles, self.count, self.ego, self.lanes, self.lane_start, self.lane_stop, self.dead_end
+        )
+        lane = self.lane_start + self.vehicles[worlds, self.ego, T.LANE].astype(np.int64)
+        light = self.road_arrays[6][previous_lane]  # the light of the lane the ego was on (local row)
+        state = (
+            self.light_state[worlds, np.maximum(light, 0)] if self.light_state.shape[1] else np.zeros(k, int)
+        )
+        crossed = self.lanes[lane, L.FROM_NODE] == self.lanes[previous_lane, L.TO_NODE]
+        self._red_light = ~restart & (light >= 0) & crossed & (state == LIGHT_RED)
+        if np.count_nonzero(restart):  # as FastSimulator.step (ndarray.any costs a microsecond)
+            self._start_episodes(np.flatnonzero(restart), seeds)
+        self._project(fresh=restart, update=self._every_world)
+        self.batch = self._export()
+        return self.batch
+
+    def apply_controls(self, controls: np.ndarray) -> None:
+        """The egos' meta-actions on their maps' lanes, or continuous controls (as FastSimulator)."""
+        if self.control != "meta":
+            super().apply_controls(controls)
+            return
+        actions = np.asarray(controls).reshape(self.num_worlds).astype(np.int64)
+        apply_meta_map_worlds(
+            self.vehicles, self.count, self.ego, self.lanes, self.lane_start, self.lane_stop, actions,
+            self._road.target_speeds,
+        )  # fmt: skip
+
+    # --- export ---------------------------------------------------------------------------------
+    def _export(self) -> WorldBatch:
+        floats, ints, flags, vehicles, valid = self._export_buffers()
+        export_map_worlds(
+            self.vehicles, self.count, self.ego, self.lanes, self.lane_start, self.lane_stop,
+            self.in_junction, self.dead_end, self.solid, floats, ints, flags, vehicles, valid,
+        )  # fmt: skip
+        if self._roads_of is None or not np.array_equal(self._roads_of, self.world_map):
+            used, index = np.unique(self.world_map, return_inverse=True)
+            self.roads = tuple(self.map_roads[slot] for slot in used)
+            self._road_index, self._roads_of = index.astype(np.int64), self.world_map.copy()
+            self._road_index.setflags(write=False)
+        self._empty = {**self._empty, "road_index": self._road_index}
+        batch = self._export_arrays(floats, ints, flags, vehicles, valid)
+        if not self.light_state.shape[1]:
+            return batch  # no map of the set has lights
+        if self._lights_of is None or not np.array_equal(self._lights_of, self.world_map):
+            count = self.signal_stop - self.signal_start
+            slot = np.arange(max(int(count.max()), 1))
+            light_valid = slot[None, :] < count[:, None]
+            rows = np.where(light_valid, self.signal_start[:, None] + slot[None, :], 0)
+            light_valid.setflags(write=False)
+            self._light_gather, self._lights_of = (rows, light_valid), self.world_map.copy()
+        rows, light_valid = self._light_gather
+        state = np.take_along_axis(self.light_state, self.signal_light[rows], axis=1)
+        lights = np.concatenate([self.signal_xyh[rows], state[..., None]], axis=2)
+        lights[~light_valid] = 0.0
+        events = batch.events.replaced(red_light_crossed=self._red_light.copy())
+        return batch.replaced(events=events, traffic_lights=lights, light_valid=light_valid)

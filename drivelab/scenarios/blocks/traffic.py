@@ -1,0 +1,412 @@
+"""The procedural maps' traffic as compiled loops over ONE world's arrays (the caller loops the worlds).
+
+``blocks_simulate`` is ``traffic.simulate`` (highway-env's frames: every vehicle acts, the road's
+rules every regulation period, every vehicle steps, collisions) with ``blocks_act`` in place of
+``traffic.act``. It differs for the traffic rows (KIND ``IDM``) only; the ego rows act as in
+``traffic.act``:
+
+- **lane changes** (highway-env's MOBIL, ``traffic``'s own neighbour search and IDM accelerations,
+  ``blocks_mobil``) only where a road's lanes run side by side: ``changeable`` lanes, those of a
+  road of two lanes or more whose lanes are all of one kind (straight or arc) outside the
+  intersections and the roundabouts (``blocks_spawn.changeable_lanes``). A change is considered
+  only when the rest of the vehicle's route can still be driven from the new lane through the
+  lanes that continue one another (``route_feasible``): a vehicle bound for an off-ramp stays in
+  the lane that leads there. On an ``ending`` lane (one that leads into a taper merging into its
+  neighbour: the in-ramp's acceleration lane, the merge's lane that ends) the change is
+  mandatory: checked every frame, taken as soon as neither the vehicle nor its new follower has
+  to brake harder than LANE_CHANGE_MAX_BRAKING_IMPOSED (MOBIL's safety criterion, the rule
+  highway-env's MOBIL applies to a lane its route asks for); a vehicle that finds no gap stops
+  at the ending lane's end (the town's stop-line deceleration, ``stop_ahead``) and waits for one.
+- **the next lane** at the end of a lane (``blocks_follow_road``): the continuation of the lane on
+  the route's next road, the route's named lane first, else another continuation from which the
+  rest of the route can be driven; past the route's end (or off it) the continuation with the
+  same lane id, else the first one; a lane leading nowhere is kept (the vehicle leaves the map).
+- **traffic lights** (signalised junctions): the town's stop-line rule (``town_traffic``'s
+  ``town_acceleration`` with no leader: red always, yellow unless too late to stop, a left turn
+  on green waits for oncoming vehicles), its virtual leader's deceleration taken when lower.
+
+Arrays (one world): ``v`` (N, VEHICLE_COLUMNS) vehicle rows; ``lanes`` (L, LANE_COLUMNS) the
+map's lane rows (lane indices local to the map); ``junction``, ``from_arm``, ``to_arm``,
+``turn``, ``end_junction``, ``end_arm``, ``light`` (L,) int64 (the description's; ``light`` is
+-1 on lanes without a light); ``changeable``, ``ending`` (L,) bool; ``successor_start`` (L + 1,) int64
+offsets into ``successors`` (E,) int64 local lane rows (the CSR of ``blocks_spawn._continuations``,
+offsets possibly shifted: a stacked array's slice); ``light_states`` (M,) int64 LIGHT_* of the
+map's lights.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from drivelab.sim.core import traffic as T
+from drivelab.sim.core.borrow import borrowed
+from drivelab.sim.core.lanes import (
+    FIRST_OF_ROAD,
+    LANE_COUNT,
+    LANE_ID,
+    LENGTH,
+    VEHICLE_LENGTH,
+    is_reachable_from,
+    local_coordinates,
+)
+from drivelab.sim.junctions.rows import PEDESTRIAN_COLUMNS
+from drivelab.sim.junctions.rules import STOP_MARGIN_M
+from drivelab.sim.junctions.traffic import py_square, town_acceleration
+
+_NO_PEDESTRIANS = np.zeros((0, PEDESTRIAN_COLUMNS))
+
+
+@njit(cache=True)
+def route_feasible(
+    v: np.ndarray, lanes: np.ndarray, successor_start: np.ndarray, successors: np.ndarray, i: int,
+    lane: int, first: int,
+) -> bool:  # fmt: skip
+    """Whether vehicle i's route entries ``first`` … ROUTE_END − 1 (roads) can be driven from lane
+    row ``lane``, each step a lane continuing the one before it (depth-first over the
+    continuations; a route holds at most a dozen roads and few lanes branch)."""
+    v, lanes, successor_start, successors = borrowed((v, lanes, successor_start, successors))
+    n = int(v[i, T.ROUTE_END]) - first
+    if n <= 0:
+        return True
+    edge = np.empty(n, dtype=np.int64)  # the next continuation to try at each depth
+    path = np.empty(n, dtype=np.int64)  # the lane chosen at each depth
+    depth, edge[0] = 0, successor_start[lane]
+    while True:
+        parent = lane if depth == 0 else path[depth - 1]
+        wanted = v[i, T.ROUTE + 2 * (first + depth)]
+        found = False
+        while edge[depth] < successor_start[parent + 1]:
+            candidate = successors[edge[depth]]
+            edge[depth] += 1
+            if lanes[candidate, FIRST_OF_ROAD] == wanted:
+                path[depth], found = candidate, True
+                break
+        if found:
+            if depth == n - 1:
+                return True
+            depth += 1
+            edge[depth] = successor_start[path[depth - 1]]
+        elif depth == 0:
+            return False
+        else:
+            depth -= 1
+
+
+@njit(cache=True, inline="always")
+def _after_road(v: np.ndarray, lanes: np.ndarray, i: int, lane: int) -> int:
+    """The first of vehicle i's route entries after the road of ``lane`` (a route's first entry
+    is the road the vehicle is on until it is left)."""
+    start = int(v[i, T.ROUTE_START])
+    if start < v[i, T.ROUTE_END] and v[i, T.ROUTE + 2 * start] == lanes[lane, FIRST_OF_ROAD]:
+        start += 1
+    return start
+
+
+@njit(cache=True)
+def blocks_follow_road(
+    v: np.ndarray, lanes: np.ndarray, successor_start: np.ndarray, successors: np.ndarray, i: int
+) -> None:
+    """At the end of vehicle i's target lane (as ``ControlledVehicle.follow_road``: within half a
+    vehicle length of it), target the next lane (see the module docstring); the finished route
+    entry is dropped."""
+    v, lanes, successor_start, successors = borrowed((v, lanes, successor_start, successors))
+    target = int(v[i, T.TARGET_LANE])
+    s, _ = local_coordinates(lanes, target, v[i, T.X], v[i, T.Y])
+    if s <= lanes[target, LENGTH] - VEHICLE_LENGTH / 2:
+        return
+    start = _after_road(v, lanes, i, target)
+    v[i, T.ROUTE_START] = start
+    first, stop = successor_start[target], successor_start[target + 1]
+    if stop == first:
+        return  # a dead end: the vehicle drives on to the lane's end and leaves
+    choice = -1
+    if start < v[i, T.ROUTE_END]:
+        wanted, named = v[i, T.ROUTE + 2 * start], v[i, T.ROUTE + 2 * start + 1]
+        for named_only in (True, False):
+            for e in range(first, stop):
+                candidate = successors[e]
+                if lanes[candidate, FIRST_OF_ROAD] != wanted or (
+                    named_only and lanes[candidate, LANE_ID] != named
+                ):
+                    continue
+                if route_feasible(v, lanes, successor_start, successors, i, candidate, start + 1):
+                    choice = candidate
+                    break
+            if choice >= 0:
+                break
+    if choice < 0:  # no route left (or off it): the lane's own continuation, else the first
+        choice = successors[first]
+        for e in range(first, stop):
+            if lanes[successors[e], LANE_ID] == lanes[target, LANE_ID]:
+                choice = successors[e]
+                break
+    v[i, T.TARGET_LANE] = choice
+
+
+@njit(cache=True)
+def rear_across(
+    v: np.ndarray, lanes: np.ndarray, coords: np.ndarray, done: np.ndarray, i: int, lane: int,
+    successor_start: np.ndarray, successors: np.ndarray,
+) -> int:  # fmt: skip
+    """The vehicle behind vehicle i on ``lane`` (``traffic.cached_neighbours``' rear), else the one
+    nearest the end of a lane that ``lane`` continues (it comes onto ``lane`` next; highway-env's
+    neighbour search, which looks at the lane alone, misses it at a road's start), else -1."""
+    v, lanes, coords, done, successor_start, successors = borrowed(
+        (v, lanes, coords, done, successor_start, successors)
+    )
+    _, rear = T.cached_neighbours(v, lanes, coords, done, i, lane)
+    if rear >= 0:
+        return rear
+    behind_m = np.inf
+    for r in range(lanes.shape[0]):
+        for e in range(successor_start[r], successor_start[r + 1]):
+            if successors[e] != lane:
+                continue
+            T.lane_coordinates(v, lanes, coords, done, r)
+            for rank in range(done[r] - 1, -1, -1):  # the farthest along the lane first
+                j = int(coords[r, rank, 3])
+                if j != i:
+                    if lanes[r, LENGTH] - coords[r, j, 0] < behind_m:
+                        rear, behind_m = j, lanes[r, LENGTH] - coords[r, j, 0]
+                    break
+    return rear
+
+
+@njit(cache=True)
+def blocks_mobil(
+    v: np.ndarray, lanes: np.ndarray, p: np.ndarray, coords: np.ndarray, done: np.ndarray,
+    trig: np.ndarray, i: int, lane: int, successor_start: np.ndarray, successors: np.ndarray,
+) -> bool:  # fmt: skip
+    """highway-env's ``IDMVehicle.mobil`` (``traffic.mobil_side``) without its planned-lane
+    branch: the change to ``lane`` is safe for the new follower (it brakes less than
+    LANE_CHANGE_MAX_BRAKING_IMPOSED) and worth it (the politeness-weighted acceleration gain
+    reaches LANE_CHANGE_MIN_ACC_GAIN). The route is checked by ``route_feasible`` instead; the new
+    follower may come from the lane before ``lane`` (``rear_across``)."""
+    v, lanes, p, coords, done, trig, successor_start, successors = borrowed(
+        (v, lanes, p, coords, done, trig, successor_start, successors)
+    )
+    new_preceding, _ = T.cached_neighbours(v, lanes, coords, done, i, lane)
+    new_following = rear_across(v, lanes, coords, done, i, lane, successor_start, successors)
+    new_following_a = T.cached_idm_acceleration(
+        v, lanes, p, coords, done, trig, i, new_following, new_preceding
+    )
+    new_following_pred_a = T.cached_idm_acceleration(v, lanes, p, coords, done, trig, i, new_following, i)
+    if new_following_pred_a < -p[T.MAX_BRAKING_IMPOSED]:
+        return False
+    old_preceding, old_following = T.cached_neighbours(v, lanes, coords, done, i, int(v[i, T.LANE]))
+    self_pred_a = T.cached_idm_acceleration(v, lanes, p, coords, done, trig, i, i, new_preceding)
+    self_a = T.cached_idm_acceleration(v, lanes, p, coords, done, trig, i, i, old_preceding)
+    old_following_a = T.cached_idm_acceleration(v, lanes, p, coords, done, trig, i, old_following, i)
+    old_following_pred_a = T.cached_idm_acceleration(
+        v, lanes, p, coords, done, trig, i, old_following, old_preceding
+    )
+    jerk = (
+        self_pred_a
+        - self_a
+        + p[T.POLITENESS] * (new_following_pred_a - new_following_a + old_following_pred_a - old_following_a)
+    )
+    return jerk >= p[T.MIN_ACC_GAIN]
+
+
+@njit(cache=True)
+def merge_safe(
+    v: np.ndarray, lanes: np.ndarray, p: np.ndarray, coords: np.ndarray, done: np.ndarray,
+    trig: np.ndarray, i: int, lane: int, successor_start: np.ndarray, successors: np.ndarray,
+) -> bool:  # fmt: skip
+    """MOBIL's safety criterion for a mandatory change to ``lane``: neither the new follower
+    behind vehicle i nor vehicle i behind its new leader brakes harder than
+    LANE_CHANGE_MAX_BRAKING_IMPOSED (``traffic.mobil_side``'s branch for a lane the route asks
+    for; the new follower as ``blocks_mobil`` finds it)."""
+    v, lanes, p, coords, done, trig, successor_start, successors = borrowed(
+        (v, lanes, p, coords, done, trig, successor_start, successors)
+    )
+    new_preceding, _ = T.cached_neighbours(v, lanes, coords, done, i, lane)
+    new_following = rear_across(v, lanes, coords, done, i, lane, successor_start, successors)
+    new_following_pred_a = T.cached_idm_acceleration(v, lanes, p, coords, done, trig, i, new_following, i)
+    if new_following_pred_a < -p[T.MAX_BRAKING_IMPOSED]:
+        return False
+    self_pred_a = T.cached_idm_acceleration(v, lanes, p, coords, done, trig, i, i, new_preceding)
+    return not self_pred_a < -p[T.MAX_BRAKING_IMPOSED]
+
+
+@njit(cache=True, inline="always")
+def _side_lane(
+    v: np.ndarray, lanes: np.ndarray, i: int, lane: int, side: int, changeable: np.ndarray,
+    successor_start: np.ndarray, successors: np.ndarray,
+) -> int:  # fmt: skip
+    """The lane beside ``lane`` on ``side`` (-1 left, +1 right) when vehicle i may change to it
+    (changeable and reachable), else -1."""
+    lane_id, count = lanes[lane, LANE_ID], lanes[lane, LANE_COUNT]
+    if not (0 <= lane_id + side < count):
+        return -1
+    candidate = lane + side
+    if not changeable[candidate] or not is_reachable_from(lanes, candidate, v[i, T.X], v[i, T.Y]):
+        return -1
+    return candidate
+
+
+@njit(cache=True, inline="always")
+def _route_goes_on(
+    v: np.ndarray, lanes: np.ndarray, i: int, lane: int, successor_start: np.ndarray, successors: np.ndarray
+) -> bool:
+    """Vehicle i's route can be driven on from ``lane`` (``route_feasible`` after its road)."""
+    first = _after_road(v, lanes, i, lane)
+    return route_feasible(v, lanes, successor_start, successors, i, lane, first)
+
+
+@njit(cache=True)
+def blocks_change_lane_policy(
+    v: np.ndarray, lanes: np.ndarray, p: np.ndarray, coords: np.ndarray, done: np.ndarray,
+    trig: np.ndarray, i: int, changeable: np.ndarray, ending: np.ndarray, successor_start: np.ndarray,
+    successors: np.ndarray,
+) -> None:  # fmt: skip
+    """``IDMVehicle.change_lane_policy`` (``traffic.change_lane_policy``: abort a change into a lane
+    someone else is entering; every LANE_CHANGE_DELAY seconds ask MOBIL about each side lane, the
+    right one last) on ``changeable`` lanes, to side lanes from which the route goes on."""
+    v, lanes, p, coords, done, trig, changeable, ending, successor_start, successors = borrowed(
+        (v, lanes, p, coords, done, trig, changeable, ending, successor_start, successors)
+    )
+    lane, target = int(v[i, T.LANE]), int(v[i, T.TARGET_LANE])
+    if lane != target:
+        if lanes[lane, FIRST_OF_ROAD] == lanes[target, FIRST_OF_ROAD]:
+            for j in range(v.shape[0]):
+                if (
+                    j != i
+                    and int(v[j, T.LANE]) != target
+                    and (v[j, T.KIND] == T.CONTROLLED or v[j, T.KIND] == T.IDM)
+                    and int(v[j, T.TARGET_LANE]) == target
+                ):
+                    T.lane_coordinates(v, lanes, coords, done, lane)
+                    if 0 < coords[lane, j, 0] - coords[lane, i, 0] < T.cached_desired_gap(v, p, trig, i, j):
+                        v[i, T.TARGET_LANE] = lane
+                        break
+        return
+    if ending[lane]:  # a mandatory change, looked for every frame
+        for side in (-1, 1):
+            candidate = _side_lane(v, lanes, i, lane, side, changeable, successor_start, successors)
+            if (
+                candidate >= 0
+                and not ending[candidate]
+                and merge_safe(v, lanes, p, coords, done, trig, i, candidate, successor_start, successors)
+                and _route_goes_on(v, lanes, i, candidate, successor_start, successors)
+            ):
+                v[i, T.TARGET_LANE] = candidate
+                return
+        return
+    if not p[T.LANE_CHANGE_DELAY] < v[i, T.TIMER]:
+        return
+    v[i, T.TIMER] = 0.0
+    if not changeable[lane] or np.abs(v[i, T.SPEED]) < 1:
+        return
+    for side in (-1, 1):
+        candidate = _side_lane(v, lanes, i, lane, side, changeable, successor_start, successors)
+        if (
+            candidate >= 0
+            and blocks_mobil(v, lanes, p, coords, done, trig, i, candidate, successor_start, successors)
+            and _route_goes_on(v, lanes, i, candidate, successor_start, successors)
+        ):
+            v[i, T.TARGET_LANE] = candidate
+
+
+@njit(cache=True, inline="always")
+def stop_ahead(v: np.ndarray, p: np.ndarray, i: int, ahead_m: float) -> float:
+    """IDM's acceleration of vehicle i behind a stopped virtual leader ``ahead_m`` metres beyond
+    its front bumper, to stand STOP_MARGIN_M short of it (``town_traffic.town_acceleration``'s
+    stop line, the same arithmetic)."""
+    gap_m = ahead_m - STOP_MARGIN_M + p[T.DISTANCE_WANTED]
+    speed = max(v[i, T.SPEED], 0.0)
+    ab = -p[T.COMFORT_ACC_MAX] * p[T.COMFORT_ACC_MIN]
+    desired_gap = p[T.DISTANCE_WANTED] + speed * p[T.TIME_WANTED] + speed * speed / (2 * np.sqrt(ab))
+    target = T.not_zero(v[i, T.TARGET_SPEED])
+    stop = p[T.COMFORT_ACC_MAX] * (1 - (speed / np.abs(target)) ** v[i, T.DELTA])
+    return stop - p[T.COMFORT_ACC_MAX] * py_square(desired_gap / T.not_zero(gap_m))
+
+
+@njit(cache=True)
+def blocks_act(
+    v, lanes, p, coords, done, trig, junction, from_arm, to_arm, turn, end_junction, end_arm, light,
+    changeable, ending, successor_start, successors, light_states,
+) -> None:  # fmt: skip
+    """``traffic.act`` with the procedural maps' traffic rules (see the module docstring)."""
+    v, lanes, p, coords, done, trig, changeable, ending, successor_start, successors = borrowed(
+        (v, lanes, p, coords, done, trig, changeable, ending, successor_start, successors)
+    )  # no reference counts in the inlined helpers (``borrow``)
+    junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states = borrowed(
+        (junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states)
+    )
+    T.start_frame(v, done, trig)
+    not_seen = np.zeros((0, 0), dtype=np.int8)  # town_acceleration's lane_s flags: no leader, none read
+    for i in range(v.shape[0]):
+        kind = v[i, T.KIND]
+        if kind == T.PLAIN or kind == T.PEDAL_KIND or kind == T.OBSTACLE:
+            continue
+        if kind == T.IDM and v[i, T.CRASHED] > 0:
+            continue
+        if kind == T.CONTROLLED:
+            T.follow_road(v, lanes, i)
+            v[i, T.STEER] = T.steering_control(v, lanes, i, int(v[i, T.TARGET_LANE]))
+            v[i, T.ACCEL] = T.KP_A * (v[i, T.TARGET_SPEED] - v[i, T.SPEED])
+            continue
+        blocks_follow_road(v, lanes, successor_start, successors, i)
+        blocks_change_lane_policy(
+            v, lanes, p, coords, done, trig, i, changeable, ending, successor_start, successors
+        )
+        v[i, T.STEER] = T.steering_control(v, lanes, i, int(v[i, T.TARGET_LANE]))
+        front, _ = T.cached_neighbours(v, lanes, coords, done, i, int(v[i, T.LANE]))
+        acceleration = T.cached_idm_acceleration(v, lanes, p, coords, done, trig, i, i, front)
+        if int(v[i, T.LANE]) != int(v[i, T.TARGET_LANE]):
+            front, _ = T.cached_neighbours(v, lanes, coords, done, i, int(v[i, T.TARGET_LANE]))
+            target_a = T.cached_idm_acceleration(v, lanes, p, coords, done, trig, i, i, front)
+            acceleration = min(acceleration, target_a)
+        lane = int(v[i, T.LANE])
+        if ending[lane] and lane == int(v[i, T.TARGET_LANE]):  # no gap to merge into yet
+            s, _ = local_coordinates(lanes, lane, v[i, T.X], v[i, T.Y])
+            acceleration = min(acceleration, stop_ahead(v, p, i, lanes[lane, LENGTH] - s - v[i, T.LEN] / 2))
+        if light[lane] >= 0:  # the town's stop line (with no leader: IDM's free term)
+            acceleration = min(
+                acceleration,
+                town_acceleration(
+                    v, _NO_PEDESTRIANS, lanes, p, coords, done, trig, not_seen, i, -1, junction, from_arm,
+                    to_arm, turn, end_junction, end_arm, light, light_states,
+                ),
+            )  # fmt: skip
+        v[i, T.ACCEL] = T._clip(acceleration, -p[T.ACC_MAX], p[T.ACC_MAX])
+
+
+@njit(cache=True)
+def blocks_simulate(
+    v, lanes, p, frames, dt, regulation, release_cap_mps, junction, from_arm, to_arm, turn,
+    end_junction, end_arm, light, changeable, ending, successor_start, successors, light_states,
+    ego_max_speed_mps,
+) -> None:  # fmt: skip
+    """``traffic.simulate`` (``frames`` frames of ``dt``; the road's rules every ``regulation[0]``
+    frames, at the junctions only, a released vehicle cruising at ``release_cap_mps``) with
+    ``blocks_act``; the lights hold their states (``light_states``) through the step. The ego rows
+    (every row but the traffic's) go no faster than ``ego_max_speed_mps``: above it their
+    acceleration is clipped as ``Vehicle.clip_actions`` clips at MAX_SPEED (MetaDrive's ego tops
+    out at 80 km/h, highway-env's at 40 m/s)."""
+    v, lanes, p, regulation, changeable, ending, successor_start, successors = borrowed(
+        (v, lanes, p, regulation, changeable, ending, successor_start, successors)
+    )
+    junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states = borrowed(
+        (junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states)
+    )
+    coords, done, trig = T.frame_cache(v, lanes)
+    for _ in range(frames):
+        blocks_act(
+            v, lanes, p, coords, done, trig, junction, from_arm, to_arm, turn, end_junction, end_arm,
+            light, changeable, ending, successor_start, successors, light_states,
+        )  # fmt: skip
+        if regulation[0] > 0:
+            regulation[1] += 1
+            if regulation[1] % regulation[0] == 0:
+                T.enforce_road_rules(v, lanes, release_cap_mps, True)
+        for i in range(v.shape[0]):
+            kind = v[i, T.KIND]
+            if kind == T.OBSTACLE:
+                continue
+            if kind != T.IDM and v[i, T.SPEED] > ego_max_speed_mps:
+                v[i, T.ACCEL] = min(v[i, T.ACCEL], 1.0 * (ego_max_speed_mps - v[i, T.SPEED]))
+            T.step_vehicle(v, lanes, i, dt)
+        T.handle_collisions(v, dt)

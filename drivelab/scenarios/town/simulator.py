@@ -1,0 +1,347 @@
+"""K worlds of the signalised town on the compiled core: lights, pedestrians and town traffic.
+
+``TownSimulator`` is ``FastSimulator``'s town: the same API (``reset_where``, ``step`` with
+NEXT_STEP restarts, ``batch``), the same road conversion and ego controls, and per world what the
+reference (``HighwayBackend`` on ``TownEnv``) keeps as objects:
+
+- vehicle rows ``(K, N_max, TOWN_VEHICLE_COLUMNS)`` (the ego and KIND ``TOWN`` traffic) and
+  pedestrian rows ``(K, P_max, PEDESTRIAN_COLUMNS)``, in the reference's list orders;
+- the light offsets ``(K, J)`` and each world's PCG64 words ``(K, 6)``: every random draw of the
+  frames (random routes, pedestrians' waits) and of the retargets comes from them, in the
+  reference's order, so a seed gives the reference's episode;
+- the ego's planned route (lane rows) and its polyline, which grows when a training episode
+  retargets on arrival, and the NoCrash time limit of fixed routes (``route_time_limit_s``).
+
+One policy step of a world (``simulate_town_worlds``): the light states at the step's end time
+(the reference's lights read ``env.time``, advanced before its frames), then per frame: every
+vehicle acts (``town_traffic.town_act``), the pedestrians walk, the vehicles step and collide,
+moving vehicles hit pedestrians, wrecks are towed (``pedestrians``). Then the ego's route
+progress, its retarget, and the events: a red light run is judged on the lanes before and after
+the step, as the reference judges it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numba
+import numpy as np
+from numba import njit, prange
+
+from drivelab.errors import UsageError
+from drivelab.scenarios.town.spawn import TownSetup, route_tracker
+from drivelab.sim.core import lanes as L
+from drivelab.sim.core import traffic as T
+from drivelab.sim.core.borrow import borrowed
+from drivelab.sim.core.simulator import (
+    EX_CRASHED,
+    EX_ON_ROAD,
+    FastSimulator,
+    export_worlds,
+)
+from drivelab.sim.junctions import rows as R
+from drivelab.sim.junctions.pedestrians import (
+    clear_wrecks,
+    hit_pedestrians,
+    light_states,
+    walk_pedestrians,
+)
+from drivelab.sim.junctions.rules import PEDESTRIAN_SIZE_M, LightTimings
+from drivelab.sim.junctions.traffic import (
+    random_goal,
+    road_arrays_tuple,
+    town_act,
+    town_frame_cache,
+    town_step,
+)
+from drivelab.sim.route import RouteTracker
+from drivelab.world.batch import (
+    COLLISION_NONE,
+    COLLISION_PEDESTRIAN,
+    COLLISION_VEHICLE,
+    EventsBatch,
+    WorldBatch,
+    assemble,
+)
+from drivelab.world.state import LIGHT_RED
+
+
+@njit(cache=True)
+def _simulate_town(
+    v, count, ego, peds, pcount, lanes, p, coords, done, trig, junction, from_arm, to_arm, turn,
+    end_junction, end_arm, light, street_lanes, routes, route_length, search, search_offset, search_size,
+    discs, states, rng, frames, dt,
+):  # fmt: skip
+    """One policy step (``frames`` frames of ``dt``) of one world; returns (count, ego)."""
+    v, peds, lanes, p, coords, done, trig, states, rng = borrowed(
+        (v, peds, lanes, p, coords, done, trig, states, rng)
+    )  # its arrays without reference counts (``borrow``: 12 % of the frames' time at K = 64)
+    junction, from_arm, to_arm, turn, end_junction, end_arm, light = borrowed(
+        (junction, from_arm, to_arm, turn, end_junction, end_arm, light)
+    )
+    street_lanes, routes, route_length, search, search_offset, search_size, discs = borrowed(
+        (street_lanes, routes, route_length, search, search_offset, search_size, discs)
+    )
+    for _ in range(frames):
+        town_act(
+            v, count, peds, pcount, lanes, p, coords, done, trig, junction, from_arm, to_arm, turn,
+            end_junction, end_arm, light, street_lanes, routes, route_length, search, search_offset,
+            search_size, discs, states, rng,
+        )  # fmt: skip
+        walk_pedestrians(peds, pcount, v, count, dt, rng)
+        town_step(v, count, lanes, dt)
+        T.handle_collisions(v[:count], dt)
+        hit_pedestrians(peds, pcount, v, count, ego)
+        count, ego = clear_wrecks(v, count, ego, dt)
+    return count, ego
+
+
+@njit(cache=True)
+def _light_states_worlds(light_junction, light_arm, offsets, timings, time_s, active, out) -> None:
+    for k in range(out.shape[0]):
+        if active[k]:
+            light_states(
+                light_junction, light_arm, offsets[k], timings[0], timings[1], timings[2], time_s[k], out[k]
+            )
+
+
+def _town_kernel(parallel: bool):
+    def body(
+        v, count, ego, peds, pcount, lanes, p, coords, done, trig, junction, from_arm, to_arm, turn,
+        end_junction, end_arm, light, street_lanes, routes, route_length, search, search_offset, search_size,
+        discs, states, rng, frames, dt, active,
+    ):  # fmt: skip
+        for k in prange(v.shape[0]):
+            if active[k]:
+                count[k], ego[k] = _simulate_town(
+                    v[k], count[k], ego[k], peds[k], pcount[k], lanes, p, coords[k], done[k], trig[k],
+                    junction, from_arm, to_arm, turn, end_junction, end_arm, light, street_lanes, routes,
+                    route_length, search, search_offset, search_size, discs, states[k], rng[k], frames, dt,
+                )  # fmt: skip
+
+    return njit(cache=True, parallel=parallel)(body)
+
+
+_SERIAL, _PARALLEL = _town_kernel(False), _town_kernel(True)
+
+
+@njit(cache=True)
+def export_pedestrians(peds, pcount, pedestrians, pedestrian_valid, hit_ego) -> None:
+    """The pedestrians not crashed (spawn order) of K worlds into zeroed ``pedestrians`` (K, P, 6)
+    (x, y, heading, speed, length, width) with ``pedestrian_valid``; ``hit_ego`` (K,): one of them
+    was hit by the ego (the collision's kind)."""
+    for k in range(peds.shape[0]):
+        n = 0
+        for i in range(pcount[k]):
+            if peds[k, i, R.P_HIT_EGO] > 0:
+                hit_ego[k] = True
+            if peds[k, i, R.P_CRASHED] > 0:
+                continue
+            pedestrians[k, n, 0], pedestrians[k, n, 1] = peds[k, i, R.P_X], peds[k, i, R.P_Y]
+            pedestrians[k, n, 2], pedestrians[k, n, 3] = peds[k, i, R.P_HEADING], peds[k, i, R.P_SPEED]
+            pedestrians[k, n, 4] = pedestrians[k, n, 5] = PEDESTRIAN_SIZE_M
+            pedestrian_valid[k, n] = True
+            n += 1
+
+
+class TownSimulator(FastSimulator):
+    """K worlds of the town on drivelab's compiled kernels, as arrays (see the module docstring).
+
+    :param scenario: the town scenario (``Scenario.spawn`` returns a ``TownEpisode`` as its fourth item).
+    :param traffic: "empty", "regular" or "dense".
+    :param control: "meta" or "continuous".
+    :param num_worlds: K.
+    :param overrides: extra TownEnv config keys ("layout", "fixed_routes", "retarget", …).
+    """
+
+    def __init__(self, scenario, traffic: str, control: str, num_worlds: int, overrides: dict | None = None):
+        super().__init__(scenario, traffic, control, num_worlds, overrides)
+        road, k = self._road, num_worlds
+        self.setup = TownSetup.of(road)
+        arrays = self.arrays = self.setup.arrays
+        self.road_args = road_arrays_tuple(arrays, self.lanes)
+        self.road = dataclasses.replace(self.road, crossings=arrays.crossings)
+        self.roads = (self.road,)
+        self.retarget = bool(road.config.get("retarget"))
+        timings = LightTimings(**road.config["light_timings"])
+        self.timings = np.array([timings.green_s, timings.yellow_s, timings.all_red_s])
+        self.in_junction = arrays.in_junction
+        n_max = 1 + self.setup.vehicles_count
+        p_max = max(self.setup.pedestrians_count, 1)
+        self.vehicles = np.zeros((k, n_max, T.TOWN_VEHICLE_COLUMNS))
+        self.peds = np.zeros((k, p_max, R.PEDESTRIAN_COLUMNS))
+        self.pcount = np.zeros(k, dtype=np.int64)
+        self.offsets = np.zeros((k, arrays.junction_count))
+        self.rng_words = np.zeros((k, 6), dtype=np.uint64)
+        self.light_state = np.zeros((k, len(arrays.light_junction)), dtype=np.int64)
+        self.route_time_limit_s = np.full(k, np.inf)
+        self.ego_routes: list[list[int]] = [[] for _ in range(k)]
+        self.trackers: list[RouteTracker | None] = [None] * k
+        self.route_index = np.arange(k)
+        cache = [town_frame_cache(n_max, p_max, len(self.lanes)) for _ in range(k)]
+        self.coords = np.stack([c[0] for c in cache])
+        self.done = np.stack([c[1] for c in cache])
+        self.trig = np.stack([c[2] for c in cache])
+        self._light_valid = np.ones((k, len(arrays.light_junction)), dtype=bool)
+        self._light_valid.setflags(write=False)
+        self._max_speed = self._empty["max_speed_mps"]
+        self._road_index = self._empty["road_index"]
+
+    # --- episodes -------------------------------------------------------------------------------
+    def _start_episodes(self, worlds: np.ndarray, seeds: np.ndarray) -> None:
+        """New town episodes in ``worlds`` from ``seeds[k]`` (the town's set-up, one per world)."""
+        for k in worlds:
+            rows, ego, _, episode = self.scenario.spawn(int(seeds[k]), self._road, self.control)
+            self.vehicles[k] = 0.0
+            self.vehicles[k, : len(rows)] = rows
+            self.peds[k] = 0.0
+            self.peds[k, : len(episode.pedestrians)] = episode.pedestrians
+            self.count[k], self.ego[k], self.pcount[k] = len(rows), ego, len(episode.pedestrians)
+            self.offsets[k] = episode.light_offsets_s
+            self.rng_words[k] = episode.rng_state
+            self.route_time_limit_s[k] = episode.route_time_limit_s
+            self.ego_routes[k] = [int(lane) for lane in episode.ego_route]
+            self._set_route(k)
+        self.time_s[worlds] = 0.0
+        if worlds.size:
+            self._pad_world_routes(worlds)  # once for all the worlds that started
+            active = np.zeros(self.num_worlds, dtype=bool)
+            active[worlds] = True
+            self._update_lights(active)
+
+    def _set_route(self, k: int) -> None:
+        """World k's route polyline from its planned lanes (``HighwayBackend.route_for``); the
+        padded arrays follow with ``_pad_world_routes``."""
+        self.trackers[k] = route_tracker(self.setup, self.ego_routes[k])
+        self._route_version += 1
+
+    def _pad_world_routes(self, changed) -> None:
+        """Every world's route as padded (K, S) arrays, last point repeated (``_pad_routes``): only
+        the rows of the worlds ``changed`` are rewritten while their routes fit the arrays' width
+        (a route's values do not depend on the width: readers stop at its point count)."""
+        width = self.r_polyline.shape[1] if self._trackers else 0  # no arrays before the first episodes
+        started = next(t for t in self.trackers if t is not None)  # stands in for worlds not yet reset
+        self._trackers = [t if t is not None else started for t in self.trackers]
+        if all(len(self._trackers[k].polyline) <= width for k in changed):
+            for k in changed:
+                self._pad_route(k)
+            return
+        self._pad_routes()
+
+    def _routes_stale(self, route_index: np.ndarray) -> bool:
+        """Every world keeps its own route row (route_index is constant): stale on any change."""
+        return self._route_cache is None or self._route_cache[2] != self._route_version
+
+    def _update_lights(self, active: np.ndarray) -> None:
+        aj, aa = self.arrays.light_junction, self.arrays.light_arm
+        _light_states_worlds(aj, aa, self.offsets, self.timings, self.time_s, active, self.light_state)
+
+    # --- stepping -------------------------------------------------------------------------------
+    def step(self, controls: np.ndarray, restart: np.ndarray | None = None, seeds: np.ndarray | None = None):
+        """One policy step of every world (see ``FastSimulator.step``)."""
+        if self.batch is None:
+            raise UsageError("TownSimulator.step before reset_where")
+        k = self.num_worlds
+        restart = np.zeros(k, dtype=bool) if restart is None else np.asarray(restart, dtype=bool)
+        active = ~restart
+        worlds = np.arange(k)
+        previous_lane = self.vehicles[worlds, self.ego, T.LANE].astype(np.int64)
+        self.apply_controls(controls)
+        self.time_s[active] += 1 / self.policy_frequency_hz  # the lights read the step's end time
+        self._update_lights(active)
+        kernel = _PARALLEL if k > 1 and numba.get_num_threads() > 1 else _SERIAL
+        self.run_frames(lambda frames: kernel(
+            self.vehicles, self.count, self.ego, self.peds, self.pcount, self.lanes, self.idm,
+            self.coords, self.done, self.trig, *self.road_args, self.light_state, self.rng_words,
+            frames, self.dt_s, active,
+        ))  # fmt: skip
+        ego_rows = self.vehicles[worlds, self.ego]
+        lane = ego_rows[:, T.LANE].astype(np.int64)
+        light = self.arrays.light[previous_lane]
+        state = self.light_state[worlds, np.maximum(light, 0)]
+        crossed = self.lanes[lane, L.FROM_NODE] == self.lanes[previous_lane, L.TO_NODE]
+        self._red_light = active & (light >= 0) & crossed & (state == LIGHT_RED)
+        self._project(fresh=np.zeros(k, dtype=bool), update=active)
+        if self.retarget:
+            self._retarget(active)
+        self._start_episodes(np.flatnonzero(restart), seeds)
+        self._project(fresh=restart, update=restart)
+        self.batch = self._export()
+        return self.batch
+
+    def reset_where(self, mask: np.ndarray, seeds: np.ndarray) -> WorldBatch:
+        self._red_light = np.zeros(self.num_worlds, dtype=bool)
+        return super().reset_where(mask, seeds)
+
+    def _retarget(self, active: np.ndarray) -> None:
+        """TownEnv.extend_route in every world that arrived: a random route on from the end of
+        the ego's, drawn from the world's generator after its frames; the meta-action ego's
+        planned lanes grow by it; the progress is projected on the longer route."""
+        arrays = self.arrays
+        for k in np.flatnonzero(active & self._route_ended()):
+            start = self.ego_routes[k][-1]
+            goal = random_goal(self.lanes, start, arrays.street_lanes, arrays.route_length, self.rng_words[k])
+            more = arrays.routes[start, goal, 1 : arrays.route_length[start, goal]] if goal >= 0 else []
+            self.ego_routes[k] = self.ego_routes[k] + [int(lane) for lane in more]
+            row = self.vehicles[k, self.ego[k]]
+            if row[T.KIND] == T.CONTROLLED:
+                _append_route(row, more)
+            self._set_route(k)
+            self._pad_world_routes([k])
+            update = np.zeros(self.num_worlds, dtype=bool)
+            update[k] = True
+            self._project(fresh=np.zeros(self.num_worlds, dtype=bool), update=update)
+
+    # --- export ---------------------------------------------------------------------------------
+    def _export(self) -> WorldBatch:
+        k = self.num_worlds
+        floats, ints, flags, vehicles, valid = self._export_buffers()
+        export_worlds(
+            self.vehicles, self.count, self.ego, self.lanes, self.in_junction, self._road.exit_lane,
+            0, 0.0, floats, ints, flags, vehicles, valid,
+        )  # fmt: skip
+        pedestrians = np.zeros((k, self.peds.shape[1], 6))
+        pedestrian_valid = np.zeros((k, self.peds.shape[1]), dtype=bool)
+        hit_ego = np.zeros(k, dtype=bool)
+        export_pedestrians(self.peds, self.pcount, pedestrians, pedestrian_valid, hit_ego)
+        batch = self._export_arrays(floats, ints, flags, vehicles, valid)
+        collided = flags[:, EX_CRASHED]
+        kind = np.where(hit_ego, COLLISION_PEDESTRIAN, COLLISION_VEHICLE)
+        events = assemble(
+            EventsBatch,
+            collided=collided,
+            collision_kind=np.where(collided, kind, COLLISION_NONE).astype(np.int8),
+            off_road=~flags[:, EX_ON_ROAD],
+            arrived=batch.events.arrived,
+            red_light_crossed=self._red_light.copy(),
+            blocked=self._no_event,
+            off_route=self._no_event,
+        )
+        lights = np.empty((k, len(self.arrays.light_xyh), 4))  # every world's lights and their states
+        lights[..., :3] = self.arrays.light_xyh
+        lights[..., 3] = self.light_state
+        return batch.replaced(
+            events=events,
+            traffic_lights=lights,
+            light_valid=self._light_valid,
+            pedestrians=pedestrians,
+            pedestrian_valid=pedestrian_valid,
+        )
+
+
+def _append_route(row: np.ndarray, lanes) -> None:
+    """Append lane rows to a vehicle row's planned route (roads of one lane: road = lane row),
+    closing up the entries already driven when the row would overflow."""
+    start, end = int(row[T.ROUTE_START]), int(row[T.ROUTE_END])
+    capacity = (row.size - T.ROUTE) // 2
+    if end + len(lanes) > capacity:
+        kept = row[T.ROUTE + 2 * start : T.ROUTE + 2 * end].copy()
+        row[T.ROUTE : T.ROUTE + kept.size] = kept
+        start, end = 0, end - start
+        row[T.ROUTE_START] = 0.0
+    if end + len(lanes) > capacity:
+        raise NotImplementedError(f"the town's vehicle rows keep routes of at most {capacity} roads")
+    for lane in lanes:
+        row[T.ROUTE + 2 * end], row[T.ROUTE + 2 * end + 1] = lane, 0.0
+        end += 1
+    row[T.ROUTE_END], row[T.ROUTED] = end, 1.0

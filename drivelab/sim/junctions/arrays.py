@@ -1,0 +1,146 @@
+"""The town's lane metadata as arrays, for its compiled kernels and set-up.
+
+``TownRoadArrays`` holds, per lane row (highway-env's graph insertion order, which is the order of
+``LaneTable`` rows; every town road has one lane), what the reference reads from node names:
+which junction a lane crosses and how it turns, which stop line a street ends at and its light,
+plus the light table, the zebra crossings, the streets and every shortest route between them.
+
+``town_arrays_from_network`` derives them from a highway-env network by parsing its node names
+(``J3:ir0`` is the stop line of junction 3's arm 0, ``J3:il2`` the start of its exit along arm 2),
+as the reference does: it is the oracle that the road description's arrays must equal.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from drivelab.sim.junctions.rows import TURN_LEFT, TURN_RIGHT, TURN_STRAIGHT
+
+
+@dataclass(frozen=True, eq=False)
+class TownRoadArrays:
+    """Per lane (L,): ``junction``, ``from_arm``, ``to_arm``, ``turn`` (TURN_* on junction lanes,
+    else -1), ``end_junction``/``end_arm`` (the stop line a street ends at, else -1), ``light``
+    (that approach's light row, -1 without one), ``in_junction``. Lights (M,): ``light_xyh``
+    (M, 3) stop line x, y and approach heading, ``light_junction``, ``light_arm``. ``crossings``
+    (C, 5): centre x, y, walking heading, length, width. ``street_lanes`` (S,): the streets' lane
+    rows. ``routes`` (L, S, W): lane rows of the shortest route from road r to the end node of
+    street g, -1 padded; ``route_length`` (L, S), 0 where unreachable."""
+
+    junction: np.ndarray
+    from_arm: np.ndarray
+    to_arm: np.ndarray
+    turn: np.ndarray
+    end_junction: np.ndarray
+    end_arm: np.ndarray
+    light: np.ndarray
+    in_junction: np.ndarray
+    light_xyh: np.ndarray
+    light_junction: np.ndarray
+    light_arm: np.ndarray
+    junction_count: int
+    crossings: np.ndarray
+    street_lanes: np.ndarray
+    routes: np.ndarray
+    route_length: np.ndarray
+
+    def equals(self, other: TownRoadArrays) -> bool:
+        """Every array equal (exactly), and the same junction count."""
+        names = [name for name in self.__dataclass_fields__ if name != "junction_count"]
+        return self.junction_count == other.junction_count and all(
+            np.array_equal(getattr(self, name), getattr(other, name)) for name in names
+        )
+
+
+def shortest_route(graph: dict, start: tuple[str, str], goal: str) -> list[tuple[str, str, int]]:
+    """Lane indices from road ``start`` to node ``goal`` by breadth-first search over ``graph``
+    ({from: {to: lanes}}, highway-env's ``RoadNetwork.graph``), one lane per road.
+
+    Unlike highway-env's ``shortest_path`` this never revisits a node and returns [] when the goal
+    cannot be reached."""
+    queue, seen = deque([(start[1], [start[0], start[1]])]), {start[1]}
+    while queue:
+        node, path = queue.popleft()
+        if node == goal:
+            return [(a, b, 0) for a, b in zip(path[:-1], path[1:], strict=True)]
+        for nxt in graph.get(node, {}):
+            if nxt not in seen:
+                seen.add(nxt)
+                queue.append((nxt, path + [nxt]))
+    return []
+
+
+def _junction_arm(node: str, kind: str) -> tuple[int, int] | None:
+    """(junction, arm) of a node ``J{j}:{kind}{k}``, else None."""
+    if f":{kind}" not in node:
+        return None
+    junction, arm = node[1:].split(f":{kind}")
+    return int(junction), int(arm)
+
+
+def route_table(
+    graph: dict, lanes: list[tuple[str, str, int]], streets: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``routes`` (L, S, W) and ``route_length`` (L, S): every lane's shortest route to the end
+    node of every street (see ``TownRoadArrays``)."""
+    row = {index: r for r, index in enumerate(lanes)}
+    found = [
+        [[row[lane] for lane in shortest_route(graph, lane[:2], lanes[s][1])] for s in streets]
+        for lane in lanes
+    ]
+    width = max((len(route) for per_lane in found for route in per_lane), default=0)
+    routes = np.full((len(lanes), len(streets), width), -1, dtype=np.int64)
+    lengths = np.zeros((len(lanes), len(streets)), dtype=np.int64)
+    for r, per_lane in enumerate(found):
+        for g, route in enumerate(per_lane):
+            routes[r, g, : len(route)], lengths[r, g] = route, len(route)
+    return routes, lengths
+
+
+def town_arrays_from_network(
+    network,
+    approaches: list[tuple[int, int]],
+    light_xyh: np.ndarray,
+    crossings: np.ndarray,
+    junction_count: int,
+) -> TownRoadArrays:
+    """The town's arrays from a highway-env ``RoadNetwork`` and its layout's lights (``approaches``
+    (junction, arm) in light-row order with their ``light_xyh`` rows) and ``crossings``."""
+    lanes = [(f, t, i) for f, to in network.graph.items() for t, ls in to.items() for i in range(len(ls))]
+    size = len(lanes)
+    junction, from_arm, to_arm, turn = (np.full(size, -1, dtype=np.int64) for _ in range(4))
+    end_junction, end_arm, light = (np.full(size, -1, dtype=np.int64) for _ in range(3))
+    light_row = {approach: m for m, approach in enumerate(approaches)}
+    turns = {-1 % 4: TURN_RIGHT, 1: TURN_LEFT, 2: TURN_STRAIGHT}
+    for r, (start, end, _) in enumerate(lanes):
+        entry, leaving = _junction_arm(start, "ir"), _junction_arm(end, "il")
+        if entry is not None and leaving is not None:
+            junction[r], from_arm[r], to_arm[r] = entry[0], entry[1], leaving[1]
+            turn[r] = turns[(leaving[1] - entry[1]) % 4]
+        approach = _junction_arm(end, "ir")
+        if approach is not None:
+            end_junction[r], end_arm[r] = approach
+            light[r] = light_row.get(approach, -1)
+    streets = np.array([r for r, lane in enumerate(lanes) if ":ir" in lane[1]], dtype=np.int64)
+    routes, lengths = route_table(network.graph, lanes, streets)
+    return TownRoadArrays(
+        junction=junction,
+        from_arm=from_arm,
+        to_arm=to_arm,
+        turn=turn,
+        end_junction=end_junction,
+        end_arm=end_arm,
+        light=light,
+        in_junction=junction >= 0,
+        light_xyh=np.asarray(light_xyh, dtype=float).reshape(-1, 3),
+        light_junction=np.array([j for j, _ in approaches], dtype=np.int64),
+        light_arm=np.array([k for _, k in approaches], dtype=np.int64),
+        junction_count=int(junction_count),
+        crossings=np.asarray(crossings, dtype=float).reshape(-1, 5),
+        street_lanes=streets,
+        routes=routes,
+        route_length=lengths,
+    )
