@@ -683,7 +683,7 @@ def _cost(summary: dict) -> str:
     return f"{steps} | {time_text}"
 
 
-# From this date an arrival on the step of a collision is no success (README, "An episode is a success");
+# From this date an arrival on the step of a collision is no success (docs/scenarios/index.md, "Success");
 # it changes only the tables whose success is an arrival
 SUCCESS_RULE_DATE = "2026-11-27"
 ARRIVAL_TABLES = ("merge", "roundabout", "intersection", "town", "blocks-osx", "blocks-unseen")

@@ -455,7 +455,7 @@ EXECUTOR_HELP = "pool (local processes, default) or ray (Ray tasks); not the sim
 
 @app.command()
 def sweep(
-    sweep_file: Path = typer.Argument(..., help="sweep YAML: base, grid, overrides (see README)"),
+    sweep_file: Path = typer.Argument(..., help="sweep YAML: base, grid, overrides (see docs/compare.md)"),
     runs_dir: Path | None = typer.Option(
         None, help="where run directories go (default: the file's runs_dir)"
     ),

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Create .venv and install drivelab with its test tools. Safe to run again.
+# Create .venv and install drivelab with its test and documentation tools. Safe to run again.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 PYTHON=${PYTHON:-python3}
@@ -9,4 +9,4 @@ fi
 .venv/bin/python -m pip install --quiet --upgrade pip
 # torch first, pinned: 2.13.0 is the CPU build; an unpinned torch would pull a CUDA build.
 .venv/bin/python -m pip install --quiet "torch==2.13.0"
-.venv/bin/python -m pip install --quiet -e ".[dev]"
+.venv/bin/python -m pip install --quiet -e ".[dev,docs]"
