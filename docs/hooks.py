@@ -28,7 +28,7 @@ from mkdocs.plugins import event_priority
 from mkdocs.structure.files import File
 
 # The scenario registry: its only import in the docs (the scenarios package is moving; one line then).
-from drivelab.envs.scenarios import SCENARIOS, gym_id, options_table
+from drivelab.scenarios import SCENARIOS, gym_id, options_table
 
 REPO = Path(__file__).resolve().parent.parent
 RESULTS = REPO / "benchmarks" / "results"
