@@ -80,3 +80,33 @@ def configure() -> Path:
         numba.config.CACHE_DIR = str(folder)
     _remove_stale(folder)
     return folder
+
+
+_noticed = False  # the first-compile line is said once per process
+
+
+def compile_notice(folder: Path | None = None, stream=None) -> bool:
+    """Say, once per process and on a terminal, that the simulator is being compiled when this
+    version's cache folder holds no compiled kernel yet (numba's ``*.nbi`` index files): the first
+    ``reset`` after an install or an edit compiles for about a minute, silent otherwise. Returns
+    whether it said so."""
+    global _noticed
+    stream = sys.stderr if stream is None else stream
+    folder = Path(os.environ.get("NUMBA_CACHE_DIR", "")) if folder is None else folder
+    if _noticed or not getattr(stream, "isatty", lambda: False)():
+        return False
+    try:
+        compiled = next(folder.rglob("*.nbi"), None) is not None
+    except OSError:
+        return False
+    if compiled:
+        return False
+    _noticed = True
+    print(
+        "drivelab: compiling the simulator for this machine (first run after an install or an update, "
+        "about a minute; cached after)",
+        file=stream,
+        flush=True,
+    )
+    return True
+

@@ -1,5 +1,6 @@
 """drivelab/_numba_cache.py: numba's cache folder follows the version of the sources."""
 
+import io
 import os
 import time
 
@@ -76,3 +77,27 @@ def test_configure_marks_its_folder_in_use(tmp_path, monkeypatch):
         assert time.time() - folder.stat().st_mtime < 60  # another version would keep it
     finally:
         numba.config.CACHE_DIR = before
+
+
+class _Terminal(io.StringIO):
+    def __init__(self, tty: bool) -> None:
+        super().__init__()
+        self.tty = tty
+
+    def isatty(self) -> bool:
+        return self.tty
+
+
+def test_a_first_compile_is_announced_once_on_a_terminal(tmp_path, monkeypatch):
+    monkeypatch.setattr(_numba_cache, "_noticed", False)
+    quiet = _Terminal(tty=False)
+    assert not _numba_cache.compile_notice(tmp_path, quiet) and quiet.getvalue() == ""  # a log, a pipe
+    cached = tmp_path / "cached"
+    (cached / "sub").mkdir(parents=True)
+    (cached / "sub" / "traffic.act-12.py311.nbi").write_bytes(b"")
+    terminal = _Terminal(tty=True)
+    assert not _numba_cache.compile_notice(cached, terminal) and terminal.getvalue() == ""  # compiled before
+    assert _numba_cache.compile_notice(tmp_path / "empty", terminal)
+    assert terminal.getvalue().count("\n") == 1 and "compiling the simulator" in terminal.getvalue()
+    assert not _numba_cache.compile_notice(tmp_path / "empty", terminal)  # once per process
+    assert terminal.getvalue().count("\n") == 1

@@ -35,6 +35,7 @@ from highway_env.vehicle.kinematics import Vehicle
 from highway_env.vehicle.objects import Obstacle
 from numba import njit
 
+from drivelab._numba_cache import compile_notice
 from drivelab.errors import UsageError
 from drivelab.sim.core import lanes as L
 from drivelab.sim.core import traffic as T
@@ -735,6 +736,7 @@ class FastSimulator:
             raise UsageError(f"num_worlds must be >= 1 (got {num_worlds})")
         if scenario.spawn is None:
             raise UsageError(f"the fast backend has no episode set-up for scenario {scenario.name!r}")
+        compile_notice()
         self.scenario, self.control, self.num_worlds = scenario, control, num_worlds
         self._every_world = np.ones(num_worlds, dtype=bool)  # every route projected each step
         road = self._road = self._load_road(scenario, traffic, control, overrides)
