@@ -9,6 +9,7 @@ import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from drivelab.envs.spec import ENV_KEYWORDS, check_env_options
 from drivelab.errors import UsageError
 from drivelab.scenarios import SCENARIOS, scenario_name
 from drivelab.yaml_io import dump_yaml
@@ -60,16 +61,10 @@ class RunConfig:
     eval_maps: str | None = None
 
     def env_kwargs(self) -> dict:
-        """Keyword arguments of DriveEnv for this run."""
-        return {
-            "scenario": self.env,
-            "obs": list(self.obs),
-            "action": self.action,
-            "reward": self.reward,
-            "traffic": self.traffic,
-            "backend": self.backend,
-            **self.env_options,
-        }
+        """Keyword arguments of DriveEnv for this run: its environment fields (``ENV_FIELDS``), then
+        ``env_options``."""
+        fields = {keyword: getattr(self, name) for name, keyword in ENV_FIELDS.items()}
+        return {**fields, "obs": list(self.obs), **self.env_options}
 
     def eval_env_kwargs(self) -> dict:
         """DriveEnv keyword arguments for evaluating this run: as for training, except that a
@@ -107,6 +102,9 @@ class RunConfig:
 
 
 FIELDS = {f.name: f for f in dataclasses.fields(RunConfig)}
+# the run's fields that are environment keywords (EnvSpec's), by their EnvSpec name: ``env`` is
+# the scenario; ``env_options`` may give the other keywords
+ENV_FIELDS = {"env": "scenario", **{name: name for name in FIELDS if name in ENV_KEYWORDS}}
 MAX_SEED = 2**31 - 1  # plus evaluation offsets and episode numbers, still below numpy's 2**32 limit
 # Budgets no run can reach. Steps: the fastest drivelab's worlds step is about 190 k steps/s (64
 # follow-line worlds, random actions, no agent: benchmarks/results/batch_speed.md), so 10^12 steps
@@ -164,9 +162,7 @@ def _check_type(name: str, value):
     if name == "seed" and not 0 <= value <= MAX_SEED:
         raise UsageError(f"config field 'seed' must be between 0 and {MAX_SEED}, got {value}")
     if name == "env_options":
-        from drivelab.envs.core import check_env_options
-
-        check_env_options(value)
+        check_env_options(value, taken=frozenset(ENV_FIELDS.values()))
     if name in ("steps", "eval_episodes", "n_envs") and value < 1:
         raise UsageError(f"config field {name!r} must be >= 1, got {value}")
     if name in MAXIMA and value > MAXIMA[name][0]:
@@ -213,15 +209,18 @@ def _sensor_dict_to_spec(entry) -> str:
 
 
 def build_config(values: dict) -> RunConfig:
-    """A RunConfig from a dict, rejecting unknown fields and wrong types with a one-line error."""
+    """A RunConfig from a dict, rejecting unknown fields and wrong types with a one-line error. The
+    scenario's options may stand at the top level, as MetaDrive's users write them (``map: OSX``):
+    they join ``env_options.backend_options``."""
+    if isinstance(values.get("env"), str):  # a gymnasium id (drivelab/Highway-v0) names its scenario
+        values = {**values, "env": scenario_name(values["env"])}
+    scenario = SCENARIOS.get(values.get("env", RunConfig.env))
+    values = _scenario_options_inside(values, scenario)
     unknown = sorted(set(values) - set(FIELDS), key=str)  # a YAML key may be a number
     if unknown:
         raise UsageError(f"unknown config field {unknown[0]!r} (known: {', '.join(FIELDS)})")
     if "algo" not in values:
         raise UsageError("config has no 'algo' (give --algo or algo: in the YAML)")
-    if isinstance(values.get("env"), str):  # a gymnasium id (drivelab/Highway-v0) names its scenario
-        values = {**values, "env": scenario_name(values["env"])}
-    scenario = SCENARIOS.get(values.get("env", RunConfig.env))
     if scenario is not None:  # an unknown one is reported when the env is built
         values = {"action": scenario.action_kinds[0], "reward": scenario.default_reward, **values}
     config = RunConfig(**{k: _check_type(k, v) for k, v in values.items()})
@@ -229,6 +228,23 @@ def build_config(values: dict) -> RunConfig:
         raise UsageError(f"eval_maps is for procedural maps (blocks); {config.env!r} has one road")
     _check_scenario_options(config)
     return config
+
+
+def _scenario_options_inside(values: dict, scenario) -> dict:
+    """``values`` with the scenario's options given at the top level moved into
+    ``env_options.backend_options`` (one given in both places is a UsageError)."""
+    declared = {option.name for option in scenario.options} if scenario is not None else set()
+    top = {key: values[key] for key in values if key not in FIELDS and key in declared}
+    if not top:
+        return values
+    env_options = values.get("env_options") or {}
+    inside = env_options.get("backend_options") if isinstance(env_options, dict) else None
+    if not isinstance(env_options, dict) or (inside is not None and not isinstance(inside, dict)):
+        return values  # reported by the field's own check
+    for key in set(top) & set(inside or {}):
+        raise UsageError(f"option {key!r} given twice: at the top level and in env_options.backend_options")
+    rest = {key: value for key, value in values.items() if key not in top}
+    return {**rest, "env_options": {**env_options, "backend_options": {**(inside or {}), **top}}}
 
 
 def _check_scenario_options(config: RunConfig) -> None:

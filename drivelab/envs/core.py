@@ -9,17 +9,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from drivelab.envs.actions import ActionAdapter
-from drivelab.envs.vector import (  # noqa: F401  (re-exported: the options of DriveEnv)
-    BACKENDS,
-    LIGHT_LABEL_DISTANCE_M,
-    VectorDriveEnv,
-    autoreset_mode_of,
-    check_env_options,
-    check_reset_options,
-    env_option_names,
-    world_info,
-)
+from drivelab.envs.vector import VectorDriveEnv, autoreset_mode_of, check_reset_options, world_info
 from drivelab.scenarios import get_scenario
 from drivelab.world.state import WorldState
 
@@ -27,29 +17,14 @@ from drivelab.world.state import WorldState
 class DriveEnv(gym.Env):
     """One driving scenario seen through drivelab's sensors and rewarded by its shapers.
 
-    :param scenario: a name of ``drivelab.scenarios.SCENARIOS`` (highway, merge, roundabout,
-        intersection, racetrack, town, follow-line, follow-lane).
-    :param obs: a sensor spec (``"lidar"``, ``"lidar:beams=120:stack=3"``), a comma list, or a
-        list of specs. One sensor gives its Box; several give a Dict keyed by sensor name.
-    :param action: an action kind (``drivelab.envs.actions.ACTIONS``) or an ActionAdapter; default
-        the scenario's first (``meta`` on the highway scenarios, ``seed_line`` on follow-line, …),
-        as ``drivelab train`` picks it.
-    :param reward: a preset, ``"term=w,…"``, ``"preset,term=w"`` or a dict of weights; default the
-        scenario's preset (``roach`` in the town, ``line_follow`` on follow-line, …).
-    :param traffic: "empty", "regular" or "dense".
-    :param backend: "auto" (fast where it runs the scenario, else highway), "fast" (drivelab's
-        compiled port of highway-env's traffic model on highway-env's roads: step for step the
-        same episodes, many times faster, see benchmarks/results/backend_speed.md) or "highway"
-        (highway-env itself, the reference).
-    :param duration_s: episode time limit; default the scenario's (in the town with fixed routes,
-        the route's NoCrash limit; a given duration caps it).
-    :param offroad_terminal: end the episode when the ego leaves the road.
-    :param action_options: keyword options of the action adapter (e.g. ``steer_levels``).
-    :param backend_options: the scenario's options (``Scenario.options``: road, traffic and
-        timing keys, highway-env's names); an unknown key, a bad value or a contradiction is a
-        UsageError.
-    :param config: a highway-env config dict, as highway-env's users write it
-        (``envs/highway_config.py``); the keyword arguments given beside it win.
+    :param scenario: a name of ``drivelab.scenarios.SCENARIOS`` or its gymnasium id.
+    :param render_mode: "rgb_array" for ``render()``.
+    :param seed: resets the episode at once with this seed.
+    :param keywords: the environment's keywords (``obs``, ``action``, ``reward``, ``traffic``,
+        ``backend``, ``duration_s``, ``offroad_terminal``, ``action_options``, ``backend_options``:
+        :class:`~drivelab.envs.spec.EnvSpec` says each; ``config``: a highway-env config dict as
+        its users write it; the scenario's options also at the top level, as MetaDrive's users
+        write them), or ``env_spec``, an EnvSpec already built.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 5}
@@ -57,35 +32,13 @@ class DriveEnv(gym.Env):
     def __init__(
         self,
         scenario: str = "highway",
-        obs: str | list | None = None,
-        action: str | ActionAdapter | None = None,
-        reward: str | dict | None = None,
-        traffic: str = "regular",
-        backend: str = "auto",
-        duration_s: float | None = None,
-        offroad_terminal: bool | None = None,
-        action_options: dict | None = None,
-        backend_options: dict | None = None,
+        *,
         render_mode: str | None = None,
         seed: int | None = None,
-        config: dict | None = None,
+        **keywords,
     ) -> None:
         super().__init__()
-        self.vector = VectorDriveEnv(
-            1,
-            scenario=scenario,
-            obs=obs,
-            action=action,
-            reward=reward,
-            traffic=traffic,
-            backend=backend,
-            duration_s=duration_s,
-            offroad_terminal=offroad_terminal,
-            action_options=action_options,
-            backend_options=backend_options,
-            render_mode=render_mode,
-            config=config,
-        )
+        self.vector = VectorDriveEnv(1, scenario, render_mode=render_mode, **keywords)
         vector = self.vector
         self.scenario, self.adapter, self.sensors = vector.scenario, vector.adapter, vector.sensors
         self.reward_shaper, self.duration_s = vector.reward_shaper, vector.duration_s

@@ -14,7 +14,6 @@ SB3 adapter uses.
 
 from __future__ import annotations
 
-import inspect
 from typing import Any
 
 import numpy as np
@@ -24,9 +23,9 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from drivelab.envs.actions import ActionAdapter, make_action
-from drivelab.envs.highway_config import env_kwargs_from_config
 from drivelab.envs.metrics import EpisodeMetrics
 from drivelab.envs.rules import EpisodeRules
+from drivelab.envs.spec import EnvSpec
 from drivelab.errors import UsageError
 from drivelab.perception.birdeye import render_birdeye
 from drivelab.perception.sensors import check_sensors_for, make_sensor, split_sensor_list
@@ -40,7 +39,6 @@ BACKENDS = ("auto", "fast", "highway")
 LIGHT_LABEL_DISTANCE_M = 18.0  # RLAD's auxiliary label: a light within this distance ahead
 LIGHT_LABELS = {-1: "none", LIGHT_GREEN: "green", LIGHT_YELLOW: "red_or_yellow", LIGHT_RED: "red_or_yellow"}
 _LABEL_OF_STATE = np.array([LIGHT_LABELS[state] for state in sorted(LIGHT_LABELS)], dtype=object)  # state + 1
-RUN_KEYWORDS = ("scenario", "obs", "action", "reward", "traffic", "backend")  # RunConfig fields
 RENDER_SIZE_HW, RENDER_PIXELS_PER_M = (256, 512), 4.0
 # Episode seeds: training draws them below TRAINING_SEED_LIMIT from each world's generator; the
 # evaluation set of every scenario is the episodes EVALUATION_SEED_BASE, +1, +2, … given directly
@@ -56,21 +54,6 @@ VALIDATION_START = 1_000_000
 def evaluation_seeds(count: int, start: int = 0) -> np.ndarray:
     """The episode seeds of evaluation episodes ``start`` … ``start + count − 1`` (int64)."""
     return EVALUATION_SEED_BASE + start + np.arange(count, dtype=np.int64)
-
-
-def _check_keywords(duration_s, offroad_terminal, action_options, backend_options) -> None:
-    """The types and ranges of the option keywords, as one-line UsageErrors."""
-    if duration_s is not None and (
-        isinstance(duration_s, bool)
-        or not isinstance(duration_s, (int, float))
-        or not 0 < duration_s < float("inf")
-    ):
-        raise UsageError(f"duration_s must be a number of seconds > 0, got {duration_s!r}")
-    if not isinstance(offroad_terminal, bool):
-        raise UsageError(f"offroad_terminal must be true or false, got {offroad_terminal!r}")
-    for name, value in (("action_options", action_options), ("backend_options", backend_options)):
-        if value is not None and not isinstance(value, dict):
-            raise UsageError(f"{name} must be a mapping of options, got {value!r}")
 
 
 AUTORESET_MODES = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP}
@@ -107,28 +90,14 @@ class VectorDriveEnv(VectorEnv):
     by its shapers, stepped together as arrays.
 
     :param num_envs: K, the number of worlds.
-    :param scenario: a name of ``drivelab.scenarios.SCENARIOS``.
-    :param obs: a sensor spec (``"lidar"``, ``"lidar:beams=120:stack=3"``), a comma list, or a
-        list of specs. One sensor gives its Box; several give a Dict keyed by sensor name.
-    :param action: an action kind (``drivelab.envs.actions.ACTIONS``) or an ActionAdapter; default
-        the scenario's first.
-    :param reward: a preset, ``"term=w,…"``, ``"preset,term=w"`` or a dict of weights; default the
-        scenario's preset.
-    :param traffic: "empty", "regular" or "dense".
-    :param backend: "auto" (the compiled core where it runs the scenario, else highway), "fast"
-        or "highway" (highway-env itself, the reference).
-    :param duration_s: episode time limit; default the scenario's (in the town with fixed routes,
-        the route's NoCrash limit; a given duration caps it).
-    :param offroad_terminal: end the episode when the ego leaves the road.
-    :param action_options: keyword options of the action adapter (e.g. ``steer_levels``).
-    :param backend_options: the scenario's options (``Scenario.options``: road, traffic and
-        timing keys, highway-env's names); an unknown key, a bad value or a contradiction is a
-        UsageError.
+    :param scenario: a name of ``drivelab.scenarios.SCENARIOS`` or its gymnasium id.
     :param render_mode: "rgb_array" for ``render()``.
     :param autoreset_mode: gymnasium's ``AutoresetMode`` (or its value): NEXT_STEP (default) or
         SAME_STEP.
-    :param config: a highway-env config dict, as highway-env's users write it
-        (``envs/highway_config.py``); the keyword arguments given beside it win.
+    :param env_spec: an :class:`~drivelab.envs.spec.EnvSpec` already built (then no other keyword).
+    :param keywords: the environment's keywords (``obs``, ``action``, ``reward``, ``traffic``,
+        ``backend``, ``duration_s``, …, ``config``: a highway-env config dict; the scenario's
+        options at the top level), read into an :class:`~drivelab.envs.spec.EnvSpec`.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 5, "autoreset_mode": AutoresetMode.NEXT_STEP}
@@ -137,41 +106,30 @@ class VectorDriveEnv(VectorEnv):
         self,
         num_envs: int = 1,
         scenario: str = "highway",
-        obs: str | list | None = None,
-        action: str | ActionAdapter | None = None,
-        reward: str | dict | None = None,
-        traffic: str = "regular",
-        backend: str = "auto",
-        duration_s: float | None = None,
-        offroad_terminal: bool | None = None,
-        action_options: dict | None = None,
-        backend_options: dict | None = None,
+        *,
         render_mode: str | None = None,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
-        config: dict | None = None,
+        env_spec: EnvSpec | None = None,
+        **keywords: Any,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise UsageError(f"num_envs must be an integer >= 1 (got {num_envs!r})")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise UsageError(f"render_mode must be None or 'rgb_array' (got {render_mode!r})")
-        if config is not None:
-            given = {"obs": obs, "action": action, "reward": reward, "duration_s": duration_s,
-                     "offroad_terminal": offroad_terminal, "action_options": action_options,
-                     "backend_options": backend_options}  # fmt: skip
-            translated = env_kwargs_from_config(config, **{k: v for k, v in given.items() if v is not None})
-            obs, action, reward, duration_s, offroad_terminal, action_options, backend_options = (
-                translated.get(key) for key in given
-            )
-        obs = "kinematics" if obs is None else obs
-        offroad_terminal = True if offroad_terminal is None else offroad_terminal
-        _check_keywords(duration_s, offroad_terminal, action_options, backend_options)
+        if env_spec is not None and keywords:
+            raise UsageError(f"give the environment's keywords or its spec, not both ({', '.join(keywords)})")
+        self.env_spec = spec = env_spec or EnvSpec.build(scenario=scenario, **keywords)
         autoreset_mode = autoreset_mode_of(autoreset_mode)
+        scenario, traffic, backend_options = spec.scenario, spec.traffic, spec.backend_options
+        action, reward = spec.action, spec.reward
         self.scenario = get_scenario(scenario)
         check_traffic(traffic)
         action = self.scenario.action_kinds[0] if action is None else action
         reward = self.scenario.default_reward if reward is None else reward
         self.adapter = (
-            action if isinstance(action, ActionAdapter) else make_action(action, **(action_options or {}))
+            action
+            if isinstance(action, ActionAdapter)
+            else make_action(action, **(spec.action_options or {}))
         )
         if self.adapter.name not in self.scenario.action_kinds:
             raise UsageError(
@@ -179,7 +137,7 @@ class VectorDriveEnv(VectorEnv):
                 f"(it takes {', '.join(self.scenario.action_kinds)})"
             )
         check_backend_options(self.scenario, backend_options, traffic, self.adapter.control)
-        self.sensors = [make_sensor(spec) for spec in split_sensor_list(obs)]
+        self.sensors = [make_sensor(sensor) for sensor in split_sensor_list(spec.obs)]
         names = [s.name for s in self.sensors]
         if len(set(names)) != len(names):
             raise UsageError(f"sensor listed twice in {names}")
@@ -187,11 +145,11 @@ class VectorDriveEnv(VectorEnv):
         self.reward_shaper = RewardShaper(reward)
         self.num_envs = int(num_envs)
         self.simulator = make_simulator(
-            backend, self.scenario, traffic, self.adapter.control, self.num_envs, backend_options
+            spec.backend, self.scenario, traffic, self.adapter.control, self.num_envs, backend_options
         )
-        self.duration_s = float(duration_s or self.simulator.duration_s)
-        self.duration_given = duration_s is not None
-        self.rules = EpisodeRules(self.scenario, offroad_terminal)
+        self.duration_s = float(spec.duration_s or self.simulator.duration_s)
+        self.duration_given = spec.duration_s is not None
+        self.rules = EpisodeRules(self.scenario, spec.offroad_terminal)
         self.metrics = EpisodeMetrics()
         self.render_mode = render_mode
         self.autoreset_mode = autoreset_mode
@@ -542,23 +500,6 @@ def _final_infos(infos: dict, mask: np.ndarray) -> np.ndarray:
                 info[key] = value[k].item() if isinstance(value[k], np.generic) else value[k]
         rows[k] = info
     return rows
-
-
-def env_option_names() -> tuple[str, ...]:
-    """Keywords a run's ``env_options`` may set: all but those the run's own fields give (scenario,
-    obs, ...) and those training sets itself (render_mode, num_envs, autoreset_mode)."""
-    parameters = inspect.signature(VectorDriveEnv.__init__).parameters
-    taken = (*RUN_KEYWORDS, "self", "render_mode", "num_envs", "autoreset_mode")
-    return tuple(name for name in parameters if name not in taken)
-
-
-def check_env_options(options: dict) -> None:
-    """An unknown ``env_options`` key is a UsageError naming the known ones (values are checked
-    by the env itself)."""
-    known = env_option_names()
-    for key in options:
-        if key not in known:
-            raise UsageError(f"unknown env_options key {key!r} (known: {', '.join(known)})")
 
 
 def world_info(infos: dict, k: int) -> dict:
