@@ -61,3 +61,17 @@ def rewrite_member(path: Path, member: str, data: bytes) -> None:
     with zipfile.ZipFile(path, "w") as archive:
         for name, value in members.items():
             archive.writestr(name, value)
+
+
+def met_observations(env, count: int) -> list:
+    """``count`` observations of ``env`` met along random actions (seeded; episodes restarted as
+    they end)."""
+    env.action_space.seed(0)
+    obs, _ = env.reset(seed=0)
+    found = [obs]
+    while len(found) < count:
+        obs, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        if terminated or truncated:
+            obs, _ = env.reset()
+        found.append(obs)
+    return found
