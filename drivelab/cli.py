@@ -637,6 +637,24 @@ def convert_run(
     typer.echo(f"run directory: {run_dir}  ({'converted' if written else 'already in the safe format'})")
 
 
+@app.command()
+def export(
+    run_dir: str = typer.Argument(..., metavar="RUN_DIR|NAME", help=RUN_OR_AGENT + " (dqn, ppo, a2c, sac)"),
+    out: Path = typer.Argument(..., help="the .zip to write (not inside the run directory)"),
+) -> None:
+    """Write a run's SB3 model in stable-baselines3's own format, for PPO.load (DQN, A2C, SAC.load).
+
+    For your own trusted use: SB3's format holds pickles, which SB3's load executes. drivelab
+    itself never reads the exported file; its runs keep their pickle-free format."""
+    from drivelab.training.export import export_sb3
+
+    try:
+        written, sb3_class = export_sb3(run_dir, out)
+    except UsageError as exc:
+        _fail(str(exc))
+    typer.echo(f"wrote {written}: stable_baselines3.{sb3_class}.load({str(written)!r}) reads it")
+
+
 benchmark_app = typer.Typer(cls=NeedsCommand, help="Driving benchmarks of trained runs.")
 app.add_typer(benchmark_app, name="benchmark")
 
