@@ -303,7 +303,20 @@ def train(
             err=True,
         )
         raise typer.Exit(130) from None
+    _print_last_evaluation(run_dir)
     typer.echo(f"run directory: {run_dir}")
+
+
+def _print_last_evaluation(run_dir: Path) -> None:
+    """The metrics of a run's last periodic evaluation, as ``evaluate`` prints its own."""
+    from drivelab.training.compare import last_evaluation
+    from drivelab.training.evaluate import load_run_config
+
+    report = last_evaluation(run_dir)
+    if report is not None:
+        config = load_run_config(run_dir)
+        step, episodes = report["step"], report["episodes"]
+        _print_metrics(f"{config.algo} on {config.env} at step {step}: {episodes} episodes", report)
 
 
 RUN_OR_AGENT = "a run directory written by drivelab train, or a shipped agent's name (drivelab zoo)"

@@ -182,3 +182,23 @@ def test_help_shows_the_defaults_a_new_run_takes():
     assert "total environment steps (default: 10000)" in result.output
     assert "[default: runs]" in result.output  # typer's own, for an option with a default value
 
+
+def test_train_ends_by_printing_its_last_evaluation(tmp_path):
+    import csv
+
+    from drivelab.yaml_io import dump_yaml
+    from tests.training.tiny_runs import tiny_config
+
+    config = tmp_path / "tiny.yaml"
+    config.write_text(dump_yaml({**tiny_config().to_dict(), "name": "tiny"}))
+    result = runner.invoke(
+        app, ["train", "--config", str(config), "--runs-dir", str(tmp_path / "runs")], env={"COLUMNS": "200"}
+    )
+    assert result.exit_code == 0, result.output
+    with (tmp_path / "runs" / "tiny" / "evaluations.csv").open() as handle:
+        last = list(csv.DictReader(handle))[-1]
+    table = result.output[result.output.index("ppo on highway at step 128: 1 episodes") :]
+    assert f"{float(last['mean_return']):.3f} ± {float(last['std_return']):.3f}" in table
+    assert f"{float(last['mean_speed_mps']):.3f}" in table
+    assert "success rate" in table and "route completion" in table
+    assert result.output.rstrip().endswith(f"run directory: {tmp_path / 'runs' / 'tiny'}")

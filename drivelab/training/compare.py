@@ -123,8 +123,6 @@ def _float_or_none(value) -> float | None:
     return float(value)
 
 
-
-
 def _final_metrics(values: dict, path: Path) -> dict:
     """The ``METRICS`` of ``values`` (a row or eval.json) as floats or None, or a UsageError naming
     the file and the metric: text, NaN or an infinity (JSON's ``NaN``, ``Infinity``), a rate outside
@@ -170,6 +168,18 @@ def read_evaluations(path: Path) -> tuple[list[tuple[int, float]], dict]:
             f"{str(path)!r} is not an evaluations.csv written by drivelab train{line}: {type(exc).__name__}"
         ) from None
     return curve, last_row
+
+
+def last_evaluation(run_dir: Path) -> dict | None:
+    """A run's last periodic evaluation: the last row of its evaluations.csv, numbers as numbers
+    (None where a metric is empty: a scenario without routes has no route completion); None when
+    it has none."""
+    path = Path(run_dir) / "evaluations.csv"
+    _, row = read_evaluations(path) if path.is_file() else ([], {})
+    if not row:
+        return None
+    return {key: None if value == "" else int(value) if key in ("step", "episodes") else float(value)
+            for key, value in row.items()}  # fmt: skip
 
 
 def _check_names(config: RunConfig, path: Path) -> None:
