@@ -655,6 +655,8 @@ def _learn(model, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWo
     checkpoint (the state may be half-updated); the run then resumes from the previous one.
     """
     model.set_logger(configure(str(run_dir), ["csv", "tensorboard"]))
+    if hasattr(model, "log_over"):  # SB3's on-policy models: rows by the step (``RolloutLogs``)
+        model.log_over(config.steps)
     with _full_disk_reported_once():
         try:
             _learn_logged(model, run_dir, config, eval_env, worlds, on_evaluation, eval_first)

@@ -1,0 +1,45 @@
+"""A run's progress logs: rows and TensorBoard scalars for short on-policy runs too (A2C's 100
+rollouts between rows left a short run with an empty progress.csv), logged by the step."""
+
+import pandas as pd
+import pytest
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+from drivelab.agents.sb3 import DrivelabA2C, DrivelabPPO
+from drivelab.training import run as run_module
+from tests.training.tiny_runs import tiny_config
+
+pytestmark = pytest.mark.usefixtures("one_torch_thread")
+A2C = {"algo": "a2c", "hyperparams": {"n_steps": 8, "policy_kwargs": {"net_arch": [16]}}}
+
+
+def _scalar_steps(run_dir, tag: str) -> list[int]:
+    """The steps of ``tag``'s scalars as TensorBoard shows them (events of every file, purges applied)."""
+    events = EventAccumulator(str(run_dir))
+    events.Reload()
+    return [event.step for event in events.Scalars(tag)]
+
+
+def test_a_short_a2c_run_logs_progress_rows_and_tensorboard_scalars(tmp_path):
+    run_dir = run_module.train(tiny_config(**A2C), tmp_path)  # 128 steps: 16 rollouts of 8
+    progress = pd.read_csv(run_dir / "progress.csv")
+    assert progress["time/total_timesteps"].tolist() == list(range(8, 129, 8))
+    assert progress["time/iterations"].tolist() == list(range(1, 17))
+    assert progress["train/policy_loss"].notna().sum() >= 15  # each row after the first update
+    assert _scalar_steps(run_dir, "train/value_loss") == list(range(16, 129, 8))
+
+
+@pytest.mark.parametrize(
+    ("model_class", "rollout", "steps", "every"),
+    [
+        (DrivelabA2C, 16, 1_000, 6),  # too short for SB3's 100 rollouts: about ten rows
+        (DrivelabA2C, 16, 1_000_000, 100),  # SB3's interval where it gives ten rows or more
+        (DrivelabA2C, 16, 100, 1),
+        (DrivelabPPO, 2048, 1_000_000, 1),  # PPO.learn's interval: every rollout
+    ],
+)
+def test_on_policy_rows_are_sb3s_interval_or_finer_for_ten_rows(model_class, rollout, steps, every):
+    model = model_class.__new__(model_class)  # the interval's arithmetic only: no networks
+    model.n_steps, model.n_envs = rollout, 1
+    model.log_over(steps)
+    assert model.log_rollouts == every
