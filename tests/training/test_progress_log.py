@@ -1,5 +1,6 @@
 """A run's progress logs: rows and TensorBoard scalars for short on-policy runs too (A2C's 100
-rollouts between rows left a short run with an empty progress.csv), logged by the step."""
+rollouts between rows left a short run with an empty progress.csv), by the step, so that a resumed
+run continues the one progress.csv and TensorBoard shows no step twice."""
 
 import pandas as pd
 import pytest
@@ -7,7 +8,7 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 
 from drivelab.agents.sb3 import DrivelabA2C, DrivelabPPO
 from drivelab.training import run as run_module
-from tests.training.tiny_runs import tiny_config
+from tests.training.tiny_runs import tiny_config, train_then_kill_back_to
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 A2C = {"algo": "a2c", "hyperparams": {"n_steps": 8, "policy_kwargs": {"net_arch": [16]}}}
@@ -43,3 +44,26 @@ def test_on_policy_rows_are_sb3s_interval_or_finer_for_ten_rows(model_class, rol
     model.n_steps, model.n_envs = rollout, 1
     model.log_over(steps)
     assert model.log_rollouts == every
+
+
+def test_a_resumed_run_continues_progress_csv_and_tensorboard(tmp_path, monkeypatch):
+    """A run killed after its checkpoint of step 80 had logged up to step 128 (simulated: the
+    finished run with that checkpoint put back). The resume cuts progress.csv back to step 80 and
+    continues it, and TensorBoard hides the killed process's events past 80: the logs read as the
+    run's that never stopped."""
+    config = tiny_config(**A2C, checkpoint_every=40)
+    run_dir, reference = train_then_kill_back_to(monkeypatch, tmp_path, config, 80)
+    run_module.resume(run_dir)
+
+    assert sorted(path.name for path in run_dir.glob("progress*.csv")) == ["progress.csv"]
+    columns = ["time/total_timesteps", "time/iterations"]
+    pd.testing.assert_frame_equal(
+        pd.read_csv(reference / "progress.csv")[columns], pd.read_csv(run_dir / "progress.csv")[columns]
+    )
+    assert len(list(run_dir.glob("events.out.tfevents.*"))) == 2  # one per process
+    for tag in ("time/fps", "rollout/ep_len_mean", "eval/mean_return"):
+        assert _scalar_steps(run_dir, tag) == _scalar_steps(reference, tag), tag
+    # the update at step 80 was made (and its losses recorded) by the killed process, whose row of
+    # step 88 is hidden: the resumed one logs the losses of its own updates, from step 96
+    losses = _scalar_steps(reference, "train/value_loss")
+    assert _scalar_steps(run_dir, "train/value_loss") == [step for step in losses if step != 88]
