@@ -22,3 +22,12 @@ def make(scenario: str, **kwargs):
     from drivelab.envs.core import DriveEnv
 
     return DriveEnv(scenario=scenario, **kwargs)
+
+
+def load(target):
+    """The trained agent of a run directory or of a shipped agent (``drivelab zoo``), with
+    stable-baselines3's ``predict``: ``drivelab.load("highway-ppo").predict(obs)`` → (action,
+    state). See ``drivelab.api.Model``; nothing is unpickled."""
+    from drivelab.api import load as load_model
+
+    return load_model(target)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import shlex
 import sys
 from pathlib import Path
@@ -11,6 +12,7 @@ import yaml
 from typer.core import TyperGroup
 
 from drivelab.agents.registry import ALGO_NAMES
+from drivelab.config import RunConfig
 from drivelab.envs.actions import ACTIONS
 from drivelab.errors import UsageError
 from drivelab.scenarios import SCENARIOS
@@ -185,31 +187,60 @@ def train_config(arguments: list[str]):
     return _new_run_config(given["config"], cli, given["video"], given["hyperparams"], switches)
 
 
+def run_default(field: str) -> str:
+    """What ``--help`` shows as the default of a run field's option (None there: the ``--config``
+    file's value, else this): RunConfig's default; the scenario's own for action and reward."""
+    if field in ("action", "reward"):
+        highway = SCENARIOS[RunConfig.env]
+        value = highway.action_kinds[0] if field == "action" else highway.default_reward
+        return f"the scenario's own; {RunConfig.env}: {value}"
+    if field == "name":
+        return "ALGO-ENV-sSEED-DATE-TIME"
+    if field == "eval_maps":
+        return "the training maps"
+    value = {f.name: f.default for f in dataclasses.fields(RunConfig)}[field]
+    return ",".join(value) if isinstance(value, tuple) else str(value)
+
+
+def _run_option(field: str, help: str | None = None):
+    """An option of run field ``field``: None unless given (then the ``--config`` file's value, else
+    the default), its help ending in the default, as the other options' with a default in words."""
+    shown = f"(default: {run_default(field)})"
+    return typer.Option(None, help=f"{help} {shown}" if help else shown, show_default=False)
+
+
 @app.command()
 def train(
-    algo: str | None = typer.Option(None, help=", ".join(ALGO_NAMES)),
-    env: str | None = typer.Option(None, help="scenario: " + ", ".join(SCENARIOS)),
-    obs: str | None = typer.Option(None, help="sensor or comma list, e.g. lidar,topdown or lidar:beams=120"),
-    action: str | None = typer.Option(None, help=", ".join(ACTIONS)),
-    reward: str | None = typer.Option(None, help="preset, term=weight list, or preset,term=weight"),
-    steps: int | None = typer.Option(None, help="total environment steps"),
-    seed: int | None = typer.Option(None),
-    traffic: str | None = typer.Option(None, help="empty, regular or dense"),
-    backend: str | None = typer.Option(
-        None, help="auto (default: fast where it runs the scenario), fast (compiled port) or highway"
+    algo: str | None = typer.Option(None, help=", ".join(ALGO_NAMES) + " (required here or in --config)"),
+    env: str | None = _run_option("env", "scenario: " + ", ".join(SCENARIOS)),
+    obs: str | None = _run_option("obs", "sensor or comma list, e.g. lidar,topdown or lidar:beams=120"),
+    action: str | None = _run_option("action", ", ".join(ACTIONS)),
+    reward: str | None = _run_option("reward", "preset, term=weight list, or preset,term=weight"),
+    steps: int | None = _run_option("steps", "total environment steps"),
+    seed: int | None = _run_option("seed"),
+    traffic: str | None = _run_option("traffic", "empty, regular or dense"),
+    backend: str | None = _run_option(
+        "backend", "auto (fast where it runs the scenario), fast (compiled port) or highway"
     ),
-    config: Path | None = typer.Option(None, help="YAML file of run fields (CLI options win)"),
-    name: str | None = typer.Option(None, help="run directory name"),
+    config: Path | None = typer.Option(None, help="YAML file of run fields (CLI options win over it)"),
+    name: str | None = _run_option("name", "run directory name"),
     runs_dir: Path = typer.Option(Path("runs"), help="where run directories are created"),
-    eval_every: int | None = typer.Option(
-        None, help="steps between evaluations, at most --steps (0: 5 per run)"
+    eval_every: int | None = _run_option(
+        "eval_every", "steps between evaluations, at most --steps (0: 5 per run)"
     ),
-    eval_episodes: int | None = typer.Option(None),
+    eval_episodes: int | None = _run_option("eval_episodes", "episodes per periodic evaluation"),
     video: bool = typer.Option(False, "--video", help="record a video at each periodic evaluation"),
-    checkpoint_every: int | None = typer.Option(None, help="steps between checkpoints (0: 10 per run)"),
-    n_envs: int | None = typer.Option(None, help="worlds stepped together (SB3 and own agents)"),
-    eval_maps: str | None = typer.Option(None, help="blocks: evaluate on maps START:COUNT (unseen maps)"),
-    hyperparams: list[str] = typer.Option([], "--hyperparams", "-H", help="algorithm override key=value"),
+    checkpoint_every: int | None = _run_option(
+        "checkpoint_every", "steps between checkpoints (0: 10 per run)"
+    ),
+    n_envs: int | None = _run_option("n_envs", "worlds stepped together (SB3 and own agents)"),
+    eval_maps: str | None = _run_option("eval_maps", "blocks: evaluate on maps START:COUNT (unseen maps)"),
+    hyperparams: list[str] = typer.Option(
+        [],
+        "--hyperparams",
+        "-H",
+        help="algorithm override key=value (default: drivelab/hyperparams/ALGO.yaml's)",
+    ),
     resume: Path | None = typer.Option(
         None, help="continue this run directory from its checkpoint (none yet: train it again from 0)"
     ),
@@ -272,7 +303,20 @@ def train(
             err=True,
         )
         raise typer.Exit(130) from None
+    _print_last_evaluation(run_dir)
     typer.echo(f"run directory: {run_dir}")
+
+
+def _print_last_evaluation(run_dir: Path) -> None:
+    """The metrics of a run's last periodic evaluation, as ``evaluate`` prints its own."""
+    from drivelab.training.compare import last_evaluation
+    from drivelab.training.evaluate import load_run_config
+
+    report = last_evaluation(run_dir)
+    if report is not None:
+        config = load_run_config(run_dir)
+        step, episodes = report["step"], report["episodes"]
+        _print_metrics(f"{config.algo} on {config.env} at step {step}: {episodes} episodes", report)
 
 
 RUN_OR_AGENT = "a run directory written by drivelab train, or a shipped agent's name (drivelab zoo)"
@@ -576,10 +620,10 @@ def ablate(
     reward: str = typer.Option("highway", help="the reward that --drop-terms ablates"),
     seeds: int = typer.Option(3, help="seeds per reward (0..N-1)"),
     steps: int = typer.Option(10_000, help="training steps per run"),
-    obs: str | None = typer.Option(None, help="sensors"),
-    action: str | None = typer.Option(None, help=", ".join(ACTIONS)),
-    traffic: str | None = typer.Option(None, help="empty, regular or dense"),
-    backend: str | None = typer.Option(None, help="simulation backend: highway or fast"),
+    obs: str | None = _run_option("obs", "sensors"),
+    action: str | None = _run_option("action", ", ".join(ACTIONS)),
+    traffic: str | None = _run_option("traffic", "empty, regular or dense"),
+    backend: str | None = _run_option("backend", "simulation backend: auto, fast or highway"),
     config: Path | None = typer.Option(None, help="YAML of further run fields shared by every run"),
     hyperparams: list[str] = typer.Option([], "--hyperparams", "-H", help="algorithm override key=value"),
     eval_episodes: int = typer.Option(10, help="final evaluation episodes per run"),
@@ -635,6 +679,24 @@ def convert_run(
     for path in written:
         typer.echo(f"rewrote {path}")
     typer.echo(f"run directory: {run_dir}  ({'converted' if written else 'already in the safe format'})")
+
+
+@app.command()
+def export(
+    run_dir: str = typer.Argument(..., metavar="RUN_DIR|NAME", help=RUN_OR_AGENT + " (dqn, ppo, a2c, sac)"),
+    out: Path = typer.Argument(..., help="the .zip to write (not inside the run directory)"),
+) -> None:
+    """Write a run's SB3 model in stable-baselines3's own format, for PPO.load (DQN, A2C, SAC.load).
+
+    For your own trusted use: SB3's format holds pickles, which SB3's load executes. drivelab
+    itself never reads the exported file; its runs keep their pickle-free format."""
+    from drivelab.training.export import export_sb3
+
+    try:
+        written, sb3_class = export_sb3(run_dir, out)
+    except UsageError as exc:
+        _fail(str(exc))
+    typer.echo(f"wrote {written}: stable_baselines3.{sb3_class}.load({str(written)!r}) reads it")
 
 
 benchmark_app = typer.Typer(cls=NeedsCommand, help="Driving benchmarks of trained runs.")

@@ -153,3 +153,52 @@ def test_version_through_the_script_and_python_dash_m():
     project = tomllib.loads((root / "pyproject.toml").read_text())["project"]
     assert project["version"] == drivelab.__version__
     assert project["license"] == "MIT" and (root / "LICENSE").read_text().startswith("MIT License")
+
+
+def _option_help(command: str) -> dict[str, str]:
+    import typer
+
+    params = typer.main.get_command(app).get_command(None, command).params
+    return {param.name: param.help or "" for param in params}
+
+
+def test_help_shows_the_defaults_a_new_run_takes():
+    """train's run options are None unless given (the --config file's value comes next), so typer
+    showed no default for them: each help now ends in what a run takes, as build_config fills it."""
+    from drivelab.config import build_config
+
+    config = build_config({"algo": "ppo"})
+    train_help, ablate_help = _option_help("train"), _option_help("ablate")
+    for field in ("env", "steps", "seed", "traffic", "backend", "eval_every", "eval_episodes",
+                  "checkpoint_every", "n_envs"):  # fmt: skip
+        assert train_help[field].endswith(f"(default: {getattr(config, field)})"), field
+    for helps in (train_help, ablate_help):
+        assert helps["obs"].endswith(f"(default: {','.join(config.obs)})")
+        assert helps["action"].endswith(f"highway: {config.action})")
+        assert helps["traffic"].endswith(f"(default: {config.traffic})")
+    assert train_help["reward"].endswith(f"highway: {config.reward})")
+    result = runner.invoke(app, ["train", "--help"], env={"COLUMNS": "200"})
+    assert result.exit_code == 0
+    assert "total environment steps (default: 10000)" in result.output
+    assert "[default: runs]" in result.output  # typer's own, for an option with a default value
+
+
+def test_train_ends_by_printing_its_last_evaluation(tmp_path):
+    import csv
+
+    from drivelab.yaml_io import dump_yaml
+    from tests.training.tiny_runs import tiny_config
+
+    config = tmp_path / "tiny.yaml"
+    config.write_text(dump_yaml({**tiny_config().to_dict(), "name": "tiny"}))
+    result = runner.invoke(
+        app, ["train", "--config", str(config), "--runs-dir", str(tmp_path / "runs")], env={"COLUMNS": "200"}
+    )
+    assert result.exit_code == 0, result.output
+    with (tmp_path / "runs" / "tiny" / "evaluations.csv").open() as handle:
+        last = list(csv.DictReader(handle))[-1]
+    table = result.output[result.output.index("ppo on highway at step 128: 1 episodes") :]
+    assert f"{float(last['mean_return']):.3f} ± {float(last['std_return']):.3f}" in table
+    assert f"{float(last['mean_speed_mps']):.3f}" in table
+    assert "success rate" in table and "route completion" in table
+    assert result.output.rstrip().endswith(f"run directory: {tmp_path / 'runs' / 'tiny'}")

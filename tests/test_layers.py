@@ -59,16 +59,19 @@ LAYERS = (
     # them (shared geometry lives in the bottom layer), and not each other
     Layer("perception", 3, ("drivelab.perception",), may_import=frozenset({"base"})),
     Layer("rewards", 3, ("drivelab.rewards",), may_import=frozenset({"base"})),
-    # the environments; ``drivelab`` itself (``drivelab/__init__.py``: importing it registers the
-    # gymnasium ids, ``drivelab.make`` builds a DriveEnv) is their facade
-    Layer("envs", 4, ("drivelab.envs", "drivelab")),
+    # the environments
+    Layer("envs", 4, ("drivelab.envs",)),
     # agents, with the hyper-parameters shipped for them (data read by agents/sb3.py)
     Layer("agents", 5, ("drivelab.agents", "drivelab.hyperparams")),
     # runs, evaluation, comparisons; RunConfig is a training run's config (it checks the env's
     # options through envs/, and nothing below a run reads it)
     Layer("training", 6, ("drivelab.training", "drivelab.config")),
+    # the Python API: ``drivelab`` itself (``drivelab/__init__.py``: importing it registers the
+    # gymnasium ids; ``drivelab.make`` builds a DriveEnv, ``drivelab.load`` a trained agent) and
+    # ``api.py`` (the loaded ``Model``, which reads runs through training/)
+    Layer("api", 7, ("drivelab", "drivelab.api")),
     # the command line: ``drivelab`` (cli.py) and ``python -m drivelab`` (__main__.py, which calls it)
-    Layer("cli", 7, ("drivelab.cli", "drivelab.__main__")),
+    Layer("cli", 8, ("drivelab.cli", "drivelab.__main__")),
 )
 
 # (importer, imported) edges the test tolerates while a re-layering is under way, each with its
@@ -216,7 +219,8 @@ def test_layer_table_places_the_modules_it_names():
     assert placed["drivelab.sim.core.traffic"] == "sim" and placed["drivelab.sim.junctions.rules"] == "sim"
     assert placed["drivelab.scenarios.circuits.reference_env"] == "scenarios"
     assert placed["drivelab.scenarios.town.simulator"] == "scenarios"
-    assert placed["drivelab.envs.core"] == "envs" and placed["drivelab"] == "envs"
+    assert placed["drivelab.envs.core"] == "envs" and placed["drivelab"] == "api"
+    assert placed["drivelab.api"] == "api"
     assert placed["drivelab.training.run"] == "training" and placed["drivelab.cli"] == "cli"
     assert placed["drivelab.__main__"] == "cli"
 

@@ -112,16 +112,46 @@ class SafeSave:
         buffer.pos, buffer.full = int(meta["pos"]), bool(meta["full"])
 
 
+class RolloutLogs:
+    """Mixin for SB3's on-policy algorithms: a progress row (CSV, TensorBoard) every
+    ``log_rollouts`` rollouts counted from step 0, ``time/iterations`` the rollouts since step 0.
+
+    SB3 counts its ``log_interval`` from the start of each ``learn`` call, so a resumed run logged
+    other steps than the same run never stopped; and A2C's interval (100 rollouts, of 16 steps with
+    drivelab's values) left a short run with an empty progress.csv and no TensorBoard scalars.
+    ``log_over`` sets the interval for a run's budget: SB3's own (``SB3_LOG_INTERVAL``: PPO 1, A2C
+    100), finer for a run too short for ten rows at it."""
+
+    SB3_LOG_INTERVAL = 1
+    log_rollouts = 1
+
+    def log_over(self, total_steps: int) -> None:
+        """Log at SB3's interval, or often enough for about ten rows over ``total_steps``."""
+        rollout = self.n_steps * self.n_envs
+        self.log_rollouts = max(1, min(self.SB3_LOG_INTERVAL, total_steps // (10 * rollout)))
+
+    def learn(self, *args, **kwargs):
+        kwargs["log_interval"] = 1  # every rollout asks ``dump_logs``, which decides by the step
+        return super().learn(*args, **kwargs)
+
+    def dump_logs(self, iteration: int = 0) -> None:
+        rollouts = self.num_timesteps // (self.n_steps * self.n_envs)  # every rollout is whole
+        if rollouts % self.log_rollouts == 0:
+            super().dump_logs(rollouts)
+
+
 class DrivelabDQN(SafeSave, DQN):
     """SB3 DQN saved without pickles."""
 
 
-class DrivelabPPO(SafeSave, PPO):
+class DrivelabPPO(SafeSave, RolloutLogs, PPO):
     """SB3 PPO saved without pickles."""
 
 
-class DrivelabA2C(SafeSave, A2C):
+class DrivelabA2C(SafeSave, RolloutLogs, A2C):
     """SB3 A2C saved without pickles."""
+
+    SB3_LOG_INTERVAL = 100  # A2C.learn's default
 
 
 class DrivelabSAC(SafeSave, SAC):

@@ -123,8 +123,6 @@ def _float_or_none(value) -> float | None:
     return float(value)
 
 
-
-
 def _final_metrics(values: dict, path: Path) -> dict:
     """The ``METRICS`` of ``values`` (a row or eval.json) as floats or None, or a UsageError naming
     the file and the metric: text, NaN or an infinity (JSON's ``NaN``, ``Infinity``), a rate outside
@@ -170,6 +168,18 @@ def read_evaluations(path: Path) -> tuple[list[tuple[int, float]], dict]:
             f"{str(path)!r} is not an evaluations.csv written by drivelab train{line}: {type(exc).__name__}"
         ) from None
     return curve, last_row
+
+
+def last_evaluation(run_dir: Path) -> dict | None:
+    """A run's last periodic evaluation: the last row of its evaluations.csv, numbers as numbers
+    (None where a metric is empty: a scenario without routes has no route completion); None when
+    it has none."""
+    path = Path(run_dir) / "evaluations.csv"
+    _, row = read_evaluations(path) if path.is_file() else ([], {})
+    if not row:
+        return None
+    return {key: None if value == "" else int(value) if key in ("step", "episodes") else float(value)
+            for key, value in row.items()}  # fmt: skip
 
 
 def _check_names(config: RunConfig, path: Path) -> None:
@@ -232,10 +242,11 @@ def conditions(config: RunConfig) -> dict[str, str]:
 
 
 def _scenario_labels(records: Sequence[RunRecord]) -> list[str]:
-    """Each run's scenario as its group shows it: the name, followed by the ``conditions`` that
-    differ among ``records`` (``highway (traffic=dense)``), so that runs of different traffic,
-    options or simulators are different groups and say how; the scenario alone where all agree."""
-    values = [conditions(record.config) for record in records]
+    """Each run's scenario as its group shows it: the name, followed by the ``conditions`` and the
+    training budget (``steps``) that differ among ``records`` (``highway (traffic=dense)``,
+    ``highway (steps=100000)``), so that runs of different traffic, options, simulators or budgets
+    are different groups and say how; the scenario alone where all agree."""
+    values = [{**conditions(record.config), "steps": str(record.config.steps)} for record in records]
     names = dict.fromkeys(name for value in values for name in value)
     varying = [name for name in names if len({value.get(name, "default") for value in values}) > 1]
     labels = []
@@ -250,9 +261,12 @@ def group_runs(records: Sequence[RunRecord]) -> dict[tuple[str, ...], list[RunRe
     Runs whose ``conditions`` differ (traffic, environment options, simulator, evaluation maps)
     are different groups, their scenario labelled with them (``_scenario_labels``).
 
-    Two runs of one config, seed and step budget (a copied run directory, one run named by two
-    paths) are one sample of a deterministic run, not two: a UsageError naming them. Runs of one
-    seed that differ otherwise (steps) share a group, with a warning in the report."""
+    Runs of different training budgets are different groups, as rliable's and RL Zoo's
+    comparisons are made at one budget: a final score after 10,000 steps and one after 100,000
+    are not samples of one quantity (the report says so). Two runs of one config, seed and step
+    budget (a copied run directory, one run named by two paths) are one sample of a deterministic
+    run, not two: a UsageError naming them. Runs of one seed and budget that differ otherwise (the
+    evaluation episodes) share a group, with a warning in the report."""
     groups: dict[tuple[str, ...], list[RunRecord]] = {}
     seen: dict[tuple[str, int], RunRecord] = {}
     scenarios = dict(zip((id(record) for record in records), _scenario_labels(records), strict=True))
@@ -334,6 +348,14 @@ def _markdown(
             f"The groups drive different scenarios ({', '.join(scenarios)}), each evaluated on its own"
             " scenario's episodes: a metric compares how each agent does at its own task, not the"
             " agents at one task.",
+        ]
+    budgets = sorted({runs[0].config.steps for runs in groups.values()})
+    if len(budgets) > 1:
+        lines += [
+            "",
+            f"The runs were trained for different budgets ({', '.join(f'{b:,}' for b in budgets)} steps),"
+            " and each budget is a group of its own (`steps=` in its scenario): as in rliable and RL Zoo,"
+            " final scores compare at one budget; across budgets they say how training goes on.",
         ]
     repeated = [key for key, runs in groups.items() if len({r.config.seed for r in runs}) < len(runs)]
     for key in repeated:

@@ -40,7 +40,6 @@ from __future__ import annotations
 import csv
 import hashlib
 import json
-import os
 import random
 import re
 import signal
@@ -628,22 +627,16 @@ def plan_truncation(run_dir: Path, steps: int, snapshot: Snapshot | None) -> dic
     return changes
 
 
-def apply_truncation(run_dir: Path, changes: dict[Path, str | None], steps: int) -> None:
+def apply_truncation(changes: dict[Path, str | None]) -> None:
     """Write ``plan_truncation``'s changes, the rewrites first (a full disk fails one of them
-    before anything is deleted), then set the remaining progress.csv aside as
-    ``progress-<steps>.csv`` (the logger starts a new progress.csv)."""
+    before anything is deleted). progress.csv, cut back to the checkpoint's step, is continued by
+    the resumed run's logger (``progress_log.py``)."""
     for path, text in changes.items():
         if text is not None:
             write_file(path, text)
     for path, text in changes.items():
         if text is None:
             remove_file(path)
-    progress = run_dir / "progress.csv"
-    if progress.exists():
-        target, suffix = run_dir / f"progress-{steps}.csv", 1
-        while os.path.lexists(target):
-            target, suffix = run_dir / f"progress-{steps}-{suffix}.csv", suffix + 1
-        os.replace(progress, target)
 
 
 def warn_inexact() -> None:

@@ -3,7 +3,7 @@
 Run directory layout::
 
     config.yaml            resolved RunConfig
-    progress.csv, events.* SB3 logger (CSV + TensorBoard); a resume starts a new progress-N.csv
+    progress.csv, events.* SB3 logger (CSV + TensorBoard), continued by a resume
     monitor.csv            one row per training episode (return, length, time)
     evaluations.csv        one row per periodic evaluation
     checkpoints/latest.zip + latest.json (manifest: steps, sha256, config identity)
@@ -37,7 +37,6 @@ from collections.abc import Callable
 from pathlib import Path
 
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.logger import configure
 from stable_baselines3.common.monitor import Monitor, ResultsWriter
 from tqdm import tqdm
 
@@ -59,6 +58,7 @@ from drivelab.training.evaluate import (
     run_episodes,
     write_video,
 )
+from drivelab.training.progress_log import run_logger
 from drivelab.training.resume_state import (
     ArrayVecMonitor,
     RecordEpisodes,
@@ -523,7 +523,7 @@ def _continue(run_dir: Path, config: RunConfig, on_evaluation, eval_first: int) 
     # everything checked: from here on the run directory changes
     try:
         write_file(run_dir / "config.yaml", dump_yaml(config.to_dict()))
-        apply_truncation(run_dir, changes, manifest["steps"])
+        apply_truncation(changes)
         train_env, eval_env, worlds = _make_envs(config, run_dir, resume=True)
     except (OSError, WriteError) as exc:  # a full disk: the checkpoint stands, resuming again works
         raise _write_failed(exc, run_dir, _resume_hint(run_dir)) from None
@@ -654,7 +654,9 @@ def _learn(model, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWo
     and checkpointed there (``TrainingInterrupted``). A second signal stops at once, without a new
     checkpoint (the state may be half-updated); the run then resumes from the previous one.
     """
-    model.set_logger(configure(str(run_dir), ["csv", "tensorboard"]))
+    model.set_logger(run_logger(run_dir, model.num_timesteps or None))  # a resume continues the logs
+    if hasattr(model, "log_over"):  # SB3's on-policy models: rows by the step (``RolloutLogs``)
+        model.log_over(config.steps)
     with _full_disk_reported_once():
         try:
             _learn_logged(model, run_dir, config, eval_env, worlds, on_evaluation, eval_first)

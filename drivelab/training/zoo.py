@@ -28,10 +28,14 @@ import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
 from drivelab.errors import UsageError
+
+if TYPE_CHECKING:
+    from drivelab.config import RunConfig
 
 ZOO_DIR = Path(__file__).resolve().parents[1] / "zoo"
 CARD_FORMAT = "drivelab-zoo-1"
@@ -74,6 +78,36 @@ def resolve(target: str | Path, zoo_dir: Path | None = None) -> tuple[Path, str 
     raise UsageError(
         f"run directory or shipped agent {str(target)!r} does not exist (`drivelab zoo` lists: {names})"
     )
+
+
+class Trained(NamedTuple):
+    """A run's agent, loaded to act (``load_trained``)."""
+
+    agent: Any
+    config: RunConfig
+    run_dir: Path
+    name: str | None  # the shipped agent's name; None for a run directory
+    env: Any  # the run's evaluation environment, whose spaces the agent's are
+
+
+def load_trained(target: str | Path) -> Trained:
+    """The agent of a run directory or of a shipped agent named by ``drivelab zoo`` (its final
+    model, else its latest verified checkpoint), built on the run's evaluation environment; a
+    UsageError when the model's spaces are not its config.yaml's, or config.yaml was edited after
+    training, or the run is being trained now. Nothing is unpickled."""
+    from drivelab.envs.core import DriveEnv
+    from drivelab.training.checkpoints import check_trained_config, load_agent
+    from drivelab.training.evaluate import check_spaces, load_run_config
+    from drivelab.training.safe_files import locked_run
+
+    run_dir, name = resolve(target)
+    with locked_run(run_dir, writes=False):  # not a run that trains now
+        config = load_run_config(run_dir)
+        env = DriveEnv(**config.eval_env_kwargs())
+        agent = load_agent(run_dir, config, env)
+        check_spaces(agent, env, run_dir)
+        check_trained_config(run_dir, config)
+    return Trained(agent, config, run_dir, name, env)
 
 
 def report_dir(target: str | Path, out: Path | None, runs_dir: Path = Path("runs")) -> Path | None:

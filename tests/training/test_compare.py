@@ -259,11 +259,32 @@ def test_cli_compare(runs, tmp_path):
     assert not (tmp_path / "r2").exists()
 
 
+def test_runs_of_different_budgets_are_different_groups_and_the_report_says_so(runs, tmp_path):
+    """They used to share a group (the budget only listed in its steps column), their final
+    scores pooled as if seeds of one experiment."""
+    fake_run(runs, "ppo-long-s0", seed=0, final_return=5.0, steps=40)
+    fake_run(runs, "ppo-long-s1", seed=1, final_return=7.0, steps=40)
+    groups = group_runs([load_run(p) for p in find_runs([str(runs / "ppo-s*"), str(runs / "ppo-long-*")])])
+    assert {key[1]: [r.run_dir.name for r in rs] for key, rs in groups.items()} == {
+        "highway (steps=20)": ["ppo-s0", "ppo-s1", "ppo-s2"],
+        "highway (steps=40)": ["ppo-long-s0", "ppo-long-s1"],
+    }
+    out = compare([str(runs / "ppo-s*"), str(runs / "ppo-long-*")], tmp_path / "report")
+    text = (out / "report.md").read_text()
+    assert "trained for different budgets (20, 40 steps), and each budget is a group of its own" in text
+    summary = pd.read_csv(out / "summary.csv")
+    means = summary[summary["metric"] == "mean_return"].set_index("env")["mean"].to_dict()
+    assert means == {"highway (steps=20)": pytest.approx(1 / 3), "highway (steps=40)": 6.0}
+    text = (compare([str(runs / "ppo-s*")], tmp_path / "one") / "report.md").read_text()
+    assert "different budgets" not in text and "steps=" not in text
+
+
 def test_repeated_seed_is_flagged(runs, tmp_path):
-    # the same seed with another step budget (a copy of the same run is refused: test_cli_input_more.py)
+    # the same seed and budget, other evaluation episodes (a copy of the same run is refused:
+    # test_cli_input_more.py)
     again = fake_run(runs, "ppo-s0-again", seed=0, final_return=0.0)
     config = load_run(again).config
-    save_yaml(build_config({**config.to_dict(), "steps": 40}), again / "config.yaml")
+    save_yaml(build_config({**config.to_dict(), "eval_episodes": 3}), again / "config.yaml")
     text = (compare([str(runs / "ppo-s*")], tmp_path / "report") / "report.md").read_text()
     assert (
         "**Warning:** group ppo · highway · kinematics · highway · meta has several runs with the same seed"

@@ -9,7 +9,6 @@ identical CSV values): the same code on the same machine, nothing may drift.
 
 import json
 import os
-import shutil
 import signal
 
 import pandas as pd
@@ -21,6 +20,7 @@ from drivelab.errors import UsageError
 from drivelab.training import checkpoints
 from drivelab.training import run as run_module
 from drivelab.training.evaluate import evaluate_run
+from tests.training.tiny_runs import train_then_kill_back_to
 
 pytestmark = pytest.mark.usefixtures("one_torch_thread")
 SMALL_NET = {"policy_kwargs": {"net_arch": [32, 32]}}
@@ -108,8 +108,18 @@ def _monitor(run_dir) -> pd.DataFrame:
     return pd.read_csv(run_dir / "monitor.csv", skiprows=1)
 
 
+def _progress(run_dir) -> pd.DataFrame:
+    """progress.csv's step column, and SB3's rollout count where it logs one (an empty table for a
+    run too short to log: dueling_ddqn's rows are 250 steps apart)."""
+    if (run_dir / "progress.csv").stat().st_size == 0:
+        return pd.DataFrame()
+    table = pd.read_csv(run_dir / "progress.csv")
+    return table[[column for column in ("time/total_timesteps", "time/iterations") if column in table]]
+
+
 def _assert_same_run(reference, resumed, config) -> None:
-    """Same final parameters (and optimizer state), evaluations and episodes (returns, lengths)."""
+    """Same final parameters (and optimizer state), evaluations and episodes (returns, lengths),
+    and one progress.csv with the same rows (steps) as the run never stopped."""
     expected, got = _parameters(reference, config), _parameters(resumed, config)
     assert expected.keys() == got.keys()
     different = [name for name in expected if not torch.equal(expected[name], got[name])]
@@ -119,6 +129,8 @@ def _assert_same_run(reference, resumed, config) -> None:
     )
     pd.testing.assert_frame_equal(_monitor(reference)[["r", "l"]], _monitor(resumed)[["r", "l"]])
     assert _monitor(resumed)["l"].sum() <= config.steps  # no episode counted twice
+    pd.testing.assert_frame_equal(_progress(reference), _progress(resumed))
+    assert sorted(path.name for path in resumed.glob("progress*.csv")) == ["progress.csv"]
 
 
 @pytest.mark.parametrize(
@@ -168,23 +180,9 @@ def test_resume_after_a_kill_cuts_the_logs_back_to_the_checkpoint(tmp_path, monk
     eval.json). Resuming cuts evaluations.csv, monitor.csv and progress back to step 200, removes
     the stale eval.json and ends exactly as the finished run did."""
     config = _config("dqn", "run")
-    kept = tmp_path / "kept"
-    checkpoint = run_module.RunCallback.checkpoint
-
-    def keep_200(self, snapshot):
-        checkpoint(self, snapshot)
-        if snapshot.steps == 200:
-            shutil.copytree(self.run_dir / "checkpoints", kept)
-
-    monkeypatch.setattr(run_module.RunCallback, "checkpoint", keep_200)
-    run_dir = run_module.train(config, tmp_path / "runs")
-    monkeypatch.undo()
-    evaluate_run(run_dir, episodes=1)
-    reference = tmp_path / "reference"
-    shutil.copytree(run_dir, reference)
-    shutil.rmtree(run_dir / "checkpoints")
-    shutil.copytree(kept, run_dir / "checkpoints")
-    (run_dir / "model.zip").unlink()  # killed before the end
+    run_dir, reference = train_then_kill_back_to(
+        monkeypatch, tmp_path, config, 200, then=lambda run_dir: evaluate_run(run_dir, episodes=1)
+    )
 
     calls = []
     learn = run_module._learn
@@ -194,9 +192,8 @@ def test_resume_after_a_kill_cuts_the_logs_back_to_the_checkpoint(tmp_path, monk
         assert not (run_dir / "eval.json").exists()
         assert list(pd.read_csv(run_dir / "evaluations.csv")["step"]) == [50, 100, 150, 200]
         assert _monitor(run_dir)["l"].sum() <= 200
-        progress = pd.read_csv(run_dir / "progress-200.csv")
+        progress = pd.read_csv(run_dir / "progress.csv")  # continued by the resumed run
         assert progress["time/total_timesteps"].max() <= 200
-        assert not (run_dir / "progress.csv").exists()
         return learn(model, run_dir, *args)
 
     monkeypatch.setattr(run_module, "_learn", inspect_then_learn)

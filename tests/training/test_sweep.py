@@ -2,6 +2,7 @@
 
 import json
 import shutil
+import zipfile
 
 import pytest
 import yaml
@@ -80,6 +81,12 @@ def _manifest_steps(run_dir):
     return json.loads((run_dir / "checkpoints" / "latest.json").read_text())["steps"]
 
 
+def _learned_from(run_dir) -> int:
+    """The step the last training of the run's model started from (SB3's counter)."""
+    with zipfile.ZipFile(run_dir / "model.zip") as archive:
+        return json.loads(archive.read("sb3.json"))["counters"]["_num_timesteps_at_start"]
+
+
 def test_rerun_skips_finished_resumes_interrupted_restarts_unstarted(tmp_path):
     runs = tmp_path / "runs"
     sweep = expand_sweep(tiny_spec(steps=32), runs)
@@ -107,8 +114,8 @@ def test_rerun_skips_finished_resumes_interrupted_restarts_unstarted(tmp_path):
     outcomes = run_sweep(longer, workers=1)
     assert all(o["ok"] for o in outcomes), outcomes
     assert "stale" not in json.loads((s0 / "eval.json").read_text())  # re-evaluated after the resume
-    assert _manifest_steps(s0) == 48 and (s0 / "progress-32.csv").is_file()  # continued from 32
-    assert _manifest_steps(s1) == 48 and not (s1 / "progress-32.csv").exists()  # trained afresh
+    assert _manifest_steps(s0) == 48 and _learned_from(s0) == 32  # continued from 32
+    assert _manifest_steps(s1) == 48 and _learned_from(s1) == 0  # trained afresh
     assert [action for _, action in plan(longer)] == ["skip", "skip"]
 
     (s0 / "eval.json").unlink()

@@ -61,3 +61,48 @@ def rewrite_member(path: Path, member: str, data: bytes) -> None:
     with zipfile.ZipFile(path, "w") as archive:
         for name, value in members.items():
             archive.writestr(name, value)
+
+
+def met_observations(env, count: int) -> list:
+    """``count`` observations of ``env`` met along random actions (seeded; episodes restarted as
+    they end)."""
+    env.action_space.seed(0)
+    obs, _ = env.reset(seed=0)
+    found = [obs]
+    while len(found) < count:
+        obs, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        if terminated or truncated:
+            obs, _ = env.reset()
+        found.append(obs)
+    return found
+
+
+def train_then_kill_back_to(
+    monkeypatch, tmp_path: Path, config: RunConfig, steps: int, then=None
+) -> tuple[Path, Path]:
+    """(run directory, reference): ``config`` trained to the end in ``tmp_path/runs`` (``then``
+    called with the run directory, if given), copied whole as the reference, then put back as a run
+    killed after its checkpoint of ``steps`` that had logged past it: that checkpoint in place of
+    the final one, no model.zip, the logs as written."""
+    import shutil
+
+    from drivelab.training import run as run_module
+
+    kept, checkpoint = tmp_path / "kept", run_module.RunCallback.checkpoint
+
+    def keep(self, snapshot):
+        checkpoint(self, snapshot)
+        if snapshot.steps == steps:
+            shutil.copytree(self.run_dir / "checkpoints", kept)
+
+    monkeypatch.setattr(run_module.RunCallback, "checkpoint", keep)
+    run_dir = run_module.train(config, tmp_path / "runs")
+    monkeypatch.undo()
+    if then is not None:
+        then(run_dir)
+    reference = tmp_path / "reference"
+    shutil.copytree(run_dir, reference)
+    shutil.rmtree(run_dir / "checkpoints")
+    shutil.copytree(kept, run_dir / "checkpoints")
+    (run_dir / "model.zip").unlink()  # killed before the end
+    return run_dir, reference
