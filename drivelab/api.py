@@ -30,7 +30,7 @@ class Model:
         reward, hyper-parameters, steps.
     :ivar run_dir: the run directory it was loaded from (a shipped agent's folder in the package).
     :ivar name: the shipped agent's name, or None for a run directory.
-    :ivar observation_space, action_space: the spaces of ``make_env()``'s environment, which
+    :ivar observation_space: with ``action_space``, the spaces of ``make_env()``'s environment, which
         ``predict`` reads and returns.
     """
 
