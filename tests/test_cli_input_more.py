@@ -96,7 +96,7 @@ def test_train_lane_writes_only_the_weights_file(work):
 
 
 COMMANDS = (
-    "envs, train, evaluate, zoo, enjoy, compare, sweep, tune, ablate, convert-run, maps, "
+    "envs, train, evaluate, zoo, enjoy, compare, sweep, tune, ablate, convert-run, export, maps, "
     + "benchmark, perception"
 )
 
