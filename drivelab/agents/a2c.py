@@ -1,7 +1,7 @@
 """drivelab's A2C: one gradient step of the advantage-weighted log-likelihood per rollout (Mnih et
 al. 2016), on the on-policy trainer of ``onpolicy.py`` (collect loop, GAE, networks, normalisation).
 
-Seed 003: "a critic loss based on mean squared error between predicted and actual returns, and
+The MetaDrive study: "a critic loss based on mean squared error between predicted and actual returns, and
 an actor loss that maximizes the probability of good actions using advantage-weighted
 log-probabilities ... advantage values computed using Generalized Advantage Estimation".
 """
@@ -27,7 +27,8 @@ class A2CConfig(OnPolicyConfig):
     gae_lambda: float = 1.0
     entropy_coef: float = 0.01
     normalize_advantages: bool = False
-    shared_encoder: bool = False  # seed 003's A2C: "convolutional layers in both the actor and critic"
+    # the MetaDrive study's A2C: "convolutional layers in both the actor and critic"
+    shared_encoder: bool = False
 
 
 def a2c_loss(

@@ -1,12 +1,12 @@
 """The actor-critic of drivelab's on-policy trainer: an encoder, an action distribution, a value head,
 and the running statistics that normalise its input.
 
-- ``ActorCritic``: the shared encoders of ``networks.py`` (MLP, seed 003's CNN, fusion) feed an
+- ``ActorCritic``: the shared encoders of ``networks.py`` (MLP, the MetaDrive study's CNN, fusion) feed an
   action head and a value head (one encoder for both, or one each).
 - The action head is one of three distributions, chosen by the action space and ``distribution``:
   ``categorical`` (Discrete: meta, grid, the line and lane tables), ``tanh_gaussian`` (Box:
   a = tanh(u) clipped into the box, u ~ N(μ(s), σ²), σ a trained state-independent vector, as
-  seed 003 and behaviour cloning, whose weights it loads) and
+  the MetaDrive study and behaviour cloning, whose weights it loads) and
   ``beta`` (Box: a ~ Beta(α(s), β(s)) on [low, high], α, β = 1 + softplus(·) > 1, Roach's choice
   for driving: bounded and unimodal, no probability mass piled up at the bounds).
 - ``RunningNorm``: the running mean and variance of the observation's vectors (images are scaled by

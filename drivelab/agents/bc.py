@@ -13,7 +13,7 @@ of the samples held out), then the validation loss and the action agreement are 
 is the squared error of tanh(μ) (``loss=mse``) or the tanh-Gaussian's negative log-likelihood of
 the expert's action (``loss=nll``, which also fits σ).
 
-The policy is the tanh-Gaussian actor-critic of our PPO (``networks.py``: seed 003's CNN, its
+The policy is the tanh-Gaussian actor-critic of our PPO (``networks.py``: the MetaDrive study's CNN, its
 fusion network or an MLP, following the observation), so a cloned policy's weights load into
 ``ppo_own`` for fine-tuning (its value head is left untrained here). The dataset is the agent's
 ``replay_buffer``: run.py checkpoints it as an ``.npz`` beside the model, so a run resumes exactly.

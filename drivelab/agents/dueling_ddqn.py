@@ -1,4 +1,4 @@
-"""Dueling Double DQN with prioritised replay (seed 003), one file, top to bottom:
+"""Dueling Double DQN with prioritised replay (the MetaDrive study), one file, top to bottom:
 
 1. ``SumTree``: priorities in a binary tree, so sampling proportional to priority is O(log N);
 2. ``PrioritizedReplayBuffer``: P(i) = p_i^α / Σ p^α, importance weights (N·P(i))^−β (Schaul et
@@ -306,7 +306,7 @@ def linear(start: float, end: float, progress: float) -> float:
 
 
 class DuelingDoubleDQN(OwnAgent):
-    """Seed 003's Dueling Double DQN agent with prioritised replay."""
+    """The MetaDrive study's Dueling Double DQN agent with prioritised replay."""
 
     config_class = DuelingDDQNConfig
 

@@ -1,10 +1,10 @@
-"""Seed 003's encoders (CNN and fusion), the tanh-Gaussian actor-critic, and SB3 extractors of both.
+"""The MetaDrive study's encoders (CNN and fusion), the tanh-Gaussian actor-critic, SB3 extractors of both.
 
 - ``SeedCnn``: Conv 5→16 8×8/4 → ReLU → Conv 16→32 4×4/2 → ReLU → FC 2592→256 → ReLU (84×84 input).
 - ``FusionEncoder``: image FC 256 + vector FC 64 (the 5 ego-state numbers) + LiDAR-120 FC 128,
   concatenated (448) → FC 256 → ReLU.
 - ``TanhGaussianActorCritic``: an encoder, a mean head, a trainable log-std, a value head;
-  action = tanh(μ + σ·ε) (seed 003's "final action").
+  action = tanh(μ + σ·ε) (the MetaDrive study's "final action").
 - ``SeedCnnExtractor`` / ``FusionExtractor``: the same encoders as stable-baselines3 features
   extractors, so SB3 PPO/A2C run the same networks on the same input
   (``-H features_extractor=seed``).
@@ -53,7 +53,7 @@ def observation_kind(space: spaces.Space) -> str:
 
 
 class SeedCnn(nn.Module):
-    """Seed 003's image encoder; the FC input size follows the image size (2592 for 84×84)."""
+    """The MetaDrive study's image encoder; the FC input size follows the image size (2592 for 84×84)."""
 
     def __init__(self, image_space: spaces.Box, features: int = 256) -> None:
         super().__init__()
@@ -199,7 +199,7 @@ def squashed_log_prob(distribution: torch.distributions.Normal, unsquashed: torc
 
 
 class SeedCnnExtractor(BaseFeaturesExtractor):
-    """Seed 003's CNN as an SB3 features extractor (image observations)."""
+    """The MetaDrive study's CNN as an SB3 features extractor (image observations)."""
 
     def __init__(self, observation_space: spaces.Box) -> None:
         super().__init__(observation_space, features_dim=256)
@@ -210,7 +210,7 @@ class SeedCnnExtractor(BaseFeaturesExtractor):
 
 
 class FusionExtractor(BaseFeaturesExtractor):
-    """Seed 003's fusion network as an SB3 features extractor (Dict: image + ego state + LiDAR)."""
+    """The MetaDrive study's fusion network as an SB3 features extractor (Dict: image + ego state + LiDAR)."""
 
     def __init__(self, observation_space: spaces.Dict) -> None:
         super().__init__(observation_space, features_dim=256)

@@ -1,4 +1,4 @@
-"""Tabular Q-learning with ε-greedy exploration (seed 004), behind drivelab's Agent protocol.
+"""Tabular Q-learning with ε-greedy exploration (the CARLA study), behind drivelab's Agent protocol.
 
 The agent reads a discrete observation (the ``line``, ``lane`` or ``ttc_grid`` sensors) and picks
 one of a discrete action set (the seed's 5-action tables, ``meta``, ``grid``). Defaults are the
@@ -33,7 +33,7 @@ FORMAT = "drivelab-qlearning-1"
 
 @dataclass(frozen=True)
 class QLearningConfig:
-    """Hyper-parameters (seed 004, sections 3.3 and 4.3).
+    """Hyper-parameters (the CARLA study, sections 3.3 and 4.3).
 
     :param learning_rate: α of the update.
     :param gamma: discount factor γ.
@@ -91,7 +91,7 @@ def _discrete_size(space: spaces.Space, what: str) -> int:
 
 
 class QLearning:
-    """A Q-table over (state, action) learnt with the one-step Q-learning update (seed 004, eq. 1).
+    """A Q-table over (state, action) learnt with the one-step Q-learning update (the CARLA study, eq. 1).
 
     :param env: a gymnasium environment with Discrete observation and action spaces.
     :param seed: seeds the exploration generator.
@@ -151,7 +151,7 @@ class QLearning:
     def update(self, state: int, action: int, reward: float, next_state: int, terminal: bool) -> float:
         """One Q-learning update; returns the TD error.
 
-        seed 004, eq. 1: Q(s, a) ← Q(s, a) + α [r + γ max_a' Q(s', a') − Q(s, a)], without the
+        the CARLA study, eq. 1: Q(s, a) ← Q(s, a) + α [r + γ max_a' Q(s', a') − Q(s, a)], without the
         bootstrap term when the episode ended in a terminal state (not at a time limit).
         """
         target = reward if terminal else reward + self.config.gamma * float(self.q_table[next_state].max())

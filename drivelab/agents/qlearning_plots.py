@@ -1,4 +1,4 @@
-"""Seed 004's three-panel training plot (its figs. 6 and 8): ε per step, return and length per episode.
+"""The CARLA study's three-panel training plot (its figs. 6 and 8): ε per step, return and length per episode.
 
 The Q-learning agent writes it into its run directory with its Q-table (``write_run_artifacts``),
 so it lives beside the agent: agents do not import ``training/``.

@@ -105,31 +105,31 @@ ALGORITHMS: dict[str, AlgoSpec] = {
                  "sb3", multi_env=True, on_policy=True),
         AlgoSpec("sac", "stable-baselines3 SAC", _CONTINUOUS, "drivelab.agents.sb3:DrivelabSAC", "sb3",
                  sb3_replay=True, multi_env=True),
-        AlgoSpec("dueling_ddqn", "drivelab's Dueling Double DQN, prioritised replay (seed 003)", _DISCRETE,
+        AlgoSpec("dueling_ddqn", "Dueling Double DQN, prioritised replay (the MetaDrive study)", _DISCRETE,
                  "drivelab.agents.dueling_ddqn:DuelingDoubleDQN", "own", sb3_replay=True,
                  observation_kinds=("vector",), multi_env=True),
         AlgoSpec("a2c_own", "drivelab's A2C on the fast on-policy trainer (categorical, tanh-Gaussian or "
-                 "Beta; MLP, seed 003's CNN / fusion network)", _DISCRETE + _CONTINUOUS,
+                 "Beta; MLP, the MetaDrive study's CNN / fusion network)", _DISCRETE + _CONTINUOUS,
                  "drivelab.agents.a2c:OwnA2C", "own", observation_kinds=_READABLE, multi_env=True,
                  on_policy=True),
         AlgoSpec("ppo_own", "drivelab's PPO on the fast on-policy trainer (categorical, tanh-Gaussian or "
-                 "Beta; MLP, seed 003's CNN / fusion network)", _DISCRETE + _CONTINUOUS,
+                 "Beta; MLP, the MetaDrive study's CNN / fusion network)", _DISCRETE + _CONTINUOUS,
                  "drivelab.agents.ppo:OwnPPO", "own", observation_kinds=_READABLE, multi_env=True,
                  on_policy=True),
         AlgoSpec("rlad", "drivelab's RLAD: SAC from pixels, A-LIX, DrQ shifts, WayConv1D, traffic-light loss "
-                 "(seed 000)", _CONTINUOUS, "drivelab.agents.rlad.sac:RLAD", "own", sb3_replay=True,
+                 "(the RLAD paper)", _CONTINUOUS, "drivelab.agents.rlad.sac:RLAD", "own", sb3_replay=True,
                  observation_check=_RLAD_CHECK),
-        AlgoSpec("drq", "DrQ baseline of seed 000: rlad without A-LIX and the traffic-light loss, MLP "
+        AlgoSpec("drq", "DrQ baseline of the RLAD paper: rlad without A-LIX and the traffic-light loss, MLP "
                  "waypoints", _CONTINUOUS, "drivelab.agents.rlad.sac:DrQ", "own", sb3_replay=True,
                  observation_check=_RLAD_CHECK),
-        AlgoSpec("qlearning", "tabular Q-learning over discrete states (seed 004): line, lane, ttc_grid",
+        AlgoSpec("qlearning", "tabular Q-learning on discrete states (the CARLA study): line, lane, ttc_grid",
                  ("seed_line", "seed_lane", "meta", "grid"), "drivelab.agents.qlearning:QLearning",
                  "qlearning", observation_check="drivelab.agents.qlearning:observation_error"),
         AlgoSpec("expert", "rule-based driver (town, racetrack, block maps) on waypoints + privileged "
                  "affordances (learns nothing)",
                  ("target_speed",), "drivelab.agents.expert:RuleBasedExpert", "own", multi_env=True),
         AlgoSpec("bc", "behaviour cloning of the rule-based expert on the learner's own --obs "
-                 "(tanh-Gaussian, seed 003's networks)", ("target_speed",),
+                 "(tanh-Gaussian, the MetaDrive study's networks)", ("target_speed",),
                  "drivelab.agents.bc:BehaviourCloning", "own", sb3_replay=True, observation_kinds=_READABLE,
                  multi_env=True),
         AlgoSpec("dagger", "DAgger: the learner drives (beta-mixture with the rule-based expert), the expert "

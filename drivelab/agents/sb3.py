@@ -181,7 +181,7 @@ def policy_for(space: spaces.Space) -> str:
 
 
 def seed_network_kwargs(algo: str, space: spaces.Space) -> dict:
-    """policy_kwargs that give SB3 PPO/A2C seed 003's network: its CNN on an image, its fusion
+    """policy_kwargs that give SB3 PPO/A2C the MetaDrive study's network: its CNN on an image, its fusion
     network on image + vectors, linear heads on the 256 features (as our own agents), actor and
     critic encoders shared for PPO and separate for A2C (as the seed)."""
     from drivelab.agents.networks import FusionExtractor, SeedCnnExtractor, observation_kind
@@ -203,7 +203,7 @@ def seed_network_kwargs(algo: str, space: spaces.Space) -> dict:
 
 def build_sb3(algo: str, env: gym.Env, seed: int, hyperparams: dict, log_dir: Path | None) -> BaseAlgorithm:
     """A fresh SB3 model for ``env``. ``features_extractor``: "sb3" (SB3's own networks, default)
-    or "seed" (seed 003's CNN / fusion network, ``seed_network_kwargs``). ``device``: "cpu" (the
+    or "seed" (the MetaDrive study's CNN / fusion network, ``seed_network_kwargs``). ``device``: "cpu" (the
     default), "cuda" or "auto". Keys ``hyperparams`` leaves out take the ``default`` entry of
     ``drivelab/hyperparams/<algo>.yaml`` (highway-env's documented SB3 examples, else SB3's own).
     Every value is checked first (``sb3_params``)."""

@@ -113,7 +113,7 @@ class MetaAction(ActionAdapter):
 
 @dataclass(frozen=True)
 class GridAction(ActionAdapter):
-    """A discretised (steering × acceleration) grid, 6 × 3 = 18 actions by default (seed 003).
+    """A discretised (steering × acceleration) grid, 6 × 3 = 18 actions by default (the MetaDrive study).
 
     Steering levels are ``sign(u)·u²`` for ``u`` evenly spaced in [-1, 1] so that the grid holds
     fine near-straight corrections (±1.8° at the default) and full lock (±45°) alike; the seed
@@ -194,7 +194,7 @@ def _all_finite(rows) -> bool:
 class TargetSpeedAction(ActionAdapter):
     """``[target speed, steering]`` in [0, 1] × [-1, 1]: the agent picks a speed (a fraction of
     ``max_speed_mps``) and a steering command; a longitudinal PID turns the speed error into the
-    acceleration command, as RLAD does for throttle and brake (seed 000; gains kp 1.0, ki 0.2,
+    acceleration command, as RLAD does for throttle and brake (the RLAD paper; gains kp 1.0, ki 0.2,
     kd 0.001 per the paper's code). The PID output is the normalised acceleration in [-1, 1]
     (highway-env's ±5 m/s²) where CARLA has throttle (> 0) and brake (< 0).
 
@@ -246,13 +246,13 @@ class TargetSpeedAction(ActionAdapter):
         return f"[target speed 0..{self.max_speed_mps:g} m/s through a PID, steering] in [0, 1] x [-1, 1]"
 
 
-# seed 004's action tables, rows (throttle, steering) in CARLA's normalised units
+# the CARLA study's action tables, rows (throttle, steering) in CARLA's normalised units
 SEED_LINE_TABLE = ((0.32, -0.2), (0.7, 0.0), (0.32, 0.2), (0.2, -0.4), (0.2, 0.4))
 SEED_LANE_TABLE = ((0.35, -0.04), (0.35, 0.04), (0.3, -0.08), (0.6, 0.0), (0.3, 0.08))
 
 
 class SeedTable(ActionAdapter):
-    """One of seed 004's two 5-action (throttle, steering) tables.
+    """One of the CARLA study's two 5-action (throttle, steering) tables.
 
     Throttle ``t`` becomes the normalised acceleration command ``t`` (a 5·t m/s² pedal; the
     follow-line/lane ego adds a speed drag so that a constant throttle levels off, see
@@ -275,7 +275,7 @@ class SeedTable(ActionAdapter):
 
     def describe(self) -> str:
         rows = ", ".join(f"({t:g}, {s:+g})" for t, s in self.table.tolist())
-        return f"seed 004's {self.name[5:]} table of 5 (throttle, steering): {rows}"
+        return f"the CARLA study's {self.name[5:]} table of 5 (throttle, steering): {rows}"
 
 
 ACTIONS = {

@@ -113,7 +113,7 @@ class DriveEnv(gym.Env):
         return str(self.vector.traffic_light_labels()[0])
 
     def render(self) -> np.ndarray | None:
-        """A 256×512 bird's-eye RGB frame of the current world (drivelab's own renderer)."""
+        """The current world's scene, drawn as drivelab's videos draw it (``VectorDriveEnv.render_world``)."""
         if self.vector.batch is None:
             return None
         return self.vector.render_world(0)

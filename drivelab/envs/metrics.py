@@ -105,7 +105,7 @@ class EpisodeMetrics:
             self.off_road_events[ended],
         )
         crashed = collisions > 0
-        # NoCrash's success (seed 000: "routes completed without collision"): the goal reached
+        # NoCrash's success (the RLAD paper: "routes completed without collision"): the goal reached
         # with no collision, one on the arrival step included; without a goal, the time limit
         # reached with no collision and no off-road event
         clean = ~crashed & (off_road_events == 0)

@@ -26,8 +26,8 @@ from drivelab.envs.actions import ActionAdapter, make_action
 from drivelab.envs.metrics import EpisodeMetrics
 from drivelab.envs.rules import EpisodeRules
 from drivelab.envs.spec import EnvSpec
+from drivelab.envs.video import camera_for, draw_scene
 from drivelab.errors import UsageError
-from drivelab.perception.birdeye import render_birdeye
 from drivelab.perception.sensors import check_sensors_for, make_sensor, split_sensor_list
 from drivelab.rewards.shapers import RewardShaper
 from drivelab.scenarios import check_traffic, get_scenario
@@ -39,7 +39,6 @@ BACKENDS = ("auto", "fast", "highway")
 LIGHT_LABEL_DISTANCE_M = 18.0  # RLAD's auxiliary label: a light within this distance ahead
 LIGHT_LABELS = {-1: "none", LIGHT_GREEN: "green", LIGHT_YELLOW: "red_or_yellow", LIGHT_RED: "red_or_yellow"}
 _LABEL_OF_STATE = np.array([LIGHT_LABELS[state] for state in sorted(LIGHT_LABELS)], dtype=object)  # state + 1
-RENDER_SIZE_HW, RENDER_PIXELS_PER_M = (256, 512), 4.0
 # Episode seeds: training draws them below TRAINING_SEED_LIMIT from each world's generator; the
 # evaluation set of every scenario is the episodes EVALUATION_SEED_BASE, +1, +2, … given directly
 # (``reset(options={"episode_seeds": …})``), so no training episode is ever an evaluation episode
@@ -459,13 +458,16 @@ class VectorDriveEnv(VectorEnv):
 
     # --- rendering -----------------------------------------------------------------------------
     def render(self) -> tuple[np.ndarray, ...] | None:
-        """One 256×512 bird's-eye RGB frame per world (drivelab's own renderer)."""
+        """One RGB frame per world, drawn as drivelab's videos draw their scenes (``render_world``)."""
         if self.batch is None or self.render_mode != "rgb_array":
             return None
         return tuple(self.render_world(k) for k in range(self.num_envs))
 
     def render_world(self, k: int) -> np.ndarray:
-        return render_birdeye(self.batch[k], size_hw=RENDER_SIZE_HW, pixels_per_meter=RENDER_PIXELS_PER_M)
+        """World ``k``'s scene as the videos' camera sees it (``envs/video.py``): landscape along the
+        road, the ego a third of the way in (256×720, 103 m × 37 m), or, in the town and on the
+        block maps, the map from above, north up (432×720, 240 m × 144 m)."""
+        return draw_scene(self.batch.select(np.array([k])), camera_for(self.scenario))[0]
 
 
 def _copy(observations):

@@ -1,4 +1,4 @@
-"""First-person pinhole camera on the ego, drawn with OpenCV from the WorldState (seed 004).
+"""First-person pinhole camera on the ego, drawn with OpenCV from the WorldState (the CARLA study).
 
 highway-env has only top views; this camera sees the road the way the seed's CARLA camera does:
 sky, grass, the road surface, white lane markings, the yellow guide line of follow-line circuits,

@@ -1,6 +1,6 @@
-"""Ego state: a short measurement vector about the ego and the vehicle in front (seed 003).
+"""Ego state: a short measurement vector about the ego and the vehicle in front (the MetaDrive study).
 
-Seed 003's fusion PPO feeds five numbers next to the image and the LiDAR: ego speed, lane offset,
+The MetaDrive study's fusion PPO feeds five numbers next to the image and the LiDAR: ego speed, lane offset,
 distance to the front vehicle, relative speed to it and heading alignment. Its Dueling DDQN reads
 "10 features" per frame next to the 240 LiDAR beams without listing them; ``features=10`` adds
 five of our choosing that a driver also knows (heading error's sine, steering, acceleration, lane

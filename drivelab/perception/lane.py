@@ -1,4 +1,4 @@
-"""Follow-lane perception (seed 004, section 4): lane lines → lane centre at 4 rows → 5 states.
+"""Follow-lane perception (the CARLA study, section 4): lane lines → lane centre at 4 rows → 5 states.
 
 A detector turns the camera frame into two masks, the ego lane's left and right lines: the seed's
 small segmentation CNN (``detector="cnn"``, weights shipped in the package, see ``lane_cnn.py``)
@@ -90,7 +90,7 @@ class LaneState(Sensor):
     """
 
     name = "lane"
-    help = "seed 004 follow-lane state: lane centre by the lane CNN (or classical), 5 strips + lost"
+    help = "the CARLA study's follow-lane state: lane centre by the lane CNN (or classical), 5 strips + lost"
 
     def __init__(self, *, detector: str = "cnn", weights: str | None = None) -> None:
         if detector not in DETECTORS:
@@ -111,7 +111,7 @@ class LaneState(Sensor):
 
     def scenario_problem(self, scenario) -> str | None:
         """Its strips and its one-line fallback (half of ``LANE_WIDTH_M``) are calibrated to the
-        3.5 m lanes of seed 004's follow-lane circuit (``scenario.keep_lane``); on other roads
+        3.5 m lanes of the CARLA study's follow-lane circuit (``scenario.keep_lane``); on other roads
         (4 m highway lanes, follow-line's single 7 m lane) its states mean something else."""
         if not scenario.keep_lane:
             return "its states are calibrated to the 3.5 m lanes of the follow-lane circuit"

@@ -1,4 +1,4 @@
-"""The seed's lane-line segmentation CNN (seed 004, section 4.1) and its training on given frames.
+"""The CARLA study's lane-line segmentation CNN (its section 4.1) and its training on given frames.
 
 A small encoder-decoder (8 768 weights, 40 KB on disk) maps a 120 x 160 camera frame to two masks, the ego
 lane's left and right lines. It is trained on frames and ground-truth masks that drivelab's own

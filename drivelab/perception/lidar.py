@@ -1,4 +1,4 @@
-"""LiDAR: beams around the ego that stop at other vehicles and at road edges (seed 003)."""
+"""LiDAR: beams around the ego that stop at other vehicles and at road edges (the MetaDrive study)."""
 
 from __future__ import annotations
 
@@ -154,7 +154,7 @@ class Lidar(Sensor):
     (``road.edges``). K worlds at once: every world's segments in one flat list, each tested
     against the beams of its own angular span only (a car 30 m away spans 2 of 240 beams).
 
-    :param beams: number of beams (seed 003: 240).
+    :param beams: number of beams (the MetaDrive study: 240).
     :param range_m: maximum range.
     :param noise_std: std of Gaussian noise added to the normalised distances (then clipped to
         [0, 1]), drawn from world k's generator handed to ``reset``.

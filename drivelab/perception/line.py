@@ -1,4 +1,4 @@
-"""Follow-line perception (seed 004, section 3): the yellow line's centre at 4 rows → a discrete state.
+"""Follow-line perception (the CARLA study, section 3): the yellow line's centre at 4 rows → a discrete state.
 
 The camera frame is converted to HSV and thresholded around yellow, then eroded and dilated (an
 opening that removes specks); in each of 4 rows the line's centre is the mean column of the
@@ -68,7 +68,7 @@ class LineState(Sensor):
     """
 
     name = "line"
-    help = "seed 004 follow-line state: yellow line centre at 4 rows, each in one of 5 strips or lost"
+    help = "the CARLA study's follow-line state: yellow line centre at 4 rows, each in 5 strips or lost"
 
     def __init__(self, *, strips: int = 5, kernel_px: int = 3) -> None:
         if strips < 2 or kernel_px < 1:

@@ -1,4 +1,4 @@
-"""Measurements: the ego's own speed and steering (RLAD's V, seed 000)."""
+"""Measurements: the ego's own speed and steering (RLAD's V)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Top-down semantic image: the 5 channels of seed 003, ego-centred and heading-aligned.
+"""Top-down semantic image: the 5 channels of the MetaDrive study, ego-centred and heading-aligned.
 
 Pixel convention (shared with ``birdeye``): the ego sits at the image centre with its heading
 pointing up. In continuous image coordinates where pixel (row r, column c) covers
@@ -317,7 +317,7 @@ class TopDown(Sensor):
     The history (past positions, previous traffic) is kept as (K, …) arrays, cleared by ``reset``
     for the worlds in its mask.
 
-    :param size: image height and width in pixels (seed 003: 84).
+    :param size: image height and width in pixels (the MetaDrive study: 84).
     :param pixels_per_meter: resolution; 2 px/m shows 21 m on each side of the ego at 84 px.
     :param history: number of past ego positions drawn.
     :param lights: add a sixth channel with the traffic lights' stop bars (1 m x 4 m across the

@@ -1,4 +1,4 @@
-"""Waypoints: the next points of the planned route, in the ego frame (RLAD's W, seed 000)."""
+"""Waypoints: the next points of the planned route, in the ego frame (RLAD's W)."""
 
 from __future__ import annotations
 

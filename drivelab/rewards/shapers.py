@@ -59,7 +59,7 @@ PRESETS: dict[str, RewardSpec] = {
     ),
     "metadrive_course": RewardSpec(
         {"progress_lateral": 2.5, "speed": 0.5, "crash": -5.0, "off_road": -5.0, "arrival": 10.0},
-        description="seed 003: 2.5*progress*(1-|lat|^3) + 0.5*speed (halved in junctions), "
+        description="the MetaDrive study: 2.5*progress*(1-|lat|^3) + 0.5*speed (halved in junctions), "
         "crash/off-road -5, arrival +10",
     ),
     "metadrive": RewardSpec(
@@ -77,20 +77,20 @@ PRESETS: dict[str, RewardSpec] = {
     ),
     "roach": RewardSpec(
         {name: 1.0 for name in ROACH_TERMS},
-        description="CARLA-Roach's (RLAD, seed 000): speed to a hazard-aware target, route position "
+        description="CARLA-Roach's, as RLAD uses it: speed to a hazard-aware target, route position "
         "and heading, steering changes, terminal penalties",
     ),
     "line_follow": RewardSpec(
         {"line_centring": 1.0, "speed_mps": 1.0, "steering_power": -1.0},
-        description="seed 004 eq. 3: sum over 4 rows of f(line centre) + speed - 1.02^|steering deg|",
+        description="the CARLA study eq. 3: sum over 4 rows of f(line centre) + speed - 1.02^|steering deg|",
     ),
     "lane_follow": RewardSpec(
         {"lane_keeping": 1.0},
-        description="seed 004 eq. 4: f*(lane centre), x2 aligned and straight, /2 aligned and steering",
+        description="the CARLA study eq. 4: f*(lane centre), x2 aligned and straight, /2 aligned, steering",
     ),
     "safety_dqn": RewardSpec(
         {name: 1.0 for name in SAFETY_TERMS},
-        description="seed 003's eight-term safety table (centre, overspeed, curves, junction heading, ...)",
+        description="the MetaDrive study's eight safety terms (centre, overspeed, curves, junctions, ...)",
     ),
 }
 

@@ -70,17 +70,17 @@ def on_road(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     return _flag(batch.ego.on_road)
 
 
-# --- seed 003, the MetaDrive course reward ----------------------------------------------------
+# --- the MetaDrive study, the MetaDrive course reward ----------------------------------------------------
 @term
 def progress_lateral(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
-    """Metres of route progress weighted by lane centring: progress · (1 − |lateral|³) (seed 003)."""
+    """Metres of route progress weighted by lane centring, progress · (1 − |lateral|³) (MetaDrive study)."""
     progress_m = batch.route.progress_m - prev.route.progress_m
     return progress_m * (1.0 - _lateral_fraction(batch) ** 3)
 
 
 @term
 def speed(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
-    """Speed over 70 % of the top speed, clipped to 1, halved inside junctions (seed 003)."""
+    """Speed over 70 % of the top speed, clipped to 1, halved inside junctions (the MetaDrive study)."""
     value = np.minimum(batch.ego.speed_mps / (0.7 * batch.max_speed_mps), 1.0)
     return np.where(batch.ego.in_intersection, value / 2, value)
 
@@ -155,7 +155,7 @@ def metadrive_crash(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     return _flag(_metadrive_events(batch)[2])
 
 
-# --- seed 003, the safety-focused table used with SB3 DQN (values are the table's) ------------
+# --- the MetaDrive study, the safety-focused table used with SB3 DQN (values are the table's) ------------
 @term
 def centered(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """+0.3 while within 0.5 m of the lane centre."""
@@ -241,7 +241,7 @@ def sidewalk_crash(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     return np.where(batch.events.off_road, -4.0, 0.0)
 
 
-# --- seed 000 (RLAD) trains with CARLA-Roach's reward (shared/notes/RLAD-NOTES.md) -----------
+# --- the RLAD paper (RLAD) trains with CARLA-Roach's reward (shared/notes/RLAD-NOTES.md) -----------
 ROACH_STEER_RAD = FULL_LOCK_RAD  # steering is compared as the normalised command (highway-env: ±45°)
 
 
@@ -345,7 +345,7 @@ def roach_terminal(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     return np.where(events.collided | events.red_light_crossed, value - batch.ego.speed_mps, value)
 
 
-# --- seed 004, follow-line (eqs. 2, 3) and follow-lane (eq. 4) ---------------------------------
+# --- the CARLA study, follow-line (eqs. 2, 3) and follow-lane (eq. 4) ---------------------------------
 # Both read where the painted line / the lane centre crosses the perception rows of the camera,
 # projected from the WorldBatch's geometry (ground truth), in pixels of the seed's own frame
 # width (640 for the line, 1024 for the lane) so that its pixel bands apply unchanged.
@@ -415,7 +415,7 @@ def _steering_deg(control, num_worlds: int) -> np.ndarray:
 def line_centring(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """Σ_j f(C_j) over the 4 line rows: 15 … 1 as the line's centre moves away from the image centre
     (in pixels of 640: 15 under 38, 12 under 76, 10 under 114, 3 under 190, 1 under 228), −100 farther
-    out or for a row where the line is out of view (seed 004, eq. 2; ``LINE_BAND_EDGES_PX``)."""
+    out or for a row where the line is out of view (the CARLA study, eq. 2; ``LINE_BAND_EDGES_PX``)."""
     columns = crossing_columns(batch, guide_segment_sets(batch), LINE_CAMERA, _LINE_ROWS, batch.road_index)
     out = np.empty(batch.num_worlds)
     _line_centring(columns, float(LINE_CAMERA.centre[0]), float(LINE_CAMERA.width), out)
@@ -437,21 +437,21 @@ def _line_centring(columns, centre_px, width_px, out) -> None:
 
 @term
 def speed_mps(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
-    """The ego's speed in m/s (seed 004, eq. 3: ``+ v``)."""
+    """The ego's speed in m/s (the CARLA study, eq. 3: ``+ v``)."""
     return np.asarray(batch.ego.speed_mps, dtype=float)
 
 
 @term
 def steering_power(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
-    """λ^|α| with λ = 1.02 and α the commanded front-wheel angle in degrees (seed 004, eq. 3; the
+    """λ^|α| with λ = 1.02 and α the commanded front-wheel angle in degrees (the CARLA study, eq. 3; the
     extracted formula is garbled: we read it as a penalty growing with the steering angle)."""
     return STEERING_BASE ** np.abs(_steering_deg(control, batch.num_worlds))
 
 
 @term
 def lane_keeping(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
-    """Seed 004, eq. 4: f*(C) by the lane centre's offset C from the image centre (10, 5, 2.5, 1, −10 in
-    bands 15/30/60/80 px of 1024), doubled when the lane is within ζ = 6° of the image vertical and
+    """The CARLA study, eq. 4: f*(C) by the lane centre's offset C from the image centre (10, 5, 2.5, 1,
+    −10 in bands 15/30/60/80 px of 1024), doubled when the lane is within ζ = 6° of the image vertical and
     the action goes straight, halved when aligned but steering (the extracted text is garbled there;
     this is our reading of "higher reward when aligned and going straight")."""
     columns = crossing_columns(batch, batch.route.polyline, LANE_CAMERA, _LANE_ROWS)  # (K, D)

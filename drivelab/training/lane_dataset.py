@@ -1,5 +1,5 @@
 """Training data for the lane-line CNN: camera frames and true line masks rendered on the follow-lane
-circuit at random poses (seed 004, section 4.1), and the training run that uses them.
+circuit at random poses (the CARLA study, section 4.1), and the training run that uses them.
 
 This lives in ``training/`` because it drives the simulator (a highway-env backend builds the
 circuit); ``perception/lane_cnn.py`` only defines the network and trains it on given arrays.

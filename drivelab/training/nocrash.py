@@ -1,10 +1,10 @@
 """NoCrash-style evaluation in the town: RLAD's Table III (success per traffic level) and Table IV
-(infraction analysis of one level), seed 000.
+(infraction analysis of one level), the RLAD paper.
 
 A run trained in the town is evaluated on a town layout (the smaller test town by default: NoCrash's
 "new town") at every traffic level, on the town's fixed list of routes, without new targets on
 arrival. Episodes use the same seeds for every run, so every agent drives the same routes in the
-same traffic. Success is reaching the target without a collision (seed 000: "routes completed
+same traffic. Success is reaching the target without a collision (the RLAD paper: "routes completed
 without collision"; one on the arrival step fails too); a red light run, a block or leaving the
 route ends the episode short of it. Infractions are counted per kilometre driven.
 """

@@ -1,4 +1,4 @@
-"""The pinhole camera model: intrinsics, mounting on the ego, and its projections (seed 004 camera).
+"""The pinhole camera model: intrinsics, mounting on the ego, and its projections (the CARLA study's camera).
 
 Frames: the ego frame has x forward, y to the right, z up (metres). The camera sits ``forward_m``
 ahead of the ego's centre, ``height_m`` above the ground, pitched down by ``pitch_deg``. Pixels use
@@ -137,7 +137,7 @@ def visible_columns_into(distances, lateral, terms, out) -> None:
             out[k, j] = column if column >= -0.5 and column <= width - 0.5 else np.nan
 
 
-# The follow-line and follow-lane cameras of seed 004 (their sensors and reward terms share them).
+# The follow-line and follow-lane cameras of the CARLA study (their sensors and reward terms share them).
 # A 160 x 120 camera with the line rows 3–8 m ahead, where the 0.3 m line is at least 3 px wide,
 # so that a 3 x 3 opening keeps it. The seed does not give its rows; these are our choice.
 LINE_CAMERA = PinholeModel(width=160, height=120, fov_deg=90, height_m=1.5, pitch_deg=15, max_range_m=80)

@@ -1,9 +1,9 @@
-"""Road geometry shared by the camera sensors and seed 004's reward terms (the bottom layer).
+"""Road geometry shared by the camera sensors and the CARLA study's reward terms (the bottom layer).
 
 Segments are ``(M, 2, 2)`` arrays of (start, end) points in world metres; over K worlds they are
 ``(K, M, 2, 2)``, padded with NaN segments (which never cross anything). Where a painted line or
 a route's centre crosses the ground ``distances_m`` ahead of the ego is what the line/lane rows of
-the seed 004 camera see.
+the CARLA study camera see.
 """
 
 from __future__ import annotations
@@ -127,7 +127,7 @@ def segment_columns_into(starts, ends, index, position, cos_h, sin_h, distances,
     ``ends[index[k]]``) cross the ground rows ``distances`` (D,) ahead of its ego, nan where none
     crosses or the crossing is out of view: :func:`_nearest_crossings` then
     :func:`~drivelab.world.pinhole.visible_columns_into` (a camera's ``ground_terms``), in one
-    compiled call (the seed 004 reward terms' hot path)."""
+    compiled call (the CARLA study reward terms' hot path)."""
     lateral = np.empty(out.shape)
     _nearest_crossings(starts, ends, index, position, cos_h, sin_h, distances, lateral)
     visible_columns_into(distances, lateral, camera_terms, out)

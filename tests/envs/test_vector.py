@@ -8,10 +8,12 @@ from gymnasium.utils.env_checker import data_equivalence
 from gymnasium.vector import AutoresetMode
 from stable_baselines3 import PPO
 
+import drivelab
 from drivelab.agents.sb3_env import SB3VecEnv
 from drivelab.envs import gym_id
 from drivelab.envs.core import DriveEnv, make_vec
 from drivelab.envs.vector import VectorDriveEnv
+from drivelab.envs.video import MAP_CAMERA, ROAD_CAMERA, draw_scene
 from drivelab.errors import UsageError
 from tests.batch_worlds import assert_same_observations
 
@@ -121,8 +123,11 @@ def test_render_gives_one_frame_per_world_and_sb3_get_images():
     vector = VectorDriveEnv(2, scenario="highway", render_mode="rgb_array", autoreset_mode="same_step")
     vector.reset(seed=0)
     frames = vector.render()
-    assert len(frames) == 2 and frames[0].shape == (256, 512, 3) and frames[0].dtype == np.uint8
+    assert len(frames) == 2 and frames[0].shape == (256, 720, 3) and frames[0].dtype == np.uint8
     assert not np.array_equal(frames[0], frames[1])  # two different worlds
+    # the videos' scene: the camera along the road, as EpisodeRecorder draws it
+    scene = draw_scene(vector.batch.select(np.array([1])), ROAD_CAMERA)[0]
+    np.testing.assert_array_equal(frames[1], scene)
     venv = SB3VecEnv(vector)
     images = venv.get_images()
     assert len(images) == 2 and np.array_equal(images[0], frames[0])
@@ -197,3 +202,14 @@ def test_bad_num_envs(bad):
 def test_unknown_render_mode(make):
     with pytest.raises(UsageError, match="render_mode must be None or 'rgb_array' \\(got 'human'\\)"):
         make(2, scenario="highway", render_mode="human")
+
+
+def test_render_draws_the_town_as_its_videos_do():
+    """The town and the block maps are drawn as a map from above, north up (the videos' camera),
+    not a strip along the road."""
+    env = drivelab.make("town", obs="kinematics", action="continuous")
+    env.reset(seed=3)
+    frame = env.render()
+    assert frame.shape == (432, 720, 3)
+    np.testing.assert_array_equal(frame, draw_scene(env.vector.batch, MAP_CAMERA)[0])
+    env.close()

@@ -1,4 +1,4 @@
-"""A-LIX, adaptive local signal mixing (Cetin et al., ICML 2022), as RLAD uses it (seed 000, Table I):
+"""A-LIX, adaptive local signal mixing (Cetin et al., ICML 2022), as RLAD uses it (the RLAD paper, Table I):
 after every conv + ReLU of the image encoder.
 
 Forward, training only (evaluation is the identity): the feature maps are replicate-padded by

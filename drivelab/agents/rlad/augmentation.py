@@ -1,4 +1,4 @@
-"""DrQ's random-shift augmentation (Kostrikov et al. 2021; RLAD, seed 000, Section III-B1).
+"""DrQ's random-shift augmentation (Kostrikov et al. 2021; RLAD, Section III-B1).
 
 Each image is replicate-padded by ``pad`` pixels and cropped back to its size at a random integer
 offset, independently per sample. The pad and the crop are one gather with clamped indices (a

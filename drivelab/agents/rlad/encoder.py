@@ -1,4 +1,4 @@
-"""RLAD's image encoder (seed 000, Table I): 9 conv 3×3 layers, each followed by ReLU and A-LIX,
+"""RLAD's image encoder (the RLAD paper, Table I): 9 conv 3×3 layers, each followed by ReLU and A-LIX,
 then Linear → LayerNorm → tanh to a 256-d latent.
 
 At 256×256 (the paper's input, a stack of 3 RGB frames = 9 channels) the strides are

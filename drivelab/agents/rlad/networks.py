@@ -1,4 +1,4 @@
-"""RLAD's networks (seed 000, Fig. 1): the state encoder, the tanh-Gaussian actor, the twin critics
+"""RLAD's networks (the RLAD paper, Fig. 1): the state encoder, the tanh-Gaussian actor, the twin critics
 and the traffic-light head.
 
 - ``StateEncoder``: one encoder (image, waypoints, measurements) → h = [ĩ 256 | ṽ 16 | w̃ 32] = 304;

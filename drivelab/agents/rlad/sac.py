@@ -1,4 +1,4 @@
-"""RLAD (seed 000): SAC from pixels with A-LIX, DrQ augmentation, WayConv1D and the traffic-light
+"""RLAD: SAC from pixels with A-LIX, DrQ augmentation, WayConv1D and the traffic-light
 auxiliary loss; and the DrQ baseline as a preset of it. Top to bottom:
 
 1. ``RLADConfig``: Table II's hyper-parameters and the ablation switches;
@@ -176,7 +176,7 @@ def observation_error(space: spaces.Space) -> str | None:
 
 # --- 4., 5. the agent ----------------------------------------------------------------------------
 class RLAD(OwnAgent):
-    """SAC from pixels as RLAD (seed 000); ``config`` switches its parts off for the ablations."""
+    """SAC from pixels as RLAD; ``config`` switches its parts off for the ablations."""
 
     config_class = RLADConfig
     # checkpoints keep the replay up to this size (run.py's default is 512 MiB): 100 k transitions

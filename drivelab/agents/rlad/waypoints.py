@@ -1,4 +1,4 @@
-"""RLAD's vector encoders (seed 000, Section III-B1): WayConv1D for the waypoints, its MLP ablation,
+"""RLAD's vector encoders (the RLAD paper, Section III-B1): WayConv1D for the waypoints, its MLP ablation,
 and the measurement MLP.
 
 - ``WayConv1D``: waypoints (B, N, 2) in the ego frame (m) → (B, 2, N) → Conv1d(2 → 20, kernel 2,

@@ -1,4 +1,4 @@
-"""Procedural block maps (issue 18; MetaDrive's PG maps, seed 003's "OSX"): the preset and its
+"""Procedural block maps (issue 18; MetaDrive's PG maps, the MetaDrive study's "OSX"): the preset and its
 compiled-core hooks.
 
 Config keys (``backend_options`` / a run's ``env_options.backend_options``), MetaDrive's names

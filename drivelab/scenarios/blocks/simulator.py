@@ -58,8 +58,9 @@ from drivelab.sim.core.simulator import (
     meta_action,
 )
 from drivelab.sim.junctions.pedestrians import light_states
+from drivelab.sim.junctions.traffic import red_light_runs
 from drivelab.world.batch import WorldBatch
-from drivelab.world.state import LIGHT_RED, RoadMap
+from drivelab.world.state import RoadMap
 
 ARRIVAL_WINDOW_M = 5.0  # MetaDrive's arrive_dest: within 5 m of the final road's end
 # MetaDrive's ego tops out at 80 km/h (metadrive/component/vehicle/vehicle_type.py, max_speed_km_h;
@@ -395,11 +396,7 @@ class BlocksSimulator(FastSimulator):
         )
         lane = self.lane_start + self.vehicles[worlds, self.ego, T.LANE].astype(np.int64)
         light = self.road_arrays[6][previous_lane]  # the light of the lane the ego was on (local row)
-        state = (
-            self.light_state[worlds, np.maximum(light, 0)] if self.light_state.shape[1] else np.zeros(k, int)
-        )
-        crossed = self.lanes[lane, L.FROM_NODE] == self.lanes[previous_lane, L.TO_NODE]
-        self._red_light = ~restart & (light >= 0) & crossed & (state == LIGHT_RED)
+        self._red_light = red_light_runs(self.lanes, previous_lane, lane, light, self.light_state, ~restart)
         if np.count_nonzero(restart):  # as FastSimulator.step (ndarray.any costs a microsecond)
             self._start_episodes(np.flatnonzero(restart), seeds)
         self._project(fresh=restart, update=self._every_world)

@@ -1,4 +1,4 @@
-"""Seed 004's circuits: the follow-line and follow-lane presets (their roads are described as
+"""The CARLA study's circuits: the follow-line and follow-lane presets (their roads are described as
 blocks, ``roads.blocks.circuit``; their reference environments and vehicle are highway-env
 classes in ``drivelab.scenarios.circuits.reference_env``) and their compiled-core set-up."""
 
@@ -15,7 +15,7 @@ from drivelab.sim.roads.blocks import circuit
 from drivelab.sim.roads.description import RoadDescription
 from drivelab.world.scenario import Scenario
 
-SEED_TABLES = ("seed_line", "seed_lane")  # seed 004's two 5-action (throttle, steering) tables
+SEED_TABLES = ("seed_line", "seed_lane")  # the CARLA study's two 5-action (throttle, steering) tables
 
 
 def spawn_circuit(seed: int, road, control: str) -> tuple[np.ndarray, int, np.ndarray, None]:
@@ -47,7 +47,7 @@ def follow_lane_road(config: dict) -> RoadDescription:
 
 def circuit_options(road: dict) -> tuple[Option, ...]:
     """A circuit's options, defaults from its environment's road config (``tracks``); its track
-    is seed 004's (a track must close exactly: it is not an option)."""
+    is the CARLA study's (a track must close exactly: it is not an option)."""
     return (
         Option("lanes_count", int, road["lanes_count"], "parallel lanes around the circuit", minimum=1),
         Option("lane_width", float, road["lane_width"], "lane width, m", minimum=2),
@@ -63,7 +63,7 @@ def circuit_options(road: dict) -> tuple[Option, ...]:
 FOLLOW_LINE = Scenario(
     "follow-line",
     "drivelab.scenarios.circuits.reference_env.FollowLineEnv",
-    "seed 004: 467 m circuit, one 7 m lane with a yellow centre line, curves both ways, no traffic",
+    "the CARLA study: 467 m circuit, one 7 m lane with a yellow centre line, curves both ways, no traffic",
     config={"duration": 60},
     traffic={"empty": {}, "regular": {}, "dense": {}},  # no traffic on this task
     action_kinds=SEED_TABLES + ("grid", "continuous"),
@@ -78,7 +78,7 @@ FOLLOW_LINE = Scenario(
 FOLLOW_LANE = Scenario(
     "follow-lane",
     "drivelab.scenarios.circuits.reference_env.FollowLaneEnv",
-    "seed 004: 1.9 km three-lane circuit, curves both ways, no traffic; leaving the lane ends it",
+    "the CARLA study: 1.9 km three-lane circuit, curves both ways, no traffic; leaving the lane ends it",
     config={"duration": 60},
     traffic={"empty": {}, "regular": {}, "dense": {}},
     action_kinds=SEED_TABLES[::-1] + ("grid", "continuous"),

@@ -1,4 +1,4 @@
-"""highway-env roads for seed 004's follow-line and follow-lane tasks (no traffic).
+"""highway-env roads for the CARLA study's follow-line and follow-lane tasks (no traffic).
 
 Both are closed circuits of straights and circular arcs turning right and left, described as
 blocks (``roads.blocks.circuit``, tracks in ``roads.tracks``) and turned into highway-env's road
@@ -29,7 +29,7 @@ from drivelab.sim.core.traffic import PEDAL_DRAG_PER_S
 from drivelab.sim.roads.blocks import circuit
 from drivelab.sim.roads.highway_network import to_road_network
 
-# the pedal's drag (seed 004's speeds), shared with the compiled kernel
+# the pedal's drag (the CARLA study's speeds), shared with the compiled kernel
 DRAG_PER_S = PEDAL_DRAG_PER_S
 
 
@@ -43,7 +43,7 @@ class PedalVehicle(Vehicle):
         super().act(action)
 
     def step(self, dt: float) -> None:
-        # seed 004 speeds: acceleration = pedal − drag · v, so a constant throttle levels off
+        # the CARLA study speeds: acceleration = pedal − drag · v, so a constant throttle levels off
         self.action["acceleration"] = getattr(self, "pedal_mps2", 0.0) - DRAG_PER_S * self.speed
         super().step(dt)
 
@@ -111,11 +111,11 @@ class CircuitEnv(AbstractEnv):
 
 
 class FollowLineEnv(CircuitEnv):
-    """Seed 004's follow-line task: one 7 m lane around a 470 m circuit, a yellow centre line."""
+    """The CARLA study's follow-line task: one 7 m lane around a 470 m circuit, a yellow centre line."""
 
 
 class FollowLaneEnv(CircuitEnv):
-    """Seed 004's follow-lane task: three 3.5 m lanes around a 1.6 km circuit."""
+    """The CARLA study's follow-lane task: three 3.5 m lanes around a 1.6 km circuit."""
 
     @classmethod
     def default_config(cls) -> dict:

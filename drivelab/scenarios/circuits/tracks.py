@@ -1,4 +1,4 @@
-"""Seed 004's two circuits as tracks for ``blocks.circuit``, with the roads their tasks drive.
+"""The CARLA study's two circuits as tracks for ``blocks.circuit``, with the roads their tasks drive.
 
 Tracks are (kind, length_m) straights and (kind, radius_m, turn_deg) arcs, starting at the origin
 heading +x; a positive turn is to the right (heading grows, y points right). Both close exactly

@@ -1,4 +1,4 @@
-"""The signalised town (seed 000), one folder: its preset (here), its road described as blocks
+"""The signalised town (the RLAD paper), one folder: its preset (here), its road described as blocks
 (``road.py``), its episode set-up (``spawn.py``) and simulator (``simulator.py``) on the compiled
 core, and its highway-env reference (``reference_env.py``: road, lights, pedestrians and traffic as
 highway-env objects, ``backend="highway"``)."""

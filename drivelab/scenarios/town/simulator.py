@@ -30,7 +30,6 @@ from numba import njit, prange
 
 from drivelab.errors import UsageError
 from drivelab.scenarios.town.spawn import TownSetup, route_tracker
-from drivelab.sim.core import lanes as L
 from drivelab.sim.core import traffic as T
 from drivelab.sim.core.borrow import borrowed
 from drivelab.sim.core.simulator import (
@@ -49,6 +48,7 @@ from drivelab.sim.junctions.pedestrians import (
 from drivelab.sim.junctions.rules import PEDESTRIAN_SIZE_M, LightTimings
 from drivelab.sim.junctions.traffic import (
     random_goal,
+    red_light_runs,
     road_arrays_tuple,
     town_act,
     town_frame_cache,
@@ -63,7 +63,6 @@ from drivelab.world.batch import (
     WorldBatch,
     assemble,
 )
-from drivelab.world.state import LIGHT_RED
 
 
 @njit(cache=True)
@@ -255,12 +254,9 @@ class TownSimulator(FastSimulator):
             self.coords, self.done, self.trig, *self.road_args, self.light_state, self.rng_words,
             frames, self.dt_s, active,
         ))  # fmt: skip
-        ego_rows = self.vehicles[worlds, self.ego]
-        lane = ego_rows[:, T.LANE].astype(np.int64)
+        lane = self.vehicles[worlds, self.ego, T.LANE].astype(np.int64)
         light = self.arrays.light[previous_lane]
-        state = self.light_state[worlds, np.maximum(light, 0)]
-        crossed = self.lanes[lane, L.FROM_NODE] == self.lanes[previous_lane, L.TO_NODE]
-        self._red_light = active & (light >= 0) & crossed & (state == LIGHT_RED)
+        self._red_light = red_light_runs(self.lanes, previous_lane, lane, light, self.light_state, active)
         self._project(fresh=np.zeros(k, dtype=bool), update=active)
         if self.retarget:
             self._retarget(active)

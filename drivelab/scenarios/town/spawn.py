@@ -1,4 +1,4 @@
-"""The signalised town's episode set-up for the compiled core (seed 000; its preset is
+"""The signalised town's episode set-up for the compiled core (the RLAD paper; its preset is
 ``drivelab.scenarios.town``).
 
 The reference (``backend="highway"``) builds the road, lights, pedestrians and traffic as

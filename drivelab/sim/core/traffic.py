@@ -64,7 +64,7 @@ TOWN_VEHICLE_COLUMNS = ROUTE + 2 * TOWN_MAX_ROUTE
 # KIND: a plain kinematic vehicle (continuous-control ego), a lane-following controlled vehicle
 # (meta-action ego), an IDM/MOBIL vehicle (traffic), a static obstacle (after every vehicle), a
 # town vehicle (IDM/MOBIL that stops for lights, yields on left turns and wanders on random
-# routes: highway-env's TownVehicle), a pedal vehicle (seed 004's circuits ego: acceleration =
+# routes: highway-env's TownVehicle), a pedal vehicle (the CARLA study's circuits ego: acceleration =
 # pedal - drag * speed)
 PLAIN, CONTROLLED, IDM, OBSTACLE, TOWN, PEDAL_KIND = 0, 1, 2, 3, 4, 5
 
@@ -83,7 +83,7 @@ KP_A, KP_HEADING, KP_LATERAL = 1 / TAU_ACC, 1 / TAU_HEADING, 1 / TAU_LATERAL
 MAX_STEERING_ANGLE = np.pi / 3
 CAR_LENGTH, CAR_WIDTH = 5.0, 2.0
 MAX_SPEED, MIN_SPEED = 40.0, -40.0
-# Seed 004's pedal vehicle: a constant throttle of 0.35 (5 m/s² · 0.35 commanded) settles at
+# The CARLA study's pedal vehicle: a constant throttle of 0.35 (5 m/s² · 0.35 commanded) settles at
 # 30 km/h, the speed the seed reports for its lane actions: drag = 5 · 0.35 / (30 / 3.6).
 PEDAL_DRAG_PER_S = 5.0 * 0.35 / (30.0 / 3.6)
 

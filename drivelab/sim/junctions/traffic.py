@@ -121,7 +121,7 @@ from drivelab.sim.junctions.rules import (
     STOP_MARGIN_M,
     TURN_BRAKE_MARGIN_M,
 )
-from drivelab.world.state import LIGHT_GREEN, LIGHT_YELLOW
+from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW
 
 NO_STOP = -1.0  # stop_line_ahead's None (a distance to stop at is never negative)
 
@@ -700,3 +700,22 @@ def town_step(v: np.ndarray, count: int, lanes: np.ndarray, dt: float) -> None:
         step_vehicle(v, lanes, i, dt)
         if kind == TOWN and v[i, SPEED] < 0.0:  # Python's max(speed, 0.0): speed unless 0.0 > speed
             v[i, SPEED] = 0.0
+
+
+def red_light_runs(
+    lanes: np.ndarray,
+    previous_lane: np.ndarray,
+    lane: np.ndarray,
+    light: np.ndarray,
+    light_state: np.ndarray,
+    active: np.ndarray,
+) -> np.ndarray:
+    """(K,) whether each world's ego ran a red light in its step (the town's and the block maps'
+    rule): it left a lane whose light (``light`` (K,), -1: none) was red at the step's end
+    (``light_state`` (K, lights)) for a lane that starts where that one ends; ``active`` worlds
+    only. ``previous_lane`` and ``lane``: the ego's rows of ``lanes`` before and after the step."""
+    k = len(lane)
+    state = light_state[np.arange(k), np.maximum(light, 0)] if light_state.shape[1] else np.zeros(k, int)
+    crossed = lanes[lane, FROM_NODE] == lanes[previous_lane, TO_NODE]
+    return active & (light >= 0) & crossed & (state == LIGHT_RED)
+

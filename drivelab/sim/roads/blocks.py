@@ -5,7 +5,7 @@
   geometry at a junction centre (right turns of radius w + 5, left turns of radius w + 5 + w,
   straight on), for the arms it has; signalised or not.
 - ``grid``/``town``: junctions on a grid joined by two-way streets (the town); ``circuit``: a closed
-  loop of straights and arcs (seed 004's circuits).
+  loop of straights and arcs (the CARLA study's circuits).
 
 The formulas are those that build the same roads with highway-env objects (``scenarios/town/road.py``,
 ``scenarios/circuits/reference_env.py``), so that the lanes are bit-for-bit the same.
