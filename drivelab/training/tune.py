@@ -519,7 +519,7 @@ def run_study(
         ) as bar:
             # an interrupted trial's run raises KeyboardInterrupt here (``execute``): the trial stays
             # running in the journal and the next run resumes it
-            for outcome in execute(run_cell, jobs(), executor, workers, address, in_flight=workers):
+            for outcome in execute(run_cell, jobs(), executor, workers, in_flight=workers):
                 tell(by_name.pop(outcome["name"]), outcome)
                 bar.set_postfix_str(f"{outcome['name']}: {_state_word(outcome)}")
                 bar.update(1)
