@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import itertools
 import json
 import math
 import shlex
@@ -307,20 +308,16 @@ def open_optuna_study(study: Study):
     import optuna
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)  # tune prints its own progress
-    optuna_study = optuna.create_study(
+    keywords = dict(study.sampler)
+    seed = keywords.pop("seed", None)
+    return optuna.create_study(
         study_name=study.name,
         storage=_storage(study.study_dir),
+        sampler=optuna.samplers.TPESampler(**keywords) if seed is None else trial_seeded_tpe(seed, keywords),
         pruner=_pruner(study.pruner),
         direction=study.direction,
         load_if_exists=True,
     )
-    keywords = dict(study.sampler)
-    seed = keywords.pop("seed", None)
-    if seed is None:
-        optuna_study.sampler = optuna.samplers.TPESampler(**keywords)
-    else:
-        optuna_study.sampler = trial_seeded_tpe(seed, keywords)
-    return optuna_study
 
 
 def trial_seeded_tpe(seed: int, keywords: dict):
@@ -455,7 +452,7 @@ def run_study(
     :returns: the summary (``summary.json``'s content).
     :raises KeyboardInterrupt: a trial's run was interrupted (it resumes on the next run).
     """
-    from optuna.trial import TrialState
+    from optuna.trial import Trial, TrialState
 
     from drivelab.training.evaluate import make_out_dir
 
@@ -500,15 +497,9 @@ def run_study(
                     "eval_episodes": study.final_eval_episodes, "on_evaluation": reporter,
                     "eval_first": VALIDATION_START}  # fmt: skip
 
-        decode = {p.name: p.decode for p in study.space}
-
         def jobs():  # Optuna's trial ids (``_trial_id``) name a trial in its storage, as Trial() takes it
-            for trial in stale:
-                params = {name: decode[name](value) for name, value in trial.params.items()}
-                if (found := job(trial.number, trial._trial_id, params)) is not None:
-                    yield found
-            for _ in range(new):
-                trial = optuna_study.ask()
+            revived = (Trial(optuna_study, t._trial_id) for t in stale)  # suggest gives their stored values
+            for trial in itertools.chain(revived, (optuna_study.ask() for _ in range(new))):
                 params = {p.name: p.suggest(trial) for p in study.space}
                 if (found := job(trial.number, trial._trial_id, params)) is not None:
                     yield found
