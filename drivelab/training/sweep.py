@@ -762,8 +762,8 @@ def run_sweep(
     """
     workers = check_workers(executor, workers, address)
     steps = plan_unclaimed(sweep)  # every cell checked before anything is written
-    if all(action == "skip" for _, action in steps):
-        return [_skipped(cell) for cell in sweep.cells]  # nothing to run: no Ray started, no lock taken
+    if all(action == "skip" for _, action in steps):  # nothing to run: no Ray started, no lock taken
+        return [skipped(cell.config.name) for cell in sweep.cells]
     from drivelab.training.evaluate import make_out_dir
 
     with executor_ready(executor, workers, address):
@@ -771,7 +771,7 @@ def run_sweep(
         with claim_runs(runs_dir, [cell.config.name for cell in sweep.cells]):
             steps = plan(sweep)  # again, now that no other command can change them
             _check_logs_folder(runs_dir)
-            outcomes = [_skipped(cell) for cell, action in steps if action == "skip"]
+            outcomes = [skipped(cell.config.name) for cell, action in steps if action == "skip"]
             jobs = [
                 {"config_values": c.config.to_dict(), "runs_dir": str(runs_dir), "action": action,
                  "eval_episodes": sweep.eval_episodes}
@@ -788,15 +788,9 @@ def run_sweep(
     return sorted(outcomes, key=lambda o: order[o["name"]])
 
 
-def _skipped(cell: Cell) -> dict:
-    return {
-        "name": cell.config.name,
-        "action": "skip",
-        "ok": True,
-        "error": None,
-        "seconds": 0.0,
-        "stopped": None,
-    }
+def skipped(name: str) -> dict:
+    """The outcome (``run_cell``'s) of the run ``name`` that had nothing left to do."""
+    return {"name": name, "action": "skip", "ok": True, "error": None, "seconds": 0.0, "stopped": None}
 
 
 def run_dirs(sweep: Sweep) -> list[Path]:

@@ -56,7 +56,7 @@ from drivelab.config import FIELDS, RunConfig, build_config, check_eval_every, c
 from drivelab.errors import UsageError
 from drivelab.hyperparams import with_shipped_hyperparams, zoo_yaml
 from drivelab.training.metrics import METRICS as REGISTRY
-from drivelab.training.sweep import cell_action, check_workers, execute, executor_ready, run_cell
+from drivelab.training.sweep import cell_action, check_workers, execute, executor_ready, run_cell, skipped
 from drivelab.yaml_io import load_yaml, parse_yaml_1_1, read_text_bounded
 
 STUDY_KEYS = ("name", "study_dir", "n_trials", "metric", "direction", "space", "sampler", "pruner",
@@ -488,8 +488,7 @@ def run_study(
             config = study.trial_config(number, params)
             action = cell_action(folder / config.name, config, study.final_eval_episodes)
             if action == "skip":  # finished before its study was killed: only the tell is missing
-                tell(number, {"name": config.name, "action": "skip", "ok": True, "error": None,
-                                "stopped": None, "seconds": 0.0})  # fmt: skip
+                tell(number, skipped(config.name))
                 return None
             by_name[config.name] = number
             reporter = TrialReporter(str(folder), study.name, trial_id, study.metric, study.pruner)
