@@ -14,7 +14,7 @@ from drivelab.training.stats import bootstrap_ci, percent
 BAR_METRICS = labels(
     ("mean_return", "success_rate", "crash_rate", "mean_speed_mps", "mean_distance_km", "collisions_per_km")
 )
-CURVE_RESAMPLES = 2_000  # per evaluation step; enough for a drawn band
+CURVE_RESAMPLES = 2_000  # enough for a drawn band
 
 
 def short_labels(keys: list[tuple[str, ...]]) -> list[str]:
@@ -55,8 +55,7 @@ def plot_learning_curves(groups: dict, path: Path, confidence: float) -> Path:
             steps, values.mean(axis=0), "o-", ms=3, color=color, label=f"{labels[index]} (n={len(values)})"
         )
         if len(values) >= 2:
-            bands = [bootstrap_ci(values[:, i], confidence, CURVE_RESAMPLES) for i in range(steps.size)]
-            low, high = np.array(bands).T
+            low, high = bootstrap_ci(values, confidence, CURVE_RESAMPLES)  # one interval per step
             ax.fill_between(steps, low, high, color=color, alpha=0.2)
     ax.set_xlabel("environment steps")
     ax.set_ylabel("evaluation return (mean over seeds)")

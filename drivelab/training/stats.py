@@ -54,37 +54,40 @@ def interquartile_mean(values: Sequence[float]) -> float:
 
 
 def bootstrap_ci(
-    values: Sequence[float],
+    values: Sequence[float] | np.ndarray,
     confidence: float = CONFIDENCE,
     resamples: int = RESAMPLES,
     seed: int = 0,
-) -> tuple[float, float]:
+):
     """Percentile-bootstrap confidence interval of the mean (``scipy.stats.bootstrap``).
 
     Resamples the values with replacement ``resamples`` times and returns the
     ``(1 - confidence) / 2`` and ``(1 + confidence) / 2`` quantiles of the resampled means.
     The same ``seed`` gives the same interval. Fewer than two values give ``(nan, nan)``.
 
-    :param values: one value per run (seed).
+    :param values: one value per run (seed); or runs × steps (learning curves): then two arrays,
+        each step's interval the one its column alone gives.
     :param confidence: coverage of the interval, 0.90 for a 90 % interval.
     :param resamples: number of bootstrap resamples.
     :param seed: seed of the resampling generator.
     """
     values = np.asarray(values, dtype=float)
-    if values.size < 2:
+    if len(values) < 2:
         return math.nan, math.nan
-    if np.all(values == values[0]):  # every resample has the same mean
-        return float(values[0]), float(values[0])
     result = stats.bootstrap(
         (values,),
-        np.mean,
+        # summed as a single step's resamples are (a contiguous copy): a step's interval, bit for bit
+        lambda resamples, axis: np.mean(np.ascontiguousarray(resamples), axis=axis),
         confidence_level=confidence,
         n_resamples=resamples,
         method="percentile",
+        axis=0,
         vectorized=True,
         rng=np.random.default_rng(seed),
     )
-    return float(result.confidence_interval.low), float(result.confidence_interval.high)
+    same = np.all(values == values[0], axis=0)  # every resample has that mean, without float rounding
+    low, high = (np.where(same, values[0], end) for end in result.confidence_interval)
+    return (float(low), float(high)) if values.ndim == 1 else (low, high)
 
 
 def summarize(values: Sequence[float | None], confidence: float = CONFIDENCE, seed: int = 0) -> Summary:
@@ -92,8 +95,7 @@ def summarize(values: Sequence[float | None], confidence: float = CONFIDENCE, se
     kept = [float(v) for v in values if v is not None and not math.isnan(float(v))]
     if not kept:
         return Summary(0, math.nan, math.nan, math.nan, math.nan)
-    if all(v == kept[0] for v in kept):  # exact, without the rounding of a float mean
-        low, high = bootstrap_ci(kept, confidence=confidence, seed=seed)
-        return Summary(len(kept), kept[0], low, high, kept[0])
     low, high = bootstrap_ci(kept, confidence=confidence, seed=seed)
+    if all(v == kept[0] for v in kept):  # exact, without the rounding of a float mean
+        return Summary(len(kept), kept[0], low, high, kept[0])
     return Summary(len(kept), float(np.mean(kept)), low, high, interquartile_mean(kept))

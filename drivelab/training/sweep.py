@@ -44,7 +44,7 @@ import time
 import traceback
 import warnings
 from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -403,11 +403,11 @@ def execute(
     jobs: Iterable[dict],
     executor: str = "pool",
     workers: int = 1,
-    address: str | None = None,
     in_flight: int | None = None,
 ) -> Iterator[dict]:
     """``function(**job)`` for each job, yielded as each finishes: in this process (``pool`` with
-    one worker, one job after another), a spawned process pool, or Ray tasks (see ``run_sweep``).
+    one worker, one job after another), a spawned process pool, or Ray tasks (see ``run_sweep``;
+    inside ``executor_ready``, which starts Ray or joins its cluster).
 
     :param function: a module-level function (it must pickle), e.g. ``run_cell``; it should not raise.
     :param jobs: keyword arguments of each call. It is read lazily: a job is drawn when a slot is
@@ -416,13 +416,25 @@ def execute(
     :param in_flight: at most this many calls submitted at once; None: every job at once (Ray
         then schedules them over the whole cluster).
     """
-    if executor not in EXECUTORS:
-        raise UsageError(f"unknown executor {executor!r} (choose from {', '.join(EXECUTORS)})")
     if executor == "ray":
-        return _until_interrupted(_ray(function, iter(jobs), workers, address, in_flight))
+        import ray
+
+        remote = ray.remote(num_cpus=1, max_retries=0)(function)
+        return _until_interrupted(_as_done(lambda job: remote.remote(**job).future(), iter(jobs), in_flight))
     if workers == 1:  # one worker: run here, one after another (no process start-up)
         return _until_interrupted(function(**job) for job in jobs)
     return _until_interrupted(_pool(function, iter(jobs), workers, in_flight))
+
+
+def _as_done(submit: Callable[[dict], Future], jobs: Iterator[dict], in_flight: int | None) -> Iterator[dict]:
+    """The results of ``submit(job)``'s futures as they finish, at most ``in_flight`` pending (None:
+    every job at once); the next job is drawn when one finished."""
+    pending = {submit(job) for job in itertools.islice(jobs, in_flight)}
+    while pending:
+        done, pending = wait(pending, return_when=FIRST_COMPLETED)
+        for future in done:
+            yield future.result()
+            pending.update(submit(job) for job in itertools.islice(jobs, 1))
 
 
 def _until_interrupted(outcomes: Iterator[dict]) -> Iterator[dict]:
@@ -454,14 +466,8 @@ def _pool(function: Callable, jobs: Iterator[dict], workers: int, in_flight: int
     with ProcessPoolExecutor(
         max_workers=workers, mp_context=context, initializer=_exit_with_parent, initargs=(os.getpid(),)
     ) as pool:
-        pending = set()
         try:
-            pending.update(pool.submit(function, **job) for job in itertools.islice(jobs, in_flight))
-            while pending:
-                done, pending = wait(pending, return_when=FIRST_COMPLETED)
-                for future in done:
-                    yield future.result()
-                    pending.update(pool.submit(function, **job) for job in itertools.islice(jobs, 1))
+            yield from _as_done(lambda job: pool.submit(function, **job), jobs, in_flight)
         except KeyboardInterrupt:
             pool.shutdown(wait=True, cancel_futures=True)
             raise
@@ -526,23 +532,6 @@ def executor_ready(executor: str, workers: int, address: str | None) -> Iterator
         if started:
             import ray
 
-            ray.shutdown()
-
-
-def _ray(function: Callable, jobs: Iterator[dict], workers: int, address: str | None,
-         in_flight: int | None) -> Iterator[dict]:  # fmt: skip
-    import ray
-
-    started = _ray_init(workers, address)
-    try:
-        remote = ray.remote(num_cpus=1, max_retries=0)(function)
-        pending = [remote.remote(**job) for job in itertools.islice(jobs, in_flight)]
-        while pending:
-            done, pending = ray.wait(pending, num_returns=1)
-            yield ray.get(done[0])
-            pending += [remote.remote(**job) for job in itertools.islice(jobs, 1)]
-    finally:
-        if started:
             ray.shutdown()
 
 
@@ -773,8 +762,8 @@ def run_sweep(
     """
     workers = check_workers(executor, workers, address)
     steps = plan_unclaimed(sweep)  # every cell checked before anything is written
-    if all(action == "skip" for _, action in steps):
-        return [_skipped(cell) for cell in sweep.cells]  # nothing to run: no Ray started, no lock taken
+    if all(action == "skip" for _, action in steps):  # nothing to run: no Ray started, no lock taken
+        return [skipped(cell.config.name) for cell in sweep.cells]
     from drivelab.training.evaluate import make_out_dir
 
     with executor_ready(executor, workers, address):
@@ -782,14 +771,14 @@ def run_sweep(
         with claim_runs(runs_dir, [cell.config.name for cell in sweep.cells]):
             steps = plan(sweep)  # again, now that no other command can change them
             _check_logs_folder(runs_dir)
-            outcomes = [_skipped(cell) for cell, action in steps if action == "skip"]
+            outcomes = [skipped(cell.config.name) for cell, action in steps if action == "skip"]
             jobs = [
                 {"config_values": c.config.to_dict(), "runs_dir": str(runs_dir), "action": action,
                  "eval_episodes": sweep.eval_episodes}
                 for c, action in steps
                 if action != "skip"
             ]  # fmt: skip
-            results = execute(run_cell, jobs, executor, workers, address)
+            results = execute(run_cell, jobs, executor, workers)
             with tqdm(total=len(jobs), desc=f"sweep ({executor}, {workers} workers)", unit="run") as bar:
                 for outcome in results:
                     outcomes.append(outcome)
@@ -799,15 +788,9 @@ def run_sweep(
     return sorted(outcomes, key=lambda o: order[o["name"]])
 
 
-def _skipped(cell: Cell) -> dict:
-    return {
-        "name": cell.config.name,
-        "action": "skip",
-        "ok": True,
-        "error": None,
-        "seconds": 0.0,
-        "stopped": None,
-    }
+def skipped(name: str) -> dict:
+    """The outcome (``run_cell``'s) of the run ``name`` that had nothing left to do."""
+    return {"name": name, "action": "skip", "ok": True, "error": None, "seconds": 0.0, "stopped": None}
 
 
 def run_dirs(sweep: Sweep) -> list[Path]:

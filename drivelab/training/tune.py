@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import itertools
 import json
 import math
 import shlex
@@ -55,7 +56,7 @@ from drivelab.config import FIELDS, RunConfig, build_config, check_eval_every, c
 from drivelab.errors import UsageError
 from drivelab.hyperparams import with_shipped_hyperparams, zoo_yaml
 from drivelab.training.metrics import METRICS as REGISTRY
-from drivelab.training.sweep import cell_action, check_workers, execute, executor_ready, run_cell
+from drivelab.training.sweep import cell_action, check_workers, execute, executor_ready, run_cell, skipped
 from drivelab.yaml_io import load_yaml, parse_yaml_1_1, read_text_bounded
 
 STUDY_KEYS = ("name", "study_dir", "n_trials", "metric", "direction", "space", "sampler", "pruner",
@@ -307,20 +308,16 @@ def open_optuna_study(study: Study):
     import optuna
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)  # tune prints its own progress
-    optuna_study = optuna.create_study(
+    keywords = dict(study.sampler)
+    seed = keywords.pop("seed", None)
+    return optuna.create_study(
         study_name=study.name,
         storage=_storage(study.study_dir),
+        sampler=optuna.samplers.TPESampler(**keywords) if seed is None else trial_seeded_tpe(seed, keywords),
         pruner=_pruner(study.pruner),
         direction=study.direction,
         load_if_exists=True,
     )
-    keywords = dict(study.sampler)
-    seed = keywords.pop("seed", None)
-    if seed is None:
-        optuna_study.sampler = optuna.samplers.TPESampler(**keywords)
-    else:
-        optuna_study.sampler = trial_seeded_tpe(seed, keywords)
-    return optuna_study
 
 
 def trial_seeded_tpe(seed: int, keywords: dict):
@@ -455,7 +452,7 @@ def run_study(
     :returns: the summary (``summary.json``'s content).
     :raises KeyboardInterrupt: a trial's run was interrupted (it resumes on the next run).
     """
-    from optuna.trial import TrialState
+    from optuna.trial import Trial, TrialState
 
     from drivelab.training.evaluate import make_out_dir
 
@@ -491,8 +488,7 @@ def run_study(
             config = study.trial_config(number, params)
             action = cell_action(folder / config.name, config, study.final_eval_episodes)
             if action == "skip":  # finished before its study was killed: only the tell is missing
-                tell(number, {"name": config.name, "action": "skip", "ok": True, "error": None,
-                                "stopped": None, "seconds": 0.0})  # fmt: skip
+                tell(number, skipped(config.name))
                 return None
             by_name[config.name] = number
             reporter = TrialReporter(str(folder), study.name, trial_id, study.metric, study.pruner)
@@ -500,15 +496,9 @@ def run_study(
                     "eval_episodes": study.final_eval_episodes, "on_evaluation": reporter,
                     "eval_first": VALIDATION_START}  # fmt: skip
 
-        decode = {p.name: p.decode for p in study.space}
-
         def jobs():  # Optuna's trial ids (``_trial_id``) name a trial in its storage, as Trial() takes it
-            for trial in stale:
-                params = {name: decode[name](value) for name, value in trial.params.items()}
-                if (found := job(trial.number, trial._trial_id, params)) is not None:
-                    yield found
-            for _ in range(new):
-                trial = optuna_study.ask()
+            revived = (Trial(optuna_study, t._trial_id) for t in stale)  # suggest gives their stored values
+            for trial in itertools.chain(revived, (optuna_study.ask() for _ in range(new))):
                 params = {p.name: p.suggest(trial) for p in study.space}
                 if (found := job(trial.number, trial._trial_id, params)) is not None:
                     yield found
@@ -519,7 +509,7 @@ def run_study(
         ) as bar:
             # an interrupted trial's run raises KeyboardInterrupt here (``execute``): the trial stays
             # running in the journal and the next run resumes it
-            for outcome in execute(run_cell, jobs(), executor, workers, address, in_flight=workers):
+            for outcome in execute(run_cell, jobs(), executor, workers, in_flight=workers):
                 tell(by_name.pop(outcome["name"]), outcome)
                 bar.set_postfix_str(f"{outcome['name']}: {_state_word(outcome)}")
                 bar.update(1)

@@ -60,3 +60,14 @@ def test_summarize_skips_missing_values():
 def test_equal_values_summarize_exactly():
     s = summarize([0.95, 0.95, 0.95])  # np.mean gives 0.9499999999999998
     assert (s.mean, s.ci_low, s.ci_high, s.iqm) == (0.95, 0.95, 0.95, 0.95)
+
+
+def test_a_band_is_each_steps_own_interval_bit_for_bit():
+    """Runs × steps in one call (compare's learning-curve bands): each step's interval is the one
+    its column gives alone, to the last bit, a constant step included."""
+    values = np.random.default_rng(5).normal(size=(8, 6))
+    values[:, 2] = 0.95
+    low, high = bootstrap_ci(values, confidence=0.9, resamples=500, seed=1)
+    columns = [bootstrap_ci(values[:, i], confidence=0.9, resamples=500, seed=1) for i in range(6)]
+    assert list(zip(low.tolist(), high.tolist(), strict=True)) == columns
+    assert (low[2], high[2]) == (0.95, 0.95)
