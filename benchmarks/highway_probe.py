@@ -33,7 +33,7 @@ sys.path.insert(0, str(ROOT))
 
 import drivelab  # noqa: E402
 from drivelab.agents.expert import slip_aware_pursuit  # noqa: E402
-from drivelab.envs.vector import evaluation_seeds  # noqa: E402
+from drivelab.training.seeds import evaluation_seeds  # noqa: E402
 from drivelab.training.stats import bootstrap_ci  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "benchmarks"))

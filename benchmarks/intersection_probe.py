@@ -29,7 +29,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import drivelab  # noqa: E402
-from drivelab.envs.vector import evaluation_seeds  # noqa: E402
+from drivelab.training.seeds import evaluation_seeds  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from provenance import Parser, cpu_isa, names, whole  # noqa: E402

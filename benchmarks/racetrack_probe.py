@@ -27,8 +27,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import drivelab  # noqa: E402
-from drivelab.envs.vector import evaluation_seeds  # noqa: E402
 from drivelab.perception.ego_state import CURVATURE_SCALE_M, MAX_ACCELERATION_MPS2  # noqa: E402
+from drivelab.training.seeds import evaluation_seeds  # noqa: E402
 from drivelab.world.geometry import FULL_LOCK_RAD  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "benchmarks"))

@@ -39,20 +39,9 @@ BACKENDS = ("auto", "fast", "highway")
 LIGHT_LABEL_DISTANCE_M = 18.0  # RLAD's auxiliary label: a light within this distance ahead
 LIGHT_LABELS = {-1: "none", LIGHT_GREEN: "green", LIGHT_YELLOW: "red_or_yellow", LIGHT_RED: "red_or_yellow"}
 _LABEL_OF_STATE = np.array([LIGHT_LABELS[state] for state in sorted(LIGHT_LABELS)], dtype=object)  # state + 1
-# Episode seeds: training draws them below TRAINING_SEED_LIMIT from each world's generator; the
-# evaluation set of every scenario is the episodes EVALUATION_SEED_BASE, +1, +2, … given directly
-# (``reset(options={"episode_seeds": …})``), so no training episode is ever an evaluation episode
-# and every run, seed and algorithm is evaluated on the same episodes.
+# A world draws its training episodes' seeds below this from its own generator; evaluation plays
+# the seeds above it (``drivelab.training.seeds``), given with ``reset(options={"episode_seeds": …})``.
 TRAINING_SEED_LIMIT = 2**31 - 1
-EVALUATION_SEED_BASE = 2**31
-# Tuning selects hyper-parameters on validation episodes, the evaluation range from here on, so
-# that no test episode (the first ones: every report, the leaderboard) chooses a configuration.
-VALIDATION_START = 1_000_000
-
-
-def evaluation_seeds(count: int, start: int = 0) -> np.ndarray:
-    """The episode seeds of evaluation episodes ``start`` … ``start + count − 1`` (int64)."""
-    return EVALUATION_SEED_BASE + start + np.arange(count, dtype=np.int64)
 
 
 AUTORESET_MODES = {"next_step": AutoresetMode.NEXT_STEP, "same_step": AutoresetMode.SAME_STEP}
@@ -274,7 +263,7 @@ class VectorDriveEnv(VectorEnv):
         """Start every world's episode; an int seed gives world k the seed ``seed + k`` (a list,
         one per world). ``options={"reset_mask": mask}`` (gymnasium's partial reset) starts only
         the worlds of ``mask``; ``options={"episode_seeds": seeds}`` (K,) plays those episodes
-        (e.g. :func:`evaluation_seeds`) instead of drawing the next ones from the worlds'
+        (e.g. ``drivelab.training.seeds.evaluation_seeds``) instead of drawing the next ones from the worlds'
         generators, which it leaves as they are. Infos: ``episode_seed`` and ``traffic_light``
         per world."""
         check_reset_options(options)

@@ -57,7 +57,7 @@ def run_episodes(
     :param first: with ``seed`` None, play evaluation episodes ``first`` … ``first + episodes −
         1`` (``VALIDATION_START``: tuning's validation episodes).
     """
-    from drivelab.envs.vector import evaluation_seeds
+    from drivelab.training.seeds import evaluation_seeds
 
     recorder = None
     if record_first or on_frame is not None:

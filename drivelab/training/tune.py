@@ -483,7 +483,7 @@ def run_study(
             outcomes.append(outcome)
 
         def job(number: int, trial_id: int, params: dict) -> dict | None:
-            from drivelab.envs.vector import VALIDATION_START
+            from drivelab.training.seeds import VALIDATION_START
 
             config = study.trial_config(number, params)
             action = cell_action(folder / config.name, config, study.final_eval_episodes)
@@ -600,7 +600,7 @@ def write_summary(study: Study, optuna_study, command: str | None = None) -> dic
 
 
 def _markdown(study: Study, summary: dict, table) -> str:
-    from drivelab.envs.vector import VALIDATION_START
+    from drivelab.training.seeds import VALIDATION_START
 
     lines = [f"# tune {study.name}", ""]
     if summary["command"]:

@@ -8,7 +8,7 @@ from typer.testing import CliRunner
 from drivelab.cli import app
 from drivelab.envs.actions import MetaAction
 from drivelab.envs.core import DriveEnv
-from drivelab.envs.vector import VectorDriveEnv, evaluation_seeds
+from drivelab.envs.vector import VectorDriveEnv
 from drivelab.envs.video import (
     MAP_CAMERA,
     ROAD_CAMERA,
@@ -21,6 +21,7 @@ from drivelab.envs.video import (
     video_fps,
 )
 from drivelab.training.evaluate import run_episodes
+from drivelab.training.seeds import evaluation_seeds
 
 ACTIONS = {"highway": [3, 0, 1, 2, 4, 1], "town": [[0.8, 0.0], [1.0, 0.1], [0.5, -0.1], [0.0, 0.0]]}
 

@@ -5,15 +5,10 @@ import numpy as np
 import pytest
 
 from drivelab.envs.core import DriveEnv
-from drivelab.envs.vector import (
-    EVALUATION_SEED_BASE,
-    TRAINING_SEED_LIMIT,
-    VALIDATION_START,
-    VectorDriveEnv,
-    evaluation_seeds,
-)
+from drivelab.envs.vector import TRAINING_SEED_LIMIT, VectorDriveEnv
 from drivelab.errors import UsageError
 from drivelab.training import evaluate
+from drivelab.training.seeds import EVALUATION_SEED_BASE, VALIDATION_START, evaluation_seeds
 
 
 def test_evaluation_seeds_lie_above_every_training_seed():
