@@ -65,7 +65,7 @@ MAP_CAMERA = Camera((432, 720), 3.0, along_road=False)  # 240 m x 144 m, north u
 
 def camera_for(scenario: Scenario) -> Camera:
     """The map from above for the town and the block maps, else the view along the road."""
-    return MAP_CAMERA if scenario.town_traffic or scenario.procedural_maps else ROAD_CAMERA
+    return MAP_CAMERA if scenario.camera == "map" else ROAD_CAMERA
 
 
 def camera_view(batch: WorldBatch, camera: Camera) -> View:

@@ -28,6 +28,8 @@ class Scenario:
     :param meta_target_speeds: the speeds FASTER / SLOWER step through (None: highway-env's
         default 20, 25, 30 m/s), as in highway-env's own config of the scenario.
     :param fast_backend: drivelab's fast backend runs it (the "auto" backend then picks it).
+    :param camera: how videos and ``render()`` look at a world: "road" (along the road, the ego a
+        third of the way in) or "map" (the map from above, north up: the town, the block maps).
     :param simulator: dotted path of the compiled core's simulator class that runs it:
         ``FastSimulator`` (drivelab.sim), or the scenario's own subclass in its folder (the town's
         ``TownSimulator``, the blocks' ``BlocksSimulator``), imported when a world is built.
@@ -37,9 +39,6 @@ class Scenario:
     :param circuit: the road is a closed loop: the route is one whole lap (however long).
     :param guide_line: a yellow line is painted along the route (follow-line).
     :param keep_lane: leaving the ego's starting lane counts as leaving the road (follow-lane).
-    :param town_traffic: its traffic is the town's (lights, pedestrians, town vehicles on random
-        routes): the compiled core runs it with its town simulator, whose ``spawn`` hook returns
-        the episode's ``TownEpisode`` as its fourth item.
     :param procedural_maps: its worlds drive maps generated from seeds (the blocks): the compiled
         core runs it with its blocks simulator, which hands ``spawn`` a map (a ``BlocksMap``) as
         its ``road``; each episode's seed picks the map from the scenario's set.
@@ -76,6 +75,7 @@ class Scenario:
     meta_target_speeds: tuple[float, ...] | None = None
     fast_backend: bool = True
     simulator: str = "drivelab.sim.core.simulator.FastSimulator"
+    camera: str = "road"
     route_deviation_m: float | None = None
     blocked_after_s: float | None = None
     action_kinds: tuple[str, ...] = ("meta", "grid", "continuous", "target_speed")
@@ -83,7 +83,6 @@ class Scenario:
     circuit: bool = False
     guide_line: bool = False
     keep_lane: bool = False
-    town_traffic: bool = False
     junction_needs_both_ends: bool = False
     procedural_maps: bool = False
     reference_backend: bool = True

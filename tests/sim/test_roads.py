@@ -421,7 +421,7 @@ def test_connected_lanes_are_the_ones_highway_env_searches(name):
 
 @pytest.mark.parametrize("name", sorted(ROADS))
 def test_the_town_kernels_search_table_is_the_descriptions(name):
-    """``town_traffic.connected_lanes`` derives the same search from the lane table alone: each
+    """``junctions.traffic.connected_lanes`` derives the same search from the lane table alone: each
     lane itself (offset 0), then the description's connected lanes in order, offset by the lane's
     length for those it leads into and by minus their own length for those leading into it."""
     desc, _ = ROADS[name]

@@ -8,7 +8,7 @@ import pytest
 from drivelab.errors import UsageError
 from drivelab.scenarios import SCENARIOS
 from drivelab.sim.core import traffic as T
-from drivelab.sim.core.backend import FastBackend
+from drivelab.sim.core.backend import FastBackend, fast_simulator
 from drivelab.sim.core.simulator import FastSimulator
 from drivelab.world.batch import COLLISION_VEHICLE, WorldBatch
 
@@ -144,6 +144,20 @@ def test_refuses_bad_arguments():
     simulator = FastSimulator(SCENARIOS["highway"], "regular", "meta", 2)
     with pytest.raises(UsageError, match="before reset_where"):
         simulator.step(np.zeros(2, dtype=int))
+
+
+def test_a_scenario_runs_on_the_simulator_it_names():
+    """The town names its TownSimulator (``Scenario.simulator``): the plain core refuses it, and
+    ``fast_simulator`` builds the named class; a subclass of the named class is accepted."""
+    with pytest.raises(UsageError, match="'town' runs on drivelab.scenarios.town.simulator.TownSimulator"):
+        FastSimulator(SCENARIOS["town"], "empty", "meta", 1)
+    assert type(fast_simulator(SCENARIOS["town"], "empty", "meta", 1)).__name__ == "TownSimulator"
+    assert type(fast_simulator(SCENARIOS["blocks"], "empty", "meta", 1)).__name__ == "BlocksSimulator"
+
+    class Recording(FastSimulator):
+        pass
+
+    assert Recording(SCENARIOS["merge"], "empty", "meta", 1).scenario.name == "merge"
 
 
 @pytest.mark.parametrize("scenario, traffic, control", CASES)

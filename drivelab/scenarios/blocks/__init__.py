@@ -106,6 +106,7 @@ SCENARIO = Scenario(
     default_reward="metadrive",
     procedural_maps=True,
     simulator="drivelab.scenarios.blocks.simulator.BlocksSimulator",
+    camera="map",
     reference_backend=False,
     spawn=spawn_blocks,
     road=blocks_road,

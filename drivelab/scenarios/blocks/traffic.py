@@ -21,7 +21,7 @@ rules every regulation period, every vehicle steps, collisions) with ``blocks_ac
   the route's next road, the route's named lane first, else another continuation from which the
   rest of the route can be driven; past the route's end (or off it) the continuation with the
   same lane id, else the first one; a lane leading nowhere is kept (the vehicle leaves the map).
-- **traffic lights** (signalised junctions): the town's stop-line rule (``town_traffic``'s
+- **traffic lights** (signalised junctions): the town's stop-line rule (``junctions/traffic.py``'s
   ``town_acceleration`` with no leader: red always, yellow unless too late to stop, a left turn
   on green waits for oncoming vehicles), its virtual leader's deceleration taken when lower.
 
@@ -312,7 +312,7 @@ def blocks_change_lane_policy(
 @njit(cache=True, inline="always")
 def stop_ahead(v: np.ndarray, p: np.ndarray, i: int, ahead_m: float) -> float:
     """IDM's acceleration of vehicle i behind a stopped virtual leader ``ahead_m`` metres beyond
-    its front bumper, to stand STOP_MARGIN_M short of it (``town_traffic.town_acceleration``'s
+    its front bumper, to stand STOP_MARGIN_M short of it (``junctions.traffic.town_acceleration``'s
     stop line, the same arithmetic)."""
     gap_m = ahead_m - STOP_MARGIN_M + p[T.DISTANCE_WANTED]
     speed = max(v[i, T.SPEED], 0.0)

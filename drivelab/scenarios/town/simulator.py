@@ -14,7 +14,7 @@ reference (``HighwayBackend`` on ``TownEnv``) keeps as objects:
 
 One policy step of a world (``simulate_town_worlds``): the light states at the step's end time
 (the reference's lights read ``env.time``, advanced before its frames), then per frame: every
-vehicle acts (``town_traffic.town_act``), the pedestrians walk, the vehicles step and collide,
+vehicle acts (``junctions.traffic.town_act``), the pedestrians walk, the vehicles step and collide,
 moving vehicles hit pedestrians, wrecks are towed (``pedestrians``). Then the ego's route
 progress, its retarget, and the events: a red light run is judged on the lanes before and after
 the step, as the reference judges it.

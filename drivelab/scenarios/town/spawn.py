@@ -24,7 +24,7 @@ generator state (tested in ``tests/envs/test_town_spawn.py``). The draws, in ord
 
 Routes come from the road's route table (``TownRoadArrays.routes``: the reference's breadth-first
 ``shortest_route`` from every lane to every street's stop line); a random route's goal is drawn
-as the kernels draw it (``town_traffic.random_goal``), among the streets that do not end where
+as the kernels draw it (``junctions.traffic.random_goal``), among the streets that do not end where
 the start lane ends.
 """
 
@@ -49,6 +49,7 @@ from drivelab.sim.core.spawn import (
 )
 from drivelab.sim.junctions import rows as R
 from drivelab.sim.junctions.arrays import TownRoadArrays
+from drivelab.sim.junctions.arrays_description import town_arrays
 from drivelab.sim.junctions.rules import (
     FIXED_ROUTE_COUNT,
     MEAN_WAIT_S,
@@ -147,11 +148,13 @@ class TownSetup:
     def of(cls, road) -> TownSetup:
         """The set-up of the simulator's converted ``road`` (kept in ``road.cache["town_setup"]``).
         It reads ``road.table``, ``road.geometry``, ``road.config`` (TownEnv's), the vehicle
-        constants and ``road.cache["town_arrays"]`` (the TownRoadArrays of the road's
-        description, which the simulator's road conversion puts there)."""
+        constants and the TownRoadArrays of the road's description (``road.cache["town_arrays"]``,
+        derived at the first use)."""
         setup = road.cache.get("town_setup")
         if setup is None:
-            arrays = road.cache["town_arrays"]
+            arrays = road.cache.get("town_arrays")
+            if arrays is None:
+                arrays = road.cache["town_arrays"] = town_arrays(road.description)
             config = road.config
             setup = road.cache["town_setup"] = cls(
                 table=road.table,

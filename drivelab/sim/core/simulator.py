@@ -41,6 +41,7 @@ from drivelab.sim.core import lanes as L
 from drivelab.sim.core import traffic as T
 from drivelab.sim.core.spawn import LaneGeometry, all_shortest_paths
 from drivelab.sim.reference.highway import HighwayBackend, build_road_map, is_idm_class
+from drivelab.sim.roads.description import RoadDescription
 from drivelab.sim.route import SEARCH_WINDOW_M, WINDOW_PENALTY_M, RouteTracker
 from drivelab.world.batch import (
     COLLISION_NONE,
@@ -173,6 +174,7 @@ class _Road:
     :param keep_npcs, extra_vehicles: the traffic level's drivelab keys (HighwayBackend's).
     :param destination: the scenario's destination node (extra vehicles are routed to it).
     :param cache: static arrays a spawner derives from the road, made at its first use.
+    :param description: the road's description (``Scenario.road``'s), None for highway-env's roads.
     """
 
     table: L.LaneTable
@@ -202,6 +204,7 @@ class _Road:
     extra_vehicles: int
     destination: str | None
     cache: dict
+    description: RoadDescription | None = None
 
 
 _ROADS: dict[tuple, _Road] = {}
@@ -297,10 +300,6 @@ def _describe_road(scenario: Scenario, traffic: str, control: str, overrides: di
         has_goal = bool(scenario.destination) or scenario.arrival == "route_end"
         for row in range(len(table.indices)):
             routes[row] = RouteTracker(centre_line(desc, circuit_route(desc, row)), has_goal=has_goal)
-    if scenario.town_traffic:
-        from drivelab.sim.junctions.arrays_description import town_arrays
-
-        cache["town_arrays"] = town_arrays(desc)
     target_speeds = [0.0]
     if control == "meta":
         target_speeds = config["action"].get("target_speeds", MDPVehicle.DEFAULT_TARGET_SPEEDS)
@@ -334,6 +333,7 @@ def _describe_road(scenario: Scenario, traffic: str, control: str, overrides: di
         extra_vehicles=extra_vehicles,
         destination=scenario.destination,
         cache=cache,
+        description=desc,
     )
 
 
@@ -722,7 +722,7 @@ class FastSimulator:
         num_worlds: int,
         overrides: dict | None = None,
     ) -> None:
-        if scenario.town_traffic and type(self) is FastSimulator:
+        if scenario.simulator not in {f"{c.__module__}.{c.__qualname__}" for c in type(self).__mro__}:
             raise UsageError(
                 f"scenario {scenario.name!r} runs on {scenario.simulator} (sim.core.backend.fast_simulator)"
             )
