@@ -178,3 +178,21 @@ def test_every_difference_is_said_in_one_line():
     assert "\n" not in message
     assert "'absolute' True" in message and "screen_width" in message and "'cars'" in message
 
+
+def test_configure_changes_the_env_from_the_next_reset():
+    env = drivelab.make("highway", obs="kinematics", backend_options={"vehicles_count": 5})
+    first, _ = env.reset(seed=0)
+    env.configure(
+        {"observation": {"type": "Kinematics", "vehicles_count": 3}, "lanes_count": 2, "duration": 7}
+    )
+    assert env.observation_space.shape == (35,)  # the running episode is unchanged
+    env.step(1)
+    obs, _ = env.reset(seed=0)
+    assert obs.shape == env.observation_space.shape == (3, 5)
+    assert env.world.ego.lane_count == 2 and env.time_limit_s == 7
+    assert env.vector.simulator.count[0] == 6  # vehicles_count given before is kept
+    with pytest.raises(UsageError, match="'absolute' True"):
+        env.configure({"observation": {"type": "Kinematics", "absolute": True}})
+    env.configure({"collision_reward": -3})  # configurations add up, as highway-env's
+    env.reset(seed=0)
+    assert env.observation_space.shape == (3, 5) and env.reward_shaper.spec.weights["collision"] == -3
