@@ -261,7 +261,8 @@ def _check_scenario_options(config: RunConfig) -> None:
     from drivelab.scenarios.options import check_backend_options
 
     if isinstance(highway_config, dict):
-        options = {**env_kwargs_from_config(highway_config).get("backend_options", {}), **(options or {})}
+        translated = env_kwargs_from_config(highway_config, scenario.name)
+        options = {**translated.get("backend_options", {}), **(options or {})}
     control = getattr(ACTIONS.get(config.action), "control", "continuous")
     check_backend_options(scenario, options, config.traffic, control)
 

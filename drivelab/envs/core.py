@@ -38,17 +38,43 @@ class DriveEnv(gym.Env):
         **keywords,
     ) -> None:
         super().__init__()
-        self.vector = VectorDriveEnv(1, scenario, render_mode=render_mode, **keywords)
-        vector = self.vector
-        self.scenario, self.adapter, self.sensors = vector.scenario, vector.adapter, vector.sensors
-        self.reward_shaper, self.duration_s = vector.reward_shaper, vector.duration_s
         self.render_mode = render_mode
-        self.metadata = {**self.metadata, "render_fps": vector.metadata["render_fps"]}
-        self.action_space = vector.single_action_space
-        self.observation_space = vector.single_observation_space
+        self._use(VectorDriveEnv(1, scenario, render_mode=render_mode, **keywords))
+        self._configured: VectorDriveEnv | None = None  # configure()'s env, taken at the next reset
         self.episode_over = False  # the last step ended the episode: reset before the next step
         if seed is not None:
             self.reset(seed=seed)
+
+    def _use(self, vector: VectorDriveEnv) -> None:
+        """Make ``vector`` (one world) this env's: its scenario, parts and spaces."""
+        self.vector = vector
+        self.scenario, self.adapter, self.sensors = vector.scenario, vector.adapter, vector.sensors
+        self.reward_shaper, self.duration_s = vector.reward_shaper, vector.duration_s
+        self.metadata = {**type(self).metadata, "render_fps": vector.metadata["render_fps"]}
+        self.action_space = vector.single_action_space
+        self.observation_space = vector.single_observation_space
+
+    def configure(self, config: dict) -> None:
+        """Change the environment from the next ``reset()`` on, as highway-env's ``configure``:
+        ``config`` is a highway-env config dict (its keys read as ``drivelab.make(config=...)``
+        reads them), whose settings replace this env's (the scenario's options it gives join the
+        others). The parts are built now from the new :class:`~drivelab.envs.spec.EnvSpec`, so a
+        refused key is a UsageError here and the current episode runs on unchanged; the next
+        ``reset()`` switches to them, with their observation and action spaces."""
+        from drivelab.envs.highway_config import env_kwargs_from_config
+        from drivelab.envs.spec import EnvSpec
+
+        current = (self._configured or self.vector).env_spec
+        keywords = current.keywords()
+        for key, value in env_kwargs_from_config(config, current.scenario).items():
+            if key in ("backend_options", "action_options"):
+                value = {**(keywords[key] or {}), **value}
+            keywords[key] = value
+        spec = EnvSpec.build(**keywords)
+        configured = VectorDriveEnv(1, render_mode=self.render_mode, env_spec=spec)
+        if self._configured is not None:
+            self._configured.close()
+        self._configured = configured
 
     @property
     def simulator(self):
@@ -73,6 +99,10 @@ class DriveEnv(gym.Env):
         """Start an episode. ``options={"episode_seed": s}`` plays episode ``s`` (an integer in
         [0, 2**63)) instead of the next one drawn from ``np_random``."""
         check_reset_options(options)
+        if self._configured is not None:  # configure()'s env from this episode on
+            self.vector.close()
+            self._use(self._configured)
+            self._configured = None
         super().reset(seed=seed)
         self.vector.world_rngs[0] = self.np_random  # the episode seed is drawn from np_random
         if options and options.get("episode_seed") is not None:  # this episode, not the next drawn

@@ -186,7 +186,7 @@ def _circuit_step(
         last_progress[k] = progress[k]
         last_length[k] = route_length[route[k]]
     rows = np.zeros((num_worlds, int(params[P_ROWS]), 7))
-    ego_rows_into(rows, speed, cos_relative, sin_relative, params[P_SPEED_SCALE], observations)
+    ego_rows_into(rows, speed, cos_relative, sin_relative, params[P_SPEED_SCALE], True, observations)
 
 
 # what circuit_step reads and updates in place besides its per-step arrays: one object, so that a
@@ -242,6 +242,7 @@ class CircuitStep:
             and type(env.adapter).controls_for is ActionAdapter.controls_for  # no feedback loop
             and len(env.sensors) == 1
             and type(env.sensors[0]) is Kinematics
+            and env.sensors[0].plain  # its default layout: every feature, flat, normalised
             and spec.gate is None
             and all(name in FUSED_TERMS for name in spec.weights)
             and env.rules.blocked_after_s is None

@@ -81,7 +81,7 @@ class EnvSpec:
             keywords["backend_options"] = {**(given or {}), **options}
         if config is not None:
             given = {key: value for key, value in keywords.items() if key != "scenario"}
-            keywords = {**keywords, **env_kwargs_from_config(config, **given)}
+            keywords = {**keywords, **env_kwargs_from_config(config, scenario.name, **given)}
         spec = cls(**{**keywords, "scenario": scenario.name})
         spec.check()
         return spec

@@ -6,6 +6,7 @@ import numpy as np
 from gymnasium import spaces
 from numba import njit
 
+from drivelab.errors import UsageError
 from drivelab.perception.base import Sensor
 from drivelab.world.batch import WorldBatch
 
@@ -13,34 +14,61 @@ FEATURES = ("presence", "x", "y", "vx", "vy", "cos_h", "sin_h")
 
 
 class Kinematics(Sensor):
-    """A flat vector of ``vehicles_count`` rows × 7 features, all in [-1, 1].
+    """``vehicles_count`` rows of the nearest vehicles' features, flat by default, all in [-1, 1].
 
-    Features per row: ``presence, x, y, vx, vy, cos_h, sin_h`` (``FEATURES``). Row 0 is the
-    ego: presence 1, position (0, 0), its velocity (speed, 0) in its own frame, and its heading
-    relative to its lane (so a drifting ego sees sin_h ≠ 0). Rows 1… are the nearest other
-    vehicles within ``perception_distance_m`` (centre to centre), nearest first: position and
-    velocity relative to the ego, in the ego frame (x forward, y right), and heading relative
-    to the ego. Positions are divided by the perception distance, velocities by
-    ``speed_scale_mps``, then everything is clipped to [-1, 1]; absent rows are all zero.
+    Features per row (``features``, default all of ``FEATURES``): ``presence, x, y, vx, vy,
+    cos_h, sin_h``. Row 0 is the ego: presence 1, position (0, 0), its velocity (speed, 0) in
+    its own frame, and its heading relative to its lane (so a drifting ego sees sin_h ≠ 0). Rows
+    1… are the nearest other vehicles within ``perception_distance_m`` (centre to centre),
+    nearest first: position and velocity relative to the ego, in the ego frame (x forward, y
+    right), and heading relative to the ego. Positions are divided by the perception distance,
+    velocities by ``speed_scale_mps``, then everything is clipped to [-1, 1]; absent rows are all
+    zero.
 
     :param vehicles_count: rows, the ego included.
-    :param perception_distance_m: vehicles farther than this are not seen.
+    :param perception_distance_m: vehicles farther than this are not seen; also the position scale.
     :param speed_scale_mps: velocity normalisation; highway-env's 2 × its 40 m/s maximum speed.
+    :param features: the features of each row and their order, names of ``FEATURES`` joined by
+        ``+`` (``"presence+x+y+vx+vy"``, highway-env's default five) or a sequence of names.
+    :param flatten: one flat vector (``vehicles_count · features``,); false: highway-env's
+        ``(vehicles_count, features)`` array, as attention policies written for it read it.
+    :param normalize: divide positions and velocities by the scales above; false: raw metres and
+        m/s (and no clipping), as highway-env's ``normalize: False``.
+    :param clip: clip the normalised values to [-1, 1] (highway-env's ``clip``).
     """
 
     name = "kinematics"
     help = "nearest vehicles' presence, position, velocity, heading in the ego frame"
 
     def __init__(
-        self, *, vehicles_count: int = 5, perception_distance_m: float = 100.0, speed_scale_mps: float = 80.0
+        self,
+        *,
+        vehicles_count: int = 5,
+        perception_distance_m: float = 100.0,
+        speed_scale_mps: float = 80.0,
+        features: str = "+".join(FEATURES),
+        flatten: bool = True,
+        normalize: bool = True,
+        clip: bool = True,
     ) -> None:
         if vehicles_count < 1 or perception_distance_m <= 0 or speed_scale_mps <= 0:
             raise ValueError("kinematics needs vehicles_count >= 1 and positive distance and speed scales")
         self.vehicles_count = int(vehicles_count)
         self.perception_distance_m = float(perception_distance_m)
         self.speed_scale_mps = float(speed_scale_mps)
-        size = self.vehicles_count * len(FEATURES)
-        self._space = spaces.Box(-1.0, 1.0, shape=(size,), dtype=np.float32)
+        self.features = feature_names(features)
+        self.columns = np.array([FEATURES.index(name) for name in self.features], dtype=np.int64)
+        self.flatten, self.normalize = bool(flatten), bool(normalize)
+        self.clip = bool(clip) and self.normalize  # highway-env clips only what it normalises
+        # every feature in FEATURES' order: the rows are written straight into the observation
+        self._all_columns = self.features == FEATURES
+        # the default layout (every feature, flat, normalised and clipped), which fused steps write
+        self.plain = self._all_columns and self.flatten and self.clip
+        shape = (self.vehicles_count, len(self.features))
+        bound = 1.0 if self.clip else np.inf
+        self._space = spaces.Box(
+            -bound, bound, shape=(shape[0] * shape[1],) if self.flatten else shape, dtype=np.float32
+        )
 
     @property
     def space(self) -> spaces.Box:
@@ -50,6 +78,8 @@ class Kinematics(Sensor):
         ego = batch.ego
         rows = np.zeros((batch.num_worlds, self.vehicles_count, len(FEATURES)))  # (K, rows, 7)
         relative_heading = ego.heading - ego.lane_heading
+        position_scale = self.perception_distance_m if self.normalize else 1.0
+        speed_scale = self.speed_scale_mps if self.normalize else 1.0
         others = batch.vehicles  # (K, N, 6)
         if others.shape[1] and self.vehicles_count > 1:
             # the selection compiled, the transcendental functions in numpy (its rounding
@@ -57,20 +87,41 @@ class Kinematics(Sensor):
             cos_h, sin_h = batch.heading_cos_sin()
             chosen, heading = nearest_rows(
                 others, batch.vehicle_valid, ego.position, ego.heading, cos_h, sin_h,
-                self.perception_distance_m, rows,
+                self.perception_distance_m, position_scale, rows,
             )  # fmt: skip
             cos_other, sin_other = np.cos(heading), np.sin(heading)
-            motion_rows(others, chosen, ego.speed_mps, cos_other, sin_other, self.speed_scale_mps, rows)
-        ego_rows_into(
-            rows, ego.speed_mps, np.cos(relative_heading), np.sin(relative_heading), self.speed_scale_mps, out
+            motion_rows(others, chosen, ego.speed_mps, cos_other, sin_other, speed_scale, rows)
+        cos_relative, sin_relative = np.cos(relative_heading), np.sin(relative_heading)
+        flat = out.reshape(out.shape[0], -1)
+        if self._all_columns and np.shares_memory(flat, out):
+            ego_rows_into(rows, ego.speed_mps, cos_relative, sin_relative, speed_scale, self.clip, flat)
+            return
+        every = np.empty((batch.num_worlds, self.vehicles_count * len(FEATURES)))
+        ego_rows_into(rows, ego.speed_mps, cos_relative, sin_relative, speed_scale, self.clip, every)
+        every = every.reshape(batch.num_worlds, self.vehicles_count, len(FEATURES))
+        out[...] = every[:, :, self.columns].reshape(out.shape)
+
+
+def feature_names(features) -> tuple[str, ...]:
+    """The feature names of ``features`` (names joined by ``+``, or a sequence of names), each one
+    of ``FEATURES`` and none twice; a UsageError otherwise."""
+    names = features.split("+") if isinstance(features, str) else list(features)
+    names = [str(name).strip() for name in names]
+    unknown = [name for name in names if name not in FEATURES]
+    if unknown or not names or len(set(names)) != len(names):
+        what = f"unknown {unknown}" if unknown else "each at most once"
+        raise UsageError(
+            f"kinematics features must be names of {', '.join(FEATURES)} joined by '+', {what}: "
+            f"got {features!r}"
         )
+    return tuple(names)
 
 
 @njit(cache=True)
-def ego_rows_into(rows, speed_mps, cos_relative, sin_relative, speed_scale, out):
+def ego_rows_into(rows, speed_mps, cos_relative, sin_relative, speed_scale, clip, out):
     """Row 0 of every world (the ego: presence 1, speed / scale, cos and sin of its heading
-    relative to its lane) into ``rows`` (K, rows, 7), then every value clipped to [-1, 1] (nan
-    kept, as np.clip keeps it) into ``out`` (K, rows · 7) in ``out``'s float type."""
+    relative to its lane) into ``rows`` (K, rows, 7), then every value, clipped to [-1, 1] when
+    ``clip`` (nan kept, as np.clip keeps it), into ``out`` (K, rows · 7) in ``out``'s float type."""
     for k in range(rows.shape[0]):
         row = rows[k, 0]
         row[0], row[3] = 1.0, speed_mps[k] / speed_scale
@@ -78,7 +129,9 @@ def ego_rows_into(rows, speed_mps, cos_relative, sin_relative, speed_scale, out)
         flat = rows[k].ravel()
         for i in range(flat.size):
             value = flat[i]
-            if value < -1.0:
+            if not clip:
+                pass
+            elif value < -1.0:
                 value = -1.0
             elif value > 1.0:
                 value = 1.0
@@ -86,13 +139,13 @@ def ego_rows_into(rows, speed_mps, cos_relative, sin_relative, speed_scale, out)
 
 
 @njit(cache=True)
-def nearest_rows(vehicles, valid, position, heading, cos_h, sin_h, reach, rows):
+def nearest_rows(vehicles, valid, position, heading, cos_h, sin_h, reach, scale, rows):
     """Presence and position of rows 1… of every world: its nearest seen vehicles, nearest first
     (on ties highway-env's order, as a stable sort gives), relative to the ego in the ego frame
     (``ego_frame``'s arithmetic). The nearest are selected by insertion into the few rows wanted
     (a strict comparison keeps the earlier vehicle first on ties), not by sorting every slot.
-    Returns the chosen slots (K, rows - 1), -1 for none, and their headings relative to the
-    ego's (0 for none)."""
+    Positions are divided by ``scale``. Returns the chosen slots (K, rows - 1), -1 for none, and
+    their headings relative to the ego's (0 for none)."""
     num_worlds, slots = valid.shape
     wanted = min(rows.shape[1] - 1, slots)
     chosen = np.full((num_worlds, rows.shape[1] - 1), -1, dtype=np.int64)
@@ -123,7 +176,7 @@ def nearest_rows(vehicles, valid, position, heading, cos_h, sin_h, reach, rows):
             j = pick[r]
             row = rows[k, 1 + r]
             row[0] = 1.0
-            row[1], row[2] = x[j] / reach, y[j] / reach
+            row[1], row[2] = x[j] / scale, y[j] / scale
             relative[k, r] = vehicles[k, j, 2] - heading[k]
     return chosen, relative
 

@@ -19,6 +19,7 @@ from drivelab.world.batch import WorldBatch
 from drivelab.world.geometry import FULL_LOCK_DEG, FULL_LOCK_RAD, ROACH_MAX_SPEED_MPS
 from drivelab.world.pinhole import LANE_CAMERA, LANE_ROWS_M, LINE_CAMERA, LINE_ROWS_M, PinholeModel
 from drivelab.world.road_geometry import guide_segment_sets, segment_columns_into
+from drivelab.world.scenario import META_ACTIONS
 from drivelab.world.state import LIGHT_GREEN, WorldState
 
 Term = Callable[[WorldBatch, WorldBatch, np.ndarray | None], np.ndarray]
@@ -68,6 +69,20 @@ def high_speed(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
 def on_road(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """1 while the ego is on a lane."""
     return _flag(batch.ego.on_road)
+
+
+LANE_CHANGES = np.array([META_ACTIONS.index("LANE_LEFT"), META_ACTIONS.index("LANE_RIGHT")])
+
+
+@term
+def lane_change(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
+    """1 when the step's meta-action is a lane change (LANE_LEFT or LANE_RIGHT): highway-env's
+    ``lane_change_reward`` of its merge and roundabout (weight it −0.05 as they do); 0 for the
+    other meta-actions and for continuous controls."""
+    values = None if control is None else np.asarray(control)
+    if values is None or values.ndim != 1:
+        return np.zeros(batch.num_worlds)
+    return _flag(np.isin(values, LANE_CHANGES))
 
 
 # --- the MetaDrive study, the MetaDrive course reward ----------------------------------------------------

@@ -60,3 +60,46 @@ def test_shape_matches_space():
     assert np.all(obs[14:] == 0)  # the third row is absent
     with pytest.raises(ValueError):
         Kinematics(vehicles_count=0)
+
+
+def test_features_pick_and_order_the_columns():
+    w = world(speed_mps=20.0, vehicles=[[30.0, 4.0, 0.0, 25.0, 5, 2]])
+    every = _observe(Kinematics(vehicles_count=3), w)
+    sensor = Kinematics(vehicles_count=3, features="vx+presence+y")
+    obs = sensor.observe(w)
+    assert sensor.space.shape == obs.shape == (9,)
+    np.testing.assert_array_equal(obs.reshape(3, 3), every[:, [3, 0, 2]].astype(np.float32))
+    np.testing.assert_allclose(obs.reshape(3, 3)[1], [0.0625, 1, 0.04], atol=1e-7)
+    assert Kinematics(features=["presence", "x"]).features == ("presence", "x")
+
+
+@pytest.mark.parametrize("features", ["presence+heading", "x+x", ""])
+def test_unknown_or_repeated_features_are_refused(features):
+    from drivelab.errors import UsageError
+
+    with pytest.raises(UsageError, match="kinematics features must be names of presence, x, y"):
+        Kinematics(features=features)
+
+
+def test_unflattened_rows_are_highway_envs_vehicles_by_features():
+    w = world(speed_mps=20.0, vehicles=[[30.0, 4.0, 0.0, 25.0, 5, 2]])
+    sensor = Kinematics(vehicles_count=4, features="presence+x+y+vx+vy", flatten=False)
+    obs = sensor.observe(w)
+    assert obs.shape == sensor.space.shape == (4, 5) and sensor.space.contains(obs)
+    np.testing.assert_allclose(obs[:2], [[1, 0, 0, 0.25, 0], [1, 0.3, 0.04, 0.0625, 0]], atol=1e-7)
+    assert np.all(obs[2:] == 0)
+
+
+def test_unnormalised_rows_are_metres_and_metres_per_second():
+    w = world(speed_mps=20.0, vehicles=[[160.0, -90.0, 0.0, 200.0, 5, 2]])
+    sensor = Kinematics(vehicles_count=2, perception_distance_m=200.0, normalize=False)
+    rows = sensor.observe(w).reshape(2, 7)
+    assert np.isinf(sensor.space.high).all()
+    np.testing.assert_allclose(rows, [[1, 0, 0, 20, 0, 1, 0], [1, 160, -90, 180, 0, 1, 0]], atol=1e-5)
+
+
+def test_without_clipping_normalised_values_may_leave_the_unit_range():
+    w = world(speed_mps=0.0, vehicles=[[60.0, -90.0, 0.0, 200.0, 5, 2]])
+    sensor = Kinematics(vehicles_count=2, perception_distance_m=110.0, speed_scale_mps=100.0, clip=False)
+    rows = _observe(sensor, w)
+    np.testing.assert_allclose(rows[1], [1, 60 / 110, -90 / 110, 2.0, 0, 1, 0], atol=1e-7)

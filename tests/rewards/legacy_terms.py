@@ -61,6 +61,15 @@ def on_road(prev: WorldState, world: WorldState, control) -> float:
     return float(world.ego.on_road)
 
 
+@term
+def lane_change(prev: WorldState, world: WorldState, control) -> float:
+    """1 for the meta-actions LANE_LEFT (0) and LANE_RIGHT (2), 0 otherwise and for continuous
+    controls (added with the term, issue 51: its one-world reference)."""
+    if control is None or np.ndim(control) != 0:
+        return 0.0
+    return float(int(control) in (0, 2))
+
+
 # --- seed 003, the MetaDrive course reward ----------------------------------------------------
 @term
 def progress_lateral(prev: WorldState, world: WorldState, control) -> float:

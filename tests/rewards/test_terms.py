@@ -38,6 +38,14 @@ def test_highway_terms():
     assert one(terms.on_road, now, world(on_road=False), None) == 0.0
 
 
+def test_lane_change_is_one_for_the_lane_change_meta_actions():
+    now = world()
+    # META_ACTIONS: LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER
+    assert [one(terms.lane_change, now, now, action) for action in range(5)] == [1.0, 0.0, 1.0, 0.0, 0.0]
+    assert one(terms.lane_change, now, now, np.array([0.5, -1.0], dtype=np.float32)) == 0.0
+    assert one(terms.lane_change, now, now, None) == 0.0
+
+
 def test_safety_table_values():
     calm = world(lateral_offset_m=0.2, speed_mps=5.0)
     assert one(terms.centered, calm, calm, None) == 0.3
