@@ -309,6 +309,12 @@ class DuelingDoubleDQN(OwnAgent):
     """The MetaDrive study's Dueling Double DQN agent with prioritised replay."""
 
     config_class = DuelingDDQNConfig
+    log_every: int | None = None  # steps between progress rows for a run's budget (``log_over``)
+
+    def log_over(self, total_steps: int) -> None:
+        """Log every ``log_interval`` steps, or often enough for about ten rows over a run of
+        ``total_steps`` too short for ten at it (a short run would leave progress.csv empty)."""
+        self.log_every = max(1, min(self.config.log_interval, total_steps // 10))
 
     def _build(self) -> None:
         if not isinstance(self.action_space, spaces.Discrete):
@@ -450,7 +456,7 @@ class DuelingDoubleDQN(OwnAgent):
                     self.update_target()
             if config.tau == 1.0 and _multiples(before, self.num_timesteps, config.target_update_interval):
                 self.update_target()
-            if _multiples(before, self.num_timesteps, config.log_interval):
+            if _multiples(before, self.num_timesteps, self.log_every or config.log_interval):
                 self._log(metrics, epsilon, learning_rate, start_steps, start_time)
         callback.on_training_end()
         return self

@@ -655,7 +655,7 @@ def _learn(model, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWo
     checkpoint (the state may be half-updated); the run then resumes from the previous one.
     """
     model.set_logger(run_logger(run_dir, model.num_timesteps or None))  # a resume continues the logs
-    if hasattr(model, "log_over"):  # SB3's on-policy models: rows by the step (``RolloutLogs``)
+    if hasattr(model, "log_over"):  # rows by the step, about ten in a short run (SB3's on-policy, DDQN)
         model.log_over(config.steps)
     with _full_disk_reported_once():
         try:

@@ -67,3 +67,13 @@ def test_a_resumed_run_continues_progress_csv_and_tensorboard(tmp_path, monkeypa
     # step 88 is hidden: the resumed one logs the losses of its own updates, from step 96
     losses = _scalar_steps(reference, "train/value_loss")
     assert _scalar_steps(run_dir, "train/value_loss") == [step for step in losses if step != 88]
+
+
+def test_a_short_dueling_ddqn_run_logs_about_ten_rows(tmp_path):
+    """dueling_ddqn logs every 250 steps: a 128-step run wrote no row; it now writes about ten, at
+    steps that do not depend on where a learn call started."""
+    config = tiny_config(algo="dueling_ddqn", hyperparams={"learning_starts": 16, "batch_size": 8})
+    run_dir = run_module.train(config, tmp_path)
+    progress = pd.read_csv(run_dir / "progress.csv")
+    assert progress["time/total_timesteps"].tolist() == list(range(12, 129, 12))
+    assert progress["train/epsilon"].is_monotonic_decreasing and progress["train/loss"].notna().sum() >= 8
