@@ -316,7 +316,8 @@ def _print_last_evaluation(run_dir: Path) -> None:
     if report is not None:
         config = load_run_config(run_dir)
         step, episodes = report["step"], report["episodes"]
-        _print_metrics(f"{config.algo} on {config.env} at step {step}: {episodes} episodes", report)
+        title = f"{config.algo} on {config.env} at step {step}: {episodes} episodes"
+        _print_metrics(title, report, config.env)
 
 
 RUN_OR_AGENT = "a run directory written by drivelab train, or a shipped agent's name (drivelab zoo)"
@@ -367,8 +368,8 @@ def evaluate(
     )
 
 
-def _print_metrics(title: str, report: dict) -> None:
-    """An evaluation report's driving metrics as a table."""
+def _print_metrics(title: str, report: dict, scenario: str | None = None) -> None:
+    """An evaluation report's driving metrics as a table (``scenario``: the report's)."""
     from rich.console import Console
     from rich.table import Table
 
@@ -377,7 +378,7 @@ def _print_metrics(title: str, report: dict) -> None:
     table = Table(title=title)
     table.add_column("metric")
     table.add_column("value", justify="right")
-    for label, value in metrics_rows(report):
+    for label, value in metrics_rows(report, scenario or report.get("env")):
         table.add_row(label, value)
     Console().print(table)
 

@@ -376,10 +376,22 @@ METRIC_LABELS = labels(
 METRIC_LABELS["mean_return"] += " (mean ± std)"  # printed as mean ± std (metrics_rows)
 
 
-def metrics_rows(report: dict) -> list[tuple[str, str]]:
-    """(label, formatted value) rows for printing."""
+# what success means where a scenario has no goal to reach (the highway, the roundabout, the
+# racetrack, the circuits): said where it is printed, so that a slow, safe policy's 100 % reads as
+# what it is
+NO_GOAL_SUCCESS = "success rate (no goal here: the time limit reached, no crash, no off-road)"
+
+
+def metrics_rows(report: dict, scenario: str | None = None) -> list[tuple[str, str]]:
+    """(label, formatted value) rows for printing; ``scenario``: the report's, whose success rate
+    is labelled for what it measures when the scenario has no goal."""
+    from drivelab.scenarios import get_scenario
+
+    goal = scenario is None or get_scenario(scenario).arrival != "none"
     rows = []
     for key, label in METRIC_LABELS.items():
+        if key == "success_rate" and not goal:
+            label = NO_GOAL_SUCCESS
         value = report[key]
         if value is None or (isinstance(value, float) and math.isnan(value)):
             text = "n/a"

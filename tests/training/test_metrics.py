@@ -43,3 +43,18 @@ def test_the_registry_names_what_an_evaluation_reports_with_values_of_its_kind()
             assert 0.0 <= value <= 1.0, name
         elif metric.values == "count":
             assert value >= 0.0, name
+
+
+def test_a_scenario_without_a_goal_says_what_its_success_rate_measures():
+    """On the highway (no goal) success is reaching the time limit without a crash or leaving the
+    road: a slow, safe policy's 100 % is labelled as that; with a goal (merge) it is the plain rate."""
+    from drivelab.training.evaluate import NO_GOAL_SUCCESS, metrics_rows
+
+    report = {"mean_return": 1.0, "std_return": 0.0, "success_rate": 1.0, "crash_rate": 0.0,
+              "mean_distance_km": 0.6, "mean_speed_mps": 20.0, "collisions_per_km": 0.0,
+              "off_road_per_km": 0.0, "red_lights_per_km": 0.0, "blocked_per_km": 0.0,
+              "route_completion": None}  # fmt: skip
+    highway = dict(metrics_rows(report, "highway"))
+    assert highway[NO_GOAL_SUCCESS] == "1.000" and "success rate" not in highway
+    assert dict(metrics_rows(report, "merge"))["success rate"] == "1.000"
+    assert dict(metrics_rows(report))["success rate"] == "1.000"  # no scenario named: the plain label
