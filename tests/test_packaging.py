@@ -25,3 +25,12 @@ def test_every_dependency_but_highway_env_has_a_floor():
     requirements = _requirements()
     assert requirements.pop("highway-env") == "==1.12.1"
     assert {name: spec for name, spec in requirements.items() if ">=" not in spec or "==" in spec} == {}
+
+
+def test_the_metadata_names_the_licence_and_the_audience():
+    project = tomllib.loads(PYPROJECT.read_text())["project"]
+    assert project["license"] == "MIT" and project["license-files"] == ["LICENSE"]
+    assert (PYPROJECT.parent / "LICENSE").read_text().startswith("MIT License")
+    classifiers = project["classifiers"]
+    assert "Programming Language :: Python :: 3.11" in classifiers
+    assert not [c for c in classifiers if c.startswith("License ::")]  # PEP 639: the expression only
