@@ -349,6 +349,14 @@ def _markdown(
             " scenario's episodes: a metric compares how each agent does at its own task, not the"
             " agents at one task.",
         ]
+    goalless = [name for name in scenarios if name in SCENARIOS and SCENARIOS[name].arrival == "none"]
+    if goalless:
+        lines += [
+            "",
+            f"{', '.join(goalless)} {'has' if len(goalless) == 1 else 'have'} no goal to reach: there,"
+            " success is the time limit reached with no collision and no off-road event, which a slow,"
+            " careful policy also scores; read speed and distance beside it.",
+        ]
     budgets = sorted({runs[0].config.steps for runs in groups.values()})
     if len(budgets) > 1:
         lines += [

@@ -99,6 +99,16 @@ def test_a_report_of_several_scenarios_says_each_is_evaluated_on_its_own(tmp_pat
     assert "different scenarios" not in text
 
 
+def test_a_report_says_what_success_is_where_a_scenario_has_no_goal(tmp_path):
+    root = tmp_path / "runs"
+    fake_run(root, "highway-s0", final_return=1.0)
+    fake_run(root, "merge-s0", final_return=2.0, env="merge")
+    text = (compare([str(root / "*")], tmp_path / "both") / "report.md").read_text()
+    assert "\nhighway has no goal to reach: there, success is the time limit reached" in text  # merge has one
+    text = (compare([str(root / "merge-*")], tmp_path / "merge") / "report.md").read_text()
+    assert "no goal to reach" not in text  # the merge's goal is its end: success is reaching it
+
+
 def test_report_numbers_and_files(runs, tmp_path):
     out = compare([str(runs / "*")], tmp_path / "report", command="drivelab compare --runs 'runs/*'")
     for name in ("report.md", "summary.csv", "runs.csv", "learning_curves.png", "metrics.png"):
