@@ -92,9 +92,12 @@ def compile_notice(folder: Path | None = None, stream=None) -> bool:
     whether it said so."""
     global _noticed
     stream = sys.stderr if stream is None else stream
-    folder = Path(os.environ.get("NUMBA_CACHE_DIR", "")) if folder is None else folder
     if _noticed or not getattr(stream, "isatty", lambda: False)():
         return False
+    if folder is None:
+        if not os.environ.get("NUMBA_CACHE_DIR"):
+            return False  # numba's own cache beside each module: nothing to look at
+        folder = Path(os.environ["NUMBA_CACHE_DIR"])
     try:
         compiled = next(folder.rglob("*.nbi"), None) is not None
     except OSError:

@@ -121,9 +121,9 @@ def env_kwargs_from_config(
     declared = {option.name for option in scene.options}
     unknown = [key for key in rest if key not in declared]
     if unknown:
-        from drivelab.scenarios.options import _unknown_message
+        from drivelab.scenarios.options import unknown_options_message
 
-        problems.append(_unknown_message(scene, unknown))
+        problems.append(unknown_options_message(scene, unknown))
     if problems:
         raise UsageError(f"highway-env config for {scene.name!r}: {'; '.join(problems)}")
     if rest:

@@ -92,8 +92,8 @@ class Kinematics(Sensor):
             cos_other, sin_other = np.cos(heading), np.sin(heading)
             motion_rows(others, chosen, ego.speed_mps, cos_other, sin_other, speed_scale, rows)
         cos_relative, sin_relative = np.cos(relative_heading), np.sin(relative_heading)
-        flat = out.reshape(out.shape[0], -1)
-        if self._all_columns and np.shares_memory(flat, out):
+        if self._all_columns and out.flags.c_contiguous:  # its flat view: the rows written in place
+            flat = out.reshape(out.shape[0], -1)
             ego_rows_into(rows, ego.speed_mps, cos_relative, sin_relative, speed_scale, self.clip, flat)
             return
         every = np.empty((batch.num_worlds, self.vehicles_count * len(FEATURES)))

@@ -121,7 +121,7 @@ def check_backend_options(
     declared = {option.name: option for option in scenario.options}
     unknown = [key for key in options if key not in declared]
     if unknown:
-        raise UsageError(_unknown_message(scenario, unknown))
+        raise UsageError(unknown_options_message(scenario, unknown))
     for key, value in options.items():
         declared[key].validate(value, scenario.name)
     level = declared_config(scenario, check_traffic(traffic), control)
@@ -144,7 +144,7 @@ def check_backend_options(
         scenario.check_options(merged)
 
 
-def _unknown_message(scenario: Scenario, unknown: list[str]) -> str:
+def unknown_options_message(scenario: Scenario, unknown: list[str]) -> str:
     """One line: each unknown key with the nearest declared one, or a hint, or the known keys."""
     names = [option.name for option in scenario.options]
     parts, listed = [], False
