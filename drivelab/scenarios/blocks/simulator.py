@@ -371,37 +371,28 @@ class BlocksSimulator(FastSimulator):
         self._red_light = np.zeros(self.num_worlds, dtype=bool)
         return super().reset_where(mask, seeds)
 
-    def step(
-        self, controls: np.ndarray, restart: np.ndarray | None = None, seeds: np.ndarray | None = None
-    ) -> WorldBatch:
-        """One policy step of every world (see ``FastSimulator.step``); traffic at a dead end leaves.
-        The lights take their states at the step's end time (as the town's), and the ego runs a red
-        light when it leaves a lane whose light is red for one starting where that lane ends."""
-        if self.batch is None:
-            raise UsageError("BlocksSimulator.step before reset_where")
-        k = self.num_worlds
-        restart = np.zeros(k, dtype=bool) if restart is None else np.asarray(restart, dtype=bool)
-        worlds = np.arange(k)
-        previous_lane = self.lane_start + self.vehicles[worlds, self.ego, T.LANE].astype(np.int64)
-        self.apply_controls(controls)
-        np.add(self.time_s, self._dt_policy, out=self.time_s)
-        self._update_lights(~restart)
-        self.run_frames(lambda frames: simulate_map_worlds(
+    # --- stepping (``FastSimulator.step``'s hooks; the lights as the town's) -----------------------
+    _whole_step_kernel = False
+
+    def _before_frames(self) -> np.ndarray:
+        return self.lane_start + self.vehicles[np.arange(self.num_worlds), self.ego, T.LANE].astype(np.int64)
+
+    def _simulate(self, frames: int, active: np.ndarray) -> None:
+        simulate_map_worlds(
             self.vehicles, self.count, self.lanes, self.lane_start, self.lane_stop, self.idm, frames,
-            self.dt_s, self.regulation, ~restart, TRAFFIC_SPEED_MPS, self.road_arrays, self.light_start,
+            self.dt_s, self.regulation, active, TRAFFIC_SPEED_MPS, self.road_arrays, self.light_start,
             self.light_stop, self.light_state, EGO_MAX_SPEED_MPS,
-        ))  # fmt: skip
+        )  # fmt: skip
+
+    def _after_frames(self, active: np.ndarray, previous_lane: np.ndarray) -> None:
+        """Traffic at a dead end leaves; the ego runs a red light when it leaves a lane whose light
+        is red for one starting where that lane ends."""
         clear_dead_ends(
             self.vehicles, self.count, self.ego, self.lanes, self.lane_start, self.lane_stop, self.dead_end
         )
-        lane = self.lane_start + self.vehicles[worlds, self.ego, T.LANE].astype(np.int64)
         light = self.road_arrays[6][previous_lane]  # the light of the lane the ego was on (local row)
-        self._red_light = red_light_runs(self.lanes, previous_lane, lane, light, self.light_state, ~restart)
-        if np.count_nonzero(restart):  # as FastSimulator.step (ndarray.any costs a microsecond)
-            self._start_episodes(np.flatnonzero(restart), seeds)
-        self._project(fresh=restart, update=self._every_world)
-        self.batch = self._export()
-        return self.batch
+        lane = self._before_frames()
+        self._red_light = red_light_runs(self.lanes, previous_lane, lane, light, self.light_state, active)
 
     def apply_controls(self, controls: np.ndarray) -> None:
         """The egos' meta-actions on their maps' lanes, or continuous controls (as FastSimulator)."""

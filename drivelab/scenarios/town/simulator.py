@@ -28,7 +28,6 @@ import numba
 import numpy as np
 from numba import njit, prange
 
-from drivelab.errors import UsageError
 from drivelab.scenarios.town.spawn import TownSetup, route_tracker
 from drivelab.sim.core import traffic as T
 from drivelab.sim.core.borrow import borrowed
@@ -235,35 +234,32 @@ class TownSimulator(FastSimulator):
         aj, aa = self.arrays.light_junction, self.arrays.light_arm
         _light_states_worlds(aj, aa, self.offsets, self.timings, self.time_s, active, self.light_state)
 
-    # --- stepping -------------------------------------------------------------------------------
-    def step(self, controls: np.ndarray, restart: np.ndarray | None = None, seeds: np.ndarray | None = None):
-        """One policy step of every world (see ``FastSimulator.step``)."""
-        if self.batch is None:
-            raise UsageError("TownSimulator.step before reset_where")
-        k = self.num_worlds
-        restart = np.zeros(k, dtype=bool) if restart is None else np.asarray(restart, dtype=bool)
-        active = ~restart
-        worlds = np.arange(k)
-        previous_lane = self.vehicles[worlds, self.ego, T.LANE].astype(np.int64)
-        self.apply_controls(controls)
-        self.time_s[active] += 1 / self.policy_frequency_hz  # the lights read the step's end time
-        self._update_lights(active)
-        kernel = _PARALLEL if k > 1 and numba.get_num_threads() > 1 else _SERIAL
-        self.run_frames(lambda frames: kernel(
+    # --- stepping (``FastSimulator.step``'s hooks) --------------------------------------------------
+    _whole_step_kernel = False
+
+    def _before_frames(self) -> np.ndarray:
+        return self.vehicles[np.arange(self.num_worlds), self.ego, T.LANE].astype(np.int64)
+
+    def _simulate(self, frames: int, active: np.ndarray) -> None:
+        kernel = _PARALLEL if self.num_worlds > 1 and numba.get_num_threads() > 1 else _SERIAL
+        kernel(
             self.vehicles, self.count, self.ego, self.peds, self.pcount, self.lanes, self.idm,
             self.coords, self.done, self.trig, *self.road_args, self.light_state, self.rng_words,
             frames, self.dt_s, active,
-        ))  # fmt: skip
-        lane = self.vehicles[worlds, self.ego, T.LANE].astype(np.int64)
+        )  # fmt: skip
+
+    def _after_frames(self, active: np.ndarray, previous_lane: np.ndarray) -> None:
+        """The red lights the egos ran, the progress of the worlds that stepped and, where
+        ``retarget`` is set, a route on for the egos that arrived."""
+        lane = self._before_frames()
         light = self.arrays.light[previous_lane]
         self._red_light = red_light_runs(self.lanes, previous_lane, lane, light, self.light_state, active)
-        self._project(fresh=np.zeros(k, dtype=bool), update=active)
+        self._project(fresh=np.zeros(self.num_worlds, dtype=bool), update=active)
         if self.retarget:
             self._retarget(active)
-        self._start_episodes(np.flatnonzero(restart), seeds)
-        self._project(fresh=restart, update=restart)
-        self.batch = self._export()
-        return self.batch
+
+    def _projected(self, restart: np.ndarray) -> np.ndarray:
+        return restart  # the others were projected before their routes grew (``_after_frames``)
 
     def reset_where(self, mask: np.ndarray, seeds: np.ndarray) -> WorldBatch:
         self._red_light = np.zeros(self.num_worlds, dtype=bool)

@@ -929,8 +929,11 @@ class FastSimulator:
     def step(
         self, controls: np.ndarray, restart: np.ndarray | None = None, seeds: np.ndarray | None = None
     ) -> WorldBatch:
-        """One policy step of every world: the egos' controls, ``frames`` simulation steps, the
-        traffic's departures and arrivals, the route progress; returns the new batch.
+        """One policy step of every world, in the order every simulator shares: the egos' controls,
+        the clocks (and the lights on them), ``frames`` simulation frames, the scenario's rules
+        after the frames (``_after_frames``), the episodes that restart, the routes' progress, the
+        export. A scenario's simulator fills in the hooks; this class's step is also one compiled
+        call (``advance_worlds``) where nothing in between needs Python (``_one_call``).
 
         :param controls: meta: (K,) int meta-actions; continuous: (K, 2) [acceleration, steering]
             normalised in [-1, 1] (highway-env's order).
@@ -938,34 +941,63 @@ class FastSimulator:
             stepping (gymnasium's NEXT_STEP autoreset), as ``reset_where`` would start it.
         """
         if not self.started:
-            raise UsageError("FastSimulator.step before reset_where")
+            raise UsageError(f"{type(self).__name__}.step before reset_where")
         if restart is None:
             restart = np.zeros(self.num_worlds, dtype=bool)
         restart = np.asarray(restart, dtype=bool)
-        self.apply_controls(controls)
-        if self._one_call and not np.count_nonzero(restart):
+        restarting = np.count_nonzero(restart)  # ndarray.any's Python wrapper costs a microsecond
+        if self._one_call and not restarting:
+            self.apply_controls(controls)
             self.batch = self._advance()
             return self.batch
-        self.run_frames(lambda frames: T.simulate_worlds(
-            self.vehicles, self.count, self.lanes, self.idm, frames, self.dt_s, self.regulation, ~restart
-        ))  # fmt: skip
-        np.add(self.time_s, self._dt_policy, out=self.time_s)
-        if self.traffic_flow:  # IntersectionEnv.step: clear, then maybe spawn
-            clear_departed(self.vehicles, self.count, self.ego, self.lanes, self._road.exit_lane)
-            self._spawn_arrivals()
-        if np.count_nonzero(restart):  # ndarray.any's Python wrapper costs a microsecond
+        active = ~restart
+        before = self._before_frames()
+        self.apply_controls(controls)
+        np.add(self.time_s, self._dt_policy, out=self.time_s)  # the lights read the step's end time
+        self._update_lights(active)
+        self.run_frames(lambda frames: self._simulate(frames, active))
+        self._after_frames(active, before)
+        if restarting:
             self._start_episodes(np.flatnonzero(restart), seeds)
-        self._project(fresh=restart, update=self._every_world)
+        self._project(fresh=restart, update=self._projected(restart))
         self.batch = self._export()
         return self.batch
 
+    # the step's hooks (``step``)
+    def _before_frames(self):
+        """What ``_after_frames`` needs from before the controls (the town's: the egos' lanes)."""
+        return None
+
+    def _update_lights(self, active: np.ndarray) -> None:
+        """The traffic lights of the ``active`` worlds at their clocks (none here)."""
+
+    def _simulate(self, frames: int, active: np.ndarray) -> None:
+        """``frames`` simulation frames of the ``active`` worlds (one compiled call)."""
+        T.simulate_worlds(
+            self.vehicles, self.count, self.lanes, self.idm, frames, self.dt_s, self.regulation, active
+        )
+
+    def _after_frames(self, active: np.ndarray, before) -> None:
+        """The scenario's rules after the frames: here IntersectionEnv.step's traffic (clear the
+        vehicles that left, then maybe spawn one)."""
+        if self.traffic_flow:
+            clear_departed(self.vehicles, self.count, self.ego, self.lanes, self._road.exit_lane)
+            self._spawn_arrivals()
+
+    def _projected(self, restart: np.ndarray) -> np.ndarray:
+        """The worlds whose route progress the step projects after the restarts (every world)."""
+        return self._every_world
+
+    # whether ``step`` can be ``advance_worlds``: this class's hooks and no others
+    _whole_step_kernel = True
+
     @property
     def _one_call(self) -> bool:
-        """The step is one compiled call (``advance_worlds``): not recording frames, no traffic
-        arriving between steps, and the worlds simulated one after another (one world, or one
-        numba thread)."""
+        """The step is one compiled call (``advance_worlds``): this class's hooks, not recording
+        frames, no traffic arriving between steps, and the worlds simulated one after another
+        (one world, or one numba thread)."""
         serial = self.num_worlds == 1 or numba.get_num_threads() == 1
-        return self.on_frame is None and not self.traffic_flow and serial
+        return self._whole_step_kernel and self.on_frame is None and not self.traffic_flow and serial
 
     def _advance(self) -> WorldBatch:
         """``advance_worlds`` then the WorldBatch of its export (see ``step``)."""
