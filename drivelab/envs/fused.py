@@ -6,8 +6,8 @@ metrics, the sensor and the infos are a dozen Python calls of about a microsecon
 world's step came to ~45 µs of which the simulation is ~1 µs. Like PufferLib's native
 environments, :class:`CircuitStep` runs all of it as one compiled call over the K worlds: the
 controls, ``advance_worlds`` (the simulator's own step), the scenario's events, the episode rules
-(``rules._episode_ends``), every reward term of the circuits' presets (their own kernels:
-``segment_columns_into``, ``_line_centring``, ``_lane_keeping``), the metrics (``metrics._add_step``)
+(``rules.episode_ends``), every reward term of the circuits' presets (their own kernels:
+``segment_columns_into``, ``_line_centring``, ``_lane_keeping``), the metrics (``metrics.add_step``)
 and the kinematics sensor (``ego_rows_into``). The WorldBatch is made only when something reads it
 (``FastSimulator.batch``).
 
@@ -37,8 +37,8 @@ from numba.core import types
 from numba.experimental import structref
 
 from drivelab.envs.actions import ActionAdapter
-from drivelab.envs.metrics import _add_step
-from drivelab.envs.rules import _episode_ends
+from drivelab.envs.metrics import add_step
+from drivelab.envs.rules import episode_ends
 from drivelab.perception.kinematics import Kinematics, ego_rows_into
 from drivelab.rewards.terms import (
     _LANE_ROWS,
@@ -61,9 +61,9 @@ from drivelab.sim.core.simulator import (
     EX_X,
     EX_Y,
     FastSimulator,
-    _command_ranges,
-    _float_controls,
     advance_worlds,
+    command_ranges,
+    float_controls,
     set_ego_controls,
 )
 from drivelab.world.geometry import FULL_LOCK_DEG
@@ -99,7 +99,7 @@ def _circuit_step(
 ) -> None:  # fmt: skip
     """One policy step of K circuit worlds (none restarting), as ``VectorDriveEnv.step`` runs it
     through the pipeline: the controls (``FastSimulator.apply_controls``; ``command`` the rows of
-    ``_command_ranges``), the simulator's step (``advance_worlds``: frames, clocks, routes, the
+    ``command_ranges``), the simulator's step (``advance_worlds``: frames, clocks, routes, the
     export into ``out[:EX_FLOATS].T``, ``ints`` and ``out_flags[:4].T``), the events
     ``_export_arrays`` derives (off the road, or off the starting lane with ``keep_lane``; the
     route's end), the rules (``terminated``, ``truncated``), the reward terms ``codes`` weighted
@@ -141,7 +141,7 @@ def _circuit_step(
         steering_deg[k] = np.float64(controls[k, 1]) * FULL_LOCK_DEG  # _steering_deg
         rewards[k] = 0.0
         state[0, k], state[1, k], state[2, k] = time_s[k], progress[k], route[k]
-    _episode_ends(
+    episode_ends(
         collided, arrived, no_event, no_event, no_event, off_road, params[P_OFFROAD_TERMINAL] != 0.0, time_s,
         truncate_at_s, terminated, truncated,
     )  # fmt: skip
@@ -178,7 +178,7 @@ def _circuit_step(
         low, high = params[P_LOW], params[P_HIGH]
         for k in range(num_worlds):
             rewards[k] = (rewards[k] - low) / (high - low)
-    _add_step(
+    add_step(
         metric_floats, metric_ints, metric_flags, last_position, rewards, position, speed, collided, kind,
         off_road, no_event, no_event, arrived,
     )  # fmt: skip
@@ -260,7 +260,7 @@ class CircuitStep:
         self.sensor: Kinematics = env.sensors[0]
         low, high = spec.normalize if spec.normalize is not None else (0.0, 1.0)
         self.params = np.array([
-            sim.frames, sim.dt_s, sim._dt_policy_s, sim.arrival, sim.arrival_threshold,
+            sim.frames, sim.dt_s, sim.dt_policy_s, sim.arrival, sim.arrival_threshold,
             sim.scenario.keep_lane, env.rules.offroad_terminal, self.sensor.vehicles_count,
             self.sensor.speed_scale_mps,
             spec.normalize is not None, low, high,
@@ -280,7 +280,7 @@ class CircuitStep:
 
     def ready(self) -> bool:
         """The simulator steps in one call now (not recording frames; one world or one thread)."""
-        return self.simulator._one_call
+        return self.simulator.one_call
 
     def _guide_segments(self) -> tuple[np.ndarray, np.ndarray]:
         """The guide lines' segment starts and ends of the simulator's roads (one set per road,
@@ -302,13 +302,13 @@ class CircuitStep:
             and key[0] is sim.vehicles
             and key[1] is sim.r_polyline
             and key[2] is sim.roads
-            and key[3] is rules._truncate_at_s
-            and key[4] is metrics._floats
+            and key[3] is rules.truncate_at_s
+            and key[4] is metrics.accumulators[0]
         ):
             return self._arrays
-        key = (sim.vehicles, sim.r_polyline, sim.roads, rules._truncate_at_s, metrics._floats)
+        key = (sim.vehicles, sim.r_polyline, sim.roads, rules.truncate_at_s, metrics.accumulators[0])
         # the batch's road_index: each world's route where a guide line is painted along it
-        road_index = sim.route_index if sim.scenario.guide_line else sim._empty["road_index"]
+        road_index = sim.route_index if sim.scenario.guide_line else np.zeros(sim.num_worlds, dtype=np.int64)
         slots = max(sim.vehicles.shape[1] - 1, 0)  # the export's other vehicles
         if slots:  # (their arrays below are shared by every step's batch: empty ones only)
             raise NotImplementedError("the compiled circuit step drives the ego alone")
@@ -317,10 +317,10 @@ class CircuitStep:
             _command_rows(self._control_type), sim.vehicles, sim.count, sim.ego, sim.lanes, sim.idm,
             sim.regulation, sim.time_s, sim.route_index, sim.r_starts, sim.r_segments, sim.r_lengths2,
             sim.r_segment_m, sim.r_stations, sim.r_count, sim.r_closed, sim.progress_m, road.in_junction,
-            road.exit_lane, sim.start_lane_id, sim.r_length, sim.r_polyline, rules._truncate_at_s,
+            road.exit_lane, sim.start_lane_id, sim.r_length, sim.r_polyline, rules.truncate_at_s,
             self.params, self.codes, self.weights, road_index, *self._guide_segments(), self.cameras,
-            np.zeros((k, slots, 6)), np.zeros((k, slots), dtype=bool), metrics._floats, metrics._ints,
-            metrics._flags, metrics.last_position, metrics.last_progress_m, metrics.last_route_length_m,
+            np.zeros((k, slots, 6)), np.zeros((k, slots), dtype=bool), *metrics.accumulators,
+            metrics.last_position, metrics.last_progress_m, metrics.last_route_length_m,
         )  # fmt: skip
         self._arrays, self._held_object = arrays, _Held(*arrays)
         self._key = key
@@ -336,7 +336,7 @@ class CircuitStep:
             or controls.shape != (k, 2)
             or controls.dtype != self._control_type
         ):
-            controls = _float_controls(controls, k)
+            controls = float_controls(controls, k)
             if controls.dtype != self._control_type:
                 self._control_type, self._key = controls.dtype, None
         # every entry of these but the export's flags is written by every step
@@ -381,8 +381,8 @@ class CircuitStep:
 
 @functools.cache
 def _command_rows(dtype: np.dtype) -> np.ndarray:
-    """``_command_ranges(dtype)`` as the rows of one (3, 2) array."""
-    return np.stack(_command_ranges(dtype))
+    """``command_ranges(dtype)`` as the rows of one (3, 2) array."""
+    return np.stack(command_ranges(dtype))
 
 
 def _export_parts(out, ints, out_flags, vehicles, valid) -> tuple:

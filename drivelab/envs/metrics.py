@@ -12,7 +12,7 @@ _FLOAT_ROWS, _INT_ROWS, _FLAG_ROWS = 3, 6, 3
 
 
 @njit(cache=True)
-def _add_step(
+def add_step(
     floats, ints, flags, last_position, rewards, position, speed, collided, kind, off_road, red, blocked, won
 ) -> None:
     """One step of every world into the accumulators (rows as ``EpisodeMetrics._allocate`` names
@@ -62,6 +62,12 @@ class EpisodeMetrics:
         self.last_progress_m = np.zeros(count)
         self.last_route_length_m = np.zeros(count)
 
+    @property
+    def accumulators(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The (floats, ints, flags) rows ``add_step`` updates in place (replaced when the number
+        of worlds changes)."""
+        return self._floats, self._ints, self._flags
+
     def reset(self, batch: WorldBatch, mask: np.ndarray | None = None) -> None:
         """Start the episodes of the worlds where ``mask`` (K,; default all) from their first world
         in ``batch``. A new number of worlds starts every world."""
@@ -85,7 +91,7 @@ class EpisodeMetrics:
     def update(self, batch: WorldBatch, rewards: np.ndarray) -> None:
         """Add the step of every world that led to ``batch``, with its ``rewards`` (K,)."""
         events, ego = batch.events, batch.ego
-        _add_step(
+        add_step(
             self._floats, self._ints, self._flags, self.last_position, np.asarray(rewards, dtype=float),
             ego.position, ego.speed_mps, events.collided, events.collision_kind, events.off_road,
             events.red_light_crossed, events.blocked, events.arrived,

@@ -44,7 +44,7 @@ class EpisodeRules:
         self.offroad_terminal = bool(offroad_terminal)
         self.stopped_s = np.zeros(0)  # (K,) seconds each ego has stood still
         self.time_limit_s = np.zeros(0)  # (K,) each episode's time limit
-        self._truncate_at_s = np.zeros(0)  # (K,) the limit less 1e-9 s (set with it)
+        self.truncate_at_s = np.zeros(0)  # (K,) the limit less 1e-9 s (set with it)
 
     def reset(self, mask: np.ndarray, time_limit_s: np.ndarray | float) -> None:
         """Start the episodes of the worlds where ``mask`` (K,): their stopped timers cleared, their
@@ -57,9 +57,9 @@ class EpisodeRules:
         self.stopped_s[mask] = 0.0
         self.time_limit_s[mask] = limits[mask]
         # a step's time reaching it truncates (written in place: the compiled circuit step holds it)
-        if self._truncate_at_s.shape != self.time_limit_s.shape:
-            self._truncate_at_s = np.empty_like(self.time_limit_s)
-        np.subtract(self.time_limit_s, 1e-9, out=self._truncate_at_s)
+        if self.truncate_at_s.shape != self.time_limit_s.shape:
+            self.truncate_at_s = np.empty_like(self.time_limit_s)
+        np.subtract(self.time_limit_s, 1e-9, out=self.truncate_at_s)
 
     def apply(self, batch: WorldBatch) -> tuple[WorldBatch, np.ndarray, np.ndarray]:
         """``(batch with its blocked / off_route events, terminated (K,), truncated (K,))`` for the
@@ -72,9 +72,9 @@ class EpisodeRules:
             batch = self._judge(batch)
         events, count = batch.events, len(self.stopped_s)
         terminated, truncated = np.empty(count, dtype=bool), np.empty(count, dtype=bool)
-        _episode_ends(
+        episode_ends(
             events.collided, events.arrived, events.red_light_crossed, events.blocked, events.off_route,
-            events.off_road, self.offroad_terminal, batch.time_s, self._truncate_at_s, terminated, truncated,
+            events.off_road, self.offroad_terminal, batch.time_s, self.truncate_at_s, terminated, truncated,
         )  # fmt: skip
         return batch, terminated, truncated
 
@@ -98,19 +98,10 @@ class EpisodeRules:
 
 
 @njit(cache=True)
-def _episode_ends(
-    collided,
-    arrived,
-    red_light_crossed,
-    blocked,
-    off_route,
-    off_road,
-    offroad_terminal,
-    time_s,
-    truncate_at_s,
-    terminated,
-    truncated,
-) -> None:
+def episode_ends(
+    collided, arrived, red_light_crossed, blocked, off_route, off_road, offroad_terminal, time_s,
+    truncate_at_s, terminated, truncated
+) -> None:  # fmt: skip
     """``terminated`` (K,): a collision, the goal, a red light run, blocked, off the route, or off
     the road where that ends an episode; ``truncated`` (K,): not terminated, and the clock at the
     time limit (one compiled pass: a handful of ufuncs cost more than the step's other rules)."""

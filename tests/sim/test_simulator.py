@@ -307,11 +307,11 @@ def test_windowed_route_projection_is_route_trackers():
 
 
 class _OneCall(FastSimulator):
-    _one_call = True  # every step in one compiled call (advance_worlds), whatever the threads
+    one_call = True  # every step in one compiled call (advance_worlds), whatever the threads
 
 
 class _KernelByKernel(FastSimulator):
-    _one_call = False  # every step's kernels called one by one from Python
+    one_call = False  # every step's kernels called one by one from Python
 
 
 @pytest.mark.parametrize(
@@ -337,4 +337,4 @@ def test_one_call_step_is_the_kernel_by_kernel_step(scenario, traffic, control):
         for k in range(worlds):
             assert _state(one, k)[1:] == _state(split, k)[1:]
             np.testing.assert_array_equal(one.vehicles[k], split.vehicles[k])
-    assert not FastSimulator(SCENARIOS["intersection"], "dense", "meta", 1)._one_call  # traffic arrives
+    assert not FastSimulator(SCENARIOS["intersection"], "dense", "meta", 1).one_call  # traffic arrives

@@ -392,19 +392,9 @@ def _continuations(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 @njit(cache=True)
 def _traffic_rows(
-    lanes: np.ndarray,
-    lane: np.ndarray,
-    s: np.ndarray,
-    delta: np.ndarray,
-    walk: np.ndarray,
-    successor_start: np.ndarray,
-    successors: np.ndarray,
-    speed: float,
-    length: float,
-    width: float,
-    lane_change_delay: float,
-    rows: np.ndarray,
-) -> None:
+    lanes, lane, s, delta, walk, successor_start, successors, speed: float, length: float, width: float,
+    lane_change_delay: float, rows
+) -> None:  # fmt: skip
     """Traffic vehicle rows (M, VEHICLE_COLUMNS) at ``s`` (M,) on lane rows ``lane`` (M,), heading
     along them at ``speed`` (their target speed), with DELTA ``delta`` (M,) and a route: their
     lane, then a random walk through the lanes that continue it (``successor_start`` /

@@ -23,17 +23,8 @@ from drivelab.world.scenario import Scenario
 
 @njit(cache=True)
 def _create_random(
-    rng: np.ndarray,
-    lanes: np.ndarray,
-    to_roads: np.ndarray,
-    to_count: np.ndarray,
-    decay: np.ndarray,
-    speed: float,
-    lane_id: int,
-    spacing: float,
-    front_x: float,
-    row: np.ndarray,
-) -> None:
+    rng, lanes, to_roads, to_count, decay, speed: float, lane_id: int, spacing: float, front_x: float, row
+) -> None:  # fmt: skip
     """Vehicle.create_random into ``row``: a random road (``np_random.choice`` of a sequence draws
     ``integers(0, len)``), ``lane_id`` or a random lane (-1), ``speed`` or a random one within its
     speed limit (NaN), placed ahead of the front-most vehicle (``front_x``, NaN: none yet)."""
@@ -58,18 +49,9 @@ def _create_random(
 
 @njit(cache=True)
 def _spawn_worlds(
-    states: np.ndarray,
-    v: np.ndarray,
-    lanes: np.ndarray,
-    to_roads: np.ndarray,
-    to_count: np.ndarray,
-    decay: np.ndarray,
-    ego_lane_id: int,
-    ego_spacing: float,
-    vehicles: int,
-    spacing: float,
-    target_speeds: np.ndarray,
-) -> None:
+    states, v, lanes, to_roads, to_count, decay, ego_lane_id: int, ego_spacing: float, vehicles: int,
+    spacing: float, target_speeds
+) -> None:  # fmt: skip
     """HighwayEnv._create_vehicles in world m of ``v`` (M, 1 + vehicles, VEHICLE_COLUMNS) from
     generator ``states[m]`` (M, 6), the ego first. A non-empty
     ``target_speeds`` makes the ego an MDPVehicle (its target speed snapped to the nearest

@@ -362,14 +362,7 @@ def meta_action(w: np.ndarray, e: int, lanes: np.ndarray, action: int, speeds: n
 
 
 @njit(cache=True)
-def apply_meta(
-    v: np.ndarray,
-    count: np.ndarray,
-    ego: np.ndarray,
-    lanes: np.ndarray,
-    actions: np.ndarray,
-    speeds: np.ndarray,
-) -> None:
+def apply_meta(v, count, ego, lanes, actions, speeds) -> None:
     """``meta_action`` of each world's ego ``actions[k]`` (the controls follow in the kernel)."""
     for k in range(v.shape[0]):
         meta_action(v[k, : count[k]], ego[k], lanes, actions[k], speeds)
@@ -413,13 +406,13 @@ def continuous_commands(controls, num_worlds: int) -> np.ndarray:
     ``ContinuousAction.get_action`` does, in the controls' own float type (the ranges enter its
     arithmetic as Python floats, i.e. rounded to that type), so both backends get the same bits;
     controls neither float32 nor float64 are taken as float64."""
-    controls = _float_controls(controls, num_worlds)
+    controls = float_controls(controls, num_worlds)
     commands = np.empty_like(controls)
-    _commands(controls, *_command_ranges(controls.dtype), commands)
+    _commands(controls, *command_ranges(controls.dtype), commands)
     return commands
 
 
-def _float_controls(controls, num_worlds: int) -> np.ndarray:
+def float_controls(controls, num_worlds: int) -> np.ndarray:
     """(K, 2) controls in float32 or float64, the types the compiled arithmetic takes: those
     stay as they are, anything else (ints, float16, long double) becomes float64."""
     controls = np.asarray(controls).reshape(num_worlds, 2)
@@ -430,7 +423,7 @@ _COMPILED_FLOATS = (np.dtype(np.float32), np.dtype(np.float64))
 
 
 @functools.cache
-def _command_ranges(dtype: np.dtype) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def command_ranges(dtype: np.dtype) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The (low, span) of [acceleration, steering] and the constants (1, 2) in ``dtype``, made
     once per float type."""
     low = np.array([ACCELERATION_RANGE[0], STEERING_RANGE[0]], dtype=dtype)
@@ -473,20 +466,9 @@ def set_ego_controls(vehicles, ego, controls, low, span, constants) -> None:
 
 @njit(cache=True)
 def project_routes(
-    vehicles: np.ndarray,
-    ego: np.ndarray,
-    route: np.ndarray,
-    starts: np.ndarray,
-    segments: np.ndarray,
-    lengths2: np.ndarray,
-    segment_m: np.ndarray,
-    stations: np.ndarray,
-    point_count: np.ndarray,
-    closed: np.ndarray,
-    fresh: np.ndarray,
-    update: np.ndarray,
-    progress: np.ndarray,
-) -> None:
+    vehicles, ego, route, starts, segments, lengths2, segment_m, stations, point_count, closed, fresh, update,
+    progress
+) -> None:  # fmt: skip
     """RouteTracker.project for K egos (world k's is row ``ego[k]`` of ``vehicles``) on route
     ``route[k]`` of the padded route table (R routes of ``point_count`` points: ``starts`` /
     ``segments`` (R, S, 2), ``lengths2`` / ``segment_m`` / ``stations`` (R, S + 1)); in place in
@@ -585,19 +567,9 @@ def _span(stations, low, high, count):
 
 @njit(cache=True, inline="always")
 def export_world(
-    w: np.ndarray,
-    e: int,
-    lanes: np.ndarray,
-    in_junction: np.ndarray,
-    exit_lane: np.ndarray,
-    arrival: int,
-    arrival_threshold: float,
-    out: np.ndarray,
-    ints: np.ndarray,
-    flags: np.ndarray,
-    vehicles: np.ndarray,
-    valid: np.ndarray,
-) -> None:
+    w, e: int, lanes, in_junction, exit_lane, arrival: int, arrival_threshold: float, out, ints, flags,
+    vehicles, valid
+) -> None:  # fmt: skip
     """What WorldBatch needs of one world (vehicles ``w`` (N, VEHICLE_COLUMNS), ego row ``e``),
     into zeroed outputs: the ego's ``out`` (EX_FLOATS,), ``ints`` (3,) and ``flags`` (4,)
     (columns EX_*), and the other vehicles, obstacles left out as highway-env exports them, in
@@ -647,20 +619,9 @@ def export_world(
 
 @njit(cache=True)
 def export_worlds(
-    v: np.ndarray,
-    count: np.ndarray,
-    ego: np.ndarray,
-    lanes: np.ndarray,
-    in_junction: np.ndarray,
-    exit_lane: np.ndarray,
-    arrival: int,
-    arrival_threshold: float,
-    floats: np.ndarray,
-    ints: np.ndarray,
-    flags: np.ndarray,
-    vehicles: np.ndarray,
-    valid: np.ndarray,
-) -> None:
+    v, count, ego, lanes, in_junction, exit_lane, arrival: int, arrival_threshold: float, floats, ints, flags,
+    vehicles, valid
+) -> None:  # fmt: skip
     """``export_world`` of K worlds on one road: ``floats`` (K, EX_FLOATS), ``ints`` (K, 3),
     ``flags`` (K, 4), ``vehicles`` (K, N, 6), ``valid`` (K, N). (Serial: about a microsecond
     per world, less than a thread pool's launch.)"""
@@ -743,8 +704,8 @@ class FastSimulator:
         self.table, self.lanes, self.road = road.table, road.table.rows, road.road_map
         self.roads: tuple[RoadMap, ...] = (self.road,)
         self.policy_frequency_hz, self.duration_s = road.policy_frequency_hz, road.duration_s
-        self._dt_policy_s = 1.0 / self.policy_frequency_hz
-        self._dt_policy = np.array(self._dt_policy_s)  # 0-d: added to time_s without a scalar's conversion
+        self.dt_policy_s = 1.0 / self.policy_frequency_hz
+        self._dt_policy = np.array(self.dt_policy_s)  # 0-d: added to time_s without a scalar's conversion
         self.frames, self.dt_s = road.frames, road.dt_s
         self.idm = road.idm
         self.arrival, self.arrival_threshold = ARRIVAL_RULES[scenario.arrival]
@@ -933,7 +894,7 @@ class FastSimulator:
         the clocks (and the lights on them), ``frames`` simulation frames, the scenario's rules
         after the frames (``_after_frames``), the episodes that restart, the routes' progress, the
         export. A scenario's simulator fills in the hooks; this class's step is also one compiled
-        call (``advance_worlds``) where nothing in between needs Python (``_one_call``).
+        call (``advance_worlds``) where nothing in between needs Python (``one_call``).
 
         :param controls: meta: (K,) int meta-actions; continuous: (K, 2) [acceleration, steering]
             normalised in [-1, 1] (highway-env's order).
@@ -946,7 +907,7 @@ class FastSimulator:
             restart = np.zeros(self.num_worlds, dtype=bool)
         restart = np.asarray(restart, dtype=bool)
         restarting = np.count_nonzero(restart)  # ndarray.any's Python wrapper costs a microsecond
-        if self._one_call and not restarting:
+        if self.one_call and not restarting:
             self.apply_controls(controls)
             self.batch = self._advance()
             return self.batch
@@ -992,7 +953,7 @@ class FastSimulator:
     _whole_step_kernel = True
 
     @property
-    def _one_call(self) -> bool:
+    def one_call(self) -> bool:
         """The step is one compiled call (``advance_worlds``): this class's hooks, not recording
         frames, no traffic arriving between steps, and the worlds simulated one after another
         (one world, or one numba thread)."""
@@ -1005,7 +966,7 @@ class FastSimulator:
         road = self._road
         advance_worlds(
             self.vehicles, self.count, self.ego, self.lanes, self.idm, self.frames, self.dt_s,
-            self.regulation, self.time_s, self._dt_policy_s, self.route_index, self.r_starts,
+            self.regulation, self.time_s, self.dt_policy_s, self.route_index, self.r_starts,
             self.r_segments, self.r_lengths2, self.r_segment_m, self.r_stations, self.r_count,
             self.r_closed, self.progress_m, road.in_junction, road.exit_lane, self.arrival,
             self.arrival_threshold, floats, ints, flags, vehicles, valid,
@@ -1031,8 +992,8 @@ class FastSimulator:
             actions = np.asarray(controls).reshape(self.num_worlds).astype(np.int64)
             apply_meta(self.vehicles, self.count, self.ego, self.lanes, actions, self._road.target_speeds)
             return
-        controls = _float_controls(controls, self.num_worlds)
-        set_ego_controls(self.vehicles, self.ego, controls, *_command_ranges(controls.dtype))
+        controls = float_controls(controls, self.num_worlds)
+        set_ego_controls(self.vehicles, self.ego, controls, *command_ranges(controls.dtype))
 
     def _spawn_arrivals(self) -> None:
         """IntersectionEnv._spawn_vehicle in each world, from its own generator (its draws are
@@ -1136,7 +1097,7 @@ class FastSimulator:
         return assemble(
             WorldBatch,
             time_s=time_s,
-            dt_s=self._dt_policy_s,
+            dt_s=self.dt_policy_s,
             ego=ego,
             vehicles=vehicles,
             vehicle_valid=valid,

@@ -243,17 +243,7 @@ def idm_free_road(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, me: int, ego:
 
 
 @njit(cache=True, inline="always")
-def idm_behind(
-    v: np.ndarray,
-    lanes: np.ndarray,
-    p: np.ndarray,
-    coords: np.ndarray,
-    done: np.ndarray,
-    trig: np.ndarray,
-    free_road: float,
-    ego: int,
-    front: int,
-) -> float:
+def idm_behind(v, lanes, p, coords, done, trig, free_road: float, ego: int, front: int) -> float:
     """IDMVehicle.acceleration from its free-road term (``idm_free_road``): less the interaction
     with ``front`` (none: -1). MOBIL asks about one vehicle behind several fronts; the free-road
     term (a ``pow``) is the same for all of them and is computed once."""
@@ -270,17 +260,7 @@ def idm_behind(
 
 
 @njit(cache=True, inline="always")
-def cached_idm_acceleration(
-    v: np.ndarray,
-    lanes: np.ndarray,
-    p: np.ndarray,
-    coords: np.ndarray,
-    done: np.ndarray,
-    trig: np.ndarray,
-    me: int,
-    ego: int,
-    front: int,
-) -> float:
+def cached_idm_acceleration(v, lanes, p, coords, done, trig, me: int, ego: int, front: int) -> float:
     """IDMVehicle.acceleration as computed by vehicle ``me`` (its DELTA) for ``ego`` behind ``front``."""
     free_road = idm_free_road(v, lanes, p, me, ego)
     return idm_behind(v, lanes, p, coords, done, trig, free_road, ego, front)
@@ -293,16 +273,7 @@ OWN_FREE, OWN_A, OWN_FRONT, OWN_REAR, OWN_REAR_A, OWN_REAR_PRED_A, OWN_REAR_FILL
 
 
 @njit(cache=True, inline="always")
-def own_lane(
-    v: np.ndarray,
-    lanes: np.ndarray,
-    p: np.ndarray,
-    coords: np.ndarray,
-    done: np.ndarray,
-    trig: np.ndarray,
-    i: int,
-    own: np.ndarray,
-) -> None:
+def own_lane(v, lanes, p, coords, done, trig, i: int, own) -> None:
     """Fill ``own`` for vehicle i: its front and rear on its lane, its free-road term and its
     acceleration behind that front (IDMVehicle.acceleration(self, front))."""
     front, rear = cached_neighbours(v, lanes, coords, done, i, int(v[i, LANE]))
@@ -371,16 +342,7 @@ def mobil(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, i: int, lane: int) ->
 
 
 @njit(cache=True, inline="always")
-def change_lane_policy(
-    v: np.ndarray,
-    lanes: np.ndarray,
-    p: np.ndarray,
-    coords: np.ndarray,
-    done: np.ndarray,
-    trig: np.ndarray,
-    i: int,
-    own: np.ndarray,
-) -> None:
+def change_lane_policy(v, lanes, p, coords, done, trig, i: int, own) -> None:
     """IDMVehicle.change_lane_policy: abort a change into a lane someone else is entering; else,
     every LANE_CHANGE_DELAY seconds, ask MOBIL about each side lane (the right one last).
     ``own`` (OWN_SIZE,): vehicle i's ``own_lane`` row, or scratch whose OWN_FREE is NaN (filled
@@ -479,15 +441,7 @@ def follow_road(v: np.ndarray, lanes: np.ndarray, i: int) -> None:
 
 
 @njit(cache=True)
-def act(
-    v: np.ndarray,
-    lanes: np.ndarray,
-    p: np.ndarray,
-    coords: np.ndarray,
-    done: np.ndarray,
-    trig: np.ndarray,
-    own: np.ndarray,
-) -> None:
+def act(v, lanes, p, coords, done, trig, own) -> None:
     """Road.act: every vehicle decides its controls, in list order (``frame_cache`` arrays;
     ``own`` (OWN_SIZE,) scratch, the caller's, so that it is borrowed here as well)."""
     v, lanes, p, coords, done, trig, own = borrowed((v, lanes, p, coords, done, trig, own))

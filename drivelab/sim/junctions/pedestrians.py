@@ -65,15 +65,8 @@ PEDESTRIAN_DIAGONAL_M = np.sqrt(PEDESTRIAN_SIZE_M**2 + PEDESTRIAN_SIZE_M**2)  # 
 
 @njit(cache=True)
 def light_states(
-    light_junction: np.ndarray,
-    light_arm: np.ndarray,
-    offsets: np.ndarray,
-    green_s: float,
-    yellow_s: float,
-    all_red_s: float,
-    time_s: float,
-    out: np.ndarray,
-) -> None:
+    light_junction, light_arm, offsets, green_s: float, yellow_s: float, all_red_s: float, time_s: float, out
+) -> None:  # fmt: skip
     """``out[m]`` = ``light_state(timings, light_arm[m], time_s, offsets[light_junction[m]])``
     (LIGHT_GREEN / YELLOW / RED) for every light row m. ``light_junction``, ``light_arm``, ``out``:
     (M,); ``offsets``: (J,), the world's cycle offsets of every junction. Python's float ``%``

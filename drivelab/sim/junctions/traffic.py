@@ -211,16 +211,7 @@ def random_goal(
 
 
 @njit(cache=True)
-def random_route(
-    v: np.ndarray,
-    lanes: np.ndarray,
-    i: int,
-    start: int,
-    street_lanes: np.ndarray,
-    routes: np.ndarray,
-    route_length: np.ndarray,
-    rng_words: np.ndarray,
-) -> None:
+def random_route(v, lanes, i: int, start: int, street_lanes, routes, route_length, rng_words) -> None:
     """town_env.random_route from lane row ``start`` into vehicle i's route entries: the route to
     ``random_goal``'s street, else ``start`` alone."""
     v, lanes, routes, route_length = borrowed((v, lanes, routes, route_length))
@@ -249,15 +240,7 @@ def object_xy(v: np.ndarray, peds: np.ndarray, j: int) -> tuple[float, float]:
 
 
 @njit(cache=True, inline="always")
-def lane_s(
-    v: np.ndarray,
-    peds: np.ndarray,
-    lanes: np.ndarray,
-    coords: np.ndarray,
-    seen: np.ndarray,
-    lane: int,
-    j: int,
-) -> float:
+def lane_s(v, peds, lanes, coords, seen, lane: int, j: int) -> float:
     """Object j's longitudinal coordinate in ``lane`` (computed once per frame: the same bits);
     ``seen[lane, j]`` becomes 1 if it is on the lane (``on_lane``, 1 m margin), else 0."""
     if seen[lane, j] < 0:
@@ -314,17 +297,7 @@ def connected_lanes(lanes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
 
 
 @njit(cache=True, inline="always")
-def lane_objects(
-    v: np.ndarray,
-    peds: np.ndarray,
-    lanes: np.ndarray,
-    coords: np.ndarray,
-    seen: np.ndarray,
-    discs: np.ndarray,
-    near: np.ndarray,
-    near_count: np.ndarray,
-    lane: int,
-) -> None:
+def lane_objects(v, peds, lanes, coords, seen, discs, near, near_count, lane: int) -> None:
     """``near[lane, :near_count[lane]]``: the objects on ``lane`` (``on_lane``, 1 m margin) in
     scan order (vehicles, then pedestrians not crashed), listed once per frame: only those inside
     the lane's disc (and, on a circular lane, within its lateral reach) are measured."""
@@ -352,20 +325,9 @@ def lane_objects(
 
 @njit(cache=True)
 def connected_front(
-    v: np.ndarray,
-    peds: np.ndarray,
-    lanes: np.ndarray,
-    coords: np.ndarray,
-    seen: np.ndarray,
-    near: np.ndarray,
-    near_count: np.ndarray,
-    search: np.ndarray,
-    search_offset: np.ndarray,
-    search_size: np.ndarray,
-    discs: np.ndarray,
-    i: int,
-    lane: int,
-) -> int:
+    v, peds, lanes, coords, seen, near, near_count, search, search_offset, search_size, discs, i: int,
+    lane: int
+) -> int:  # fmt: skip
     """Road.neighbour_vehicles(vehicle i, lane)[0] with ``neighbour_vehicles_connected_lanes``:
     the row of the leader (a vehicle j < count, or pedestrian k as count + k), -1 for none.
 
@@ -403,17 +365,8 @@ def connected_front(
 
 @njit(cache=True)
 def left_turn_must_wait(
-    v: np.ndarray,
-    lanes: np.ndarray,
-    i: int,
-    turn_lane: int,
-    junction: np.ndarray,
-    from_arm: np.ndarray,
-    to_arm: np.ndarray,
-    turn: np.ndarray,
-    end_junction: np.ndarray,
-    end_arm: np.ndarray,
-) -> bool:
+    v, lanes, i: int, turn_lane: int, junction, from_arm, to_arm, turn, end_junction, end_arm
+) -> bool:  # fmt: skip
     """town_env.left_turn_must_wait: ``turn_lane`` is a left turn and another vehicle (the ego
     included) moving at MOVING_MPS or more is in the junction coming from the opposite arm (not
     leaving by it), or on the street to the opposite stop line within ONCOMING_WATCH_M of it."""
@@ -438,19 +391,8 @@ def left_turn_must_wait(
 
 @njit(cache=True)
 def stop_line_ahead(
-    v: np.ndarray,
-    lanes: np.ndarray,
-    p: np.ndarray,
-    i: int,
-    junction: np.ndarray,
-    from_arm: np.ndarray,
-    to_arm: np.ndarray,
-    turn: np.ndarray,
-    end_junction: np.ndarray,
-    end_arm: np.ndarray,
-    light: np.ndarray,
-    light_states: np.ndarray,
-) -> float:
+    v, lanes, p, i: int, junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states
+) -> float:  # fmt: skip
     """TownVehicle.stop_line_ahead: metres from vehicle i's front bumper to the stop line it must
     stop at, else NO_STOP. It reads no frame cache: ``blocks_traffic`` calls it (through
     ``town_acceleration`` without a leader) with ``traffic``'s cache, whose flags are per lane."""
@@ -477,25 +419,9 @@ def stop_line_ahead(
 
 @njit(cache=True)
 def town_acceleration(
-    v: np.ndarray,
-    peds: np.ndarray,
-    lanes: np.ndarray,
-    p: np.ndarray,
-    coords: np.ndarray,
-    done: np.ndarray,
-    trig: np.ndarray,
-    seen: np.ndarray,
-    i: int,
-    front: int,
-    junction: np.ndarray,
-    from_arm: np.ndarray,
-    to_arm: np.ndarray,
-    turn: np.ndarray,
-    end_junction: np.ndarray,
-    end_arm: np.ndarray,
-    light: np.ndarray,
-    light_states: np.ndarray,
-) -> float:
+    v, peds, lanes, p, coords, done, trig, seen, i: int, front: int, junction, from_arm, to_arm, turn,
+    end_junction, end_arm, light, light_states
+) -> float:  # fmt: skip
     """TownVehicle.acceleration(self, front): IDM with the straight-line gap to ``front`` (a
     vehicle row, a pedestrian as count + k, or -1), then the stop line's virtual leader.
     ``coords`` and ``seen`` (``town_act``'s) are read only with a front."""
@@ -542,32 +468,10 @@ def town_acceleration(
 
 @njit(cache=True)
 def town_act(
-    v: np.ndarray,
-    count: int,
-    peds: np.ndarray,
-    pcount: int,
-    lanes: np.ndarray,
-    p: np.ndarray,
-    coords: np.ndarray,
-    done: np.ndarray,
-    trig: np.ndarray,
-    junction: np.ndarray,
-    from_arm: np.ndarray,
-    to_arm: np.ndarray,
-    turn: np.ndarray,
-    end_junction: np.ndarray,
-    end_arm: np.ndarray,
-    light: np.ndarray,
-    street_lanes: np.ndarray,
-    routes: np.ndarray,
-    route_length: np.ndarray,
-    search: np.ndarray,
-    search_offset: np.ndarray,
-    search_size: np.ndarray,
-    discs: np.ndarray,
-    light_states: np.ndarray,
-    rng_words: np.ndarray,
-) -> None:
+    v, count: int, peds, pcount: int, lanes, p, coords, done, trig, junction, from_arm, to_arm, turn,
+    end_junction, end_arm, light, street_lanes, routes, route_length, search, search_offset, search_size,
+    discs, light_states, rng_words
+) -> None:  # fmt: skip
     """Road.act of one town world: rows ``0..count-1`` of ``v`` decide their controls in order
     (see the module docstring for the arrays); random routes draw on ``rng_words``. The frame's
     scratch is made here, and ``_act_rows`` borrows it with the arguments (``borrow``): ``own``,
@@ -587,36 +491,10 @@ def town_act(
 
 @njit(cache=True)
 def _act_rows(
-    v: np.ndarray,
-    count: int,
-    peds: np.ndarray,
-    pcount: int,
-    lanes: np.ndarray,
-    p: np.ndarray,
-    coords: np.ndarray,
-    done: np.ndarray,
-    trig: np.ndarray,
-    junction: np.ndarray,
-    from_arm: np.ndarray,
-    to_arm: np.ndarray,
-    turn: np.ndarray,
-    end_junction: np.ndarray,
-    end_arm: np.ndarray,
-    light: np.ndarray,
-    street_lanes: np.ndarray,
-    routes: np.ndarray,
-    route_length: np.ndarray,
-    search: np.ndarray,
-    search_offset: np.ndarray,
-    search_size: np.ndarray,
-    discs: np.ndarray,
-    light_states: np.ndarray,
-    rng_words: np.ndarray,
-    own: np.ndarray,
-    near: np.ndarray,
-    near_count: np.ndarray,
-    seen: np.ndarray,
-) -> None:
+    v, count: int, peds, pcount: int, lanes, p, coords, done, trig, junction, from_arm, to_arm, turn,
+    end_junction, end_arm, light, street_lanes, routes, route_length, search, search_offset, search_size,
+    discs, light_states, rng_words, own, near, near_count, seen
+) -> None:  # fmt: skip
     """``town_act``'s loop over the rows, every array borrowed."""
     v, peds, lanes, p, coords, done, trig, light_states, rng_words = borrowed(
         (v, peds, lanes, p, coords, done, trig, light_states, rng_words)
@@ -718,4 +596,3 @@ def red_light_runs(
     state = light_state[np.arange(k), np.maximum(light, 0)] if light_state.shape[1] else np.zeros(k, int)
     crossed = lanes[lane, FROM_NODE] == lanes[previous_lane, TO_NODE]
     return active & (light >= 0) & crossed & (state == LIGHT_RED)
-
