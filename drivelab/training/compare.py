@@ -1,13 +1,6 @@
-"""Comparisons: read run directories (never re-train), group them over seeds, write a report.
-
-A report directory holds::
-
-    report.md            per-metric tables: mean, 90 % bootstrap interval, IQM over seeds
-    summary.csv          the same numbers, one row per (group, metric)
-    runs.csv             every run's own final metrics, with where they came from
-    learning_curves.png  periodic-evaluation return against steps, mean over seeds with a 90 % band
-    metrics.png          bar charts of the main metrics (mean, interval, IQM, each seed)
-    report-manifest.json the files above: all that a later report in the same place may replace
+"""Comparisons: read run directories (never re-train), group them over seeds, write a report
+directory (report.md, summary.csv, runs.csv, learning_curves.png, metrics.png and
+report-manifest.json; see docs/compare.md).
 
 A run's final metrics come from its ``eval.json`` when it has one, else from the last row of its
 ``evaluations.csv``."""

@@ -1,17 +1,6 @@
 """Sweeps: a grid of runs (algorithms × scenarios × sensors × rewards × seeds …) with per-cell
-overrides, executed in a local process pool or as Ray tasks. A sweep file::
-
-    name: cmp                     # optional prefix of run names
-    runs_dir: runs/cmp            # optional; --runs-dir wins
-    eval_episodes: 20             # final evaluation of each run (eval.json); 0: none
-    base: {steps: 20000, backend: fast, traffic: regular}
-    grid:                         # any RunConfig field but name; seed may be a count
-      algo: [dqn, ppo]
-      reward: [highway, "highway,right_lane=0"]
-      seed: 3
-    overrides:                    # applied in order to the cells that match
-      - match: {algo: dqn}
-        set: {hyperparams: {learning_rate: 1.0e-3}}
+overrides, executed in a local process pool or as Ray tasks. The sweep file (``name``, ``runs_dir``,
+``eval_episodes``, ``base``, ``grid``, ``overrides``) is described in docs/compare.md.
 
 Each cell's run directory is named from its grid values, so a re-run skips a finished run, resumes
 an interrupted one and restarts one that never reached a checkpoint (``cell_action``); a directory

@@ -1,16 +1,10 @@
 """Shipped agents: the zoo inside the package, ``drivelab zoo`` and ``drivelab enjoy``.
 
 A shipped agent is a run directory cut down to what acting needs, in ``drivelab/zoo/<name>/``:
-
-    config.yaml   the run's resolved config (the environment it was trained and is evaluated on)
-    model.zip     the run's final model in the safe format (``agents/storage.py``), weights in
-                  float16 and the optimizer's moments dropped: a quarter of the run's model.zip
-    card.json     what it is and how well it drives: algorithm, scenario, observation, action,
-                  reward, hyper-parameters, training steps and time, the training command, and
-                  every evaluation measured on it with its command
-
-Loading one is loading a run directory: nothing is unpickled, and every command that takes a run
-directory takes a zoo name too. ``benchmarks/zoo_build.py`` trains, packs and measures them."""
+config.yaml, model.zip (float16 weights, no optimizer moments) and card.json (what it is and every
+evaluation measured on it; see docs/zoo.md). Loading one is loading a run directory: nothing is
+unpickled, and every command that takes a run directory takes a zoo name too.
+``benchmarks/zoo_build.py`` trains, packs and measures them."""
 
 from __future__ import annotations
 
