@@ -1,14 +1,9 @@
 """Writing in a run directory: never through a link, each file whole or not at all, one command at a
-time, and a failed write (a full disk) as one line. A run directory may come from someone else:
-nothing drivelab writes may land outside it.
-
-- ``locked_run``: a command holds a ``flock`` on the run directory (exclusive to write, shared to
-read); a second command is refused with one line naming the first one's pid (``IN_USE``). -
-``check_run_members``: a run directory holding a symbolic link, or a folder where drivelab writes a
-file, is refused before anything is written. - ``replacing`` / ``write_file``: a file is written
-into a temporary created exclusively (``O_EXCL | O_NOFOLLOW``), then renamed over its name. -
-``remove_file``: deletes a regular file only, never a folder or what a link points to. -
-``write_failure``: the one-line UsageError of a failed write, naming a full disk as such."""
+time, and a failed write (a full disk) as one line; a run directory may come from someone else, and
+nothing drivelab writes may land outside it (docs/trust.md). ``locked_run`` holds the run,
+``check_run_members`` refuses links and folders in the way, ``replacing`` / ``write_file`` write
+through an exclusive temporary renamed over the name, ``remove_file`` deletes regular files only and
+``write_failure`` makes the one-line error."""
 
 from __future__ import annotations
 
