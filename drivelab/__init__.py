@@ -14,11 +14,9 @@ import drivelab.envs  # noqa: E402, F401  (registers the gymnasium ids)
 def make(scenario: str, **kwargs):
     """Build a DriveEnv: ``drivelab.make("highway", obs=["lidar", "topdown"], seed=0)``.
 
-    ``scenario`` is a name or its gymnasium id (``"drivelab/Highway-v0"``). Same keyword arguments
-    as ``gymnasium.make("drivelab/Highway-v0", ...)``; see DriveEnv. ``config={...}`` takes
-    highway-env's config dict as its users write it:
-    ``drivelab.make("highway", config={"observation": {"type": "Kinematics"}, "lanes_count": 4})``.
-    """
+    ``scenario`` is a name or its gymnasium id (``"drivelab/Highway-v0"``); the keyword arguments
+    are ``gymnasium.make``'s (see DriveEnv), ``config={...}`` a highway-env config dict:
+    ``drivelab.make("highway", config={"observation": {"type": "Kinematics"}, "lanes_count": 4})``."""
     from drivelab.envs.core import DriveEnv
 
     return DriveEnv(scenario=scenario, **kwargs)

@@ -1,13 +1,9 @@
 """One numba cache folder per version of drivelab's sources.
 
-numba's ``cache=True`` keys a kernel's cached machine code on its own file only: an edit to a jitted
-function it calls from another module leaves the cache in place, and the kernel keeps running the
-old code (numba's documented limitation, "cache invalidation fails to recognize changes in symbols
-defined in another file"). drivelab's kernels call each other across modules, so the cache lives in
-a folder named after a hash of every source file of the package: any edit starts a fresh cache.
-The folder is set through ``NUMBA_CACHE_DIR`` (numba reads it again when it compiles, and child
-processes inherit it), so other libraries' cached kernels in the same process land there too.
-"""
+numba's ``cache=True`` keys a kernel's cache on its own file only, so an edit to a jitted function
+it calls from another module leaves stale code in the cache. The cache therefore lives in a folder
+named after a hash of every source file of the package, set through ``NUMBA_CACHE_DIR`` (which child
+processes inherit)."""
 
 from __future__ import annotations
 
@@ -38,9 +34,8 @@ def source_digest(root: Path = PACKAGE) -> str:
 
 
 def cache_folder(digest: str, environ: dict[str, str] | None = None) -> Path:
-    """Where this version's kernels are cached: under ``NUMBA_CACHE_DIR`` when the user set one
-    (a child process inherits the folder itself and keeps it), else beside the sources, else in the
-    user's own cache folder (a read-only install; never a folder other users can write)."""
+    """Where this version's kernels are cached: under ``NUMBA_CACHE_DIR`` when set, else beside the
+    sources, else in the user's own cache folder."""
     environ = os.environ if environ is None else environ
     given = environ.get("NUMBA_CACHE_DIR")
     if given:
@@ -55,8 +50,7 @@ def cache_folder(digest: str, environ: dict[str, str] | None = None) -> Path:
 
 
 def _remove_stale(folder: Path) -> None:
-    """Other versions' folders beside ``folder`` that no process has imported for ``STALE_S`` (an
-    edited tree leaves one per version it ran; ``configure`` touches its own on every import)."""
+    """Remove other versions' folders beside ``folder`` unused for ``STALE_S``."""
     try:
         siblings = [p for p in folder.parent.glob(f"{PREFIX}*") if p != folder and p.is_dir()]
         for old in siblings:
@@ -87,9 +81,7 @@ _noticed = False  # the first-compile line is said once per process
 
 def compile_notice(folder: Path | None = None, stream=None) -> bool:
     """Say, once per process and on a terminal, that the simulator is being compiled when this
-    version's cache folder holds no compiled kernel yet (numba's ``*.nbi`` index files): the first
-    ``reset`` after an install or an edit compiles for about a minute, silent otherwise. Returns
-    whether it said so."""
+    version's cache folder holds no compiled kernel yet; whether it said so."""
     global _noticed
     stream = sys.stderr if stream is None else stream
     if _noticed or not getattr(stream, "isatty", lambda: False)():
@@ -112,4 +104,3 @@ def compile_notice(folder: Path | None = None, stream=None) -> bool:
         flush=True,
     )
     return True
-

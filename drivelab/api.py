@@ -24,15 +24,11 @@ from drivelab.config import RunConfig
 class Model:
     """A trained agent of a run directory or of the zoo, with stable-baselines3's ``predict``.
 
-    :ivar agent: the agent itself (an SB3 model for ``dqn``, ``ppo``, ``a2c``, ``sac``; drivelab's own
-        agent class otherwise).
-    :ivar config: the run's resolved config (``config.yaml``): algorithm, scenario, sensors, action,
-        reward, hyper-parameters, steps.
+    :ivar agent: the agent itself (an SB3 model, or drivelab's own agent class).
+    :ivar config: the run's resolved config (``config.yaml``).
     :ivar run_dir: the run directory it was loaded from (a shipped agent's folder in the package).
     :ivar name: the shipped agent's name, or None for a run directory.
-    :ivar observation_space: with ``action_space``, the spaces of ``make_env()``'s environment, which
-        ``predict`` reads and returns.
-    """
+    :ivar observation_space: with ``action_space``, the spaces of ``make_env()``'s environment."""
 
     def __init__(self, agent: Any, config: RunConfig, run_dir: Path, name: str | None, env) -> None:
         self.agent, self.config, self.run_dir, self.name = agent, config, run_dir, name
@@ -56,11 +52,9 @@ class Model:
         episode_start: Any = None,
         deterministic: bool = True,
     ) -> tuple[np.ndarray, Any]:
-        """(action, state) for an observation, or for a batch of them (a leading axis): as
-        stable-baselines3's ``predict``, except that ``deterministic`` defaults to True (the greedy
-        policy that ``drivelab evaluate`` measures; SB3's default samples). ``state`` and
-        ``episode_start`` are for recurrent policies, which drivelab has none of: the returned state
-        is None."""
+        """(action, state) for an observation, or for a batch of them (a leading axis), as
+        stable-baselines3's ``predict`` but greedy by default (as ``drivelab evaluate``). drivelab
+        has no recurrent policies: the returned state is None."""
         if self._is_sb3():
             return self.agent.predict(
                 observation, state=state, episode_start=episode_start, deterministic=deterministic
@@ -74,10 +68,9 @@ class Model:
         return np.stack([np.asarray(action) for action in actions]), None
 
     def make_env(self, **overrides: Any):
-        """A new ``DriveEnv`` of the run's evaluation environment (its scenario, sensors, action,
-        reward, traffic and options); ``overrides``: other ``drivelab.make`` keyword arguments
-        (``render_mode="rgb_array"``, ``traffic="dense"``). An override that changes the
-        observation or action space makes an environment the model cannot act in."""
+        """A new ``DriveEnv`` of the run's evaluation environment; ``overrides``: other
+        ``drivelab.make`` keyword arguments (``render_mode="rgb_array"``), which must leave the
+        spaces as they are."""
         from drivelab.envs.core import DriveEnv
 
         return DriveEnv(**{**self.config.eval_env_kwargs(), **overrides})
@@ -114,13 +107,11 @@ def _unbatch(observation: Any, space: spaces.Space) -> list[Any]:
 
 
 def load(target: str | Path) -> Model:
-    """The trained agent of a run directory (``drivelab train``'s) or of a shipped agent named by
-    ``drivelab zoo`` (an existing directory of that name wins, as for the commands).
-
-    Its final model, else its latest verified checkpoint; refused (``drivelab.errors.UsageError``,
-    with the line the commands print) when ``target`` is neither, when the model's spaces are not
-    those of the run's ``config.yaml`` or that file was edited after training, when the run is
-    being trained right now, and for a run in the old pickle format. Nothing is unpickled."""
+    """The trained agent of a run directory or of a shipped agent named by ``drivelab zoo`` (an
+    existing directory of that name wins): its final model, else its latest verified checkpoint.
+    Refused with the ``UsageError`` the commands print for anything else, a model that does not
+    match its config.yaml, a run being trained now and a run in the old pickle format. Nothing is
+    unpickled."""
     from drivelab.training.zoo import load_trained
 
     trained = load_trained(target)

@@ -35,8 +35,7 @@ class NeedsCommand(TyperGroup):
 
 class OneLineErrors(NeedsCommand):
     """The command line's own mistakes (an unknown command or option, a value of the wrong type, a
-    missing argument) as the one ``error:`` line and exit code 2 that every other bad input gets,
-    instead of click's usage box."""
+    missing argument) and a command's ``UsageError`` as one ``error:`` line and exit code 2."""
 
     def main(self, *args, standalone_mode: bool = True, **kwargs):
         if not standalone_mode:
@@ -49,6 +48,9 @@ class OneLineErrors(NeedsCommand):
             if isinstance(exc, CLICK_ERRORS["UsageError"]) and context is not None:
                 message += f" (see `{context.command_path} --help`)"
             typer.echo(f"error: {message[0].lower()}{message[1:]}", err=True)
+            sys.exit(2)
+        except UsageError as exc:
+            typer.echo(error_line(str(exc)), err=True)
             sys.exit(2)
         except typer.Abort:
             typer.echo("Aborted!", err=True)
@@ -84,11 +86,6 @@ def error_line(message: str) -> str:
     """``error: message`` as one line: a line break in the message (a folder's name can hold one)
     is written ``\\n`` (``\\r``)."""
     return "error: " + message.replace("\r", "\\r").replace("\n", "\\n")
-
-
-def _fail(message: str) -> None:
-    typer.echo(error_line(message), err=True)
-    raise typer.Exit(2)
 
 
 def _parse_pairs(pairs: list[str], what: str) -> dict:
@@ -135,12 +132,19 @@ def envs() -> None:
         typer.echo(f"algo      {name:<18} {spec.description} (actions: {', '.join(spec.action_kinds)})")
 
 
-def _rlad_switches(no_alix: bool, no_aux: bool, no_augment: bool, waypoint_encoder: str | None) -> dict:
-    """RLAD's ablation flags as the hyper-parameters they stand for (other algorithms reject them
-    as unknown hyper-parameters)."""
-    switches = {"alix": False if no_alix else None, "aux": False if no_aux else None}
-    switches.update(augment=False if no_augment else None, waypoint_encoder=waypoint_encoder)
-    return {key: value for key, value in switches.items() if value is not None}
+# train's options that are run fields
+RUN_OPTIONS = ("algo", "env", "obs", "action", "reward", "steps", "seed", "traffic", "backend", "name",
+               "eval_every", "eval_episodes", "checkpoint_every", "n_envs", "eval_maps")  # fmt: skip
+
+
+def _rlad_switches(given: dict) -> dict:
+    """RLAD's ablation flags among train's ``given`` options as the hyper-parameters they stand for
+    (other algorithms reject them as unknown hyper-parameters)."""
+    switches = {"alix": given["no_alix"], "aux": given["no_aux"], "augment": given["no_augment"]}
+    chosen = {key: False for key, off in switches.items() if off}
+    if given["waypoint_encoder"] is not None:
+        chosen["waypoint_encoder"] = given["waypoint_encoder"]
+    return chosen
 
 
 def _with_hyperparams(values: dict, hyperparams: list[str], switches: dict | None = None) -> dict:
@@ -152,19 +156,20 @@ def _with_hyperparams(values: dict, hyperparams: list[str], switches: dict | Non
     return {**given, **_parse_pairs(hyperparams, "--hyperparams"), **(switches or {})}
 
 
-def _new_run_config(config: Path | None, cli: dict, video: bool, hyperparams: list[str], switches: dict):
-    """The config of a new run: the ``--config`` file's fields, the options given over them, and
-    drivelab's shipped hyper-parameters under the ``-H`` ones."""
+def _new_run_config(given: dict):
+    """The config of a new run from train's ``given`` options: the ``--config`` file's fields, the
+    options given over them, and drivelab's shipped hyper-parameters under the ``-H`` ones."""
     from drivelab.config import build_config
     from drivelab.hyperparams import with_shipped_hyperparams
     from drivelab.yaml_io import load_yaml
 
-    values = load_yaml(config) if config is not None else {}
-    values.update({k: v for k, v in cli.items() if v is not None})
-    if video:
+    values = load_yaml(given["config"]) if given["config"] is not None else {}
+    values.update({key: given[key] for key in RUN_OPTIONS if given[key] is not None})
+    if given["video"]:
         values["eval_video"] = True
-    if hyperparams or switches:
-        values["hyperparams"] = _with_hyperparams(values, hyperparams, switches)
+    switches = _rlad_switches(given)
+    if given["hyperparams"] or switches:
+        values["hyperparams"] = _with_hyperparams(values, given["hyperparams"], switches)
     return build_config(with_shipped_hyperparams(values))
 
 
@@ -177,14 +182,7 @@ def train_config(arguments: list[str]):
         given = context.params
     if given["resume"] is not None:
         raise UsageError("train_config: --resume trains the run's own config")
-    switches = _rlad_switches(
-        given["no_alix"], given["no_aux"], given["no_augment"], given["waypoint_encoder"]
-    )
-    cli = {key: given[key] for key in (
-        "algo", "env", "obs", "action", "reward", "steps", "seed", "traffic", "backend", "name", "eval_every",
-        "eval_episodes", "checkpoint_every", "n_envs", "eval_maps",
-    )}  # fmt: skip
-    return _new_run_config(given["config"], cli, given["video"], given["hyperparams"], switches)
+    return _new_run_config(given)
 
 
 def run_default(field: str) -> str:
@@ -211,6 +209,7 @@ def _run_option(field: str, help: str | None = None):
 
 @app.command()
 def train(
+    context: typer.Context,
     algo: str | None = typer.Option(None, help=", ".join(ALGO_NAMES) + " (required here or in --config)"),
     env: str | None = _run_option("env", "scenario: " + ", ".join(SCENARIOS)),
     obs: str | None = _run_option("obs", "sensor or comma list, e.g. lidar,topdown or lidar:beams=120"),
@@ -257,45 +256,17 @@ def train(
     from drivelab.training.run import resume as resume_run
     from drivelab.training.run import train as train_run
 
-    switches = _rlad_switches(no_alix, no_aux, no_augment, waypoint_encoder)
+    given = context.params
     try:
         if resume is not None:
-            given = [
-                o
-                for o in (
-                    algo,
-                    env,
-                    obs,
-                    action,
-                    reward,
-                    seed,
-                    traffic,
-                    backend,
-                    config,
-                    name,
-                    n_envs,
-                    eval_maps,
-                    eval_every,
-                    eval_episodes,
-                    checkpoint_every,
-                )
-                if o is not None
-            ]
-            if given or hyperparams or switches or video:
+            others = [given[key] is not None for key in (*RUN_OPTIONS, "config") if key != "steps"]
+            if any(others) or hyperparams or _rlad_switches(given) or video:
                 raise UsageError("--resume takes the run's own config; only --steps may be given with it")
             run_dir = resume_run(resume, steps)
         else:
-            cli = {
-                "algo": algo, "env": env, "obs": obs, "action": action, "reward": reward,
-                "steps": steps, "seed": seed, "traffic": traffic, "backend": backend, "name": name,
-                "eval_every": eval_every, "eval_episodes": eval_episodes,
-                "checkpoint_every": checkpoint_every, "n_envs": n_envs, "eval_maps": eval_maps,
-            }  # fmt: skip
-            new_config = _new_run_config(config, cli, video, hyperparams, switches)
+            new_config = _new_run_config(given)
             check_eval_every(new_config)
             run_dir = train_run(new_config, runs_dir)
-    except UsageError as exc:
-        _fail(str(exc))
     except TrainingInterrupted as stop:
         typer.echo(
             f"\ninterrupted at step {stop.steps}: checkpoint saved; "
@@ -348,15 +319,12 @@ def evaluate(
 
     _one_torch_thread()
 
-    try:
-        path, name = resolve(run_dir)
-        out_dir = report_dir(run_dir, out)
-        report = evaluate_run(
-            path, episodes=episodes, video=video, deterministic=not stochastic, out_dir=out_dir, maps=maps,
-            side_by_side=side_by_side, progress=True,
-        )  # fmt: skip
-    except UsageError as exc:
-        _fail(str(exc))
+    path, name = resolve(run_dir)
+    out_dir = report_dir(run_dir, out)
+    report = evaluate_run(
+        path, episodes=episodes, video=video, deterministic=not stochastic, out_dir=out_dir, maps=maps,
+        side_by_side=side_by_side, progress=True,
+    )  # fmt: skip
     _print_metrics(f"{name or report['algo']} on {report['env']}: {report['episodes']} episodes", report)
     if "video" in report:
         typer.echo(f"video: {report['video']}")
@@ -399,9 +367,8 @@ def zoo() -> None:
 
 
 def _one_torch_thread() -> None:
-    """Evaluating and enjoying run one world: the agent acts on one observation at a time, where
-    torch's threads only add hand-offs (a town video with the image DAgger agent: 25.8 s with the
-    default 2 threads, 21.2 s with 1)."""
+    """Evaluating and enjoying act on one observation at a time, where torch's threads only add
+    hand-offs."""
     import torch
 
     torch.set_num_threads(1)
@@ -432,12 +399,9 @@ def enjoy(
             f"{1000 * metrics['distance_km']:.0f} m"
         )
 
-    try:
-        report = drive(
-            agent, episodes=episodes, video=video, seed=seed, on_episode=progress, side_by_side=side_by_side
-        )
-    except UsageError as exc:
-        _fail(str(exc))
+    report = drive(
+        agent, episodes=episodes, video=video, seed=seed, on_episode=progress, side_by_side=side_by_side
+    )
     episodes_text = "fixed evaluation episodes" if seed is None else f"episodes of seeds {seed}+e"
     _print_metrics(
         f"{report['agent']} ({report['algo']}) on {report['env']}: {episodes} {episodes_text}", report
@@ -457,27 +421,29 @@ def compare(
     """Group runs over seeds; write tables (Markdown, CSV), learning curves and bar charts."""
     from drivelab.training.compare import compare as compare_runs
 
-    try:
-        report = compare_runs(
-            [*(run_dirs or []), *runs], out, title=title, command=_command_line(), confidence=confidence
-        )
-    except UsageError as exc:
-        _fail(str(exc))
+    report = compare_runs(
+        [*(run_dirs or []), *runs], out, title=title, command=_command_line(), confidence=confidence
+    )
     typer.echo(f"report: {report / 'report.md'}")
 
 
-def _print_outcomes(outcomes: list[dict], runs_dir: Path) -> None:
+def _print_outcome_table(title: str, outcomes: list[dict], what: str) -> None:
+    """A table of sweep or tuning outcomes (``sweep.run_cell``'s), one row per ``what``."""
     from rich.console import Console
     from rich.table import Table
 
-    table = Table(title=f"runs in {runs_dir}")
-    for column in ("run", "did", "result", "seconds"):
+    table = Table(title=title)
+    for column in (what, "did", "result", "seconds"):
         table.add_column(column, justify="right" if column == "seconds" else "left")
     for o in outcomes:
-        table.add_row(
-            o["name"], o["action"], "ok" if o["ok"] else f"FAILED: {o['error']}", f"{o['seconds']:.1f}"
-        )
+        result = f"FAILED: {o['error']}" if not o["ok"] else "ok"
+        result = f"pruned at step {o['stopped']}" if o["ok"] and o.get("stopped") is not None else result
+        table.add_row(o["name"], o["action"], result, f"{o['seconds']:.1f}")
     Console().print(table)
+
+
+def _print_outcomes(outcomes: list[dict], runs_dir: Path) -> None:
+    _print_outcome_table(f"runs in {runs_dir}", outcomes, "run")
     failed = [o["name"] for o in outcomes if not o["ok"]]
     if failed:
         typer.echo(
@@ -521,17 +487,12 @@ def sweep(
                 typer.echo(f"{action:<8} {spec.runs_dir / cell.config.name}")
             return
         outcomes = run_sweep(spec, executor=executor, workers=workers, address=address)
-    except UsageError as exc:
-        _fail(str(exc))
     except KeyboardInterrupt:
         _interrupted()
     _print_outcomes(outcomes, spec.runs_dir)
     if report is not None:
-        try:
-            records = [load_run(d) for d in run_dirs(spec)]
-            written = write_report(records, report, title=f"sweep {sweep_file.name}", command=_command_line())
-        except UsageError as exc:
-            _fail(str(exc))
+        records = [load_run(d) for d in run_dirs(spec)]
+        written = write_report(records, report, title=f"sweep {sweep_file.name}", command=_command_line())
         typer.echo(f"report: {written / 'report.md'}")
 
 
@@ -550,9 +511,6 @@ def tune(
     ),
 ) -> None:
     """Tune hyper-parameters with Optuna (TPE, median pruning); a re-run continues the study."""
-    from rich.console import Console
-    from rich.table import Table
-
     from drivelab.training.tune import check_zoo_file, load_study, run_study
     from drivelab.training.tune import write_best as write_best_file
 
@@ -562,18 +520,11 @@ def tune(
             check_zoo_file(write_best)
         summary = run_study(study, executor, workers, address, command=_command_line())
         written = write_best_file(study, summary, write_best) if write_best is not None else None
-    except UsageError as exc:
-        _fail(str(exc))
     except KeyboardInterrupt:
         _interrupted()
-    table = Table(title=f"study {study.name}: {study.metric} ({study.direction})")
-    for column in ("trial", "did", "result", "seconds"):
-        table.add_column(column, justify="right" if column == "seconds" else "left")
-    for o in summary["outcomes"]:
-        result = f"FAILED: {o['error']}" if not o["ok"] else "ok"
-        result = f"pruned at step {o['stopped']}" if o["ok"] and o["stopped"] is not None else result
-        table.add_row(o["name"], o["action"], result, f"{o['seconds']:.1f}")
-    Console().print(table)
+    _print_outcome_table(
+        f"study {study.name}: {study.metric} ({study.direction})", summary["outcomes"], "trial"
+    )
     best = summary["best"]
     if best is not None:
         typer.echo(f"best: {best['run_dir']} {study.metric} {best['value']:.4g} {best['params']}")
@@ -656,8 +607,6 @@ def ablate(
             eval_episodes=eval_episodes, executor=executor, workers=workers, address=address,
             command=_command_line(),
         )  # fmt: skip
-    except UsageError as exc:
-        _fail(str(exc))
     except KeyboardInterrupt:
         _interrupted()
     _print_outcomes(outcomes, runs_dir)
@@ -673,10 +622,7 @@ def convert_run(
     Loading the old files executes whatever they hold: convert only runs you trust."""
     from drivelab.training.convert import convert_run as convert
 
-    try:
-        written = convert(run_dir)
-    except UsageError as exc:
-        _fail(str(exc))
+    written = convert(run_dir)
     for path in written:
         typer.echo(f"rewrote {path}")
     typer.echo(f"run directory: {run_dir}  ({'converted' if written else 'already in the safe format'})")
@@ -693,10 +639,7 @@ def export(
     itself never reads the exported file; its runs keep their pickle-free format."""
     from drivelab.training.export import export_sb3
 
-    try:
-        written, sb3_class = export_sb3(run_dir, out)
-    except UsageError as exc:
-        _fail(str(exc))
+    written, sb3_class = export_sb3(run_dir, out)
     typer.echo(f"wrote {written}: stable_baselines3.{sb3_class}.load({str(written)!r}) reads it")
 
 
@@ -718,12 +661,9 @@ def benchmark_nocrash(
     from drivelab.training.nocrash import nocrash, report_markdown
     from drivelab.training.zoo import report_dir, resolve
 
-    try:
-        path, _ = resolve(run_dir)
-        out_dir = report_dir(run_dir, out)
-        report = nocrash(path, town=town, episodes=episodes, infraction_level=level, out_dir=out_dir)
-    except UsageError as exc:
-        _fail(str(exc))
+    path, _ = resolve(run_dir)
+    out_dir = report_dir(run_dir, out)
+    report = nocrash(path, town=town, episodes=episodes, infraction_level=level, out_dir=out_dir)
     typer.echo(report_markdown(report))
 
 
@@ -745,12 +685,9 @@ def train_lane(
     from drivelab.training.lane_dataset import train_lane_detector
 
     torch.set_num_threads(min(2, torch.get_num_threads()))
-    try:
-        summary = train_lane_detector(
-            frames=frames, epochs=epochs, seed=seed, out=out or WEIGHTS_PATH, log=typer.echo
-        )
-    except UsageError as exc:
-        _fail(str(exc))
+    summary = train_lane_detector(
+        frames=frames, epochs=epochs, seed=seed, out=out or WEIGHTS_PATH, log=typer.echo
+    )
     size_kib, seconds = summary["bytes"] / 1024, summary["seconds"]
     typer.echo(f"weights: {summary['weights']} ({size_kib:.0f} KiB, trained in {seconds:.0f} s)")
 
@@ -784,34 +721,27 @@ def maps(
     from drivelab.scenarios.blocks.gallery import draw_gallery
     from drivelab.scenarios.blocks.spawn import MapSet
 
-    try:
-        if out.suffix.lower() != ".png" or out.is_dir():
-            raise UsageError(f"--out {str(out)!r} must name a .png file")
-        start, count = _map_seeds(seeds)
-        spec = int(map_spec) if map_spec.strip().isdigit() else map_spec
-        config = {"map": spec, "start_seed": start, "num_scenarios": count}
-        map_set = MapSet.from_config({**config, "lane_count": lane_count or None})
-        if columns < 1:
-            raise UsageError("--columns must be >= 1")
-        rows = -(-count // columns)
-        if max(rows, columns) > GALLERY_MAX_SIDE_MAPS:
-            raise UsageError(
-                f"--seeds {seeds!r} with --columns {columns} draws a gallery of {rows} x {columns} maps: at "
-                f"most {GALLERY_MAX_SIDE_MAPS} a side fit in one PNG (matplotlib's 65,536 pixels)"
-            )
-        path = draw_gallery([map_set.generate(seed) for seed in range(start, start + count)], out, columns)
-    except UsageError as exc:
-        _fail(str(exc))
+    if out.suffix.lower() != ".png" or out.is_dir():
+        raise UsageError(f"--out {str(out)!r} must name a .png file")
+    start, count = _map_seeds(seeds)
+    spec = int(map_spec) if map_spec.strip().isdigit() else map_spec
+    config = {"map": spec, "start_seed": start, "num_scenarios": count}
+    map_set = MapSet.from_config({**config, "lane_count": lane_count or None})
+    if columns < 1:
+        raise UsageError("--columns must be >= 1")
+    rows = -(-count // columns)
+    if max(rows, columns) > GALLERY_MAX_SIDE_MAPS:
+        raise UsageError(
+            f"--seeds {seeds!r} with --columns {columns} draws a gallery of {rows} x {columns} maps: at "
+            f"most {GALLERY_MAX_SIDE_MAPS} a side fit in one PNG (matplotlib's 65,536 pixels)"
+        )
+    path = draw_gallery([map_set.generate(seed) for seed in range(start, start + count)], out, columns)
     typer.echo(f"gallery: {path}")
 
 
 def main() -> None:
     """Entry point of the ``drivelab`` console script."""
-    try:
-        app()
-    except UsageError as exc:  # raised outside a command's own handler
-        typer.echo(error_line(str(exc)), err=True)
-        sys.exit(2)
+    app()
 
 
 if __name__ == "__main__":

@@ -2,7 +2,5 @@
 
 
 class UsageError(ValueError):
-    """Bad input from the user (unknown name, impossible combination, malformed file).
-
-    The CLI prints ``error: <message>`` and exits with code 2, before writing anything.
-    """
+    """Bad input from the user (unknown name, impossible combination, malformed file): the CLI
+    prints ``error: <message>`` and exits with code 2, before writing anything."""

@@ -1,19 +1,10 @@
 """One instruction set for numbers that must agree across x86-64 machines.
 
-numpy, OpenBLAS, oneDNN, torch's own kernels and numba each pick their vector code at run time:
-AVX-512 where the CPU has it, AVX2 elsewhere. The two round differently (another order of the
-same sums, other polynomial kernels), so a shipped agent driving its check episodes on an
-AVX-512 machine acts a few float32 ulps apart from the same agent on an AVX2 machine, and a
-3-episode mean moves by about 1e-3 (``town-dagger``'s ``std_return``: 32.9196 on AVX-512,
-32.9626 on an AVX2 EPYC).
-
-``PINNED_ISA`` caps every one of them at AVX2 (plus one thread each, so that no reduction is split
-differently), which every x86-64 machine that runs drivelab's CI has. A number recorded and
-checked under it is the same on either kind of CPU: on an AVX-512 EPYC, ``town-dagger``'s check
-under it gives 32.96262951516252, the value an AVX2 EPYC measures natively, bit for bit. The
-variables are read when each library loads, so the pin applies to a fresh process only:
-``call_pinned`` runs a function in one and returns its JSON result. On an AVX2 machine the pin
-changes no result.
+numpy, OpenBLAS, oneDNN, torch and numba pick AVX-512 or AVX2 code at run time, which round
+differently: an agent's check episodes give numbers a few float32 ulps apart on the two kinds of
+CPU. ``PINNED_ISA`` caps every one of them at AVX2 (and one thread each), so a number recorded and
+checked under it is the same on both. The variables are read when each library loads, so
+``call_pinned`` runs a function in a fresh process and returns its JSON result.
 
     python -m drivelab.isa MODULE:FUNCTION [ARG ...]   # prints the function's result as JSON
 """
@@ -51,10 +42,8 @@ def pinned_environ(environ: dict[str, str] | None = None) -> dict[str, str]:
 
 
 def code_paths() -> dict[str, str]:
-    """The vector code each library of this process runs: numpy's widest dispatched feature
-    enabled, torch's kernels' capability, numba's target CPU (``"x86-64 AVX-512"`` machines read
-    ``X86_V4``, ``AVX512``, a ``znver4``-like name; under ``PINNED_ISA``, ``X86_V3``, ``AVX2``,
-    ``haswell``)."""
+    """The vector code each library of this process runs: numpy's widest enabled feature, torch's
+    kernels' capability, numba's target CPU."""
     import llvmlite.binding
     import torch
     from numba.core import config

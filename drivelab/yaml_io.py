@@ -1,8 +1,5 @@
-"""YAML read as drivelab reads it everywhere: run configs, sweeps, ``-H`` values, sensor options.
-
-The bottom layer: it imports nothing of drivelab but its errors, so perception's sensor specs and
-the run config share one loader.
-"""
+"""YAML read as drivelab reads it everywhere: run configs, sweeps, ``-H`` values, sensor options. It
+imports nothing of drivelab but its errors."""
 
 from __future__ import annotations
 
@@ -13,10 +10,8 @@ import yaml
 
 from drivelab.errors import UsageError
 
-# What a file drivelab reads may hold. Its own files are small and shallow (a sweep with overrides
-# nests 5 levels, the largest shipped file is 5 KB); the bounds stop, before anything is built from
-# the nodes, a file that would take minutes and gigabytes: a few hundred bytes of anchors whose
-# aliases expand to 10^8 values ("billion laughs"), or brackets nested deeper than Python recurses.
+# What a file drivelab reads may hold: far more than its own files need, far less than a "billion
+# laughs" of aliases or brackets nested deeper than Python recurses.
 MAX_YAML_BYTES = 1 << 20
 MAX_YAML_DEPTH = 64
 MAX_YAML_VALUES = 100_000  # scalars, lists and mappings, every alias counted as what it repeats

@@ -15,11 +15,9 @@ def reward_variants(rewards: list[str] | None, drop_terms: list[str] | None, bas
     """The rewards to train under.
 
     :param rewards: explicit reward specs (presets or ``term=weight`` lists), used as given.
-    :param drop_terms: terms of ``base_reward`` to drop one at a time; the variants are
-        ``base_reward`` itself followed by ``"<base_reward>,<term>=0"`` for each term (the term's
-        own weight in ``base_reward``, if it gives one, left out).
-    :param base_reward: the reward that ``drop_terms`` refers to.
-    """
+    :param drop_terms: terms of ``base_reward`` to drop one at a time: ``base_reward`` itself, then
+        ``"<base_reward>,<term>=0"`` for each term.
+    :param base_reward: the reward that ``drop_terms`` refers to."""
     if bool(rewards) == bool(drop_terms):
         raise UsageError("give exactly one of --rewards or --drop-terms")
     if rewards:
@@ -43,8 +41,7 @@ def reward_variants(rewards: list[str] | None, drop_terms: list[str] | None, bas
 
 
 def _dropped(reward: str, term: str) -> str:
-    """``"<reward>,<term>=0"``, without the weight ``reward`` itself gives ``term`` (a term given
-    twice is refused)."""
+    """``"<reward>,<term>=0"``, without the weight ``reward`` itself gives ``term``."""
     items = [item.strip() for item in reward.split(",") if item.strip()]
     kept = [item for item in items if "=" not in item or item.partition("=")[0].strip() != term]
     return ",".join([*kept, f"{term}=0"]) if len(kept) < len(items) else f"{reward},{term}=0"
@@ -95,15 +92,11 @@ def ablate(
     address: str | None = None,
     command: str | None = None,
 ) -> tuple[Path | None, list[dict]]:
-    """Run a reward ablation and write its comparison report.
-
-    Validates everything first, runs the grid as a sweep (finished runs are skipped on a re-run),
-    then compares the runs. Returns (report directory, sweep outcomes); the report is None when
-    a run failed.
+    """Run a reward ablation as a sweep (finished runs skipped on a re-run) and compare its runs;
+    (report directory, sweep outcomes), the report None when a run failed.
 
     :param out_dir: report directory (default ``reports/ablate-<algo>-<env>``).
-    :param command: the command line, quoted in the report.
-    """
+    :param command: the command line, quoted in the report."""
     variants = reward_variants(rewards, drop_terms, base_reward)
     spec = ablation_spec(env, algo, variants, seeds, steps, base, eval_episodes)
     sweep = expand_sweep(spec, runs_dir)

@@ -1,9 +1,4 @@
-"""A run directory's checkpoints and final model: written, verified and loaded.
-
-``checkpoints/latest.zip`` (+ ``replay.npz``) is written with a manifest ``latest.json`` (steps,
-sha256, config identity); the manifest's sha256 only detects a truncated or corrupted checkpoint.
-Nothing is unpickled when a model is loaded (``agents/storage.py``).
-"""
+"""A run directory's checkpoints and final model: written, verified and loaded (nothing unpickled)."""
 
 from __future__ import annotations
 
@@ -37,11 +32,9 @@ def file_sha256(path: Path) -> str:
 def save_checkpoint(model, run_dir: Path, config: RunConfig, save_replay: bool) -> Path:
     """Write checkpoints/latest.zip (and replay.npz) with a manifest that lets resume verify them.
 
-    Every file is written into a temporary created for it (``safe_files.temporary_file``: never
-    through a link) and renamed only when all are written, the manifest last: a failed write (disk
-    full, read-only) removes the temporary files, keeps the previous checkpoint valid and raises a
-    one-line UsageError. A kill between the renames leaves the new manifest beside the new model;
-    ``verify_checkpoint`` finishes the renames (``_finish_renames``)."""
+    Every file is written into a temporary and renamed only when all are written, the manifest last:
+    a failed write keeps the previous checkpoint and is a one-line UsageError. A kill between the
+    renames is finished by ``verify_checkpoint`` (``_finish_renames``)."""
     folder = run_dir / "checkpoints"
     what = f"checkpoint in {str(folder)!r}"
     renames = {folder / "latest.tmp.zip": folder / "latest.zip"}
@@ -84,11 +77,9 @@ def save_checkpoint(model, run_dir: Path, config: RunConfig, save_replay: bool) 
 
 
 def _finish_renames(folder: Path) -> None:
-    """Finish a checkpoint whose renames a kill cut short (``save_checkpoint`` renames the model,
-    the replay, then the manifest): when the written manifest ``latest.tmp.json`` is the one of
-    the model already renamed, rename the replay and the manifest too. Every file was whole then,
-    so this changes no content; otherwise (killed before the first rename) nothing is done and the
-    previous checkpoint stands."""
+    """Finish a checkpoint whose renames a kill cut short: when ``latest.tmp.json`` is the manifest
+    of the model already renamed, rename the replay and the manifest too; otherwise the previous
+    checkpoint stands."""
     pending, model = folder / "latest.tmp.json", folder / "latest.zip"
     if not pending.is_file() or not model.is_file():
         return
@@ -107,9 +98,7 @@ def _finish_renames(folder: Path) -> None:
 
 
 def _replay_fits(model) -> bool:
-    """Whether the model has a replay buffer small enough to checkpoint (``REPLAY_LIMIT_BYTES``, or
-    the model's own ``replay_checkpoint_limit_bytes``: RLAD's, whose long runs resume exactly only
-    with their replay)."""
+    """Whether the model's replay buffer is small enough to checkpoint (``REPLAY_LIMIT_BYTES``)."""
     if getattr(model, "replay_buffer", None) is None:
         return False
     observations = model.replay_buffer.observations  # a dict of arrays for Dict observations
@@ -127,10 +116,7 @@ def old_format_error(run_dir: Path) -> UsageError:
 
 
 def verify_checkpoint(run_dir: Path, config: RunConfig) -> dict:
-    """The checkpoint manifest, after checking the file is whole and belongs to ``config``.
-
-    The sha256 detects a truncated or corrupted file only: it is stored beside the file, so it
-    proves nothing against tampering (loading never executes code, whatever the file holds)."""
+    """The checkpoint manifest, once the file is checked whole and of ``config``."""
     folder = run_dir / "checkpoints"
     manifest_path, model_path = folder / "latest.json", folder / "latest.zip"
     _finish_renames(folder)
@@ -154,11 +140,8 @@ def verify_checkpoint(run_dir: Path, config: RunConfig) -> dict:
 
 def check_trained_config(run_dir: Path, config: RunConfig) -> None:
     """A UsageError when ``config`` (the run's config.yaml) is not the config its checkpoint
-    manifest records (``config_identity``, written while it trained): config.yaml was edited after
-    training (traffic, n_envs, sensors), and an evaluation would run under settings the model was
-    not trained or reported with. A run without a readable manifest (a shipped agent, a packed
-    model) has nothing to be checked against. Like the sha256, this finds edits and accidents;
-    someone rewriting the manifest too is not stopped."""
+    manifest recorded while it trained: config.yaml was edited after training. A run without a
+    readable manifest (a shipped agent) is not checked."""
     try:
         recorded = json.loads((run_dir / "checkpoints" / "latest.json").read_text())["config_identity"]
     except (OSError, ValueError, KeyError, TypeError):
@@ -180,8 +163,7 @@ def model_path(run_dir: Path, config: RunConfig) -> Path:
 
 
 def load_agent(run_dir: Path, config: RunConfig, env=None, path: Path | None = None):
-    """The agent of ``path`` (default ``model_path``), rebuilt from the run's config on ``env``
-    (default: the config's evaluation environment, whose spaces must be the saved ones)."""
+    """The agent of ``path`` (default ``model_path``) on ``env`` (default: the evaluation env)."""
     from drivelab.envs.core import DriveEnv
 
     spec = get_algo(config.algo)

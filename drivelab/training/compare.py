@@ -1,17 +1,9 @@
-"""Comparisons: read run directories (never re-train), group them over seeds, write a report.
+"""Comparisons: read run directories (never re-train), group them over seeds, write a report
+directory (report.md, summary.csv, runs.csv, learning_curves.png, metrics.png and
+report-manifest.json; see docs/compare.md).
 
-A report directory holds::
-
-    report.md            per-metric tables: mean, 90 % bootstrap interval, IQM over seeds
-    summary.csv          the same numbers, one row per (group, metric)
-    runs.csv             every run's own final metrics, with where they came from
-    learning_curves.png  periodic-evaluation return against steps, mean over seeds with a 90 % band
-    metrics.png          bar charts of the main metrics (mean, interval, IQM, each seed)
-    report-manifest.json the files above: all that a later report in the same place may replace
-
-A run's final metrics come from its ``eval.json`` (``drivelab evaluate``) when it has one, else
-from the last row of its ``evaluations.csv``.
-"""
+A run's final metrics come from its ``eval.json`` when it has one, else from the last row of its
+``evaluations.csv``."""
 
 from __future__ import annotations
 
@@ -38,7 +30,7 @@ from drivelab.scenarios import SCENARIOS
 from drivelab.training.evaluate import load_run_config
 from drivelab.training.metrics import METRICS as REGISTRY
 from drivelab.training.metrics import labels
-from drivelab.training.safe_files import remove_file, write_failure
+from drivelab.training.safe_files import remove_empty_folders, remove_file, write_failure
 from drivelab.training.stats import CONFIDENCE, Summary, summarize
 from drivelab.training.stats import percent as percent_of
 
@@ -80,25 +72,17 @@ class RunRecord:
 
 def group_key(config: RunConfig) -> tuple[str, ...]:
     """(algorithm, scenario, sensors, reward, action[, hyper-parameter changes]): runs that differ
-    only in seed share it. Hyper-parameters that differ from the algorithm's shipped values for the
-    scenario (``drivelab/hyperparams``) are a sixth part, ``key=value,…`` (ablations such as
-    ``alix=False``); runs on the shipped values have five parts."""
+    only in seed share it. Hyper-parameters that differ from the shipped ones are a sixth part,
+    ``key=value,…``."""
     key = (config.algo, config.env, ",".join(config.obs), config.reward, config.action)
     shipped = shipped_hyperparams(config.algo, config.env)
     changed = {k: v for k, v in sorted(config.hyperparams.items()) if k not in shipped or shipped[k] != v}
     return key + (",".join(f"{k}={v}" for k, v in changed.items()),) if changed else key
 
 
-def group_label(key: tuple[str, ...]) -> str:
-    """A short readable name of a group, e.g. ``ppo | highway | kinematics | highway | meta``."""
-    return " | ".join(key)
-
-
 def find_runs(patterns: Iterable[str | Path]) -> list[Path]:
-    """Run directories named by paths or glob patterns (``runs/*``), in order, without repeats.
-
-    A pattern that matches no run directory, or a path that is not one, raises UsageError.
-    """
+    """Run directories named by paths or glob patterns (``runs/*``), in order, without repeats; a
+    UsageError for a pattern that matches none or a path that is not one."""
     found: list[Path] = []
     for pattern in patterns:
         text = str(pattern)
@@ -124,9 +108,9 @@ def _float_or_none(value) -> float | None:
 
 
 def _final_metrics(values: dict, path: Path) -> dict:
-    """The ``METRICS`` of ``values`` (a row or eval.json) as floats or None, or a UsageError naming
-    the file and the metric: text, NaN or an infinity (JSON's ``NaN``, ``Infinity``), a rate outside
-    [0, 1] or a negative count, none of which an evaluation writes."""
+    """The ``METRICS`` of ``values`` (a row or eval.json) as floats or None; a UsageError naming the
+    file and the metric for a value no evaluation writes (text, NaN, infinity, a rate outside [0,
+    1], a negative count)."""
     final = {}
     for key in METRICS:
         given = values.get(key)
@@ -145,8 +129,7 @@ def _final_metrics(values: dict, path: Path) -> dict:
 
 
 def read_evaluations(path: Path) -> tuple[list[tuple[int, float]], dict]:
-    """(step, mean return) of every row of an evaluations.csv, and its last row; a file that
-    drivelab did not write (no header, missing fields, text for numbers) is a UsageError."""
+    """(step, mean return) of every row of an evaluations.csv, and its last row."""
     curve: list[tuple[int, float]] = []
     last_row: dict = {}
     try:
@@ -171,9 +154,7 @@ def read_evaluations(path: Path) -> tuple[list[tuple[int, float]], dict]:
 
 
 def last_evaluation(run_dir: Path) -> dict | None:
-    """A run's last periodic evaluation: the last row of its evaluations.csv, numbers as numbers
-    (None where a metric is empty: a scenario without routes has no route completion); None when
-    it has none."""
+    """A run's last periodic evaluation (numbers as numbers, None where empty), or None."""
     path = Path(run_dir) / "evaluations.csv"
     _, row = read_evaluations(path) if path.is_file() else ([], {})
     if not row:
@@ -183,8 +164,7 @@ def last_evaluation(run_dir: Path) -> dict | None:
 
 
 def _check_names(config: RunConfig, path: Path) -> None:
-    """A UsageError when a run's config names an algorithm or a scenario drivelab does not have
-    (an edited or foreign config.yaml): its group would be a label of nothing."""
+    """A UsageError when a run's config names an algorithm or a scenario drivelab does not have."""
     from drivelab.agents.registry import ALGORITHMS
 
     if config.algo not in ALGORITHMS:
@@ -227,9 +207,8 @@ def load_run(run_dir: str | Path) -> RunRecord:
 
 
 def conditions(config: RunConfig) -> dict[str, str]:
-    """What a run was trained and evaluated on beside its scenario: the traffic level, the
-    simulator ("auto" read as the one it picks), each environment option and the evaluation maps,
-    as printable values."""
+    """What a run was trained and evaluated on beside its scenario: traffic, simulator ("auto" read
+    as the one it picks), environment options and evaluation maps, as printable values."""
     backend = config.backend
     if backend == "auto" and config.env in SCENARIOS:
         backend = "fast" if SCENARIOS[config.env].fast_backend else "highway"
@@ -242,10 +221,9 @@ def conditions(config: RunConfig) -> dict[str, str]:
 
 
 def _scenario_labels(records: Sequence[RunRecord]) -> list[str]:
-    """Each run's scenario as its group shows it: the name, followed by the ``conditions`` and the
-    training budget (``steps``) that differ among ``records`` (``highway (traffic=dense)``,
-    ``highway (steps=100000)``), so that runs of different traffic, options, simulators or budgets
-    are different groups and say how; the scenario alone where all agree."""
+    """Each run's scenario as its group shows it: the name, followed by the ``conditions`` and
+    ``steps`` that differ among ``records`` (``highway (traffic=dense)``); the name alone where all
+    agree."""
     values = [{**conditions(record.config), "steps": str(record.config.steps)} for record in records]
     names = dict.fromkeys(name for value in values for name in value)
     varying = [name for name in names if len({value.get(name, "default") for value in values}) > 1]
@@ -257,16 +235,10 @@ def _scenario_labels(records: Sequence[RunRecord]) -> list[str]:
 
 
 def group_runs(records: Sequence[RunRecord]) -> dict[tuple[str, ...], list[RunRecord]]:
-    """Runs grouped by ``group_key``, groups in order of first appearance, runs sorted by seed.
-    Runs whose ``conditions`` differ (traffic, environment options, simulator, evaluation maps)
-    are different groups, their scenario labelled with them (``_scenario_labels``).
-
-    Runs of different training budgets are different groups, as rliable's and RL Zoo's
-    comparisons are made at one budget: a final score after 10,000 steps and one after 100,000
-    are not samples of one quantity (the report says so). Two runs of one config, seed and step
-    budget (a copied run directory, one run named by two paths) are one sample of a deterministic
-    run, not two: a UsageError naming them. Runs of one seed and budget that differ otherwise (the
-    evaluation episodes) share a group, with a warning in the report."""
+    """Runs grouped by ``group_key``, groups in order of first appearance, runs sorted by seed. Runs
+    whose ``conditions`` or training budgets differ are different groups, their scenario labelled
+    with the difference (``_scenario_labels``). Two runs of one config, seed and budget are one
+    sample, not two: a UsageError naming them."""
     groups: dict[tuple[str, ...], list[RunRecord]] = {}
     seen: dict[tuple[str, int], RunRecord] = {}
     scenarios = dict(zip((id(record) for record in records), _scenario_labels(records), strict=True))
@@ -405,15 +377,12 @@ def _markdown(
 
 
 def _group_columns(key: tuple[str, ...]) -> dict[str, str]:
-    """A group key as CSV columns: the five ``GROUP_FIELDS`` and ``hyperparams``, the changed
-    hyper-parameters as one field (``key=value,…``, ``SHIPPED`` on the shipped values)."""
+    """A group key as CSV columns: the ``GROUP_FIELDS`` and ``hyperparams`` (or ``SHIPPED``)."""
     return {**dict(zip(GROUP_FIELDS, key[:5], strict=True)), HYPERPARAMS_FIELD: ",".join(key[5:]) or SHIPPED}
 
 
 def _write_csvs(folder: Path, groups, summaries) -> None:
-    """summary.csv (one row per group and metric) and runs.csv (one row per run), written by pandas
-    with their columns named up front, so every row has exactly the header's fields. A metric a run
-    does not report is an empty field in runs.csv."""
+    """summary.csv (one row per group and metric) and runs.csv (one row per run)."""
     import pandas as pd
 
     summary = [
@@ -446,9 +415,7 @@ TMP_PREFIX = ".report.tmp-"  # the folder a report is written into before its fi
 
 
 def _is_report_tmp(folder: Path) -> bool:
-    """Whether ``folder`` is one that ``publish_dir`` writes a report into: a folder (not a link)
-    named ``TMP_PREFIX…`` holding nothing but files of a report. A user's folder of that name
-    holding anything else is not."""
+    """Whether ``folder`` is a ``TMP_PREFIX…`` folder (not a link) holding only files of a report."""
     if not folder.name.startswith(TMP_PREFIX) or folder.is_symlink() or not folder.is_dir():
         return False
     try:
@@ -461,15 +428,13 @@ def _is_report_tmp(folder: Path) -> bool:
 
 
 def _tmp_folders(out_dir: Path) -> list[Path]:
-    """The folders in ``out_dir`` that ``publish_dir`` writes reports into: of a report being
-    written now (locked), or left by one killed while it wrote (SIGKILL: no cleanup)."""
+    """The folders in ``out_dir`` that ``publish_dir`` writes reports into."""
     return sorted(p for p in out_dir.iterdir() if _is_report_tmp(p))
 
 
 def _remove_stale_tmp_folders(out_dir: Path, keep: Path) -> None:
-    """Remove the temporary folders of reports killed while they were written: their report files,
-    then the folder once empty. A folder that another process is writing a report into holds a
-    lock (``publish_dir``) and stays, as does one that holds anything else."""
+    """Remove the temporary folders of reports killed while they were written; one that another
+    process holds locked (``publish_dir``), or that holds anything else, stays."""
     for folder in _tmp_folders(out_dir):
         if folder == keep:
             continue
@@ -480,9 +445,7 @@ def _remove_stale_tmp_folders(out_dir: Path, keep: Path) -> None:
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
-            # BlockingIOError: a report being written now. Any other error: a file system without
-            # locks (on NFS an exclusive flock needs a descriptor open for writing, which a folder's
-            # cannot be): whether it is in use cannot be told, so it stays (it blocks no report)
+            # a report being written now, or a file system without locks (NFS): it stays
             os.close(handle)
             continue
         try:
@@ -496,10 +459,8 @@ def _remove_stale_tmp_folders(out_dir: Path, keep: Path) -> None:
 
 
 def _new_tmp_folder(out_dir: Path) -> tuple[Path, int]:
-    """A new temporary folder in ``out_dir`` for ``publish_dir``, and a descriptor of it holding its
-    lock, so that another report's ``_remove_stale_tmp_folders`` leaves it alone. A folder that such
-    a cleanup removed between its creation and its lock is replaced by a new one. On a file system
-    without locks the folder is not locked (and no cleanup removes it)."""
+    """A new temporary folder in ``out_dir`` for ``publish_dir`` and a descriptor of it holding its
+    lock (none on a file system without locks), so that another report's cleanup leaves it alone."""
     while True:
         tmp = Path(tempfile.mkdtemp(prefix=TMP_PREFIX, dir=out_dir))
         try:
@@ -522,10 +483,8 @@ def _new_tmp_folder(out_dir: Path) -> tuple[Path, int]:
 
 
 def previous_report_files(out_dir: Path) -> list[str] | None:
-    """The names of the files a previous drivelab report wrote into ``out_dir`` (its manifest
-    included), None when ``out_dir`` holds no drivelab report. A report from before the manifest
-    existed is recognised by its report.md and owns only the files every report had. A manifest
-    naming anything but a report's files is not drivelab's: a UsageError, nothing is removed."""
+    """The files a previous drivelab report wrote into ``out_dir`` (its manifest included), None
+    when it holds none; a manifest naming anything but a report's files is a UsageError."""
     manifest = out_dir / MANIFEST
     if manifest.is_file():
         try:
@@ -547,8 +506,7 @@ def previous_report_files(out_dir: Path) -> list[str] | None:
 
 
 def _check_out_dir(out_dir: Path) -> list[str]:
-    """The previous report's files in ``out_dir`` (empty when there is none), or a UsageError when
-    writing there could delete or overwrite a file that drivelab did not write."""
+    """The previous report's files in ``out_dir``; a UsageError where writing could harm other files."""
     if not out_dir.exists():
         return []
     if not out_dir.is_dir():
@@ -573,13 +531,9 @@ def publish_dir(out_dir: Path, fill) -> Path:
     """Write a report with ``fill(folder)`` into a temporary folder inside ``out_dir``, then move
     its files into ``out_dir`` and list them in ``report-manifest.json``.
 
-    A failure while filling leaves ``out_dir`` as it was; a failed write (a full disk) is one
-    line. Of a previous report only the files its manifest lists, all files a report writes, are
-    replaced or removed; other files in ``out_dir`` are never touched, and a non-empty ``out_dir``
-    without a report is refused. The temporary folder of a report killed while it was written
-    (SIGKILL: no cleanup) is not the user's: it does not make ``out_dir`` foreign, and the next
-    report removes its files and then it.
-    """
+    A failure leaves ``out_dir`` as it was (a failed write is one line). Of a previous report only
+    the files its manifest lists are replaced or removed; a non-empty ``out_dir`` without a report
+    is refused. The temporary folder of a killed report is removed by the next one."""
     out_dir = Path(out_dir)
     previous = _check_out_dir(out_dir)
     created = [p for p in (out_dir, *out_dir.parents) if not p.exists()]
@@ -588,7 +542,7 @@ def publish_dir(out_dir: Path, fill) -> Path:
         # locked while in use: a later report removes it only if this process was killed meanwhile
         tmp, lock = _new_tmp_folder(out_dir)
     except OSError as exc:
-        _remove_empty(created)
+        remove_empty_folders(created)
         raise write_failure(exc, out_dir, what=f"a report in {str(out_dir)!r}") from None
     try:
         fill(tmp)
@@ -604,7 +558,7 @@ def publish_dir(out_dir: Path, fill) -> Path:
         os.replace(tmp / MANIFEST, out_dir / MANIFEST)
     except BaseException as exc:
         shutil.rmtree(tmp, ignore_errors=True)
-        _remove_empty(created)
+        remove_empty_folders(created)
         if isinstance(exc, OSError):  # a full disk, most often
             raise write_failure(exc, out_dir, what=f"a report in {str(out_dir)!r}") from None
         raise
@@ -613,13 +567,6 @@ def publish_dir(out_dir: Path, fill) -> Path:
     shutil.rmtree(tmp, ignore_errors=True)
     _remove_stale_tmp_folders(out_dir, keep=tmp)
     return out_dir
-
-
-def _remove_empty(folders: list[Path]) -> None:
-    """Remove the folders this call created (innermost first), if they are still empty."""
-    for folder in folders:
-        if folder.is_dir() and not any(folder.iterdir()):
-            folder.rmdir()
 
 
 def write_report(
@@ -657,8 +604,7 @@ def compare(
     :param out_dir: report directory to (re)write.
     :param title: heading of report.md.
     :param command: the command line that made the report, quoted in report.md.
-    :param confidence: coverage of the bootstrap intervals (0.9: 90 %).
-    """
+    :param confidence: coverage of the bootstrap intervals (0.9: 90 %)."""
     if not 0.0 < confidence < 1.0:
         raise UsageError(f"--confidence must be between 0 and 1, got {confidence}")
     records = [load_run(path) for path in find_runs(runs)]

@@ -24,12 +24,9 @@ def short_labels(keys: list[tuple[str, ...]]) -> list[str]:
 
 
 def aligned_curves(curves: list[list[tuple[int, float]]]) -> tuple[np.ndarray, np.ndarray]:
-    """Put runs evaluated at different steps on one grid.
-
-    The grid is every evaluation step of any run between the first step that every run has
-    evaluated and the last step that all runs reached; each run is linearly interpolated onto it,
-    never extrapolated. Returns (steps, values of shape runs × steps).
-    """
+    """Put runs evaluated at different steps on one grid: every evaluation step of any run between
+    the first step every run has and the last step all runs reached, each run interpolated linearly,
+    never extrapolated. Returns (steps, values of shape runs × steps)."""
     curves = [c for c in curves if c]
     if not curves:
         return np.zeros(0, dtype=int), np.zeros((0, 0))

@@ -1,11 +1,8 @@
 """``drivelab convert-run``: rewrite a trusted run directory of the old pickle format.
 
-Earlier drivelab versions saved SB3 models with SB3's ``save`` (cloudpickled entries in the zip),
-own agents with pickled spaces and ``torch.load(weights_only=False)`` state, and replays as
-pickles. Loading those can execute code, so drivelab refuses them everywhere else; this module is
-the one place that unpickles, and only for a directory the user names and trusts. It loads each
-old file the old way and writes it again in the safe format (``agents/storage.py``).
-"""
+Loading the pickles of earlier drivelab versions can execute code, so drivelab refuses them
+everywhere else; this module, the one place that unpickles, loads each old file the old way and
+writes it again in the safe format (``agents/storage.py``), for a directory the user trusts."""
 
 from __future__ import annotations
 

@@ -1,16 +1,11 @@
 """Divergence: a run whose weights became NaN or infinite stops at once, keeping its last finite
 checkpoint.
 
-A diverged network acts on NaN (a DQN's argmax of NaN Q-values is action 0, no error), so nothing
-else would stop the run before its next checkpoint refused to save it. ``RunCallback`` therefore
-looks at the weights (``non_finite_weights``) at its safe points, at most once per
-``CHECK_EVERY_STEPS`` steps, on a fixed grid of steps (a resumed run checks where the
-uninterrupted one did), and before every periodic evaluation and checkpoint. A non-finite loss
-reaches the weights in the update that computed it (its gradient is NaN or infinite; clipping
-by a NaN norm keeps it NaN), so it is found there too. Q-learning's table is numpy, not looked
-at: with 0 < α <= 1 and γ <= 1 (checked) its values stay between the rewards' (γ < 1) or grow by
-at most the reward per update, finite. The rule-based expert learns nothing.
-"""
+A diverged network acts on NaN without an error, so ``RunCallback`` looks at the weights
+(``non_finite_weights``) at its safe points, at most once per ``CHECK_EVERY_STEPS`` steps on a fixed
+grid of steps (a resumed run checks where the uninterrupted one did), and before every periodic
+evaluation and checkpoint. Q-learning's table is not looked at: with 0 < α <= 1 and γ <= 1 (checked)
+its values stay finite."""
 
 from __future__ import annotations
 
@@ -21,17 +16,14 @@ import torch
 from drivelab.config import RunConfig
 from drivelab.errors import UsageError
 
-# At most one check per this many steps. A check reads every weight once: 0.04-0.1 ms for the MLPs,
-# 0.1-0.4 ms for the CNNs and the dueling DQN, 1.2 ms for RLAD's 7.7 M weights (one CPU thread),
-# against 100 training steps of 70 ms or more: under 0.1 % of a run, where a check at every step
-# would cost 2-8 % (benchmarks/results/divergence_check.md).
+# at most one check per this many steps: under 0.1 % of a run (benchmarks/results/divergence_check.md)
 CHECK_EVERY_STEPS = 100
 
 
 def model_weights(model) -> list[tuple[str, torch.Tensor]]:
     """(name, tensor) of every floating-point weight of ``model``, each once: the parameters and
-    buffers of its torch modules and its tensor attributes (SB3's ``log_ent_coef``, RLAD's
-    ``log_alpha``), named from the attribute that holds them (``policy.q_net.q_net.0.weight``)."""
+    buffers of its torch modules and its tensor attributes, named from the attribute that holds
+    them."""
     seen: set[int] = set()
     weights = []
     for attribute, value in vars(model).items():
@@ -49,12 +41,9 @@ def model_weights(model) -> list[tuple[str, torch.Tensor]]:
 
 
 def non_finite_weights(model) -> list[tuple[str, str]]:
-    """(name, "nan" or "inf") of each weight tensor of ``model`` holding a NaN or an infinity
-    (``model_weights`` order); empty when every weight is finite.
-
-    One sum per tensor and one device synchronisation: a NaN or an infinity makes a sum NaN or
-    infinite, so finite sums prove finite weights. Only when a sum is not finite (or overflowed)
-    is each tensor read element by element."""
+    """(name, "nan" or "inf") of each weight tensor of ``model`` holding a NaN or an infinity; empty
+    when every weight is finite. One sum per tensor: only a tensor whose sum is not finite is read
+    element by element."""
     weights = model_weights(model)
     by_device: dict[torch.device, list[torch.Tensor]] = {}
     for _, tensor in weights:
@@ -77,15 +66,14 @@ def remedy(model) -> str:
 
 
 class TrainingDiverged(UsageError):
-    """The network's weights (or the action distribution they give) became NaN or infinite:
-    training cannot go on. No checkpoint is written from such a model; the run keeps those before.
+    """The network's weights (or the action distribution they give) became NaN or infinite: training
+    cannot go on. No checkpoint is written from such a model.
 
     :param steps: the step at which it was found.
-    :param checkpoint_steps: the step of the run's latest checkpoint (all of them finite).
+    :param checkpoint_steps: the step of the run's latest (finite) checkpoint.
     :param found: ``non_finite_weights``; empty when the weights are finite but what they computed
-        is not (torch's check of a distribution's parameters).
-    :param remedy: ``remedy(model)``.
-    """
+        is not.
+    :param remedy: ``remedy(model)``."""
 
     def __init__(
         self,
@@ -116,8 +104,7 @@ class TrainingDiverged(UsageError):
 
 
 def raised_by_divergence(model, exc: Exception) -> bool:
-    """Whether ``exc``, raised while learning, comes from non-finite numbers: weights that are no
-    longer finite, or torch's check of a distribution's parameters (NaN logits from overflowing
-    weights) that found invalid values."""
+    """Whether ``exc``, raised while learning, comes from non-finite numbers: non-finite weights, or
+    torch's check of a distribution's parameters."""
     invalid_distribution = isinstance(exc, ValueError) and "found invalid values" in str(exc)
     return invalid_distribution or bool(non_finite_weights(model))

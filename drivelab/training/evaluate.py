@@ -19,8 +19,10 @@ from drivelab.training.metrics import labels
 from drivelab.training.safe_files import (
     check_folder,
     check_replaceable,
+    check_run_dir,
     locked_run,
     make_folder,
+    remove_empty_folders,
     remove_file,
     replacing,
     write_failure,
@@ -40,23 +42,17 @@ def run_episodes(
     side_by_side: bool | None = None,
     first: int = 0,
 ) -> tuple[list[dict], list[np.ndarray]]:
-    """Play ``episodes`` episodes; return each one's ``episode_metrics`` and, optionally, the
-    video frames of the first episode. ``on_episode`` is called with each episode's metrics,
-    ``on_frame`` (when given) with every frame of every episode (not kept).
+    """Play ``episodes`` episodes; return each one's ``episode_metrics`` and, with ``record_first``,
+    the video frames of the first episode (``envs/video.py``'s, one per simulation frame).
+    ``on_episode`` is called with each episode's metrics, ``on_frame`` with every frame of every
+    episode (not kept).
 
-    Frames are ``envs/video.py``'s, for people: one per simulation frame (``1 + frames per step
-    × steps`` per episode, played at ``video_fps(env)``), the scene along the road or the map from
-    above, with speed, action, reward and events written under it; an episode not recorded runs
-    its steps in one compiled call each, as in training.
-
-    :param seed: None: the scenario's evaluation set (episode seeds ``evaluation_seeds``: the
-        same episodes for every run, none of them a training episode); an int: episode e is the
-        first episode of the env seeded ``seed + e`` (a protocol's own seeds, as NoCrash's).
-    :param side_by_side: show the agent's image observation left of the scene; None: when it
-        has one (camera, birdeye, topdown).
-    :param first: with ``seed`` None, play evaluation episodes ``first`` … ``first + episodes −
-        1`` (``VALIDATION_START``: tuning's validation episodes).
-    """
+    :param seed: None: the scenario's evaluation episodes (``evaluation_seeds``, none of them a
+        training episode); an int: episode e is the first episode of the env seeded ``seed + e``.
+    :param side_by_side: show the agent's image observation left of the scene; None: when it has
+        one.
+    :param first: with ``seed`` None, play evaluation episodes ``first`` … (``VALIDATION_START``:
+        tuning's validation episodes)."""
     from drivelab.training.seeds import evaluation_seeds
 
     recorder = None
@@ -98,8 +94,7 @@ def run_episodes(
 
 
 def aggregate(results: list[dict]) -> dict[str, float]:
-    """Mean return ± std, success / crash rates, distance, speed, events per km (summed counts
-    over summed distance)."""
+    """Mean return ± std, success / crash rates, distance, speed, events per km."""
     returns = np.array([r["return"] for r in results], dtype=float)
     km = sum(r["distance_km"] for r in results)
     per_km = lambda key: sum(r.get(key, 0) for r in results) / km if km > 0 else None  # noqa: E731
@@ -135,10 +130,8 @@ def has_mp4_encoder() -> bool:
 
 
 def write_video(frames: list[np.ndarray], path: Path, fps: float) -> Path:
-    """Write frames as mp4 (imageio-ffmpeg), or as a gif where no mp4 encoder is installed;
-    ``fps``: ``video_fps(env)`` for ``run_episodes``' frames. The video is written whole into a
-    temporary in its folder (``safe_files.replacing``; the folder made if missing, never a link):
-    a failed write leaves nothing and is one line, naming a full disk."""
+    """Write frames as mp4, or as a gif where no mp4 encoder is installed, whole or not at all
+    (``safe_files.replacing``); a failed write is one line."""
     import imageio.v2 as imageio
 
     made = not path.parent.exists()
@@ -162,17 +155,13 @@ def write_video(frames: list[np.ndarray], path: Path, fps: float) -> Path:
 
 
 def report_name(maps: str | None = None) -> str:
-    """The file an evaluation writes: ``eval.json``, or ``eval-maps-START-COUNT.json`` on block maps
-    ``maps`` ("START:COUNT")."""
+    """``eval.json``, or ``eval-maps-START-COUNT.json`` on block maps ``maps`` ("START:COUNT")."""
     return "eval.json" if maps is None else "eval-maps-{}-{}.json".format(*parse_maps(maps))
 
 
 def load_run_config(run_dir: Path) -> RunConfig:
     """The resolved config of an existing run directory."""
-    if run_dir.exists() and not run_dir.is_dir():
-        raise UsageError(f"{str(run_dir)!r} is a file, not a run directory")
-    if not run_dir.is_dir():
-        raise UsageError(f"run directory {str(run_dir)!r} does not exist")
+    check_run_dir(run_dir)
     config_path = run_dir / "config.yaml"
     if not config_path.is_file():
         raise UsageError(f"{str(run_dir)!r} is not a drivelab run directory (no config.yaml)")
@@ -190,92 +179,73 @@ def evaluate_run(
     first: int = 0,
     progress: bool = False,
 ) -> dict:
-    """Evaluate the final model of ``run_dir`` (or its latest checkpoint); write eval.json (and
-    the video) into ``out_dir`` (default: the run directory; created if missing).
+    """Evaluate the final model of ``run_dir`` (or its latest checkpoint); write eval.json (and the
+    video) into ``out_dir`` (default: the run directory; created if missing).
 
-    :param maps: procedural maps only: ``"START:COUNT"``, play on the maps of seeds START …
-        START + COUNT − 1 instead of the run's evaluation maps (its ``eval_maps``, else its
-        training maps), and write ``eval-maps-START-COUNT.json`` instead of eval.json. Episode e
-        plays map START + (2**31 + e) mod COUNT, so COUNT episodes play each map once.
-    :param side_by_side: the video shows the agent's image observation beside the scene; None:
-        when it has one.
-    :param first: play evaluation episodes ``first`` … (``run_episodes``); the report says so
-        (``first_episode``) when it is not 0.
-    :param progress: show a progress bar of the episodes (on stderr).
-    """
-    if episodes < 1:
-        raise UsageError("--episodes must be >= 1")
-    run_dir = Path(run_dir)
-    with locked_run(run_dir, writes=out_dir is None):  # no evaluation of a run that trains now
-        return _evaluate_locked(run_dir, episodes, video, deterministic, out_dir, maps, side_by_side, first,
-                                progress)  # fmt: skip
-
-
-def _evaluate_locked(run_dir: Path, episodes: int, video: bool, deterministic: bool,
-                     out_dir: str | Path | None, maps: str | None, side_by_side: bool | None, first: int,
-                     progress: bool) -> dict:  # fmt: skip
-    """``evaluate_run`` while it holds ``run_dir``."""
+    :param maps: procedural maps only: ``"START:COUNT"``, play the maps of seeds START … START +
+        COUNT − 1 instead of the run's evaluation maps, and write ``eval-maps-START-COUNT.json``.
+    :param side_by_side: the video shows the agent's image observation beside the scene; None: when
+        it has one.
+    :param first: the first evaluation episode played (``run_episodes``).
+    :param progress: show a progress bar of the episodes (on stderr)."""
     from drivelab.envs.core import DriveEnv
     from drivelab.envs.video import video_fps
     from drivelab.training.checkpoints import check_trained_config, load_agent
 
-    config = load_run_config(run_dir)
-    trained = config
-    if maps is not None:
-        config = build_config({**config.to_dict(), "eval_maps": maps})  # checks START:COUNT, scenario
-    name = report_name(maps)
-    if out_dir is None:
-        out_dir = run_dir
-        check_writable(out_dir, name, video)
-    env = DriveEnv(**config.eval_env_kwargs())
-    agent = load_agent(run_dir, config)
-    check_spaces(agent, env, run_dir)
-    check_trained_config(run_dir, trained)  # edits that leave the spaces as they were: traffic, n_envs
-    if out_dir is not run_dir:  # created only once the model has loaded
-        out_dir = make_out_dir(Path(out_dir))
-        check_writable(out_dir, name, video)
-    policy = lambda obs: agent.predict(obs, deterministic=deterministic)[0]  # noqa: E731
-    with tqdm(total=episodes, desc=f"evaluate {config.algo}", unit="episode", disable=not progress) as bar:
-        results, frames = run_episodes(
-            policy,
-            env,
-            episodes,
-            record_first=video,
-            side_by_side=side_by_side,
-            first=first,
-            on_episode=lambda _: bar.update(),
-        )
-    report = {"run": str(run_dir), "algo": config.algo, "env": config.env, **aggregate(results)}
-    report["model_steps"] = int(agent.num_timesteps)  # compare: an eval.json of this model only
-    if first:
-        report["first_episode"] = first
-    if maps is not None:
-        report["maps"] = config.eval_maps
-    made = not (out_dir / "videos").exists()
-    if video:
-        report["video"] = str(write_video(frames, out_dir / "videos" / "evaluate", video_fps(env)))
-    try:
-        write_file(out_dir / name, json.dumps({**report, "per_episode": results}, indent=2))
-    except UsageError:  # a full disk: the report and its video are written together or not at all
+    if episodes < 1:
+        raise UsageError("--episodes must be >= 1")
+    run_dir = Path(run_dir)
+    with locked_run(run_dir, writes=out_dir is None):  # no evaluation of a run that trains now
+        config = load_run_config(run_dir)
+        trained = config
+        if maps is not None:
+            config = build_config({**config.to_dict(), "eval_maps": maps})  # checks START:COUNT, scenario
+        name = report_name(maps)
+        if out_dir is None:
+            out_dir = run_dir
+            check_writable(out_dir, name, video)
+        env = DriveEnv(**config.eval_env_kwargs())
+        agent = load_agent(run_dir, config)
+        check_spaces(agent, env, run_dir)
+        check_trained_config(run_dir, trained)  # edits that leave the spaces as they were: traffic, n_envs
+        if out_dir is not run_dir:  # created only once the model has loaded
+            out_dir = make_out_dir(Path(out_dir))
+            check_writable(out_dir, name, video)
+        policy = lambda obs: agent.predict(obs, deterministic=deterministic)[0]  # noqa: E731
+        with tqdm(
+            total=episodes, desc=f"evaluate {config.algo}", unit="episode", disable=not progress
+        ) as bar:
+            results, frames = run_episodes(
+                policy, env, episodes, record_first=video, side_by_side=side_by_side, first=first,
+                on_episode=lambda _: bar.update(),
+            )  # fmt: skip
+        report = {"run": str(run_dir), "algo": config.algo, "env": config.env, **aggregate(results)}
+        report["model_steps"] = int(agent.num_timesteps)  # compare: an eval.json of this model only
+        if first:
+            report["first_episode"] = first
+        if maps is not None:
+            report["maps"] = config.eval_maps
+        made = not (out_dir / "videos").exists()
         if video:
-            remove_file(Path(report["video"]))
-            if made:
-                with contextlib.suppress(OSError):
-                    (out_dir / "videos").rmdir()
-        raise
-    return report
+            report["video"] = str(write_video(frames, out_dir / "videos" / "evaluate", video_fps(env)))
+        try:
+            write_file(out_dir / name, json.dumps({**report, "per_episode": results}, indent=2))
+        except UsageError:  # a full disk: the report and its video are written together or not at all
+            if video:
+                remove_file(Path(report["video"]))
+                remove_empty_folders([out_dir / "videos"] if made else [])
+            raise
+        return report
 
 
 def make_out_dir(path: Path, what: str = "report folder") -> Path:
-    """``path`` as a folder (for reports, runs, a study), created if missing; a one-line
-    UsageError naming ``what`` if it cannot be, and then none of the folders above it is left."""
+    """``path`` as a folder, created if missing; a one-line UsageError naming ``what`` if it cannot
+    be (then no folder above it is left)."""
     missing = [folder for folder in (path, *path.parents) if not _exists(folder)]
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        for folder in missing:  # innermost first; one that could not be made raises, as it is not there
-            with contextlib.suppress(OSError):
-                folder.rmdir()
+        remove_empty_folders(missing)
         raise UsageError(f"cannot create {what} {str(path)!r}: {exc.strerror or exc}") from None
     return path
 
@@ -289,11 +259,8 @@ def _exists(path: Path) -> bool:
 
 
 def check_writable(run_dir: Path, name: str, video: bool = False) -> None:
-    """A UsageError unless a file can be created in ``run_dir``, ``name`` there is not a folder
-    and its temporary is nothing but a file (``safe_files.check_replaceable``), and with ``video``,
-    ``videos`` there is a folder or missing: checked before an evaluation, not after its episodes.
-    The probe is a real file (removed at once), as permission bits say nothing on a read-only mount
-    or for root."""
+    """A UsageError unless ``name`` (and with ``video``, ``videos/``) can be written in ``run_dir``,
+    probed with a real file: checked before an evaluation, not after its episodes."""
     if (run_dir / name).is_dir():
         raise UsageError(f"cannot write {name} in {str(run_dir)!r}: it is a directory")
     check_replaceable(run_dir / name)
@@ -305,9 +272,7 @@ def check_writable(run_dir: Path, name: str, video: bool = False) -> None:
 
 
 def check_output_file(path: Path, option: str) -> None:
-    """A UsageError unless the file ``path`` (given as ``option``) can be written: its folder exists
-    and takes a new file (probed with a real one, removed at once; permission bits say nothing on
-    a read-only mount or for root). Checked before the work that makes the file."""
+    """A UsageError unless the file ``path`` (given as ``option``) can be written."""
     folder = path.parent
     if not folder.is_dir():
         raise UsageError(f"cannot write {option} {str(path)!r}: folder {str(folder)!r} does not exist")
@@ -317,8 +282,8 @@ def check_output_file(path: Path, option: str) -> None:
 
 
 def _cannot_create_in(folder: Path) -> str | None:
-    """Why no file can be created in ``folder`` (None: one can), from a real probe file removed at
-    once: permission bits say nothing on a read-only mount or for root."""
+    """Why no file can be created in ``folder`` (None: one can), from a real probe file: permission
+    bits say nothing on a read-only mount or for root."""
     try:
         with tempfile.TemporaryFile(dir=folder):
             return None
@@ -346,9 +311,7 @@ def _saved_spaces(agent) -> tuple[spaces.Space | None, spaces.Space | None]:
 
 
 def check_spaces(agent, env, run_dir: Path) -> None:
-    """A UsageError when ``env`` (built from the run's config.yaml) gives observations or takes
-    actions that the saved model does not: config.yaml was edited after training. SB3 stores a
-    channel-last image transposed to channels-first, so that form also matches."""
+    """A UsageError when ``env`` does not match the saved model's spaces (config.yaml edited)."""
     from stable_baselines3.common.base_class import BaseAlgorithm
 
     saved_obs, saved_action = _saved_spaces(agent)
@@ -376,15 +339,13 @@ METRIC_LABELS = labels(
 METRIC_LABELS["mean_return"] += " (mean ± std)"  # printed as mean ± std (metrics_rows)
 
 
-# what success means where a scenario has no goal to reach (the highway, the roundabout, the
-# racetrack, the circuits): said where it is printed, so that a slow, safe policy's 100 % reads as
-# what it is
+# what success means where a scenario has no goal to reach (a slow, safe policy scores 100 %)
 NO_GOAL_SUCCESS = "success rate (no goal here: the time limit reached, no crash, no off-road)"
 
 
 def metrics_rows(report: dict, scenario: str | None = None) -> list[tuple[str, str]]:
-    """(label, formatted value) rows for printing; ``scenario``: the report's, whose success rate
-    is labelled for what it measures when the scenario has no goal."""
+    """(label, formatted value) rows for printing; ``scenario``: the report's, whose success rate is
+    labelled for what it measures when the scenario has no goal."""
     from drivelab.scenarios import get_scenario
 
     goal = scenario is None or get_scenario(scenario).arrival != "none"

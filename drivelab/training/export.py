@@ -1,17 +1,8 @@
 """``drivelab export``: a run's SB3 model in stable-baselines3's own format, for ``PPO.load``.
 
-drivelab saves SB3 models without pickles (``agents/sb3.py``), which SB3's ``load`` cannot read
-("No data found in the saved file"). The export writes the file SB3's own ``save`` writes: a zip
-whose ``data`` holds cloudpickled objects (spaces, schedules, the policy class) that SB3's
-``load`` unpickles. So the exported file is for the user's own, trusted use: loading one runs what
-it holds. drivelab never reads it (nor any other pickle) back: its runs stay in the safe format,
-and the export may not be written into a run directory, where it would be taken for the run's own
-model.
-
-The model is loaded as every drivelab command loads it (nothing unpickled), then saved by SB3's
-``BaseAlgorithm.save``; ``stable_baselines3.<ALGO>.load`` reads it and, given the same
-observations, returns the same actions as ``drivelab.load``'s model.
-"""
+drivelab saves SB3 models without pickles, which SB3's ``load`` cannot read. The export writes what
+SB3's own ``save`` writes, cloudpickled objects included, so the exported file is for the user's
+own, trusted use; drivelab never reads it back, and it may not be written into a run directory."""
 
 from __future__ import annotations
 
@@ -24,11 +15,9 @@ SB3_CLASSES = {"dqn": "DQN", "ppo": "PPO", "a2c": "A2C", "sac": "SAC"}  # drivel
 
 def export_sb3(target: str | Path, out: str | Path) -> tuple[Path, str]:
     """Write the SB3 model of ``target`` (a run directory or a shipped agent's name) to ``out``, a
-    ``.zip`` in stable-baselines3's own format; (the path written, the SB3 class that reads it).
-
-    Refused with a UsageError, before anything is written: a run of an algorithm other than SB3's,
-    ``out`` not ending in ``.zip``, a folder, in a folder that does not exist, or inside the run
-    directory. The file is written whole or not at all (a temporary renamed over ``out``)."""
+    ``.zip`` in stable-baselines3's own format, whole or not at all; (the path written, the SB3
+    class that reads it). A UsageError, before anything is written, for a non-SB3 run or an ``out``
+    that is not a new ``.zip`` outside the run directory."""
     from drivelab.agents.sb3 import SafeSave
     from drivelab.training.evaluate import check_output_file, load_run_config
     from drivelab.training.safe_files import replacing

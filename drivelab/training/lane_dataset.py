@@ -1,9 +1,6 @@
-"""Training data for the lane-line CNN: camera frames and true line masks rendered on the follow-lane
-circuit at random poses (the CARLA study, section 4.1), and the training run that uses them.
-
-This lives in ``training/`` because it drives the simulator (a highway-env backend builds the
-circuit); ``perception/lane_cnn.py`` only defines the network and trains it on given arrays.
-"""
+"""Training data for the lane-line CNN: camera frames and true line masks rendered on the
+follow-lane circuit at random poses (the CARLA study, section 4.1), and the training run that uses
+them."""
 
 from __future__ import annotations
 
@@ -77,10 +74,8 @@ def available_memory_bytes() -> int | None:
 
 
 def check_lane_training(frames: int, epochs: int, seed: int, out: str | Path) -> Path:
-    """The checks of ``train_lane_detector``'s arguments, before anything is generated or written:
-    counts and seed in range, the frames fit in memory, and ``out`` names a ``.pt`` file (what
-    ``load_lane_cnn`` and the lane sensor's ``weights`` option read) in an existing folder that can
-    be written. Returns ``out`` as a Path; a one-line UsageError otherwise."""
+    """Check ``train_lane_detector``'s arguments before anything is generated: counts and seed in
+    range, the frames fit in memory, ``out`` a writable ``.pt`` path. Returns ``out`` as a Path."""
     if frames < 1 or epochs < 1:
         raise UsageError("--frames and --epochs must be >= 1")
     if seed < 0:
@@ -103,11 +98,8 @@ def check_lane_training(frames: int, epochs: int, seed: int, out: str | Path) ->
 def train_lane_detector(
     frames: int = 1500, epochs: int = 15, seed: int = 0, out: str | Path = WEIGHTS_PATH, log=print
 ) -> dict:
-    """Generate ``frames`` frames with ``seed``, train the lane CNN on them (``train_lane_cnn``),
-    save its weights to ``out`` and return the training summary.
-
-    Every argument is checked first (``check_lane_training``); the weights are written under a
-    temporary name and renamed, so ``out`` is either the old file or the whole new one."""
+    """Generate ``frames`` frames with ``seed``, train the lane CNN on them, save its weights to
+    ``out`` (whole or not at all) and return the training summary."""
     out = check_lane_training(frames, epochs, seed, out)
     images, masks = generate_lane_frames(frames, seed)
     partial = out.with_name(out.name + ".tmp")

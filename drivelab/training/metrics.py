@@ -1,8 +1,5 @@
-"""The evaluation metrics, written once: name, label, the direction that is better, and what values
-they take. ``evaluate`` prints them, ``compare`` checks, tabulates and plots them, ``tune``
-optimises them; each reads names, labels and directions from here and lists only which metrics it
-shows.
-"""
+"""The evaluation metrics, written once: name, label, the better direction and the values they take
+(read by ``evaluate``, ``compare`` and ``tune``)."""
 
 from __future__ import annotations
 
@@ -16,9 +13,7 @@ class Metric:
     :param name: its key in ``eval.json`` and ``evaluations.csv``.
     :param label: how tables and plots name it (with its unit).
     :param better: "maximize" or "minimize": the direction a study takes on it unless told.
-    :param values: "rate" (a fraction in [0, 1]), "signed" (any finite number) or "count" (a count
-        or a measure, >= 0).
-    """
+    :param values: "rate" (in [0, 1]), "signed" (any finite number) or "count" (>= 0)."""
 
     name: str
     label: str

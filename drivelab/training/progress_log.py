@@ -1,13 +1,9 @@
 """A run's SB3 logger: ``progress.csv`` and TensorBoard events that a resume continues.
 
-SB3's ``configure`` opens progress.csv with ``"w+"``, emptying it, so a resume used to set the
-old file aside (``progress-<steps>.csv``) and start a new one. Here the CSV is opened for
-appending, its columns read from its header; ``resume_state.plan_truncation`` has cut it back to
-the checkpoint's step first, so the resumed rows follow on as the rows of the run never stopped
-(``agents/sb3.py``'s ``RolloutLogs`` logs on-policy rows by their step). TensorBoard keeps each
-process's events in a file of its own; a resumed run's writer starts with ``purge_step`` one past
-the checkpoint, and TensorBoard then hides what the stopped process had logged after it.
-"""
+The CSV is opened for appending (SB3's ``configure`` would empty it), its columns read from its
+header, after ``resume_state.plan_truncation`` cut it back to the checkpoint's step. A resumed run's
+TensorBoard writer starts with ``purge_step`` one past the checkpoint, which hides what the stopped
+process logged after it."""
 
 from __future__ import annotations
 
@@ -19,8 +15,7 @@ from stable_baselines3.common.logger import CSVOutputFormat, Logger, TensorBoard
 
 
 class ContinuedCSV(CSVOutputFormat):
-    """SB3's CSV output appending to ``path`` (created if missing; never through a link), with
-    the columns of its header; a key that is new adds a column, as SB3's does."""
+    """SB3's CSV output appending to ``path`` (never through a link), with the columns of its header."""
 
     def __init__(self, path: Path) -> None:
         descriptor = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
@@ -32,8 +27,7 @@ class ContinuedCSV(CSVOutputFormat):
 
 
 class ContinuedTensorBoard(TensorBoardOutputFormat):
-    """SB3's TensorBoard output whose writer hides the events logged at ``purge_step`` or later
-    by an earlier writer of the folder (a stopped process's, past its checkpoint)."""
+    """SB3's TensorBoard output hiding the events an earlier writer logged at ``purge_step`` or later."""
 
     def __init__(self, folder: Path, purge_step: int) -> None:
         from torch.utils.tensorboard import SummaryWriter
@@ -43,8 +37,7 @@ class ContinuedTensorBoard(TensorBoardOutputFormat):
 
 
 def run_logger(run_dir: Path, resumed_at: int | None = None) -> Logger:
-    """The logger of a run directory: ``progress.csv`` (continued) and TensorBoard events; with
-    ``resumed_at``, the checkpoint's step a resume starts from."""
+    """A run's logger: ``progress.csv`` (continued) and TensorBoard; ``resumed_at``: a resume's step."""
     tensorboard = (
         TensorBoardOutputFormat(str(run_dir))
         if resumed_at is None

@@ -1,39 +1,25 @@
 """Exact resume: the state a checkpoint needs beyond the model so that an interrupted and resumed
 run continues exactly as the uninterrupted one would have, and the safe points where it is taken.
 
-What decides the rest of a run, besides the weights, optimizer and replay (the model's own files):
+Besides the model's own files (weights, optimizer, replay) the rest of a run depends on:
 
-- the random generators: python ``random``, numpy's global generator (SB3 DQN's exploration and
-  replay sampling, SB3 PPO's minibatch shuffles), torch's (SB3 PPO's action sampling), the model's
-  action space (SB3 DQN's warm-up ``action_space.sample()``) and our own agents' ``rng`` and
-  ``generator``;
-- the learning loop's counters (steps, updates, episodes, DQN's ε and target-update clock) and its
-  current observation;
-- the training environment, mid-episode. Simulator objects are not serialised: an episode is a
-  deterministic function of the generator state its reset draws from (``DriveEnv.reset`` draws the
-  episode seed from ``np_random``; backend and sensors are seeded from that) and of the actions
-  since. ``RecordEpisodes`` / ``RecordVecEpisodes`` log, per world, that state and those actions;
-  ``restore`` sets the state, resets and replays the actions, and checks that the replay ends in
-  the saved observation;
-- the monitors' partial episodes (their returns so far) and how many rows monitor.csv and
-  evaluations.csv held, so that a resume cuts rows written after the checkpoint.
+- the random generators: python ``random``, numpy's global generator, torch's, the model's action
+space and our own agents' ``rng`` and ``generator``; - the learning loop's counters (steps, updates,
+episodes, ε, …) and its current observation; - the training environment, mid-episode. An episode is
+a deterministic function of the generator state its reset draws from and of the actions since:
+``RecordEpisodes`` / ``RecordVecEpisodes`` log both per world, and ``restore`` resets from that
+state, replays the actions and checks that the replay ends in the saved observation; - the monitors'
+partial episodes and the rows monitor.csv and evaluations.csv held, so that a resume cuts rows
+written after the checkpoint.
 
-Safe points. A checkpoint must describe a state from which the remaining training is exactly the
-uninterrupted one. Every learning loop (SB3's and ours) calls ``callback.on_rollout_start()``
-between its training phases (SB3 DQN and our off-policy agents before every step, on-policy
-agents before every rollout) and ``callback.on_step()`` right after the environment step, before
-the step changes anything learned (replay, weights, optimizer). So a ``Snapshot`` taken at the
-rollout start stays valid until the next rollout start: when SIGINT/SIGTERM arrive
-(``StopRequest`` turns them into a flag), ``on_step`` returns False, the loop stops, and the
-run is rolled back to the snapshot (``Snapshot.apply_to_model``) before it is saved; the steps
-since (part of a rollout) are done again after the resume. Periodic checkpoints are written at
-rollout starts.
+Safe points: every learning loop calls ``callback.on_rollout_start()`` between its training phases
+and ``callback.on_step()`` after the environment step, before the step changes anything learned. A
+``Snapshot`` taken at a rollout start stays valid until the next one: on SIGINT/SIGTERM
+(``StopRequest``) ``on_step`` returns False and the run is rolled back to the snapshot
+(``apply_to_model``) before it is saved.
 
-Files: ``checkpoints/resume-<steps>.json`` (everything JSON can hold) and ``resume-<steps>.npz``
-(arrays: torch generator states, actions, observations; no object arrays, loaded with
-``allow_pickle=False``). They are written before the checkpoint manifest, keyed by the step count
-the manifest names, so a crash between the two leaves the previous checkpoint's pair in place.
-"""
+Files: ``checkpoints/resume-<steps>.json`` and ``resume-<steps>.npz`` (arrays, loaded with
+``allow_pickle=False``), written before the checkpoint manifest that names their step."""
 
 from __future__ import annotations
 
@@ -103,8 +89,7 @@ class StopRequest:
 
 # --- recording the training worlds ---------------------------------------------------------------
 class EpisodeLog:
-    """Per world: the ``np_random`` state its current episode's reset drew from, and the actions
-    taken since (each a copy)."""
+    """Per world: the ``np_random`` state its episode's reset drew from, and the actions since."""
 
     def __init__(self, worlds: int) -> None:
         self.starts: list[dict | None] = [None] * worlds
@@ -117,8 +102,7 @@ class EpisodeLog:
         self.actions[index].append(np.array(action, copy=True))
 
     def mark(self) -> list[tuple[dict | None, list, int]]:
-        """The log as it is now, without copying: episodes only grow their own action list, and a
-        new episode starts a new list."""
+        """The log as it is now, without copying (an episode only appends to its own list)."""
         return [
             (start, actions, len(actions)) for start, actions in zip(self.starts, self.actions, strict=True)
         ]
@@ -126,7 +110,7 @@ class EpisodeLog:
 
 def _state_before_reset(env: gym.Env, generator: np.random.Generator, state: dict) -> dict:
     """The state the reset that just happened drew from: ``state`` (taken before it) when the env
-    kept ``generator``, else (it was reseeded) a fresh generator of its new seed."""
+    kept ``generator``, else (reseeded) a fresh generator of its new seed's."""
     if env.np_random is generator:
         return state
     return seeding.np_random(env.np_random_seed)[0].bit_generator.state
@@ -191,8 +175,7 @@ class RecordVecEpisodes(VecEnvWrapper):
 
     def _log_step(self, actions: np.ndarray, dones: np.ndarray) -> None:
         """A finished world started its next episode inside the step, from the generator state its
-        seed draw recorded (``VectorDriveEnv.draw_states``: a world's generator draws only then);
-        every other world took its action (one copy of the step's actions, a row each)."""
+        seed draw recorded (``VectorDriveEnv.draw_states``); every other world took its action."""
         actions = np.array(actions, copy=True)
         for index, done in enumerate(dones):
             if done:
@@ -202,10 +185,9 @@ class RecordVecEpisodes(VecEnvWrapper):
 
 
 class ArrayVecMonitor(VecMonitor):
-    """SB3's ``VecMonitor`` (monitor.csv, episode returns and lengths) that also passes
-    ``step_arrays`` through: the finished episodes' ``{"r", "l", "t"}`` go into the infos as
-    ``episode`` (one dict per finished world) with the mask ``_episode``, and into monitor.csv, as
-    ``step_wait`` writes them."""
+    """SB3's ``VecMonitor`` that also passes ``step_arrays`` through, recording the finished
+    episodes in the infos (``episode`` and the mask ``_episode``) and in monitor.csv as
+    ``step_wait`` does."""
 
     def step_arrays(self, actions: np.ndarray):
         obs, rewards, terminated, truncated, infos = self.venv.step_arrays(actions)
@@ -232,8 +214,7 @@ class ArrayVecMonitor(VecMonitor):
 
 @dataclass
 class TrainingWorlds:
-    """The training env's monitor (SB3 ``Monitor`` or ``VecMonitor``), its episode log and its
-    DriveEnvs."""
+    """The training env's monitor, its episode log and its DriveEnvs."""
 
     monitor: Any
     log: EpisodeLog
@@ -366,7 +347,7 @@ def _saved_observation(layout: Any, arrays: dict[str, np.ndarray], prefix: str) 
 
 def apply_to_model(model, snapshot: Snapshot) -> None:
     """Put the model's counters, current observation, episode buffers and every generator back to
-    ``snapshot`` (weights and optimizer are untouched: they do not change between safe points)."""
+    ``snapshot`` (weights and optimizer do not change between safe points)."""
     meta, arrays = snapshot.meta, snapshot.arrays
     for name, value in meta["counters"].items():
         setattr(model, name, value)
@@ -401,8 +382,7 @@ def _observation_row(observations: Any, index: int) -> Any:
 
 def _matches(saved: Any, obs: Any, index: int | None) -> bool:
     """Whether world ``index``'s part of the saved current observation equals the replayed ``obs``
-    (None: the saved one is a single world's). Shapes that differ (an image transposed by SB3's
-    wrapper) are not compared."""
+    (None: a single world's). Shapes that differ (an image transposed by SB3) are not compared."""
     if isinstance(saved, dict):
         return all(_matches(saved[key], obs[key], index) for key in saved)
     part = saved if index is None else saved[index]
@@ -416,19 +396,16 @@ def restore(model, worlds: TrainingWorlds, snapshot: Snapshot) -> None:
     meta, arrays = snapshot.meta, snapshot.arrays
     saved = _saved_observation(meta["last_obs"], arrays, "last_obs")
     batched = not isinstance(model.get_env(), gym.Env)
+    starts = [start for start, _, _ in snapshot.worlds]
     if not isinstance(worlds.worlds, list):  # one VectorDriveEnv: every world replayed together
-        starts = [start for start, _, _ in snapshot.worlds]
-        actions = [_stack_actions(actions[:count]) for _, actions, count in snapshot.worlds]
-        replayed = worlds.worlds.replay(starts, actions)
-        for index, (start, actions_k, count) in enumerate(snapshot.worlds):
-            worlds.log.started(index, start)
-            worlds.log.actions[index] = list(actions_k[:count])
+        replayed = worlds.worlds.replay(starts, snapshot.world_actions())
         observations = [_observation_row(replayed, index) for index in range(len(snapshot.worlds))]
     else:
-        (world,), ((start, actions, count),) = worlds.worlds, snapshot.worlds
-        observations = [_replay_world(world, start, _stack_actions(actions[:count]))]
-        worlds.log.started(0, start)
-        worlds.log.actions[0] = list(actions[:count])
+        (world,), (actions,) = worlds.worlds, snapshot.world_actions()
+        observations = [_replay_world(world, starts[0], actions)]
+    for index, (start, actions, count) in enumerate(snapshot.worlds):
+        worlds.log.started(index, start)
+        worlds.log.actions[index] = list(actions[:count])
     for index, replayed_obs in enumerate(observations):
         if saved is not None and not _matches(saved, replayed_obs, index if batched else None):
             raise UsageError(
@@ -476,8 +453,7 @@ def write_state(folder: Path, snapshot: Snapshot) -> None:
 
 
 def read_state(folder: Path, steps: int) -> Snapshot | None:
-    """The resume state of the checkpoint at ``steps`` (None when it has none: a checkpoint of an
-    older drivelab); a damaged one is a UsageError."""
+    """The resume state of the checkpoint at ``steps`` (None: it has none); a damaged one is a UsageError."""
     json_path, npz_path = _paths(folder, steps)
     if not json_path.is_file():
         return None
@@ -501,8 +477,7 @@ def read_state(folder: Path, steps: int) -> Snapshot | None:
 
 def _check_meta(meta: dict) -> None:
     """A ValueError naming the first part of a resume state's JSON that is not as ``take_snapshot``
-    and ``write_state`` write it. What only a restore can check (generator states, the episodes'
-    replay) is checked by restoring (``check_restore``)."""
+    writes it; the rest is checked by restoring (``check_restore``)."""
 
     def need(ok: bool, what: str) -> None:
         if not ok:
@@ -535,10 +510,8 @@ def _is_number(value: Any) -> bool:
 
 
 def check_restore(model, worlds: TrainingWorlds, snapshot: Snapshot, path: Path) -> None:
-    """``restore`` into ``model`` and a training env built only for this check (``worlds``, writing
-    no file), before anything of the run changes: a state that parses but does not restore (a
-    generator state of the wrong size, an episode that does not replay) is a UsageError naming
-    ``path``. Restoring sets states only, so the real ``restore`` that follows gives the same."""
+    """``restore`` into ``model`` and a training env built for this check, before anything of the
+    run changes: a state that does not restore is a UsageError naming ``path``."""
     try:
         restore(model, worlds, snapshot)
     except UsageError as exc:
@@ -548,8 +521,7 @@ def check_restore(model, worlds: TrainingWorlds, snapshot: Snapshot, path: Path)
 
 
 def prune_states(folder: Path, keep_steps: int) -> None:
-    """Remove the resume states of earlier checkpoints (after the manifest moved on): the files
-    named as ``write_state`` names them, no other."""
+    """Remove the resume states of checkpoints other than the one at ``keep_steps``."""
     keep = set(_paths(folder, keep_steps))
     for path in folder.iterdir():
         if STATE_NAME.fullmatch(path.name) and path not in keep:
@@ -599,9 +571,8 @@ def _evaluations_upto(path: Path, steps: int) -> str | None:
 
 
 def plan_truncation(run_dir: Path, steps: int, snapshot: Snapshot | None) -> dict[Path, str | None]:
-    """What a resume from the checkpoint at ``steps`` must rewrite (path → new text) or delete
-    (path → None): logs written after the checkpoint, and results of the older model. Reads only;
-    an unreadable log is a UsageError."""
+    """What a resume from the checkpoint at ``steps`` must rewrite (path → new text) or delete (path
+    → None): logs written after the checkpoint, and results of the older model. Reads only."""
     changes: dict[Path, str | None] = {}
     try:
         if snapshot is not None:
@@ -628,9 +599,8 @@ def plan_truncation(run_dir: Path, steps: int, snapshot: Snapshot | None) -> dic
 
 
 def apply_truncation(changes: dict[Path, str | None]) -> None:
-    """Write ``plan_truncation``'s changes, the rewrites first (a full disk fails one of them
-    before anything is deleted). progress.csv, cut back to the checkpoint's step, is continued by
-    the resumed run's logger (``progress_log.py``)."""
+    """Write ``plan_truncation``'s changes, the rewrites first (a full disk fails one of them before
+    anything is deleted)."""
     for path, text in changes.items():
         if text is not None:
             write_file(path, text)

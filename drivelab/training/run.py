@@ -8,20 +8,15 @@ Run directory layout::
     evaluations.csv        one row per periodic evaluation
     checkpoints/latest.zip + latest.json (manifest: steps, sha256, config identity)
     checkpoints/replay.npz replay buffer of off-policy agents (arrays)
-    checkpoints/resume-<steps>.json + .npz  what an exact resume needs beyond the model
-                           (generators, counters, the training episodes; resume_state.py)
+    checkpoints/resume-<steps>.json + .npz  what an exact resume needs beyond the model (resume_state.py)
     model.zip              final model: tensors (``torch.load(weights_only=True)``) and JSON
     learning_curve.png     training returns and evaluation returns against steps
     videos/                periodic-evaluation videos (when asked)
     .in-use.pid            the pid of the command using the run, while it runs
 
-Nothing in a run directory is unpickled (``agents/storage.py``): a run from elsewhere cannot run
-code when it is evaluated or resumed. Nor can it make drivelab write outside it: a run holding a
-symbolic link is refused, files are written through temporaries created exclusively, and one
-command at a time uses it, under a lock (``safe_files.py``). The manifest's sha256 only detects a
-truncated or corrupted checkpoint; stored beside the file, it proves nothing against deliberate
-tampering. Checkpoints and the final model are written, verified and loaded by ``checkpoints.py``.
-"""
+Nothing in a run directory is unpickled (``agents/storage.py``), and nothing is written through a
+link in it (``safe_files.py``). The manifest's sha256 only detects a truncated or corrupted
+checkpoint, not tampering."""
 
 from __future__ import annotations
 
@@ -86,6 +81,7 @@ from drivelab.training.safe_files import (
     WriteError,
     locked_run,
     make_folder,
+    remove_empty_folders,
     remove_file,
     replacing,
     write_failure,
@@ -95,8 +91,7 @@ from drivelab.yaml_io import dump_yaml
 
 
 class TrainingInterrupted(KeyboardInterrupt):
-    """SIGINT or SIGTERM during training; ``steps``: the checkpoint to resume from (the one saved
-    on the way out, or after a second signal that stopped at once, the latest one before)."""
+    """SIGINT or SIGTERM during training; ``steps``: the checkpoint to resume from."""
 
     def __init__(self, run_dir: Path, steps: int) -> None:
         super().__init__(f"interrupted at step {steps}")
@@ -105,7 +100,7 @@ class TrainingInterrupted(KeyboardInterrupt):
 
 class StoppedByEvaluation(Exception):
     """``on_evaluation`` returned False (a pruned tuning trial): the run stopped and was
-    checkpointed at ``steps``, as after SIGINT, and can be resumed."""
+    checkpointed at ``steps``, as after SIGINT."""
 
     def __init__(self, run_dir: Path, steps: int) -> None:
         super().__init__(f"stopped after an evaluation, checkpointed at step {steps}")
@@ -114,18 +109,13 @@ class StoppedByEvaluation(Exception):
 
 # --- callbacks -------------------------------------------------------------------------------
 class RunCallback(BaseCallback):
-    """Progress bar, periodic evaluation (CSV + logger + optional video), checkpoints, stopping,
-    and divergence: the weights are checked at safe points (at most once per ``CHECK_EVERY_STEPS``
-    steps) and before every evaluation and checkpoint, and ``TrainingDiverged`` stops the run at
-    the first NaN or infinity (``divergence.py``).
+    """Progress bar, periodic evaluation (CSV + logger + optional video), checkpoints, stopping, and
+    divergence checks (``divergence.py``) at safe points and before every evaluation and checkpoint.
 
-    Evaluations run in ``on_step``; ``on_evaluation(step, summary)``, when given, is called after
-    each, and returning False stops the run as a stop request does (``StoppedByEvaluation``).
-    Checkpoints are written at rollout starts, the safe points of
-    ``resume_state``: each rollout start takes a ``Snapshot``, and when ``stop`` is requested
-    (SIGINT/SIGTERM) ``on_step`` returns False, so the learning loop ends before the step changes
-    anything learned, and ``_learn`` saves the run as it was at that snapshot.
-    """
+    ``on_evaluation(step, summary)``, when given, is called after each evaluation; returning False
+    stops the run as a stop request does. Each rollout start takes a ``Snapshot`` (the safe points
+    of ``resume_state``) and writes the periodic checkpoints; on a stop request ``on_step`` returns
+    False and ``_learn`` saves the run as it was at that snapshot."""
 
     def __init__(
         self,
@@ -172,8 +162,7 @@ class RunCallback(BaseCallback):
         self.safe_point()
 
     def safe_point(self) -> None:
-        """Look for divergence when a check is due; take the snapshot; write the periodic checkpoint
-        when one is due."""
+        """Check for divergence when due, take the snapshot, write the checkpoint when due."""
         if self.num_timesteps >= self.next_divergence_check:
             self.check_weights(self.num_timesteps)
             self.next_divergence_check = _next_multiple(self.num_timesteps, CHECK_EVERY_STEPS)
@@ -200,8 +189,8 @@ class RunCallback(BaseCallback):
             self.bar.close()
 
     def checkpoint(self, snapshot: Snapshot) -> None:
-        """The model's checkpoint and the resume state of ``snapshot`` (taken at the model's
-        present state), the resume state first: the manifest, written last, commits both."""
+        """The model's checkpoint and the resume state of ``snapshot``, the resume state first: the
+        manifest, written last, commits both."""
         self.check_weights(snapshot.steps)  # keep the last finite checkpoint as the latest
         folder = make_folder(self.run_dir / "checkpoints")
         write_state(folder, snapshot)
@@ -256,7 +245,7 @@ def _next_multiple(value: int, every: int) -> int:
 # --- the run ---------------------------------------------------------------------------------
 def new_run_dir(config: RunConfig, runs_root: Path) -> Path:
     """The path of a new run directory inside ``runs_root`` (not created yet). A UsageError when it
-    exists, or when ``runs_root`` is not a directory that this process can create folders in."""
+    exists, or when no folder can be created in ``runs_root``."""
     name = config.name or f"{config.algo}-{config.env}-s{config.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
     run_dir = runs_root / name
     try:
@@ -274,9 +263,8 @@ def new_run_dir(config: RunConfig, runs_root: Path) -> Path:
 
 
 def _check_model(spec, config: RunConfig, probe) -> None:
-    """Build the agent once on the probe environment and throw it away, so that a hyper-parameter
-    the algorithm rejects (SB3's or the agent's own checks) fails before any folder exists. The
-    real build that follows re-seeds everything, so this changes no result."""
+    """Build the agent once on the probe environment and throw it away, so that hyper-parameters the
+    algorithm rejects fail before any folder exists. The real build re-seeds everything."""
     try:
         spec.build(config.algo, probe, config.seed, dict(config.hyperparams), None)
     except UsageError:
@@ -290,25 +278,18 @@ def _check_model(spec, config: RunConfig, probe) -> None:
 
 
 def _make_envs(config: RunConfig, run_dir: Path | None, resume: bool):
-    """(training env, evaluation env, the training env's ``TrainingWorlds``). The training env has
-    ``n_envs`` worlds (an SB3 VecEnv when more than one), logs its episodes to monitor.csv (appending
-    on a resume; ``run_dir`` None: to no file) and records them for the checkpoints' resume state;
-    it is seeded with the run's seed (an exact resume then replays its checkpoint's episodes over
-    that)."""
+    """(training env, evaluation env, the training env's ``TrainingWorlds``). The training env logs
+    its episodes to monitor.csv (appending on a resume; ``run_dir`` None: to no file), records them
+    for the resume state and is seeded with the run's seed."""
     from drivelab.envs.core import DriveEnv
 
     monitor = None if run_dir is None else str(run_dir / "monitor.csv")
     if config.n_envs == 1:
-        recorder = RecordEpisodes(DriveEnv(**config.env_kwargs()))
+        recorder = RecordEpisodes(_training_worlds(config))
         train_env = Monitor(recorder)
         train_env.reset(seed=config.seed)
     else:
-        from drivelab.agents.sb3_env import SB3VecEnv
-        from drivelab.envs.vector import VectorDriveEnv
-
-        recorder = RecordVecEpisodes(
-            SB3VecEnv(VectorDriveEnv(config.n_envs, autoreset_mode="same_step", **config.env_kwargs()))
-        )
+        recorder = RecordVecEpisodes(_training_worlds(config))
         train_env = ArrayVecMonitor(recorder)
         train_env.seed(config.seed)
     if monitor is not None:  # the scenario's name in the header (SB3's would read the env's spec: None)
@@ -318,9 +299,20 @@ def _make_envs(config: RunConfig, run_dir: Path | None, resume: bool):
     return train_env, DriveEnv(**config.eval_env_kwargs()), TrainingWorlds.of(train_env, recorder)
 
 
+def _training_worlds(config: RunConfig):
+    """The run's ``n_envs`` training worlds, unmonitored: a DriveEnv, or an SB3 VecEnv of several."""
+    from drivelab.envs.core import DriveEnv
+
+    if config.n_envs == 1:
+        return DriveEnv(**config.env_kwargs())
+    from drivelab.agents.sb3_env import SB3VecEnv
+    from drivelab.envs.vector import VectorDriveEnv
+
+    return SB3VecEnv(VectorDriveEnv(config.n_envs, autoreset_mode="same_step", **config.env_kwargs()))
+
+
 def _check_snapshot(model, config: RunConfig, snapshot: Snapshot, path: Path) -> None:
-    """Restore ``snapshot`` into ``model`` and a training env that writes no file
-    (``check_restore``): a damaged resume state is found before the run directory changes."""
+    """``check_restore`` into ``model`` and a training env that writes no file."""
     check_env, check_eval_env, check_worlds = _make_envs(config, None, resume=True)
     try:
         model.set_env(check_env)
@@ -338,13 +330,10 @@ def _check_n_envs(config: RunConfig) -> None:
 
 
 def check_config(config: RunConfig):
-    """Everything a run's config must pass before anything is written: the algorithm with its
-    action kind and number of worlds, the environment (scenario, sensors, reward, action) and the
-    agent, built once with its hyper-parameters on a probe environment. Returns the algorithm's
-    spec. Not the evaluation schedule (``check_eval_every``): the commands check that for new runs
-    only, as it may not hold for a run made before the check (trained again from step 0 when it
-    stopped before its first checkpoint) or for a slice of a run (``benchmarks/rlad_ablation.py``
-    trains a new run to fewer steps than its ``eval_every``, then resumes it)."""
+    """Everything a run's config must pass before anything is written: the algorithm with its action
+    kind and number of worlds, the environment, and the agent built once on a probe environment.
+    Returns the algorithm's spec. Not ``check_eval_every``, which the commands check for new runs
+    only."""
     from drivelab.envs.core import DriveEnv
 
     check_combination(config.algo, config.action)
@@ -367,14 +356,12 @@ def train(
     """Train a new run; every input is validated (the agent built once) before anything is written.
 
     :param on_evaluation: called after each periodic evaluation with (step, its summary); False
-        stops the run there, checkpointed, with ``StoppedByEvaluation`` (a pruned tuning trial).
-    :param eval_first: the periodic evaluations play evaluation episodes ``eval_first`` … (a tuning
-        trial: the validation episodes, ``VALIDATION_START``).
+        stops the run there, checkpointed, with ``StoppedByEvaluation``.
+    :param eval_first: the first evaluation episode the periodic evaluations play (tuning's
+        validation episodes).
 
-    A run that fails before its first checkpoint (training diverged to NaN: ``TrainingDiverged``,
-    memory ran out, a bug) could not be resumed: its directory, and any folder above it that this
-    call created, are removed. One that fails later keeps its checkpoints (the last one finite).
-    """
+    A run that fails before its first checkpoint cannot be resumed: its directory, and the folders
+    above it that this call created, are removed."""
     run_dir = new_run_dir(config, Path(runs_root))
     spec = check_config(config)
     check_steps(config)
@@ -406,9 +393,7 @@ def train(
 
 
 def _make_run_dir(run_dir: Path) -> list[Path]:
-    """Make ``run_dir`` and the folders above it that are missing; the folders made (innermost
-    first). Its own ``mkdir`` is exclusive: when another command made it since ``new_run_dir``
-    looked (the same run started twice at once), a UsageError, and nothing of theirs is touched."""
+    """Make ``run_dir`` exclusively and the folders above it; the folders made, innermost first."""
     created = [folder for folder in (run_dir, *run_dir.parents) if not folder.exists()]
     make_out_dir(run_dir.parent, "runs folder")  # one error line, no folder left, if it cannot be
     try:
@@ -416,7 +401,7 @@ def _make_run_dir(run_dir: Path) -> list[Path]:
     except FileExistsError:
         raise _exists(run_dir) from None
     except OSError as exc:
-        _remove_empty(created[1:])
+        remove_empty_folders(created[1:])
         raise UsageError(f"cannot create run directory {str(run_dir)!r}: {exc.strerror or exc}") from None
     return created
 
@@ -435,27 +420,16 @@ def _write_failed(exc: OSError | WriteError, run_dir: Path, then: str) -> WriteE
 
 
 def _resume_hint(run_dir: Path) -> str:
-    """What to do after a failure (a full disk) that left ``run_dir`` with a checkpoint, or
-    without (then the run was removed, or never changed: the command can run again)."""
+    """What to do after a failure that left ``run_dir`` with a checkpoint, or without one."""
     if (run_dir / "checkpoints" / "latest.json").is_file():
         return f"continue with `drivelab train --resume {run_dir}`"
     return AGAIN
 
 
 def _remove_created(created: list[Path]) -> None:
-    """Remove the run directory ``created[0]`` and the folders above it that ``train`` created
-    (innermost first), those only while empty."""
+    """Remove the run directory ``created[0]``, then the folders above it that are left empty."""
     shutil.rmtree(created[0], ignore_errors=True)
-    _remove_empty(created[1:])
-
-
-def _remove_empty(folders: list[Path]) -> None:
-    """Remove ``folders`` (innermost first) while they are empty."""
-    for folder in folders:
-        try:
-            folder.rmdir()
-        except OSError:
-            break
+    remove_empty_folders(created[1:])
 
 
 def _out_of_memory(config: RunConfig) -> str:
@@ -471,22 +445,14 @@ def resume(
     on_evaluation: Callable[[int, dict], bool | None] | None = None,
     eval_first: int = 0,
 ) -> Path:
-    """Continue a run from its latest checkpoint up to ``steps`` (default: its configured total).
+    """Continue a run from its latest checkpoint up to ``steps`` (default: its configured total),
+    exactly as the uninterrupted run with the checkpoint's resume state (``resume_state``).
 
-    With the checkpoint's resume state the continuation is exactly the uninterrupted run's
-    (``resume_state``). Everything is read and checked (config, checkpoint, resume state, replay,
-    logs) before anything is written; then the logs are cut back to the checkpoint (monitor.csv
-    and evaluations.csv to the rows it had written, progress.csv to its step) and the results of
-    the older model (eval.json, eval-maps-*.json, nocrash.json, learning_curve.png, model.zip) are
-    removed.
-    A damaged resume state is found before that: it is parsed and restored into the loaded model
-    and a training env that writes no file.
-    A run killed before its first checkpoint (config and logs, no checkpoint, no model) has
-    nothing to continue from: its files (``UNSTARTED_FILES``) are removed and it is trained again
-    from step 0 in the same directory; a folder holding anything else is refused. One stopped
-    between its final checkpoint and its model gets the checkpoint's model.
-    ``on_evaluation``, ``eval_first``: as for ``train``.
-    """
+    Everything is read and checked (a damaged resume state too, by restoring it) before anything is
+    written; then the logs are cut back to the checkpoint and the older model's results removed. A
+    run killed before its first checkpoint is trained again from step 0 in the same directory
+    (``unstarted_run_files``); one stopped between its final checkpoint and its model gets the
+    checkpoint's model. ``on_evaluation``, ``eval_first``: as for ``train``."""
     run_dir = Path(run_dir)
     with locked_run(run_dir):  # one command at a time; no link in it (``safe_files``)
         config = load_run_config(run_dir)
@@ -542,8 +508,7 @@ def _stopped_before_first_checkpoint(run_dir: Path) -> bool:
     )
 
 
-# What a run writes before its first checkpoint (the layout above): the files a resume that finds
-# no checkpoint may remove. The checkpoint's own files appear when one was being written.
+# what a run writes before its first checkpoint: the files a resume that finds no checkpoint may remove
 UNSTARTED_FILES = (
     "config.yaml", "config.yaml.tmp", "monitor.csv", "progress.csv", "progress-*.csv", "evaluations.csv",
     "events.out.tfevents.*", "learning_curve.png", "learning_curve.tmp.png", IN_USE, IN_USE + ".tmp",
@@ -558,8 +523,7 @@ UNSTARTED_FOLDERS = {
 def unstarted_run_files(run_dir: Path) -> list[Path]:
     """The files in ``run_dir``, a run stopped before its first checkpoint, that its run wrote
     (``UNSTARTED_FILES``, ``UNSTARTED_FOLDERS``). A UsageError, naming them, when it holds anything
-    else, or has no monitor.csv of SB3's (written as training starts): then it is not such a run,
-    and nothing in it may be removed."""
+    else or has no monitor.csv of SB3's: then nothing in it may be removed."""
     if run_dir.is_symlink():
         raise UsageError(f"run directory {str(run_dir)!r} is a link; nothing is removed through it")
     written: list[Path] = []
@@ -603,9 +567,7 @@ def _is_monitor_log(path: Path) -> bool:
 
 
 def remove_unstarted_run(run_dir: Path) -> None:
-    """Remove ``run_dir``, a run stopped before its first checkpoint: its own files, checked again
-    (``unstarted_run_files``: the folder may have changed since it was last looked at), then the
-    folders they leave empty. Anything else there is refused, and nothing removed."""
+    """Remove ``run_dir``, a run stopped before its first checkpoint, if it holds only its own files."""
     with locked_run(run_dir):
         _remove_run_files(run_dir, unstarted_run_files(run_dir))
 
@@ -622,19 +584,9 @@ def _remove_run_files(run_dir: Path, files: list[Path]) -> None:
 
 def _load_checkpoint(config: RunConfig, run_dir: Path, manifest: dict, replay: bool = True):
     """The checkpoint's model with its replay buffer (unless not ``replay``), rebuilt on an
-    unmonitored copy of the training env (as many worlds; ``set_env`` later gives it the monitored
-    one), so that nothing is written."""
-    from drivelab.envs.core import DriveEnv
-
-    if config.n_envs == 1:
-        env = DriveEnv(**config.env_kwargs())
-    else:
-        from drivelab.agents.sb3_env import SB3VecEnv
-        from drivelab.envs.vector import VectorDriveEnv
-
-        env = SB3VecEnv(VectorDriveEnv(config.n_envs, autoreset_mode="same_step", **config.env_kwargs()))
+    unmonitored copy of the training env, so that nothing is written."""
     path = run_dir / "checkpoints" / "latest.zip"
-    model = load_agent(run_dir, config, env, path)
+    model = load_agent(run_dir, config, _training_worlds(config), path)
     if replay and manifest.get("replay_buffer"):
         load_replay(model, run_dir, manifest)
     if model.num_timesteps != manifest["steps"]:  # the logs are cut back to the manifest's step
@@ -650,10 +602,9 @@ def _learn(model, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWo
            eval_first: int = 0) -> None:  # fmt: skip
     """Train to ``config.steps``, then save the final checkpoint, model and learning curve.
 
-    SIGINT/SIGTERM stop at the next step: the run is put back to the last safe point's snapshot
-    and checkpointed there (``TrainingInterrupted``). A second signal stops at once, without a new
-    checkpoint (the state may be half-updated); the run then resumes from the previous one.
-    """
+    SIGINT/SIGTERM stop at the next step: the run is put back to the last safe point's snapshot and
+    checkpointed there (``TrainingInterrupted``). A second signal stops at once, without a
+    checkpoint."""
     model.set_logger(run_logger(run_dir, model.num_timesteps or None))  # a resume continues the logs
     if hasattr(model, "log_over"):  # rows by the step, about ten in a short run (SB3's on-policy, DDQN)
         model.log_over(config.steps)
@@ -667,9 +618,8 @@ def _learn(model, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWo
 
 @contextlib.contextmanager
 def _full_disk_reported_once():
-    """TensorBoard writes its event file from a thread of its own, which printed a traceback when
-    the disk was full; its error comes again in the training loop (at TensorBoard's next write),
-    which reports it as one line. Other errors of threads go to the previous hook."""
+    """Silence the traceback TensorBoard's writer thread prints on a full disk (the training loop
+    reports the same error as one line); other thread errors go to the previous hook."""
     previous = threading.excepthook
 
     def report(args) -> None:
@@ -720,8 +670,7 @@ def _learn_logged(model, run_dir: Path, config: RunConfig, eval_env, worlds: Tra
 
 
 def _close_logs(model) -> None:
-    """Close the run's logs (SB3's logger, the training env's monitor) after a failed write: left
-    open, their buffers would be written again as the process exits, each failure printed."""
+    """Close the run's logs after a failed write, so that they are not written again at exit."""
     with contextlib.suppress(Exception):
         model.logger.close()
     with contextlib.suppress(Exception):
@@ -729,9 +678,8 @@ def _close_logs(model) -> None:
 
 
 def _save_model(model, run_dir: Path) -> None:
-    """The trained model (``model.zip``, written whole or not at all) and the learning curve; when
-    the curve fails (a full disk), the model is removed too, so that a resume writes both from the
-    final checkpoint (a run stopped between its final checkpoint and its model)."""
+    """The final ``model.zip`` (written whole) and the learning curve; when the curve fails, the
+    model is removed too, so that a resume writes both from the final checkpoint."""
     from drivelab.training.plots import plot_learning_curve
 
     with replacing(run_dir / "model.zip", run_dir / "model.tmp.zip") as temporary:

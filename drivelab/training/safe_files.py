@@ -1,23 +1,9 @@
-"""Writing in a run directory: never through a link, each file whole or not at all, one command at
-a time, and a failed write (a full disk) as one line.
-
-A run directory may come from someone else (downloaded, shared): it is data, and nothing drivelab
-writes may land outside it.
-
-- ``locked_run``: a command that writes in a run directory holds an exclusive ``flock`` on it (one
-  that only reads it, a shared one): a second command is refused with one line naming the first
-  one's pid, written in ``IN_USE`` while the lock is held. The kernel lets go of the lock when its
-  process dies, so a killed run resumes normally.
-- ``check_run_members``: under the lock, and before anything is written, a run directory holding a
-  symbolic link (at its top, in ``checkpoints/`` or ``videos/``), or a folder where drivelab writes
-  a file, is refused with one line.
-- ``replacing`` / ``write_file``: a file is written into a temporary created exclusively
-  (``O_CREAT | O_EXCL | O_NOFOLLOW``: never an existing file, never a link's target), then renamed
-  over its name; a rename replaces a link instead of writing where it points. A failed write
-  removes the temporary.
-- ``remove_file``: deletes a regular file only, never a folder or what a link points to.
-- ``write_failure``: the one-line UsageError of a failed write, naming a full disk as such.
-"""
+"""Writing in a run directory: never through a link, each file whole or not at all, one command at a
+time, and a failed write (a full disk) as one line; a run directory may come from someone else, and
+nothing drivelab writes may land outside it (docs/trust.md). ``locked_run`` holds the run,
+``check_run_members`` refuses links and folders in the way, ``replacing`` / ``write_file`` write
+through an exclusive temporary renamed over the name, ``remove_file`` deletes regular files only and
+``write_failure`` makes the one-line error."""
 
 from __future__ import annotations
 
@@ -52,8 +38,8 @@ AGAIN = "run the command again"
 
 
 class WriteError(UsageError):
-    """A write that failed, as one line: ``what`` (a quoted path, or words naming one), ``reason``,
-    and when ``disk_full``, what to do once space is freed (``then``)."""
+    """A write that failed, as one line: ``what``, ``reason``, and when ``disk_full``, what to do
+    once space is freed (``then``)."""
 
     def __init__(self, what: str, reason: str, disk_full: bool, then: str = AGAIN) -> None:
         self.what, self.reason, self.disk_full = what, reason, disk_full
@@ -66,8 +52,7 @@ class WriteError(UsageError):
 
 
 def write_failure(exc: BaseException, path: Path, then: str = AGAIN, what: str | None = None) -> WriteError:
-    """The ``WriteError`` of a write to ``path`` (described as ``what``, default the quoted path)
-    that failed with ``exc``: a full disk is named as such, anything else by its reason."""
+    """The ``WriteError`` of a write to ``path`` (or ``what``) that failed with ``exc``."""
     if isinstance(exc, WriteError):
         return exc.advising(then)
     what = repr(str(path)) if what is None else what
@@ -81,8 +66,8 @@ def write_failure(exc: BaseException, path: Path, then: str = AGAIN, what: str |
 
 
 def _disk_full(exc: BaseException, path: Path) -> bool:
-    """Whether ``exc`` says the disk is full; a writer that reports failures without an errno
-    (ffmpeg, writing through a pipe) is judged by the free space left where it wrote."""
+    """Whether ``exc`` says the disk is full; a writer that fails without an errno (ffmpeg) is
+    judged by the free space left where it wrote."""
     if isinstance(exc, OSError) and exc.errno is not None:
         return exc.errno in DISK_FULL
     folder = next((p for p in (path, *path.parents) if p.is_dir()), None)
@@ -95,7 +80,7 @@ def _disk_full(exc: BaseException, path: Path) -> bool:
 # --- members ---------------------------------------------------------------------------------
 def _kind(path: Path) -> str | None:
     """What ``path`` is, its link not followed: "a symbolic link", "a folder", "a file" or "a
-    special file" (a fifo, a socket, a device); None when nothing is there."""
+    special file"; None when nothing is there."""
     try:
         mode = os.lstat(path).st_mode
     except FileNotFoundError:
@@ -122,9 +107,8 @@ def _refuse(path: Path, kind: str, want: str) -> UsageError:
 
 def check_run_members(run_dir: Path) -> None:
     """A UsageError naming the first member of ``run_dir`` that drivelab could write or delete
-    through, or that is in the way of a file it writes: a symbolic link at its top or in its
-    ``OWN_FOLDERS``, one of those folders that is not a folder, anything but a file inside them,
-    a folder of a name drivelab writes as a file (``FILE_NAMES``)."""
+    through, or that is in the way of a file it writes: a symbolic link, an ``OWN_FOLDERS`` entry
+    that is not a folder of files, a folder of a name in ``FILE_NAMES``."""
     for path in sorted(run_dir.iterdir()):
         kind = _kind(path)
         if kind == "a symbolic link":
@@ -140,7 +124,7 @@ def check_run_members(run_dir: Path) -> None:
 
 def check_replaceable(path: Path, temporary: Path | None = None) -> None:
     """A UsageError when ``replacing(path, temporary)`` could not write: ``path`` is a folder, or
-    its temporary's name holds anything but a file (a leftover file is replaced)."""
+    its temporary's name holds anything but a file."""
     temporary = temporary_of(path) if temporary is None else temporary
     if _kind(path) == "a folder":
         raise _refuse(path, "a folder", "writes a file")
@@ -155,8 +139,7 @@ def temporary_of(path: Path) -> Path:
 
 
 def _create(temporary: Path) -> int:
-    """A descriptor of ``temporary``, created now (``_CREATE``). A file there, left by a command
-    killed while it wrote it, is replaced; anything else there (a link, a folder) is a UsageError."""
+    """A descriptor of ``temporary``, created now (a file a killed command left there is replaced)."""
     try:
         return os.open(temporary, _CREATE, 0o666)
     except FileExistsError:
@@ -183,10 +166,9 @@ def _still(descriptor: int, temporary: Path) -> bool:
 
 @contextlib.contextmanager
 def temporary_file(temporary: Path, final: Path | None = None) -> Iterator[Path]:
-    """Yield ``temporary``, a file created now (``_create``: never an existing file, never through
-    a link), for the caller to write by its path (``model.save``, ``savefig``) and later rename to
-    ``final``. When the block fails it is removed, and an OSError becomes ``write_failure``'s one
-    line about ``final``; when it ends, it is kept, checked to be still the file created."""
+    """Yield ``temporary``, a file created now (``_create``), for the caller to write by its path
+    and later rename to ``final``. When the block fails it is removed (an OSError becomes
+    ``write_failure``'s line); when it ends, it must still be the file created."""
     descriptor = _create(temporary)
     try:
         yield temporary
@@ -206,11 +188,8 @@ def temporary_file(temporary: Path, final: Path | None = None) -> Iterator[Path]
 @contextlib.contextmanager
 def replacing(path: Path, temporary: Path | None = None) -> Iterator[Path]:
     """Yield a new empty file, ``temporary`` (default ``temporary_of(path)``), for the caller to
-    write by its path; when the block ends, rename it over ``path`` (``temporary_file``).
-
-    Nothing is written into an existing file or through a link; the rename replaces whatever
-    ``path`` was (a link too) without following it. When the block or the rename fails the
-    temporary is removed; an OSError becomes ``write_failure``'s one line."""
+    write by its path; when the block ends, rename it over ``path`` (never following a link there).
+    On a failure the temporary is removed; an OSError becomes ``write_failure``'s one line."""
     temporary = temporary_of(path) if temporary is None else temporary
     with temporary_file(temporary, path):
         yield temporary
@@ -231,8 +210,7 @@ def write_file(path: Path, data: str | bytes, temporary: Path | None = None) -> 
 
 
 def remove_file(path: Path) -> None:
-    """Delete ``path`` when it is a file (nothing when it is missing); a link or a folder there is a
-    UsageError: what it points to, or holds, is not drivelab's."""
+    """Delete ``path`` when it is a file; a link or a folder there is a UsageError."""
     kind = _kind(path)
     if kind is None:
         return
@@ -241,9 +219,15 @@ def remove_file(path: Path) -> None:
     path.unlink(missing_ok=True)
 
 
+def remove_empty_folders(folders: list[Path]) -> None:
+    """Remove the empty ones of ``folders`` (innermost first: those a failed command created)."""
+    for folder in folders:
+        with contextlib.suppress(OSError):
+            folder.rmdir()
+
+
 def check_folder(path: Path) -> None:
-    """A UsageError unless ``path``, a folder of drivelab's own (``checkpoints/``, ``videos/``), is a
-    folder or missing (a link, even to a folder, is refused)."""
+    """A UsageError unless ``path``, a folder of drivelab's own, is a folder or missing."""
     kind = _kind(path)
     if kind not in (None, "a folder"):
         raise _refuse(path, kind, "keeps a folder of its own files")
@@ -276,16 +260,20 @@ def _holder(run_dir: Path) -> str:
     return f" (pid {text})" if text.isdigit() else ""
 
 
-@contextlib.contextmanager
-def locked_run(run_dir: Path, writes: bool = True) -> Iterator[None]:
-    """Hold ``run_dir`` for this command: exclusively when it ``writes`` there (then its members
-    are checked, ``check_run_members``, and ``IN_USE`` holds this process's pid until the block
-    ends), shared when it only reads it. Another command holding it is a UsageError naming its pid.
-    On a file system without locks (some network mounts) nothing is held."""
+def check_run_dir(run_dir: Path) -> None:
+    """A UsageError unless ``run_dir`` is an existing folder."""
     if run_dir.exists() and not run_dir.is_dir():
         raise UsageError(f"{str(run_dir)!r} is a file, not a run directory")
     if not run_dir.is_dir():
         raise UsageError(f"run directory {str(run_dir)!r} does not exist")
+
+
+@contextlib.contextmanager
+def locked_run(run_dir: Path, writes: bool = True) -> Iterator[None]:
+    """Hold ``run_dir`` for this command: exclusively when it ``writes`` there (then its members are
+    checked and ``IN_USE`` holds this pid), shared when it only reads it. Another command holding it
+    is a UsageError naming its pid. On a file system without locks nothing is held."""
+    check_run_dir(run_dir)
     try:
         descriptor = os.open(run_dir, os.O_RDONLY | os.O_DIRECTORY | os.O_CLOEXEC)
     except OSError as exc:

@@ -1,12 +1,9 @@
 """The seed protocol of evaluation and tuning.
 
-Training episodes are drawn by each world below ``TRAINING_SEED_LIMIT`` (``envs/vector.py``). The
-evaluation set of every scenario is the episodes ``EVALUATION_SEED_BASE``, +1, +2, … given directly
-(``reset(options={"episode_seeds": …})``), so no training episode is ever an evaluation episode,
-and every run, seed and algorithm is evaluated on the same episodes. Tuning selects
-hyper-parameters on validation episodes, the evaluation range from ``VALIDATION_START`` on, so that
-no test episode (the first ones: every report, the leaderboard) chooses a configuration.
-"""
+Training episodes are drawn below ``TRAINING_SEED_LIMIT`` (``envs/vector.py``); the evaluation set
+of every scenario is the episodes ``EVALUATION_SEED_BASE``, +1, +2, …, the same for every run and
+never a training episode. Tuning selects on validation episodes, from ``VALIDATION_START`` on, so
+that no test episode (the first ones: every report, the leaderboard) chooses a configuration."""
 
 from __future__ import annotations
 

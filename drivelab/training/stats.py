@@ -1,9 +1,5 @@
-"""Statistics over seeds: mean, percentile-bootstrap confidence interval, interquartile mean.
-
-Following Agarwal et al. (2021), "Deep RL at the Edge of the Statistical Precipice" (rliable):
-with a handful of seeds report an interval, not only a mean, and the interquartile mean (IQM),
-which discards the lowest and highest 25 % of runs and so is robust to one outlying seed.
-"""
+"""Statistics over seeds: mean, percentile-bootstrap confidence interval, interquartile mean, as
+rliable (Agarwal et al., 2021) recommends for a handful of seeds."""
 
 from __future__ import annotations
 
@@ -42,11 +38,8 @@ def percent(confidence: float) -> str:
 
 
 def interquartile_mean(values: Sequence[float]) -> float:
-    """Mean of the values left after cutting ``floor(n / 4)`` from each end of the sorted list.
-
-    This is rliable's IQM (``scipy.stats.trim_mean(x, 0.25)``); with fewer than 4 values nothing
-    is cut and it equals the mean.
-    """
+    """Mean of the values left after cutting ``floor(n / 4)`` from each end of the sorted list:
+    rliable's IQM; with fewer than 4 values it equals the mean."""
     values = np.asarray(values, dtype=float)
     if values.size == 0:
         return math.nan
@@ -59,18 +52,14 @@ def bootstrap_ci(
     resamples: int = RESAMPLES,
     seed: int = 0,
 ):
-    """Percentile-bootstrap confidence interval of the mean (``scipy.stats.bootstrap``).
-
-    Resamples the values with replacement ``resamples`` times and returns the
-    ``(1 - confidence) / 2`` and ``(1 + confidence) / 2`` quantiles of the resampled means.
-    The same ``seed`` gives the same interval. Fewer than two values give ``(nan, nan)``.
+    """Percentile-bootstrap confidence interval of the mean (``scipy.stats.bootstrap``); ``(nan,
+    nan)`` for fewer than two values.
 
     :param values: one value per run (seed); or runs × steps (learning curves): then two arrays,
         each step's interval the one its column alone gives.
     :param confidence: coverage of the interval, 0.90 for a 90 % interval.
     :param resamples: number of bootstrap resamples.
-    :param seed: seed of the resampling generator.
-    """
+    :param seed: seed of the resampling generator."""
     values = np.asarray(values, dtype=float)
     if len(values) < 2:
         return math.nan, math.nan

@@ -1,26 +1,10 @@
 """Sweeps: a grid of runs (algorithms × scenarios × sensors × rewards × seeds …) with per-cell
-overrides, executed in a local process pool or as Ray tasks, with the same run directories.
+overrides, executed in a local process pool or as Ray tasks. The sweep file (``name``, ``runs_dir``,
+``eval_episodes``, ``base``, ``grid``, ``overrides``) is described in docs/compare.md.
 
-A sweep file::
-
-    name: cmp                     # optional prefix of run names
-    runs_dir: runs/cmp            # optional; --runs-dir wins
-    eval_episodes: 20             # final evaluation of each run (eval.json); 0: none
-    base: {steps: 20000, backend: fast, traffic: regular}
-    grid:                         # any RunConfig field but name; seed may be a count
-      algo: [dqn, ppo]
-      reward: [highway, "highway,right_lane=0"]
-      seed: 3
-    overrides:                    # applied in order to the cells that match
-      - match: {algo: dqn}
-        set: {hyperparams: {learning_rate: 1.0e-3}}
-
-Each cell's run directory is named from its grid values, so a re-run finds it: a finished run is
-skipped, an interrupted one resumes from its checkpoint, and one that never reached a checkpoint
-starts again (only the files such a run writes are removed). A run directory made with a different
-config, a damaged run (a checkpoint or model without a readable manifest) and a folder holding
-anything a run does not write are refused before anything runs.
-"""
+Each cell's run directory is named from its grid values, so a re-run skips a finished run, resumes
+an interrupted one and restarts one that never reached a checkpoint (``cell_action``); a directory
+that is not that cell's run is refused before anything runs."""
 
 from __future__ import annotations
 
@@ -59,9 +43,8 @@ SWEEP_KEYS = ("name", "runs_dir", "eval_episodes", "base", "grid", "overrides")
 MERGED_FIELDS = ("hyperparams", "env_options")  # dict fields merged key by key, not replaced
 EXECUTORS = ("pool", "ray")
 LOG_FOLDER = ".sweep-logs"  # per-run stdout/stderr of the workers, beside the run directories
-# How long the lock file or logs folder that this user may not write is looked at again before
-# that is an error: another user's command that has just made it shares it (``_share_like_folder``)
-# a moment after it appears, with the mode of its umask in between.
+# how long a lock file or logs folder this user may not write is waited for: another user's command
+# that has just made it shares it a moment later (``_share_like_folder``)
 SHARE_WAIT_S = 0.5
 LOCK_FILE = ".sweep.lock"  # the runs a command is running now (``claim_runs``), beside them
 RAY_CONNECT_TIMEOUT_S = 10  # --address: how long the cluster's port may take to answer
@@ -189,19 +172,14 @@ def load_sweep(path: str | Path, runs_dir: str | Path | None = None) -> Sweep:
 
 
 def _check_cells(sweep: Sweep) -> None:
-    """Fail before any run starts or anything is written, as ``drivelab train`` does: an
-    ``eval_every`` larger than a new cell's ``steps`` (every cell whose run does not exist yet,
-    unless the sweep was begun before that check: see below), impossible algorithm/action pairs,
-    bad env options, hyper-parameters the agent refuses (``check_config``, once per distinct config
-    but for its name, seed and step budget), and a new cell's ``steps`` fewer than one rollout
-    (``check_steps``)."""
+    """Fail before anything is written, as ``drivelab train`` does: ``check_config`` once per
+    distinct config (but for name, seed and steps), and for the cells whose run does not exist yet
+    ``check_eval_every`` and ``check_steps``."""
     from drivelab.training.run import check_config
 
     begun = [os.path.lexists(sweep.runs_dir / cell.config.name) for cell in sweep.cells]
-    # A run that exists goes on with its own schedule, as `drivelab train --resume` does. One made
-    # before the check with eval_every > steps shows that the sweep was: its other cells share that
-    # schedule (eval_every is part of a run's identity), and refusing them would leave the sweep
-    # neither continuable nor fixable in its file.
+    # a run that exists keeps its own schedule; one made before the check with eval_every > steps
+    # shows that the whole sweep was (eval_every is part of a run's identity)
     before_the_check = any(
         exists and cell.config.eval_every > cell.config.steps
         for cell, exists in zip(sweep.cells, begun, strict=True)
@@ -221,17 +199,10 @@ def _check_cells(sweep: Sweep) -> None:
 
 # --- what each cell needs --------------------------------------------------------------------
 def cell_action(run_dir: Path, config: RunConfig, eval_episodes: int) -> str:
-    """What a re-run must do for this cell: "train", "restart", "resume", "finish", "evaluate" or
-    "skip".
-
-    "restart" is for a run stopped before its first checkpoint (no checkpoint, no model: nothing
-    to continue from), whose directory holds only what such a run writes. "finish" is for a run
-    killed after its model was saved, before its learning curve was drawn: the curve is drawn (and
-    the run evaluated if it has no eval.json yet), as the run that was never stopped has it.
-    Raises UsageError when ``run_dir`` is not that cell's run (a file, a folder of something else,
-    a run with a different config) or is a damaged run (a checkpoint or model without a readable
-    manifest): nothing in it is replaced or deleted.
-    """
+    """What a re-run must do for this cell: "train", "restart" (stopped before its first
+    checkpoint), "resume", "finish" (killed between model.zip and its learning curve), "evaluate" or
+    "skip". A UsageError when ``run_dir`` is not that cell's run or is damaged: nothing in it is
+    replaced or deleted."""
     from drivelab.training.evaluate import load_run_config
 
     if not run_dir.exists() and not run_dir.is_symlink():
@@ -297,9 +268,7 @@ def plan(sweep: Sweep) -> list[tuple[Cell, str]]:
 
 
 def preview(sweep: Sweep) -> list[tuple[Cell, str]]:
-    """What ``run_sweep`` would do with each cell (``--dry-run``), or the UsageError it would
-    give, with nothing written: ``plan``, and, as ``run_sweep`` claims the runs unless it has
-    nothing to run, the refusal of a run that another command is running now (``check_unclaimed``)."""
+    """What ``run_sweep`` would do with each cell (``--dry-run``), with nothing written."""
     steps = plan_unclaimed(sweep)
     if not all(action == "skip" for _, action in steps):
         check_unclaimed(sweep)
@@ -307,10 +276,8 @@ def preview(sweep: Sweep) -> list[tuple[Cell, str]]:
 
 
 def plan_unclaimed(sweep: Sweep) -> list[tuple[Cell, str]]:
-    """``plan`` by a command that holds none of the sweep's runs (``run_sweep`` before it claims
-    them, ``preview``). A run that another command is running now can look half-made (a folder
-    with only its config.yaml while its envs start): when a cell's check fails, and one of the runs
-    is held elsewhere, the UsageError says that, not that the folder is not a run."""
+    """``plan`` by a command that holds none of the sweep's runs: when a check fails and a run is
+    held by another command, the UsageError says that (a run being started looks half-made)."""
     try:
         return plan(sweep)
     except UsageError:
@@ -319,10 +286,9 @@ def plan_unclaimed(sweep: Sweep) -> list[tuple[Cell, str]]:
 
 
 def check_unclaimed(sweep: Sweep) -> None:
-    """A UsageError when another command is running one of the sweep's runs now: their locks
-    (``claim_runs`` without creating the lock file) are taken and let go at once; nothing is
-    written. Never call it while this process holds the claim: closing another handle of the lock
-    file would drop this process's locks (``fcntl.lockf``)."""
+    """A UsageError when another command is running one of the sweep's runs now; nothing is written.
+    Never call it while this process holds the claim (closing another handle of the lock file drops
+    this process's ``fcntl.lockf`` locks)."""
     with claim_runs(sweep.runs_dir.resolve(), [cell.config.name for cell in sweep.cells], create=False):
         pass
 
@@ -335,19 +301,15 @@ def run_cell(
     on_evaluation=None,
     eval_first: int = 0,
 ) -> dict:
-    """Do one cell's work in a worker (process-pool worker or Ray task); never raises.
+    """Do one cell's work in a worker (process-pool worker or Ray task); never raises. Its output
+    goes to ``runs_dir/.sweep-logs/<name>.log``.
 
-    Output (progress bars, warnings) goes to ``runs_dir/.sweep-logs/<name>.log``.
-
-    :param on_evaluation: called after each periodic evaluation as ``on_evaluation(step, summary)``
-        (``run.train``); returning False stops the run there, checkpointed (a pruned tuning trial:
-        ``drivelab.training.tune``). It must pickle for the process pool and Ray.
-    :param eval_first: the periodic and final evaluations play evaluation episodes ``eval_first``
-        … (tuning's validation episodes).
+    :param on_evaluation: ``run.train``'s (it must pickle); returning False stops the run there (a
+        pruned tuning trial).
+    :param eval_first: the first evaluation episode played (tuning's validation episodes).
     :returns: ``{"name", "action", "ok", "seconds", "error", "stopped"}`` (and ``"interrupted":
-        True`` when Ctrl-C or SIGTERM stopped it); ``stopped``: the step at
-        which ``on_evaluation`` stopped the run (no final evaluation then), else None.
-    """
+        True`` after Ctrl-C or SIGTERM); ``stopped``: the step at which ``on_evaluation`` stopped
+        the run, else None."""
     import torch
 
     torch.set_num_threads(1)  # one run per core: no oversubscription
@@ -405,17 +367,13 @@ def execute(
     workers: int = 1,
     in_flight: int | None = None,
 ) -> Iterator[dict]:
-    """``function(**job)`` for each job, yielded as each finishes: in this process (``pool`` with
-    one worker, one job after another), a spawned process pool, or Ray tasks (see ``run_sweep``;
-    inside ``executor_ready``, which starts Ray or joins its cluster).
+    """``function(**job)`` for each job, yielded as each finishes: in this process (one ``pool``
+    worker), in a spawned process pool, or as Ray tasks (inside ``executor_ready``).
 
-    :param function: a module-level function (it must pickle), e.g. ``run_cell``; it should not raise.
-    :param jobs: keyword arguments of each call. It is read lazily: a job is drawn when a slot is
-        free, so a job may depend on the results yielded before it (``tune`` asks Optuna for a
-        trial only then).
-    :param in_flight: at most this many calls submitted at once; None: every job at once (Ray
-        then schedules them over the whole cluster).
-    """
+    :param function: a module-level function that pickles and does not raise, e.g. ``run_cell``.
+    :param jobs: keyword arguments of each call, drawn lazily when a slot is free (``tune`` asks
+        Optuna for a trial only then).
+    :param in_flight: at most this many calls at once; None: every job at once."""
     if executor == "ray":
         import ray
 
@@ -427,8 +385,7 @@ def execute(
 
 
 def _as_done(submit: Callable[[dict], Future], jobs: Iterator[dict], in_flight: int | None) -> Iterator[dict]:
-    """The results of ``submit(job)``'s futures as they finish, at most ``in_flight`` pending (None:
-    every job at once); the next job is drawn when one finished."""
+    """The results of ``submit(job)``'s futures as they finish, at most ``in_flight`` pending."""
     pending = {submit(job) for job in itertools.islice(jobs, in_flight)}
     while pending:
         done, pending = wait(pending, return_when=FIRST_COMPLETED)
@@ -438,9 +395,8 @@ def _as_done(submit: Callable[[dict], Future], jobs: Iterator[dict], in_flight: 
 
 
 def _until_interrupted(outcomes: Iterator[dict]) -> Iterator[dict]:
-    """``outcomes`` until one says its run was interrupted (Ctrl-C, SIGTERM: checkpointed, or
-    stopped in its final evaluation); then KeyboardInterrupt, as the driver's own Ctrl-C, so that
-    the command stops there and a re-run resumes that run instead of counting it as failed."""
+    """``outcomes`` until one says its run was interrupted; then KeyboardInterrupt, so that the
+    command stops and a re-run resumes that run instead of counting it as failed."""
     for outcome in outcomes:
         if outcome.get("interrupted"):
             raise KeyboardInterrupt
@@ -448,10 +404,7 @@ def _until_interrupted(outcomes: Iterator[dict]) -> Iterator[dict]:
 
 
 def _exit_with_parent(parent: int) -> None:
-    """A pool worker's start: a daemon thread ends the worker once its parent is gone. A killed
-    sweep (SIGKILL: no cleanup) would otherwise leave its workers training their cells, then idle
-    for ever, orphans writing into the run directories that a re-run's workers resume. Each run
-    keeps its last checkpoint (written whole, the manifest last), as after any kill."""
+    """A pool worker's start: the worker exits once its parent is gone (no orphan trains on)."""
 
     def watch() -> None:
         while os.getppid() == parent:
@@ -474,12 +427,9 @@ def _pool(function: Callable, jobs: Iterator[dict], workers: int, in_flight: int
 
 
 def _ray_init(workers: int, address: str | None) -> bool:
-    """Start a local Ray cluster of ``workers`` CPUs, or join the one at ``address``, unless Ray is
-    running in this process already; True when this call started it (then shut it down).
-
-    A cluster that cannot be started or joined (nothing answers, a token is required) is one
-    UsageError line, within ``RAY_CONNECT_TIMEOUT_S`` where nothing answers at its host and port
-    (Ray itself would retry for minutes), without Ray's messages about the failed attempt."""
+    """Start a local Ray cluster of ``workers`` CPUs, or join the one at ``address``, unless Ray
+    runs in this process already; True when this call started it. Failing that is one UsageError
+    line, within ``RAY_CONNECT_TIMEOUT_S`` when nothing answers."""
     try:
         import ray
     except ImportError:
@@ -505,8 +455,8 @@ def _ray_init(workers: int, address: str | None) -> bool:
 
 
 def _check_answers(address: str) -> None:
-    """A UsageError when nothing answers at the host and port of ``address`` (``ray://host:port``
-    or ``host:port``; others, such as ``auto``, are left to Ray)."""
+    """A UsageError when nothing answers at the host and port of ``address`` (``ray://host:port`` or
+    ``host:port``; others are left to Ray)."""
     match = re.fullmatch(r"(?:ray://)?\[?([^\[\]/]+?)\]?:(\d+)", address)
     if match is None:
         return
@@ -523,8 +473,8 @@ def _check_answers(address: str) -> None:
 @contextlib.contextmanager
 def executor_ready(executor: str, workers: int, address: str | None) -> Iterator[None]:
     """With ``executor`` "ray": Ray started (or its cluster joined) for the block, so that a cluster
-    that cannot be joined stops a command before it writes anything or draws a progress bar; shut
-    down after the block if started here. The process pool starts with its first job."""
+    that cannot be joined stops a command before it writes anything; shut down after if started
+    here."""
     started = executor == "ray" and _ray_init(workers, address)
     try:
         yield
@@ -538,18 +488,14 @@ def executor_ready(executor: str, workers: int, address: str | None) -> Iterator
 @contextlib.contextmanager
 def claim_runs(runs_dir: Path, names: Iterable[str], create: bool = True) -> Iterator[None]:
     """Hold the run directories ``names`` of ``runs_dir`` for this process: a second command that
-    would run one of them (the same sweep started twice, a double click) is refused with one
-    UsageError line instead of training into the same directories at once, which mixes their logs
-    and results. Commands running other runs of the same folder go on side by side.
+    would run one of them is refused with one UsageError line. Commands running other runs of the
+    folder go on side by side.
 
     One byte-range lock (``fcntl.lockf``) per run in ``runs_dir/.sweep.lock``, at an offset drawn
-    from its name; the locks go with the process, so a killed command leaves none behind. On a file
-    system without locks (some network mounts) runs are not claimed. With ``create`` False nothing
-    is written: without a lock file no run is claimed (a check that none is running elsewhere).
-
-    Every user who runs sweeps in a shared runs folder must open the lock file for writing: it is
-    made as writable for the folder's group and others as the folder is (``_share_like_folder``),
-    and one that this user cannot write is one UsageError line that says so."""
+    from its name; the locks go with the process. On a file system without locks runs are not
+    claimed. With ``create`` False nothing is written: without a lock file no run is claimed. The
+    lock file is shared as the folder is (``_share_like_folder``); one this user cannot write is a
+    UsageError."""
     path = runs_dir / LOCK_FILE
     try:
         handle = _open_lock_file(path, create)
@@ -581,10 +527,9 @@ def claim_runs(runs_dir: Path, names: Iterable[str], create: bool = True) -> Ite
 
 
 def _open_lock_file(path: Path, create: bool):
-    """``path``, the lock file, opened for appending (a lock needs a handle open for writing;
-    nothing is ever written). A new one (``create``) is made with mode 0o666, so that the umask
-    decides, then shared as the folder is (``_share_like_folder``). OSError when it cannot be
-    opened (FileNotFoundError when it is missing and not ``create``)."""
+    """``path``, the lock file, opened for appending (a lock needs a handle open for writing); a new
+    one (``create``) is made with mode 0o666 and shared as its folder is. OSError when it cannot be
+    opened."""
     flags = os.O_WRONLY | os.O_APPEND
     if create:
         try:
@@ -605,12 +550,9 @@ def _open_lock_file(path: Path, create: bool):
 
 
 def _share_like_folder(descriptor: int, folder: Path) -> None:
-    """Let the group and others read and write the new file or folder ``descriptor`` (and enter
-    the folder) where ``folder`` lets them write (the group only where it has the folder's group: a
-    setgid folder, or the user's own group), whatever the umask: in a runs folder shared by a group
-    (``chmod g+ws``), a umask of 022 would leave the lock file and the logs folder writable by their
-    maker alone, and every other user's sweep refused. A file system that refuses the change keeps
-    them as they were made."""
+    """Let the group and others read and write the new file or folder ``descriptor`` where
+    ``folder`` lets them write (the group only where it has the folder's group), whatever the umask,
+    so that every user of a group-shared runs folder can use it. A refused change is ignored."""
     with contextlib.suppress(OSError):
         folder_stat, file_stat = os.stat(folder), os.fstat(descriptor)
         every = 0o007 if stat.S_ISDIR(file_stat.st_mode) else 0o006  # read, write (and enter a folder)
@@ -622,9 +564,7 @@ def _share_like_folder(descriptor: int, folder: Path) -> None:
 
 
 def logs_folder(runs_dir: Path) -> Path:
-    """``runs_dir/.sweep-logs``, made when missing (``runs_dir`` too) and then shared as
-    ``runs_dir`` is (``_share_like_folder``): each user of a group-shared runs folder writes the
-    logs of their runs in it."""
+    """``runs_dir/.sweep-logs``, made when missing and shared as ``runs_dir`` is."""
     folder = runs_dir / LOG_FOLDER
     runs_dir.mkdir(parents=True, exist_ok=True)
     try:
@@ -640,8 +580,7 @@ def logs_folder(runs_dir: Path) -> Path:
 
 
 def _check_logs_folder(runs_dir: Path) -> None:
-    """``logs_folder``, and a UsageError line when this user cannot write in it (made by another
-    user of a shared runs folder before it was shared), before any run starts."""
+    """``logs_folder``, and a UsageError when this user cannot write in it, before any run starts."""
     try:
         folder = logs_folder(runs_dir)
     except OSError as exc:
@@ -669,9 +608,7 @@ def _owner(path: Path) -> int | None:
 
 
 def shell_word(text: str) -> str:
-    """``text`` as one shell word on one line: ``shlex.quote``'s, or where ``text`` holds a control
-    character (a newline in a folder's name), bash's ``$'…'`` with that character escaped, so that
-    an error line quoting a command stays one line and the command still names the path."""
+    """``text`` as one shell word on one line (bash's ``$'…'`` for control characters)."""
     if text.isprintable():
         return shlex.quote(text)
     return "$'" + "".join(_ansi_c(character) for character in text) + "'"
@@ -681,8 +618,8 @@ _ANSI_C = {"\\": "\\\\", "'": "\\'", "\n": "\\n", "\t": "\\t", "\r": "\\r"}
 
 
 def _ansi_c(character: str) -> str:
-    """One character inside bash's ``$'…'``: itself when printable, else its escape (a byte that
-    was not UTF-8, kept by Python as a surrogate, as that byte)."""
+    """One character inside bash's ``$'…'``: itself when printable, else its escape (an undecodable
+    byte, kept by Python as a surrogate, as that byte)."""
     code = ord(character)
     if character in _ANSI_C:
         return _ANSI_C[character]
@@ -708,9 +645,8 @@ def _chmod_fix(path: Path, owner: int) -> str:
 
 
 def _regroup(path: Path) -> str:
-    """``chgrp GROUP PATH && `` when ``path`` is not of its folder's group GROUP (in a folder
-    without setgid it gets its maker's group, which a ``chmod g+w`` alone lets write, not the
-    folder's); empty when it is, or when either cannot be looked at."""
+    """``chgrp GROUP PATH && `` when ``path`` is not of its folder's group GROUP; empty when it is,
+    or when either cannot be looked at."""
     try:
         gid, folder_gid = path.stat().st_gid, path.parent.stat().st_gid
     except OSError:
@@ -755,11 +691,10 @@ def run_sweep(
 
     :param sweep: from ``load_sweep`` / ``expand_sweep``.
     :param executor: "pool" (local processes) or "ray" (Ray tasks).
-    :param workers: parallel runs; default one per core. One worker runs the cells in this
-        process. With Ray and no ``address``, the CPUs of the local cluster it starts.
-    :param address: an existing Ray cluster (``ray://host:10001`` or ``auto``); it needs drivelab
-        installed on its nodes and ``runs_dir`` on storage they share.
-    """
+    :param workers: parallel runs; default one per core (with Ray and no ``address``: the local
+        cluster's CPUs). One worker runs the cells in this process.
+    :param address: an existing Ray cluster (``ray://host:10001`` or ``auto``), with drivelab
+        installed on its nodes and ``runs_dir`` on storage they share."""
     workers = check_workers(executor, workers, address)
     steps = plan_unclaimed(sweep)  # every cell checked before anything is written
     if all(action == "skip" for _, action in steps):  # nothing to run: no Ray started, no lock taken

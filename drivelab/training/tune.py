@@ -1,9 +1,8 @@
 """Tuning: an Optuna study over run directories (TPE sampler, median pruner on the periodic
 evaluations), its trials run on the local process pool or as Ray tasks like a sweep's cells.
 
-A study file is a run config (any ``RunConfig`` field but ``name``: the budget per trial is
-``steps``, the periodic evaluations that the pruner reads are ``eval_every`` / ``eval_episodes``)
-plus the study's own keys::
+A study file is a run config (any ``RunConfig`` field but ``name``; ``steps`` is each trial's
+budget) plus the study's own keys::
 
     name: ppo-highway            # study name (default <algo>-<env>); folder runs/tune/<name>
     study_dir: runs/tune/ppo     # optional; --study-dir wins
@@ -25,17 +24,12 @@ plus the study's own keys::
       n_steps: {type: int, low: 64, high: 1024, log: true}
       batch_size: {type: categorical, choices: [32, 64, 128]}
 
-Every trial is a run directory ``<study_dir>/trial-NNNN`` (``drivelab compare`` reads them), all
-trained with the study's seed, so every trial is evaluated on the same episodes: the scenario's
-validation episodes (``VALIDATION_START`` on), never its first evaluation episodes, the test
-episodes of every report and of the leaderboard, so no tuned value is chosen on them. The study lives
-in ``<study_dir>/study.journal`` (Optuna's journal file): a killed study, run again, re-dispatches
-the trials that were running (their runs resume from their latest checkpoint) and then asks for
-the missing ones; with a sampler seed, trial n's values are drawn with seed + n, so on one worker
-the continued study is the study that was never stopped. When it ends it writes ``summary.md``,
-``summary.json``, ``trials.csv`` and ``best-hyperparams.yml`` (the best trial's values in RL Zoo's
-format).
-"""
+Every trial is a run directory ``<study_dir>/trial-NNNN``, trained with the study's seed and
+evaluated on the scenario's validation episodes (``VALIDATION_START`` on), never on the test
+episodes of the reports. The study lives in ``<study_dir>/study.journal``: a killed study, run
+again, resumes its running trials, then asks for the missing ones; with a sampler seed, trial n
+draws with seed + n. At the end it writes ``summary.md``, ``summary.json``, ``trials.csv`` and
+``best-hyperparams.yml`` (RL Zoo's format)."""
 
 from __future__ import annotations
 
@@ -75,8 +69,8 @@ MACHINE_KEYS = ("device",)  # settings of the machine, not hyper-parameters: lef
 @dataclass(frozen=True)
 class Param:
     """One searched hyper-parameter: ``kind`` "float", "int" or "categorical"; ``low``/``high``,
-    ``log`` and ``step`` for numbers; ``choices`` for a categorical (values that are not scalars,
-    e.g. ``net_arch`` lists, are offered to Optuna as their JSON text)."""
+    ``log`` and ``step`` for numbers; ``choices`` for a categorical (non-scalar choices are offered
+    to Optuna as their JSON text)."""
 
     name: str
     kind: str
@@ -214,8 +208,7 @@ def read_study(spec: dict, study_dir: str | Path | None = None, n_trials: int | 
     """Validate a study mapping (see the module docstring); nothing is built or written.
 
     :param study_dir: overrides the file's ``study_dir`` (default ``runs/tune/<name>``).
-    :param n_trials: overrides the file's ``n_trials``.
-    """
+    :param n_trials: overrides the file's ``n_trials``."""
     if not isinstance(spec, dict):
         raise UsageError("a tune file must be a mapping")
     stray = sorted(set(spec) - set(STUDY_KEYS) - set(RUN_KEYS), key=str)
@@ -252,16 +245,15 @@ def read_study(spec: dict, study_dir: str | Path | None = None, n_trials: int | 
 
 
 def load_study(path: str | Path, study_dir: str | Path | None = None, n_trials: int | None = None) -> Study:
-    """Read, validate and check a study file: every searched value at its bounds (each choice of
-    a categorical) is built into the agent once, so a bad space fails before anything is written."""
+    """Read, validate and check (``check_study``) a study file."""
     study = read_study(load_yaml(path), study_dir, n_trials)
     check_study(study)
     return study
 
 
 def check_study(study: Study) -> None:
-    """Build the environment once and the agent at the low and the high corner of the space and
-    at each categorical choice: a one-line UsageError for any value the algorithm refuses."""
+    """Build the agent at the low and the high corner of the space and at each categorical choice,
+    so that a value the algorithm refuses fails, as one line, before anything is written."""
     from drivelab.agents.registry import check_combination
     from drivelab.envs.core import DriveEnv
     from drivelab.training.run import _check_model
@@ -303,8 +295,7 @@ def _pruner(keywords: dict):
 
 
 def open_optuna_study(study: Study):
-    """The study's Optuna study in ``<study_dir>/study.journal`` (created when new), with a TPE
-    sampler; with a seed, trial n draws its values with seed + n (``TrialSeededTPE``)."""
+    """The study's Optuna study in ``<study_dir>/study.journal`` (created when new)."""
     import optuna
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)  # tune prints its own progress
@@ -321,11 +312,9 @@ def open_optuna_study(study: Study):
 
 
 def trial_seeded_tpe(seed: int, keywords: dict):
-    """A TPE sampler that draws trial n's values with its own seed, ``seed + n``, from the trials
-    finished before it. One TPESampler seeded once draws trial n from a random stream advanced
-    by every draw of the process before it, so a study killed and run again (a new process, a
-    new sampler) would ask other values than the study that was never stopped; with one seed per
-    trial it asks the same ones, given the same finished trials (one worker)."""
+    """A TPE sampler that draws trial n's values with the seed ``seed + n``, so that a study killed
+    and run again asks the same values as the study that was never stopped (given the same finished
+    trials)."""
     import optuna
 
     class TrialSeededTPE(optuna.samplers.BaseSampler):
@@ -358,9 +347,8 @@ def trial_seeded_tpe(seed: int, keywords: dict):
 
 @dataclass(frozen=True)
 class TrialReporter:
-    """``on_evaluation`` of a trial's run (it pickles to pool workers and Ray tasks): reports the
-    metric of each periodic evaluation to the trial and returns False when the median pruner says
-    the trial falls behind the others at that step."""
+    """``on_evaluation`` of a trial's run (it pickles): reports each periodic evaluation's metric to
+    the trial and returns False when the median pruner prunes it."""
 
     study_dir: str
     study_name: str
@@ -383,8 +371,7 @@ class TrialReporter:
 
 @contextlib.contextmanager
 def _locked(study_dir: Path):
-    """Hold ``<study_dir>/.study.lock``: one process runs a study at a time. The lock goes with
-    the process, so a killed study leaves none behind."""
+    """Hold ``<study_dir>/.study.lock``: one process runs a study at a time."""
     with (study_dir / LOCK_FILE).open("a") as handle:
         try:
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -442,16 +429,14 @@ def run_study(
     address: str | None = None,
     command: str | None = None,
 ) -> dict:
-    """Run the study's missing trials (``n_trials`` finished ones in all, failed ones not
-    counted), the trials left running by a killed study first; write the summary.
+    """Run the study's missing trials (``n_trials`` finished ones in all), the trials left running
+    by a killed study first; write the summary and return it.
 
     :param executor: "pool" (local processes) or "ray" (Ray tasks), as for ``run_sweep``.
     :param workers: trials at once (default one per core). One worker runs them in this process.
     :param address: an existing Ray cluster; the study directory must be on storage its nodes share.
     :param command: the command line, written into the summary.
-    :returns: the summary (``summary.json``'s content).
-    :raises KeyboardInterrupt: a trial's run was interrupted (it resumes on the next run).
-    """
+    :raises KeyboardInterrupt: a trial's run was interrupted (it resumes on the next run)."""
     from optuna.trial import Trial, TrialState
 
     from drivelab.training.evaluate import make_out_dir
@@ -526,9 +511,8 @@ def _state_word(outcome: dict) -> str:
 
 # --- the summary -----------------------------------------------------------------------------
 def trials_table(study: Study, optuna_study):
-    """One row per trial (pandas DataFrame): number, state, value, the searched values (as Optuna
-    stores them: a list or mapping choice as its JSON text), the last step it reported, its
-    seconds and run directory."""
+    """One row per trial (a pandas DataFrame): number, state, value, the searched values as Optuna
+    stores them, the last step it reported, its seconds and run directory."""
     import pandas as pd
 
     rows = []
@@ -544,9 +528,7 @@ def trials_table(study: Study, optuna_study):
 
 
 def best_entry(study: Study, params: dict) -> dict:
-    """The hyper-parameters of a trial as one RL Zoo entry: ``n_timesteps`` (the budget per trial),
-    ``policy`` (SB3 algorithms: the network class of the observation), ``env_kwargs`` (the run's
-    environment) and every algorithm keyword the run used (shipped, fixed and searched)."""
+    """A trial's hyper-parameters as one RL Zoo entry (``best-hyperparams.yml``)."""
     from drivelab.agents.registry import get_algo
     from drivelab.envs.core import DriveEnv
 
@@ -636,8 +618,8 @@ def _cell(value) -> str:
 
 # --- writing the best values into a hyper-parameter file ---------------------------------------
 def check_zoo_file(path: Path) -> dict:
-    """The entries of an RL Zoo hyper-parameter file that ``write_best`` may update (empty for a
-    file that does not exist yet); a UsageError for anything else, before the study runs."""
+    """The entries of the RL Zoo hyper-parameter file ``path`` that ``write_best`` may update (empty
+    for a file not there yet); a UsageError for anything else, before the study runs."""
     if path.is_dir():
         raise UsageError(f"--write-best {str(path)!r} is a directory")
     if not path.exists():
@@ -660,9 +642,7 @@ def check_zoo_file(path: Path) -> dict:
 
 
 def write_best(study: Study, summary: dict, path: str | Path) -> Path:
-    """Set the entry of the study's env id in the RL Zoo file ``path`` to the best trial's values
-    (``best-hyperparams.yml``), keeping its other entries and its leading comment lines (anchors
-    are written out in full; comments inside entries are not kept)."""
+    """Set the study's env entry of the RL Zoo file ``path`` to the best values, keeping the rest."""
     from drivelab.envs import gym_id
 
     path = Path(path)

@@ -1,21 +1,10 @@
 """Shipped agents: the zoo inside the package, ``drivelab zoo`` and ``drivelab enjoy``.
 
 A shipped agent is a run directory cut down to what acting needs, in ``drivelab/zoo/<name>/``:
-
-    config.yaml   the run's resolved config (the environment the agent was trained and is evaluated on)
-    model.zip     the run's final model in the run directories' safe format (``agents/storage.py``:
-                  tensors read with ``torch.load(weights_only=True)``, spaces and counters as JSON),
-                  weights in float16, the optimizer's moments dropped (they only matter to further
-                  training): a quarter of the run's model.zip
-    card.json     what it is and how well it drives: algorithm, scenario, observation, action,
-                  reward, hyper-parameters, training steps and time, the command that trained it,
-                  and every evaluation measured on it with the command that measured it
-
-Loading one is loading a run directory (``checkpoints.load_agent``): nothing is unpickled, and
-every command that takes a run directory (``evaluate``, ``benchmark nocrash``, ``enjoy``) takes a
-zoo name too. ``benchmarks/zoo_build.py`` trains, packs and measures the shipped agents from their
-recorded commands.
-"""
+config.yaml, model.zip (float16 weights, no optimizer moments) and card.json (what it is and every
+evaluation measured on it; see docs/zoo.md). Loading one is loading a run directory: nothing is
+unpickled, and every command that takes a run directory takes a zoo name too.
+``benchmarks/zoo_build.py`` trains, packs and measures them."""
 
 from __future__ import annotations
 
@@ -64,8 +53,7 @@ def shipped_agents(zoo_dir: Path | None = None) -> list[ShippedAgent]:
 
 
 def resolve(target: str | Path, zoo_dir: Path | None = None) -> tuple[Path, str | None]:
-    """(run directory, zoo name or None) of what a command was given: an existing directory is a
-    run directory; otherwise ``target`` must name a shipped agent."""
+    """(run directory, zoo name or None) of a command's ``target``: a directory, else a shipped agent."""
     path = Path(target)
     if path.is_dir():
         return path, None
@@ -91,10 +79,9 @@ class Trained(NamedTuple):
 
 
 def load_trained(target: str | Path) -> Trained:
-    """The agent of a run directory or of a shipped agent named by ``drivelab zoo`` (its final
-    model, else its latest verified checkpoint), built on the run's evaluation environment; a
-    UsageError when the model's spaces are not its config.yaml's, or config.yaml was edited after
-    training, or the run is being trained now. Nothing is unpickled."""
+    """The agent of a run directory or of a shipped agent (its final model, else its latest verified
+    checkpoint), built on the run's evaluation environment; a UsageError when its spaces or config
+    are not those it was trained with, or the run is being trained now."""
     from drivelab.envs.core import DriveEnv
     from drivelab.training.checkpoints import check_trained_config, load_agent
     from drivelab.training.evaluate import check_spaces, load_run_config
@@ -111,9 +98,8 @@ def load_trained(target: str | Path) -> Trained:
 
 
 def report_dir(target: str | Path, out: Path | None, runs_dir: Path = Path("runs")) -> Path | None:
-    """Where an evaluation of ``target`` writes its reports: ``out`` when given, else None (the
-    run directory itself) for a run directory and ``runs_dir/zoo-<name>`` for a shipped agent, so
-    that the package stays as shipped."""
+    """Where an evaluation of ``target`` writes its reports: ``out`` when given, else None (the run
+    directory itself) for a run directory and ``runs_dir/zoo-<name>`` for a shipped agent."""
     _, name = resolve(target)
     if out is not None or name is None:
         return out
@@ -144,8 +130,7 @@ def headline(card: dict) -> str:
 
 # --- packing -----------------------------------------------------------------------------------
 def _drop_optimizer_moments(agent) -> None:
-    """Empty the state (Adam's moments) of every optimizer the agent holds, directly or in its
-    SB3 policy: a fresh optimizer's, so the model loads and acts as with them."""
+    """Empty the state of every optimizer the agent (or its SB3 policy) holds: a fresh optimizer's."""
     import torch
 
     holders = [agent, getattr(agent, "policy", None)]
@@ -157,7 +142,7 @@ def _drop_optimizer_moments(agent) -> None:
 
 def _halve(state, converted: dict):
     """``state`` (nested dicts/lists of tensors) with every float32 tensor as float16; a tensor
-    shared by two entries (a shared encoder) stays one tensor (``converted``: by storage view)."""
+    shared by two entries stays one tensor (``converted``: by storage view)."""
     import torch
 
     if isinstance(state, dict):
@@ -184,10 +169,7 @@ def _halve(state, converted: dict):
 
 
 def _store_half_precision(path: Path) -> None:
-    """Rewrite the tensor files (``*.pt``) of the model zip ``path`` with float16 weights. The
-    loaders copy them into the float32 networks (``load_state_dict`` casts), so a model loads as
-    before, in half the bytes; its actions change in the last digits (the card's numbers are
-    measured on the shipped weights)."""
+    """Rewrite the tensor files (``*.pt``) of the model zip ``path`` with float16 weights."""
     from drivelab.agents.storage import tensors_from_bytes, tensors_to_bytes
 
     with zipfile.ZipFile(path) as archive:
@@ -209,11 +191,9 @@ def pack(
     zoo_dir: Path | None = None,
 ) -> Path:
     """Copy ``run_dir``'s config and final model into ``zoo_dir/name`` (replacing an older copy)
-    with a card: ``description``, the ``command`` that trained the run, its ``timing`` (e.g.
-    ``train_wall_s``, ``train_cpu_s``, ``machine``; default: the run's train_timing.json if any),
-    and what the run directory records (algorithm, environment, hyper-parameters, steps). The
-    model is loaded and saved again without the optimizer's moments, its weights in float16
-    (``_store_half_precision``). Evaluations are added by ``add_evaluation``."""
+    with a card: ``description``, the training ``command``, its ``timing`` (default: the run's
+    train_timing.json if any) and what the run directory records. The model is saved without the
+    optimizer's moments, in float16. Evaluations are added by ``add_evaluation``."""
     from drivelab.config import check_run_name, save_yaml
     from drivelab.training.checkpoints import file_sha256, load_agent
     from drivelab.training.evaluate import load_run_config
@@ -273,11 +253,9 @@ def pack(
 
 
 def model_differences(first: str | Path, second: str | Path) -> dict[str, str]:
-    """How the model zips ``first`` and ``second`` differ, member by member, in the values they
-    hold: {} when every member holds the same values (tensors and arrays element for element, bit
-    for bit, JSON as parsed, less SB3's bookkeeping of when it learned: ``_without_clock``). A differing
-    member's entry says how: missing from one, other keys, other shapes, or the largest absolute
-    difference of its numbers. Read like every model: no unpickling."""
+    """How the model zips ``first`` and ``second`` differ, member by member, in the values they hold
+    (``_without_clock``): {} when they hold the same; otherwise, per member, how (missing from one,
+    other keys, other shapes, the largest absolute difference). Nothing is unpickled."""
     with zipfile.ZipFile(first) as one, zipfile.ZipFile(second) as two:
         left = {name: one.read(name) for name in one.namelist()}
         right = {name: two.read(name) for name in two.namelist()}
@@ -309,10 +287,7 @@ def _member_difference(name: str, left: bytes, right: bytes) -> str | None:
     elif name.endswith(".npz"):
         a, b = read_arrays(left), read_arrays(right)
     elif name.endswith(".npy"):
-        a, b = (
-            {"": np.load(io.BytesIO(left), allow_pickle=False)},
-            {"": np.load(io.BytesIO(right), allow_pickle=False)},
-        )
+        a, b = ({"": np.load(io.BytesIO(data), allow_pickle=False)} for data in (left, right))
     else:
         return "other bytes"
     if set(a) != set(b):
@@ -341,11 +316,7 @@ def _member_difference(name: str, left: bytes, right: bytes) -> str | None:
 
 
 def _without_clock(state):
-    """A model's JSON without what says when, not what, it learned: the wall-clock seconds of SB3's
-    episode records (``t`` of each entry of ``ep_info_buffer``: when the Monitor saw the episode
-    end, which no two runs share) and SB3's ``_num_timesteps_at_start`` (where the last ``learn``
-    call began, for its steps-per-second log: a resumed run's checkpoint step, 0 in one never
-    stopped)."""
+    """A model's JSON without SB3's wall-clock records (``t``, ``_num_timesteps_at_start``)."""
     if not isinstance(state, dict):
         return state
     state = dict(state)
@@ -376,8 +347,7 @@ def _leaves(state, prefix: str = "") -> dict[str, np.ndarray]:
 
 
 def add_evaluation(name: str, evaluation: dict, zoo_dir: Path | None = None) -> dict:
-    """Record ``evaluation`` (protocol, episodes, command, metrics, machine) in ``name``'s card,
-    replacing an earlier one of the same protocol; the card as written."""
+    """Record ``evaluation`` in ``name``'s card, replacing one of the same protocol; the card."""
     path = (ZOO_DIR if zoo_dir is None else zoo_dir) / name / "card.json"
     card = json.loads(path.read_text())
     kept = [e for e in card["evaluations"] if e["protocol"] != evaluation["protocol"]]
@@ -388,8 +358,7 @@ def add_evaluation(name: str, evaluation: dict, zoo_dir: Path | None = None) -> 
 
 # --- enjoy -------------------------------------------------------------------------------------
 def check_video_path(path: Path) -> None:
-    """A UsageError unless a video can be written at ``path``: a known suffix, an mp4 encoder for
-    .mp4, an existing writable folder, not a folder itself (checked before any episode)."""
+    """A UsageError unless a video can be written at ``path`` (checked before any episode)."""
     if path.suffix.lower() not in VIDEO_SUFFIXES:
         raise UsageError(f"--video {str(path)!r} must end in .mp4 or .gif")
     from drivelab.training.evaluate import check_output_file, has_mp4_encoder
@@ -403,8 +372,7 @@ def check_video_path(path: Path) -> None:
 
 
 class VideoFile:
-    """Frames streamed to an mp4 (imageio-ffmpeg) or gif (Pillow) under a temporary name, renamed
-    to ``path`` by ``close`` and removed by ``discard``: a failed run leaves no partial video."""
+    """Frames streamed to a temporary video, renamed to ``path`` by ``close``, removed by ``discard``."""
 
     def __init__(self, path: Path, fps: float) -> None:
         import imageio.v2 as imageio
@@ -445,12 +413,11 @@ def enjoy(
     """Drive a shipped agent (or a run directory's model) greedily for ``episodes`` episodes and
     return its metrics (``evaluate.aggregate``) with the per-episode ones; writes only ``video``.
 
-    :param seed: None: the scenario's fixed evaluation episodes, the same as ``drivelab evaluate``;
-        an int S: episode e is the first episode of the env seeded S + e.
+    :param seed: None: the scenario's fixed evaluation episodes; an int S: episode e is the first
+        episode of the env seeded S + e.
     :param on_episode: called with (episode index, episode metrics) after each episode.
-    :param side_by_side: the video shows the agent's image observation beside the scene; None:
-        when it has one (``envs/video.py``).
-    """
+    :param side_by_side: the video shows the agent's image observation beside the scene; None: when
+        it has one."""
     from drivelab.envs.core import DriveEnv
     from drivelab.envs.video import video_fps
     from drivelab.training.checkpoints import load_agent
@@ -496,10 +463,9 @@ def enjoy(
 
 
 def check_metrics(name: str, zoo_dir: str | None = None) -> dict:
-    """The metrics of agent ``name``'s card check, played in this process: its ``episodes`` first
-    evaluation episodes, greedy (``enjoy``'s), each cut at the check's ``duration_s`` where it
-    has one. Recorded and compared under ``drivelab.isa.PINNED_ISA`` (``pinned_check_metrics``),
-    so that every x86-64 CPU gives the same numbers."""
+    """The metrics of agent ``name``'s card check, played in this process: its first ``episodes``
+    evaluation episodes, greedy, each cut at the check's ``duration_s`` where it has one. Recorded
+    and compared under ``drivelab.isa.PINNED_ISA`` (``pinned_check_metrics``)."""
     from drivelab.envs.core import DriveEnv
     from drivelab.training.checkpoints import load_agent
     from drivelab.training.evaluate import aggregate, load_run_config, run_episodes
