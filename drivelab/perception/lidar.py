@@ -20,12 +20,8 @@ def _near_parts(
 ) -> tuple[np.ndarray, ...]:
     """The parts within ``range_m`` of segments (M,) given relative to the ray origin: their
     start x, start y, end x, end y (T,), the (M,) mask of the segments kept, and each part's
-    (T,) distance to the origin.
-
-    A segment is kept by the distance of its nearest point, not its end points (a 10 km road
-    edge passes by the ego far from both ends), and cut down to the stretch inside the range
-    circle, so what follows works on short, origin-relative segments (float32 is then exact
-    to micrometres).
+    (T,) distance to the origin. A segment is kept by the distance of its nearest point and cut
+    to the stretch inside the range circle, so that float32 is then exact to micrometres.
     """
     edge_x, edge_y = end_x - start_x, end_y - start_y
     safe_length2 = np.maximum(edge_x * edge_x + edge_y * edge_y, 1e-12)
@@ -58,9 +54,7 @@ def _part_terms(start_x, start_y, end_x, end_y) -> tuple[np.ndarray, ...]:
 
 def _hit_distances(direction_x, direction_y, start_x, start_y, edge_x, edge_y, s_cross_e) -> np.ndarray:
     """Per (ray, part) pair (P,), the distance along the ray to the part: float32, ``inf`` on a miss.
-
-    Rays ``direction`` are unit vectors from the origin, parts come from ``_part_terms``. Ray t·d
-    meets segment s + u·e where t = (s × e) / (d × e) and u = (s × d) / (d × e); a hit needs
+    Ray t·d meets segment s + u·e at t = (s × e) / (d × e), u = (s × d) / (d × e); a hit needs
     t ≥ 0 and 0 ≤ u ≤ 1.
     """
     d_cross_e = direction_x * edge_y - direction_y * edge_x
@@ -73,10 +67,8 @@ def _hit_distances(direction_x, direction_y, start_x, start_y, edge_x, edge_y, s
 
 
 def cast_rays(origin: np.ndarray, angles: np.ndarray, segments: np.ndarray, range_m: float) -> np.ndarray:
-    """Distance along each ray to the first segment it meets, ``range_m`` when none is nearer.
-
-    Every ray × every segment (float32 inside, accurate to about 1e-6 of the range); segments
-    out of range are dropped first. ``Lidar`` does the same arithmetic on the pairs that can hit.
+    """Distance along each ray to the first segment it meets, ``range_m`` when none is nearer:
+    every ray × every segment (``Lidar`` does the same arithmetic on the pairs that can hit).
 
     :param origin: (2,) ray origin, world metres.
     :param angles: (N,) world-frame ray directions, radians (from +x towards +y).
@@ -148,11 +140,8 @@ def _cast_parts(
 class Lidar(Sensor):
     """``beams`` distances around the ego, divided by ``range_m`` (1 = nothing within range).
 
-    Beam ``i`` points ``2π·i/beams`` clockwise from the heading (towards the ego's right):
-    beam 0 straight ahead, beam ``beams/4`` to the right, ``beams/2`` behind, ``3·beams/4`` left.
-    Beams stop at the outlines of other vehicles and pedestrians and at the road edges
-    (``road.edges``). K worlds at once: every world's segments in one flat list, each tested
-    against the beams of its own angular span only (a car 30 m away spans 2 of 240 beams).
+    Beam ``i`` points ``2π·i/beams`` clockwise from the heading: beam 0 straight ahead, beam
+    ``beams/4`` to the right. Beams stop at other vehicles, pedestrians and the road edges.
 
     :param beams: number of beams (the MetaDrive study: 240).
     :param range_m: maximum range.
@@ -177,10 +166,6 @@ class Lidar(Sensor):
         # of the part (~1e-7 · range) could move its ends by more than the one-beam margin below.
         self.close_m = 1e-4 * self.range_m / min(self.beam_step, 1.0)
         self._space = spaces.Box(0.0, 1.0, shape=(self.beams,), dtype=np.float32)
-
-    @property
-    def space(self) -> spaces.Box:
-        return self._space
 
     def _segments(self, batch: WorldBatch) -> tuple[np.ndarray, ...]:
         """Everything the beams can hit, as flat (M,) arrays: start x, start y, end x, end y in
@@ -235,17 +220,8 @@ class Lidar(Sensor):
         beams, step = self.beams, self.beam_step
         *segments, worlds = self._segments(batch)
         nearest = np.full(batch.num_worlds * beams, np.inf, dtype=np.float32)
-        _cast_parts(
-            *segments,
-            worlds,
-            self.range_m,
-            beams,
-            step,
-            self.close_m,
-            self.direction_x,
-            self.direction_y,
-            nearest,
-        )
+        directions = (self.direction_x, self.direction_y)
+        _cast_parts(*segments, worlds, self.range_m, beams, step, self.close_m, *directions, nearest)
         return np.minimum(nearest.reshape(batch.num_worlds, beams).astype(float), self.range_m)
 
     def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:

@@ -107,10 +107,7 @@ class Route:
     def poses_at(self, distances_m: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
         """Points (..., 2) and headings (...) at arc lengths along the polyline: clamped to its
         ends (so a finished route repeats its last point), wrapped round the lap on a circuit."""
-        stations = self.stations_m
-        if stations is None:
-            steps = np.linalg.norm(np.diff(self.polyline, axis=0), axis=1)
-            stations = np.r_[0.0, np.cumsum(steps)]
+        stations = stations_of(self.polyline) if self.stations_m is None else self.stations_m
         distances = np.asarray(distances_m, dtype=float)
         if self.closed and stations[-1] > 0:
             distances = np.mod(distances, stations[-1])
@@ -121,6 +118,12 @@ class Route:
         fraction = ((distances - stations[segment]) / span)[..., None]
         delta = end - start
         return start + fraction * delta, np.arctan2(delta[..., 1], delta[..., 0])
+
+
+def stations_of(polyline: np.ndarray) -> np.ndarray:
+    """Arc length (P,) of each point of a polyline (P, 2) from its first."""
+    steps = np.linalg.norm(np.diff(np.asarray(polyline, dtype=float), axis=0), axis=1)
+    return np.r_[0.0, np.cumsum(steps)]
 
 
 @dataclass(frozen=True)
