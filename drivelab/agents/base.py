@@ -115,9 +115,12 @@ def observation_to_tensor(obs: Any, space: spaces.Space) -> torch.Tensor | dict[
     return tensor / 255.0 if space.dtype == np.uint8 else tensor
 
 
-def map_obs(fn: Callable[[Any], Any], obs: Any) -> Any:
-    """``fn(obs)``, or for a dict observation ``fn`` of each value (the same keys)."""
-    return {key: fn(value) for key, value in obs.items()} if isinstance(obs, dict) else fn(obs)
+def map_obs(fn: Callable[..., Any], obs: Any, *others: Any) -> Any:
+    """``fn(obs, *others)``, or for a dict observation ``fn`` of each value and the others' values
+    of its key (the same keys)."""
+    if isinstance(obs, dict):
+        return {key: fn(value, *(other[key] for other in others)) for key, value in obs.items()}
+    return fn(obs, *others)
 
 
 def batch_of_one(obs: Any) -> Any:

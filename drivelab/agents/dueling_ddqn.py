@@ -19,7 +19,7 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from torch import nn
 
-from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent, gradient_step
+from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent, batch_of_one, gradient_step
 from drivelab.agents.buffer_memory import check_buffer_memory
 from drivelab.agents.storage import assign_arrays
 from drivelab.agents.worlds import Worlds
@@ -275,16 +275,9 @@ def double_dqn_targets(
 
 
 # --- the agent ----------------------------------------------------------------------------------
-def flatten_observation(obs: Any, space: spaces.Space) -> np.ndarray:
-    """A vector observation (or a Dict of them, in key order) as one float32 vector."""
-    if isinstance(space, spaces.Dict):
-        return np.concatenate([np.asarray(obs[key], dtype=np.float32).ravel() for key in space.spaces])
-    return np.asarray(obs, dtype=np.float32).ravel()
-
-
 def flatten_batch(batch: Any, space: spaces.Space) -> np.ndarray:
-    """K observations (batched, a Dict key by key) as (K, flat size) float32, each row
-    ``flatten_observation`` of one; for a float32 Box, a view of ``batch`` (write into a copy)."""
+    """K observations (batched, a Dict key by key) as (K, flat size) float32, a Dict's parts
+    concatenated in key order; for a float32 Box, a view of ``batch`` (write into a copy)."""
     if isinstance(space, spaces.Dict):
         parts = [np.asarray(batch[key], dtype=np.float32) for key in space.spaces]
         return np.concatenate([part.reshape(len(part), -1) for part in parts], axis=1)
@@ -351,7 +344,7 @@ class DuelingDoubleDQN(OwnAgent):
         """argmax_a Q(s, a) (ε-greedy with the final ε when not deterministic)."""
         if not deterministic and self.rng.random() < self.config.exploration_final_eps:
             return np.array(self.rng.integers(self.action_space.n)), None
-        flat = flatten_observation(obs, self.observation_space)[None]
+        flat = flatten_batch(batch_of_one(obs), self.observation_space)
         return np.array(int(self.q_values(flat).argmax(dim=1)[0])), None
 
     def train_step(self, progress: float) -> dict[str, float]:

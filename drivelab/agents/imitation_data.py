@@ -207,9 +207,7 @@ def _allocate(space: spaces.Space, capacity: int):
 
 
 def _grown(array: np.ndarray, capacity: int) -> np.ndarray:
-    bigger = np.zeros((capacity, *array.shape[1:]), dtype=array.dtype)
-    bigger[: len(array)] = array
-    return bigger
+    return np.pad(array, [(0, capacity - len(array))] + [(0, 0)] * (array.ndim - 1))
 
 
 def collect(

@@ -146,8 +146,7 @@ class Storage:
             dtype = torch.uint8 if sub.dtype == np.uint8 else torch.float32
             return torch.zeros((steps, worlds, *sub.shape), dtype=dtype)
 
-        self.keys = list(space.spaces) if isinstance(space, spaces.Dict) else None
-        self.obs = {k: block(s) for k, s in space.spaces.items()} if self.keys else block(space)
+        self.obs = map_obs(block, space.spaces if isinstance(space, spaces.Dict) else space)
         action_dtype = torch.int64 if discrete else torch.float32
         self.actions = torch.zeros((steps, worlds, *action_shape), dtype=action_dtype)
         self.log_probs = torch.zeros((steps, worlds))
@@ -159,18 +158,13 @@ class Storage:
 
     def put(self, t: int, obs: Any) -> Any:
         """Store step ``t``'s observations (K, ...); the stored tensors."""
-        if self.keys:
-            for key in self.keys:
-                self.obs[key][t].copy_(torch.from_numpy(np.asarray(obs[key])))
-            return {key: self.obs[key][t] for key in self.keys}
-        self.obs[t].copy_(torch.from_numpy(np.asarray(obs)))
-        return self.obs[t]
+        rows = map_obs(lambda block: block[t], self.obs)
+        map_obs(lambda row, value: row.copy_(torch.from_numpy(np.asarray(value))), rows, obs)
+        return rows
 
     def flat_obs(self, steps: int) -> Any:
         """The first ``steps`` steps' observations as (steps·K, ...)."""
-        if self.keys:
-            return {key: value[:steps].flatten(0, 1) for key, value in self.obs.items()}
-        return self.obs[:steps].flatten(0, 1)
+        return map_obs(lambda block: block[:steps].flatten(0, 1), self.obs)
 
 
 def to_tensor(obs: Any) -> Any:

@@ -1,11 +1,8 @@
 """Tabular Q-learning with ε-greedy exploration (the CARLA study), behind drivelab's Agent protocol.
 
-The agent reads a discrete observation (the ``line``, ``lane`` or ``ttc_grid`` sensors) and picks
-one of a discrete action set (the seed's 5-action tables, ``meta``, ``grid``). Defaults are the
-seed's hyper-parameters: α = 0.8, γ = 0.9, ε starting at 0.9999 and multiplied by 0.9998 after
-every step. It follows stable-baselines3's conventions where training runs rely on them:
-``learn(total_timesteps, callback, reset_num_timesteps)`` with SB3 callbacks, ``set_logger``,
-``predict`` and a zip ``save``/``load``.
+It reads a discrete observation (the ``line``, ``lane`` or ``ttc_grid`` sensors) and picks one of a
+discrete action set. Defaults are the seed's: α = 0.8, γ = 0.9, ε from 0.9999, multiplied by 0.9998
+after every step.
 """
 
 from __future__ import annotations
@@ -309,14 +306,8 @@ def write_run_artifacts(agent: QLearning, run_dir: str | Path) -> list[Path]:
     np.save(run_dir / "q_table.npy", agent.q_table)
     header = "state," + ",".join(f"action_{a}" for a in range(agent.q_table.shape[1]))
     rows = np.column_stack([np.arange(len(agent.q_table)), agent.q_table])
-    np.savetxt(
-        run_dir / "q_table.csv",
-        rows,
-        delimiter=",",
-        header=header,
-        comments="",
-        fmt=["%d"] + ["%.6g"] * agent.q_table.shape[1],
-    )
+    fmt = ["%d"] + ["%.6g"] * agent.q_table.shape[1]
+    np.savetxt(run_dir / "q_table.csv", rows, delimiter=",", header=header, comments="", fmt=fmt)
     plot = plot_qlearning(agent.epsilon_history(), agent.episode_returns, agent.episode_lengths,
                           run_dir / "qlearning_curves.png")  # fmt: skip
     return [run_dir / "q_table.npy", run_dir / "q_table.csv", plot]

@@ -12,6 +12,7 @@ import copy
 import json
 import zipfile
 from collections import deque
+from operator import attrgetter
 from pathlib import Path
 
 import gymnasium as gym
@@ -53,7 +54,7 @@ class SafeSave:
     def save(self, path: str | Path) -> None:
         """One zip: ``sb3.json`` and ``parameters.pt``."""
         _, variables = self._get_torch_save_params()
-        tensors = {name: _attribute(self, name).detach().cpu() for name in variables}
+        tensors = {name: attrgetter(name)(self).detach().cpu() for name in variables}
         parameters = {"state_dicts": self.get_parameters(), "variables": tensors}
         meta = {
             "format": FORMAT,
@@ -147,12 +148,6 @@ class DrivelabSAC(SafeSave, SAC):
     """SB3 SAC saved without pickles."""
 
 
-def _attribute(model: BaseAlgorithm, dotted: str):
-    for part in dotted.split("."):
-        model = getattr(model, part)
-    return model
-
-
 def _json_number(value):
     """numpy scalars in counters and episode infos → Python numbers for JSON."""
     if isinstance(value, np.generic):
@@ -237,7 +232,7 @@ def load_sb3(algo: str, path: Path, env: gym.Env | None, hyperparams: dict | Non
         parameters = tensors_from_bytes(read_member(archive, "parameters.pt", limit))
     model.set_parameters(parameters["state_dicts"], exact_match=True, device=get_device(model.device))
     for name, value in parameters["variables"].items():
-        _attribute(model, name).data.copy_(value)
+        attrgetter(name)(model).data.copy_(value)
     for name, value in counters.items():
         setattr(model, name, value)
     model.ep_info_buffer = deque(meta["ep_info_buffer"], maxlen=model._stats_window_size)

@@ -1,11 +1,7 @@
-"""The stable-baselines3 hyper-parameters drivelab accepts, with their types and ranges.
-
-SB3 checks few of its keyword arguments: ``batch_size=0`` trains on empty batches (a nan loss and
-exit code 0), ``gamma="abc"`` fails hundreds of steps into training. ``check_sb3_hyperparams``
-validates every ``-H`` / YAML value before a model is built, so bad input is one line and no run
-directory. Keys of SB3's constructors that take Python objects (``action_noise``,
-``replay_buffer_class``, ...) or that drivelab sets itself (``env``, ``seed``, ``tensorboard_log``,
-...) are refused by name; keys SB3's constructor does not have are unknown.
+"""The stable-baselines3 hyper-parameters drivelab accepts, with their types and ranges:
+``check_sb3_hyperparams`` validates every ``-H`` / YAML value before a model is built (SB3 checks
+few: ``batch_size=0`` trains on empty batches). Keys that take Python objects or that drivelab
+sets itself are refused by name; keys SB3's constructor does not have are unknown.
 """
 
 from __future__ import annotations

@@ -1,11 +1,7 @@
-"""Safe files for agents and replays: tensors, arrays and JSON, never pickles.
-
-A run directory may come from someone else, so nothing read here can execute code: tensors and
-state dicts go through ``torch.load(weights_only=True)`` (plain containers of tensors and numbers
-only), arrays through ``np.load(allow_pickle=False)`` (an object array is refused), everything else
-is JSON. Spaces are described in JSON and compared with the spaces of the environment the run's
-config makes. Files from drivelab before this format (pickles inside) raise ``OldFormatError``;
-``drivelab convert-run`` rewrites a directory the user trusts.
+"""Safe files for agents and replays: tensors (``torch.load(weights_only=True)``), arrays
+(``np.load(allow_pickle=False)``) and JSON, never pickles, since a run directory may come from
+someone else. Files from drivelab before this format raise ``OldFormatError``; ``drivelab
+convert-run`` rewrites a directory the user trusts.
 """
 
 from __future__ import annotations
