@@ -173,9 +173,7 @@ class Lidar(Sensor):
         ego = batch.ego
         cos_h, sin_h = np.cos(ego.heading)[:, None], np.sin(ego.heading)[:, None]  # (K, 1)
         position_x, position_y = ego.position[:, 0, None], ego.position[:, 1, None]
-        # road edges: those whose bounding box comes within range of the ego (the others lie
-        # farther than the range and ``_near_parts`` would drop them), as a flat list (W,) of
-        # (world, edge) pairs, end points turned into the ego frame of their world
+        # road edges whose bounding box comes within range, as (world, edge) pairs (W,) in ego frames
         edge_world, chosen = _edges_within(batch, self.range_m + 1.0)  # a metre over rounding
         delta_x = chosen[..., 0] - position_x[edge_world]
         delta_y = chosen[..., 1] - position_y[edge_world]
@@ -189,8 +187,7 @@ class Lidar(Sensor):
         # a body whose centre is farther than range + half its diagonal cannot be hit
         reach = self.range_m + 0.5 * np.hypot(users[..., 4], users[..., 5])
         kept = valid & (box_x * box_x + box_y * box_y <= reach * reach)
-        # the bodies within reach as a flat list (V,): boxes in the ego frame (centre turned,
-        # heading made relative), so that their corners come out there
+        # the bodies within reach (V,) as boxes in the ego frame, so that their corners come out there
         body_world = np.nonzero(kept)[0]
         box_x, box_y, bodies = box_x[kept][:, None], box_y[kept][:, None], users[kept]
         turn = bodies[:, 2] - ego.heading[body_world]
@@ -200,9 +197,8 @@ class Lidar(Sensor):
         corner_x = box_x + half_l * cos_b - half_w * sin_b
         corner_y = box_y + half_l * sin_b + half_w * cos_b
         next_x, next_y = corner_x[:, _NEXT_CORNER], corner_y[:, _NEXT_CORNER]
-        # Only sides facing the ego can be hit first (back-face culling halves the work). Corners
-        # run around the box so that the ego is outside a side when start × following < 0; an
-        # ego inside a box (a crash) faces none of them and keeps all four.
+        # only sides facing the ego (start × following < 0) can be hit first; an ego inside a box
+        # (a crash) faces none of them and keeps all four
         facing = corner_x * next_y - corner_y * next_x < 0  # (V, 4)
         facing |= ~facing.any(axis=1, keepdims=True)
         return (

@@ -184,13 +184,8 @@ class View:
         if counts.sum() == 0:
             return polygons
         world_of_vertex = np.concatenate(world_of_vertex)
-        pixels = to_pixels(
-            np.concatenate(vertices),
-            self.positions[world_of_vertex],
-            self.headings[world_of_vertex],
-            self.size_hw,
-            self.ppm,
-        )
+        position, heading = self.positions[world_of_vertex], self.headings[world_of_vertex]
+        pixels = to_pixels(np.concatenate(vertices), position, heading, self.size_hw, self.ppm)
         margin = 4.0  # rows beyond the image: the cut edges (and their anti-aliasing) stay unseen
         pixels, counts = _clip_rows_counts(pixels, counts, -margin, self.size_hw[0] - 1 + margin)
         for world, polygon in zip(owners, np.split(fixed_point(pixels), np.cumsum(counts)[:-1]), strict=True):

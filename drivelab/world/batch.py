@@ -95,8 +95,7 @@ class RouteBatch:
     progress_m: np.ndarray
     length_m: np.ndarray
     closed: np.ndarray
-    # values derived from these arrays by their readers, made once per batch (never stale: the
-    # arrays do not change; a replaced batch starts an empty cache)
+    # values derived from these arrays by their readers, made once per batch
     cache: dict = field(init=False, default_factory=dict, compare=False, repr=False)
 
     def pose(self) -> tuple[np.ndarray, np.ndarray]:
@@ -150,12 +149,10 @@ class RouteBatch:
 
 @njit(cache=True)
 def _route_poses(polyline, stations, count, closed, distances, points, delta) -> None:
-    """``RouteBatch.poses_at``'s points into ``points`` (K, D, 2) and the segments' directions
-    into ``delta`` (K, D, 2), with the arithmetic of its first, numpy formulation: a distance
-    wrapped round the lap (np.mod) and clamped to the route, then found among the stations with
-    every world's stations and distances shifted by k · (the longest route + 1) as that code
-    shifted them to search all worlds at once (the shift's rounding can decide a segment),
-    then interpolated on its segment."""
+    """``RouteBatch.poses_at``'s points into ``points`` (K, D, 2) and the segments' directions into
+    ``delta`` (K, D, 2): a distance wrapped round the lap (np.mod), clamped to the route, found among
+    the stations shifted by k · (the longest route + 1) (that shift's rounding can decide a segment,
+    so it is kept), then interpolated on its segment."""
     worlds, width = stations.shape
     longest = 0.0
     for k in range(worlds):
@@ -254,8 +251,7 @@ class WorldBatch:
     pedestrian_valid: np.ndarray
     max_speed_mps: np.ndarray
     speed_limit_mps: np.ndarray
-    # for a sub-batch (``select``): the slot of each row among the K worlds a sensor keeps state
-    # for (None: row k is slot k)
+    # for a sub-batch (``select``): each row's slot among the K worlds (None: row k is slot k)
     slots: np.ndarray | None = None
     # values derived by readers, made once per batch (a replaced batch starts an empty cache)
     cache: dict = field(init=False, default_factory=dict, compare=False, repr=False)
@@ -451,8 +447,7 @@ _DEFAULTS = {
 def assemble(cls, /, **fields):
     """``cls(**fields)`` for :class:`EgoBatch`, :class:`RouteBatch`, :class:`EventsBatch` or
     :class:`WorldBatch` (``cache`` empty), without the frozen ``__init__``'s ``object.__setattr__``
-    per field (there is no ``__post_init__`` to run): a simulator's per-step export, where one
-    world's whole step is a few dozen microseconds. The same fields are required."""
+    per field (a simulator's per-step export). The same fields are required."""
     defaults = _DEFAULTS[cls]
     if defaults:
         fields = defaults | fields
@@ -509,7 +504,4 @@ def pad_slots(array: np.ndarray, size: int, edge: bool = False) -> np.ndarray:
     missing = size - array.shape[1]
     if missing <= 0:
         return array
-    if edge:
-        return np.concatenate([array, np.repeat(array[:, -1:], missing, axis=1)], axis=1)
-    widths = [(0, 0), (0, missing)] + [(0, 0)] * (array.ndim - 2)
-    return np.pad(array, widths)
+    return np.pad(array, [(0, 0), (0, missing)] + [(0, 0)] * (array.ndim - 2), "edge" if edge else "constant")

@@ -137,8 +137,7 @@ def lateral_crossings(
     nearest the ego's axis, (K, D), nan where nothing crosses.
 
     ``segments`` is (K, M, 2, 2), one set per world, or with ``index`` (K,) a few sets (S, M, 2, 2)
-    of which world k uses ``segments[index[k]]`` (the distinct maps' guide lines, not copied per
-    world). Compiled: one pass over each world's segments, no (K, D, M) temporaries.
+    of which world k uses ``segments[index[k]]`` (the distinct maps' guide lines).
     """
     segments = np.asarray(segments, dtype=float)
     return _crossings(position, heading, segments[:, :, 0], segments[:, :, 1], distances_m, index)

@@ -46,8 +46,7 @@ class RoadMap:
     crossings: np.ndarray = field(default_factory=lambda: np.zeros((0, 5)))  # zebra crossings (C, 5):
     # centre x, y, heading (the direction pedestrians walk), length (across the road), width
 
-    # geometry derived from this map by its readers (raster layers, guide-line segments, …), built
-    # once per map by ``derived``: the map is immutable, so it is never stale and dies with the map
+    # geometry its readers derive from this immutable map, built once by ``derived``
     derived_cache: dict = field(default_factory=dict, compare=False, repr=False)
 
     def derived(self, key: object, build: Callable[[RoadMap], object]) -> object:
