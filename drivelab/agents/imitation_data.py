@@ -165,11 +165,10 @@ class Demonstrations:
 
     def load_state_arrays(self, arrays: dict[str, np.ndarray]) -> None:
         """Replace the samples held by those of ``state_arrays`` (shapes checked against the space)."""
-        keys = (
-            list(self.observation_space.spaces) if isinstance(self.observation_space, spaces.Dict) else None
-        )
+        space = self.observation_space
+        keys = list(space.spaces) if isinstance(space, spaces.Dict) else None
         observations = {key: arrays[f"obs.{key}"] for key in keys} if keys else arrays["obs"]
-        for key, sub in _subspaces(self.observation_space).items():
+        for key, sub in (space.spaces if keys else {"": space}).items():
             array = observations[key] if keys else observations
             if array.shape[1:] != sub.shape:
                 raise ValueError(
@@ -194,10 +193,6 @@ class Demonstrations:
         data = cls(observation_space, action_size, meta.get("validation_fraction", 0.1))
         data.load_state_arrays(arrays)
         return data
-
-
-def _subspaces(space: spaces.Space) -> dict[str, spaces.Space]:
-    return dict(space.spaces) if isinstance(space, spaces.Dict) else {"": space}
 
 
 def _allocate(space: spaces.Space, capacity: int):

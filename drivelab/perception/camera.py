@@ -49,18 +49,6 @@ def _near_clip_m(model: PinholeModel) -> float:
     return max(model.forward_m + model.near_m, below_image if np.isfinite(below_image) else 0.0)
 
 
-def _ground_polygons(
-    model: PinholeModel,
-    position: np.ndarray,
-    heading: float,
-    groups: list[tuple[np.ndarray, np.ndarray]],
-) -> list[list[np.ndarray]]:
-    """Ground polygons in world coordinates, in groups of (vertices one after another, counts) →
-    per group, the fixed-point pixel polygons in sight of the ego at ``position`` (2,) and
-    ``heading`` (one world of ``_ground_polygons_batch``)."""
-    return _ground_polygons_batch(model, np.reshape(position, (1, 2)), np.reshape(heading, 1), [groups])[0]
-
-
 def _ground_polygons_batch(
     model: PinholeModel,
     positions: np.ndarray,
@@ -364,7 +352,8 @@ def render_masks(world: WorldState, model: PinholeModel) -> np.ndarray:
     groups = [
         _strip_quads(_near(position, s, model), w) for s, w in zip((left, right, guide), widths, strict=True)
     ]
-    for channel, polygons in enumerate(_ground_polygons(model, position, world.ego.heading, groups)):
+    positions, headings = np.reshape(position, (1, 2)), np.reshape(world.ego.heading, 1)
+    for channel, polygons in enumerate(_ground_polygons_batch(model, positions, headings, [groups])[0]):
         _fill_strips(masks[channel], polygons, 1)
     return masks
 

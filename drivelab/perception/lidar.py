@@ -238,10 +238,6 @@ class EdgeBoxes:
         self.boxes = np.concatenate([(low + high) / 2, (high - low) / 2], axis=1).T.copy()
 
 
-def _edge_boxes(road) -> np.ndarray:
-    return road.derived(EdgeBoxes, EdgeBoxes).boxes
-
-
 def _edges_within(batch: WorldBatch, reach_m: float) -> tuple[np.ndarray, np.ndarray]:
     """(worlds (W,), edges (W, 2, 2)): every road edge whose bounding box lies within ``reach_m``
     of its world's ego along x and along y, with that world, one map at a time (not one world)."""
@@ -249,7 +245,7 @@ def _edges_within(batch: WorldBatch, reach_m: float) -> tuple[np.ndarray, np.nda
     worlds, chosen = [], []
     for row, road in enumerate(batch.roads):
         on_map = np.flatnonzero(batch.road_index == row) if len(batch.roads) > 1 else np.arange(len(position))
-        centre_x, centre_y, half_x, half_y = _edge_boxes(road)  # (E,) each
+        centre_x, centre_y, half_x, half_y = road.derived(EdgeBoxes, EdgeBoxes).boxes  # (E,) each
         near = np.abs(centre_x - position[on_map, 0, None]) <= half_x + reach_m  # (K_map, E)
         near &= np.abs(centre_y - position[on_map, 1, None]) <= half_y + reach_m
         world, edge = np.nonzero(near)
