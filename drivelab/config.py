@@ -37,8 +37,7 @@ class RunConfig:
     :param env_options: extra DriveEnv keywords (``duration_s``, ``action_options``, ...).
     :param n_envs: worlds stepped together while training.
     :param eval_maps: procedural maps only (``blocks``): ``"START:COUNT"``, evaluation on the maps
-        of seeds START … START + COUNT − 1 instead of the training set (MetaDrive's ``start_seed``
-        / ``num_scenarios``; e.g. train on ``num_scenarios: 100`` and evaluate on ``"1000:100"``).
+        of seeds START … START + COUNT − 1 instead of the training set (e.g. ``"1000:100"``).
     """
 
     algo: str
@@ -106,11 +105,7 @@ FIELDS = {f.name: f for f in dataclasses.fields(RunConfig)}
 # the scenario; ``env_options`` may give the other keywords
 ENV_FIELDS = {"env": "scenario", **{name: name for name in FIELDS if name in ENV_KEYWORDS}}
 MAX_SEED = 2**31 - 1  # plus evaluation offsets and episode numbers, still below numpy's 2**32 limit
-# Budgets no run can reach. Steps: the fastest drivelab's worlds step is about 190 k steps/s (64
-# follow-line worlds, random actions, no agent: benchmarks/results/batch_speed.md), so 10^12 steps
-# take two months of stepping alone, beyond the 10^5 to 10^6 steps of the seeds' runs by a factor of
-# a million. Worlds: 2^16 already make one vector step take a second on that machine, and an
-# SB3 rollout of their shipped 256 steps each 17 M transitions.
+# Budgets no run can reach (benchmarks/results/batch_speed.md: about 190 k steps/s at best).
 MAXIMA = {
     "steps": (10**12, "more steps than any machine trains in months (the fastest world steps ~2e5 a second)"),
     "n_envs": (2**16, "more worlds than one process steps (one vector step of 65,536 worlds takes ~1 s)"),
@@ -174,18 +169,16 @@ def _check_type(name: str, value):
 
 
 MAX_NAME_BYTES = 255  # the longest file name of Linux, macOS and Windows file systems
-# Unicode categories a run name may not hold: controls (a newline), formats (right-to-left marks and
-# overrides, zero-width spaces and joiners: a folder that displays as another name), line and
-# paragraph separators, and surrogates (bytes of the command line that were not UTF-8).
+# Unicode categories a run name may not hold: controls, formats (bidirectional, zero-width), line and
+# paragraph separators, and surrogates (command-line bytes that were not UTF-8).
 UNSEEN_CATEGORIES = ("Cc", "Cf", "Zl", "Zp", "Cs")
 
 
 def check_run_name(name: str) -> str:
     """``name`` if it is one path component (the run directory inside ``--runs-dir``): not empty,
-    not ``.`` or ``..``, without ``/``, ``\\`` or NUL, so a run never lands outside ``--runs-dir``
-    or makes ``--runs-dir`` itself the run; at most ``MAX_NAME_BYTES`` in UTF-8 and without
-    characters of ``UNSEEN_CATEGORIES`` (a newline, a right-to-left override, a zero-width space),
-    so that every file system can hold it and every log line and listing shows it as it is."""
+    not ``.`` or ``..``, without ``/``, ``\\`` or NUL, at most ``MAX_NAME_BYTES`` in UTF-8 and
+    without characters of ``UNSEEN_CATEGORIES``, so that every file system holds it and every
+    listing shows it as it is."""
     if not name or name in (".", "..") or any(char in name for char in "/\\\0"):
         raise UsageError(f"run name {name!r} must be a single directory name (no '/', not '.' or '..')")
     hidden = next((char for char in name if unicodedata.category(char) in UNSEEN_CATEGORIES), None)
@@ -268,10 +261,8 @@ def _check_scenario_options(config: RunConfig) -> None:
 
 
 def check_eval_every(config: RunConfig) -> None:
-    """A UsageError when ``eval_every`` is larger than ``steps``: a new run would never evaluate
-    (0, five evaluations over the run, and ``eval_every == steps``, one at the end, pass). Checked
-    for new runs only, not when an existing run's config.yaml is read: a run made before this check
-    with such a schedule stays readable and can be resumed to more steps."""
+    """A UsageError when ``eval_every`` is larger than ``steps``: a new run would never evaluate.
+    Checked for new runs only, so that an existing run's config.yaml stays readable."""
     if config.eval_every > config.steps:
         raise UsageError(
             f"config field 'eval_every' ({config.eval_every}) is larger than 'steps' ({config.steps}): "
@@ -281,11 +272,8 @@ def check_eval_every(config: RunConfig) -> None:
 
 def check_steps(config: RunConfig) -> None:
     """A UsageError when ``steps`` is fewer than the algorithm trains in one go
-    (``steps_per_update``: a PPO rollout of ``n_steps`` × ``n_envs``): the run would train
-    more steps than its config.yaml says, and evaluate at every step of a schedule made for fewer.
-    Refused rather than raised to the true count, which would change the budget the user wrote
-    (and every schedule derived from it) behind their back. Checked for new runs, as
-    ``check_eval_every``."""
+    (``steps_per_update``: a PPO rollout of ``n_steps`` × ``n_envs``), which would train more
+    steps than config.yaml says. Checked for new runs, as ``check_eval_every``."""
     fewest, what = steps_per_update(config.algo, config.hyperparams, config.n_envs)
     if config.steps < fewest:
         raise UsageError(
@@ -295,12 +283,8 @@ def check_steps(config: RunConfig) -> None:
 
 
 def steps_per_update(algo: str, hyperparams: dict, n_envs: int) -> tuple[int, str]:
-    """(the fewest environment steps a run of ``algo`` in ``n_envs`` worlds takes, what they are).
-
-    An on-policy algorithm collects a whole rollout, ``n_steps`` from every world, before it looks
-    at the budget: SB3's ``learn(total_timesteps)`` (and RL Zoo's ``n_timesteps``) is a lower bound
-    that ends at the end of a rollout, so a smaller budget trains a whole rollout all the same. The
-    others step every world at once: ``n_envs`` steps."""
+    """(the fewest environment steps a run of ``algo`` in ``n_envs`` worlds takes, what they are):
+    a whole rollout for an on-policy algorithm, one step of every world for the others."""
     from drivelab.agents.registry import get_algo
     from drivelab.agents.sb3_params import _given_or_default
 

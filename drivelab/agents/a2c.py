@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
+from drivelab.agents.base import gradient_step
 from drivelab.agents.onpolicy import OnPolicyAgent, OnPolicyConfig, Rollout, explained_variance
 
 
@@ -70,8 +71,5 @@ class OwnA2C(OnPolicyAgent):
         loss, metrics = a2c_loss(
             log_probs, advantages, values, rollout.returns, entropy, config.value_coef, self.entropy_coef
         )
-        self.optimizer.zero_grad()
-        loss.backward()
-        nn.utils.clip_grad_norm_(policy.parameters(), config.max_grad_norm)
-        self.optimizer.step()
+        gradient_step(self.optimizer, loss, policy.parameters(), config.max_grad_norm)
         return {**metrics, "explained_variance": explained_variance(rollout.values, rollout.returns)}

@@ -1,20 +1,7 @@
-"""The actor-critic of drivelab's on-policy trainer: an encoder, an action distribution, a value head,
-and the running statistics that normalise its input.
-
-- ``ActorCritic``: the shared encoders of ``networks.py`` (MLP, the MetaDrive study's CNN, fusion) feed an
-  action head and a value head (one encoder for both, or one each).
-- The action head is one of three distributions, chosen by the action space and ``distribution``:
-  ``categorical`` (Discrete: meta, grid, the line and lane tables), ``tanh_gaussian`` (Box:
-  a = tanh(u) clipped into the box, u ~ N(μ(s), σ²), σ a trained state-independent vector, as
-  the MetaDrive study and behaviour cloning, whose weights it loads) and
-  ``beta`` (Box: a ~ Beta(α(s), β(s)) on [low, high], α, β = 1 + softplus(·) > 1, Roach's choice
-  for driving: bounded and unimodal, no probability mass piled up at the bounds).
-- ``RunningNorm``: the running mean and variance of the observation's vectors (images are scaled by
-  1/255 instead), SB3 ``VecNormalize``'s statistics; buffers of the module, so they are saved with
-  the weights and applied by ``predict``.
-
-What a rollout stores of an action is the distribution's own variable (the class index, the
-pre-tanh u, the Beta's x in (0, 1)), so that log π is computed again without inverting anything.
+"""The actor-critic of drivelab's on-policy trainer: an encoder (``networks.py``), an action
+distribution (``categorical``, ``tanh_gaussian`` or ``beta``), a value head, and the running
+statistics that normalise its input. A rollout stores the distribution's own variable (the class
+index, the pre-tanh u, the Beta's x in (0, 1)), so that log π is computed again without inverting.
 """
 
 from __future__ import annotations

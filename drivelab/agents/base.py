@@ -31,8 +31,9 @@ import json
 import math
 import time
 import zipfile
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, Self
 
 import gymnasium as gym
 import numpy as np
@@ -57,10 +58,8 @@ from drivelab.agents.storage import (
 from drivelab.errors import UsageError
 
 FORMAT = "drivelab-agent-2"
-# The largest learning rate of every agent, SB3's and drivelab's (and of Q-learning's α). Adam and
-# RMSprop move each weight by about the learning rate per update, and networks start with weights
-# of order 1/sqrt(width): a rate above 1 wipes the initialisation out in one update and overflows
-# to NaN within a few. Published rates lie in 1e-5 … 1e-2, and SB3's tuning ranges stay below 1.
+# The largest learning rate of every agent, SB3's and drivelab's (and of Q-learning's α): a rate
+# above 1 wipes a network's initialisation out in one update and overflows to NaN within a few.
 MAX_LEARNING_RATE = 1.0
 
 
@@ -116,11 +115,27 @@ def observation_to_tensor(obs: Any, space: spaces.Space) -> torch.Tensor | dict[
     return tensor / 255.0 if space.dtype == np.uint8 else tensor
 
 
+def map_obs(fn: Callable[..., Any], obs: Any, *others: Any) -> Any:
+    """``fn(obs, *others)``, or for a dict observation ``fn`` of each value and the others' values
+    of its key (the same keys)."""
+    if isinstance(obs, dict):
+        return {key: fn(value, *(other[key] for other in others)) for key, value in obs.items()}
+    return fn(obs, *others)
+
+
 def batch_of_one(obs: Any) -> Any:
     """One observation → a batch of one (dicts key by key)."""
-    if isinstance(obs, dict):
-        return {key: np.asarray(value)[None] for key, value in obs.items()}
-    return np.asarray(obs)[None]
+    return map_obs(lambda value: np.asarray(value)[None], obs)
+
+
+def gradient_step(optimizer: torch.optim.Optimizer, loss: torch.Tensor, parameters=None, max_grad_norm=None):
+    """One ``optimizer`` step on the gradients of ``loss``, their global norm over ``parameters``
+    first clipped to ``max_grad_norm`` when given."""
+    optimizer.zero_grad()
+    loss.backward()
+    if max_grad_norm is not None:
+        torch.nn.utils.clip_grad_norm_(parameters, max_grad_norm)
+    optimizer.step()
 
 
 class RegisteredName:
@@ -187,11 +202,6 @@ class OwnAgent:
     def set_env(self, env: gym.Env) -> None:
         self.env = env
 
-    def _start_callback(self, callback: BaseCallback | None) -> BaseCallback:
-        callback = callback if callback is not None else CallbackList([])
-        callback.init_callback(self)
-        return callback
-
     def save_replay_buffer(self, path: str | Path) -> None:
         """Write ``self.replay_buffer``'s arrays as an ``.npz`` file (run.py checkpoints it)."""
         write_arrays(path, self.replay_buffer.state_arrays())
@@ -200,16 +210,42 @@ class OwnAgent:
         """Fill this agent's (fresh) replay buffer from a ``save_replay_buffer`` file."""
         self.replay_buffer.load_state_arrays(read_arrays(path))
 
-    def _start_learning(self, total_timesteps: int, reset_num_timesteps: bool) -> tuple[int, int, float]:
-        """(step to stop at, step now, clock now) for ``learn``: ``total_timesteps`` more steps,
-        counted from 0 again when ``reset_num_timesteps``."""
+    def learn(
+        self,
+        total_timesteps: int,
+        callback: BaseCallback | None = None,
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> Self:
+        """Train ``total_timesteps`` more environment steps (counted from 0 again when
+        ``reset_num_timesteps``), with the callback calls of the contract above."""
+        from drivelab.agents.worlds import Worlds
+
         if reset_num_timesteps:
             self.num_timesteps = 0
-        return self.num_timesteps + int(total_timesteps), self.num_timesteps, time.perf_counter()
+        self._started = (self.num_timesteps, time.perf_counter())  # for the steps per second
+        target = self.num_timesteps + int(total_timesteps)
+        worlds = Worlds(self.env)
+        self._start_worlds(worlds)
+        callback = callback if callback is not None else CallbackList([])
+        callback.init_callback(self)
+        callback.on_training_start(locals(), globals())
+        self._learn(worlds, callback, target)
+        callback.on_training_end()
+        return self
 
-    def _log_progress(self, metrics: dict[str, float], start_steps: int, start_time: float) -> None:
+    def _start_worlds(self, worlds) -> None:
+        """Start the K worlds (``worlds.Worlds``) unless a previous ``learn`` left them running."""
+        self._last_obs = worlds.start(self._last_obs, self.observation_space)
+
+    def _learn(self, worlds, callback: BaseCallback, target: int) -> None:
+        """The learning loop, until ``num_timesteps`` reaches ``target`` or ``callback.on_step`` is False."""
+        raise NotImplementedError
+
+    def _log_progress(self, metrics: dict[str, float]) -> None:
         """Record ``train/<metric>``, the mean return of ``self.episode_returns`` and the steps per
-        second since (``start_steps``, ``start_time``), then dump the logger."""
+        second since ``learn`` started, then dump the logger."""
+        start_steps, start_time = self._started
         for key, value in metrics.items():
             self.logger.record(f"train/{key}", value)
         if getattr(self, "episode_returns", None):

@@ -1,22 +1,11 @@
-"""Behaviour cloning of the rule-based expert, in the town, on the racetrack or the block maps
-(``--algo bc``): supervised learning of the expert's actions from the learner's own observation.
+"""Behaviour cloning of the rule-based expert (``--algo bc``): supervised learning of the expert's
+actions from the learner's own observation.
 
-The expert (``expert.py``) reads privileged sensors (route waypoints and affordances: the light's
-state, the distances to the leader, the stop line, pedestrians); the learner reads the run's
-``--obs``, e.g. ``topdown:lights=true,waypoints,measurements``. Demonstrations are generated on
-the run's training env: each of its K worlds (``--n-envs``) is driven by the expert while the
-learner's observation and the expert's action are recorded (``imitation_data.py``).
-
-Training runs in rounds: ``round_steps`` environment steps of demonstrations are added to the
-dataset, then ``epochs`` passes of minibatch Adam over all of it (a fixed ~``validation_fraction``
-of the samples held out), then the validation loss and the action agreement are logged. The loss
-is the squared error of tanh(μ) (``loss=mse``) or the tanh-Gaussian's negative log-likelihood of
-the expert's action (``loss=nll``, which also fits σ).
-
-The policy is the tanh-Gaussian actor-critic of our PPO (``networks.py``: the MetaDrive study's CNN, its
-fusion network or an MLP, following the observation), so a cloned policy's weights load into
-``ppo_own`` for fine-tuning (its value head is left untrained here). The dataset is the agent's
-``replay_buffer``: run.py checkpoints it as an ``.npz`` beside the model, so a run resumes exactly.
+The expert (``expert.py``) reads privileged sensors; the learner reads the run's ``--obs``, e.g.
+``topdown:lights=true,waypoints,measurements``. Training runs in rounds: ``round_steps`` steps of
+demonstrations from the K training worlds (``imitation_data.py``) join the dataset, then ``epochs``
+passes of minibatch Adam over all of it. The policy is our PPO's tanh-Gaussian actor-critic
+(``networks.py``), so a cloned policy's weights load into ``ppo_own`` for fine-tuning.
 Behaviour cloning is DAgger with β = 1 at every iteration (``dagger.py``).
 """
 
@@ -32,7 +21,13 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from torch import nn
 
-from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent, batch_of_one, observation_to_tensor
+from drivelab.agents.base import (
+    MAX_LEARNING_RATE,
+    OwnAgent,
+    batch_of_one,
+    gradient_step,
+    observation_to_tensor,
+)
 from drivelab.agents.expert import ExpertConfig, check_expert_env
 from drivelab.agents.imitation_data import Demonstrations, Teacher, action_agreement, collect, stack_steps
 from drivelab.agents.networks import TanhGaussianActorCritic, squashed_log_prob
@@ -198,10 +193,7 @@ class BehaviourCloning(OwnAgent):
                 rows = np.sort(order[start : start + config.batch_size])
                 obs = observation_to_tensor(data.select(rows), self.observation_space)
                 loss = imitation_loss(self.policy, obs, torch.as_tensor(data.actions[rows]), config.loss)
-                self.optimizer.zero_grad()
-                loss.backward()
-                nn.utils.clip_grad_norm_(self.policy.parameters(), config.max_grad_norm)
-                self.optimizer.step()
+                gradient_step(self.optimizer, loss, self.policy.parameters(), config.max_grad_norm)
                 losses.append(loss.item())
         held_out = self.evaluate_on(validation)
         return {
@@ -211,23 +203,11 @@ class BehaviourCloning(OwnAgent):
             "dataset_size": len(data),
         }
 
-    def learn(
-        self,
-        total_timesteps: int,
-        callback: BaseCallback | None = None,
-        reset_num_timesteps: bool = True,
-        progress_bar: bool = False,
-    ) -> BehaviourCloning:
-        """Rounds of demonstrations and training until ``total_timesteps`` more environment steps were
-        taken (all K worlds count; contract in base.py). Round i drives the training env with the
-        mixture βᵢ (``beta``), labels every visited state with the expert's action, adds them to the
-        dataset, then trains on all of it. The dataset and the weights change only after the
-        round's last ``on_step``, so each round start is a safe point for the checkpoints."""
-        target, start_steps, start_time = self._start_learning(total_timesteps, reset_num_timesteps)
-        worlds = Worlds(self.env)
-        self._last_obs = worlds.start(self._last_obs, self.observation_space)
-        callback = self._start_callback(callback)
-        callback.on_training_start(locals(), globals())
+    def _learn(self, worlds: Worlds, callback: BaseCallback, target: int) -> None:
+        """Rounds: round i drives the K worlds with the mixture βᵢ (``beta``), labels every visited
+        state with the expert's action, adds them to the dataset, then trains on all of it. The
+        dataset and the weights change only after the round's last ``on_step``, so each round start
+        is a safe point for the checkpoints."""
 
         def on_step(obs: Any) -> bool:
             self.num_timesteps += worlds.count
@@ -252,6 +232,4 @@ class BehaviourCloning(OwnAgent):
             )
             metrics = self.fit()
             self._n_updates = iteration
-            self._log_progress({**metrics, "beta": beta, "iteration": iteration}, start_steps, start_time)
-        callback.on_training_end()
-        return self
+            self._log_progress({**metrics, "beta": beta, "iteration": iteration})

@@ -1,12 +1,6 @@
-"""Whether an agent's replay buffer, rollout or training batch can fit in this machine's memory.
-
-Buffers are arrays of (size, *observation shape): a size no machine can hold (``-H
-buffer_size=1e12``) ends in a MemoryError traceback when they are allocated, or, allocated lazily
-(numpy's zeros), in the out-of-memory killer once they fill. ``check_buffer_memory`` refuses such
-a size before the agent is built, from an estimate of its bytes: the observation's bytes times the
-copies the buffer keeps, plus a few bytes of action, reward and flags per entry. The bound is the
-machine's physical memory, the most any buffer could ever use; sensible sizes (SB3's 1 M
-transitions of vectors, 100 k of 84 × 84 images) stay far below it.
+"""Whether an agent's replay buffer, rollout or training batch can fit in this machine's memory:
+``check_buffer_memory`` refuses a size (``-H buffer_size=1e12``) whose estimated bytes exceed the
+physical memory before the agent is built, rather than a MemoryError or the OOM killer later.
 """
 
 from __future__ import annotations

@@ -1,10 +1,6 @@
 """The learning loops' counters that a saved model (``sb3.json``) or a resume state carries, and
-what each may hold.
-
-They are set on the model as attributes when it is loaded or resumed, so a file (which may come
-from someone else) may name only these, each holding a value of its kind: otherwise an edited file
-could set any attribute (``gamma``, ``ent_coef``, ``n_epochs``) past the hyper-parameter checks, or
-a step count of -1000, 1e30 or "abc" that fails only after training has started and written files.
+what each may hold: they are set on the model as attributes, so a file (maybe someone else's) may
+name only these, each with a value of its kind, and cannot set any other attribute.
 """
 
 from __future__ import annotations

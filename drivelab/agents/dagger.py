@@ -1,19 +1,9 @@
 """DAgger (Ross, Gordon & Bagnell, AISTATS 2011) with the rule-based expert (``--algo dagger``).
 
-Behaviour cloning fails by compounding errors: once the learner drifts where the expert never
-drives (off the lane centre, too fast into a bend), it has no labels for those states. DAgger
-lets the learner visit them and asks the expert what it would have done there:
-
-- iteration i drives the training worlds with the mixture πᵢ = βᵢ·π* + (1 − βᵢ)·π̂ᵢ: in each world
-  and at each step the expert acts with probability βᵢ, else the current learner (deterministic);
-- every visited state is labelled with the expert's action (the privileged sensors are computed
-  for every world, so the expert can be asked in any state the learner reaches);
-- the labelled states join all those gathered before (the aggregate), and the learner is retrained
-  on the aggregate (continuing from its weights: ``epochs`` passes per iteration).
-
-β₁ = 1 (the first iteration is behaviour cloning), βᵢ = p^(i−1) with p = ``beta_decay``. An
-iteration is one round of ``round_steps`` environment steps; everything else (the learner, the
-dataset, the losses, checkpoints) is ``bc.py``'s.
+Iteration i drives the training worlds with the mixture πᵢ = βᵢ·π* + (1 − βᵢ)·π̂ᵢ (in each world
+and step the expert acts with probability βᵢ, else the deterministic learner), labels every
+visited state with the expert's action, and retrains the learner on all the labelled states so
+far. β₁ = 1 (behaviour cloning), βᵢ = p^(i−1) with p = ``beta_decay``; everything else is ``bc.py``'s.
 """
 
 from __future__ import annotations

@@ -1,14 +1,6 @@
-"""Dueling Double DQN with prioritised replay (the MetaDrive study), one file, top to bottom:
-
-1. ``SumTree``: priorities in a binary tree, so sampling proportional to priority is O(log N);
-2. ``PrioritizedReplayBuffer``: P(i) = p_i^α / Σ p^α, importance weights (N·P(i))^−β (Schaul et
-   al. 2016), β annealed to 1;
-3. ``DuelingQNetwork``: features 750 → 512 → 512 → 256 (LayerNorm + ReLU), value and advantage
-   streams 256 → 256 → 128 → 1 / |A| (BatchNorm + ReLU, as the seed), Q = V + (A − mean A)
-   (Wang et al. 2016, eq. 9);
-4. ``double_dqn_targets``: y = r + γ·Q_target(s', argmax_a Q_online(s', a)) (van Hasselt et al. 2016);
-5. ``DuelingDoubleDQN``: ε-greedy acting, a linear learning-rate schedule, hard or Polyak target
-   updates, logging of ε, loss, TD error and learning rate.
+"""Dueling Double DQN with prioritised replay (the MetaDrive study): a sum tree, the prioritised
+replay (Schaul et al. 2016), the dueling network (Wang et al. 2016), the double-DQN target (van
+Hasselt et al. 2016) and the agent, top to bottom.
 
 The seed's input: ``--obs lidar:stack=3,ego_state:features=10:stack=3`` (240 beams + 10 features,
 3 frames = 750 numbers) with the 18-action ``grid`` and its ``safety_dqn`` reward. Any vector
@@ -27,7 +19,7 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from torch import nn
 
-from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent
+from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent, batch_of_one, gradient_step
 from drivelab.agents.buffer_memory import check_buffer_memory
 from drivelab.agents.storage import assign_arrays
 from drivelab.agents.worlds import Worlds
@@ -105,7 +97,7 @@ class DuelingDDQNConfig:
             raise UsageError(f"{algo!r}: stream_norm must be 'batch' or 'layer', got {self.stream_norm!r}")
 
 
-# --- 1. sum tree -----------------------------------------------------------------------------
+# --- sum tree ---------------------------------------------------------------------------------
 class SumTree:
     """Leaf priorities under a complete binary tree whose nodes hold the sum of their children.
 
@@ -151,7 +143,7 @@ class SumTree:
         return np.minimum(leaf, self.capacity - 1)
 
 
-# --- 2. prioritised replay ---------------------------------------------------------------------
+# --- prioritised replay -------------------------------------------------------------------------
 class PrioritizedReplayBuffer:
     """A ring buffer of transitions sampled with probability p_i^α / Σ_j p_j^α.
 
@@ -229,7 +221,7 @@ class PrioritizedReplayBuffer:
         assign_arrays(self.tree, nodes, ("nodes",))
 
 
-# --- 3. dueling network ------------------------------------------------------------------------
+# --- dueling network ----------------------------------------------------------------------------
 def _stream(inputs: int, outputs: int, norm: str) -> nn.Sequential:
     """256 → 256 → 128 → outputs with a normalisation + ReLU after each hidden layer."""
     normalisation = nn.BatchNorm1d if norm == "batch" else nn.LayerNorm
@@ -268,7 +260,7 @@ def dueling_q_values(value: torch.Tensor, advantage: torch.Tensor) -> torch.Tens
     return value + advantage - advantage.mean(dim=1, keepdim=True)
 
 
-# --- 4. double-DQN target ----------------------------------------------------------------------
+# --- double-DQN target --------------------------------------------------------------------------
 def double_dqn_targets(
     rewards: torch.Tensor,
     terminals: torch.Tensor,
@@ -282,17 +274,10 @@ def double_dqn_targets(
     return rewards + gamma * (1.0 - terminals) * next_q_target.gather(1, best).squeeze(1)
 
 
-# --- 5. the agent ------------------------------------------------------------------------------
-def flatten_observation(obs: Any, space: spaces.Space) -> np.ndarray:
-    """A vector observation (or a Dict of them, in key order) as one float32 vector."""
-    if isinstance(space, spaces.Dict):
-        return np.concatenate([np.asarray(obs[key], dtype=np.float32).ravel() for key in space.spaces])
-    return np.asarray(obs, dtype=np.float32).ravel()
-
-
+# --- the agent ----------------------------------------------------------------------------------
 def flatten_batch(batch: Any, space: spaces.Space) -> np.ndarray:
-    """K observations (batched, a Dict key by key) as (K, flat size) float32, each row
-    ``flatten_observation`` of one; for a float32 Box, a view of ``batch`` (write into a copy)."""
+    """K observations (batched, a Dict key by key) as (K, flat size) float32, a Dict's parts
+    concatenated in key order; for a float32 Box, a view of ``batch`` (write into a copy)."""
     if isinstance(space, spaces.Dict):
         parts = [np.asarray(batch[key], dtype=np.float32) for key in space.spaces]
         return np.concatenate([part.reshape(len(part), -1) for part in parts], axis=1)
@@ -359,7 +344,7 @@ class DuelingDoubleDQN(OwnAgent):
         """argmax_a Q(s, a) (ε-greedy with the final ε when not deterministic)."""
         if not deterministic and self.rng.random() < self.config.exploration_final_eps:
             return np.array(self.rng.integers(self.action_space.n)), None
-        flat = flatten_observation(obs, self.observation_space)[None]
+        flat = flatten_batch(batch_of_one(obs), self.observation_space)
         return np.array(int(self.q_values(flat).argmax(dim=1)[0])), None
 
     def train_step(self, progress: float) -> dict[str, float]:
@@ -381,10 +366,7 @@ class DuelingDoubleDQN(OwnAgent):
         loss = (
             torch.as_tensor(weights) * nn.functional.smooth_l1_loss(q_taken, targets, reduction="none")
         ).mean()
-        self.optimizer.zero_grad()
-        loss.backward()
-        nn.utils.clip_grad_norm_(self.q_network.parameters(), config.max_grad_norm)
-        self.optimizer.step()
+        gradient_step(self.optimizer, loss, self.q_network.parameters(), config.max_grad_norm)
         self.replay_buffer.update_priorities(indices, td_errors.detach().numpy())
         return {"loss": loss.item(), "td_error": td_errors.abs().mean().item(), "beta": beta,
                 "q_mean": q_taken.mean().item()}  # fmt: skip
@@ -399,26 +381,14 @@ class DuelingDoubleDQN(OwnAgent):
             for target, online in zip(self.target_network.buffers(), self.q_network.buffers(), strict=True):
                 target.copy_(online)
 
-    def learn(
-        self,
-        total_timesteps: int,
-        callback: BaseCallback | None = None,
-        reset_num_timesteps: bool = True,
-        progress_bar: bool = False,
-    ) -> DuelingDoubleDQN:
-        """Act ε-greedily in each of the env's K worlds, store, learn, until ``total_timesteps``
-        more steps of all worlds (contract in base.py). ``train_freq``, ``target_update_interval``
-        and ``log_interval`` count transitions, so K worlds keep one world's updates per
-        transition: a step of K worlds that passes n multiples of ``train_freq`` trains n times."""
-        config, worlds = self.config, Worlds(self.env)
-        target_steps, start_steps, start_time = self._start_learning(total_timesteps, reset_num_timesteps)
-        self._last_obs = worlds.start(self._last_obs, self.observation_space)
-        callback = self._start_callback(callback)
-        callback.on_training_start(locals(), globals())
+    def _learn(self, worlds: Worlds, callback: BaseCallback, target: int) -> None:
+        """Act ε-greedily in each of the K worlds, store, learn. ``train_freq``,
+        ``target_update_interval`` and ``log_interval`` count transitions of all worlds."""
+        config = self.config
         metrics: dict[str, float] = {}
-        while self.num_timesteps < target_steps:
+        while self.num_timesteps < target:
             callback.on_rollout_start()  # a safe point: nothing is half-done (contract in base.py)
-            progress = self.num_timesteps / max(target_steps, 1)
+            progress = self.num_timesteps / max(target, 1)
             explored = progress / config.exploration_fraction if config.exploration_fraction else 1.0
             epsilon = linear(config.exploration_initial_eps, config.exploration_final_eps, explored)
             observations = flatten_batch(self._last_obs, self.observation_space)
@@ -457,15 +427,8 @@ class DuelingDoubleDQN(OwnAgent):
             if config.tau == 1.0 and _multiples(before, self.num_timesteps, config.target_update_interval):
                 self.update_target()
             if _multiples(before, self.num_timesteps, self.log_every or config.log_interval):
-                self._log(metrics, epsilon, learning_rate, start_steps, start_time)
-        callback.on_training_end()
-        return self
-
-    def _log(
-        self, metrics: dict, epsilon: float, learning_rate: float, start_steps: int, start_time: float
-    ) -> None:
-        schedule = {"epsilon": epsilon, "learning_rate": learning_rate}
-        self._log_progress({**metrics, **schedule}, start_steps, start_time)
+                schedule = {"epsilon": epsilon, "learning_rate": learning_rate}
+                self._log_progress({**metrics, **schedule})
 
 
 def _multiples(before: int, after: int, every: int) -> int:

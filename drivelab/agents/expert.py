@@ -1,21 +1,14 @@
-"""A rule-based driver for the town, the racetrack and the block maps (``--algo expert``): it shows
-they can be solved and that the NoCrash metrics measure what they should, and it teaches ``bc`` and
-``dagger``.
-
-It reads the ``waypoints`` and ``affordances`` sensors and acts through the ``target_speed``
-adapter (whose PID turns its speed into throttle and brake):
+"""A rule-based driver for the town, the racetrack and the block maps (``--algo expert``), which
+also teaches ``bc`` and ``dagger``. It reads the ``waypoints`` and ``affordances`` sensors and acts
+through the ``target_speed`` adapter:
 
 - steering: pure pursuit of the route point a speed-dependent distance ahead, on highway-env's
-  kinematic bicycle (its wheelbase is the vehicle length), in the heading's frame (the town's
-  recorded expert) or, ``slip_aware``, in the frame of the velocity, which the bicycle's slip angle
-  turns off the heading (the block maps' solid lines need that);
-- speed: cruise at Roach's 6 m/s, slower where the route bends (bounded lateral acceleration), and
-  never faster than lets it stop at a comfortable deceleration before a red light's stop line, a
-  yellow one it can still stop for, the vehicle ahead on its route, a pedestrian on or near the
-  route, or, for a left turn at a light, the line while an oncoming vehicle comes.
+  kinematic bicycle, in the heading's frame or, ``slip_aware``, in the velocity's frame;
+- speed: cruise at Roach's 6 m/s, slower in bends (bounded lateral acceleration), and never faster
+  than lets it stop before a red (or stoppable yellow) light's stop line, the vehicle ahead, a
+  pedestrian, or, for a left turn at a light, the line while an oncoming vehicle comes.
 
-It learns nothing: ``learn`` drives the environment for the requested steps (so that a run directory,
-its training curve and its evaluations exist like any other algorithm's).
+It learns nothing: ``learn`` drives the environment for the requested steps.
 """
 
 from __future__ import annotations
@@ -32,10 +25,7 @@ from drivelab.errors import UsageError
 from drivelab.perception.affordances import FIELDS
 from drivelab.world.geometry import FULL_LOCK_RAD, ROACH_MAX_SPEED_MPS
 
-# the scenarios its rules were written and tested for: the town (its defaults), the racetrack (one
-# other car on the lane ahead) and the procedural block maps (traffic on the route, junctions
-# without lights); benchmarks/leaderboard.py's RACETRACK_RULES and BLOCKS_RULES drive the last two
-# faster than the town's 6 m/s
+# the scenarios its rules were written and tested for
 SCENARIOS = ("town", "racetrack", "blocks")
 
 
@@ -209,28 +199,13 @@ class RuleBasedExpert(OwnAgent):
         return limits
 
     # --- "training": driving the environment with the rules ---------------------------------------
-    def learn(
-        self,
-        total_timesteps: int,
-        callback: BaseCallback | None = None,
-        reset_num_timesteps: bool = True,
-        progress_bar: bool = False,
-    ) -> RuleBasedExpert:
-        """Drive ``total_timesteps`` steps with the rules (nothing is learned; contract in base.py).
-        The env is seen as K worlds (``worlds.Worlds``; ``drivelab train`` gives the expert one), the
-        rules applied in each world."""
-        worlds = Worlds(self.env)
-        target_steps, start_steps, start_time = self._start_learning(total_timesteps, reset_num_timesteps)
-        self._last_obs = worlds.start(self._last_obs, self.observation_space)
-        callback = self._start_callback(callback)
-        callback.on_training_start(locals(), globals())
-        while self.num_timesteps < target_steps:
+    def _learn(self, worlds: Worlds, callback: BaseCallback, target: int) -> None:
+        """Drive with the rules in each of the K worlds (nothing is learned)."""
+        while self.num_timesteps < target:
             actions = np.stack([self.predict(row(self._last_obs, k))[0] for k in range(worlds.count)])
             self._last_obs, rewards, terminated, truncated, _, _ = worlds.step(actions)
             self.num_timesteps += worlds.count
             callback.update_locals(locals())
             if not callback.on_step():
                 break
-        self._log_progress({}, start_steps, start_time)
-        callback.on_training_end()
-        return self
+        self._log_progress({})

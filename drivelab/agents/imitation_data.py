@@ -1,20 +1,8 @@
 """Expert demonstrations for imitation (``bc``, ``dagger``): the teacher, the dataset, the collection loop.
 
-Two observations of one state. The learner sees the run's ``--obs`` (non-privileged: a top-down
-image with lights, waypoints, measurements, ...); the rule-based expert (``expert.py``) reads the
-privileged ``waypoints`` and ``affordances``. Both sensors are stateless (no history, no noise), so
-the teacher computes them beside the learner's, from the same ``WorldBatch`` the environment has
-just observed (``VectorDriveEnv.batch``): the training env stays the run's own, and its K worlds'
-privileged views cost one batched ``observe`` per step.
-
-- ``Teacher``: the expert's actions (K, 2) for the K worlds of a batch.
-- ``Demonstrations``: the labelled states, growing numpy arrays (an ``.npz`` file, never a pickle),
-  each sample marked for training or validation when it is added.
-- ``collect``: drive the run's training env as K worlds (``worlds.Worlds``: batched observations,
-  autoreset, the ``WorldBatch`` behind them) with the β-mixture of expert and learner, label
-  every visited state.
-- ``generate_demonstrations``: expert-only data from a ``VectorDriveEnv`` of K worlds on the
-  compiled core, without a run (tests, notebooks, benchmarks).
+The learner sees the run's ``--obs``; the rule-based expert reads the privileged ``waypoints`` and
+``affordances``. Both are stateless, so the teacher computes them from the same ``WorldBatch`` the
+environment has just observed (``VectorDriveEnv.batch``), one batched ``observe`` per step.
 """
 
 from __future__ import annotations
@@ -27,6 +15,7 @@ import numpy as np
 import torch
 from gymnasium import spaces
 
+from drivelab.agents.base import map_obs
 from drivelab.agents.storage import read_arrays, split_meta, write_arrays
 from drivelab.agents.worlds import Worlds
 from drivelab.errors import UsageError
@@ -56,10 +45,7 @@ class Teacher:
         return {name: sensor.observe(batch) for name, sensor in self.sensors.items()}
 
     def actions(self, batch) -> np.ndarray:
-        """(K, 2) ``[target speed fraction, steering]`` of the expert in each world of ``batch``.
-
-        The expert's rules are written for one world (``RuleBasedExpert.predict``), so this loops
-        over the K worlds; its sensors are batched."""
+        """(K, 2) ``[target speed fraction, steering]`` of the expert in each world of ``batch``."""
         views = self.observe(batch)
         rows = [
             self.expert.predict({name: view[k] for name, view in views.items()})[0]
@@ -81,9 +67,8 @@ def action_agreement(
 
 class Demonstrations:
     """Labelled states: the learner's observations (N, …) (a dict of arrays for a Dict space), the
-    expert's actions (N, A), the DAgger iteration that visited each (N,) and a validation mask (N,).
-
-    Arrays grow by doubling their capacity, so aggregating is amortised O(1) per sample.
+    expert's actions (N, A), the DAgger iteration that visited each (N,) and a validation mask (N,),
+    in arrays that grow by doubling.
 
     :param observation_space: the learner's observation space (one world).
     :param action_size: A.
@@ -101,8 +86,11 @@ class Demonstrations:
         self.observation_space, self.action_size = observation_space, int(action_size)
         self.validation_fraction = float(validation_fraction)
         self.rng = rng if rng is not None else np.random.default_rng(0)
+        self._clear()
+
+    def _clear(self) -> None:
         self.size = 0
-        self._observations = _allocate(observation_space, 0)
+        self._observations = _allocate(self.observation_space, 0)
         self._actions = np.zeros((0, self.action_size), dtype=np.float32)
         self._iterations = np.zeros(0, dtype=np.int64)
         self._validation = np.zeros(0, dtype=bool)
@@ -113,7 +101,7 @@ class Demonstrations:
     # views of the filled part
     @property
     def observations(self) -> np.ndarray | dict[str, np.ndarray]:
-        return _rows(self._observations, slice(0, self.size))
+        return map_obs(lambda array: array[: self.size], self._observations)
 
     @property
     def actions(self) -> np.ndarray:
@@ -138,7 +126,7 @@ class Demonstrations:
         count, end = len(actions), self.size + len(actions)
         if end > len(self._actions):
             capacity = max(end, 2 * len(self._actions), 256)
-            self._observations = _grow(self._observations, capacity)
+            self._observations = map_obs(lambda array: _grown(array, capacity), self._observations)
             self._actions = _grown(self._actions, capacity)
             self._iterations = _grown(self._iterations, capacity)
             self._validation = _grown(self._validation, capacity)
@@ -158,7 +146,7 @@ class Demonstrations:
 
     def select(self, indices: np.ndarray) -> Any:
         """The observations of rows ``indices`` (an array, or a dict of arrays)."""
-        return _rows(self._observations, indices)
+        return map_obs(lambda array: array[indices], self._observations)
 
     # --- files: npz of plain arrays ----------------------------------------------------------------
     def state_arrays(self) -> dict[str, np.ndarray]:
@@ -177,11 +165,10 @@ class Demonstrations:
 
     def load_state_arrays(self, arrays: dict[str, np.ndarray]) -> None:
         """Replace the samples held by those of ``state_arrays`` (shapes checked against the space)."""
-        keys = (
-            list(self.observation_space.spaces) if isinstance(self.observation_space, spaces.Dict) else None
-        )
+        space = self.observation_space
+        keys = list(space.spaces) if isinstance(space, spaces.Dict) else None
         observations = {key: arrays[f"obs.{key}"] for key in keys} if keys else arrays["obs"]
-        for key, sub in _subspaces(self.observation_space).items():
+        for key, sub in (space.spaces if keys else {"": space}).items():
             array = observations[key] if keys else observations
             if array.shape[1:] != sub.shape:
                 raise ValueError(
@@ -192,11 +179,7 @@ class Demonstrations:
             raise ValueError(
                 f"demonstrated actions of shape {actions.shape} for {self.action_size} components"
             )
-        self.size = 0
-        self._observations = _allocate(self.observation_space, 0)
-        self._actions = np.zeros((0, self.action_size), dtype=np.float32)
-        self._iterations = np.zeros(0, dtype=np.int64)
-        self._validation = np.zeros(0, dtype=bool)
+        self._clear()
         self._append(observations, actions, arrays["iterations"], arrays["validation"])
 
     def save(self, path: str | Path) -> None:
@@ -212,10 +195,6 @@ class Demonstrations:
         return data
 
 
-def _subspaces(space: spaces.Space) -> dict[str, spaces.Space]:
-    return dict(space.spaces) if isinstance(space, spaces.Dict) else {"": space}
-
-
 def _allocate(space: spaces.Space, capacity: int):
     if isinstance(space, spaces.Dict):
         return {key: np.zeros((capacity, *sub.shape), dtype=sub.dtype) for key, sub in space.spaces.items()}
@@ -223,21 +202,7 @@ def _allocate(space: spaces.Space, capacity: int):
 
 
 def _grown(array: np.ndarray, capacity: int) -> np.ndarray:
-    bigger = np.zeros((capacity, *array.shape[1:]), dtype=array.dtype)
-    bigger[: len(array)] = array
-    return bigger
-
-
-def _grow(observations, capacity: int):
-    if isinstance(observations, dict):
-        return {key: _grown(value, capacity) for key, value in observations.items()}
-    return _grown(observations, capacity)
-
-
-def _rows(observations, index):
-    if isinstance(observations, dict):
-        return {key: value[index] for key, value in observations.items()}
-    return observations[index]
+    return np.pad(array, [(0, capacity - len(array))] + [(0, 0)] * (array.ndim - 1))
 
 
 def collect(
@@ -272,7 +237,7 @@ def collect(
             from_learner = rng.random(worlds.count) >= beta
             if from_learner.any():
                 actions = np.where(from_learner[:, None], learner(obs), expert).astype(np.float32)
-        observations.append(_copy(obs))
+        observations.append(map_obs(np.copy, obs))
         labels.append(expert)
         obs, _, _, _, _, returns = worlds.step(actions)
         if episode_returns is not None:
@@ -287,12 +252,6 @@ def stack_steps(observations: list, space: spaces.Space) -> Any:
     if isinstance(space, spaces.Dict):
         return {key: np.concatenate([o[key] for o in observations]) for key in space.spaces}
     return np.concatenate(observations)
-
-
-def _copy(obs: Any) -> Any:
-    if isinstance(obs, dict):
-        return {key: np.array(value, copy=True) for key, value in obs.items()}
-    return np.array(obs, copy=True)
 
 
 def generate_demonstrations(

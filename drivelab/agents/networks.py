@@ -1,14 +1,5 @@
-"""The MetaDrive study's encoders (CNN and fusion), the tanh-Gaussian actor-critic, SB3 extractors of both.
-
-- ``SeedCnn``: Conv 5→16 8×8/4 → ReLU → Conv 16→32 4×4/2 → ReLU → FC 2592→256 → ReLU (84×84 input).
-- ``FusionEncoder``: image FC 256 + vector FC 64 (the 5 ego-state numbers) + LiDAR-120 FC 128,
-  concatenated (448) → FC 256 → ReLU.
-- ``TanhGaussianActorCritic``: an encoder, a mean head, a trainable log-std, a value head;
-  action = tanh(μ + σ·ε) (the MetaDrive study's "final action").
-- ``SeedCnnExtractor`` / ``FusionExtractor``: the same encoders as stable-baselines3 features
-  extractors, so SB3 PPO/A2C run the same networks on the same input
-  (``-H features_extractor=seed``).
-"""
+"""The MetaDrive study's encoders (CNN and fusion), the tanh-Gaussian actor-critic, and SB3
+features extractors of both (``-H features_extractor=seed``)."""
 
 from __future__ import annotations
 
@@ -174,8 +165,7 @@ class TanhGaussianActorCritic(nn.Module):
         self, obs, deterministic: bool = False, generator: torch.Generator | None = None
     ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """(pre-tanh u, log π(tanh u), V): u = μ + σ·ε, ε ~ N(0, 1) drawn from ``generator``, or u = μ
-        when ``deterministic`` (nothing drawn: acting greedily, e.g. in an evaluation during training,
-        leaves the training's random stream as it was); log π is corrected for the squashing."""
+        when ``deterministic`` (nothing drawn); log π is corrected for the squashing."""
         mean, value = self(obs)
         distribution = self.distribution(mean)
         if deterministic:

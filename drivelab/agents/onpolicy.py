@@ -1,19 +1,10 @@
 """drivelab's on-policy trainer: one collect loop over K worlds' arrays, shared by PPO and A2C.
 
-CleanRL's shape at the simulator's speed. Each iteration fills preallocated ``(n_steps, K, ...)``
-tensors from the worlds' batched arrays (``worlds.Worlds``: a VectorDriveEnv, or ``drivelab
-train``'s monitored chain stepped by ``step_arrays``; no info dict per world), computes GAE over
-the whole ``(n_steps, K)`` block, then hands the flattened batch to the algorithm's ``update``
-(``ppo.py``, ``a2c.py``: one file each, all that differs between them).
-
-What SB3 and CleanRL users expect, in ``OnPolicyConfig``: a time-limit end bootstraps from the
-final observation (γ·V(s_final) added to the reward; only a crash or an arrival ends the value),
-advantage normalisation, optional observation and reward normalisation (running statistics saved
-with the model), learning-rate and entropy annealing, gradient clipping, seeded draws.
-
-Every statistic the run keeps (input statistics, the reward scale, each world's running discounted
-return) changes only between a rollout's last step and the next rollout's start, the safe points
-where ``drivelab train`` checkpoints, so that a resumed run equals an uninterrupted one.
+Each iteration fills preallocated ``(n_steps, K, ...)`` tensors from the worlds' batched arrays
+(``worlds.Worlds``), computes GAE over the block, then hands the flattened batch to the
+algorithm's ``update`` (``ppo.py``, ``a2c.py``). A time-limit end bootstraps from the final
+observation. Every running statistic changes only between rollouts, the safe points where
+``drivelab train`` checkpoints, so that a resumed run equals an uninterrupted one.
 """
 
 from __future__ import annotations
@@ -28,7 +19,7 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 
 from drivelab.agents.actor_critic import DISTRIBUTIONS, NORM_CLIP, NORM_EPSILON, ActorCritic, merge_moments
-from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent, batch_of_one
+from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent, batch_of_one, map_obs
 from drivelab.agents.buffer_memory import check_buffer_memory, observation_bytes
 from drivelab.agents.worlds import Worlds
 from drivelab.errors import UsageError
@@ -155,8 +146,7 @@ class Storage:
             dtype = torch.uint8 if sub.dtype == np.uint8 else torch.float32
             return torch.zeros((steps, worlds, *sub.shape), dtype=dtype)
 
-        self.keys = list(space.spaces) if isinstance(space, spaces.Dict) else None
-        self.obs = {k: block(s) for k, s in space.spaces.items()} if self.keys else block(space)
+        self.obs = map_obs(block, space.spaces if isinstance(space, spaces.Dict) else space)
         action_dtype = torch.int64 if discrete else torch.float32
         self.actions = torch.zeros((steps, worlds, *action_shape), dtype=action_dtype)
         self.log_probs = torch.zeros((steps, worlds))
@@ -168,25 +158,18 @@ class Storage:
 
     def put(self, t: int, obs: Any) -> Any:
         """Store step ``t``'s observations (K, ...); the stored tensors."""
-        if self.keys:
-            for key in self.keys:
-                self.obs[key][t].copy_(torch.from_numpy(np.asarray(obs[key])))
-            return {key: self.obs[key][t] for key in self.keys}
-        self.obs[t].copy_(torch.from_numpy(np.asarray(obs)))
-        return self.obs[t]
+        rows = map_obs(lambda block: block[t], self.obs)
+        map_obs(lambda row, value: row.copy_(torch.from_numpy(np.asarray(value))), rows, obs)
+        return rows
 
     def flat_obs(self, steps: int) -> Any:
         """The first ``steps`` steps' observations as (steps·K, ...)."""
-        if self.keys:
-            return {key: value[:steps].flatten(0, 1) for key, value in self.obs.items()}
-        return self.obs[:steps].flatten(0, 1)
+        return map_obs(lambda block: block[:steps].flatten(0, 1), self.obs)
 
 
 def to_tensor(obs: Any) -> Any:
     """A batch of raw observations (numpy) as tensors of their own dtype (no copy where possible)."""
-    if isinstance(obs, dict):
-        return {key: torch.from_numpy(np.ascontiguousarray(value)) for key, value in obs.items()}
-    return torch.from_numpy(np.ascontiguousarray(obs))
+    return map_obs(lambda value: torch.from_numpy(np.ascontiguousarray(value)), obs)
 
 
 class OnPolicyAgent(OwnAgent):
@@ -267,8 +250,7 @@ class OnPolicyAgent(OwnAgent):
 
     def collect(self, worlds: Worlds, callback: BaseCallback) -> Rollout | None:
         """``n_steps`` steps of each of the K worlds (fewer at the step budget), then advantages;
-        None when the callback stops training. The hot loop is one forward pass and one batched
-        step per K transitions."""
+        None when the callback stops training."""
         config, count, policy = self.config, worlds.count, self.policy
         storage = self._storage_for(count)
         steps = min(config.n_steps, -(-(self._target - self.num_timesteps) // count))
@@ -331,24 +313,16 @@ class OnPolicyAgent(OwnAgent):
         raise NotImplementedError
 
     # --- the loop -------------------------------------------------------------------------------
-    def learn(
-        self,
-        total_timesteps: int,
-        callback: BaseCallback | None = None,
-        reset_num_timesteps: bool = True,
-        progress_bar: bool = False,
-    ) -> OnPolicyAgent:
-        """Collect and update until ``total_timesteps`` more steps were taken (see the contract in base)."""
-        started = self._start_learning(total_timesteps, reset_num_timesteps)
-        self._target, self._start_steps, start_time = started
-        worlds = Worlds(self.env)
+    def _start_worlds(self, worlds: Worlds) -> None:
         if worlds.count != len(self.running_returns):
             self.running_returns = torch.zeros(worlds.count, dtype=torch.float64)
-        self._last_obs = worlds.start(self._last_obs, self.observation_space)
+        super()._start_worlds(worlds)
         if self.config.normalize_observations and self.policy.norm.count <= 0:
             self.policy.norm.update(to_tensor(self._last_obs))  # the statistics start from the first batch
-        callback = self._start_callback(callback)
-        callback.on_training_start(locals(), globals())
+
+    def _learn(self, worlds: Worlds, callback: BaseCallback, target: int) -> None:
+        """Collect a rollout, update, until ``target``."""
+        self._target = target
         while self.num_timesteps < self._target:
             callback.on_rollout_start()
             rollout = self.collect(worlds, callback)
@@ -366,9 +340,7 @@ class OnPolicyAgent(OwnAgent):
             metrics.update(learning_rate=self.learning_rate, entropy_coef=self.entropy_coef)
             if self.policy.kind == "tanh_gaussian":
                 metrics["std"] = self.policy.std()
-            self._log_progress(metrics, self._start_steps, start_time)
-        callback.on_training_end()
-        return self
+            self._log_progress(metrics)
 
 
 def explained_variance(values: torch.Tensor, returns: torch.Tensor) -> float:

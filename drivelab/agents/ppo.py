@@ -1,21 +1,18 @@
 """drivelab's PPO: the clipped surrogate objective over several epochs of minibatches (Schulman et
-al. 2017), on the on-policy trainer of ``onpolicy.py`` (collect loop, GAE, networks, normalisation).
-
-Read top to bottom: the hyper-parameters, the two losses, the update. Defaults are drivelab's SB3
-PPO values for highway-env (learning rate 5e-4, rollouts of 256 steps per world, minibatches of 64,
-10 epochs, γ 0.8), so that the two compare one to one; many worlds train faster with fewer, larger
-minibatches (the leaderboard's merge and roundabout rows: 64 worlds, ``-H n_steps=32
-batch_size=256``).
+al. 2017), on the on-policy trainer of ``onpolicy.py``. Defaults are drivelab's SB3 PPO values for
+highway-env, so that the two compare one to one.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from operator import itemgetter
 
 import numpy as np
 import torch
 from torch import nn
 
+from drivelab.agents.base import gradient_step, map_obs
 from drivelab.agents.onpolicy import OnPolicyAgent, OnPolicyConfig, Rollout, explained_variance
 from drivelab.errors import UsageError
 
@@ -72,13 +69,6 @@ def value_loss(
     return torch.max((returns - values) ** 2, (returns - clipped) ** 2).mean()
 
 
-def minibatch(observations, indices: torch.Tensor):
-    """Rows ``indices`` of a tensor or of every tensor of a dict."""
-    if isinstance(observations, dict):
-        return {key: value[indices] for key, value in observations.items()}
-    return observations[indices]
-
-
 class OwnPPO(OnPolicyAgent):
     """Proximal policy optimisation with a clipped surrogate, from rollouts of ``n_steps`` × K."""
 
@@ -96,7 +86,7 @@ class OwnPPO(OnPolicyAgent):
                 advantages = rollout.advantages[indices]
                 if config.normalize_advantages and len(indices) > 1:
                     advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
-                out, values = policy(minibatch(rollout.observations, indices))
+                out, values = policy(map_obs(itemgetter(indices), rollout.observations))
                 log_probs, entropy = policy.log_prob_entropy(out, rollout.actions[indices])
                 old_log_probs = rollout.log_probs[indices]
                 policy_loss, clip_fraction = clipped_policy_loss(
@@ -113,10 +103,7 @@ class OwnPPO(OnPolicyAgent):
                 if config.target_kl > 0 and approx_kl > 1.5 * config.target_kl:
                     stop = True
                     break
-                self.optimizer.zero_grad()
-                loss.backward()
-                nn.utils.clip_grad_norm_(policy.parameters(), config.max_grad_norm)
-                self.optimizer.step()
+                gradient_step(self.optimizer, loss, policy.parameters(), config.max_grad_norm)
                 for key, value in zip(
                     history, (policy_loss, critic_loss, entropy, clip_fraction, approx_kl), strict=True
                 ):

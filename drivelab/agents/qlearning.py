@@ -1,11 +1,8 @@
 """Tabular Q-learning with ε-greedy exploration (the CARLA study), behind drivelab's Agent protocol.
 
-The agent reads a discrete observation (the ``line``, ``lane`` or ``ttc_grid`` sensors) and picks
-one of a discrete action set (the seed's 5-action tables, ``meta``, ``grid``). Defaults are the
-seed's hyper-parameters: α = 0.8, γ = 0.9, ε starting at 0.9999 and multiplied by 0.9998 after
-every step. It follows stable-baselines3's conventions where training runs rely on them:
-``learn(total_timesteps, callback, reset_num_timesteps)`` with SB3 callbacks, ``set_logger``,
-``predict`` and a zip ``save``/``load``.
+It reads a discrete observation (the ``line``, ``lane`` or ``ttc_grid`` sensors) and picks one of a
+discrete action set. Defaults are the seed's: α = 0.8, γ = 0.9, ε from 0.9999, multiplied by 0.9998
+after every step.
 """
 
 from __future__ import annotations
@@ -90,6 +87,10 @@ def _discrete_size(space: spaces.Space, what: str) -> int:
     return int(space.n)
 
 
+def _table_shape(env: gym.Env) -> tuple[int, int]:
+    return _discrete_size(env.observation_space, "observation"), _discrete_size(env.action_space, "action")
+
+
 class QLearning:
     """A Q-table over (state, action) learnt with the one-step Q-learning update (the CARLA study, eq. 1).
 
@@ -107,8 +108,7 @@ class QLearning:
         self.log_dir = Path(log_dir) if log_dir is not None else None
         self.env = env
         if env is not None:
-            n_states = _discrete_size(env.observation_space, "observation")
-            n_actions = _discrete_size(env.action_space, "action")
+            n_states, n_actions = _table_shape(env)
         if n_states is None or n_actions is None:
             raise ValueError("QLearning needs an env or both n_states and n_actions")
         self.q_table = np.full((n_states, n_actions), self.config.initial_q, dtype=np.float64)
@@ -247,14 +247,9 @@ class QLearning:
             state = json.loads(read_member(archive, "state.json", MAX_META_BYTES))
             if not isinstance(state, dict) or state.get("format") != FORMAT:
                 raise ValueError(f"{path} is not a drivelab Q-learning model")
-            # bounded by what the table and the episode log can be (8-byte numbers; every episode
-            # at least one step), plus a header and a MiB of zip structure
-            if env is None:
-                cells = MAX_TABLE_CELLS
-            else:
-                cells = _discrete_size(env.observation_space, "observation") * _discrete_size(
-                    env.action_space, "action"
-                )
+            # bounded by what the table and the episode log (8-byte numbers) can be
+            shape = None if env is None else _table_shape(env)
+            cells = MAX_TABLE_CELLS if shape is None else shape[0] * shape[1]
             table = read_member(archive, "q_table.npy", 8 * cells + STATE_OVERHEAD_BYTES)
             q_table = np.load(io.BytesIO(table), allow_pickle=False)
             steps = state.get("num_timesteps")
@@ -265,10 +260,7 @@ class QLearning:
         agent = cls(None, state["seed"], config, n_states=q_table.shape[0], n_actions=q_table.shape[1],
                     log_dir=log_dir)  # fmt: skip
         if env is not None:
-            if (
-                _discrete_size(env.observation_space, "observation"),
-                _discrete_size(env.action_space, "action"),
-            ) != q_table.shape:
+            if shape != q_table.shape:
                 raise UsageError(f"Q-table {q_table.shape} does not fit this environment's spaces")
             agent.env = env
         agent.q_table = q_table
@@ -314,14 +306,8 @@ def write_run_artifacts(agent: QLearning, run_dir: str | Path) -> list[Path]:
     np.save(run_dir / "q_table.npy", agent.q_table)
     header = "state," + ",".join(f"action_{a}" for a in range(agent.q_table.shape[1]))
     rows = np.column_stack([np.arange(len(agent.q_table)), agent.q_table])
-    np.savetxt(
-        run_dir / "q_table.csv",
-        rows,
-        delimiter=",",
-        header=header,
-        comments="",
-        fmt=["%d"] + ["%.6g"] * agent.q_table.shape[1],
-    )
+    fmt = ["%d"] + ["%.6g"] * agent.q_table.shape[1]
+    np.savetxt(run_dir / "q_table.csv", rows, delimiter=",", header=header, comments="", fmt=fmt)
     plot = plot_qlearning(agent.epsilon_history(), agent.episode_returns, agent.episode_lengths,
                           run_dir / "qlearning_curves.png")  # fmt: skip
     return [run_dir / "q_table.npy", run_dir / "q_table.csv", plot]

@@ -1,9 +1,6 @@
-"""``--algo`` names → agents, with the action kinds each can take: ``ALGORITHMS``, the one table.
-
-Everything else that lists algorithms derives from it: ``ALGO_NAMES`` (the CLI's help), the agent
-classes by family (``agent_classes``), and the class → name lookup SB3 models save under
-(``algo_of``). Implementations are named by entry point (``"module:attribute"``, as gymnasium
-registers environments) and imported when first used, so listing the algorithms imports neither
+"""``--algo`` names → agents, with the action kinds each can take: ``ALGORITHMS``, the one table
+every other list of algorithms derives from. Implementations are named by entry point
+(``"module:attribute"``) and imported when first used, so listing the algorithms imports neither
 torch nor stable-baselines3.
 """
 
@@ -32,11 +29,9 @@ class AlgoSpec:
     """A registered algorithm.
 
     :param implementation: entry point of its agent class (an SB3 class for the ``sb3`` family).
-    :param family: "sb3", "own" or "qlearning": which builder and loader make its agents
-        (``FAMILIES``). Builders take (algo, env, seed, hyperparams, log_dir); loaders take (algo,
-        path, env or None, hyperparams=None, seed=None) and unpickle nothing. ``hyperparams`` and
-        ``seed`` are the run config's (the file's own when None, and they must agree); SB3 models
-        are rebuilt from them and need ``env``.
+    :param family: "sb3", "own" or "qlearning": which builder (algo, env, seed, hyperparams,
+        log_dir) and loader (algo, path, env or None, hyperparams=None, seed=None) make its agents
+        (``FAMILIES``); loaders unpickle nothing.
     :param action_kinds: action adapters it accepts.
     :param sb3_replay: the agent has a replay buffer worth checkpointing (``replay_buffer.observations``,
         ``save_replay_buffer``, ``load_replay_buffer``, as SB3's off-policy models).

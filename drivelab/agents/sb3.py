@@ -1,16 +1,9 @@
 """stable-baselines3 algorithms behind drivelab's Agent protocol, saved without pickles.
 
-SB3's own ``save`` pickles parts of a model (the ``:serialized:`` entries of the zip's ``data``) and
-its ``load`` unpickles them, so a model file could run code. drivelab's SB3 classes save instead a zip of
-``sb3.json`` (the counters and statistics that further training reads: steps, updates, episodes,
-exploration rate, progress, episode-info buffers; plus the seed, hyper-parameters and spaces) and
-``parameters.pt`` (the state dicts of the policy and its optimizers and SB3's torch variables,
-read with ``torch.load(weights_only=True)``). ``load_sb3`` rebuilds the model from the run's config
-with ``build_sb3`` and loads the parameters into it (SB3's ``set_parameters``). Replays are
-``.npz`` arrays loaded into the rebuilt model's fresh buffer.
-
-As SB3's ``load`` given an environment, a loaded model has no last observation, so its next
-``learn`` starts by resetting the environment.
+A model is saved as a zip of ``sb3.json`` (the counters and statistics further training reads,
+the seed, hyper-parameters and spaces) and ``parameters.pt`` (state dicts, read with
+``torch.load(weights_only=True)``); ``load_sb3`` rebuilds the model from the run's config and
+loads the parameters. Replays are ``.npz`` arrays. A loaded model's next ``learn`` resets the env.
 """
 
 from __future__ import annotations
@@ -19,6 +12,7 @@ import copy
 import json
 import zipfile
 from collections import deque
+from operator import attrgetter
 from pathlib import Path
 
 import gymnasium as gym
@@ -60,7 +54,7 @@ class SafeSave:
     def save(self, path: str | Path) -> None:
         """One zip: ``sb3.json`` and ``parameters.pt``."""
         _, variables = self._get_torch_save_params()
-        tensors = {name: _attribute(self, name).detach().cpu() for name in variables}
+        tensors = {name: attrgetter(name)(self).detach().cpu() for name in variables}
         parameters = {"state_dicts": self.get_parameters(), "variables": tensors}
         meta = {
             "format": FORMAT,
@@ -81,13 +75,8 @@ class SafeSave:
 
     def save_replay_buffer(self, path: str | Path) -> None:
         """The replay buffer's arrays (dict observations key by key) and position as ``.npz``."""
-        buffer, arrays = self.replay_buffer, {}
-        for name in REPLAY_ARRAYS:
-            value = getattr(buffer, name, None)
-            if isinstance(value, dict):
-                arrays.update({f"{name}/{key}": array for key, array in value.items()})
-            elif value is not None:
-                arrays[name] = value
+        buffer = self.replay_buffer
+        arrays = {key: holder[name] for key, (holder, name) in _replay_slots(buffer).items()}
         write_arrays(path, arrays, {"pos": int(buffer.pos), "full": bool(buffer.full)})
 
     def load_replay_buffer(self, path: str | Path) -> None:
@@ -95,13 +84,7 @@ class SafeSave:
         must have the shape and dtype of the buffer's own (same buffer size and spaces)."""
         arrays, meta = split_meta(read_arrays(path))
         buffer = self.replay_buffer
-        expected = {}
-        for name in REPLAY_ARRAYS:
-            value = getattr(buffer, name, None)
-            if isinstance(value, dict):
-                expected.update({f"{name}/{key}": (value, key) for key in value})
-            elif value is not None:
-                expected[name] = (buffer.__dict__, name)
+        expected = _replay_slots(buffer)
         if set(arrays) != set(expected) or not {"pos", "full"} <= set(meta):
             raise ValueError("the replay's arrays do not match this model's replay buffer")
         for key, (holder, name) in expected.items():
@@ -112,15 +95,22 @@ class SafeSave:
         buffer.pos, buffer.full = int(meta["pos"]), bool(meta["full"])
 
 
-class RolloutLogs:
-    """Mixin for SB3's on-policy algorithms: a progress row (CSV, TensorBoard) every
-    ``log_rollouts`` rollouts counted from step 0, ``time/iterations`` the rollouts since step 0.
+def _replay_slots(buffer) -> dict[str, tuple[dict, str]]:
+    """``{file key: (holder, key in it)}`` of the replay's arrays (dict observations key by key)."""
+    slots = {}
+    for name in REPLAY_ARRAYS:
+        value = getattr(buffer, name, None)
+        if isinstance(value, dict):
+            slots.update({f"{name}/{key}": (value, key) for key in value})
+        elif value is not None:
+            slots[name] = (buffer.__dict__, name)
+    return slots
 
-    SB3 counts its ``log_interval`` from the start of each ``learn`` call, so a resumed run logged
-    other steps than the same run never stopped; and A2C's interval (100 rollouts, of 16 steps with
-    drivelab's values) left a short run with an empty progress.csv and no TensorBoard scalars.
-    ``log_over`` sets the interval for a run's budget: SB3's own (``SB3_LOG_INTERVAL``: PPO 1, A2C
-    100), finer for a run too short for ten rows at it."""
+
+class RolloutLogs:
+    """Mixin for SB3's on-policy algorithms: a progress row every ``log_rollouts`` rollouts counted
+    from step 0 (SB3 counts from each ``learn`` call, so a resumed run would log other steps);
+    ``time/iterations`` is the rollouts since step 0."""
 
     SB3_LOG_INTERVAL = 1
     log_rollouts = 1
@@ -156,12 +146,6 @@ class DrivelabA2C(SafeSave, RolloutLogs, A2C):
 
 class DrivelabSAC(SafeSave, SAC):
     """SB3 SAC saved without pickles."""
-
-
-def _attribute(model: BaseAlgorithm, dotted: str):
-    for part in dotted.split("."):
-        model = getattr(model, part)
-    return model
 
 
 def _json_number(value):
@@ -248,7 +232,7 @@ def load_sb3(algo: str, path: Path, env: gym.Env | None, hyperparams: dict | Non
         parameters = tensors_from_bytes(read_member(archive, "parameters.pt", limit))
     model.set_parameters(parameters["state_dicts"], exact_match=True, device=get_device(model.device))
     for name, value in parameters["variables"].items():
-        _attribute(model, name).data.copy_(value)
+        attrgetter(name)(model).data.copy_(value)
     for name, value in counters.items():
         setattr(model, name, value)
     model.ep_info_buffer = deque(meta["ep_info_buffer"], maxlen=model._stats_window_size)

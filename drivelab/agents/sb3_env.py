@@ -53,9 +53,7 @@ class SB3VecEnv(VecEnv):
     def step_arrays(self, actions: np.ndarray):
         """``step`` without the per-world info dicts: the VectorDriveEnv's own ``(observations,
         rewards, terminated, truncated, infos)``, arrays of K worlds (finished worlds already
-        started again, their last observations in ``infos["final_obs"]``). Array-aware wrappers
-        (``RecordVecEpisodes``, ``ArrayVecMonitor``) pass it through; ``agents/worlds.py`` steps
-        by it when the whole chain has it."""
+        started again, their last observations in ``infos["final_obs"]``)."""
         return self.vector_env.step(actions)
 
     def seed(self, seed: int | None = None):

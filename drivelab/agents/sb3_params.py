@@ -1,11 +1,7 @@
-"""The stable-baselines3 hyper-parameters drivelab accepts, with their types and ranges.
-
-SB3 checks few of its keyword arguments: ``batch_size=0`` trains on empty batches (a nan loss and
-exit code 0), ``gamma="abc"`` fails hundreds of steps into training. ``check_sb3_hyperparams``
-validates every ``-H`` / YAML value before a model is built, so bad input is one line and no run
-directory. Keys of SB3's constructors that take Python objects (``action_noise``,
-``replay_buffer_class``, ...) or that drivelab sets itself (``env``, ``seed``, ``tensorboard_log``,
-...) are refused by name; keys SB3's constructor does not have are unknown.
+"""The stable-baselines3 hyper-parameters drivelab accepts, with their types and ranges:
+``check_sb3_hyperparams`` validates every ``-H`` / YAML value before a model is built (SB3 checks
+few: ``batch_size=0`` trains on empty batches). Keys that take Python objects or that drivelab
+sets itself are refused by name; keys SB3's constructor does not have are unknown.
 """
 
 from __future__ import annotations
@@ -270,11 +266,8 @@ def _given_or_default(algo: str, hyperparams: dict, key: str):
 
 
 def check_sb3_memory(algo: str, hyperparams: dict, observation_space, n_envs: int = 1) -> None:
-    """Refuse sizes whose buffers this machine cannot hold (``buffer_memory``), from checked
-    ``hyperparams`` and the observation space: the replay buffer of DQN and SAC (``buffer_size``
-    transitions, each observation kept twice unless ``optimize_memory_usage``) and its training
-    batches (``batch_size``, float32 tensors of both observations); the rollout of PPO and A2C
-    (``n_steps`` × ``n_envs`` entries, observations stored as float32)."""
+    """Refuse sizes whose buffers this machine cannot hold (``buffer_memory``): the replay buffer
+    and training batch of DQN and SAC, the rollout of PPO and A2C."""
     if "buffer_size" in PARAMS[algo]:
         copies = 1 if _given_or_default(algo, hyperparams, "optimize_memory_usage") else 2
         stored = copies * observation_bytes(observation_space)
@@ -287,10 +280,5 @@ def check_sb3_memory(algo: str, hyperparams: dict, observation_space, n_envs: in
         )
     else:
         entries = _given_or_default(algo, hyperparams, "n_steps") * n_envs
-        check_buffer_memory(
-            algo,
-            "n_steps",
-            entries,
-            observation_bytes(observation_space, itemsize=4),
-            "rollout (n_steps × n_envs)",
-        )
+        stored = observation_bytes(observation_space, itemsize=4)
+        check_buffer_memory(algo, "n_steps", entries, stored, "rollout (n_steps × n_envs)")

@@ -1,11 +1,7 @@
-"""Safe files for agents and replays: tensors, arrays and JSON, never pickles.
-
-A run directory may come from someone else, so nothing read here can execute code: tensors and
-state dicts go through ``torch.load(weights_only=True)`` (plain containers of tensors and numbers
-only), arrays through ``np.load(allow_pickle=False)`` (an object array is refused), everything else
-is JSON. Spaces are described in JSON and compared with the spaces of the environment the run's
-config makes. Files from drivelab before this format (pickles inside) raise ``OldFormatError``;
-``drivelab convert-run`` rewrites a directory the user trusts.
+"""Safe files for agents and replays: tensors (``torch.load(weights_only=True)``), arrays
+(``np.load(allow_pickle=False)``) and JSON, never pickles, since a run directory may come from
+someone else. Files from drivelab before this format raise ``OldFormatError``; ``drivelab
+convert-run`` rewrites a directory the user trusts.
 """
 
 from __future__ import annotations
@@ -41,19 +37,22 @@ class NonFiniteParametersError(UsageError):
 
 
 # --- tensors -----------------------------------------------------------------------------------
-def non_finite_tensors(state: Any, name: str = "") -> list[str]:
+def _tensors(state: Any, name: str = ""):
+    """(dotted name, tensor) of every tensor in nested dicts/lists ``state``."""
+    if isinstance(state, torch.Tensor):
+        yield name or "tensor", state
+    elif isinstance(state, (dict, list, tuple)):
+        for key, value in state.items() if isinstance(state, dict) else enumerate(state):
+            yield from _tensors(value, f"{name}.{key}".lstrip("."))
+
+
+def non_finite_tensors(state: Any) -> list[str]:
     """The dotted names of the floating-point tensors in nested dicts/lists ``state`` that hold a
     nan or an inf (``["q_network.value.0.weight", ...]``)."""
-    if isinstance(state, torch.Tensor):
-        floating = state.is_floating_point() or state.is_complex()
-        return [name or "tensor"] if floating and not bool(torch.isfinite(state).all()) else []
-    if isinstance(state, dict):
-        items = state.items()
-    elif isinstance(state, (list, tuple)):
-        items = enumerate(state)
-    else:
-        return []
-    return [found for key, value in items for found in non_finite_tensors(value, f"{name}.{key}".lstrip("."))]
+    return [
+        name for name, tensor in _tensors(state)
+        if (tensor.is_floating_point() or tensor.is_complex()) and not bool(torch.isfinite(tensor).all())
+    ]  # fmt: skip
 
 
 def _check_finite(state: Any, prefix: str = "") -> None:
@@ -80,8 +79,7 @@ def tensors_from_bytes(data: bytes) -> Any:
     tensors holding nan or inf (``NonFiniteParametersError``)."""
     try:
         with warnings.catch_warnings():
-            # a file pickled with another protocol than torch's own (a foreign or crafted file) makes
-            # torch warn before it refuses or reads it: the refusal below, or the tensors, say enough
+            # torch warns about a foreign pickle protocol before it refuses or reads the file
             warnings.filterwarnings("ignore", message="Detected pickle protocol", category=UserWarning)
             state = torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
     except pickle.UnpicklingError:
@@ -211,11 +209,9 @@ def check_spaces(saved: dict, observation_space: spaces.Space, action_space: spa
 
 
 # --- zips --------------------------------------------------------------------------------------
-# A model zip's members are read whole, so each is bounded before it is inflated: a few MB of zip can
-# declare, or inflate to, gigabytes. The JSON metadata holds hyper-parameters, counters and the last
-# 100 episodes' returns: kilobytes. A tensor file holds the networks (target networks included) and
-# their optimizers' moments, at most three more copies of the weights (Adam keeps two, RMSprop with
-# momentum and centring three), plus the torch file's own structure, generator states and counters.
+# A model zip's members are read whole, so each is bounded before it is inflated: the JSON metadata
+# to kilobytes' worth, a tensor file to the weights plus at most three copies of them (optimizer
+# moments) plus a MiB of structure, generator states and counters.
 MAX_META_BYTES = 16 << 20
 STATE_COPIES = 4
 STATE_OVERHEAD_BYTES = 1 << 20
@@ -223,13 +219,7 @@ STATE_OVERHEAD_BYTES = 1 << 20
 
 def tensor_bytes(state: Any) -> int:
     """Bytes of the tensors in nested dicts/lists ``state`` (a state dict, an optimizer's state)."""
-    if isinstance(state, torch.Tensor):
-        return state.numel() * state.element_size()
-    if isinstance(state, dict):
-        return sum(tensor_bytes(value) for value in state.values())
-    if isinstance(state, (list, tuple)):
-        return sum(tensor_bytes(value) for value in state)
-    return 0
+    return sum(tensor.numel() * tensor.element_size() for _, tensor in _tensors(state))
 
 
 def state_limit(weights: Any) -> int:

@@ -1,11 +1,6 @@
-"""The training env as K worlds, the one loop of acting shared by drivelab's own agents.
-
-An agent trains on one gymnasium env (K = 1) or on an SB3 ``VecEnv`` of K worlds (``drivelab
-train --n-envs K``: a VectorDriveEnv that resets a finished world in the step that ended it).
-``Worlds`` gives both the VecEnv's shape: observations batched (K, ...), rewards and flags (K,),
-the final observation of every world whose episode ended, and the returns of the episodes that
-ended, so the agents' collect loops are written once, for K worlds. ``Worlds.batch`` is the
-``WorldBatch`` behind the observations last returned (the imitation teacher reads it).
+"""The training env as K worlds (``Worlds``), the one loop of acting shared by drivelab's own
+agents: a gymnasium env (K = 1) or an SB3 ``VecEnv`` of K worlds (``drivelab train --n-envs K``)
+seen with the VecEnv's shapes, so that the agents' collect loops are written once.
 """
 
 from __future__ import annotations
@@ -16,7 +11,7 @@ import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.vec_env import VecEnv
 
-from drivelab.agents.base import batch_of_one
+from drivelab.agents.base import batch_of_one, map_obs
 from drivelab.errors import UsageError
 
 
@@ -39,14 +34,10 @@ def vector_env_of(env: Any):
 
 class Worlds:
     """The training env as K worlds: a gymnasium env (K = 1, reset here when its episode ends), an
-    SB3 ``VecEnv`` (K = ``num_envs``, resetting a finished world itself) or a ``VectorDriveEnv``
-    with ``autoreset_mode="same_step"``. Observations come and go batched (K, ...), dicts key by
-    key; a finished world has started again when ``step`` returns, so ``batch`` always holds the
-    state of the observations last returned.
-
-    A VectorDriveEnv, and a VecEnv whose whole wrapper chain has ``step_arrays`` (``SB3VecEnv``
-    under ``RecordVecEpisodes`` and ``ArrayVecMonitor``, how ``drivelab train`` builds it), are
-    stepped as arrays: no info dict per world is made (``infos`` makes them when read)."""
+    SB3 ``VecEnv`` (K = ``num_envs``) or a ``VectorDriveEnv`` with ``autoreset_mode="same_step"``.
+    Observations come and go batched (K, ...); a finished world has started again when ``step``
+    returns. A VectorDriveEnv, and a VecEnv whose whole wrapper chain has ``step_arrays``, are
+    stepped as arrays: the info dicts per world are made only when ``infos`` is read."""
 
     def __init__(self, env) -> None:
         from gymnasium.vector import AutoresetMode
@@ -102,10 +93,8 @@ class Worlds:
     def step(self, actions: np.ndarray):
         """(observations, rewards (K,), terminated (K,), truncated (K,), the final observations of
         the worlds that ended (batched, rows of the others unspecified) or None, the returns of
-        the episodes that ended). ``infos`` then holds the step's info of every world (of the
-        step that ended it, for a finished world); with one world, ``reset_infos`` the reset's when
-        it started again (a VecEnv's ``reset_infos`` are its last ``reset``'s: SB3VecEnv does not
-        give the infos of the resets inside ``step``)."""
+        the episodes that ended). ``infos`` then holds the step's info of every world; with one
+        world, ``reset_infos`` the reset's when it started again."""
         if self.arrays:
             return self._step_arrays(actions)
         if self.vector:
@@ -115,7 +104,7 @@ class Worlds:
             terminated = np.asarray(dones, dtype=bool) & ~truncated
             final = None
             if dones.any():
-                final = _copy(new_obs)
+                final = map_obs(np.ndarray.copy, new_obs)
                 for k in np.flatnonzero(dones):
                     _set_row(final, k, infos[k]["terminal_observation"])
             returns = [float(info["episode"]["r"]) for info in infos if "episode" in info]
@@ -133,9 +122,8 @@ class Worlds:
         )  # fmt: skip
 
     def _step_arrays(self, actions: np.ndarray):
-        """``step`` through ``step_arrays`` (or a VectorDriveEnv's own step): arrays only, Python
-        per finished world. Rewards are rounded to float32 as SB3's VecEnvs give them, so that
-        both ways of stepping train alike."""
+        """``step`` through ``step_arrays`` (or a VectorDriveEnv's own step); rewards rounded to
+        float32 as SB3's VecEnvs give them, so that both ways of stepping train alike."""
         if self.direct:
             new_obs, rewards, terminated, truncated, infos = self.env.step(actions)
         else:
@@ -145,7 +133,7 @@ class Worlds:
         done = terminated | truncated
         final, returns = None, []
         if np.count_nonzero(done):
-            final = _copy(new_obs)
+            final = map_obs(np.ndarray.copy, new_obs)
             final_obs = infos["final_obs"]
             finished = np.flatnonzero(done)
             for k in finished:
@@ -191,7 +179,7 @@ def _listed_infos(infos: dict, count: int) -> list[dict]:
 
 def row(batch: Any, k: int) -> Any:
     """World ``k``'s observation of a batch (K, ...) (a view; dicts key by key)."""
-    return {key: value[k] for key, value in batch.items()} if isinstance(batch, dict) else batch[k]
+    return map_obs(lambda value: value[k], batch)
 
 
 def is_batched(obs: Any, space: spaces.Space) -> bool:
@@ -199,10 +187,6 @@ def is_batched(obs: Any, space: spaces.Space) -> bool:
         key = next(iter(space.spaces))
         return is_batched(obs[key], space.spaces[key])
     return np.ndim(obs) == len(space.shape) + 1
-
-
-def _copy(batch: Any) -> Any:
-    return {key: value.copy() for key, value in batch.items()} if isinstance(batch, dict) else batch.copy()
 
 
 def _set_row(batch: Any, k: int, row: Any) -> None:

@@ -1,16 +1,9 @@
-"""Shipped hyper-parameters: one YAML file per algorithm in RL Zoo's format.
-
-``drivelab/hyperparams/<algo>.yaml`` is an rl-baselines3-zoo hyper-parameter file: its top-level
-keys are gymnasium env ids (``drivelab/Highway-v0``, ``drivelab.envs.gym_id``) or ``default``, and
-each entry holds RL Zoo's run settings (``n_timesteps``, ``policy``, optionally ``env_kwargs``) and
-the algorithm's keyword arguments. RL Zoo reads it with ``-conf`` (its ``ExperimentManager``
-picks the env id's entry, else ``default``); drivelab reads the same entries without the run
-settings, which a drivelab run takes from its own config (``--steps``, ``--obs``, ``--action``).
-
-The ``default`` entry is where the SB3 defaults are written: ``build_sb3`` starts every model from
-it. A new run starts from the entry of its scenario; ``--hyperparams key=value`` (or the run YAML's
-``hyperparams``) overrides single keys, and the merged values are written into ``config.yaml``.
-A file of an algorithm RL Zoo does not have may key its entries by scenario name instead.
+"""Shipped hyper-parameters: ``drivelab/hyperparams/<algo>.yaml``, one rl-baselines3-zoo file per
+algorithm. Top-level keys are gymnasium env ids (``drivelab/Highway-v0``) or ``default``; each
+entry holds RL Zoo's run settings and the algorithm's keyword arguments. drivelab reads the same
+entries without the run settings (its run config gives them). ``build_sb3`` starts every model
+from ``default``; a new run starts from its scenario's entry, ``--hyperparams key=value``
+overriding single keys. A file of an algorithm RL Zoo does not have may key entries by scenario.
 """
 
 from __future__ import annotations
@@ -23,7 +16,7 @@ import yaml
 
 from drivelab.errors import UsageError
 
-# RL Zoo's run settings that drivelab takes from its run config instead (see the module docstring)
+# RL Zoo's run settings that drivelab takes from its run config instead
 ZOO_RUN_KEYS = ("n_timesteps", "policy", "env_kwargs")
 # RL Zoo's other run settings (ExperimentManager._preprocess_hyperparams): drivelab has no
 # equivalent of them, so a file that sets one would train differently under RL Zoo; refused.

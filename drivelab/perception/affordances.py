@@ -1,8 +1,6 @@
-"""Affordances: a few privileged numbers about what lies on the ego's route, read from the world.
-
-In the spirit of Conditional Affordance Learning (Sauer et al., CoRL 2018): instead of pixels, the
-distances a rule-based driver needs, measured exactly. ``--algo expert`` drives on them; a learner
-may use them as a privileged baseline (an upper bound on what perception could give it).
+"""Affordances: a few privileged numbers about what lies on the ego's route, measured exactly from
+the world (after Conditional Affordance Learning, Sauer et al., CoRL 2018): what ``--algo expert``
+drives on, and a privileged baseline for learners.
 """
 
 from __future__ import annotations
@@ -49,10 +47,6 @@ class Affordances(Sensor):
         self.range_m = float(range_m)
         high = np.full(len(FIELDS), max(self.range_m, 50.0), dtype=np.float32)
         self._space = spaces.Box(-high, high, dtype=np.float32)
-
-    @property
-    def space(self) -> spaces.Box:
-        return self._space
 
     def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
         ego, route = batch.ego, batch.route

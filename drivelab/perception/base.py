@@ -16,29 +16,22 @@ from drivelab.world.state import WorldState
 class Sensor(ABC):
     """Turns the K worlds of a WorldBatch into K observations of one declared (single-world) space.
 
-    Batched use (the environments): ``reset(batch, rngs, mask)`` when worlds start an episode,
-    then ``observe(batch, out)`` once per policy step writes ``(K, *space.shape)`` into ``out``.
-    One-world use (tests, notebooks): ``reset(world, rng)`` and ``observe(world)`` return the
-    observation of that world alone, through the same batched code with K = 1.
-
-    Subclasses implement ``_observe(batch, out)`` and, when they keep history, ``_reset(batch,
-    mask)`` over ``(K, …)`` state arrays; ``self.rngs[k]`` is world k's episode generator, the only
-    source of noise. ``_observe`` may get a sub-batch (``batch.select``: the environment observes
-    the worlds it just reset a second time in a same-step autoreset): per-world state is then
-    read and written at ``state[batch.rows]`` and world i of the sub-batch is slot
-    ``batch.slots[i]``, so only those worlds advance.
+    ``reset(batch, rngs, mask)`` when worlds start an episode, then ``observe(batch, out)`` once
+    per policy step; a WorldState instead of a batch observes that one world. Subclasses set
+    ``_space`` and implement ``_observe(batch, out)`` and, when they keep history, ``_reset(batch,
+    mask)``; ``self.rngs[k]`` is world k's generator. ``_observe`` may get a sub-batch
+    (``batch.select``), whose per-world state lives at ``state[batch.rows]``.
     """
 
     name: str = "sensor"
     help: str = ""  # one line for `drivelab envs`
-    # draws noise from ``self.rngs``: the environments make episode generators only for such sensors
-    # (the others get None in ``rngs``: a generator costs ~10 µs to seed, per world and reset)
+    # draws noise from ``self.rngs`` (the environments make generators only for such sensors)
     uses_rng: bool = False
 
     @property
-    @abstractmethod
     def space(self) -> spaces.Space:
-        """The observation space of one world, fixed at construction."""
+        """The observation space of one world, fixed at construction (subclasses set ``_space``)."""
+        return self._space
 
     def reset(
         self,

@@ -39,12 +39,9 @@ DASH_LENGTH_M, DASH_PERIOD_M = 3.0, 8.0  # painted 3 m, then a 5 m gap
 
 
 class DashedMarkings:
-    """A road's dashed markings with the arc length at which each segment starts along its line.
-
-    Dashes are laid along the arc length of chains of touching segments (curved lines come as
-    2 m pieces), so they keep their rhythm around bends and stay put in the world as the ego
-    moves. Only the dashes in sight are cut each frame, so a 10 km line costs what a short one does.
-    """
+    """A road's dashed markings with the arc length at which each segment starts along its chain
+    of touching segments, so that dashes keep their rhythm around bends and stay put in the world;
+    only the dashes in sight are cut each frame."""
 
     def __init__(self, road: RoadMap) -> None:
         segments = np.asarray(road.markings, dtype=float)[road.marking_kinds == MARKING_DASHED]
@@ -146,10 +143,6 @@ def draw_birdeye(
 ) -> None:
     """Draw the K worlds' bird's-eye images into ``out`` (K, H, W, 3) uint8 (see ``render_birdeye``).
 
-    The ego-frame transforms and culling of lanes, routes, traffic, lights and egos run over all K
-    worlds at once, the markings' culling over all the worlds of a map; the OpenCV drawing runs
-    world by world.
-
     :param view: the camera of each world (centre (K, 2), the world direction drawn upwards (K,),
         ``out``'s size and ``pixels_per_meter``); default each ego's, heading up (the sensor's).
     :param layers: "all"; "road": only what never moves (grass, lanes, markings, crossings), which
@@ -225,10 +218,6 @@ class BirdEye(Sensor):
             raise ValueError("birdeye needs size >= 8 and pixels_per_meter > 0")
         self.size, self.ppm = int(size), float(pixels_per_meter)
         self._space = spaces.Box(0, 255, shape=(self.size, self.size, 3), dtype=np.uint8)
-
-    @property
-    def space(self) -> spaces.Box:
-        return self._space
 
     def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
         draw_birdeye(batch, out, self.ppm)

@@ -1,16 +1,8 @@
-"""First-person pinhole camera on the ego, drawn with OpenCV from the WorldState (the CARLA study).
-
-highway-env has only top views; this camera sees the road the way the seed's CARLA camera does:
-sky, grass, the road surface, white lane markings, the yellow guide line of follow-line circuits,
-other vehicles as shaded 3-D boxes and traffic lights. The same projection draws ground-truth
-masks of the ego lane's left and right lines and of the guide line, for training and scoring
-perception.
-
-The projection is ``pinhole.PinholeModel`` (frames and pixel convention documented there).
-
-Ground shapes (lanes cut into per-station pieces, markings as thin rectangles) within
-``max_range_m`` are culled to the view wedge, clipped where they would fall more than a few rows
-below the image, projected and filled, all with ``cv2.LINE_8`` so that a marking and its mask
+"""First-person pinhole camera on the ego, drawn with OpenCV from the WorldState (the CARLA study):
+sky, grass, the road, white lane markings, the yellow guide line of follow-line circuits, other
+vehicles as shaded 3-D boxes and traffic lights, through ``pinhole.PinholeModel``. The same
+projection draws ground-truth masks of the ego lane's lines and of the guide line. Ground shapes
+are culled, clipped, projected and filled with ``cv2.LINE_8``, so that a marking and its mask
 cover exactly the same pixels.
 """
 
@@ -22,7 +14,7 @@ from gymnasium import spaces
 
 from drivelab.perception.base import ZEBRA_STRIPE_M, Sensor, box_corners, ego_frame
 from drivelab.perception.birdeye import DashedMarkings, zebra_boxes
-from drivelab.perception.topdown import SHIFT, _clip_half_plane, fixed_point, road_users, segments_near
+from drivelab.perception.topdown import SHIFT, LanePolygons, _clip_half_plane, fixed_point, segments_near
 from drivelab.world.batch import WorldBatch
 from drivelab.world.pinhole import PinholeModel
 from drivelab.world.road_geometry import GuideSegments, lateral_at_distances, polyline_segments  # noqa: F401
@@ -55,18 +47,6 @@ def _near_clip_m(model: PinholeModel) -> float:
     on its forward distance only, so one cut on x also bounds the rows OpenCV fills)."""
     below_image = float(model.distance_of_row(model.height - 1 + 4.0))
     return max(model.forward_m + model.near_m, below_image if np.isfinite(below_image) else 0.0)
-
-
-def _ground_polygons(
-    model: PinholeModel,
-    position: np.ndarray,
-    heading: float,
-    groups: list[tuple[np.ndarray, np.ndarray]],
-) -> list[list[np.ndarray]]:
-    """Ground polygons in world coordinates, in groups of (vertices one after another, counts) →
-    per group, the fixed-point pixel polygons in sight of the ego at ``position`` (2,) and
-    ``heading`` (one world of ``_ground_polygons_batch``)."""
-    return _ground_polygons_batch(model, np.reshape(position, (1, 2)), np.reshape(heading, 1), [groups])[0]
 
 
 def _ground_polygons_batch(
@@ -151,7 +131,7 @@ class PaintedSegments:
 PIECE_STATIONS = 2  # lane pieces span this many of the road map's 2 m stations
 
 
-class LanePieces:
+class LanePieces(LanePolygons):
     """A road's lane polygons cut into quadrilaterals between consecutive stations (a polygon made of a
     left edge and its right edge reversed, as ``RoadMap`` stores them), so that only the pieces in
     the camera's view are clipped and drawn; pieces are stored one after another with counts."""
@@ -170,12 +150,7 @@ class LanePieces:
             left, right = left[keep], right[keep]
             quads = np.stack([left[:-1], left[1:], right[1:], right[:-1]], axis=1)
             pieces.extend(quads)
-        self.counts = np.array([len(p) for p in pieces], dtype=int)
-        self.vertices = np.concatenate(pieces) if pieces else np.zeros((0, 2))
-        self.owner = np.repeat(np.arange(len(pieces)), self.counts)
-        low = np.array([p.min(axis=0) for p in pieces]).reshape(-1, 2)
-        high = np.array([p.max(axis=0) for p in pieces]).reshape(-1, 2)
-        self.centres, self.radii = (low + high) / 2, np.hypot(*(high - low).T) / 2
+        self._index(pieces)
 
 
 def _circles(segments: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -218,7 +193,7 @@ def _road_user_corners(batch: WorldBatch) -> tuple[np.ndarray, np.ndarray, np.nd
     """Ground corners (K, N + P, 4, 2) in each ego's frame of every world's vehicles then
     pedestrians (front-left, front-right, … as ``box_corners``), their (K, N + P) valid mask and
     the (K, N + P) mask of the pedestrians."""
-    users, valid = road_users(batch)
+    users, valid = batch.road_users()
     is_pedestrian = np.broadcast_to(np.arange(users.shape[1]) >= batch.vehicles.shape[1], valid.shape)
     corners = box_corners(users[..., [0, 1, 2, 4, 5]])
     position, heading = batch.ego.position[:, None, None], batch.ego.heading[:, None, None]
@@ -334,12 +309,7 @@ def render_camera(world: WorldState, model: PinholeModel) -> np.ndarray:
 
 
 def draw_camera(batch: WorldBatch, model: PinholeModel, out: np.ndarray) -> None:
-    """Draw the K worlds' camera images into ``out`` (K, H, W, 3) uint8.
-
-    Each world's road is culled against its map; then the ground polygons of all K worlds, their
-    road users and traffic lights are transformed, culled and projected together; only the OpenCV
-    drawing runs world by world.
-    """
+    """Draw the K worlds' camera images into ``out`` (K, H, W, 3) uint8."""
     count = batch.num_worlds
     layers = _ground_layers(batch, model)
     # every world's painted strips as rectangles in one pass, then back to their world and kind
@@ -382,7 +352,8 @@ def render_masks(world: WorldState, model: PinholeModel) -> np.ndarray:
     groups = [
         _strip_quads(_near(position, s, model), w) for s, w in zip((left, right, guide), widths, strict=True)
     ]
-    for channel, polygons in enumerate(_ground_polygons(model, position, world.ego.heading, groups)):
+    positions, headings = np.reshape(position, (1, 2)), np.reshape(world.ego.heading, 1)
+    for channel, polygons in enumerate(_ground_polygons_batch(model, positions, headings, [groups])[0]):
         _fill_strips(masks[channel], polygons, 1)
     return masks
 
@@ -418,10 +389,6 @@ class Camera(Sensor):
             float(max_range_m),
         )  # fmt: skip
         self._space = spaces.Box(0, 255, shape=(self.model.height, self.model.width, 3), dtype=np.uint8)
-
-    @property
-    def space(self) -> spaces.Box:
-        return self._space
 
     def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
         draw_camera(batch, self.model, out)

@@ -1,10 +1,6 @@
-"""Ego state: a short measurement vector about the ego and the vehicle in front (the MetaDrive study).
-
-The MetaDrive study's fusion PPO feeds five numbers next to the image and the LiDAR: ego speed, lane offset,
-distance to the front vehicle, relative speed to it and heading alignment. Its Dueling DDQN reads
-"10 features" per frame next to the 240 LiDAR beams without listing them; ``features=10`` adds
-five of our choosing that a driver also knows (heading error's sine, steering, acceleration, lane
-curvature, lane position).
+"""Ego state: a short measurement vector about the ego and the vehicle in front (the MetaDrive study's
+five fusion features; ``features=10`` adds five of our choosing for its Dueling DDQN's unlisted
+"10 features").
 """
 
 from __future__ import annotations
@@ -25,16 +21,10 @@ CURVATURE_SCALE_M = 50.0  # curvature · 50 m: a 50 m radius reads 1
 
 
 class EgoState(Sensor):
-    """``features`` numbers in [-1, 1] (``FUSION_FEATURES``, then ``EXTRA_FEATURES`` when 10);
-    batched, ``(K, features)``.
-
-    - speed: ego speed over the world's maximum speed;
-    - lane_offset: signed offset from the lane centre over half the lane width (+ right);
-    - front_distance: gap (centre to centre) to the nearest vehicle ahead within half a lane
-      width of the ego's line of travel, over ``range_m``; 1 when there is none;
-    - front_relative_speed: that vehicle's speed along the ego heading minus the ego's, over the
-      maximum speed; 0 when there is none;
-    - heading_alignment: cos(ego heading − lane heading), 1 when aligned with the lane.
+    """``features`` numbers in [-1, 1] (``FUSION_FEATURES``, then ``EXTRA_FEATURES`` when 10):
+    speed over the maximum speed; lane offset over half the lane width (+ right); the gap to the
+    nearest vehicle ahead in the ego's lane over ``range_m`` (1: none); that vehicle's speed along
+    the ego heading minus the ego's, over the maximum speed (0: none); cos(heading − lane heading).
 
     :param features: 5 (the seed's fusion vector) or 10 (adds ``EXTRA_FEATURES``).
     :param range_m: distance at which the front gap saturates.
@@ -48,10 +38,6 @@ class EgoState(Sensor):
             raise ValueError("ego_state needs features 5 or 10 and range_m > 0")
         self.features, self.range_m = int(features), float(range_m)
         self._space = spaces.Box(-1.0, 1.0, shape=(self.features,), dtype=np.float32)
-
-    @property
-    def space(self) -> spaces.Box:
-        return self._space
 
     def front_vehicle(self, batch: WorldBatch | WorldState) -> tuple[np.ndarray, np.ndarray]:
         """(K,) gaps in metres and (K,) speeds along the ego heading of the nearest vehicle ahead

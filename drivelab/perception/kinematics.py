@@ -16,24 +16,18 @@ FEATURES = ("presence", "x", "y", "vx", "vy", "cos_h", "sin_h")
 class Kinematics(Sensor):
     """``vehicles_count`` rows of the nearest vehicles' features, flat by default, all in [-1, 1].
 
-    Features per row (``features``, default all of ``FEATURES``): ``presence, x, y, vx, vy,
-    cos_h, sin_h``. Row 0 is the ego: presence 1, position (0, 0), its velocity (speed, 0) in
-    its own frame, and its heading relative to its lane (so a drifting ego sees sin_h ≠ 0). Rows
-    1… are the nearest other vehicles within ``perception_distance_m`` (centre to centre),
-    nearest first: position and velocity relative to the ego, in the ego frame (x forward, y
-    right), and heading relative to the ego. Positions are divided by the perception distance,
-    velocities by ``speed_scale_mps``, then everything is clipped to [-1, 1]; absent rows are all
-    zero.
+    Row 0 is the ego (presence 1, position (0, 0), velocity (speed, 0), heading relative to its
+    lane); rows 1… are the nearest other vehicles within ``perception_distance_m``, nearest first,
+    relative to the ego in its frame (x forward, y right). Absent rows are all zero.
 
     :param vehicles_count: rows, the ego included.
     :param perception_distance_m: vehicles farther than this are not seen; also the position scale.
     :param speed_scale_mps: velocity normalisation; highway-env's 2 × its 40 m/s maximum speed.
-    :param features: the features of each row and their order, names of ``FEATURES`` joined by
-        ``+`` (``"presence+x+y+vx+vy"``, highway-env's default five) or a sequence of names.
-    :param flatten: one flat vector (``vehicles_count · features``,); false: highway-env's
-        ``(vehicles_count, features)`` array, as attention policies written for it read it.
+    :param features: names of ``FEATURES`` joined by ``+`` (e.g. highway-env's default
+        ``"presence+x+y+vx+vy"``), or a sequence of names.
+    :param flatten: one flat vector; false: highway-env's ``(vehicles_count, features)`` array.
     :param normalize: divide positions and velocities by the scales above; false: raw metres and
-        m/s (and no clipping), as highway-env's ``normalize: False``.
+        m/s, unclipped.
     :param clip: clip the normalised values to [-1, 1] (highway-env's ``clip``).
     """
 
@@ -69,10 +63,6 @@ class Kinematics(Sensor):
         self._space = spaces.Box(
             -bound, bound, shape=(shape[0] * shape[1],) if self.flatten else shape, dtype=np.float32
         )
-
-    @property
-    def space(self) -> spaces.Box:
-        return self._space
 
     def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
         ego = batch.ego

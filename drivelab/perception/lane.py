@@ -1,12 +1,9 @@
 """Follow-lane perception (the CARLA study, section 4): lane lines → lane centre at 4 rows → 5 states.
 
-A detector turns the camera frame into two masks, the ego lane's left and right lines: the seed's
-small segmentation CNN (``detector="cnn"``, weights shipped in the package, see ``lane_cnn.py``)
-or a classical one (``detector="classical"``: white pixels, the nearest run on each side of the
-image centre, row by row). In each of 4 rows the lane centre is the middle of the two lines (or,
-where one is missing, the other shifted by half the lane's expected width in pixels); ``C`` is the
-mean of the centres found, and its offset from the image centre falls in one of 5 strips, or the
-lane is lost (state 5).
+A detector (the shipped segmentation CNN, ``lane_cnn.py``, or a classical white-pixel one) turns
+the camera frame into the ego lane's left and right line masks. In each of 4 rows the lane centre
+is the middle of the two lines (or one line shifted by half a lane); the mean centre's offset from
+the image centre falls in one of 5 strips, or the lane is lost (state 5).
 """
 
 from __future__ import annotations
@@ -116,10 +113,6 @@ class LaneState(Sensor):
         if not scenario.keep_lane:
             return "its states are calibrated to the 3.5 m lanes of the follow-lane circuit"
         return None
-
-    @property
-    def space(self) -> spaces.Discrete:
-        return self._space
 
     def masks(self, image_rgb: np.ndarray) -> np.ndarray:
         """The detector's left/right line masks bool: (2, H, W) for a camera frame (H, W, 3),

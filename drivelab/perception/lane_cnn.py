@@ -1,10 +1,9 @@
 """The CARLA study's lane-line segmentation CNN (its section 4.1) and its training on given frames.
 
-A small encoder-decoder (8 768 weights, 40 KB on disk) maps a 120 x 160 camera frame to two masks, the ego
-lane's left and right lines. It is trained on frames and ground-truth masks that drivelab's own
-camera renders on the follow-lane circuit at random poses (``drivelab.training.lane_dataset``, which
-drives the simulator: perception never builds one), so nothing is downloaded; the trained weights
-ship in ``drivelab/perception/weights/lane_cnn.pt``. ``drivelab perception train-lane`` retrains them.
+A small encoder-decoder maps a 120 x 160 camera frame to the ego lane's left and right line masks.
+It is trained on frames that drivelab's own camera renders on the follow-lane circuit
+(``drivelab.training.lane_dataset``); the weights ship in ``drivelab/perception/weights/lane_cnn.pt``
+and ``drivelab perception train-lane`` retrains them.
 """
 
 from __future__ import annotations

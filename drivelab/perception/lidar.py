@@ -20,12 +20,8 @@ def _near_parts(
 ) -> tuple[np.ndarray, ...]:
     """The parts within ``range_m`` of segments (M,) given relative to the ray origin: their
     start x, start y, end x, end y (T,), the (M,) mask of the segments kept, and each part's
-    (T,) distance to the origin.
-
-    A segment is kept by the distance of its nearest point, not its end points (a 10 km road
-    edge passes by the ego far from both ends), and cut down to the stretch inside the range
-    circle, so what follows works on short, origin-relative segments (float32 is then exact
-    to micrometres).
+    (T,) distance to the origin. A segment is kept by the distance of its nearest point and cut
+    to the stretch inside the range circle, so that float32 is then exact to micrometres.
     """
     edge_x, edge_y = end_x - start_x, end_y - start_y
     safe_length2 = np.maximum(edge_x * edge_x + edge_y * edge_y, 1e-12)
@@ -58,9 +54,7 @@ def _part_terms(start_x, start_y, end_x, end_y) -> tuple[np.ndarray, ...]:
 
 def _hit_distances(direction_x, direction_y, start_x, start_y, edge_x, edge_y, s_cross_e) -> np.ndarray:
     """Per (ray, part) pair (P,), the distance along the ray to the part: float32, ``inf`` on a miss.
-
-    Rays ``direction`` are unit vectors from the origin, parts come from ``_part_terms``. Ray t·d
-    meets segment s + u·e where t = (s × e) / (d × e) and u = (s × d) / (d × e); a hit needs
+    Ray t·d meets segment s + u·e at t = (s × e) / (d × e), u = (s × d) / (d × e); a hit needs
     t ≥ 0 and 0 ≤ u ≤ 1.
     """
     d_cross_e = direction_x * edge_y - direction_y * edge_x
@@ -73,10 +67,8 @@ def _hit_distances(direction_x, direction_y, start_x, start_y, edge_x, edge_y, s
 
 
 def cast_rays(origin: np.ndarray, angles: np.ndarray, segments: np.ndarray, range_m: float) -> np.ndarray:
-    """Distance along each ray to the first segment it meets, ``range_m`` when none is nearer.
-
-    Every ray × every segment (float32 inside, accurate to about 1e-6 of the range); segments
-    out of range are dropped first. ``Lidar`` does the same arithmetic on the pairs that can hit.
+    """Distance along each ray to the first segment it meets, ``range_m`` when none is nearer:
+    every ray × every segment (``Lidar`` does the same arithmetic on the pairs that can hit).
 
     :param origin: (2,) ray origin, world metres.
     :param angles: (N,) world-frame ray directions, radians (from +x towards +y).
@@ -148,11 +140,8 @@ def _cast_parts(
 class Lidar(Sensor):
     """``beams`` distances around the ego, divided by ``range_m`` (1 = nothing within range).
 
-    Beam ``i`` points ``2π·i/beams`` clockwise from the heading (towards the ego's right):
-    beam 0 straight ahead, beam ``beams/4`` to the right, ``beams/2`` behind, ``3·beams/4`` left.
-    Beams stop at the outlines of other vehicles and pedestrians and at the road edges
-    (``road.edges``). K worlds at once: every world's segments in one flat list, each tested
-    against the beams of its own angular span only (a car 30 m away spans 2 of 240 beams).
+    Beam ``i`` points ``2π·i/beams`` clockwise from the heading: beam 0 straight ahead, beam
+    ``beams/4`` to the right. Beams stop at other vehicles, pedestrians and the road edges.
 
     :param beams: number of beams (the MetaDrive study: 240).
     :param range_m: maximum range.
@@ -178,19 +167,13 @@ class Lidar(Sensor):
         self.close_m = 1e-4 * self.range_m / min(self.beam_step, 1.0)
         self._space = spaces.Box(0.0, 1.0, shape=(self.beams,), dtype=np.float32)
 
-    @property
-    def space(self) -> spaces.Box:
-        return self._space
-
     def _segments(self, batch: WorldBatch) -> tuple[np.ndarray, ...]:
         """Everything the beams can hit, as flat (M,) arrays: start x, start y, end x, end y in
         the ego frame of the world each segment belongs to, and that world."""
         ego = batch.ego
         cos_h, sin_h = np.cos(ego.heading)[:, None], np.sin(ego.heading)[:, None]  # (K, 1)
         position_x, position_y = ego.position[:, 0, None], ego.position[:, 1, None]
-        # road edges: those whose bounding box comes within range of the ego (the others lie
-        # farther than the range and ``_near_parts`` would drop them), as a flat list (W,) of
-        # (world, edge) pairs, end points turned into the ego frame of their world
+        # road edges whose bounding box comes within range, as (world, edge) pairs (W,) in ego frames
         edge_world, chosen = _edges_within(batch, self.range_m + 1.0)  # a metre over rounding
         delta_x = chosen[..., 0] - position_x[edge_world]
         delta_y = chosen[..., 1] - position_y[edge_world]
@@ -204,8 +187,7 @@ class Lidar(Sensor):
         # a body whose centre is farther than range + half its diagonal cannot be hit
         reach = self.range_m + 0.5 * np.hypot(users[..., 4], users[..., 5])
         kept = valid & (box_x * box_x + box_y * box_y <= reach * reach)
-        # the bodies within reach as a flat list (V,): boxes in the ego frame (centre turned,
-        # heading made relative), so that their corners come out there
+        # the bodies within reach (V,) as boxes in the ego frame, so that their corners come out there
         body_world = np.nonzero(kept)[0]
         box_x, box_y, bodies = box_x[kept][:, None], box_y[kept][:, None], users[kept]
         turn = bodies[:, 2] - ego.heading[body_world]
@@ -215,9 +197,8 @@ class Lidar(Sensor):
         corner_x = box_x + half_l * cos_b - half_w * sin_b
         corner_y = box_y + half_l * sin_b + half_w * cos_b
         next_x, next_y = corner_x[:, _NEXT_CORNER], corner_y[:, _NEXT_CORNER]
-        # Only sides facing the ego can be hit first (back-face culling halves the work). Corners
-        # run around the box so that the ego is outside a side when start × following < 0; an
-        # ego inside a box (a crash) faces none of them and keeps all four.
+        # only sides facing the ego (start × following < 0) can be hit first; an ego inside a box
+        # (a crash) faces none of them and keeps all four
         facing = corner_x * next_y - corner_y * next_x < 0  # (V, 4)
         facing |= ~facing.any(axis=1, keepdims=True)
         return (
@@ -235,17 +216,8 @@ class Lidar(Sensor):
         beams, step = self.beams, self.beam_step
         *segments, worlds = self._segments(batch)
         nearest = np.full(batch.num_worlds * beams, np.inf, dtype=np.float32)
-        _cast_parts(
-            *segments,
-            worlds,
-            self.range_m,
-            beams,
-            step,
-            self.close_m,
-            self.direction_x,
-            self.direction_y,
-            nearest,
-        )
+        directions = (self.direction_x, self.direction_y)
+        _cast_parts(*segments, worlds, self.range_m, beams, step, self.close_m, *directions, nearest)
         return np.minimum(nearest.reshape(batch.num_worlds, beams).astype(float), self.range_m)
 
     def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
@@ -266,10 +238,6 @@ class EdgeBoxes:
         self.boxes = np.concatenate([(low + high) / 2, (high - low) / 2], axis=1).T.copy()
 
 
-def _edge_boxes(road) -> np.ndarray:
-    return road.derived(EdgeBoxes, EdgeBoxes).boxes
-
-
 def _edges_within(batch: WorldBatch, reach_m: float) -> tuple[np.ndarray, np.ndarray]:
     """(worlds (W,), edges (W, 2, 2)): every road edge whose bounding box lies within ``reach_m``
     of its world's ego along x and along y, with that world, one map at a time (not one world)."""
@@ -277,7 +245,7 @@ def _edges_within(batch: WorldBatch, reach_m: float) -> tuple[np.ndarray, np.nda
     worlds, chosen = [], []
     for row, road in enumerate(batch.roads):
         on_map = np.flatnonzero(batch.road_index == row) if len(batch.roads) > 1 else np.arange(len(position))
-        centre_x, centre_y, half_x, half_y = _edge_boxes(road)  # (E,) each
+        centre_x, centre_y, half_x, half_y = road.derived(EdgeBoxes, EdgeBoxes).boxes  # (E,) each
         near = np.abs(centre_x - position[on_map, 0, None]) <= half_x + reach_m  # (K_map, E)
         near &= np.abs(centre_y - position[on_map, 1, None]) <= half_y + reach_m
         world, edge = np.nonzero(near)

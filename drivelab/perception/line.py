@@ -1,11 +1,9 @@
 """Follow-line perception (the CARLA study, section 3): the yellow line's centre at 4 rows → a discrete state.
 
-The camera frame is converted to HSV and thresholded around yellow, then eroded and dilated (an
-opening that removes specks); in each of 4 rows the line's centre is the mean column of the
-pixels kept. Each centre falls in one of ``strips`` equidistant vertical strips of the image, or
-is missing; the state encodes the 4 answers in base ``strips + 1``, so the last state, every row
-missing, is "line lost". In sharp bends the line seen obliquely at the farthest row can be
-thinner than the opening's 3 px and be reported missing there.
+The camera frame is thresholded around yellow in HSV, then opened (eroded and dilated); in each of
+4 rows the line's centre is the mean column of the pixels kept, and falls in one of ``strips``
+equal vertical strips or is missing. The state encodes the 4 answers in base ``strips + 1``; the
+last state, every row missing, is "line lost".
 """
 
 from __future__ import annotations
@@ -80,10 +78,6 @@ class LineState(Sensor):
         # (K, 4) line centre columns found at the last observe, for plots and tests
         self.centres = np.full((0, len(LINE_ROWS_M)), np.nan)
         self.frames = np.zeros((0, self.model.height, self.model.width, 3), dtype=np.uint8)
-
-    @property
-    def space(self) -> spaces.Discrete:
-        return self._space
 
     def scenario_problem(self, scenario) -> str | None:
         """It looks for the yellow guide line, painted only where ``scenario.guide_line``

@@ -21,10 +21,6 @@ class Measurements(Sensor):
     def __init__(self) -> None:
         self._space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
 
-    @property
-    def space(self) -> spaces.Box:
-        return self._space
-
     def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
         out[:, 0] = batch.ego.speed_mps / batch.max_speed_mps
         out[:, 1] = batch.ego.steering / MAX_STEERING_RAD

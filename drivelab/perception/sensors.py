@@ -34,12 +34,9 @@ SENSORS: dict[str, type[Sensor]] = {
 }
 SENSOR_HELP = {name: cls.help for name, cls in SENSORS.items()}  # one line each, from the class
 
-# One world's observation may hold at most this many values (after frame stacking): 16.8 M, 64 MiB as
-# float32, already more than a replay buffer can keep many of (a 2048 × 2048 RGB image is 12.6 M);
-# larger ones end in a MemoryError traceback when the sensor, its (K, …) buffers or a stack are built.
+# One world's observation may hold at most this many values (after frame stacking): 64 MiB as float32.
 MAX_OBSERVATION_VALUES = 2**24
-# The largest value of each size option: far above any use in the seeds and the literature, and
-# small enough that one world's observation stays under MAX_OBSERVATION_VALUES.
+# The largest value of each size option: far above any use, and under MAX_OBSERVATION_VALUES.
 SIZE_LIMITS = {
     "lidar": {"beams": 100_000},  # spinning lidars give ~360-4000 beams a ring; this is 0.0036° apart
     "topdown": {"size": 1024, "history": 10_000},  # 6 × 1024² values; 10 000 past positions: 17 min
@@ -52,12 +49,8 @@ SIZE_LIMITS = {
     "line": {"strips": 40, "kernel_px": 120},
 }
 
-# The range of each real-valued option, closed: a distance of 1e-300 m or a noise of 1e300 builds a
-# sensor whose every observation is the same (or NaN), and a training run on it learns nothing.
-# Distances from a metre (the length of a bumper) to a kilometre (beyond any road sensor's reach:
-# automotive lidars and cameras see 100-300 m); scales in pixels per metre from a 1.7 km wide 84-pixel
-# image to centimetre pixels; lidar noise in its normalised distances, which are clipped to [0, 1]
-# (a standard deviation of 1 is all noise).
+# The range of each real-valued option, closed: outside it a sensor's every observation is the same
+# (or NaN). Distances from a metre to a kilometre; lidar noise in its normalised distances.
 VALUE_RANGES = {
     "kinematics": {"perception_distance_m": (1.0, 1000.0), "speed_scale_mps": (1.0, 1000.0)},
     "lidar": {"range_m": (1.0, 1000.0), "noise_std": (0.0, 1.0)},
@@ -86,12 +79,12 @@ class FrameStack(Sensor):
         inner = sensor.space
         repeat = lambda a: np.concatenate([a] * frames, axis=self.axis)  # noqa: E731
         self._space = spaces.Box(repeat(inner.low), repeat(inner.high), dtype=inner.dtype)
-        self.history = sensor.empty(0)[:, None].repeat(frames, axis=1)  # (K, frames, *inner shape)
-        self.started = np.zeros(0, dtype=bool)  # per world: a frame was seen this episode
+        self._allocate(0)
 
-    @property
-    def space(self) -> spaces.Box:
-        return self._space
+    def _allocate(self, count: int) -> None:
+        shape, dtype = self.sensor.space.shape, self.sensor.space.dtype
+        self.history = np.zeros((count, self.frames, *shape), dtype)  # (K, frames, *inner shape)
+        self.started = np.zeros(count, dtype=bool)  # per world: a frame was seen this episode
 
     def scenario_problem(self, scenario) -> str | None:
         return self.sensor.scenario_problem(scenario)
@@ -102,10 +95,7 @@ class FrameStack(Sensor):
 
     def _reset(self, batch: WorldBatch, mask: np.ndarray) -> None:
         if len(self.started) != batch.num_worlds:
-            self.history = np.zeros(
-                (batch.num_worlds, self.frames, *self.sensor.space.shape), self.sensor.space.dtype
-            )
-            self.started = np.zeros(batch.num_worlds, dtype=bool)
+            self._allocate(batch.num_worlds)
         self.started[mask] = False
 
     def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:

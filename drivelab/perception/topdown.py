@@ -1,11 +1,9 @@
 """Top-down semantic image: the 5 channels of the MetaDrive study, ego-centred and heading-aligned.
 
-Pixel convention (shared with ``birdeye``): the ego sits at the image centre with its heading
-pointing up. In continuous image coordinates where pixel (row r, column c) covers
-``[r, r+1) × [c, c+1)``, a point ``x`` m ahead of the ego and ``y`` m to its right lies at
-``column = W/2 + y·ppm, row = H/2 − x·ppm``. ``to_pixels`` returns OpenCV's coordinates, where
-integers are pixel *centres*, i.e. those values minus 0.5. So the ego is at the shared corner of
-the four middle pixels of an even-sized image, and the view is exactly symmetric.
+Pixel convention (shared with ``birdeye``): the ego sits at the image centre, heading up. A point
+``x`` m ahead of the ego and ``y`` m to its right lies at ``column = W/2 + y·ppm``, ``row = H/2 −
+x·ppm`` in continuous image coordinates; ``to_pixels`` returns OpenCV's (integers at pixel
+centres: those values minus 0.5), so the view is exactly symmetric.
 """
 
 from __future__ import annotations
@@ -17,7 +15,7 @@ import numpy as np
 from gymnasium import spaces
 
 from drivelab.perception.base import Sensor, box_corners, ego_frame
-from drivelab.world.batch import WorldBatch
+from drivelab.world.batch import WorldBatch, pad_slots
 from drivelab.world.state import RoadMap
 
 SHIFT = 4  # OpenCV sub-pixel bits: coordinates are drawn to 1/16 pixel
@@ -46,11 +44,8 @@ def to_pixels(
     size_hw: tuple[int, int],
     pixels_per_meter: float,
 ) -> np.ndarray:
-    """World points (..., 2) → float image coordinates (..., 2) as (column, row).
-
-    Ego-centred, heading up, OpenCV's pixel-centre convention (see the module docstring):
-    ``column = W/2 − 0.5 + y·ppm``, ``row = H/2 − 0.5 − x·ppm`` for a point ``x`` m ahead and
-    ``y`` m to the right of the ego.
+    """World points (..., 2) → float image coordinates (..., 2) as (column, row): ``column = W/2 −
+    0.5 + y·ppm``, ``row = H/2 − 0.5 − x·ppm`` for a point ``x`` m ahead and ``y`` m right of the ego.
     """
     local = ego_frame(points_world, ego_position, ego_heading)
     height, width = size_hw
@@ -65,11 +60,8 @@ def fixed_point(pixels: np.ndarray) -> np.ndarray:
 
 
 def segments_near(segments: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
-    """Mask (M,) of the segments (M, 2, 2) that come within ``radius`` of ``centre`` (2,), or mask
-    (W, M) for W centres (W, 2).
-
-    Tests each segment's nearest point, so a 10 km road line passing the ego counts.
-    """
+    """Mask (M,) of the segments (M, 2, 2) whose nearest point comes within ``radius`` of
+    ``centre`` (2,), or mask (W, M) for W centres (W, 2)."""
     centre = np.asarray(centre, dtype=float)
     start = segments[:, 0] - centre[..., None, :]  # (..., M, 2)
     edge = segments[:, 1] - segments[:, 0]
@@ -83,7 +75,9 @@ class LanePolygons:
     """All lane outlines of a road as one vertex array, with a bounding circle per lane."""
 
     def __init__(self, road: RoadMap) -> None:
-        polygons = [np.asarray(p, dtype=float).reshape(-1, 2) for p in road.lane_polygons]
+        self._index([np.asarray(p, dtype=float).reshape(-1, 2) for p in road.lane_polygons])
+
+    def _index(self, polygons: list[np.ndarray]) -> None:
         self.counts = np.array([len(p) for p in polygons], dtype=int)
         self.vertices = np.concatenate(polygons) if polygons else np.zeros((0, 2))
         self.owner = np.repeat(np.arange(len(polygons)), self.counts)
@@ -130,13 +124,8 @@ def _clip_rows_counts(
 
 
 def clip_rows(points: np.ndarray, counts: np.ndarray, top: float, bottom: float) -> list[np.ndarray]:
-    """Cut polygons (pixel vertices, one after another) to the rows ``top``..``bottom``.
-
-    OpenCV's polygon fill costs time in proportion to the rows a polygon spans, in or out of the
-    image (a 10 km lane: ~0.1 ms), so lanes are cut to a band around the image first.
-
-    :return: the non-empty clipped polygons as float (K, 2) arrays.
-    """
+    """Cut polygons (pixel vertices, one after another) to the rows ``top``..``bottom`` (OpenCV's
+    fill costs time per row a polygon spans, in or out of the image): the non-empty ones, (K, 2)."""
     points, counts = _clip_rows_counts(points, counts, top, bottom)
     polygons = np.split(points, np.cumsum(counts)[:-1])
     return [polygon for polygon in polygons if len(polygon) >= 3]
@@ -195,13 +184,8 @@ class View:
         if counts.sum() == 0:
             return polygons
         world_of_vertex = np.concatenate(world_of_vertex)
-        pixels = to_pixels(
-            np.concatenate(vertices),
-            self.positions[world_of_vertex],
-            self.headings[world_of_vertex],
-            self.size_hw,
-            self.ppm,
-        )
+        position, heading = self.positions[world_of_vertex], self.headings[world_of_vertex]
+        pixels = to_pixels(np.concatenate(vertices), position, heading, self.size_hw, self.ppm)
         margin = 4.0  # rows beyond the image: the cut edges (and their anti-aliasing) stay unseen
         pixels, counts = _clip_rows_counts(pixels, counts, -margin, self.size_hw[0] - 1 + margin)
         for world, polygon in zip(owners, np.split(fixed_point(pixels), np.cumsum(counts)[:-1]), strict=True):
@@ -211,11 +195,7 @@ class View:
 
     def polylines(self, polylines: np.ndarray, counts: np.ndarray, width_px: int) -> list[list[np.ndarray]]:
         """Per world, the segments of its polyline (K, R, 2) (``counts[k]`` real points) that reach
-        its image, as (2, 2) fixed-point pixel arrays.
-
-        Each segment is cut to a band of rows around the image, because OpenCV's thick lines,
-        like its polygons, cost time in proportion to the rows they span.
-        """
+        its image, as (2, 2) fixed-point pixel arrays cut to a band of rows around the image."""
         pixels = self.pixels(polylines)  # (K, R, 2)
         start, end = pixels[:, :-1], pixels[:, 1:]
         margin = width_px / 2 + 2.0
@@ -273,16 +253,6 @@ class View:
         return corners[0][seen[0]]
 
 
-def road_users(batch: WorldBatch) -> tuple[np.ndarray, np.ndarray]:
-    """Every body besides the ego, (K, N + P, 6) vehicles then pedestrians, and its (K, N + P) valid mask."""
-    if batch.pedestrians.shape[1] == 0:
-        return batch.vehicles, batch.vehicle_valid
-    return (
-        np.concatenate([batch.vehicles, batch.pedestrians], axis=1),
-        np.concatenate([batch.vehicle_valid, batch.pedestrian_valid], axis=1),
-    )
-
-
 Colour = int | tuple[int, int, int]
 
 
@@ -304,18 +274,10 @@ def fill_boxes(image: np.ndarray, corners: np.ndarray, colour: Colour, line_type
 class TopDown(Sensor):
     """Five uint8 channels (0 or 255), channels first, ``(5, size, size)``, ego-centred, heading up.
 
-    0 road layout (lane polygons filled), 1 planned route (a 2 m wide band along the route
-    polyline), 2 past ego positions (1 m square dots at the last ``history`` positions, the
-    current one excluded), 3 other vehicles now, 4 other vehicles at the previous ``observe``
-    (the same as now on an episode's first frame). Everything is drawn in the current ego frame,
-    so channels 3 and 4 together show the relative motion of traffic. See the module docstring
-    for the pixel mapping: vehicles and dots cover exactly the pixels whose centres they contain;
-    lanes and the route get OpenCV's usual extra half pixel around their outline.
-
-    K worlds per call: routes, past positions, traffic and stop bars of all K worlds are moved to
-    their ego frames and culled at once, lanes once per map; then one OpenCV raster per world.
-    The history (past positions, previous traffic) is kept as (K, …) arrays, cleared by ``reset``
-    for the worlds in its mask.
+    0 road layout (lane polygons), 1 planned route (a 2 m wide band), 2 past ego positions (1 m
+    square dots at the last ``history`` positions), 3 other vehicles now, 4 other vehicles at the
+    previous ``observe`` (as now on an episode's first frame), all in the current ego frame.
+    Vehicles and dots cover exactly the pixels whose centres they contain.
 
     :param size: image height and width in pixels (the MetaDrive study: 84).
     :param pixels_per_meter: resolution; 2 px/m shows 21 m on each side of the ego at 84 px.
@@ -336,26 +298,20 @@ class TopDown(Sensor):
         self.lights = bool(lights)
         channels = len(CHANNELS) + int(self.lights)
         self._space = spaces.Box(0, 255, shape=(channels, self.size, self.size), dtype=np.uint8)
-        # history over K worlds: the last ``history`` ego positions (oldest first, the newest
-        # ``past_count[k]`` rows real) and the traffic at the previous observe
-        self.past_positions = np.zeros((0, self.history, 2))  # (K, history, 2)
-        self.past_count = np.zeros(0, dtype=np.int64)  # (K,)
-        self.previous_traffic = np.zeros((0, 0, 6))  # (K, M, 6)
-        self.previous_valid = np.zeros((0, 0), dtype=bool)  # (K, M)
-        self.has_previous = np.zeros(0, dtype=bool)  # (K,) False on an episode's first frame
+        self._allocate(0)
 
-    @property
-    def space(self) -> spaces.Box:
-        return self._space
+    def _allocate(self, count: int) -> None:
+        """History of ``count`` worlds: the last ``history`` ego positions (oldest first, the newest
+        ``past_count[k]`` rows real) and the traffic (K, M, 6) at the previous observe."""
+        self.past_positions = np.zeros((count, self.history, 2))
+        self.past_count = np.zeros(count, dtype=np.int64)
+        self.previous_traffic = np.zeros((count, 0, 6))
+        self.previous_valid = np.zeros((count, 0), dtype=bool)
+        self.has_previous = np.zeros(count, dtype=bool)  # False on an episode's first frame
 
     def _reset(self, batch: WorldBatch, mask: np.ndarray) -> None:
-        count = batch.num_worlds
-        if len(self.past_count) != count:
-            self.past_positions = np.zeros((count, self.history, 2))
-            self.past_count = np.zeros(count, dtype=np.int64)
-            self.previous_traffic = np.zeros((count, 0, 6))
-            self.previous_valid = np.zeros((count, 0), dtype=bool)
-            self.has_previous = np.zeros(count, dtype=bool)
+        if len(self.past_count) != batch.num_worlds:
+            self._allocate(batch.num_worlds)
         self.past_count[mask] = 0
         self.has_previous[mask] = False
 
@@ -371,12 +327,12 @@ class TopDown(Sensor):
         dots[..., :2] = self.past_positions
         dots[..., 2], dots[..., 3:] = batch.ego.heading[:, None], PAST_DOT_M
         past = np.arange(self.history) >= self.history - self.past_count[:, None]  # (K, history)
-        traffic, traffic_valid = road_users(batch)
+        traffic, traffic_valid = batch.road_users()
         size = max(traffic.shape[1], self.previous_traffic.shape[1])
         first = ~self.has_previous[:, None, None]  # the first frame shows the traffic now twice
-        previous = np.where(first, _pad_slots(traffic, size), _pad_slots(self.previous_traffic, size))
+        previous = np.where(first, pad_slots(traffic, size), pad_slots(self.previous_traffic, size))
         previous_valid = np.where(
-            first[..., 0], _pad_slots(traffic_valid, size), _pad_slots(self.previous_valid, size)
+            first[..., 0], pad_slots(traffic_valid, size), pad_slots(self.previous_valid, size)
         )
         columns = [0, 1, 2, 4, 5]  # vehicle rows → rectangles x, y, heading, length, width
         groups = [
@@ -408,11 +364,3 @@ class TopDown(Sensor):
             self.past_count = np.minimum(self.past_count + 1, self.history)
         self.previous_traffic, self.previous_valid = traffic.copy(), traffic_valid.copy()
         self.has_previous[:] = True
-
-
-def _pad_slots(array: np.ndarray, size: int) -> np.ndarray:
-    """``array`` (K, N, ...) zero-padded to ``size`` slots on axis 1."""
-    missing = size - array.shape[1]
-    if missing <= 0:
-        return array
-    return np.pad(array, [(0, 0), (0, missing)] + [(0, 0)] * (array.ndim - 2))

@@ -1,10 +1,8 @@
 """A discrete time-to-collision grid: highway driving as a small tabular state for Q-learning.
 
-After highway-env's ``TimeToCollision`` observation (lanes × time bins), reduced to one integer:
-for the left, current and right lane, the time to reach the nearest vehicle ahead at the current
-closing speed falls in one of ``len(TTC_EDGES_S) + 1`` bins (the last: no vehicle closing in), and
-a lane that does not exist counts as the most urgent bin; the ego's speed adds 3 bins. With the
-default edges: 4³ · 3 = 192 states.
+After highway-env's ``TimeToCollision`` observation: for the left, current and right lane, the
+time to the nearest closing vehicle ahead falls in one of ``len(TTC_EDGES_S) + 1`` bins (a lane
+that does not exist counts as the most urgent), times 3 speed bins: 4³ · 3 = 192 states.
 """
 
 from __future__ import annotations
@@ -55,10 +53,6 @@ class TTCGrid(Sensor):
     def __init__(self) -> None:
         self.bins = len(TTC_EDGES_S) + 1
         self._space = spaces.Discrete(self.bins**3 * (len(SPEED_EDGES_MPS) + 1))
-
-    @property
-    def space(self) -> spaces.Discrete:
-        return self._space
 
     def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
         lanes = np.searchsorted(TTC_EDGES_S, lane_ttc_s(batch), side="right")  # (K, 3)

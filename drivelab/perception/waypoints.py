@@ -12,10 +12,7 @@ from drivelab.world.batch import WorldBatch
 class Waypoints(Sensor):
     """The route ``count`` points ahead, ``spacing_m`` apart from the ego's projection on it, as
     (x forward, y right) metres in the ego frame; past the route's end the last point repeats.
-    Batched: ``(K, count, 2)`` from ``RouteBatch.poses_at`` over every world at once.
-
-    RLAD feeds N = 10 planner waypoints; CARLA's planner spacing is not stated in the paper, so
-    2 m (about one car length apart, 20 m of look-ahead) is our choice.
+    RLAD feeds N = 10 planner waypoints; the 2 m spacing is our choice (the paper states none).
 
     :param count: number of waypoints N.
     :param spacing_m: arc length between consecutive waypoints along the route.
@@ -30,10 +27,6 @@ class Waypoints(Sensor):
         self.count, self.spacing_m = int(count), float(spacing_m)
         self.range_m = self.count * self.spacing_m + 20.0  # a far-off ego still fits the space
         self._space = spaces.Box(-self.range_m, self.range_m, shape=(self.count, 2), dtype=np.float32)
-
-    @property
-    def space(self) -> spaces.Box:
-        return self._space
 
     def _observe(self, batch: WorldBatch, out: np.ndarray) -> None:
         route, ego = batch.route, batch.ego

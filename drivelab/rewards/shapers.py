@@ -49,10 +49,8 @@ PRESETS: dict[str, RewardSpec] = {
         description="highway-env's own: collision -1, right lane 0.1, high speed 0.4, normalised, x on_road",
     ),
     "highway_fast": RewardSpec(
-        # A training reward for issue 19's highway target (crash <= 5 % at >= 25 m/s), not a
-        # source's: highway's own reward pays 0.67 a step for crawling at 20 m/s (its normalised
-        # constant), so PPO settles there; here a step at 20 m/s earns 0, at 30 m/s 1, and a
-        # collision costs 10 (benchmarks/results/highway_competence.md: the screen of weights).
+        # drivelab's training reward for highway at >= 25 m/s (highway's own pays 0.67 a step for
+        # crawling at 20 m/s): benchmarks/results/highway_competence.md screened the weights
         {"collision": -10.0, "high_speed": 1.0},
         description="highway's speed target: high speed (0 at 20, 1 at 30 m/s on highway), "
         "collision -10, no constant",

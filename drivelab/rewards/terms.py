@@ -318,11 +318,6 @@ def _roach_desired_speed(
         out[k] = desired
 
 
-def _route_pose(batch: WorldBatch) -> tuple[np.ndarray, np.ndarray]:
-    """(K, 2) point and (K,) heading of each route at the ego's progress."""
-    return batch.route.pose()
-
-
 @term
 def roach_speed(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """1 − |v − v*| / v_max: drive at the hazard-aware desired speed."""
@@ -332,14 +327,14 @@ def roach_speed(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
 @term
 def roach_position(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """−(distance from the route, m) / 2."""
-    point, _ = _route_pose(batch)
+    point, _ = batch.route.pose()
     return -np.linalg.norm(batch.ego.position - point, axis=1) / 2.0
 
 
 @term
 def roach_rotation(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """−|heading error against the route| (rad)."""
-    _, heading = _route_pose(batch)
+    _, heading = batch.route.pose()
     return -_heading_error(batch.ego.heading, heading)
 
 

@@ -1,21 +1,14 @@
 """WorldBatch: K worlds as arrays — the one thing every sensor, reward term, rule and metric reads.
 
-Shapes (K worlds, N vehicle slots, P pedestrian slots, L light slots, R route points):
+Shapes (K worlds, N vehicle slots, P pedestrian slots, L light slots, R route points): ``ego`` an
+:class:`EgoBatch` of ``(K,)`` arrays; ``vehicles`` ``(K, N, 6)`` with ``vehicle_valid`` ``(K, N)``,
+``pedestrians`` ``(K, P, 6)`` and ``traffic_lights`` ``(K, L, 4)`` likewise (rows past a world's
+count are zeros); ``route`` a :class:`RouteBatch` of polylines ``(K, R, 2)`` padded by repeating
+the last point; ``events`` an :class:`EventsBatch`; the distinct :class:`RoadMap` objects in
+``roads`` and each world's in ``road_index`` ``(K,)``.
 
-- ``ego``: :class:`EgoBatch`, every field of :class:`~drivelab.world.state.Ego` as a ``(K,)``
-  array (``position`` is ``(K, 2)``);
-- ``vehicles`` ``(K, N, 6)`` with ``vehicle_valid`` ``(K, N)``; ``pedestrians`` ``(K, P, 6)`` with
-  ``pedestrian_valid``; ``traffic_lights`` ``(K, L, 4)`` with ``light_valid``. Rows past a world's
-  count are zeros and must be masked out;
-- ``route``: :class:`RouteBatch`, polylines padded to ``(K, R, 2)`` by repeating the last point;
-- ``events``: :class:`EventsBatch`, ``(K,)`` booleans and a collision code (no strings);
-- ``time_s``, ``max_speed_mps``, ``speed_limit_mps`` ``(K,)``; ``dt_s`` one float;
-- roads: the distinct immutable :class:`~drivelab.world.state.RoadMap` objects in ``roads`` and
-  each world's entry in ``road_index`` ``(K,)`` (one map shared by every world of a scenario).
-
-A WorldBatch is a value: simulators hand out a new one per step and nothing mutates it, so the
-batch before a step stays valid for reward terms. ``batch[k]`` is world k as a
-:class:`~drivelab.world.state.WorldState` (tests, notebooks, the reference backend), and
+A WorldBatch is a value: simulators hand out a new one per step and nothing mutates it.
+``batch[k]`` is world k as a :class:`~drivelab.world.state.WorldState`, and
 ``WorldBatch.stack(worlds)`` builds a batch from WorldStates.
 """
 
@@ -27,7 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from drivelab.world.state import Ego, Events, RoadMap, Route, WorldState
+from drivelab.world.state import Ego, Events, RoadMap, Route, WorldState, stations_of
 
 # ``EventsBatch.collision_kind`` codes, and the names WorldState's Events use for them
 COLLISION_NONE, COLLISION_VEHICLE, COLLISION_PEDESTRIAN, COLLISION_OBJECT = range(4)
@@ -102,8 +95,7 @@ class RouteBatch:
     progress_m: np.ndarray
     length_m: np.ndarray
     closed: np.ndarray
-    # values derived from these arrays by their readers, made once per batch (never stale: the
-    # arrays do not change; a replaced batch starts an empty cache)
+    # values derived from these arrays by their readers, made once per batch
     cache: dict = field(init=False, default_factory=dict, compare=False, repr=False)
 
     def pose(self) -> tuple[np.ndarray, np.ndarray]:
@@ -120,7 +112,7 @@ class RouteBatch:
     def stack(routes: list[Route]) -> RouteBatch:
         polylines = [np.asarray(route.polyline, dtype=float).reshape(-1, 2) for route in routes]
         stations = [
-            _stations(route.polyline) if route.stations_m is None else route.stations_m for route in routes
+            stations_of(route.polyline) if route.stations_m is None else route.stations_m for route in routes
         ]
         size = max(max(len(p) for p in polylines), 2)
         return RouteBatch(
@@ -157,12 +149,10 @@ class RouteBatch:
 
 @njit(cache=True)
 def _route_poses(polyline, stations, count, closed, distances, points, delta) -> None:
-    """``RouteBatch.poses_at``'s points into ``points`` (K, D, 2) and the segments' directions
-    into ``delta`` (K, D, 2), with the arithmetic of its first, numpy formulation: a distance
-    wrapped round the lap (np.mod) and clamped to the route, then found among the stations with
-    every world's stations and distances shifted by k · (the longest route + 1) as that code
-    shifted them to search all worlds at once (the shift's rounding can decide a segment),
-    then interpolated on its segment."""
+    """``RouteBatch.poses_at``'s points into ``points`` (K, D, 2) and the segments' directions into
+    ``delta`` (K, D, 2): a distance wrapped round the lap (np.mod), clamped to the route, found among
+    the stations shifted by k · (the longest route + 1) (that shift's rounding can decide a segment,
+    so it is kept), then interpolated on its segment."""
     worlds, width = stations.shape
     longest = 0.0
     for k in range(worlds):
@@ -261,8 +251,7 @@ class WorldBatch:
     pedestrian_valid: np.ndarray
     max_speed_mps: np.ndarray
     speed_limit_mps: np.ndarray
-    # for a sub-batch (``select``): the slot of each row among the K worlds a sensor keeps state
-    # for (None: row k is slot k)
+    # for a sub-batch (``select``): each row's slot among the K worlds (None: row k is slot k)
     slots: np.ndarray | None = None
     # values derived by readers, made once per batch (a replaced batch starts an empty cache)
     cache: dict = field(init=False, default_factory=dict, compare=False, repr=False)
@@ -290,13 +279,7 @@ class WorldBatch:
         if not worlds:
             raise ValueError("a WorldBatch needs at least one world")
         roads: list[RoadMap] = []
-        road_index = []
-        for world in worlds:
-            found = next((i for i, road in enumerate(roads) if road is world.road), None)
-            if found is None:
-                roads.append(world.road)
-                found = len(roads) - 1
-            road_index.append(found)
+        road_index = [_road_slot(roads, world.road) for world in worlds]
         vehicles, vehicle_valid = _stack_rows([w.vehicles for w in worlds], 6)
         pedestrians, pedestrian_valid = _stack_rows([w.pedestrians for w in worlds], 6)
         lights, light_valid = _stack_rows([w.traffic_lights for w in worlds], 4)
@@ -340,22 +323,14 @@ class WorldBatch:
         indices = np.asarray(indices, dtype=np.int64)
         take = lambda a: a[indices]  # noqa: E731
         return WorldBatch(
-            time_s=take(self.time_s),
             dt_s=self.dt_s,
             ego=EgoBatch(**{f.name: take(getattr(self.ego, f.name)) for f in _FIELDS_EGO}),
-            vehicles=take(self.vehicles),
-            vehicle_valid=take(self.vehicle_valid),
             roads=self.roads,
             road_index=take(self.road_index),
             route=RouteBatch(**{f.name: take(getattr(self.route, f.name)) for f in _FIELDS_ROUTE}),
             events=EventsBatch(**{f.name: take(getattr(self.events, f.name)) for f in _FIELDS_EVENTS}),
-            traffic_lights=take(self.traffic_lights),
-            light_valid=take(self.light_valid),
-            pedestrians=take(self.pedestrians),
-            pedestrian_valid=take(self.pedestrian_valid),
-            max_speed_mps=take(self.max_speed_mps),
-            speed_limit_mps=take(self.speed_limit_mps),
             slots=indices if self.slots is None else self.slots[indices],
+            **{name: take(getattr(self, name)) for name in _WORLD_ARRAYS},
         )
 
     @property
@@ -382,23 +357,14 @@ class WorldBatch:
         merged into a stepped batch). Slot counts are padded to the larger of the two."""
         mask = np.asarray(mask, dtype=bool)
         roads = list(self.roads)
-        remap = []
-        for road in other.roads:
-            found = next((i for i, known in enumerate(roads) if known is road), None)
-            if found is None:
-                roads.append(road)
-                found = len(roads) - 1
-            remap.append(found)
+        remap = [_road_slot(roads, road) for road in other.roads]
         pick = lambda a, b: _where_rows(mask, a, b)  # noqa: E731
         pick_edge = lambda a, b: _where_rows(mask, a, b, edge=True)  # noqa: E731
         return WorldBatch(
-            time_s=pick(self.time_s, other.time_s),
             dt_s=self.dt_s,
             ego=EgoBatch(
                 **{f.name: pick(getattr(self.ego, f.name), getattr(other.ego, f.name)) for f in _FIELDS_EGO}
             ),
-            vehicles=pick(self.vehicles, other.vehicles),
-            vehicle_valid=pick(self.vehicle_valid, other.vehicle_valid),
             roads=tuple(roads),
             road_index=np.where(mask, np.asarray(remap, dtype=np.int64)[other.road_index], self.road_index),
             route=RouteBatch(
@@ -415,12 +381,7 @@ class WorldBatch:
                     for f in _FIELDS_EVENTS
                 }
             ),
-            traffic_lights=pick(self.traffic_lights, other.traffic_lights),
-            light_valid=pick(self.light_valid, other.light_valid),
-            pedestrians=pick(self.pedestrians, other.pedestrians),
-            pedestrian_valid=pick(self.pedestrian_valid, other.pedestrian_valid),
-            max_speed_mps=pick(self.max_speed_mps, other.max_speed_mps),
-            speed_limit_mps=pick(self.speed_limit_mps, other.speed_limit_mps),
+            **{name: pick(getattr(self, name), getattr(other, name)) for name in _WORLD_ARRAYS},
         )
 
     def road_users(self) -> tuple[np.ndarray, np.ndarray]:
@@ -467,6 +428,9 @@ class WorldBatch:
 _FIELDS_EGO = dataclasses.fields(EgoBatch)
 _FIELDS_EVENTS = dataclasses.fields(EventsBatch)
 _FIELDS_ROUTE = [f for f in dataclasses.fields(RouteBatch) if f.init]
+# WorldBatch's (K, ...) arrays besides ego, route, events and road_index
+_WORLD_ARRAYS = ("time_s", "vehicles", "vehicle_valid", "traffic_lights", "light_valid", "pedestrians",
+                 "pedestrian_valid", "max_speed_mps", "speed_limit_mps")  # fmt: skip
 # per batch class: its init fields' names, and the defaults of those that have one
 _INIT_NAMES = {
     cls: frozenset(f.name for f in dataclasses.fields(cls) if f.init)
@@ -483,8 +447,7 @@ _DEFAULTS = {
 def assemble(cls, /, **fields):
     """``cls(**fields)`` for :class:`EgoBatch`, :class:`RouteBatch`, :class:`EventsBatch` or
     :class:`WorldBatch` (``cache`` empty), without the frozen ``__init__``'s ``object.__setattr__``
-    per field (there is no ``__post_init__`` to run): a simulator's per-step export, where one
-    world's whole step is a few dozen microseconds. The same fields are required."""
+    per field (a simulator's per-step export). The same fields are required."""
     defaults = _DEFAULTS[cls]
     if defaults:
         fields = defaults | fields
@@ -498,9 +461,13 @@ def assemble(cls, /, **fields):
     return made
 
 
-def _stations(polyline: np.ndarray) -> np.ndarray:
-    steps = np.linalg.norm(np.diff(np.asarray(polyline, dtype=float), axis=0), axis=1)
-    return np.r_[0.0, np.cumsum(steps)]
+def _road_slot(roads: list[RoadMap], road: RoadMap) -> int:
+    """The index of ``road`` (the same object) in ``roads``, appended when it is not there."""
+    found = next((i for i, known in enumerate(roads) if known is road), None)
+    if found is None:
+        roads.append(road)
+        found = len(roads) - 1
+    return found
 
 
 def pad_edge(array: np.ndarray, size: int) -> np.ndarray:
@@ -528,15 +495,13 @@ def _where_rows(mask: np.ndarray, a: np.ndarray, b: np.ndarray, edge: bool = Fal
     (with zeros, or by repeating the last slot when ``edge``)."""
     if a.ndim > 1 and a.shape[1] != b.shape[1]:
         size = max(a.shape[1], b.shape[1])
-        a, b = (_pad_slots(x, size, edge) for x in (a, b))
+        a, b = (pad_slots(x, size, edge) for x in (a, b))
     return np.where(mask.reshape((-1,) + (1,) * (a.ndim - 1)), b, a)
 
 
-def _pad_slots(array: np.ndarray, size: int, edge: bool) -> np.ndarray:
+def pad_slots(array: np.ndarray, size: int, edge: bool = False) -> np.ndarray:
+    """``array`` (K, N, ...) padded to ``size`` slots on axis 1: zeros, or its last slot when ``edge``."""
     missing = size - array.shape[1]
     if missing <= 0:
         return array
-    if edge:
-        return np.concatenate([array, np.repeat(array[:, -1:], missing, axis=1)], axis=1)
-    widths = [(0, 0), (0, missing)] + [(0, 0)] * (array.ndim - 2)
-    return np.pad(array, widths)
+    return np.pad(array, [(0, 0), (0, missing)] + [(0, 0)] * (array.ndim - 2), "edge" if edge else "constant")

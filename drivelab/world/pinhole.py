@@ -1,10 +1,9 @@
 """The pinhole camera model: intrinsics, mounting on the ego, and its projections (the CARLA study's camera).
 
-Frames: the ego frame has x forward, y to the right, z up (metres). The camera sits ``forward_m``
-ahead of the ego's centre, ``height_m`` above the ground, pitched down by ``pitch_deg``. Pixels use
-OpenCV's convention (integer coordinates are pixel centres): a point at camera coordinates
-(X right, Y down, Z along the optical axis) lands at ``u = cx + f·X/Z``, ``v = cy + f·Y/Z`` with
-``cx = (W − 1)/2``, ``cy = (H − 1)/2`` and ``f = (W/2) / tan(fov/2)`` (square pixels).
+The ego frame has x forward, y to the right, z up; the camera sits ``forward_m`` ahead of the
+ego's centre, ``height_m`` above the ground, pitched down by ``pitch_deg``. Camera coordinates
+(X right, Y down, Z along the axis) land at ``u = cx + f·X/Z``, ``v = cy + f·Y/Z`` with
+``cx = (W − 1)/2``, ``cy = (H − 1)/2``, ``f = (W/2) / tan(fov/2)`` (OpenCV's pixel centres).
 """
 
 from __future__ import annotations

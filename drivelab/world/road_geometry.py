@@ -1,9 +1,7 @@
-"""Road geometry shared by the camera sensors and the CARLA study's reward terms (the bottom layer).
-
-Segments are ``(M, 2, 2)`` arrays of (start, end) points in world metres; over K worlds they are
-``(K, M, 2, 2)``, padded with NaN segments (which never cross anything). Where a painted line or
-a route's centre crosses the ground ``distances_m`` ahead of the ego is what the line/lane rows of
-the CARLA study camera see.
+"""Road geometry shared by the camera sensors and the CARLA study's reward terms (the bottom layer):
+where painted lines and routes cross the ground rows ahead of the ego that the line/lane camera
+sees. Segments are ``(M, 2, 2)`` arrays of (start, end) points in world metres; over K worlds
+``(K, M, 2, 2)``, padded with NaN segments (which never cross anything).
 """
 
 from __future__ import annotations
@@ -12,14 +10,8 @@ import numpy as np
 from numba import njit
 
 from drivelab.world.batch import WorldBatch
-from drivelab.world.geometry import ego_frame
 from drivelab.world.pinhole import visible_columns_into
 from drivelab.world.state import RoadMap, WorldState
-
-
-def ego_ground(world: WorldState, points_world: np.ndarray) -> np.ndarray:
-    """World points (..., 2) → the ego frame of ``world`` (x forward, y to the right)."""
-    return ego_frame(points_world, world.ego.position, world.ego.heading)
 
 
 def polyline_segments(polyline: np.ndarray) -> np.ndarray:
@@ -145,8 +137,7 @@ def lateral_crossings(
     nearest the ego's axis, (K, D), nan where nothing crosses.
 
     ``segments`` is (K, M, 2, 2), one set per world, or with ``index`` (K,) a few sets (S, M, 2, 2)
-    of which world k uses ``segments[index[k]]`` (the distinct maps' guide lines, not copied per
-    world). Compiled: one pass over each world's segments, no (K, D, M) temporaries.
+    of which world k uses ``segments[index[k]]`` (the distinct maps' guide lines).
     """
     segments = np.asarray(segments, dtype=float)
     return _crossings(position, heading, segments[:, :, 0], segments[:, :, 1], distances_m, index)
@@ -165,19 +156,9 @@ def _crossings(position, heading, starts, ends, distances_m, index) -> np.ndarra
     distances = np.ascontiguousarray(distances_m, dtype=float).reshape(-1)
     heading = np.asarray(heading, dtype=float)
     out = np.empty((len(heading), len(distances)))
-    if index is None:
-        index = np.arange(len(heading))
-    position = np.asarray(position, dtype=float)
-    _nearest_crossings(
-        starts,
-        ends,
-        np.asarray(index, dtype=np.int64),
-        position,
-        np.cos(heading),
-        np.sin(heading),
-        distances,
-        out,
-    )
+    index = np.asarray(np.arange(len(heading)) if index is None else index, dtype=np.int64)
+    position, cos_h, sin_h = np.asarray(position, dtype=float), np.cos(heading), np.sin(heading)
+    _nearest_crossings(starts, ends, index, position, cos_h, sin_h, distances, out)
     return out
 
 

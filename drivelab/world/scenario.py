@@ -17,31 +17,27 @@ class Scenario:
 
     :param env_class: dotted path of the highway-env environment class that builds the road.
     :param config: highway-env config shared by every traffic level.
-    :param traffic: per traffic level, highway-env config overrides plus the drivelab-only key
-        ``extra_vehicles`` (NPCs added on random lanes after highway-env populated the road) and
-        ``keep_npcs`` (False removes every NPC highway-env created).
+    :param traffic: per traffic level, highway-env config overrides plus drivelab's
+        ``extra_vehicles`` (NPCs added on random lanes) and ``keep_npcs`` (False removes them all).
     :param destination: road-network node the ego is routed to (None: follow the road).
     :param arrival: how the backend decides the goal is reached: "none", "merge_end", "exit".
     :param intersection_nodes: road-network nodes whose lanes count as junction area.
     :param junction_needs_both_ends: a lane is junction area only when it also ends at one of
         those nodes (the roundabout: its exits leave ring nodes too).
-    :param meta_target_speeds: the speeds FASTER / SLOWER step through (None: highway-env's
-        default 20, 25, 30 m/s), as in highway-env's own config of the scenario.
+    :param meta_target_speeds: the speeds FASTER / SLOWER step through (None: 20, 25, 30 m/s).
     :param fast_backend: drivelab's fast backend runs it (the "auto" backend then picks it).
     :param camera: how videos and ``render()`` look at a world: "road" (along the road, the ego a
         third of the way in) or "map" (the map from above, north up: the town, the block maps).
-    :param simulator: dotted path of the compiled core's simulator class that runs it:
-        ``FastSimulator`` (drivelab.sim), or the scenario's own subclass in its folder (the town's
-        ``TownSimulator``, the blocks' ``BlocksSimulator``), imported when a world is built.
+    :param simulator: dotted path of the compiled core's simulator class that runs it
+        (``FastSimulator``, or the scenario's own subclass), imported when a world is built.
     :param route_deviation_m: the episode fails when the ego is farther than this from its route.
     :param blocked_after_s: the episode fails when the ego stays below 0.1 m/s this long.
     :param default_reward: the reward preset a run gets when it names none.
     :param circuit: the road is a closed loop: the route is one whole lap (however long).
     :param guide_line: a yellow line is painted along the route (follow-line).
     :param keep_lane: leaving the ego's starting lane counts as leaving the road (follow-lane).
-    :param procedural_maps: its worlds drive maps generated from seeds (the blocks): the compiled
-        core runs it with its blocks simulator, which hands ``spawn`` a map (a ``BlocksMap``) as
-        its ``road``; each episode's seed picks the map from the scenario's set.
+    :param procedural_maps: its worlds drive maps generated from seeds (the blocks); each
+        episode's seed picks the map from the scenario's set.
     :param reference_backend: highway-env's reference backend can run it (``backend="highway"``).
     :param spawn: the compiled core's episode set-up of one world, ``spawn(seed, road, control)
         -> (vehicle rows, ego row, regulation (2,), generator between steps or None)`` (``road``:
@@ -51,12 +47,10 @@ class Scenario:
         generator between steps (None: ``spawn`` once per reset world).
     :param arrivals: ``arrivals(road)`` gives the object whose ``spawn(rows, rng, probability)``
         brings a vehicle in between steps (a scenario with a ``traffic_flow``).
-    :param road: ``road(config)``: the scenario's ``RoadDescription`` from its config (the
-        highway-env config the scenario's environment gets: scenario, traffic level and backend
-        options merged); None: the road is highway-env's (converted from its network).
+    :param road: ``road(config)``: the scenario's ``RoadDescription`` from its merged config;
+        None: the road is highway-env's (converted from its network).
     :param options: the config keys a user may set (``backend_options``), declared with their
-        type, range, default and meaning (``drivelab.world.options``); any other key is
-        refused.
+        type, range, default and meaning (``drivelab.world.options``).
     :param check_options: the scenario's own cross-checks of its options, given every declared
         option's value (the user's over the defaults); raises a UsageError.
     """

@@ -46,8 +46,7 @@ class RoadMap:
     crossings: np.ndarray = field(default_factory=lambda: np.zeros((0, 5)))  # zebra crossings (C, 5):
     # centre x, y, heading (the direction pedestrians walk), length (across the road), width
 
-    # geometry derived from this map by its readers (raster layers, guide-line segments, …), built
-    # once per map by ``derived``: the map is immutable, so it is never stale and dies with the map
+    # geometry its readers derive from this immutable map, built once by ``derived``
     derived_cache: dict = field(default_factory=dict, compare=False, repr=False)
 
     def derived(self, key: object, build: Callable[[RoadMap], object]) -> object:
@@ -107,10 +106,7 @@ class Route:
     def poses_at(self, distances_m: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
         """Points (..., 2) and headings (...) at arc lengths along the polyline: clamped to its
         ends (so a finished route repeats its last point), wrapped round the lap on a circuit."""
-        stations = self.stations_m
-        if stations is None:
-            steps = np.linalg.norm(np.diff(self.polyline, axis=0), axis=1)
-            stations = np.r_[0.0, np.cumsum(steps)]
+        stations = stations_of(self.polyline) if self.stations_m is None else self.stations_m
         distances = np.asarray(distances_m, dtype=float)
         if self.closed and stations[-1] > 0:
             distances = np.mod(distances, stations[-1])
@@ -121,6 +117,12 @@ class Route:
         fraction = ((distances - stations[segment]) / span)[..., None]
         delta = end - start
         return start + fraction * delta, np.arctan2(delta[..., 1], delta[..., 0])
+
+
+def stations_of(polyline: np.ndarray) -> np.ndarray:
+    """Arc length (P,) of each point of a polyline (P, 2) from its first."""
+    steps = np.linalg.norm(np.diff(np.asarray(polyline, dtype=float), axis=0), axis=1)
+    return np.r_[0.0, np.cumsum(steps)]
 
 
 @dataclass(frozen=True)

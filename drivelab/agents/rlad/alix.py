@@ -1,27 +1,12 @@
-"""A-LIX, adaptive local signal mixing (Cetin et al., ICML 2022), as RLAD uses it (the RLAD paper, Table I):
-after every conv + ReLU of the image encoder.
+"""A-LIX, adaptive local signal mixing (Cetin et al., ICML 2022), after every conv + ReLU of RLAD's
+image encoder (the RLAD paper, Table I).
 
-Forward, training only (evaluation is the identity): the feature maps are replicate-padded by
-``PAD`` pixels and resampled bilinearly on a grid displaced by one random 2-D offset, uniform
-within ±``MAX_SHIFT_PX``·S pixels, shared by the batch and all positions. At fractional offsets
-the bilinear weights mix each feature with its neighbours; S = 0 is exactly the identity. The
-resampling at one shared offset is done with four shifted slices, which equals ``grid_sample``'s
-bilinear interpolation at a uniform shift and costs less on a CPU.
-
-The strength S is not trained by the RL loss (the mixing reads it detached). It follows a dual
-objective: on the way back, the last A-LIX layer of the encoder hands S the gradient β − ND, where
-ND is the normalised discontinuity of the feature gradient that reaches that layer's input (the
-gradient after the mixing has smoothed it), so gradient descent raises S while ND > β and lowers
-it otherwise, and ND settles near β. The earlier layers use the same S without producing its
-gradient.
-
-``shift_bilinear_tensor`` is the same resampling with the shift given as a tensor (on the
-features' device), for the fast update (sac.py, ``fast_update``): no value goes back to Python,
-so a GPU never waits for the host and the update can be compiled or captured in a CUDA graph. The
-two integer windows around the shift are gathered with ``index_select`` at indices computed on the
-device and clamped to the edge (the replicate padding, without a padding op), and mixed with the
-same association as ``shift_bilinear``; the result differs from it only by the rounding of the
-shift itself (float32 on the device against a Python double, ~1e-7).
+Forward, training only: the feature maps are replicate-padded and resampled bilinearly at one
+random 2-D offset within ±``MAX_SHIFT_PX``·S pixels, shared by the batch (S = 0 is the identity).
+The strength S follows a dual objective: the last A-LIX layer hands S the gradient β − ND, ND
+the normalised discontinuity of the feature gradient reaching it, so ND settles near β.
+``shift_bilinear_tensor`` takes the shift as a device tensor, for the fast update (no host
+round trip); it differs from ``shift_bilinear`` only by the shift's float32 rounding.
 """
 
 from __future__ import annotations

@@ -1,16 +1,8 @@
 """RLAD's image encoder (the RLAD paper, Table I): 9 conv 3×3 layers, each followed by ReLU and A-LIX,
 then Linear → LayerNorm → tanh to a 256-d latent.
 
-At 256×256 (the paper's input, a stack of 3 RGB frames = 9 channels) the strides are
-2, 2, 2, 2, 1, 1, 1, 1, 1 and the last feature map is 64×5×5 (1600 → 256). Smaller inputs keep
-the same nine layers and channels (32, 32, 32, 64, 64, 64, 64, 64, 64) and turn the trailing
-stride-2 layers into stride-1 ones until at least 3×3 is left (``encoder_strides``): at 84×84,
-drivelab's CPU default, that is 2, 2, 1, 1, 1, 1, 1, 1, 1 and a 64×6×6 map (2304 → 256); at
-128×128, 2, 2, 2, 1, … and 64×3×3.
-
-Table I's layers add up to 634,624 weights at 256×256 (plus A-LIX's one strength); the paper's
-text rounds the encoder to "around 1M parameters". At 84×84 the larger flatten gives the linear
-layer 180,224 more (814,848 in all).
+At 256×256 the strides are 2, 2, 2, 2, 1, 1, 1, 1, 1 (a 64×5×5 map); smaller inputs turn the
+trailing stride-2 layers into stride-1 ones until at least 3×3 is left (``encoder_strides``).
 """
 
 from __future__ import annotations

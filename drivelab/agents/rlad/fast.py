@@ -1,45 +1,22 @@
-"""RLAD's fast update (``-H fast_update=true``; sac.py ``RLAD._fast_update``): the same update as
-``RLAD.train_step`` written so that a GPU is bound by its arithmetic, not by kernel launches and
-host round trips.
+"""RLAD's fast update (``-H fast_update=true``; sac.py ``RLAD._fast_update``): ``RLAD.train_step``
+written so that a GPU is bound by its arithmetic, not by kernel launches and host round trips.
 
-What changes against the plain update, and what it does to the result:
+What differs from the plain update:
 
-- every random number of the update (DrQ shifts, A-LIX offsets, the actor's ε for the target and
-  for the actor loss) is drawn up front from the agent's CPU generator, in the plain update's order
-  and shapes, so both updates use the same numbers (``draw_update_noise``); they reach the device
-  in a few copies;
-- A-LIX resamples at a shift computed on the device (``alix.shift_bilinear_tensor``) on a GPU
-  and when compiled: no ``float(S)`` per layer. The shift is rounded in float32 instead of a
-  Python double: the features differ from the plain update's by ~1e-7 relative. Eager on the CPU
-  (where reading a number costs nothing) it shifts as the plain update does, bitwise;
-- the auxiliary loss is the summed cross-entropy over the labelled samples divided by their
-  count, at least 1 (no branch on whether the batch holds a labelled sample). A
-  batch without any labelled sample steps the head's Adam with zero gradients where the plain
-  update leaves the head out (the town labels every observation, so this does not arise there);
-- the actor loss reads the critic through detached parameters (``torch.func.functional_call``):
-  the plain update computes the critics' weight gradients of the actor loss and throws them away
-  at the next critic step; the actor's gradients are the same;
-- Adam is the fused implementation (``fused=True``, one kernel per parameter group on a GPU,
-  also on the CPU in torch ≥ 2.4); the plain update uses the default (single-tensor on the CPU,
-  foreach on a GPU). Same formula, rounding may differ in the last bit;
-- the target critics' EMA is one ``torch._foreach_lerp_`` (bitwise the per-tensor ``lerp_``);
-- the losses are kept as tensors: the only host synchronisation is when metrics are logged.
+- every random number of the update is drawn up front from the agent's CPU generator, in the
+  plain update's order and shapes (``draw_update_noise``), so both use the same numbers;
+- A-LIX shifts by a device tensor on a GPU and when compiled (``alix.shift_bilinear_tensor``):
+  ~1e-7 relative; eager on the CPU it is bitwise the plain update's;
+- the auxiliary loss divides by the labelled count, at least 1 (a batch without a label steps the
+  head's Adam with zero gradients);
+- the actor loss reads the critic through detached parameters (``torch.func.functional_call``);
+- Adam is fused (``fused=True``): rounding may differ in the last bit;
+- the target EMA is one ``torch._foreach_lerp_``, the losses stay tensors until logged.
 
-Options on top (``compile``, ``bf16``):
-
-- ``compile``: ``torch.compile`` (inductor) of the two pure-tensor parts, the critic + auxiliary
-  objective (target included) and the actor objective, forward and backward. ``reduce-overhead``
-  adds CUDA graphs on a GPU (``torch.compile``'s CUDA-graph trees; on a CPU it is inductor's default
-  mode). Inductor fuses element-wise chains (A-LIX's mixing, the losses) and may reorder float
-  additions: results agree with the eager fast update to float32 rounding, not bitwise. Inductor
-  needs a C++ compiler on the CPU and Triton on a GPU; without them (``compile_unavailable``) the
-  fast update runs eagerly and says so once;
-- ``bf16``: the objectives' forward under ``torch.autocast(bfloat16)`` (convolutions and matrix
-  products in bfloat16, losses and A-LIX's dual gradient in float32). This changes the result:
-  bfloat16 keeps 8 bits of mantissa, so losses and gradients differ from float32 at ~1e-2
-  relative; it is off by default and stated wherever used;
-- ``channels_last``: the image encoder's convolutions in NHWC (``torch.channels_last``), the
-  layout cuDNN's fastest kernels use on a GPU; the same arithmetic, summed in another order.
+Options: ``compile`` (``torch.compile`` of the critic and actor objectives; agrees to float32
+rounding; eager, said once, without a C++ compiler or Triton: ``compile_unavailable``), ``bf16``
+(autocast of the forward passes: ~1e-2 relative, off by default), ``channels_last`` (NHWC
+convolutions).
 """
 
 from __future__ import annotations

@@ -1,23 +1,11 @@
 """Device memory for replay frames shared by several processes on one GPU (``replay_frames=auto``).
 
-One process decides alone whether its frames go to the GPU: they do when they take less than half
-of the device's free memory (the other half is left for the networks' activations). Several
-processes started together all read the same free memory before any of them has allocated its
-frames (the replay allocates at its first write), so each would take the GPU, and together they
-would overcommit it. ``DeviceMemoryLedger`` makes the decision shared: a small JSON file, read and
-written under an exclusive ``flock``, holds each process's reservation (pid, device, bytes, and
-whether the bytes are allocated yet). A process then counts as free
-
-    free memory now − the reservations of live processes not yet allocated
-
-(allocated ones are already missing from the free memory), takes the device when its frames fit
-in half of that, and records its own reservation before it releases the lock. A reservation is
-marked allocated when the replay allocates the frames, and removed when the agent is collected or
-the process exits; one whose pid is no longer alive is ignored and dropped (a killed process).
-
-The ledger lives in the temporary directory (``DRIVELAB_DEVICE_LEDGER`` names another file), so
-every process of one machine sees it. Devices are told apart by their UUID, which does not depend
-on ``CUDA_VISIBLE_DEVICES``.
+A process puts its frames on the GPU when they take less than half of the device's free memory.
+Processes started together would all read the same free memory before any allocates, so
+``DeviceMemoryLedger`` keeps a JSON file, under an exclusive ``flock``, of each process's
+reservation (pid, device, bytes, allocated yet); the free memory counted is the device's minus
+the live processes' reservations not yet allocated. The ledger lives in the temporary directory
+(``DRIVELAB_DEVICE_LEDGER`` names another file); devices are told apart by their UUID.
 """
 
 from __future__ import annotations

@@ -1,10 +1,5 @@
-"""RLAD's networks (the RLAD paper, Fig. 1): the state encoder, the tanh-Gaussian actor, the twin critics
-and the traffic-light head.
-
-- ``StateEncoder``: one encoder (image, waypoints, measurements) → h = [ĩ 256 | ṽ 16 | w̃ 32] = 304;
-- ``Actor``: MLP 304 → 1024 → 1024 → (μ, log σ), log σ squashed into [−10, 2], a = tanh(μ + σ·ε);
-- ``TwinCritic``: two MLPs [h, a] → 1024 → 1024 → 1;
-- ``TrafficLightHead``: ĩ (256) → 128 → 64 → 3 logits (none, green, red or yellow).
+"""RLAD's networks (the RLAD paper, Fig. 1): the state encoder h = [ĩ 256 | ṽ 16 | w̃ 32], the
+tanh-Gaussian actor, the twin critics and the traffic-light head.
 """
 
 from __future__ import annotations

@@ -1,31 +1,16 @@
 """RLAD's replay buffer: every camera frame stored once, stacks rebuilt by index.
 
-The camera sensor stacks frames itself (``camera:stack=3``), so consecutive observations share
-all but their newest frame, and a transition's next observation shares all but one frame with
-its observation. Storing (obs, next_obs) stacks would keep each frame 2·K times; here each
-environment step writes one *observation record* (newest frame, waypoints, measurements and
-traffic-light label) into a ring, and a transition keeps the absolute numbers of the K records of
-its observation's stack (oldest first) and of its next observation's newest record; the next
-stack is the observation's stack shifted by one.
+Consecutive stacked observations share all but their newest frame, so each environment step
+writes one *observation record* (newest frame, waypoints, measurements, traffic-light label) into
+a ring, and a transition keeps the record numbers of its observation's stack and of its next
+observation's newest record. ``start_episode`` pads the stack with the reset observation, so no
+stack mixes two episodes; a time-limit end is not terminal. The ring holds ``capacity`` plus 5 %
+slack records; with very short episodes the ring, not ``capacity``, bounds how many transitions
+are sampleable.
 
-Episode boundaries: ``start_episode`` writes the reset observation and pads the stack with it
-(the camera's own stack does the same at reset), so no stack mixes two episodes. ``terminated``
-is stored for the target; a time-limit end (truncated) is not terminal and its stored next
-observation bootstraps as usual.
-
-The record ring holds ``capacity`` plus 5 % slack records (the reset records of new episodes).
-A transition stays sampleable while all its records are in the ring; with very short episodes
-(under about 20 steps on average) the ring, not ``capacity``, bounds how many transitions are
-sampleable. Memory: ``nbytes`` counts every array; ``unique_frame_bytes`` the distinct frames
-that sampleable transitions reference.
-
-Frames may live on the networks' device (``frame_device``): a batch's stacks are then gathered
-there, and neither the gather of B·2K frames on the CPU nor their copy to the GPU is paid at every
-update (on an H100 at 256×256 the two took 127 of an update's 191 ms,
-benchmarks/results/rlad_profile_gpu_256_host.md). The device tensor is allocated at the first
-write, so an agent loaded only to act reserves no device memory. The small arrays stay in numpy.
-A checkpoint holds the buffer as arrays (``state_arrays``, frames as numpy); ``load_state_arrays``
-puts the frames where this buffer's ``frame_device`` says.
+Frames may live on the networks' device (``frame_device``, allocated at the first write): a
+batch's stacks are then gathered there, with no copy to the GPU per update. A checkpoint holds
+the buffer as numpy arrays (``state_arrays``).
 """
 
 from __future__ import annotations
@@ -212,11 +197,7 @@ class FrameReplayBuffer:
     @property
     def nbytes(self) -> int:
         """Bytes of every array the buffer holds."""
-        arrays = (
-            self.frames, self.waypoints, self.measurements, self.labels, self.stacks, self.next_newest,
-            self.actions, self.rewards, self.terminated,
-        )  # fmt: skip
-        return int(sum(array.nbytes for array in arrays))
+        return int(sum(getattr(self, name).nbytes for name in self.ARRAYS))
 
     def unique_frame_bytes(self) -> int:
         """Bytes of the distinct frames the sampleable transitions reference."""

@@ -1,18 +1,10 @@
 """RLAD: SAC from pixels with A-LIX, DrQ augmentation, WayConv1D and the traffic-light
-auxiliary loss; and the DrQ baseline as a preset of it. Top to bottom:
-
-1. ``RLADConfig``: Table II's hyper-parameters and the ablation switches;
-2. ``observation_error``: what RLAD reads (camera stack, waypoints, measurements);
-3. the networks (``networks.py``): one ``StateEncoder``, ``Actor``, ``TwinCritic``, ``TrafficLightHead``;
-4. ``RLAD.train_step``: critic (eq. 1, 2) + auxiliary cross-entropy (eq. 4) through the encoder,
-   actor (eq. 3) on the detached state, temperature (Haarnoja et al. 2018), EMA target critics;
-5. ``RLAD.learn``: random actions for the warm-up, then the policy; one update per step.
+auxiliary loss; and the DrQ baseline as a preset of it.
 
 Observation: ``--obs camera:stack=3,waypoints,measurements:stack=3`` (the paper's K = 3 frames
 and 3 measurement frames); any camera size from 21 px, any stack. Action: ``target_speed``
-([target speed, steer] through the town's PID). Action repeat 2 lives in the environment: the
-town simulates at 10 Hz and takes a decision at 5 Hz (town_env.py), so every action is held for
-two simulation steps, as the paper's CARLA runs; one agent step is one environment step.
+([target speed, steer] through the town's PID), each held for two 10 Hz simulation steps by the
+environment, as the paper's CARLA runs.
 """
 
 from __future__ import annotations
@@ -32,7 +24,7 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from torch import nn
 
-from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent
+from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent, gradient_step
 from drivelab.agents.buffer_memory import check_buffer_memory, observation_bytes
 from drivelab.agents.rlad.augmentation import default_pad, random_shift
 from drivelab.agents.rlad.fast import COMPILE_MODES, compile_unavailable, draw_update_noise
@@ -73,12 +65,10 @@ class RLADConfig:
     :param train_freq: environment steps between updates.
     :param log_interval: environment steps between logger dumps.
     :param device: "auto" (CUDA when available, else CPU), "cpu", "cuda" or "cuda:N".
-    :param replay_frames: where the replay keeps its frames: "host" (numpy), "device" (a tensor on
-        ``device``, gathered there) or "auto" (the device when it is a GPU with room for them in
-        half its free memory, else the host; the processes of one machine share the decision
-        through ``memory.DeviceMemoryLedger``, so several runs on one GPU do not overcommit it).
-    :param fast_update: the update without host round trips, fused Adam (``fast.py`` says what
-        it changes: the same update to float32 rounding).
+    :param replay_frames: where the replay keeps its frames: "host", "device" or "auto" (the
+        device when it is a GPU with room for them in half its free memory, ``memory.py``).
+    :param fast_update: the update without host round trips (``fast.py``: the same update to
+        float32 rounding).
     :param compile: with ``fast_update``, ``torch.compile`` mode of its pure-tensor parts: "none",
         "default", "reduce-overhead" (CUDA graphs on a GPU) or "max-autotune".
     :param bf16: with ``fast_update``, bfloat16 autocast of the forward passes (changes the result
@@ -174,13 +164,12 @@ def observation_error(space: spaces.Space) -> str | None:
     return None
 
 
-# --- 4., 5. the agent ----------------------------------------------------------------------------
+# --- the agent ----------------------------------------------------------------------------------
 class RLAD(OwnAgent):
     """SAC from pixels as RLAD; ``config`` switches its parts off for the ablations."""
 
     config_class = RLADConfig
-    # checkpoints keep the replay up to this size (run.py's default is 512 MiB): 100 k transitions
-    # at 84x84 take 2.2 GB, and a long run resumes exactly only with them (at 256x256, 21 GB do not)
+    # checkpoints keep the replay up to this size (run.py's default is 512 MiB; 84x84 takes 2.2 GB)
     replay_checkpoint_limit_bytes = 16 * 2**30
 
     def _build(self) -> None:
@@ -376,19 +365,13 @@ class RLAD(OwnAgent):
             known = labels != UNKNOWN_LABEL
             accuracy = (logits.argmax(dim=1)[known] == labels[known]).float().mean()
             metrics.update(aux_loss=aux_loss.item(), aux_accuracy=accuracy.item())
-        self.critic_optimizer.zero_grad()
-        loss.backward()
-        self.critic_optimizer.step()
+        gradient_step(self.critic_optimizer, loss)
         # eq. 3 on the detached state: the actor's gradient does not reach the encoder
         action, log_prob = self.actor.sample(h.detach(), self.generator)
         actor_loss = (alpha * log_prob - torch.min(*self.critic(h.detach(), action))).mean()
-        self.actor_optimizer.zero_grad()
-        actor_loss.backward()
-        self.actor_optimizer.step()
+        gradient_step(self.actor_optimizer, actor_loss)
         alpha_loss = (self.alpha * (-log_prob.detach() - self.target_entropy)).mean()
-        self.alpha_optimizer.zero_grad()
-        alpha_loss.backward()
-        self.alpha_optimizer.step()
+        gradient_step(self.alpha_optimizer, alpha_loss)
         with torch.no_grad():  # θ̄ ← τθ + (1 − τ)θ̄
             for target_p, p in zip(self.critic_target.parameters(), self.critic.parameters(), strict=True):
                 target_p.lerp_(p, config.tau)
@@ -468,9 +451,7 @@ class RLAD(OwnAgent):
                 self.encoder.image.strength.clamp_(0.0, 1.0)
         alpha = self.log_alpha.detach().exp()
         loss, h, metrics = self._critic_objective_fn(t, noise, alpha)
-        self.critic_optimizer.zero_grad()
-        loss.backward()
-        self.critic_optimizer.step()
+        gradient_step(self.critic_optimizer, loss)
         actor_loss, log_prob = self._actor_objective_fn(h, noise["noise"], alpha)
         alpha_loss = (self.log_alpha.exp() * (-log_prob - self.target_entropy)).mean()
         self.actor_optimizer.zero_grad()
@@ -502,26 +483,18 @@ class RLAD(OwnAgent):
         frame = np.moveaxis(obs["camera"][..., -3:], -1, 0)
         return frame, obs["waypoints"], obs["measurements"], label_index(info.get("traffic_light"))
 
-    def learn(
-        self,
-        total_timesteps: int,
-        callback: BaseCallback | None = None,
-        reset_num_timesteps: bool = True,
-        progress_bar: bool = False,
-    ) -> RLAD:
-        """Warm-up with random actions, then act with the policy and update every ``train_freq``
-        steps, until ``total_timesteps`` more steps (contract in base.py). One world
-        (``worlds.Worlds`` with K = 1): the replay keeps one stream of episodes and ``_last_obs``
-        is that world's observation."""
-        config, worlds, replay = self.config, Worlds(self.env), self.replay_buffer
-        target_steps, start_steps, start_time = self._start_learning(total_timesteps, reset_num_timesteps)
+    def _start_worlds(self, worlds: Worlds) -> None:
         if self._last_obs is None:
             self._last_obs = row(worlds.reset(), 0)
-            replay.start_episode(*self._record(self._last_obs, worlds.reset_infos[0]))
-        callback = self._start_callback(callback)
-        callback.on_training_start(locals(), globals())
+            self.replay_buffer.start_episode(*self._record(self._last_obs, worlds.reset_infos[0]))
+
+    def _learn(self, worlds: Worlds, callback: BaseCallback, target: int) -> None:
+        """Warm-up with random actions, then act with the policy and update every ``train_freq``
+        steps. One world (``worlds.Worlds`` with K = 1): the replay keeps one stream of episodes
+        and ``_last_obs`` is that world's observation."""
+        config, replay = self.config, self.replay_buffer
         metrics: dict[str, Any] = {}  # the fast update's are tensors until logged
-        while self.num_timesteps < target_steps:
+        while self.num_timesteps < target:
             callback.on_rollout_start()  # a safe point: nothing is half-done (contract in base.py)
             if self.num_timesteps < config.learning_starts:
                 action = self.rng.uniform(-1.0, 1.0, size=self.low.shape).astype(np.float32)
@@ -545,9 +518,7 @@ class RLAD(OwnAgent):
                 metrics = self._fast_update() if config.fast_update else self.train_step()
             if self.num_timesteps % config.log_interval == 0:
                 logged = self._floats(metrics) if config.fast_update else metrics
-                self._log_progress(logged, start_steps, start_time)
-        callback.on_training_end()
-        return self
+                self._log_progress(logged)
 
 
 class DrQ(RLAD):

@@ -1,13 +1,5 @@
-"""RLAD's vector encoders (the RLAD paper, Section III-B1): WayConv1D for the waypoints, its MLP ablation,
-and the measurement MLP.
-
-- ``WayConv1D``: waypoints (B, N, 2) in the ego frame (m) → (B, 2, N) → Conv1d(2 → 20, kernel 2,
-  i.e. a 2×2 kernel over consecutive points) → ReLU → flatten (20·(N − 1) = 180 at N = 10) →
-  Linear → 20 → ReLU → Linear → 32 → LayerNorm → tanh.
-- ``WaypointMLP`` (the ablation, ``waypoint_encoder=mlp``): the same widths with the convolution
-  replaced by a dense layer on the flattened 2N numbers.
-- ``MeasurementEncoder``: [speed / v_max, steer] × 3 frames (6) → 8 → ReLU → 16 → LayerNorm → tanh.
-"""
+"""RLAD's vector encoders (the RLAD paper, Section III-B1): WayConv1D for the waypoints, its MLP
+ablation, and the measurement MLP."""
 
 from __future__ import annotations
 
