@@ -7,7 +7,7 @@ world's step came to ~45 µs of which the simulation is ~1 µs. Like PufferLib's
 environments, :class:`CircuitStep` runs all of it as one compiled call over the K worlds: the
 controls, ``advance_worlds`` (the simulator's own step), the scenario's events, the episode rules
 (``rules.episode_ends``), every reward term of the circuits' presets (their own kernels:
-``segment_columns_into``, ``_line_centring``, ``_lane_keeping``), the metrics (``metrics.add_step``)
+``segment_columns_into``, ``line_centring_into``, ``lane_keeping_into``), the metrics (``metrics.add_step``)
 and the kinematics sensor (``ego_rows_into``). The WorldBatch is made only when something reads it
 (``FastSimulator.batch``).
 
@@ -41,12 +41,12 @@ from drivelab.envs.metrics import add_step
 from drivelab.envs.rules import episode_ends
 from drivelab.perception.kinematics import Kinematics, ego_rows_into
 from drivelab.rewards.terms import (
-    _LANE_ROWS,
-    _LANE_ROWS_PX,
-    _LINE_ROWS,
+    LANE_ROWS,
+    LANE_ROWS_PX,
+    LINE_ROWS,
     STEERING_BASE,
-    _lane_keeping,
-    _line_centring,
+    lane_keeping_into,
+    line_centring_into,
 )
 from drivelab.sim.core.simulator import (
     ARRIVE_ROUTE_END,
@@ -85,7 +85,7 @@ _CAMERA_SIZE = 7  # a pinhole camera's ground_terms
 def _cameras() -> np.ndarray:
     """The reward terms' rows and cameras in one array: the line's rows (4), its camera's
     ground_terms (7), the lane's rows (4), their image rows (4), the lane camera's ground_terms."""
-    parts = (_LINE_ROWS, LINE_CAMERA.ground_terms, _LANE_ROWS, _LANE_ROWS_PX, LANE_CAMERA.ground_terms)
+    parts = (LINE_ROWS, LINE_CAMERA.ground_terms, LANE_ROWS, LANE_ROWS_PX, LANE_CAMERA.ground_terms)
     return np.concatenate([np.asarray(part, dtype=float) for part in parts])
 
 
@@ -158,7 +158,7 @@ def _circuit_step(
             segment_columns_into(
                 guide_starts, guide_ends, road_index, position, cos_h, sin_h, line_rows, line_terms, columns
             )
-            _line_centring(columns, line_terms[0], line_terms[6], term)
+            line_centring_into(columns, line_terms[0], line_terms[6], term)
         elif code == 1:  # speed_mps
             term[:] = speed
         elif code == 2:  # steering_power
@@ -170,7 +170,7 @@ def _circuit_step(
                 route_polyline[:, :-1], route_polyline[:, 1:], route, position, cos_h, sin_h, lane_rows,
                 lane_terms, columns,
             )  # fmt: skip
-            _lane_keeping(columns, lane_rows_px, lane_terms[0], lane_terms[6], steering_deg, term)
+            lane_keeping_into(columns, lane_rows_px, lane_terms[0], lane_terms[6], steering_deg, term)
         for k in range(num_worlds):
             values[t, k] = weights[t] * term[k]
             rewards[k] += values[t, k]

@@ -366,8 +366,8 @@ STEERING_BASE = 1.02  # the seed's λ
 LANE_BAND_EDGES_PX = np.array([15.0, 2 * 15, 3 * 20, 4 * 20])  # as extracted: 15, 30, 60, 80
 LANE_BAND_VALUES = np.array([10.0, 5.0, 2.5, 1.0, -10.0])
 LANE_ALIGNED_DEG = 6.0  # the seed's ζ
-_LINE_ROWS, _LANE_ROWS = np.array(LINE_ROWS_M), np.array(LANE_ROWS_M)  # ground rows ahead (m)
-_LANE_ROWS_PX = LANE_CAMERA.row_of_distance(_LANE_ROWS)  # image rows of the lane rows
+LINE_ROWS, LANE_ROWS = np.array(LINE_ROWS_M), np.array(LANE_ROWS_M)  # ground rows ahead (m)
+LANE_ROWS_PX = LANE_CAMERA.row_of_distance(LANE_ROWS)  # image rows of the lane rows
 
 
 def crossing_columns(
@@ -426,14 +426,14 @@ def line_centring(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """Σ_j f(C_j) over the 4 line rows: 15 … 1 as the line's centre moves away from the image centre
     (in pixels of 640: 15 under 38, 12 under 76, 10 under 114, 3 under 190, 1 under 228), −100 farther
     out or for a row where the line is out of view (the CARLA study, eq. 2; ``LINE_BAND_EDGES_PX``)."""
-    columns = crossing_columns(batch, guide_segment_sets(batch), LINE_CAMERA, _LINE_ROWS, batch.road_index)
+    columns = crossing_columns(batch, guide_segment_sets(batch), LINE_CAMERA, LINE_ROWS, batch.road_index)
     out = np.empty(batch.num_worlds)
-    _line_centring(columns, float(LINE_CAMERA.centre[0]), float(LINE_CAMERA.width), out)
+    line_centring_into(columns, float(LINE_CAMERA.centre[0]), float(LINE_CAMERA.width), out)
     return out
 
 
 @njit(cache=True)
-def _line_centring(columns, centre_px, width_px, out) -> None:
+def line_centring_into(columns, centre_px, width_px, out) -> None:
     """:func:`line_centring`'s values from the line's columns (K, D) in an image ``width_px`` wide
     centred on ``centre_px`` into ``out`` (K,)."""
     for k in range(columns.shape[0]):
@@ -464,15 +464,16 @@ def lane_keeping(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     −10 in bands 15/30/60/80 px of 1024), doubled when the lane is within ζ = 6° of the image vertical and
     the action goes straight, halved when aligned but steering (the extracted text is garbled there;
     this is our reading of "higher reward when aligned and going straight")."""
-    columns = crossing_columns(batch, batch.route.polyline, LANE_CAMERA, _LANE_ROWS)  # (K, D)
+    columns = crossing_columns(batch, batch.route.polyline, LANE_CAMERA, LANE_ROWS)  # (K, D)
     out = np.empty(batch.num_worlds)
     centre_px, width_px = float(LANE_CAMERA.centre[0]), float(LANE_CAMERA.width)
-    _lane_keeping(columns, _LANE_ROWS_PX, centre_px, width_px, _steering_deg(control, batch.num_worlds), out)
+    steering_deg = _steering_deg(control, batch.num_worlds)
+    lane_keeping_into(columns, LANE_ROWS_PX, centre_px, width_px, steering_deg, out)
     return out
 
 
 @njit(cache=True)
-def _lane_keeping(columns, rows, centre_px, width_px, steering_deg, out) -> None:
+def lane_keeping_into(columns, rows, centre_px, width_px, steering_deg, out) -> None:
     """:func:`lane_keeping`'s values from the lane centre's columns (K, D) at the image ``rows``
     (D,), nearest first, and the commanded steering (K,) degrees, into ``out`` (K,). C is the mean
     of the rows where the centre is seen (summed in row order, as numpy sums so few); g* the angle
