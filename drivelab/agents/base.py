@@ -31,7 +31,6 @@ import json
 import math
 import time
 import zipfile
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any, Protocol, Self
 
@@ -55,6 +54,7 @@ from drivelab.agents.storage import (
     tensors_to_bytes,
     write_arrays,
 )
+from drivelab.agents.worlds import Worlds
 from drivelab.errors import UsageError
 
 FORMAT = "drivelab-agent-2"
@@ -113,19 +113,6 @@ def observation_to_tensor(obs: Any, space: spaces.Space) -> torch.Tensor | dict[
         return {key: observation_to_tensor(obs[key], sub) for key, sub in space.spaces.items()}
     tensor = torch.as_tensor(np.asarray(obs), dtype=torch.float32)
     return tensor / 255.0 if space.dtype == np.uint8 else tensor
-
-
-def map_obs(fn: Callable[..., Any], obs: Any, *others: Any) -> Any:
-    """``fn(obs, *others)``, or for a dict observation ``fn`` of each value and the others' values
-    of its key (the same keys)."""
-    if isinstance(obs, dict):
-        return {key: fn(value, *(other[key] for other in others)) for key, value in obs.items()}
-    return fn(obs, *others)
-
-
-def batch_of_one(obs: Any) -> Any:
-    """One observation → a batch of one (dicts key by key)."""
-    return map_obs(lambda value: np.asarray(value)[None], obs)
 
 
 def gradient_step(optimizer: torch.optim.Optimizer, loss: torch.Tensor, parameters=None, max_grad_norm=None):
@@ -219,8 +206,6 @@ class OwnAgent:
     ) -> Self:
         """Train ``total_timesteps`` more environment steps (counted from 0 again when
         ``reset_num_timesteps``), with the callback calls of the contract above."""
-        from drivelab.agents.worlds import Worlds
-
         if reset_num_timesteps:
             self.num_timesteps = 0
         self._started = (self.num_timesteps, time.perf_counter())  # for the steps per second

@@ -19,10 +19,10 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from torch import nn
 
-from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent, batch_of_one, gradient_step
+from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent, gradient_step
 from drivelab.agents.buffer_memory import check_buffer_memory
 from drivelab.agents.storage import assign_arrays
-from drivelab.agents.worlds import Worlds
+from drivelab.agents.worlds import Worlds, batch_of_one
 from drivelab.errors import UsageError
 
 

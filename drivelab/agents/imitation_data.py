@@ -15,9 +15,8 @@ import numpy as np
 import torch
 from gymnasium import spaces
 
-from drivelab.agents.base import map_obs
 from drivelab.agents.storage import read_arrays, split_meta, write_arrays
-from drivelab.agents.worlds import Worlds
+from drivelab.agents.worlds import Worlds, map_obs
 from drivelab.errors import UsageError
 from drivelab.perception.affordances import Affordances
 from drivelab.perception.waypoints import Waypoints

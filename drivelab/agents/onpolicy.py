@@ -19,9 +19,9 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 
 from drivelab.agents.actor_critic import DISTRIBUTIONS, NORM_CLIP, NORM_EPSILON, ActorCritic, merge_moments
-from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent, batch_of_one, map_obs
+from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent
 from drivelab.agents.buffer_memory import check_buffer_memory, observation_bytes
-from drivelab.agents.worlds import Worlds
+from drivelab.agents.worlds import Worlds, batch_of_one, map_obs
 from drivelab.errors import UsageError
 
 

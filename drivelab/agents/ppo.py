@@ -12,8 +12,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from drivelab.agents.base import gradient_step, map_obs
+from drivelab.agents.base import gradient_step
 from drivelab.agents.onpolicy import OnPolicyAgent, OnPolicyConfig, Rollout, explained_variance
+from drivelab.agents.worlds import map_obs
 from drivelab.errors import UsageError
 
 

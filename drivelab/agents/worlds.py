@@ -5,13 +5,13 @@ seen with the VecEnv's shapes, so that the agents' collect loops are written onc
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 from stable_baselines3.common.vec_env import VecEnv
 
-from drivelab.agents.base import batch_of_one, map_obs
 from drivelab.errors import UsageError
 
 
@@ -30,6 +30,19 @@ def vector_env_of(env: Any):
             "(DriveEnv, VectorDriveEnv)"
         )
     return vector
+
+
+def map_obs(fn: Callable[..., Any], obs: Any, *others: Any) -> Any:
+    """``fn(obs, *others)``, or for a dict observation ``fn`` of each value and the others' values
+    of its key (the same keys)."""
+    if isinstance(obs, dict):
+        return {key: fn(value, *(other[key] for other in others)) for key, value in obs.items()}
+    return fn(obs, *others)
+
+
+def batch_of_one(obs: Any) -> Any:
+    """One observation → a batch of one (dicts key by key)."""
+    return map_obs(lambda value: np.asarray(value)[None], obs)
 
 
 class Worlds:
