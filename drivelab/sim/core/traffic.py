@@ -116,12 +116,11 @@ def steering_control(v: np.ndarray, lanes: np.ndarray, i: int, target: int) -> f
 
 @njit(cache=True)
 def frame_cache(v: np.ndarray, lanes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Scratch arrays for one simulation frame's ``act``. ``coords`` (L, N, 4): per lane, every
-    vehicle's (longitudinal, lateral, on the lane within 1 m) and, in column 3, the vehicles on
-    the lane sorted by (longitudinal, row); ``done`` (L,): how many vehicles are on the lane, -1
-    until the lane is first used in the frame; ``trig`` (N, 2): the cosine and sine of every
-    heading. Positions and headings do not change during ``act``, so each value is computed once
-    per frame instead of once per use (same function, same inputs: the same bits)."""
+    """Scratch arrays for one simulation frame's ``act``, each value computed once per frame (the
+    same bits). ``coords`` (L, N, 4): per lane, every vehicle's (longitudinal, lateral, on the lane
+    within 1 m) and, in column 3, the vehicles on the lane sorted by (longitudinal, row); ``done``
+    (L,): how many vehicles are on the lane, -1 until first used; ``trig`` (N, 2): cos, sin of
+    every heading."""
     coords = np.empty((lanes.shape[0], v.shape[0], 4))
     return coords, np.full(lanes.shape[0], -1, dtype=np.int64), np.empty((v.shape[0], 2))
 
@@ -138,11 +137,8 @@ def start_frame(v: np.ndarray, done: np.ndarray, trig: np.ndarray) -> None:
 def lane_coordinates(
     v: np.ndarray, lanes: np.ndarray, coords: np.ndarray, done: np.ndarray, lane: int
 ) -> None:
-    """Fill ``coords[lane]`` once per frame: every vehicle's ``local_coordinates`` in ``lane``,
-    whether it is on the lane as ``Road.neighbour_vehicles`` counts it (``on_lane`` with a 1 m
-    margin), and the rows of those on it sorted by (longitudinal, row) (insertion sort: a lane
-    holds a handful). Only the check is inlined: the filling, inlined at each of the dozen uses
-    that ``act`` inlines, made numba compile ``act`` for minutes."""
+    """Fill ``coords[lane]`` once per frame (``fill_lane_coordinates``; only this check is inlined,
+    which keeps ``act``'s compile time short)."""
     if done[lane] < 0:
         fill_lane_coordinates(v, lanes, coords, done, lane)
 
@@ -151,7 +147,9 @@ def lane_coordinates(
 def fill_lane_coordinates(
     v: np.ndarray, lanes: np.ndarray, coords: np.ndarray, done: np.ndarray, lane: int
 ) -> None:
-    """``lane_coordinates``' filling of ``coords[lane]`` and ``done[lane]``."""
+    """Every vehicle's ``local_coordinates`` in ``lane``, whether it is on the lane as
+    ``Road.neighbour_vehicles`` counts it (``on_lane``, 1 m margin), and the rows of those on it
+    sorted by (longitudinal, row) (insertion sort), into ``coords[lane]`` and ``done[lane]``."""
     v, lanes, coords, done = borrowed((v, lanes, coords, done))
     count = 0
     for j in range(v.shape[0]):
@@ -244,9 +242,8 @@ def idm_free_road(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, me: int, ego:
 
 @njit(cache=True, inline="always")
 def idm_behind(v, lanes, p, coords, done, trig, free_road: float, ego: int, front: int) -> float:
-    """IDMVehicle.acceleration from its free-road term (``idm_free_road``): less the interaction
-    with ``front`` (none: -1). MOBIL asks about one vehicle behind several fronts; the free-road
-    term (a ``pow``) is the same for all of them and is computed once."""
+    """IDMVehicle.acceleration from its free-road term (``idm_free_road``, computed once for the
+    several fronts MOBIL asks about): less the interaction with ``front`` (none: -1)."""
     if ego < 0 or v[ego, KIND] == OBSTACLE:
         return 0.0
     acceleration = free_road
@@ -266,9 +263,8 @@ def cached_idm_acceleration(v, lanes, p, coords, done, trig, me: int, ego: int, 
     return idm_behind(v, lanes, p, coords, done, trig, free_road, ego, front)
 
 
-# What MOBIL needs of vehicle i's own lane, the same for both side lanes: a (OWN_SIZE,) scratch
-# row. The acceleration behind the front is also what ``act`` applies, so ``act`` fills the row
-# once per vehicle and frame; the old follower's two accelerations are filled on first use.
+# What MOBIL needs of vehicle i's own lane, for both side lanes (a (OWN_SIZE,) scratch row that
+# ``act`` fills once per vehicle and frame; the old follower's accelerations on first use)
 OWN_FREE, OWN_A, OWN_FRONT, OWN_REAR, OWN_REAR_A, OWN_REAR_PRED_A, OWN_REAR_FILLED, OWN_SIZE = range(8)
 
 
@@ -282,21 +278,10 @@ def own_lane(v, lanes, p, coords, done, trig, i: int, own) -> None:
     own[OWN_FRONT], own[OWN_REAR], own[OWN_REAR_FILLED] = front, rear, 0.0
 
 
-@njit(cache=True)  # a call, not inlined: asked once per LANE_CHANGE_DELAY per vehicle and side, and
-def mobil_side(  # its body (5 IDM terms, a neighbour search) inlined made numba compile act for long
-    v: np.ndarray,
-    lanes: np.ndarray,
-    p: np.ndarray,
-    coords: np.ndarray,
-    done: np.ndarray,
-    trig: np.ndarray,
-    i: int,
-    lane: int,
-    own: np.ndarray,
-) -> bool:
+@njit(cache=True)  # not inlined: inlined, its body made numba compile ``act`` for long
+def mobil_side(v, lanes, p, coords, done, trig, i: int, lane: int, own) -> bool:
     """IDMVehicle.mobil: is a change to ``lane`` safe for the new follower, and worth it?
-    (``own``: vehicle i's row of ``own_lane``; the same arithmetic as highway-env's, each value
-    computed once.)"""
+    (``own``: vehicle i's row of ``own_lane``; highway-env's arithmetic, each value computed once.)"""
     v, lanes, p, coords, done, trig, own = borrowed((v, lanes, p, coords, done, trig, own))
     new_preceding, new_following = cached_neighbours(v, lanes, coords, done, i, lane)
     new_following_free = idm_free_road(v, lanes, p, i, new_following)
@@ -457,8 +442,6 @@ def act(v, lanes, p, coords, done, trig, own) -> None:
             v[i, STEER] = steering_control(v, lanes, i, int(v[i, TARGET_LANE]))
             v[i, ACCEL] = KP_A * (v[i, TARGET_SPEED] - v[i, SPEED])
             continue
-        # the acceleration behind the front on its own lane, computed before the lane-change
-        # decision that reuses it (nothing it reads changes in between: the same bits)
         own_lane(v, lanes, p, coords, done, trig, i, own)
         change_lane_policy(v, lanes, p, coords, done, trig, i, own)
         v[i, STEER] = steering_control(v, lanes, i, int(v[i, TARGET_LANE]))
@@ -515,8 +498,7 @@ def _polygon_into(v: np.ndarray, i: int, corners: np.ndarray) -> None:
         px, py = local[k]
         corners[k, 0] = c * px + -s * py + v[i, X]
         corners[k, 1] = s * px + c * py + v[i, Y]
-    corners[4, 0], corners[4, 1] = corners[0, 0], corners[0, 1]  # element-wise: a row copy compiles
-    # numba's shape-mismatch error message (seconds of a cold start)
+    corners[4, 0], corners[4, 1] = corners[0, 0], corners[0, 1]  # element-wise: cheaper to compile
 
 
 @njit(cache=True)
@@ -583,8 +565,7 @@ def handle_collisions(v: np.ndarray, dt: float) -> None:
                 continue
             dx, dy = v[j, X] - v[i, X], v[j, Y] - v[i, Y]
             reach = (diagonals[i] + diagonals[j]) / 2 + v[i, SPEED] * dt
-            # sqrt(dx² + dy²) ≥ max(|dx|, |dy|) in floating point too: a pair apart by more than
-            # the reach along x or y is skipped without the square root, as the test below would
+            # sqrt(dx² + dy²) ≥ max(|dx|, |dy|): the square root only when both are within reach
             if np.abs(dx) > reach or np.abs(dy) > reach or np.sqrt(dx * dx + dy * dy) > reach:
                 continue
             ci, si = cos0(v[i, HEADING]), sin0(v[i, HEADING])
@@ -711,14 +692,7 @@ def enforce_road_rules(
 
 @njit(cache=True)
 def simulate(
-    v: np.ndarray,
-    lanes: np.ndarray,
-    p: np.ndarray,
-    frames: int,
-    dt: float,
-    regulation: np.ndarray,
-    release_cap_mps: float = np.inf,
-    prioritised_only: bool = False,
+    v, lanes, p, frames: int, dt: float, regulation, release_cap_mps: float = np.inf, prioritised_only=False
 ) -> None:
     """AbstractEnv._simulate for ``frames`` simulation steps of ``dt`` seconds.
 
@@ -755,22 +729,11 @@ def _simulate_worlds_parallel(v, count, lanes, p, frames, dt, regulation, active
             simulate(v[k, : count[k]], lanes, p, frames, dt, regulation[k])
 
 
-def simulate_worlds(
-    v: np.ndarray,
-    count: np.ndarray,
-    lanes: np.ndarray,
-    p: np.ndarray,
-    frames: int,
-    dt: float,
-    regulation: np.ndarray,
-    active: np.ndarray | None = None,
-) -> None:
+def simulate_worlds(v, count, lanes, p, frames: int, dt: float, regulation, active=None) -> None:
     """``simulate`` for K worlds: world k's vehicles are ``v[k, :count[k]]`` of the (K, N_max,
     VEHICLE_COLUMNS) buffer and its regulation state ``regulation[k]`` (K, 2); only the worlds
-    of ``active`` (K,) bool (default: all) are simulated. The worlds share
-    the road and the IDM parameters and never see each other: one numba thread per world where
-    numba has several threads and there are several worlds (else the serial loop, which saves
-    the thread pool's launch)."""
+    of ``active`` (K,) bool (default: all) are simulated, one numba thread per world where numba
+    has several threads and there are several worlds."""
     parallel = v.shape[0] > 1 and numba.get_num_threads() > 1
     kernel = _simulate_worlds_parallel if parallel else _simulate_worlds_serial
     if active is None:
