@@ -27,7 +27,7 @@ from drivelab.scenarios.blocks.pg_map import JUNCTION_LETTERS, MAX_LANES, PGMap,
 from drivelab.sim.core import lanes as L
 from drivelab.sim.core import traffic as T
 from drivelab.sim.core.spawn import DELTA_RANGE, LaneGeometry, ego_kind, vehicle_row
-from drivelab.sim.junctions.rows import TURN_LEFT
+from drivelab.sim.junctions.rows import LANE_METADATA, TURN_LEFT
 from drivelab.sim.roads.description import ARC, LINE_CONTINUOUS, STRAIGHT
 from drivelab.sim.roads.road_map import centre_line, road_map
 from drivelab.sim.route import RouteTracker
@@ -322,8 +322,7 @@ def blocks_map(pg: PGMap, base_road) -> BlocksMap:
     changeable = changeable_lanes(rows, in_junction)
     signal_lanes = np.flatnonzero(np.asarray(desc.light) >= 0)
     junction_arrays = tuple(
-        np.ascontiguousarray(getattr(desc, name), dtype=np.int64)
-        for name in ("junction", "from_arm", "to_arm", "turn", "end_junction", "end_arm", "light")
+        np.ascontiguousarray(getattr(desc, name), dtype=np.int64) for name in LANE_METADATA
     )
     return BlocksMap(
         pg=pg,

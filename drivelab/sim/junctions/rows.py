@@ -24,3 +24,5 @@ from __future__ import annotations
 PEDESTRIAN_COLUMNS = 14
 
 TURN_RIGHT, TURN_STRAIGHT, TURN_LEFT = 0, 1, 2  # a junction lane's turn; -1 on a street
+# the lane metadata's (L,) int64 arrays, in the kernels' argument order
+LANE_METADATA = ("junction", "from_arm", "to_arm", "turn", "end_junction", "end_arm", "light")

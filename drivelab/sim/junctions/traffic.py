@@ -113,7 +113,7 @@ from drivelab.sim.core.traffic import (
     steering_control,
     step_vehicle,
 )
-from drivelab.sim.junctions.rows import P_CRASHED, P_HEADING, P_SPEED, P_X, P_Y, TURN_LEFT
+from drivelab.sim.junctions.rows import LANE_METADATA, P_CRASHED, P_HEADING, P_SPEED, P_X, P_Y, TURN_LEFT
 from drivelab.sim.junctions.rules import (
     MOVING_MPS,
     ONCOMING_WATCH_M,
@@ -137,33 +137,20 @@ def py_square(x: float) -> float:
 
 def town_frame_cache(vehicles: int, pedestrians: int, lane_count: int):
     """Scratch arrays of one frame's ``town_act`` for up to ``vehicles`` vehicle rows and
-    ``pedestrians`` pedestrian rows on ``lane_count`` lanes: ``coords`` (L, N+P, 4), ``done``
-    (L,) int64, ``trig`` (N+P, 2). ``coords[lane, j, :2]`` is (longitudinal, lateral) of vehicle
-    j < count, and of pedestrian k at j = count + k, once measured in this frame (``town_act``'s
-    ``seen`` says which are); ``coords[..., 2:]`` and ``done`` are ``traffic``'s (its flags, its
-    sorted vehicle rows per lane, and -1 or the count of vehicles on the lane once it filled it).
-    ``trig`` holds the cosine and sine of the headings, vehicles then pedestrians. Allocate once
-    per world and reuse every frame (``town_act`` refills what it reads)."""
+    ``pedestrians`` pedestrian rows (pedestrian k at j = count + k) on ``lane_count`` lanes:
+    ``traffic.frame_cache``'s ``coords`` (L, N+P, 4), ``done`` (L,), ``trig`` (N+P, 2). Allocate
+    once per world; ``town_act`` refills what it reads."""
     size = vehicles + pedestrians
     return np.empty((lane_count, size, 4)), np.full(lane_count, -1, dtype=np.int64), np.empty((size, 2))
 
 
 def road_arrays_tuple(arrays, lanes: np.ndarray) -> tuple:
     """The road arrays ``town_act`` takes, in its argument order: the ``TownRoadArrays`` fields
-    ``junction``, ``from_arm``, ``to_arm``, ``turn``, ``end_junction``, ``end_arm``, ``light``
-    (each (L,) int64), ``street_lanes`` (S,) int64, ``routes`` (L, S, W) int64, ``route_length``
-    (L, S) int64; then ``connected_lanes(lanes)``."""
+    LANE_METADATA, ``street_lanes`` (S,), ``routes`` (L, S, W), ``route_length`` (L, S) as int64;
+    then ``connected_lanes(lanes)``."""
+    names = (*LANE_METADATA, "street_lanes", "routes", "route_length")
     return (
-        np.ascontiguousarray(arrays.junction, dtype=np.int64),
-        np.ascontiguousarray(arrays.from_arm, dtype=np.int64),
-        np.ascontiguousarray(arrays.to_arm, dtype=np.int64),
-        np.ascontiguousarray(arrays.turn, dtype=np.int64),
-        np.ascontiguousarray(arrays.end_junction, dtype=np.int64),
-        np.ascontiguousarray(arrays.end_arm, dtype=np.int64),
-        np.ascontiguousarray(arrays.light, dtype=np.int64),
-        np.ascontiguousarray(arrays.street_lanes, dtype=np.int64),
-        np.ascontiguousarray(arrays.routes, dtype=np.int64),
-        np.ascontiguousarray(arrays.route_length, dtype=np.int64),
+        *(np.ascontiguousarray(getattr(arrays, name), dtype=np.int64) for name in names),
         *connected_lanes(lanes),
     )
 
@@ -580,14 +567,7 @@ def town_step(v: np.ndarray, count: int, lanes: np.ndarray, dt: float) -> None:
             v[i, SPEED] = 0.0
 
 
-def red_light_runs(
-    lanes: np.ndarray,
-    previous_lane: np.ndarray,
-    lane: np.ndarray,
-    light: np.ndarray,
-    light_state: np.ndarray,
-    active: np.ndarray,
-) -> np.ndarray:
+def red_light_runs(lanes, previous_lane, lane, light, light_state, active) -> np.ndarray:
     """(K,) whether each world's ego ran a red light in its step (the town's and the block maps'
     rule): it left a lane whose light (``light`` (K,), -1: none) was red at the step's end
     (``light_state`` (K, lights)) for a lane that starts where that one ends; ``active`` worlds
