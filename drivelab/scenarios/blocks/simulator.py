@@ -1,33 +1,21 @@
 """K worlds of procedural block maps on the compiled core, each world on its own map.
 
-``BlocksSimulator`` is ``FastSimulator`` (same API: ``reset_where``, ``step`` with NEXT_STEP
-restarts, ``batch``) for a scenario whose maps come from seeds (``Scenario.procedural_maps``):
-an episode's seed picks its map from the scenario's set (``MapSet.seed_of``), and the K worlds
-of a batch may drive K different maps.
+``BlocksSimulator`` is ``FastSimulator`` for a scenario whose maps come from seeds
+(``Scenario.procedural_maps``): an episode's seed picks its map from the scenario's set
+(``MapSet.seed_of``). Every map is converted once (``BlocksMap``: a LaneTable with lane rows local
+to it) and the tables of the maps loaded so far are stacked; world k reads the rows
+``[lane_start[k], lane_stop[k])`` of its map, a view in which its lane indices are the map's own,
+so that one compiled call steps all K worlds. ``WorldBatch.roads`` holds the maps the K worlds
+drive and ``road_index`` each world's.
 
-Every map is converted once (``BlocksMap``: its own LaneTable with lane rows local to it) and
-the tables of the maps loaded so far are stacked into one ``(L_total, LANE_COLUMNS)`` array;
-world k reads the rows ``[lane_start[k], lane_stop[k])`` of its map. The compiled kernels
-(``blocks_traffic.blocks_simulate``: highway-env's frames with MOBIL lane changes where lanes run
-side by side and the town's stop lines; ``export_world``, ``meta_action``) are called per world on
-that slice of rows (and of the stacked per-lane arrays), a view in which the world's lane indices
-are the map's own: one compiled call steps all K worlds, with no Python loop over worlds or
-vehicles. Each world's RoadMap (for the sensors and renderers) is its map's: ``WorldBatch.roads``
-holds the maps the K worlds drive (at most K, however many the set has) and ``road_index`` each
-world's.
-
-Signalised maps (``signalised: true``) run the town's lights: the maps' light rows are stacked
-like the lanes (world k's are ``[light_start[k], light_stop[k])``), each world draws its
-intersections' cycle offsets ``(K, J_max)`` at its episode's start, and every step the states
-``(K, M_max)`` are those at the step's end time (``pedestrians.light_states``, the town's). The
-batch exports them as ``traffic_lights`` (stop point x, y, approach heading, state) with
-``light_valid``, one row per lane ending at a light (a block's arm has several lanes, the town's
-one), and the ego's red-light runs as ``red_light_crossed`` (judged as the town's).
+Signalised maps run the town's lights: the maps' light rows are stacked like the lanes, each world
+draws its intersections' cycle offsets at its episode's start, and the batch exports the states
+at the step's end time (one row per lane ending at a light) and the ego's red-light runs.
 
 Episode rules (MetaDrive's, ``metadrive/envs/metadrive_env.py``): arrival within 5 m of the
-route's end (the destination road's end), out of road when not on a lane or when the ego's body
-crosses a solid line (the centre line or the road's edge: ``on_continuous_line_done``), crash on
-any collision; the time limit is the route's (``blocks_spawn.route_time_limit_s``).
+route's end, out of road when not on a lane or when the ego's body crosses a solid line
+(``on_continuous_line_done``), crash on any collision; the time limit is the route's
+(``blocks_spawn.route_time_limit_s``).
 """
 
 from __future__ import annotations
@@ -91,28 +79,13 @@ _SERIAL, _PARALLEL = _world_kernel(False), _world_kernel(True)
 
 
 def simulate_map_worlds(
-    v: np.ndarray,
-    count: np.ndarray,
-    lanes: np.ndarray,
-    start: np.ndarray,
-    stop: np.ndarray,
-    p: np.ndarray,
-    frames: int,
-    dt: float,
-    regulation: np.ndarray,
-    active: np.ndarray,
-    release_cap_mps: float,
-    road: tuple[np.ndarray, ...],
-    light_start: np.ndarray,
-    light_stop: np.ndarray,
-    light_states: np.ndarray,
-    ego_max_speed_mps: float,
-) -> None:
+    v, count, lanes, start, stop, p, frames: int, dt: float, regulation, active, release_cap_mps: float, road,
+    light_start, light_stop, light_states, ego_max_speed_mps: float
+) -> None:  # fmt: skip
     """``blocks_traffic.blocks_simulate`` of world k's vehicles ``v[k, :count[k]]`` (K, N_max,
     VEHICLE_COLUMNS) on its map's lane rows ``lanes[start[k]:stop[k]]`` for the worlds of
-    ``active`` (K,); one numba thread per world where numba has several (``traffic.simulate_worlds``'
-    rule). Right of way is enforced at the junctions only (``enforce_road_rules``'
-    ``prioritised_only``), and a vehicle that yielded cruises on at ``release_cap_mps``.
+    ``active`` (K,), as ``traffic.simulate_worlds`` (a thread per world); a vehicle that yielded
+    cruises on at ``release_cap_mps``.
 
     :param road: the stacked per-lane arrays (L_total,) of every loaded map, in
         ``blocks_simulate``'s order: junction, from_arm, to_arm, turn, end_junction, end_arm, light
@@ -167,11 +140,8 @@ def export_map_worlds(
             floats[k], ints[k], flags[k], vehicles[k], valid[k],
         )  # fmt: skip
         lane = a + int(v[k, ego[k], T.LANE])
-        half_body, half_lane, lateral = (
-            floats[k, EX_WID] / 2,
-            floats[k, EX_LANE_WIDTH] / 2,
-            floats[k, EX_LATERAL],
-        )
+        half_body, half_lane = floats[k, EX_WID] / 2, floats[k, EX_LANE_WIDTH] / 2
+        lateral = floats[k, EX_LATERAL]
         if (solid[lane, 0] and lateral - half_body < -half_lane) or (
             solid[lane, 1] and lateral + half_body > half_lane
         ):
@@ -204,15 +174,8 @@ def clear_dead_ends(v, count, ego, lanes, start, stop, dead_end) -> None:
 
 
 class BlocksSimulator(FastSimulator):
-    """K worlds of a procedural-maps scenario on the compiled core (see the module docstring).
-
-    :param scenario: a scenario with ``procedural_maps`` (its ``spawn(seed, blocks_map, control)``).
-    :param traffic: "empty", "regular" or "dense".
-    :param control: "meta" or "continuous".
-    :param num_worlds: K.
-    :param overrides: config keys: the map set's (``map``, ``start_seed``, ``num_scenarios``,
-        ``lane_count``, ``lane_width``, ``signalised``), ``traffic_density``, highway-env's.
-    """
+    """K worlds of a procedural-maps scenario (``procedural_maps``) on the compiled core;
+    FastSimulator's parameters (``overrides``: also the map set's keys, MAP_DEFAULTS)."""
 
     def __init__(self, scenario, traffic: str, control: str, num_worlds: int, overrides: dict | None = None):
         if not scenario.procedural_maps:
@@ -366,7 +329,6 @@ class BlocksSimulator(FastSimulator):
                 self.timings, self.time_s, active, self.light_state,
             )  # fmt: skip
 
-    # --- stepping -------------------------------------------------------------------------------
     def reset_where(self, mask: np.ndarray, seeds: np.ndarray) -> WorldBatch:
         self._red_light = np.zeros(self.num_worlds, dtype=bool)
         return super().reset_where(mask, seeds)
