@@ -6,16 +6,7 @@ handed to them; nothing below this package looks a scenario up by name."""
 from __future__ import annotations
 
 from drivelab.errors import UsageError
-from drivelab.scenarios import (
-    blocks,
-    circuits,
-    highway,
-    intersection,
-    merge,
-    racetrack,
-    roundabout,
-    town,
-)
+from drivelab.scenarios import blocks, circuits, highway, intersection, merge, racetrack, roundabout, town
 from drivelab.scenarios.circuits import SEED_TABLES
 from drivelab.scenarios.options import TRAFFIC_LEVELS, check_traffic, option_rows
 from drivelab.world.scenario import Scenario

@@ -21,12 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivelab.sim.roads.blocks import Arc, Straight
-from drivelab.sim.roads.description import (
-    LINE_CONTINUOUS,
-    LINE_NONE,
-    LINE_STRIPED,
-    LaneRecord,
-)
+from drivelab.sim.roads.description import LINE_CONTINUOUS, LINE_NONE, LINE_STRIPED, LaneRecord
 
 Segment = Straight | Arc
 

@@ -31,19 +31,9 @@ from numba import njit, prange
 from drivelab.scenarios.town.spawn import TownSetup, route_tracker
 from drivelab.sim.core import traffic as T
 from drivelab.sim.core.borrow import borrowed
-from drivelab.sim.core.simulator import (
-    EX_CRASHED,
-    EX_ON_ROAD,
-    FastSimulator,
-    export_worlds,
-)
+from drivelab.sim.core.simulator import EX_CRASHED, EX_ON_ROAD, FastSimulator, export_worlds
 from drivelab.sim.junctions import rows as R
-from drivelab.sim.junctions.pedestrians import (
-    clear_wrecks,
-    hit_pedestrians,
-    light_states,
-    walk_pedestrians,
-)
+from drivelab.sim.junctions.pedestrians import clear_wrecks, hit_pedestrians, light_states, walk_pedestrians
 from drivelab.sim.junctions.rules import PEDESTRIAN_SIZE_M, LightTimings
 from drivelab.sim.junctions.traffic import (
     random_goal,

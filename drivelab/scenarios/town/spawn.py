@@ -40,22 +40,11 @@ from numba import njit
 from drivelab.sim.core import lanes as L
 from drivelab.sim.core import pcg64
 from drivelab.sim.core import traffic as T
-from drivelab.sim.core.spawn import (
-    DELTA_RANGE,
-    LaneGeometry,
-    ego_kind,
-    lane_distances,
-    mdp_target_speed,
-)
+from drivelab.sim.core.spawn import DELTA_RANGE, LaneGeometry, ego_kind, lane_distances, mdp_target_speed
 from drivelab.sim.junctions import rows as R
 from drivelab.sim.junctions.arrays import TownRoadArrays
 from drivelab.sim.junctions.arrays_description import town_arrays
-from drivelab.sim.junctions.rules import (
-    FIXED_ROUTE_COUNT,
-    MEAN_WAIT_S,
-    PAVEMENT_M,
-    LightTimings,
-)
+from drivelab.sim.junctions.rules import FIXED_ROUTE_COUNT, MEAN_WAIT_S, PAVEMENT_M, LightTimings
 from drivelab.sim.junctions.traffic import random_goal, random_route
 from drivelab.sim.route import RouteTracker
 
