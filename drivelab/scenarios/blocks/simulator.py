@@ -45,7 +45,7 @@ from drivelab.sim.core.simulator import (
     export_world,
     meta_action,
 )
-from drivelab.sim.junctions.pedestrians import light_states
+from drivelab.sim.junctions.pedestrians import light_states_worlds
 from drivelab.sim.junctions.traffic import red_light_runs
 from drivelab.world.batch import WorldBatch
 from drivelab.world.state import RoadMap
@@ -102,21 +102,6 @@ def simulate_map_worlds(
         v, count, lanes, start, stop, p, frames, dt, regulation, active, release_cap_mps, *road, light_start,
         light_stop, light_states, ego_max_speed_mps,
     )  # fmt: skip
-
-
-@njit(cache=True)
-def light_states_map_worlds(light_junction, light_arm, start, stop, offsets, timings, time_s, active, out):
-    """``pedestrians.light_states`` of world k's lights (rows ``start[k]:stop[k]`` of the stacked
-    ``light_junction`` / ``light_arm``, junctions local to its map) with its offsets ``offsets[k]``
-    (K, J_max) at ``time_s[k]``, into ``out[k]`` (K, M_max), for the worlds of ``active``;
-    ``timings``: (green, yellow, all red) seconds."""
-    for k in range(out.shape[0]):
-        if active[k]:
-            a, b = start[k], stop[k]
-            light_states(
-                light_junction[a:b], light_arm[a:b], offsets[k], timings[0], timings[1], timings[2],
-                time_s[k], out[k, : b - a],
-            )  # fmt: skip
 
 
 @njit(cache=True)
@@ -322,9 +307,9 @@ class BlocksSimulator(FastSimulator):
             self._update_lights(np.isin(np.arange(self.num_worlds), worlds))
 
     def _update_lights(self, active: np.ndarray) -> None:
-        """The light states of the ``active`` worlds at their time (``light_states_map_worlds``)."""
+        """The light states of the ``active`` worlds at their time (junctions local to each map)."""
         if self.light_state.shape[1]:
-            light_states_map_worlds(
+            light_states_worlds(
                 self.light_junction, self.light_arm, self.light_start, self.light_stop, self.offsets,
                 self.timings, self.time_s, active, self.light_state,
             )  # fmt: skip

@@ -86,6 +86,20 @@ def light_states(
 
 
 @njit(cache=True)
+def light_states_worlds(light_junction, light_arm, start, stop, offsets, timings, time_s, active, out):
+    """``light_states`` of world k's lights (rows ``start[k]:stop[k]`` of ``light_junction`` /
+    ``light_arm``) with its offsets ``offsets[k]`` (K, J) at ``time_s[k]``, into ``out[k]`` (K, M),
+    for the worlds of ``active``; ``timings``: (green, yellow, all red) seconds."""
+    for k in range(out.shape[0]):
+        if active[k]:
+            a, b = start[k], stop[k]
+            light_states(
+                light_junction[a:b], light_arm[a:b], offsets[k], timings[0], timings[1], timings[2],
+                time_s[k], out[k, : b - a],
+            )  # fmt: skip
+
+
+@njit(cache=True)
 def gap_clear(peds: np.ndarray, i: int, v: np.ndarray, count: int) -> bool:
     """``Pedestrian._gap_clear`` of pedestrian ``i`` over vehicle rows 0..count-1 (ego included):
     no vehicle within CROSSING_CLEAR_M of the crossing's centre, none facing it within
