@@ -24,18 +24,7 @@ import numpy as np
 
 from drivelab.sim.junctions.arrays import TownRoadArrays, town_arrays_from_network
 from drivelab.sim.junctions.arrays import shortest_route as graph_shortest_route
-from drivelab.sim.junctions.rules import (  # noqa: F401 (re-exported for the town's users)
-    ARM_DIRECTIONS,
-    CROSSING_WIDTH_M,
-    LANE_WIDTH_M,
-    LEFT_TURN_RADIUS_M,
-    OUTER_M,
-    RIGHT_TURN_RADIUS_M,
-    SPEED_LIMIT_MPS,
-    TURN_SPEED_MPS,
-    LightTimings,
-    light_state,
-)
+from drivelab.sim.junctions.rules import LightTimings, light_state
 from drivelab.sim.roads import blocks
 from drivelab.sim.roads.description import RoadDescription
 

@@ -360,8 +360,3 @@ class HighwayBackend:
             max_speed_mps=float(ego.MAX_SPEED),
             speed_limit_mps=float(lane.speed_limit or 30.0),
         )
-
-    def render_native(self) -> np.ndarray:
-        """highway-env's own pygame rendering (for comparison; drivelab videos use BirdEye)."""
-        self.env.render_mode = "rgb_array"
-        return self.env.render()

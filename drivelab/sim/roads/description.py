@@ -224,11 +224,6 @@ class RoadDescription:
         return self.junction >= 0
 
     @property
-    def light_group(self) -> np.ndarray:
-        """(M,) each light's phase group: arms 0 and 2 go first (0), then arms 1 and 3 (1)."""
-        return self.light_arm % 2
-
-    @property
     def junction_count(self) -> int:
         return len(self.junction_centre)
 
