@@ -115,18 +115,9 @@ def end_pose(segment: Segment, position: np.ndarray, heading: float) -> tuple[np
 
 
 def lay_lanes(
-    out: list[LaneRecord],
-    segment: Segment,
-    position: np.ndarray,
-    heading: float,
-    count: int,
-    width: float,
-    start: str,
-    end: str,
-    speed_limit: float,
-    lines=road_lines,
-    **lane,
-) -> None:
+    out: list[LaneRecord], segment: Segment, position: np.ndarray, heading: float, count: int, width: float,
+    start: str, end: str, speed_limit: float, lines=road_lines, **lane,
+) -> None:  # fmt: skip
     """Append ``count`` forward lanes of ``segment`` from the pose (one road ``start`` → ``end``);
     ``lines(k, count)``: lane k's markings."""
     for k in range(count):
@@ -139,25 +130,18 @@ def lay_lanes(
 
 
 def lay_road(
-    out: list[LaneRecord],
-    segment: Segment,
-    position: np.ndarray,
-    heading: float,
-    count: int,
-    width: float,
-    start: str,
-    end: str,
-    speed_limit: float,
-    reverse: dict | None = None,
-) -> tuple[np.ndarray, float]:
-    """A two-way road along ``segment`` from the pose: ``count`` lanes each way (``start`` →
-    ``end`` and ``-end`` → ``-start``); ``reverse``: extra LaneRecord fields of the reverse
-    lanes. Returns the end pose of the centre line."""
+    out: list[LaneRecord], segment: Segment, position: np.ndarray, heading: float, count: int, width: float,
+    start: str, end: str, speed_limit: float, reverse: dict | None = None, reverse_count: int | None = None,
+) -> tuple[np.ndarray, float]:  # fmt: skip
+    """A two-way road along ``segment`` from the pose: ``count`` lanes forward (``start`` → ``end``)
+    and ``reverse_count`` (default ``count``) back (``-end`` → ``-start``); ``reverse``: extra
+    LaneRecord fields of the reverse lanes. Returns the end pose of the centre line."""
     lay_lanes(out, segment, position, heading, count, width, start, end, speed_limit)
     end_position, end_heading = end_pose(segment, position, heading)
     lay_lanes(
-        out, reversed_segment(segment), end_position, end_heading + np.pi, count, width,
-        reverse_node(end), reverse_node(start), speed_limit, **(reverse or {}),
+        out, reversed_segment(segment), end_position, end_heading + np.pi,
+        count if reverse_count is None else reverse_count, width, reverse_node(end), reverse_node(start),
+        speed_limit, **(reverse or {}),
     )  # fmt: skip
     return end_position, end_heading
 
