@@ -51,8 +51,7 @@ from drivelab.sim.core.lanes import (
     local_coordinates,
 )
 from drivelab.sim.junctions.rows import PEDESTRIAN_COLUMNS
-from drivelab.sim.junctions.rules import STOP_MARGIN_M
-from drivelab.sim.junctions.traffic import py_square, town_acceleration
+from drivelab.sim.junctions.traffic import stop_ahead, town_acceleration
 
 _NO_PEDESTRIANS = np.zeros((0, PEDESTRIAN_COLUMNS))
 
@@ -269,18 +268,7 @@ def blocks_change_lane_policy(
     )
     lane, target = int(v[i, T.LANE]), int(v[i, T.TARGET_LANE])
     if lane != target:
-        if lanes[lane, FIRST_OF_ROAD] == lanes[target, FIRST_OF_ROAD]:
-            for j in range(v.shape[0]):
-                if (
-                    j != i
-                    and int(v[j, T.LANE]) != target
-                    and (v[j, T.KIND] == T.CONTROLLED or v[j, T.KIND] == T.IDM)
-                    and int(v[j, T.TARGET_LANE]) == target
-                ):
-                    T.lane_coordinates(v, lanes, coords, done, lane)
-                    if 0 < coords[lane, j, 0] - coords[lane, i, 0] < T.cached_desired_gap(v, p, trig, i, j):
-                        v[i, T.TARGET_LANE] = lane
-                        break
+        T.abort_change(v, lanes, p, coords, done, trig, i, lane, target)
         return
     if ending[lane]:  # a mandatory change, looked for every frame
         for side in (-1, 1):
@@ -307,20 +295,6 @@ def blocks_change_lane_policy(
             and _route_goes_on(v, lanes, i, candidate, successor_start, successors)
         ):
             v[i, T.TARGET_LANE] = candidate
-
-
-@njit(cache=True, inline="always")
-def stop_ahead(v: np.ndarray, p: np.ndarray, i: int, ahead_m: float) -> float:
-    """IDM's acceleration of vehicle i behind a stopped virtual leader ``ahead_m`` metres beyond
-    its front bumper, to stand STOP_MARGIN_M short of it (``junctions.traffic.town_acceleration``'s
-    stop line, the same arithmetic)."""
-    gap_m = ahead_m - STOP_MARGIN_M + p[T.DISTANCE_WANTED]
-    speed = max(v[i, T.SPEED], 0.0)
-    ab = -p[T.COMFORT_ACC_MAX] * p[T.COMFORT_ACC_MIN]
-    desired_gap = p[T.DISTANCE_WANTED] + speed * p[T.TIME_WANTED] + speed * speed / (2 * np.sqrt(ab))
-    target = T.not_zero(v[i, T.TARGET_SPEED])
-    stop = p[T.COMFORT_ACC_MAX] * (1 - (speed / np.abs(target)) ** v[i, T.DELTA])
-    return stop - p[T.COMFORT_ACC_MAX] * py_square(desired_gap / T.not_zero(gap_m))
 
 
 @njit(cache=True)

@@ -327,6 +327,25 @@ def mobil(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, i: int, lane: int) ->
 
 
 @njit(cache=True, inline="always")
+def abort_change(v, lanes, p, coords, done, trig, i: int, lane: int, target: int) -> None:
+    """IDMVehicle.change_lane_policy's abort: vehicle i, changing from ``lane`` to ``target`` on
+    the same road, goes back when another vehicle entering ``target`` is within its desired gap."""
+    if lanes[lane, FIRST_OF_ROAD] != lanes[target, FIRST_OF_ROAD]:
+        return
+    for j in range(v.shape[0]):
+        if (
+            j != i
+            and int(v[j, LANE]) != target
+            and (v[j, KIND] == CONTROLLED or v[j, KIND] == IDM)
+            and int(v[j, TARGET_LANE]) == target
+        ):
+            lane_coordinates(v, lanes, coords, done, lane)
+            if 0 < coords[lane, j, 0] - coords[lane, i, 0] < cached_desired_gap(v, p, trig, i, j):
+                v[i, TARGET_LANE] = lane
+                return
+
+
+@njit(cache=True, inline="always")
 def change_lane_policy(v, lanes, p, coords, done, trig, i: int, own) -> None:
     """IDMVehicle.change_lane_policy: abort a change into a lane someone else is entering; else,
     every LANE_CHANGE_DELAY seconds, ask MOBIL about each side lane (the right one last).
@@ -334,19 +353,7 @@ def change_lane_policy(v, lanes, p, coords, done, trig, i: int, own) -> None:
     here when MOBIL is asked)."""
     lane, target = int(v[i, LANE]), int(v[i, TARGET_LANE])
     if lane != target:
-        same_road = lanes[lane, FIRST_OF_ROAD] == lanes[target, FIRST_OF_ROAD]
-        if same_road:
-            for j in range(v.shape[0]):
-                if (
-                    j != i
-                    and int(v[j, LANE]) != target
-                    and (v[j, KIND] == CONTROLLED or v[j, KIND] == IDM)
-                    and int(v[j, TARGET_LANE]) == target
-                ):
-                    lane_coordinates(v, lanes, coords, done, lane)
-                    if 0 < coords[lane, j, 0] - coords[lane, i, 0] < cached_desired_gap(v, p, trig, i, j):
-                        v[i, TARGET_LANE] = lane
-                        break
+        abort_change(v, lanes, p, coords, done, trig, i, lane, target)
         return
     if not p[LANE_CHANGE_DELAY] < v[i, TIMER]:
         return

@@ -443,14 +443,20 @@ def town_acceleration(
     )
     if ahead_m == NO_STOP:
         return acceleration
+    return min(acceleration, stop_ahead(v, p, i, ahead_m))
+
+
+@njit(cache=True, inline="always")
+def stop_ahead(v, p, i: int, ahead_m: float) -> float:
+    """IDM's acceleration of vehicle i behind a stopped virtual leader ``ahead_m`` metres beyond
+    its front bumper, to stand STOP_MARGIN_M short of it (TownVehicle.acceleration's stop line)."""
     gap_m = ahead_m - STOP_MARGIN_M + p[DISTANCE_WANTED]
     speed = max(v[i, SPEED], 0.0)
     ab = -p[COMFORT_ACC_MAX] * p[COMFORT_ACC_MIN]
     desired_gap = p[DISTANCE_WANTED] + speed * p[TIME_WANTED] + speed * speed / (2 * np.sqrt(ab))
     target = not_zero(v[i, TARGET_SPEED])
     stop = p[COMFORT_ACC_MAX] * (1 - (speed / np.abs(target)) ** v[i, DELTA])
-    stop -= p[COMFORT_ACC_MAX] * py_square(desired_gap / not_zero(gap_m))
-    return min(acceleration, stop)
+    return stop - p[COMFORT_ACC_MAX] * py_square(desired_gap / not_zero(gap_m))
 
 
 @njit(cache=True)
