@@ -88,8 +88,21 @@ class LaneRecord:
         return np.arctan2(self.end[1] - self.start[1], self.end[0] - self.start[0])
 
 
-def _column(records: list[LaneRecord], name: str, dtype) -> np.ndarray:
-    return np.array([getattr(record, name) for record in records], dtype=dtype)
+# the LaneRecord fields a RoadDescription keeps as (L,) columns, (L, 2) for the pairs
+_COLUMNS = {
+    **dict.fromkeys(
+        ("start", "end", "centre", "radius", "start_phase", "end_phase", "width", "speed_limit"), float
+    ),
+    **dict.fromkeys(("kind", "lines", "priority", "junction", "from_arm", "to_arm", "turn"), np.int64),
+    **dict.fromkeys(("end_junction", "end_arm"), np.int64),
+    **dict.fromkeys(("clockwise", "forbidden"), bool),
+}
+_PAIRS = ("start", "end", "centre", "lines")
+
+
+def _column(records: list[LaneRecord], name: str) -> np.ndarray:
+    column = np.array([getattr(record, name) for record in records], dtype=_COLUMNS[name])
+    return column.reshape(-1, 2) if name in _PAIRS else column
 
 
 @dataclass(frozen=True, eq=False)
@@ -191,25 +204,7 @@ class RoadDescription:
             lane_from=np.array([node_of[r.start_node] for r in records], dtype=np.int64),
             lane_to=np.array([node_of[r.end_node] for r in records], dtype=np.int64),
             lane_id=np.array(lane_id, dtype=np.int64),
-            kind=_column(records, "kind", np.int64),
-            start=_column(records, "start", float).reshape(-1, 2),
-            end=_column(records, "end", float).reshape(-1, 2),
-            centre=_column(records, "centre", float).reshape(-1, 2),
-            radius=_column(records, "radius", float),
-            start_phase=_column(records, "start_phase", float),
-            end_phase=_column(records, "end_phase", float),
-            clockwise=_column(records, "clockwise", bool),
-            width=_column(records, "width", float),
-            lines=_column(records, "lines", np.int64).reshape(-1, 2),
-            speed_limit=_column(records, "speed_limit", float),
-            priority=_column(records, "priority", np.int64),
-            forbidden=_column(records, "forbidden", bool),
-            junction=_column(records, "junction", np.int64),
-            from_arm=_column(records, "from_arm", np.int64),
-            to_arm=_column(records, "to_arm", np.int64),
-            turn=_column(records, "turn", np.int64),
-            end_junction=_column(records, "end_junction", np.int64),
-            end_arm=_column(records, "end_arm", np.int64),
+            **{name: _column(records, name) for name in _COLUMNS},
             light=np.array(light, dtype=np.int64),
             **rest,
         )
