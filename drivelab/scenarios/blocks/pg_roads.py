@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drivelab.sim.roads.blocks import Arc, Straight
+from drivelab.sim.roads.blocks import Arc, Straight, road_lines
 from drivelab.sim.roads.description import LINE_CONTINUOUS, LINE_NONE, LINE_STRIPED, LaneRecord
 
 Segment = Straight | Arc
@@ -91,14 +91,6 @@ def right_normal(heading: float) -> np.ndarray:
 def lane_offset(k: int, width: float) -> float:
     """Offset of lane ``k`` to the right of its road's centre line."""
     return (k + 0.5) * width
-
-
-def road_lines(k: int, count: int) -> tuple[int, int]:
-    """(left, right) markings of lane ``k`` of ``count``: the centre line and the road edge are
-    solid, the lines between lanes dashed (each drawn once, on the left of the lane right of it)."""
-    left = LINE_CONTINUOUS if k == 0 else LINE_STRIPED
-    right = LINE_CONTINUOUS if k == count - 1 else LINE_NONE
-    return left, right
 
 
 def reversed_segment(segment: Segment) -> Segment:
