@@ -1,37 +1,26 @@
 """The procedural maps' traffic as compiled loops over ONE world's arrays (the caller loops the worlds).
 
-``blocks_simulate`` is ``traffic.simulate`` (highway-env's frames: every vehicle acts, the road's
-rules every regulation period, every vehicle steps, collisions) with ``blocks_act`` in place of
-``traffic.act``. It differs for the traffic rows (KIND ``IDM``) only; the ego rows act as in
-``traffic.act``:
+``blocks_simulate`` is ``traffic.simulate`` with ``blocks_act`` in place of ``traffic.act``; it
+differs for the traffic rows (KIND ``IDM``) only:
 
-- **lane changes** (highway-env's MOBIL, ``traffic``'s own neighbour search and IDM accelerations,
-  ``blocks_mobil``) only where a road's lanes run side by side: ``changeable`` lanes, those of a
-  road of two lanes or more whose lanes are all of one kind (straight or arc) outside the
-  intersections and the roundabouts (``blocks_spawn.changeable_lanes``). A change is considered
-  only when the rest of the vehicle's route can still be driven from the new lane through the
-  lanes that continue one another (``route_feasible``): a vehicle bound for an off-ramp stays in
-  the lane that leads there. On an ``ending`` lane (one that leads into a taper merging into its
-  neighbour: the in-ramp's acceleration lane, the merge's lane that ends) the change is
-  mandatory: checked every frame, taken as soon as neither the vehicle nor its new follower has
-  to brake harder than LANE_CHANGE_MAX_BRAKING_IMPOSED (MOBIL's safety criterion, the rule
-  highway-env's MOBIL applies to a lane its route asks for); a vehicle that finds no gap stops
-  at the ending lane's end (the town's stop-line deceleration, ``stop_ahead``) and waits for one.
-- **the next lane** at the end of a lane (``blocks_follow_road``): the continuation of the lane on
-  the route's next road, the route's named lane first, else another continuation from which the
-  rest of the route can be driven; past the route's end (or off it) the continuation with the
-  same lane id, else the first one; a lane leading nowhere is kept (the vehicle leaves the map).
-- **traffic lights** (signalised junctions): the town's stop-line rule (``junctions/traffic.py``'s
-  ``town_acceleration`` with no leader: red always, yellow unless too late to stop, a left turn
-  on green waits for oncoming vehicles), its virtual leader's deceleration taken when lower.
+- **lane changes** (highway-env's MOBIL, ``blocks_mobil``) only on ``changeable`` lanes (side by
+  side, outside the intersections and roundabouts: ``blocks_spawn.changeable_lanes``), and only
+  when the rest of the route can still be driven from the new lane (``route_feasible``). On an
+  ``ending`` lane (one leading into a taper that merges into its neighbour) the change is
+  mandatory: checked every frame, taken as soon as MOBIL's safety criterion holds
+  (``merge_safe``); a vehicle that finds no gap stops at the lane's end (``stop_ahead``).
+- **the next lane** at the end of a lane (``blocks_follow_road``): the continuation on the route's
+  next road, its named lane first, else one from which the rest of the route can be driven; off
+  the route, the continuation with the same lane id, else the first; a dead end is kept (the
+  vehicle leaves the map).
+- **traffic lights**: the town's stop-line rule (``junctions.traffic.town_acceleration`` with no
+  leader), its deceleration taken when lower.
 
-Arrays (one world): ``v`` (N, VEHICLE_COLUMNS) vehicle rows; ``lanes`` (L, LANE_COLUMNS) the
-map's lane rows (lane indices local to the map); ``junction``, ``from_arm``, ``to_arm``,
-``turn``, ``end_junction``, ``end_arm``, ``light`` (L,) int64 (the description's; ``light`` is
--1 on lanes without a light); ``changeable``, ``ending`` (L,) bool; ``successor_start`` (L + 1,) int64
-offsets into ``successors`` (E,) int64 local lane rows (the CSR of ``blocks_spawn._continuations``,
-offsets possibly shifted: a stacked array's slice); ``light_states`` (M,) int64 LIGHT_* of the
-map's lights.
+Arrays (one world): ``v`` (N, VEHICLE_COLUMNS) vehicle rows; ``lanes`` the map's lane rows (lane
+indices local to the map); the description's LANE_METADATA arrays (``light`` -1 on lanes without
+one); ``changeable``, ``ending`` (L,) bool; ``successor_start`` (L + 1,) offsets into
+``successors`` (E,) (the CSR of ``blocks_spawn._continuations``, offsets possibly shifted);
+``light_states`` (M,) LIGHT_* of the map's lights.
 """
 
 from __future__ import annotations

@@ -1,10 +1,8 @@
 """The highway: its preset and its episode set-up, for many worlds in one compiled call.
 
 ``spawn_highway_worlds`` writes, for each world to reset, the rows ``HighwayEnv._create_vehicles``
-(one controlled vehicle, ``Vehicle.create_random``, ``IDMVehicle.randomize_behavior``) would
-create from that world's seed, straight into the simulator's vehicle buffer. The random numbers
-come from :mod:`pcg64` generators seeded as ``gymnasium.utils.seeding.np_random(seed)``, drawn in
-highway-env's order, so a seed gives the same vehicles as highway-env's own reset (tested).
+would create from that world's seed, with :mod:`pcg64` generators seeded as gymnasium seeds them
+and drawn in highway-env's order.
 """
 
 from __future__ import annotations

@@ -1,14 +1,11 @@
 """IntersectionEnv's episode set-up and arrivals as vehicle rows, without highway-env objects.
 
 ``spawn_intersection`` reproduces ``_make_vehicles``: vehicles arrive at the entries, the road
-runs three seconds without an ego (on the compiled kernel, ``traffic.simulate``), a challenger
-arrives, the ego is placed and the vehicles within 20 m of it leave. ``IntersectionTraffic``
-reproduces ``_spawn_vehicle``, which the simulator also calls between steps with the world's
-generator: the one this set-up drew from, so it goes on exactly as highway-env's ``np_random``.
-
-The warm-up is highway-env's ``road.act`` / ``road.step`` as the kernel computes them: the same
-arithmetic in the same order, bit for bit the same rows where numpy does not dispatch AVX-512
-kernels (see ``tests/sim/test_spawn.py``); with them, a position can differ by ULPs.
+runs three seconds without an ego (``traffic.simulate``), a challenger arrives, the ego is placed
+and the vehicles within 20 m of it leave. ``IntersectionTraffic`` reproduces ``_spawn_vehicle``,
+which the simulator also calls between steps with the generator this set-up drew from. The
+warm-up is bit for bit highway-env's where numpy does not dispatch AVX-512 kernels (else a
+position can differ by ULPs; ``tests/sim/test_spawn.py``).
 """
 
 from __future__ import annotations

@@ -1,14 +1,12 @@
 """numpy's PCG64 generator as plain uint64 arrays, so that compiled code can seed and draw from
-many of them in one call (numba's own Generator support unboxes one Python object per call).
+many of them in one call.
 
 A generator is a ``(6,)`` uint64 array: the 128-bit LCG state and increment as (high, low)
 words, then numpy's 32-bit buffer (a flag and the buffered half of the last 64-bit output).
-``seeded_states`` builds them from integer seeds exactly as ``gymnasium.utils.seeding.np_random``
-(``PCG64(SeedSequence(seed))``) does, SeedSequence's hash (O'Neill's seed_seq_fe) included;
-``next_uint64``, ``bounded_int`` and ``uniform`` return
-the numbers ``Generator.random_raw`` / ``integers(0, n)`` / ``uniform(a, b)`` would, in the same
-order (tested against numpy). The algorithms are the published ones: PCG's XSL-RR output over a
-128-bit LCG (O'Neill 2014) and Lemire's bounded integers with numpy's buffered 32-bit draws.
+``seeded_states`` builds them from integer seeds as ``gymnasium.utils.seeding.np_random``
+(``PCG64(SeedSequence(seed))``) does; ``next_uint64``, ``bounded_int`` and ``uniform`` return the
+numbers ``Generator.random_raw`` / ``integers(0, n)`` / ``uniform(a, b)`` would, in the same order
+(PCG's XSL-RR output over a 128-bit LCG, O'Neill 2014; Lemire's bounded integers).
 """
 
 from __future__ import annotations

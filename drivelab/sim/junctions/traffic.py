@@ -1,48 +1,30 @@
 """The town's vehicles as compiled loops over ONE world's arrays (the caller loops the worlds).
 
 ``town_act`` is ``Road.act()`` of the reference town (``scenarios/town/reference_env.py``): every
-vehicle row decides its controls in list order. The ego rows behave as in ``traffic.act``
-(``CONTROLLED``: the meta-action ego's lane following and speed control; ``PLAIN`` and
-``PEDAL_KIND`` keep their last action; ``OBSTACLE`` rows never act; ``IDM`` rows are not town
-traffic and raise). ``TOWN`` rows are highway-env's ``TownVehicle``:
+vehicle row decides its controls in list order; the ego rows behave as in ``traffic.act``, and
+``TOWN`` rows are highway-env's ``TownVehicle``:
 
 - ``TownVehicle.act``: the target speed is the current lane's limit, or the next planned lane's
-  (the turn's) once within TURN_BRAKE_MARGIN_M plus the braking distance to it, computed before
-  ``follow_road`` (a crashed vehicle sets it too, then does nothing else);
+  once within TURN_BRAKE_MARGIN_M plus the braking distance to it, set before ``follow_road``;
 - ``TownVehicle.follow_road``: with at most one route entry left, a new ``random_route`` from the
-  target lane (goals: the streets' end nodes except the target lane's, in street order; up to
-  ROUTE_GOAL_TRIES draws of ``integers(len(goals))`` on the world's PCG64 words; the route from the
-  precomputed BFS table; else the target lane alone), then ``ControlledVehicle.follow_road``;
-- ``IDMVehicle.act``: ``change_lane_policy`` (``traffic``'s; every town road has one lane, so only
-  its timer reset is ever reached), steering to the target lane, IDM behind the leader on the
-  current lane and, while changing lanes, on the target lane;
-- leaders are found as ``Road.neighbour_vehicles`` with ``neighbour_vehicles_connected_lanes``:
-  on the lane, else on its successor roads (offset by the lane's length), else on its predecessor
-  roads (offset by minus their length), over the vehicles and then the pedestrians that are not
-  crashed (highway-env's ``road.objects``), the last of equals in front; the gap is
-  ``TownVehicle.lane_distance_to``: the straight-line distance, signed by the projection on the
-  current lane;
+  target lane (``random_goal``'s draws on the world's PCG64 words), then
+  ``ControlledVehicle.follow_road``;
+- ``IDMVehicle.act``: ``change_lane_policy`` (``traffic``'s), steering to the target lane, IDM
+  behind the leader on the current lane and, while changing lanes, on the target lane;
+- leaders are found as ``Road.neighbour_vehicles`` with ``neighbour_vehicles_connected_lanes``
+  (``connected_front``) over the vehicles and then the pedestrians not crashed; the gap is
+  ``TownVehicle.lane_distance_to``: the straight-line distance, signed by the lane projection;
 - ``TownVehicle.acceleration``: IDM, then the minimum with a stopped virtual leader at the stop
-  line when ``stop_line_ahead`` says stop: red always; yellow unless v² / (2 max(ahead, 1e-3))
-  exceeds the comfortable deceleration; green only when the next planned lane is a left turn that
-  must wait (``left_turn_must_wait``).
+  line when ``stop_line_ahead`` says stop.
 
 ``town_step`` is ``Road.step``'s vehicle loop: ``Vehicle.step`` for every row, and for ``TOWN``
 rows the IDM timer and ``TownVehicle.step``'s no-reversing clamp.
 
-Arrays (one world):
-- ``v`` (N_max, TOWN_VEHICLE_COLUMNS) vehicle rows (``traffic``'s columns), rows ``0..count-1``
-  live, in ``road.vehicles`` order; a row's route capacity is ``(v.shape[1] - ROUTE) // 2``;
-- ``peds`` (P_max, PEDESTRIAN_COLUMNS) pedestrian rows (``town_rows``), rows ``0..pcount-1`` live,
-  in spawn order;
-- ``lanes`` (L, LANE_COLUMNS) the lane table; ``p`` (9,) the IDM parameters
-  (``traffic.IDM_PARAMETERS``);
-- ``coords``, ``done``, ``trig``: the frame cache, ``town_frame_cache(N_max, P_max, L)``, made
-  once per world (``town_act`` refills it; it must hold count + pcount objects);
-- the road arrays of ``road_arrays_tuple`` (in that order): the ``TownRoadArrays`` fields and the
-  ``connected_lanes`` tables;
-- ``light_states`` (M,) int64: LIGHT_* of each light row at the step's end time;
-- ``rng_words`` (6,) uint64: the world's PCG64 state (``pcg64``), advanced in place.
+Arrays (one world): ``v`` (N_max, TOWN_VEHICLE_COLUMNS) vehicle rows, ``0..count-1`` live;
+``peds`` (P_max, PEDESTRIAN_COLUMNS) pedestrian rows, ``0..pcount-1`` live; ``lanes`` the lane
+table; ``p`` the IDM parameters; ``coords``, ``done``, ``trig`` the frame cache
+(``town_frame_cache``); the road arrays of ``road_arrays_tuple``, in its order; ``light_states``
+(M,) LIGHT_* at the step's end time; ``rng_words`` (6,) the world's PCG64 state, advanced in place.
 """
 
 from __future__ import annotations
