@@ -195,7 +195,6 @@ class BlocksSimulator(FastSimulator):
         self.light_stop = np.zeros(k, dtype=np.int64)
         self.offsets = np.zeros((k, 0))  # (K, J_max) world k's cycle offset of each intersection
         self.light_state = np.zeros((k, 0), dtype=np.int64)  # (K, M_max) LIGHT_* of world k's lights
-        self._red_light = np.zeros(k, dtype=bool)
         self._lights_of: np.ndarray | None = None  # the world_map the light gather was made for
         self._light_gather = (np.zeros((k, 0), dtype=np.int64), np.zeros((k, 0), dtype=bool))
         self.timings = np.zeros(3)  # the lights' (green, yellow, all red) seconds: the maps' own
@@ -284,10 +283,8 @@ class BlocksSimulator(FastSimulator):
             slot = self._slot(self.map_set.seed_of(seed))
             bmap = self.maps[slot]
             rows, ego, regulation, offsets = self.scenario.spawn(seed, bmap, self.control)
-            self._fit(len(rows))
-            self.vehicles[k] = 0.0
-            self.vehicles[k, : len(rows)] = rows
-            self.count[k], self.ego[k], self.regulation[k] = len(rows), ego, regulation
+            self._put_rows(k, rows, ego)
+            self.regulation[k] = regulation
             self.world_map[k] = slot
             self.lane_start[k] = self.map_start[slot]
             self.lane_stop[k] = self.map_start[slot] + len(bmap.table.rows)
@@ -313,10 +310,6 @@ class BlocksSimulator(FastSimulator):
                 self.light_junction, self.light_arm, self.light_start, self.light_stop, self.offsets,
                 self.timings, self.time_s, active, self.light_state,
             )  # fmt: skip
-
-    def reset_where(self, mask: np.ndarray, seeds: np.ndarray) -> WorldBatch:
-        self._red_light = np.zeros(self.num_worlds, dtype=bool)
-        return super().reset_where(mask, seeds)
 
     # --- stepping (``FastSimulator.step``'s hooks; the lights as the town's) -----------------------
     _whole_step_kernel = False

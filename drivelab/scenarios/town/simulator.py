@@ -237,10 +237,6 @@ class TownSimulator(FastSimulator):
     def _projected(self, restart: np.ndarray) -> np.ndarray:
         return restart  # the others were projected before their routes grew (``_after_frames``)
 
-    def reset_where(self, mask: np.ndarray, seeds: np.ndarray) -> WorldBatch:
-        self._red_light = np.zeros(self.num_worlds, dtype=bool)
-        return super().reset_where(mask, seeds)
-
     def _retarget(self, active: np.ndarray) -> None:
         """TownEnv.extend_route in every world that arrived: a random route on from the end of
         the ego's, drawn from the world's generator after its frames; the meta-action ego's

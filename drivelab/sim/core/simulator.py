@@ -764,6 +764,13 @@ class FastSimulator:
         grown[:, :capacity] = self.vehicles
         self.vehicles = grown
 
+    def _put_rows(self, k: int, rows: np.ndarray, ego: int) -> None:
+        """World k's vehicles become ``rows`` (the rest of its buffer zeros), its ego row ``ego``."""
+        self._fit(len(rows))
+        self.vehicles[k] = 0.0
+        self.vehicles[k, : len(rows)] = rows
+        self.count[k], self.ego[k] = len(rows), ego
+
     def _route_for_lane(self, lane: int) -> int:
         """The index of the ego route that starts on lane row ``lane`` (padded on first use)."""
         if lane not in self._route_of_lane:
@@ -811,6 +818,7 @@ class FastSimulator:
         """Start a new episode from ``seeds[k]`` in every world where ``mask[k]`` (K,); the other
         worlds are untouched. Returns the whole batch."""
         mask = np.asarray(mask, dtype=bool)
+        self._red_light = np.zeros(self.num_worlds, dtype=bool)  # the lights' rules (town, block maps)
         self._start_episodes(np.flatnonzero(mask), seeds)
         self._project(fresh=mask, update=mask)
         self.batch = self._export()
@@ -825,10 +833,8 @@ class FastSimulator:
         else:
             for k in worlds:
                 rows, ego, regulation, rng = self.scenario.spawn(int(seeds[k]), self._road, self.control)
-                self._fit(len(rows))
-                self.vehicles[k] = 0.0
-                self.vehicles[k, : len(rows)] = rows
-                self.count[k], self.ego[k], self.regulation[k], self.rngs[k] = len(rows), ego, regulation, rng
+                self._put_rows(k, rows, ego)
+                self.regulation[k], self.rngs[k] = regulation, rng
                 self.route_index[k] = self._route_for_lane(int(rows[ego, T.LANE]))
         ego_lane = self.vehicles[worlds, self.ego[worlds], T.LANE].astype(np.int64)
         self.start_lane_id[worlds] = self.lanes[ego_lane, L.LANE_ID]
