@@ -150,29 +150,20 @@ def traffic_density(config: dict) -> float:
 class BlocksMap:
     """One procedural map as the compiled core reads it (L lane rows, local to this map).
 
-    :param pg: the generated map.
-    :param road: the simulator's converted road of it (``simulator._Road``: LaneTable, RoadMap,
-        geometry, the config and vehicle constants), shared by every episode on the map.
-    :param spawn_lanes: (n,) lane rows of the spawn road (lane 0 first).
-    :param routes: the ego's route (RouteTracker) from each spawn lane row.
-    :param in_junction: (L,) intersection lanes and roundabout curves and ring.
-    :param solid: (L, 2) whether the lane's left / right line is solid (centre line, road edge).
-    :param dead_end: (L,) lanes whose end leads nowhere (traffic leaves the map there).
-    :param successor_start: (L + 1,) / ``successors`` (E,): CSR of the lanes that continue each
-        lane row (``_continuations``).
-    :param spot_lane: / ``spot_s`` / ``spot_block`` (S,): the candidate traffic spots (lane row,
-        longitudinal position, block index); ``block_spots`` (B,): floor(length / 10) of each
-        block's candidate lanes (B blocks).
-    :param changeable: (L,) lanes where traffic may change lanes (``changeable_lanes``);
-        ``ending`` (L,) those of them that lead into a merging taper (``ending_lanes``).
-    :param junction_arrays: the description's (L,) int64 ``junction``, ``from_arm``, ``to_arm``,
-        ``turn``, ``end_junction``, ``end_arm``, ``light`` (``blocks_traffic``'s argument order).
-    :param junction_count: J, the map's intersections (X and T); ``light_junction``,
-        ``light_arm`` (M,), ``light_xyh`` (M, 3): its lights (none unless signalised), one per arm
-        at the middle of the arm's stop line.
-    :param signal_xyh: (S, 3) the stop point (x, y, heading) of every lane that ends at a light,
-        and ``signal_light`` (S,) that light's row: the lights as the batch exports them, one per
-        lane, so that a lane's light stands in it (``WorldBatch.light_ahead``).
+    :param road: the simulator's converted road of it (``simulator._Road``), shared by every
+        episode on the map; ``pg``: the generated map.
+    :param spawn_lanes: (n,) lane rows of the spawn road; ``routes``: the ego's RouteTracker from each.
+    :param in_junction: (L,) intersection lanes and roundabout curves and ring; ``solid`` (L, 2):
+        the lane's left / right line is solid; ``dead_end`` (L,): traffic leaves the map there.
+    :param successor_start: (L + 1,) / ``successors`` (E,): CSR of ``_continuations``.
+    :param spot_lane: / ``spot_s`` / ``spot_block`` (S,): the candidate traffic spots (``_spots``);
+        ``block_spots`` (B,): floor(length / 10) of each block's candidate lanes.
+    :param changeable: (L,) ``changeable_lanes``; ``ending`` (L,) ``ending_lanes``.
+    :param junction_arrays: the description's LANE_METADATA arrays (int64).
+    :param junction_count: J, the map's intersections; ``light_junction``, ``light_arm`` (M,),
+        ``light_xyh`` (M, 3): its lights (none unless signalised), one per arm.
+    :param signal_xyh: (S, 3) the stop point (x, y, heading) of every lane that ends at a light and
+        ``signal_light`` (S,) its light's row: the lights as the batch exports them, one per lane.
     """
 
     pg: PGMap

@@ -151,20 +151,16 @@ def idm_parameters(npc_class: type = IDMVehicle) -> np.ndarray:
 class _Road:
     """A scenario's road and timing as arrays, shared by every simulator of that configuration.
 
-    :param routes: ego route (RouteTracker) per start lane row, planned at conversion for every
-        lane a route can be planned from.
-    :param in_junction: (L,) lane rows that count as junction area.
-    :param exit_lane: (L,) lane rows that are an intersection exit (from "il…" to "o…").
-    :param geometry: highway-env's lane formulas over the table (the spawners').
-    :param paths: ``RoadNetwork.shortest_path`` between every two nodes.
+    :param routes: ego route (RouteTracker) per start lane row a route can be planned from.
+    :param in_junction: (L,) junction lanes; ``exit_lane`` (L,): intersection exits ("il…" → "o…").
+    :param geometry: highway-env's lane formulas (the spawners'); ``paths``: ``shortest_path``s.
     :param objects: (M, VEHICLE_COLUMNS) the road's static obstacles, after every vehicle.
-    :param idm: the IDM / MOBIL parameters as the traffic class had them at conversion.
-    :param ego_length, ego_width: the ego class's size; ``npc_*``, ``lane_change_delay``,
-        ``idm_delta``: the traffic class's size, LANE_CHANGE_DELAY and default DELTA.
-    :param keep_npcs, extra_vehicles: the traffic level's drivelab keys (HighwayBackend's).
-    :param destination: the scenario's destination node (extra vehicles are routed to it).
-    :param cache: static arrays a spawner derives from the road, made at its first use.
-    :param description: the road's description (``Scenario.road``'s), None for highway-env's roads.
+    :param idm: the traffic class's IDM / MOBIL parameters; ``npc_*``, ``lane_change_delay``,
+        ``idm_delta``: its size, LANE_CHANGE_DELAY and DELTA; ``ego_*``: the ego class's size.
+    :param keep_npcs, extra_vehicles: the traffic level's drivelab keys; ``destination``: the
+        scenario's (extra vehicles are routed to it).
+    :param cache: what a spawner derives from the road at its first use; ``description``: the
+        road's description (``Scenario.road``'s), None for highway-env's roads.
     """
 
     table: L.LaneTable
@@ -857,11 +853,10 @@ class FastSimulator:
     def step(
         self, controls: np.ndarray, restart: np.ndarray | None = None, seeds: np.ndarray | None = None
     ) -> WorldBatch:
-        """One policy step of every world, in the order every simulator shares: the egos' controls,
-        the clocks (and the lights on them), ``frames`` simulation frames, the scenario's rules
-        after the frames (``_after_frames``), the episodes that restart, the routes' progress, the
-        export. A scenario's simulator fills in the hooks; this class's step is also one compiled
-        call (``advance_worlds``) where nothing in between needs Python (``one_call``).
+        """One policy step of every world: the egos' controls, the clocks (and lights), ``frames``
+        simulation frames, the scenario's rules after the frames, the episodes that restart, the
+        routes' progress, the export (one compiled call where nothing in between needs Python,
+        ``one_call``). A scenario's simulator fills in the hooks.
 
         :param controls: meta: (K,) int meta-actions; continuous: (K, 2) [acceleration, steering]
             normalised in [-1, 1] (highway-env's order).
