@@ -810,6 +810,10 @@ class FastSimulator:
         self.r_closed[row] = tracker.closed
 
     # --- episodes -------------------------------------------------------------------------------
+    def _episode(self, seed: int) -> tuple[np.ndarray, int, np.ndarray, np.random.Generator | None]:
+        """A new episode's (vehicle rows, ego row, regulation state, generator between steps)."""
+        return self.scenario.spawn(int(seed), self._road, self.control)
+
     def reset_where(self, mask: np.ndarray, seeds: np.ndarray) -> WorldBatch:
         """Start a new episode from ``seeds[k]`` in every world where ``mask[k]`` (K,); the other
         worlds are untouched. Returns the whole batch."""
@@ -828,7 +832,7 @@ class FastSimulator:
             self._spawn_many(worlds, seeds)
         else:
             for k in worlds:
-                rows, ego, regulation, rng = self.scenario.spawn(int(seeds[k]), self._road, self.control)
+                rows, ego, regulation, rng = self._episode(seeds[k])
                 self._put_rows(k, rows, ego)
                 self.regulation[k], self.rngs[k] = regulation, rng
                 self.route_index[k] = self._route_for_lane(int(rows[ego, T.LANE]))
