@@ -1,17 +1,12 @@
 """Two-way roads, lane-count tapers and the parameter spaces the procedural blocks are made of.
 
-A procedural map (``pg_map``) is a chain of blocks (``pg_blocks``, ``pg_junctions``) in the
-manner of MetaDrive's procedural generation (``metadrive/component/pgblock/``): each block starts
-at a ``Socket`` of the block before it and ends at sockets of its own. Lanes are
-``description.LaneRecord`` segments laid with ``blocks.Straight`` and ``blocks.Arc``, so the
-geometry is highway-env's (heading grows turning right; a lane's lateral offset grows to the
-right; lane 0 of a road is its leftmost).
-
-A road's reference line is its centre line (the line between its two directions): forward lane k
-lies (k + ½)·w to the right of it, the reverse road's lane k (k + ½)·w to its left. MetaDrive
-takes the rightmost forward lane as reference (``cmp/road_network``); the centre line keeps both
-directions' lanes symmetric. The reverse of road (a, b) runs from node ``-b`` to node ``-a``, as
-MetaDrive names its reverse roads (``metadrive/component/road_network/road.py``).
+A procedural map (``pg_map``) is a chain of blocks (``pg_blocks``, ``pg_junctions``), MetaDrive's
+way (``metadrive/component/pgblock/``): each block starts at a ``Socket`` of the block before it
+and ends at sockets of its own. Lanes are laid with ``blocks.Straight`` and ``blocks.Arc`` in
+highway-env's geometry (heading grows turning right, lateral offsets grow to the right, lane 0 is
+the leftmost). A road's reference line is its centre line: forward lane k lies (k + ½)·w to its
+right, the reverse road's lane k (k + ½)·w to its left; the reverse of road (a, b) runs from node
+``-b`` to node ``-a``, as MetaDrive names its reverse roads.
 """
 
 from __future__ import annotations

@@ -386,13 +386,10 @@ def _traffic_rows(
     lane_change_delay: float, rows
 ) -> None:  # fmt: skip
     """Traffic vehicle rows (M, VEHICLE_COLUMNS) at ``s`` (M,) on lane rows ``lane`` (M,), heading
-    along them at ``speed`` (their target speed), with DELTA ``delta`` (M,) and a route: their
-    lane, then a random walk through the lanes that continue it (``successor_start`` /
-    ``successors``: ``_continuations``), ``walk`` (M, MAX_ROUTE - 1) uniform draws in [0, 1)
-    picking each next lane (a dead end stops it). Every route step names its lane: MOBIL then
-    keeps the vehicle in it (``traffic.mobil_side``), so that it never has to swerve where a
-    road splits or merges; traffic keeps its lane (MetaDrive's IDM policy changes lanes only to
-    overtake)."""
+    along them at ``speed`` (their target speed), with DELTA ``delta`` (M,) and a route: their lane,
+    then a random walk through the lanes that continue it, ``walk`` (M, MAX_ROUTE - 1) uniform draws
+    picking each next lane (a dead end stops it). Every route step names its lane, so that MOBIL
+    keeps the vehicle in it (``traffic.mobil_side``): traffic keeps its lane."""
     for m in range(lane.size):
         row, k = rows[m], lane[m]
         x, y = L.position(lanes, k, s[m], 0.0)
@@ -442,10 +439,8 @@ def spawn_blocks_episode(
     """An episode on ``bmap`` from ``seed``: ``(rows (N, VEHICLE_COLUMNS), ego row, regulation
     [period, 0], light offsets (J,))``. The ego (first row) on a random lane of the spawn road at
     s = 5 m, at rest; per block after the spawn road floor(block spots · ``density``) traffic
-    vehicles on distinct random spots (MetaDrive's trigger-mode count), each on a random route;
-    vehicles within SPAWN_CLEARANCE_M of the ego or of one placed before them are dropped. A map
-    with lights then draws each intersection's cycle offset uniform in [0, cycle) (the town's
-    draw); without lights nothing more is drawn (J = 0)."""
+    vehicles on distinct random spots (MetaDrive's count), each on a random route, dropped within
+    SPAWN_CLEARANCE_M of one placed before; then, with lights, each intersection's cycle offset."""
     rng = np.random.default_rng(int(seed))
     road, table = bmap.road, bmap.table
     lane = int(bmap.spawn_lanes[rng.integers(len(bmap.spawn_lanes))])

@@ -54,16 +54,12 @@ ROUTE_TIMEOUT_EXTRA_S = 10.0  # NoCrash's time limit: the route at ROUTE_TIMEOUT
 class TownEpisode:
     """One town episode as set up from its seed (``town_episode``).
 
-    :param vehicles: (N, TOWN_VEHICLE_COLUMNS) the ego then the NPCs (KIND TOWN), as
-        ``vehicles_to_array(road.vehicles, table, town_class=TownVehicle)`` lays them out.
-    :param ego: the ego's row (0).
-    :param pedestrians: (P, PEDESTRIAN_COLUMNS) in spawn order.
-    :param light_offsets_s: (J,) every junction's cycle offset (``TownLights.offsets_s``).
-    :param ego_route: (R,) int64 lane rows of the ego's planned route (``TownEnv.ego_route``).
-    :param route_time_limit_s: the NoCrash time limit with fixed routes, else inf (what
-        ``HighwayBackend.route_time_limit_s`` is; inf where it is None).
-    :param rng_state: (6,) uint64 PCG64 words of the episode's generator after the set-up
-        (``env.np_random``; ``pcg64``): the frames' draws go on from them.
+    :param vehicles: (N, TOWN_VEHICLE_COLUMNS) the ego (row ``ego``, 0) then the NPCs (KIND TOWN),
+        laid out as ``vehicles_to_array(..., town_class=TownVehicle)`` lays them out.
+    :param pedestrians: (P, PEDESTRIAN_COLUMNS) in spawn order; ``light_offsets_s`` (J,): every
+        junction's cycle offset; ``ego_route`` (R,): the lane rows of the ego's planned route.
+    :param route_time_limit_s: the NoCrash time limit with fixed routes, else inf.
+    :param rng_state: (6,) uint64 PCG64 words of the episode's generator after the set-up.
     """
 
     vehicles: np.ndarray

@@ -1,16 +1,13 @@
 """Episode set-up without highway-env objects, drawing the same random numbers in the same order.
 
-The scenarios' set-ups (each in its module of ``drivelab.scenarios``: ``spawn_merge``,
-``spawn_roundabout``, ``spawn_racetrack``, ``spawn_intersection``; the highway's is compiled for
-many worlds at once) share the helpers below:
-highway-env's lane formulas in numpy call for call (``LaneGeometry``: the same bits as highway-
-env on any CPU), its vehicle constructors as rows (``vehicle_row``), its route planning
-(``shortest_path``, ``plan_route``) and drivelab's traffic levels (``arrange_traffic``). Every
-spawner has the signature ``spawner(seed, road, control) -> (rows, ego_row, regulation, rng)``:
-``road`` is the simulator's converted road (its LaneTable, geometry, config, paths and the
-vehicle constants read once at conversion), ``rows`` (N, VEHICLE_COLUMNS) the vehicles then the
-road's obstacles as ``vehicles_to_array`` lays them out, ``regulation`` (2,) the RegulatedRoad
-state, ``rng`` the episode's generator where draws go on between steps (else None).
+The scenarios' spawners (``spawn_merge``, ``spawn_roundabout``, ``spawn_racetrack``,
+``spawn_intersection``) share these helpers: highway-env's lane formulas in numpy call for call
+(``LaneGeometry``), its vehicle constructors as rows (``vehicle_row``), its route planning
+(``shortest_path``, ``plan_route``) and drivelab's traffic levels (``arrange_traffic``). A spawner
+is ``spawner(seed, road, control) -> (rows, ego_row, regulation, rng)``: ``road`` the simulator's
+converted road, ``rows`` (N, VEHICLE_COLUMNS) the vehicles then the road's obstacles (as
+``vehicles_to_array`` lays them out), ``regulation`` (2,) the RegulatedRoad state, ``rng`` the
+episode's generator where draws go on between steps (else None).
 """
 
 from __future__ import annotations

@@ -1,15 +1,11 @@
 """The town's traffic lights, pedestrians, pedestrian hits and wreck towing as compiled loops over
-ONE world's arrays (the simulator loops the worlds). Each function names the reference method
-(``drivelab.scenarios.town.reference_env`` / ``drivelab.sim.junctions.rules``) it reproduces, in the
-same order and with the same scalar arithmetic:
+ONE world's arrays, each the reference method (``scenarios.town.reference_env``,
+``junctions.rules``) in its order and scalar arithmetic:
 
-- ``light_states``: ``town_rules.light_state`` of every light row;
+- ``light_states``: ``rules.light_state`` of every light row;
 - ``walk_pedestrians``: ``Pedestrian.walk`` (and ``_gap_clear``) of every pedestrian in spawn order;
 - ``hit_pedestrians``: ``TownRoad._hit_pedestrians`` (highway-env's ``_is_colliding`` box test);
 - ``clear_wrecks``: ``TownRoad._clear_wrecks`` (crashed NPC rows towed, the rows closing up).
-
-Pedestrian rows are ``(P, PEDESTRIAN_COLUMNS)`` (``town_rows.P_*``), vehicle rows are the town's
-``(N, TOWN_VEHICLE_COLUMNS)`` (``traffic`` columns); ``count`` / ``pcount`` rows are in use.
 """
 
 from __future__ import annotations
@@ -200,9 +196,8 @@ def hit_pedestrians(peds: np.ndarray, pcount: int, v: np.ndarray, count: int, eg
 @njit(cache=True)
 def clear_wrecks(v: np.ndarray, count: int, ego: int, dt: float) -> tuple[int, int]:
     """``TownRoad._clear_wrecks``: every crashed row but the ego's adds ``dt`` to WRECKED_S (the
-    reference's float sum: at dt 0.1 it reaches WRECK_CLEARED_S on the 101st frame) and is removed
-    once WRECKED_S >= WRECK_CLEARED_S. Kept rows close up in order, freed rows become zeros.
-    Returns the new (count, ego row)."""
+    reference's float sum) and is removed once WRECKED_S >= WRECK_CLEARED_S; kept rows close up in
+    order, freed rows become zeros. Returns the new (count, ego row)."""
     (v,) = borrowed((v,))
     kept, new_ego = 0, ego
     for j in range(count):

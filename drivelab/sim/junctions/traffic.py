@@ -223,17 +223,15 @@ def lane_s(v, peds, lanes, coords, seen, lane: int, j: int) -> float:
 def connected_lanes(lanes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The static tables ``connected_front`` searches, per lane row (made once per road):
 
-    - ``search`` (L, S) int64 and ``search_size`` (L,): the lanes
-      ``neighbour_vehicles_connected_lanes`` looks on, in order: the lane, its successor roads'
-      lanes, its predecessor roads' lanes (the network's order; the same lane index on each road,
-      else its lane 0);
+    - ``search`` (L, S), ``search_size`` (L,): the lanes ``neighbour_vehicles_connected_lanes``
+      looks on, in order: the lane, its successor roads', its predecessor roads' (the same lane
+      index on each road, else its lane 0);
     - ``search_offset`` (L, S): what shifts a longitudinal coordinate on that lane into the lane's
-      frame (plus the lane's length for successors, minus their own for predecessors);
-    - ``discs`` (L, 3): x, y and squared radius of a disc holding every point ``on_lane`` counts as
-      on the lane (1 m margin). A point at (s, r) of a straight or circular lane lies |r| from the
-      centre line at s, which lies at most |s - length/2| from the lane's middle (a chord is no
-      longer than its arc), and on_lane bounds both; 1 m more absorbs rounding. Sine lanes get no
-      disc (infinite radius)."""
+      frame (+ the lane's length for successors, - their own for predecessors);
+    - ``discs`` (L, 3): x, y and squared radius of a disc holding every point ``on_lane`` counts as on
+      the lane: |r| from the centre line at s, at most |s - length/2| from the lane's middle, 1 m more
+      for rounding (sine lanes: an infinite radius).
+    """
     count = lanes.shape[0]
     rows = np.arange(count)
     first = lanes[:, FIRST_OF_ROAD] == rows
@@ -298,14 +296,10 @@ def connected_front(
     lane: int
 ) -> int:  # fmt: skip
     """Road.neighbour_vehicles(vehicle i, lane)[0] with ``neighbour_vehicles_connected_lanes``:
-    the row of the leader (a vehicle j < count, or pedestrian k as count + k), -1 for none.
-
-    Each object is placed on the first of the lanes ``search[lane]`` (``connected_lanes``) it lies
-    on (``on_lane``, 1 m margin), its longitudinal coordinate shifted into the lane's frame; the
-    leader is the nearest at or ahead of vehicle i, the last in scan order (vehicles, then
-    pedestrians not crashed) among equals. The lanes are read in order from their per-frame object
-    lists (``near``, ``near_count``: ``lane_objects``); an object listed on an earlier one of them
-    was placed there."""
+    the row of the leader (a vehicle j < count, or pedestrian k as count + k), -1 for none: the
+    nearest at or ahead of vehicle i (the last in scan order among equals), each object placed on the
+    first of the lanes ``search[lane]`` it lies on, its longitudinal coordinate shifted into the
+    lane's frame (the lanes' object lists: ``lane_objects``)."""
     v, peds, lanes, coords, seen, near, near_count, search, search_offset, search_size, discs = borrowed(
         (v, peds, lanes, coords, seen, near, near_count, search, search_offset, search_size, discs)
     )
@@ -448,10 +442,9 @@ def town_act(
     discs, light_states, rng_words
 ) -> None:  # fmt: skip
     """Road.act of one town world: rows ``0..count-1`` of ``v`` decide their controls in order
-    (see the module docstring for the arrays); random routes draw on ``rng_words``. The frame's
-    scratch is made here, and ``_act_rows`` borrows it with the arguments (``borrow``): ``own``,
-    MOBIL's own-lane row (``traffic.own_lane``); ``near`` and ``near_count``, ``lane_objects``'
-    lists; ``seen``, which objects ``lane_s`` measured on which lane (-1: not yet)."""
+    (see the module docstring for the arrays). The frame's scratch is made here and ``_act_rows``
+    borrows it: ``own`` (``traffic.own_lane``), ``near`` and ``near_count`` (``lane_objects``), and
+    ``seen`` (which objects ``lane_s`` measured on which lane, -1: not yet)."""
     size = count + pcount
     own = np.empty(OWN_SIZE)
     near = np.empty((lanes.shape[0], size), dtype=np.int64)

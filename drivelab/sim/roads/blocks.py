@@ -7,9 +7,6 @@
 - ``grid``/``town``: junctions on a grid joined by two-way streets (the town); ``circuit``: a closed
   loop of straights and arcs (the CARLA study's circuits).
 
-The formulas are those that build the same roads with highway-env objects (``scenarios/town/road.py``,
-``scenarios/circuits/reference_env.py``), so that the lanes are bit-for-bit the same.
-
 Town conventions: arm k of a junction points along ``rotation(90°·k) @ (0, 1)`` (arm 0 is +y, arm
 1 is -x, arm 2 is -y, arm 3 is +x); ``J3:ir0`` is the stop line of junction 3's arm 0, ``J3:il2``
 the start of its exit along arm 2.
