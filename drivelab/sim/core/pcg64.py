@@ -52,9 +52,9 @@ def _seed_words(seed: int) -> np.ndarray:
 
 
 @njit(cache=True)
-def _hashmix(value: np.uint64, hash_const: np.ndarray) -> np.uint64:
+def _hashmix(value: np.uint64, hash_const: np.ndarray, mult: int = MULT_A) -> np.uint64:
     value = (value ^ hash_const[0]) & _MASK32
-    hash_const[0] = (hash_const[0] * np.uint64(MULT_A)) & _MASK32
+    hash_const[0] = (hash_const[0] * np.uint64(mult)) & _MASK32
     value = (value * hash_const[0]) & _MASK32
     return value ^ (value >> np.uint64(XSHIFT))
 
@@ -84,10 +84,7 @@ def _seed_sequence_state(seed: int) -> np.ndarray:
     hash_const[0] = np.uint64(INIT_B)
     words = np.zeros(8, dtype=np.uint64)
     for i in range(8):
-        value = (pool[i % POOL_SIZE] ^ hash_const[0]) & _MASK32
-        hash_const[0] = (hash_const[0] * np.uint64(MULT_B)) & _MASK32
-        value = (value * hash_const[0]) & _MASK32
-        words[i] = value ^ (value >> np.uint64(XSHIFT))
+        words[i] = _hashmix(pool[i % POOL_SIZE], hash_const, MULT_B)
     out = np.zeros(4, dtype=np.uint64)
     for j in range(4):
         out[j] = words[2 * j] | (words[2 * j + 1] << _32)

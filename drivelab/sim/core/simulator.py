@@ -329,11 +329,8 @@ def meta_action(w: np.ndarray, e: int, lanes: np.ndarray, action: int, speeds: n
     """MDPVehicle.act for the ego (row ``e``) of one world's vehicles ``w`` (N, VEHICLE_COLUMNS):
     FASTER / SLOWER step the target speed, the lane changes retarget when reachable."""
     if action == FASTER or action == SLOWER:
-        top = speeds.size - 1
-        ratio = (w[e, T.SPEED] - speeds[0]) / (speeds[-1] - speeds[0])
-        index = int(min(max(np.rint(ratio * top), 0.0), float(top)))  # np.round: half to even
-        index = min(max(index + (1 if action == FASTER else -1), 0), top)
-        w[e, T.TARGET_SPEED] = speeds[index]
+        index = T.speed_index(w[e, T.SPEED], speeds) + (1 if action == FASTER else -1)
+        w[e, T.TARGET_SPEED] = speeds[min(max(index, 0), speeds.size - 1)]
         return
     T.follow_road(w, lanes, e)
     if action == LANE_LEFT or action == LANE_RIGHT:

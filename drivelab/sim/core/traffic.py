@@ -101,6 +101,14 @@ def _clip(value: float, low: float, high: float) -> float:
 
 
 @njit(cache=True, inline="always")
+def speed_index(speed: float, speeds: np.ndarray) -> int:
+    """MDPVehicle.speed_to_index: the index of the allowed speed nearest ``speed``."""
+    top = speeds.size - 1
+    ratio = (speed - speeds[0]) / (speeds[-1] - speeds[0])
+    return int(min(max(np.rint(ratio * top), 0.0), float(top)))  # np.round: half to even
+
+
+@njit(cache=True, inline="always")
 def steering_control(v: np.ndarray, lanes: np.ndarray, i: int, target: int) -> float:
     """ControlledVehicle.steering_control: lateral P → heading reference → heading P → steering."""
     s, r = local_coordinates(lanes, target, v[i, X], v[i, Y])
