@@ -168,16 +168,9 @@ def curve_block(site: BlockSite, parameters: dict) -> Block:
         site.speed_limit_mps,
     )  # fmt: skip
     position, heading = lay_road(
-        lanes,
-        Straight(parameters["length"]),
-        position,
-        heading,
-        count,
-        width,
-        middle,
-        end,
+        lanes, Straight(parameters["length"]), position, heading, count, width, middle, end,
         site.speed_limit_mps,
-    )
+    )  # fmt: skip
     return _one_socket(site, "C", parameters, lanes, position, heading, count, end)
 
 
@@ -224,16 +217,9 @@ def in_ramp_block(site: BlockSite, parameters: dict) -> Block:
     run = _run(ramp)
     names = [site.entry.node] + [node(site, "r", 0, k) for k in range(5)]
     position, heading = lay_road(
-        lanes,
-        Straight(parameters["length"] + run[0]),
-        position,
-        heading,
-        count,
-        width,
-        names[0],
-        names[1],
+        lanes, Straight(parameters["length"] + run[0]), position, heading, count, width, names[0], names[1],
         speed,
-    )
+    )  # fmt: skip
     # the ramp ends where the acceleration lane (lane ``count`` of the next road) starts
     join = position + lane_offset(count, width) * right_normal(heading)
     rotation = np.array([[np.cos(heading), -np.sin(heading)], [np.sin(heading), np.cos(heading)]])

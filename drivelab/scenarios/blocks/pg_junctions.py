@@ -165,17 +165,9 @@ def roundabout_block(site: BlockSite, parameters: dict) -> Block:
             (Arc(island, -2.0 * gamma), exit_at[after], entry_at[after], False),
         ):
             lay_lanes(
-                lanes,
-                segment,
-                ring_position,
-                ring_heading,
-                count,
-                width,
-                start,
-                end,
-                speed,
+                lanes, segment, ring_position, ring_heading, count, width, start, end, speed,
                 lines=_ring_lines(closed),
-            )
+            )  # fmt: skip
             if not closed:  # the exit curve leaves where this ring part starts
                 lay_lanes(
                     lanes, curve, ring_position, ring_heading, count, width, start,
