@@ -28,17 +28,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from drivelab.sim.core import lanes as L
 from drivelab.sim.core import traffic as T
 from drivelab.sim.core.borrow import borrowed
-from drivelab.sim.core.lanes import (
-    FIRST_OF_ROAD,
-    LANE_COUNT,
-    LANE_ID,
-    LENGTH,
-    VEHICLE_LENGTH,
-    is_reachable_from,
-    local_coordinates,
-)
 from drivelab.sim.junctions.rows import PEDESTRIAN_COLUMNS
 from drivelab.sim.junctions.traffic import stop_ahead, town_acceleration
 
@@ -67,7 +59,7 @@ def route_feasible(
         while edge[depth] < successor_start[parent + 1]:
             candidate = successors[edge[depth]]
             edge[depth] += 1
-            if lanes[candidate, FIRST_OF_ROAD] == wanted:
+            if lanes[candidate, L.FIRST_OF_ROAD] == wanted:
                 path[depth], found = candidate, True
                 break
         if found:
@@ -86,7 +78,7 @@ def _after_road(v: np.ndarray, lanes: np.ndarray, i: int, lane: int) -> int:
     """The first of vehicle i's route entries after the road of ``lane`` (a route's first entry
     is the road the vehicle is on until it is left)."""
     start = int(v[i, T.ROUTE_START])
-    if start < v[i, T.ROUTE_END] and v[i, T.ROUTE + 2 * start] == lanes[lane, FIRST_OF_ROAD]:
+    if start < v[i, T.ROUTE_END] and v[i, T.ROUTE + 2 * start] == lanes[lane, L.FIRST_OF_ROAD]:
         start += 1
     return start
 
@@ -100,8 +92,8 @@ def blocks_follow_road(
     entry is dropped."""
     v, lanes, successor_start, successors = borrowed((v, lanes, successor_start, successors))
     target = int(v[i, T.TARGET_LANE])
-    s, _ = local_coordinates(lanes, target, v[i, T.X], v[i, T.Y])
-    if s <= lanes[target, LENGTH] - VEHICLE_LENGTH / 2:
+    s, _ = L.local_coordinates(lanes, target, v[i, T.X], v[i, T.Y])
+    if s <= lanes[target, L.LENGTH] - L.VEHICLE_LENGTH / 2:
         return
     start = _after_road(v, lanes, i, target)
     v[i, T.ROUTE_START] = start
@@ -114,8 +106,8 @@ def blocks_follow_road(
         for named_only in (True, False):
             for e in range(first, stop):
                 candidate = successors[e]
-                if lanes[candidate, FIRST_OF_ROAD] != wanted or (
-                    named_only and lanes[candidate, LANE_ID] != named
+                if lanes[candidate, L.FIRST_OF_ROAD] != wanted or (
+                    named_only and lanes[candidate, L.LANE_ID] != named
                 ):
                     continue
                 if route_feasible(v, lanes, successor_start, successors, i, candidate, start + 1):
@@ -126,7 +118,7 @@ def blocks_follow_road(
     if choice < 0:  # no route left (or off it): the lane's own continuation, else the first
         choice = successors[first]
         for e in range(first, stop):
-            if lanes[successors[e], LANE_ID] == lanes[target, LANE_ID]:
+            if lanes[successors[e], L.LANE_ID] == lanes[target, L.LANE_ID]:
                 choice = successors[e]
                 break
     v[i, T.TARGET_LANE] = choice
@@ -155,8 +147,8 @@ def rear_across(
             for rank in range(done[r] - 1, -1, -1):  # the farthest along the lane first
                 j = int(coords[r, rank, 3])
                 if j != i:
-                    if lanes[r, LENGTH] - coords[r, j, 0] < behind_m:
-                        rear, behind_m = j, lanes[r, LENGTH] - coords[r, j, 0]
+                    if lanes[r, L.LENGTH] - coords[r, j, 0] < behind_m:
+                        rear, behind_m = j, lanes[r, L.LENGTH] - coords[r, j, 0]
                     break
     return rear
 
@@ -225,11 +217,11 @@ def _side_lane(
 ) -> int:  # fmt: skip
     """The lane beside ``lane`` on ``side`` (-1 left, +1 right) when vehicle i may change to it
     (changeable and reachable), else -1."""
-    lane_id, count = lanes[lane, LANE_ID], lanes[lane, LANE_COUNT]
+    lane_id, count = lanes[lane, L.LANE_ID], lanes[lane, L.LANE_COUNT]
     if not (0 <= lane_id + side < count):
         return -1
     candidate = lane + side
-    if not changeable[candidate] or not is_reachable_from(lanes, candidate, v[i, T.X], v[i, T.Y]):
+    if not changeable[candidate] or not L.is_reachable_from(lanes, candidate, v[i, T.X], v[i, T.Y]):
         return -1
     return candidate
 
@@ -324,8 +316,8 @@ def blocks_act(
             acceleration = min(acceleration, target_a)
         lane = int(v[i, T.LANE])
         if ending[lane] and lane == int(v[i, T.TARGET_LANE]):  # no gap to merge into yet
-            s, _ = local_coordinates(lanes, lane, v[i, T.X], v[i, T.Y])
-            acceleration = min(acceleration, stop_ahead(v, p, i, lanes[lane, LENGTH] - s - v[i, T.LEN] / 2))
+            s, _ = L.local_coordinates(lanes, lane, v[i, T.X], v[i, T.Y])
+            acceleration = min(acceleration, stop_ahead(v, p, i, lanes[lane, L.LENGTH] - s - v[i, T.LEN] / 2))
         if light[lane] >= 0:  # the town's stop line (with no leader: IDM's free term)
             acceleration = min(
                 acceleration,

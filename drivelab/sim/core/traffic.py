@@ -17,31 +17,9 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from drivelab.sim.core import lanes as L
 from drivelab.sim.core.borrow import borrowed
-from drivelab.sim.core.lanes import (
-    FIRST_OF_ROAD,
-    FROM_NODE,
-    LANE_COUNT,
-    LANE_ID,
-    LENGTH,
-    PRIORITY,
-    SPEED_LIMIT,
-    TO_NODE,
-    VEHICLE_LENGTH,
-    arcsin0,
-    arctan0,
-    closest_lane,
-    cos0,
-    distance,
-    heading_at,
-    is_reachable_from,
-    local_coordinates,
-    on_lane,
-    position,
-    sin0,
-    tan0,
-    wrap_to_pi,
-)
+from drivelab.sim.core.lanes import distance
 
 # vehicle columns
 (
@@ -111,14 +89,14 @@ def speed_index(speed: float, speeds: np.ndarray) -> int:
 @njit(cache=True, inline="always")
 def steering_control(v: np.ndarray, lanes: np.ndarray, i: int, target: int) -> float:
     """ControlledVehicle.steering_control: lateral P → heading reference → heading P → steering."""
-    s, r = local_coordinates(lanes, target, v[i, X], v[i, Y])
-    future_heading = heading_at(lanes, target, s + v[i, SPEED] * TAU_PURSUIT)
+    s, r = L.local_coordinates(lanes, target, v[i, X], v[i, Y])
+    future_heading = L.heading_at(lanes, target, s + v[i, SPEED] * TAU_PURSUIT)
     lateral_speed_command = -KP_LATERAL * r
-    heading_command = arcsin0(_clip(lateral_speed_command / not_zero(v[i, SPEED]), -1.0, 1.0))
+    heading_command = L.arcsin0(_clip(lateral_speed_command / not_zero(v[i, SPEED]), -1.0, 1.0))
     heading_ref = future_heading + _clip(heading_command, -np.pi / 4, np.pi / 4)
-    heading_rate_command = KP_HEADING * wrap_to_pi(heading_ref - v[i, HEADING])
-    slip_angle = arcsin0(_clip(v[i, LEN] / 2 / not_zero(v[i, SPEED]) * heading_rate_command, -1.0, 1.0))
-    steering = arctan0(2 * tan0(slip_angle))
+    heading_rate_command = KP_HEADING * L.wrap_to_pi(heading_ref - v[i, HEADING])
+    slip_angle = L.arcsin0(_clip(v[i, LEN] / 2 / not_zero(v[i, SPEED]) * heading_rate_command, -1.0, 1.0))
+    steering = L.arctan0(2 * L.tan0(slip_angle))
     return _clip(steering, -MAX_STEERING_ANGLE, MAX_STEERING_ANGLE)
 
 
@@ -138,7 +116,7 @@ def start_frame(v: np.ndarray, done: np.ndarray, trig: np.ndarray) -> None:
     v, done, trig = borrowed((v, done, trig))
     done[:] = -1
     for j in range(v.shape[0]):
-        trig[j, 0], trig[j, 1] = cos0(v[j, HEADING]), sin0(v[j, HEADING])
+        trig[j, 0], trig[j, 1] = L.cos0(v[j, HEADING]), L.sin0(v[j, HEADING])
 
 
 @njit(cache=True, inline="always")
@@ -161,10 +139,10 @@ def fill_lane_coordinates(
     v, lanes, coords, done = borrowed((v, lanes, coords, done))
     count = 0
     for j in range(v.shape[0]):
-        s_j, r_j = local_coordinates(lanes, lane, v[j, X], v[j, Y])
+        s_j, r_j = L.local_coordinates(lanes, lane, v[j, X], v[j, Y])
         coords[lane, j, 0], coords[lane, j, 1] = s_j, r_j
         coords[lane, j, 2] = 0.0
-        if on_lane(lanes, lane, s_j, r_j, 1.0):
+        if L.on_lane(lanes, lane, s_j, r_j, 1.0):
             coords[lane, j, 2] = 1.0
             rank = count
             while rank > 0 and coords[lane, int(coords[lane, rank - 1, 3]), 0] > s_j:
@@ -241,7 +219,7 @@ def idm_free_road(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, me: int, ego:
     if ego < 0 or v[ego, KIND] == OBSTACLE:  # highway-env: only a Vehicle accelerates
         return 0.0
     target_speed = v[ego, TARGET_SPEED] if v[ego, KIND] != PLAIN else 0.0
-    limit = lanes[int(v[ego, LANE]), SPEED_LIMIT]
+    limit = lanes[int(v[ego, LANE]), L.SPEED_LIMIT]
     if not np.isnan(limit):
         target_speed = _clip(target_speed, 0.0, limit)
     ratio = max(v[ego, SPEED], 0.0) / np.abs(not_zero(target_speed))
@@ -303,9 +281,9 @@ def mobil_side(v, lanes, p, coords, done, trig, i: int, lane: int, own) -> bool:
     start = int(v[i, ROUTE_START])
     if start < v[i, ROUTE_END] and v[i, ROUTE + 2 * start + 1] >= 0:
         # the next route step names a lane: only move towards it, and only without hard braking
-        target_id = lanes[int(v[i, TARGET_LANE]), LANE_ID]
+        target_id = lanes[int(v[i, TARGET_LANE]), L.LANE_ID]
         wanted_id = v[i, ROUTE + 2 * start + 1]
-        if np.sign(lanes[lane, LANE_ID] - target_id) != np.sign(wanted_id - target_id):
+        if np.sign(lanes[lane, L.LANE_ID] - target_id) != np.sign(wanted_id - target_id):
             return False
         return not self_pred_a < -p[MAX_BRAKING_IMPOSED]
     if own[OWN_REAR_FILLED] == 0.0:
@@ -338,7 +316,7 @@ def mobil(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, i: int, lane: int) ->
 def abort_change(v, lanes, p, coords, done, trig, i: int, lane: int, target: int) -> None:
     """IDMVehicle.change_lane_policy's abort: vehicle i, changing from ``lane`` to ``target`` on
     the same road, goes back when another vehicle entering ``target`` is within its desired gap."""
-    if lanes[lane, FIRST_OF_ROAD] != lanes[target, FIRST_OF_ROAD]:
+    if lanes[lane, L.FIRST_OF_ROAD] != lanes[target, L.FIRST_OF_ROAD]:
         return
     for j in range(v.shape[0]):
         if (
@@ -366,12 +344,12 @@ def change_lane_policy(v, lanes, p, coords, done, trig, i: int, own) -> None:
     if not p[LANE_CHANGE_DELAY] < v[i, TIMER]:
         return
     v[i, TIMER] = 0.0
-    lane_id, count = lanes[lane, LANE_ID], lanes[lane, LANE_COUNT]
+    lane_id, count = lanes[lane, L.LANE_ID], lanes[lane, L.LANE_COUNT]
     for side in (-1, 1):
         if not (0 <= lane_id + side < count):
             continue
         candidate = lane + side
-        if not is_reachable_from(lanes, candidate, v[i, X], v[i, Y]):
+        if not L.is_reachable_from(lanes, candidate, v[i, X], v[i, Y]):
             continue
         if np.abs(v[i, SPEED]) < 1:
             continue
@@ -388,10 +366,10 @@ def lane_on_next_road(
     """RoadNetwork.next_lane_given_next_road: keep the lane id where the lane counts agree,
     else take the next road's lane closest to (x, y). Returns (lane row, its distance)."""
     (lanes,) = borrowed((lanes,))
-    count = int(lanes[next_road, LANE_COUNT])
-    if lanes[lane, LANE_COUNT] == count:
+    count = int(lanes[next_road, L.LANE_COUNT])
+    if lanes[lane, L.LANE_COUNT] == count:
         if next_id < 0:
-            next_id = int(lanes[lane, LANE_ID])
+            next_id = int(lanes[lane, L.LANE_ID])
     else:
         best = np.inf
         for k in range(count):
@@ -408,22 +386,22 @@ def next_lane(v: np.ndarray, lanes: np.ndarray, i: int) -> int:
     closest; the same lane when the road leads nowhere."""
     v, lanes = borrowed((v, lanes))
     lane = int(v[i, TARGET_LANE])
-    road, end_node = int(lanes[lane, FIRST_OF_ROAD]), lanes[lane, TO_NODE]
+    road, end_node = int(lanes[lane, L.FIRST_OF_ROAD]), lanes[lane, L.TO_NODE]
     next_road, next_id = -1, -1
     start, stop = int(v[i, ROUTE_START]), int(v[i, ROUTE_END])
     if start < stop:
         if int(v[i, ROUTE + 2 * start]) == road:
             start += 1
             v[i, ROUTE_START] = start
-        if start < stop and lanes[int(v[i, ROUTE + 2 * start]), FROM_NODE] == end_node:
+        if start < stop and lanes[int(v[i, ROUTE + 2 * start]), L.FROM_NODE] == end_node:
             next_road, next_id = int(v[i, ROUTE + 2 * start]), int(v[i, ROUTE + 2 * start + 1])
-    s, _ = local_coordinates(lanes, lane, v[i, X], v[i, Y])
-    x, y = position(lanes, lane, s, 0.0)
+    s, _ = L.local_coordinates(lanes, lane, v[i, X], v[i, Y])
+    x, y = L.position(lanes, lane, s, 0.0)
     if next_road >= 0:
         return lane_on_next_road(lanes, lane, next_road, next_id, x, y)[0]
     best_lane, best = lane, np.inf
     for candidate in range(lanes.shape[0]):  # roads leaving the end node, in the network's order
-        if lanes[candidate, FIRST_OF_ROAD] != candidate or lanes[candidate, FROM_NODE] != end_node:
+        if lanes[candidate, L.FIRST_OF_ROAD] != candidate or lanes[candidate, L.FROM_NODE] != end_node:
             continue
         row, d = lane_on_next_road(lanes, lane, candidate, -1, x, y)
         if d < best:
@@ -435,8 +413,8 @@ def next_lane(v: np.ndarray, lanes: np.ndarray, i: int) -> int:
 def follow_road(v: np.ndarray, lanes: np.ndarray, i: int) -> None:
     """ControlledVehicle.follow_road: at the end of the target lane, target the next one."""
     target = int(v[i, TARGET_LANE])
-    s, _ = local_coordinates(lanes, target, v[i, X], v[i, Y])
-    if s > lanes[target, LENGTH] - VEHICLE_LENGTH / 2:
+    s, _ = L.local_coordinates(lanes, target, v[i, X], v[i, Y])
+    if s > lanes[target, L.LENGTH] - L.VEHICLE_LENGTH / 2:
         v[i, TARGET_LANE] = next_lane(v, lanes, i)
 
 
@@ -483,17 +461,17 @@ def step_vehicle(v: np.ndarray, lanes: np.ndarray, i: int, dt: float) -> None:
         v[i, ACCEL] = min(v[i, ACCEL], 1.0 * (MAX_SPEED - v[i, SPEED]))
     elif v[i, SPEED] < MIN_SPEED:
         v[i, ACCEL] = max(v[i, ACCEL], 1.0 * (MIN_SPEED - v[i, SPEED]))
-    beta = arctan0(1 / 2 * tan0(v[i, STEER]))
-    v[i, X] += v[i, SPEED] * cos0(v[i, HEADING] + beta) * dt
-    v[i, Y] += v[i, SPEED] * sin0(v[i, HEADING] + beta) * dt
+    beta = L.arctan0(1 / 2 * L.tan0(v[i, STEER]))
+    v[i, X] += v[i, SPEED] * L.cos0(v[i, HEADING] + beta) * dt
+    v[i, Y] += v[i, SPEED] * L.sin0(v[i, HEADING] + beta) * dt
     if v[i, HAS_IMPACT] > 0:
         v[i, X] += v[i, IMPACT_X]
         v[i, Y] += v[i, IMPACT_Y]
         v[i, CRASHED] = 1.0
         v[i, HAS_IMPACT] = 0.0
-    v[i, HEADING] += v[i, SPEED] * sin0(beta) / (v[i, LEN] / 2) * dt
+    v[i, HEADING] += v[i, SPEED] * L.sin0(beta) / (v[i, LEN] / 2) * dt
     v[i, SPEED] += v[i, ACCEL] * dt
-    v[i, LANE] = closest_lane(lanes, v[i, X], v[i, Y], v[i, HEADING], int(v[i, LANE]))
+    v[i, LANE] = L.closest_lane(lanes, v[i, X], v[i, Y], v[i, HEADING], int(v[i, LANE]))
 
 
 @njit(cache=True)
@@ -506,7 +484,7 @@ def _polygon(v: np.ndarray, i: int) -> np.ndarray:
 
 @njit(cache=True, inline="always")
 def _polygon_into(v: np.ndarray, i: int, corners: np.ndarray) -> None:
-    c, s = cos0(v[i, HEADING]), sin0(v[i, HEADING])
+    c, s = L.cos0(v[i, HEADING]), L.sin0(v[i, HEADING])
     half_l, half_w = v[i, LEN] / 2, v[i, WID] / 2
     local = ((-half_l, -half_w), (-half_l, half_w), (half_l, half_w), (half_l, -half_w))
     for k in range(4):
@@ -583,8 +561,8 @@ def handle_collisions(v: np.ndarray, dt: float) -> None:
             # sqrt(dx² + dy²) ≥ max(|dx|, |dy|): the square root only when both are within reach
             if np.abs(dx) > reach or np.abs(dy) > reach or np.sqrt(dx * dx + dy * dy) > reach:
                 continue
-            ci, si = cos0(v[i, HEADING]), sin0(v[i, HEADING])
-            cj, sj = cos0(v[j, HEADING]), sin0(v[j, HEADING])
+            ci, si = L.cos0(v[i, HEADING]), L.sin0(v[i, HEADING])
+            cj, sj = L.cos0(v[j, HEADING]), L.sin0(v[j, HEADING])
             _polygon_into(v, i, polygon_i)
             _polygon_into(v, j, polygon_j)
             intersecting, will_intersect, tx, ty = polygons_intersecting(
@@ -607,20 +585,20 @@ def predicted_pose(v: np.ndarray, lanes: np.ndarray, i: int, t: float) -> tuple[
     route (RoadNetwork.position_heading_along_route; a route step without a lane id keeps the
     current lane id)."""
     lane = int(v[i, LANE])
-    s, _ = local_coordinates(lanes, lane, v[i, X], v[i, Y])
+    s, _ = L.local_coordinates(lanes, lane, v[i, X], v[i, Y])
     s += v[i, SPEED] * t
     start, stop = int(v[i, ROUTE_START]), int(v[i, ROUTE_END])
     if start >= stop:  # highway-env: route or [lane_index]
-        return position(lanes, lane, s, 0.0) + (heading_at(lanes, lane, s),)
+        return L.position(lanes, lane, s, 0.0) + (L.heading_at(lanes, lane, s),)
     k = start
     while True:
         lane_id = int(v[i, ROUTE + 2 * k + 1])
-        row = int(v[i, ROUTE + 2 * k]) + (lane_id if lane_id >= 0 else int(lanes[lane, LANE_ID]))
-        if k + 1 < stop and s > lanes[row, LENGTH]:
-            s -= lanes[row, LENGTH]
+        row = int(v[i, ROUTE + 2 * k]) + (lane_id if lane_id >= 0 else int(lanes[lane, L.LANE_ID]))
+        if k + 1 < stop and s > lanes[row, L.LENGTH]:
+            s -= lanes[row, L.LENGTH]
             k += 1
             continue
-        return position(lanes, row, s, 0.0) + (heading_at(lanes, row, s),)
+        return L.position(lanes, row, s, 0.0) + (L.heading_at(lanes, row, s),)
 
 
 @njit(cache=True)
@@ -682,7 +660,7 @@ def enforce_road_rules(
     n = v.shape[0]
     for i in range(n):
         if v[i, YIELDING] > 0:
-            limit = lanes[int(v[i, LANE]), SPEED_LIMIT]
+            limit = lanes[int(v[i, LANE]), L.SPEED_LIMIT]
             v[i, TARGET_SPEED] = release_cap_mps if limit > release_cap_mps else limit  # NaN kept
             v[i, YIELDING] = 0.0
     for i in range(n - 1):
@@ -691,7 +669,7 @@ def enforce_road_rules(
         for j in range(i + 1, n):
             if v[j, KIND] == OBSTACLE:
                 continue
-            priority_i, priority_j = lanes[int(v[i, LANE]), PRIORITY], lanes[int(v[j, LANE]), PRIORITY]
+            priority_i, priority_j = lanes[int(v[i, LANE]), L.PRIORITY], lanes[int(v[j, LANE]), L.PRIORITY]
             if prioritised_only and priority_i <= 0 and priority_j <= 0:
                 continue
             if not conflict_possible(v, lanes, i, j):

@@ -13,35 +13,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from drivelab.sim.core import traffic as T
 from drivelab.sim.core.borrow import borrowed
 from drivelab.sim.core.pcg64 import standard_exponential_inv
-from drivelab.sim.core.traffic import (
-    CRASHED,
-    HEADING,
-    LEN,
-    SPEED,
-    WID,
-    WRECKED_S,
-    X,
-    Y,
-    _polygon,
-    polygons_intersecting,
-)
-from drivelab.sim.junctions.rows import (
-    P_ACROSS_X,
-    P_ACROSS_Y,
-    P_CENTRE_X,
-    P_CENTRE_Y,
-    P_CRASHED,
-    P_HEADING,
-    P_HIT_EGO,
-    P_PACE,
-    P_SIDE,
-    P_SPEED,
-    P_WAIT_S,
-    P_X,
-    P_Y,
-)
+from drivelab.sim.junctions import rows as R
 from drivelab.sim.junctions.rules import (
     COURTESY_M,
     CROSSING_CLEAR_M,
@@ -101,14 +76,14 @@ def gap_clear(peds: np.ndarray, i: int, v: np.ndarray, count: int) -> bool:
     no vehicle within CROSSING_CLEAR_M of the crossing's centre, none facing it within
     CROSSING_GAP_M + CROSSING_GAP_S·speed, nor within COURTESY_M."""
     peds, v = borrowed((peds, v))
-    cx, cy = peds[i, P_CENTRE_X], peds[i, P_CENTRE_Y]
+    cx, cy = peds[i, R.P_CENTRE_X], peds[i, R.P_CENTRE_Y]
     for j in range(count):
-        dx, dy = cx - v[j, X], cy - v[j, Y]
+        dx, dy = cx - v[j, T.X], cy - v[j, T.Y]
         distance = np.sqrt(dx * dx + dy * dy)
         if distance < CROSSING_CLEAR_M:
             return False
-        facing = np.cos(v[j, HEADING]) * dx + np.sin(v[j, HEADING]) * dy > FACING_COS * distance
-        if facing and distance < CROSSING_GAP_M + CROSSING_GAP_S * max(v[j, SPEED], 0.0):
+        facing = np.cos(v[j, T.HEADING]) * dx + np.sin(v[j, T.HEADING]) * dy > FACING_COS * distance
+        if facing and distance < CROSSING_GAP_M + CROSSING_GAP_S * max(v[j, T.SPEED], 0.0):
             return False
         if facing and distance < COURTESY_M:
             return False
@@ -126,36 +101,38 @@ def walk_pedestrians(
     from the world's generator ``rng_words`` (6,) (in pedestrian order, as the reference)."""
     peds, v, rng_words = borrowed((peds, v, rng_words))
     for i in range(pcount):
-        if peds[i, P_CRASHED] != 0.0:
-            peds[i, P_SPEED] = 0.0
+        if peds[i, R.P_CRASHED] != 0.0:
+            peds[i, R.P_SPEED] = 0.0
             continue
-        side = peds[i, P_SIDE]
-        if peds[i, P_SPEED] == 0.0:
-            peds[i, P_WAIT_S] -= dt
-            if peds[i, P_WAIT_S] <= 0.0 and gap_clear(peds, i, v, count):
-                peds[i, P_HEADING] = np.arctan2(-side * peds[i, P_ACROSS_Y], -side * peds[i, P_ACROSS_X])
-                peds[i, P_SPEED] = peds[i, P_PACE]
+        side = peds[i, R.P_SIDE]
+        if peds[i, R.P_SPEED] == 0.0:
+            peds[i, R.P_WAIT_S] -= dt
+            if peds[i, R.P_WAIT_S] <= 0.0 and gap_clear(peds, i, v, count):
+                peds[i, R.P_HEADING] = np.arctan2(
+                    -side * peds[i, R.P_ACROSS_Y], -side * peds[i, R.P_ACROSS_X]
+                )
+                peds[i, R.P_SPEED] = peds[i, R.P_PACE]
             continue
-        step = peds[i, P_SPEED] * dt
-        peds[i, P_X] = peds[i, P_X] + step * np.cos(peds[i, P_HEADING])
-        peds[i, P_Y] = peds[i, P_Y] + step * np.sin(peds[i, P_HEADING])
-        dx, dy = peds[i, P_X] - peds[i, P_CENTRE_X], peds[i, P_Y] - peds[i, P_CENTRE_Y]
-        if -side * (dx * peds[i, P_ACROSS_X] + dy * peds[i, P_ACROSS_Y]) >= PAVEMENT_M:
-            peds[i, P_SIDE], peds[i, P_SPEED] = -side, 0.0
-            peds[i, P_WAIT_S] = MEAN_WAIT_S * standard_exponential_inv(rng_words)
+        step = peds[i, R.P_SPEED] * dt
+        peds[i, R.P_X] = peds[i, R.P_X] + step * np.cos(peds[i, R.P_HEADING])
+        peds[i, R.P_Y] = peds[i, R.P_Y] + step * np.sin(peds[i, R.P_HEADING])
+        dx, dy = peds[i, R.P_X] - peds[i, R.P_CENTRE_X], peds[i, R.P_Y] - peds[i, R.P_CENTRE_Y]
+        if -side * (dx * peds[i, R.P_ACROSS_X] + dy * peds[i, R.P_ACROSS_Y]) >= PAVEMENT_M:
+            peds[i, R.P_SIDE], peds[i, R.P_SPEED] = -side, 0.0
+            peds[i, R.P_WAIT_S] = MEAN_WAIT_S * standard_exponential_inv(rng_words)
 
 
 @njit(cache=True)
 def _pedestrian_polygon(peds: np.ndarray, i: int) -> np.ndarray:
     """RoadObject.polygon of a pedestrian: its PEDESTRIAN_SIZE_M square, closed (5, 2)."""
-    c, s = np.cos(peds[i, P_HEADING]), np.sin(peds[i, P_HEADING])
+    c, s = np.cos(peds[i, R.P_HEADING]), np.sin(peds[i, R.P_HEADING])
     corners = np.empty((5, 2))
     half = PEDESTRIAN_SIZE_M / 2
     local = ((-half, -half), (-half, half), (half, half), (half, -half))
     for k in range(4):
         px, py = local[k]
-        corners[k, 0] = c * px + -s * py + peds[i, P_X]
-        corners[k, 1] = s * px + c * py + peds[i, P_Y]
+        corners[k, 0] = c * px + -s * py + peds[i, R.P_X]
+        corners[k, 1] = s * px + c * py + peds[i, R.P_Y]
     corners[4, 0], corners[4, 1] = corners[0, 0], corners[0, 1]  # element-wise (see traffic._polygon_into)
     return corners
 
@@ -170,27 +147,27 @@ def hit_pedestrians(peds: np.ndarray, pcount: int, v: np.ndarray, count: int, eg
     peds, v = borrowed((peds, v))
     reach_vehicle = -1.0
     for j in range(count):
-        if v[j, SPEED] > MOVING_MPS:
-            reach_vehicle = max(reach_vehicle, np.sqrt(v[j, LEN] ** 2 + v[j, WID] ** 2))
+        if v[j, T.SPEED] > MOVING_MPS:
+            reach_vehicle = max(reach_vehicle, np.sqrt(v[j, T.LEN] ** 2 + v[j, T.WID] ** 2))
     if reach_vehicle < 0.0:
         return  # no moving vehicle
     reach = (PEDESTRIAN_DIAGONAL_M + reach_vehicle) / 2
     for i in range(pcount):
-        if peds[i, P_CRASHED] != 0.0:
+        if peds[i, R.P_CRASHED] != 0.0:
             continue
         for j in range(count):
-            if v[j, SPEED] <= MOVING_MPS:
+            if v[j, T.SPEED] <= MOVING_MPS:
                 continue
-            dx, dy = peds[i, P_X] - v[j, X], peds[i, P_Y] - v[j, Y]
+            dx, dy = peds[i, R.P_X] - v[j, T.X], peds[i, R.P_Y] - v[j, T.Y]
             gap = np.sqrt(dx * dx + dy * dy)
-            if not gap < reach or peds[i, P_CRASHED] != 0.0:
+            if not gap < reach or peds[i, R.P_CRASHED] != 0.0:
                 continue
-            diagonal = np.sqrt(v[j, LEN] ** 2 + v[j, WID] ** 2)
-            if gap > (diagonal + PEDESTRIAN_DIAGONAL_M) / 2 + v[j, SPEED] * 0.0:
+            diagonal = np.sqrt(v[j, T.LEN] ** 2 + v[j, T.WID] ** 2)
+            if gap > (diagonal + PEDESTRIAN_DIAGONAL_M) / 2 + v[j, T.SPEED] * 0.0:
                 continue  # _is_colliding's own sphere check
-            if polygons_intersecting(_polygon(v, j), _pedestrian_polygon(peds, i), 0.0, 0.0, 0.0, 0.0)[0]:
-                v[j, CRASHED], peds[i, P_CRASHED] = 1.0, 1.0
-                peds[i, P_HIT_EGO] = 1.0 if j == ego else 0.0
+            if T.polygons_intersecting(T._polygon(v, j), _pedestrian_polygon(peds, i), 0.0, 0.0, 0.0, 0.0)[0]:
+                v[j, T.CRASHED], peds[i, R.P_CRASHED] = 1.0, 1.0
+                peds[i, R.P_HIT_EGO] = 1.0 if j == ego else 0.0
 
 
 @njit(cache=True)
@@ -201,9 +178,9 @@ def clear_wrecks(v: np.ndarray, count: int, ego: int, dt: float) -> tuple[int, i
     (v,) = borrowed((v,))
     kept, new_ego = 0, ego
     for j in range(count):
-        if j != ego and v[j, CRASHED] != 0.0:
-            v[j, WRECKED_S] = v[j, WRECKED_S] + dt
-            if v[j, WRECKED_S] >= WRECK_CLEARED_S:
+        if j != ego and v[j, T.CRASHED] != 0.0:
+            v[j, T.WRECKED_S] = v[j, T.WRECKED_S] + dt
+            if v[j, T.WRECKED_S] >= WRECK_CLEARED_S:
                 continue
         if j == ego:
             new_ego = kept
