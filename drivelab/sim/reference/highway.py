@@ -60,6 +60,13 @@ def _lane_stations(lane) -> np.ndarray:
     return lane_stations(lane, type(lane) is StraightLane)
 
 
+def _object_rows(objects: list) -> np.ndarray:
+    """(N, 6) x, y, heading, speed, length, width of highway-env road objects."""
+    return np.array(
+        [[*o.position, o.heading, o.speed, o.LENGTH, o.WIDTH] for o in objects], dtype=float
+    ).reshape(-1, 6)
+
+
 def build_road_map(network) -> RoadMap:
     """Convert highway-env's road network to arrays (once per reset)."""
     lanes = network.lanes_list()
@@ -235,12 +242,8 @@ class HighwayBackend:
                 break
             lane_index = road.network.random_lane_index(rng)
             lane = road.network.get_lane(lane_index)
-            vehicle = IDMVehicle.make_on_lane(
-                road,
-                lane_index,
-                longitudinal=float(rng.uniform(0, lane.length)),
-                speed=float(lane.speed_limit or 20.0) * 0.8,
-            )
+            longitudinal, speed = float(rng.uniform(0, lane.length)), float(lane.speed_limit or 20.0) * 0.8
+            vehicle = IDMVehicle.make_on_lane(road, lane_index, longitudinal=longitudinal, speed=speed)
             if min(np.linalg.norm(v.position - vehicle.position) for v in road.vehicles) < 15:
                 continue
             if self.scenario.destination:
@@ -317,18 +320,8 @@ class HighwayBackend:
         heading_back, heading_ahead = lane.heading_at(s - 1.0), lane.heading_at(s + 1.0)
         curvature = float(np.angle(np.exp(1j * (heading_ahead - heading_back)))) / 2.0
         target = getattr(ego, "target_lane_index", lane_index)
-        others = [v for v in env.road.vehicles if v is not ego]
-        vehicles = np.array(
-            [[*v.position, v.heading, v.speed, v.LENGTH, v.WIDTH] for v in others], dtype=float
-        ).reshape(-1, 6)
-        pedestrians = np.array(
-            [
-                [*p.position, p.heading, p.speed, p.LENGTH, p.WIDTH]
-                for p in self._pedestrians()
-                if not p.crashed
-            ],
-            dtype=float,
-        ).reshape(-1, 6)
+        vehicles = _object_rows([v for v in env.road.vehicles if v is not ego])
+        pedestrians = _object_rows([p for p in self._pedestrians() if not p.crashed])
         ego_state = Ego(
             position=np.array(ego.position, dtype=float),
             heading=float(ego.heading),
