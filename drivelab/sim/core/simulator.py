@@ -1014,37 +1014,26 @@ class FastSimulator:
         # highway-env's export: angle(exp(1j * turn)) / 2, numpy's arctan2 of the kernel's parts
         curvature = np.arctan2(turn_sin, turn_cos)
         curvature *= 0.5
+        position = np.ascontiguousarray(floats[:, EX_X : EX_Y + 1])  # (K, 2): a view for K = 1
         ego = assemble(
-            EgoBatch,
-            position=np.ascontiguousarray(floats[:, EX_X : EX_Y + 1]),  # (K, 2): a view for K = 1
-            heading=heading,
-            speed_mps=speed,
-            steering=steering,
-            acceleration_mps2=acceleration,
-            length_m=length,
-            width_m=width,
-            lane_id=lane_id,
-            lane_count=lane_count,
-            target_lane_id=target_lane_id,
-            lane_width_m=lane_width,
-            lateral_offset_m=lateral,
-            lane_heading=lane_heading,
-            lane_curvature=curvature,
-            on_road=on_road,
+            EgoBatch, position=position, heading=heading, speed_mps=speed, steering=steering,
+            acceleration_mps2=acceleration, length_m=length, width_m=width, lane_id=lane_id,
+            lane_count=lane_count, target_lane_id=target_lane_id, lane_width_m=lane_width,
+            lateral_offset_m=lateral, lane_heading=lane_heading, lane_curvature=curvature, on_road=on_road,
             in_intersection=in_junction,
-        )
+        )  # fmt: skip
         no_event = self._no_event
         off_road = ~on_road
         if self.scenario.keep_lane:  # follow-lane: leaving the starting lane is leaving the road
             off_road |= lane_id != self.start_lane_id
+        if self.arrival == ARRIVE_ROUTE_END:
+            arrived = self._route_ended(route_index, progress_m)
         events = assemble(
             EventsBatch,
             collided=collided,
             collision_kind=collided.view(np.int8),  # COLLISION_NONE 0, COLLISION_VEHICLE 1
             off_road=off_road,
-            arrived=arrived
-            if self.arrival != ARRIVE_ROUTE_END
-            else self._route_ended(route_index, progress_m),
+            arrived=arrived,
             red_light_crossed=no_event,  # the rules add blocked and off_route; no lights here
             blocked=no_event,
             off_route=no_event,
