@@ -257,16 +257,6 @@ _NO_FIXED = np.zeros((0, 2), dtype=np.int64)
 
 
 @njit(cache=True)
-def _street_point(lanes, lane, longitudinal):
-    """LaneGeometry.position(lane, longitudinal, 0.0) of a straight lane, in numpy's order:
-    start + longitudinal * direction + 0.0 * lateral direction."""
-    lateral = 0.0
-    x = lanes[lane, L.START_X] + longitudinal * lanes[lane, L.DIR_X] + lateral * -lanes[lane, L.DIR_Y]
-    y = lanes[lane, L.START_Y] + longitudinal * lanes[lane, L.DIR_Y] + lateral * lanes[lane, L.DIR_X]
-    return x, y
-
-
-@njit(cache=True)
 def _place(row, lanes, x, y, heading, speed, idm_delta) -> bool:
     """``vehicle_row``'s common part: pose, speed, the closest lane (compiled distances; True when
     another lane is within 1e-6 of it, for numpy's distances to decide), DELTA, collisions."""
@@ -318,7 +308,7 @@ def _town_rows(
         ego_route[0] = start
     longitudinal = pcg64.uniform(words, 5.0, max(lanes[start, L.LENGTH] - 20.0, 5.0))
     ego = vehicles[0]
-    x, y = _street_point(lanes, start, longitudinal)
+    x, y = L.position(lanes, start, longitudinal, 0.0)  # LaneGeometry.position's order
     ambiguous[0] = _place(ego, lanes, x, y, lanes[start, L.HEADING], ego_speed, idm_delta)
     ego[T.KIND], ego[T.LEN], ego[T.WID] = kind, ego_length, ego_width
     if kind == T.CONTROLLED:  # an MDPVehicle: the allowed speed nearest its own; its route
@@ -329,7 +319,7 @@ def _town_rows(
         placed = False
         for _ in range(PLACEMENT_TRIES):
             lane = streets[pcg64.bounded_int(words, streets.shape[0])]
-            x, y = _street_point(lanes, lane, pcg64.uniform(words, 5.0, lanes[lane, L.LENGTH] - 5.0))
+            x, y = L.position(lanes, lane, pcg64.uniform(words, 5.0, lanes[lane, L.LENGTH] - 5.0), 0.0)
             nearest = np.inf
             for other in range(count):
                 dx, dy = vehicles[other, T.X] - x, vehicles[other, T.Y] - y
