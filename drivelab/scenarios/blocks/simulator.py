@@ -54,6 +54,8 @@ ARRIVAL_WINDOW_M = 5.0  # MetaDrive's arrive_dest: within 5 m of the final road'
 # MetaDrive's ego tops out at 80 km/h (metadrive/component/vehicle/vehicle_type.py, max_speed_km_h;
 # its default reward's speed term divides by it too)
 EGO_MAX_SPEED_MPS = 80.0 / 3.6
+# the BlocksMap arrays the simulator stacks over the loaded maps under the same names
+_STACKED = ("in_junction", "dead_end", "solid", "light_junction", "light_arm", "signal_xyh", "signal_light")
 
 
 def _world_kernel(parallel: bool):
@@ -227,10 +229,11 @@ class BlocksSimulator(FastSimulator):
         slot = self._slot_of[seed] = len(self.maps)
         self.maps.append(bmap)
         self.map_start = np.append(self.map_start, len(self.lanes))
+        self.map_light_start = np.append(self.map_light_start, len(self.light_arm))
+        self.map_signal_start = np.append(self.map_signal_start, len(self.signal_light))
         self.lanes = np.concatenate([self.lanes, bmap.table.rows])
-        self.in_junction = np.concatenate([self.in_junction, bmap.in_junction])
-        self.dead_end = np.concatenate([self.dead_end, bmap.dead_end])
-        self.solid = np.concatenate([self.solid, bmap.solid])
+        for name in _STACKED:
+            setattr(self, name, np.concatenate([getattr(self, name), getattr(bmap, name)]))
         *lane_arrays, changeable, ending, successor_start, successors = self.road_arrays
         self.road_arrays = (
             *(np.concatenate([a, b]) for a, b in zip(lane_arrays, bmap.junction_arrays, strict=True)),
@@ -239,12 +242,6 @@ class BlocksSimulator(FastSimulator):
             np.concatenate([successor_start[:-1], bmap.successor_start + len(successors)]),
             np.concatenate([successors, bmap.successors]),
         )
-        self.map_light_start = np.append(self.map_light_start, len(self.light_arm))
-        self.light_junction = np.concatenate([self.light_junction, bmap.light_junction])
-        self.light_arm = np.concatenate([self.light_arm, bmap.light_arm])
-        self.map_signal_start = np.append(self.map_signal_start, len(self.signal_light))
-        self.signal_xyh = np.concatenate([self.signal_xyh, bmap.signal_xyh])
-        self.signal_light = np.concatenate([self.signal_light, bmap.signal_light])
         timings = bmap.pg.description.timings
         self.timings = np.array([timings.green_s, timings.yellow_s, timings.all_red_s])
         k = self.num_worlds
