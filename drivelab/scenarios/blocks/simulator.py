@@ -89,13 +89,9 @@ def simulate_map_worlds(
     ``active`` (K,), as ``traffic.simulate_worlds`` (a thread per world); a vehicle that yielded
     cruises on at ``release_cap_mps``.
 
-    :param road: the stacked per-lane arrays (L_total,) of every loaded map, in
-        ``blocks_simulate``'s order: junction, from_arm, to_arm, turn, end_junction, end_arm, light
-        (int64, local to each map), changeable, ending (bool), then the continuations' CSR: starts
-        (L_total + 1,) into successors (E_total,) of local lane rows.
-    :param light_start: / ``light_stop`` (K,): world k's lights, the rows of its map in the stacked
-        light table; ``light_states`` (K, M_max) their LIGHT_* states (world k's first
-        ``light_stop[k] - light_start[k]``).
+    :param road: ``BlocksSimulator.road_arrays``, in ``blocks_simulate``'s order.
+    :param light_start: / ``light_stop`` (K,): world k's rows of the stacked light table;
+        ``light_states`` (K, M_max) their LIGHT_* states (world k's first ``light_stop[k] - light_start[k]``).
     :param ego_max_speed_mps: the egos' top speed.
     """
     parallel = v.shape[0] > 1 and numba.get_num_threads() > 1

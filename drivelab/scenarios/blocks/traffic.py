@@ -158,11 +158,9 @@ def blocks_mobil(
     v: np.ndarray, lanes: np.ndarray, p: np.ndarray, coords: np.ndarray, done: np.ndarray,
     trig: np.ndarray, i: int, lane: int, successor_start: np.ndarray, successors: np.ndarray,
 ) -> bool:  # fmt: skip
-    """highway-env's ``IDMVehicle.mobil`` (``traffic.mobil_side``) without its planned-lane
-    branch: the change to ``lane`` is safe for the new follower (it brakes less than
-    LANE_CHANGE_MAX_BRAKING_IMPOSED) and worth it (the politeness-weighted acceleration gain
-    reaches LANE_CHANGE_MIN_ACC_GAIN). The route is checked by ``route_feasible`` instead; the new
-    follower may come from the lane before ``lane`` (``rear_across``)."""
+    """highway-env's ``IDMVehicle.mobil`` (``traffic.mobil_side``) without its planned-lane branch
+    (the route is checked by ``route_feasible``); the new follower may come from the lane before
+    ``lane`` (``rear_across``)."""
     v, lanes, p, coords, done, trig, successor_start, successors = borrowed(
         (v, lanes, p, coords, done, trig, successor_start, successors)
     )
@@ -194,10 +192,8 @@ def merge_safe(
     v: np.ndarray, lanes: np.ndarray, p: np.ndarray, coords: np.ndarray, done: np.ndarray,
     trig: np.ndarray, i: int, lane: int, successor_start: np.ndarray, successors: np.ndarray,
 ) -> bool:  # fmt: skip
-    """MOBIL's safety criterion for a mandatory change to ``lane``: neither the new follower
-    behind vehicle i nor vehicle i behind its new leader brakes harder than
-    LANE_CHANGE_MAX_BRAKING_IMPOSED (``traffic.mobil_side``'s branch for a lane the route asks
-    for; the new follower as ``blocks_mobil`` finds it)."""
+    """MOBIL's safety criterion for a mandatory change to ``lane`` (``traffic.mobil_side``'s branch
+    for a lane the route asks for), the new follower as ``blocks_mobil`` finds it."""
     v, lanes, p, coords, done, trig, successor_start, successors = borrowed(
         (v, lanes, p, coords, done, trig, successor_start, successors)
     )
@@ -335,12 +331,10 @@ def blocks_simulate(
     end_junction, end_arm, light, changeable, ending, successor_start, successors, light_states,
     ego_max_speed_mps,
 ) -> None:  # fmt: skip
-    """``traffic.simulate`` (``frames`` frames of ``dt``; the road's rules every ``regulation[0]``
-    frames, at the junctions only, a released vehicle cruising at ``release_cap_mps``) with
-    ``blocks_act``; the lights hold their states (``light_states``) through the step. The ego rows
-    (every row but the traffic's) go no faster than ``ego_max_speed_mps``: above it their
-    acceleration is clipped as ``Vehicle.clip_actions`` clips at MAX_SPEED (MetaDrive's ego tops
-    out at 80 km/h, highway-env's at 40 m/s)."""
+    """``traffic.simulate`` (the road's rules every ``regulation[0]`` frames, at the junctions only, a
+    released vehicle cruising at ``release_cap_mps``) with ``blocks_act``; the lights hold their
+    ``light_states`` through the step. The ego rows go no faster than ``ego_max_speed_mps``
+    (``Vehicle.clip_actions``' rule at MAX_SPEED; MetaDrive's ego tops out at 80 km/h)."""
     v, lanes, p, regulation, changeable, ending, successor_start, successors = borrowed(
         (v, lanes, p, regulation, changeable, ending, successor_start, successors)
     )
