@@ -312,6 +312,7 @@ def blocks_map(pg: PGMap, base_road) -> BlocksMap:
     spot_lane, spot_s, spot_block, block_spots = _spots(pg, rows[:, L.LENGTH])
     changeable = changeable_lanes(rows, in_junction)
     signal_lanes = np.flatnonzero(np.asarray(desc.light) >= 0)
+    signal_ends = [(r, rows[r, L.LENGTH]) for r in signal_lanes]  # a lane's light stands at its end
     junction_arrays = tuple(
         np.ascontiguousarray(getattr(desc, name), dtype=np.int64) for name in LANE_METADATA
     )
@@ -337,10 +338,7 @@ def blocks_map(pg: PGMap, base_road) -> BlocksMap:
         light_arm=np.asarray(desc.light_arm, dtype=np.int64),
         light_xyh=np.asarray(desc.light_xyh, dtype=float).reshape(-1, 3),
         signal_xyh=np.array(
-            [
-                [*L.position(rows, r, rows[r, L.LENGTH], 0.0), L.heading_at(rows, r, rows[r, L.LENGTH])]
-                for r in signal_lanes
-            ]
+            [(*L.position(rows, r, end, 0.0), L.heading_at(rows, r, end)) for r, end in signal_ends]
         ).reshape(-1, 3),
         signal_light=np.asarray(desc.light, dtype=np.int64)[signal_lanes],
     )

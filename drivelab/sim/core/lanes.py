@@ -71,22 +71,16 @@ class LaneTable:
             if isinstance(lane, CircularLane):
                 values[KIND] = CIRCLE
                 values[CENTER_X], values[CENTER_Y] = lane.center
-                values[RADIUS], values[START_PHASE], values[SENSE] = (
-                    lane.radius,
-                    lane.start_phase,
-                    lane.direction,
-                )
+                values[RADIUS], values[START_PHASE] = lane.radius, lane.start_phase
+                values[SENSE] = lane.direction
             elif isinstance(lane, StraightLane):
                 values[KIND] = SINE if isinstance(lane, SineLane) else STRAIGHT
                 values[START_X], values[START_Y] = lane.start
                 values[DIR_X], values[DIR_Y] = lane.direction
                 values[HEADING] = lane.heading
                 if isinstance(lane, SineLane):
-                    values[AMPLITUDE], values[PULSATION], values[PHASE] = (
-                        lane.amplitude,
-                        lane.pulsation,
-                        lane.phase,
-                    )
+                    values[AMPLITUDE], values[PULSATION] = lane.amplitude, lane.pulsation
+                    values[PHASE] = lane.phase
             else:
                 raise NotImplementedError(f"the fast backend has no {type(lane).__name__} yet")
         _fill_boxes(rows)
