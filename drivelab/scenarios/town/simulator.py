@@ -151,9 +151,7 @@ class TownSimulator(FastSimulator):
         self.trackers: list[RouteTracker | None] = [None] * k
         self.route_index = np.arange(k)
         cache = [town_frame_cache(n_max, p_max, len(self.lanes)) for _ in range(k)]
-        self.coords = np.stack([c[0] for c in cache])
-        self.done = np.stack([c[1] for c in cache])
-        self.trig = np.stack([c[2] for c in cache])
+        self.coords, self.done, self.trig = (np.stack(parts) for parts in zip(*cache, strict=True))
         self._light_valid = np.ones((k, len(arrays.light_junction)), dtype=bool)
         self._light_valid.setflags(write=False)
         self._max_speed = self._empty["max_speed_mps"]
