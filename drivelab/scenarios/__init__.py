@@ -32,12 +32,8 @@ __all__ = [
 ]  # fmt: skip
 
 
-FAST_SCENARIOS = tuple(
-    name for name, scenario in SCENARIOS.items() if scenario.fast_backend
-)  # the compiled core's
-REFERENCE_SCENARIOS = tuple(
-    name for name, scenario in SCENARIOS.items() if scenario.reference_backend
-)  # highway-env's (the reference backend's)
+FAST_SCENARIOS = tuple(name for name, s in SCENARIOS.items() if s.fast_backend)  # the compiled core's
+REFERENCE_SCENARIOS = tuple(name for name, s in SCENARIOS.items() if s.reference_backend)  # highway-env's
 
 
 def gym_id(scenario: str) -> str:
