@@ -43,12 +43,7 @@ class PedalVehicle(Vehicle):
 
 
 def build_circuit(track, lane_count: int, lane_width_m: float, speed_limit_mps: float) -> RoadNetwork:
-    """A closed road of ``lane_count`` parallel lanes along ``track`` (see ``FOLLOW_LINE_TRACK``),
-    as highway-env lanes (``roads.blocks.circuit``).
-
-    Lane 0 is the leftmost; the outer lines are solid, the lines between lanes dashed. Nodes are
-    named "0", "1", … so that node ``k`` starts segment ``k`` and the last segment ends at "0".
-    """
+    """``roads.blocks.circuit`` of ``track`` (see ``FOLLOW_LINE_TRACK``) as highway-env lanes."""
     return to_road_network(circuit(track, lane_count, lane_width_m, speed_limit_mps))
 
 

@@ -58,11 +58,8 @@ from drivelab.world.state import LIGHT_GREEN, LIGHT_YELLOW
 
 
 class Pedestrian(RoadObject):
-    """A pedestrian who walks to and fro across one zebra crossing.
-
-    It waits on the pavement (off the road) for a random time, then for a gap in the traffic, then
-    walks straight across at its own pace. highway-env's IDM sees it as a leader while it is on a
-    lane; collisions with vehicles are checked by ``TownRoad``.
+    """A pedestrian who walks to and fro across one zebra crossing: it waits on the pavement for a
+    random time, then for a gap in the traffic, then walks straight across at its own pace.
 
     :param road: the town's road.
     :param crossing: the crossing's row (centre x, y, walking heading, length, width).

@@ -94,11 +94,8 @@ def gap_clear(peds: np.ndarray, i: int, v: np.ndarray, count: int) -> bool:
 def walk_pedestrians(
     peds: np.ndarray, pcount: int, v: np.ndarray, count: int, dt: float, rng_words: np.ndarray
 ) -> None:
-    """``Pedestrian.walk(dt, road.vehicles)`` of pedestrian rows 0..pcount-1 in order: a crashed
-    one stands still; a waiting one counts its wait down and, once it is over and the gap is clear,
-    turns to the far pavement at its pace; a walking one moves and, past PAVEMENT_M on the far
-    side, stops there and draws its next wait, ``MEAN_WAIT_S * standard_exponential(method="inv")``
-    from the world's generator ``rng_words`` (6,) (in pedestrian order, as the reference)."""
+    """``Pedestrian.walk(dt, road.vehicles)`` of pedestrian rows 0..pcount-1 in order, the waits
+    drawn from the world's generator ``rng_words`` (6,) in pedestrian order, as the reference."""
     peds, v, rng_words = borrowed((peds, v, rng_words))
     for i in range(pcount):
         if peds[i, R.P_CRASHED] != 0.0:

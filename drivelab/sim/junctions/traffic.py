@@ -496,10 +496,9 @@ def town_step(v: np.ndarray, count: int, lanes: np.ndarray, dt: float) -> None:
 
 
 def red_light_runs(lanes, previous_lane, lane, light, light_state, active) -> np.ndarray:
-    """(K,) whether each world's ego ran a red light in its step (the town's and the block maps'
-    rule): it left a lane whose light (``light`` (K,), -1: none) was red at the step's end
-    (``light_state`` (K, lights)) for a lane that starts where that one ends; ``active`` worlds
-    only. ``previous_lane`` and ``lane``: the ego's rows of ``lanes`` before and after the step."""
+    """(K,) whether each ``active`` world's ego ran a red light in its step: it left lane
+    ``previous_lane``, whose light (``light`` (K,), -1: none) was red at the step's end
+    (``light_state`` (K, lights)), for a lane ``lane`` that starts where that one ends."""
     k = len(lane)
     state = light_state[np.arange(k), np.maximum(light, 0)] if light_state.shape[1] else np.zeros(k, int)
     crossed = lanes[lane, L.FROM_NODE] == lanes[previous_lane, L.TO_NODE]
