@@ -27,23 +27,20 @@ from drivelab.sim.core.lanes import distance
     IMPACT_X, IMPACT_Y, HAS_IMPACT, CHECK_COLLISIONS, KIND, LEN, WID, ROUTE_START, ROUTE_END, ROUTED,
     YIELDING, WRECKED_S, PEDAL,
 ) = range(25)  # fmt: skip
-# A planned route (highway-env's ``vehicle.route``) is stored in the row itself: MAX_ROUTE entries
-# of (road, lane id) from column ROUTE, a road named by the row of its lane 0, lane id -1 for None;
-# entries ROUTE_START..ROUTE_END-1 are still to be driven (highway-env pops them from the front);
-# ROUTED is 0 where highway-env's route is None. YIELDING: stopped by RegulatedRoad's right of way.
-# WRECKED_S: seconds a crashed town vehicle has stood (towed at WRECK_CLEARED_S). PEDAL: a pedal
-# vehicle's commanded acceleration (drag is taken off it each frame).
+# A planned route (highway-env's ``vehicle.route``) is stored in the row: MAX_ROUTE entries of
+# (road: the row of its lane 0, lane id: -1 for None) from column ROUTE, ROUTE_START..ROUTE_END-1
+# still to be driven; ROUTED is 0 where the route is None. YIELDING: stopped by RegulatedRoad's
+# right of way. WRECKED_S: seconds a crashed town vehicle has stood. PEDAL: a pedal vehicle's
+# commanded acceleration.
 ROUTE, MAX_ROUTE = 25, 12
 VEHICLE_COLUMNS = ROUTE + 2 * MAX_ROUTE
 # The town's routes are longer (up to 19 roads, and a retargeted ego appends a second one): its
 # rows are wider. Kernels read a row's route capacity as (row width - ROUTE) // 2.
 TOWN_MAX_ROUTE = 40
 TOWN_VEHICLE_COLUMNS = ROUTE + 2 * TOWN_MAX_ROUTE
-# KIND: a plain kinematic vehicle (continuous-control ego), a lane-following controlled vehicle
-# (meta-action ego), an IDM/MOBIL vehicle (traffic), a static obstacle (after every vehicle), a
-# town vehicle (IDM/MOBIL that stops for lights, yields on left turns and wanders on random
-# routes: highway-env's TownVehicle), a pedal vehicle (the CARLA study's circuits ego: acceleration =
-# pedal - drag * speed)
+# KIND: a kinematic Vehicle (continuous-control ego), a ControlledVehicle (meta-action ego), an
+# IDMVehicle (traffic), a static obstacle (after every vehicle), a TownVehicle, a pedal vehicle (the
+# circuits' ego: acceleration = pedal - drag * speed)
 PLAIN, CONTROLLED, IDM, OBSTACLE, TOWN, PEDAL_KIND = 0, 1, 2, 3, 4, 5
 
 # IDM / MOBIL parameters, read from highway-env's IDMVehicle class at reset (IDM_PARAMETERS order)
