@@ -74,11 +74,7 @@ SCENARIO = Scenario(
     "highway_env.envs.roundabout_env.RoundaboutEnv",
     "two-lane roundabout, enter from the south and leave to the north",
     config={"duration": 11},
-    traffic={
-        "empty": {"keep_npcs": False},
-        "regular": {},
-        "dense": {"extra_vehicles": 5},
-    },
+    traffic={"empty": {"keep_npcs": False}, "regular": {}, "dense": {"extra_vehicles": 5}},
     destination="nxs",
     intersection_nodes=RING,
     meta_target_speeds=(0, 8, 16),
