@@ -359,12 +359,8 @@ class TownEnv(AbstractEnv):
             self.ego_route = random_route(road, start)
         lane = road.network.get_lane(start)
         longitudinal = rng.uniform(5.0, max(lane.length - 20.0, 5.0))
-        ego = self.action_type.vehicle_class(
-            road,
-            lane.position(longitudinal, 0.0),
-            lane.heading_at(longitudinal),
-            self.config["ego_start_speed"],
-        )
+        position, heading = lane.position(longitudinal, 0.0), lane.heading_at(longitudinal)
+        ego = self.action_type.vehicle_class(road, position, heading, self.config["ego_start_speed"])
         if hasattr(ego, "route"):  # a meta-action ego follows the planned route itself
             ego.route = list(self.ego_route)
         road.vehicles.append(ego)

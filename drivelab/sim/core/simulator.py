@@ -561,8 +561,7 @@ def export_world(
     out[EX_LANE_HEADING] = L.heading_at(lanes, lane, s)
     out[EX_SPEED_LIMIT] = 30.0 if np.isnan(limit) else limit
     turn = L.heading_at(lanes, lane, s + 1.0) - L.heading_at(lanes, lane, s - 1.0)
-    # libm's cos and sin, the parts of numpy's exp(1j * turn) (glibc's cexp of an imaginary number;
-    # the same bits on 2.1 M random angles on the development machine)
+    # libm's cos and sin, the parts of numpy's exp(1j * turn) (glibc's cexp of an imaginary number)
     out[EX_TURN_COS], out[EX_TURN_SIN] = math.cos(turn), math.sin(turn)
     ints[EX_LANE_ID], ints[EX_LANE_COUNT] = lanes[lane, L.LANE_ID], lanes[lane, L.LANE_COUNT]
     ints[EX_TARGET_LANE_ID] = lanes[target, L.LANE_ID]

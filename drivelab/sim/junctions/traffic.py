@@ -431,8 +431,7 @@ def _act_rows(
             continue  # plain and pedal vehicles keep their last action; obstacles never act
         if kind != T.CONTROLLED and kind != T.TOWN:
             raise ValueError("town_act drives CONTROLLED, PLAIN, PEDAL_KIND and TOWN rows only")
-        # one call site each for the inlined follow_road and steering_control: a second copy
-        # would be compiled again (seconds of a cold start)
+        # one call site each for the inlined follow_road and steering_control (each is compiled anew)
         lane = int(w[i, T.LANE])
         if kind == T.TOWN:  # TownVehicle.act: the turn's speed limit, before follow_road
             limit = lanes[lane, L.SPEED_LIMIT]

@@ -188,12 +188,8 @@ class RoadDescription:
             key = (r.start_node, r.end_node)
             lane_id.append(seen.get(key, 0))
             seen[key] = lane_id[-1] + 1
-        light_of = {
-            (int(j), int(k)): m
-            for m, (j, k) in enumerate(
-                zip(rest.get("light_junction", ()), rest.get("light_arm", ()), strict=True)
-            )
-        }
+        lights = zip(rest.get("light_junction", ()), rest.get("light_arm", ()), strict=True)
+        light_of = {(int(j), int(k)): m for m, (j, k) in enumerate(lights)}
         light = [light_of.get((r.end_junction, r.end_arm), -1) for r in records]
         crossing_lanes = rest.pop("crossing_lanes", None)
         if crossing_lanes is not None:  # given as positions in ``records`` before the ordering
