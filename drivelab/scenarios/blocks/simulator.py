@@ -172,15 +172,10 @@ class BlocksSimulator(FastSimulator):
         self.in_junction = np.zeros(0, dtype=bool)
         self.dead_end = np.zeros(0, dtype=bool)
         self.solid = np.zeros((0, 2), dtype=bool)
-        # blocks_traffic's per-lane arrays of every loaded map, stacked: junction, from_arm, to_arm,
-        # turn, end_junction, end_arm, light, changeable, ending; then the continuations' CSR
-        self.road_arrays: tuple[np.ndarray, ...] = (
-            *(np.zeros(0, dtype=np.int64) for _ in range(7)),
-            np.zeros(0, dtype=bool),
-            np.zeros(0, dtype=bool),
-            np.zeros(1, dtype=np.int64),
-            np.zeros(0, dtype=np.int64),
-        )
+        # blocks_traffic's per-lane arrays of every loaded map, stacked: LANE_METADATA, changeable,
+        # ending; then the continuations' CSR
+        ints, flags = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=bool)
+        self.road_arrays = (*[ints] * 7, flags, flags, np.zeros(1, dtype=np.int64), ints)
         self.light_junction = np.zeros(0, dtype=np.int64)  # every loaded map's lights, stacked
         self.light_arm = np.zeros(0, dtype=np.int64)
         self.signal_xyh = np.zeros((0, 3))  # every loaded map's exported lights (one per lane), stacked
