@@ -283,12 +283,9 @@ class TownSimulator(FastSimulator):
         lights[..., :3] = self.arrays.light_xyh
         lights[..., 3] = self.light_state
         return batch.replaced(
-            events=events,
-            traffic_lights=lights,
-            light_valid=self._light_valid,
-            pedestrians=pedestrians,
+            events=events, traffic_lights=lights, light_valid=self._light_valid, pedestrians=pedestrians,
             pedestrian_valid=pedestrian_valid,
-        )
+        )  # fmt: skip
 
 
 def _append_route(row: np.ndarray, lanes) -> None:
