@@ -638,12 +638,7 @@ class FastSimulator:
     on_frame: Callable[[WorldBatch], None] | None = None
 
     def __init__(
-        self,
-        scenario: Scenario,
-        traffic: str,
-        control: str,
-        num_worlds: int,
-        overrides: dict | None = None,
+        self, scenario: Scenario, traffic: str, control: str, num_worlds: int, overrides: dict | None = None
     ) -> None:
         if scenario.simulator not in {f"{c.__module__}.{c.__qualname__}" for c in type(self).__mro__}:
             raise UsageError(
