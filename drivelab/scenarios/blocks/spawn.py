@@ -116,13 +116,10 @@ class MapSet:
         if not isinstance(signalised, bool):
             raise UsageError(f"signalised must be true or false, got {signalised!r}")
         return MapSet(
-            spec if isinstance(spec, str) else int(spec),
-            _integer(config, "start_seed", 0),
-            _integer(config, "num_scenarios", 1),
-            lane_count,
-            None if width is None else float(width),
+            spec if isinstance(spec, str) else int(spec), _integer(config, "start_seed", 0),
+            _integer(config, "num_scenarios", 1), lane_count, None if width is None else float(width),
             signalised,
-        )
+        )  # fmt: skip
 
     def seed_of(self, episode_seed: int) -> int:
         """The map seed an episode plays: ``start_seed + episode_seed mod num_scenarios``."""

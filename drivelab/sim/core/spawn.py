@@ -58,9 +58,8 @@ class LaneGeometry:
         if kind == L.CIRCLE:
             direction = self._direction_sign[lane]
             phi = direction * longitudinal / row[L.RADIUS] + row[L.START_PHASE]
-            return self._center[lane] + (row[L.RADIUS] - lateral * direction) * np.array(
-                [np.cos(phi), np.sin(phi)]
-            )
+            unit = np.array([np.cos(phi), np.sin(phi)])
+            return self._center[lane] + (row[L.RADIUS] - lateral * direction) * unit
         if kind == L.SINE:
             lateral = lateral + row[L.AMPLITUDE] * np.sin(row[L.PULSATION] * longitudinal + row[L.PHASE])
         return self._start[lane] + longitudinal * self._direction[lane] + lateral * self._lateral[lane]
@@ -73,9 +72,8 @@ class LaneGeometry:
             phi = direction * longitudinal / row[L.RADIUS] + row[L.START_PHASE]
             return phi + np.pi / 2 * direction
         if kind == L.SINE:
-            slope = (
-                row[L.AMPLITUDE] * row[L.PULSATION] * np.cos(row[L.PULSATION] * longitudinal + row[L.PHASE])
-            )
+            pulsation = row[L.PULSATION]
+            slope = row[L.AMPLITUDE] * pulsation * np.cos(pulsation * longitudinal + row[L.PHASE])
             return row[L.HEADING] + np.arctan(slope)
         return row[L.HEADING]
 

@@ -74,9 +74,8 @@ class LaneRecord:
         """World point (2,) at (longitudinal, lateral) of the lane."""
         if self.kind == ARC:
             phi = self.sense * longitudinal / self.radius + self.start_phase
-            return np.array(self.centre) + (self.radius - lateral * self.sense) * np.array(
-                [np.cos(phi), np.sin(phi)]
-            )
+            unit = np.array([np.cos(phi), np.sin(phi)])
+            return np.array(self.centre) + (self.radius - lateral * self.sense) * unit
         start, end = np.array(self.start), np.array(self.end)
         direction = (end - start) / self.length
         return start + longitudinal * direction + lateral * np.array([-direction[1], direction[0]])
