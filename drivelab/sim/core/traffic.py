@@ -201,10 +201,16 @@ def neighbours(v: np.ndarray, lanes: np.ndarray, i: int, lane: int) -> tuple[int
 @njit(cache=True, inline="always")
 def cached_desired_gap(v: np.ndarray, p: np.ndarray, trig: np.ndarray, ego: int, front: int) -> float:
     """IDMVehicle.desired_gap, projected on the ego's direction (``trig``: headings' cos, sin)."""
+    return desired_gap_to(v, p, trig, ego, front, v[front, SPEED])
+
+
+@njit(cache=True, inline="always")
+def desired_gap_to(v, p, trig, ego: int, front: int, front_speed: float) -> float:
+    """``cached_desired_gap`` to a front object at ``front_speed`` whose heading is ``trig[front]``."""
     ab = -p[COMFORT_ACC_MAX] * p[COMFORT_ACC_MIN]
     cos_e, sin_e = trig[ego, 0], trig[ego, 1]
-    dvx = v[ego, SPEED] * cos_e - v[front, SPEED] * trig[front, 0]
-    dvy = v[ego, SPEED] * sin_e - v[front, SPEED] * trig[front, 1]
+    dvx = v[ego, SPEED] * cos_e - front_speed * trig[front, 0]
+    dvy = v[ego, SPEED] * sin_e - front_speed * trig[front, 1]
     dv = dvx * cos_e + dvy * sin_e
     return p[DISTANCE_WANTED] + v[ego, SPEED] * p[TIME_WANTED] + v[ego, SPEED] * dv / (2 * np.sqrt(ab))
 

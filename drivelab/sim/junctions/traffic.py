@@ -340,19 +340,10 @@ def town_acceleration(
         if front < count:
             fx, fy = v[front, T.X], v[front, T.Y]
             desired_gap = T.cached_desired_gap(v, p, trig, i, front)
-        else:
+        else:  # a pedestrian (its heading's cos, sin in trig[front])
             k = front - count
             fx, fy = peds[k, P_X], peds[k, P_Y]
-            ab = -p[T.COMFORT_ACC_MAX] * p[T.COMFORT_ACC_MIN]
-            cos_e, sin_e = trig[i, 0], trig[i, 1]
-            dvx = v[i, T.SPEED] * cos_e - peds[k, P_SPEED] * trig[front, 0]
-            dvy = v[i, T.SPEED] * sin_e - peds[k, P_SPEED] * trig[front, 1]
-            dv = dvx * cos_e + dvy * sin_e
-            desired_gap = (
-                p[T.DISTANCE_WANTED]
-                + v[i, T.SPEED] * p[T.TIME_WANTED]
-                + v[i, T.SPEED] * dv / (2 * np.sqrt(ab))
-            )
+            desired_gap = T.desired_gap_to(v, p, trig, i, front, peds[k, P_SPEED])
         lane = int(v[i, T.LANE])
         along = lane_s(v, peds, lanes, coords, seen, lane, front) - lane_s(
             v, peds, lanes, coords, seen, lane, i
