@@ -220,22 +220,13 @@ class RoadDescription:
     def lane(self, row: int) -> LaneRecord:
         """Lane ``row`` as a record (its geometry formulas: length, position, heading)."""
         return LaneRecord(
-            self.nodes[self.lane_from[row]],
-            self.nodes[self.lane_to[row]],
-            int(self.kind[row]),
-            start=tuple(self.start[row]),
-            end=tuple(self.end[row]),
-            centre=tuple(self.centre[row]),
-            radius=self.radius[row],
-            start_phase=self.start_phase[row],
-            end_phase=self.end_phase[row],
-            clockwise=bool(self.clockwise[row]),
-            width=self.width[row],
-            lines=tuple(int(v) for v in self.lines[row]),
-            speed_limit=self.speed_limit[row],
-            priority=int(self.priority[row]),
-            forbidden=bool(self.forbidden[row]),
-        )
+            self.nodes[self.lane_from[row]], self.nodes[self.lane_to[row]], int(self.kind[row]),
+            start=tuple(self.start[row]), end=tuple(self.end[row]), centre=tuple(self.centre[row]),
+            radius=self.radius[row], start_phase=self.start_phase[row], end_phase=self.end_phase[row],
+            clockwise=bool(self.clockwise[row]), width=self.width[row],
+            lines=tuple(int(v) for v in self.lines[row]), speed_limit=self.speed_limit[row],
+            priority=int(self.priority[row]), forbidden=bool(self.forbidden[row]),
+        )  # fmt: skip
 
     @property
     def indices(self) -> tuple[tuple[str, str, int], ...]:
