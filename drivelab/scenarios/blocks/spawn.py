@@ -286,18 +286,10 @@ def blocks_map(pg: PGMap, base_road) -> BlocksMap:
     )
     period = int(base_road.config["simulation_frequency"] // REGULATION_FREQUENCY_HZ)
     road = dataclasses.replace(
-        base_road,
-        table=table,
-        road_map=road_map(desc),
-        graph_keys=graph_keys,
-        routes={},
-        in_junction=in_junction,
-        exit_lane=np.zeros(len(rows), dtype=bool),
-        regulation_period=period,
-        geometry=LaneGeometry(table),
-        paths={},
-        cache={},
-    )
+        base_road, table=table, road_map=road_map(desc), graph_keys=graph_keys, routes={},
+        in_junction=in_junction, exit_lane=np.zeros(len(rows), dtype=bool), regulation_period=period,
+        geometry=LaneGeometry(table), paths={}, cache={},
+    )  # fmt: skip
     spawn_lanes = pg.spawn_lanes
     routes = {
         int(lane): RouteTracker(

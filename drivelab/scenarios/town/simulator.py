@@ -24,7 +24,7 @@ from numba import njit, prange
 from drivelab.scenarios.town.spawn import TownSetup, route_tracker
 from drivelab.sim.core import traffic as T
 from drivelab.sim.core.borrow import borrowed
-from drivelab.sim.core.simulator import EX_CRASHED, EX_ON_ROAD, FastSimulator, export_worlds
+from drivelab.sim.core.simulator import EX_CRASHED, FastSimulator, export_worlds
 from drivelab.sim.junctions import rows as R
 from drivelab.sim.junctions.pedestrians import (
     clear_wrecks,
@@ -42,14 +42,7 @@ from drivelab.sim.junctions.traffic import (
     town_step,
 )
 from drivelab.sim.route import RouteTracker
-from drivelab.world.batch import (
-    COLLISION_NONE,
-    COLLISION_PEDESTRIAN,
-    COLLISION_VEHICLE,
-    EventsBatch,
-    WorldBatch,
-    assemble,
-)
+from drivelab.world.batch import COLLISION_NONE, COLLISION_PEDESTRIAN, COLLISION_VEHICLE, WorldBatch
 
 
 @njit(cache=True)
@@ -269,15 +262,9 @@ class TownSimulator(FastSimulator):
         batch = self._export_arrays(floats, ints, flags, vehicles, valid)
         collided = flags[:, EX_CRASHED]
         kind = np.where(hit_ego, COLLISION_PEDESTRIAN, COLLISION_VEHICLE)
-        events = assemble(
-            EventsBatch,
-            collided=collided,
+        events = batch.events.replaced(  # a pedestrian hit is its own kind; the lights' red runs
             collision_kind=np.where(collided, kind, COLLISION_NONE).astype(np.int8),
-            off_road=~flags[:, EX_ON_ROAD],
-            arrived=batch.events.arrived,
             red_light_crossed=self._red_light.copy(),
-            blocked=self._no_event,
-            off_route=self._no_event,
         )
         lights = np.empty((k, len(self.arrays.light_xyh), 4))  # every world's lights and their states
         lights[..., :3] = self.arrays.light_xyh
