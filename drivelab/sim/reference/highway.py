@@ -323,23 +323,15 @@ class HighwayBackend:
         vehicles = _object_rows([v for v in env.road.vehicles if v is not ego])
         pedestrians = _object_rows([p for p in self._pedestrians() if not p.crashed])
         ego_state = Ego(
-            position=np.array(ego.position, dtype=float),
-            heading=float(ego.heading),
-            speed_mps=float(ego.speed),
-            steering=float(ego.action.get("steering", 0.0)),
-            acceleration_mps2=float(ego.action.get("acceleration", 0.0)),
-            length_m=float(ego.LENGTH),
-            width_m=float(ego.WIDTH),
-            lane_id=int(lane_index[2]),
-            lane_count=len(env.road.network.all_side_lanes(lane_index)),
-            target_lane_id=int(target[2]),
-            lane_width_m=float(lane.width_at(s)),
-            lateral_offset_m=float(lateral),
-            lane_heading=float(lane.heading_at(s)),
-            lane_curvature=curvature,
-            on_road=bool(ego.on_road),
+            position=np.array(ego.position, dtype=float), heading=float(ego.heading),
+            speed_mps=float(ego.speed), steering=float(ego.action.get("steering", 0.0)),
+            acceleration_mps2=float(ego.action.get("acceleration", 0.0)), length_m=float(ego.LENGTH),
+            width_m=float(ego.WIDTH), lane_id=int(lane_index[2]),
+            lane_count=len(env.road.network.all_side_lanes(lane_index)), target_lane_id=int(target[2]),
+            lane_width_m=float(lane.width_at(s)), lateral_offset_m=float(lateral),
+            lane_heading=float(lane.heading_at(s)), lane_curvature=curvature, on_road=bool(ego.on_road),
             in_intersection=self.scenario.in_junction(lane_index),
-        )
+        )  # fmt: skip
         return WorldState(
             time_s=float(env.time),
             dt_s=1.0 / self.policy_frequency_hz,
