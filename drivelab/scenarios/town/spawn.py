@@ -242,14 +242,9 @@ def town_episode(seed: int, setup: TownSetup, control: str) -> TownEpisode:
         progress = route.project(vehicles[0, T.X : T.Y + 1])
         limit = (route.length_m - progress) / ROUTE_TIMEOUT_MPS + ROUTE_TIMEOUT_EXTRA_S
     return TownEpisode(
-        vehicles=vehicles[:count],
-        ego=0,
-        pedestrians=pedestrians,
-        light_offsets_s=offsets,
-        ego_route=ego_route,
-        route_time_limit_s=float(limit),
-        rng_state=words,
-    )
+        vehicles=vehicles[:count], ego=0, pedestrians=pedestrians, light_offsets_s=offsets,
+        ego_route=ego_route, route_time_limit_s=float(limit), rng_state=words,
+    )  # fmt: skip
 
 
 TRACKER_CACHE_SIZE = 4096  # routes whose trackers a set-up keeps (a retargeted ego's grow without end)

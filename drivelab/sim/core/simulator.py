@@ -1037,18 +1037,9 @@ class FastSimulator:
             self._empty if not self.scenario.guide_line else {**self._empty, "road_index": route_index.copy()}
         )
         return assemble(
-            WorldBatch,
-            time_s=time_s,
-            dt_s=self.dt_policy_s,
-            ego=ego,
-            vehicles=vehicles,
-            vehicle_valid=valid,
-            roads=self.roads,
-            route=route,
-            events=events,
-            speed_limit_mps=speed_limit,
-            **extra,
-        )
+            WorldBatch, time_s=time_s, dt_s=self.dt_policy_s, ego=ego, vehicles=vehicles, vehicle_valid=valid,
+            roads=self.roads, route=route, events=events, speed_limit_mps=speed_limit, **extra,
+        )  # fmt: skip
 
     def _route_ended(
         self, route_index: np.ndarray | None = None, progress_m: np.ndarray | None = None

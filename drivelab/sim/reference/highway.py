@@ -332,16 +332,10 @@ class HighwayBackend:
             lane_heading=float(lane.heading_at(s)), lane_curvature=curvature, on_road=bool(ego.on_road),
             in_intersection=self.scenario.in_junction(lane_index),
         )  # fmt: skip
+        lights = self.lights.table(env.time) if self.lights is not None else np.zeros((0, 4))
         return WorldState(
-            time_s=float(env.time),
-            dt_s=1.0 / self.policy_frequency_hz,
-            ego=ego_state,
-            vehicles=vehicles,
-            pedestrians=pedestrians,
-            road=self.road_map,
-            route=self.route.at(self.progress_m),
-            events=events,
-            traffic_lights=self.lights.table(env.time) if self.lights is not None else np.zeros((0, 4)),
-            max_speed_mps=float(ego.MAX_SPEED),
+            time_s=float(env.time), dt_s=1.0 / self.policy_frequency_hz, ego=ego_state, vehicles=vehicles,
+            pedestrians=pedestrians, road=self.road_map, route=self.route.at(self.progress_m), events=events,
+            traffic_lights=lights, max_speed_mps=float(ego.MAX_SPEED),
             speed_limit_mps=float(lane.speed_limit or 30.0),
-        )
+        )  # fmt: skip
