@@ -6,16 +6,7 @@ handed to them; nothing below this package looks a scenario up by name."""
 from __future__ import annotations
 
 from drivelab.errors import UsageError
-from drivelab.scenarios import (
-    blocks,
-    circuits,
-    highway,
-    intersection,
-    merge,
-    racetrack,
-    roundabout,
-    town,
-)
+from drivelab.scenarios import blocks, circuits, highway, intersection, merge, racetrack, roundabout, town
 from drivelab.scenarios.circuits import SEED_TABLES
 from drivelab.scenarios.options import TRAFFIC_LEVELS, check_traffic, option_rows
 from drivelab.world.scenario import Scenario
@@ -41,12 +32,8 @@ __all__ = [
 ]  # fmt: skip
 
 
-FAST_SCENARIOS = tuple(
-    name for name, scenario in SCENARIOS.items() if scenario.fast_backend
-)  # the compiled core's
-REFERENCE_SCENARIOS = tuple(
-    name for name, scenario in SCENARIOS.items() if scenario.reference_backend
-)  # highway-env's (the reference backend's)
+FAST_SCENARIOS = tuple(name for name, s in SCENARIOS.items() if s.fast_backend)  # the compiled core's
+REFERENCE_SCENARIOS = tuple(name for name, s in SCENARIOS.items() if s.reference_backend)  # highway-env's
 
 
 def gym_id(scenario: str) -> str:

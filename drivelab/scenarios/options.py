@@ -2,19 +2,12 @@
 (``backend_options=``, a highway-env ``config=`` dict's road and traffic keys, a run's
 ``env_options: {backend_options: …}``) with its type, range, default and meaning.
 
-One check at the boundary (``check_backend_options``, called by ``VectorDriveEnv`` and by
-``build_config``) refuses, as one-line UsageErrors:
-
-- a key the scenario does not declare, naming the nearest declared one (a key highway-env accepts
-  but drivelab's simulators do not read is refused too, and the line says so);
-- a value of the wrong type or out of range (a count below 0, a frequency of 0, inf, NaN);
-- settings that contradict each other: a traffic option given with an explicit ``empty`` or
-  ``dense`` traffic level that sets it otherwise (the levels are presets of the traffic options,
-  and ``regular``, the default, is the one the options adjust); a policy frequency that does not
-  divide the simulation frequency; the scenario's own cross-checks (``Scenario.check_options``).
-
-The declarations are data: ``option_rows`` lists them for the documentation's tables, and the
-tests hold every declared default to the config the simulators assemble.
+``check_backend_options`` (called by ``VectorDriveEnv`` and ``build_config``) refuses, as one-line
+UsageErrors: a key the scenario does not declare (naming the nearest declared one); a value of the
+wrong type or out of range; settings that contradict each other (a traffic option with an explicit
+``empty`` or ``dense`` level that sets it otherwise, a policy frequency that does not divide the
+simulation frequency, the scenario's own ``Scenario.check_options``). ``option_rows`` lists the
+declarations for the documentation's tables.
 """
 
 from __future__ import annotations

@@ -1,19 +1,12 @@
-"""Procedural block maps (issue 18; MetaDrive's PG maps, the MetaDrive study's "OSX"): the preset and its
-compiled-core hooks.
+"""Procedural block maps (MetaDrive's PG maps, the MetaDrive study's "OSX"): the preset and its
+compiled-core hooks (only the compiled core runs them: highway-env has no such road).
 
-Config keys (``backend_options`` / a run's ``env_options.backend_options``), MetaDrive's names
-and defaults (``metadrive/envs/metadrive_env.py``): ``map`` (a block string such as ``"OSX"`` or a
-number of random blocks; 3), ``start_seed`` (0) and ``num_scenarios`` (1): the maps of seeds
-``start_seed`` … ``start_seed + num_scenarios − 1``, each episode on the map its seed picks;
-``lane_count`` (3; null: 2 or 3 per map), ``lane_width`` (3.5; null: U[3, 4.5] per map),
-``signalised`` (false; true: the town's traffic lights at every X and T intersection, each
-junction's cycle from a random offset per episode: NPCs stop at red, running a red light is the
-ego's red-light event, and the lights are exported for the sensors) and ``traffic_density``.
-
-Traffic levels set ``traffic_density``: empty 0, regular 0.1 (MetaDrive's default), dense 0.2
-(twice it; any density in [0, 1] can be given).
-
-Only the compiled core runs these maps (``backend="fast"``): highway-env has no such road.
+Config keys (``backend_options``), MetaDrive's names and defaults: ``map`` (a block string such as
+``"OSX"`` or a number of random blocks; 3), ``start_seed`` (0) and ``num_scenarios`` (1): the maps
+of seeds ``start_seed`` … ``start_seed + num_scenarios − 1``; ``lane_count`` (3; null: 2 or 3 per
+map), ``lane_width`` (3.5; null: U[3, 4.5] per map), ``signalised`` (false; true: the town's
+traffic lights at every X and T intersection) and ``traffic_density`` (the traffic levels: empty
+0, regular 0.1, dense 0.2).
 """
 
 from __future__ import annotations

@@ -22,7 +22,6 @@ from drivelab.scenarios.blocks.pg_roads import (
     Socket,
     end_pose,
     lane_offset,
-    lay_lanes,
     lay_road,
     lay_taper,
     reverse_node,
@@ -169,16 +168,9 @@ def curve_block(site: BlockSite, parameters: dict) -> Block:
         site.speed_limit_mps,
     )  # fmt: skip
     position, heading = lay_road(
-        lanes,
-        Straight(parameters["length"]),
-        position,
-        heading,
-        count,
-        width,
-        middle,
-        end,
+        lanes, Straight(parameters["length"]), position, heading, count, width, middle, end,
         site.speed_limit_mps,
-    )
+    )  # fmt: skip
     return _one_socket(site, "C", parameters, lanes, position, heading, count, end)
 
 
@@ -225,29 +217,18 @@ def in_ramp_block(site: BlockSite, parameters: dict) -> Block:
     run = _run(ramp)
     names = [site.entry.node] + [node(site, "r", 0, k) for k in range(5)]
     position, heading = lay_road(
-        lanes,
-        Straight(parameters["length"] + run[0]),
-        position,
-        heading,
-        count,
-        width,
-        names[0],
-        names[1],
+        lanes, Straight(parameters["length"] + run[0]), position, heading, count, width, names[0], names[1],
         speed,
-    )
+    )  # fmt: skip
     # the ramp ends where the acceleration lane (lane ``count`` of the next road) starts
     join = position + lane_offset(count, width) * right_normal(heading)
     rotation = np.array([[np.cos(heading), -np.sin(heading)], [np.sin(heading), np.cos(heading)]])
     ramp_nodes = [node(site, "r", 1, k) for k in range(len(ramp))] + [names[1]]
     _ramp_chain(lanes, ramp, join - rotation @ run, heading, ramp_nodes, width)
     extension = Straight(parameters["extension_length"])
-    lay_lanes(lanes, extension, position, heading, count + 1, width, names[1], names[2], speed)
-    end_position, end_heading = end_pose(extension, position, heading)
-    lay_lanes(
-        lanes, extension, end_position, end_heading + np.pi, count, width, reverse_node(names[2]),
-        reverse_node(names[1]), speed,
-    )  # fmt: skip
-    position, heading = end_position, end_heading
+    position, heading = lay_road(
+        lanes, extension, position, heading, count + 1, width, names[1], names[2], speed, reverse_count=count
+    )
     # the acceleration lane merges, then a socket road
     position, heading = _two_way_taper(
         lanes, position, heading, (count + 1, count), (count, count), width, tuple(names[2:5]), speed
@@ -276,13 +257,9 @@ def out_ramp_block(site: BlockSite, parameters: dict) -> Block:
         lanes, position, heading, (count, count + 1), (count, count), width, tuple(names[1:4]), speed
     )
     extension = Straight(parameters["extension_length"])
-    lay_lanes(lanes, extension, position, heading, count + 1, width, names[3], names[4], speed)
-    end_position, end_heading = end_pose(extension, position, heading)
-    lay_lanes(
-        lanes, extension, end_position, end_heading + np.pi, count, width, reverse_node(names[4]),
-        reverse_node(names[3]), speed,
-    )  # fmt: skip
-    position, heading = end_position, end_heading
+    position, heading = lay_road(
+        lanes, extension, position, heading, count + 1, width, names[3], names[4], speed, reverse_count=count
+    )
     leave = position + lane_offset(count, width) * right_normal(heading)
     ramp_nodes = [names[4]] + [node(site, "R", 1, k) for k in range(len(ramp))]
     _ramp_chain(lanes, ramp, leave, heading, ramp_nodes, width)

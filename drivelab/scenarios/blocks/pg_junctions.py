@@ -32,8 +32,8 @@ from drivelab.scenarios.blocks.pg_roads import (
     right_normal,
 )
 from drivelab.sim.junctions.rows import TURN_LEFT, TURN_RIGHT, TURN_STRAIGHT
-from drivelab.sim.roads.blocks import Arc, Straight
-from drivelab.sim.roads.description import LINE_CONTINUOUS, LINE_NONE, LINE_STRIPED, LaneRecord
+from drivelab.sim.roads.blocks import Arc, Straight, road_lines
+from drivelab.sim.roads.description import LINE_NONE, LaneRecord
 
 JUNCTION_RADIUS_M = 10.0  # MetaDrive's intersection radius (fixed in its parameter space)
 EXIT_ROAD_M = 35.0  # the arms after a junction or roundabout (MetaDrive's EXIT_PART_LENGTH)
@@ -116,16 +116,9 @@ def t_intersection_block(site: BlockSite, parameters: dict) -> Block:
     return _intersection(site, parameters, "T", exits)
 
 
-def _ring_lines(closed: bool):
-    """Ring lane markings: the island's edge solid, dashed between lanes, the outer edge solid
-    except where the arms' curves join (``closed`` False)."""
-
-    def lines(k: int, count: int) -> tuple[int, int]:
-        left = LINE_CONTINUOUS if k == 0 else LINE_STRIPED
-        right = LINE_CONTINUOUS if closed and k == count - 1 else LINE_NONE
-        return left, right
-
-    return lines
+def _open_ring_lines(k: int, count: int) -> tuple[int, int]:
+    """A ring part where the arms' curves join: ``road_lines`` without the solid outer edge."""
+    return road_lines(k, count)[0], LINE_NONE
 
 
 def roundabout_block(site: BlockSite, parameters: dict) -> Block:
@@ -165,17 +158,9 @@ def roundabout_block(site: BlockSite, parameters: dict) -> Block:
             (Arc(island, -2.0 * gamma), exit_at[after], entry_at[after], False),
         ):
             lay_lanes(
-                lanes,
-                segment,
-                ring_position,
-                ring_heading,
-                count,
-                width,
-                start,
-                end,
-                speed,
-                lines=_ring_lines(closed),
-            )
+                lanes, segment, ring_position, ring_heading, count, width, start, end, speed,
+                lines=road_lines if closed else _open_ring_lines,
+            )  # fmt: skip
             if not closed:  # the exit curve leaves where this ring part starts
                 lay_lanes(
                     lanes, curve, ring_position, ring_heading, count, width, start,

@@ -33,11 +33,7 @@ from drivelab.scenarios.blocks.pg_blocks import (
 )
 from drivelab.scenarios.blocks.pg_blocks import SPACES as ROAD_SPACES
 from drivelab.scenarios.blocks.pg_junctions import SPACES as JUNCTION_SPACES
-from drivelab.scenarios.blocks.pg_junctions import (
-    intersection_block,
-    roundabout_block,
-    t_intersection_block,
-)
+from drivelab.scenarios.blocks.pg_junctions import intersection_block, roundabout_block, t_intersection_block
 from drivelab.scenarios.blocks.pg_roads import BlockFailed, reverse_node, sample_parameters
 from drivelab.sim.junctions.arrays import shortest_route
 from drivelab.sim.roads.description import LINE_CONTINUOUS, RoadDescription, _graph_order

@@ -1,17 +1,12 @@
 """Two-way roads, lane-count tapers and the parameter spaces the procedural blocks are made of.
 
-A procedural map (``pg_map``) is a chain of blocks (``pg_blocks``, ``pg_junctions``) in the
-manner of MetaDrive's procedural generation (``metadrive/component/pgblock/``): each block starts
-at a ``Socket`` of the block before it and ends at sockets of its own. Lanes are
-``description.LaneRecord`` segments laid with ``blocks.Straight`` and ``blocks.Arc``, so the
-geometry is highway-env's (heading grows turning right; a lane's lateral offset grows to the
-right; lane 0 of a road is its leftmost).
-
-A road's reference line is its centre line (the line between its two directions): forward lane k
-lies (k + ½)·w to the right of it, the reverse road's lane k (k + ½)·w to its left. MetaDrive
-takes the rightmost forward lane as reference (``cmp/road_network``); the centre line keeps both
-directions' lanes symmetric. The reverse of road (a, b) runs from node ``-b`` to node ``-a``, as
-MetaDrive names its reverse roads (``metadrive/component/road_network/road.py``).
+A procedural map (``pg_map``) is a chain of blocks (``pg_blocks``, ``pg_junctions``), MetaDrive's
+way (``metadrive/component/pgblock/``): each block starts at a ``Socket`` of the block before it
+and ends at sockets of its own. Lanes are laid with ``blocks.Straight`` and ``blocks.Arc`` in
+highway-env's geometry (heading grows turning right, lateral offsets grow to the right, lane 0 is
+the leftmost). A road's reference line is its centre line: forward lane k lies (k + ½)·w to its
+right, the reverse road's lane k (k + ½)·w to its left; the reverse of road (a, b) runs from node
+``-b`` to node ``-a``, as MetaDrive names its reverse roads.
 """
 
 from __future__ import annotations
@@ -20,13 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drivelab.sim.roads.blocks import Arc, Straight
-from drivelab.sim.roads.description import (
-    LINE_CONTINUOUS,
-    LINE_NONE,
-    LINE_STRIPED,
-    LaneRecord,
-)
+from drivelab.sim.roads.blocks import Arc, Straight, road_lines
+from drivelab.sim.roads.description import LINE_CONTINUOUS, LINE_NONE, LINE_STRIPED, LaneRecord
 
 Segment = Straight | Arc
 
@@ -98,14 +88,6 @@ def lane_offset(k: int, width: float) -> float:
     return (k + 0.5) * width
 
 
-def road_lines(k: int, count: int) -> tuple[int, int]:
-    """(left, right) markings of lane ``k`` of ``count``: the centre line and the road edge are
-    solid, the lines between lanes dashed (each drawn once, on the left of the lane right of it)."""
-    left = LINE_CONTINUOUS if k == 0 else LINE_STRIPED
-    right = LINE_CONTINUOUS if k == count - 1 else LINE_NONE
-    return left, right
-
-
 def reversed_segment(segment: Segment) -> Segment:
     """The segment that runs ``segment``'s reference line backwards."""
     if isinstance(segment, Arc):
@@ -120,18 +102,9 @@ def end_pose(segment: Segment, position: np.ndarray, heading: float) -> tuple[np
 
 
 def lay_lanes(
-    out: list[LaneRecord],
-    segment: Segment,
-    position: np.ndarray,
-    heading: float,
-    count: int,
-    width: float,
-    start: str,
-    end: str,
-    speed_limit: float,
-    lines=road_lines,
-    **lane,
-) -> None:
+    out: list[LaneRecord], segment: Segment, position: np.ndarray, heading: float, count: int, width: float,
+    start: str, end: str, speed_limit: float, lines=road_lines, **lane,
+) -> None:  # fmt: skip
     """Append ``count`` forward lanes of ``segment`` from the pose (one road ``start`` → ``end``);
     ``lines(k, count)``: lane k's markings."""
     for k in range(count):
@@ -144,25 +117,18 @@ def lay_lanes(
 
 
 def lay_road(
-    out: list[LaneRecord],
-    segment: Segment,
-    position: np.ndarray,
-    heading: float,
-    count: int,
-    width: float,
-    start: str,
-    end: str,
-    speed_limit: float,
-    reverse: dict | None = None,
-) -> tuple[np.ndarray, float]:
-    """A two-way road along ``segment`` from the pose: ``count`` lanes each way (``start`` →
-    ``end`` and ``-end`` → ``-start``); ``reverse``: extra LaneRecord fields of the reverse
-    lanes. Returns the end pose of the centre line."""
+    out: list[LaneRecord], segment: Segment, position: np.ndarray, heading: float, count: int, width: float,
+    start: str, end: str, speed_limit: float, reverse: dict | None = None, reverse_count: int | None = None,
+) -> tuple[np.ndarray, float]:  # fmt: skip
+    """A two-way road along ``segment`` from the pose: ``count`` lanes forward (``start`` → ``end``)
+    and ``reverse_count`` (default ``count``) back (``-end`` → ``-start``); ``reverse``: extra
+    LaneRecord fields of the reverse lanes. Returns the end pose of the centre line."""
     lay_lanes(out, segment, position, heading, count, width, start, end, speed_limit)
     end_position, end_heading = end_pose(segment, position, heading)
     lay_lanes(
-        out, reversed_segment(segment), end_position, end_heading + np.pi, count, width,
-        reverse_node(end), reverse_node(start), speed_limit, **(reverse or {}),
+        out, reversed_segment(segment), end_position, end_heading + np.pi,
+        count if reverse_count is None else reverse_count, width, reverse_node(end), reverse_node(start),
+        speed_limit, **(reverse or {}),
     )  # fmt: skip
     return end_position, end_heading
 

@@ -1,33 +1,21 @@
 """K worlds of procedural block maps on the compiled core, each world on its own map.
 
-``BlocksSimulator`` is ``FastSimulator`` (same API: ``reset_where``, ``step`` with NEXT_STEP
-restarts, ``batch``) for a scenario whose maps come from seeds (``Scenario.procedural_maps``):
-an episode's seed picks its map from the scenario's set (``MapSet.seed_of``), and the K worlds
-of a batch may drive K different maps.
+``BlocksSimulator`` is ``FastSimulator`` for a scenario whose maps come from seeds
+(``Scenario.procedural_maps``): an episode's seed picks its map from the scenario's set
+(``MapSet.seed_of``). Every map is converted once (``BlocksMap``: a LaneTable with lane rows local
+to it) and the tables of the maps loaded so far are stacked; world k reads the rows
+``[lane_start[k], lane_stop[k])`` of its map, a view in which its lane indices are the map's own,
+so that one compiled call steps all K worlds. ``WorldBatch.roads`` holds the maps the K worlds
+drive and ``road_index`` each world's.
 
-Every map is converted once (``BlocksMap``: its own LaneTable with lane rows local to it) and
-the tables of the maps loaded so far are stacked into one ``(L_total, LANE_COLUMNS)`` array;
-world k reads the rows ``[lane_start[k], lane_stop[k])`` of its map. The compiled kernels
-(``blocks_traffic.blocks_simulate``: highway-env's frames with MOBIL lane changes where lanes run
-side by side and the town's stop lines; ``export_world``, ``meta_action``) are called per world on
-that slice of rows (and of the stacked per-lane arrays), a view in which the world's lane indices
-are the map's own: one compiled call steps all K worlds, with no Python loop over worlds or
-vehicles. Each world's RoadMap (for the sensors and renderers) is its map's: ``WorldBatch.roads``
-holds the maps the K worlds drive (at most K, however many the set has) and ``road_index`` each
-world's.
-
-Signalised maps (``signalised: true``) run the town's lights: the maps' light rows are stacked
-like the lanes (world k's are ``[light_start[k], light_stop[k])``), each world draws its
-intersections' cycle offsets ``(K, J_max)`` at its episode's start, and every step the states
-``(K, M_max)`` are those at the step's end time (``pedestrians.light_states``, the town's). The
-batch exports them as ``traffic_lights`` (stop point x, y, approach heading, state) with
-``light_valid``, one row per lane ending at a light (a block's arm has several lanes, the town's
-one), and the ego's red-light runs as ``red_light_crossed`` (judged as the town's).
+Signalised maps run the town's lights: the maps' light rows are stacked like the lanes, each world
+draws its intersections' cycle offsets at its episode's start, and the batch exports the states
+at the step's end time (one row per lane ending at a light) and the ego's red-light runs.
 
 Episode rules (MetaDrive's, ``metadrive/envs/metadrive_env.py``): arrival within 5 m of the
-route's end (the destination road's end), out of road when not on a lane or when the ego's body
-crosses a solid line (the centre line or the road's edge: ``on_continuous_line_done``), crash on
-any collision; the time limit is the route's (``blocks_spawn.route_time_limit_s``).
+route's end, out of road when not on a lane or when the ego's body crosses a solid line
+(``on_continuous_line_done``), crash on any collision; the time limit is the route's
+(``blocks_spawn.route_time_limit_s``).
 """
 
 from __future__ import annotations
@@ -57,7 +45,7 @@ from drivelab.sim.core.simulator import (
     export_world,
     meta_action,
 )
-from drivelab.sim.junctions.pedestrians import light_states
+from drivelab.sim.junctions.pedestrians import light_states_worlds
 from drivelab.sim.junctions.traffic import red_light_runs
 from drivelab.world.batch import WorldBatch
 from drivelab.world.state import RoadMap
@@ -66,6 +54,8 @@ ARRIVAL_WINDOW_M = 5.0  # MetaDrive's arrive_dest: within 5 m of the final road'
 # MetaDrive's ego tops out at 80 km/h (metadrive/component/vehicle/vehicle_type.py, max_speed_km_h;
 # its default reward's speed term divides by it too)
 EGO_MAX_SPEED_MPS = 80.0 / 3.6
+# the BlocksMap arrays the simulator stacks over the loaded maps under the same names
+_STACKED = ("in_junction", "dead_end", "solid", "light_junction", "light_arm", "signal_xyh", "signal_light")
 
 
 def _world_kernel(parallel: bool):
@@ -91,36 +81,17 @@ _SERIAL, _PARALLEL = _world_kernel(False), _world_kernel(True)
 
 
 def simulate_map_worlds(
-    v: np.ndarray,
-    count: np.ndarray,
-    lanes: np.ndarray,
-    start: np.ndarray,
-    stop: np.ndarray,
-    p: np.ndarray,
-    frames: int,
-    dt: float,
-    regulation: np.ndarray,
-    active: np.ndarray,
-    release_cap_mps: float,
-    road: tuple[np.ndarray, ...],
-    light_start: np.ndarray,
-    light_stop: np.ndarray,
-    light_states: np.ndarray,
-    ego_max_speed_mps: float,
-) -> None:
+    v, count, lanes, start, stop, p, frames: int, dt: float, regulation, active, release_cap_mps: float, road,
+    light_start, light_stop, light_states, ego_max_speed_mps: float
+) -> None:  # fmt: skip
     """``blocks_traffic.blocks_simulate`` of world k's vehicles ``v[k, :count[k]]`` (K, N_max,
     VEHICLE_COLUMNS) on its map's lane rows ``lanes[start[k]:stop[k]]`` for the worlds of
-    ``active`` (K,); one numba thread per world where numba has several (``traffic.simulate_worlds``'
-    rule). Right of way is enforced at the junctions only (``enforce_road_rules``'
-    ``prioritised_only``), and a vehicle that yielded cruises on at ``release_cap_mps``.
+    ``active`` (K,), as ``traffic.simulate_worlds`` (a thread per world); a vehicle that yielded
+    cruises on at ``release_cap_mps``.
 
-    :param road: the stacked per-lane arrays (L_total,) of every loaded map, in
-        ``blocks_simulate``'s order: junction, from_arm, to_arm, turn, end_junction, end_arm, light
-        (int64, local to each map), changeable, ending (bool), then the continuations' CSR: starts
-        (L_total + 1,) into successors (E_total,) of local lane rows.
-    :param light_start: / ``light_stop`` (K,): world k's lights, the rows of its map in the stacked
-        light table; ``light_states`` (K, M_max) their LIGHT_* states (world k's first
-        ``light_stop[k] - light_start[k]``).
+    :param road: ``BlocksSimulator.road_arrays``, in ``blocks_simulate``'s order.
+    :param light_start: / ``light_stop`` (K,): world k's rows of the stacked light table;
+        ``light_states`` (K, M_max) their LIGHT_* states (world k's first ``light_stop[k] - light_start[k]``).
     :param ego_max_speed_mps: the egos' top speed.
     """
     parallel = v.shape[0] > 1 and numba.get_num_threads() > 1
@@ -129,21 +100,6 @@ def simulate_map_worlds(
         v, count, lanes, start, stop, p, frames, dt, regulation, active, release_cap_mps, *road, light_start,
         light_stop, light_states, ego_max_speed_mps,
     )  # fmt: skip
-
-
-@njit(cache=True)
-def light_states_map_worlds(light_junction, light_arm, start, stop, offsets, timings, time_s, active, out):
-    """``pedestrians.light_states`` of world k's lights (rows ``start[k]:stop[k]`` of the stacked
-    ``light_junction`` / ``light_arm``, junctions local to its map) with its offsets ``offsets[k]``
-    (K, J_max) at ``time_s[k]``, into ``out[k]`` (K, M_max), for the worlds of ``active``;
-    ``timings``: (green, yellow, all red) seconds."""
-    for k in range(out.shape[0]):
-        if active[k]:
-            a, b = start[k], stop[k]
-            light_states(
-                light_junction[a:b], light_arm[a:b], offsets[k], timings[0], timings[1], timings[2],
-                time_s[k], out[k, : b - a],
-            )  # fmt: skip
 
 
 @njit(cache=True)
@@ -167,11 +123,8 @@ def export_map_worlds(
             floats[k], ints[k], flags[k], vehicles[k], valid[k],
         )  # fmt: skip
         lane = a + int(v[k, ego[k], T.LANE])
-        half_body, half_lane, lateral = (
-            floats[k, EX_WID] / 2,
-            floats[k, EX_LANE_WIDTH] / 2,
-            floats[k, EX_LATERAL],
-        )
+        half_body, half_lane = floats[k, EX_WID] / 2, floats[k, EX_LANE_WIDTH] / 2
+        lateral = floats[k, EX_LATERAL]
         if (solid[lane, 0] and lateral - half_body < -half_lane) or (
             solid[lane, 1] and lateral + half_body > half_lane
         ):
@@ -204,15 +157,8 @@ def clear_dead_ends(v, count, ego, lanes, start, stop, dead_end) -> None:
 
 
 class BlocksSimulator(FastSimulator):
-    """K worlds of a procedural-maps scenario on the compiled core (see the module docstring).
-
-    :param scenario: a scenario with ``procedural_maps`` (its ``spawn(seed, blocks_map, control)``).
-    :param traffic: "empty", "regular" or "dense".
-    :param control: "meta" or "continuous".
-    :param num_worlds: K.
-    :param overrides: config keys: the map set's (``map``, ``start_seed``, ``num_scenarios``,
-        ``lane_count``, ``lane_width``, ``signalised``), ``traffic_density``, highway-env's.
-    """
+    """K worlds of a procedural-maps scenario (``procedural_maps``) on the compiled core;
+    FastSimulator's parameters (``overrides``: also the map set's keys, MAP_DEFAULTS)."""
 
     def __init__(self, scenario, traffic: str, control: str, num_worlds: int, overrides: dict | None = None):
         if not scenario.procedural_maps:
@@ -226,15 +172,10 @@ class BlocksSimulator(FastSimulator):
         self.in_junction = np.zeros(0, dtype=bool)
         self.dead_end = np.zeros(0, dtype=bool)
         self.solid = np.zeros((0, 2), dtype=bool)
-        # blocks_traffic's per-lane arrays of every loaded map, stacked: junction, from_arm, to_arm,
-        # turn, end_junction, end_arm, light, changeable, ending; then the continuations' CSR
-        self.road_arrays: tuple[np.ndarray, ...] = (
-            *(np.zeros(0, dtype=np.int64) for _ in range(7)),
-            np.zeros(0, dtype=bool),
-            np.zeros(0, dtype=bool),
-            np.zeros(1, dtype=np.int64),
-            np.zeros(0, dtype=np.int64),
-        )
+        # blocks_traffic's per-lane arrays of every loaded map, stacked: LANE_METADATA, changeable,
+        # ending; then the continuations' CSR
+        ints, flags = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=bool)
+        self.road_arrays = (*[ints] * 7, flags, flags, np.zeros(1, dtype=np.int64), ints)
         self.light_junction = np.zeros(0, dtype=np.int64)  # every loaded map's lights, stacked
         self.light_arm = np.zeros(0, dtype=np.int64)
         self.signal_xyh = np.zeros((0, 3))  # every loaded map's exported lights (one per lane), stacked
@@ -247,7 +188,6 @@ class BlocksSimulator(FastSimulator):
         self.light_stop = np.zeros(k, dtype=np.int64)
         self.offsets = np.zeros((k, 0))  # (K, J_max) world k's cycle offset of each intersection
         self.light_state = np.zeros((k, 0), dtype=np.int64)  # (K, M_max) LIGHT_* of world k's lights
-        self._red_light = np.zeros(k, dtype=bool)
         self._lights_of: np.ndarray | None = None  # the world_map the light gather was made for
         self._light_gather = (np.zeros((k, 0), dtype=np.int64), np.zeros((k, 0), dtype=bool))
         self.timings = np.zeros(3)  # the lights' (green, yellow, all red) seconds: the maps' own
@@ -280,10 +220,11 @@ class BlocksSimulator(FastSimulator):
         slot = self._slot_of[seed] = len(self.maps)
         self.maps.append(bmap)
         self.map_start = np.append(self.map_start, len(self.lanes))
+        self.map_light_start = np.append(self.map_light_start, len(self.light_arm))
+        self.map_signal_start = np.append(self.map_signal_start, len(self.signal_light))
         self.lanes = np.concatenate([self.lanes, bmap.table.rows])
-        self.in_junction = np.concatenate([self.in_junction, bmap.in_junction])
-        self.dead_end = np.concatenate([self.dead_end, bmap.dead_end])
-        self.solid = np.concatenate([self.solid, bmap.solid])
+        for name in _STACKED:
+            setattr(self, name, np.concatenate([getattr(self, name), getattr(bmap, name)]))
         *lane_arrays, changeable, ending, successor_start, successors = self.road_arrays
         self.road_arrays = (
             *(np.concatenate([a, b]) for a, b in zip(lane_arrays, bmap.junction_arrays, strict=True)),
@@ -292,12 +233,6 @@ class BlocksSimulator(FastSimulator):
             np.concatenate([successor_start[:-1], bmap.successor_start + len(successors)]),
             np.concatenate([successors, bmap.successors]),
         )
-        self.map_light_start = np.append(self.map_light_start, len(self.light_arm))
-        self.light_junction = np.concatenate([self.light_junction, bmap.light_junction])
-        self.light_arm = np.concatenate([self.light_arm, bmap.light_arm])
-        self.map_signal_start = np.append(self.map_signal_start, len(self.signal_light))
-        self.signal_xyh = np.concatenate([self.signal_xyh, bmap.signal_xyh])
-        self.signal_light = np.concatenate([self.signal_light, bmap.signal_light])
         timings = bmap.pg.description.timings
         self.timings = np.array([timings.green_s, timings.yellow_s, timings.all_red_s])
         k = self.num_worlds
@@ -336,10 +271,8 @@ class BlocksSimulator(FastSimulator):
             slot = self._slot(self.map_set.seed_of(seed))
             bmap = self.maps[slot]
             rows, ego, regulation, offsets = self.scenario.spawn(seed, bmap, self.control)
-            self._fit(len(rows))
-            self.vehicles[k] = 0.0
-            self.vehicles[k, : len(rows)] = rows
-            self.count[k], self.ego[k], self.regulation[k] = len(rows), ego, regulation
+            self._put_rows(k, rows, ego)
+            self.regulation[k] = regulation
             self.world_map[k] = slot
             self.lane_start[k] = self.map_start[slot]
             self.lane_stop[k] = self.map_start[slot] + len(bmap.table.rows)
@@ -359,17 +292,12 @@ class BlocksSimulator(FastSimulator):
             self._update_lights(np.isin(np.arange(self.num_worlds), worlds))
 
     def _update_lights(self, active: np.ndarray) -> None:
-        """The light states of the ``active`` worlds at their time (``light_states_map_worlds``)."""
+        """The light states of the ``active`` worlds at their time (junctions local to each map)."""
         if self.light_state.shape[1]:
-            light_states_map_worlds(
+            light_states_worlds(
                 self.light_junction, self.light_arm, self.light_start, self.light_stop, self.offsets,
                 self.timings, self.time_s, active, self.light_state,
             )  # fmt: skip
-
-    # --- stepping -------------------------------------------------------------------------------
-    def reset_where(self, mask: np.ndarray, seeds: np.ndarray) -> WorldBatch:
-        self._red_light = np.zeros(self.num_worlds, dtype=bool)
-        return super().reset_where(mask, seeds)
 
     # --- stepping (``FastSimulator.step``'s hooks; the lights as the town's) -----------------------
     _whole_step_kernel = False

@@ -27,7 +27,7 @@ from drivelab.scenarios.blocks.pg_map import JUNCTION_LETTERS, MAX_LANES, PGMap,
 from drivelab.sim.core import lanes as L
 from drivelab.sim.core import traffic as T
 from drivelab.sim.core.spawn import DELTA_RANGE, LaneGeometry, ego_kind, vehicle_row
-from drivelab.sim.junctions.rows import TURN_LEFT
+from drivelab.sim.junctions.rows import LANE_METADATA, TURN_LEFT
 from drivelab.sim.roads.description import ARC, LINE_CONTINUOUS, STRAIGHT
 from drivelab.sim.roads.road_map import centre_line, road_map
 from drivelab.sim.route import RouteTracker
@@ -116,13 +116,10 @@ class MapSet:
         if not isinstance(signalised, bool):
             raise UsageError(f"signalised must be true or false, got {signalised!r}")
         return MapSet(
-            spec if isinstance(spec, str) else int(spec),
-            _integer(config, "start_seed", 0),
-            _integer(config, "num_scenarios", 1),
-            lane_count,
-            None if width is None else float(width),
+            spec if isinstance(spec, str) else int(spec), _integer(config, "start_seed", 0),
+            _integer(config, "num_scenarios", 1), lane_count, None if width is None else float(width),
             signalised,
-        )
+        )  # fmt: skip
 
     def seed_of(self, episode_seed: int) -> int:
         """The map seed an episode plays: ``start_seed + episode_seed mod num_scenarios``."""
@@ -150,29 +147,20 @@ def traffic_density(config: dict) -> float:
 class BlocksMap:
     """One procedural map as the compiled core reads it (L lane rows, local to this map).
 
-    :param pg: the generated map.
-    :param road: the simulator's converted road of it (``simulator._Road``: LaneTable, RoadMap,
-        geometry, the config and vehicle constants), shared by every episode on the map.
-    :param spawn_lanes: (n,) lane rows of the spawn road (lane 0 first).
-    :param routes: the ego's route (RouteTracker) from each spawn lane row.
-    :param in_junction: (L,) intersection lanes and roundabout curves and ring.
-    :param solid: (L, 2) whether the lane's left / right line is solid (centre line, road edge).
-    :param dead_end: (L,) lanes whose end leads nowhere (traffic leaves the map there).
-    :param successor_start: (L + 1,) / ``successors`` (E,): CSR of the lanes that continue each
-        lane row (``_continuations``).
-    :param spot_lane: / ``spot_s`` / ``spot_block`` (S,): the candidate traffic spots (lane row,
-        longitudinal position, block index); ``block_spots`` (B,): floor(length / 10) of each
-        block's candidate lanes (B blocks).
-    :param changeable: (L,) lanes where traffic may change lanes (``changeable_lanes``);
-        ``ending`` (L,) those of them that lead into a merging taper (``ending_lanes``).
-    :param junction_arrays: the description's (L,) int64 ``junction``, ``from_arm``, ``to_arm``,
-        ``turn``, ``end_junction``, ``end_arm``, ``light`` (``blocks_traffic``'s argument order).
-    :param junction_count: J, the map's intersections (X and T); ``light_junction``,
-        ``light_arm`` (M,), ``light_xyh`` (M, 3): its lights (none unless signalised), one per arm
-        at the middle of the arm's stop line.
-    :param signal_xyh: (S, 3) the stop point (x, y, heading) of every lane that ends at a light,
-        and ``signal_light`` (S,) that light's row: the lights as the batch exports them, one per
-        lane, so that a lane's light stands in it (``WorldBatch.light_ahead``).
+    :param road: the simulator's converted road of it (``simulator._Road``), shared by every
+        episode on the map; ``pg``: the generated map.
+    :param spawn_lanes: (n,) lane rows of the spawn road; ``routes``: the ego's RouteTracker from each.
+    :param in_junction: (L,) intersection lanes and roundabout curves and ring; ``solid`` (L, 2):
+        the lane's left / right line is solid; ``dead_end`` (L,): traffic leaves the map there.
+    :param successor_start: (L + 1,) / ``successors`` (E,): CSR of ``_continuations``.
+    :param spot_lane: / ``spot_s`` / ``spot_block`` (S,): the candidate traffic spots (``_spots``);
+        ``block_spots`` (B,): floor(length / 10) of each block's candidate lanes.
+    :param changeable: (L,) ``changeable_lanes``; ``ending`` (L,) ``ending_lanes``.
+    :param junction_arrays: the description's LANE_METADATA arrays (int64).
+    :param junction_count: J, the map's intersections; ``light_junction``, ``light_arm`` (M,),
+        ``light_xyh`` (M, 3): its lights (none unless signalised), one per arm.
+    :param signal_xyh: (S, 3) the stop point (x, y, heading) of every lane that ends at a light and
+        ``signal_light`` (S,) its light's row: the lights as the batch exports them, one per lane.
     """
 
     pg: PGMap
@@ -298,18 +286,10 @@ def blocks_map(pg: PGMap, base_road) -> BlocksMap:
     )
     period = int(base_road.config["simulation_frequency"] // REGULATION_FREQUENCY_HZ)
     road = dataclasses.replace(
-        base_road,
-        table=table,
-        road_map=road_map(desc),
-        graph_keys=graph_keys,
-        routes={},
-        in_junction=in_junction,
-        exit_lane=np.zeros(len(rows), dtype=bool),
-        regulation_period=period,
-        geometry=LaneGeometry(table),
-        paths={},
-        cache={},
-    )
+        base_road, table=table, road_map=road_map(desc), graph_keys=graph_keys, routes={},
+        in_junction=in_junction, exit_lane=np.zeros(len(rows), dtype=bool), regulation_period=period,
+        geometry=LaneGeometry(table), paths={}, cache={},
+    )  # fmt: skip
     spawn_lanes = pg.spawn_lanes
     routes = {
         int(lane): RouteTracker(
@@ -321,9 +301,9 @@ def blocks_map(pg: PGMap, base_road) -> BlocksMap:
     spot_lane, spot_s, spot_block, block_spots = _spots(pg, rows[:, L.LENGTH])
     changeable = changeable_lanes(rows, in_junction)
     signal_lanes = np.flatnonzero(np.asarray(desc.light) >= 0)
+    signal_ends = [(r, rows[r, L.LENGTH]) for r in signal_lanes]  # a lane's light stands at its end
     junction_arrays = tuple(
-        np.ascontiguousarray(getattr(desc, name), dtype=np.int64)
-        for name in ("junction", "from_arm", "to_arm", "turn", "end_junction", "end_arm", "light")
+        np.ascontiguousarray(getattr(desc, name), dtype=np.int64) for name in LANE_METADATA
     )
     return BlocksMap(
         pg=pg,
@@ -347,10 +327,7 @@ def blocks_map(pg: PGMap, base_road) -> BlocksMap:
         light_arm=np.asarray(desc.light_arm, dtype=np.int64),
         light_xyh=np.asarray(desc.light_xyh, dtype=float).reshape(-1, 3),
         signal_xyh=np.array(
-            [
-                [*L.position(rows, r, rows[r, L.LENGTH], 0.0), L.heading_at(rows, r, rows[r, L.LENGTH])]
-                for r in signal_lanes
-            ]
+            [(*L.position(rows, r, end, 0.0), L.heading_at(rows, r, end)) for r, end in signal_ends]
         ).reshape(-1, 3),
         signal_light=np.asarray(desc.light, dtype=np.int64)[signal_lanes],
     )
@@ -396,13 +373,10 @@ def _traffic_rows(
     lane_change_delay: float, rows
 ) -> None:  # fmt: skip
     """Traffic vehicle rows (M, VEHICLE_COLUMNS) at ``s`` (M,) on lane rows ``lane`` (M,), heading
-    along them at ``speed`` (their target speed), with DELTA ``delta`` (M,) and a route: their
-    lane, then a random walk through the lanes that continue it (``successor_start`` /
-    ``successors``: ``_continuations``), ``walk`` (M, MAX_ROUTE - 1) uniform draws in [0, 1)
-    picking each next lane (a dead end stops it). Every route step names its lane: MOBIL then
-    keeps the vehicle in it (``traffic.mobil_side``), so that it never has to swerve where a
-    road splits or merges; traffic keeps its lane (MetaDrive's IDM policy changes lanes only to
-    overtake)."""
+    along them at ``speed`` (their target speed), with DELTA ``delta`` (M,) and a route: their lane,
+    then a random walk through the lanes that continue it, ``walk`` (M, MAX_ROUTE - 1) uniform draws
+    picking each next lane (a dead end stops it). Every route step names its lane, so that MOBIL
+    keeps the vehicle in it (``traffic.mobil_side``): traffic keeps its lane."""
     for m in range(lane.size):
         row, k = rows[m], lane[m]
         x, y = L.position(lanes, k, s[m], 0.0)
@@ -452,10 +426,8 @@ def spawn_blocks_episode(
     """An episode on ``bmap`` from ``seed``: ``(rows (N, VEHICLE_COLUMNS), ego row, regulation
     [period, 0], light offsets (J,))``. The ego (first row) on a random lane of the spawn road at
     s = 5 m, at rest; per block after the spawn road floor(block spots · ``density``) traffic
-    vehicles on distinct random spots (MetaDrive's trigger-mode count), each on a random route;
-    vehicles within SPAWN_CLEARANCE_M of the ego or of one placed before them are dropped. A map
-    with lights then draws each intersection's cycle offset uniform in [0, cycle) (the town's
-    draw); without lights nothing more is drawn (J = 0)."""
+    vehicles on distinct random spots (MetaDrive's count), each on a random route, dropped within
+    SPAWN_CLEARANCE_M of one placed before; then, with lights, each intersection's cycle offset."""
     rng = np.random.default_rng(int(seed))
     road, table = bmap.road, bmap.table
     lane = int(bmap.spawn_lanes[rng.integers(len(bmap.spawn_lanes))])

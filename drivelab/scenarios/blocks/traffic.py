@@ -1,37 +1,26 @@
 """The procedural maps' traffic as compiled loops over ONE world's arrays (the caller loops the worlds).
 
-``blocks_simulate`` is ``traffic.simulate`` (highway-env's frames: every vehicle acts, the road's
-rules every regulation period, every vehicle steps, collisions) with ``blocks_act`` in place of
-``traffic.act``. It differs for the traffic rows (KIND ``IDM``) only; the ego rows act as in
-``traffic.act``:
+``blocks_simulate`` is ``traffic.simulate`` with ``blocks_act`` in place of ``traffic.act``; it
+differs for the traffic rows (KIND ``IDM``) only:
 
-- **lane changes** (highway-env's MOBIL, ``traffic``'s own neighbour search and IDM accelerations,
-  ``blocks_mobil``) only where a road's lanes run side by side: ``changeable`` lanes, those of a
-  road of two lanes or more whose lanes are all of one kind (straight or arc) outside the
-  intersections and the roundabouts (``blocks_spawn.changeable_lanes``). A change is considered
-  only when the rest of the vehicle's route can still be driven from the new lane through the
-  lanes that continue one another (``route_feasible``): a vehicle bound for an off-ramp stays in
-  the lane that leads there. On an ``ending`` lane (one that leads into a taper merging into its
-  neighbour: the in-ramp's acceleration lane, the merge's lane that ends) the change is
-  mandatory: checked every frame, taken as soon as neither the vehicle nor its new follower has
-  to brake harder than LANE_CHANGE_MAX_BRAKING_IMPOSED (MOBIL's safety criterion, the rule
-  highway-env's MOBIL applies to a lane its route asks for); a vehicle that finds no gap stops
-  at the ending lane's end (the town's stop-line deceleration, ``stop_ahead``) and waits for one.
-- **the next lane** at the end of a lane (``blocks_follow_road``): the continuation of the lane on
-  the route's next road, the route's named lane first, else another continuation from which the
-  rest of the route can be driven; past the route's end (or off it) the continuation with the
-  same lane id, else the first one; a lane leading nowhere is kept (the vehicle leaves the map).
-- **traffic lights** (signalised junctions): the town's stop-line rule (``junctions/traffic.py``'s
-  ``town_acceleration`` with no leader: red always, yellow unless too late to stop, a left turn
-  on green waits for oncoming vehicles), its virtual leader's deceleration taken when lower.
+- **lane changes** (highway-env's MOBIL, ``blocks_mobil``) only on ``changeable`` lanes (side by
+  side, outside the intersections and roundabouts: ``blocks_spawn.changeable_lanes``), and only
+  when the rest of the route can still be driven from the new lane (``route_feasible``). On an
+  ``ending`` lane (one leading into a taper that merges into its neighbour) the change is
+  mandatory: checked every frame, taken as soon as MOBIL's safety criterion holds
+  (``merge_safe``); a vehicle that finds no gap stops at the lane's end (``stop_ahead``).
+- **the next lane** at the end of a lane (``blocks_follow_road``): the continuation on the route's
+  next road, its named lane first, else one from which the rest of the route can be driven; off
+  the route, the continuation with the same lane id, else the first; a dead end is kept (the
+  vehicle leaves the map).
+- **traffic lights**: the town's stop-line rule (``junctions.traffic.town_acceleration`` with no
+  leader), its deceleration taken when lower.
 
-Arrays (one world): ``v`` (N, VEHICLE_COLUMNS) vehicle rows; ``lanes`` (L, LANE_COLUMNS) the
-map's lane rows (lane indices local to the map); ``junction``, ``from_arm``, ``to_arm``,
-``turn``, ``end_junction``, ``end_arm``, ``light`` (L,) int64 (the description's; ``light`` is
--1 on lanes without a light); ``changeable``, ``ending`` (L,) bool; ``successor_start`` (L + 1,) int64
-offsets into ``successors`` (E,) int64 local lane rows (the CSR of ``blocks_spawn._continuations``,
-offsets possibly shifted: a stacked array's slice); ``light_states`` (M,) int64 LIGHT_* of the
-map's lights.
+Arrays (one world): ``v`` (N, VEHICLE_COLUMNS) vehicle rows; ``lanes`` the map's lane rows (lane
+indices local to the map); the description's LANE_METADATA arrays (``light`` -1 on lanes without
+one); ``changeable``, ``ending`` (L,) bool; ``successor_start`` (L + 1,) offsets into
+``successors`` (E,) (the CSR of ``blocks_spawn._continuations``, offsets possibly shifted);
+``light_states`` (M,) LIGHT_* of the map's lights.
 """
 
 from __future__ import annotations
@@ -39,20 +28,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from drivelab.sim.core import lanes as L
 from drivelab.sim.core import traffic as T
 from drivelab.sim.core.borrow import borrowed
-from drivelab.sim.core.lanes import (
-    FIRST_OF_ROAD,
-    LANE_COUNT,
-    LANE_ID,
-    LENGTH,
-    VEHICLE_LENGTH,
-    is_reachable_from,
-    local_coordinates,
-)
 from drivelab.sim.junctions.rows import PEDESTRIAN_COLUMNS
-from drivelab.sim.junctions.rules import STOP_MARGIN_M
-from drivelab.sim.junctions.traffic import py_square, town_acceleration
+from drivelab.sim.junctions.traffic import stop_ahead, town_acceleration
 
 _NO_PEDESTRIANS = np.zeros((0, PEDESTRIAN_COLUMNS))
 
@@ -79,7 +59,7 @@ def route_feasible(
         while edge[depth] < successor_start[parent + 1]:
             candidate = successors[edge[depth]]
             edge[depth] += 1
-            if lanes[candidate, FIRST_OF_ROAD] == wanted:
+            if lanes[candidate, L.FIRST_OF_ROAD] == wanted:
                 path[depth], found = candidate, True
                 break
         if found:
@@ -98,7 +78,7 @@ def _after_road(v: np.ndarray, lanes: np.ndarray, i: int, lane: int) -> int:
     """The first of vehicle i's route entries after the road of ``lane`` (a route's first entry
     is the road the vehicle is on until it is left)."""
     start = int(v[i, T.ROUTE_START])
-    if start < v[i, T.ROUTE_END] and v[i, T.ROUTE + 2 * start] == lanes[lane, FIRST_OF_ROAD]:
+    if start < v[i, T.ROUTE_END] and v[i, T.ROUTE + 2 * start] == lanes[lane, L.FIRST_OF_ROAD]:
         start += 1
     return start
 
@@ -112,8 +92,8 @@ def blocks_follow_road(
     entry is dropped."""
     v, lanes, successor_start, successors = borrowed((v, lanes, successor_start, successors))
     target = int(v[i, T.TARGET_LANE])
-    s, _ = local_coordinates(lanes, target, v[i, T.X], v[i, T.Y])
-    if s <= lanes[target, LENGTH] - VEHICLE_LENGTH / 2:
+    s, _ = L.local_coordinates(lanes, target, v[i, T.X], v[i, T.Y])
+    if s <= lanes[target, L.LENGTH] - L.VEHICLE_LENGTH / 2:
         return
     start = _after_road(v, lanes, i, target)
     v[i, T.ROUTE_START] = start
@@ -126,8 +106,8 @@ def blocks_follow_road(
         for named_only in (True, False):
             for e in range(first, stop):
                 candidate = successors[e]
-                if lanes[candidate, FIRST_OF_ROAD] != wanted or (
-                    named_only and lanes[candidate, LANE_ID] != named
+                if lanes[candidate, L.FIRST_OF_ROAD] != wanted or (
+                    named_only and lanes[candidate, L.LANE_ID] != named
                 ):
                     continue
                 if route_feasible(v, lanes, successor_start, successors, i, candidate, start + 1):
@@ -138,7 +118,7 @@ def blocks_follow_road(
     if choice < 0:  # no route left (or off it): the lane's own continuation, else the first
         choice = successors[first]
         for e in range(first, stop):
-            if lanes[successors[e], LANE_ID] == lanes[target, LANE_ID]:
+            if lanes[successors[e], L.LANE_ID] == lanes[target, L.LANE_ID]:
                 choice = successors[e]
                 break
     v[i, T.TARGET_LANE] = choice
@@ -167,8 +147,8 @@ def rear_across(
             for rank in range(done[r] - 1, -1, -1):  # the farthest along the lane first
                 j = int(coords[r, rank, 3])
                 if j != i:
-                    if lanes[r, LENGTH] - coords[r, j, 0] < behind_m:
-                        rear, behind_m = j, lanes[r, LENGTH] - coords[r, j, 0]
+                    if lanes[r, L.LENGTH] - coords[r, j, 0] < behind_m:
+                        rear, behind_m = j, lanes[r, L.LENGTH] - coords[r, j, 0]
                     break
     return rear
 
@@ -178,11 +158,9 @@ def blocks_mobil(
     v: np.ndarray, lanes: np.ndarray, p: np.ndarray, coords: np.ndarray, done: np.ndarray,
     trig: np.ndarray, i: int, lane: int, successor_start: np.ndarray, successors: np.ndarray,
 ) -> bool:  # fmt: skip
-    """highway-env's ``IDMVehicle.mobil`` (``traffic.mobil_side``) without its planned-lane
-    branch: the change to ``lane`` is safe for the new follower (it brakes less than
-    LANE_CHANGE_MAX_BRAKING_IMPOSED) and worth it (the politeness-weighted acceleration gain
-    reaches LANE_CHANGE_MIN_ACC_GAIN). The route is checked by ``route_feasible`` instead; the new
-    follower may come from the lane before ``lane`` (``rear_across``)."""
+    """highway-env's ``IDMVehicle.mobil`` (``traffic.mobil_side``) without its planned-lane branch
+    (the route is checked by ``route_feasible``); the new follower may come from the lane before
+    ``lane`` (``rear_across``)."""
     v, lanes, p, coords, done, trig, successor_start, successors = borrowed(
         (v, lanes, p, coords, done, trig, successor_start, successors)
     )
@@ -214,10 +192,8 @@ def merge_safe(
     v: np.ndarray, lanes: np.ndarray, p: np.ndarray, coords: np.ndarray, done: np.ndarray,
     trig: np.ndarray, i: int, lane: int, successor_start: np.ndarray, successors: np.ndarray,
 ) -> bool:  # fmt: skip
-    """MOBIL's safety criterion for a mandatory change to ``lane``: neither the new follower
-    behind vehicle i nor vehicle i behind its new leader brakes harder than
-    LANE_CHANGE_MAX_BRAKING_IMPOSED (``traffic.mobil_side``'s branch for a lane the route asks
-    for; the new follower as ``blocks_mobil`` finds it)."""
+    """MOBIL's safety criterion for a mandatory change to ``lane`` (``traffic.mobil_side``'s branch
+    for a lane the route asks for), the new follower as ``blocks_mobil`` finds it."""
     v, lanes, p, coords, done, trig, successor_start, successors = borrowed(
         (v, lanes, p, coords, done, trig, successor_start, successors)
     )
@@ -237,11 +213,11 @@ def _side_lane(
 ) -> int:  # fmt: skip
     """The lane beside ``lane`` on ``side`` (-1 left, +1 right) when vehicle i may change to it
     (changeable and reachable), else -1."""
-    lane_id, count = lanes[lane, LANE_ID], lanes[lane, LANE_COUNT]
+    lane_id, count = lanes[lane, L.LANE_ID], lanes[lane, L.LANE_COUNT]
     if not (0 <= lane_id + side < count):
         return -1
     candidate = lane + side
-    if not changeable[candidate] or not is_reachable_from(lanes, candidate, v[i, T.X], v[i, T.Y]):
+    if not changeable[candidate] or not L.is_reachable_from(lanes, candidate, v[i, T.X], v[i, T.Y]):
         return -1
     return candidate
 
@@ -269,18 +245,7 @@ def blocks_change_lane_policy(
     )
     lane, target = int(v[i, T.LANE]), int(v[i, T.TARGET_LANE])
     if lane != target:
-        if lanes[lane, FIRST_OF_ROAD] == lanes[target, FIRST_OF_ROAD]:
-            for j in range(v.shape[0]):
-                if (
-                    j != i
-                    and int(v[j, T.LANE]) != target
-                    and (v[j, T.KIND] == T.CONTROLLED or v[j, T.KIND] == T.IDM)
-                    and int(v[j, T.TARGET_LANE]) == target
-                ):
-                    T.lane_coordinates(v, lanes, coords, done, lane)
-                    if 0 < coords[lane, j, 0] - coords[lane, i, 0] < T.cached_desired_gap(v, p, trig, i, j):
-                        v[i, T.TARGET_LANE] = lane
-                        break
+        T.abort_change(v, lanes, p, coords, done, trig, i, lane, target)
         return
     if ending[lane]:  # a mandatory change, looked for every frame
         for side in (-1, 1):
@@ -307,20 +272,6 @@ def blocks_change_lane_policy(
             and _route_goes_on(v, lanes, i, candidate, successor_start, successors)
         ):
             v[i, T.TARGET_LANE] = candidate
-
-
-@njit(cache=True, inline="always")
-def stop_ahead(v: np.ndarray, p: np.ndarray, i: int, ahead_m: float) -> float:
-    """IDM's acceleration of vehicle i behind a stopped virtual leader ``ahead_m`` metres beyond
-    its front bumper, to stand STOP_MARGIN_M short of it (``junctions.traffic.town_acceleration``'s
-    stop line, the same arithmetic)."""
-    gap_m = ahead_m - STOP_MARGIN_M + p[T.DISTANCE_WANTED]
-    speed = max(v[i, T.SPEED], 0.0)
-    ab = -p[T.COMFORT_ACC_MAX] * p[T.COMFORT_ACC_MIN]
-    desired_gap = p[T.DISTANCE_WANTED] + speed * p[T.TIME_WANTED] + speed * speed / (2 * np.sqrt(ab))
-    target = T.not_zero(v[i, T.TARGET_SPEED])
-    stop = p[T.COMFORT_ACC_MAX] * (1 - (speed / np.abs(target)) ** v[i, T.DELTA])
-    return stop - p[T.COMFORT_ACC_MAX] * py_square(desired_gap / T.not_zero(gap_m))
 
 
 @njit(cache=True)
@@ -361,8 +312,8 @@ def blocks_act(
             acceleration = min(acceleration, target_a)
         lane = int(v[i, T.LANE])
         if ending[lane] and lane == int(v[i, T.TARGET_LANE]):  # no gap to merge into yet
-            s, _ = local_coordinates(lanes, lane, v[i, T.X], v[i, T.Y])
-            acceleration = min(acceleration, stop_ahead(v, p, i, lanes[lane, LENGTH] - s - v[i, T.LEN] / 2))
+            s, _ = L.local_coordinates(lanes, lane, v[i, T.X], v[i, T.Y])
+            acceleration = min(acceleration, stop_ahead(v, p, i, lanes[lane, L.LENGTH] - s - v[i, T.LEN] / 2))
         if light[lane] >= 0:  # the town's stop line (with no leader: IDM's free term)
             acceleration = min(
                 acceleration,
@@ -380,12 +331,10 @@ def blocks_simulate(
     end_junction, end_arm, light, changeable, ending, successor_start, successors, light_states,
     ego_max_speed_mps,
 ) -> None:  # fmt: skip
-    """``traffic.simulate`` (``frames`` frames of ``dt``; the road's rules every ``regulation[0]``
-    frames, at the junctions only, a released vehicle cruising at ``release_cap_mps``) with
-    ``blocks_act``; the lights hold their states (``light_states``) through the step. The ego rows
-    (every row but the traffic's) go no faster than ``ego_max_speed_mps``: above it their
-    acceleration is clipped as ``Vehicle.clip_actions`` clips at MAX_SPEED (MetaDrive's ego tops
-    out at 80 km/h, highway-env's at 40 m/s)."""
+    """``traffic.simulate`` (the road's rules every ``regulation[0]`` frames, at the junctions only, a
+    released vehicle cruising at ``release_cap_mps``) with ``blocks_act``; the lights hold their
+    ``light_states`` through the step. The ego rows go no faster than ``ego_max_speed_mps``
+    (``Vehicle.clip_actions``' rule at MAX_SPEED; MetaDrive's ego tops out at 80 km/h)."""
     v, lanes, p, regulation, changeable, ending, successor_start, successors = borrowed(
         (v, lanes, p, regulation, changeable, ending, successor_start, successors)
     )

@@ -1,15 +1,9 @@
 """highway-env roads for the CARLA study's follow-line and follow-lane tasks (no traffic).
 
-Both are closed circuits of straights and circular arcs turning right and left, described as
-blocks (``roads.blocks.circuit``, tracks in ``roads.tracks``) and turned into highway-env's road
-network (``StraightLane``, ``CircularLane``), so the ``highway`` backend runs them like any other
-scenario. The follow-line circuit is one wide lane with a yellow line painted along its centre
-(exported as ``RoadMap.guide_lines`` by the backend); the follow-lane circuit has three lanes with
-dashed lines between them.
-
-The ego is a ``PedalVehicle``: the seed's CARLA actions are throttle values, which in CARLA give a
-speed that levels off, so its acceleration is the commanded one minus a speed-proportional drag
-(``DRAG_PER_S``).
+Both are closed circuits of straights and arcs described as blocks (``roads.blocks.circuit``)
+and turned into highway-env's road network, so that the ``highway`` backend runs them. The ego is
+a ``PedalVehicle``: the seed's CARLA actions are throttle values, so its acceleration is the
+commanded one minus a speed-proportional drag (``DRAG_PER_S``).
 """
 
 from __future__ import annotations
@@ -49,12 +43,7 @@ class PedalVehicle(Vehicle):
 
 
 def build_circuit(track, lane_count: int, lane_width_m: float, speed_limit_mps: float) -> RoadNetwork:
-    """A closed road of ``lane_count`` parallel lanes along ``track`` (see ``FOLLOW_LINE_TRACK``),
-    as highway-env lanes (``roads.blocks.circuit``).
-
-    Lane 0 is the leftmost; the outer lines are solid, the lines between lanes dashed. Nodes are
-    named "0", "1", … so that node ``k`` starts segment ``k`` and the last segment ends at "0".
-    """
+    """``roads.blocks.circuit`` of ``track`` (see ``FOLLOW_LINE_TRACK``) as highway-env lanes."""
     return to_road_network(circuit(track, lane_count, lane_width_m, speed_limit_mps))
 
 

@@ -1,10 +1,8 @@
 """The highway: its preset and its episode set-up, for many worlds in one compiled call.
 
 ``spawn_highway_worlds`` writes, for each world to reset, the rows ``HighwayEnv._create_vehicles``
-(one controlled vehicle, ``Vehicle.create_random``, ``IDMVehicle.randomize_behavior``) would
-create from that world's seed, straight into the simulator's vehicle buffer. The random numbers
-come from :mod:`pcg64` generators seeded as ``gymnasium.utils.seeding.np_random(seed)``, drawn in
-highway-env's order, so a seed gives the same vehicles as highway-env's own reset (tested).
+would create from that world's seed, with :mod:`pcg64` generators seeded as gymnasium seeds them
+and drawn in highway-env's order.
 """
 
 from __future__ import annotations
@@ -53,17 +51,14 @@ def _spawn_worlds(
     spacing: float, target_speeds
 ) -> None:  # fmt: skip
     """HighwayEnv._create_vehicles in world m of ``v`` (M, 1 + vehicles, VEHICLE_COLUMNS) from
-    generator ``states[m]`` (M, 6), the ego first. A non-empty
-    ``target_speeds`` makes the ego an MDPVehicle (its target speed snapped to the nearest
-    allowed one, as MDPVehicle does), an empty one a plain vehicle."""
+    generator ``states[m]`` (M, 6), the ego first: an MDPVehicle where ``target_speeds`` is not
+    empty (its target speed the nearest allowed one), else a plain vehicle."""
     for m in range(states.shape[0]):
         rng, w = states[m], v[m]
         _create_random(rng, lanes, to_roads, to_count, decay, 25.0, ego_lane_id, ego_spacing, np.nan, w[0])
         w[0, T.CHECK_COLLISIONS] = 1.0
         if target_speeds.size:
-            top = target_speeds.size - 1
-            ratio = (w[0, T.SPEED] - target_speeds[0]) / (target_speeds[-1] - target_speeds[0])
-            index = int(min(max(np.rint(ratio * top), 0.0), float(top)))  # np.round: half to even
+            index = T.speed_index(w[0, T.SPEED], target_speeds)
             w[0, T.TARGET_SPEED], w[0, T.KIND] = target_speeds[index], T.CONTROLLED
         else:  # a plain kinematic vehicle has no target speed
             w[0, T.TARGET_SPEED], w[0, T.KIND] = 0.0, T.PLAIN

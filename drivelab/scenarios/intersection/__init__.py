@@ -1,14 +1,11 @@
 """IntersectionEnv's episode set-up and arrivals as vehicle rows, without highway-env objects.
 
 ``spawn_intersection`` reproduces ``_make_vehicles``: vehicles arrive at the entries, the road
-runs three seconds without an ego (on the compiled kernel, ``traffic.simulate``), a challenger
-arrives, the ego is placed and the vehicles within 20 m of it leave. ``IntersectionTraffic``
-reproduces ``_spawn_vehicle``, which the simulator also calls between steps with the world's
-generator: the one this set-up drew from, so it goes on exactly as highway-env's ``np_random``.
-
-The warm-up is highway-env's ``road.act`` / ``road.step`` as the kernel computes them: the same
-arithmetic in the same order, bit for bit the same rows where numpy does not dispatch AVX-512
-kernels (see ``tests/sim/test_spawn.py``); with them, a position can differ by ULPs.
+runs three seconds without an ego (``traffic.simulate``), a challenger arrives, the ego is placed
+and the vehicles within 20 m of it leave. ``IntersectionTraffic`` reproduces ``_spawn_vehicle``,
+which the simulator also calls between steps with the generator this set-up drew from. The
+warm-up is bit for bit highway-env's where numpy does not dispatch AVX-512 kernels (else a
+position can differ by ULPs; ``tests/sim/test_spawn.py``).
 """
 
 from __future__ import annotations
@@ -57,15 +54,9 @@ class IntersectionTraffic:
         return traffic
 
     def spawn(
-        self,
-        vehicles,
-        rng: np.random.Generator,
-        spawn_probability: float = 0.6,
-        longitudinal: float = 0.0,
-        position_deviation: float = 1.0,
-        speed_deviation: float = 1.0,
-        go_straight: bool = False,
-    ) -> np.ndarray | None:
+        self, vehicles, rng: np.random.Generator, spawn_probability: float = 0.6, longitudinal: float = 0.0,
+        position_deviation: float = 1.0, speed_deviation: float = 1.0, go_straight: bool = False,
+    ) -> np.ndarray | None:  # fmt: skip
         """The row of an arriving vehicle, or None when none arrives or it would be within 15 m
         of another vehicle (the draws are made all the same, as highway-env makes them).
 
@@ -113,24 +104,16 @@ def spawn_intersection(
     rows[:, IMPACT_COLUMNS] = 0.0  # as vehicles_to_array takes a highway-env vehicle over
     vehicles = list(rows)
     challenger = traffic.spawn(
-        rows,
-        rng,
-        spawn_probability=1.0,
-        longitudinal=60,
-        position_deviation=0.1,
-        speed_deviation=0.0,
+        rows, rng, spawn_probability=1.0, longitudinal=60, position_deviation=0.1, speed_deviation=0.0,
         go_straight=True,
-    )
+    )  # fmt: skip
     if challenger is not None:
         vehicles.append(challenger)
     ego_lane = geometry.row_of[("o0", "ir0", 0)]
     destination = config["destination"] or "o" + str(rng.integers(1, 4))
+    position = geometry.position(ego_lane, 60.0 + 5.0 * rng.normal(1.0), 0.0)
     ego = vehicle_row(
-        road,
-        geometry.position(ego_lane, 60.0 + 5.0 * rng.normal(1.0), 0.0),
-        geometry.heading_at(ego_lane, 60.0),
-        geometry.speed_limit(ego_lane),
-        ego_kind(control),
+        road, position, geometry.heading_at(ego_lane, 60.0), geometry.speed_limit(ego_lane), ego_kind(control)
     )
     if control == "meta":  # an MDPVehicle plans its route; a plain Vehicle has none
         plan_route(ego, road, destination)

@@ -46,11 +46,7 @@ SCENARIO = Scenario(
     "highway_env.envs.merge_env.MergeEnv",
     "highway with an on-ramp merging in; ends after the merge (x > 370 m)",
     config={"duration": 40},
-    traffic={
-        "empty": {"keep_npcs": False},
-        "regular": {},
-        "dense": {"extra_vehicles": 6},
-    },
+    traffic={"empty": {"keep_npcs": False}, "regular": {}, "dense": {"extra_vehicles": 6}},
     arrival="merge_end",
     arrival_x_m=370.0,
     spawn=spawn_merge,

@@ -8,13 +8,7 @@ from gymnasium.utils import seeding
 
 from drivelab.scenarios.options import Option, timing_options
 from drivelab.sim.core import traffic as T
-from drivelab.sim.core.spawn import (
-    arrange_traffic,
-    finish,
-    make_on_lane,
-    random_lane_index,
-    too_close,
-)
+from drivelab.sim.core.spawn import arrange_traffic, finish, make_on_lane, random_lane_index, too_close
 from drivelab.world.scenario import Scenario
 
 

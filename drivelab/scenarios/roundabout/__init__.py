@@ -24,6 +24,16 @@ EGO_DESTINATION = "nxs"
 POSITION_DEVIATION = SPEED_DEVIATION = 2.0
 
 
+def _npc(road, rng: np.random.Generator, lane: tuple, longitudinal: float, destination: str | None = None):
+    """A vehicle on ``lane`` about ``longitudinal`` along it at about 16 m/s, routed to
+    ``destination`` (None: a random exit), with a random DELTA (RoundaboutEnv's draws, in order)."""
+    s = longitudinal + rng.normal() * POSITION_DEVIATION
+    row = make_on_lane(road, road.geometry.row_of[lane], s, 16.0 + rng.normal() * SPEED_DEVIATION)
+    plan_route(row, road, rng.choice(DESTINATIONS) if destination is None else destination)
+    randomize_behavior(row, rng)
+    return row
+
+
 def spawn_roundabout(seed: int, road, control: str) -> tuple[np.ndarray, int, np.ndarray, None]:
     """The ego entering from the south (routed north under meta-actions), a vehicle on the ring's
     inner lane, two on its outer lane and one entering from the east, each routed to a random
@@ -31,41 +41,19 @@ def spawn_roundabout(seed: int, road, control: str) -> tuple[np.ndarray, int, np
     regulation, None)."""
     rng, _ = seeding.np_random(int(seed))
     geometry = road.geometry
-    lane_of = geometry.row_of
-    ego_lane = lane_of[("ser", "ses", 0)]
-    ego = vehicle_row(
-        road,
-        geometry.position(ego_lane, 125.0, 0.0),
-        geometry.heading_at(ego_lane, 140.0),
-        8.0,
-        ego_kind(control),
-    )
+    ego_lane = geometry.row_of[("ser", "ses", 0)]
+    position, heading = geometry.position(ego_lane, 125.0, 0.0), geometry.heading_at(ego_lane, 140.0)
+    ego = vehicle_row(road, position, heading, 8.0, ego_kind(control))
     if control == "meta":  # an MDPVehicle plans its route; a plain Vehicle has none
         plan_route(ego, road, EGO_DESTINATION)
-    vehicles = [ego]
-    # the incoming vehicle
-    row = make_on_lane(
-        road,
-        lane_of[("we", "sx", 1)],
-        5.0 + rng.normal() * POSITION_DEVIATION,
-        16 + rng.normal() * SPEED_DEVIATION,
-    )
     incoming = road.config.get("incoming_vehicle_destination")
-    destination = DESTINATIONS[incoming] if incoming is not None else rng.choice(DESTINATIONS)
-    plan_route(row, road, destination)
-    randomize_behavior(row, rng)
-    vehicles.append(row)
+    vehicles = [
+        ego,
+        _npc(road, rng, ("we", "sx", 1), 5.0, None if incoming is None else DESTINATIONS[incoming]),
+    ]
     # the other vehicles: ahead of and behind it on the outer lane, then one entering from the east
     for lane, longitudinal in ((("we", "sx", 0), 20.0), (("we", "sx", 0), -20.0), (("eer", "ees", 0), 50.0)):
-        row = make_on_lane(
-            road,
-            lane_of[lane],
-            longitudinal + rng.normal() * POSITION_DEVIATION,
-            16.0 + rng.normal() * SPEED_DEVIATION,
-        )
-        plan_route(row, road, rng.choice(DESTINATIONS))
-        randomize_behavior(row, rng)
-        vehicles.append(row)
+        vehicles.append(_npc(road, rng, lane, longitudinal))
     vehicles, ego_index = arrange_traffic(road, vehicles, 0, rng)
     return finish(road, vehicles), ego_index, np.zeros(2), None
 
@@ -86,11 +74,7 @@ SCENARIO = Scenario(
     "highway_env.envs.roundabout_env.RoundaboutEnv",
     "two-lane roundabout, enter from the south and leave to the north",
     config={"duration": 11},
-    traffic={
-        "empty": {"keep_npcs": False},
-        "regular": {},
-        "dense": {"extra_vehicles": 5},
-    },
+    traffic={"empty": {"keep_npcs": False}, "regular": {}, "dense": {"extra_vehicles": 5}},
     destination="nxs",
     intersection_nodes=RING,
     meta_target_speeds=(0, 8, 16),

@@ -1,27 +1,21 @@
 """The signalised town as a highway-env environment, so that the reference backend runs it.
 
-``TownEnv`` builds a ``drivelab.scenarios.town.road`` layout, cycles its traffic lights with the episode's
-clock, puts the ego at a random street position with a route to a random stop line elsewhere in
-town, and fills the streets with ``TownVehicle``s: IDM/MOBIL drivers that stop for red lights (and
-for yellow ones when they can stop comfortably) and wander on random routes. Pedestrians wait on
-the pavement at a zebra crossing in the middle of each street and walk across when no vehicle is
-about to reach it; vehicles must yield to those on the crossing (IDM sees them as leaders) and a
-vehicle that touches one has collided.
+``TownEnv`` builds a ``scenarios.town.road`` layout, cycles its traffic lights with the episode's
+clock, puts the ego on a random street with a route to a random stop line, and fills the streets
+with ``TownVehicle``s: IDM/MOBIL drivers that stop for red lights (and yellow ones when they can
+stop comfortably) and wander on random routes. Pedestrians wait at a zebra crossing in the middle
+of each street and walk across when no vehicle is about to reach it; vehicles yield to those on
+the crossing (IDM sees them as leaders), and a vehicle that touches one has collided.
 
-Arithmetic. Distances and dot products of 2-vectors are written out as scalar Python float
-operations, ``math.sqrt(dx * dx + dy * dy)`` and ``ax * bx + ay * by`` (x term first), never
-``np.linalg.norm`` / ``np.dot``, whose results may depend on the CPU's SIMD or BLAS: the compiled
-kernels do the same operations in the same order, so that only highway-env's own lane formulas can
-differ between the two by an ULP. The operands are: ``_gap_clear`` dx, dy = crossing centre minus
-vehicle position and ``direction · (dx, dy)``; ``walk`` (position − centre) · across; the hit
-prefilter pedestrian minus vehicle; the spawn spacing check vehicle minus new position;
-``lane_distance_to`` other minus self. A pedestrian's walking heading is ``math.atan2`` (libm's,
-as compiled code calls it; numpy's ``arctan2`` dispatches SIMD kernels that differ from it by an
-ULP on AVX-512 CPUs). A pedestrian's wait on the pavement is
-``MEAN_WAIT_S * standard_exponential(method="inv")``: numpy computes ``-log1p(-U)`` of one
-53-bit double U (not ``-log(1 - U)``, which differs in the last bit for ~7 % of draws), which the
-kernels draw bit for bit from the same PCG64 state (numpy's default ziggurat is not reproduced
-there).
+Arithmetic. Distances and dot products of 2-vectors are scalar Python float operations,
+``math.sqrt(dx * dx + dy * dy)`` and ``ax * bx + ay * by`` (x term first), never ``np.linalg.norm``
+/ ``np.dot`` (which may depend on the CPU's SIMD or BLAS): the compiled kernels do the same
+operations in the same order. The operands: ``_gap_clear`` dx, dy = crossing centre minus vehicle
+position and ``direction · (dx, dy)``; ``walk`` (position − centre) · across; the hit prefilter
+pedestrian minus vehicle; the spawn spacing check vehicle minus new position; ``lane_distance_to``
+other minus self. A pedestrian's walking heading is ``math.atan2`` (libm's, as compiled code calls
+it); its wait on the pavement is ``MEAN_WAIT_S * standard_exponential(method="inv")`` (numpy's
+``-log1p(-U)`` of one 53-bit double, which the kernels draw from the same PCG64 state).
 """
 
 from __future__ import annotations
@@ -64,11 +58,8 @@ from drivelab.world.state import LIGHT_GREEN, LIGHT_YELLOW
 
 
 class Pedestrian(RoadObject):
-    """A pedestrian who walks to and fro across one zebra crossing.
-
-    It waits on the pavement (off the road) for a random time, then for a gap in the traffic, then
-    walks straight across at its own pace. highway-env's IDM sees it as a leader while it is on a
-    lane; collisions with vehicles are checked by ``TownRoad``.
+    """A pedestrian who walks to and fro across one zebra crossing: it waits on the pavement for a
+    random time, then for a gap in the traffic, then walks straight across at its own pace.
 
     :param road: the town's road.
     :param crossing: the crossing's row (centre x, y, walking heading, length, width).
@@ -368,12 +359,8 @@ class TownEnv(AbstractEnv):
             self.ego_route = random_route(road, start)
         lane = road.network.get_lane(start)
         longitudinal = rng.uniform(5.0, max(lane.length - 20.0, 5.0))
-        ego = self.action_type.vehicle_class(
-            road,
-            lane.position(longitudinal, 0.0),
-            lane.heading_at(longitudinal),
-            self.config["ego_start_speed"],
-        )
+        position, heading = lane.position(longitudinal, 0.0), lane.heading_at(longitudinal)
+        ego = self.action_type.vehicle_class(road, position, heading, self.config["ego_start_speed"])
         if hasattr(ego, "route"):  # a meta-action ego follows the planned route itself
             ego.route = list(self.ego_route)
         road.vehicles.append(ego)

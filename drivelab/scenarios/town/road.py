@@ -1,13 +1,10 @@
 """A signalised town: two-way streets, T- and 4-way junctions, lights.
 
 The town is a grid of junctions ``block_m`` apart joined by straight two-way streets with one lane
-each way (right-hand traffic). Each junction is highway-env's own 4-way intersection geometry
-(its incoming, straight, left- and right-turn lanes) moved to the junction's centre, with the
-arms a T-junction lacks left out. Node names: ``J3:ir0`` is the stop line of junction 3's arm 0,
-``J3:il2`` the start of its exit along arm 2; arm k points along ``rotation(90°·k) @ (0, 1)``
-(arm 0 is +y, arm 1 is -x, arm 2 is -y, arm 3 is +x). The road is described as blocks
-(``road_description``: ``roads.blocks.town``); ``build_network`` turns it into highway-env lanes
-for the reference backend, and the compiled core reads the description itself.
+each way (right-hand traffic); each junction is highway-env's 4-way intersection geometry, less the
+arms a T-junction lacks. The road is described as blocks (``roads.blocks.town``, which gives the
+node names and arm directions); ``build_network`` turns it into highway-env lanes for the reference
+backend, and the compiled core reads the description itself.
 
 Lights: at every junction with three or more arms, arms 0 and 2 share one phase and arms 1 and 3
 the other: green, yellow, all red, then the other axis. Each junction's cycle starts at its own
@@ -24,18 +21,7 @@ import numpy as np
 
 from drivelab.sim.junctions.arrays import TownRoadArrays, town_arrays_from_network
 from drivelab.sim.junctions.arrays import shortest_route as graph_shortest_route
-from drivelab.sim.junctions.rules import (  # noqa: F401 (re-exported for the town's users)
-    ARM_DIRECTIONS,
-    CROSSING_WIDTH_M,
-    LANE_WIDTH_M,
-    LEFT_TURN_RADIUS_M,
-    OUTER_M,
-    RIGHT_TURN_RADIUS_M,
-    SPEED_LIMIT_MPS,
-    TURN_SPEED_MPS,
-    LightTimings,
-    light_state,
-)
+from drivelab.sim.junctions.rules import LightTimings, light_state
 from drivelab.sim.roads import blocks
 from drivelab.sim.roads.description import RoadDescription
 

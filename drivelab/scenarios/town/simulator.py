@@ -1,23 +1,16 @@
 """K worlds of the signalised town on the compiled core: lights, pedestrians and town traffic.
 
-``TownSimulator`` is ``FastSimulator``'s town: the same API (``reset_where``, ``step`` with
-NEXT_STEP restarts, ``batch``), the same road conversion and ego controls, and per world what the
-reference (``HighwayBackend`` on ``TownEnv``) keeps as objects:
+``TownSimulator`` is ``FastSimulator``'s town, with per world what the reference (``HighwayBackend``
+on ``TownEnv``) keeps as objects: vehicle rows (the ego and KIND ``TOWN`` traffic) and pedestrian
+rows in the reference's list orders, the light offsets, the world's PCG64 words (every draw of the
+frames and retargets, in the reference's order), and the ego's planned route, which grows when a
+training episode retargets on arrival.
 
-- vehicle rows ``(K, N_max, TOWN_VEHICLE_COLUMNS)`` (the ego and KIND ``TOWN`` traffic) and
-  pedestrian rows ``(K, P_max, PEDESTRIAN_COLUMNS)``, in the reference's list orders;
-- the light offsets ``(K, J)`` and each world's PCG64 words ``(K, 6)``: every random draw of the
-  frames (random routes, pedestrians' waits) and of the retargets comes from them, in the
-  reference's order, so a seed gives the reference's episode;
-- the ego's planned route (lane rows) and its polyline, which grows when a training episode
-  retargets on arrival, and the NoCrash time limit of fixed routes (``route_time_limit_s``).
-
-One policy step of a world (``simulate_town_worlds``): the light states at the step's end time
-(the reference's lights read ``env.time``, advanced before its frames), then per frame: every
-vehicle acts (``junctions.traffic.town_act``), the pedestrians walk, the vehicles step and collide,
-moving vehicles hit pedestrians, wrecks are towed (``pedestrians``). Then the ego's route
-progress, its retarget, and the events: a red light run is judged on the lanes before and after
-the step, as the reference judges it.
+One policy step of a world (``_simulate_town``): the light states at the step's end time, then per
+frame: every vehicle acts (``junctions.traffic.town_act``), the pedestrians walk, the vehicles step
+and collide, moving vehicles hit pedestrians, wrecks are towed (``pedestrians``). Then the ego's
+route progress, its retarget and the events (a red light run judged on the lanes before and after
+the step, as the reference judges it).
 """
 
 from __future__ import annotations
@@ -31,17 +24,12 @@ from numba import njit, prange
 from drivelab.scenarios.town.spawn import TownSetup, route_tracker
 from drivelab.sim.core import traffic as T
 from drivelab.sim.core.borrow import borrowed
-from drivelab.sim.core.simulator import (
-    EX_CRASHED,
-    EX_ON_ROAD,
-    FastSimulator,
-    export_worlds,
-)
+from drivelab.sim.core.simulator import EX_CRASHED, FastSimulator, export_worlds
 from drivelab.sim.junctions import rows as R
 from drivelab.sim.junctions.pedestrians import (
     clear_wrecks,
     hit_pedestrians,
-    light_states,
+    light_states_worlds,
     walk_pedestrians,
 )
 from drivelab.sim.junctions.rules import PEDESTRIAN_SIZE_M, LightTimings
@@ -54,14 +42,7 @@ from drivelab.sim.junctions.traffic import (
     town_step,
 )
 from drivelab.sim.route import RouteTracker
-from drivelab.world.batch import (
-    COLLISION_NONE,
-    COLLISION_PEDESTRIAN,
-    COLLISION_VEHICLE,
-    EventsBatch,
-    WorldBatch,
-    assemble,
-)
+from drivelab.world.batch import COLLISION_NONE, COLLISION_PEDESTRIAN, COLLISION_VEHICLE, WorldBatch
 
 
 @njit(cache=True)
@@ -73,7 +54,7 @@ def _simulate_town(
     """One policy step (``frames`` frames of ``dt``) of one world; returns (count, ego)."""
     v, peds, lanes, p, coords, done, trig, states, rng = borrowed(
         (v, peds, lanes, p, coords, done, trig, states, rng)
-    )  # its arrays without reference counts (``borrow``: 12 % of the frames' time at K = 64)
+    )  # its arrays without reference counts (``borrow``)
     junction, from_arm, to_arm, turn, end_junction, end_arm, light = borrowed(
         (junction, from_arm, to_arm, turn, end_junction, end_arm, light)
     )
@@ -92,15 +73,6 @@ def _simulate_town(
         hit_pedestrians(peds, pcount, v, count, ego)
         count, ego = clear_wrecks(v, count, ego, dt)
     return count, ego
-
-
-@njit(cache=True)
-def _light_states_worlds(light_junction, light_arm, offsets, timings, time_s, active, out) -> None:
-    for k in range(out.shape[0]):
-        if active[k]:
-            light_states(
-                light_junction, light_arm, offsets[k], timings[0], timings[1], timings[2], time_s[k], out[k]
-            )
 
 
 def _town_kernel(parallel: bool):
@@ -143,14 +115,8 @@ def export_pedestrians(peds, pcount, pedestrians, pedestrian_valid, hit_ego) -> 
 
 
 class TownSimulator(FastSimulator):
-    """K worlds of the town on drivelab's compiled kernels, as arrays (see the module docstring).
-
-    :param scenario: the town scenario (``Scenario.spawn`` returns a ``TownEpisode`` as its fourth item).
-    :param traffic: "empty", "regular" or "dense".
-    :param control: "meta" or "continuous".
-    :param num_worlds: K.
-    :param overrides: extra TownEnv config keys ("layout", "fixed_routes", "retarget", …).
-    """
+    """K worlds of the town on the compiled kernels; FastSimulator's parameters (``overrides``:
+    TownEnv's keys, "layout", "fixed_routes", "retarget", …)."""
 
     def __init__(self, scenario, traffic: str, control: str, num_worlds: int, overrides: dict | None = None):
         super().__init__(scenario, traffic, control, num_worlds, overrides)
@@ -172,14 +138,13 @@ class TownSimulator(FastSimulator):
         self.offsets = np.zeros((k, arrays.junction_count))
         self.rng_words = np.zeros((k, 6), dtype=np.uint64)
         self.light_state = np.zeros((k, len(arrays.light_junction)), dtype=np.int64)
+        self._light_rows = np.zeros(k, dtype=np.int64), np.full(k, len(arrays.light_junction), dtype=np.int64)
         self.route_time_limit_s = np.full(k, np.inf)
         self.ego_routes: list[list[int]] = [[] for _ in range(k)]
         self.trackers: list[RouteTracker | None] = [None] * k
         self.route_index = np.arange(k)
         cache = [town_frame_cache(n_max, p_max, len(self.lanes)) for _ in range(k)]
-        self.coords = np.stack([c[0] for c in cache])
-        self.done = np.stack([c[1] for c in cache])
-        self.trig = np.stack([c[2] for c in cache])
+        self.coords, self.done, self.trig = (np.stack(parts) for parts in zip(*cache, strict=True))
         self._light_valid = np.ones((k, len(arrays.light_junction)), dtype=bool)
         self._light_valid.setflags(write=False)
         self._max_speed = self._empty["max_speed_mps"]
@@ -231,8 +196,10 @@ class TownSimulator(FastSimulator):
         return self._route_cache is None or self._route_cache[2] != self._route_version
 
     def _update_lights(self, active: np.ndarray) -> None:
-        aj, aa = self.arrays.light_junction, self.arrays.light_arm
-        _light_states_worlds(aj, aa, self.offsets, self.timings, self.time_s, active, self.light_state)
+        aj, aa, (start, stop) = self.arrays.light_junction, self.arrays.light_arm, self._light_rows
+        light_states_worlds(
+            aj, aa, start, stop, self.offsets, self.timings, self.time_s, active, self.light_state
+        )
 
     # --- stepping (``FastSimulator.step``'s hooks) --------------------------------------------------
     _whole_step_kernel = False
@@ -260,10 +227,6 @@ class TownSimulator(FastSimulator):
 
     def _projected(self, restart: np.ndarray) -> np.ndarray:
         return restart  # the others were projected before their routes grew (``_after_frames``)
-
-    def reset_where(self, mask: np.ndarray, seeds: np.ndarray) -> WorldBatch:
-        self._red_light = np.zeros(self.num_worlds, dtype=bool)
-        return super().reset_where(mask, seeds)
 
     def _retarget(self, active: np.ndarray) -> None:
         """TownEnv.extend_route in every world that arrived: a random route on from the end of
@@ -299,26 +262,17 @@ class TownSimulator(FastSimulator):
         batch = self._export_arrays(floats, ints, flags, vehicles, valid)
         collided = flags[:, EX_CRASHED]
         kind = np.where(hit_ego, COLLISION_PEDESTRIAN, COLLISION_VEHICLE)
-        events = assemble(
-            EventsBatch,
-            collided=collided,
+        events = batch.events.replaced(  # a pedestrian hit is its own kind; the lights' red runs
             collision_kind=np.where(collided, kind, COLLISION_NONE).astype(np.int8),
-            off_road=~flags[:, EX_ON_ROAD],
-            arrived=batch.events.arrived,
             red_light_crossed=self._red_light.copy(),
-            blocked=self._no_event,
-            off_route=self._no_event,
         )
         lights = np.empty((k, len(self.arrays.light_xyh), 4))  # every world's lights and their states
         lights[..., :3] = self.arrays.light_xyh
         lights[..., 3] = self.light_state
         return batch.replaced(
-            events=events,
-            traffic_lights=lights,
-            light_valid=self._light_valid,
-            pedestrians=pedestrians,
+            events=events, traffic_lights=lights, light_valid=self._light_valid, pedestrians=pedestrians,
             pedestrian_valid=pedestrian_valid,
-        )
+        )  # fmt: skip
 
 
 def _append_route(row: np.ndarray, lanes) -> None:

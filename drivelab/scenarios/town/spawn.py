@@ -1,16 +1,13 @@
 """The signalised town's episode set-up for the compiled core (the RLAD paper; its preset is
 ``drivelab.scenarios.town``).
 
-The reference (``backend="highway"``) builds the road, lights, pedestrians and traffic as
-highway-env objects (``reference_env.py``). ``town_episode`` sets up the same episode from a
-seed as arrays, without any highway-env object: it draws the numbers ``TownEnv._reset`` draws,
-from a generator seeded as gymnasium seeds ``env.np_random`` (``PCG64(SeedSequence(seed))``, its
-words made by ``pcg64``), in the same order, and computes positions with highway-env's lane
-formulas operation for operation, in one compiled call (``_town_rows``). Every street is a
-straight lane, so those formulas are +, -, *, /, sqrt and % (each correctly rounded: the same bits in numba
-as in numpy); the crossings' cos / sin come from numpy once per road. So a seed gives bit for bit
-the reference's vehicle rows, pedestrian rows, light offsets, ego route, NoCrash time limit and
-generator state (tested in ``tests/envs/test_town_spawn.py``). The draws, in order:
+``town_episode`` sets up the reference's (``reference_env.py``) episode of a seed as arrays, in
+one compiled call (``_town_rows``): the numbers ``TownEnv._reset`` draws, from a generator seeded
+as gymnasium seeds ``env.np_random`` (``PCG64(SeedSequence(seed))``, words made by ``pcg64``), in
+the same order, and highway-env's lane formulas operation for operation (every street is straight:
++, -, *, /, sqrt and %, correctly rounded; the crossings' cos / sin come from numpy). So a seed
+gives bit for bit the reference's rows, light offsets, ego route, time limit and generator state.
+The draws, in order:
 
 1. light offsets ``uniform(0, cycle, size=J)``, every junction (corners included);
 2. the ego: a fixed route ``integers(25)`` (``fixed_routes``) or a street ``integers(S)`` and a
@@ -40,22 +37,11 @@ from numba import njit
 from drivelab.sim.core import lanes as L
 from drivelab.sim.core import pcg64
 from drivelab.sim.core import traffic as T
-from drivelab.sim.core.spawn import (
-    DELTA_RANGE,
-    LaneGeometry,
-    ego_kind,
-    lane_distances,
-    mdp_target_speed,
-)
+from drivelab.sim.core.spawn import DELTA_RANGE, LaneGeometry, ego_kind, lane_distances, mdp_target_speed
 from drivelab.sim.junctions import rows as R
 from drivelab.sim.junctions.arrays import TownRoadArrays
 from drivelab.sim.junctions.arrays_description import town_arrays
-from drivelab.sim.junctions.rules import (
-    FIXED_ROUTE_COUNT,
-    MEAN_WAIT_S,
-    PAVEMENT_M,
-    LightTimings,
-)
+from drivelab.sim.junctions.rules import FIXED_ROUTE_COUNT, MEAN_WAIT_S, PAVEMENT_M, LightTimings
 from drivelab.sim.junctions.traffic import random_goal, random_route
 from drivelab.sim.route import RouteTracker
 
@@ -68,16 +54,12 @@ ROUTE_TIMEOUT_EXTRA_S = 10.0  # NoCrash's time limit: the route at ROUTE_TIMEOUT
 class TownEpisode:
     """One town episode as set up from its seed (``town_episode``).
 
-    :param vehicles: (N, TOWN_VEHICLE_COLUMNS) the ego then the NPCs (KIND TOWN), as
-        ``vehicles_to_array(road.vehicles, table, town_class=TownVehicle)`` lays them out.
-    :param ego: the ego's row (0).
-    :param pedestrians: (P, PEDESTRIAN_COLUMNS) in spawn order.
-    :param light_offsets_s: (J,) every junction's cycle offset (``TownLights.offsets_s``).
-    :param ego_route: (R,) int64 lane rows of the ego's planned route (``TownEnv.ego_route``).
-    :param route_time_limit_s: the NoCrash time limit with fixed routes, else inf (what
-        ``HighwayBackend.route_time_limit_s`` is; inf where it is None).
-    :param rng_state: (6,) uint64 PCG64 words of the episode's generator after the set-up
-        (``env.np_random``; ``pcg64``): the frames' draws go on from them.
+    :param vehicles: (N, TOWN_VEHICLE_COLUMNS) the ego (row ``ego``, 0) then the NPCs (KIND TOWN),
+        laid out as ``vehicles_to_array(..., town_class=TownVehicle)`` lays them out.
+    :param pedestrians: (P, PEDESTRIAN_COLUMNS) in spawn order; ``light_offsets_s`` (J,): every
+        junction's cycle offset; ``ego_route`` (R,): the lane rows of the ego's planned route.
+    :param route_time_limit_s: the NoCrash time limit with fixed routes, else inf.
+    :param rng_state: (6,) uint64 PCG64 words of the episode's generator after the set-up.
     """
 
     vehicles: np.ndarray
@@ -101,35 +83,26 @@ class TownEpisode:
 class TownSetup:
     """What a town set-up reads from the road, once per road and configuration (``of``).
 
-    :param table: the town's LaneTable; ``geometry`` its highway-env lane formulas.
+    :param road: the simulator's converted road: its LaneTable, lane formulas (``geometry``), the
+        meta-action ego's allowed speeds and the vehicle classes' constants.
     :param arrays: the town's lane metadata, crossings and route table.
     :param vehicles_count, pedestrians_count: the traffic level's NPCs and pedestrians.
     :param cycle_s: the lights' cycle; ``ego_start_speed``: the ego's initial speed.
     :param fixed_routes: NoCrash's fixed routes (else a random start and route).
-    :param target_speeds: the meta-action ego's allowed speeds (MDPVehicle's).
-    :param ego_length, ego_width, npc_length, npc_width, lane_change_delay, idm_delta: the
-        vehicle classes' constants, as the simulator's road holds them (``vehicle_row`` reads them).
     """
 
-    table: L.LaneTable
-    geometry: LaneGeometry
+    road: object
     arrays: TownRoadArrays
     vehicles_count: int
     pedestrians_count: int
     cycle_s: float
     ego_start_speed: float
     fixed_routes: bool
-    target_speeds: np.ndarray
-    ego_length: float
-    ego_width: float
-    npc_length: float
-    npc_width: float
-    lane_change_delay: float
-    idm_delta: float
     _fixed: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
-        rows, streets = self.table.rows, self.arrays.street_lanes
+        self.geometry: LaneGeometry = self.road.geometry
+        rows, streets = self.road.table.rows, self.arrays.street_lanes
         if np.any(rows[streets, L.KIND] != L.STRAIGHT):
             raise NotImplementedError("the town's set-up places vehicles on straight streets only")
         crossings = self.arrays.crossings
@@ -142,14 +115,12 @@ class TownSetup:
     def ego_target_speed(self) -> float:
         """A meta-action ego's first target speed (MDPVehicle's: the allowed speed nearest its start
         speed)."""
-        return float(mdp_target_speed(self.ego_start_speed, self.target_speeds))
+        return float(mdp_target_speed(self.ego_start_speed, self.road.target_speeds))
 
     @classmethod
     def of(cls, road) -> TownSetup:
-        """The set-up of the simulator's converted ``road`` (kept in ``road.cache["town_setup"]``).
-        It reads ``road.table``, ``road.geometry``, ``road.config`` (TownEnv's), the vehicle
-        constants and the TownRoadArrays of the road's description (``road.cache["town_arrays"]``,
-        derived at the first use)."""
+        """The set-up of the simulator's converted ``road`` (kept in ``road.cache["town_setup"]``),
+        with the TownRoadArrays of the road's description (``road.cache["town_arrays"]``)."""
         setup = road.cache.get("town_setup")
         if setup is None:
             arrays = road.cache.get("town_arrays")
@@ -157,21 +128,13 @@ class TownSetup:
                 arrays = road.cache["town_arrays"] = town_arrays(road.description)
             config = road.config
             setup = road.cache["town_setup"] = cls(
-                table=road.table,
-                geometry=road.geometry,
+                road=road,
                 arrays=arrays,
                 vehicles_count=int(config["vehicles_count"]),
                 pedestrians_count=int(config["pedestrians_count"]),
                 cycle_s=LightTimings(**config["light_timings"]).cycle_s,
                 ego_start_speed=float(config["ego_start_speed"]),
                 fixed_routes=bool(config["fixed_routes"]),
-                target_speeds=np.asarray(road.target_speeds, dtype=float),
-                ego_length=float(road.ego_length),
-                ego_width=float(road.ego_width),
-                npc_length=float(road.npc_length),
-                npc_width=float(road.npc_width),
-                lane_change_delay=float(road.lane_change_delay),
-                idm_delta=float(road.idm_delta),
             )
         return setup
 
@@ -194,9 +157,8 @@ class TownSetup:
 
 def route_polyline(geometry: LaneGeometry, lanes, parts: dict | None = None) -> np.ndarray:
     """(K, 2) the centre line of ``lanes`` (lane rows), sampled as ``HighwayBackend.route_for``
-    samples it: a straight lane's two ends, a curved one every <= 2 m (``np.linspace``), with the
-    lane formulas' own bits. ``parts``: a cache of each lane's samples (a lane's do not depend on
-    the route it is in)."""
+    samples it: a straight lane's two ends, a curved one every <= 2 m (``np.linspace``).
+    ``parts``: a cache of each lane's samples."""
     from drivelab.sim.reference.highway import SAMPLE_SPACING_M  # the reference's sampling
 
     parts = {} if parts is None else parts
@@ -257,12 +219,13 @@ def town_episode(seed: int, setup: TownSetup, control: str) -> TownEpisode:
     ego_route = np.empty(arrays.routes.shape[2] + 1, dtype=np.int64)
     ambiguous = np.zeros(len(vehicles), dtype=bool)
     target_speed = setup.ego_target_speed if kind == T.CONTROLLED else 0.0
+    road = setup.road
     count, route_size = _town_rows(
-        words, setup.table.rows, arrays.street_lanes, setup.fixed if setup.fixed_routes else _NO_FIXED,
+        words, road.table.rows, arrays.street_lanes, setup.fixed if setup.fixed_routes else _NO_FIXED,
         arrays.routes, arrays.route_length, arrays.crossings, setup.across, setup.cycle_s, kind,
-        setup.ego_start_speed, target_speed, setup.ego_length, setup.ego_width,
-        setup.npc_length, setup.npc_width, setup.lane_change_delay, setup.idm_delta,
-        vehicles, pedestrians, offsets, ego_route, ambiguous,
+        setup.ego_start_speed, target_speed, road.ego_length, road.ego_width, road.npc_length,
+        road.npc_width, road.lane_change_delay, road.idm_delta, vehicles, pedestrians, offsets, ego_route,
+        ambiguous,
     )  # fmt: skip
     for row in np.flatnonzero(ambiguous[:count]):  # lanes within 1e-6: numpy's distances decide
         lane = geometry.closest_lane(vehicles[row, T.X : T.Y + 1].copy(), vehicles[row, T.HEADING])
@@ -279,28 +242,13 @@ def town_episode(seed: int, setup: TownSetup, control: str) -> TownEpisode:
         progress = route.project(vehicles[0, T.X : T.Y + 1])
         limit = (route.length_m - progress) / ROUTE_TIMEOUT_MPS + ROUTE_TIMEOUT_EXTRA_S
     return TownEpisode(
-        vehicles=vehicles[:count],
-        ego=0,
-        pedestrians=pedestrians,
-        light_offsets_s=offsets,
-        ego_route=ego_route,
-        route_time_limit_s=float(limit),
-        rng_state=words,
-    )
+        vehicles=vehicles[:count], ego=0, pedestrians=pedestrians, light_offsets_s=offsets,
+        ego_route=ego_route, route_time_limit_s=float(limit), rng_state=words,
+    )  # fmt: skip
 
 
 TRACKER_CACHE_SIZE = 4096  # routes whose trackers a set-up keeps (a retargeted ego's grow without end)
 _NO_FIXED = np.zeros((0, 2), dtype=np.int64)
-
-
-@njit(cache=True)
-def _street_point(lanes, lane, longitudinal):
-    """LaneGeometry.position(lane, longitudinal, 0.0) of a straight lane, in numpy's order:
-    start + longitudinal * direction + 0.0 * lateral direction."""
-    lateral = 0.0
-    x = lanes[lane, L.START_X] + longitudinal * lanes[lane, L.DIR_X] + lateral * -lanes[lane, L.DIR_Y]
-    y = lanes[lane, L.START_Y] + longitudinal * lanes[lane, L.DIR_Y] + lateral * lanes[lane, L.DIR_X]
-    return x, y
 
 
 @njit(cache=True)
@@ -339,11 +287,7 @@ def _town_rows(
     """``town_episode``'s draws and rows (see the module docstring), on the PCG64 ``words``:
     fills the zeroed ``vehicles`` (ego, then NPCs), ``peds``, ``offsets`` and ``ego_route``;
     ``ambiguous[i]``: row i's closest lane is to be decided by numpy. Returns (vehicle count,
-    ego route length). ``fixed``: NoCrash's routes, or (0, 2) for random ones.
-
-    Every street is straight, so every float is made by +, -, *, / and sqrt of the reference's
-    operands in its order (each correctly rounded: the same bits as numpy on any CPU); the one
-    transcendental, a crossing's cos / sin, comes in ``across``, made by numpy."""
+    ego route length). ``fixed``: NoCrash's routes, or (0, 2) for random ones."""
     for j in range(offsets.shape[0]):
         offsets[j] = pcg64.uniform(words, 0.0, cycle_s)
     if fixed.shape[0]:
@@ -359,7 +303,7 @@ def _town_rows(
         ego_route[0] = start
     longitudinal = pcg64.uniform(words, 5.0, max(lanes[start, L.LENGTH] - 20.0, 5.0))
     ego = vehicles[0]
-    x, y = _street_point(lanes, start, longitudinal)
+    x, y = L.position(lanes, start, longitudinal, 0.0)  # LaneGeometry.position's order
     ambiguous[0] = _place(ego, lanes, x, y, lanes[start, L.HEADING], ego_speed, idm_delta)
     ego[T.KIND], ego[T.LEN], ego[T.WID] = kind, ego_length, ego_width
     if kind == T.CONTROLLED:  # an MDPVehicle: the allowed speed nearest its own; its route
@@ -370,7 +314,7 @@ def _town_rows(
         placed = False
         for _ in range(PLACEMENT_TRIES):
             lane = streets[pcg64.bounded_int(words, streets.shape[0])]
-            x, y = _street_point(lanes, lane, pcg64.uniform(words, 5.0, lanes[lane, L.LENGTH] - 5.0))
+            x, y = L.position(lanes, lane, pcg64.uniform(words, 5.0, lanes[lane, L.LENGTH] - 5.0), 0.0)
             nearest = np.inf
             for other in range(count):
                 dx, dy = vehicles[other, T.X] - x, vehicles[other, T.Y] - y
@@ -407,9 +351,7 @@ def _town_rows(
 
 
 def spawn_town(seed: int, road, control: str) -> tuple[np.ndarray, int, np.ndarray, TownEpisode]:
-    """The ``Scenario.spawn`` hook: ``(vehicle rows, ego row, regulation (2,) zeros, episode)``,
-    where the fourth item, what goes on between steps, is the whole ``TownEpisode`` (its ``rng``
-    is the generator the frames draw from; pedestrians, light offsets, the ego's route and its
-    time limit are the town's additions to the contract)."""
+    """The ``Scenario.spawn`` hook: ``(vehicle rows, ego row, regulation (2,) zeros, episode)``, the
+    whole ``TownEpisode`` going on between steps."""
     episode = town_episode(seed, TownSetup.of(road), control)
     return episode.vehicles, episode.ego, np.zeros(2), episode

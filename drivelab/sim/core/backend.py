@@ -1,9 +1,5 @@
 """The fast backend for one world: a :class:`FastSimulator` of K = 1, read as a WorldState.
 
-At reset highway-env lays out the road and places the vehicles exactly as it would itself (same
-seed, same scenario code), or, for the highway, drivelab's own spawner draws the same numbers
-without building any highway-env object; from then on every step is ``traffic.simulate_worlds``
-over the vehicle array (routes, obstacles and the intersection's right-of-way rules included).
 See ``simulator.py``: this class only gives DriveEnv its single-world API.
 """
 

@@ -1,18 +1,15 @@
 """Borrowed array views: how the traffic kernels pass arrays without reference counting.
 
-numba counts the references to an array's memory with atomic increments and decrements. Each
-``inline="always"`` helper that takes an array adds a pair per array and call, and numba's
-pruning pass cannot remove the pairs once the inlined branches merge them through phi nodes.
-In highway traffic (21 vehicles, 5 frames a step) these atomics were about 40 % of
-``traffic.act``'s time (perf: ``NRT_incref`` / ``NRT_decref``). A borrowed view has the same data,
-shape and strides but no memory owner: a null ``meminfo``. Borrowed at the top of the function
-whose body inlines the helpers, the null is a constant there and LLVM folds every count away
-(highway K = 64: the frames 31 → 20 µs a world-step).
+numba counts the references to an array's memory with atomic increments and decrements, a pair
+per array and call of each ``inline="always"`` helper, which its pruning pass cannot remove once
+the inlined branches merge them. A borrowed view has the same data, shape and strides but no
+memory owner (a null ``meminfo``): borrowed at the top of the function whose body inlines the
+helpers, the null is a constant there and LLVM folds every count away.
 
 The rule that keeps it safe: a kernel borrows only its own arguments, at its top, and never
-returns or stores the views. The caller holds those arguments until the kernel returns, so the
-memory outlives every view of it. (An array the kernel allocates itself must not be borrowed
-there: the name rebound to the view would release the only reference.)
+returns or stores the views (the caller holds the arguments until the kernel returns). An array
+the kernel allocates itself must not be borrowed there: the name rebound to the view would release
+the only reference.
 """
 
 from __future__ import annotations

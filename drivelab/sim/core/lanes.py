@@ -71,22 +71,16 @@ class LaneTable:
             if isinstance(lane, CircularLane):
                 values[KIND] = CIRCLE
                 values[CENTER_X], values[CENTER_Y] = lane.center
-                values[RADIUS], values[START_PHASE], values[SENSE] = (
-                    lane.radius,
-                    lane.start_phase,
-                    lane.direction,
-                )
+                values[RADIUS], values[START_PHASE] = lane.radius, lane.start_phase
+                values[SENSE] = lane.direction
             elif isinstance(lane, StraightLane):
                 values[KIND] = SINE if isinstance(lane, SineLane) else STRAIGHT
                 values[START_X], values[START_Y] = lane.start
                 values[DIR_X], values[DIR_Y] = lane.direction
                 values[HEADING] = lane.heading
                 if isinstance(lane, SineLane):
-                    values[AMPLITUDE], values[PULSATION], values[PHASE] = (
-                        lane.amplitude,
-                        lane.pulsation,
-                        lane.phase,
-                    )
+                    values[AMPLITUDE], values[PULSATION] = lane.amplitude, lane.pulsation
+                    values[PHASE] = lane.phase
             else:
                 raise NotImplementedError(f"the fast backend has no {type(lane).__name__} yet")
         _fill_boxes(rows)
@@ -149,11 +143,9 @@ def _fill_boxes(rows: np.ndarray) -> None:
 TWO_PI = 2 * np.pi
 
 
-# The trigonometric functions with their zero written out. IEEE 754 (C99 Annex F) fixes
-# sin, tan, arcsin and arctan of a signed zero to that same zero and cos of it to 1, so these
-# return the library's own bits; they skip the library call, which costs as much for a zero as
-# for any angle. A vehicle driving straight along a highway lane's centre has heading, steering
-# and lateral offset exactly 0, most of the time in most worlds.
+# The trigonometric functions with their zero written out (IEEE 754 fixes sin, tan, arcsin and
+# arctan of a signed zero to that zero and cos of it to 1: the library's own bits, without its
+# call). A vehicle driving straight along a lane's centre has heading, steering and offset 0.
 @njit(cache=True, inline="always")
 def sin0(x: float) -> float:
     return x if x == 0.0 else np.sin(x)

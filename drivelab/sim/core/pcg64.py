@@ -1,14 +1,12 @@
 """numpy's PCG64 generator as plain uint64 arrays, so that compiled code can seed and draw from
-many of them in one call (numba's own Generator support unboxes one Python object per call).
+many of them in one call.
 
 A generator is a ``(6,)`` uint64 array: the 128-bit LCG state and increment as (high, low)
 words, then numpy's 32-bit buffer (a flag and the buffered half of the last 64-bit output).
-``seeded_states`` builds them from integer seeds exactly as ``gymnasium.utils.seeding.np_random``
-(``PCG64(SeedSequence(seed))``) does, SeedSequence's hash (O'Neill's seed_seq_fe) included;
-``next_uint64``, ``bounded_int`` and ``uniform`` return
-the numbers ``Generator.random_raw`` / ``integers(0, n)`` / ``uniform(a, b)`` would, in the same
-order (tested against numpy). The algorithms are the published ones: PCG's XSL-RR output over a
-128-bit LCG (O'Neill 2014) and Lemire's bounded integers with numpy's buffered 32-bit draws.
+``seeded_states`` builds them from integer seeds as ``gymnasium.utils.seeding.np_random``
+(``PCG64(SeedSequence(seed))``) does; ``next_uint64``, ``bounded_int`` and ``uniform`` return the
+numbers ``Generator.random_raw`` / ``integers(0, n)`` / ``uniform(a, b)`` would, in the same order
+(PCG's XSL-RR output over a 128-bit LCG, O'Neill 2014; Lemire's bounded integers).
 """
 
 from __future__ import annotations
@@ -54,9 +52,9 @@ def _seed_words(seed: int) -> np.ndarray:
 
 
 @njit(cache=True)
-def _hashmix(value: np.uint64, hash_const: np.ndarray) -> np.uint64:
+def _hashmix(value: np.uint64, hash_const: np.ndarray, mult: int = MULT_A) -> np.uint64:
     value = (value ^ hash_const[0]) & _MASK32
-    hash_const[0] = (hash_const[0] * np.uint64(MULT_A)) & _MASK32
+    hash_const[0] = (hash_const[0] * np.uint64(mult)) & _MASK32
     value = (value * hash_const[0]) & _MASK32
     return value ^ (value >> np.uint64(XSHIFT))
 
@@ -86,10 +84,7 @@ def _seed_sequence_state(seed: int) -> np.ndarray:
     hash_const[0] = np.uint64(INIT_B)
     words = np.zeros(8, dtype=np.uint64)
     for i in range(8):
-        value = (pool[i % POOL_SIZE] ^ hash_const[0]) & _MASK32
-        hash_const[0] = (hash_const[0] * np.uint64(MULT_B)) & _MASK32
-        value = (value * hash_const[0]) & _MASK32
-        words[i] = value ^ (value >> np.uint64(XSHIFT))
+        words[i] = _hashmix(pool[i % POOL_SIZE], hash_const, MULT_B)
     out = np.zeros(4, dtype=np.uint64)
     for j in range(4):
         out[j] = words[2 * j] | (words[2 * j + 1] << _32)

@@ -1,20 +1,14 @@
 """FastSimulator: K worlds of one scenario stepped, reset and exported as arrays.
 
-Every world's vehicles live in one preallocated ``(K, N_max, VEHICLE_COLUMNS)`` buffer with a
-per-world count (rows past it are zeros) and the row of its ego; a reset rewrites that world's
-rows only. A step applies the K controls, runs ``traffic.simulate_worlds`` (one compiled call,
-one thread per world where numba has several), the scenario's arrivals and departures, the K
-route projections and the export into a :class:`~drivelab.world.batch.WorldBatch`, all compiled
-loops over worlds.
+Every world's vehicles live in one ``(K, N_max, VEHICLE_COLUMNS)`` buffer with a per-world count
+(rows past it are zeros) and the row of its ego. A step applies the K controls, runs
+``traffic.simulate_worlds``, the scenario's arrivals and departures, the route projections and
+the export into a :class:`~drivelab.world.batch.WorldBatch`, all compiled loops over worlds.
 
-The road (LaneTable, RoadMap, the ego's route from every lane, shortest paths, the vehicle
-classes' constants) is converted from highway-env once per scenario and configuration and shared
-by every simulator of it (``_road``); no highway-env object outlives that conversion. Every
-episode is then set up by drivelab's own spawner of the scenario (its ``Scenario.spawn`` hook,
-or ``spawn_many`` for all reset worlds in one call: the same draws
-from the same seed as highway-env's ``_make_vehicles``, hence the same vehicles); the
-intersection's arrivals between steps draw from the generator its spawner returned, as
-highway-env's ``np_random`` would go on.
+The road (``_Road``: lane arrays, road map, ego routes, shortest paths, the vehicle classes'
+constants) is converted once per scenario and configuration and shared by its simulators; every
+episode is set up by the scenario's spawner (``Scenario.spawn`` or ``spawn_many``), with the same
+draws from the same seed as highway-env's ``_make_vehicles``.
 """
 
 from __future__ import annotations
@@ -60,12 +54,9 @@ META = META_ACTIONS
 LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER = range(5)
 ACCELERATION_RANGE, STEERING_RANGE = (-5.0, 5.0), (-FULL_LOCK_RAD, FULL_LOCK_RAD)  # ContinuousAction's
 
-# How a scenario's episode reaches its goal, by ``Scenario.arrival``: (rule, threshold).
-# ARRIVE_PAST_X: the ego's x beyond ``Scenario.arrival_x_m`` (the merge's end). ARRIVE_EXIT: the ego
-# on an exit lane at least the threshold along it (IntersectionEnv.has_arrived, 25 m). A scenario
-# with a ``traffic_flow`` also loses the vehicles that reach the end of their exit and may get a
-# new one at an entry after every step (IntersectionEnv.step).
-# ARRIVE_ROUTE_END: less than the threshold of the ego's route left (the town's planned route).
+# ``Scenario.arrival`` → (rule, threshold). ARRIVE_PAST_X: the ego's x beyond ``Scenario.arrival_x_m``
+# (the merge's end); ARRIVE_EXIT: on an exit lane at least the threshold along it
+# (IntersectionEnv.has_arrived); ARRIVE_ROUTE_END: less than the threshold of the ego's route left.
 ARRIVE_NEVER, ARRIVE_PAST_X, ARRIVE_EXIT, ARRIVE_ROUTE_END = 0, 1, 2, 3
 ARRIVAL_RULES = {
     "none": (ARRIVE_NEVER, 0.0),
@@ -74,9 +65,8 @@ ARRIVAL_RULES = {
     "route_end": (ARRIVE_ROUTE_END, 2.0),
 }
 
-# Columns of the export kernel's float, int and flag outputs. The lane's turn over the 2 m around
-# the ego is exported as its cosine and sine (the complex exponential highway-env's export takes
-# the angle of), so that the curvature is one arctan2 of two columns.
+# Columns of the export kernel's float, int and flag outputs; the lane's turn over the 2 m around the
+# ego as its cosine and sine (highway-env takes the angle of exp(1j * turn)).
 (
     EX_X, EX_Y, EX_HEADING, EX_SPEED, EX_STEER, EX_ACCEL, EX_LEN, EX_WID, EX_LANE_WIDTH, EX_LATERAL,
     EX_LANE_HEADING, EX_SPEED_LIMIT, EX_TURN_COS, EX_TURN_SIN,
@@ -161,20 +151,16 @@ def idm_parameters(npc_class: type = IDMVehicle) -> np.ndarray:
 class _Road:
     """A scenario's road and timing as arrays, shared by every simulator of that configuration.
 
-    :param routes: ego route (RouteTracker) per start lane row, planned at conversion for every
-        lane a route can be planned from.
-    :param in_junction: (L,) lane rows that count as junction area.
-    :param exit_lane: (L,) lane rows that are an intersection exit (from "il…" to "o…").
-    :param geometry: highway-env's lane formulas over the table (the spawners').
-    :param paths: ``RoadNetwork.shortest_path`` between every two nodes.
+    :param routes: ego route (RouteTracker) per start lane row a route can be planned from.
+    :param in_junction: (L,) junction lanes; ``exit_lane`` (L,): intersection exits ("il…" → "o…").
+    :param geometry: highway-env's lane formulas (the spawners'); ``paths``: ``shortest_path``s.
     :param objects: (M, VEHICLE_COLUMNS) the road's static obstacles, after every vehicle.
-    :param idm: the IDM / MOBIL parameters as the traffic class had them at conversion.
-    :param ego_length, ego_width: the ego class's size; ``npc_*``, ``lane_change_delay``,
-        ``idm_delta``: the traffic class's size, LANE_CHANGE_DELAY and default DELTA.
-    :param keep_npcs, extra_vehicles: the traffic level's drivelab keys (HighwayBackend's).
-    :param destination: the scenario's destination node (extra vehicles are routed to it).
-    :param cache: static arrays a spawner derives from the road, made at its first use.
-    :param description: the road's description (``Scenario.road``'s), None for highway-env's roads.
+    :param idm: the traffic class's IDM / MOBIL parameters; ``npc_*``, ``lane_change_delay``,
+        ``idm_delta``: its size, LANE_CHANGE_DELAY and DELTA; ``ego_*``: the ego class's size.
+    :param keep_npcs, extra_vehicles: the traffic level's drivelab keys; ``destination``: the
+        scenario's (extra vehicles are routed to it).
+    :param cache: what a spawner derives from the road at its first use; ``description``: the
+        road's description (``Scenario.road``'s), None for highway-env's roads.
     """
 
     table: L.LaneTable
@@ -220,6 +206,37 @@ def _static_objects(road) -> list:
     return [o for o in road.objects if id(o) not in walkers]
 
 
+def _npc_class(config: dict) -> type:
+    """The config's traffic class, which the compiled core must know (an IDMVehicle)."""
+    npc_class = hw_utils.class_from_path(config["other_vehicles_type"])
+    if not is_idm_class(npc_class):
+        raise NotImplementedError(f"the fast backend has no {npc_class.__name__}")
+    return npc_class
+
+
+def _new_road(scenario: Scenario, table: L.LaneTable, graph_keys: dict, config: dict, **fields) -> _Road:
+    """A _Road of ``table`` with the fields every conversion derives alike; ``fields``: the rest."""
+    npc_class = _npc_class(config)
+    return _Road(
+        table=table,
+        graph_keys=graph_keys,
+        config=dict(config),
+        frames=int(config["simulation_frequency"] // config["policy_frequency"]),
+        dt_s=1 / config["simulation_frequency"],
+        in_junction=np.array([scenario.in_junction(index) for index in table.indices], dtype=bool),
+        exit_lane=np.array([("il" in f and "o" in t) for f, t, _ in table.indices], dtype=bool),
+        geometry=LaneGeometry(table),
+        paths=all_shortest_paths(graph_keys),
+        idm=idm_parameters(npc_class),
+        npc_length=float(npc_class.LENGTH),
+        npc_width=float(npc_class.WIDTH),
+        lane_change_delay=float(npc_class.LANE_CHANGE_DELAY),
+        idm_delta=float(npc_class.DELTA),
+        destination=scenario.destination,
+        **fields,
+    )
+
+
 def _convert_road(builder: HighwayBackend, scenario: Scenario) -> _Road:
     """The road highway-env built in ``builder`` (after a reset) as a _Road, with everything the
     episodes need planned now: the builder is dropped afterwards."""
@@ -232,42 +249,26 @@ def _convert_road(builder: HighwayBackend, scenario: Scenario) -> _Road:
         lanes = builder._plan_route(index)
         if lanes:  # no route from a lane with no path to the destination: no ego starts there
             routes[row] = builder.route_for(lanes)
-    if isinstance(env.road, RegulatedRoad) and RegulatedRoad.YIELD_DURATION != 0:
+    regulated = isinstance(env.road, RegulatedRoad)
+    if regulated and RegulatedRoad.YIELD_DURATION != 0:
         raise NotImplementedError("the fast backend assumes RegulatedRoad.YIELD_DURATION = 0")
     dt_s = 1 / config["simulation_frequency"]
-    npc_class = hw_utils.class_from_path(config["other_vehicles_type"])
-    if not is_idm_class(npc_class):
-        raise NotImplementedError(f"the fast backend has no {npc_class.__name__}")
-    graph_keys = {f: list(to) for f, to in network.graph.items()}
-    return _Road(
-        table=table,
+    return _new_road(
+        scenario,
+        table,
+        {f: list(to) for f, to in network.graph.items()},
+        config,
         road_map=build_road_map(network),
-        graph_keys=graph_keys,
-        config=dict(config),
         target_speeds=np.asarray(getattr(env.action_type, "target_speeds", [0.0]), dtype=float),
-        frames=int(config["simulation_frequency"] // config["policy_frequency"]),
-        dt_s=dt_s,
         policy_frequency_hz=builder.policy_frequency_hz,
         duration_s=builder.duration_s,
         routes=routes,
-        in_junction=np.array([scenario.in_junction(index) for index in table.indices], dtype=bool),
-        exit_lane=np.array([("il" in f and "o" in t) for f, t, _ in table.indices], dtype=bool),
-        regulation_period=int(1 / dt_s / RegulatedRoad.REGULATION_FREQUENCY)
-        if isinstance(env.road, RegulatedRoad)
-        else 0,
-        geometry=LaneGeometry(table),
-        paths=all_shortest_paths(graph_keys),
+        regulation_period=int(1 / dt_s / RegulatedRoad.REGULATION_FREQUENCY) if regulated else 0,
         objects=vehicles_to_array([], table, _static_objects(env.road)),
-        idm=idm_parameters(npc_class),
         ego_length=float(env.vehicle.LENGTH),
         ego_width=float(env.vehicle.WIDTH),
-        npc_length=float(npc_class.LENGTH),
-        npc_width=float(npc_class.WIDTH),
-        lane_change_delay=float(npc_class.LANE_CHANGE_DELAY),
-        idm_delta=float(npc_class.DELTA),
         keep_npcs=builder.keep_npcs,
         extra_vehicles=builder.extra_vehicles,
-        destination=scenario.destination,
         cache={},
     )
 
@@ -284,18 +285,14 @@ def described_config(
 
 
 def _describe_road(scenario: Scenario, traffic: str, control: str, overrides: dict | None) -> _Road:
-    """A _Road from the scenario's road description (``Scenario.road``): lane arrays, road map and
-    the ego's routes from the description, the config as highway-env would assemble it (its
-    class's defaults, then HighwayBackend's keys): no highway-env object is built."""
+    """A _Road from the scenario's road description (``Scenario.road``), the config as
+    ``described_config`` assembles it: no highway-env object is built."""
     from drivelab.sim.roads.road_map import centre_line, circuit_route, road_map
 
     config, keep_npcs, extra_vehicles = described_config(scenario, traffic, control, overrides)
     desc = scenario.road(config)
     table = L.LaneTable.from_description(desc)
-    npc_class = hw_utils.class_from_path(config["other_vehicles_type"])
-    if not is_idm_class(npc_class):
-        raise NotImplementedError(f"the fast backend has no {npc_class.__name__}")
-    routes, cache = {}, {}
+    routes = {}
     if scenario.circuit:  # every lane's route is one lap of the circuit
         has_goal = bool(scenario.destination) or scenario.arrival == "route_end"
         for row in range(len(table.indices)):
@@ -303,36 +300,23 @@ def _describe_road(scenario: Scenario, traffic: str, control: str, overrides: di
     target_speeds = [0.0]
     if control == "meta":
         target_speeds = config["action"].get("target_speeds", MDPVehicle.DEFAULT_TARGET_SPEEDS)
-    graph_keys = {f: list(to) for f, to in desc.graph.items()}
-    dt_s = 1 / config["simulation_frequency"]
-    return _Road(
-        table=table,
+    return _new_road(
+        scenario,
+        table,
+        {f: list(to) for f, to in desc.graph.items()},
+        config,
         road_map=road_map(desc),
-        graph_keys=graph_keys,
-        config=dict(config),
         target_speeds=np.asarray(target_speeds, dtype=float),
-        frames=int(config["simulation_frequency"] // config["policy_frequency"]),
-        dt_s=dt_s,
         policy_frequency_hz=float(config["policy_frequency"]),
         duration_s=float(config["duration"]),
         routes=routes,
-        in_junction=np.array([scenario.in_junction(index) for index in table.indices], dtype=bool),
-        exit_lane=np.array([("il" in f and "o" in t) for f, t, _ in table.indices], dtype=bool),
         regulation_period=0,
-        geometry=LaneGeometry(table),
-        paths=all_shortest_paths(graph_keys),
         objects=np.zeros((0, T.VEHICLE_COLUMNS)),
-        idm=idm_parameters(npc_class),
         ego_length=float(Vehicle.LENGTH),  # every ego class of highway-env keeps Vehicle's size
         ego_width=float(Vehicle.WIDTH),
-        npc_length=float(npc_class.LENGTH),
-        npc_width=float(npc_class.WIDTH),
-        lane_change_delay=float(npc_class.LANE_CHANGE_DELAY),
-        idm_delta=float(npc_class.DELTA),
         keep_npcs=keep_npcs,
         extra_vehicles=extra_vehicles,
-        destination=scenario.destination,
-        cache=cache,
+        cache={},
         description=desc,
     )
 
@@ -345,11 +329,8 @@ def meta_action(w: np.ndarray, e: int, lanes: np.ndarray, action: int, speeds: n
     """MDPVehicle.act for the ego (row ``e``) of one world's vehicles ``w`` (N, VEHICLE_COLUMNS):
     FASTER / SLOWER step the target speed, the lane changes retarget when reachable."""
     if action == FASTER or action == SLOWER:
-        top = speeds.size - 1
-        ratio = (w[e, T.SPEED] - speeds[0]) / (speeds[-1] - speeds[0])
-        index = int(min(max(np.rint(ratio * top), 0.0), float(top)))  # np.round: half to even
-        index = min(max(index + (1 if action == FASTER else -1), 0), top)
-        w[e, T.TARGET_SPEED] = speeds[index]
+        index = T.speed_index(w[e, T.SPEED], speeds) + (1 if action == FASTER else -1)
+        w[e, T.TARGET_SPEED] = speeds[min(max(index, 0), speeds.size - 1)]
         return
     T.follow_road(w, lanes, e)
     if action == LANE_LEFT or action == LANE_RIGHT:
@@ -384,7 +365,7 @@ def clear_departed(
 ) -> None:
     """IntersectionEnv._clear_vehicles in every world: drop the vehicles at the end of their exit
     (and any without a route), the ego excepted; the kept rows close up in order, the freed rows
-    become zeros, ``count`` and ``ego`` follow. (Serial: a few operations per vehicle.)"""
+    become zeros, ``count`` and ``ego`` follow."""
     for k in range(v.shape[0]):
         kept, new_ego = 0, ego[k]
         for j in range(count[k]):
@@ -401,11 +382,9 @@ def clear_departed(
 
 
 def continuous_commands(controls, num_worlds: int) -> np.ndarray:
-    """(K, 2) [acceleration m/s², steering rad] of normalised continuous controls: clipped to
-    [-1, 1], then mapped linearly onto ACCELERATION_RANGE and STEERING_RANGE as highway-env's
-    ``ContinuousAction.get_action`` does, in the controls' own float type (the ranges enter its
-    arithmetic as Python floats, i.e. rounded to that type), so both backends get the same bits;
-    controls neither float32 nor float64 are taken as float64."""
+    """(K, 2) [acceleration m/s², steering rad] of normalised controls: ``ContinuousAction.get_action``'s
+    clip to [-1, 1] and linear map onto ACCELERATION_RANGE and STEERING_RANGE, in the controls' own
+    float type (``float_controls``), so that both backends get the same bits."""
     controls = float_controls(controls, num_worlds)
     commands = np.empty_like(controls)
     _commands(controls, *command_ranges(controls.dtype), commands)
@@ -424,8 +403,7 @@ _COMPILED_FLOATS = (np.dtype(np.float32), np.dtype(np.float64))
 
 @functools.cache
 def command_ranges(dtype: np.dtype) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The (low, span) of [acceleration, steering] and the constants (1, 2) in ``dtype``, made
-    once per float type."""
+    """The (low, span) of [acceleration, steering] and the constants (1, 2) in ``dtype``."""
     low = np.array([ACCELERATION_RANGE[0], STEERING_RANGE[0]], dtype=dtype)
     span = np.array([ACCELERATION_RANGE[1] - ACCELERATION_RANGE[0], STEERING_RANGE[1] - STEERING_RANGE[0]])
     return low, span.astype(dtype), np.array([1, 2], dtype=dtype)
@@ -469,15 +447,12 @@ def project_routes(
     vehicles, ego, route, starts, segments, lengths2, segment_m, stations, point_count, closed, fresh, update,
     progress
 ) -> None:  # fmt: skip
-    """RouteTracker.project for K egos (world k's is row ``ego[k]`` of ``vehicles``) on route
-    ``route[k]`` of the padded route table (R routes of ``point_count`` points: ``starts`` /
-    ``segments`` (R, S, 2), ``lengths2`` / ``segment_m`` / ``stations`` (R, S + 1)); in place in
-    ``progress`` (K,), for the worlds of ``update`` (a
-    projection is not idempotent to the last bit): the nearest point where ``fresh[k]``,
-    else the nearest within SEARCH_WINDOW_M of the previous progress (unwrapped on a circuit).
-    Same arithmetic in the same order as RouteTracker's numpy code; after the first projection
-    the segments within reach of the window are searched first, and the rest only when none of
-    them scores under the window's penalty (the same answer, see ``_window_spans``)."""
+    """RouteTracker.project for K egos (row ``ego[k]`` of world k) on route ``route[k]`` of the
+    padded route table (``FastSimulator._pad_routes``), in place in ``progress`` (K,) for the worlds
+    of ``update``: the nearest point where ``fresh[k]``, else the nearest within SEARCH_WINDOW_M of
+    the previous progress (unwrapped on a circuit), RouteTracker's arithmetic in its order. The
+    segments within reach of the window are searched first, the rest only when none of them scores
+    under the window's penalty (the same answer, see ``_window_spans``)."""
     for k in range(route.size):
         if not update[k]:
             continue
@@ -579,24 +554,14 @@ def export_world(
     s, lateral = L.local_coordinates(lanes, lane, row[T.X], row[T.Y])
     target = int(row[T.TARGET_LANE]) if row[T.KIND] != T.PLAIN else lane
     limit = lanes[lane, L.SPEED_LIMIT]
-    out[EX_X], out[EX_Y], out[EX_HEADING], out[EX_SPEED] = (
-        row[T.X],
-        row[T.Y],
-        row[T.HEADING],
-        row[T.SPEED],
-    )
-    out[EX_STEER], out[EX_ACCEL], out[EX_LEN], out[EX_WID] = (
-        row[T.STEER],
-        row[T.ACCEL],
-        row[T.LEN],
-        row[T.WID],
-    )
+    out[EX_X], out[EX_Y], out[EX_HEADING], out[EX_SPEED] = row[T.X], row[T.Y], row[T.HEADING], row[T.SPEED]
+    out[EX_STEER], out[EX_ACCEL] = row[T.STEER], row[T.ACCEL]
+    out[EX_LEN], out[EX_WID] = row[T.LEN], row[T.WID]
     out[EX_LANE_WIDTH], out[EX_LATERAL] = lanes[lane, L.WIDTH], lateral
     out[EX_LANE_HEADING] = L.heading_at(lanes, lane, s)
     out[EX_SPEED_LIMIT] = 30.0 if np.isnan(limit) else limit
     turn = L.heading_at(lanes, lane, s + 1.0) - L.heading_at(lanes, lane, s - 1.0)
-    # libm's cos and sin, the parts of numpy's exp(1j * turn) (glibc's cexp of an imaginary number;
-    # the same bits on 2.1 M random angles on the development machine)
+    # libm's cos and sin, the parts of numpy's exp(1j * turn) (glibc's cexp of an imaginary number)
     out[EX_TURN_COS], out[EX_TURN_SIN] = math.cos(turn), math.sin(turn)
     ints[EX_LANE_ID], ints[EX_LANE_COUNT] = lanes[lane, L.LANE_ID], lanes[lane, L.LANE_COUNT]
     ints[EX_TARGET_LANE_ID] = lanes[target, L.LANE_ID]
@@ -623,8 +588,7 @@ def export_worlds(
     vehicles, valid
 ) -> None:  # fmt: skip
     """``export_world`` of K worlds on one road: ``floats`` (K, EX_FLOATS), ``ints`` (K, 3),
-    ``flags`` (K, 4), ``vehicles`` (K, N, 6), ``valid`` (K, N). (Serial: about a microsecond
-    per world, less than a thread pool's launch.)"""
+    ``flags`` (K, 4), ``vehicles`` (K, N, 6), ``valid`` (K, N)."""
     for k in range(v.shape[0]):
         export_world(
             v[k, : count[k]], ego[k], lanes, in_junction, exit_lane, arrival, arrival_threshold,
@@ -639,10 +603,8 @@ def advance_worlds(
     arrival_threshold, floats, ints, flags, vehicles, valid,
 ) -> None:  # fmt: skip
     """A policy step of all K worlds (none restarting) after their controls are set, in one
-    compiled call: the simulation frames (``simulate_worlds``' serial loop), the clocks, every
-    route projected (``project_routes``) and the export (``export_worlds``). The kernels that
-    ``FastSimulator.step`` otherwise calls one by one, in its order, so the same bits; one call
-    saves the others' dispatch, most of one world's simulator step."""
+    compiled call: the kernels ``FastSimulator.step`` otherwise calls one by one, in its order
+    (frames, clocks, ``project_routes``, ``export_worlds``)."""
     every, fresh = np.ones(v.shape[0], dtype=np.bool_), np.zeros(v.shape[0], dtype=np.bool_)
     T._simulate_worlds_serial(v, count, lanes, idm, frames, dt, regulation, every)
     for k in range(time_s.size):
@@ -676,12 +638,7 @@ class FastSimulator:
     on_frame: Callable[[WorldBatch], None] | None = None
 
     def __init__(
-        self,
-        scenario: Scenario,
-        traffic: str,
-        control: str,
-        num_worlds: int,
-        overrides: dict | None = None,
+        self, scenario: Scenario, traffic: str, control: str, num_worlds: int, overrides: dict | None = None
     ) -> None:
         if scenario.simulator not in {f"{c.__module__}.{c.__qualname__}" for c in type(self).__mro__}:
             raise UsageError(
@@ -766,10 +723,8 @@ class FastSimulator:
 
     def defer_batch(self, parts: Callable[[], tuple]) -> None:
         """The step just made leaves its WorldBatch to be made when ``batch`` is read, from
-        ``parts()``: ``_export_arrays``' arguments, its ``state`` included (the step's own
-        clocks, progress and routes, so that it is this step's batch whenever it is made). An
-        episode's start replaces it: ``reset_where`` sets the batch, and a restarting step reads
-        it first."""
+        ``parts()``: ``_export_arrays``' arguments, its ``state`` (the step's own clocks, progress
+        and routes) included."""
         self._batch, self._deferred = None, parts
 
     @staticmethod
@@ -795,6 +750,13 @@ class FastSimulator:
         grown = np.zeros((self.num_worlds, max(rows, 2 * capacity), T.VEHICLE_COLUMNS))
         grown[:, :capacity] = self.vehicles
         self.vehicles = grown
+
+    def _put_rows(self, k: int, rows: np.ndarray, ego: int) -> None:
+        """World k's vehicles become ``rows`` (the rest of its buffer zeros), its ego row ``ego``."""
+        self._fit(len(rows))
+        self.vehicles[k] = 0.0
+        self.vehicles[k, : len(rows)] = rows
+        self.count[k], self.ego[k] = len(rows), ego
 
     def _route_for_lane(self, lane: int) -> int:
         """The index of the ego route that starts on lane row ``lane`` (padded on first use)."""
@@ -841,32 +803,29 @@ class FastSimulator:
     # --- episodes -------------------------------------------------------------------------------
     def _episode(self, seed: int) -> tuple[np.ndarray, int, np.ndarray, np.random.Generator | None]:
         """A new episode's (vehicle rows, ego row, regulation state, generator between steps)."""
-        rows, ego, regulation, rng = self.scenario.spawn(int(seed), self._road, self.control)
-        return rows, ego, regulation, rng
+        return self.scenario.spawn(int(seed), self._road, self.control)
 
     def reset_where(self, mask: np.ndarray, seeds: np.ndarray) -> WorldBatch:
         """Start a new episode from ``seeds[k]`` in every world where ``mask[k]`` (K,); the other
         worlds are untouched. Returns the whole batch."""
         mask = np.asarray(mask, dtype=bool)
+        self._red_light = np.zeros(self.num_worlds, dtype=bool)  # the lights' rules (town, block maps)
         self._start_episodes(np.flatnonzero(mask), seeds)
         self._project(fresh=mask, update=mask)
         self.batch = self._export()
         return self.batch
 
     def _start_episodes(self, worlds: np.ndarray, seeds: np.ndarray) -> None:
-        """New episodes in ``worlds`` from ``seeds[k]``: the highway in one compiled call for all
-        of them, the other scenarios one episode set-up per world."""
+        """New episodes in ``worlds`` from ``seeds[k]`` (``spawn_many`` where the scenario has it)."""
         if worlds.size == 0:
             return
         if self.scenario.spawn_many is not None:
             self._spawn_many(worlds, seeds)
         else:
             for k in worlds:
-                rows, ego, regulation, rng = self._episode(int(seeds[k]))
-                self._fit(len(rows))
-                self.vehicles[k] = 0.0
-                self.vehicles[k, : len(rows)] = rows
-                self.count[k], self.ego[k], self.regulation[k], self.rngs[k] = len(rows), ego, regulation, rng
+                rows, ego, regulation, rng = self._episode(seeds[k])
+                self._put_rows(k, rows, ego)
+                self.regulation[k], self.rngs[k] = regulation, rng
                 self.route_index[k] = self._route_for_lane(int(rows[ego, T.LANE]))
         ego_lane = self.vehicles[worlds, self.ego[worlds], T.LANE].astype(np.int64)
         self.start_lane_id[worlds] = self.lanes[ego_lane, L.LANE_ID]
@@ -874,8 +833,7 @@ class FastSimulator:
 
     def _spawn_many(self, worlds: np.ndarray, seeds: np.ndarray) -> None:
         """The scenario's many-world set-up for ``worlds`` (no regulation, no generator between
-        steps); every lane's route is registered at the first call so that a world's route index
-        is an array lookup."""
+        steps); every lane's route is registered at the first call."""
         if self._lane_route is None:
             lanes = range(len(self.table.indices))
             self._lane_route = np.array([self._route_for_lane(lane) for lane in lanes])
@@ -890,11 +848,10 @@ class FastSimulator:
     def step(
         self, controls: np.ndarray, restart: np.ndarray | None = None, seeds: np.ndarray | None = None
     ) -> WorldBatch:
-        """One policy step of every world, in the order every simulator shares: the egos' controls,
-        the clocks (and the lights on them), ``frames`` simulation frames, the scenario's rules
-        after the frames (``_after_frames``), the episodes that restart, the routes' progress, the
-        export. A scenario's simulator fills in the hooks; this class's step is also one compiled
-        call (``advance_worlds``) where nothing in between needs Python (``one_call``).
+        """One policy step of every world: the egos' controls, the clocks (and lights), ``frames``
+        simulation frames, the scenario's rules after the frames, the episodes that restart, the
+        routes' progress, the export (one compiled call where nothing in between needs Python,
+        ``one_call``). A scenario's simulator fills in the hooks.
 
         :param controls: meta: (K,) int meta-actions; continuous: (K, 2) [acceleration, steering]
             normalised in [-1, 1] (highway-env's order).
@@ -906,7 +863,7 @@ class FastSimulator:
         if restart is None:
             restart = np.zeros(self.num_worlds, dtype=bool)
         restart = np.asarray(restart, dtype=bool)
-        restarting = np.count_nonzero(restart)  # ndarray.any's Python wrapper costs a microsecond
+        restarting = np.count_nonzero(restart)
         if self.one_call and not restarting:
             self.apply_controls(controls)
             self.batch = self._advance()
@@ -976,9 +933,7 @@ class FastSimulator:
     def run_frames(self, simulate: Callable[[int], None]) -> None:
         """The step's simulation frames: one compiled call ``simulate(frames)``; while recording
         (``on_frame`` set), ``frames`` calls of ``simulate(1)``, ``on_frame`` shown the batch after
-        each. The kernels keep nothing from one frame to the next outside the arrays they are
-        given (their scratch is refilled every frame), so both give the same frames, bit for bit;
-        the recorded batches skip the route projection, which runs once per step."""
+        each (the same frames, bit for bit; the recorded batches skip the route projection)."""
         if self.on_frame is None:
             simulate(self.frames)
             return
@@ -996,8 +951,7 @@ class FastSimulator:
         set_ego_controls(self.vehicles, self.ego, controls, *command_ranges(controls.dtype))
 
     def _spawn_arrivals(self) -> None:
-        """IntersectionEnv._spawn_vehicle in each world, from its own generator (its draws are
-        sequential per world: this is the one loop over worlds of a step, intersection only)."""
+        """IntersectionEnv._spawn_vehicle in each world, from its own generator."""
         probability = self._road.config["spawn_probability"]
         for k in range(self.num_worlds):
             n = int(self.count[k])
@@ -1014,9 +968,8 @@ class FastSimulator:
         )  # fmt: skip
 
     def _export_buffers(self) -> tuple[np.ndarray, ...]:
-        """Zeroed (floats, ints, flags, vehicles, valid) arrays the export kernels fill. The first
-        three are (K, columns) in column-major order, so that each column (one WorldBatch field)
-        is a contiguous (K,) array of its own."""
+        """Zeroed (floats, ints, flags, vehicles, valid) arrays the export kernels fill; the first
+        three column-major, so that each column (one WorldBatch field) is contiguous."""
         k, slots = self.num_worlds, max(self.vehicles.shape[1] - 1, 0)
         floats, ints = np.zeros((EX_FLOATS, k)).T, np.zeros((3, k), dtype=np.int64).T
         flags = np.zeros((4, k), dtype=bool).T
@@ -1055,37 +1008,26 @@ class FastSimulator:
         # highway-env's export: angle(exp(1j * turn)) / 2, numpy's arctan2 of the kernel's parts
         curvature = np.arctan2(turn_sin, turn_cos)
         curvature *= 0.5
+        position = np.ascontiguousarray(floats[:, EX_X : EX_Y + 1])  # (K, 2): a view for K = 1
         ego = assemble(
-            EgoBatch,
-            position=np.ascontiguousarray(floats[:, EX_X : EX_Y + 1]),  # (K, 2): a view for K = 1
-            heading=heading,
-            speed_mps=speed,
-            steering=steering,
-            acceleration_mps2=acceleration,
-            length_m=length,
-            width_m=width,
-            lane_id=lane_id,
-            lane_count=lane_count,
-            target_lane_id=target_lane_id,
-            lane_width_m=lane_width,
-            lateral_offset_m=lateral,
-            lane_heading=lane_heading,
-            lane_curvature=curvature,
-            on_road=on_road,
+            EgoBatch, position=position, heading=heading, speed_mps=speed, steering=steering,
+            acceleration_mps2=acceleration, length_m=length, width_m=width, lane_id=lane_id,
+            lane_count=lane_count, target_lane_id=target_lane_id, lane_width_m=lane_width,
+            lateral_offset_m=lateral, lane_heading=lane_heading, lane_curvature=curvature, on_road=on_road,
             in_intersection=in_junction,
-        )
+        )  # fmt: skip
         no_event = self._no_event
         off_road = ~on_road
         if self.scenario.keep_lane:  # follow-lane: leaving the starting lane is leaving the road
             off_road |= lane_id != self.start_lane_id
+        if self.arrival == ARRIVE_ROUTE_END:
+            arrived = self._route_ended(route_index, progress_m)
         events = assemble(
             EventsBatch,
             collided=collided,
             collision_kind=collided.view(np.int8),  # COLLISION_NONE 0, COLLISION_VEHICLE 1
             off_road=off_road,
-            arrived=arrived
-            if self.arrival != ARRIVE_ROUTE_END
-            else self._route_ended(route_index, progress_m),
+            arrived=arrived,
             red_light_crossed=no_event,  # the rules add blocked and off_route; no lights here
             blocked=no_event,
             off_route=no_event,
@@ -1095,18 +1037,9 @@ class FastSimulator:
             self._empty if not self.scenario.guide_line else {**self._empty, "road_index": route_index.copy()}
         )
         return assemble(
-            WorldBatch,
-            time_s=time_s,
-            dt_s=self.dt_policy_s,
-            ego=ego,
-            vehicles=vehicles,
-            vehicle_valid=valid,
-            roads=self.roads,
-            route=route,
-            events=events,
-            speed_limit_mps=speed_limit,
-            **extra,
-        )
+            WorldBatch, time_s=time_s, dt_s=self.dt_policy_s, ego=ego, vehicles=vehicles, vehicle_valid=valid,
+            roads=self.roads, route=route, events=events, speed_limit_mps=speed_limit, **extra,
+        )  # fmt: skip
 
     def _route_ended(
         self, route_index: np.ndarray | None = None, progress_m: np.ndarray | None = None
@@ -1135,5 +1068,4 @@ class FastSimulator:
 
     def _routes_stale(self, route_index: np.ndarray) -> bool:
         """A world's route changed since the route arrays were last made."""
-        # equal bytes are equal indices (the same shape and type): cheaper than an elementwise test
         return self._route_cache is None or self._route_cache[0].tobytes() != route_index.tobytes()

@@ -1,16 +1,13 @@
 """Episode set-up without highway-env objects, drawing the same random numbers in the same order.
 
-The scenarios' set-ups (each in its module of ``drivelab.scenarios``: ``spawn_merge``,
-``spawn_roundabout``, ``spawn_racetrack``, ``spawn_intersection``; the highway's is compiled for
-many worlds at once) share the helpers below:
-highway-env's lane formulas in numpy call for call (``LaneGeometry``: the same bits as highway-
-env on any CPU), its vehicle constructors as rows (``vehicle_row``), its route planning
-(``shortest_path``, ``plan_route``) and drivelab's traffic levels (``arrange_traffic``). Every
-spawner has the signature ``spawner(seed, road, control) -> (rows, ego_row, regulation, rng)``:
-``road`` is the simulator's converted road (its LaneTable, geometry, config, paths and the
-vehicle constants read once at conversion), ``rows`` (N, VEHICLE_COLUMNS) the vehicles then the
-road's obstacles as ``vehicles_to_array`` lays them out, ``regulation`` (2,) the RegulatedRoad
-state, ``rng`` the episode's generator where draws go on between steps (else None).
+The scenarios' spawners (``spawn_merge``, ``spawn_roundabout``, ``spawn_racetrack``,
+``spawn_intersection``) share these helpers: highway-env's lane formulas in numpy call for call
+(``LaneGeometry``), its vehicle constructors as rows (``vehicle_row``), its route planning
+(``shortest_path``, ``plan_route``) and drivelab's traffic levels (``arrange_traffic``). A spawner
+is ``spawner(seed, road, control) -> (rows, ego_row, regulation, rng)``: ``road`` the simulator's
+converted road, ``rows`` (N, VEHICLE_COLUMNS) the vehicles then the road's obstacles (as
+``vehicles_to_array`` lays them out), ``regulation`` (2,) the RegulatedRoad state, ``rng`` the
+episode's generator where draws go on between steps (else None).
 """
 
 from __future__ import annotations
@@ -61,9 +58,8 @@ class LaneGeometry:
         if kind == L.CIRCLE:
             direction = self._direction_sign[lane]
             phi = direction * longitudinal / row[L.RADIUS] + row[L.START_PHASE]
-            return self._center[lane] + (row[L.RADIUS] - lateral * direction) * np.array(
-                [np.cos(phi), np.sin(phi)]
-            )
+            unit = np.array([np.cos(phi), np.sin(phi)])
+            return self._center[lane] + (row[L.RADIUS] - lateral * direction) * unit
         if kind == L.SINE:
             lateral = lateral + row[L.AMPLITUDE] * np.sin(row[L.PULSATION] * longitudinal + row[L.PHASE])
         return self._start[lane] + longitudinal * self._direction[lane] + lateral * self._lateral[lane]
@@ -76,9 +72,8 @@ class LaneGeometry:
             phi = direction * longitudinal / row[L.RADIUS] + row[L.START_PHASE]
             return phi + np.pi / 2 * direction
         if kind == L.SINE:
-            slope = (
-                row[L.AMPLITUDE] * row[L.PULSATION] * np.cos(row[L.PULSATION] * longitudinal + row[L.PHASE])
-            )
+            pulsation = row[L.PULSATION]
+            slope = row[L.AMPLITUDE] * pulsation * np.cos(pulsation * longitudinal + row[L.PHASE])
             return row[L.HEADING] + np.arctan(slope)
         return row[L.HEADING]
 

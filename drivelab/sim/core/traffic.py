@@ -17,31 +17,9 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from drivelab.sim.core import lanes as L
 from drivelab.sim.core.borrow import borrowed
-from drivelab.sim.core.lanes import (
-    FIRST_OF_ROAD,
-    FROM_NODE,
-    LANE_COUNT,
-    LANE_ID,
-    LENGTH,
-    PRIORITY,
-    SPEED_LIMIT,
-    TO_NODE,
-    VEHICLE_LENGTH,
-    arcsin0,
-    arctan0,
-    closest_lane,
-    cos0,
-    distance,
-    heading_at,
-    is_reachable_from,
-    local_coordinates,
-    on_lane,
-    position,
-    sin0,
-    tan0,
-    wrap_to_pi,
-)
+from drivelab.sim.core.lanes import distance
 
 # vehicle columns
 (
@@ -49,23 +27,20 @@ from drivelab.sim.core.lanes import (
     IMPACT_X, IMPACT_Y, HAS_IMPACT, CHECK_COLLISIONS, KIND, LEN, WID, ROUTE_START, ROUTE_END, ROUTED,
     YIELDING, WRECKED_S, PEDAL,
 ) = range(25)  # fmt: skip
-# A planned route (highway-env's ``vehicle.route``) is stored in the row itself: MAX_ROUTE entries
-# of (road, lane id) from column ROUTE, a road named by the row of its lane 0, lane id -1 for None;
-# entries ROUTE_START..ROUTE_END-1 are still to be driven (highway-env pops them from the front);
-# ROUTED is 0 where highway-env's route is None. YIELDING: stopped by RegulatedRoad's right of way.
-# WRECKED_S: seconds a crashed town vehicle has stood (towed at WRECK_CLEARED_S). PEDAL: a pedal
-# vehicle's commanded acceleration (drag is taken off it each frame).
+# A planned route (highway-env's ``vehicle.route``) is stored in the row: MAX_ROUTE entries of
+# (road: the row of its lane 0, lane id: -1 for None) from column ROUTE, ROUTE_START..ROUTE_END-1
+# still to be driven; ROUTED is 0 where the route is None. YIELDING: stopped by RegulatedRoad's
+# right of way. WRECKED_S: seconds a crashed town vehicle has stood. PEDAL: a pedal vehicle's
+# commanded acceleration.
 ROUTE, MAX_ROUTE = 25, 12
 VEHICLE_COLUMNS = ROUTE + 2 * MAX_ROUTE
 # The town's routes are longer (up to 19 roads, and a retargeted ego appends a second one): its
 # rows are wider. Kernels read a row's route capacity as (row width - ROUTE) // 2.
 TOWN_MAX_ROUTE = 40
 TOWN_VEHICLE_COLUMNS = ROUTE + 2 * TOWN_MAX_ROUTE
-# KIND: a plain kinematic vehicle (continuous-control ego), a lane-following controlled vehicle
-# (meta-action ego), an IDM/MOBIL vehicle (traffic), a static obstacle (after every vehicle), a
-# town vehicle (IDM/MOBIL that stops for lights, yields on left turns and wanders on random
-# routes: highway-env's TownVehicle), a pedal vehicle (the CARLA study's circuits ego: acceleration =
-# pedal - drag * speed)
+# KIND: a kinematic Vehicle (continuous-control ego), a ControlledVehicle (meta-action ego), an
+# IDMVehicle (traffic), a static obstacle (after every vehicle), a TownVehicle, a pedal vehicle (the
+# circuits' ego: acceleration = pedal - drag * speed)
 PLAIN, CONTROLLED, IDM, OBSTACLE, TOWN, PEDAL_KIND = 0, 1, 2, 3, 4, 5
 
 # IDM / MOBIL parameters, read from highway-env's IDMVehicle class at reset (IDM_PARAMETERS order)
@@ -101,27 +76,34 @@ def _clip(value: float, low: float, high: float) -> float:
 
 
 @njit(cache=True, inline="always")
+def speed_index(speed: float, speeds: np.ndarray) -> int:
+    """MDPVehicle.speed_to_index: the index of the allowed speed nearest ``speed``."""
+    top = speeds.size - 1
+    ratio = (speed - speeds[0]) / (speeds[-1] - speeds[0])
+    return int(min(max(np.rint(ratio * top), 0.0), float(top)))  # np.round: half to even
+
+
+@njit(cache=True, inline="always")
 def steering_control(v: np.ndarray, lanes: np.ndarray, i: int, target: int) -> float:
     """ControlledVehicle.steering_control: lateral P → heading reference → heading P → steering."""
-    s, r = local_coordinates(lanes, target, v[i, X], v[i, Y])
-    future_heading = heading_at(lanes, target, s + v[i, SPEED] * TAU_PURSUIT)
+    s, r = L.local_coordinates(lanes, target, v[i, X], v[i, Y])
+    future_heading = L.heading_at(lanes, target, s + v[i, SPEED] * TAU_PURSUIT)
     lateral_speed_command = -KP_LATERAL * r
-    heading_command = arcsin0(_clip(lateral_speed_command / not_zero(v[i, SPEED]), -1.0, 1.0))
+    heading_command = L.arcsin0(_clip(lateral_speed_command / not_zero(v[i, SPEED]), -1.0, 1.0))
     heading_ref = future_heading + _clip(heading_command, -np.pi / 4, np.pi / 4)
-    heading_rate_command = KP_HEADING * wrap_to_pi(heading_ref - v[i, HEADING])
-    slip_angle = arcsin0(_clip(v[i, LEN] / 2 / not_zero(v[i, SPEED]) * heading_rate_command, -1.0, 1.0))
-    steering = arctan0(2 * tan0(slip_angle))
+    heading_rate_command = KP_HEADING * L.wrap_to_pi(heading_ref - v[i, HEADING])
+    slip_angle = L.arcsin0(_clip(v[i, LEN] / 2 / not_zero(v[i, SPEED]) * heading_rate_command, -1.0, 1.0))
+    steering = L.arctan0(2 * L.tan0(slip_angle))
     return _clip(steering, -MAX_STEERING_ANGLE, MAX_STEERING_ANGLE)
 
 
 @njit(cache=True)
 def frame_cache(v: np.ndarray, lanes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Scratch arrays for one simulation frame's ``act``. ``coords`` (L, N, 4): per lane, every
-    vehicle's (longitudinal, lateral, on the lane within 1 m) and, in column 3, the vehicles on
-    the lane sorted by (longitudinal, row); ``done`` (L,): how many vehicles are on the lane, -1
-    until the lane is first used in the frame; ``trig`` (N, 2): the cosine and sine of every
-    heading. Positions and headings do not change during ``act``, so each value is computed once
-    per frame instead of once per use (same function, same inputs: the same bits)."""
+    """Scratch arrays for one simulation frame's ``act``, each value computed once per frame (the
+    same bits). ``coords`` (L, N, 4): per lane, every vehicle's (longitudinal, lateral, on the lane
+    within 1 m) and, in column 3, the vehicles on the lane sorted by (longitudinal, row); ``done``
+    (L,): how many vehicles are on the lane, -1 until first used; ``trig`` (N, 2): cos, sin of
+    every heading."""
     coords = np.empty((lanes.shape[0], v.shape[0], 4))
     return coords, np.full(lanes.shape[0], -1, dtype=np.int64), np.empty((v.shape[0], 2))
 
@@ -131,18 +113,15 @@ def start_frame(v: np.ndarray, done: np.ndarray, trig: np.ndarray) -> None:
     v, done, trig = borrowed((v, done, trig))
     done[:] = -1
     for j in range(v.shape[0]):
-        trig[j, 0], trig[j, 1] = cos0(v[j, HEADING]), sin0(v[j, HEADING])
+        trig[j, 0], trig[j, 1] = L.cos0(v[j, HEADING]), L.sin0(v[j, HEADING])
 
 
 @njit(cache=True, inline="always")
 def lane_coordinates(
     v: np.ndarray, lanes: np.ndarray, coords: np.ndarray, done: np.ndarray, lane: int
 ) -> None:
-    """Fill ``coords[lane]`` once per frame: every vehicle's ``local_coordinates`` in ``lane``,
-    whether it is on the lane as ``Road.neighbour_vehicles`` counts it (``on_lane`` with a 1 m
-    margin), and the rows of those on it sorted by (longitudinal, row) (insertion sort: a lane
-    holds a handful). Only the check is inlined: the filling, inlined at each of the dozen uses
-    that ``act`` inlines, made numba compile ``act`` for minutes."""
+    """Fill ``coords[lane]`` once per frame (``fill_lane_coordinates``; only this check is inlined,
+    which keeps ``act``'s compile time short)."""
     if done[lane] < 0:
         fill_lane_coordinates(v, lanes, coords, done, lane)
 
@@ -151,14 +130,16 @@ def lane_coordinates(
 def fill_lane_coordinates(
     v: np.ndarray, lanes: np.ndarray, coords: np.ndarray, done: np.ndarray, lane: int
 ) -> None:
-    """``lane_coordinates``' filling of ``coords[lane]`` and ``done[lane]``."""
+    """Every vehicle's ``local_coordinates`` in ``lane``, whether it is on the lane as
+    ``Road.neighbour_vehicles`` counts it (``on_lane``, 1 m margin), and the rows of those on it
+    sorted by (longitudinal, row) (insertion sort), into ``coords[lane]`` and ``done[lane]``."""
     v, lanes, coords, done = borrowed((v, lanes, coords, done))
     count = 0
     for j in range(v.shape[0]):
-        s_j, r_j = local_coordinates(lanes, lane, v[j, X], v[j, Y])
+        s_j, r_j = L.local_coordinates(lanes, lane, v[j, X], v[j, Y])
         coords[lane, j, 0], coords[lane, j, 1] = s_j, r_j
         coords[lane, j, 2] = 0.0
-        if on_lane(lanes, lane, s_j, r_j, 1.0):
+        if L.on_lane(lanes, lane, s_j, r_j, 1.0):
             coords[lane, j, 2] = 1.0
             rank = count
             while rank > 0 and coords[lane, int(coords[lane, rank - 1, 3]), 0] > s_j:
@@ -220,10 +201,16 @@ def neighbours(v: np.ndarray, lanes: np.ndarray, i: int, lane: int) -> tuple[int
 @njit(cache=True, inline="always")
 def cached_desired_gap(v: np.ndarray, p: np.ndarray, trig: np.ndarray, ego: int, front: int) -> float:
     """IDMVehicle.desired_gap, projected on the ego's direction (``trig``: headings' cos, sin)."""
+    return desired_gap_to(v, p, trig, ego, front, v[front, SPEED])
+
+
+@njit(cache=True, inline="always")
+def desired_gap_to(v, p, trig, ego: int, front: int, front_speed: float) -> float:
+    """``cached_desired_gap`` to a front object at ``front_speed`` whose heading is ``trig[front]``."""
     ab = -p[COMFORT_ACC_MAX] * p[COMFORT_ACC_MIN]
     cos_e, sin_e = trig[ego, 0], trig[ego, 1]
-    dvx = v[ego, SPEED] * cos_e - v[front, SPEED] * trig[front, 0]
-    dvy = v[ego, SPEED] * sin_e - v[front, SPEED] * trig[front, 1]
+    dvx = v[ego, SPEED] * cos_e - front_speed * trig[front, 0]
+    dvy = v[ego, SPEED] * sin_e - front_speed * trig[front, 1]
     dv = dvx * cos_e + dvy * sin_e
     return p[DISTANCE_WANTED] + v[ego, SPEED] * p[TIME_WANTED] + v[ego, SPEED] * dv / (2 * np.sqrt(ab))
 
@@ -235,7 +222,7 @@ def idm_free_road(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, me: int, ego:
     if ego < 0 or v[ego, KIND] == OBSTACLE:  # highway-env: only a Vehicle accelerates
         return 0.0
     target_speed = v[ego, TARGET_SPEED] if v[ego, KIND] != PLAIN else 0.0
-    limit = lanes[int(v[ego, LANE]), SPEED_LIMIT]
+    limit = lanes[int(v[ego, LANE]), L.SPEED_LIMIT]
     if not np.isnan(limit):
         target_speed = _clip(target_speed, 0.0, limit)
     ratio = max(v[ego, SPEED], 0.0) / np.abs(not_zero(target_speed))
@@ -244,9 +231,8 @@ def idm_free_road(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, me: int, ego:
 
 @njit(cache=True, inline="always")
 def idm_behind(v, lanes, p, coords, done, trig, free_road: float, ego: int, front: int) -> float:
-    """IDMVehicle.acceleration from its free-road term (``idm_free_road``): less the interaction
-    with ``front`` (none: -1). MOBIL asks about one vehicle behind several fronts; the free-road
-    term (a ``pow``) is the same for all of them and is computed once."""
+    """IDMVehicle.acceleration from its free-road term (``idm_free_road``, computed once for the
+    several fronts MOBIL asks about): less the interaction with ``front`` (none: -1)."""
     if ego < 0 or v[ego, KIND] == OBSTACLE:
         return 0.0
     acceleration = free_road
@@ -266,9 +252,8 @@ def cached_idm_acceleration(v, lanes, p, coords, done, trig, me: int, ego: int, 
     return idm_behind(v, lanes, p, coords, done, trig, free_road, ego, front)
 
 
-# What MOBIL needs of vehicle i's own lane, the same for both side lanes: a (OWN_SIZE,) scratch
-# row. The acceleration behind the front is also what ``act`` applies, so ``act`` fills the row
-# once per vehicle and frame; the old follower's two accelerations are filled on first use.
+# What MOBIL needs of vehicle i's own lane, for both side lanes (a (OWN_SIZE,) scratch row that
+# ``act`` fills once per vehicle and frame; the old follower's accelerations on first use)
 OWN_FREE, OWN_A, OWN_FRONT, OWN_REAR, OWN_REAR_A, OWN_REAR_PRED_A, OWN_REAR_FILLED, OWN_SIZE = range(8)
 
 
@@ -282,21 +267,10 @@ def own_lane(v, lanes, p, coords, done, trig, i: int, own) -> None:
     own[OWN_FRONT], own[OWN_REAR], own[OWN_REAR_FILLED] = front, rear, 0.0
 
 
-@njit(cache=True)  # a call, not inlined: asked once per LANE_CHANGE_DELAY per vehicle and side, and
-def mobil_side(  # its body (5 IDM terms, a neighbour search) inlined made numba compile act for long
-    v: np.ndarray,
-    lanes: np.ndarray,
-    p: np.ndarray,
-    coords: np.ndarray,
-    done: np.ndarray,
-    trig: np.ndarray,
-    i: int,
-    lane: int,
-    own: np.ndarray,
-) -> bool:
+@njit(cache=True)  # not inlined: inlined, its body made numba compile ``act`` for long
+def mobil_side(v, lanes, p, coords, done, trig, i: int, lane: int, own) -> bool:
     """IDMVehicle.mobil: is a change to ``lane`` safe for the new follower, and worth it?
-    (``own``: vehicle i's row of ``own_lane``; the same arithmetic as highway-env's, each value
-    computed once.)"""
+    (``own``: vehicle i's row of ``own_lane``; highway-env's arithmetic, each value computed once.)"""
     v, lanes, p, coords, done, trig, own = borrowed((v, lanes, p, coords, done, trig, own))
     new_preceding, new_following = cached_neighbours(v, lanes, coords, done, i, lane)
     new_following_free = idm_free_road(v, lanes, p, i, new_following)
@@ -310,9 +284,9 @@ def mobil_side(  # its body (5 IDM terms, a neighbour search) inlined made numba
     start = int(v[i, ROUTE_START])
     if start < v[i, ROUTE_END] and v[i, ROUTE + 2 * start + 1] >= 0:
         # the next route step names a lane: only move towards it, and only without hard braking
-        target_id = lanes[int(v[i, TARGET_LANE]), LANE_ID]
+        target_id = lanes[int(v[i, TARGET_LANE]), L.LANE_ID]
         wanted_id = v[i, ROUTE + 2 * start + 1]
-        if np.sign(lanes[lane, LANE_ID] - target_id) != np.sign(wanted_id - target_id):
+        if np.sign(lanes[lane, L.LANE_ID] - target_id) != np.sign(wanted_id - target_id):
             return False
         return not self_pred_a < -p[MAX_BRAKING_IMPOSED]
     if own[OWN_REAR_FILLED] == 0.0:
@@ -342,6 +316,25 @@ def mobil(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, i: int, lane: int) ->
 
 
 @njit(cache=True, inline="always")
+def abort_change(v, lanes, p, coords, done, trig, i: int, lane: int, target: int) -> None:
+    """IDMVehicle.change_lane_policy's abort: vehicle i, changing from ``lane`` to ``target`` on
+    the same road, goes back when another vehicle entering ``target`` is within its desired gap."""
+    if lanes[lane, L.FIRST_OF_ROAD] != lanes[target, L.FIRST_OF_ROAD]:
+        return
+    for j in range(v.shape[0]):
+        if (
+            j != i
+            and int(v[j, LANE]) != target
+            and (v[j, KIND] == CONTROLLED or v[j, KIND] == IDM)
+            and int(v[j, TARGET_LANE]) == target
+        ):
+            lane_coordinates(v, lanes, coords, done, lane)
+            if 0 < coords[lane, j, 0] - coords[lane, i, 0] < cached_desired_gap(v, p, trig, i, j):
+                v[i, TARGET_LANE] = lane
+                return
+
+
+@njit(cache=True, inline="always")
 def change_lane_policy(v, lanes, p, coords, done, trig, i: int, own) -> None:
     """IDMVehicle.change_lane_policy: abort a change into a lane someone else is entering; else,
     every LANE_CHANGE_DELAY seconds, ask MOBIL about each side lane (the right one last).
@@ -349,29 +342,17 @@ def change_lane_policy(v, lanes, p, coords, done, trig, i: int, own) -> None:
     here when MOBIL is asked)."""
     lane, target = int(v[i, LANE]), int(v[i, TARGET_LANE])
     if lane != target:
-        same_road = lanes[lane, FIRST_OF_ROAD] == lanes[target, FIRST_OF_ROAD]
-        if same_road:
-            for j in range(v.shape[0]):
-                if (
-                    j != i
-                    and int(v[j, LANE]) != target
-                    and (v[j, KIND] == CONTROLLED or v[j, KIND] == IDM)
-                    and int(v[j, TARGET_LANE]) == target
-                ):
-                    lane_coordinates(v, lanes, coords, done, lane)
-                    if 0 < coords[lane, j, 0] - coords[lane, i, 0] < cached_desired_gap(v, p, trig, i, j):
-                        v[i, TARGET_LANE] = lane
-                        break
+        abort_change(v, lanes, p, coords, done, trig, i, lane, target)
         return
     if not p[LANE_CHANGE_DELAY] < v[i, TIMER]:
         return
     v[i, TIMER] = 0.0
-    lane_id, count = lanes[lane, LANE_ID], lanes[lane, LANE_COUNT]
+    lane_id, count = lanes[lane, L.LANE_ID], lanes[lane, L.LANE_COUNT]
     for side in (-1, 1):
         if not (0 <= lane_id + side < count):
             continue
         candidate = lane + side
-        if not is_reachable_from(lanes, candidate, v[i, X], v[i, Y]):
+        if not L.is_reachable_from(lanes, candidate, v[i, X], v[i, Y]):
             continue
         if np.abs(v[i, SPEED]) < 1:
             continue
@@ -388,10 +369,10 @@ def lane_on_next_road(
     """RoadNetwork.next_lane_given_next_road: keep the lane id where the lane counts agree,
     else take the next road's lane closest to (x, y). Returns (lane row, its distance)."""
     (lanes,) = borrowed((lanes,))
-    count = int(lanes[next_road, LANE_COUNT])
-    if lanes[lane, LANE_COUNT] == count:
+    count = int(lanes[next_road, L.LANE_COUNT])
+    if lanes[lane, L.LANE_COUNT] == count:
         if next_id < 0:
-            next_id = int(lanes[lane, LANE_ID])
+            next_id = int(lanes[lane, L.LANE_ID])
     else:
         best = np.inf
         for k in range(count):
@@ -408,22 +389,22 @@ def next_lane(v: np.ndarray, lanes: np.ndarray, i: int) -> int:
     closest; the same lane when the road leads nowhere."""
     v, lanes = borrowed((v, lanes))
     lane = int(v[i, TARGET_LANE])
-    road, end_node = int(lanes[lane, FIRST_OF_ROAD]), lanes[lane, TO_NODE]
+    road, end_node = int(lanes[lane, L.FIRST_OF_ROAD]), lanes[lane, L.TO_NODE]
     next_road, next_id = -1, -1
     start, stop = int(v[i, ROUTE_START]), int(v[i, ROUTE_END])
     if start < stop:
         if int(v[i, ROUTE + 2 * start]) == road:
             start += 1
             v[i, ROUTE_START] = start
-        if start < stop and lanes[int(v[i, ROUTE + 2 * start]), FROM_NODE] == end_node:
+        if start < stop and lanes[int(v[i, ROUTE + 2 * start]), L.FROM_NODE] == end_node:
             next_road, next_id = int(v[i, ROUTE + 2 * start]), int(v[i, ROUTE + 2 * start + 1])
-    s, _ = local_coordinates(lanes, lane, v[i, X], v[i, Y])
-    x, y = position(lanes, lane, s, 0.0)
+    s, _ = L.local_coordinates(lanes, lane, v[i, X], v[i, Y])
+    x, y = L.position(lanes, lane, s, 0.0)
     if next_road >= 0:
         return lane_on_next_road(lanes, lane, next_road, next_id, x, y)[0]
     best_lane, best = lane, np.inf
     for candidate in range(lanes.shape[0]):  # roads leaving the end node, in the network's order
-        if lanes[candidate, FIRST_OF_ROAD] != candidate or lanes[candidate, FROM_NODE] != end_node:
+        if lanes[candidate, L.FIRST_OF_ROAD] != candidate or lanes[candidate, L.FROM_NODE] != end_node:
             continue
         row, d = lane_on_next_road(lanes, lane, candidate, -1, x, y)
         if d < best:
@@ -435,8 +416,8 @@ def next_lane(v: np.ndarray, lanes: np.ndarray, i: int) -> int:
 def follow_road(v: np.ndarray, lanes: np.ndarray, i: int) -> None:
     """ControlledVehicle.follow_road: at the end of the target lane, target the next one."""
     target = int(v[i, TARGET_LANE])
-    s, _ = local_coordinates(lanes, target, v[i, X], v[i, Y])
-    if s > lanes[target, LENGTH] - VEHICLE_LENGTH / 2:
+    s, _ = L.local_coordinates(lanes, target, v[i, X], v[i, Y])
+    if s > lanes[target, L.LENGTH] - L.VEHICLE_LENGTH / 2:
         v[i, TARGET_LANE] = next_lane(v, lanes, i)
 
 
@@ -457,8 +438,6 @@ def act(v, lanes, p, coords, done, trig, own) -> None:
             v[i, STEER] = steering_control(v, lanes, i, int(v[i, TARGET_LANE]))
             v[i, ACCEL] = KP_A * (v[i, TARGET_SPEED] - v[i, SPEED])
             continue
-        # the acceleration behind the front on its own lane, computed before the lane-change
-        # decision that reuses it (nothing it reads changes in between: the same bits)
         own_lane(v, lanes, p, coords, done, trig, i, own)
         change_lane_policy(v, lanes, p, coords, done, trig, i, own)
         v[i, STEER] = steering_control(v, lanes, i, int(v[i, TARGET_LANE]))
@@ -485,17 +464,17 @@ def step_vehicle(v: np.ndarray, lanes: np.ndarray, i: int, dt: float) -> None:
         v[i, ACCEL] = min(v[i, ACCEL], 1.0 * (MAX_SPEED - v[i, SPEED]))
     elif v[i, SPEED] < MIN_SPEED:
         v[i, ACCEL] = max(v[i, ACCEL], 1.0 * (MIN_SPEED - v[i, SPEED]))
-    beta = arctan0(1 / 2 * tan0(v[i, STEER]))
-    v[i, X] += v[i, SPEED] * cos0(v[i, HEADING] + beta) * dt
-    v[i, Y] += v[i, SPEED] * sin0(v[i, HEADING] + beta) * dt
+    beta = L.arctan0(1 / 2 * L.tan0(v[i, STEER]))
+    v[i, X] += v[i, SPEED] * L.cos0(v[i, HEADING] + beta) * dt
+    v[i, Y] += v[i, SPEED] * L.sin0(v[i, HEADING] + beta) * dt
     if v[i, HAS_IMPACT] > 0:
         v[i, X] += v[i, IMPACT_X]
         v[i, Y] += v[i, IMPACT_Y]
         v[i, CRASHED] = 1.0
         v[i, HAS_IMPACT] = 0.0
-    v[i, HEADING] += v[i, SPEED] * sin0(beta) / (v[i, LEN] / 2) * dt
+    v[i, HEADING] += v[i, SPEED] * L.sin0(beta) / (v[i, LEN] / 2) * dt
     v[i, SPEED] += v[i, ACCEL] * dt
-    v[i, LANE] = closest_lane(lanes, v[i, X], v[i, Y], v[i, HEADING], int(v[i, LANE]))
+    v[i, LANE] = L.closest_lane(lanes, v[i, X], v[i, Y], v[i, HEADING], int(v[i, LANE]))
 
 
 @njit(cache=True)
@@ -508,15 +487,14 @@ def _polygon(v: np.ndarray, i: int) -> np.ndarray:
 
 @njit(cache=True, inline="always")
 def _polygon_into(v: np.ndarray, i: int, corners: np.ndarray) -> None:
-    c, s = cos0(v[i, HEADING]), sin0(v[i, HEADING])
+    c, s = L.cos0(v[i, HEADING]), L.sin0(v[i, HEADING])
     half_l, half_w = v[i, LEN] / 2, v[i, WID] / 2
     local = ((-half_l, -half_w), (-half_l, half_w), (half_l, half_w), (half_l, -half_w))
     for k in range(4):
         px, py = local[k]
         corners[k, 0] = c * px + -s * py + v[i, X]
         corners[k, 1] = s * px + c * py + v[i, Y]
-    corners[4, 0], corners[4, 1] = corners[0, 0], corners[0, 1]  # element-wise: a row copy compiles
-    # numba's shape-mismatch error message (seconds of a cold start)
+    corners[4, 0], corners[4, 1] = corners[0, 0], corners[0, 1]  # element-wise: cheaper to compile
 
 
 @njit(cache=True)
@@ -583,12 +561,11 @@ def handle_collisions(v: np.ndarray, dt: float) -> None:
                 continue
             dx, dy = v[j, X] - v[i, X], v[j, Y] - v[i, Y]
             reach = (diagonals[i] + diagonals[j]) / 2 + v[i, SPEED] * dt
-            # sqrt(dx² + dy²) ≥ max(|dx|, |dy|) in floating point too: a pair apart by more than
-            # the reach along x or y is skipped without the square root, as the test below would
+            # sqrt(dx² + dy²) ≥ max(|dx|, |dy|): the square root only when both are within reach
             if np.abs(dx) > reach or np.abs(dy) > reach or np.sqrt(dx * dx + dy * dy) > reach:
                 continue
-            ci, si = cos0(v[i, HEADING]), sin0(v[i, HEADING])
-            cj, sj = cos0(v[j, HEADING]), sin0(v[j, HEADING])
+            ci, si = L.cos0(v[i, HEADING]), L.sin0(v[i, HEADING])
+            cj, sj = L.cos0(v[j, HEADING]), L.sin0(v[j, HEADING])
             _polygon_into(v, i, polygon_i)
             _polygon_into(v, j, polygon_j)
             intersecting, will_intersect, tx, ty = polygons_intersecting(
@@ -611,20 +588,20 @@ def predicted_pose(v: np.ndarray, lanes: np.ndarray, i: int, t: float) -> tuple[
     route (RoadNetwork.position_heading_along_route; a route step without a lane id keeps the
     current lane id)."""
     lane = int(v[i, LANE])
-    s, _ = local_coordinates(lanes, lane, v[i, X], v[i, Y])
+    s, _ = L.local_coordinates(lanes, lane, v[i, X], v[i, Y])
     s += v[i, SPEED] * t
     start, stop = int(v[i, ROUTE_START]), int(v[i, ROUTE_END])
     if start >= stop:  # highway-env: route or [lane_index]
-        return position(lanes, lane, s, 0.0) + (heading_at(lanes, lane, s),)
+        return L.position(lanes, lane, s, 0.0) + (L.heading_at(lanes, lane, s),)
     k = start
     while True:
         lane_id = int(v[i, ROUTE + 2 * k + 1])
-        row = int(v[i, ROUTE + 2 * k]) + (lane_id if lane_id >= 0 else int(lanes[lane, LANE_ID]))
-        if k + 1 < stop and s > lanes[row, LENGTH]:
-            s -= lanes[row, LENGTH]
+        row = int(v[i, ROUTE + 2 * k]) + (lane_id if lane_id >= 0 else int(lanes[lane, L.LANE_ID]))
+        if k + 1 < stop and s > lanes[row, L.LENGTH]:
+            s -= lanes[row, L.LENGTH]
             k += 1
             continue
-        return position(lanes, row, s, 0.0) + (heading_at(lanes, row, s),)
+        return L.position(lanes, row, s, 0.0) + (L.heading_at(lanes, row, s),)
 
 
 @njit(cache=True)
@@ -686,7 +663,7 @@ def enforce_road_rules(
     n = v.shape[0]
     for i in range(n):
         if v[i, YIELDING] > 0:
-            limit = lanes[int(v[i, LANE]), SPEED_LIMIT]
+            limit = lanes[int(v[i, LANE]), L.SPEED_LIMIT]
             v[i, TARGET_SPEED] = release_cap_mps if limit > release_cap_mps else limit  # NaN kept
             v[i, YIELDING] = 0.0
     for i in range(n - 1):
@@ -695,7 +672,7 @@ def enforce_road_rules(
         for j in range(i + 1, n):
             if v[j, KIND] == OBSTACLE:
                 continue
-            priority_i, priority_j = lanes[int(v[i, LANE]), PRIORITY], lanes[int(v[j, LANE]), PRIORITY]
+            priority_i, priority_j = lanes[int(v[i, LANE]), L.PRIORITY], lanes[int(v[j, LANE]), L.PRIORITY]
             if prioritised_only and priority_i <= 0 and priority_j <= 0:
                 continue
             if not conflict_possible(v, lanes, i, j):
@@ -711,14 +688,7 @@ def enforce_road_rules(
 
 @njit(cache=True)
 def simulate(
-    v: np.ndarray,
-    lanes: np.ndarray,
-    p: np.ndarray,
-    frames: int,
-    dt: float,
-    regulation: np.ndarray,
-    release_cap_mps: float = np.inf,
-    prioritised_only: bool = False,
+    v, lanes, p, frames: int, dt: float, regulation, release_cap_mps: float = np.inf, prioritised_only=False
 ) -> None:
     """AbstractEnv._simulate for ``frames`` simulation steps of ``dt`` seconds.
 
@@ -755,22 +725,11 @@ def _simulate_worlds_parallel(v, count, lanes, p, frames, dt, regulation, active
             simulate(v[k, : count[k]], lanes, p, frames, dt, regulation[k])
 
 
-def simulate_worlds(
-    v: np.ndarray,
-    count: np.ndarray,
-    lanes: np.ndarray,
-    p: np.ndarray,
-    frames: int,
-    dt: float,
-    regulation: np.ndarray,
-    active: np.ndarray | None = None,
-) -> None:
+def simulate_worlds(v, count, lanes, p, frames: int, dt: float, regulation, active=None) -> None:
     """``simulate`` for K worlds: world k's vehicles are ``v[k, :count[k]]`` of the (K, N_max,
     VEHICLE_COLUMNS) buffer and its regulation state ``regulation[k]`` (K, 2); only the worlds
-    of ``active`` (K,) bool (default: all) are simulated. The worlds share
-    the road and the IDM parameters and never see each other: one numba thread per world where
-    numba has several threads and there are several worlds (else the serial loop, which saves
-    the thread pool's launch)."""
+    of ``active`` (K,) bool (default: all) are simulated, one numba thread per world where numba
+    has several threads and there are several worlds."""
     parallel = v.shape[0] > 1 and numba.get_num_threads() > 1
     kernel = _simulate_worlds_parallel if parallel else _simulate_worlds_serial
     if active is None:

@@ -1,13 +1,10 @@
 """The town's lane metadata as arrays, for its compiled kernels and set-up.
 
-``TownRoadArrays`` holds, per lane row (highway-env's graph insertion order, which is the order of
-``LaneTable`` rows; every town road has one lane), what the reference reads from node names:
-which junction a lane crosses and how it turns, which stop line a street ends at and its light,
-plus the light table, the zebra crossings, the streets and every shortest route between them.
-
-``town_arrays_from_network`` derives them from a highway-env network by parsing its node names
-(``J3:ir0`` is the stop line of junction 3's arm 0, ``J3:il2`` the start of its exit along arm 2),
-as the reference does: it is the oracle that the road description's arrays must equal.
+``TownRoadArrays`` holds, per lane row (``LaneTable`` order; every town road has one lane), what
+the reference reads from node names (the junction a lane crosses and its turn, the stop line a
+street ends at and its light), the light table, the crossings, the streets and every shortest
+route between them. ``town_arrays_from_network`` derives them from a highway-env network's node
+names, as the reference does: the oracle that the road description's arrays must equal.
 """
 
 from __future__ import annotations

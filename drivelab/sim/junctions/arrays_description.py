@@ -5,6 +5,7 @@ every shortest route between the streets."""
 from __future__ import annotations
 
 from drivelab.sim.junctions.arrays import TownRoadArrays, route_table
+from drivelab.sim.junctions.rows import LANE_METADATA
 from drivelab.sim.roads.description import RoadDescription
 
 
@@ -13,13 +14,7 @@ def town_arrays(desc: RoadDescription) -> TownRoadArrays:
     streets = desc.street_lanes
     routes, lengths = route_table(desc.graph, list(desc.indices), streets)
     return TownRoadArrays(
-        junction=desc.junction.copy(),
-        from_arm=desc.from_arm.copy(),
-        to_arm=desc.to_arm.copy(),
-        turn=desc.turn.copy(),
-        end_junction=desc.end_junction.copy(),
-        end_arm=desc.end_arm.copy(),
-        light=desc.light.copy(),
+        **{name: getattr(desc, name).copy() for name in LANE_METADATA},
         in_junction=desc.in_junction,
         light_xyh=desc.light_xyh.copy(),
         light_junction=desc.light_junction.copy(),

@@ -1,48 +1,30 @@
 """The town's vehicles as compiled loops over ONE world's arrays (the caller loops the worlds).
 
 ``town_act`` is ``Road.act()`` of the reference town (``scenarios/town/reference_env.py``): every
-vehicle row decides its controls in list order. The ego rows behave as in ``traffic.act``
-(``CONTROLLED``: the meta-action ego's lane following and speed control; ``PLAIN`` and
-``PEDAL_KIND`` keep their last action; ``OBSTACLE`` rows never act; ``IDM`` rows are not town
-traffic and raise). ``TOWN`` rows are highway-env's ``TownVehicle``:
+vehicle row decides its controls in list order; the ego rows behave as in ``traffic.act``, and
+``TOWN`` rows are highway-env's ``TownVehicle``:
 
 - ``TownVehicle.act``: the target speed is the current lane's limit, or the next planned lane's
-  (the turn's) once within TURN_BRAKE_MARGIN_M plus the braking distance to it, computed before
-  ``follow_road`` (a crashed vehicle sets it too, then does nothing else);
+  once within TURN_BRAKE_MARGIN_M plus the braking distance to it, set before ``follow_road``;
 - ``TownVehicle.follow_road``: with at most one route entry left, a new ``random_route`` from the
-  target lane (goals: the streets' end nodes except the target lane's, in street order; up to
-  ROUTE_GOAL_TRIES draws of ``integers(len(goals))`` on the world's PCG64 words; the route from the
-  precomputed BFS table; else the target lane alone), then ``ControlledVehicle.follow_road``;
-- ``IDMVehicle.act``: ``change_lane_policy`` (``traffic``'s; every town road has one lane, so only
-  its timer reset is ever reached), steering to the target lane, IDM behind the leader on the
-  current lane and, while changing lanes, on the target lane;
-- leaders are found as ``Road.neighbour_vehicles`` with ``neighbour_vehicles_connected_lanes``:
-  on the lane, else on its successor roads (offset by the lane's length), else on its predecessor
-  roads (offset by minus their length), over the vehicles and then the pedestrians that are not
-  crashed (highway-env's ``road.objects``), the last of equals in front; the gap is
-  ``TownVehicle.lane_distance_to``: the straight-line distance, signed by the projection on the
-  current lane;
+  target lane (``random_goal``'s draws on the world's PCG64 words), then
+  ``ControlledVehicle.follow_road``;
+- ``IDMVehicle.act``: ``change_lane_policy`` (``traffic``'s), steering to the target lane, IDM
+  behind the leader on the current lane and, while changing lanes, on the target lane;
+- leaders are found as ``Road.neighbour_vehicles`` with ``neighbour_vehicles_connected_lanes``
+  (``connected_front``) over the vehicles and then the pedestrians not crashed; the gap is
+  ``TownVehicle.lane_distance_to``: the straight-line distance, signed by the lane projection;
 - ``TownVehicle.acceleration``: IDM, then the minimum with a stopped virtual leader at the stop
-  line when ``stop_line_ahead`` says stop: red always; yellow unless v² / (2 max(ahead, 1e-3))
-  exceeds the comfortable deceleration; green only when the next planned lane is a left turn that
-  must wait (``left_turn_must_wait``).
+  line when ``stop_line_ahead`` says stop.
 
 ``town_step`` is ``Road.step``'s vehicle loop: ``Vehicle.step`` for every row, and for ``TOWN``
 rows the IDM timer and ``TownVehicle.step``'s no-reversing clamp.
 
-Arrays (one world):
-- ``v`` (N_max, TOWN_VEHICLE_COLUMNS) vehicle rows (``traffic``'s columns), rows ``0..count-1``
-  live, in ``road.vehicles`` order; a row's route capacity is ``(v.shape[1] - ROUTE) // 2``;
-- ``peds`` (P_max, PEDESTRIAN_COLUMNS) pedestrian rows (``town_rows``), rows ``0..pcount-1`` live,
-  in spawn order;
-- ``lanes`` (L, LANE_COLUMNS) the lane table; ``p`` (9,) the IDM parameters
-  (``traffic.IDM_PARAMETERS``);
-- ``coords``, ``done``, ``trig``: the frame cache, ``town_frame_cache(N_max, P_max, L)``, made
-  once per world (``town_act`` refills it; it must hold count + pcount objects);
-- the road arrays of ``road_arrays_tuple`` (in that order): the ``TownRoadArrays`` fields and the
-  ``connected_lanes`` tables;
-- ``light_states`` (M,) int64: LIGHT_* of each light row at the step's end time;
-- ``rng_words`` (6,) uint64: the world's PCG64 state (``pcg64``), advanced in place.
+Arrays (one world): ``v`` (N_max, TOWN_VEHICLE_COLUMNS) vehicle rows, ``0..count-1`` live;
+``peds`` (P_max, PEDESTRIAN_COLUMNS) pedestrian rows, ``0..pcount-1`` live; ``lanes`` the lane
+table; ``p`` the IDM parameters; ``coords``, ``done``, ``trig`` the frame cache
+(``town_frame_cache``); the road arrays of ``road_arrays_tuple``, in its order; ``light_states``
+(M,) LIGHT_* at the step's end time; ``rng_words`` (6,) the world's PCG64 state, advanced in place.
 """
 
 from __future__ import annotations
@@ -52,68 +34,11 @@ import math
 import numpy as np
 from numba import njit
 
+from drivelab.sim.core import lanes as L
+from drivelab.sim.core import traffic as T
 from drivelab.sim.core.borrow import borrowed
-from drivelab.sim.core.lanes import (
-    CIRCLE,
-    FIRST_OF_ROAD,
-    FROM_NODE,
-    LANE_COUNT,
-    LANE_ID,
-    LENGTH,
-    SINE,
-    SPEED_LIMIT,
-    TO_NODE,
-    VEHICLE_LENGTH,
-    WIDTH,
-    circle_lateral,
-    local_coordinates,
-    on_lane,
-    position,
-)
-from drivelab.sim.core.lanes import KIND as LANE_KIND
 from drivelab.sim.core.pcg64 import bounded_int
-from drivelab.sim.core.traffic import (
-    ACC_MAX,
-    ACCEL,
-    COMFORT_ACC_MAX,
-    COMFORT_ACC_MIN,
-    CONTROLLED,
-    CRASHED,
-    DELTA,
-    DISTANCE_WANTED,
-    KIND,
-    KP_A,
-    LANE,
-    LEN,
-    OBSTACLE,
-    OWN_FREE,
-    OWN_SIZE,
-    PEDAL_KIND,
-    PLAIN,
-    ROUTE,
-    ROUTE_END,
-    ROUTE_START,
-    ROUTED,
-    SPEED,
-    STEER,
-    TARGET_LANE,
-    TARGET_SPEED,
-    TIME_WANTED,
-    TIMER,
-    TOWN,
-    X,
-    Y,
-    _clip,
-    cached_desired_gap,
-    cached_idm_acceleration,
-    change_lane_policy,
-    follow_road,
-    not_zero,
-    start_frame,
-    steering_control,
-    step_vehicle,
-)
-from drivelab.sim.junctions.rows import P_CRASHED, P_HEADING, P_SPEED, P_X, P_Y, TURN_LEFT
+from drivelab.sim.junctions.rows import LANE_METADATA, P_CRASHED, P_HEADING, P_SPEED, P_X, P_Y, TURN_LEFT
 from drivelab.sim.junctions.rules import (
     MOVING_MPS,
     ONCOMING_WATCH_M,
@@ -137,33 +62,20 @@ def py_square(x: float) -> float:
 
 def town_frame_cache(vehicles: int, pedestrians: int, lane_count: int):
     """Scratch arrays of one frame's ``town_act`` for up to ``vehicles`` vehicle rows and
-    ``pedestrians`` pedestrian rows on ``lane_count`` lanes: ``coords`` (L, N+P, 4), ``done``
-    (L,) int64, ``trig`` (N+P, 2). ``coords[lane, j, :2]`` is (longitudinal, lateral) of vehicle
-    j < count, and of pedestrian k at j = count + k, once measured in this frame (``town_act``'s
-    ``seen`` says which are); ``coords[..., 2:]`` and ``done`` are ``traffic``'s (its flags, its
-    sorted vehicle rows per lane, and -1 or the count of vehicles on the lane once it filled it).
-    ``trig`` holds the cosine and sine of the headings, vehicles then pedestrians. Allocate once
-    per world and reuse every frame (``town_act`` refills what it reads)."""
+    ``pedestrians`` pedestrian rows (pedestrian k at j = count + k) on ``lane_count`` lanes:
+    ``traffic.frame_cache``'s ``coords`` (L, N+P, 4), ``done`` (L,), ``trig`` (N+P, 2). Allocate
+    once per world; ``town_act`` refills what it reads."""
     size = vehicles + pedestrians
     return np.empty((lane_count, size, 4)), np.full(lane_count, -1, dtype=np.int64), np.empty((size, 2))
 
 
 def road_arrays_tuple(arrays, lanes: np.ndarray) -> tuple:
     """The road arrays ``town_act`` takes, in its argument order: the ``TownRoadArrays`` fields
-    ``junction``, ``from_arm``, ``to_arm``, ``turn``, ``end_junction``, ``end_arm``, ``light``
-    (each (L,) int64), ``street_lanes`` (S,) int64, ``routes`` (L, S, W) int64, ``route_length``
-    (L, S) int64; then ``connected_lanes(lanes)``."""
+    LANE_METADATA, ``street_lanes`` (S,), ``routes`` (L, S, W), ``route_length`` (L, S) as int64;
+    then ``connected_lanes(lanes)``."""
+    names = (*LANE_METADATA, "street_lanes", "routes", "route_length")
     return (
-        np.ascontiguousarray(arrays.junction, dtype=np.int64),
-        np.ascontiguousarray(arrays.from_arm, dtype=np.int64),
-        np.ascontiguousarray(arrays.to_arm, dtype=np.int64),
-        np.ascontiguousarray(arrays.turn, dtype=np.int64),
-        np.ascontiguousarray(arrays.end_junction, dtype=np.int64),
-        np.ascontiguousarray(arrays.end_arm, dtype=np.int64),
-        np.ascontiguousarray(arrays.light, dtype=np.int64),
-        np.ascontiguousarray(arrays.street_lanes, dtype=np.int64),
-        np.ascontiguousarray(arrays.routes, dtype=np.int64),
-        np.ascontiguousarray(arrays.route_length, dtype=np.int64),
+        *(np.ascontiguousarray(getattr(arrays, name), dtype=np.int64) for name in names),
         *connected_lanes(lanes),
     )
 
@@ -172,11 +84,11 @@ def road_arrays_tuple(arrays, lanes: np.ndarray) -> tuple:
 def planned_next(v: np.ndarray, lanes: np.ndarray, i: int) -> int:
     """TownVehicle.next_lane: the lane row of the first route entry that starts where vehicle i's
     current lane ends, else -1 (a route entry without a lane id names the road's lane 0)."""
-    end_node = lanes[int(v[i, LANE]), TO_NODE]
-    for k in range(int(v[i, ROUTE_START]), int(v[i, ROUTE_END])):
-        road = int(v[i, ROUTE + 2 * k])
-        if lanes[road, FROM_NODE] == end_node:
-            return road + max(int(v[i, ROUTE + 2 * k + 1]), 0)
+    end_node = lanes[int(v[i, T.LANE]), L.TO_NODE]
+    for k in range(int(v[i, T.ROUTE_START]), int(v[i, T.ROUTE_END])):
+        road = int(v[i, T.ROUTE + 2 * k])
+        if lanes[road, L.FROM_NODE] == end_node:
+            return road + max(int(v[i, T.ROUTE + 2 * k + 1]), 0)
     return -1
 
 
@@ -189,10 +101,10 @@ def random_goal(
     ROUTE_GOAL_TRIES times until one is reachable; -1 when none was (the route is then ``start``
     alone). The draws are ``integers(goals)`` on the PCG64 ``rng_words``."""
     lanes, street_lanes, route_length, rng_words = borrowed((lanes, street_lanes, route_length, rng_words))
-    end_node = lanes[start, TO_NODE]
+    end_node = lanes[start, L.TO_NODE]
     goals = 0
     for g in range(street_lanes.shape[0]):
-        if lanes[street_lanes[g], TO_NODE] != end_node:
+        if lanes[street_lanes[g], L.TO_NODE] != end_node:
             goals += 1
     if goals == 0:
         raise ValueError("a town street has no other street to route to")
@@ -200,7 +112,7 @@ def random_goal(
         pick = bounded_int(rng_words, goals)
         street = -1
         for g in range(street_lanes.shape[0]):
-            if lanes[street_lanes[g], TO_NODE] != end_node:
+            if lanes[street_lanes[g], L.TO_NODE] != end_node:
                 if pick == 0:
                     street = g
                     break
@@ -218,24 +130,24 @@ def random_route(v, lanes, i: int, start: int, street_lanes, routes, route_lengt
     street = random_goal(lanes, start, street_lanes, route_length, rng_words)
     if street >= 0:
         n = route_length[start, street]
-        if n > (v.shape[1] - ROUTE) // 2:
+        if n > (v.shape[1] - T.ROUTE) // 2:
             raise ValueError("a town route is longer than the vehicle row's route capacity")
         for k in range(n):
             row = routes[start, street, k]
-            v[i, ROUTE + 2 * k] = lanes[row, FIRST_OF_ROAD]
-            v[i, ROUTE + 2 * k + 1] = lanes[row, LANE_ID]
-        v[i, ROUTE_START], v[i, ROUTE_END], v[i, ROUTED] = 0.0, n, 1.0
+            v[i, T.ROUTE + 2 * k] = lanes[row, L.FIRST_OF_ROAD]
+            v[i, T.ROUTE + 2 * k + 1] = lanes[row, L.LANE_ID]
+        v[i, T.ROUTE_START], v[i, T.ROUTE_END], v[i, T.ROUTED] = 0.0, n, 1.0
         return
-    v[i, ROUTE] = lanes[start, FIRST_OF_ROAD]
-    v[i, ROUTE + 1] = lanes[start, LANE_ID]
-    v[i, ROUTE_START], v[i, ROUTE_END], v[i, ROUTED] = 0.0, 1.0, 1.0
+    v[i, T.ROUTE] = lanes[start, L.FIRST_OF_ROAD]
+    v[i, T.ROUTE + 1] = lanes[start, L.LANE_ID]
+    v[i, T.ROUTE_START], v[i, T.ROUTE_END], v[i, T.ROUTED] = 0.0, 1.0, 1.0
 
 
 @njit(cache=True, inline="always")
 def object_xy(v: np.ndarray, peds: np.ndarray, j: int) -> tuple[float, float]:
     """Position of vehicle j, or of pedestrian j - count."""
     if j < v.shape[0]:
-        return v[j, X], v[j, Y]
+        return v[j, T.X], v[j, T.Y]
     return peds[j - v.shape[0], P_X], peds[j - v.shape[0], P_Y]
 
 
@@ -245,41 +157,41 @@ def lane_s(v, peds, lanes, coords, seen, lane: int, j: int) -> float:
     ``seen[lane, j]`` becomes 1 if it is on the lane (``on_lane``, 1 m margin), else 0."""
     if seen[lane, j] < 0:
         x, y = object_xy(v, peds, j)
-        s, r = local_coordinates(lanes, lane, x, y)
+        s, r = L.local_coordinates(lanes, lane, x, y)
         coords[lane, j, 0], coords[lane, j, 1] = s, r
-        seen[lane, j] = 1 if on_lane(lanes, lane, s, r, 1.0) else 0
+        seen[lane, j] = 1 if L.on_lane(lanes, lane, s, r, 1.0) else 0
     return coords[lane, j, 0]
 
 
 def connected_lanes(lanes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The static tables ``connected_front`` searches, per lane row (made once per road):
 
-    - ``search`` (L, S) int64 and ``search_size`` (L,): the lanes
-      ``neighbour_vehicles_connected_lanes`` looks on, in order: the lane, its successor roads'
-      lanes, its predecessor roads' lanes (the network's order; the same lane index on each road,
-      else its lane 0);
+    - ``search`` (L, S), ``search_size`` (L,): the lanes ``neighbour_vehicles_connected_lanes``
+      looks on, in order: the lane, its successor roads', its predecessor roads' (the same lane
+      index on each road, else its lane 0);
     - ``search_offset`` (L, S): what shifts a longitudinal coordinate on that lane into the lane's
-      frame (plus the lane's length for successors, minus their own for predecessors);
-    - ``discs`` (L, 3): x, y and squared radius of a disc holding every point ``on_lane`` counts as
-      on the lane (1 m margin). A point at (s, r) of a straight or circular lane lies |r| from the
-      centre line at s, which lies at most |s - length/2| from the lane's middle (a chord is no
-      longer than its arc), and on_lane bounds both; 1 m more absorbs rounding. Sine lanes get no
-      disc (infinite radius)."""
+      frame (+ the lane's length for successors, - their own for predecessors);
+    - ``discs`` (L, 3): x, y and squared radius of a disc holding every point ``on_lane`` counts as on
+      the lane: |r| from the centre line at s, at most |s - length/2| from the lane's middle, 1 m more
+      for rounding (sine lanes: an infinite radius).
+    """
     count = lanes.shape[0]
     rows = np.arange(count)
-    first = lanes[:, FIRST_OF_ROAD] == rows
+    first = lanes[:, L.FIRST_OF_ROAD] == rows
 
     def lane_on(road: int, lane_id: float) -> int:
-        return int(road) + (int(lane_id) if lane_id < lanes[road, LANE_COUNT] else 0)
+        return int(road) + (int(lane_id) if lane_id < lanes[road, L.LANE_COUNT] else 0)
 
     found: list[tuple[list[int], list[float]]] = []
     for lane in range(count):
-        lane_id = lanes[lane, LANE_ID]
-        leaving = rows[first & (lanes[:, FROM_NODE] == lanes[lane, TO_NODE])]  # successor roads
-        entering = rows[first & (lanes[:, TO_NODE] == lanes[lane, FROM_NODE])]  # predecessor roads
+        lane_id = lanes[lane, L.LANE_ID]
+        leaving = rows[first & (lanes[:, L.FROM_NODE] == lanes[lane, L.TO_NODE])]  # successor roads
+        entering = rows[first & (lanes[:, L.TO_NODE] == lanes[lane, L.FROM_NODE])]  # predecessor roads
         roads = [lane_on(road, lane_id) for road in leaving]
         into = [lane_on(road, lane_id) for road in entering]
-        offset = [0.0] + [lanes[lane, LENGTH]] * len(roads) + [-lanes[previous, LENGTH] for previous in into]
+        offset = (
+            [0.0] + [lanes[lane, L.LENGTH]] * len(roads) + [-lanes[previous, L.LENGTH] for previous in into]
+        )
         found.append(([lane, *roads, *into], offset))
     width = max(len(search) for search, _ in found)
     search = np.zeros((count, width), dtype=np.int64)
@@ -289,10 +201,10 @@ def connected_lanes(lanes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
         search[lane, : len(lanes_on)], offset[lane, : len(shifts)] = lanes_on, shifts
     discs = np.empty((count, 3))
     for lane in range(count):
-        half = lanes[lane, LENGTH] / 2
-        discs[lane, 0], discs[lane, 1] = position(lanes, lane, half, 0.0)
-        reach = half + VEHICLE_LENGTH + lanes[lane, WIDTH] / 2 + 1.0 + 1.0
-        discs[lane, 2] = np.inf if lanes[lane, LANE_KIND] == SINE else reach * reach
+        half = lanes[lane, L.LENGTH] / 2
+        discs[lane, 0], discs[lane, 1] = L.position(lanes, lane, half, 0.0)
+        reach = half + L.VEHICLE_LENGTH + lanes[lane, L.WIDTH] / 2 + 1.0 + 1.0
+        discs[lane, 2] = np.inf if lanes[lane, L.KIND] == L.SINE else reach * reach
     return search, offset, size, discs
 
 
@@ -305,7 +217,7 @@ def lane_objects(v, peds, lanes, coords, seen, discs, near, near_count, lane: in
         return
     count, n = v.shape[0], 0
     cx, cy, reach2 = discs[lane, 0], discs[lane, 1], discs[lane, 2]
-    arc, half_width = lanes[lane, LANE_KIND] == CIRCLE, lanes[lane, WIDTH] / 2 + 1.0
+    arc, half_width = lanes[lane, L.KIND] == L.CIRCLE, lanes[lane, L.WIDTH] / 2 + 1.0
     for j in range(count + peds.shape[0]):
         if j >= count and peds[j - count, P_CRASHED] > 0:
             continue
@@ -314,7 +226,7 @@ def lane_objects(v, peds, lanes, coords, seen, discs, near, near_count, lane: in
             dx, dy = x - cx, y - cy
             if dx * dx + dy * dy > reach2:
                 continue
-            if arc and not np.abs(circle_lateral(lanes, lane, x, y)) <= half_width:
+            if arc and not np.abs(L.circle_lateral(lanes, lane, x, y)) <= half_width:
                 continue  # on_lane's lateral test fails (the same bits), its arctan2 spared
             lane_s(v, peds, lanes, coords, seen, lane, j)
         if seen[lane, j] == 1:
@@ -329,14 +241,10 @@ def connected_front(
     lane: int
 ) -> int:  # fmt: skip
     """Road.neighbour_vehicles(vehicle i, lane)[0] with ``neighbour_vehicles_connected_lanes``:
-    the row of the leader (a vehicle j < count, or pedestrian k as count + k), -1 for none.
-
-    Each object is placed on the first of the lanes ``search[lane]`` (``connected_lanes``) it lies
-    on (``on_lane``, 1 m margin), its longitudinal coordinate shifted into the lane's frame; the
-    leader is the nearest at or ahead of vehicle i, the last in scan order (vehicles, then
-    pedestrians not crashed) among equals. The lanes are read in order from their per-frame object
-    lists (``near``, ``near_count``: ``lane_objects``); an object listed on an earlier one of them
-    was placed there."""
+    the row of the leader (a vehicle j < count, or pedestrian k as count + k), -1 for none: the
+    nearest at or ahead of vehicle i (the last in scan order among equals), each object placed on the
+    first of the lanes ``search[lane]`` it lies on, its longitudinal coordinate shifted into the
+    lane's frame (the lanes' object lists: ``lane_objects``)."""
     v, peds, lanes, coords, seen, near, near_count, search, search_offset, search_size, discs = borrowed(
         (v, peds, lanes, coords, seen, near, near_count, search, search_offset, search_size, discs)
     )
@@ -377,14 +285,14 @@ def left_turn_must_wait(
         return False
     j, opposite = junction[turn_lane], (from_arm[turn_lane] + 2) % 4
     for o in range(v.shape[0]):
-        if o == i or v[o, SPEED] < MOVING_MPS:
+        if o == i or v[o, T.SPEED] < MOVING_MPS:
             continue
-        lane = int(v[o, LANE])
+        lane = int(v[o, T.LANE])
         if junction[lane] == j and from_arm[lane] == opposite and to_arm[lane] != opposite:
             return True
         if end_junction[lane] == j and end_arm[lane] == opposite:
-            s, _ = local_coordinates(lanes, lane, v[o, X], v[o, Y])
-            if lanes[lane, LENGTH] - s < ONCOMING_WATCH_M:
+            s, _ = L.local_coordinates(lanes, lane, v[o, T.X], v[o, T.Y])
+            if lanes[lane, L.LENGTH] - s < ONCOMING_WATCH_M:
                 return True
     return False
 
@@ -397,12 +305,12 @@ def stop_line_ahead(
     stop at, else NO_STOP. It reads no frame cache: ``blocks_traffic`` calls it (through
     ``town_acceleration`` without a leader) with ``traffic``'s cache, whose flags are per lane."""
     v, lanes, p, light, light_states = borrowed((v, lanes, p, light, light_states))
-    lane = int(v[i, LANE])
+    lane = int(v[i, T.LANE])
     if light[lane] < 0:
         return NO_STOP
     state = light_states[light[lane]]
-    s, _ = local_coordinates(lanes, lane, v[i, X], v[i, Y])
-    ahead_m = lanes[lane, LENGTH] - s - v[i, LEN] / 2
+    s, _ = L.local_coordinates(lanes, lane, v[i, T.X], v[i, T.Y])
+    ahead_m = lanes[lane, L.LENGTH] - s - v[i, T.LEN] / 2
     if ahead_m < 0:
         return NO_STOP
     if state == LIGHT_GREEN:
@@ -412,7 +320,7 @@ def stop_line_ahead(
         ):
             return ahead_m
         return NO_STOP
-    if state == LIGHT_YELLOW and py_square(v[i, SPEED]) / (2 * max(ahead_m, 1e-3)) > -p[COMFORT_ACC_MIN]:
+    if state == LIGHT_YELLOW and py_square(v[i, T.SPEED]) / (2 * max(ahead_m, 1e-3)) > -p[T.COMFORT_ACC_MIN]:
         return NO_STOP
     return ahead_m
 
@@ -427,43 +335,42 @@ def town_acceleration(
     ``coords`` and ``seen`` (``town_act``'s) are read only with a front."""
     v, peds, lanes, p, coords, done, trig, seen = borrowed((v, peds, lanes, p, coords, done, trig, seen))
     count = v.shape[0]
-    acceleration = cached_idm_acceleration(v, lanes, p, coords, done, trig, i, i, -1)
+    acceleration = T.cached_idm_acceleration(v, lanes, p, coords, done, trig, i, i, -1)
     if front >= 0:
         if front < count:
-            fx, fy = v[front, X], v[front, Y]
-            desired_gap = cached_desired_gap(v, p, trig, i, front)
-        else:
+            fx, fy = v[front, T.X], v[front, T.Y]
+            desired_gap = T.cached_desired_gap(v, p, trig, i, front)
+        else:  # a pedestrian (its heading's cos, sin in trig[front])
             k = front - count
             fx, fy = peds[k, P_X], peds[k, P_Y]
-            ab = -p[COMFORT_ACC_MAX] * p[COMFORT_ACC_MIN]
-            cos_e, sin_e = trig[i, 0], trig[i, 1]
-            dvx = v[i, SPEED] * cos_e - peds[k, P_SPEED] * trig[front, 0]
-            dvy = v[i, SPEED] * sin_e - peds[k, P_SPEED] * trig[front, 1]
-            dv = dvx * cos_e + dvy * sin_e
-            desired_gap = (
-                p[DISTANCE_WANTED] + v[i, SPEED] * p[TIME_WANTED] + v[i, SPEED] * dv / (2 * np.sqrt(ab))
-            )
-        lane = int(v[i, LANE])
+            desired_gap = T.desired_gap_to(v, p, trig, i, front, peds[k, P_SPEED])
+        lane = int(v[i, T.LANE])
         along = lane_s(v, peds, lanes, coords, seen, lane, front) - lane_s(
             v, peds, lanes, coords, seen, lane, i
         )
-        dx, dy = fx - v[i, X], fy - v[i, Y]
+        dx, dy = fx - v[i, T.X], fy - v[i, T.Y]
         gap_m = math.copysign(math.sqrt(dx * dx + dy * dy), along)
         # IDMVehicle.acceleration squares with np.power(·, 2): numpy's square, x * x
-        acceleration -= p[COMFORT_ACC_MAX] * (desired_gap / not_zero(gap_m)) ** 2
+        acceleration -= p[T.COMFORT_ACC_MAX] * (desired_gap / T.not_zero(gap_m)) ** 2
     ahead_m = stop_line_ahead(
         v, lanes, p, i, junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states
     )
     if ahead_m == NO_STOP:
         return acceleration
-    gap_m = ahead_m - STOP_MARGIN_M + p[DISTANCE_WANTED]
-    speed = max(v[i, SPEED], 0.0)
-    ab = -p[COMFORT_ACC_MAX] * p[COMFORT_ACC_MIN]
-    desired_gap = p[DISTANCE_WANTED] + speed * p[TIME_WANTED] + speed * speed / (2 * np.sqrt(ab))
-    target = not_zero(v[i, TARGET_SPEED])
-    stop = p[COMFORT_ACC_MAX] * (1 - (speed / np.abs(target)) ** v[i, DELTA])
-    stop -= p[COMFORT_ACC_MAX] * py_square(desired_gap / not_zero(gap_m))
-    return min(acceleration, stop)
+    return min(acceleration, stop_ahead(v, p, i, ahead_m))
+
+
+@njit(cache=True, inline="always")
+def stop_ahead(v, p, i: int, ahead_m: float) -> float:
+    """IDM's acceleration of vehicle i behind a stopped virtual leader ``ahead_m`` metres beyond
+    its front bumper, to stand STOP_MARGIN_M short of it (TownVehicle.acceleration's stop line)."""
+    gap_m = ahead_m - STOP_MARGIN_M + p[T.DISTANCE_WANTED]
+    speed = max(v[i, T.SPEED], 0.0)
+    ab = -p[T.COMFORT_ACC_MAX] * p[T.COMFORT_ACC_MIN]
+    desired_gap = p[T.DISTANCE_WANTED] + speed * p[T.TIME_WANTED] + speed * speed / (2 * np.sqrt(ab))
+    target = T.not_zero(v[i, T.TARGET_SPEED])
+    stop = p[T.COMFORT_ACC_MAX] * (1 - (speed / np.abs(target)) ** v[i, T.DELTA])
+    return stop - p[T.COMFORT_ACC_MAX] * py_square(desired_gap / T.not_zero(gap_m))
 
 
 @njit(cache=True)
@@ -473,12 +380,11 @@ def town_act(
     discs, light_states, rng_words
 ) -> None:  # fmt: skip
     """Road.act of one town world: rows ``0..count-1`` of ``v`` decide their controls in order
-    (see the module docstring for the arrays); random routes draw on ``rng_words``. The frame's
-    scratch is made here, and ``_act_rows`` borrows it with the arguments (``borrow``): ``own``,
-    MOBIL's own-lane row (``traffic.own_lane``); ``near`` and ``near_count``, ``lane_objects``'
-    lists; ``seen``, which objects ``lane_s`` measured on which lane (-1: not yet)."""
+    (see the module docstring for the arrays). The frame's scratch is made here and ``_act_rows``
+    borrows it: ``own`` (``traffic.own_lane``), ``near`` and ``near_count`` (``lane_objects``), and
+    ``seen`` (which objects ``lane_s`` measured on which lane, -1: not yet)."""
     size = count + pcount
-    own = np.empty(OWN_SIZE)
+    own = np.empty(T.OWN_SIZE)
     near = np.empty((lanes.shape[0], size), dtype=np.int64)
     near_count = np.full(lanes.shape[0], -1, dtype=np.int64)
     seen = np.full((lanes.shape[0], size), -1, dtype=np.int8)
@@ -507,40 +413,39 @@ def _act_rows(
         (street_lanes, routes, route_length, search, search_offset, search_size, discs)
     )
     w, q = v[:count], peds[:pcount]
-    start_frame(w, done, trig)
+    T.start_frame(w, done, trig)
     for k in range(pcount):
         trig[count + k, 0], trig[count + k, 1] = np.cos(q[k, P_HEADING]), np.sin(q[k, P_HEADING])
     for i in range(count):
-        kind = w[i, KIND]
-        if kind == PLAIN or kind == PEDAL_KIND or kind == OBSTACLE:
+        kind = w[i, T.KIND]
+        if kind == T.PLAIN or kind == T.PEDAL_KIND or kind == T.OBSTACLE:
             continue  # plain and pedal vehicles keep their last action; obstacles never act
-        if kind != CONTROLLED and kind != TOWN:
+        if kind != T.CONTROLLED and kind != T.TOWN:
             raise ValueError("town_act drives CONTROLLED, PLAIN, PEDAL_KIND and TOWN rows only")
-        # one call site each for the inlined follow_road and steering_control: a second copy
-        # would be compiled again (seconds of a cold start)
-        lane = int(w[i, LANE])
-        if kind == TOWN:  # TownVehicle.act: the turn's speed limit, before follow_road
-            limit = lanes[lane, SPEED_LIMIT]
+        # one call site each for the inlined follow_road and steering_control (each is compiled anew)
+        lane = int(w[i, T.LANE])
+        if kind == T.TOWN:  # TownVehicle.act: the turn's speed limit, before follow_road
+            limit = lanes[lane, L.SPEED_LIMIT]
             turn_lane = planned_next(w, lanes, i)
             if turn_lane >= 0:
-                next_limit = lanes[turn_lane, SPEED_LIMIT]
-                ahead_m = lanes[lane, LENGTH] - lane_s(w, q, lanes, coords, seen, lane, i)
-                braking = (py_square(w[i, SPEED]) - py_square(next_limit)) / (2 * -p[COMFORT_ACC_MIN])
+                next_limit = lanes[turn_lane, L.SPEED_LIMIT]
+                ahead_m = lanes[lane, L.LENGTH] - lane_s(w, q, lanes, coords, seen, lane, i)
+                braking = (py_square(w[i, T.SPEED]) - py_square(next_limit)) / (2 * -p[T.COMFORT_ACC_MIN])
                 if ahead_m < TURN_BRAKE_MARGIN_M + braking:
                     limit = min(limit, next_limit)
-            w[i, TARGET_SPEED] = limit
-            if w[i, CRASHED] > 0:
+            w[i, T.TARGET_SPEED] = limit
+            if w[i, T.CRASHED] > 0:
                 continue
-            if w[i, ROUTE_END] - w[i, ROUTE_START] <= 1:
-                target = int(w[i, TARGET_LANE])
+            if w[i, T.ROUTE_END] - w[i, T.ROUTE_START] <= 1:
+                target = int(w[i, T.TARGET_LANE])
                 random_route(w, lanes, i, target, street_lanes, routes, route_length, rng_words)
-        follow_road(w, lanes, i)
-        if kind == TOWN:
-            own[OWN_FREE] = np.nan  # the own-lane row is made only if MOBIL is asked
-            change_lane_policy(w, lanes, p, coords, done, trig, i, own)
-        w[i, STEER] = steering_control(w, lanes, i, int(w[i, TARGET_LANE]))
-        if kind == CONTROLLED:
-            w[i, ACCEL] = KP_A * (w[i, TARGET_SPEED] - w[i, SPEED])
+        T.follow_road(w, lanes, i)
+        if kind == T.TOWN:
+            own[T.OWN_FREE] = np.nan  # the own-lane row is made only if MOBIL is asked
+            T.change_lane_policy(w, lanes, p, coords, done, trig, i, own)
+        w[i, T.STEER] = T.steering_control(w, lanes, i, int(w[i, T.TARGET_LANE]))
+        if kind == T.CONTROLLED:
+            w[i, T.ACCEL] = T.KP_A * (w[i, T.TARGET_SPEED] - w[i, T.SPEED])
             continue
         front = connected_front(
             w, q, lanes, coords, seen, near, near_count, search, search_offset, search_size, discs, i, lane
@@ -549,7 +454,7 @@ def _act_rows(
             w, q, lanes, p, coords, done, trig, seen, i, front,
             junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states,
         )  # fmt: skip
-        target = int(w[i, TARGET_LANE])
+        target = int(w[i, T.TARGET_LANE])
         if lane != target:
             front = connected_front(
                 w, q, lanes, coords, seen, near, near_count, search, search_offset, search_size, discs, i,
@@ -560,7 +465,7 @@ def _act_rows(
                 junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states,
             )  # fmt: skip
             acceleration = min(acceleration, target_a)
-        w[i, ACCEL] = _clip(acceleration, -p[ACC_MAX], p[ACC_MAX])
+        w[i, T.ACCEL] = T._clip(acceleration, -p[T.ACC_MAX], p[T.ACC_MAX])
 
 
 @njit(cache=True)
@@ -570,29 +475,21 @@ def town_step(v: np.ndarray, count: int, lanes: np.ndarray, dt: float) -> None:
     (``speed = max(speed, 0)``). The ego (not TOWN) is not clamped."""
     v, lanes = borrowed((v, lanes))
     for i in range(count):
-        kind = v[i, KIND]
-        if kind == OBSTACLE:
+        kind = v[i, T.KIND]
+        if kind == T.OBSTACLE:
             continue
-        if kind == TOWN:
-            v[i, TIMER] += dt
-        step_vehicle(v, lanes, i, dt)
-        if kind == TOWN and v[i, SPEED] < 0.0:  # Python's max(speed, 0.0): speed unless 0.0 > speed
-            v[i, SPEED] = 0.0
+        if kind == T.TOWN:
+            v[i, T.TIMER] += dt
+        T.step_vehicle(v, lanes, i, dt)
+        if kind == T.TOWN and v[i, T.SPEED] < 0.0:  # Python's max(speed, 0.0): speed unless 0.0 > speed
+            v[i, T.SPEED] = 0.0
 
 
-def red_light_runs(
-    lanes: np.ndarray,
-    previous_lane: np.ndarray,
-    lane: np.ndarray,
-    light: np.ndarray,
-    light_state: np.ndarray,
-    active: np.ndarray,
-) -> np.ndarray:
-    """(K,) whether each world's ego ran a red light in its step (the town's and the block maps'
-    rule): it left a lane whose light (``light`` (K,), -1: none) was red at the step's end
-    (``light_state`` (K, lights)) for a lane that starts where that one ends; ``active`` worlds
-    only. ``previous_lane`` and ``lane``: the ego's rows of ``lanes`` before and after the step."""
+def red_light_runs(lanes, previous_lane, lane, light, light_state, active) -> np.ndarray:
+    """(K,) whether each ``active`` world's ego ran a red light in its step: it left lane
+    ``previous_lane``, whose light (``light`` (K,), -1: none) was red at the step's end
+    (``light_state`` (K, lights)), for a lane ``lane`` that starts where that one ends."""
     k = len(lane)
     state = light_state[np.arange(k), np.maximum(light, 0)] if light_state.shape[1] else np.zeros(k, int)
-    crossed = lanes[lane, FROM_NODE] == lanes[previous_lane, TO_NODE]
+    crossed = lanes[lane, L.FROM_NODE] == lanes[previous_lane, L.TO_NODE]
     return active & (light >= 0) & crossed & (state == LIGHT_RED)

@@ -60,6 +60,13 @@ def _lane_stations(lane) -> np.ndarray:
     return lane_stations(lane, type(lane) is StraightLane)
 
 
+def _object_rows(objects: list) -> np.ndarray:
+    """(N, 6) x, y, heading, speed, length, width of highway-env road objects."""
+    return np.array(
+        [[*o.position, o.heading, o.speed, o.LENGTH, o.WIDTH] for o in objects], dtype=float
+    ).reshape(-1, 6)
+
+
 def build_road_map(network) -> RoadMap:
     """Convert highway-env's road network to arrays (once per reset)."""
     lanes = network.lanes_list()
@@ -235,12 +242,8 @@ class HighwayBackend:
                 break
             lane_index = road.network.random_lane_index(rng)
             lane = road.network.get_lane(lane_index)
-            vehicle = IDMVehicle.make_on_lane(
-                road,
-                lane_index,
-                longitudinal=float(rng.uniform(0, lane.length)),
-                speed=float(lane.speed_limit or 20.0) * 0.8,
-            )
+            longitudinal, speed = float(rng.uniform(0, lane.length)), float(lane.speed_limit or 20.0) * 0.8
+            vehicle = IDMVehicle.make_on_lane(road, lane_index, longitudinal=longitudinal, speed=speed)
             if min(np.linalg.norm(v.position - vehicle.position) for v in road.vehicles) < 15:
                 continue
             if self.scenario.destination:
@@ -317,51 +320,22 @@ class HighwayBackend:
         heading_back, heading_ahead = lane.heading_at(s - 1.0), lane.heading_at(s + 1.0)
         curvature = float(np.angle(np.exp(1j * (heading_ahead - heading_back)))) / 2.0
         target = getattr(ego, "target_lane_index", lane_index)
-        others = [v for v in env.road.vehicles if v is not ego]
-        vehicles = np.array(
-            [[*v.position, v.heading, v.speed, v.LENGTH, v.WIDTH] for v in others], dtype=float
-        ).reshape(-1, 6)
-        pedestrians = np.array(
-            [
-                [*p.position, p.heading, p.speed, p.LENGTH, p.WIDTH]
-                for p in self._pedestrians()
-                if not p.crashed
-            ],
-            dtype=float,
-        ).reshape(-1, 6)
+        vehicles = _object_rows([v for v in env.road.vehicles if v is not ego])
+        pedestrians = _object_rows([p for p in self._pedestrians() if not p.crashed])
         ego_state = Ego(
-            position=np.array(ego.position, dtype=float),
-            heading=float(ego.heading),
-            speed_mps=float(ego.speed),
-            steering=float(ego.action.get("steering", 0.0)),
-            acceleration_mps2=float(ego.action.get("acceleration", 0.0)),
-            length_m=float(ego.LENGTH),
-            width_m=float(ego.WIDTH),
-            lane_id=int(lane_index[2]),
-            lane_count=len(env.road.network.all_side_lanes(lane_index)),
-            target_lane_id=int(target[2]),
-            lane_width_m=float(lane.width_at(s)),
-            lateral_offset_m=float(lateral),
-            lane_heading=float(lane.heading_at(s)),
-            lane_curvature=curvature,
-            on_road=bool(ego.on_road),
+            position=np.array(ego.position, dtype=float), heading=float(ego.heading),
+            speed_mps=float(ego.speed), steering=float(ego.action.get("steering", 0.0)),
+            acceleration_mps2=float(ego.action.get("acceleration", 0.0)), length_m=float(ego.LENGTH),
+            width_m=float(ego.WIDTH), lane_id=int(lane_index[2]),
+            lane_count=len(env.road.network.all_side_lanes(lane_index)), target_lane_id=int(target[2]),
+            lane_width_m=float(lane.width_at(s)), lateral_offset_m=float(lateral),
+            lane_heading=float(lane.heading_at(s)), lane_curvature=curvature, on_road=bool(ego.on_road),
             in_intersection=self.scenario.in_junction(lane_index),
-        )
+        )  # fmt: skip
+        lights = self.lights.table(env.time) if self.lights is not None else np.zeros((0, 4))
         return WorldState(
-            time_s=float(env.time),
-            dt_s=1.0 / self.policy_frequency_hz,
-            ego=ego_state,
-            vehicles=vehicles,
-            pedestrians=pedestrians,
-            road=self.road_map,
-            route=self.route.at(self.progress_m),
-            events=events,
-            traffic_lights=self.lights.table(env.time) if self.lights is not None else np.zeros((0, 4)),
-            max_speed_mps=float(ego.MAX_SPEED),
+            time_s=float(env.time), dt_s=1.0 / self.policy_frequency_hz, ego=ego_state, vehicles=vehicles,
+            pedestrians=pedestrians, road=self.road_map, route=self.route.at(self.progress_m), events=events,
+            traffic_lights=lights, max_speed_mps=float(ego.MAX_SPEED),
             speed_limit_mps=float(lane.speed_limit or 30.0),
-        )
-
-    def render_native(self) -> np.ndarray:
-        """highway-env's own pygame rendering (for comparison; drivelab videos use BirdEye)."""
-        self.env.render_mode = "rgb_array"
-        return self.env.render()
+        )  # fmt: skip

@@ -1,10 +1,8 @@
 """The batch-first simulator API over single-world backends (highway-env, the reference).
 
-``PerWorldSimulator`` holds K single-world backends and steps them one after another: the
-reference ``highway`` backend runs one world at a time by design (it is highway-env itself), and
-scenarios the compiled core does not run yet (the town, the circuits) take this path. For K > 1
-of those, ``gymnasium``'s ``AsyncVectorEnv`` over DriveEnvs is faster (one process per world):
-``drivelab.envs.vector.make_vec`` picks it.
+``PerWorldSimulator`` holds K single-world backends and steps them one after another (the
+reference runs one world at a time by design); for K > 1, ``gymnasium``'s ``AsyncVectorEnv`` over
+DriveEnvs is faster, and ``drivelab.envs.vector.make_vec`` picks it.
 """
 
 from __future__ import annotations

@@ -7,9 +7,6 @@
 - ``grid``/``town``: junctions on a grid joined by two-way streets (the town); ``circuit``: a closed
   loop of straights and arcs (the CARLA study's circuits).
 
-The formulas are those that build the same roads with highway-env objects (``scenarios/town/road.py``,
-``scenarios/circuits/reference_env.py``), so that the lanes are bit-for-bit the same.
-
 Town conventions: arm k of a junction points along ``rotation(90°·k) @ (0, 1)`` (arm 0 is +y, arm
 1 is -x, arm 2 is -y, arm 3 is +x); ``J3:ir0`` is the stop line of junction 3's arm 0, ``J3:il2``
 the start of its exit along arm 2.
@@ -84,6 +81,14 @@ class Arc:
         )  # fmt: skip
 
 
+def road_lines(k: int, count: int) -> tuple[int, int]:
+    """(left, right) markings of lane ``k`` of ``count``: the outer lines solid, the lines between
+    lanes dashed (each drawn once, on the left of the lane right of it)."""
+    left = LINE_CONTINUOUS if k == 0 else LINE_STRIPED
+    right = LINE_CONTINUOUS if k == count - 1 else LINE_NONE
+    return left, right
+
+
 def segment(spec: tuple) -> Straight | Arc:
     """A track entry ``("straight", length_m)`` or ``("arc", radius_m, turn_deg)`` as a block."""
     kind, *values = spec
@@ -107,10 +112,7 @@ def circuit(
         block = segment(spec)
         start, end = str(index), str((index + 1) % len(track))
         for lane_id, offset in enumerate(offsets):
-            lines = (
-                LINE_CONTINUOUS if lane_id == 0 else LINE_STRIPED,
-                LINE_CONTINUOUS if lane_id == lane_count - 1 else LINE_NONE,
-            )
+            lines = road_lines(lane_id, lane_count)
             records.append(
                 block.lane(
                     position, heading, offset, start_node=start, end_node=end, lines=lines,

@@ -74,9 +74,8 @@ class LaneRecord:
         """World point (2,) at (longitudinal, lateral) of the lane."""
         if self.kind == ARC:
             phi = self.sense * longitudinal / self.radius + self.start_phase
-            return np.array(self.centre) + (self.radius - lateral * self.sense) * np.array(
-                [np.cos(phi), np.sin(phi)]
-            )
+            unit = np.array([np.cos(phi), np.sin(phi)])
+            return np.array(self.centre) + (self.radius - lateral * self.sense) * unit
         start, end = np.array(self.start), np.array(self.end)
         direction = (end - start) / self.length
         return start + longitudinal * direction + lateral * np.array([-direction[1], direction[0]])
@@ -88,8 +87,21 @@ class LaneRecord:
         return np.arctan2(self.end[1] - self.start[1], self.end[0] - self.start[0])
 
 
-def _column(records: list[LaneRecord], name: str, dtype) -> np.ndarray:
-    return np.array([getattr(record, name) for record in records], dtype=dtype)
+# the LaneRecord fields a RoadDescription keeps as (L,) columns, (L, 2) for the pairs
+_COLUMNS = {
+    **dict.fromkeys(
+        ("start", "end", "centre", "radius", "start_phase", "end_phase", "width", "speed_limit"), float
+    ),
+    **dict.fromkeys(("kind", "lines", "priority", "junction", "from_arm", "to_arm", "turn"), np.int64),
+    **dict.fromkeys(("end_junction", "end_arm"), np.int64),
+    **dict.fromkeys(("clockwise", "forbidden"), bool),
+}
+_PAIRS = ("start", "end", "centre", "lines")
+
+
+def _column(records: list[LaneRecord], name: str) -> np.ndarray:
+    column = np.array([getattr(record, name) for record in records], dtype=_COLUMNS[name])
+    return column.reshape(-1, 2) if name in _PAIRS else column
 
 
 @dataclass(frozen=True, eq=False)
@@ -175,12 +187,8 @@ class RoadDescription:
             key = (r.start_node, r.end_node)
             lane_id.append(seen.get(key, 0))
             seen[key] = lane_id[-1] + 1
-        light_of = {
-            (int(j), int(k)): m
-            for m, (j, k) in enumerate(
-                zip(rest.get("light_junction", ()), rest.get("light_arm", ()), strict=True)
-            )
-        }
+        lights = zip(rest.get("light_junction", ()), rest.get("light_arm", ()), strict=True)
+        light_of = {(int(j), int(k)): m for m, (j, k) in enumerate(lights)}
         light = [light_of.get((r.end_junction, r.end_arm), -1) for r in records]
         crossing_lanes = rest.pop("crossing_lanes", None)
         if crossing_lanes is not None:  # given as positions in ``records`` before the ordering
@@ -191,25 +199,7 @@ class RoadDescription:
             lane_from=np.array([node_of[r.start_node] for r in records], dtype=np.int64),
             lane_to=np.array([node_of[r.end_node] for r in records], dtype=np.int64),
             lane_id=np.array(lane_id, dtype=np.int64),
-            kind=_column(records, "kind", np.int64),
-            start=_column(records, "start", float).reshape(-1, 2),
-            end=_column(records, "end", float).reshape(-1, 2),
-            centre=_column(records, "centre", float).reshape(-1, 2),
-            radius=_column(records, "radius", float),
-            start_phase=_column(records, "start_phase", float),
-            end_phase=_column(records, "end_phase", float),
-            clockwise=_column(records, "clockwise", bool),
-            width=_column(records, "width", float),
-            lines=_column(records, "lines", np.int64).reshape(-1, 2),
-            speed_limit=_column(records, "speed_limit", float),
-            priority=_column(records, "priority", np.int64),
-            forbidden=_column(records, "forbidden", bool),
-            junction=_column(records, "junction", np.int64),
-            from_arm=_column(records, "from_arm", np.int64),
-            to_arm=_column(records, "to_arm", np.int64),
-            turn=_column(records, "turn", np.int64),
-            end_junction=_column(records, "end_junction", np.int64),
-            end_arm=_column(records, "end_arm", np.int64),
+            **{name: _column(records, name) for name in _COLUMNS},
             light=np.array(light, dtype=np.int64),
             **rest,
         )
@@ -224,33 +214,19 @@ class RoadDescription:
         return self.junction >= 0
 
     @property
-    def light_group(self) -> np.ndarray:
-        """(M,) each light's phase group: arms 0 and 2 go first (0), then arms 1 and 3 (1)."""
-        return self.light_arm % 2
-
-    @property
     def junction_count(self) -> int:
         return len(self.junction_centre)
 
     def lane(self, row: int) -> LaneRecord:
         """Lane ``row`` as a record (its geometry formulas: length, position, heading)."""
         return LaneRecord(
-            self.nodes[self.lane_from[row]],
-            self.nodes[self.lane_to[row]],
-            int(self.kind[row]),
-            start=tuple(self.start[row]),
-            end=tuple(self.end[row]),
-            centre=tuple(self.centre[row]),
-            radius=self.radius[row],
-            start_phase=self.start_phase[row],
-            end_phase=self.end_phase[row],
-            clockwise=bool(self.clockwise[row]),
-            width=self.width[row],
-            lines=tuple(int(v) for v in self.lines[row]),
-            speed_limit=self.speed_limit[row],
-            priority=int(self.priority[row]),
-            forbidden=bool(self.forbidden[row]),
-        )
+            self.nodes[self.lane_from[row]], self.nodes[self.lane_to[row]], int(self.kind[row]),
+            start=tuple(self.start[row]), end=tuple(self.end[row]), centre=tuple(self.centre[row]),
+            radius=self.radius[row], start_phase=self.start_phase[row], end_phase=self.end_phase[row],
+            clockwise=bool(self.clockwise[row]), width=self.width[row],
+            lines=tuple(int(v) for v in self.lines[row]), speed_limit=self.speed_limit[row],
+            priority=int(self.priority[row]), forbidden=bool(self.forbidden[row]),
+        )  # fmt: skip
 
     @property
     def indices(self) -> tuple[tuple[str, str, int], ...]:

@@ -8,12 +8,7 @@ import dataclasses
 
 import numpy as np
 
-from drivelab.sim.roads.description import (
-    LINE_CONTINUOUS,
-    LINE_NONE,
-    STRAIGHT,
-    RoadDescription,
-)
+from drivelab.sim.roads.description import LINE_CONTINUOUS, LINE_NONE, STRAIGHT, RoadDescription
 from drivelab.world.state import RoadMap
 
 SAMPLE_SPACING_M = 2.0  # curved lanes are turned into polylines with points this far apart
