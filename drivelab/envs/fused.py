@@ -295,7 +295,7 @@ class CircuitStep:
         while they are the same objects: the simulator replaces its vehicle and route arrays, the
         rules their limits and the metrics their accumulators only when episodes start."""
         sim, env = self.simulator, self.env
-        metrics, rules, road = env.metrics, env.rules, sim._road
+        metrics, rules = env.metrics, env.rules
         key = self._key
         if (
             key is not None
@@ -316,8 +316,8 @@ class CircuitStep:
         arrays = (
             _command_rows(self._control_type), sim.vehicles, sim.count, sim.ego, sim.lanes, sim.idm,
             sim.regulation, sim.time_s, sim.route_index, sim.r_starts, sim.r_segments, sim.r_lengths2,
-            sim.r_segment_m, sim.r_stations, sim.r_count, sim.r_closed, sim.progress_m, road.in_junction,
-            road.exit_lane, sim.start_lane_id, sim.r_length, sim.r_polyline, rules.truncate_at_s,
+            sim.r_segment_m, sim.r_stations, sim.r_count, sim.r_closed, sim.progress_m, sim.in_junction,
+            sim.exit_lane, sim.start_lane_id, sim.r_length, sim.r_polyline, rules.truncate_at_s,
             self.params, self.codes, self.weights, road_index, *self._guide_segments(), self.cameras,
             np.zeros((k, slots, 6)), np.zeros((k, slots), dtype=bool), *metrics.accumulators,
             metrics.last_position, metrics.last_progress_m, metrics.last_route_length_m,

@@ -252,7 +252,7 @@ class TownSimulator(FastSimulator):
         k = self.num_worlds
         floats, ints, flags, vehicles, valid = self._export_buffers()
         export_worlds(
-            self.vehicles, self.count, self.ego, self.lanes, self.in_junction, self._road.exit_lane,
+            self.vehicles, self.count, self.ego, self.lanes, self.in_junction, self.exit_lane,
             0, 0.0, floats, ints, flags, vehicles, valid,
         )  # fmt: skip
         pedestrians = np.zeros((k, self.peds.shape[1], 6))

@@ -659,6 +659,7 @@ class FastSimulator:
         self._every_world = np.ones(num_worlds, dtype=bool)  # every route projected each step
         road = self._road = self._load_road(scenario, traffic, control, overrides)
         self.table, self.lanes, self.road = road.table, road.table.rows, road.road_map
+        self.in_junction, self.exit_lane = road.in_junction, road.exit_lane  # (L,) lane-row flags
         self.roads: tuple[RoadMap, ...] = (self.road,)
         self.policy_frequency_hz, self.duration_s = road.policy_frequency_hz, road.duration_s
         self.dt_policy_s = 1.0 / self.policy_frequency_hz
@@ -899,7 +900,7 @@ class FastSimulator:
         """The scenario's rules after the frames: here IntersectionEnv.step's traffic (clear the
         vehicles that left, then maybe spawn one)."""
         if self.traffic_flow:
-            clear_departed(self.vehicles, self.count, self.ego, self.lanes, self._road.exit_lane)
+            clear_departed(self.vehicles, self.count, self.ego, self.lanes, self.exit_lane)
             self._spawn_arrivals()
 
     def _projected(self, restart: np.ndarray) -> np.ndarray:
@@ -920,12 +921,11 @@ class FastSimulator:
     def _advance(self) -> WorldBatch:
         """``advance_worlds`` then the WorldBatch of its export (see ``step``)."""
         floats, ints, flags, vehicles, valid = self._export_buffers()
-        road = self._road
         advance_worlds(
             self.vehicles, self.count, self.ego, self.lanes, self.idm, self.frames, self.dt_s,
             self.regulation, self.time_s, self.dt_policy_s, self.route_index, self.r_starts,
             self.r_segments, self.r_lengths2, self.r_segment_m, self.r_stations, self.r_count,
-            self.r_closed, self.progress_m, road.in_junction, road.exit_lane, self.arrival,
+            self.r_closed, self.progress_m, self.in_junction, self.exit_lane, self.arrival,
             self.arrival_threshold, floats, ints, flags, vehicles, valid,
         )  # fmt: skip
         return self._export_arrays(floats, ints, flags, vehicles, valid)
@@ -977,9 +977,8 @@ class FastSimulator:
 
     def _export(self) -> WorldBatch:
         floats, ints, flags, vehicles, valid = self._export_buffers()
-        road = self._road
         export_worlds(
-            self.vehicles, self.count, self.ego, self.lanes, road.in_junction, road.exit_lane,
+            self.vehicles, self.count, self.ego, self.lanes, self.in_junction, self.exit_lane,
             self.arrival, self.arrival_threshold, floats, ints, flags, vehicles, valid,
         )  # fmt: skip
         return self._export_arrays(floats, ints, flags, vehicles, valid)
