@@ -24,14 +24,13 @@ from torch import nn
 from drivelab.agents.base import (
     MAX_LEARNING_RATE,
     OwnAgent,
-    batch_of_one,
     gradient_step,
     observation_to_tensor,
 )
 from drivelab.agents.expert import ExpertConfig, check_expert_env
 from drivelab.agents.imitation_data import Demonstrations, Teacher, action_agreement, collect, stack_steps
 from drivelab.agents.networks import TanhGaussianActorCritic, squashed_log_prob
-from drivelab.agents.worlds import Worlds, vector_env_of
+from drivelab.agents.worlds import Worlds, batch_of_one, vector_env_of
 from drivelab.errors import UsageError
 
 LOSSES = ("mse", "nll")
