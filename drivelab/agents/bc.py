@@ -126,7 +126,6 @@ class BehaviourCloning(OwnAgent):
             self.observation_space, 2, self.config.validation_fraction, self.rng
         )
         self._n_updates = 0  # training phases done = DAgger iterations done
-        self._last_obs = None
         self.episode_returns: deque[float] = deque(maxlen=100)
 
     @property
@@ -134,16 +133,14 @@ class BehaviourCloning(OwnAgent):
         """The labelled states gathered so far (checkpointed by run.py as the replay buffer)."""
         return self.replay_buffer
 
+    def _modules(self) -> dict[str, Any]:
+        return {"policy": self.policy, "optimizer": self.optimizer}
+
     def _state(self) -> dict[str, Any]:
-        return {
-            "policy": self.policy.state_dict(),
-            "optimizer": self.optimizer.state_dict(),
-            "rounds": torch.tensor(self._n_updates),
-        }
+        return {**super()._state(), "rounds": torch.tensor(self._n_updates)}
 
     def _set_state(self, state: dict[str, Any]) -> None:
-        self.policy.load_state_dict(state["policy"])
-        self.optimizer.load_state_dict(state["optimizer"])
+        super()._set_state(state)
         self._n_updates = int(state["rounds"])
 
     # --- acting -----------------------------------------------------------------------------------

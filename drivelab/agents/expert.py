@@ -126,13 +126,9 @@ class RuleBasedExpert(OwnAgent):
             raise UsageError("expert drives with --action target_speed")
         if self.env is not None:
             check_expert_env(vector_env_of(self.env), self.config.max_speed_mps, "expert")
-        self._last_obs = None
 
-    def _state(self) -> dict:
-        return {}
-
-    def _set_state(self, state: dict) -> None:
-        pass
+    def _modules(self) -> dict:
+        return {}  # rules only: nothing to save
 
     # --- acting -----------------------------------------------------------------------------------
     def predict(self, obs, state=None, episode_start=None, deterministic: bool = True):
