@@ -514,8 +514,7 @@ class RLAD(OwnAgent):
             if ready and self.num_timesteps % config.train_freq == 0:
                 metrics = self._fast_update() if config.fast_update else self.train_step()
             if self.num_timesteps % config.log_interval == 0:
-                logged = self._floats(metrics) if config.fast_update else metrics
-                self._log_progress(logged)
+                self._log_progress(self._floats(metrics) if config.fast_update else metrics)
 
 
 class DrQ(RLAD):
