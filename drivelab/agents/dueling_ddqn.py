@@ -309,10 +309,8 @@ class DuelingDoubleDQN(OwnAgent):
         transition_bytes = 2 * 4 * self.observation_size  # observation and next one, float32
         check_buffer_memory(self.algo, "buffer_size", config.buffer_size, transition_bytes, "replay buffer")
         check_buffer_memory(self.algo, "batch_size", config.batch_size, transition_bytes, "training batch")
-        self.q_network = DuelingQNetwork(self.observation_size, int(self.action_space.n), config.stream_norm)
-        self.target_network = DuelingQNetwork(
-            self.observation_size, int(self.action_space.n), config.stream_norm
-        )
+        architecture = (self.observation_size, int(self.action_space.n), config.stream_norm)
+        self.q_network, self.target_network = DuelingQNetwork(*architecture), DuelingQNetwork(*architecture)
         self.target_network.load_state_dict(self.q_network.state_dict())
         self.target_network.eval()
         self.optimizer = torch.optim.Adam(self.q_network.parameters(), lr=config.learning_rate, foreach=True)

@@ -281,7 +281,7 @@ class OnPolicyAgent(OwnAgent):
             rewards + storage.bootstrap[:steps], storage.values[:steps].double().numpy(),
             storage.ends[:steps], self._values(obs), config.gamma, config.gae_lambda,
         )  # fmt: skip
-        rollout = Rollout(
+        return Rollout(
             storage.flat_obs(steps),
             storage.actions[:steps].flatten(0, 1),
             storage.log_probs[:steps].flatten(),
@@ -289,7 +289,6 @@ class OnPolicyAgent(OwnAgent):
             torch.from_numpy(advantages.reshape(-1)),
             torch.from_numpy(returns.reshape(-1)),
         )
-        return rollout
 
     def _scaled_rewards(self, rewards: np.ndarray, ends: np.ndarray) -> np.ndarray:
         """The rollout's rewards (T, K), divided by the running std of the discounted return when
