@@ -175,11 +175,7 @@ class ActorCritic(nn.Module):
         return (1.0 + nn.functional.softplus(out)).chunk(2, dim=-1)
 
     def sample(
-        self,
-        out: torch.Tensor,
-        deterministic: bool,
-        generator: torch.Generator,
-        rng: np.random.Generator,
+        self, out: torch.Tensor, deterministic: bool, generator: torch.Generator, rng: np.random.Generator
     ) -> torch.Tensor:
         """The distribution's variable for a batch of head outputs: drawn (from ``generator``, or
         ``rng`` for the Beta, which torch samples without a generator), or the mode (categorical),

@@ -21,12 +21,7 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from torch import nn
 
-from drivelab.agents.base import (
-    MAX_LEARNING_RATE,
-    OwnAgent,
-    gradient_step,
-    observation_to_tensor,
-)
+from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent, gradient_step, observation_to_tensor
 from drivelab.agents.expert import ExpertConfig, check_expert_env
 from drivelab.agents.imitation_data import Demonstrations, Teacher, action_agreement, collect, stack_steps
 from drivelab.agents.networks import TanhGaussianActorCritic, squashed_log_prob
