@@ -55,9 +55,6 @@ class RunningNorm(nn.Module):
             self.register_buffer(_name("var", key), torch.ones(shape, dtype=torch.float64))
         self.register_buffer("count", torch.zeros((), dtype=torch.float64))
 
-    def _part(self, obs, key: str) -> torch.Tensor:
-        return obs if self.keys is None else obs[key]
-
     def forward(self, obs):
         """Float tensors (B, ...) ready for the encoder, from stored observations of any dtype."""
         if self.keys is None:
@@ -82,7 +79,7 @@ class RunningNorm(nn.Module):
         count = None
         for key in self.normalised:
             mean, var = getattr(self, _name("mean", key)), getattr(self, _name("var", key))
-            batch = self._part(obs, key).double().reshape(-1, *mean.shape)
+            batch = (obs if self.keys is None else obs[key]).double().reshape(-1, *mean.shape)
             count = batch.shape[0]
             merged_mean, merged_var = merge_moments(
                 mean, var, self.count, batch.mean(0), batch.var(0, unbiased=False), count
@@ -175,15 +172,10 @@ class ActorCritic(nn.Module):
 
     # --- the distributions ----------------------------------------------------------------------
     def _beta(self, out: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        alpha, beta = (1.0 + nn.functional.softplus(out)).chunk(2, dim=-1)
-        return alpha, beta
+        return (1.0 + nn.functional.softplus(out)).chunk(2, dim=-1)
 
     def sample(
-        self,
-        out: torch.Tensor,
-        deterministic: bool,
-        generator: torch.Generator,
-        rng: np.random.Generator,
+        self, out: torch.Tensor, deterministic: bool, generator: torch.Generator, rng: np.random.Generator
     ) -> torch.Tensor:
         """The distribution's variable for a batch of head outputs: drawn (from ``generator``, or
         ``rng`` for the Beta, which torch samples without a generator), or the mode (categorical),

@@ -136,7 +136,7 @@ class OwnAgent:
     """Everything run.py needs from an agent, except the learning loop (``learn``) and networks.
 
     Subclasses set ``algo`` and ``config_class``, build their networks in ``_build`` and list what
-    ``save`` must keep in ``_state`` / ``_set_state``.
+    ``save`` must keep in ``_modules`` (and any further tensors in ``_state`` / ``_set_state``).
 
     :param observation_space: the environment's observation space.
     :param action_space: the environment's action space.
@@ -165,18 +165,24 @@ class OwnAgent:
         torch.manual_seed(self.seed)  # network initialisation
         self.generator = torch.Generator().manual_seed(self.seed)  # every torch draw while training
         self.logger: Logger = Logger(folder=None, output_formats=[])  # silent until run.py sets one
+        self._last_obs = None  # the observations the next ``learn`` goes on from (``_start_worlds``)
         self._build()
 
     # --- what subclasses provide ------------------------------------------------------------
     def _build(self) -> None:
         raise NotImplementedError
 
-    def _state(self) -> dict[str, Any]:
-        """Tensors and state dicts to save (networks, optimizers)."""
+    def _modules(self) -> dict[str, Any]:
+        """The networks and optimizers ``save`` keeps, by name."""
         raise NotImplementedError
 
+    def _state(self) -> dict[str, Any]:
+        """Tensors and state dicts to save: the ``_modules``' state dicts."""
+        return {key: module.state_dict() for key, module in self._modules().items()}
+
     def _set_state(self, state: dict[str, Any]) -> None:
-        raise NotImplementedError
+        for key, module in self._modules().items():
+            module.load_state_dict(state[key])
 
     # --- the SB3-compatible surface ---------------------------------------------------------
     def set_logger(self, logger: Logger) -> None:

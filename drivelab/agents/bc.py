@@ -21,12 +21,7 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from torch import nn
 
-from drivelab.agents.base import (
-    MAX_LEARNING_RATE,
-    OwnAgent,
-    gradient_step,
-    observation_to_tensor,
-)
+from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent, gradient_step, observation_to_tensor
 from drivelab.agents.expert import ExpertConfig, check_expert_env
 from drivelab.agents.imitation_data import Demonstrations, Teacher, action_agreement, collect, stack_steps
 from drivelab.agents.networks import TanhGaussianActorCritic, squashed_log_prob
@@ -126,7 +121,6 @@ class BehaviourCloning(OwnAgent):
             self.observation_space, 2, self.config.validation_fraction, self.rng
         )
         self._n_updates = 0  # training phases done = DAgger iterations done
-        self._last_obs = None
         self.episode_returns: deque[float] = deque(maxlen=100)
 
     @property
@@ -134,16 +128,14 @@ class BehaviourCloning(OwnAgent):
         """The labelled states gathered so far (checkpointed by run.py as the replay buffer)."""
         return self.replay_buffer
 
+    def _modules(self) -> dict[str, Any]:
+        return {"policy": self.policy, "optimizer": self.optimizer}
+
     def _state(self) -> dict[str, Any]:
-        return {
-            "policy": self.policy.state_dict(),
-            "optimizer": self.optimizer.state_dict(),
-            "rounds": torch.tensor(self._n_updates),
-        }
+        return {**super()._state(), "rounds": torch.tensor(self._n_updates)}
 
     def _set_state(self, state: dict[str, Any]) -> None:
-        self.policy.load_state_dict(state["policy"])
-        self.optimizer.load_state_dict(state["optimizer"])
+        super()._set_state(state)
         self._n_updates = int(state["rounds"])
 
     # --- acting -----------------------------------------------------------------------------------

@@ -309,30 +309,22 @@ class DuelingDoubleDQN(OwnAgent):
         transition_bytes = 2 * 4 * self.observation_size  # observation and next one, float32
         check_buffer_memory(self.algo, "buffer_size", config.buffer_size, transition_bytes, "replay buffer")
         check_buffer_memory(self.algo, "batch_size", config.batch_size, transition_bytes, "training batch")
-        self.q_network = DuelingQNetwork(self.observation_size, int(self.action_space.n), config.stream_norm)
-        self.target_network = DuelingQNetwork(
-            self.observation_size, int(self.action_space.n), config.stream_norm
-        )
+        architecture = (self.observation_size, int(self.action_space.n), config.stream_norm)
+        self.q_network, self.target_network = DuelingQNetwork(*architecture), DuelingQNetwork(*architecture)
         self.target_network.load_state_dict(self.q_network.state_dict())
         self.target_network.eval()
         self.optimizer = torch.optim.Adam(self.q_network.parameters(), lr=config.learning_rate, foreach=True)
         self.replay_buffer = PrioritizedReplayBuffer(
             config.buffer_size, self.observation_size, config.alpha, config.priority_eps
         )
-        self._last_obs = None
         self.episode_returns: deque[float] = deque(maxlen=100)
 
-    def _state(self) -> dict[str, Any]:
+    def _modules(self) -> dict[str, Any]:
         return {
-            "q_network": self.q_network.state_dict(),
-            "target_network": self.target_network.state_dict(),
-            "optimizer": self.optimizer.state_dict(),
+            "q_network": self.q_network,
+            "target_network": self.target_network,
+            "optimizer": self.optimizer,
         }
-
-    def _set_state(self, state: dict[str, Any]) -> None:
-        self.q_network.load_state_dict(state["q_network"])
-        self.target_network.load_state_dict(state["target_network"])
-        self.optimizer.load_state_dict(state["optimizer"])
 
     def q_values(self, observations: np.ndarray) -> torch.Tensor:
         """Q(s, ·) for a batch of flat observations, BatchNorm on its running statistics."""

@@ -126,13 +126,9 @@ class RuleBasedExpert(OwnAgent):
             raise UsageError("expert drives with --action target_speed")
         if self.env is not None:
             check_expert_env(vector_env_of(self.env), self.config.max_speed_mps, "expert")
-        self._last_obs = None
 
-    def _state(self) -> dict:
-        return {}
-
-    def _set_state(self, state: dict) -> None:
-        pass
+    def _modules(self) -> dict:
+        return {}  # rules only: nothing to save
 
     # --- acting -----------------------------------------------------------------------------------
     def predict(self, obs, state=None, episode_start=None, deterministic: bool = True):
@@ -143,9 +139,7 @@ class RuleBasedExpert(OwnAgent):
         speed = max(facts["speed_mps"], 0.0)
         steer, curvature = self._pursuit(waypoints, config.lookahead_m + config.lookahead_s * speed)
         target = min(config.cruise_speed_mps, np.sqrt(config.lateral_accel_mps2 / max(abs(curvature), 1e-6)))
-        target = min(target, self._bend_ahead(waypoints))
-        for limit in self._hazard_limits(facts, speed):
-            target = min(target, limit)
+        target = min(target, self._bend_ahead(waypoints), *self._hazard_limits(facts, speed))
         action = np.array([np.clip(target / config.max_speed_mps, 0.0, 1.0), steer], dtype=np.float32)
         return action, None
 

@@ -16,7 +16,7 @@ import torch
 from gymnasium import spaces
 
 from drivelab.agents.storage import read_arrays, split_meta, write_arrays
-from drivelab.agents.worlds import Worlds, map_obs
+from drivelab.agents.worlds import Worlds, map_obs, row
 from drivelab.errors import UsageError
 from drivelab.perception.affordances import Affordances
 from drivelab.perception.waypoints import Waypoints
@@ -46,10 +46,7 @@ class Teacher:
     def actions(self, batch) -> np.ndarray:
         """(K, 2) ``[target speed fraction, steering]`` of the expert in each world of ``batch``."""
         views = self.observe(batch)
-        rows = [
-            self.expert.predict({name: view[k] for name, view in views.items()})[0]
-            for k in range(batch.num_worlds)
-        ]
+        rows = [self.expert.predict(row(views, k))[0] for k in range(batch.num_worlds)]
         return np.stack(rows).astype(np.float32)
 
 
@@ -150,17 +147,11 @@ class Demonstrations:
     # --- files: npz of plain arrays ----------------------------------------------------------------
     def state_arrays(self) -> dict[str, np.ndarray]:
         """Every array (``obs`` or ``obs.<key>``, ``actions``, ``iterations``, ``validation``)."""
+        labels = {"actions": self.actions, "iterations": self.iterations, "validation": self.validation}
         observations = self.observations
         if isinstance(observations, dict):
-            arrays = {f"obs.{key}": value for key, value in observations.items()}
-        else:
-            arrays = {"obs": observations}
-        return {
-            **arrays,
-            "actions": self.actions,
-            "iterations": self.iterations,
-            "validation": self.validation,
-        }
+            return {**{f"obs.{key}": value for key, value in observations.items()}, **labels}
+        return {"obs": observations, **labels}
 
     def load_state_arrays(self, arrays: dict[str, np.ndarray]) -> None:
         """Replace the samples held by those of ``state_arrays`` (shapes checked against the space)."""

@@ -50,12 +50,10 @@ class SeedCnn(nn.Module):
         super().__init__()
         channels = image_space.shape[0]
         self.conv = nn.Sequential(
-            nn.Conv2d(channels, 16, kernel_size=8, stride=4),
-            nn.ReLU(),
-            nn.Conv2d(16, 32, kernel_size=4, stride=2),
-            nn.ReLU(),
+            nn.Conv2d(channels, 16, kernel_size=8, stride=4), nn.ReLU(),
+            nn.Conv2d(16, 32, kernel_size=4, stride=2), nn.ReLU(),
             nn.Flatten(),
-        )
+        )  # fmt: skip
         with torch.no_grad():
             flat = self.conv(torch.zeros(1, *image_space.shape)).shape[1]
         self.fc = nn.Sequential(nn.Linear(flat, features), nn.ReLU())
@@ -174,12 +172,6 @@ class TanhGaussianActorCritic(nn.Module):
             unsquashed = mean + distribution.stddev * torch.randn(mean.shape, generator=generator)
         return unsquashed, squashed_log_prob(distribution, unsquashed), value
 
-    def evaluate(self, obs, unsquashed: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """(log π of stored pre-tanh actions, entropy of the Gaussian before squashing, V)."""
-        mean, value = self(obs)
-        distribution = self.distribution(mean)
-        return squashed_log_prob(distribution, unsquashed), distribution.entropy().sum(-1), value
-
 
 def squashed_log_prob(distribution: torch.distributions.Normal, unsquashed: torch.Tensor) -> torch.Tensor:
     """log π(a) for a = tanh(u): log N(u) − Σ log(1 − tanh²u), the change of variables, computed
@@ -191,20 +183,17 @@ def squashed_log_prob(distribution: torch.distributions.Normal, unsquashed: torc
 class SeedCnnExtractor(BaseFeaturesExtractor):
     """The MetaDrive study's CNN as an SB3 features extractor (image observations)."""
 
-    def __init__(self, observation_space: spaces.Box) -> None:
-        super().__init__(observation_space, features_dim=256)
-        self.encoder = SeedCnn(observation_space)
+    encoder_class: type[nn.Module] = SeedCnn
 
-    def forward(self, observations: torch.Tensor) -> torch.Tensor:
+    def __init__(self, observation_space: spaces.Space) -> None:
+        super().__init__(observation_space, features_dim=256)
+        self.encoder = self.encoder_class(observation_space)
+
+    def forward(self, observations) -> torch.Tensor:
         return self.encoder(observations)
 
 
-class FusionExtractor(BaseFeaturesExtractor):
+class FusionExtractor(SeedCnnExtractor):
     """The MetaDrive study's fusion network as an SB3 features extractor (Dict: image + ego state + LiDAR)."""
 
-    def __init__(self, observation_space: spaces.Dict) -> None:
-        super().__init__(observation_space, features_dim=256)
-        self.encoder = FusionEncoder(observation_space)
-
-    def forward(self, observations: dict[str, torch.Tensor]) -> torch.Tensor:
-        return self.encoder(observations)
+    encoder_class = FusionEncoder

@@ -201,21 +201,21 @@ class OnPolicyAgent(OwnAgent):
         self.return_stats = torch.tensor([0.0, 1.0, 0.0], dtype=torch.float64)  # mean, var, count
         self.running_returns = torch.zeros(worlds, dtype=torch.float64)
         self.learning_rate, self.entropy_coef = config.learning_rate, config.entropy_coef  # annealed in learn
-        self._last_obs = None
         self._storage: Storage | None = None
         self.episode_returns: deque[float] = deque(maxlen=100)
 
+    def _modules(self) -> dict[str, Any]:
+        return {"policy": self.policy, "optimizer": self.optimizer}
+
     def _state(self) -> dict[str, Any]:
         return {
-            "policy": self.policy.state_dict(),
-            "optimizer": self.optimizer.state_dict(),
+            **super()._state(),
             "return_stats": self.return_stats,
             "running_returns": self.running_returns,
         }
 
     def _set_state(self, state: dict[str, Any]) -> None:
-        self.policy.load_state_dict(state["policy"])
-        self.optimizer.load_state_dict(state["optimizer"])
+        super()._set_state(state)
         if "return_stats" in state:  # (files saved before reward normalisation have none)
             self.return_stats = state["return_stats"].clone()
             self.running_returns = state["running_returns"].clone()
@@ -281,7 +281,7 @@ class OnPolicyAgent(OwnAgent):
             rewards + storage.bootstrap[:steps], storage.values[:steps].double().numpy(),
             storage.ends[:steps], self._values(obs), config.gamma, config.gae_lambda,
         )  # fmt: skip
-        rollout = Rollout(
+        return Rollout(
             storage.flat_obs(steps),
             storage.actions[:steps].flatten(0, 1),
             storage.log_probs[:steps].flatten(),
@@ -289,7 +289,6 @@ class OnPolicyAgent(OwnAgent):
             torch.from_numpy(advantages.reshape(-1)),
             torch.from_numpy(returns.reshape(-1)),
         )
-        return rollout
 
     def _scaled_rewards(self, rewards: np.ndarray, ends: np.ndarray) -> np.ndarray:
         """The rollout's rewards (T, K), divided by the running std of the discounted return when

@@ -89,13 +89,6 @@ def tensors_from_bytes(data: bytes) -> Any:
 
 
 # --- arrays ------------------------------------------------------------------------------------
-def arrays_to_bytes(arrays: dict[str, np.ndarray]) -> bytes:
-    """Arrays (no object dtype) as ``.npz`` bytes."""
-    buffer = io.BytesIO()
-    np.savez(buffer, **arrays)
-    return buffer.getvalue()
-
-
 def read_arrays(source: str | Path | bytes) -> dict[str, np.ndarray]:
     """Every array of an ``.npz`` file or its bytes; object arrays are refused (ValueError), and so
     are compressed members: drivelab writes its arrays uncompressed (``np.savez``), so that none
@@ -251,20 +244,18 @@ def read_zip(path: str | Path, meta_name: str) -> tuple[dict, zipfile.ZipFile]:
     ``OldFormatError`` before anything inside it is read, metadata over ``MAX_META_BYTES`` a
     ValueError."""
     archive = zipfile.ZipFile(path)
-    names = set(archive.namelist())
-    if names & set(PICKLED_MEMBERS) or meta_name not in names:
-        archive.close()
+    try:
+        names = set(archive.namelist())
         if names & set(PICKLED_MEMBERS):
             raise OldFormatError(path)
-        raise ValueError(f"{str(path)!r} has no {meta_name}")
-    try:
+        if meta_name not in names:
+            raise ValueError(f"{str(path)!r} has no {meta_name}")
         meta = json.loads(read_member(archive, meta_name, MAX_META_BYTES))
+        if not isinstance(meta, dict):
+            raise ValueError(f"{meta_name} is not a mapping")
     except BaseException:
         archive.close()
         raise
-    if not isinstance(meta, dict):
-        archive.close()
-        raise ValueError(f"{meta_name} is not a mapping")
     return meta, archive
 
 

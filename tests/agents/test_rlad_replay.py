@@ -1,10 +1,12 @@
 """RLAD's replay: each frame stored once, stacks rebuilt across episode boundaries, memory."""
 
+import io
+
 import numpy as np
 import torch
 
 from drivelab.agents.rlad.replay import UNKNOWN_LABEL, FrameReplayBuffer, label_index
-from drivelab.agents.storage import arrays_to_bytes, read_arrays
+from drivelab.agents.storage import read_arrays
 from drivelab.envs.core import DriveEnv
 
 OBS = "camera:width=24:height=24:stack=3,waypoints,measurements:stack=3"
@@ -13,6 +15,13 @@ OBS = "camera:width=24:height=24:stack=3,waypoints,measurements:stack=3"
 def _record(obs, info):
     frame = np.moveaxis(obs["camera"][..., -3:], -1, 0)
     return frame, obs["waypoints"], obs["measurements"], label_index(info.get("traffic_light"))
+
+
+def _arrays_to_bytes(arrays):
+    """Arrays as the bytes of an ``.npz`` file (``np.savez``, uncompressed as drivelab writes them)."""
+    buffer = io.BytesIO()
+    np.savez(buffer, **arrays)
+    return buffer.getvalue()
 
 
 def _channels_first(camera):
@@ -116,7 +125,7 @@ def test_frames_kept_in_a_tensor_give_the_same_batches_and_save_as_numpy():
     arrays = tensor.state_arrays()
     assert all(isinstance(array, np.ndarray) and array.dtype != object for array in arrays.values())
     loaded = FrameReplayBuffer(30, (3, 6, 6), 3, (10, 2), 6, 2)  # frames on the host
-    loaded.load_state_arrays(read_arrays(arrays_to_bytes(arrays)))
+    loaded.load_state_arrays(read_arrays(_arrays_to_bytes(arrays)))
     assert isinstance(loaded.frames, np.ndarray) and loaded.frame_device is None
     np.testing.assert_array_equal(loaded.frames, tensor.frames.numpy())
     counters = ("written", "position", "stored")

@@ -32,13 +32,9 @@ def normalized_discontinuity(gradient: torch.Tensor) -> torch.Tensor:
     mean = gradient.mean(dim=0, keepdim=True)  # (1, C, H, W)
     height, width = mean.shape[-2:]
     padded = nn.functional.pad(mean, (1, 1, 1, 1), mode="replicate")
+    shifts = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if (dy, dx) != (0, 0)]
     neighbours = torch.stack(
-        [
-            padded[..., 1 + dy : 1 + dy + height, 1 + dx : 1 + dx + width]
-            for dy in (-1, 0, 1)
-            for dx in (-1, 0, 1)
-            if (dy, dx) != (0, 0)
-        ]
+        [padded[..., 1 + dy : 1 + dy + height, 1 + dx : 1 + dx + width] for dy, dx in shifts]
     )
     signal = (neighbours**2).mean(dim=0)
     noise = ((neighbours - mean) ** 2).mean(dim=0)

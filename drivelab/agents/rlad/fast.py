@@ -29,7 +29,6 @@ from drivelab.agents.rlad.alix import draw_offsets
 from drivelab.agents.rlad.augmentation import draw_shifts
 
 COMPILE_MODES = ("none", "default", "reduce-overhead", "max-autotune")
-NOISE_KEYS = ("shifts", "next_shifts", "next_offsets", "next_noise", "offsets", "noise")
 
 
 def compile_unavailable(device: torch.device) -> str | None:

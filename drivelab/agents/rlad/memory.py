@@ -60,10 +60,7 @@ class DeviceMemoryLedger:
     """
 
     def __init__(
-        self,
-        path: str | Path | None = None,
-        pid: int | None = None,
-        alive: Callable[[int], bool] = pid_alive,
+        self, path: str | Path | None = None, pid: int | None = None, alive: Callable[[int], bool] = pid_alive
     ) -> None:
         self.path = Path(path) if path is not None else default_ledger_path()
         self.pid = os.getpid() if pid is None else int(pid)

@@ -74,12 +74,9 @@ class FrameReplayBuffer:
     # --- writing -------------------------------------------------------------------------------
     def _write(self, frame: np.ndarray, waypoints, measurements, label: int) -> int:
         number, slot = self.written, self.written % self.records
-        if self.frame_device is None:
-            self.frames[slot] = frame
-        else:
-            if not isinstance(self.frames, torch.Tensor):  # the first write: allocate on the device
-                self._frames_to(self.frame_device)
-            self.frames[slot] = torch.as_tensor(frame)
+        if self.frame_device is not None and not isinstance(self.frames, torch.Tensor):
+            self._frames_to(self.frame_device)  # the first write: allocate on the device
+        self.frames[slot] = frame if self.frame_device is None else torch.as_tensor(frame)
         self.waypoints[slot] = waypoints
         self.measurements[slot], self.labels[slot] = measurements, label
         self.written += 1

@@ -218,7 +218,6 @@ class RLAD(OwnAgent):
         )  # fmt: skip
         self.replay_buffer.on_allocate = self._frames_allocated
         self.low, self.high = self.action_space.low, self.action_space.high
-        self._last_obs = None
         self.episode_returns: deque[float] = deque(maxlen=100)
 
     def _check_memory(self) -> None:
@@ -290,12 +289,10 @@ class RLAD(OwnAgent):
         }  # fmt: skip
 
     def _state(self) -> dict[str, Any]:
-        state = {key: module.state_dict() for key, module in self._modules().items()}
-        return {**state, "log_alpha": self.log_alpha.detach()}
+        return {**super()._state(), "log_alpha": self.log_alpha.detach()}
 
     def _set_state(self, state: dict[str, Any]) -> None:
-        for key, module in self._modules().items():
-            module.load_state_dict(state[key])
+        super()._set_state(state)
         with torch.no_grad():
             self.log_alpha.copy_(state["log_alpha"])
 
@@ -517,8 +514,7 @@ class RLAD(OwnAgent):
             if ready and self.num_timesteps % config.train_freq == 0:
                 metrics = self._fast_update() if config.fast_update else self.train_step()
             if self.num_timesteps % config.log_interval == 0:
-                logged = self._floats(metrics) if config.fast_update else metrics
-                self._log_progress(logged)
+                self._log_progress(self._floats(metrics) if config.fast_update else metrics)
 
 
 class DrQ(RLAD):

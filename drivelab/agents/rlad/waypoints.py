@@ -10,10 +10,10 @@ WAYPOINT_ENCODERS = ("wayconv1d", "mlp")
 CONV_CHANNELS, HIDDEN = 20, 20
 
 
-def _latent(inputs: int, features: int) -> nn.Sequential:
-    """inputs → HIDDEN → ReLU → features → LayerNorm → tanh (the tail both waypoint encoders share)."""
+def _latent(inputs: int, features: int, hidden: int = HIDDEN) -> nn.Sequential:
+    """inputs → hidden → ReLU → features → LayerNorm → tanh (waypoint encoders' tail, measurement MLP)."""
     return nn.Sequential(
-        nn.Linear(inputs, HIDDEN), nn.ReLU(), nn.Linear(HIDDEN, features), nn.LayerNorm(features), nn.Tanh()
+        nn.Linear(inputs, hidden), nn.ReLU(), nn.Linear(hidden, features), nn.LayerNorm(features), nn.Tanh()
     )
 
 
@@ -73,9 +73,7 @@ class MeasurementEncoder(nn.Module):
 
     def __init__(self, size: int, features: int = 16) -> None:
         super().__init__()
-        self.net = nn.Sequential(
-            nn.Linear(size, 8), nn.ReLU(), nn.Linear(8, features), nn.LayerNorm(features), nn.Tanh()
-        )
+        self.net = _latent(size, features, hidden=8)
         self.features = features
 
     def forward(self, measurements: torch.Tensor) -> torch.Tensor:
