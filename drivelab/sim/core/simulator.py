@@ -47,10 +47,9 @@ from drivelab.world.batch import (
     assemble,
 )
 from drivelab.world.geometry import FULL_LOCK_RAD
-from drivelab.world.scenario import META_ACTIONS, Scenario
+from drivelab.world.scenario import Scenario
 from drivelab.world.state import RoadMap
 
-META = META_ACTIONS
 LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER = range(5)
 ACCELERATION_RANGE, STEERING_RANGE = (-5.0, 5.0), (-FULL_LOCK_RAD, FULL_LOCK_RAD)  # ContinuousAction's
 
@@ -381,16 +380,6 @@ def clear_departed(
         count[k], ego[k] = kept, new_ego
 
 
-def continuous_commands(controls, num_worlds: int) -> np.ndarray:
-    """(K, 2) [acceleration m/s², steering rad] of normalised controls: ``ContinuousAction.get_action``'s
-    clip to [-1, 1] and linear map onto ACCELERATION_RANGE and STEERING_RANGE, in the controls' own
-    float type (``float_controls``), so that both backends get the same bits."""
-    controls = float_controls(controls, num_worlds)
-    commands = np.empty_like(controls)
-    _commands(controls, *command_ranges(controls.dtype), commands)
-    return commands
-
-
 def float_controls(controls, num_worlds: int) -> np.ndarray:
     """(K, 2) controls in float32 or float64, the types the compiled arithmetic takes: those
     stay as they are, anything else (ints, float16, long double) becomes float64."""
@@ -421,20 +410,14 @@ def _command(control, low, span, constants):
     return low + (control + one) * span / two
 
 
-@njit(cache=True)
-def _commands(controls, low, span, constants, out) -> None:
-    for k in range(controls.shape[0]):
-        for i in range(2):
-            out[k, i] = _command(controls[k, i], low[i], span[i], constants)
-
-
 assert (COLLISION_NONE, COLLISION_VEHICLE) == (0, 1)  # a crashed flag as int8 is its collision kind
 
 
 @njit(cache=True)
 def set_ego_controls(vehicles, ego, controls, low, span, constants) -> None:
-    """Each world's ego row gets the command of its normalised control (K, 2) (``continuous_commands``'
-    arithmetic): acceleration (also the pedal of a pedal ego, the circuits') and steering."""
+    """Each world's ego row gets the command of its normalised control (K, 2) (``ContinuousAction``'s
+    clip and linear map, ``_command``): acceleration (also the pedal of a pedal ego, the circuits')
+    and steering."""
     for k in range(ego.size):
         acceleration = _command(controls[k, 0], low[0], span[0], constants)
         vehicles[k, ego[k], T.ACCEL] = acceleration
