@@ -147,8 +147,6 @@ class TownSimulator(FastSimulator):
         self.coords, self.done, self.trig = (np.stack(parts) for parts in zip(*cache, strict=True))
         self._light_valid = np.ones((k, len(arrays.light_junction)), dtype=bool)
         self._light_valid.setflags(write=False)
-        self._max_speed = self._empty["max_speed_mps"]
-        self._road_index = self._empty["road_index"]
 
     # --- episodes -------------------------------------------------------------------------------
     def _start_episodes(self, worlds: np.ndarray, seeds: np.ndarray) -> None:

@@ -670,14 +670,11 @@ def enforce_road_rules(
 
 
 @njit(cache=True)
-def simulate(
-    v, lanes, p, frames: int, dt: float, regulation, release_cap_mps: float = np.inf, prioritised_only=False
-) -> None:
+def simulate(v, lanes, p, frames: int, dt: float, regulation) -> None:
     """AbstractEnv._simulate for ``frames`` simulation steps of ``dt`` seconds.
 
     :param regulation: [period, road steps so far]: a RegulatedRoad enforces its rules every
         ``period`` road steps (0: a plain Road); the step count is updated in place.
-    :param release_cap_mps: / ``prioritised_only``: ``enforce_road_rules``' options.
     """
     v, lanes, p = borrowed((v, lanes, p))
     coords, done, trig = frame_cache(v, lanes)
@@ -687,7 +684,7 @@ def simulate(
         if regulation[0] > 0:
             regulation[1] += 1
             if regulation[1] % regulation[0] == 0:
-                enforce_road_rules(v, lanes, release_cap_mps, prioritised_only)
+                enforce_road_rules(v, lanes)
         for i in range(v.shape[0]):
             if v[i, KIND] != OBSTACLE:
                 step_vehicle(v, lanes, i, dt)
