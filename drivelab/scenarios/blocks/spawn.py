@@ -240,11 +240,7 @@ def _merging(rows: np.ndarray, start: np.ndarray, successors: np.ndarray) -> np.
 
 def _ego_route_rows(pg: PGMap, lane_id: int) -> list[int]:
     """Lane rows of the route's roads, keeping ``lane_id`` where a road has that many lanes."""
-    rows = []
-    for road in pg.route:
-        lanes = pg.road_rows(road)
-        rows.append(int(lanes[min(lane_id, len(lanes) - 1)]))
-    return rows
+    return [int(lanes[min(lane_id, len(lanes) - 1)]) for lanes in map(pg.road_rows, pg.route)]
 
 
 def _spots(pg: PGMap, lane_length: np.ndarray) -> tuple[np.ndarray, ...]:

@@ -188,7 +188,7 @@ class _Road:
     keep_npcs: bool
     extra_vehicles: int
     destination: str | None
-    cache: dict
+    cache: dict = dataclasses.field(default_factory=dict)
     description: RoadDescription | None = None
 
 
@@ -213,9 +213,11 @@ def _npc_class(config: dict) -> type:
     return npc_class
 
 
-def _new_road(scenario: Scenario, table: L.LaneTable, graph_keys: dict, config: dict, **fields) -> _Road:
-    """A _Road of ``table`` with the fields every conversion derives alike; ``fields``: the rest."""
+def _new_road(scenario: Scenario, table: L.LaneTable, graph: dict, config: dict, **fields) -> _Road:
+    """A _Road of ``table`` and ``graph`` ({from: {to: lanes}}) with the fields every conversion
+    derives alike; ``fields``: the rest."""
     npc_class = _npc_class(config)
+    graph_keys = {f: list(to) for f, to in graph.items()}
     return _Road(
         table=table,
         graph_keys=graph_keys,
@@ -255,7 +257,7 @@ def _convert_road(builder: HighwayBackend, scenario: Scenario) -> _Road:
     return _new_road(
         scenario,
         table,
-        {f: list(to) for f, to in network.graph.items()},
+        network.graph,
         config,
         road_map=build_road_map(network),
         target_speeds=np.asarray(getattr(env.action_type, "target_speeds", [0.0]), dtype=float),
@@ -268,7 +270,6 @@ def _convert_road(builder: HighwayBackend, scenario: Scenario) -> _Road:
         ego_width=float(env.vehicle.WIDTH),
         keep_npcs=builder.keep_npcs,
         extra_vehicles=builder.extra_vehicles,
-        cache={},
     )
 
 
@@ -302,7 +303,7 @@ def _describe_road(scenario: Scenario, traffic: str, control: str, overrides: di
     return _new_road(
         scenario,
         table,
-        {f: list(to) for f, to in desc.graph.items()},
+        desc.graph,
         config,
         road_map=road_map(desc),
         target_speeds=np.asarray(target_speeds, dtype=float),
@@ -315,7 +316,6 @@ def _describe_road(scenario: Scenario, traffic: str, control: str, overrides: di
         ego_width=float(Vehicle.WIDTH),
         keep_npcs=keep_npcs,
         extra_vehicles=extra_vehicles,
-        cache={},
         description=desc,
     )
 

@@ -246,13 +246,7 @@ def cell_centre(cell: Cell, block_m: float) -> np.ndarray:
 
 def junction_block(arms: tuple[int, ...]) -> Junction:
     """The block a grid cell with these arms (laying order) gets: signalised with three or more."""
-    if len(arms) == 4:
-        return Junction.x(arms)
-    if len(arms) == 3:
-        return Junction.t(next(k for k in range(4) if k not in arms), arms)
-    if len(arms) == 2:
-        return Junction.corner(arms)
-    return Junction(tuple(arms), False)
+    return Junction(tuple(arms), signalised=len(arms) >= 3)
 
 
 def town(
