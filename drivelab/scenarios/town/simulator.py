@@ -166,9 +166,7 @@ class TownSimulator(FastSimulator):
         self.time_s[worlds] = 0.0
         if worlds.size:
             self._pad_world_routes(worlds)  # once for all the worlds that started
-            active = np.zeros(self.num_worlds, dtype=bool)
-            active[worlds] = True
-            self._update_lights(active)
+            self._update_lights(np.isin(np.arange(self.num_worlds), worlds))
 
     def _set_route(self, k: int) -> None:
         """World k's route polyline from its planned lanes (``HighwayBackend.route_for``); the
@@ -241,9 +239,7 @@ class TownSimulator(FastSimulator):
                 _append_route(row, more)
             self._set_route(k)
             self._pad_world_routes([k])
-            update = np.zeros(self.num_worlds, dtype=bool)
-            update[k] = True
-            self._project(fresh=np.zeros(self.num_worlds, dtype=bool), update=update)
+            self._project(fresh=np.zeros(self.num_worlds, dtype=bool), update=np.arange(self.num_worlds) == k)
 
     # --- export ---------------------------------------------------------------------------------
     def _export(self) -> WorldBatch:

@@ -195,10 +195,6 @@ class _Road:
 _ROADS: dict[tuple, _Road] = {}
 
 
-def _road_key(scenario: Scenario, traffic: str, control: str, overrides: dict | None) -> tuple:
-    return (repr(scenario), traffic, control, repr(sorted((overrides or {}).items())))
-
-
 def _static_objects(road) -> list:
     """The road's obstacles: its objects but the town's pedestrians (they are set up per episode)."""
     walkers = {id(p) for p in getattr(road, "pedestrians", [])}
@@ -653,9 +649,7 @@ class FastSimulator:
         self.traffic_flow = scenario.traffic_flow
         if self.arrival == ARRIVE_PAST_X:
             self.arrival_threshold = float(scenario.arrival_x_m)
-        self.arrivals = None
-        if self.traffic_flow:
-            self.arrivals = scenario.arrivals(road)
+        self.arrivals = scenario.arrivals(road) if self.traffic_flow else None
         k = num_worlds
         self.vehicles = np.zeros((k, 1, T.VEHICLE_COLUMNS))  # grows to the largest world
         self.count = np.zeros(k, dtype=np.int64)
@@ -714,7 +708,7 @@ class FastSimulator:
     @staticmethod
     def _load_road(scenario: Scenario, traffic: str, control: str, overrides: dict | None) -> _Road:
         """The scenario's road for this configuration, converted at its first use (``_ROADS``)."""
-        key = _road_key(scenario, traffic, control, overrides)
+        key = (repr(scenario), traffic, control, repr(sorted((overrides or {}).items())))
         road = _ROADS.get(key)
         if road is None and scenario.road is not None:  # a described road: no highway-env object
             road = _ROADS[key] = _describe_road(scenario, traffic, control, overrides)
