@@ -264,11 +264,10 @@ class HighwayBackend:
                     break
                 nodes.append(successors[0])
                 length += network.get_lane((nodes[-2], nodes[-1], 0)).length
-        lanes = []
-        for _from, _to in zip(nodes[:-1], nodes[1:], strict=True):
-            count = len(network.graph[_from][_to])
-            lanes.append((_from, _to, min(lane_id, count - 1)))
-        return lanes
+        return [
+            (_from, _to, min(lane_id, len(network.graph[_from][_to]) - 1))
+            for _from, _to in zip(nodes[:-1], nodes[1:], strict=True)
+        ]
 
     def route_for(self, lanes: list[tuple]) -> RouteTracker:
         """A RouteTracker along the centre lines of ``lanes``."""
