@@ -174,21 +174,15 @@ def _highway_env_keys(scenario: Scenario) -> set[str]:
 def option_rows(scenario: Scenario) -> list[dict[str, Any]]:
     """The scenario's options as table rows for the docs: name, type, range, default, the
     traffic levels' values (traffic options; else empty), doc."""
-    rows = []
-    for option in scenario.options:
-        levels = {}
-        if option.traffic:
-            levels = {
-                level: declared_config(scenario, level, "meta")[option.name] for level in TRAFFIC_LEVELS
-            }
-        rows.append(
-            {
-                "name": option.name,
-                "type": option.type_name,
-                "range": option.range_text,
-                "default": option.default,
-                "traffic_levels": levels,
-                "doc": option.doc,
-            }
-        )
-    return rows
+    levels = {level: declared_config(scenario, level, "meta") for level in TRAFFIC_LEVELS}
+    return [
+        {
+            "name": option.name,
+            "type": option.type_name,
+            "range": option.range_text,
+            "default": option.default,
+            "traffic_levels": {level: levels[level][option.name] for level in levels if option.traffic},
+            "doc": option.doc,
+        }
+        for option in scenario.options
+    ]

@@ -11,11 +11,11 @@ from drivelab.scenarios.town.road import (
     TownLights,
     approach_of,
     build_network,
-    road_arrays,
     shortest_route,
 )
 from drivelab.sim.core.lanes import LaneTable
 from drivelab.sim.junctions.rows import TURN_LEFT, TURN_RIGHT, TURN_STRAIGHT
+from tests.envs.town_reference import road_arrays
 
 
 @pytest.mark.parametrize("name", sorted(LAYOUTS))

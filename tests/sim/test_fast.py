@@ -12,6 +12,7 @@ from highway_env.road.road import Road, RoadNetwork
 from highway_env.vehicle.behavior import IDMVehicle
 from highway_env.vehicle.controller import ControlledVehicle
 from highway_env.vehicle.kinematics import Vehicle
+from numba import njit
 
 from drivelab.envs.core import DriveEnv
 from drivelab.errors import UsageError
@@ -182,6 +183,23 @@ def test_idm_follower_behind_a_braking_leader():
     assert not follower.crashed and state[0, T.CRASHED] == 0
 
 
+@njit
+def _neighbours(v, lanes, i: int, lane: int) -> tuple[int, int]:
+    """``traffic.cached_neighbours`` without a frame cache."""
+    coords, done, _ = T.frame_cache(v, lanes)
+    return T.cached_neighbours(v, lanes, coords, done, i, lane)
+
+
+@njit
+def _mobil(v, lanes, p, i: int, lane: int) -> bool:
+    """``traffic.mobil_side`` without a frame cache (as highway-env's ``IDMVehicle.mobil``)."""
+    coords, done, trig = T.frame_cache(v, lanes)
+    T.start_frame(v, done, trig)
+    own = np.empty(T.OWN_SIZE)
+    T.own_lane(v, lanes, p, coords, done, trig, i, own)
+    return T.mobil_side(v, lanes, p, coords, done, trig, i, lane, own)
+
+
 def test_neighbours_match_highway_env_with_ties():
     """The lane-sorted neighbour search finds highway-env's front and rear vehicles, also where
     several vehicles share a longitudinal position (highway-env keeps the last such row ahead and
@@ -197,7 +215,7 @@ def test_neighbours_match_highway_env_with_ties():
         for row, lane_index in enumerate(table.indices):
             expected = road.neighbour_vehicles(vehicle, lane_index)
             expected = tuple(-1 if v is None else road.vehicles.index(v) for v in expected)
-            assert T.neighbours(state, table.rows, i, row) == expected
+            assert _neighbours(state, table.rows, i, row) == expected
 
 
 @pytest.mark.parametrize(
@@ -218,7 +236,7 @@ def test_mobil_decisions_match(others, expected):
         road.vehicles.append(IDMVehicle(road, np.array(position), 0.0, speed, target_speed=speed))
     state = vehicles_to_array(road.vehicles, table)
     candidate = table.row_of[("0", "1", 0)]
-    ours = T.mobil(state, table.rows, idm_parameters(), 0, candidate)
+    ours = _mobil(state, table.rows, idm_parameters(), 0, candidate)
     assert me.mobil(("0", "1", 0)) == ours == expected
 
 

@@ -26,7 +26,7 @@ from drivelab.scenarios.town.reference_env import fixed_routes
 from drivelab.scenarios.town.road import LAYOUTS, build_network, road_description
 from drivelab.sim.core import lanes as L
 from drivelab.sim.core.lanes import LaneTable
-from drivelab.sim.junctions.arrays import shortest_route, town_arrays_from_network
+from drivelab.sim.junctions.arrays import shortest_route
 from drivelab.sim.junctions.arrays_description import town_arrays
 from drivelab.sim.junctions.rows import TURN_LEFT, TURN_RIGHT, TURN_STRAIGHT
 from drivelab.sim.junctions.rules import (
@@ -45,6 +45,7 @@ from drivelab.sim.roads import blocks
 from drivelab.sim.roads.highway_network import to_road_network
 from drivelab.sim.roads.road_map import centre_line, circuit_route, road_map
 from drivelab.sim.roads.road_map import lane_points as _lane_points
+from tests.envs.town_reference import town_arrays_from_network
 
 
 # --- frozen oracles: the town and circuit construction before the road description ------------

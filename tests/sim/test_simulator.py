@@ -4,12 +4,13 @@ import dataclasses
 
 import numpy as np
 import pytest
+from numba import njit
 
 from drivelab.errors import UsageError
 from drivelab.scenarios import SCENARIOS
 from drivelab.sim.core import traffic as T
 from drivelab.sim.core.backend import FastBackend, fast_simulator
-from drivelab.sim.core.simulator import FastSimulator
+from drivelab.sim.core.simulator import FastSimulator, _command, command_ranges, float_controls
 from drivelab.world.batch import COLLISION_VEHICLE, WorldBatch
 
 # (scenario, traffic, control): every scenario the fast backend runs, with traffic
@@ -199,17 +200,30 @@ def test_batched_highway_set_up_is_the_one_world_set_up(traffic, control):
         assert not simulator.vehicles[k, len(rows) :].any()
 
 
+@njit
+def _commands(controls, low, span, constants, out) -> None:
+    for k in range(controls.shape[0]):
+        for i in range(2):
+            out[k, i] = _command(controls[k, i], low[i], span[i], constants)
+
+
+def continuous_commands(controls, num_worlds: int) -> np.ndarray:
+    """(K, 2) [acceleration m/s², steering rad] of normalised controls: ``ContinuousAction.get_action``'s
+    clip to [-1, 1] and linear map onto ACCELERATION_RANGE and STEERING_RANGE, in the controls' own
+    float type (``float_controls``), as ``set_ego_controls`` computes the egos' commands."""
+    controls = float_controls(controls, num_worlds)
+    commands = np.empty_like(controls)
+    _commands(controls, *command_ranges(controls.dtype), commands)
+    return commands
+
+
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_continuous_commands_are_highway_envs_bits(dtype):
     """The egos' commands are ContinuousAction.get_action's: clipped to [-1, 1], mapped onto
     ±5 m/s² and ±45° in the controls' own float type, to the last bit (NaN kept)."""
     from highway_env import utils as hw_utils
 
-    from drivelab.sim.core.simulator import (
-        ACCELERATION_RANGE,
-        STEERING_RANGE,
-        continuous_commands,
-    )
+    from drivelab.sim.core.simulator import ACCELERATION_RANGE, STEERING_RANGE
 
     controls = np.random.default_rng(0).uniform(-1.5, 1.5, (512, 2)).astype(dtype)
     controls[:4, 0] = [-1.0, 1.0, -0.0, np.nan]
@@ -223,8 +237,6 @@ def test_continuous_commands_are_highway_envs_bits(dtype):
 
 @pytest.mark.parametrize("dtype", [np.float16, np.int64])
 def test_other_control_types_are_taken_as_float64(dtype):
-    from drivelab.sim.core.simulator import continuous_commands
-
     controls = np.array([[0.5, -1.0], [2.0, 0.0]]).astype(dtype)
     commands = continuous_commands(controls, 2)
     assert commands.dtype == np.float64

@@ -235,14 +235,12 @@ class BlocksSimulator(FastSimulator):
         )
         timings = bmap.pg.description.timings
         self.timings = np.array([timings.green_s, timings.yellow_s, timings.all_red_s])
-        k = self.num_worlds
-        if bmap.junction_count > self.offsets.shape[1]:
-            self.offsets = np.concatenate(
-                [self.offsets, np.zeros((k, bmap.junction_count - self.offsets.shape[1]))], axis=1
-            )
-        if len(bmap.light_arm) > self.light_state.shape[1]:
-            grow = len(bmap.light_arm) - self.light_state.shape[1]
-            self.light_state = np.concatenate([self.light_state, np.zeros((k, grow), dtype=np.int64)], axis=1)
+        extra_junctions = bmap.junction_count - self.offsets.shape[1]
+        if extra_junctions > 0:
+            self.offsets = np.pad(self.offsets, ((0, 0), (0, extra_junctions)))
+        extra_lights = len(bmap.light_arm) - self.light_state.shape[1]
+        if extra_lights > 0:
+            self.light_state = np.pad(self.light_state, ((0, 0), (0, extra_lights)))
         self.map_roads = (*self.map_roads, bmap.road.road_map)
         return slot
 

@@ -194,11 +194,10 @@ class BlocksMap:
 def _priorities(pg: PGMap, rows: np.ndarray) -> None:
     """Right of way of the junction lanes (see MAIN_ROAD_PRIORITY), into ``rows[:, PRIORITY]``."""
     desc = pg.description
-    priority = np.zeros(desc.lane_count)
     junction, approach = desc.junction >= 0, desc.end_junction >= 0
     arm = np.where(junction, desc.from_arm, desc.end_arm)
     main = np.where(arm % 2 == 0, MAIN_ROAD_PRIORITY, SIDE_ROAD_PRIORITY)
-    priority = np.where(junction | approach, main - (junction & (desc.turn == TURN_LEFT)), priority)
+    priority = np.where(junction | approach, main - (junction & (desc.turn == TURN_LEFT)), 0.0)
     ring = np.array([bool(_RING_NODE.match(f)) and bool(_RING_NODE.match(t)) for f, t, _ in desc.indices])
     rows[:, L.PRIORITY] = np.where(ring, RING_PRIORITY, priority)
 
@@ -240,11 +239,7 @@ def _merging(rows: np.ndarray, start: np.ndarray, successors: np.ndarray) -> np.
 
 def _ego_route_rows(pg: PGMap, lane_id: int) -> list[int]:
     """Lane rows of the route's roads, keeping ``lane_id`` where a road has that many lanes."""
-    rows = []
-    for road in pg.route:
-        lanes = pg.road_rows(road)
-        rows.append(int(lanes[min(lane_id, len(lanes) - 1)]))
-    return rows
+    return [int(lanes[min(lane_id, len(lanes) - 1)]) for lanes in map(pg.road_rows, pg.route)]
 
 
 def _spots(pg: PGMap, lane_length: np.ndarray) -> tuple[np.ndarray, ...]:

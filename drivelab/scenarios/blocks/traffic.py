@@ -207,10 +207,7 @@ def merge_safe(
 
 
 @njit(cache=True, inline="always")
-def _side_lane(
-    v: np.ndarray, lanes: np.ndarray, i: int, lane: int, side: int, changeable: np.ndarray,
-    successor_start: np.ndarray, successors: np.ndarray,
-) -> int:  # fmt: skip
+def _side_lane(v: np.ndarray, lanes: np.ndarray, i: int, lane: int, side: int, changeable: np.ndarray) -> int:
     """The lane beside ``lane`` on ``side`` (-1 left, +1 right) when vehicle i may change to it
     (changeable and reachable), else -1."""
     lane_id, count = lanes[lane, L.LANE_ID], lanes[lane, L.LANE_COUNT]
@@ -249,7 +246,7 @@ def blocks_change_lane_policy(
         return
     if ending[lane]:  # a mandatory change, looked for every frame
         for side in (-1, 1):
-            candidate = _side_lane(v, lanes, i, lane, side, changeable, successor_start, successors)
+            candidate = _side_lane(v, lanes, i, lane, side, changeable)
             if (
                 candidate >= 0
                 and not ending[candidate]
@@ -265,7 +262,7 @@ def blocks_change_lane_policy(
     if not changeable[lane] or np.abs(v[i, T.SPEED]) < 1:
         return
     for side in (-1, 1):
-        candidate = _side_lane(v, lanes, i, lane, side, changeable, successor_start, successors)
+        candidate = _side_lane(v, lanes, i, lane, side, changeable)
         if (
             candidate >= 0
             and blocks_mobil(v, lanes, p, coords, done, trig, i, candidate, successor_start, successors)

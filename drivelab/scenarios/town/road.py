@@ -19,7 +19,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from drivelab.sim.junctions.arrays import TownRoadArrays, town_arrays_from_network
 from drivelab.sim.junctions.arrays import shortest_route as graph_shortest_route
 from drivelab.sim.junctions.rules import LightTimings, light_state
 from drivelab.sim.roads import blocks
@@ -144,15 +143,3 @@ def approach_of(lane_index: tuple) -> tuple[int, int] | None:
         return None
     junction, arm = _to[1:].split(":ir")
     return int(junction), int(arm)
-
-
-def road_arrays(layout: TownLayout) -> TownRoadArrays:
-    """The compiled kernels' arrays of ``layout`` (lane metadata, lights, crossings, routes)."""
-    lights = TownLights(layout, LightTimings(), np.zeros(len(layout.junctions)))
-    return town_arrays_from_network(
-        build_network(layout),
-        lights.approaches,
-        np.column_stack([lights.positions, lights.headings]),
-        street_crossings(layout),
-        len(layout.junctions),
-    )

@@ -147,8 +147,6 @@ class TownSimulator(FastSimulator):
         self.coords, self.done, self.trig = (np.stack(parts) for parts in zip(*cache, strict=True))
         self._light_valid = np.ones((k, len(arrays.light_junction)), dtype=bool)
         self._light_valid.setflags(write=False)
-        self._max_speed = self._empty["max_speed_mps"]
-        self._road_index = self._empty["road_index"]
 
     # --- episodes -------------------------------------------------------------------------------
     def _start_episodes(self, worlds: np.ndarray, seeds: np.ndarray) -> None:
@@ -168,9 +166,7 @@ class TownSimulator(FastSimulator):
         self.time_s[worlds] = 0.0
         if worlds.size:
             self._pad_world_routes(worlds)  # once for all the worlds that started
-            active = np.zeros(self.num_worlds, dtype=bool)
-            active[worlds] = True
-            self._update_lights(active)
+            self._update_lights(np.isin(np.arange(self.num_worlds), worlds))
 
     def _set_route(self, k: int) -> None:
         """World k's route polyline from its planned lanes (``HighwayBackend.route_for``); the
@@ -243,9 +239,7 @@ class TownSimulator(FastSimulator):
                 _append_route(row, more)
             self._set_route(k)
             self._pad_world_routes([k])
-            update = np.zeros(self.num_worlds, dtype=bool)
-            update[k] = True
-            self._project(fresh=np.zeros(self.num_worlds, dtype=bool), update=update)
+            self._project(fresh=np.zeros(self.num_worlds, dtype=bool), update=np.arange(self.num_worlds) == k)
 
     # --- export ---------------------------------------------------------------------------------
     def _export(self) -> WorldBatch:

@@ -28,7 +28,7 @@ the start lane ends.
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from gymnasium.utils import seeding
@@ -43,6 +43,7 @@ from drivelab.sim.junctions.arrays import TownRoadArrays
 from drivelab.sim.junctions.arrays_description import town_arrays
 from drivelab.sim.junctions.rules import FIXED_ROUTE_COUNT, MEAN_WAIT_S, PAVEMENT_M, LightTimings
 from drivelab.sim.junctions.traffic import random_goal, random_route
+from drivelab.sim.roads.road_map import SAMPLE_SPACING_M
 from drivelab.sim.route import RouteTracker
 
 PLACEMENT_TRIES = 10  # TownEnv._make_vehicles: tries at a free spot per NPC
@@ -98,7 +99,6 @@ class TownSetup:
     cycle_s: float
     ego_start_speed: float
     fixed_routes: bool
-    _fixed: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         self.geometry: LaneGeometry = self.road.geometry
@@ -138,29 +138,25 @@ class TownSetup:
             )
         return setup
 
-    @property
+    @functools.cached_property
     def fixed(self) -> np.ndarray:
         """(FIXED_ROUTE_COUNT, 2) ``town_env.fixed_routes``: (start street, goal street) indices
         into ``arrays.street_lanes``, drawn once from ``default_rng(0)`` as the reference draws
         them (start, then goal, kept when the goal is another stop line and reachable)."""
-        if self._fixed is None:
-            rng = np.random.default_rng(0)
-            streets, lengths = self.arrays.street_lanes, self.arrays.route_length
-            pairs = []
-            while len(pairs) < FIXED_ROUTE_COUNT:
-                start, goal = int(rng.integers(len(streets))), int(rng.integers(len(streets)))
-                if lengths[streets[start], goal] > 1:  # 1: ends at the goal already; 0: unreachable
-                    pairs.append((start, goal))
-            self._fixed = np.array(pairs, dtype=np.int64)
-        return self._fixed
+        rng = np.random.default_rng(0)
+        streets, lengths = self.arrays.street_lanes, self.arrays.route_length
+        pairs = []
+        while len(pairs) < FIXED_ROUTE_COUNT:
+            start, goal = int(rng.integers(len(streets))), int(rng.integers(len(streets)))
+            if lengths[streets[start], goal] > 1:  # 1: ends at the goal already; 0: unreachable
+                pairs.append((start, goal))
+        return np.array(pairs, dtype=np.int64)
 
 
 def route_polyline(geometry: LaneGeometry, lanes, parts: dict | None = None) -> np.ndarray:
     """(K, 2) the centre line of ``lanes`` (lane rows), sampled as ``HighwayBackend.route_for``
     samples it: a straight lane's two ends, a curved one every <= 2 m (``np.linspace``).
     ``parts``: a cache of each lane's samples."""
-    from drivelab.sim.reference.highway import SAMPLE_SPACING_M  # the reference's sampling
-
     parts = {} if parts is None else parts
     for lane in lanes:
         lane = int(lane)
@@ -187,13 +183,8 @@ def route_tracker(setup: TownSetup, lanes) -> RouteTracker:
         tracker = setup._trackers[key] = RouteTracker(
             route_polyline(setup.geometry, key, setup._polylines), has_goal=True
         )
-        for array in (
-            tracker.polyline,
-            tracker.stations,
-            tracker._starts,
-            tracker._segments,
-            tracker._lengths2,
-        ):
+        arrays = tracker.polyline, tracker.stations, tracker._starts, tracker._segments, tracker._lengths2
+        for array in arrays:
             array.setflags(write=False)  # shared by every episode on the route
     return tracker
 

@@ -47,10 +47,9 @@ from drivelab.world.batch import (
     assemble,
 )
 from drivelab.world.geometry import FULL_LOCK_RAD
-from drivelab.world.scenario import META_ACTIONS, Scenario
+from drivelab.world.scenario import Scenario
 from drivelab.world.state import RoadMap
 
-META = META_ACTIONS
 LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER = range(5)
 ACCELERATION_RANGE, STEERING_RANGE = (-5.0, 5.0), (-FULL_LOCK_RAD, FULL_LOCK_RAD)  # ContinuousAction's
 
@@ -189,15 +188,11 @@ class _Road:
     keep_npcs: bool
     extra_vehicles: int
     destination: str | None
-    cache: dict
+    cache: dict = dataclasses.field(default_factory=dict)
     description: RoadDescription | None = None
 
 
 _ROADS: dict[tuple, _Road] = {}
-
-
-def _road_key(scenario: Scenario, traffic: str, control: str, overrides: dict | None) -> tuple:
-    return (repr(scenario), traffic, control, repr(sorted((overrides or {}).items())))
 
 
 def _static_objects(road) -> list:
@@ -214,9 +209,11 @@ def _npc_class(config: dict) -> type:
     return npc_class
 
 
-def _new_road(scenario: Scenario, table: L.LaneTable, graph_keys: dict, config: dict, **fields) -> _Road:
-    """A _Road of ``table`` with the fields every conversion derives alike; ``fields``: the rest."""
+def _new_road(scenario: Scenario, table: L.LaneTable, graph: dict, config: dict, **fields) -> _Road:
+    """A _Road of ``table`` and ``graph`` ({from: {to: lanes}}) with the fields every conversion
+    derives alike; ``fields``: the rest."""
     npc_class = _npc_class(config)
+    graph_keys = {f: list(to) for f, to in graph.items()}
     return _Road(
         table=table,
         graph_keys=graph_keys,
@@ -256,7 +253,7 @@ def _convert_road(builder: HighwayBackend, scenario: Scenario) -> _Road:
     return _new_road(
         scenario,
         table,
-        {f: list(to) for f, to in network.graph.items()},
+        network.graph,
         config,
         road_map=build_road_map(network),
         target_speeds=np.asarray(getattr(env.action_type, "target_speeds", [0.0]), dtype=float),
@@ -269,7 +266,6 @@ def _convert_road(builder: HighwayBackend, scenario: Scenario) -> _Road:
         ego_width=float(env.vehicle.WIDTH),
         keep_npcs=builder.keep_npcs,
         extra_vehicles=builder.extra_vehicles,
-        cache={},
     )
 
 
@@ -303,7 +299,7 @@ def _describe_road(scenario: Scenario, traffic: str, control: str, overrides: di
     return _new_road(
         scenario,
         table,
-        {f: list(to) for f, to in desc.graph.items()},
+        desc.graph,
         config,
         road_map=road_map(desc),
         target_speeds=np.asarray(target_speeds, dtype=float),
@@ -316,7 +312,6 @@ def _describe_road(scenario: Scenario, traffic: str, control: str, overrides: di
         ego_width=float(Vehicle.WIDTH),
         keep_npcs=keep_npcs,
         extra_vehicles=extra_vehicles,
-        cache={},
         description=desc,
     )
 
@@ -381,16 +376,6 @@ def clear_departed(
         count[k], ego[k] = kept, new_ego
 
 
-def continuous_commands(controls, num_worlds: int) -> np.ndarray:
-    """(K, 2) [acceleration m/s², steering rad] of normalised controls: ``ContinuousAction.get_action``'s
-    clip to [-1, 1] and linear map onto ACCELERATION_RANGE and STEERING_RANGE, in the controls' own
-    float type (``float_controls``), so that both backends get the same bits."""
-    controls = float_controls(controls, num_worlds)
-    commands = np.empty_like(controls)
-    _commands(controls, *command_ranges(controls.dtype), commands)
-    return commands
-
-
 def float_controls(controls, num_worlds: int) -> np.ndarray:
     """(K, 2) controls in float32 or float64, the types the compiled arithmetic takes: those
     stay as they are, anything else (ints, float16, long double) becomes float64."""
@@ -421,20 +406,14 @@ def _command(control, low, span, constants):
     return low + (control + one) * span / two
 
 
-@njit(cache=True)
-def _commands(controls, low, span, constants, out) -> None:
-    for k in range(controls.shape[0]):
-        for i in range(2):
-            out[k, i] = _command(controls[k, i], low[i], span[i], constants)
-
-
 assert (COLLISION_NONE, COLLISION_VEHICLE) == (0, 1)  # a crashed flag as int8 is its collision kind
 
 
 @njit(cache=True)
 def set_ego_controls(vehicles, ego, controls, low, span, constants) -> None:
-    """Each world's ego row gets the command of its normalised control (K, 2) (``continuous_commands``'
-    arithmetic): acceleration (also the pedal of a pedal ego, the circuits') and steering."""
+    """Each world's ego row gets the command of its normalised control (K, 2) (``ContinuousAction``'s
+    clip and linear map, ``_command``): acceleration (also the pedal of a pedal ego, the circuits')
+    and steering."""
     for k in range(ego.size):
         acceleration = _command(controls[k, 0], low[0], span[0], constants)
         vehicles[k, ego[k], T.ACCEL] = acceleration
@@ -670,9 +649,7 @@ class FastSimulator:
         self.traffic_flow = scenario.traffic_flow
         if self.arrival == ARRIVE_PAST_X:
             self.arrival_threshold = float(scenario.arrival_x_m)
-        self.arrivals = None
-        if self.traffic_flow:
-            self.arrivals = scenario.arrivals(road)
+        self.arrivals = scenario.arrivals(road) if self.traffic_flow else None
         k = num_worlds
         self.vehicles = np.zeros((k, 1, T.VEHICLE_COLUMNS))  # grows to the largest world
         self.count = np.zeros(k, dtype=np.int64)
@@ -731,7 +708,7 @@ class FastSimulator:
     @staticmethod
     def _load_road(scenario: Scenario, traffic: str, control: str, overrides: dict | None) -> _Road:
         """The scenario's road for this configuration, converted at its first use (``_ROADS``)."""
-        key = _road_key(scenario, traffic, control, overrides)
+        key = (repr(scenario), traffic, control, repr(sorted((overrides or {}).items())))
         road = _ROADS.get(key)
         if road is None and scenario.road is not None:  # a described road: no highway-env object
             road = _ROADS[key] = _describe_road(scenario, traffic, control, overrides)

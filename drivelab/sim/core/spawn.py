@@ -34,9 +34,7 @@ class LaneGeometry:
     """
 
     def __init__(self, table: L.LaneTable) -> None:
-        self.table, self.lanes = table, table.rows
-        self.row_of = table.row_of
-        self.indices = table.indices
+        self.lanes, self.row_of = table.rows, table.row_of
         rows = table.rows
         self._start = [np.array([r[L.START_X], r[L.START_Y]]) for r in rows]
         self._direction = [np.array([r[L.DIR_X], r[L.DIR_Y]]) for r in rows]

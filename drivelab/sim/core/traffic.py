@@ -191,13 +191,6 @@ def cached_neighbours(
     return front, rear
 
 
-@njit(cache=True)
-def neighbours(v: np.ndarray, lanes: np.ndarray, i: int, lane: int) -> tuple[int, int]:
-    """``cached_neighbours`` without a frame cache."""
-    coords, done, _ = frame_cache(v, lanes)
-    return cached_neighbours(v, lanes, coords, done, i, lane)
-
-
 @njit(cache=True, inline="always")
 def cached_desired_gap(v: np.ndarray, p: np.ndarray, trig: np.ndarray, ego: int, front: int) -> float:
     """IDMVehicle.desired_gap, projected on the ego's direction (``trig``: headings' cos, sin)."""
@@ -303,16 +296,6 @@ def mobil_side(v, lanes, p, coords, done, trig, i: int, lane: int, own) -> bool:
         + p[POLITENESS] * (new_following_pred_a - new_following_a + own[OWN_REAR_PRED_A] - own[OWN_REAR_A])
     )
     return jerk >= p[MIN_ACC_GAIN]
-
-
-@njit(cache=True)
-def mobil(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, i: int, lane: int) -> bool:
-    """``mobil_side`` without a frame cache (as highway-env's ``IDMVehicle.mobil``)."""
-    coords, done, trig = frame_cache(v, lanes)
-    start_frame(v, done, trig)
-    own = np.empty(OWN_SIZE)
-    own_lane(v, lanes, p, coords, done, trig, i, own)
-    return mobil_side(v, lanes, p, coords, done, trig, i, lane, own)
 
 
 @njit(cache=True, inline="always")
@@ -687,14 +670,11 @@ def enforce_road_rules(
 
 
 @njit(cache=True)
-def simulate(
-    v, lanes, p, frames: int, dt: float, regulation, release_cap_mps: float = np.inf, prioritised_only=False
-) -> None:
+def simulate(v, lanes, p, frames: int, dt: float, regulation) -> None:
     """AbstractEnv._simulate for ``frames`` simulation steps of ``dt`` seconds.
 
     :param regulation: [period, road steps so far]: a RegulatedRoad enforces its rules every
         ``period`` road steps (0: a plain Road); the step count is updated in place.
-    :param release_cap_mps: / ``prioritised_only``: ``enforce_road_rules``' options.
     """
     v, lanes, p = borrowed((v, lanes, p))
     coords, done, trig = frame_cache(v, lanes)
@@ -704,7 +684,7 @@ def simulate(
         if regulation[0] > 0:
             regulation[1] += 1
             if regulation[1] % regulation[0] == 0:
-                enforce_road_rules(v, lanes, release_cap_mps, prioritised_only)
+                enforce_road_rules(v, lanes)
         for i in range(v.shape[0]):
             if v[i, KIND] != OBSTACLE:
                 step_vehicle(v, lanes, i, dt)

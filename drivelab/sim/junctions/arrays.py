@@ -3,8 +3,7 @@
 ``TownRoadArrays`` holds, per lane row (``LaneTable`` order; every town road has one lane), what
 the reference reads from node names (the junction a lane crosses and its turn, the stop line a
 street ends at and its light), the light table, the crossings, the streets and every shortest
-route between them. ``town_arrays_from_network`` derives them from a highway-env network's node
-names, as the reference does: the oracle that the road description's arrays must equal.
+route between them.
 """
 
 from __future__ import annotations
@@ -13,8 +12,6 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
-
-from drivelab.sim.junctions.rows import TURN_LEFT, TURN_RIGHT, TURN_STRAIGHT
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,14 +67,6 @@ def shortest_route(graph: dict, start: tuple[str, str], goal: str) -> list[tuple
     return []
 
 
-def _junction_arm(node: str, kind: str) -> tuple[int, int] | None:
-    """(junction, arm) of a node ``J{j}:{kind}{k}``, else None."""
-    if f":{kind}" not in node:
-        return None
-    junction, arm = node[1:].split(f":{kind}")
-    return int(junction), int(arm)
-
-
 def route_table(
     graph: dict, lanes: list[tuple[str, str, int]], streets: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -95,49 +84,3 @@ def route_table(
         for g, route in enumerate(per_lane):
             routes[r, g, : len(route)], lengths[r, g] = route, len(route)
     return routes, lengths
-
-
-def town_arrays_from_network(
-    network,
-    approaches: list[tuple[int, int]],
-    light_xyh: np.ndarray,
-    crossings: np.ndarray,
-    junction_count: int,
-) -> TownRoadArrays:
-    """The town's arrays from a highway-env ``RoadNetwork`` and its layout's lights (``approaches``
-    (junction, arm) in light-row order with their ``light_xyh`` rows) and ``crossings``."""
-    lanes = [(f, t, i) for f, to in network.graph.items() for t, ls in to.items() for i in range(len(ls))]
-    size = len(lanes)
-    junction, from_arm, to_arm, turn = (np.full(size, -1, dtype=np.int64) for _ in range(4))
-    end_junction, end_arm, light = (np.full(size, -1, dtype=np.int64) for _ in range(3))
-    light_row = {approach: m for m, approach in enumerate(approaches)}
-    turns = {-1 % 4: TURN_RIGHT, 1: TURN_LEFT, 2: TURN_STRAIGHT}
-    for r, (start, end, _) in enumerate(lanes):
-        entry, leaving = _junction_arm(start, "ir"), _junction_arm(end, "il")
-        if entry is not None and leaving is not None:
-            junction[r], from_arm[r], to_arm[r] = entry[0], entry[1], leaving[1]
-            turn[r] = turns[(leaving[1] - entry[1]) % 4]
-        approach = _junction_arm(end, "ir")
-        if approach is not None:
-            end_junction[r], end_arm[r] = approach
-            light[r] = light_row.get(approach, -1)
-    streets = np.array([r for r, lane in enumerate(lanes) if ":ir" in lane[1]], dtype=np.int64)
-    routes, lengths = route_table(network.graph, lanes, streets)
-    return TownRoadArrays(
-        junction=junction,
-        from_arm=from_arm,
-        to_arm=to_arm,
-        turn=turn,
-        end_junction=end_junction,
-        end_arm=end_arm,
-        light=light,
-        in_junction=junction >= 0,
-        light_xyh=np.asarray(light_xyh, dtype=float).reshape(-1, 3),
-        light_junction=np.array([j for j, _ in approaches], dtype=np.int64),
-        light_arm=np.array([k for _, k in approaches], dtype=np.int64),
-        junction_count=int(junction_count),
-        crossings=np.asarray(crossings, dtype=float).reshape(-1, 5),
-        street_lanes=streets,
-        routes=routes,
-        route_length=lengths,
-    )

@@ -14,12 +14,7 @@ import os
 import numpy as np
 
 from drivelab.errors import UsageError
-from drivelab.sim.roads.road_map import (
-    SAMPLE_SPACING_M,  # noqa: F401 (re-exported)
-    lane_points,
-    lane_stations,
-    lanes_road_map,
-)
+from drivelab.sim.roads.road_map import lane_points, lane_stations, lanes_road_map
 from drivelab.sim.route import RouteTracker
 from drivelab.world.scenario import Scenario
 from drivelab.world.state import LIGHT_RED, Ego, Events, RoadMap, WorldState
@@ -45,7 +40,7 @@ def is_idm_class(cls: type) -> bool:
     the compiled core's IDM/MOBIL model, with the class's parameters."""
     if not (isinstance(cls, type) and issubclass(cls, IDMVehicle)):
         return False
-    own = [c for c in cls.__mro__[: cls.__mro__.index(IDMVehicle)]]
+    own = cls.__mro__[: cls.__mro__.index(IDMVehicle)]
     return not any(
         callable(value) for c in own for name, value in vars(c).items() if not name.startswith("__")
     )
@@ -269,11 +264,10 @@ class HighwayBackend:
                     break
                 nodes.append(successors[0])
                 length += network.get_lane((nodes[-2], nodes[-1], 0)).length
-        lanes = []
-        for _from, _to in zip(nodes[:-1], nodes[1:], strict=True):
-            count = len(network.graph[_from][_to])
-            lanes.append((_from, _to, min(lane_id, count - 1)))
-        return lanes
+        return [
+            (_from, _to, min(lane_id, len(network.graph[_from][_to]) - 1))
+            for _from, _to in zip(nodes[:-1], nodes[1:], strict=True)
+        ]
 
     def route_for(self, lanes: list[tuple]) -> RouteTracker:
         """A RouteTracker along the centre lines of ``lanes``."""

@@ -214,13 +214,12 @@ def grid_cells(
     cell indices) except the ``missing`` (cell, cell) links."""
     cells = tuple((c, r) for r in range(rows) for c in range(columns))
     index = {cell: k for k, cell in enumerate(cells)}
-    streets = []
-    for (c, r), k in index.items():
-        for step in ((1, 0), (0, 1)):
-            other = (c + step[0], r + step[1])
-            if other in index and ((c, r), other) not in missing:
-                streets.append((k, index[other]))
-    return cells, tuple(streets)
+    return cells, tuple(
+        (k, index[other])
+        for (c, r), k in index.items()
+        for other in ((c + 1, r), (c, r + 1))
+        if other in index and ((c, r), other) not in missing
+    )
 
 
 def junction_arms(
@@ -228,14 +227,8 @@ def junction_arms(
 ) -> dict[int, int]:
     """{arm: neighbouring junction} of ``junction``, in the order of ``streets``."""
     column, row = cells[junction]
-    found = {}
-    for a, b in streets:
-        if junction not in (a, b):
-            continue
-        other = b if a == junction else a
-        step = (cells[other][0] - column, cells[other][1] - row)
-        found[ARM_DIRECTIONS.index(step)] = other
-    return found
+    neighbours = [b if a == junction else a for a, b in streets if junction in (a, b)]
+    return {ARM_DIRECTIONS.index((cells[n][0] - column, cells[n][1] - row)): n for n in neighbours}
 
 
 def cell_centre(cell: Cell, block_m: float) -> np.ndarray:
@@ -246,13 +239,7 @@ def cell_centre(cell: Cell, block_m: float) -> np.ndarray:
 
 def junction_block(arms: tuple[int, ...]) -> Junction:
     """The block a grid cell with these arms (laying order) gets: signalised with three or more."""
-    if len(arms) == 4:
-        return Junction.x(arms)
-    if len(arms) == 3:
-        return Junction.t(next(k for k in range(4) if k not in arms), arms)
-    if len(arms) == 2:
-        return Junction.corner(arms)
-    return Junction(tuple(arms), False)
+    return Junction(tuple(arms), signalised=len(arms) >= 3)
 
 
 def town(

@@ -33,10 +33,6 @@ def lane_points(lane, stations: np.ndarray, lateral: float | np.ndarray) -> np.n
     return np.array([lane.position(s, r) for s, r in zip(stations, lateral, strict=True)])
 
 
-def _segments(polyline: np.ndarray) -> np.ndarray:
-    return np.stack([polyline[:-1], polyline[1:]], axis=1)
-
-
 def centre_line(desc: RoadDescription, rows) -> np.ndarray:
     """(P, 2) centre line of lanes ``rows`` one after the other, each sampled with its ends (as
     the highway backend samples a route)."""
@@ -74,7 +70,7 @@ def lanes_road_map(lanes, straight, widths, lines) -> RoadMap:
             line_type = line_types[side]
             if line_type == LINE_NONE:
                 continue
-            segments = _segments(boundary)
+            segments = np.stack([boundary[:-1], boundary[1:]], axis=1)
             solid = line_type >= LINE_CONTINUOUS
             markings.append(segments)
             kinds.append(np.full(len(segments), 2 if solid else 1))
