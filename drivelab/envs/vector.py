@@ -427,9 +427,7 @@ class VectorDriveEnv(VectorEnv):
             if len(starting):
                 for k in starting:
                     self.world_rngs[k].bit_generator.state = starts[k]
-                mask = np.zeros(self.num_envs, dtype=bool)
-                mask[starting] = True
-                self._start(mask)  # and the first observation of those worlds, as reset gives it
+                self._start(begin == t)  # and the first observation of those worlds, as reset gives it
                 observations = self._observe_again(observations, self.batch, starting)
             if t == total:
                 return observations
@@ -478,18 +476,13 @@ def _rows_as_objects(observations, mask: np.ndarray) -> np.ndarray:
 
 
 def _final_infos(infos: dict, mask: np.ndarray) -> np.ndarray:
-    """(K,) object array of each finished world's own step info as a plain dict."""
+    """(K,) object array of each finished world's own step info as a plain dict: its ``world_info``
+    and its ``final_obs`` (a Python number for a discrete observation)."""
     rows = np.empty(len(mask), dtype=object)
     for k in np.flatnonzero(mask):
-        info = {}
-        for key, value in infos.items():
-            if key.startswith("_"):
-                continue
-            if key == "reward_terms":
-                info[key] = {name: float(v[k]) for name, v in value.items()}
-            elif infos.get(f"_{key}", np.ones(len(mask), bool))[k]:
-                info[key] = value[k].item() if isinstance(value[k], np.generic) else value[k]
-        rows[k] = info
+        final_obs = infos["final_obs"][k]
+        final_obs = final_obs.item() if isinstance(final_obs, np.generic) else final_obs
+        rows[k] = {**world_info(infos, k), "final_obs": final_obs}
     return rows
 
 
