@@ -275,21 +275,15 @@ def events_of(batch: WorldBatch, k: int, end_of_step: bool) -> tuple[str, ...]:
     itself shows (a collision, leaving the road); at a step's end also what the rules judge once
     per step (arrival, a red light run, blocked, off route)."""
     events = batch.events
-    found = []
-    if events.collided[k]:
-        found.append("CRASH")
-    if events.off_road[k]:
-        found.append("OFF-ROAD")
+    flags = [(events.collided, "CRASH"), (events.off_road, "OFF-ROAD")]
     if end_of_step:
-        for flag, name in (
+        flags += [
             (events.arrived, "ARRIVED"),
             (events.red_light_crossed, "RED LIGHT"),
             (events.blocked, "BLOCKED"),
             (events.off_route, "OFF ROUTE"),
-        ):
-            if flag[k]:
-                found.append(name)
-    return tuple(found)
+        ]
+    return tuple(name for flag, name in flags if flag[k])
 
 
 def action_text(adapter, action) -> str:

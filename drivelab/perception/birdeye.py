@@ -79,9 +79,8 @@ class DashedMarkings:
         begin = np.clip(k * DASH_PERIOD_M - arc[owner], 0.0, length[owner])
         finish = np.clip(k * DASH_PERIOD_M + DASH_LENGTH_M - arc[owner], 0.0, length[owner])
         origin, unit = segments[owner, 0], direction[owner]
-        return np.stack([origin + begin[:, None] * unit, origin + finish[:, None] * unit], axis=1), around[
-            owner
-        ]
+        dashes = np.stack([origin + begin[:, None] * unit, origin + finish[:, None] * unit], axis=1)
+        return dashes, around[owner]
 
 
 def render_birdeye(
