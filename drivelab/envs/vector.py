@@ -216,10 +216,9 @@ class VectorDriveEnv(VectorEnv):
     def _start(
         self, mask: np.ndarray, batch: WorldBatch | None = None, episode_seeds: np.ndarray | None = None
     ) -> None:
-        """New episodes in the worlds of ``mask``: episode seeds from each world's generator (or
-        ``episode_seeds`` (K,) given), then the simulator, the adapter, the sensors, the rules and
-        the metrics reset by mask. With ``batch``, the simulator has already started them (in its
-        step) from the drawn seeds."""
+        """New episodes in the worlds of ``mask``, every part reset by mask: episode seeds from each
+        world's generator (or ``episode_seeds`` (K,) given). With ``batch``, the simulator has
+        already started them (in its step) from the drawn seeds."""
         worlds = np.flatnonzero(mask)
         if batch is None:
             if episode_seeds is None:

@@ -472,10 +472,7 @@ def _road_slot(roads: list[RoadMap], road: RoadMap) -> int:
 
 def pad_edge(array: np.ndarray, size: int) -> np.ndarray:
     """``array`` (R, ...) extended to ``size`` rows by repeating its last row."""
-    missing = size - len(array)
-    if missing <= 0:
-        return array
-    return np.concatenate([array, np.repeat(array[-1:], missing, axis=0)])
+    return np.pad(array, [(0, max(size - len(array), 0))] + [(0, 0)] * (array.ndim - 1), "edge")
 
 
 def _stack_rows(arrays: list[np.ndarray], columns: int) -> tuple[np.ndarray, np.ndarray]:
