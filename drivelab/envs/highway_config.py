@@ -222,14 +222,9 @@ def _observation(spec: Any, problems: list[str]) -> str | None:
     if kind == "Kinematics":
         return _kinematics(spec, problems)
     sensor, names = OBSERVATIONS[kind]
-    options = []
-    for key, value in spec.items():
-        if key == "type":
-            continue
-        if key not in names:
-            problems.append(f"{kind} option {key!r}: no such option in drivelab's {sensor}")
-            continue
-        options.append(f"{names[key]}={value}")
+    unknown = [key for key in spec if key != "type" and key not in names]
+    problems.extend(f"{kind} option {key!r}: no such option in drivelab's {sensor}" for key in unknown)
+    options = [f"{names[key]}={value}" for key, value in spec.items() if key in names]
     return ":".join([sensor, *options])
 
 
