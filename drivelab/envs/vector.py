@@ -281,10 +281,7 @@ class VectorDriveEnv(VectorEnv):
         return self.observations, self._reset_infos(mask)
 
     def _reset_infos(self, mask: np.ndarray) -> dict:
-        infos = {
-            "episode_seed": self.episode_seeds.copy(),
-            "traffic_light": self.traffic_light_labels(),
-        }
+        infos = {"episode_seed": self.episode_seeds.copy(), "traffic_light": self.traffic_light_labels()}
         infos.update({f"_{key}": mask.copy() for key in list(infos)})
         return infos
 
