@@ -369,10 +369,8 @@ class VectorDriveEnv(VectorEnv):
             infos["_episode_seed"] = done | restarting
             infos["traffic_light"] = self.traffic_light_labels()
             self.pending_reset[:] = False
-        else:
-            self.pending_reset = (
-                done if self.autoreset_mode == AutoresetMode.NEXT_STEP else self.pending_reset
-            )
+        elif self.autoreset_mode == AutoresetMode.NEXT_STEP:
+            self.pending_reset = done
         self.observations = observations
         return observations, rewards, terminated, truncated, infos
 
