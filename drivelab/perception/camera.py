@@ -183,8 +183,6 @@ def ego_lane_lines(world: WorldState) -> tuple[np.ndarray, np.ndarray]:
 
 def _near(position: np.ndarray, segments: np.ndarray, model: PinholeModel) -> np.ndarray:
     """The segments (M, 2, 2) within the camera's drawing range of an ego at ``position`` (2,)."""
-    if len(segments) == 0:
-        return segments
     reach = model.forward_m + model.max_range_m
     return segments[segments_near(segments, position, reach)]
 

@@ -79,10 +79,9 @@ def lane_change(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """1 when the step's meta-action is a lane change (LANE_LEFT or LANE_RIGHT): highway-env's
     ``lane_change_reward`` of its merge and roundabout (weight it −0.05 as they do); 0 for the
     other meta-actions and for continuous controls."""
-    values = None if control is None else np.asarray(control)
-    if values is None or values.ndim != 1:
+    if control is None or np.ndim(control) != 1:
         return np.zeros(batch.num_worlds)
-    return _flag(np.isin(values, LANE_CHANGES))
+    return _flag(np.isin(control, LANE_CHANGES))
 
 
 # --- the MetaDrive study, the MetaDrive course reward ----------------------------------------------------
