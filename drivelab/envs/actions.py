@@ -267,7 +267,7 @@ class SeedTable(ActionAdapter):
     def __init__(self, table: str) -> None:
         rows = {"line": SEED_LINE_TABLE, "lane": SEED_LANE_TABLE}[table]
         self.name = f"seed_{table}"
-        self.table = np.array([[throttle, steer] for throttle, steer in rows], dtype=np.float32)
+        self.table = np.array(rows, dtype=np.float32)
         self.space = spaces.Discrete(len(rows))
 
     def to_controls(self, actions) -> np.ndarray:

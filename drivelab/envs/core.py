@@ -9,6 +9,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from drivelab.envs.highway_config import env_kwargs_from_config
+from drivelab.envs.spec import EnvSpec
 from drivelab.envs.vector import VectorDriveEnv, autoreset_mode_of, check_reset_options, world_info
 from drivelab.scenarios import get_scenario
 from drivelab.world.state import WorldState
@@ -61,9 +63,6 @@ class DriveEnv(gym.Env):
         others). The parts are built now from the new :class:`~drivelab.envs.spec.EnvSpec`, so a
         refused key is a UsageError here and the current episode runs on unchanged; the next
         ``reset()`` switches to them, with their observation and action spaces."""
-        from drivelab.envs.highway_config import env_kwargs_from_config
-        from drivelab.envs.spec import EnvSpec
-
         current = (self._configured or self.vector).env_spec
         keywords = current.keywords()
         for key, value in env_kwargs_from_config(config, current.scenario).items():

@@ -41,6 +41,8 @@ from typing import Any
 from drivelab.errors import UsageError
 from drivelab.perception.kinematics import FEATURES
 from drivelab.rewards.shapers import PRESETS
+from drivelab.scenarios import get_scenario
+from drivelab.scenarios.options import unknown_options_message
 
 # highway-env observation type → (drivelab sensor, {highway-env option: drivelab option})
 OBSERVATIONS = {
@@ -94,8 +96,6 @@ def env_kwargs_from_config(
 ) -> dict[str, Any]:
     """DriveEnv keyword arguments from a highway-env config dict for ``scenario`` (default
     highway); ``given`` (explicit keyword arguments) win over the config."""
-    from drivelab.scenarios import get_scenario
-
     if not isinstance(config, dict):
         raise UsageError(f"config must be a dict of highway-env settings, got {config!r}")
     scene = get_scenario(scenario or "highway")
@@ -121,8 +121,6 @@ def env_kwargs_from_config(
     declared = {option.name for option in scene.options}
     unknown = [key for key in rest if key not in declared]
     if unknown:
-        from drivelab.scenarios.options import unknown_options_message
-
         problems.append(unknown_options_message(scene, unknown))
     if problems:
         raise UsageError(f"highway-env config for {scene.name!r}: {'; '.join(problems)}")
@@ -222,14 +220,9 @@ def _observation(spec: Any, problems: list[str]) -> str | None:
     if kind == "Kinematics":
         return _kinematics(spec, problems)
     sensor, names = OBSERVATIONS[kind]
-    options = []
-    for key, value in spec.items():
-        if key == "type":
-            continue
-        if key not in names:
-            problems.append(f"{kind} option {key!r}: no such option in drivelab's {sensor}")
-            continue
-        options.append(f"{names[key]}={value}")
+    unknown = [key for key in spec if key != "type" and key not in names]
+    problems.extend(f"{kind} option {key!r}: no such option in drivelab's {sensor}" for key in unknown)
+    options = [f"{names[key]}={value}" for key, value in spec.items() if key in names]
     return ":".join([sensor, *options])
 
 

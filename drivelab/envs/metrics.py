@@ -78,10 +78,7 @@ class EpisodeMetrics:
         mask = np.asarray(mask, dtype=bool)
         self._floats[:, mask], self._ints[:, mask], self.arrived[mask] = 0.0, 0, False  # last flags: below
         self.start_progress_m[mask] = batch.route.progress_m[mask]
-        self._remember(batch, mask)
-
-    def _remember(self, batch: WorldBatch, mask: np.ndarray) -> None:
-        """Keep what the next update compares against: the worlds where ``mask`` of ``batch``."""
+        # what the next update compares against
         self.last_position[mask] = batch.ego.position[mask]
         self.last_collided[mask] = batch.events.collided[mask]
         self.last_off_road[mask] = batch.events.off_road[mask]

@@ -216,10 +216,9 @@ class VectorDriveEnv(VectorEnv):
     def _start(
         self, mask: np.ndarray, batch: WorldBatch | None = None, episode_seeds: np.ndarray | None = None
     ) -> None:
-        """New episodes in the worlds of ``mask``: episode seeds from each world's generator (or
-        ``episode_seeds`` (K,) given), then the simulator, the adapter, the sensors, the rules and
-        the metrics reset by mask. With ``batch``, the simulator has already started them (in its
-        step) from the drawn seeds."""
+        """New episodes in the worlds of ``mask``, every part reset by mask: episode seeds from each
+        world's generator (or ``episode_seeds`` (K,) given). With ``batch``, the simulator has
+        already started them (in its step) from the drawn seeds."""
         worlds = np.flatnonzero(mask)
         if batch is None:
             if episode_seeds is None:
@@ -282,10 +281,7 @@ class VectorDriveEnv(VectorEnv):
         return self.observations, self._reset_infos(mask)
 
     def _reset_infos(self, mask: np.ndarray) -> dict:
-        infos = {
-            "episode_seed": self.episode_seeds.copy(),
-            "traffic_light": self.traffic_light_labels(),
-        }
+        infos = {"episode_seed": self.episode_seeds.copy(), "traffic_light": self.traffic_light_labels()}
         infos.update({f"_{key}": mask.copy() for key in list(infos)})
         return infos
 
@@ -373,10 +369,8 @@ class VectorDriveEnv(VectorEnv):
             infos["_episode_seed"] = done | restarting
             infos["traffic_light"] = self.traffic_light_labels()
             self.pending_reset[:] = False
-        else:
-            self.pending_reset = (
-                done if self.autoreset_mode == AutoresetMode.NEXT_STEP else self.pending_reset
-            )
+        elif self.autoreset_mode == AutoresetMode.NEXT_STEP:
+            self.pending_reset = done
         self.observations = observations
         return observations, rewards, terminated, truncated, infos
 
@@ -427,9 +421,7 @@ class VectorDriveEnv(VectorEnv):
             if len(starting):
                 for k in starting:
                     self.world_rngs[k].bit_generator.state = starts[k]
-                mask = np.zeros(self.num_envs, dtype=bool)
-                mask[starting] = True
-                self._start(mask)  # and the first observation of those worlds, as reset gives it
+                self._start(begin == t)  # and the first observation of those worlds, as reset gives it
                 observations = self._observe_again(observations, self.batch, starting)
             if t == total:
                 return observations
@@ -478,18 +470,13 @@ def _rows_as_objects(observations, mask: np.ndarray) -> np.ndarray:
 
 
 def _final_infos(infos: dict, mask: np.ndarray) -> np.ndarray:
-    """(K,) object array of each finished world's own step info as a plain dict."""
+    """(K,) object array of each finished world's own step info as a plain dict: its ``world_info``
+    and its ``final_obs`` (a Python number for a discrete observation)."""
     rows = np.empty(len(mask), dtype=object)
     for k in np.flatnonzero(mask):
-        info = {}
-        for key, value in infos.items():
-            if key.startswith("_"):
-                continue
-            if key == "reward_terms":
-                info[key] = {name: float(v[k]) for name, v in value.items()}
-            elif infos.get(f"_{key}", np.ones(len(mask), bool))[k]:
-                info[key] = value[k].item() if isinstance(value[k], np.generic) else value[k]
-        rows[k] = info
+        final_obs = infos["final_obs"][k]
+        final_obs = final_obs.item() if isinstance(final_obs, np.generic) else final_obs
+        rows[k] = {**world_info(infos, k), "final_obs": final_obs}
     return rows
 
 

@@ -28,8 +28,9 @@ from functools import lru_cache
 import cv2
 import numpy as np
 
+from drivelab.errors import UsageError
 from drivelab.perception.birdeye import draw_birdeye
-from drivelab.perception.topdown import View
+from drivelab.perception.topdown import LanePolygons, View
 from drivelab.world.batch import WorldBatch
 from drivelab.world.scenario import Scenario
 
@@ -116,8 +117,6 @@ class Backdrop:
     """
 
     def __init__(self, batch: WorldBatch, k: int, camera: Camera) -> None:
-        from drivelab.perception.topdown import LanePolygons
-
         self.road, self.camera = batch.road_of(k), camera
         vertices = self.road.derived(LanePolygons, LanePolygons).vertices
         low, high = vertices.min(axis=0), vertices.max(axis=0)
@@ -275,21 +274,15 @@ def events_of(batch: WorldBatch, k: int, end_of_step: bool) -> tuple[str, ...]:
     itself shows (a collision, leaving the road); at a step's end also what the rules judge once
     per step (arrival, a red light run, blocked, off route)."""
     events = batch.events
-    found = []
-    if events.collided[k]:
-        found.append("CRASH")
-    if events.off_road[k]:
-        found.append("OFF-ROAD")
+    flags = [(events.collided, "CRASH"), (events.off_road, "OFF-ROAD")]
     if end_of_step:
-        for flag, name in (
+        flags += [
             (events.arrived, "ARRIVED"),
             (events.red_light_crossed, "RED LIGHT"),
             (events.blocked, "BLOCKED"),
             (events.off_route, "OFF ROUTE"),
-        ):
-            if flag[k]:
-                found.append(name)
-    return tuple(found)
+        ]
+    return tuple(name for flag, name in flags if flag[k])
 
 
 def action_text(adapter, action) -> str:
@@ -345,17 +338,13 @@ def side_by_side(left: np.ndarray, scene: np.ndarray) -> np.ndarray:
 
 
 # --- recording ----------------------------------------------------------------------------------
-def frames_per_step(env) -> int:
-    """Video frames per policy step of ``env`` (a DriveEnv or VectorDriveEnv): its simulation
-    frames on the compiled core, 1 on highway-env's reference backend (no frame hook)."""
-    simulator = getattr(env, "vector", env).simulator
-    return int(simulator.frames) if hasattr(simulator, "on_frame") else 1
-
-
 def video_fps(env) -> float:
-    """The frame rate of ``env``'s recorded videos: its simulation frequency on the compiled core
-    (its policy frequency on the reference backend), so that a video plays in real time."""
-    return float(getattr(env, "vector", env).simulator.policy_frequency_hz) * frames_per_step(env)
+    """The frame rate of ``env``'s recorded videos (a DriveEnv or VectorDriveEnv): its simulation
+    frequency on the compiled core (a frame per simulation frame), its policy frequency on
+    highway-env's reference backend (no frame hook), so that a video plays in real time."""
+    simulator = getattr(env, "vector", env).simulator
+    frames_per_step = int(simulator.frames) if hasattr(simulator, "on_frame") else 1
+    return float(simulator.policy_frequency_hz) * frames_per_step
 
 
 class EpisodeRecorder:
@@ -378,8 +367,6 @@ class EpisodeRecorder:
         self.camera = camera or camera_for(self.vector.scenario)
         self.sensor = image_sensor(self.vector.sensors)
         if side_by_side and self.sensor is None:
-            from drivelab.errors import UsageError
-
             names = ", ".join(s.name for s in self.vector.sensors)
             raise UsageError(
                 f"side-by-side needs an image observation (camera, birdeye, topdown); got {names}"

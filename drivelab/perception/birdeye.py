@@ -55,9 +55,9 @@ class DashedMarkings:
         chain_head = np.maximum.accumulate(np.where(joined, 0, np.arange(count)))
         self.arc = cumulative - cumulative[chain_head]
 
-    def dashes_around(self, centres: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
-        """The dashes (D, 2, 2) within ``radius`` of each of W ``centres`` (W, 2), world
-        coordinates, all centres' in one array (centre by centre), and the centre of each (D,)."""
+    def dashes_around(self, centres: np.ndarray, radius: float) -> list[np.ndarray]:
+        """Per centre of the W ``centres`` (W, 2), the dashes (D, 2, 2) within ``radius`` of it, in
+        world coordinates."""
         seen = segments_near(self.segments, centres, radius)  # (W, M)
         around, index = np.nonzero(seen)  # (segment, centre) pairs, centre by centre
         segments, length, arc = self.segments[index], self.length[index], self.arc[index]
@@ -79,9 +79,8 @@ class DashedMarkings:
         begin = np.clip(k * DASH_PERIOD_M - arc[owner], 0.0, length[owner])
         finish = np.clip(k * DASH_PERIOD_M + DASH_LENGTH_M - arc[owner], 0.0, length[owner])
         origin, unit = segments[owner, 0], direction[owner]
-        return np.stack([origin + begin[:, None] * unit, origin + finish[:, None] * unit], axis=1), around[
-            owner
-        ]
+        dashes = np.stack([origin + begin[:, None] * unit, origin + finish[:, None] * unit], axis=1)
+        return np.split(dashes, np.searchsorted(around[owner], np.arange(1, len(centres))))
 
 
 def render_birdeye(
@@ -124,10 +123,9 @@ def markings_in_sight(
         positions = centres[worlds]  # (W, 2)
         solid = road.derived(solid_markings, solid_markings)
         solid_near = segments_near(solid, positions, radius_m)  # (W, S)
-        dashes, dash_world = road.derived(DashedMarkings, DashedMarkings).dashes_around(positions, radius_m)
-        bounds = np.searchsorted(dash_world, np.arange(len(worlds) + 1))
+        dashes = road.derived(DashedMarkings, DashedMarkings).dashes_around(positions, radius_m)
         for w, k in enumerate(worlds):
-            found[k] = (solid[solid_near[w]], dashes[bounds[w] : bounds[w + 1]])
+            found[k] = (solid[solid_near[w]], dashes[w])
     return found
 
 
@@ -135,11 +133,7 @@ LAYERS = ("all", "road", "moving")
 
 
 def draw_birdeye(
-    batch: WorldBatch,
-    out: np.ndarray,
-    pixels_per_meter: float,
-    view: View | None = None,
-    layers: str = "all",
+    batch: WorldBatch, out: np.ndarray, pixels_per_meter: float, view: View | None = None, layers: str = "all"
 ) -> None:
     """Draw the K worlds' bird's-eye images into ``out`` (K, H, W, 3) uint8 (see ``render_birdeye``).
 

@@ -183,8 +183,6 @@ def ego_lane_lines(world: WorldState) -> tuple[np.ndarray, np.ndarray]:
 
 def _near(position: np.ndarray, segments: np.ndarray, model: PinholeModel) -> np.ndarray:
     """The segments (M, 2, 2) within the camera's drawing range of an ego at ``position`` (2,)."""
-    if len(segments) == 0:
-        return segments
     reach = model.forward_m + model.max_range_m
     return segments[segments_near(segments, position, reach)]
 
@@ -280,9 +278,7 @@ def _ground_layers(batch: WorldBatch, model: PinholeModel) -> list[tuple[tuple, 
         visible = np.hypot(offset[..., 0], offset[..., 1]) <= reach + lanes.radii  # (W, P)
         painted: PaintedSegments = road.derived(PaintedSegments, PaintedSegments)
         solid_near, guide_near = painted.near_masks(positions, reach)
-        dashed_lines: DashedMarkings = road.derived(DashedMarkings, DashedMarkings)
-        dashes, dash_world = dashed_lines.dashes_around(positions, reach)
-        dash_bounds = np.searchsorted(dash_world, np.arange(len(worlds) + 1))
+        dashes = road.derived(DashedMarkings, DashedMarkings).dashes_around(positions, reach)
         if len(road.crossings):
             stripes = road.derived(zebra_boxes, zebra_boxes)
             along = np.column_stack([np.cos(stripes[:, 2]), np.sin(stripes[:, 2])]) * stripes[:, 3:4] / 2
@@ -290,9 +286,8 @@ def _ground_layers(batch: WorldBatch, model: PinholeModel) -> list[tuple[tuple, 
             zebra_near = segments_near(zebra, positions, reach)  # (W, S)
         for w, k in enumerate(worlds):
             lane_points, lane_counts = lanes.vertices[visible[w][lanes.owner]], lanes.counts[visible[w]]
-            dashed = dashes[dash_bounds[w] : dash_bounds[w + 1]]
             strips = [
-                (np.concatenate([painted.solid[solid_near[w]], dashed]), MARKING_WIDTH_M, WHITE),
+                (np.concatenate([painted.solid[solid_near[w]], dashes[w]]), MARKING_WIDTH_M, WHITE),
                 (painted.guide[guide_near[w]], GUIDE_WIDTH_M, YELLOW),
             ]
             if len(road.crossings):

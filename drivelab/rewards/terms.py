@@ -79,10 +79,9 @@ def lane_change(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """1 when the step's meta-action is a lane change (LANE_LEFT or LANE_RIGHT): highway-env's
     ``lane_change_reward`` of its merge and roundabout (weight it −0.05 as they do); 0 for the
     other meta-actions and for continuous controls."""
-    values = None if control is None else np.asarray(control)
-    if values is None or values.ndim != 1:
+    if control is None or np.ndim(control) != 1:
         return np.zeros(batch.num_worlds)
-    return _flag(np.isin(values, LANE_CHANGES))
+    return _flag(np.isin(control, LANE_CHANGES))
 
 
 # --- the MetaDrive study, the MetaDrive course reward ----------------------------------------------------
@@ -403,21 +402,10 @@ def _world_indices(count: int) -> np.ndarray:
     return indices
 
 
-def _crossing_columns(
-    world: WorldState, segments: np.ndarray, model: PinholeModel, distances_m
-) -> np.ndarray:
-    """:func:`crossing_columns` of one world with segments (M, 2, 2): (D,) columns (tests)."""
-    segments = np.asarray(segments, dtype=float).reshape(1, -1, 2, 2)
-    return crossing_columns(WorldBatch.stack([world]), segments, model, distances_m)[0]
-
-
 def _steering_deg(control, num_worlds: int) -> np.ndarray:
     """(K,) commanded front-wheel angle in degrees: 0 for meta-actions (no steering command)."""
-    if control is None:
-        return np.zeros(num_worlds)
-    values = np.asarray(control, dtype=float)
-    if values.ndim == 2 and values.shape[1] == 2:
-        return values[:, 1] * FULL_LOCK_DEG
+    if control is not None and np.shape(control)[1:] == (2,):
+        return np.asarray(control, dtype=float)[:, 1] * FULL_LOCK_DEG
     return np.zeros(num_worlds)
 
 

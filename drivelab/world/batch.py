@@ -358,30 +358,18 @@ class WorldBatch:
         mask = np.asarray(mask, dtype=bool)
         roads = list(self.roads)
         remap = [_road_slot(roads, road) for road in other.roads]
-        pick = lambda a, b: _where_rows(mask, a, b)  # noqa: E731
-        pick_edge = lambda a, b: _where_rows(mask, a, b, edge=True)  # noqa: E731
+
+        def pick(part, other_part, name: str) -> np.ndarray:
+            return _where_rows(mask, getattr(part, name), getattr(other_part, name), name in _EDGE_PADDED)
+
         return WorldBatch(
             dt_s=self.dt_s,
-            ego=EgoBatch(
-                **{f.name: pick(getattr(self.ego, f.name), getattr(other.ego, f.name)) for f in _FIELDS_EGO}
-            ),
+            ego=EgoBatch(**{f.name: pick(self.ego, other.ego, f.name) for f in _FIELDS_EGO}),
             roads=tuple(roads),
             road_index=np.where(mask, np.asarray(remap, dtype=np.int64)[other.road_index], self.road_index),
-            route=RouteBatch(
-                polyline=pick_edge(self.route.polyline, other.route.polyline),
-                stations_m=pick_edge(self.route.stations_m, other.route.stations_m),
-                **{
-                    name: pick(getattr(self.route, name), getattr(other.route, name))
-                    for name in ("count", "progress_m", "length_m", "closed")
-                },
-            ),
-            events=EventsBatch(
-                **{
-                    f.name: pick(getattr(self.events, f.name), getattr(other.events, f.name))
-                    for f in _FIELDS_EVENTS
-                }
-            ),
-            **{name: pick(getattr(self, name), getattr(other, name)) for name in _WORLD_ARRAYS},
+            route=RouteBatch(**{f.name: pick(self.route, other.route, f.name) for f in _FIELDS_ROUTE}),
+            events=EventsBatch(**{f.name: pick(self.events, other.events, f.name) for f in _FIELDS_EVENTS}),
+            **{name: pick(self, other, name) for name in _WORLD_ARRAYS},
         )
 
     def road_users(self) -> tuple[np.ndarray, np.ndarray]:
@@ -431,6 +419,7 @@ _FIELDS_ROUTE = [f for f in dataclasses.fields(RouteBatch) if f.init]
 # WorldBatch's (K, ...) arrays besides ego, route, events and road_index
 _WORLD_ARRAYS = ("time_s", "vehicles", "vehicle_valid", "traffic_lights", "light_valid", "pedestrians",
                  "pedestrian_valid", "max_speed_mps", "speed_limit_mps")  # fmt: skip
+_EDGE_PADDED = ("polyline", "stations_m")  # RouteBatch's arrays padded by repeating their last point
 # per batch class: its init fields' names, and the defaults of those that have one
 _INIT_NAMES = {
     cls: frozenset(f.name for f in dataclasses.fields(cls) if f.init)
@@ -472,10 +461,7 @@ def _road_slot(roads: list[RoadMap], road: RoadMap) -> int:
 
 def pad_edge(array: np.ndarray, size: int) -> np.ndarray:
     """``array`` (R, ...) extended to ``size`` rows by repeating its last row."""
-    missing = size - len(array)
-    if missing <= 0:
-        return array
-    return np.concatenate([array, np.repeat(array[-1:], missing, axis=0)])
+    return np.pad(array, [(0, max(size - len(array), 0))] + [(0, 0)] * (array.ndim - 1), "edge")
 
 
 def _stack_rows(arrays: list[np.ndarray], columns: int) -> tuple[np.ndarray, np.ndarray]:

@@ -95,17 +95,6 @@ class PinholeModel:
         terms.setflags(write=False)
         return terms
 
-    def visible_columns(self, distances_m: np.ndarray, lateral_m: np.ndarray) -> np.ndarray:
-        """Image columns (K, D) of ground points ``distances_m`` (D,) ahead and ``lateral_m`` (K, D)
-        to the right of the ego centre, nan where the point falls outside the image (or ``lateral_m``
-        is nan): ``project_ground(...)[..., 0]`` with the same operations, without building the 3-D
-        points, in one compiled pass (the reward terms' hot path)."""
-        out = np.empty(np.shape(lateral_m))
-        visible_columns_into(
-            np.asarray(distances_m, dtype=float), np.asarray(lateral_m, dtype=float), self.ground_terms, out
-        )
-        return out
-
     def row_of_distance(self, distance_m: np.ndarray | float) -> np.ndarray:
         """Image row (float) of the ground straight ahead at ``distance_m`` ahead of the ego centre."""
         distance = np.asarray(distance_m, dtype=float)
@@ -123,9 +112,12 @@ class PinholeModel:
 
 @njit(cache=True)
 def visible_columns_into(distances, lateral, terms, out) -> None:
-    """``PinholeModel.visible_columns`` into ``out`` (K, D): ``terms`` (7,) are the model's
-    ``ground_terms`` (cx, focal, forward, cos p, sin p, camera height, image width); numpy's
-    operations in numpy's order (no fused multiply-adds), so the columns are numpy's to the bit."""
+    """Image columns (K, D) into ``out`` of ground points ``distances`` (D,) ahead and ``lateral``
+    (K, D) to the right of the ego centre, nan where the point falls outside the image (or
+    ``lateral`` is nan): ``project_ground(...)[..., 0]`` without building the 3-D points. ``terms``
+    (7,) are the model's ``ground_terms`` (cx, focal, forward, cos p, sin p, camera height, image
+    width); numpy's operations in numpy's order (no fused multiply-adds), so the columns are
+    numpy's to the bit."""
     cx, focal, forward_m, cos_p, sin_p = terms[0], terms[1], terms[2], terms[3], terms[4]
     height_m, width = terms[5], terms[6]
     for j in range(distances.shape[0]):

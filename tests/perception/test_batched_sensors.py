@@ -12,12 +12,13 @@ import numpy as np
 import pytest
 
 from drivelab.perception.affordances import Affordances
-from drivelab.perception.lidar import Lidar, cast_rays
+from drivelab.perception.lidar import Lidar
 from drivelab.perception.sensors import FrameStack, make_sensor
 from drivelab.world.batch import WorldBatch
 from drivelab.world.geometry import box_corners
 from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, RoadMap, Route
 from tests.batch_worlds import ALL_SCENARIOS, world_sequences
+from tests.perception.rays import cast_rays
 from tests.worlds import world
 
 SPECS = (

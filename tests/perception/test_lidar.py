@@ -5,8 +5,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from drivelab.perception.lidar import Lidar, cast_rays
+from drivelab.perception.lidar import Lidar
 from drivelab.world.state import RoadMap
+from tests.perception.rays import cast_rays
 from tests.worlds import world
 
 CAR = (5.0, 2.0)  # length, width
@@ -161,7 +162,7 @@ def test_worlds_on_several_block_maps_see_their_own_road_edges():
 def _numpy_distances(lidar: Lidar, batch) -> np.ndarray:
     """The vectorised numpy formulation the compiled pass replaced (every (part, beam) pair of each
     part's angular span as arrays), as an independent reference for exact equality."""
-    from drivelab.perception.lidar import _hit_distances, _near_parts, _part_terms
+    from tests.perception.rays import _hit_distances, _near_parts, _part_terms
 
     beams, step = lidar.beams, lidar.beam_step
     *segments, worlds = lidar._segments(batch)

@@ -8,7 +8,14 @@ from drivelab.envs.core import DriveEnv
 from drivelab.perception.camera import GuideSegments, render_camera
 from drivelab.perception.lane import LOST_STATE, LaneState, classical_lane_masks, lane_centres, state_of
 from drivelab.perception.line import LINE_CAMERA, LINE_ROWS_M, LineState, encode_state, strip_of
-from drivelab.rewards.terms import _crossing_columns
+from drivelab.rewards.terms import crossing_columns
+from drivelab.world.batch import WorldBatch
+
+
+def _crossing_columns(world, segments: np.ndarray, model, distances_m) -> np.ndarray:
+    """:func:`crossing_columns` of one world with segments (M, 2, 2): (D,) columns."""
+    segments = np.asarray(segments, dtype=float).reshape(1, -1, 2, 2)
+    return crossing_columns(WorldBatch.stack([world]), segments, model, distances_m)[0]
 
 
 def test_strips_and_encoding():
