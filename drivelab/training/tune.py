@@ -416,11 +416,6 @@ def _continued(study: Study) -> bool:
     return _saved_spec(study) == _spec(study)
 
 
-def _trial_value(run_dir: Path, metric: str) -> float:
-    report = json.loads((run_dir / "eval.json").read_text())
-    return float(report[metric])
-
-
 # --- running ---------------------------------------------------------------------------------
 def run_study(
     study: Study,
@@ -458,13 +453,13 @@ def run_study(
         outcomes: list[dict] = []
 
         def tell(number: int, outcome: dict) -> None:
-            run_dir = folder / outcome["name"]
             if not outcome["ok"]:
                 optuna_study.tell(number, state=TrialState.FAIL)
             elif outcome["stopped"] is not None:
                 optuna_study.tell(number, state=TrialState.PRUNED)
             else:
-                optuna_study.tell(number, _trial_value(run_dir, study.metric))
+                report = json.loads((folder / outcome["name"] / "eval.json").read_text())
+                optuna_study.tell(number, float(report[study.metric]))
             outcomes.append(outcome)
 
         def job(number: int, trial_id: int, params: dict) -> dict | None:
@@ -488,9 +483,8 @@ def run_study(
                 if (found := job(trial.number, trial._trial_id, params)) is not None:
                     yield found
 
-        total = len(stale) + new
         with tqdm(
-            total=total, desc=f"tune {study.name} ({executor}, {workers} workers)", unit="trial"
+            total=len(stale) + new, desc=f"tune {study.name} ({executor}, {workers} workers)", unit="trial"
         ) as bar:
             # an interrupted trial's run raises KeyboardInterrupt here (``execute``): the trial stays
             # running in the journal and the next run resumes it
