@@ -178,11 +178,8 @@ def load_run(run_dir: str | Path) -> RunRecord:
     run_dir = Path(run_dir)
     config = load_run_config(run_dir)
     _check_names(config, run_dir / "config.yaml")
-    curve: list[tuple[int, float]] = []
-    last_row: dict = {}
     evaluations = run_dir / "evaluations.csv"
-    if evaluations.is_file():
-        curve, last_row = read_evaluations(evaluations)
+    curve, last_row = read_evaluations(evaluations) if evaluations.is_file() else ([], {})
     eval_json = run_dir / "eval.json"
     if eval_json.is_file():
         try:
