@@ -150,12 +150,7 @@ def _halve(state, converted: dict):
     if isinstance(state, (list, tuple)):
         return type(state)(_halve(value, converted) for value in state)
     if isinstance(state, torch.Tensor) and state.dtype == torch.float32:
-        view = (
-            state.untyped_storage().data_ptr(),
-            state.storage_offset(),
-            tuple(state.shape),
-            state.stride(),
-        )
+        view = (state.untyped_storage().data_ptr(), state.storage_offset(), state.shape, state.stride())
         if view not in converted:
             largest = float(state.abs().max()) if state.numel() else 0.0
             if largest > torch.finfo(torch.float16).max:
@@ -367,7 +362,6 @@ def check_video_path(path: Path) -> None:
         raise UsageError("no mp4 encoder (imageio-ffmpeg's ffmpeg) is installed: use a .gif path")
     if path.is_dir():
         raise UsageError(f"--video {str(path)!r} is a directory")
-
     check_output_file(path, "--video")
 
 
