@@ -646,8 +646,8 @@ def write_best(study: Study, summary: dict, path: str | Path) -> Path:
     key = gym_id(summary["env"])
     entries[key] = yaml.safe_load((study.study_dir / BEST_FILE).read_text())[key]
     old = path.read_text(encoding="utf-8").splitlines() if path.exists() else []
-    comments = [line[2:] if line.startswith("# ") else line[1:] for line in old if line.startswith("#")]
-    comments = comments[: next((i for i, line in enumerate(old) if not line.startswith("#")), len(old))]
+    header = itertools.takewhile(lambda line: line.startswith("#"), old)
+    comments = [line[2:] if line.startswith("# ") else line[1:] for line in header]
     note = (
         f"{key}: tuned by drivelab tune (study {summary['study']!r}, best {summary['metric']} "
         f"{summary['best']['value']:.4g} over {sum(summary['states'].values())} trials of "
