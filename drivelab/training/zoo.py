@@ -43,13 +43,12 @@ class ShippedAgent:
 def shipped_agents(zoo_dir: Path | None = None) -> list[ShippedAgent]:
     """Every agent of ``zoo_dir`` (default: the package's zoo), sorted by name."""
     zoo_dir = ZOO_DIR if zoo_dir is None else zoo_dir
-    agents = []
-    for card_path in sorted(zoo_dir.glob("*/card.json")) if zoo_dir.is_dir() else []:
-        if card_path.parent.name.startswith("."):  # a pack in progress
-            continue
-        card = json.loads(card_path.read_text())
-        agents.append(ShippedAgent(card_path.parent.name, card_path.parent, card))
-    return agents
+    cards = sorted(zoo_dir.glob("*/card.json")) if zoo_dir.is_dir() else []
+    return [
+        ShippedAgent(card.parent.name, card.parent, json.loads(card.read_text()))
+        for card in cards
+        if not card.parent.name.startswith(".")  # a pack in progress
+    ]
 
 
 def resolve(target: str | Path, zoo_dir: Path | None = None) -> tuple[Path, str | None]:
