@@ -524,8 +524,7 @@ def claim_runs(runs_dir: Path, names: Iterable[str], create: bool = True) -> Ite
 
 def _open_lock_file(path: Path, create: bool):
     """``path``, the lock file, opened for appending (a lock needs a handle open for writing); a new
-    one (``create``) is made with mode 0o666 and shared as its folder is. OSError when it cannot be
-    opened."""
+    one (``create``) is made with mode 0o666 and shared as its folder is."""
     flags = os.O_WRONLY | os.O_APPEND
     if create:
         try:
