@@ -7,6 +7,7 @@ processes inherit)."""
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import shutil
@@ -51,23 +52,19 @@ def cache_folder(digest: str, environ: dict[str, str] | None = None) -> Path:
 
 def _remove_stale(folder: Path) -> None:
     """Remove other versions' folders beside ``folder`` unused for ``STALE_S``."""
-    try:
+    with contextlib.suppress(OSError):
         siblings = [p for p in folder.parent.glob(f"{PREFIX}*") if p != folder and p.is_dir()]
         for old in siblings:
             if time.time() - old.stat().st_mtime > STALE_S:
                 shutil.rmtree(old, ignore_errors=True)
-    except OSError:
-        pass
 
 
 def configure() -> Path:
     """Point numba's cache at this version's folder (before any drivelab kernel is decorated)."""
     folder = cache_folder(source_digest())
-    try:
+    with contextlib.suppress(OSError):  # numba says so itself if it cannot write there
         folder.mkdir(parents=True, exist_ok=True)
         os.utime(folder)  # in use: another version's configure leaves it alone
-    except OSError:
-        pass  # numba says so itself if it cannot write there
     os.environ["NUMBA_CACHE_DIR"] = str(folder)
     numba = sys.modules.get("numba")
     if numba is not None:  # imported before drivelab: its config has read the environment already

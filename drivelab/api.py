@@ -55,7 +55,9 @@ class Model:
         """(action, state) for an observation, or for a batch of them (a leading axis), as
         stable-baselines3's ``predict`` but greedy by default (as ``drivelab evaluate``). drivelab
         has no recurrent policies: the returned state is None."""
-        if self._is_sb3():
+        from drivelab.agents.registry import get_algo
+
+        if get_algo(self.config.algo).family == "sb3":
             return self.agent.predict(
                 observation, state=state, episode_start=episode_start, deterministic=deterministic
             )
@@ -74,11 +76,6 @@ class Model:
         from drivelab.envs.core import DriveEnv
 
         return DriveEnv(**{**self.config.eval_env_kwargs(), **overrides})
-
-    def _is_sb3(self) -> bool:
-        from drivelab.agents.registry import get_algo
-
-        return get_algo(self.config.algo).family == "sb3"
 
     def __repr__(self) -> str:
         where = f"zoo agent {self.name!r}" if self.name else f"run {str(self.run_dir)!r}"

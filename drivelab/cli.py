@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import shlex
 import sys
 from pathlib import Path
@@ -12,7 +11,7 @@ import yaml
 from typer.core import TyperGroup
 
 from drivelab.agents.registry import ALGO_NAMES
-from drivelab.config import RunConfig
+from drivelab.config import FIELDS, RunConfig
 from drivelab.envs.actions import ACTIONS
 from drivelab.errors import UsageError
 from drivelab.scenarios import SCENARIOS
@@ -140,8 +139,7 @@ RUN_OPTIONS = ("algo", "env", "obs", "action", "reward", "steps", "seed", "traff
 def _rlad_switches(given: dict) -> dict:
     """RLAD's ablation flags among train's ``given`` options as the hyper-parameters they stand for
     (other algorithms reject them as unknown hyper-parameters)."""
-    switches = {"alix": given["no_alix"], "aux": given["no_aux"], "augment": given["no_augment"]}
-    chosen = {key: False for key, off in switches.items() if off}
+    chosen = {key: False for key in ("alix", "aux", "augment") if given[f"no_{key}"]}
     if given["waypoint_encoder"] is not None:
         chosen["waypoint_encoder"] = given["waypoint_encoder"]
     return chosen
@@ -196,7 +194,7 @@ def run_default(field: str) -> str:
         return "ALGO-ENV-sSEED-DATE-TIME"
     if field == "eval_maps":
         return "the training maps"
-    value = {f.name: f.default for f in dataclasses.fields(RunConfig)}[field]
+    value = FIELDS[field].default
     return ",".join(value) if isinstance(value, tuple) else str(value)
 
 
@@ -286,8 +284,7 @@ def _print_last_evaluation(run_dir: Path) -> None:
     report = last_evaluation(run_dir)
     if report is not None:
         config = load_run_config(run_dir)
-        step, episodes = report["step"], report["episodes"]
-        title = f"{config.algo} on {config.env} at step {step}: {episodes} episodes"
+        title = f"{config.algo} on {config.env} at step {report['step']}: {report['episodes']} episodes"
         _print_metrics(title, report, config.env)
 
 
@@ -313,7 +310,6 @@ def evaluate(
     ),
 ) -> None:
     """Evaluate a run's model: print the driving metrics and write eval.json."""
-
     from drivelab.training.evaluate import evaluate_run, report_name
     from drivelab.training.zoo import report_dir, resolve
 
@@ -386,7 +382,6 @@ def enjoy(
 ) -> None:
     """Drive an agent greedily on its scenario, print each episode and the metrics; nothing else is
     written."""
-
     from drivelab.training.zoo import enjoy as drive
 
     _one_torch_thread()
@@ -442,18 +437,18 @@ def _print_outcome_table(title: str, outcomes: list[dict], what: str) -> None:
     Console().print(table)
 
 
+def _exit_if_failed(outcomes: list[dict], what: str, folder: Path, then: str) -> None:
+    """One error line and exit code 1 when a run (``what``: "run" or "trial") of ``outcomes`` failed."""
+    failed = sum(not o["ok"] for o in outcomes)
+    if failed:
+        message = f"{failed} {what}(s) failed; see {folder / '.sweep-logs'}/<{what}>.log{then}"
+        typer.echo(error_line(message), err=True)
+        raise typer.Exit(1)
+
+
 def _print_outcomes(outcomes: list[dict], runs_dir: Path) -> None:
     _print_outcome_table(f"runs in {runs_dir}", outcomes, "run")
-    failed = [o["name"] for o in outcomes if not o["ok"]]
-    if failed:
-        typer.echo(
-            error_line(
-                f"{len(failed)} run(s) failed; see {runs_dir / '.sweep-logs'}/<run>.log, "
-                "then re-run the same command to finish them"
-            ),
-            err=True,
-        )
-        raise typer.Exit(1)
+    _exit_if_failed(outcomes, "run", runs_dir, ", then re-run the same command to finish them")
 
 
 def _interrupted() -> None:
@@ -531,16 +526,7 @@ def tune(
     typer.echo(f"study directory: {study.study_dir}  (summary.md, trials.csv, best-hyperparams.yml)")
     if written is not None:
         typer.echo(f"wrote {written}")
-    failed = [o["name"] for o in summary["outcomes"] if not o["ok"]]
-    if failed:
-        typer.echo(
-            error_line(
-                f"{len(failed)} trial(s) failed; see {study.study_dir / '.sweep-logs'}/<trial>.log; "
-                "re-running the command replaces them"
-            ),
-            err=True,
-        )
-        raise typer.Exit(1)
+    _exit_if_failed(summary["outcomes"], "trial", study.study_dir, "; re-running the command replaces them")
 
 
 def _split_rewards(values: list[str]) -> list[str]:

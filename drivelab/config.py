@@ -78,9 +78,7 @@ class RunConfig:
         return kwargs
 
     def to_dict(self) -> dict:
-        data = dataclasses.asdict(self)
-        data["obs"] = list(self.obs)
-        return data
+        return {**dataclasses.asdict(self), "obs": list(self.obs)}
 
     def identity(self) -> str:
         """Hash of everything but the step budget and name: what a checkpoint must match."""

@@ -36,11 +36,6 @@ PINNED_ISA = {
 }
 
 
-def pinned_environ(environ: dict[str, str] | None = None) -> dict[str, str]:
-    """``environ`` (default: this process's) with ``PINNED_ISA`` over it."""
-    return {**(os.environ if environ is None else environ), **PINNED_ISA}
-
-
 def code_paths() -> dict[str, str]:
     """The vector code each library of this process runs: numpy's widest enabled feature, torch's
     kernels' capability, numba's target CPU."""
@@ -66,7 +61,7 @@ def call_pinned(target: str, *args: str, timeout_s: float | None = None) -> Any:
     """
     child = subprocess.run(
         [sys.executable, "-m", "drivelab.isa", target, *args],
-        env=pinned_environ(),
+        env={**os.environ, **PINNED_ISA},
         capture_output=True,
         text=True,
         timeout=timeout_s,

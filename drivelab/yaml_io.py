@@ -81,12 +81,9 @@ class YamlLoader(BoundedLoader):
             if key_node.tag == "tag:yaml.org,2002:merge":
                 continue
             if not isinstance(key_node, yaml.ScalarNode) or key_node.tag != "tag:yaml.org,2002:str":
-                scalar = isinstance(key_node, yaml.ScalarNode)
-                problem = (
-                    f"key {key_node.value!r} is not a string (quote it)"
-                    if scalar
-                    else "a key is not a string"
-                )
+                problem = "a key is not a string"
+                if isinstance(key_node, yaml.ScalarNode):
+                    problem = f"key {key_node.value!r} is not a string (quote it)"
                 raise yaml.composer.ComposerError(
                     "while composing a mapping", node.start_mark, problem, key_node.start_mark
                 )

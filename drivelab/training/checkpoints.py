@@ -22,11 +22,8 @@ REPLAY_LIMIT_BYTES = 512 * 2**20  # larger replay buffers are not checkpointed (
 
 def file_sha256(path: Path) -> str:
     """Hex SHA-256 of a file's bytes."""
-    digest = hashlib.sha256()
     with path.open("rb") as handle:
-        for block in iter(lambda: handle.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
+        return hashlib.file_digest(handle, "sha256").hexdigest()
 
 
 def save_checkpoint(model, run_dir: Path, config: RunConfig, save_replay: bool) -> Path:

@@ -109,8 +109,7 @@ def _float_or_none(value) -> float | None:
 
 def _final_metrics(values: dict, path: Path) -> dict:
     """The ``METRICS`` of ``values`` (a row or eval.json) as floats or None; a UsageError naming the
-    file and the metric for a value no evaluation writes (text, NaN, infinity, a rate outside [0,
-    1], a negative count)."""
+    file and the metric for a value no evaluation writes."""
     final = {}
     for key in METRICS:
         given = values.get(key)
@@ -178,11 +177,8 @@ def load_run(run_dir: str | Path) -> RunRecord:
     run_dir = Path(run_dir)
     config = load_run_config(run_dir)
     _check_names(config, run_dir / "config.yaml")
-    curve: list[tuple[int, float]] = []
-    last_row: dict = {}
     evaluations = run_dir / "evaluations.csv"
-    if evaluations.is_file():
-        curve, last_row = read_evaluations(evaluations)
+    curve, last_row = read_evaluations(evaluations) if evaluations.is_file() else ([], {})
     eval_json = run_dir / "eval.json"
     if eval_json.is_file():
         try:
@@ -227,11 +223,8 @@ def _scenario_labels(records: Sequence[RunRecord]) -> list[str]:
     values = [{**conditions(record.config), "steps": str(record.config.steps)} for record in records]
     names = dict.fromkeys(name for value in values for name in value)
     varying = [name for name in names if len({value.get(name, "default") for value in values}) > 1]
-    labels = []
-    for record, value in zip(records, values, strict=True):
-        parts = ", ".join(f"{name}={value.get(name, 'default')}" for name in varying)
-        labels.append(f"{record.config.env} ({parts})" if parts else record.config.env)
-    return labels
+    parts = [", ".join(f"{name}={value.get(name, 'default')}" for name in varying) for value in values]
+    return [f"{r.config.env} ({p})" if p else r.config.env for r, p in zip(records, parts, strict=True)]
 
 
 def group_runs(records: Sequence[RunRecord]) -> dict[tuple[str, ...], list[RunRecord]]:
@@ -241,8 +234,7 @@ def group_runs(records: Sequence[RunRecord]) -> dict[tuple[str, ...], list[RunRe
     sample, not two: a UsageError naming them."""
     groups: dict[tuple[str, ...], list[RunRecord]] = {}
     seen: dict[tuple[str, int], RunRecord] = {}
-    scenarios = dict(zip((id(record) for record in records), _scenario_labels(records), strict=True))
-    for record in records:
+    for record, scenario in zip(records, _scenario_labels(records), strict=True):
         config = record.config
         same = seen.setdefault((config.identity(), config.steps), record)  # the identity has the seed
         if same is not record:
@@ -252,7 +244,7 @@ def group_runs(records: Sequence[RunRecord]) -> dict[tuple[str, ...], list[RunRe
                 "compare one of them"
             )
         key = record.group
-        groups.setdefault((key[0], scenarios[id(record)], *key[2:]), []).append(record)
+        groups.setdefault((key[0], scenario, *key[2:]), []).append(record)
     return {key: sorted(runs, key=lambda r: (r.config.seed, str(r.run_dir))) for key, runs in groups.items()}
 
 
@@ -474,11 +466,9 @@ def _new_tmp_folder(out_dir: Path) -> tuple[Path, int]:
             fcntl.flock(handle, fcntl.LOCK_EX)
         except OSError:
             return tmp, handle  # no locks on this file system
-        try:
+        with contextlib.suppress(FileNotFoundError):
             if os.path.samestat(os.fstat(handle), os.stat(tmp)):
                 return tmp, handle
-        except FileNotFoundError:
-            pass
         os.close(handle)  # removed before it was locked
 
 

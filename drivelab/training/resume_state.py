@@ -153,8 +153,7 @@ class RecordVecEpisodes(VecEnvWrapper):
         obs = self.venv.reset()
         for index, (generator, state) in enumerate(before):
             if self.vector.world_rngs[index] is not generator:  # reseeded: the new seed's first state
-                world_seed = seeds + index
-                state = seeding.np_random(world_seed)[0].bit_generator.state
+                state = seeding.np_random(seeds + index)[0].bit_generator.state
             self.log.started(index, state)
         return obs
 
@@ -245,11 +244,10 @@ class Snapshot:
     worlds: list = field(default_factory=list)
 
     def world_actions(self) -> list[np.ndarray]:
-        return [_stack_actions(actions[:count]) for _, actions, count in self.worlds]
-
-
-def _stack_actions(actions: list[np.ndarray]) -> np.ndarray:
-    return np.stack(actions) if actions else np.zeros((0,), dtype=np.float32)
+        return [
+            np.stack(actions[:count]) if count else np.zeros((0,), dtype=np.float32)
+            for _, actions, count in self.worlds
+        ]
 
 
 def _rng_state(model) -> tuple[dict, dict[str, np.ndarray]]:
@@ -573,7 +571,6 @@ def _evaluations_upto(path: Path, steps: int) -> str | None:
 def plan_truncation(run_dir: Path, steps: int, snapshot: Snapshot | None) -> dict[Path, str | None]:
     """What a resume from the checkpoint at ``steps`` must rewrite (path → new text) or delete (path
     → None): logs written after the checkpoint, and results of the older model. Reads only."""
-    changes: dict[Path, str | None] = {}
     try:
         if snapshot is not None:
             rows = snapshot.meta["rows"]
@@ -587,9 +584,7 @@ def plan_truncation(run_dir: Path, steps: int, snapshot: Snapshot | None) -> dic
             cuts[path] = _progress_upto(path, steps)
     except (OSError, ValueError, IndexError, csv.Error, UnicodeDecodeError) as exc:
         raise UsageError(f"cannot read the logs of {str(run_dir)!r} to resume ({exc})") from None
-    for path, text in cuts.items():
-        if text is not None:
-            changes[path] = text if text != "" else None
+    changes = {path: text or None for path, text in cuts.items() if text is not None}  # "": no row left
     for name in STALE_RESULTS:
         if (run_dir / name).exists():
             changes[run_dir / name] = None

@@ -327,11 +327,7 @@ def run_cell(
         where = str(root / LOG_FOLDER / f"{config.name}.log")
         outcome.update(ok=False, error=f"cannot write its log {where!r}: {exc.strerror or exc}", seconds=0.0)
         return outcome
-    with (
-        log_file as log,
-        contextlib.redirect_stderr(log),
-        contextlib.redirect_stdout(log),
-    ):
+    with log_file as log, contextlib.redirect_stderr(log), contextlib.redirect_stdout(log):
         try:
             if action == "restart":
                 run.remove_unstarted_run(run_dir)
@@ -528,8 +524,7 @@ def claim_runs(runs_dir: Path, names: Iterable[str], create: bool = True) -> Ite
 
 def _open_lock_file(path: Path, create: bool):
     """``path``, the lock file, opened for appending (a lock needs a handle open for writing); a new
-    one (``create``) is made with mode 0o666 and shared as its folder is. OSError when it cannot be
-    opened."""
+    one (``create``) is made with mode 0o666 and shared as its folder is."""
     flags = os.O_WRONLY | os.O_APPEND
     if create:
         try:
@@ -591,10 +586,9 @@ def _check_logs_folder(runs_dir: Path) -> None:
     while not os.access(folder, os.W_OK | os.X_OK) and time.monotonic() < deadline:
         time.sleep(0.02)
     if not os.access(folder, os.W_OK | os.X_OK):
-        owner = folder.stat().st_uid
         raise UsageError(
             f"cannot write the sweep logs in {str(folder)!r} (permission denied), which every sweep or "
-            f"ablation there needs; {_chmod_fix(folder, owner)}"
+            f"ablation there needs; {_chmod_fix(folder, folder.stat().st_uid)}"
         )
 
 

@@ -416,11 +416,6 @@ def _continued(study: Study) -> bool:
     return _saved_spec(study) == _spec(study)
 
 
-def _trial_value(run_dir: Path, metric: str) -> float:
-    report = json.loads((run_dir / "eval.json").read_text())
-    return float(report[metric])
-
-
 # --- running ---------------------------------------------------------------------------------
 def run_study(
     study: Study,
@@ -458,13 +453,13 @@ def run_study(
         outcomes: list[dict] = []
 
         def tell(number: int, outcome: dict) -> None:
-            run_dir = folder / outcome["name"]
             if not outcome["ok"]:
                 optuna_study.tell(number, state=TrialState.FAIL)
             elif outcome["stopped"] is not None:
                 optuna_study.tell(number, state=TrialState.PRUNED)
             else:
-                optuna_study.tell(number, _trial_value(run_dir, study.metric))
+                report = json.loads((folder / outcome["name"] / "eval.json").read_text())
+                optuna_study.tell(number, float(report[study.metric]))
             outcomes.append(outcome)
 
         def job(number: int, trial_id: int, params: dict) -> dict | None:
@@ -488,9 +483,8 @@ def run_study(
                 if (found := job(trial.number, trial._trial_id, params)) is not None:
                     yield found
 
-        total = len(stale) + new
         with tqdm(
-            total=total, desc=f"tune {study.name} ({executor}, {workers} workers)", unit="trial"
+            total=len(stale) + new, desc=f"tune {study.name} ({executor}, {workers} workers)", unit="trial"
         ) as bar:
             # an interrupted trial's run raises KeyboardInterrupt here (``execute``): the trial stays
             # running in the journal and the next run resumes it
@@ -652,8 +646,8 @@ def write_best(study: Study, summary: dict, path: str | Path) -> Path:
     key = gym_id(summary["env"])
     entries[key] = yaml.safe_load((study.study_dir / BEST_FILE).read_text())[key]
     old = path.read_text(encoding="utf-8").splitlines() if path.exists() else []
-    comments = [line[2:] if line.startswith("# ") else line[1:] for line in old if line.startswith("#")]
-    comments = comments[: next((i for i, line in enumerate(old) if not line.startswith("#")), len(old))]
+    header = itertools.takewhile(lambda line: line.startswith("#"), old)
+    comments = [line[2:] if line.startswith("# ") else line[1:] for line in header]
     note = (
         f"{key}: tuned by drivelab tune (study {summary['study']!r}, best {summary['metric']} "
         f"{summary['best']['value']:.4g} over {sum(summary['states'].values())} trials of "

@@ -43,13 +43,12 @@ class ShippedAgent:
 def shipped_agents(zoo_dir: Path | None = None) -> list[ShippedAgent]:
     """Every agent of ``zoo_dir`` (default: the package's zoo), sorted by name."""
     zoo_dir = ZOO_DIR if zoo_dir is None else zoo_dir
-    agents = []
-    for card_path in sorted(zoo_dir.glob("*/card.json")) if zoo_dir.is_dir() else []:
-        if card_path.parent.name.startswith("."):  # a pack in progress
-            continue
-        card = json.loads(card_path.read_text())
-        agents.append(ShippedAgent(card_path.parent.name, card_path.parent, card))
-    return agents
+    cards = sorted(zoo_dir.glob("*/card.json")) if zoo_dir.is_dir() else []
+    return [
+        ShippedAgent(card.parent.name, card.parent, json.loads(card.read_text()))
+        for card in cards
+        if not card.parent.name.startswith(".")  # a pack in progress
+    ]
 
 
 def resolve(target: str | Path, zoo_dir: Path | None = None) -> tuple[Path, str | None]:
@@ -150,12 +149,7 @@ def _halve(state, converted: dict):
     if isinstance(state, (list, tuple)):
         return type(state)(_halve(value, converted) for value in state)
     if isinstance(state, torch.Tensor) and state.dtype == torch.float32:
-        view = (
-            state.untyped_storage().data_ptr(),
-            state.storage_offset(),
-            tuple(state.shape),
-            state.stride(),
-        )
+        view = (state.untyped_storage().data_ptr(), state.storage_offset(), state.shape, state.stride())
         if view not in converted:
             largest = float(state.abs().max()) if state.numel() else 0.0
             if largest > torch.finfo(torch.float16).max:
@@ -367,7 +361,6 @@ def check_video_path(path: Path) -> None:
         raise UsageError("no mp4 encoder (imageio-ffmpeg's ffmpeg) is installed: use a .gif path")
     if path.is_dir():
         raise UsageError(f"--video {str(path)!r} is a directory")
-
     check_output_file(path, "--video")
 
 
