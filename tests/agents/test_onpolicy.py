@@ -82,8 +82,9 @@ def test_gae_bootstraps_a_time_limit_from_the_final_observation_and_ends_a_termi
     delta_cut = 1 + gamma * v - v  # the cut step: its own reward, the bootstrap, no next value
     delta_on = 1 + gamma * v - v  # a step followed by another of its episode
     delta_end = 1 - v  # a terminated step: nothing after it
+    # world 0's last step bootstraps V(s_4) = v
     world0 = [delta_on + gamma * lam * delta_cut, delta_cut,
-              delta_on + gamma * lam * delta_on, delta_on]  # fmt: skip  (the last bootstraps V(s_4) = v)
+              delta_on + gamma * lam * delta_on, delta_on]  # fmt: skip
     world1 = [delta_on + gamma * lam * (delta_on + gamma * lam * delta_end),
               delta_on + gamma * lam * delta_end, delta_end, delta_on]  # fmt: skip
     expected = np.array([world0, world1]).T.reshape(-1)  # time-major (T·K,)
