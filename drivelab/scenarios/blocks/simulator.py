@@ -74,6 +74,8 @@ def _world_kernel(parallel: bool):
                     light_states[k, : light_stop[k] - light_start[k]], ego_max_speed_mps,
                 )  # fmt: skip
 
+    # numba keys its cache on the function's name and code, not on ``parallel``: one name per variant
+    body.__qualname__ += "_parallel" if parallel else "_serial"
     return njit(cache=True, parallel=parallel)(body)
 
 

@@ -89,6 +89,8 @@ def _town_kernel(parallel: bool):
                     route_length, search, search_offset, search_size, discs, states[k], rng[k], frames, dt,
                 )  # fmt: skip
 
+    # numba keys its cache on the function's name and code, not on ``parallel``: one name per variant
+    body.__qualname__ += "_parallel" if parallel else "_serial"
     return njit(cache=True, parallel=parallel)(body)
 
 
