@@ -986,6 +986,12 @@ TUNE_CASES = {
         [],
         "config field 'eval_every' (128) is larger than 'steps' (64)",
     ),
+    "n_envs for a one-world algorithm": (
+        "algo: rlad\naction: continuous\nn_envs: 2\nenv: highway\nbackend: fast\nsteps: 64\nn_trials: 3\n"
+        "space: {learning_rate: {type: log, low: 0.0001, high: 0.01}}\n",
+        [],
+        "algorithm 'rlad' trains in one world: n_envs must be 1 (got 2)",
+    ),
     "bad executor": (TUNE_BASE + GAMMA, ["--executor", "slurm"], "unknown executor 'slurm'"),
     "write-best not YAML": (
         TUNE_BASE + GAMMA,

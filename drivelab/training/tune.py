@@ -256,7 +256,7 @@ def check_study(study: Study) -> None:
     so that a value the algorithm refuses fails, as one line, before anything is written."""
     from drivelab.agents.registry import check_combination
     from drivelab.envs.core import DriveEnv
-    from drivelab.training.run import _check_model
+    from drivelab.training.run import _check_model, check_n_envs
 
     low = {p.name: p.extremes()[0] for p in study.space}
     probes = [low, {p.name: p.extremes()[-1] for p in study.space}]
@@ -268,6 +268,7 @@ def check_study(study: Study) -> None:
     if new:
         check_eval_every(first)  # the pruner reads the periodic evaluations: at least one must run
     check_combination(first.algo, first.action)
+    check_n_envs(first)  # each trial's run would refuse it
     env = DriveEnv(**first.env_kwargs())  # validates scenario, sensors, reward, action
     try:
         spec = check_combination(first.algo, first.action, env.observation_space)
