@@ -17,7 +17,7 @@ from drivelab.perception.birdeye import DashedMarkings, zebra_boxes
 from drivelab.perception.topdown import SHIFT, LanePolygons, _clip_half_plane, fixed_point, segments_near
 from drivelab.world.batch import WorldBatch
 from drivelab.world.pinhole import PinholeModel
-from drivelab.world.road_geometry import GuideSegments, lateral_at_distances, polyline_segments  # noqa: F401
+from drivelab.world.road_geometry import GuideSegments, polyline_segments
 from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW, MARKING_SOLID, RoadMap, WorldState
 
 SKY = (150, 190, 235)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from drivelab.perception import camera
-from drivelab.perception.camera import Camera, PinholeModel, lateral_at_distances, render_masks
+from drivelab.perception.camera import Camera, PinholeModel, render_masks
 from drivelab.perception.sensors import make_sensor
 from drivelab.world.state import (
     LIGHT_GREEN,
@@ -18,6 +18,7 @@ from drivelab.world.state import (
     RoadMap,
     Route,
 )
+from tests.crossings import lateral_at_distances
 from tests.worlds import world
 
 STRAIGHT = np.array([[-50.0, 0.0], [500.0, 0.0]])

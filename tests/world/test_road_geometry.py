@@ -6,19 +6,16 @@ import dataclasses
 import numpy as np
 
 from drivelab.world.batch import WorldBatch
-from drivelab.world.road_geometry import (
-    GuideSegments,
+from drivelab.world.road_geometry import GuideSegments, guide_segment_sets, guide_segments, polyline_segments
+from drivelab.world.state import RoadMap, Route
+from tests.crossings import (
     batch_guide_segments,
     batch_lateral_at_distances,
     batch_route_segments,
-    guide_segment_sets,
-    guide_segments,
     lateral_at_distances,
     lateral_crossings,
     polyline_crossings,
-    polyline_segments,
 )
-from drivelab.world.state import RoadMap, Route
 from tests.worlds import world
 
 
