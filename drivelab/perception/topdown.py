@@ -123,14 +123,6 @@ def _clip_rows_counts(
     return points, counts
 
 
-def clip_rows(points: np.ndarray, counts: np.ndarray, top: float, bottom: float) -> list[np.ndarray]:
-    """Cut polygons (pixel vertices, one after another) to the rows ``top``..``bottom`` (OpenCV's
-    fill costs time per row a polygon spans, in or out of the image): the non-empty ones, (K, 2)."""
-    points, counts = _clip_rows_counts(points, counts, top, bottom)
-    polygons = np.split(points, np.cumsum(counts)[:-1])
-    return [polygon for polygon in polygons if len(polygon) >= 3]
-
-
 class View:
     """The world → image transforms for K ego poses, with culling of what is out of sight.
 

@@ -9,7 +9,7 @@ import dataclasses
 
 import numpy as np
 
-from drivelab.perception.topdown import TopDown, clip_rows, to_pixels
+from drivelab.perception.topdown import TopDown, _clip_rows_counts, to_pixels
 from drivelab.world.state import RoadMap
 from tests.worlds import world
 
@@ -72,6 +72,14 @@ def test_ten_km_lane_is_drawn_to_the_pixel():
     for row in (0, 41, 83):
         assert np.all(image[ROAD, row, 38:46] == 255)
         assert image[ROAD, row, 36] == 0 and image[ROAD, row, 47] == 0
+
+
+def clip_rows(points: np.ndarray, counts: np.ndarray, top: float, bottom: float) -> list[np.ndarray]:
+    """Cut polygons (pixel vertices, one after another) to the rows ``top``..``bottom`` (OpenCV's
+    fill costs time per row a polygon spans, in or out of the image): the non-empty ones, (K, 2)."""
+    points, counts = _clip_rows_counts(points, counts, top, bottom)
+    polygons = np.split(points, np.cumsum(counts)[:-1])
+    return [polygon for polygon in polygons if len(polygon) >= 3]
 
 
 def test_clip_rows():
