@@ -13,12 +13,12 @@ import numpy as np
 from gymnasium import spaces
 
 from drivelab.perception.base import ZEBRA_STRIPE_M, Sensor, box_corners, ego_frame
-from drivelab.perception.birdeye import DashedMarkings, zebra_boxes
+from drivelab.perception.birdeye import DashedMarkings, solid_markings, zebra_boxes
 from drivelab.perception.topdown import SHIFT, LanePolygons, _clip_half_plane, fixed_point, segments_near
 from drivelab.world.batch import WorldBatch
 from drivelab.world.pinhole import PinholeModel
 from drivelab.world.road_geometry import GuideSegments, polyline_segments
-from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW, MARKING_SOLID, RoadMap, WorldState
+from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW, RoadMap, WorldState
 
 SKY = (150, 190, 235)
 GRASS = (96, 140, 84)
@@ -113,8 +113,7 @@ class PaintedSegments:
     """A road's solid markings and guide lines with bounding circles, for a cheap cull per frame."""
 
     def __init__(self, road: RoadMap) -> None:
-        markings = np.asarray(road.markings, dtype=float).reshape(-1, 2, 2)
-        self.solid = markings[np.asarray(road.marking_kinds) == MARKING_SOLID]
+        self.solid = road.derived(solid_markings, solid_markings)
         self.guide = GuideSegments(road).segments
         self.circles = [_circles(segments) for segments in (self.solid, self.guide)]
 
@@ -181,30 +180,15 @@ def ego_lane_lines(world: WorldState) -> tuple[np.ndarray, np.ndarray]:
     return _offset_polyline(route, -half), _offset_polyline(route, half)
 
 
-def _near(position: np.ndarray, segments: np.ndarray, model: PinholeModel) -> np.ndarray:
-    """The segments (M, 2, 2) within the camera's drawing range of an ego at ``position`` (2,)."""
-    reach = model.forward_m + model.max_range_m
-    return segments[segments_near(segments, position, reach)]
-
-
-def _road_user_corners(batch: WorldBatch) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Ground corners (K, N + P, 4, 2) in each ego's frame of every world's vehicles then
-    pedestrians (front-left, front-right, … as ``box_corners``), their (K, N + P) valid mask and
-    the (K, N + P) mask of the pedestrians."""
-    users, valid = batch.road_users()
-    is_pedestrian = np.broadcast_to(np.arange(users.shape[1]) >= batch.vehicles.shape[1], valid.shape)
-    corners = box_corners(users[..., [0, 1, 2, 4, 5]])
-    position, heading = batch.ego.position[:, None, None], batch.ego.heading[:, None, None]
-    return ego_frame(corners, position, heading), valid, is_pedestrian
-
-
 def _road_user_quads(
     model: PinholeModel, batch: WorldBatch
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The road users in front of each camera, for all K worlds at once: fixed-point pixels (U, 8, 2)
     of their boxes' bottom then top corners, the (U, 4) side faces seen, (U,) pedestrian flags and
     distances, and the (K + 1,) offsets of each world's users in those rows."""
-    corners, valid, is_pedestrian = _road_user_corners(batch)
+    users, valid = batch.road_users()  # vehicles, then pedestrians
+    position, heading = batch.ego.position[:, None, None], batch.ego.heading[:, None, None]
+    corners = ego_frame(box_corners(users[..., [0, 1, 2, 4, 5]]), position, heading)  # (K, N + P, 4, 2)
     distance = np.hypot(*np.moveaxis(corners.mean(axis=2) - [model.forward_m, 0.0], -1, 0))  # (K, M)
     ahead = (
         valid
@@ -212,7 +196,8 @@ def _road_user_quads(
         & (distance < model.max_range_m)
     )
     world, slot = np.nonzero(ahead)  # world-major, each world's users in order
-    corners, is_pedestrian, distance = corners[world, slot], is_pedestrian[world, slot], distance[world, slot]
+    corners, distance = corners[world, slot], distance[world, slot]
+    is_pedestrian = slot >= batch.vehicles.shape[1]  # the slots after the vehicles'
     count = len(corners)
     bottom = np.concatenate([corners, np.zeros((count, 4, 1))], axis=2)
     heights = np.where(is_pedestrian, PEDESTRIAN_HEIGHT_M, VEHICLE_HEIGHT_M)
@@ -305,7 +290,6 @@ def render_camera(world: WorldState, model: PinholeModel) -> np.ndarray:
 
 def draw_camera(batch: WorldBatch, model: PinholeModel, out: np.ndarray) -> None:
     """Draw the K worlds' camera images into ``out`` (K, H, W, 3) uint8."""
-    count = batch.num_worlds
     layers = _ground_layers(batch, model)
     # every world's painted strips as rectangles in one pass, then back to their world and kind
     strips = [(segments, width) for _, world_strips in layers for segments, width, _ in world_strips]
@@ -322,7 +306,7 @@ def draw_camera(batch: WorldBatch, model: PinholeModel, out: np.ndarray) -> None
     lights_seen, light_pixels, radii, states = _traffic_light_marks(model, batch)
     out[:] = GRASS
     out[:, : int(np.clip(np.ceil(model.horizon_row), 0, model.height))] = SKY
-    for k in range(count):  # one OpenCV raster per world
+    for k in range(batch.num_worlds):  # one OpenCV raster per world
         image = out[k]
         _fill_strips(image, projected[k][0], ROAD)  # lane pieces are quads: convex, also once clipped
         for polygons, (_, _, colour) in zip(projected[k][1:], layers[k][1], strict=True):
@@ -344,8 +328,10 @@ def render_masks(world: WorldState, model: PinholeModel) -> np.ndarray:
     left, right = ego_lane_lines(world)
     guide = world.road.derived(GuideSegments, GuideSegments).segments
     widths = (MARKING_WIDTH_M, MARKING_WIDTH_M, GUIDE_WIDTH_M)
+    reach = model.forward_m + model.max_range_m  # the camera's drawing range
     groups = [
-        _strip_quads(_near(position, s, model), w) for s, w in zip((left, right, guide), widths, strict=True)
+        _strip_quads(s[segments_near(s, position, reach)], w)
+        for s, w in zip((left, right, guide), widths, strict=True)
     ]
     positions, headings = np.reshape(position, (1, 2)), np.reshape(world.ego.heading, 1)
     for channel, polygons in enumerate(_ground_polygons_batch(model, positions, headings, [groups])[0]):
