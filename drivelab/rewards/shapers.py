@@ -139,7 +139,6 @@ class RewardShaper:
 
     def __init__(self, spec: str | dict | RewardSpec) -> None:
         self.spec = parse_reward(spec)
-        self.terms = {name: TERMS[name] for name in self.spec.weights}
         self._weighted = [(name, weight, TERMS[name]) for name, weight in self.spec.weights.items()]
 
     def __call__(self, prev: WorldBatch | WorldState, batch: WorldBatch | WorldState, control) -> tuple:
