@@ -107,13 +107,11 @@ class VectorDriveEnv(VectorEnv):
         if env_spec is not None and keywords:
             raise UsageError(f"give the environment's keywords or its spec, not both ({', '.join(keywords)})")
         self.env_spec = spec = env_spec or EnvSpec.build(scenario=scenario, **keywords)
-        autoreset_mode = autoreset_mode_of(autoreset_mode)
-        scenario, traffic, backend_options = spec.scenario, spec.traffic, spec.backend_options
-        action, reward = spec.action, spec.reward
-        self.scenario = get_scenario(scenario)
-        check_traffic(traffic)
-        action = self.scenario.action_kinds[0] if action is None else action
-        reward = self.scenario.default_reward if reward is None else reward
+        self.autoreset_mode = autoreset_mode_of(autoreset_mode)
+        self.scenario = get_scenario(spec.scenario)
+        check_traffic(spec.traffic)
+        action = self.scenario.action_kinds[0] if spec.action is None else spec.action
+        reward = self.scenario.default_reward if spec.reward is None else spec.reward
         self.adapter = (
             action
             if isinstance(action, ActionAdapter)
@@ -121,10 +119,11 @@ class VectorDriveEnv(VectorEnv):
         )
         if self.adapter.name not in self.scenario.action_kinds:
             raise UsageError(
-                f"scenario {scenario!r} cannot take action {self.adapter.name!r} "
+                f"scenario {spec.scenario!r} cannot take action {self.adapter.name!r} "
                 f"(it takes {', '.join(self.scenario.action_kinds)})"
             )
-        check_backend_options(self.scenario, backend_options, traffic, self.adapter.control)
+        options = spec.backend_options
+        check_backend_options(self.scenario, options, spec.traffic, self.adapter.control)
         self.sensors = [make_sensor(sensor) for sensor in split_sensor_list(spec.obs)]
         names = [s.name for s in self.sensors]
         if len(set(names)) != len(names):
@@ -133,18 +132,17 @@ class VectorDriveEnv(VectorEnv):
         self.reward_shaper = RewardShaper(reward)
         self.num_envs = int(num_envs)
         self.simulator = make_simulator(
-            spec.backend, self.scenario, traffic, self.adapter.control, self.num_envs, backend_options
+            spec.backend, self.scenario, spec.traffic, self.adapter.control, self.num_envs, options
         )
         self.duration_s = float(spec.duration_s or self.simulator.duration_s)
         self.duration_given = spec.duration_s is not None
         self.rules = EpisodeRules(self.scenario, spec.offroad_terminal)
         self.metrics = EpisodeMetrics()
         self.render_mode = render_mode
-        self.autoreset_mode = autoreset_mode
         self.metadata = {
             **self.metadata,
             "render_fps": self.simulator.policy_frequency_hz,
-            "autoreset_mode": autoreset_mode,
+            "autoreset_mode": self.autoreset_mode,
         }
         self.single_action_space = self.adapter.space
         if len(self.sensors) == 1:
@@ -351,9 +349,8 @@ class VectorDriveEnv(VectorEnv):
         self.observations = observations
         info, reward, terminated, truncated = fused.world_step(out, flags)
         if terminated or truncated:
-            done = np.array([True])
             has_goal = self.scenario.arrival != "none"
-            info["episode_metrics"] = self.metrics.summaries(done, has_goal, np.array([truncated]))[0]
+            info["episode_metrics"] = self.metrics.summaries([True], has_goal, np.array([truncated]))[0]
         info["traffic_light"] = _LABEL_OF_STATE[0]
         return observations[0], reward, terminated, truncated, info
 
