@@ -102,11 +102,8 @@ class EpisodeMetrics:
         """The final numbers of each world where ``mask`` (K,), in order (``EpisodeMetrics.summary``
         for each; ``timed_out`` (K,) says whose episode reached its time limit)."""
         ended = np.flatnonzero(mask)  # only the worlds whose episode ends: a dict each
-        length, collisions, off_road_events = (
-            self.length[ended],
-            self.collisions[ended],
-            self.off_road_events[ended],
-        )
+        length, collisions = self.length[ended], self.collisions[ended]
+        off_road_events = self.off_road_events[ended]
         crashed = collisions > 0
         # NoCrash's success (the RLAD paper: "routes completed without collision"): the goal reached
         # with no collision, one on the arrival step included; without a goal, the time limit

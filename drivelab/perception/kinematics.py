@@ -82,14 +82,12 @@ class Kinematics(Sensor):
             cos_other, sin_other = np.cos(heading), np.sin(heading)
             motion_rows(others, chosen, ego.speed_mps, cos_other, sin_other, speed_scale, rows)
         cos_relative, sin_relative = np.cos(relative_heading), np.sin(relative_heading)
-        if self._all_columns and out.flags.c_contiguous:  # its flat view: the rows written in place
-            flat = out.reshape(out.shape[0], -1)
-            ego_rows_into(rows, ego.speed_mps, cos_relative, sin_relative, speed_scale, self.clip, flat)
-            return
-        every = np.empty((batch.num_worlds, self.vehicles_count * len(FEATURES)))
+        in_place = self._all_columns and out.flags.c_contiguous  # the rows written into out's flat view
+        flat = (batch.num_worlds, self.vehicles_count * len(FEATURES))
+        every = out.reshape(flat) if in_place else np.empty(flat)
         ego_rows_into(rows, ego.speed_mps, cos_relative, sin_relative, speed_scale, self.clip, every)
-        every = every.reshape(batch.num_worlds, self.vehicles_count, len(FEATURES))
-        out[...] = every[:, :, self.columns].reshape(out.shape)
+        if not in_place:
+            out[...] = every.reshape(rows.shape)[:, :, self.columns].reshape(out.shape)
 
 
 def feature_names(features) -> tuple[str, ...]:
