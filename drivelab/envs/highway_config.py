@@ -259,8 +259,7 @@ def _kinematics(spec: dict, problems: list[str]) -> str:
 def _features_range(ranges: Any, features, problems: list[str]) -> dict[str, float]:
     """``perception_distance_m`` and ``speed_scale_mps`` of a features_range that drivelab's
     scales reproduce: x and y over one symmetric range, vx and vy over another."""
-    wanted = {"x": ("x", "y"), "vx": ("vx", "vy")}
-    names = {"x": "perception_distance_m", "vx": "speed_scale_mps"}
+    wanted = {"perception_distance_m": ("x", "y"), "speed_scale_mps": ("vx", "vy")}
     seen = [name for group in wanted.values() for name in group if name in features]
     out: dict[str, float] = {}
     if not isinstance(ranges, dict) or set(ranges) - {"x", "y", "vx", "vy"} or not set(seen) <= set(ranges):
@@ -269,7 +268,7 @@ def _features_range(ranges: Any, features, problems: list[str]) -> dict[str, flo
             f"one speed: give x, y: [-d, d] and vx, vy: [-s, s] (d, s in [1, 1000])"
         )
         return out
-    for first, group in wanted.items():
+    for option, group in wanted.items():
         given = [ranges[name] for name in group if name in ranges]
         try:
             pairs = [(float(low), float(high)) for low, high in given]
@@ -281,11 +280,11 @@ def _features_range(ranges: Any, features, problems: list[str]) -> dict[str, flo
         if any(pair != pairs[0] for pair in pairs) or low != -high or not 1.0 <= high <= 1000.0:
             problems.append(
                 f"Kinematics features_range {', '.join(n for n in group if n in ranges)} {given!r}: drivelab "
-                f"scales {' and '.join(group)} by one {names[first]}: give them one range [-d, d], d in "
+                f"scales {' and '.join(group)} by one {option}: give them one range [-d, d], d in "
                 f"[1, 1000]"
             )
             continue
-        out[names[first]] = high
+        out[option] = high
     return out
 
 

@@ -231,9 +231,7 @@ class Glyphs:
         band[:] = (band * (1.0 - alpha) + np.asarray(colour, dtype=np.float32) * alpha + 0.5).astype(np.uint8)
 
 
-@lru_cache(maxsize=4)
-def _glyphs(size: int) -> Glyphs:
-    return Glyphs(size)
+_glyphs = lru_cache(maxsize=4)(Glyphs)  # one per font size, its words kept
 
 
 @dataclass(frozen=True)
@@ -304,10 +302,7 @@ def action_text(adapter, action) -> str:
 # --- what the agent sees ------------------------------------------------------------------------
 def image_sensor(sensors) -> object | None:
     """The first sensor of ``sensors`` that gives an image (camera, birdeye, topdown), else None."""
-    for sensor in sensors:
-        if getattr(sensor, "sensor", sensor).name in IMAGE_SENSORS:
-            return sensor
-    return None
+    return next((s for s in sensors if getattr(s, "sensor", s).name in IMAGE_SENSORS), None)
 
 
 def observation_image(sensor, observation: np.ndarray) -> np.ndarray:

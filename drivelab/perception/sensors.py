@@ -218,10 +218,7 @@ def check_sensors_for(scenario, sensors: list[Sensor]) -> None:
 
 def split_sensor_list(obs: str | list | tuple) -> list:
     """``"lidar,topdown"`` → ["lidar", "topdown"]; lists pass through."""
-    if isinstance(obs, str):
-        items = [s.strip() for s in obs.split(",") if s.strip()]
-    else:
-        items = list(obs)
+    items = [s.strip() for s in obs.split(",") if s.strip()] if isinstance(obs, str) else list(obs)
     if not items:
         raise UsageError("no sensor given (--obs)")
     return items
