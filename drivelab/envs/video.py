@@ -31,14 +31,16 @@ import numpy as np
 from drivelab.errors import UsageError
 from drivelab.perception.birdeye import draw_birdeye
 from drivelab.perception.topdown import LanePolygons, View
-from drivelab.world.batch import WorldBatch
+from drivelab.world.batch import EVENT_FLAGS, WorldBatch
 from drivelab.world.scenario import Scenario
 
 STRIP_HEIGHT = 48  # the overlay strip under the scene, two lines of text
 STRIP_BACKGROUND = (24, 24, 28)
 TEXT = (235, 235, 235)
+# the strip's event badges and their colours, in the order of batch.events' flags (EVENT_FLAGS)
 EVENT_COLOURS = {"CRASH": (235, 60, 50), "OFF-ROAD": (240, 150, 40), "ARRIVED": (70, 200, 90)}
 EVENT_COLOURS |= {"RED LIGHT": (235, 60, 50), "BLOCKED": (240, 150, 40), "OFF ROUTE": (240, 150, 40)}
+EVENT_NAMES = dict(zip(EVENT_FLAGS, EVENT_COLOURS, strict=True))  # flag → badge
 EGO_RING = (255, 235, 60)
 IMAGE_SENSORS = ("camera", "birdeye", "topdown")  # the observations side-by-side shows
 # topdown's channels in colour: road, route, past ego positions, traffic now, traffic before
@@ -130,18 +132,13 @@ class Backdrop:
         draw_birdeye(one, self.image, camera.pixels_per_meter, self.view, layers="road")
         self.image = self.image[0]
 
-    def window(self, centre: np.ndarray) -> tuple[int, int]:
-        """The backdrop's (row, column) of the top-left pixel of a frame centred at ``centre``
-        (a frame on whole pixels of the backdrop: ``map_view``)."""
+    def copy_into(self, image: np.ndarray, centre: np.ndarray) -> bool:
+        """Copy the window of the frame centred at ``centre`` (on whole pixels of the backdrop:
+        ``map_view``) into ``image``; False (nothing copied) when it is not all on the backdrop."""
         column, row = self.view.pixels_of(0, centre)
         height, width = self.camera.size_hw
-        return int(round(row - (height / 2 - 0.5))), int(round(column - (width / 2 - 0.5)))
-
-    def copy_into(self, image: np.ndarray, centre: np.ndarray) -> bool:
-        """Copy the window of the frame centred at ``centre`` into ``image``; False (nothing
-        copied) when it is not all on the backdrop."""
-        row, column = self.window(centre)
-        height, width = self.camera.size_hw
+        # the backdrop's pixel under the frame's top-left one
+        row, column = int(round(row - (height / 2 - 0.5))), int(round(column - (width / 2 - 0.5)))
         if min(row, column) < 0 or row + height > len(self.image) or column + width > self.image.shape[1]:
             return False
         image[:] = self.image[row : row + height, column : column + width]
@@ -271,16 +268,8 @@ def events_of(batch: WorldBatch, k: int, end_of_step: bool) -> tuple[str, ...]:
     """World ``k``'s events as the strip names them. Between a step's frames only what the frame
     itself shows (a collision, leaving the road); at a step's end also what the rules judge once
     per step (arrival, a red light run, blocked, off route)."""
-    events = batch.events
-    flags = [(events.collided, "CRASH"), (events.off_road, "OFF-ROAD")]
-    if end_of_step:
-        flags += [
-            (events.arrived, "ARRIVED"),
-            (events.red_light_crossed, "RED LIGHT"),
-            (events.blocked, "BLOCKED"),
-            (events.off_route, "OFF ROUTE"),
-        ]
-    return tuple(name for flag, name in flags if flag[k])
+    flags = EVENT_FLAGS if end_of_step else ("collided", "off_road")
+    return tuple(EVENT_NAMES[flag] for flag in flags if getattr(batch.events, flag)[k])
 
 
 def action_text(adapter, action) -> str:
