@@ -145,12 +145,8 @@ def _circuit_step(
         collided, arrived, no_event, no_event, no_event, off_road, params[P_OFFROAD_TERMINAL] != 0.0, time_s,
         truncate_at_s, terminated, truncated,
     )  # fmt: skip
-    line_rows, line_terms = cameras[0:4], cameras[4 : 4 + _CAMERA_SIZE]
-    lane_rows, lane_rows_px = (
-        cameras[4 + _CAMERA_SIZE : 8 + _CAMERA_SIZE],
-        cameras[8 + _CAMERA_SIZE : 12 + _CAMERA_SIZE],
-    )
-    lane_terms = cameras[12 + _CAMERA_SIZE : 12 + 2 * _CAMERA_SIZE]
+    line_rows, line_terms, lane = cameras[0:4], cameras[4 : 4 + _CAMERA_SIZE], cameras[4 + _CAMERA_SIZE :]
+    lane_rows, lane_rows_px, lane_terms = lane[0:4], lane[4:8], lane[8 : 8 + _CAMERA_SIZE]
     for t in range(terms):  # each term's (K,) values, weighted, summed in the spec's order
         code = codes[t]
         if code == 0:  # line_centring
