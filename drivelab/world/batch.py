@@ -397,20 +397,16 @@ class WorldBatch:
         if not self.traffic_lights.shape[1]:  # no lights in any world: nothing to search or filter
             return np.full(self.num_worlds, -1, dtype=np.int64), np.full(self.num_worlds, np.inf)
         if "light_ahead" not in self.cache:
-            self.cache["light_ahead"] = self._nearest_light()
+            ego, (cos_h, sin_h) = self.ego, self.heading_cos_sin()
+            state, distance = np.empty(self.num_worlds, dtype=np.int64), np.empty(self.num_worlds)
+            _nearest_lights(
+                self.traffic_lights, self.light_valid, ego.position, ego.heading, cos_h, sin_h,
+                ego.lane_width_m, state, distance,
+            )  # fmt: skip
+            self.cache["light_ahead"] = state, distance
         state, distance = self.cache["light_ahead"]
         within = distance <= max_distance_m
         return np.where(within, state, -1), np.where(within, distance, np.inf)
-
-    def _nearest_light(self) -> tuple[np.ndarray, np.ndarray]:
-        """``light_ahead`` without a distance limit."""
-        ego, (cos_h, sin_h) = self.ego, self.heading_cos_sin()
-        state, distance = np.empty(self.num_worlds, dtype=np.int64), np.empty(self.num_worlds)
-        _nearest_lights(
-            self.traffic_lights, self.light_valid, ego.position, ego.heading, cos_h, sin_h,
-            ego.lane_width_m, state, distance,
-        )  # fmt: skip
-        return state, distance
 
 
 _FIELDS_EGO = dataclasses.fields(EgoBatch)
