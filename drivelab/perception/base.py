@@ -50,7 +50,7 @@ class Sensor(ABC):
         mask = np.ones(count, dtype=bool) if mask is None else np.asarray(mask, dtype=bool)
         for k in np.flatnonzero(mask):
             self.rngs[k] = rngs[k]
-        self._reset(batch, np.asarray(mask, dtype=bool))
+        self._reset(batch, mask)
 
     def scenario_problem(self, scenario) -> str | None:
         """Why this sensor reads nothing meaningful in ``scenario`` (a ``Scenario``), e.g. paint the

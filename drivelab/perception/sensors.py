@@ -143,11 +143,9 @@ def _typed_option(sensor: str, key: str, value, default):
         noun = "an integer" if isinstance(default, int) else "a finite number"
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
             raise UsageError(wrong.format(noun))
-        if isinstance(default, int):
-            if not float(value).is_integer():
-                raise UsageError(wrong.format(noun))
-            return int(value)
-        return float(value)
+        if isinstance(default, int) and not float(value).is_integer():
+            raise UsageError(wrong.format(noun))
+        return int(value) if isinstance(default, int) else float(value)
     if not isinstance(value, str):  # string options, and None defaults (a weights path)
         raise UsageError(wrong.format("a string"))
     return value
