@@ -295,55 +295,31 @@ def _pruner(keywords: dict):
     return optuna.pruners.MedianPruner(**keywords)
 
 
+def _sampler(keywords: dict, number: int = 0):
+    """The study's TPE sampler; with a seed, trial ``number``'s: it draws with seed + number, so that a
+    study killed and run again asks the same values as the study that was never stopped (given the
+    same finished trials)."""
+    import optuna
+
+    keywords = dict(keywords)
+    if "seed" in keywords:
+        keywords["seed"] += number
+    return optuna.samplers.TPESampler(**keywords)
+
+
 def open_optuna_study(study: Study):
     """The study's Optuna study in ``<study_dir>/study.journal`` (created when new)."""
     import optuna
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)  # tune prints its own progress
-    keywords = dict(study.sampler)
-    seed = keywords.pop("seed", None)
     return optuna.create_study(
         study_name=study.name,
         storage=_storage(study.study_dir),
-        sampler=optuna.samplers.TPESampler(**keywords) if seed is None else trial_seeded_tpe(seed, keywords),
+        sampler=_sampler(study.sampler),
         pruner=_pruner(study.pruner),
         direction=study.direction,
         load_if_exists=True,
     )
-
-
-def trial_seeded_tpe(seed: int, keywords: dict):
-    """A TPE sampler that draws trial n's values with the seed ``seed + n``, so that a study killed
-    and run again asks the same values as the study that was never stopped (given the same finished
-    trials)."""
-    import optuna
-
-    class TrialSeededTPE(optuna.samplers.BaseSampler):
-        def __init__(self) -> None:
-            self.samplers: dict[int, optuna.samplers.TPESampler] = {}
-
-        def _of(self, trial) -> optuna.samplers.TPESampler:
-            if trial.number not in self.samplers:
-                self.samplers[trial.number] = optuna.samplers.TPESampler(seed=seed + trial.number, **keywords)
-            return self.samplers[trial.number]
-
-        def infer_relative_search_space(self, study, trial):
-            return self._of(trial).infer_relative_search_space(study, trial)
-
-        def sample_relative(self, study, trial, search_space):
-            return self._of(trial).sample_relative(study, trial, search_space)
-
-        def sample_independent(self, study, trial, param_name, param_distribution):
-            return self._of(trial).sample_independent(study, trial, param_name, param_distribution)
-
-        def before_trial(self, study, trial) -> None:
-            self._of(trial).before_trial(study, trial)
-
-        def after_trial(self, study, trial, state, values) -> None:
-            self._of(trial).after_trial(study, trial, state, values)
-            del self.samplers[trial.number]
-
-    return TrialSeededTPE()
 
 
 @dataclass(frozen=True)
@@ -480,6 +456,8 @@ def run_study(
         def jobs():  # Optuna's trial ids (``_trial_id``) name a trial in its storage, as Trial() takes it
             revived = (Trial(optuna_study, t._trial_id) for t in stale)  # suggest gives their stored values
             for trial in itertools.chain(revived, (optuna_study.ask() for _ in range(new))):
+                if "seed" in study.sampler:  # Optuna draws with the study's sampler of the moment
+                    optuna_study.sampler = _sampler(study.sampler, trial.number)
                 params = {p.name: p.suggest(trial) for p in study.space}
                 if (found := job(trial.number, trial._trial_id, params)) is not None:
                     yield found
