@@ -252,33 +252,24 @@ def load_study(path: str | Path, study_dir: str | Path | None = None, n_trials: 
 
 
 def check_study(study: Study) -> None:
-    """Build the agent at the low and the high corner of the space and at each categorical choice,
-    so that a value the algorithm refuses fails, as one line, before anything is written."""
-    from drivelab.agents.registry import check_combination
-    from drivelab.envs.core import DriveEnv
-    from drivelab.training.run import _check_model, check_n_envs
+    """Check a trial's run config as ``drivelab train`` does (``run.check_config``: the agent built)
+    at the low and the high corner of the space and at each categorical choice, so that a value the
+    algorithm refuses fails, as one line, before anything is written."""
+    from drivelab.training.run import check_config
 
     low = {p.name: p.extremes()[0] for p in study.space}
     probes = [low, {p.name: p.extremes()[-1] for p in study.space}]
     probes += [
         {**low, p.name: choice} for p in study.space if p.kind == "categorical" for choice in p.choices
     ]
-    first = study.trial_config(0, low)
     new = not _continued(study)  # a study begun before these checks goes on as it was made
-    if new:
-        check_eval_every(first)  # the pruner reads the periodic evaluations: at least one must run
-    check_combination(first.algo, first.action)
-    check_n_envs(first)  # each trial's run would refuse it
-    env = DriveEnv(**first.env_kwargs())  # validates scenario, sensors, reward, action
-    try:
-        spec = check_combination(first.algo, first.action, env.observation_space)
-        for params in probes:
-            config = study.trial_config(0, params)
-            _check_model(spec, config, env)
-            if new:
-                check_steps(config)  # a searched n_steps at its high corner: a rollout within the budget
-    finally:
-        env.close()
+    if new:  # the pruner reads the periodic evaluations: at least one must run
+        check_eval_every(study.trial_config(0, low))
+    for params in probes:
+        config = study.trial_config(0, params)
+        check_config(config)
+        if new:
+            check_steps(config)  # a searched n_steps at its high corner: a rollout within the budget
 
 
 # --- Optuna ----------------------------------------------------------------------------------
