@@ -357,7 +357,7 @@ def _check_study_dir(study: Study) -> None:
     if folder.exists() and not folder.is_dir():
         raise UsageError(f"study directory {str(folder)!r} is a file")
     if (folder / SPEC_FILE).is_file():
-        if _saved_spec(study) != _spec(study):
+        if not _continued(study):
             raise UsageError(
                 f"study directory {str(folder)!r} holds another study (its {SPEC_FILE} differs); "
                 "remove it or choose another --study-dir"
@@ -371,17 +371,12 @@ def _spec(study: Study):
     return json.loads(json.dumps(study.identity()))
 
 
-def _saved_spec(study: Study):
-    """The study.yaml of the study directory, read; None when there is none to read."""
-    try:
-        return parse_yaml_1_1(read_text_bounded(study.study_dir / SPEC_FILE))
-    except (OSError, UsageError, yaml.YAMLError):
-        return None
-
-
 def _continued(study: Study) -> bool:
-    """Whether the study directory holds this very study already (``run_study`` refuses any other)."""
-    return _saved_spec(study) == _spec(study)
+    """Whether the study directory's study.yaml is this very study's (``run_study`` refuses any other)."""
+    try:
+        return parse_yaml_1_1(read_text_bounded(study.study_dir / SPEC_FILE)) == _spec(study)
+    except (OSError, UsageError, yaml.YAMLError):
+        return False
 
 
 # --- running ---------------------------------------------------------------------------------
