@@ -474,14 +474,13 @@ def trials_table(study: Study, optuna_study):
     stores them, the last step it reported, its seconds and run directory."""
     import pandas as pd
 
-    rows = []
-    for trial in optuna_study.get_trials(deepcopy=False):
-        seconds = trial.duration.total_seconds() if trial.duration is not None else None
-        row = {"number": trial.number, "state": trial.state.name.lower(), "value": trial.value}
-        row.update(trial.params)
-        row.update(last_step=max(trial.intermediate_values, default=None), seconds=seconds,
-                   run_dir=trial_name(trial.number))  # fmt: skip
-        rows.append(row)
+    rows = [
+        {"number": trial.number, "state": trial.state.name.lower(), "value": trial.value, **trial.params,
+         "last_step": max(trial.intermediate_values, default=None),
+         "seconds": trial.duration.total_seconds() if trial.duration is not None else None,
+         "run_dir": trial_name(trial.number)}
+        for trial in optuna_study.get_trials(deepcopy=False)
+    ]  # fmt: skip
     columns = ["number", "state", "value", *(p.name for p in study.space), "last_step", "seconds", "run_dir"]
     return pd.DataFrame(rows, columns=columns)
 
