@@ -65,10 +65,6 @@ class RunRecord:
     source: str
     curve: tuple[tuple[int, float], ...]
 
-    @property
-    def group(self) -> tuple[str, ...]:
-        return group_key(self.config)
-
 
 def group_key(config: RunConfig) -> tuple[str, ...]:
     """(algorithm, scenario, sensors, reward, action[, hyper-parameter changes]): runs that differ
@@ -243,7 +239,7 @@ def group_runs(records: Sequence[RunRecord]) -> dict[tuple[str, ...], list[RunRe
                 f"seed {config.seed}, {config.steps} steps): a seed counts once in a group; "
                 "compare one of them"
             )
-        key = record.group
+        key = group_key(config)
         groups.setdefault((key[0], scenario, *key[2:]), []).append(record)
     return {key: sorted(runs, key=lambda r: (r.config.seed, str(r.run_dir))) for key, runs in groups.items()}
 
