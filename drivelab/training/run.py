@@ -46,13 +46,7 @@ from drivelab.training.divergence import (
     raised_by_divergence,
     remedy,
 )
-from drivelab.training.evaluate import (
-    aggregate,
-    load_run_config,
-    make_out_dir,
-    run_episodes,
-    write_video,
-)
+from drivelab.training.evaluate import aggregate, load_run_config, make_out_dir, run_episodes, write_video
 from drivelab.training.progress_log import run_logger
 from drivelab.training.resume_state import (
     ArrayVecMonitor,

@@ -676,10 +676,7 @@ def check_workers(executor: str, workers: int | None, address: str | None) -> in
 
 
 def run_sweep(
-    sweep: Sweep,
-    executor: str = "pool",
-    workers: int | None = None,
-    address: str | None = None,
+    sweep: Sweep, executor: str = "pool", workers: int | None = None, address: str | None = None
 ) -> list[dict]:
     """Run every cell that is not finished; return one outcome per cell (skipped ones included).
 
