@@ -455,17 +455,12 @@ def run_study(
             # running in the journal and the next run resumes it
             for outcome in execute(run_cell, jobs(), executor, workers, in_flight=workers):
                 tell(by_name.pop(outcome["name"]), outcome)
-                bar.set_postfix_str(f"{outcome['name']}: {_state_word(outcome)}")
+                state = "FAILED" if not outcome["ok"] else "ok" if outcome["stopped"] is None else "pruned"
+                bar.set_postfix_str(f"{outcome['name']}: {state}")
                 bar.update(1)
         summary = write_summary(study, optuna_study, command)
     summary["outcomes"] = outcomes
     return summary
-
-
-def _state_word(outcome: dict) -> str:
-    if not outcome["ok"]:
-        return "FAILED"
-    return "pruned" if outcome["stopped"] is not None else "ok"
 
 
 # --- the summary -----------------------------------------------------------------------------
