@@ -431,17 +431,14 @@ def _remove_stale_tmp_folders(out_dir: Path, keep: Path) -> None:
         except OSError:
             continue  # gone meanwhile
         try:
+            # refused: a report being written now, or a file system without locks (NFS): it stays
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            # a report being written now, or a file system without locks (NFS): it stays
-            os.close(handle)
-            continue
-        try:
             for name in (*REPORT_FILES, MANIFEST):
                 with contextlib.suppress(OSError):
                     remove_file(folder / name)
-            with contextlib.suppress(OSError):
-                folder.rmdir()  # refused when something else is in it now: it stays
+            folder.rmdir()  # refused when something else is in it now: it stays
+        except OSError:
+            pass
         finally:
             os.close(handle)
 
