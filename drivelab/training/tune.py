@@ -158,8 +158,7 @@ def _param(name: str, entry) -> Param:
     if kind not in PARAM_TYPES:
         raise UsageError(f"{where} has unknown type {kind!r} (choose from {', '.join(PARAM_TYPES)})")
     allowed = {"type", "choices"} if kind == "categorical" else {"type", "low", "high", "log", "step"}
-    stray = sorted(set(entry) - allowed, key=str)
-    if stray:
+    if stray := sorted(set(entry) - allowed, key=str):
         raise UsageError(f"{where} of type {kind!r} has unknown key {stray[0]!r}")
     if kind == "categorical":
         choices = entry.get("choices")
@@ -188,16 +187,15 @@ def _param(name: str, entry) -> Param:
         if (Decimal(str(high)) - Decimal(str(low))) % Decimal(str(step)) != 0:
             raise UsageError(f"{where} 'step' {step!r} must divide high - low ({high!r} - {low!r})")
     kind = "float" if kind == "log" else kind
-    return Param(name, kind, float(low) if kind == "float" else int(low),
-                 float(high) if kind == "float" else int(high), log, step)  # fmt: skip
+    number = float if kind == "float" else int
+    return Param(name, kind, number(low), number(high), log, step)
 
 
 def _keywords(value, what: str, keys: tuple[str, ...]) -> dict:
     value = value or {}
     if not isinstance(value, dict):
         raise UsageError(f"tune '{what}' must be a mapping of {', '.join(keys)}")
-    stray = sorted(set(value) - set(keys), key=str)
-    if stray:
+    if stray := sorted(set(value) - set(keys), key=str):
         raise UsageError(f"tune '{what}' has unknown key {stray[0]!r} (known: {', '.join(keys)})")
     for key, number in value.items():
         _integer(number, f"tune {what} {key!r}", 0)
@@ -211,8 +209,7 @@ def read_study(spec: dict, study_dir: str | Path | None = None, n_trials: int | 
     :param n_trials: overrides the file's ``n_trials``."""
     if not isinstance(spec, dict):
         raise UsageError("a tune file must be a mapping")
-    stray = sorted(set(spec) - set(STUDY_KEYS) - set(RUN_KEYS), key=str)
-    if stray:
+    if stray := sorted(set(spec) - set(STUDY_KEYS) - set(RUN_KEYS), key=str):
         known = ", ".join([*STUDY_KEYS, *RUN_KEYS])
         raise UsageError(f"unknown tune key {stray[0]!r} (known: {known})")
     if "algo" not in spec:
