@@ -429,12 +429,10 @@ def _json_default(value: Any) -> Any:
 def write_state(folder: Path, snapshot: Snapshot) -> None:
     """``resume-<steps>.json`` + ``.npz``, each written whole (``safe_files.replacing``)."""
     json_path, npz_path = _paths(folder, snapshot.steps)
-    arrays = dict(snapshot.arrays)
-    for index, actions in enumerate(snapshot.world_actions()):
-        arrays[f"world_{index}_actions"] = actions
+    actions = {f"world_{index}_actions": taken for index, taken in enumerate(snapshot.world_actions())}
     with replacing(npz_path, folder / "resume.tmp.npz") as tmp_npz:
         with tmp_npz.open("wb") as handle:
-            np.savez(handle, **arrays)
+            np.savez(handle, **{**snapshot.arrays, **actions})
         npz_sha256 = hashlib.sha256(tmp_npz.read_bytes()).hexdigest()
     meta = {**snapshot.meta, "worlds": [{"start": start} for start, _, _ in snapshot.worlds],
             "npz_sha256": npz_sha256}  # fmt: skip
