@@ -50,6 +50,7 @@ from drivelab.config import FIELDS, RunConfig, build_config, check_eval_every, c
 from drivelab.errors import UsageError
 from drivelab.hyperparams import with_shipped_hyperparams, zoo_yaml
 from drivelab.training.metrics import METRICS as REGISTRY
+from drivelab.training.seeds import VALIDATION_START
 from drivelab.training.sweep import cell_action, check_workers, execute, executor_ready, run_cell, skipped
 from drivelab.yaml_io import load_yaml, parse_yaml_1_1, read_text_bounded
 
@@ -422,28 +423,21 @@ def run_study(
                 optuna_study.tell(number, float(report[study.metric]))
             outcomes.append(outcome)
 
-        def job(number: int, trial_id: int, params: dict) -> dict | None:
-            from drivelab.training.seeds import VALIDATION_START
-
-            config = study.trial_config(number, params)
-            action = cell_action(folder / config.name, config, study.final_eval_episodes)
-            if action == "skip":  # finished before its study was killed: only the tell is missing
-                tell(number, skipped(config.name))
-                return None
-            by_name[config.name] = number
-            reporter = TrialReporter(str(folder), study.name, trial_id, study.metric, study.pruner)
-            return {"config_values": config.to_dict(), "runs_dir": str(folder), "action": action,
-                    "eval_episodes": study.final_eval_episodes, "on_evaluation": reporter,
-                    "eval_first": VALIDATION_START}  # fmt: skip
-
         def jobs():  # Optuna's trial ids (``_trial_id``) name a trial in its storage, as Trial() takes it
             revived = (Trial(optuna_study, t._trial_id) for t in stale)  # suggest gives their stored values
             for trial in itertools.chain(revived, (optuna_study.ask() for _ in range(new))):
                 if "seed" in study.sampler:  # Optuna draws with the study's sampler of the moment
                     optuna_study.sampler = _sampler(study.sampler, trial.number)
-                params = {p.name: p.suggest(trial) for p in study.space}
-                if (found := job(trial.number, trial._trial_id, params)) is not None:
-                    yield found
+                config = study.trial_config(trial.number, {p.name: p.suggest(trial) for p in study.space})
+                action = cell_action(folder / config.name, config, study.final_eval_episodes)
+                if action == "skip":  # finished before its study was killed: only the tell is missing
+                    tell(trial.number, skipped(config.name))
+                    continue
+                by_name[config.name] = trial.number
+                reporter = TrialReporter(str(folder), study.name, trial._trial_id, study.metric, study.pruner)
+                yield {"config_values": config.to_dict(), "runs_dir": str(folder), "action": action,
+                       "eval_episodes": study.final_eval_episodes, "on_evaluation": reporter,
+                       "eval_first": VALIDATION_START}  # fmt: skip
 
         with tqdm(
             total=len(stale) + new, desc=f"tune {study.name} ({executor}, {workers} workers)", unit="trial"
@@ -532,8 +526,6 @@ def write_summary(study: Study, optuna_study, command: str | None = None) -> dic
 
 
 def _markdown(study: Study, summary: dict, table) -> str:
-    from drivelab.training.seeds import VALIDATION_START
-
     lines = [f"# tune {study.name}", ""]
     if summary["command"]:
         lines += ["```", summary["command"], "```", ""]
