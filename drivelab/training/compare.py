@@ -65,10 +65,6 @@ class RunRecord:
     source: str
     curve: tuple[tuple[int, float], ...]
 
-    @property
-    def group(self) -> tuple[str, ...]:
-        return group_key(self.config)
-
 
 def group_key(config: RunConfig) -> tuple[str, ...]:
     """(algorithm, scenario, sensors, reward, action[, hyper-parameter changes]): runs that differ
@@ -243,7 +239,7 @@ def group_runs(records: Sequence[RunRecord]) -> dict[tuple[str, ...], list[RunRe
                 f"seed {config.seed}, {config.steps} steps): a seed counts once in a group; "
                 "compare one of them"
             )
-        key = record.group
+        key = group_key(config)
         groups.setdefault((key[0], scenario, *key[2:]), []).append(record)
     return {key: sorted(runs, key=lambda r: (r.config.seed, str(r.run_dir))) for key, runs in groups.items()}
 
@@ -435,17 +431,14 @@ def _remove_stale_tmp_folders(out_dir: Path, keep: Path) -> None:
         except OSError:
             continue  # gone meanwhile
         try:
+            # refused: a report being written now, or a file system without locks (NFS): it stays
             fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            # a report being written now, or a file system without locks (NFS): it stays
-            os.close(handle)
-            continue
-        try:
             for name in (*REPORT_FILES, MANIFEST):
                 with contextlib.suppress(OSError):
                     remove_file(folder / name)
-            with contextlib.suppress(OSError):
-                folder.rmdir()  # refused when something else is in it now: it stays
+            folder.rmdir()  # refused when something else is in it now: it stays
+        except OSError:
+            pass
         finally:
             os.close(handle)
 

@@ -24,8 +24,7 @@ def model_weights(model) -> list[tuple[str, torch.Tensor]]:
     """(name, tensor) of every floating-point weight of ``model``, each once: the parameters and
     buffers of its torch modules and its tensor attributes, named from the attribute that holds
     them."""
-    seen: set[int] = set()
-    weights = []
+    weights: dict[int, tuple[str, torch.Tensor]] = {}  # by id: the first name of each tensor
     for attribute, value in vars(model).items():
         if isinstance(value, torch.nn.Module):
             named = [*value.named_parameters(attribute), *value.named_buffers(attribute)]
@@ -34,10 +33,9 @@ def model_weights(model) -> list[tuple[str, torch.Tensor]]:
         else:
             continue
         for name, tensor in named:
-            if id(tensor) not in seen and tensor.is_floating_point():
-                seen.add(id(tensor))
-                weights.append((name, tensor))
-    return weights
+            if tensor.is_floating_point():
+                weights.setdefault(id(tensor), (name, tensor))
+    return list(weights.values())
 
 
 def non_finite_weights(model) -> list[tuple[str, str]]:

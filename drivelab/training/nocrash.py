@@ -104,6 +104,7 @@ def report_markdown(report: dict) -> str:
     """Both tables as Markdown."""
     levels = report["levels"]
     infractions = levels[report["infraction_level"]]
+    cells = [(_percent if label.endswith("%") else _number)(infractions[key]) for label, key in INFRACTIONS]
     lines = [
         f"# NoCrash: {report['algo']} in the {report['town']} town",
         "",
@@ -118,11 +119,7 @@ def report_markdown(report: dict) -> str:
         "",
         "| " + " | ".join(label for label, _ in INFRACTIONS) + " |",
         "|" + "---|" * len(INFRACTIONS),
-        "| "
-        + " | ".join(
-            (_percent if label.endswith("%") else _number)(infractions[key]) for label, key in INFRACTIONS
-        )
-        + " |",
+        "| " + " | ".join(cells) + " |",
         "",
     ]
     return "\n".join(lines)

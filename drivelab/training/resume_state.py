@@ -108,14 +108,6 @@ class EpisodeLog:
         ]
 
 
-def _state_before_reset(env: gym.Env, generator: np.random.Generator, state: dict) -> dict:
-    """The state the reset that just happened drew from: ``state`` (taken before it) when the env
-    kept ``generator``, else (reseeded) a fresh generator of its new seed's."""
-    if env.np_random is generator:
-        return state
-    return seeding.np_random(env.np_random_seed)[0].bit_generator.state
-
-
 class RecordEpisodes(gym.Wrapper):
     """Logs one DriveEnv's episodes into ``log`` (world 0); sits right around the DriveEnv."""
 
@@ -128,7 +120,9 @@ class RecordEpisodes(gym.Wrapper):
         generator = drive.np_random
         state = generator.bit_generator.state
         result = self.env.reset(seed=seed, options=options)
-        self.log.started(0, _state_before_reset(drive, generator, state))
+        if drive.np_random is not generator:  # reseeded: the new seed's first state
+            state = seeding.np_random(drive.np_random_seed)[0].bit_generator.state
+        self.log.started(0, state)
         return result
 
     def step(self, action):
@@ -144,11 +138,8 @@ class RecordVecEpisodes(VecEnvWrapper):
         self.vector = venv.vector_env
         self.log = EpisodeLog(self.vector.num_envs)
 
-    def _generators(self) -> list[tuple[np.random.Generator, dict]]:
-        return [(rng, rng.bit_generator.state) for rng in self.vector.world_rngs]
-
     def reset(self):
-        before = self._generators()
+        before = [(rng, rng.bit_generator.state) for rng in self.vector.world_rngs]
         seeds = self.venv._seed
         obs = self.venv.reset()
         for index, (generator, state) in enumerate(before):
@@ -438,12 +429,10 @@ def _json_default(value: Any) -> Any:
 def write_state(folder: Path, snapshot: Snapshot) -> None:
     """``resume-<steps>.json`` + ``.npz``, each written whole (``safe_files.replacing``)."""
     json_path, npz_path = _paths(folder, snapshot.steps)
-    arrays = dict(snapshot.arrays)
-    for index, actions in enumerate(snapshot.world_actions()):
-        arrays[f"world_{index}_actions"] = actions
+    actions = {f"world_{index}_actions": taken for index, taken in enumerate(snapshot.world_actions())}
     with replacing(npz_path, folder / "resume.tmp.npz") as tmp_npz:
         with tmp_npz.open("wb") as handle:
-            np.savez(handle, **arrays)
+            np.savez(handle, **{**snapshot.arrays, **actions})
         npz_sha256 = hashlib.sha256(tmp_npz.read_bytes()).hexdigest()
     meta = {**snapshot.meta, "worlds": [{"start": start} for start, _, _ in snapshot.worlds],
             "npz_sha256": npz_sha256}  # fmt: skip

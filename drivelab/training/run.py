@@ -46,13 +46,7 @@ from drivelab.training.divergence import (
     raised_by_divergence,
     remedy,
 )
-from drivelab.training.evaluate import (
-    aggregate,
-    load_run_config,
-    make_out_dir,
-    run_episodes,
-    write_video,
-)
+from drivelab.training.evaluate import aggregate, load_run_config, make_out_dir, run_episodes, write_video
 from drivelab.training.progress_log import run_logger
 from drivelab.training.resume_state import (
     ArrayVecMonitor,
@@ -322,14 +316,6 @@ def _check_snapshot(model, config: RunConfig, snapshot: Snapshot, path: Path) ->
         check_eval_env.close()
 
 
-def check_n_envs(config: RunConfig) -> None:
-    """A UsageError when the algorithm trains in one world and ``n_envs`` asks for more."""
-    if config.n_envs > 1 and not get_algo(config.algo).multi_env:
-        raise UsageError(
-            f"algorithm {config.algo!r} trains in one world: n_envs must be 1 (got {config.n_envs})"
-        )
-
-
 def check_config(config: RunConfig):
     """Everything a run's config must pass before anything is written: the algorithm with its action
     kind and number of worlds, the environment, and the agent built once on a probe environment.
@@ -338,7 +324,10 @@ def check_config(config: RunConfig):
     from drivelab.envs.core import DriveEnv
 
     check_combination(config.algo, config.action)
-    check_n_envs(config)
+    if config.n_envs > 1 and not get_algo(config.algo).multi_env:
+        raise UsageError(
+            f"algorithm {config.algo!r} trains in one world: n_envs must be 1 (got {config.n_envs})"
+        )
     probe = DriveEnv(**config.env_kwargs())  # validates scenario, sensors, reward, action
     try:
         spec = check_combination(config.algo, config.action, probe.observation_space)

@@ -113,8 +113,7 @@ def expand_sweep(spec: dict, runs_dir: str | Path | None = None) -> Sweep:
     """
     if not isinstance(spec, dict):
         raise UsageError("a sweep file must be a mapping with a 'grid'")
-    unknown = sorted(set(spec) - set(SWEEP_KEYS), key=str)
-    if unknown:
+    if unknown := sorted(set(spec) - set(SWEEP_KEYS), key=str):
         raise UsageError(f"unknown sweep key {unknown[0]!r} (known: {', '.join(SWEEP_KEYS)})")
     base, grid, overrides = spec.get("base") or {}, spec.get("grid"), spec.get("overrides") or []
     if not isinstance(base, dict):
@@ -130,8 +129,7 @@ def expand_sweep(spec: dict, runs_dir: str | Path | None = None) -> Sweep:
     for i, override in enumerate(overrides):
         if set(override) - {"match", "set"} or not isinstance(override.get("set"), dict):
             raise UsageError(f"sweep override {i + 1} must have 'set' (a mapping) and optional 'match'")
-        stray = sorted(set(override.get("match") or {}) - set(axes), key=str)
-        if stray:
+        if stray := sorted(set(override.get("match") or {}) - set(axes), key=str):
             raise UsageError(f"sweep override {i + 1} matches {stray[0]!r}, which is not a grid axis")
     eval_episodes = spec.get("eval_episodes", 10)
     if not isinstance(eval_episodes, int) or isinstance(eval_episodes, bool) or eval_episodes < 0:
@@ -676,10 +674,7 @@ def check_workers(executor: str, workers: int | None, address: str | None) -> in
 
 
 def run_sweep(
-    sweep: Sweep,
-    executor: str = "pool",
-    workers: int | None = None,
-    address: str | None = None,
+    sweep: Sweep, executor: str = "pool", workers: int | None = None, address: str | None = None
 ) -> list[dict]:
     """Run every cell that is not finished; return one outcome per cell (skipped ones included).
 

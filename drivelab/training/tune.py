@@ -50,6 +50,7 @@ from drivelab.config import FIELDS, RunConfig, build_config, check_eval_every, c
 from drivelab.errors import UsageError
 from drivelab.hyperparams import with_shipped_hyperparams, zoo_yaml
 from drivelab.training.metrics import METRICS as REGISTRY
+from drivelab.training.seeds import VALIDATION_START
 from drivelab.training.sweep import cell_action, check_workers, execute, executor_ready, run_cell, skipped
 from drivelab.yaml_io import load_yaml, parse_yaml_1_1, read_text_bounded
 
@@ -158,8 +159,7 @@ def _param(name: str, entry) -> Param:
     if kind not in PARAM_TYPES:
         raise UsageError(f"{where} has unknown type {kind!r} (choose from {', '.join(PARAM_TYPES)})")
     allowed = {"type", "choices"} if kind == "categorical" else {"type", "low", "high", "log", "step"}
-    stray = sorted(set(entry) - allowed, key=str)
-    if stray:
+    if stray := sorted(set(entry) - allowed, key=str):
         raise UsageError(f"{where} of type {kind!r} has unknown key {stray[0]!r}")
     if kind == "categorical":
         choices = entry.get("choices")
@@ -188,16 +188,15 @@ def _param(name: str, entry) -> Param:
         if (Decimal(str(high)) - Decimal(str(low))) % Decimal(str(step)) != 0:
             raise UsageError(f"{where} 'step' {step!r} must divide high - low ({high!r} - {low!r})")
     kind = "float" if kind == "log" else kind
-    return Param(name, kind, float(low) if kind == "float" else int(low),
-                 float(high) if kind == "float" else int(high), log, step)  # fmt: skip
+    number = float if kind == "float" else int
+    return Param(name, kind, number(low), number(high), log, step)
 
 
 def _keywords(value, what: str, keys: tuple[str, ...]) -> dict:
     value = value or {}
     if not isinstance(value, dict):
         raise UsageError(f"tune '{what}' must be a mapping of {', '.join(keys)}")
-    stray = sorted(set(value) - set(keys), key=str)
-    if stray:
+    if stray := sorted(set(value) - set(keys), key=str):
         raise UsageError(f"tune '{what}' has unknown key {stray[0]!r} (known: {', '.join(keys)})")
     for key, number in value.items():
         _integer(number, f"tune {what} {key!r}", 0)
@@ -211,8 +210,7 @@ def read_study(spec: dict, study_dir: str | Path | None = None, n_trials: int | 
     :param n_trials: overrides the file's ``n_trials``."""
     if not isinstance(spec, dict):
         raise UsageError("a tune file must be a mapping")
-    stray = sorted(set(spec) - set(STUDY_KEYS) - set(RUN_KEYS), key=str)
-    if stray:
+    if stray := sorted(set(spec) - set(STUDY_KEYS) - set(RUN_KEYS), key=str):
         known = ", ".join([*STUDY_KEYS, *RUN_KEYS])
         raise UsageError(f"unknown tune key {stray[0]!r} (known: {known})")
     if "algo" not in spec:
@@ -252,33 +250,24 @@ def load_study(path: str | Path, study_dir: str | Path | None = None, n_trials: 
 
 
 def check_study(study: Study) -> None:
-    """Build the agent at the low and the high corner of the space and at each categorical choice,
-    so that a value the algorithm refuses fails, as one line, before anything is written."""
-    from drivelab.agents.registry import check_combination
-    from drivelab.envs.core import DriveEnv
-    from drivelab.training.run import _check_model, check_n_envs
+    """Check a trial's run config as ``drivelab train`` does (``run.check_config``: the agent built)
+    at the low and the high corner of the space and at each categorical choice, so that a value the
+    algorithm refuses fails, as one line, before anything is written."""
+    from drivelab.training.run import check_config
 
     low = {p.name: p.extremes()[0] for p in study.space}
     probes = [low, {p.name: p.extremes()[-1] for p in study.space}]
     probes += [
         {**low, p.name: choice} for p in study.space if p.kind == "categorical" for choice in p.choices
     ]
-    first = study.trial_config(0, low)
     new = not _continued(study)  # a study begun before these checks goes on as it was made
-    if new:
-        check_eval_every(first)  # the pruner reads the periodic evaluations: at least one must run
-    check_combination(first.algo, first.action)
-    check_n_envs(first)  # each trial's run would refuse it
-    env = DriveEnv(**first.env_kwargs())  # validates scenario, sensors, reward, action
-    try:
-        spec = check_combination(first.algo, first.action, env.observation_space)
-        for params in probes:
-            config = study.trial_config(0, params)
-            _check_model(spec, config, env)
-            if new:
-                check_steps(config)  # a searched n_steps at its high corner: a rollout within the budget
-    finally:
-        env.close()
+    if new:  # the pruner reads the periodic evaluations: at least one must run
+        check_eval_every(study.trial_config(0, low))
+    for params in probes:
+        config = study.trial_config(0, params)
+        check_config(config)
+        if new:
+            check_steps(config)  # a searched n_steps at its high corner: a rollout within the budget
 
 
 # --- Optuna ----------------------------------------------------------------------------------
@@ -295,55 +284,31 @@ def _pruner(keywords: dict):
     return optuna.pruners.MedianPruner(**keywords)
 
 
+def _sampler(keywords: dict, number: int = 0):
+    """The study's TPE sampler; with a seed, trial ``number``'s: it draws with seed + number, so that a
+    study killed and run again asks the same values as the study that was never stopped (given the
+    same finished trials)."""
+    import optuna
+
+    keywords = dict(keywords)
+    if "seed" in keywords:
+        keywords["seed"] += number
+    return optuna.samplers.TPESampler(**keywords)
+
+
 def open_optuna_study(study: Study):
     """The study's Optuna study in ``<study_dir>/study.journal`` (created when new)."""
     import optuna
 
     optuna.logging.set_verbosity(optuna.logging.WARNING)  # tune prints its own progress
-    keywords = dict(study.sampler)
-    seed = keywords.pop("seed", None)
     return optuna.create_study(
         study_name=study.name,
         storage=_storage(study.study_dir),
-        sampler=optuna.samplers.TPESampler(**keywords) if seed is None else trial_seeded_tpe(seed, keywords),
+        sampler=_sampler(study.sampler),
         pruner=_pruner(study.pruner),
         direction=study.direction,
         load_if_exists=True,
     )
-
-
-def trial_seeded_tpe(seed: int, keywords: dict):
-    """A TPE sampler that draws trial n's values with the seed ``seed + n``, so that a study killed
-    and run again asks the same values as the study that was never stopped (given the same finished
-    trials)."""
-    import optuna
-
-    class TrialSeededTPE(optuna.samplers.BaseSampler):
-        def __init__(self) -> None:
-            self.samplers: dict[int, optuna.samplers.TPESampler] = {}
-
-        def _of(self, trial) -> optuna.samplers.TPESampler:
-            if trial.number not in self.samplers:
-                self.samplers[trial.number] = optuna.samplers.TPESampler(seed=seed + trial.number, **keywords)
-            return self.samplers[trial.number]
-
-        def infer_relative_search_space(self, study, trial):
-            return self._of(trial).infer_relative_search_space(study, trial)
-
-        def sample_relative(self, study, trial, search_space):
-            return self._of(trial).sample_relative(study, trial, search_space)
-
-        def sample_independent(self, study, trial, param_name, param_distribution):
-            return self._of(trial).sample_independent(study, trial, param_name, param_distribution)
-
-        def before_trial(self, study, trial) -> None:
-            self._of(trial).before_trial(study, trial)
-
-        def after_trial(self, study, trial, state, values) -> None:
-            self._of(trial).after_trial(study, trial, state, values)
-            del self.samplers[trial.number]
-
-    return TrialSeededTPE()
 
 
 @dataclass(frozen=True)
@@ -390,7 +355,7 @@ def _check_study_dir(study: Study) -> None:
     if folder.exists() and not folder.is_dir():
         raise UsageError(f"study directory {str(folder)!r} is a file")
     if (folder / SPEC_FILE).is_file():
-        if _saved_spec(study) != _spec(study):
+        if not _continued(study):
             raise UsageError(
                 f"study directory {str(folder)!r} holds another study (its {SPEC_FILE} differs); "
                 "remove it or choose another --study-dir"
@@ -404,17 +369,12 @@ def _spec(study: Study):
     return json.loads(json.dumps(study.identity()))
 
 
-def _saved_spec(study: Study):
-    """The study.yaml of the study directory, read; None when there is none to read."""
-    try:
-        return parse_yaml_1_1(read_text_bounded(study.study_dir / SPEC_FILE))
-    except (OSError, UsageError, yaml.YAMLError):
-        return None
-
-
 def _continued(study: Study) -> bool:
-    """Whether the study directory holds this very study already (``run_study`` refuses any other)."""
-    return _saved_spec(study) == _spec(study)
+    """Whether the study directory's study.yaml is this very study's (``run_study`` refuses any other)."""
+    try:
+        return parse_yaml_1_1(read_text_bounded(study.study_dir / SPEC_FILE)) == _spec(study)
+    except (OSError, UsageError, yaml.YAMLError):
+        return False
 
 
 # --- running ---------------------------------------------------------------------------------
@@ -463,26 +423,21 @@ def run_study(
                 optuna_study.tell(number, float(report[study.metric]))
             outcomes.append(outcome)
 
-        def job(number: int, trial_id: int, params: dict) -> dict | None:
-            from drivelab.training.seeds import VALIDATION_START
-
-            config = study.trial_config(number, params)
-            action = cell_action(folder / config.name, config, study.final_eval_episodes)
-            if action == "skip":  # finished before its study was killed: only the tell is missing
-                tell(number, skipped(config.name))
-                return None
-            by_name[config.name] = number
-            reporter = TrialReporter(str(folder), study.name, trial_id, study.metric, study.pruner)
-            return {"config_values": config.to_dict(), "runs_dir": str(folder), "action": action,
-                    "eval_episodes": study.final_eval_episodes, "on_evaluation": reporter,
-                    "eval_first": VALIDATION_START}  # fmt: skip
-
         def jobs():  # Optuna's trial ids (``_trial_id``) name a trial in its storage, as Trial() takes it
             revived = (Trial(optuna_study, t._trial_id) for t in stale)  # suggest gives their stored values
             for trial in itertools.chain(revived, (optuna_study.ask() for _ in range(new))):
-                params = {p.name: p.suggest(trial) for p in study.space}
-                if (found := job(trial.number, trial._trial_id, params)) is not None:
-                    yield found
+                if "seed" in study.sampler:  # Optuna draws with the study's sampler of the moment
+                    optuna_study.sampler = _sampler(study.sampler, trial.number)
+                config = study.trial_config(trial.number, {p.name: p.suggest(trial) for p in study.space})
+                action = cell_action(folder / config.name, config, study.final_eval_episodes)
+                if action == "skip":  # finished before its study was killed: only the tell is missing
+                    tell(trial.number, skipped(config.name))
+                    continue
+                by_name[config.name] = trial.number
+                reporter = TrialReporter(str(folder), study.name, trial._trial_id, study.metric, study.pruner)
+                yield {"config_values": config.to_dict(), "runs_dir": str(folder), "action": action,
+                       "eval_episodes": study.final_eval_episodes, "on_evaluation": reporter,
+                       "eval_first": VALIDATION_START}  # fmt: skip
 
         with tqdm(
             total=len(stale) + new, desc=f"tune {study.name} ({executor}, {workers} workers)", unit="trial"
@@ -491,17 +446,12 @@ def run_study(
             # running in the journal and the next run resumes it
             for outcome in execute(run_cell, jobs(), executor, workers, in_flight=workers):
                 tell(by_name.pop(outcome["name"]), outcome)
-                bar.set_postfix_str(f"{outcome['name']}: {_state_word(outcome)}")
+                state = "FAILED" if not outcome["ok"] else "ok" if outcome["stopped"] is None else "pruned"
+                bar.set_postfix_str(f"{outcome['name']}: {state}")
                 bar.update(1)
         summary = write_summary(study, optuna_study, command)
     summary["outcomes"] = outcomes
     return summary
-
-
-def _state_word(outcome: dict) -> str:
-    if not outcome["ok"]:
-        return "FAILED"
-    return "pruned" if outcome["stopped"] is not None else "ok"
 
 
 # --- the summary -----------------------------------------------------------------------------
@@ -510,14 +460,13 @@ def trials_table(study: Study, optuna_study):
     stores them, the last step it reported, its seconds and run directory."""
     import pandas as pd
 
-    rows = []
-    for trial in optuna_study.get_trials(deepcopy=False):
-        seconds = trial.duration.total_seconds() if trial.duration is not None else None
-        row = {"number": trial.number, "state": trial.state.name.lower(), "value": trial.value}
-        row.update(trial.params)
-        row.update(last_step=max(trial.intermediate_values, default=None), seconds=seconds,
-                   run_dir=trial_name(trial.number))  # fmt: skip
-        rows.append(row)
+    rows = [
+        {"number": trial.number, "state": trial.state.name.lower(), "value": trial.value, **trial.params,
+         "last_step": max(trial.intermediate_values, default=None),
+         "seconds": trial.duration.total_seconds() if trial.duration is not None else None,
+         "run_dir": trial_name(trial.number)}
+        for trial in optuna_study.get_trials(deepcopy=False)
+    ]  # fmt: skip
     columns = ["number", "state", "value", *(p.name for p in study.space), "last_step", "seconds", "run_dir"]
     return pd.DataFrame(rows, columns=columns)
 
@@ -577,8 +526,6 @@ def write_summary(study: Study, optuna_study, command: str | None = None) -> dic
 
 
 def _markdown(study: Study, summary: dict, table) -> str:
-    from drivelab.training.seeds import VALIDATION_START
-
     lines = [f"# tune {study.name}", ""]
     if summary["command"]:
         lines += ["```", summary["command"], "```", ""]
