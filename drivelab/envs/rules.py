@@ -23,12 +23,13 @@ from drivelab.world.batch import WorldBatch
 BLOCKED_SPEED_MPS = 0.1  # below this the ego counts as standing still
 
 
-def episode_time_limit_s(duration_s: float, duration_given: bool, route_limit_s: float | None) -> float:
-    """One episode's time limit: the scenario's (or the given) duration, unless the episode's route
-    brings its own limit (the town's NoCrash protocol), which a given duration still caps."""
-    if route_limit_s is None:
-        return float(duration_s)
-    return float(min(route_limit_s, duration_s) if duration_given else route_limit_s)
+def episode_time_limits_s(duration_s: float, duration_given: bool, route_limits_s) -> np.ndarray:
+    """Each episode's time limit: the scenario's (or the given) duration, unless the episode's route
+    brings its own limit (finite in ``route_limits_s``: the town's NoCrash protocol), which a given
+    duration still caps."""
+    route = np.asarray(route_limits_s, dtype=float)
+    capped = np.minimum(route, duration_s) if duration_given else route
+    return np.where(np.isfinite(route), capped, float(duration_s))
 
 
 class EpisodeRules:

@@ -24,7 +24,7 @@ from gymnasium.vector.utils import batch_space
 
 from drivelab.envs.actions import ActionAdapter, make_action
 from drivelab.envs.metrics import EpisodeMetrics
-from drivelab.envs.rules import EpisodeRules
+from drivelab.envs.rules import EpisodeRules, episode_time_limits_s
 from drivelab.envs.spec import EnvSpec
 from drivelab.envs.video import camera_for, draw_scene
 from drivelab.errors import UsageError
@@ -231,16 +231,10 @@ class VectorDriveEnv(VectorEnv):
                 for k in worlds:
                     rngs[k] = np.random.default_rng([int(self.episode_seeds[k]), index])
             sensor.reset(batch, rngs, mask)
-        # an evaluation route brings its own time limit (the town's NoCrash protocol); a duration
-        # given to this env still caps it
-        limit = np.full(self.num_envs, self.duration_s)
         route_limits = getattr(self.simulator, "route_time_limit_s", None)
-        if route_limits is not None:
-            route_limits = np.broadcast_to(np.asarray(route_limits, dtype=float), limit.shape)
-            has_route = np.isfinite(route_limits)
-            capped = np.minimum(route_limits, self.duration_s) if self.duration_given else route_limits
-            limit = np.where(has_route, capped, limit)
-        self.rules.reset(mask, limit)
+        route_limits = np.inf if route_limits is None else route_limits
+        limits = episode_time_limits_s(self.duration_s, self.duration_given, route_limits)
+        self.rules.reset(mask, limits)
         self.metrics.reset(batch, mask)
         self.batch = batch
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from drivelab.envs.core import DriveEnv
-from drivelab.envs.rules import EpisodeRules, episode_time_limit_s
+from drivelab.envs.rules import EpisodeRules, episode_time_limits_s
 from drivelab.world.batch import WorldBatch
 from drivelab.world.state import Events
 from tests.batch_worlds import world_sequences
@@ -127,7 +127,9 @@ def test_reset_by_mask_keeps_the_other_worlds_timers():
 
 
 def test_episode_time_limit():
-    assert episode_time_limit_s(40.0, False, None) == 40.0
-    assert episode_time_limit_s(40.0, False, 75.0) == 75.0  # the route's own limit
-    assert episode_time_limit_s(40.0, True, 75.0) == 40.0  # a given duration caps it
-    assert episode_time_limit_s(80.0, True, 75.0) == 75.0
+    assert episode_time_limits_s(40.0, False, np.inf) == 40.0  # no route limit
+    assert episode_time_limits_s(40.0, False, 75.0) == 75.0  # the route's own limit
+    assert episode_time_limits_s(40.0, True, 75.0) == 40.0  # a given duration caps it
+    assert episode_time_limits_s(80.0, True, 75.0) == 75.0
+    routes = episode_time_limits_s(40.0, True, [np.inf, 30.0, 75.0])  # one per world
+    np.testing.assert_array_equal(routes, [40.0, 30.0, 40.0])
