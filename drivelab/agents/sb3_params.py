@@ -204,12 +204,8 @@ def _check_value(algo: str, key: str, value, param: Param):
         if param.none:
             return None
         raise wrong
-    if param.kind == "bool":
-        if not isinstance(value, bool):
-            raise wrong
-        return value
-    if param.kind in ("dict", "str"):
-        if not isinstance(value, dict if param.kind == "dict" else str):
+    if param.kind in ("bool", "dict", "str"):
+        if not isinstance(value, {"bool": bool, "dict": dict, "str": str}[param.kind]):
             raise wrong
         return value
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
@@ -226,17 +222,11 @@ def _check_value(algo: str, key: str, value, param: Param):
     return value
 
 
-def settable(algo: str) -> dict[str, Param]:
-    """The declared hyper-parameters of ``algo`` that the installed SB3's constructor takes."""
-    accepted = inspect.signature(get_algo(algo).agent_class().__init__).parameters
-    return {key: param for key, param in PARAMS[algo].items() if key in accepted}
-
-
 def check_sb3_hyperparams(algo: str, hyperparams: dict) -> dict:
     """``hyperparams`` with every value checked against ``algo``'s declared type and range
     (integral floats as ints); an unknown, unsettable or out-of-range key is a UsageError."""
-    declared = settable(algo)
     constructor = inspect.signature(get_algo(algo).agent_class().__init__).parameters
+    declared = {key: param for key, param in PARAMS[algo].items() if key in constructor}  # installed SB3's
     special = {
         key: check
         for key, check in {**SPECIAL, **(SAC_SPECIAL if algo == "sac" else {})}.items()
