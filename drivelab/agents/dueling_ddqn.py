@@ -164,12 +164,6 @@ class PrioritizedReplayBuffer:
         self.max_priority = 1.0  # stored as p^α; new transitions get the largest seen
         self.position, self.size = 0, 0
 
-    def add(self, observation, action: int, reward: float, next_observation, terminal: bool) -> None:
-        self.add_many(
-            np.asarray(observation)[None], np.array([action]), np.array([reward]),
-            np.asarray(next_observation)[None], np.array([terminal]),
-        )  # fmt: skip
-
     def add_many(self, observations, actions, rewards, next_observations, terminals) -> None:
         """M transitions (K worlds' steps, in world order), each at the largest priority seen."""
         for m in range(len(actions)):
@@ -365,12 +359,11 @@ class DuelingDoubleDQN(OwnAgent):
 
     def update_target(self) -> None:
         """θ' ← τθ + (1 − τ)θ' (τ = 1: a hard copy), buffers (BatchNorm statistics) copied."""
+        target_network, q_network, tau = self.target_network, self.q_network, self.config.tau
         with torch.no_grad():
-            for target, online in zip(
-                self.target_network.parameters(), self.q_network.parameters(), strict=True
-            ):
-                target.mul_(1.0 - self.config.tau).add_(online, alpha=self.config.tau)
-            for target, online in zip(self.target_network.buffers(), self.q_network.buffers(), strict=True):
+            for target, online in zip(target_network.parameters(), q_network.parameters(), strict=True):
+                target.mul_(1.0 - tau).add_(online, alpha=tau)
+            for target, online in zip(target_network.buffers(), q_network.buffers(), strict=True):
                 target.copy_(online)
 
     def _learn(self, worlds: Worlds, callback: BaseCallback, target: int) -> None:
