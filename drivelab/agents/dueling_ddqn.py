@@ -153,6 +153,9 @@ class PrioritizedReplayBuffer:
     :param priority_eps: added to |δ| in ``update_priorities``.
     """
 
+    ARRAYS = ("observations", "next_observations", "actions", "rewards", "terminals")  # a row per transition
+    SCALARS = ("max_priority", "position", "size")
+
     def __init__(self, capacity: int, observation_size: int, alpha: float, priority_eps: float) -> None:
         self.capacity, self.alpha, self.priority_eps = int(capacity), float(alpha), float(priority_eps)
         self.observations = np.zeros((self.capacity, observation_size), dtype=np.float32)
@@ -184,13 +187,7 @@ class PrioritizedReplayBuffer:
         probabilities = self.tree.priorities(indices) / self.tree.total
         weights = (self.size * probabilities) ** (-beta)
         weights = weights / weights.max()
-        batch = {
-            "observations": self.observations[indices],
-            "actions": self.actions[indices],
-            "rewards": self.rewards[indices],
-            "next_observations": self.next_observations[indices],
-            "terminals": self.terminals[indices],
-        }
+        batch = {name: getattr(self, name)[indices] for name in self.ARRAYS}
         return indices, batch, weights.astype(np.float32)
 
     def update_priorities(self, indices: np.ndarray, td_errors: np.ndarray) -> None:
@@ -198,9 +195,6 @@ class PrioritizedReplayBuffer:
         priorities = (np.abs(td_errors) + self.priority_eps) ** self.alpha
         self.tree.update(indices, priorities)
         self.max_priority = max(self.max_priority, float(priorities.max()))
-
-    ARRAYS = ("observations", "next_observations", "actions", "rewards", "terminals")
-    SCALARS = ("max_priority", "position", "size")
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         """Everything the buffer holds, sum tree included, as arrays (a checkpoint's ``.npz``)."""
@@ -314,11 +308,7 @@ class DuelingDoubleDQN(OwnAgent):
         self.episode_returns: deque[float] = deque(maxlen=100)
 
     def _modules(self) -> dict[str, Any]:
-        return {
-            "q_network": self.q_network,
-            "target_network": self.target_network,
-            "optimizer": self.optimizer,
-        }
+        return {name: getattr(self, name) for name in ("q_network", "target_network", "optimizer")}
 
     def q_values(self, observations: np.ndarray) -> torch.Tensor:
         """Q(s, ·) for a batch of flat observations, BatchNorm on its running statistics."""
