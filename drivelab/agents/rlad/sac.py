@@ -277,12 +277,9 @@ class RLAD(OwnAgent):
         self.replay_buffer.move_frames(self._frame_device(self.replay_buffer.frames.shape[1:]))
 
     def _modules(self) -> dict[str, nn.Module | torch.optim.Optimizer]:
-        return {
-            "encoder": self.encoder, "actor": self.actor, "critic": self.critic,
-            "critic_target": self.critic_target, "traffic_light_head": self.traffic_light_head,
-            "critic_optimizer": self.critic_optimizer, "actor_optimizer": self.actor_optimizer,
-            "alpha_optimizer": self.alpha_optimizer,
-        }  # fmt: skip
+        networks = ("encoder", "actor", "critic", "critic_target", "traffic_light_head")
+        optimizers = ("critic_optimizer", "actor_optimizer", "alpha_optimizer")
+        return {name: getattr(self, name) for name in networks + optimizers}
 
     def _state(self) -> dict[str, Any]:
         return {**super()._state(), "log_alpha": self.log_alpha.detach()}
