@@ -6,6 +6,7 @@ sets itself are refused by name; keys SB3's constructor does not have are unknow
 
 from __future__ import annotations
 
+import functools
 import inspect
 import math
 from collections.abc import Callable
@@ -258,17 +259,14 @@ def _given_or_default(algo: str, hyperparams: dict, key: str):
 def check_sb3_memory(algo: str, hyperparams: dict, observation_space, n_envs: int = 1) -> None:
     """Refuse sizes whose buffers this machine cannot hold (``buffer_memory``): the replay buffer
     and training batch of DQN and SAC, the rollout of PPO and A2C."""
+    given = functools.partial(_given_or_default, algo, hyperparams)
     if "buffer_size" in PARAMS[algo]:
-        copies = 1 if _given_or_default(algo, hyperparams, "optimize_memory_usage") else 2
+        copies = 1 if given("optimize_memory_usage") else 2
         stored = copies * observation_bytes(observation_space)
-        check_buffer_memory(
-            algo, "buffer_size", _given_or_default(algo, hyperparams, "buffer_size"), stored, "replay buffer"
-        )
+        check_buffer_memory(algo, "buffer_size", given("buffer_size"), stored, "replay buffer")
         batch = 2 * observation_bytes(observation_space, itemsize=4)
-        check_buffer_memory(
-            algo, "batch_size", _given_or_default(algo, hyperparams, "batch_size"), batch, "training batch"
-        )
+        check_buffer_memory(algo, "batch_size", given("batch_size"), batch, "training batch")
     else:
-        entries = _given_or_default(algo, hyperparams, "n_steps") * n_envs
+        entries = given("n_steps") * n_envs
         stored = observation_bytes(observation_space, itemsize=4)
         check_buffer_memory(algo, "n_steps", entries, stored, "rollout (n_steps × n_envs)")
