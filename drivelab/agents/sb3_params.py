@@ -226,8 +226,8 @@ def _check_value(algo: str, key: str, value, param: Param):
 def check_sb3_hyperparams(algo: str, hyperparams: dict) -> dict:
     """``hyperparams`` with every value checked against ``algo``'s declared type and range
     (integral floats as ints); an unknown, unsettable or out-of-range key is a UsageError."""
-    constructor = inspect.signature(get_algo(algo).agent_class().__init__).parameters
-    declared = {key: param for key, param in PARAMS[algo].items() if key in constructor}  # installed SB3's
+    constructor = inspect.signature(get_algo(algo).agent_class().__init__).parameters  # the installed SB3's
+    declared = {key: param for key, param in PARAMS[algo].items() if key in constructor}
     special = {
         key: check
         for key, check in {**SPECIAL, **(SAC_SPECIAL if algo == "sac" else {})}.items()
