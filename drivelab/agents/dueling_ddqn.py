@@ -153,6 +153,9 @@ class PrioritizedReplayBuffer:
     :param priority_eps: added to |δ| in ``update_priorities``.
     """
 
+    ARRAYS = ("observations", "next_observations", "actions", "rewards", "terminals")  # a row per transition
+    SCALARS = ("max_priority", "position", "size")
+
     def __init__(self, capacity: int, observation_size: int, alpha: float, priority_eps: float) -> None:
         self.capacity, self.alpha, self.priority_eps = int(capacity), float(alpha), float(priority_eps)
         self.observations = np.zeros((self.capacity, observation_size), dtype=np.float32)
@@ -163,12 +166,6 @@ class PrioritizedReplayBuffer:
         self.tree = SumTree(self.capacity)
         self.max_priority = 1.0  # stored as p^α; new transitions get the largest seen
         self.position, self.size = 0, 0
-
-    def add(self, observation, action: int, reward: float, next_observation, terminal: bool) -> None:
-        self.add_many(
-            np.asarray(observation)[None], np.array([action]), np.array([reward]),
-            np.asarray(next_observation)[None], np.array([terminal]),
-        )  # fmt: skip
 
     def add_many(self, observations, actions, rewards, next_observations, terminals) -> None:
         """M transitions (K worlds' steps, in world order), each at the largest priority seen."""
@@ -190,13 +187,7 @@ class PrioritizedReplayBuffer:
         probabilities = self.tree.priorities(indices) / self.tree.total
         weights = (self.size * probabilities) ** (-beta)
         weights = weights / weights.max()
-        batch = {
-            "observations": self.observations[indices],
-            "actions": self.actions[indices],
-            "rewards": self.rewards[indices],
-            "next_observations": self.next_observations[indices],
-            "terminals": self.terminals[indices],
-        }
+        batch = {name: getattr(self, name)[indices] for name in self.ARRAYS}
         return indices, batch, weights.astype(np.float32)
 
     def update_priorities(self, indices: np.ndarray, td_errors: np.ndarray) -> None:
@@ -204,9 +195,6 @@ class PrioritizedReplayBuffer:
         priorities = (np.abs(td_errors) + self.priority_eps) ** self.alpha
         self.tree.update(indices, priorities)
         self.max_priority = max(self.max_priority, float(priorities.max()))
-
-    ARRAYS = ("observations", "next_observations", "actions", "rewards", "terminals")
-    SCALARS = ("max_priority", "position", "size")
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         """Everything the buffer holds, sum tree included, as arrays (a checkpoint's ``.npz``)."""
@@ -320,11 +308,7 @@ class DuelingDoubleDQN(OwnAgent):
         self.episode_returns: deque[float] = deque(maxlen=100)
 
     def _modules(self) -> dict[str, Any]:
-        return {
-            "q_network": self.q_network,
-            "target_network": self.target_network,
-            "optimizer": self.optimizer,
-        }
+        return {name: getattr(self, name) for name in ("q_network", "target_network", "optimizer")}
 
     def q_values(self, observations: np.ndarray) -> torch.Tensor:
         """Q(s, ·) for a batch of flat observations, BatchNorm on its running statistics."""
@@ -365,12 +349,11 @@ class DuelingDoubleDQN(OwnAgent):
 
     def update_target(self) -> None:
         """θ' ← τθ + (1 − τ)θ' (τ = 1: a hard copy), buffers (BatchNorm statistics) copied."""
+        target_network, q_network, tau = self.target_network, self.q_network, self.config.tau
         with torch.no_grad():
-            for target, online in zip(
-                self.target_network.parameters(), self.q_network.parameters(), strict=True
-            ):
-                target.mul_(1.0 - self.config.tau).add_(online, alpha=self.config.tau)
-            for target, online in zip(self.target_network.buffers(), self.q_network.buffers(), strict=True):
+            for target, online in zip(target_network.parameters(), q_network.parameters(), strict=True):
+                target.mul_(1.0 - tau).add_(online, alpha=tau)
+            for target, online in zip(target_network.buffers(), q_network.buffers(), strict=True):
                 target.copy_(online)
 
     def _learn(self, worlds: Worlds, callback: BaseCallback, target: int) -> None:

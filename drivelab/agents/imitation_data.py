@@ -86,7 +86,9 @@ class Demonstrations:
 
     def _clear(self) -> None:
         self.size = 0
-        self._observations = _allocate(self.observation_space, 0)
+        space = self.observation_space
+        parts = space.spaces if isinstance(space, spaces.Dict) else space
+        self._observations = map_obs(lambda sub: np.zeros((0, *sub.shape), dtype=sub.dtype), parts)
         self._actions = np.zeros((0, self.action_size), dtype=np.float32)
         self._iterations = np.zeros(0, dtype=np.int64)
         self._validation = np.zeros(0, dtype=bool)
@@ -183,12 +185,6 @@ class Demonstrations:
         data = cls(observation_space, action_size, meta.get("validation_fraction", 0.1))
         data.load_state_arrays(arrays)
         return data
-
-
-def _allocate(space: spaces.Space, capacity: int):
-    if isinstance(space, spaces.Dict):
-        return {key: np.zeros((capacity, *sub.shape), dtype=sub.dtype) for key, sub in space.spaces.items()}
-    return np.zeros((capacity, *space.shape), dtype=space.dtype)
 
 
 def _grown(array: np.ndarray, capacity: int) -> np.ndarray:

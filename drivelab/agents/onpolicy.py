@@ -162,10 +162,6 @@ class Storage:
         map_obs(lambda row, value: row.copy_(torch.from_numpy(np.asarray(value))), rows, obs)
         return rows
 
-    def flat_obs(self, steps: int) -> Any:
-        """The first ``steps`` steps' observations as (steps·K, ...)."""
-        return map_obs(lambda block: block[:steps].flatten(0, 1), self.obs)
-
 
 def to_tensor(obs: Any) -> Any:
     """A batch of raw observations (numpy) as tensors of their own dtype (no copy where possible)."""
@@ -239,14 +235,11 @@ class OnPolicyAgent(OwnAgent):
 
     # --- collecting -----------------------------------------------------------------------------
     def _storage_for(self, worlds: int) -> Storage:
-        storage = self._storage
-        if storage is None or storage.worlds != worlds or storage.steps != self.config.n_steps:
-            discrete = self.policy.kind == "categorical"
-            storage = Storage(
-                self.observation_space, self.config.n_steps, worlds, self.policy.stored_shape(), discrete
-            )
-            self._storage = storage
-        return storage
+        storage, steps = self._storage, self.config.n_steps
+        if storage is None or (storage.steps, storage.worlds) != (steps, worlds):
+            shape, discrete = self.policy.stored_shape(), self.policy.kind == "categorical"
+            self._storage = Storage(self.observation_space, steps, worlds, shape, discrete)
+        return self._storage
 
     def collect(self, worlds: Worlds, callback: BaseCallback) -> Rollout | None:
         """``n_steps`` steps of each of the K worlds (fewer at the step budget), then advantages;
@@ -282,7 +275,7 @@ class OnPolicyAgent(OwnAgent):
             storage.ends[:steps], self._values(obs), config.gamma, config.gae_lambda,
         )  # fmt: skip
         return Rollout(
-            storage.flat_obs(steps),
+            map_obs(lambda block: block[:steps].flatten(0, 1), storage.obs),
             storage.actions[:steps].flatten(0, 1),
             storage.log_probs[:steps].flatten(),
             storage.values[:steps].flatten(),

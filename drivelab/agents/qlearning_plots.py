@@ -21,8 +21,7 @@ def plot_qlearning(
     fig = Figure(figsize=(7, 8), dpi=100)
     axes = fig.subplots(3, 1)
     axes[0].plot(np.arange(len(epsilons)), epsilons, color="tab:purple")
-    axes[0].set_xlabel("step")
-    axes[0].set_ylabel("epsilon")
+    axes[0].set(xlabel="step", ylabel="epsilon")
     episodes = np.arange(1, len(returns) + 1)
     for axis, values, label, colour in (
         (axes[1], np.asarray(returns, float), "accumulated reward", "tab:blue"),
@@ -34,8 +33,7 @@ def plot_qlearning(
             smooth = np.convolve(values, np.ones(window) / window, mode="valid")
             axis.plot(episodes[window - 1 :], smooth, color=colour, lw=2, label=f"mean of {window}")
             axis.legend(loc="best", fontsize=8)
-        axis.set_xlabel("episode")
-        axis.set_ylabel(label)
+        axis.set(xlabel="episode", ylabel=label)
     for axis in axes:
         axis.grid(alpha=0.3)
     if title:

@@ -9,7 +9,8 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env import VecEnv
 
-from drivelab.envs.vector import VectorDriveEnv, world_info
+from drivelab.agents.worlds import listed_infos
+from drivelab.envs.vector import VectorDriveEnv
 
 
 class SB3VecEnv(VecEnv):
@@ -39,15 +40,9 @@ class SB3VecEnv(VecEnv):
     def step_wait(self):
         obs, rewards, terminations, truncations, infos = self.vector_env.step(self._actions)
         dones = terminations | truncations
-        listed = []
-        for k in range(self.num_envs):
-            if dones[k]:  # SB3 wants the last episode's info, with its final observation
-                info = dict(infos["final_info"][k])
-                info["terminal_observation"] = infos["final_obs"][k]
-                info["TimeLimit.truncated"] = bool(truncations[k] and not terminations[k])
-            else:
-                info = world_info(infos, k)
-            listed.append(info)
+        listed = listed_infos(infos, self.num_envs)  # SB3's, with terminal_observation
+        for k in np.flatnonzero(dones):
+            listed[k]["TimeLimit.truncated"] = bool(truncations[k] and not terminations[k])
         return obs, rewards.astype(np.float32), dones, listed
 
     def step_arrays(self, actions: np.ndarray):

@@ -6,6 +6,7 @@ sets itself are refused by name; keys SB3's constructor does not have are unknow
 
 from __future__ import annotations
 
+import functools
 import inspect
 import math
 from collections.abc import Callable
@@ -204,12 +205,8 @@ def _check_value(algo: str, key: str, value, param: Param):
         if param.none:
             return None
         raise wrong
-    if param.kind == "bool":
-        if not isinstance(value, bool):
-            raise wrong
-        return value
-    if param.kind in ("dict", "str"):
-        if not isinstance(value, dict if param.kind == "dict" else str):
+    if param.kind in ("bool", "dict", "str"):
+        if not isinstance(value, {"bool": bool, "dict": dict, "str": str}[param.kind]):
             raise wrong
         return value
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
@@ -226,17 +223,11 @@ def _check_value(algo: str, key: str, value, param: Param):
     return value
 
 
-def settable(algo: str) -> dict[str, Param]:
-    """The declared hyper-parameters of ``algo`` that the installed SB3's constructor takes."""
-    accepted = inspect.signature(get_algo(algo).agent_class().__init__).parameters
-    return {key: param for key, param in PARAMS[algo].items() if key in accepted}
-
-
 def check_sb3_hyperparams(algo: str, hyperparams: dict) -> dict:
     """``hyperparams`` with every value checked against ``algo``'s declared type and range
     (integral floats as ints); an unknown, unsettable or out-of-range key is a UsageError."""
-    declared = settable(algo)
-    constructor = inspect.signature(get_algo(algo).agent_class().__init__).parameters
+    constructor = inspect.signature(get_algo(algo).agent_class().__init__).parameters  # the installed SB3's
+    declared = {key: param for key, param in PARAMS[algo].items() if key in constructor}
     special = {
         key: check
         for key, check in {**SPECIAL, **(SAC_SPECIAL if algo == "sac" else {})}.items()
@@ -268,17 +259,14 @@ def _given_or_default(algo: str, hyperparams: dict, key: str):
 def check_sb3_memory(algo: str, hyperparams: dict, observation_space, n_envs: int = 1) -> None:
     """Refuse sizes whose buffers this machine cannot hold (``buffer_memory``): the replay buffer
     and training batch of DQN and SAC, the rollout of PPO and A2C."""
+    given = functools.partial(_given_or_default, algo, hyperparams)
     if "buffer_size" in PARAMS[algo]:
-        copies = 1 if _given_or_default(algo, hyperparams, "optimize_memory_usage") else 2
+        copies = 1 if given("optimize_memory_usage") else 2
         stored = copies * observation_bytes(observation_space)
-        check_buffer_memory(
-            algo, "buffer_size", _given_or_default(algo, hyperparams, "buffer_size"), stored, "replay buffer"
-        )
+        check_buffer_memory(algo, "buffer_size", given("buffer_size"), stored, "replay buffer")
         batch = 2 * observation_bytes(observation_space, itemsize=4)
-        check_buffer_memory(
-            algo, "batch_size", _given_or_default(algo, hyperparams, "batch_size"), batch, "training batch"
-        )
+        check_buffer_memory(algo, "batch_size", given("batch_size"), batch, "training batch")
     else:
-        entries = _given_or_default(algo, hyperparams, "n_steps") * n_envs
+        entries = given("n_steps") * n_envs
         stored = observation_bytes(observation_space, itemsize=4)
         check_buffer_memory(algo, "n_steps", entries, stored, "rollout (n_steps × n_envs)")

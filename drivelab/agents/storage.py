@@ -46,17 +46,11 @@ def _tensors(state: Any, name: str = ""):
             yield from _tensors(value, f"{name}.{key}".lstrip("."))
 
 
-def non_finite_tensors(state: Any) -> list[str]:
-    """The dotted names of the floating-point tensors in nested dicts/lists ``state`` that hold a
-    nan or an inf (``["q_network.value.0.weight", ...]``)."""
-    return [
+def _check_finite(state: Any, prefix: str = "") -> None:
+    names = [
         name for name, tensor in _tensors(state)
         if (tensor.is_floating_point() or tensor.is_complex()) and not bool(torch.isfinite(tensor).all())
     ]  # fmt: skip
-
-
-def _check_finite(state: Any, prefix: str = "") -> None:
-    names = non_finite_tensors(state)
     if names:
         shown = ", ".join(names[:3]) + (f" and {len(names) - 3} more" if len(names) > 3 else "")
         raise NonFiniteParametersError(
@@ -210,15 +204,11 @@ STATE_COPIES = 4
 STATE_OVERHEAD_BYTES = 1 << 20
 
 
-def tensor_bytes(state: Any) -> int:
-    """Bytes of the tensors in nested dicts/lists ``state`` (a state dict, an optimizer's state)."""
-    return sum(tensor.numel() * tensor.element_size() for _, tensor in _tensors(state))
-
-
 def state_limit(weights: Any) -> int:
     """The most bytes a saved state of a model with these fresh tensors (``weights``: its state
     dicts, optimizers without moments yet) can take, trained to any step."""
-    return STATE_COPIES * tensor_bytes(weights) + STATE_OVERHEAD_BYTES
+    weight_bytes = sum(tensor.numel() * tensor.element_size() for _, tensor in _tensors(weights))
+    return STATE_COPIES * weight_bytes + STATE_OVERHEAD_BYTES
 
 
 def read_member(archive: zipfile.ZipFile, name: str, limit: int) -> bytes:

@@ -72,7 +72,7 @@ class Worlds:
     def infos(self) -> list[dict]:
         """The last step's info of every world (of the step that ended it, for a finished world)."""
         if isinstance(self._infos, dict):
-            self._infos = _listed_infos(self._infos, self.count)
+            self._infos = listed_infos(self._infos, self.count)
         return self._infos
 
     @property
@@ -92,7 +92,7 @@ class Worlds:
         """Start every world; the batched observations (K, ...)."""
         if self.direct:
             obs, infos = self.env.reset()
-            self.reset_infos = _listed_infos(infos, self.count)
+            self.reset_infos = listed_infos(infos, self.count)
             self._returns[:] = 0.0
             return obs
         if self.vector:
@@ -145,20 +145,18 @@ class Worlds:
         rewards = rewards.astype(np.float32).astype(np.float64)
         done = terminated | truncated
         final, returns = None, []
+        if self.direct:
+            self._returns += rewards
         if np.count_nonzero(done):
             final = map_obs(np.ndarray.copy, new_obs)
-            final_obs = infos["final_obs"]
             finished = np.flatnonzero(done)
             for k in finished:
-                _set_row(final, k, final_obs[k])
+                _set_row(final, k, infos["final_obs"][k])
             if self.direct:
-                self._returns += rewards
                 returns = [float(self._returns[k]) for k in finished]
                 self._returns[finished] = 0.0
             elif "episode" in infos:
                 returns = [float(infos["episode"][k]["r"]) for k in finished]
-        elif self.direct:
-            self._returns += rewards
         truncated = truncated & ~terminated
         return new_obs, rewards, terminated, truncated, final, returns
 
@@ -172,7 +170,7 @@ def _has_step_arrays(env) -> bool:
     return True
 
 
-def _listed_infos(infos: dict, count: int) -> list[dict]:
+def listed_infos(infos: dict, count: int) -> list[dict]:
     """Gymnasium-style vector infos (arrays of K) as SB3's list of K dicts, finished worlds' from
     their ``final_info`` with ``terminal_observation`` (and ``episode`` where a monitor gave one)."""
     from drivelab.envs.vector import world_info

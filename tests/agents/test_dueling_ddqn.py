@@ -43,10 +43,18 @@ def test_sampling_is_proportional_to_priority():
     assert tree.find(np.array([9.999999])).tolist() == [2]  # never an empty padding leaf
 
 
+def _add(buffer, observation, action, reward, next_observation, terminal):
+    """One transition (the agent adds its K worlds' with ``add_many``)."""
+    buffer.add_many(
+        np.asarray(observation)[None], np.array([action]), np.array([reward]),
+        np.asarray(next_observation)[None], np.array([terminal]),
+    )  # fmt: skip
+
+
 def _buffer(priorities, alpha=1.0):
     buffer = PrioritizedReplayBuffer(8, observation_size=2, alpha=alpha, priority_eps=0.0)
     for i in range(len(priorities)):
-        buffer.add(np.full(2, i), i, float(i), np.full(2, i + 1), False)
+        _add(buffer, np.full(2, i), i, float(i), np.full(2, i + 1), False)
     buffer.update_priorities(np.arange(len(priorities)), np.array(priorities, dtype=float))
     return buffer
 
@@ -72,7 +80,7 @@ def test_importance_weights(beta, expected):
 
 def test_new_transitions_get_the_largest_priority():
     buffer = _buffer([1.0, 5.0])
-    buffer.add(np.zeros(2), 0, 0.0, np.zeros(2), True)
+    _add(buffer, np.zeros(2), 0, 0.0, np.zeros(2), True)
     assert buffer.tree.priorities(np.array([2]))[0] == pytest.approx(5.0)
     assert buffer.size == 3 and buffer.terminals[2] == 1.0
 
@@ -80,7 +88,7 @@ def test_new_transitions_get_the_largest_priority():
 def test_ring_buffer_overwrites_the_oldest():
     buffer = PrioritizedReplayBuffer(3, observation_size=1, alpha=0.6, priority_eps=1e-6)
     for i in range(5):
-        buffer.add(np.array([i]), 0, 0.0, np.array([i]), False)
+        _add(buffer, np.array([i]), 0, 0.0, np.array([i]), False)
     assert buffer.size == 3 and sorted(buffer.observations[:, 0].tolist()) == [2.0, 3.0, 4.0]
 
 

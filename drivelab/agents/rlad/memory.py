@@ -25,10 +25,6 @@ LEDGER_ENV = "DRIVELAB_DEVICE_LEDGER"
 SHARE = 0.5  # frames may take at most this share of the memory that is free and not reserved
 
 
-def default_ledger_path() -> Path:
-    return Path(os.environ.get(LEDGER_ENV) or Path(tempfile.gettempdir()) / "drivelab-device-memory.json")
-
-
 def pid_alive(pid: int) -> bool:
     """Whether a process ``pid`` exists (signal 0 checks without sending anything)."""
     try:
@@ -62,7 +58,9 @@ class DeviceMemoryLedger:
     def __init__(
         self, path: str | Path | None = None, pid: int | None = None, alive: Callable[[int], bool] = pid_alive
     ) -> None:
-        self.path = Path(path) if path is not None else default_ledger_path()
+        if path is None:
+            path = os.environ.get(LEDGER_ENV) or Path(tempfile.gettempdir()) / "drivelab-device-memory.json"
+        self.path = Path(path)
         self.pid = os.getpid() if pid is None else int(pid)
         self.alive = alive
 

@@ -123,14 +123,10 @@ class RLADConfig:
             raise UsageError(f"{algo!r} needs aux_weight >= 0 and alix_target > 0")
         if self.device not in ("auto", "cpu", "cuda") and not self.device.startswith("cuda:"):
             raise UsageError(f"{algo!r}: device must be auto, cpu, cuda or cuda:N, got {self.device!r}")
-        if self.replay_frames not in REPLAY_FRAMES:
-            raise UsageError(
-                f"{algo!r}: replay_frames must be one of {', '.join(REPLAY_FRAMES)}, "
-                f"got {self.replay_frames!r}"
-            )
-        if self.compile not in COMPILE_MODES:
-            modes = ", ".join(COMPILE_MODES)
-            raise UsageError(f"{algo!r}: compile must be one of {modes}, got {self.compile!r}")
+        for key, allowed in (("replay_frames", REPLAY_FRAMES), ("compile", COMPILE_MODES)):
+            value = getattr(self, key)
+            if value not in allowed:
+                raise UsageError(f"{algo!r}: {key} must be one of {', '.join(allowed)}, got {value!r}")
         if not self.fast_update and (self.compile != "none" or self.bf16 or self.channels_last):
             raise UsageError(f"{algo!r}: compile, bf16 and channels_last need fast_update=true")
         if self.waypoint_encoder not in WAYPOINT_ENCODERS:
@@ -281,12 +277,9 @@ class RLAD(OwnAgent):
         self.replay_buffer.move_frames(self._frame_device(self.replay_buffer.frames.shape[1:]))
 
     def _modules(self) -> dict[str, nn.Module | torch.optim.Optimizer]:
-        return {
-            "encoder": self.encoder, "actor": self.actor, "critic": self.critic,
-            "critic_target": self.critic_target, "traffic_light_head": self.traffic_light_head,
-            "critic_optimizer": self.critic_optimizer, "actor_optimizer": self.actor_optimizer,
-            "alpha_optimizer": self.alpha_optimizer,
-        }  # fmt: skip
+        networks = ("encoder", "actor", "critic", "critic_target", "traffic_light_head")
+        optimizers = ("critic_optimizer", "actor_optimizer", "alpha_optimizer")
+        return {name: getattr(self, name) for name in networks + optimizers}
 
     def _state(self) -> dict[str, Any]:
         return {**super()._state(), "log_alpha": self.log_alpha.detach()}
