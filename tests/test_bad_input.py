@@ -173,7 +173,7 @@ TRAIN_CASES = {
     "dueling_ddqn alpha=abc": (
         ["--algo", "dueling_ddqn", "-H", "alpha=abc"],
         {},
-        "'alpha' of 'dueling_ddqn' must be a number, got 'abc'",
+        "'alpha' of 'dueling_ddqn' must be a finite number, got 'abc'",
     ),
     "dueling_ddqn exploration 2": (
         ["--algo", "dueling_ddqn", "-H", "exploration_fraction=2"],
@@ -183,7 +183,7 @@ TRAIN_CASES = {
     "qlearning learning_rate=abc": (
         ["--algo", "qlearning", "--env", "follow-line", "--obs", "line", "-H", "learning_rate=abc"],
         {},
-        "'learning_rate' of 'qlearning' must be a number, got 'abc'",
+        "'learning_rate' of 'qlearning' must be a finite number, got 'abc'",
     ),
     "qlearning gamma=2": (
         ["--algo", "qlearning", "--env", "follow-line", "--obs", "line", "-H", "gamma=2"],

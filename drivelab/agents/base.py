@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import time
 import zipfile
 from pathlib import Path
@@ -55,7 +54,7 @@ from drivelab.agents.storage import (
     write_arrays,
 )
 from drivelab.agents.worlds import Worlds
-from drivelab.errors import UsageError
+from drivelab.errors import UsageError, like_default
 
 FORMAT = "drivelab-agent-2"
 # The largest learning rate of every agent, SB3's and drivelab's (and of Q-learning's α): a rate
@@ -88,20 +87,7 @@ def parse_hyperparams(config_class: type, algo: str, hyperparams: dict) -> Any:
     for key, value in hyperparams.items():
         if key not in fields:
             raise UsageError(f"unknown hyperparameter {key!r} for {algo!r} (known: {', '.join(fields)})")
-        default = fields[key].default
-        if isinstance(default, bool) and not isinstance(value, bool):
-            raise UsageError(f"hyperparameter {key!r} of {algo!r} must be true or false, got {value!r}")
-        if isinstance(default, (int, float)) and not isinstance(default, bool):
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise UsageError(f"hyperparameter {key!r} of {algo!r} must be a number, got {value!r}")
-            if not math.isfinite(value):
-                raise UsageError(f"hyperparameter {key!r} of {algo!r} must be a finite number, got {value!r}")
-            if isinstance(default, int) and not float(value).is_integer():
-                raise UsageError(f"hyperparameter {key!r} of {algo!r} must be an integer, got {value!r}")
-            value = type(default)(value)
-        if isinstance(default, str) and not isinstance(value, str):
-            raise UsageError(f"hyperparameter {key!r} of {algo!r} must be a string, got {value!r}")
-        values[key] = value
+        values[key] = like_default(value, fields[key].default, f"hyperparameter {key!r} of {algo!r}")
     config = config_class(**values)
     config.check(algo)
     return config

@@ -9,7 +9,7 @@ import numpy as np
 import yaml
 from gymnasium import spaces
 
-from drivelab.errors import UsageError
+from drivelab.errors import UsageError, like_default
 from drivelab.perception.affordances import Affordances
 from drivelab.perception.base import Sensor
 from drivelab.perception.birdeye import BirdEye
@@ -132,23 +132,9 @@ def parse_sensor_spec(spec: str | dict) -> tuple[str, dict]:
 
 
 def _typed_option(sensor: str, key: str, value, default):
-    """``value`` in the type of the option's ``default`` (an integral float becomes an int): the
-    sensors check ranges, and would fail on a string with an unreadable comparison error."""
-    wrong = f"sensor option {key!r} of {sensor!r} must be {{}}, got {value!r}"
-    if isinstance(default, bool):
-        if not isinstance(value, bool):
-            raise UsageError(wrong.format("true or false"))
-        return value
-    if isinstance(default, (int, float)):
-        noun = "an integer" if isinstance(default, int) else "a finite number"
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise UsageError(wrong.format(noun))
-        if isinstance(default, int) and not float(value).is_integer():
-            raise UsageError(wrong.format(noun))
-        return int(value) if isinstance(default, int) else float(value)
-    if not isinstance(value, str):  # string options, and None defaults (a weights path)
-        raise UsageError(wrong.format("a string"))
-    return value
+    """``value`` in the type of the option's ``default`` (a None default: a string, the weights'
+    path): the sensors check ranges, and would fail on a string with an unreadable comparison error."""
+    return like_default(value, "" if default is None else default, f"sensor option {key!r} of {sensor!r}")
 
 
 def check_sensor_options(name: str, options: dict) -> tuple[int, dict]:

@@ -150,7 +150,7 @@ def test_run_directory_resume_and_evaluation(algo, tmp_path):
         ("ppo_own", "kinematics", "meta", {"net_arch": "64,wide"}, "net_arch must be layer widths"),
         ("ppo_own", "kinematics", "continuous", {"clip_range": -1}, "clip_range > 0"),
         ("ppo_own", "kinematics", "continuous", {"n_epoch": 3}, "unknown hyperparameter 'n_epoch'"),
-        ("dueling_ddqn", "kinematics", "meta", {"batch_size": "big"}, "must be a number"),
+        ("dueling_ddqn", "kinematics", "meta", {"batch_size": "big"}, "must be an integer"),
         ("dueling_ddqn", "kinematics", "meta", {"stream_norm": "group"}, "stream_norm"),
     ],
 )
