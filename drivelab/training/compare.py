@@ -280,58 +280,51 @@ def _markdown(
     command: str | None,
 ) -> str:
     percent = percent_of(confidence)
-    lines = [
-        f"# {title}",
-        "",
-        f"Written {time.strftime('%Y-%m-%d %H:%M:%S %Z')} by drivelab on {machine_description()}.",
-    ]
+    notes = [f"Written {time.strftime('%Y-%m-%d %H:%M:%S %Z')} by drivelab on {machine_description()}."]
     if command:
-        lines += ["", "Made with:", "", "```bash", command, "```"]
-    lines += [
-        "",
+        notes.append(f"Made with:\n\n```bash\n{command}\n```")
+    notes.append(
         f"Each run contributes one value per metric (its final evaluation). Over the seeds of a group:"
         f" the mean, a {percent} % percentile-bootstrap confidence interval of the mean"
         f" (scipy.stats.bootstrap, 10,000 resamples) and the interquartile mean (IQM, rliable's"
-        f" trimmed mean; with fewer than 4 seeds it equals the mean).",
-    ]
+        f" trimmed mean; with fewer than 4 seeds it equals the mean)."
+    )
     if len({key[3] for key in groups}) > 1:
-        lines += [
-            "",
+        notes.append(
             "The groups differ in reward, and each run's return is measured with its own reward:"
             " compare returns across rewards with care; the driving metrics (success, crashes, speed,"
-            " distance) do not depend on the reward.",
-        ]
+            " distance) do not depend on the reward."
+        )
     scenarios = list(dict.fromkeys(runs[0].config.env for runs in groups.values()))
     if len(scenarios) > 1:
-        lines += [
-            "",
+        notes.append(
             f"The groups drive different scenarios ({', '.join(scenarios)}), each evaluated on its own"
             " scenario's episodes: a metric compares how each agent does at its own task, not the"
-            " agents at one task.",
-        ]
+            " agents at one task."
+        )
     goalless = [name for name in scenarios if name in SCENARIOS and SCENARIOS[name].arrival == "none"]
     if goalless:
-        lines += [
-            "",
+        notes.append(
             f"{', '.join(goalless)} {'has' if len(goalless) == 1 else 'have'} no goal to reach: there,"
             " success is the time limit reached with no collision and no off-road event, which a slow,"
-            " careful policy also scores; read speed and distance beside it.",
-        ]
+            " careful policy also scores; read speed and distance beside it."
+        )
     budgets = sorted({runs[0].config.steps for runs in groups.values()})
     if len(budgets) > 1:
-        lines += [
-            "",
+        notes.append(
             f"The runs were trained for different budgets ({', '.join(f'{b:,}' for b in budgets)} steps),"
             " and each budget is a group of its own (`steps=` in its scenario): as in rliable and RL Zoo,"
-            " final scores compare at one budget; across budgets they say how training goes on.",
-        ]
-    repeated = [key for key, runs in groups.items() if len({r.config.seed for r in runs}) < len(runs)]
-    for key in repeated:
-        lines += [
-            "",
-            f"**Warning:** group {' · '.join(key)} has several runs with the same seed; each counts as"
-            " a separate sample, which narrows its interval.",
-        ]
+            " final scores compare at one budget; across budgets they say how training goes on."
+        )
+    notes += [
+        f"**Warning:** group {' · '.join(key)} has several runs with the same seed; each counts as"
+        " a separate sample, which narrows its interval."
+        for key, runs in groups.items()
+        if len({r.config.seed for r in runs}) < len(runs)
+    ]
+    lines = [f"# {title}"]
+    for note in notes:
+        lines += ["", note]
     lines += [
         "",
         "## Groups",
