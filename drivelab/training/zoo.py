@@ -28,6 +28,8 @@ if TYPE_CHECKING:
 
 ZOO_DIR = Path(__file__).resolve().parents[1] / "zoo"
 CARD_FORMAT = "drivelab-zoo-1"
+# the run fields a card repeats from config.yaml, in its order
+CARD_RUN_FIELDS = ("algo", "env", "obs", "action", "reward", "traffic", "seed", "hyperparams")
 VIDEO_SUFFIXES = (".mp4", ".gif")
 
 
@@ -213,14 +215,7 @@ def pack(
             "format": CARD_FORMAT,
             "name": name,
             "description": description,
-            "algo": config.algo,
-            "env": config.env,
-            "obs": list(config.obs),
-            "action": config.action,
-            "reward": config.reward,
-            "traffic": config.traffic,
-            "seed": config.seed,
-            "hyperparams": config.hyperparams,
+            **{key: value for key, value in config.to_dict().items() if key in CARD_RUN_FIELDS},
             "training": {
                 "steps": int(agent.num_timesteps),
                 "n_envs": config.n_envs,
