@@ -23,12 +23,17 @@ from drivelab.scenarios.town.road import (
     TownLights,
     build_network,
     light_state,
-    stop_line,
     street_crossings,
 )
 from drivelab.sim.reference.highway import HighwayBackend
+from drivelab.sim.roads import blocks
 from drivelab.world.batch import WorldBatch
 from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW
+
+
+def stop_line(layout, junction: int, arm: int) -> np.ndarray:
+    """World position of the stop line at the end of ``arm``'s incoming lane."""
+    return blocks.stop_line(layout.centre(junction), arm)
 
 
 @pytest.mark.parametrize("layout", sorted(LAYOUTS))

@@ -71,11 +71,6 @@ def road_description(layout: TownLayout) -> RoadDescription:
     return blocks.town(layout.junctions, layout.streets, layout.block_m, layout.palette)
 
 
-def stop_line(layout: TownLayout, junction: int, arm: int) -> np.ndarray:
-    """World position of the stop line at the end of ``arm``'s incoming lane."""
-    return blocks.stop_line(layout.centre(junction), arm)
-
-
 def build_network(layout: TownLayout) -> RoadNetwork:
     """The town's lanes as a highway-env network: in each junction highway-env's intersection
     lanes between the arms it has, and a straight street from each exit to the neighbour's

@@ -71,14 +71,6 @@ class TownEpisode:
     route_time_limit_s: float
     rng_state: np.ndarray
 
-    @property
-    def rng(self) -> np.random.Generator:
-        """A numpy Generator in the state ``rng_state`` (made on demand: the compiled core reads
-        the words)."""
-        generator = np.random.Generator(np.random.PCG64())
-        pcg64.set_state(generator, self.rng_state)
-        return generator
-
 
 @dataclass
 class TownSetup:
