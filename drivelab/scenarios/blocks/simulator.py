@@ -59,6 +59,11 @@ _STACKED = ("in_junction", "dead_end", "solid", "light_junction", "light_arm", "
 
 
 def _world_kernel(parallel: bool):
+    """The worlds' loop: ``blocks_simulate`` of world k's vehicles ``v[k, :count[k]]`` on its map's
+    rows ``start[k]:stop[k]`` of the stacked lane tables (``BlocksSimulator.road_arrays``) and its
+    lights' states ``light_states[k]``, for the worlds of ``active`` (K,); a thread per world when
+    ``parallel``, as ``traffic.simulate_worlds``."""
+
     def body(
         v, count, lanes, start, stop, p, frames, dt, regulation, active, cap, junction, from_arm, to_arm,
         turn, end_junction, end_arm, light, changeable, ending, successor_start, successors, light_start,
@@ -80,28 +85,6 @@ def _world_kernel(parallel: bool):
 
 
 _SERIAL, _PARALLEL = _world_kernel(False), _world_kernel(True)
-
-
-def simulate_map_worlds(
-    v, count, lanes, start, stop, p, frames: int, dt: float, regulation, active, release_cap_mps: float, road,
-    light_start, light_stop, light_states, ego_max_speed_mps: float
-) -> None:  # fmt: skip
-    """``blocks_traffic.blocks_simulate`` of world k's vehicles ``v[k, :count[k]]`` (K, N_max,
-    VEHICLE_COLUMNS) on its map's lane rows ``lanes[start[k]:stop[k]]`` for the worlds of
-    ``active`` (K,), as ``traffic.simulate_worlds`` (a thread per world); a vehicle that yielded
-    cruises on at ``release_cap_mps``.
-
-    :param road: ``BlocksSimulator.road_arrays``, in ``blocks_simulate``'s order.
-    :param light_start: / ``light_stop`` (K,): world k's rows of the stacked light table;
-        ``light_states`` (K, M_max) their LIGHT_* states (world k's first ``light_stop[k] - light_start[k]``).
-    :param ego_max_speed_mps: the egos' top speed.
-    """
-    parallel = v.shape[0] > 1 and numba.get_num_threads() > 1
-    kernel = _PARALLEL if parallel else _SERIAL
-    kernel(
-        v, count, lanes, start, stop, p, frames, dt, regulation, active, release_cap_mps, *road, light_start,
-        light_stop, light_states, ego_max_speed_mps,
-    )  # fmt: skip
 
 
 @njit(cache=True)
@@ -202,7 +185,6 @@ class BlocksSimulator(FastSimulator):
         self.lane_start = np.zeros(k, dtype=np.int64)
         self.lane_stop = np.zeros(k, dtype=np.int64)
         self.route_time_limit_s = np.full(k, np.inf)
-        self._route_of: dict[tuple[int, int], int] = {}  # (map slot, spawn lane) → route index
         self.arrival_threshold = ARRIVAL_WINDOW_M
         top_speed = np.full(k, EGO_MAX_SPEED_MPS)  # the sensors' speed scale (ego_state, measurements)
         top_speed.setflags(write=False)
@@ -250,18 +232,6 @@ class BlocksSimulator(FastSimulator):
         """World k's map."""
         return self.maps[int(self.world_map[k])]
 
-    def _route(self, slot: int, lane: int) -> int:
-        """The route index of the ego route from spawn lane ``lane`` of map ``slot``."""
-        key = (slot, lane)
-        if key not in self._route_of:
-            tracker = self.maps[slot].routes.get(lane)
-            if tracker is None:
-                raise NotImplementedError(f"no ego route from lane {lane} of map {slot}")
-            self._route_of[key] = len(self._trackers)
-            self._trackers.append(tracker)
-            self._pad_routes()
-        return self._route_of[key]
-
     # --- episodes -------------------------------------------------------------------------------
     def _start_episodes(self, worlds: np.ndarray, seeds: np.ndarray) -> None:
         """New episodes in ``worlds``: each seed's map, then the scenario's set-up on it (one call
@@ -277,7 +247,9 @@ class BlocksSimulator(FastSimulator):
             self.lane_start[k] = self.map_start[slot]
             self.lane_stop[k] = self.map_start[slot] + len(bmap.table.rows)
             lane = int(rows[ego, T.LANE])
-            self.route_index[k] = self._route(slot, lane)
+            self.route_index[k] = self._route(
+                (slot, lane), bmap.routes.get(lane), f"lane {lane} of map {slot}"
+            )
             self.route_time_limit_s[k] = route_time_limit_s(self._trackers[self.route_index[k]])
             self.start_lane_id[k] = bmap.table.rows[lane, L.LANE_ID]
             self.light_start[k] = self.map_light_start[slot]
@@ -306,9 +278,11 @@ class BlocksSimulator(FastSimulator):
         return self.lane_start + self.vehicles[np.arange(self.num_worlds), self.ego, T.LANE].astype(np.int64)
 
     def _simulate(self, frames: int, active: np.ndarray) -> None:
-        simulate_map_worlds(
+        """A released vehicle cruises on at TRAFFIC_SPEED_MPS, the egos at most at EGO_MAX_SPEED_MPS."""
+        kernel = _PARALLEL if self.num_worlds > 1 and numba.get_num_threads() > 1 else _SERIAL
+        kernel(
             self.vehicles, self.count, self.lanes, self.lane_start, self.lane_stop, self.idm, frames,
-            self.dt_s, self.regulation, active, TRAFFIC_SPEED_MPS, self.road_arrays, self.light_start,
+            self.dt_s, self.regulation, active, TRAFFIC_SPEED_MPS, *self.road_arrays, self.light_start,
             self.light_stop, self.light_state, EGO_MAX_SPEED_MPS,
         )  # fmt: skip
 

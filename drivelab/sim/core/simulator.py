@@ -676,7 +676,7 @@ class FastSimulator:
         # (route_index, RouteBatch arrays, _route_version) of the last batch
         self._route_cache: tuple[np.ndarray, dict, int] | None = None
         self._route_version = 0  # counts route changes that keep route_index (the town's)
-        self._route_of_lane: dict[int, int] = {}
+        self._route_of: dict = {}  # what ``_route`` registered a route under → its index
         self._trackers: list[RouteTracker] = []
         self._batch: WorldBatch | None = None
         # the last step's export, when its batch is made on first read (``defer_batch``)
@@ -709,15 +709,13 @@ class FastSimulator:
     def _load_road(scenario: Scenario, traffic: str, control: str, overrides: dict | None) -> _Road:
         """The scenario's road for this configuration, converted at its first use (``_ROADS``)."""
         key = (repr(scenario), traffic, control, repr(sorted((overrides or {}).items())))
-        road = _ROADS.get(key)
-        if road is None and scenario.road is not None:  # a described road: no highway-env object
-            road = _ROADS[key] = _describe_road(scenario, traffic, control, overrides)
-        if road is None:  # highway-env builds the road once; nothing of it is kept but arrays
+        if key not in _ROADS and scenario.road is not None:  # a described road: no highway-env object
+            _ROADS[key] = _describe_road(scenario, traffic, control, overrides)
+        elif key not in _ROADS:  # highway-env builds the road once; nothing of it is kept but arrays
             builder = HighwayBackend(scenario, traffic, control, overrides)
             builder.reset(0)
-            road = _ROADS[key] = _convert_road(builder, scenario)
-            del builder
-        return road
+            _ROADS[key] = _convert_road(builder, scenario)
+        return _ROADS[key]
 
     # --- buffers --------------------------------------------------------------------------------
     def _fit(self, rows: int) -> None:
@@ -737,15 +735,19 @@ class FastSimulator:
         self.count[k], self.ego[k] = len(rows), ego
 
     def _route_for_lane(self, lane: int) -> int:
-        """The index of the ego route that starts on lane row ``lane`` (padded on first use)."""
-        if lane not in self._route_of_lane:
-            tracker = self._road.routes.get(lane)
+        """The index of the ego route that starts on lane row ``lane``."""
+        return self._route(lane, self._road.routes.get(lane), f"lane {self.table.indices[lane]}")
+
+    def _route(self, key, tracker: RouteTracker | None, where: str) -> int:
+        """The index of the ego route ``tracker`` (from ``where``; None: there is none) under
+        ``key``, padded at its first use."""
+        if key not in self._route_of:
             if tracker is None:
-                raise NotImplementedError(f"no ego route from lane {self.table.indices[lane]}")
-            self._route_of_lane[lane] = len(self._trackers)
+                raise NotImplementedError(f"no ego route from {where}")
+            self._route_of[key] = len(self._trackers)
             self._trackers.append(tracker)
             self._pad_routes()
-        return self._route_of_lane[lane]
+        return self._route_of[key]
 
     def _pad_routes(self) -> None:
         """The routes in use as padded arrays (R routes, S segments at most), last point repeated."""
