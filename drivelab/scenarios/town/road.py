@@ -86,16 +86,19 @@ def street_crossings(layout: TownLayout) -> np.ndarray:
     return road_description(layout).crossings.copy()
 
 
-def signalised(layout: TownLayout) -> list[tuple[int, int]]:
-    """(junction, arm) of every approach that has a light: junctions with three or more arms."""
-    desc = road_description(layout)
-    return [(int(j), int(k)) for j, k in zip(desc.light_junction, desc.light_arm, strict=True)]
-
-
 def shortest_route(network: RoadNetwork, start: tuple[str, str], goal: str) -> list[tuple[str, str, int]]:
     """Lane indices from road ``start`` to node ``goal`` by breadth-first search (one lane per road);
     [] when the goal cannot be reached (``roads.town_arrays.shortest_route`` on the network's graph)."""
     return graph_shortest_route(network.graph, start, goal)
+
+
+def approach_of(lane_index: tuple) -> tuple[int, int] | None:
+    """(junction, arm) when ``lane_index`` is a street ending at a stop line, else None."""
+    _to = lane_index[1]
+    if ":ir" not in _to:
+        return None
+    junction, arm = _to[1:].split(":ir")
+    return int(junction), int(arm)
 
 
 class TownLights:
@@ -106,18 +109,15 @@ class TownLights:
     :param offsets_s: per junction, where its cycle starts (drawn per episode).
     """
 
-    @staticmethod
-    def approach_of(lane_index: tuple) -> tuple[int, int] | None:
-        """(junction, arm) when ``lane_index`` is a street ending at a stop line, else None (the
-        simulator asks the lights, so that it need not know the town's node names)."""
-        return approach_of(lane_index)
+    # the simulator asks the lights, so that it need not know the town's node names
+    approach_of = staticmethod(approach_of)
 
     def __init__(self, layout: TownLayout, timings: LightTimings, offsets_s: np.ndarray) -> None:
         self.layout, self.timings, self.offsets_s = layout, timings, np.asarray(offsets_s, dtype=float)
-        self.approaches = signalised(layout)
+        desc = road_description(layout)  # the approaches with a light: junctions of three arms or more
+        self.approaches = [(int(j), int(k)) for j, k in zip(desc.light_junction, desc.light_arm, strict=True)]
         self.index = {approach: k for k, approach in enumerate(self.approaches)}
-        light_xyh = road_description(layout).light_xyh
-        self.positions, self.headings = light_xyh[:, :2].copy(), light_xyh[:, 2].copy()
+        self.positions, self.headings = desc.light_xyh[:, :2].copy(), desc.light_xyh[:, 2].copy()
 
     def state(self, junction: int, arm: int, time_s: float) -> int | None:
         """The light of one approach, or None where the junction has no lights."""
@@ -129,12 +129,3 @@ class TownLights:
         """WorldState.traffic_lights rows: stop line x, y, approach heading, state."""
         states = [light_state(self.timings, k, time_s, self.offsets_s[j]) for j, k in self.approaches]
         return np.column_stack([self.positions, self.headings, states]).reshape(-1, 4)
-
-
-def approach_of(lane_index: tuple) -> tuple[int, int] | None:
-    """(junction, arm) when ``lane_index`` is a street ending at a stop line, else None."""
-    _to = lane_index[1]
-    if ":ir" not in _to:
-        return None
-    junction, arm = _to[1:].split(":ir")
-    return int(junction), int(arm)

@@ -155,11 +155,10 @@ class TownSimulator(FastSimulator):
         """New town episodes in ``worlds`` from ``seeds[k]`` (the town's set-up, one per world)."""
         for k in worlds:
             rows, ego, _, episode = self.scenario.spawn(int(seeds[k]), self._road, self.control)
-            self.vehicles[k] = 0.0
-            self.vehicles[k, : len(rows)] = rows
+            self._put_rows(k, rows, ego)
             self.peds[k] = 0.0
             self.peds[k, : len(episode.pedestrians)] = episode.pedestrians
-            self.count[k], self.ego[k], self.pcount[k] = len(rows), ego, len(episode.pedestrians)
+            self.pcount[k] = len(episode.pedestrians)
             self.offsets[k] = episode.light_offsets_s
             self.rng_words[k] = episode.rng_state
             self.route_time_limit_s[k] = episode.route_time_limit_s

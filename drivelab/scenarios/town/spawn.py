@@ -145,11 +145,10 @@ class TownSetup:
         return np.array(pairs, dtype=np.int64)
 
 
-def route_polyline(geometry: LaneGeometry, lanes, parts: dict | None = None) -> np.ndarray:
+def route_polyline(geometry: LaneGeometry, lanes, parts: dict) -> np.ndarray:
     """(K, 2) the centre line of ``lanes`` (lane rows), sampled as ``HighwayBackend.route_for``
     samples it: a straight lane's two ends, a curved one every <= 2 m (``np.linspace``).
     ``parts``: a cache of each lane's samples."""
-    parts = {} if parts is None else parts
     for lane in lanes:
         lane = int(lane)
         if lane in parts:
