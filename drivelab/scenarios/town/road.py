@@ -45,22 +45,13 @@ class TownLayout:
     block_m: float = 70.0
     palette: str = "day"
 
-    def arms(self, junction: int) -> dict[int, int]:
-        """{arm: neighbouring junction} of ``junction`` (in the order of ``streets``)."""
-        return blocks.junction_arms(self.junctions, self.streets, junction)
 
-    def centre(self, junction: int) -> np.ndarray:
-        return blocks.cell_centre(self.junctions[junction], self.block_m)
-
-
-# Training town: 3 x 3 junctions: four corners, four T-junctions and one 4-way crossing.
-_TRAIN = blocks.grid_cells(3, 3, missing=())
-# Test town: a smaller 3 x 2 grid with shorter blocks (corners and T-junctions only), drawn in
-# another palette: NoCrash's "new town, new weather" in spirit.
-_TEST = blocks.grid_cells(3, 2, missing=())
 LAYOUTS = {
-    "train": TownLayout("train", *_TRAIN),
-    "test": TownLayout("test", *_TEST, block_m=60.0, palette="dusk"),
+    # 3 x 3 junctions: four corners, four T-junctions and one 4-way crossing
+    "train": TownLayout("train", *blocks.grid_cells(3, 3)),
+    # a smaller 3 x 2 grid with shorter blocks (corners and T-junctions only), drawn in another
+    # palette: NoCrash's "new town, new weather" in spirit
+    "test": TownLayout("test", *blocks.grid_cells(3, 2), block_m=60.0, palette="dusk"),
 }
 
 
