@@ -195,24 +195,12 @@ class _Road:
 _ROADS: dict[tuple, _Road] = {}
 
 
-def _static_objects(road) -> list:
-    """The road's obstacles: its objects but the town's pedestrians (they are set up per episode)."""
-    walkers = {id(p) for p in getattr(road, "pedestrians", [])}
-    return [o for o in road.objects if id(o) not in walkers]
-
-
-def _npc_class(config: dict) -> type:
-    """The config's traffic class, which the compiled core must know (an IDMVehicle)."""
-    npc_class = hw_utils.class_from_path(config["other_vehicles_type"])
-    if not is_idm_class(npc_class):
-        raise NotImplementedError(f"the fast backend has no {npc_class.__name__}")
-    return npc_class
-
-
 def _new_road(scenario: Scenario, table: L.LaneTable, graph: dict, config: dict, **fields) -> _Road:
     """A _Road of ``table`` and ``graph`` ({from: {to: lanes}}) with the fields every conversion
     derives alike; ``fields``: the rest."""
-    npc_class = _npc_class(config)
+    npc_class = hw_utils.class_from_path(config["other_vehicles_type"])
+    if not is_idm_class(npc_class):  # the traffic class the compiled core knows: an IDMVehicle
+        raise NotImplementedError(f"the fast backend has no {npc_class.__name__}")
     graph_keys = {f: list(to) for f, to in graph.items()}
     return _Road(
         table=table,
@@ -250,6 +238,7 @@ def _convert_road(builder: HighwayBackend, scenario: Scenario) -> _Road:
     if regulated and RegulatedRoad.YIELD_DURATION != 0:
         raise NotImplementedError("the fast backend assumes RegulatedRoad.YIELD_DURATION = 0")
     dt_s = 1 / config["simulation_frequency"]
+    walkers = {id(p) for p in getattr(env.road, "pedestrians", [])}  # the town's: set up per episode
     return _new_road(
         scenario,
         table,
@@ -261,7 +250,7 @@ def _convert_road(builder: HighwayBackend, scenario: Scenario) -> _Road:
         duration_s=builder.duration_s,
         routes=routes,
         regulation_period=int(1 / dt_s / RegulatedRoad.REGULATION_FREQUENCY) if regulated else 0,
-        objects=vehicles_to_array([], table, _static_objects(env.road)),
+        objects=vehicles_to_array([], table, [o for o in env.road.objects if id(o) not in walkers]),
         ego_length=float(env.vehicle.LENGTH),
         ego_width=float(env.vehicle.WIDTH),
         keep_npcs=builder.keep_npcs,
