@@ -142,16 +142,9 @@ def s_curve(shift_m: float, length_m: float) -> tuple[float, float]:
 
 
 def lay_taper(
-    out: list[LaneRecord],
-    position: np.ndarray,
-    heading: float,
-    from_count: int,
-    to_count: int,
-    width: float,
-    length_m: float,
-    nodes: tuple[str, str, str],
-    speed_limit: float,
-) -> tuple[np.ndarray, float]:
+    out: list[LaneRecord], position: np.ndarray, heading: float, from_count: int, to_count: int, width: float,
+    length_m: float, nodes: tuple[str, str, str], speed_limit: float,
+) -> tuple[np.ndarray, float]:  # fmt: skip
     """One direction of a road whose lane count goes from ``from_count`` to ``to_count`` over
     ``length_m``, as two roads (``nodes[0]`` → ``nodes[1]`` → ``nodes[2]``) of half the length.
 

@@ -59,6 +59,11 @@ _STACKED = ("in_junction", "dead_end", "solid", "light_junction", "light_arm", "
 
 
 def _world_kernel(parallel: bool):
+    """The worlds' loop: ``blocks_simulate`` of world k's vehicles ``v[k, :count[k]]`` on its map's
+    rows ``start[k]:stop[k]`` of the stacked lane tables (``BlocksSimulator.road_arrays``) and its
+    lights' states ``light_states[k]``, for the worlds of ``active`` (K,); a thread per world when
+    ``parallel``, as ``traffic.simulate_worlds``."""
+
     def body(
         v, count, lanes, start, stop, p, frames, dt, regulation, active, cap, junction, from_arm, to_arm,
         turn, end_junction, end_arm, light, changeable, ending, successor_start, successors, light_start,
@@ -80,28 +85,6 @@ def _world_kernel(parallel: bool):
 
 
 _SERIAL, _PARALLEL = _world_kernel(False), _world_kernel(True)
-
-
-def simulate_map_worlds(
-    v, count, lanes, start, stop, p, frames: int, dt: float, regulation, active, release_cap_mps: float, road,
-    light_start, light_stop, light_states, ego_max_speed_mps: float
-) -> None:  # fmt: skip
-    """``blocks_traffic.blocks_simulate`` of world k's vehicles ``v[k, :count[k]]`` (K, N_max,
-    VEHICLE_COLUMNS) on its map's lane rows ``lanes[start[k]:stop[k]]`` for the worlds of
-    ``active`` (K,), as ``traffic.simulate_worlds`` (a thread per world); a vehicle that yielded
-    cruises on at ``release_cap_mps``.
-
-    :param road: ``BlocksSimulator.road_arrays``, in ``blocks_simulate``'s order.
-    :param light_start: / ``light_stop`` (K,): world k's rows of the stacked light table;
-        ``light_states`` (K, M_max) their LIGHT_* states (world k's first ``light_stop[k] - light_start[k]``).
-    :param ego_max_speed_mps: the egos' top speed.
-    """
-    parallel = v.shape[0] > 1 and numba.get_num_threads() > 1
-    kernel = _PARALLEL if parallel else _SERIAL
-    kernel(
-        v, count, lanes, start, stop, p, frames, dt, regulation, active, release_cap_mps, *road, light_start,
-        light_stop, light_states, ego_max_speed_mps,
-    )  # fmt: skip
 
 
 @njit(cache=True)
@@ -182,27 +165,24 @@ class BlocksSimulator(FastSimulator):
         self.light_arm = np.zeros(0, dtype=np.int64)
         self.signal_xyh = np.zeros((0, 3))  # every loaded map's exported lights (one per lane), stacked
         self.signal_light = np.zeros(0, dtype=np.int64)  # their light rows (local to their maps)
-        self.map_signal_start = np.zeros(0, dtype=np.int64)
+        self.lane_bounds = np.zeros(1, dtype=np.int64)  # map m's stacked rows: [bounds[m], bounds[m + 1])
+        self.light_bounds = np.zeros(1, dtype=np.int64)  # its stacked lights likewise
+        self.signal_bounds = np.zeros(1, dtype=np.int64)  # its stacked exported lights likewise
         self.signal_start = np.zeros(k, dtype=np.int64)  # world k's: [signal_start, signal_stop)
         self.signal_stop = np.zeros(k, dtype=np.int64)
-        self.map_light_start = np.zeros(0, dtype=np.int64)  # first stacked light of each map
         self.light_start = np.zeros(k, dtype=np.int64)  # world k's lights: [light_start, light_stop)
         self.light_stop = np.zeros(k, dtype=np.int64)
         self.offsets = np.zeros((k, 0))  # (K, J_max) world k's cycle offset of each intersection
         self.light_state = np.zeros((k, 0), dtype=np.int64)  # (K, M_max) LIGHT_* of world k's lights
-        self._lights_of: np.ndarray | None = None  # the world_map the light gather was made for
-        self._light_gather = (np.zeros((k, 0), dtype=np.int64), np.zeros((k, 0), dtype=bool))
         self.timings = np.zeros(3)  # the lights' (green, yellow, all red) seconds: the maps' own
-        self.map_start = np.zeros(0, dtype=np.int64)  # first stacked row of each map
         self.map_roads: tuple[RoadMap, ...] = ()  # every loaded map's RoadMap, by slot
         self.roads: tuple[RoadMap, ...] = ()  # the maps the worlds drive now (a batch's roads)
-        self._road_index = np.zeros(k, dtype=np.int64)
-        self._roads_of: np.ndarray | None = None  # the world_map the two above were made for
+        # the world_map the batch's roads, road index and light gather were made for (``_export``)
+        self._maps_of: np.ndarray | None = None
         self.world_map = np.zeros(k, dtype=np.int64)
         self.lane_start = np.zeros(k, dtype=np.int64)
         self.lane_stop = np.zeros(k, dtype=np.int64)
         self.route_time_limit_s = np.full(k, np.inf)
-        self._route_of: dict[tuple[int, int], int] = {}  # (map slot, spawn lane) → route index
         self.arrival_threshold = ARRIVAL_WINDOW_M
         top_speed = np.full(k, EGO_MAX_SPEED_MPS)  # the sensors' speed scale (ego_state, measurements)
         top_speed.setflags(write=False)
@@ -221,12 +201,12 @@ class BlocksSimulator(FastSimulator):
             bmap = converted[seed] = blocks_map(self.map_set.generate(seed), self._road)
         slot = self._slot_of[seed] = len(self.maps)
         self.maps.append(bmap)
-        self.map_start = np.append(self.map_start, len(self.lanes))
-        self.map_light_start = np.append(self.map_light_start, len(self.light_arm))
-        self.map_signal_start = np.append(self.map_signal_start, len(self.signal_light))
         self.lanes = np.concatenate([self.lanes, bmap.table.rows])
         for name in _STACKED:
             setattr(self, name, np.concatenate([getattr(self, name), getattr(bmap, name)]))
+        self.lane_bounds = np.append(self.lane_bounds, len(self.lanes))
+        self.light_bounds = np.append(self.light_bounds, len(self.light_arm))
+        self.signal_bounds = np.append(self.signal_bounds, len(self.signal_light))
         *lane_arrays, changeable, ending, successor_start, successors = self.road_arrays
         self.road_arrays = (
             *(np.concatenate([a, b]) for a, b in zip(lane_arrays, bmap.junction_arrays, strict=True)),
@@ -250,18 +230,6 @@ class BlocksSimulator(FastSimulator):
         """World k's map."""
         return self.maps[int(self.world_map[k])]
 
-    def _route(self, slot: int, lane: int) -> int:
-        """The route index of the ego route from spawn lane ``lane`` of map ``slot``."""
-        key = (slot, lane)
-        if key not in self._route_of:
-            tracker = self.maps[slot].routes.get(lane)
-            if tracker is None:
-                raise NotImplementedError(f"no ego route from lane {lane} of map {slot}")
-            self._route_of[key] = len(self._trackers)
-            self._trackers.append(tracker)
-            self._pad_routes()
-        return self._route_of[key]
-
     # --- episodes -------------------------------------------------------------------------------
     def _start_episodes(self, worlds: np.ndarray, seeds: np.ndarray) -> None:
         """New episodes in ``worlds``: each seed's map, then the scenario's set-up on it (one call
@@ -274,16 +242,15 @@ class BlocksSimulator(FastSimulator):
             self._put_rows(k, rows, ego)
             self.regulation[k] = regulation
             self.world_map[k] = slot
-            self.lane_start[k] = self.map_start[slot]
-            self.lane_stop[k] = self.map_start[slot] + len(bmap.table.rows)
+            self.lane_start[k], self.lane_stop[k] = self.lane_bounds[slot : slot + 2]
             lane = int(rows[ego, T.LANE])
-            self.route_index[k] = self._route(slot, lane)
+            self.route_index[k] = self._route(
+                (slot, lane), bmap.routes.get(lane), f"lane {lane} of map {slot}"
+            )
             self.route_time_limit_s[k] = route_time_limit_s(self._trackers[self.route_index[k]])
             self.start_lane_id[k] = bmap.table.rows[lane, L.LANE_ID]
-            self.light_start[k] = self.map_light_start[slot]
-            self.light_stop[k] = self.map_light_start[slot] + len(bmap.light_arm)
-            self.signal_start[k] = self.map_signal_start[slot]
-            self.signal_stop[k] = self.map_signal_start[slot] + len(bmap.signal_light)
+            self.light_start[k], self.light_stop[k] = self.light_bounds[slot : slot + 2]
+            self.signal_start[k], self.signal_stop[k] = self.signal_bounds[slot : slot + 2]
             self.offsets[k] = 0.0
             self.offsets[k, : len(offsets)] = offsets
             self.light_state[k] = 0
@@ -306,9 +273,11 @@ class BlocksSimulator(FastSimulator):
         return self.lane_start + self.vehicles[np.arange(self.num_worlds), self.ego, T.LANE].astype(np.int64)
 
     def _simulate(self, frames: int, active: np.ndarray) -> None:
-        simulate_map_worlds(
+        """A released vehicle cruises on at TRAFFIC_SPEED_MPS, the egos at most at EGO_MAX_SPEED_MPS."""
+        kernel = _PARALLEL if self.num_worlds > 1 and numba.get_num_threads() > 1 else _SERIAL
+        kernel(
             self.vehicles, self.count, self.lanes, self.lane_start, self.lane_stop, self.idm, frames,
-            self.dt_s, self.regulation, active, TRAFFIC_SPEED_MPS, self.road_arrays, self.light_start,
+            self.dt_s, self.regulation, active, TRAFFIC_SPEED_MPS, *self.road_arrays, self.light_start,
             self.light_stop, self.light_state, EGO_MAX_SPEED_MPS,
         )  # fmt: skip
 
@@ -340,22 +309,21 @@ class BlocksSimulator(FastSimulator):
             self.vehicles, self.count, self.ego, self.lanes, self.lane_start, self.lane_stop,
             self.in_junction, self.dead_end, self.solid, floats, ints, flags, vehicles, valid,
         )  # fmt: skip
-        if self._roads_of is None or not np.array_equal(self._roads_of, self.world_map):
+        if self._maps_of is None or not np.array_equal(self._maps_of, self.world_map):
             used, index = np.unique(self.world_map, return_inverse=True)
             self.roads = tuple(self.map_roads[slot] for slot in used)
-            self._road_index, self._roads_of = index.astype(np.int64), self.world_map.copy()
+            count = self.signal_stop - self.signal_start  # the lights each world exports
+            column = np.arange(max(int(count.max()), 1))
+            light_valid = column[None, :] < count[:, None]
+            rows = np.where(light_valid, self.signal_start[:, None] + column[None, :], 0)
+            self._road_index, self._light_gather = index.astype(np.int64), (rows, light_valid)
             self._road_index.setflags(write=False)
+            light_valid.setflags(write=False)
+            self._maps_of = self.world_map.copy()
         self._empty = {**self._empty, "road_index": self._road_index}
         batch = self._export_arrays(floats, ints, flags, vehicles, valid)
         if not self.light_state.shape[1]:
             return batch  # no map of the set has lights
-        if self._lights_of is None or not np.array_equal(self._lights_of, self.world_map):
-            count = self.signal_stop - self.signal_start
-            slot = np.arange(max(int(count.max()), 1))
-            light_valid = slot[None, :] < count[:, None]
-            rows = np.where(light_valid, self.signal_start[:, None] + slot[None, :], 0)
-            light_valid.setflags(write=False)
-            self._light_gather, self._lights_of = (rows, light_valid), self.world_map.copy()
         rows, light_valid = self._light_gather
         state = np.take_along_axis(self.light_state, self.signal_light[rows], axis=1)
         lights = np.concatenate([self.signal_xyh[rows], state[..., None]], axis=2)

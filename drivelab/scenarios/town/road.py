@@ -45,22 +45,13 @@ class TownLayout:
     block_m: float = 70.0
     palette: str = "day"
 
-    def arms(self, junction: int) -> dict[int, int]:
-        """{arm: neighbouring junction} of ``junction`` (in the order of ``streets``)."""
-        return blocks.junction_arms(self.junctions, self.streets, junction)
 
-    def centre(self, junction: int) -> np.ndarray:
-        return blocks.cell_centre(self.junctions[junction], self.block_m)
-
-
-# Training town: 3 x 3 junctions: four corners, four T-junctions and one 4-way crossing.
-_TRAIN = blocks.grid_cells(3, 3, missing=())
-# Test town: a smaller 3 x 2 grid with shorter blocks (corners and T-junctions only), drawn in
-# another palette: NoCrash's "new town, new weather" in spirit.
-_TEST = blocks.grid_cells(3, 2, missing=())
 LAYOUTS = {
-    "train": TownLayout("train", *_TRAIN),
-    "test": TownLayout("test", *_TEST, block_m=60.0, palette="dusk"),
+    # 3 x 3 junctions: four corners, four T-junctions and one 4-way crossing
+    "train": TownLayout("train", *blocks.grid_cells(3, 3)),
+    # a smaller 3 x 2 grid with shorter blocks (corners and T-junctions only), drawn in another
+    # palette: NoCrash's "new town, new weather" in spirit
+    "test": TownLayout("test", *blocks.grid_cells(3, 2), block_m=60.0, palette="dusk"),
 }
 
 
@@ -69,11 +60,6 @@ def road_description(layout: TownLayout) -> RoadDescription:
     """The town's road (lanes, junctions, lights, crossings) as blocks: a junction block at each
     grid cell (its kind follows from its arms) and a two-way street between neighbours."""
     return blocks.town(layout.junctions, layout.streets, layout.block_m, layout.palette)
-
-
-def stop_line(layout: TownLayout, junction: int, arm: int) -> np.ndarray:
-    """World position of the stop line at the end of ``arm``'s incoming lane."""
-    return blocks.stop_line(layout.centre(junction), arm)
 
 
 def build_network(layout: TownLayout) -> RoadNetwork:
@@ -91,16 +77,19 @@ def street_crossings(layout: TownLayout) -> np.ndarray:
     return road_description(layout).crossings.copy()
 
 
-def signalised(layout: TownLayout) -> list[tuple[int, int]]:
-    """(junction, arm) of every approach that has a light: junctions with three or more arms."""
-    desc = road_description(layout)
-    return [(int(j), int(k)) for j, k in zip(desc.light_junction, desc.light_arm, strict=True)]
-
-
 def shortest_route(network: RoadNetwork, start: tuple[str, str], goal: str) -> list[tuple[str, str, int]]:
     """Lane indices from road ``start`` to node ``goal`` by breadth-first search (one lane per road);
     [] when the goal cannot be reached (``roads.town_arrays.shortest_route`` on the network's graph)."""
     return graph_shortest_route(network.graph, start, goal)
+
+
+def approach_of(lane_index: tuple) -> tuple[int, int] | None:
+    """(junction, arm) when ``lane_index`` is a street ending at a stop line, else None."""
+    _to = lane_index[1]
+    if ":ir" not in _to:
+        return None
+    junction, arm = _to[1:].split(":ir")
+    return int(junction), int(arm)
 
 
 class TownLights:
@@ -111,18 +100,15 @@ class TownLights:
     :param offsets_s: per junction, where its cycle starts (drawn per episode).
     """
 
-    @staticmethod
-    def approach_of(lane_index: tuple) -> tuple[int, int] | None:
-        """(junction, arm) when ``lane_index`` is a street ending at a stop line, else None (the
-        simulator asks the lights, so that it need not know the town's node names)."""
-        return approach_of(lane_index)
+    # the simulator asks the lights, so that it need not know the town's node names
+    approach_of = staticmethod(approach_of)
 
     def __init__(self, layout: TownLayout, timings: LightTimings, offsets_s: np.ndarray) -> None:
         self.layout, self.timings, self.offsets_s = layout, timings, np.asarray(offsets_s, dtype=float)
-        self.approaches = signalised(layout)
+        desc = road_description(layout)  # the approaches with a light: junctions of three arms or more
+        self.approaches = [(int(j), int(k)) for j, k in zip(desc.light_junction, desc.light_arm, strict=True)]
         self.index = {approach: k for k, approach in enumerate(self.approaches)}
-        light_xyh = road_description(layout).light_xyh
-        self.positions, self.headings = light_xyh[:, :2].copy(), light_xyh[:, 2].copy()
+        self.positions, self.headings = desc.light_xyh[:, :2].copy(), desc.light_xyh[:, 2].copy()
 
     def state(self, junction: int, arm: int, time_s: float) -> int | None:
         """The light of one approach, or None where the junction has no lights."""
@@ -134,12 +120,3 @@ class TownLights:
         """WorldState.traffic_lights rows: stop line x, y, approach heading, state."""
         states = [light_state(self.timings, k, time_s, self.offsets_s[j]) for j, k in self.approaches]
         return np.column_stack([self.positions, self.headings, states]).reshape(-1, 4)
-
-
-def approach_of(lane_index: tuple) -> tuple[int, int] | None:
-    """(junction, arm) when ``lane_index`` is a street ending at a stop line, else None."""
-    _to = lane_index[1]
-    if ":ir" not in _to:
-        return None
-    junction, arm = _to[1:].split(":ir")
-    return int(junction), int(arm)

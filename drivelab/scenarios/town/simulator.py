@@ -24,7 +24,7 @@ from numba import njit, prange
 from drivelab.scenarios.town.spawn import TownSetup, route_tracker
 from drivelab.sim.core import traffic as T
 from drivelab.sim.core.borrow import borrowed
-from drivelab.sim.core.simulator import EX_CRASHED, FastSimulator, export_worlds
+from drivelab.sim.core.simulator import FastSimulator
 from drivelab.sim.junctions import rows as R
 from drivelab.sim.junctions.pedestrians import (
     clear_wrecks,
@@ -155,11 +155,10 @@ class TownSimulator(FastSimulator):
         """New town episodes in ``worlds`` from ``seeds[k]`` (the town's set-up, one per world)."""
         for k in worlds:
             rows, ego, _, episode = self.scenario.spawn(int(seeds[k]), self._road, self.control)
-            self.vehicles[k] = 0.0
-            self.vehicles[k, : len(rows)] = rows
+            self._put_rows(k, rows, ego)
             self.peds[k] = 0.0
             self.peds[k, : len(episode.pedestrians)] = episode.pedestrians
-            self.count[k], self.ego[k], self.pcount[k] = len(rows), ego, len(episode.pedestrians)
+            self.pcount[k] = len(episode.pedestrians)
             self.offsets[k] = episode.light_offsets_s
             self.rng_words[k] = episode.rng_state
             self.route_time_limit_s[k] = episode.route_time_limit_s
@@ -245,21 +244,17 @@ class TownSimulator(FastSimulator):
 
     # --- export ---------------------------------------------------------------------------------
     def _export(self) -> WorldBatch:
+        """FastSimulator's export (the arrival at the route's end is judged there), then the
+        pedestrians and the lights."""
         k = self.num_worlds
-        floats, ints, flags, vehicles, valid = self._export_buffers()
-        export_worlds(
-            self.vehicles, self.count, self.ego, self.lanes, self.in_junction, self.exit_lane,
-            0, 0.0, floats, ints, flags, vehicles, valid,
-        )  # fmt: skip
+        batch = super()._export()
         pedestrians = np.zeros((k, self.peds.shape[1], 6))
         pedestrian_valid = np.zeros((k, self.peds.shape[1]), dtype=bool)
         hit_ego = np.zeros(k, dtype=bool)
         export_pedestrians(self.peds, self.pcount, pedestrians, pedestrian_valid, hit_ego)
-        batch = self._export_arrays(floats, ints, flags, vehicles, valid)
-        collided = flags[:, EX_CRASHED]
         kind = np.where(hit_ego, COLLISION_PEDESTRIAN, COLLISION_VEHICLE)
         events = batch.events.replaced(  # a pedestrian hit is its own kind; the lights' red runs
-            collision_kind=np.where(collided, kind, COLLISION_NONE).astype(np.int8),
+            collision_kind=np.where(batch.events.collided, kind, COLLISION_NONE).astype(np.int8),
             red_light_crossed=self._red_light.copy(),
         )
         lights = np.empty((k, len(self.arrays.light_xyh), 4))  # every world's lights and their states

@@ -71,14 +71,6 @@ class TownEpisode:
     route_time_limit_s: float
     rng_state: np.ndarray
 
-    @property
-    def rng(self) -> np.random.Generator:
-        """A numpy Generator in the state ``rng_state`` (made on demand: the compiled core reads
-        the words)."""
-        generator = np.random.Generator(np.random.PCG64())
-        pcg64.set_state(generator, self.rng_state)
-        return generator
-
 
 @dataclass
 class TownSetup:
@@ -153,11 +145,10 @@ class TownSetup:
         return np.array(pairs, dtype=np.int64)
 
 
-def route_polyline(geometry: LaneGeometry, lanes, parts: dict | None = None) -> np.ndarray:
+def route_polyline(geometry: LaneGeometry, lanes, parts: dict) -> np.ndarray:
     """(K, 2) the centre line of ``lanes`` (lane rows), sampled as ``HighwayBackend.route_for``
     samples it: a straight lane's two ends, a curved one every <= 2 m (``np.linspace``).
     ``parts``: a cache of each lane's samples."""
-    parts = {} if parts is None else parts
     for lane in lanes:
         lane = int(lane)
         if lane in parts:

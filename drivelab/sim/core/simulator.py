@@ -195,24 +195,12 @@ class _Road:
 _ROADS: dict[tuple, _Road] = {}
 
 
-def _static_objects(road) -> list:
-    """The road's obstacles: its objects but the town's pedestrians (they are set up per episode)."""
-    walkers = {id(p) for p in getattr(road, "pedestrians", [])}
-    return [o for o in road.objects if id(o) not in walkers]
-
-
-def _npc_class(config: dict) -> type:
-    """The config's traffic class, which the compiled core must know (an IDMVehicle)."""
-    npc_class = hw_utils.class_from_path(config["other_vehicles_type"])
-    if not is_idm_class(npc_class):
-        raise NotImplementedError(f"the fast backend has no {npc_class.__name__}")
-    return npc_class
-
-
 def _new_road(scenario: Scenario, table: L.LaneTable, graph: dict, config: dict, **fields) -> _Road:
     """A _Road of ``table`` and ``graph`` ({from: {to: lanes}}) with the fields every conversion
     derives alike; ``fields``: the rest."""
-    npc_class = _npc_class(config)
+    npc_class = hw_utils.class_from_path(config["other_vehicles_type"])
+    if not is_idm_class(npc_class):  # the traffic class the compiled core knows: an IDMVehicle
+        raise NotImplementedError(f"the fast backend has no {npc_class.__name__}")
     graph_keys = {f: list(to) for f, to in graph.items()}
     return _Road(
         table=table,
@@ -250,6 +238,7 @@ def _convert_road(builder: HighwayBackend, scenario: Scenario) -> _Road:
     if regulated and RegulatedRoad.YIELD_DURATION != 0:
         raise NotImplementedError("the fast backend assumes RegulatedRoad.YIELD_DURATION = 0")
     dt_s = 1 / config["simulation_frequency"]
+    walkers = {id(p) for p in getattr(env.road, "pedestrians", [])}  # the town's: set up per episode
     return _new_road(
         scenario,
         table,
@@ -261,7 +250,7 @@ def _convert_road(builder: HighwayBackend, scenario: Scenario) -> _Road:
         duration_s=builder.duration_s,
         routes=routes,
         regulation_period=int(1 / dt_s / RegulatedRoad.REGULATION_FREQUENCY) if regulated else 0,
-        objects=vehicles_to_array([], table, _static_objects(env.road)),
+        objects=vehicles_to_array([], table, [o for o in env.road.objects if id(o) not in walkers]),
         ego_length=float(env.vehicle.LENGTH),
         ego_width=float(env.vehicle.WIDTH),
         keep_npcs=builder.keep_npcs,
@@ -676,7 +665,7 @@ class FastSimulator:
         # (route_index, RouteBatch arrays, _route_version) of the last batch
         self._route_cache: tuple[np.ndarray, dict, int] | None = None
         self._route_version = 0  # counts route changes that keep route_index (the town's)
-        self._route_of_lane: dict[int, int] = {}
+        self._route_of: dict = {}  # what ``_route`` registered a route under → its index
         self._trackers: list[RouteTracker] = []
         self._batch: WorldBatch | None = None
         # the last step's export, when its batch is made on first read (``defer_batch``)
@@ -709,15 +698,13 @@ class FastSimulator:
     def _load_road(scenario: Scenario, traffic: str, control: str, overrides: dict | None) -> _Road:
         """The scenario's road for this configuration, converted at its first use (``_ROADS``)."""
         key = (repr(scenario), traffic, control, repr(sorted((overrides or {}).items())))
-        road = _ROADS.get(key)
-        if road is None and scenario.road is not None:  # a described road: no highway-env object
-            road = _ROADS[key] = _describe_road(scenario, traffic, control, overrides)
-        if road is None:  # highway-env builds the road once; nothing of it is kept but arrays
+        if key not in _ROADS and scenario.road is not None:  # a described road: no highway-env object
+            _ROADS[key] = _describe_road(scenario, traffic, control, overrides)
+        elif key not in _ROADS:  # highway-env builds the road once; nothing of it is kept but arrays
             builder = HighwayBackend(scenario, traffic, control, overrides)
             builder.reset(0)
-            road = _ROADS[key] = _convert_road(builder, scenario)
-            del builder
-        return road
+            _ROADS[key] = _convert_road(builder, scenario)
+        return _ROADS[key]
 
     # --- buffers --------------------------------------------------------------------------------
     def _fit(self, rows: int) -> None:
@@ -737,15 +724,19 @@ class FastSimulator:
         self.count[k], self.ego[k] = len(rows), ego
 
     def _route_for_lane(self, lane: int) -> int:
-        """The index of the ego route that starts on lane row ``lane`` (padded on first use)."""
-        if lane not in self._route_of_lane:
-            tracker = self._road.routes.get(lane)
+        """The index of the ego route that starts on lane row ``lane``."""
+        return self._route(lane, self._road.routes.get(lane), f"lane {self.table.indices[lane]}")
+
+    def _route(self, key, tracker: RouteTracker | None, where: str) -> int:
+        """The index of the ego route ``tracker`` (from ``where``; None: there is none) under
+        ``key``, padded at its first use."""
+        if key not in self._route_of:
             if tracker is None:
-                raise NotImplementedError(f"no ego route from lane {self.table.indices[lane]}")
-            self._route_of_lane[lane] = len(self._trackers)
+                raise NotImplementedError(f"no ego route from {where}")
+            self._route_of[key] = len(self._trackers)
             self._trackers.append(tracker)
             self._pad_routes()
-        return self._route_of_lane[lane]
+        return self._route_of[key]
 
     def _pad_routes(self) -> None:
         """The routes in use as padded arrays (R routes, S segments at most), last point repeated."""

@@ -705,13 +705,11 @@ def _simulate_worlds_parallel(v, count, lanes, p, frames, dt, regulation, active
             simulate(v[k, : count[k]], lanes, p, frames, dt, regulation[k])
 
 
-def simulate_worlds(v, count, lanes, p, frames: int, dt: float, regulation, active=None) -> None:
+def simulate_worlds(v, count, lanes, p, frames: int, dt: float, regulation, active) -> None:
     """``simulate`` for K worlds: world k's vehicles are ``v[k, :count[k]]`` of the (K, N_max,
     VEHICLE_COLUMNS) buffer and its regulation state ``regulation[k]`` (K, 2); only the worlds
-    of ``active`` (K,) bool (default: all) are simulated, one numba thread per world where numba
-    has several threads and there are several worlds."""
+    of ``active`` (K,) bool are simulated, one numba thread per world where numba has several
+    threads and there are several worlds."""
     parallel = v.shape[0] > 1 and numba.get_num_threads() > 1
     kernel = _simulate_worlds_parallel if parallel else _simulate_worlds_serial
-    if active is None:
-        active = np.ones(v.shape[0], dtype=np.bool_)
     kernel(v, count, lanes, p, frames, dt, regulation, active)

@@ -41,13 +41,6 @@ class TownRoadArrays:
     routes: np.ndarray
     route_length: np.ndarray
 
-    def equals(self, other: TownRoadArrays) -> bool:
-        """Every array equal (exactly), and the same junction count."""
-        names = [name for name in self.__dataclass_fields__ if name != "junction_count"]
-        return self.junction_count == other.junction_count and all(
-            np.array_equal(getattr(self, name), getattr(other, name)) for name in names
-        )
-
 
 def shortest_route(graph: dict, start: tuple[str, str], goal: str) -> list[tuple[str, str, int]]:
     """Lane indices from road ``start`` to node ``goal`` by breadth-first search over ``graph``

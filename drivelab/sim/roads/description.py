@@ -245,27 +245,6 @@ class RoadDescription:
             graph.setdefault(f, {}).setdefault(t, []).append(row)
         return graph
 
-    @functools.cached_property
-    def connected_lanes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The lanes highway-env's ``Road.neighbour_vehicles`` also searches (its
-        ``neighbour_vehicles_connected_lanes``), as CSR: for lane row r, ``rows[offsets[r]:
-        offsets[r + 1]]`` are first every road leaving r's end node (graph order), then every road
-        entering its start node (graph order of their origins), each as the lane of r's id on that
-        road, else its lane 0; ``before`` (E,) is True for the latter (offset -their length, the
-        former +r's length). Shapes: offsets (L + 1,), rows (E,), before (E,) bool."""
-        graph, offsets, rows, before = self.graph, [0], [], []
-        for f, t, i in self.indices:
-            for lanes in graph.get(t, {}).values():
-                rows.append(lanes[i] if i < len(lanes) else lanes[0])
-                before.append(False)
-            for to in graph.values():
-                if f in to:
-                    lanes = to[f]
-                    rows.append(lanes[i] if i < len(lanes) else lanes[0])
-                    before.append(True)
-            offsets.append(len(rows))
-        return np.array(offsets, dtype=np.int64), np.array(rows, dtype=np.int64), np.array(before, dtype=bool)
-
     @property
     def street_lanes(self) -> np.ndarray:
         """(S,) rows of the lanes that end at a junction approach (the town's streets), in row order."""
