@@ -137,10 +137,8 @@ class Worlds:
     def _step_arrays(self, actions: np.ndarray):
         """``step`` through ``step_arrays`` (or a VectorDriveEnv's own step); rewards rounded to
         float32 as SB3's VecEnvs give them, so that both ways of stepping train alike."""
-        if self.direct:
-            new_obs, rewards, terminated, truncated, infos = self.env.step(actions)
-        else:
-            new_obs, rewards, terminated, truncated, infos = self.env.step_arrays(actions)
+        step = self.env.step if self.direct else self.env.step_arrays
+        new_obs, rewards, terminated, truncated, infos = step(actions)
         self._infos = infos
         rewards = rewards.astype(np.float32).astype(np.float64)
         done = terminated | truncated

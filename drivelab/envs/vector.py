@@ -112,11 +112,9 @@ class VectorDriveEnv(VectorEnv):
         check_traffic(spec.traffic)
         action = self.scenario.action_kinds[0] if spec.action is None else spec.action
         reward = self.scenario.default_reward if spec.reward is None else spec.reward
-        self.adapter = (
-            action
-            if isinstance(action, ActionAdapter)
-            else make_action(action, **(spec.action_options or {}))
-        )
+        if not isinstance(action, ActionAdapter):
+            action = make_action(action, **(spec.action_options or {}))
+        self.adapter = action
         if self.adapter.name not in self.scenario.action_kinds:
             raise UsageError(
                 f"scenario {spec.scenario!r} cannot take action {self.adapter.name!r} "

@@ -131,18 +131,14 @@ def parse_sensor_spec(spec: str | dict) -> tuple[str, dict]:
     return name.strip(), options
 
 
-def _typed_option(sensor: str, key: str, value, default):
-    """``value`` in the type of the option's ``default`` (a None default: a string, the weights'
-    path): the sensors check ranges, and would fail on a string with an unreadable comparison error."""
-    return like_default(value, "" if default is None else default, f"sensor option {key!r} of {sensor!r}")
-
-
 def check_sensor_options(name: str, options: dict) -> tuple[int, dict]:
     """(stack, the sensor's keyword options) with every value of the type the sensor declares;
     an unknown option, a wrong type, a size over ``SIZE_LIMITS``, a value outside ``VALUE_RANGES``
     or ``stack`` < 1 is a UsageError."""
+    # each value takes its default's type (a None default: a string, the weights' path): the sensors
+    # check ranges, and would fail on a string with an unreadable comparison error
     defaults = {
-        key: parameter.default
+        key: "" if parameter.default is None else parameter.default
         for key, parameter in inspect.signature(SENSORS[name].__init__).parameters.items()
         if parameter.kind is inspect.Parameter.KEYWORD_ONLY
     }
@@ -151,7 +147,7 @@ def check_sensor_options(name: str, options: dict) -> tuple[int, dict]:
         if key not in defaults and key != "stack":
             known = ", ".join([*defaults, "stack"])
             raise UsageError(f"unknown option {key!r} for sensor {name!r} (known: {known})")
-        checked[key] = _typed_option(name, key, value, defaults.get(key, 1))
+        checked[key] = like_default(value, defaults.get(key, 1), f"sensor option {key!r} of {name!r}")
     for key, limit in SIZE_LIMITS.get(name, {}).items():
         if key in checked and checked[key] > limit:
             raise UsageError(f"sensor option {key!r} of {name!r} must be <= {limit}, got {checked[key]}")

@@ -29,15 +29,9 @@ class RewardSpec:
 
 
 SAFETY_TERMS = (
-    "centered",
-    "overspeed",
-    "curve_control",
-    "intersection_heading",
-    "destination_proximity",
-    "steering_smoothness",
-    "overtaking",
-    "sidewalk_crash",
-)
+    "centered", "overspeed", "curve_control", "intersection_heading", "destination_proximity",
+    "steering_smoothness", "overtaking", "sidewalk_crash",
+)  # fmt: skip
 
 ROACH_TERMS = ("roach_speed", "roach_position", "roach_rotation", "roach_action", "roach_terminal")
 

@@ -5,13 +5,5 @@ from drivelab.world.batch import EgoBatch, EventsBatch, RouteBatch, WorldBatch
 from drivelab.world.state import Ego, Events, RoadMap, Route, WorldState
 
 __all__ = [
-    "Ego",
-    "EgoBatch",
-    "Events",
-    "EventsBatch",
-    "RoadMap",
-    "Route",
-    "RouteBatch",
-    "WorldBatch",
-    "WorldState",
-]
+    "Ego", "EgoBatch", "Events", "EventsBatch", "RoadMap", "Route", "RouteBatch", "WorldBatch", "WorldState",
+]  # fmt: skip
