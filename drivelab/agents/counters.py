@@ -5,7 +5,7 @@ name only these, each with a value of its kind, and cannot set any other attribu
 
 from __future__ import annotations
 
-import math
+import sys
 from typing import Any
 
 MAX_COUNT = 2**53  # far beyond any run; a float of it is still exact
@@ -34,8 +34,12 @@ def is_count(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool) and 0 <= value <= MAX_COUNT
 
 
-def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+def is_number(value: Any) -> bool:
+    """Whether ``value`` is an int or a float (not a bool) of finite float size: not nan or inf, nor
+    an int too large for a float (whose comparison here raises nothing, unlike ``math.isfinite``)."""
+    return (
+        isinstance(value, (int, float)) and not isinstance(value, bool) and abs(value) <= sys.float_info.max
+    )
 
 
 def _fits(kind: str, value: Any) -> bool:
@@ -43,7 +47,7 @@ def _fits(kind: str, value: Any) -> bool:
         return is_count(value)
     if kind == "state":
         return value is None or is_count(value)
-    if not _is_number(value):
+    if not is_number(value):
         return False
     if kind == "fraction":
         return 0.0 <= value <= 1.0

@@ -42,7 +42,7 @@ import torch
 from gymnasium.utils import seeding
 from stable_baselines3.common.vec_env import VecEnvWrapper, VecMonitor
 
-from drivelab.agents.counters import check_counters
+from drivelab.agents.counters import check_counters, is_number
 from drivelab.errors import UsageError
 from drivelab.training.safe_files import remove_file, replacing, write_file
 
@@ -475,9 +475,9 @@ def _check_meta(meta: dict) -> None:
 
     rows, monitor, rng = meta.get("rows"), meta.get("monitor"), meta.get("rng")
     need(isinstance(rows, dict) and all(counts(rows.get(key)) for key in ("monitor", "evaluations")), "rows")
-    need(isinstance(monitor, dict) and _is_number(monitor.get("elapsed_s")), "monitor")
+    need(isinstance(monitor, dict) and is_number(monitor.get("elapsed_s")), "monitor")
     rewards = monitor.get("rewards", [])
-    need(isinstance(rewards, list) and all(_is_number(reward) for reward in rewards), "monitor rewards")
+    need(isinstance(rewards, list) and all(is_number(reward) for reward in rewards), "monitor rewards")
     need(isinstance(rng, dict) and {"python", "numpy", "action_space", "agent_rng"} <= set(rng), "rng")
     python = rng["python"]
     need(isinstance(python, list) and len(python) == 3 and isinstance(python[1], list), "rng python")
@@ -490,10 +490,6 @@ def _check_meta(meta: dict) -> None:
     worlds = meta.get("worlds")
     need(isinstance(worlds, list) and len(worlds) > 0, "worlds")
     need(all(isinstance(world, dict) and isinstance(world.get("start"), dict) for world in worlds), "worlds")
-
-
-def _is_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
 
 
 def check_restore(model, worlds: TrainingWorlds, snapshot: Snapshot, path: Path) -> None:

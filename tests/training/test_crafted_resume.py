@@ -60,6 +60,8 @@ STATE_COUNTERS = {
     "ent_coef": ("ent_coef", 1e9, "'ent_coef' is not a counter"),
     "n_epochs": ("n_epochs", 0, "'n_epochs' is not a counter"),
     "progress nan": ("_current_progress_remaining", float("nan"), "'_current_progress_remaining' holds nan"),
+    # an int beyond float's range: math.isfinite would raise OverflowError, a traceback
+    "progress -1e400": ("_current_progress_remaining", -(10**400), "holds -1000"),
     "steps -1000": ("num_timesteps", -1000, "'num_timesteps' holds -1000, not a whole number"),
     "steps 1e30": ("num_timesteps", 10**30, "'num_timesteps' holds 1000000000000000000000000000000"),
     "steps text": ("num_timesteps", "abc", "'num_timesteps' holds 'abc'"),
