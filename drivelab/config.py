@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from drivelab.envs.spec import ENV_KEYWORDS, check_env_options
-from drivelab.errors import UsageError
+from drivelab.errors import UsageError, like_default
 from drivelab.scenarios import SCENARIOS, scenario_name
 from drivelab.yaml_io import dump_yaml
 
@@ -109,7 +109,7 @@ MAXIMA = {
     "n_envs": (2**16, "more worlds than one process steps (one vector step of 65,536 worlds takes ~1 s)"),
     "eval_episodes": (100_000, "more evaluation episodes than any report uses (the leaderboard's: 100)"),
 }
-_TYPES = {"int": int, "str": str, "bool": bool, "dict": dict}
+_EXAMPLES = {"int": 0, "str": "", "bool": False, "dict": {}}  # a value of each field type, by its name
 
 
 def parse_maps(value: str) -> tuple[int, int]:
@@ -144,12 +144,11 @@ def _check_type(name: str, value):
         if not isinstance(value, (list, tuple)) or not value:
             raise UsageError("config field 'obs' must be a sensor name or a non-empty list of them")
         return tuple(v if isinstance(v, str) else _sensor_dict_to_spec(v) for v in value)
-    kind = str(FIELDS[name].type).split(" ")[0]
-    expected = _TYPES.get(kind, str)
-    if expected is int and isinstance(value, bool) or not isinstance(value, expected):
-        if expected is str and isinstance(value, (int, float)) and name == "reward":
-            return str(value)
-        raise UsageError(f"config field {name!r} must be {expected.__name__}, got {value!r}")
+    if name == "reward" and isinstance(value, (int, float)):  # a YAML weight list read as a number
+        return str(value)
+    value = like_default(
+        value, _EXAMPLES.get(str(FIELDS[name].type).split(" ")[0], ""), f"config field {name!r}"
+    )
     if name == "name":
         return check_run_name(value)
     if name == "seed" and not 0 <= value <= MAX_SEED:

@@ -11,17 +11,19 @@ class UsageError(ValueError):
 
 def like_default(value, default, what: str):
     """``value`` in the type of ``default``: true or false for a bool, an integer (an integral
-    float becomes an int) for an int, a finite number for a float, a string for a string; any value
-    for another default (None, a container). Else the UsageError ``WHAT must be ..., got VALUE``."""
+    float becomes an int) for an int, a finite number for a float, a string for a string, a mapping
+    for a dict; any value for another default (None, a list). Else the UsageError ``WHAT must be
+    true or false`` (``an integer``, ``a number``, ``a string``, ``a mapping``) ``, got VALUE``."""
     if isinstance(default, bool):
         noun, fits = "true or false", isinstance(value, bool)
     elif isinstance(default, (int, float)):
-        noun = "an integer" if isinstance(default, int) else "a finite number"
+        noun = "an integer" if isinstance(default, int) else "a number"
         number = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
         fits = number and (isinstance(default, float) or float(value).is_integer())
         value = type(default)(value) if fits else value
-    elif isinstance(default, str):
-        noun, fits = "a string", isinstance(value, str)
+    elif isinstance(default, (str, dict)):
+        noun = "a string" if isinstance(default, str) else "a mapping"
+        fits = isinstance(value, type(default))
     else:
         return value
     if not fits:

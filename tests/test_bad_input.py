@@ -173,7 +173,7 @@ TRAIN_CASES = {
     "dueling_ddqn alpha=abc": (
         ["--algo", "dueling_ddqn", "-H", "alpha=abc"],
         {},
-        "'alpha' of 'dueling_ddqn' must be a finite number, got 'abc'",
+        "'alpha' of 'dueling_ddqn' must be a number, got 'abc'",
     ),
     "dueling_ddqn exploration 2": (
         ["--algo", "dueling_ddqn", "-H", "exploration_fraction=2"],
@@ -183,7 +183,7 @@ TRAIN_CASES = {
     "qlearning learning_rate=abc": (
         ["--algo", "qlearning", "--env", "follow-line", "--obs", "line", "-H", "learning_rate=abc"],
         {},
-        "'learning_rate' of 'qlearning' must be a finite number, got 'abc'",
+        "'learning_rate' of 'qlearning' must be a number, got 'abc'",
     ),
     "qlearning gamma=2": (
         ["--algo", "qlearning", "--env", "follow-line", "--obs", "line", "-H", "gamma=2"],
@@ -250,7 +250,7 @@ TRAIN_CASES = {
     "dueling_ddqn gamma=nan": (
         ["--algo", "dueling_ddqn", "-H", "gamma=.nan"],
         {},
-        "'gamma' of 'dueling_ddqn' must be a finite number, got nan",
+        "'gamma' of 'dueling_ddqn' must be a number, got nan",
     ),
     "topdown stack=0": (
         ["--algo", "ppo", "--obs", "topdown:stack=0"],
@@ -488,7 +488,7 @@ STEPS_CASES = {
     "YAML steps: .inf": (
         ["--config", "run.yaml"],
         {"run.yaml": b"algo: ppo\nsteps: .inf\n"},
-        "'steps' must be int",
+        "'steps' must be an integer",
     ),
     "--n-envs 100000 with steps for its rollout": (
         ["--algo", "ppo", "--n-envs", "100000", "--steps", str(256 * 100_000)],

@@ -32,10 +32,11 @@ def test_sensor_dicts_in_yaml_become_specs():
     "values, message",
     [
         ({"algo": "ppo", "stepz": 3}, "unknown config field 'stepz'"),
-        ({"algo": "ppo", "steps": "many"}, "'steps' must be int"),
+        ({"algo": "ppo", "steps": "many"}, "'steps' must be an integer"),
         ({"algo": "ppo", "steps": 0}, "'steps' must be >= 1"),
-        ({"algo": "ppo", "seed": True}, "'seed' must be int"),
-        ({"algo": "ppo", "hyperparams": [1]}, "'hyperparams' must be dict"),
+        ({"algo": "ppo", "seed": True}, "'seed' must be an integer"),
+        ({"algo": "ppo", "steps": 1.5}, "'steps' must be an integer, got 1.5"),
+        ({"algo": "ppo", "hyperparams": [1]}, "'hyperparams' must be a mapping"),
         ({"env": "highway"}, "no 'algo'"),
     ],
 )
@@ -128,3 +129,10 @@ def test_the_step_budget_is_checked_against_the_rollout_the_model_gets():
     check_steps(build_config({"algo": "ppo", "env": "highway", "steps": 256}))
     with pytest.raises(UsageError, match=r"one rollout of n_steps 256 x n_envs 2 = 512 steps"):
         check_steps(build_config({"algo": "ppo", "env": "highway", "steps": 511, "n_envs": 2}))
+
+
+def test_an_integral_float_is_an_integer_field():
+    """YAML reads ``steps: 1e5`` as a float (``yaml_io``): a whole one is the int, as for -H values."""
+    config = build_config({"algo": "ppo", "steps": 1e5, "seed": 3.0})
+    assert (config.steps, config.seed) == (100_000, 3)
+    assert type(config.steps) is int and type(config.seed) is int
