@@ -1,12 +1,20 @@
-"""The one error type users see: a single line naming what is wrong; and the type check of a
-user's value against its default, which hyper-parameters and sensor options share."""
+"""The one error type users see: a single line naming what is wrong; and the type checks of a
+user's value that run config fields, hyper-parameters, sensor options and saved counters share."""
 
-import math
+import sys
 
 
 class UsageError(ValueError):
     """Bad input from the user (unknown name, impossible combination, malformed file): the CLI
     prints ``error: <message>`` and exits with code 2, before writing anything."""
+
+
+def is_number(value) -> bool:
+    """Whether ``value`` is an int or a float (not a bool) of finite float size: not nan or inf, nor
+    an int too large for a float (whose comparison here raises nothing, unlike ``math.isfinite``)."""
+    return (
+        isinstance(value, (int, float)) and not isinstance(value, bool) and abs(value) <= sys.float_info.max
+    )
 
 
 def like_default(value, default, what: str):
@@ -18,8 +26,7 @@ def like_default(value, default, what: str):
         noun, fits = "true or false", isinstance(value, bool)
     elif isinstance(default, (int, float)):
         noun = "an integer" if isinstance(default, int) else "a number"
-        number = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-        fits = number and (isinstance(default, float) or float(value).is_integer())
+        fits = is_number(value) and (isinstance(default, float) or float(value).is_integer())
         value = type(default)(value) if fits else value
     elif isinstance(default, (str, dict)):
         noun = "a string" if isinstance(default, str) else "a mapping"

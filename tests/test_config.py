@@ -36,6 +36,7 @@ def test_sensor_dicts_in_yaml_become_specs():
         ({"algo": "ppo", "steps": 0}, "'steps' must be >= 1"),
         ({"algo": "ppo", "seed": True}, "'seed' must be an integer"),
         ({"algo": "ppo", "steps": 1.5}, "'steps' must be an integer, got 1.5"),
+        ({"algo": "ppo", "seed": 10**400}, "'seed' must be an integer, got 1000"),  # beyond a float
         ({"algo": "ppo", "hyperparams": [1]}, "'hyperparams' must be a mapping"),
         ({"env": "highway"}, "no 'algo'"),
     ],

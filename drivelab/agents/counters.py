@@ -5,8 +5,9 @@ name only these, each with a value of its kind, and cannot set any other attribu
 
 from __future__ import annotations
 
-import sys
 from typing import Any
+
+from drivelab.errors import is_number
 
 MAX_COUNT = 2**53  # far beyond any run; a float of it is still exact
 
@@ -32,14 +33,6 @@ KINDS = {
 def is_count(value: Any) -> bool:
     """Whether ``value`` is a whole number from 0 to ``MAX_COUNT`` (not a bool)."""
     return isinstance(value, int) and not isinstance(value, bool) and 0 <= value <= MAX_COUNT
-
-
-def is_number(value: Any) -> bool:
-    """Whether ``value`` is an int or a float (not a bool) of finite float size: not nan or inf, nor
-    an int too large for a float (whose comparison here raises nothing, unlike ``math.isfinite``)."""
-    return (
-        isinstance(value, (int, float)) and not isinstance(value, bool) and abs(value) <= sys.float_info.max
-    )
 
 
 def _fits(kind: str, value: Any) -> bool:

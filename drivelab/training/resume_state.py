@@ -42,8 +42,8 @@ import torch
 from gymnasium.utils import seeding
 from stable_baselines3.common.vec_env import VecEnvWrapper, VecMonitor
 
-from drivelab.agents.counters import check_counters, is_number
-from drivelab.errors import UsageError
+from drivelab.agents.counters import check_counters
+from drivelab.errors import UsageError, is_number
 from drivelab.training.safe_files import remove_file, replacing, write_file
 
 FORMAT = 1
