@@ -13,9 +13,6 @@ K = 64 worlds of one ``VectorDriveEnv`` (``autoreset_mode="same_step"``). Per ob
   rate, discount and network (``MlpPolicy`` with separate 64×64 actor and critic, which ppo_own
   gets with ``shared_encoder=false``; seed 003's CNN as SB3 features extractor for pixels),
   through ``SB3VecEnv``;
-- **ppo_own with ``overlap``**: the same, each rollout's update on a second thread while the next
-  rollout is collected (the hyper-parameters and nets of "same hyper-parameters"; on highway also
-  the junction recipe);
 - **SB3 PPO, the leaderboard's highway recipe** (highway only): n_steps 256, batch 64, 10 epochs,
   256×256 actor and critic.
 
@@ -75,7 +72,7 @@ def env_alone(case: tuple, steps: int) -> float:
     return steps * K / (time.perf_counter() - start)
 
 
-def own(case: tuple, equal: bool, recipe: dict | None = None, overlap: bool = False) -> float:
+def own(case: tuple, equal: bool, recipe: dict | None = None) -> float:
     from drivelab.agents.ppo import OwnPPO
 
     scenario, obs, action, n_steps, rollouts, batch = case
@@ -86,7 +83,6 @@ def own(case: tuple, equal: bool, recipe: dict | None = None, overlap: bool = Fa
     if recipe is not None:
         hyperparams = dict(recipe)
         n_steps, rollouts = recipe["n_steps"], rollouts * case[3] // recipe["n_steps"]  # as many steps
-    hyperparams["overlap"] = overlap
     agent = OwnPPO(env.single_observation_space, env.single_action_space, 0, hyperparams, env)
     agent.learn(n_steps * K)  # warm-up rollout
     start = time.perf_counter()
@@ -124,11 +120,9 @@ def measure(case: tuple, leaderboard: bool) -> dict:
         "own_equal": own(case, equal=True),
         "own_default": own(case, equal=False) if "topdown" not in case[1] else None,
         "sb3_equal": sb3(case, {**SHARED, "n_steps": n_steps, "batch_size": batch}, rollouts),
-        "own_overlap": own(case, equal=True, overlap=True),
     }
     if leaderboard:
         row["own_recipe"] = own(case, equal=False, recipe=JUNCTION_RECIPE)
-        row["own_recipe_overlap"] = own(case, equal=False, recipe=JUNCTION_RECIPE, overlap=True)
         row["sb3_leaderboard"] = sb3(case, LEADERBOARD, 1)
     return row
 
@@ -236,24 +230,6 @@ def report(result: dict) -> str:
             + f" | {ratio(row['own_equal'], row['sb3_equal'])} | {rate(row.get('own_recipe'))} | "
             f"{rate(row.get('sb3_leaderboard'))} | {ratio(row['own_default'], row.get('sb3_leaderboard'))} | "
             f"{ratio(row.get('own_recipe'), row.get('sb3_leaderboard'))} |"
-        )
-    lines += [
-        "",
-        "With `overlap` (each rollout's update on a second thread while the next rollout is collected; "
-        "torch's and numba's threads as above, plus that one thread):",
-        "",
-        "| case | threads | ppo_own, same hp | ppo_own, same hp, overlap | overlap gain | "
-        "overlap / environment | overlap / SB3 same hp | ppo_own junction recipe | "
-        "junction recipe, overlap | junction recipe overlap / SB3 leaderboard recipe |",
-        "|---|---|---|---|---|---|---|---|---|---|",
-    ]
-    for row in result["rows"]:
-        lines.append(
-            f"| {row['case']} | {row['threads']} | {rate(row['own_equal'])} | {rate(row['own_overlap'])} | "
-            f"{row['own_overlap'] / row['own_equal']:.2f}× | {row['own_overlap'] / row['env_alone']:.0%} | "
-            f"{ratio(row['own_overlap'], row['sb3_equal'])} | {rate(row.get('own_recipe'))} | "
-            f"{rate(row.get('own_recipe_overlap'))} | "
-            f"{ratio(row.get('own_recipe_overlap'), row.get('sb3_leaderboard'))} |"
         )
     return "\n".join(lines) + "\n"
 

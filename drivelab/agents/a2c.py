@@ -62,7 +62,7 @@ class OwnA2C(OnPolicyAgent):
     config_class = A2CConfig
 
     def update(self, rollout: Rollout) -> dict[str, float]:
-        config, policy = self.config, self.learner
+        config, policy = self.config, self.policy
         advantages = rollout.advantages
         if config.normalize_advantages and len(advantages) > 1:
             advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)

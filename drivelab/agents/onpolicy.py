@@ -5,19 +5,10 @@ Each iteration fills preallocated ``(n_steps, K, ...)`` tensors from the worlds'
 algorithm's ``update`` (``ppo.py``, ``a2c.py``). A time-limit end bootstraps from the final
 observation. Every running statistic changes only between rollouts, the safe points where
 ``drivelab train`` checkpoints, so that a resumed run equals an uninterrupted one.
-
-With ``overlap`` the update of one rollout runs on a second thread while the next rollout is
-collected (the simulator's kernels and torch's operations release the GIL, so the two take both
-cores): the acting network ``policy`` is then a copy that takes the learner's weights between
-rollouts, so every rollout is collected by the weights from before the previous rollout's update,
-a lag of one update, as in asynchronous PPO. The results do not depend on the threads' timing: the
-acting weights change only between rollouts, and each thread draws from its own generator.
 """
 
 from __future__ import annotations
 
-import copy
-import threading
 from collections import deque
 from dataclasses import dataclass
 from typing import Any
@@ -56,9 +47,6 @@ class OnPolicyConfig:
     :param log_std_init: initial log σ of the tanh-Gaussian.
     :param linear_lr: anneal the learning rate linearly to 0.
     :param linear_entropy: anneal the entropy coefficient linearly to 0.
-    :param overlap: update on a second thread while the next rollout is collected (a lag of one
-        update; see the module's docstring). A ``learn`` that reaches its step target ends with
-        the last rollout's update, so two calls of ``learn`` differ from one call as long.
     """
 
     learning_rate: float = 3e-4
@@ -77,7 +65,6 @@ class OnPolicyConfig:
     log_std_init: float = 0.0
     linear_lr: bool = False
     linear_entropy: bool = False
-    overlap: bool = False
 
     def check(self, algo: str) -> None:
         if self.n_steps < 1 or not 0 < self.gamma <= 1 or not 0 <= self.gae_lambda <= 1:
@@ -181,37 +168,6 @@ def to_tensor(obs: Any) -> Any:
     return map_obs(lambda value: torch.from_numpy(np.ascontiguousarray(value)), obs)
 
 
-@dataclass
-class Overlap:
-    """What ``overlap`` adds: the network the updates train (``policy`` acts with a copy), the
-    updates' own generator, and the rollout collected but not yet learned from."""
-
-    learner: ActorCritic
-    generator: torch.Generator
-    pending: Rollout | None = None
-
-
-class UpdateThread(threading.Thread):
-    """One update on the second thread; ``result`` re-raises what it raised."""
-
-    def __init__(self, work) -> None:
-        super().__init__(name="drivelab-update", daemon=True)
-        self.work, self.metrics, self.error = work, None, None
-        self.start()
-
-    def run(self) -> None:
-        try:
-            self.metrics = self.work()
-        except BaseException as exc:  # noqa: BLE001 - re-raised on the main thread
-            self.error = exc
-
-    def result(self) -> dict[str, float]:
-        self.join()
-        if self.error is not None:
-            raise self.error
-        return self.metrics
-
-
 class OnPolicyAgent(OwnAgent):
     """The actor-critic and its collect loop; subclasses implement ``update`` (one readable file each)."""
 
@@ -219,13 +175,8 @@ class OnPolicyAgent(OwnAgent):
         config = self.config
         worlds = getattr(self.env, "num_envs", 1)
         observation = observation_bytes(self.observation_space)
-        rollouts = 2 if config.overlap else 1
         check_buffer_memory(
-            self.algo,
-            "n_steps",
-            rollouts * config.n_steps * worlds,
-            observation,
-            "rollout (n_steps × worlds)",
+            self.algo, "n_steps", config.n_steps * worlds, observation, "rollout (n_steps × worlds)"
         )
         try:
             self.policy = ActorCritic(
@@ -239,51 +190,31 @@ class OnPolicyAgent(OwnAgent):
             )
         except ValueError as exc:
             raise UsageError(f"{self.algo!r}: {exc}") from None
-        self._overlap: Overlap | None = None
-        if config.overlap:
-            self._overlap = Overlap(copy.deepcopy(self.policy), torch.Generator().manual_seed(self.seed + 1))
         self.optimizer = torch.optim.Adam(
-            self.learner.parameters(), lr=config.learning_rate, eps=1e-5, foreach=True
+            self.policy.parameters(), lr=config.learning_rate, eps=1e-5, foreach=True
         )
         # the reward scale: running mean/var of the discounted return, and each world's return so far
         self.return_stats = torch.tensor([0.0, 1.0, 0.0], dtype=torch.float64)  # mean, var, count
         self.running_returns = torch.zeros(worlds, dtype=torch.float64)
         self.learning_rate, self.entropy_coef = config.learning_rate, config.entropy_coef  # annealed in learn
-        self._storages: list[Storage | None] = [None, None]
-        self._filling = 0
+        self._storage: Storage | None = None
         self.episode_returns: deque[float] = deque(maxlen=100)
-
-    @property
-    def learner(self) -> ActorCritic:
-        """The network the updates train: ``policy`` itself, or with ``overlap`` its copy."""
-        return self.policy if self._overlap is None else self._overlap.learner
-
-    @property
-    def update_generator(self) -> torch.Generator:
-        """What the updates draw from (minibatches): ``generator``, or with ``overlap`` their own."""
-        return self.generator if self._overlap is None else self._overlap.generator
 
     def _modules(self) -> dict[str, Any]:
         return {"policy": self.policy, "optimizer": self.optimizer}
 
     def _state(self) -> dict[str, Any]:
-        state = {
+        return {
             **super()._state(),
             "return_stats": self.return_stats,
             "running_returns": self.running_returns,
         }
-        if self._overlap is not None:
-            state["update_generator"] = self._overlap.generator.get_state()
-        return state
 
     def _set_state(self, state: dict[str, Any]) -> None:
         super()._set_state(state)
         if "return_stats" in state:  # (files saved before reward normalisation have none)
             self.return_stats = state["return_stats"].clone()
             self.running_returns = state["running_returns"].clone()
-        if self._overlap is not None:
-            self._overlap.generator.set_state(state["update_generator"])
-            copy_weights(self.learner, self.policy)  # saved between rollouts: the learner's weights
 
     # --- acting ---------------------------------------------------------------------------------
     def act(self, obs: Any, deterministic: bool) -> np.ndarray:
@@ -304,16 +235,11 @@ class OnPolicyAgent(OwnAgent):
 
     # --- collecting -----------------------------------------------------------------------------
     def _storage_for(self, worlds: int) -> Storage:
-        """The storage the next rollout fills: with ``overlap`` each of two in turn, so that the
-        rollout being learned from is not written over."""
-        if self._overlap is not None:
-            self._filling = 1 - self._filling
-        storage, steps = self._storages[self._filling], self.config.n_steps
+        storage, steps = self._storage, self.config.n_steps
         if storage is None or (storage.steps, storage.worlds) != (steps, worlds):
             shape, discrete = self.policy.stored_shape(), self.policy.kind == "categorical"
-            storage = Storage(self.observation_space, steps, worlds, shape, discrete)
-            self._storages[self._filling] = storage
-        return storage
+            self._storage = Storage(self.observation_space, steps, worlds, shape, discrete)
+        return self._storage
 
     def collect(self, worlds: Worlds, callback: BaseCallback) -> Rollout | None:
         """``n_steps`` steps of each of the K worlds (fewer at the step budget), then advantages;
@@ -375,7 +301,7 @@ class OnPolicyAgent(OwnAgent):
         return np.clip(rewards / np.sqrt(var + NORM_EPSILON), -NORM_CLIP, NORM_CLIP)
 
     def update(self, rollout: Rollout) -> dict[str, float]:
-        """One update of ``learner`` from a rollout; returns the metrics to log (``train/...``)."""
+        """One policy update from a rollout; returns the metrics to log (``train/...``)."""
         raise NotImplementedError
 
     # --- the loop -------------------------------------------------------------------------------
@@ -384,133 +310,29 @@ class OnPolicyAgent(OwnAgent):
             self.running_returns = torch.zeros(worlds.count, dtype=torch.float64)
         super()._start_worlds(worlds)
         if self.config.normalize_observations and self.policy.norm.count <= 0:
-            for network in dict.fromkeys(
-                (self.policy, self.learner)
-            ):  # the statistics start from the first batch
-                network.norm.update(to_tensor(self._last_obs))
+            self.policy.norm.update(to_tensor(self._last_obs))  # the statistics start from the first batch
 
     def _learn(self, worlds: Worlds, callback: BaseCallback, target: int) -> None:
-        """Collect a rollout, update, until ``target``. With ``overlap`` the update of the rollout
-        before runs on a second thread meanwhile; a stop puts the learner back to where it was at
-        the rollout's start (the safe point the run is saved at), and the target reached ends with
-        the last rollout's update."""
-        self._target, overlap = target, self._overlap
+        """Collect a rollout, update, until ``target``."""
+        self._target = target
         while self.num_timesteps < self._target:
             callback.on_rollout_start()
-            pending, thread = overlap.pending if overlap is not None else None, None
-            if pending is not None:
-                self._schedule()
-                before = copy.deepcopy(self.optimizer.state_dict()), overlap.generator.get_state()
-                thread = UpdateThread(lambda: self._train_on(pending))  # noqa: B023 - joined below
-            try:
-                rollout = self.collect(worlds, callback)
-            finally:
-                metrics = thread.result() if thread is not None else None
-            if thread is not None and rollout is None:  # stopped: the learner back to the safe point
-                copy_weights(overlap.learner, self.policy)
-                self.optimizer.load_state_dict(before[0])
-                overlap.generator.set_state(before[1])
+            rollout = self.collect(worlds, callback)
             if rollout is None:
-                return
+                break
             callback.on_rollout_end()
-            if overlap is None:
-                self._schedule()
-                self._log_progress(self._train_on(rollout))
-                continue
-            overlap.pending = rollout
-            if metrics is not None:  # the acting network takes the learner's new weights
-                copy_weights(self.policy, overlap.learner)
-                self._log_progress(metrics)
-        if overlap is not None and overlap.pending is not None:  # the target reached
-            self._schedule()
-            metrics = self._train_on(overlap.pending)
-            copy_weights(self.policy, overlap.learner)
-            overlap.pending = None
+            fraction_left = 1.0 - self.num_timesteps / max(self._target, 1)
+            config = self.config
+            self.learning_rate = config.learning_rate * (fraction_left if config.linear_lr else 1.0)
+            self.entropy_coef = config.entropy_coef * (fraction_left if config.linear_entropy else 1.0)
+            for group in self.optimizer.param_groups:
+                group["lr"] = self.learning_rate
+            metrics = self.update(rollout)
+            self.policy.norm.update(rollout.observations)
+            metrics.update(learning_rate=self.learning_rate, entropy_coef=self.entropy_coef)
+            if self.policy.kind == "tanh_gaussian":
+                metrics["std"] = self.policy.std()
             self._log_progress(metrics)
-
-    def _schedule(self) -> None:
-        """The learning rate and entropy coefficient of the next update, annealed by the steps done."""
-        fraction_left = 1.0 - self.num_timesteps / max(self._target, 1)
-        config = self.config
-        self.learning_rate = config.learning_rate * (fraction_left if config.linear_lr else 1.0)
-        self.entropy_coef = config.entropy_coef * (fraction_left if config.linear_entropy else 1.0)
-        for group in self.optimizer.param_groups:
-            group["lr"] = self.learning_rate
-
-    def _train_on(self, rollout: Rollout) -> dict[str, float]:
-        """``update`` from a rollout, then the observation statistics; the metrics to log."""
-        metrics = self.update(rollout)
-        self.learner.norm.update(rollout.observations)
-        metrics.update(learning_rate=self.learning_rate, entropy_coef=self.entropy_coef)
-        if self.learner.kind == "tanh_gaussian":
-            metrics["std"] = self.learner.std()
-        return metrics
-
-    # --- the rollout not yet learned from, in a checkpoint's resume state -------------------------
-    def loop_arrays(self) -> dict[str, np.ndarray]:
-        """With ``overlap``, the rollout collected but not yet learned from, as arrays (copies)."""
-        pending = self._overlap.pending if self._overlap is not None else None
-        if pending is None:
-            return {}
-        arrays = {f"pending.{name}": getattr(pending, name).numpy().copy() for name in ROLLOUT_TENSORS}
-        if isinstance(pending.observations, dict):
-            arrays.update({f"pending.observations.{key}": value.numpy().copy()
-                           for key, value in pending.observations.items()})  # fmt: skip
-        else:
-            arrays["pending.observations"] = pending.observations.numpy().copy()
-        return arrays
-
-    def set_loop_arrays(self, arrays: dict[str, np.ndarray]) -> None:
-        """The inverse of ``loop_arrays``; a ValueError or KeyError for arrays it did not write."""
-        names = [key for key in arrays if key.startswith("pending.")]
-        if self._overlap is None:
-            if names:
-                raise ValueError("a pending rollout for an agent without overlap")
-            return
-        if not names:
-            self._overlap.pending = None
-            return
-        size = len(arrays["pending.returns"])
-        tensors = {
-            name: _checked(arrays[f"pending.{name}"], (size,), np.float32) for name in ROLLOUT_TENSORS[1:]
-        }
-        action_dtype = np.int64 if self.policy.kind == "categorical" else np.float32
-        tensors["actions"] = _checked(
-            arrays["pending.actions"], (size, *self.policy.stored_shape()), action_dtype
-        )
-        space = self.observation_space
-
-        def observations(sub: spaces.Box, name: str) -> torch.Tensor:
-            dtype = np.uint8 if sub.dtype == np.uint8 else np.float32
-            return _checked(arrays[name], (size, *sub.shape), dtype)
-
-        if isinstance(space, spaces.Dict):
-            obs = {key: observations(sub, f"pending.observations.{key}") for key, sub in space.spaces.items()}
-        else:
-            obs = observations(space, "pending.observations")
-        self._overlap.pending = Rollout(observations=obs, **tensors)
-
-
-ROLLOUT_TENSORS = ("actions", "log_probs", "values", "advantages", "returns")  # besides observations
-
-
-def _checked(array: np.ndarray, shape: tuple, dtype) -> torch.Tensor:
-    """A saved array as a tensor (a copy), when it has this shape and dtype and (floats) is finite."""
-    array = np.asarray(array)
-    if array.shape != tuple(shape) or array.dtype != dtype:
-        raise ValueError(
-            f"a pending rollout's array is {array.dtype}{array.shape}, not {np.dtype(dtype)}{shape}"
-        )
-    if array.dtype.kind == "f" and not np.isfinite(array).all():
-        raise ValueError("a pending rollout's array holds nan or inf")
-    return torch.from_numpy(array.copy())
-
-
-def copy_weights(target: torch.nn.Module, source: torch.nn.Module) -> None:
-    """Copy ``source``'s parameters and buffers into ``target`` (the same architecture)."""
-    with torch.no_grad():
-        for mine, theirs in zip(target.state_dict().values(), source.state_dict().values(), strict=True):
-            mine.copy_(theirs)
 
 
 def explained_variance(values: torch.Tensor, returns: torch.Tensor) -> float:

@@ -76,14 +76,14 @@ class OwnPPO(OnPolicyAgent):
     config_class = PPOConfig
 
     def update(self, rollout: Rollout) -> dict[str, float]:
-        config, policy = self.config, self.learner
+        config, policy = self.config, self.policy
         size = len(rollout.returns)
         history: dict[str, list[float]] = {
             "policy_loss": [], "value_loss": [], "entropy": [], "clip_fraction": [], "approx_kl": []
         }  # fmt: skip
         for _ in range(config.n_epochs):
             stop = False
-            for indices in torch.randperm(size, generator=self.update_generator).split(config.batch_size):
+            for indices in torch.randperm(size, generator=self.generator).split(config.batch_size):
                 advantages = rollout.advantages[indices]
                 if config.normalize_advantages and len(indices) > 1:
                     advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)

@@ -162,7 +162,7 @@ class ContinuousAction(ActionAdapter):
         return "continuous [steering, acceleration] in [-1, 1] (±45°, ±5 m/s²)"
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _clipped_swapped(rows, out) -> bool:
     """``[steering, acceleration]`` rows (K, 2) clipped to [-1, 1] and swapped into ``out`` as
     ``[acceleration, steering]``, highway-env's order; False when a value is NaN or infinite (an
@@ -180,7 +180,7 @@ def _clipped_swapped(rows, out) -> bool:
     return finite
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _all_finite(rows) -> bool:
     """Whether no value of ``rows`` (K, 2) is NaN or infinite (a third of np.isfinite(...).all()'s
     cost per step, which is mostly its Python wrappers)."""

@@ -89,7 +89,7 @@ def _cameras() -> np.ndarray:
     return np.concatenate([np.asarray(part, dtype=float) for part in parts])
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _circuit_step(
     controls, out, out_flags, ints, observations,
     command, v, count, ego, lanes, idm, regulation, time_s, route, starts, segments, lengths2, segment_m,
@@ -210,7 +210,7 @@ class _Held(structref.StructRefProxy):
 structref.define_proxy(_Held, _HeldType, list(_HELD))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def circuit_step(controls, out, out_flags, ints, observations, held) -> None:
     """``_circuit_step`` with the arrays of ``held`` (a ``_Held``)."""
     _circuit_step(

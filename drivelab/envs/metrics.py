@@ -11,7 +11,7 @@ from drivelab.world.batch import COLLISION_PEDESTRIAN, WorldBatch
 _FLOAT_ROWS, _INT_ROWS, _FLAG_ROWS = 3, 6, 3
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def add_step(
     floats, ints, flags, last_position, rewards, position, speed, collided, kind, off_road, red, blocked, won
 ) -> None:

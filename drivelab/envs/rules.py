@@ -98,7 +98,7 @@ class EpisodeRules:
         )
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def episode_ends(
     collided, arrived, red_light_crossed, blocked, off_route, off_road, offroad_terminal, time_s,
     truncate_at_s, terminated, truncated

@@ -105,7 +105,7 @@ def feature_names(features) -> tuple[str, ...]:
     return tuple(names)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def ego_rows_into(rows, speed_mps, cos_relative, sin_relative, speed_scale, clip, out):
     """Row 0 of every world (the ego: presence 1, speed / scale, cos and sin of its heading
     relative to its lane) into ``rows`` (K, rows, 7), then every value, clipped to [-1, 1] when
@@ -126,7 +126,7 @@ def ego_rows_into(rows, speed_mps, cos_relative, sin_relative, speed_scale, clip
             out[k, i] = value
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def nearest_rows(vehicles, valid, position, heading, cos_h, sin_h, reach, scale, rows):
     """Presence and position of rows 1… of every world: its nearest seen vehicles, nearest first
     (on ties highway-env's order, as a stable sort gives), relative to the ego in the ego frame
@@ -169,7 +169,7 @@ def nearest_rows(vehicles, valid, position, heading, cos_h, sin_h, reach, scale,
     return chosen, relative
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def motion_rows(vehicles, chosen, speed_mps, cos_other, sin_other, speed_scale, rows):
     """Velocity and heading of the rows ``nearest_rows`` chose: relative to the ego's velocity
     in the ego frame, and the heading relative to the ego's (its cosine and sine given)."""

@@ -15,7 +15,7 @@ _CORNER_WIDTH = np.array([-1.0, 1.0, 1.0, -1.0])
 _NEXT_CORNER = np.array([1, 2, 3, 0])
 
 
-@njit(cache=True, nogil=True, error_model="numpy")
+@njit(cache=True, error_model="numpy")
 def _cast_parts(
     start_x, start_y, end_x, end_y, worlds, range_m, beams, step, close_m, direction_x, direction_y, nearest
 ) -> None:

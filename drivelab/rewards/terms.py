@@ -284,7 +284,7 @@ def _hazard(distance_m, stop_distance_m):
     return ROACH_MAX_SPEED_MPS * room / 5.0
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _roach_desired_speed(
     vehicles, vehicle_valid, pedestrians, pedestrian_valid, position, cos_h, sin_h, lane_width,
     light_state, light_distance, out,
@@ -420,7 +420,7 @@ def line_centring(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def line_centring_into(columns, centre_px, width_px, out) -> None:
     """:func:`line_centring`'s values from the line's columns (K, D) in an image ``width_px`` wide
     centred on ``centre_px`` into ``out`` (K,)."""
@@ -460,7 +460,7 @@ def lane_keeping(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def lane_keeping_into(columns, rows, centre_px, width_px, steering_deg, out) -> None:
     """:func:`lane_keeping`'s values from the lane centre's columns (K, D) at the image ``rows``
     (D,), nearest first, and the commanded steering (K,) degrees, into ``out`` (K,). C is the mean

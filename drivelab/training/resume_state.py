@@ -5,9 +5,8 @@ Besides the model's own files (weights, optimizer, replay) the rest of a run dep
 
 - the random generators: python ``random``, numpy's global generator, torch's, the model's action
 space and our own agents' ``rng`` and ``generator``; - the learning loop's counters (steps, updates,
-episodes, ε, …), its current observation and, for an on-policy agent that updates on a second
-thread (``overlap``), the rollout not yet learned from; - the training environment, mid-episode. An
-episode is a deterministic function of the generator state its reset draws from and of the actions since:
+episodes, ε, …) and its current observation; - the training environment, mid-episode. An episode is
+a deterministic function of the generator state its reset draws from and of the actions since:
 ``RecordEpisodes`` / ``RecordVecEpisodes`` log both per world, and ``restore`` resets from that
 state, replays the actions and checks that the replay ends in the saved observation; - the monitors'
 partial episodes and the rows monitor.csv and evaluations.csv held, so that a resume cuts rows
@@ -284,8 +283,6 @@ def take_snapshot(model, worlds: TrainingWorlds, rows: dict[str, int]) -> Snapsh
     starts = getattr(model, "_last_episode_starts", None)
     if starts is not None:
         arrays["last_episode_starts"] = np.array(starts, copy=True)
-    if hasattr(model, "loop_arrays"):  # an overlapping on-policy agent's rollout not yet learned from
-        arrays.update(model.loop_arrays())
     monitor = worlds.monitor
     if worlds.vector:
         arrays["monitor_returns"] = monitor.episode_returns.copy()
@@ -339,8 +336,7 @@ def _saved_observation(layout: Any, arrays: dict[str, np.ndarray], prefix: str) 
 
 def apply_to_model(model, snapshot: Snapshot) -> None:
     """Put the model's counters, current observation, episode buffers and every generator back to
-    ``snapshot`` (weights and optimizer do not change between safe points: an on-policy agent
-    that updates on a second thread puts its learner back itself when a stop ends its loop)."""
+    ``snapshot`` (weights and optimizer do not change between safe points)."""
     meta, arrays = snapshot.meta, snapshot.arrays
     for name, value in meta["counters"].items():
         setattr(model, name, value)
@@ -352,8 +348,6 @@ def apply_to_model(model, snapshot: Snapshot) -> None:
         model._last_obs = _saved_observation(meta["last_obs"], arrays, "last_obs")
     if "last_episode_starts" in arrays:
         model._last_episode_starts = np.array(arrays["last_episode_starts"])
-    if hasattr(model, "set_loop_arrays"):
-        model.set_loop_arrays(arrays)
     _restore_rngs(model, meta["rng"], arrays)
 
 

@@ -147,7 +147,7 @@ class RouteBatch:
         return (points[:, 0], headings[:, 0]) if single else (points, headings)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _route_poses(polyline, stations, count, closed, distances, points, delta) -> None:
     """``RouteBatch.poses_at``'s points into ``points`` (K, D, 2) and the segments' directions into
     ``delta`` (K, D, 2): a distance wrapped round the lap (np.mod), clamped to the route, found among
@@ -187,7 +187,7 @@ def _route_poses(polyline, stations, count, closed, distances, points, delta) ->
                 points[k, j, axis] = polyline[k, segment, axis] + fraction * step
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _nearest_lights(lights, valid, position, heading, cos_h, sin_h, lane_width, state, distance) -> None:
     """Per world, the state (-1: none) and distance ahead (inf: none) of the nearest light whose
     stop line is ahead (its x in the ego frame > 0), within half a lane of the ego's axis and

@@ -110,7 +110,7 @@ class PinholeModel:
             return np.where(falling > 1e-9, self.forward_m + self.height_m * along / falling, np.inf)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def visible_columns_into(distances, lateral, terms, out) -> None:
     """Image columns (K, D) into ``out`` of ground points ``distances`` (D,) ahead and ``lateral``
     (K, D) to the right of the ego centre, nan where the point falls outside the image (or

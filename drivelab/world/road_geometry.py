@@ -68,7 +68,7 @@ def guide_segment_sets_of(roads: tuple[RoadMap, ...]) -> np.ndarray:
 _CROSSING_MARGIN_M = 1e-3
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _nearest_crossings(starts, ends, index, position, cos_h, sin_h, distances, out) -> None:
     """World k's segments, from ``starts[index[k]]`` to ``ends[index[k]]`` (M, 2), in its ego
     frame (x forward, y to the right), and for each ground line ``x = d`` the y of the crossing
@@ -101,7 +101,7 @@ def _nearest_crossings(starts, ends, index, position, cos_h, sin_h, distances, o
                         best_abs[j], out[k, j] = np.abs(y), y
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def segment_columns_into(starts, ends, index, position, cos_h, sin_h, distances, camera_terms, out) -> None:
     """Image columns (K, D) into ``out`` where world k's segments (``starts[index[k]]`` to
     ``ends[index[k]]``) cross the ground rows ``distances`` (D,) ahead of its ego, nan where none

@@ -2,8 +2,6 @@
 computation, every action distribution and a Dict observation learning a tiny task, the array path
 equal to SB3's VecEnv path, the running statistics saved with the model."""
 
-import copy
-
 import numpy as np
 import pytest
 import torch
@@ -12,7 +10,7 @@ from stable_baselines3.common.vec_env import VecEnv
 
 from drivelab.agents.a2c import OwnA2C
 from drivelab.agents.actor_critic import ActorCritic
-from drivelab.agents.onpolicy import ROLLOUT_TENSORS, Rollout
+from drivelab.agents.onpolicy import Rollout
 from drivelab.agents.ppo import OwnPPO
 from drivelab.agents.worlds import Worlds
 
@@ -239,104 +237,3 @@ def test_weights_saved_by_the_tanh_gaussian_networks_load():
     new.load_state_dict(old.state_dict())
     obs = torch.rand(5, 4)
     torch.testing.assert_close(new(obs)[0], old(obs)[0])
-
-
-def _clone(rollout: Rollout) -> Rollout:
-    """A rollout's tensors copied (the trainer's own are views of storage it fills again)."""
-    fields = {name: getattr(rollout, name).clone() for name in ROLLOUT_TENSORS}
-    observations = rollout.observations
-    observations = (
-        {k: v.clone() for k, v in observations.items()}
-        if isinstance(observations, dict)
-        else observations.clone()
-    )
-    return Rollout(observations=observations, **fields)
-
-
-def _learn_recording(agent, steps) -> list[Rollout]:
-    rollouts, update = [], agent.update
-    agent.update = lambda rollout: rollouts.append(_clone(rollout)) or update(rollout)
-    agent.learn(steps)
-    return rollouts
-
-
-@pytest.mark.parametrize("overlap", [False, True])
-def test_with_overlap_each_rollout_is_collected_by_the_weights_before_the_previous_update(overlap):
-    """``overlap``: the update of rollout i runs while rollout i + 1 is collected, so rollout i + 1's
-    log-probs are those of the weights from before that update; without it, of the weights after."""
-    env = Bandit(spaces.Discrete(2))
-    agent = OwnPPO(env.observation_space, env.action_space, 0,
-                   {"n_steps": 4, "batch_size": 32, "n_epochs": 2, "learning_rate": 1e-2, "overlap": overlap},
-                   env)  # fmt: skip
-    initial = copy.deepcopy(agent.policy)
-    first, second, third = _learn_recording(agent, 3 * 4 * 16)
-    with torch.no_grad():
-        out, _ = initial(second.observations)
-        log_probs, _ = initial.log_prob_entropy(out, second.actions)
-    assert torch.allclose(log_probs, second.log_probs, atol=1e-6) == overlap
-    assert agent.learner is (agent.policy if not overlap else agent._overlap.learner)
-    # the learn reached its target: the last rollout was learned from and the acting network has
-    # the learner's weights
-    assert agent._overlap is None or agent._overlap.pending is None
-    for mine, theirs in zip(
-        agent.policy.state_dict().values(), agent.learner.state_dict().values(), strict=True
-    ):
-        assert torch.equal(mine, theirs)
-
-
-def test_overlap_is_deterministic_and_learns_a_tiny_task():
-    """The threads' timing changes nothing: two runs end with the same weights, and they learn."""
-
-    def trained():
-        env = Bandit(spaces.Discrete(2))
-        agent = OwnPPO(env.observation_space, env.action_space, 0,
-                       {"n_steps": 4, "learning_rate": 3e-3, "gamma": 0.9, "batch_size": 32, "n_epochs": 4,
-                        "overlap": True}, env)  # fmt: skip
-        agent.learn(4000)
-        return agent
-
-    a, b = trained(), trained()
-    for x, y in zip(a.policy.state_dict().values(), b.policy.state_dict().values(), strict=True):
-        assert torch.equal(x, y)
-    probe = Bandit(spaces.Discrete(2), count=200, seed=1)
-    assert np.mean(a.act(probe.reset(), deterministic=True) == (probe.x[:, 0] > 0)) >= 0.9
-
-
-def test_a_pending_rollout_goes_into_the_resume_arrays_and_back_checked():
-    env = Bandit(spaces.Box(-1, 1, (2,), np.float32), dict_obs=True)
-    agent = OwnA2C(env.observation_space, env.action_space, 0, {"n_steps": 4, "overlap": True}, env)
-    agent.learn(64)
-    assert agent.loop_arrays() == {}  # the target reached: nothing pending
-    agent._target = 10**6
-    agent._overlap.pending = agent.collect(Worlds(env), _Continue())
-    arrays = agent.loop_arrays()
-    assert sorted(arrays) == ["pending.actions", "pending.advantages", "pending.log_probs",
-                              "pending.observations.noise", "pending.observations.x",
-                              "pending.returns", "pending.values"]  # fmt: skip
-    fresh = OwnA2C(env.observation_space, env.action_space, 0, {"n_steps": 4, "overlap": True}, env)
-    fresh.set_loop_arrays(arrays)
-    assert torch.equal(fresh._overlap.pending.observations["x"], agent._overlap.pending.observations["x"])
-    assert torch.equal(fresh._overlap.pending.actions, agent._overlap.pending.actions)
-    wrong = {
-        "pending.actions": arrays["pending.actions"][:, :1],
-        "pending.values": np.full_like(arrays["pending.values"], np.nan),
-        "pending.observations.x": arrays["pending.observations.x"].astype(np.float64),
-    }
-    for name, bad in wrong.items():
-        with pytest.raises(ValueError, match="pending rollout"):
-            fresh.set_loop_arrays({**arrays, name: bad})
-    with pytest.raises(KeyError):
-        fresh.set_loop_arrays({key: value for key, value in arrays.items() if key != "pending.log_probs"})
-    plain = OwnA2C(env.observation_space, env.action_space, 0, {"n_steps": 4}, env)
-    with pytest.raises(ValueError, match="without overlap"):
-        plain.set_loop_arrays(arrays)
-
-
-class _Continue:
-    """A callback that lets every step through."""
-
-    def update_locals(self, values):
-        pass
-
-    def on_step(self):
-        return True

@@ -11,7 +11,6 @@ import json
 import os
 import signal
 
-import numpy as np
 import pandas as pd
 import pytest
 import torch
@@ -50,14 +49,6 @@ SETUPS = {
     "a2c_own-3-worlds-beta": {"algo": "a2c_own", "action": "continuous", "steps": 240, "n_envs": 3,
                               "hyperparams": {"n_steps": 16, "distribution": "beta",
                                               "normalize_observations": True}},
-    # the update on a second thread: the rollout not yet learned from is part of the resume state
-    "ppo_own-4-worlds-overlap": {"algo": "ppo_own", "action": "meta", "steps": 256, "n_envs": 4,
-                                 "hyperparams": {"n_steps": 8, "batch_size": 16, "n_epochs": 2,
-                                                 "normalize_observations": True, "normalize_rewards": True,
-                                                 "overlap": True}},
-    "a2c_own-3-worlds-beta-overlap": {"algo": "a2c_own", "action": "continuous", "steps": 240,
-                                      "n_envs": 3, "hyperparams": {"n_steps": 16, "distribution": "beta",
-                                                                   "overlap": True}},
     # pixel SAC: the replay (frames, stacks, the open episode) is part of the checkpoint
     **{name: {"algo": algo, "env": "town", "obs": ["camera:width=24:height=24:stack=3", "waypoints",
                                                      "measurements:stack=3"],
@@ -154,8 +145,6 @@ def _assert_same_run(reference, resumed, config) -> None:
         ("ppo_own-4-worlds", 100, signal.SIGINT, 96),  # rollouts of 8 steps x 4 worlds
         ("ppo_own-4-worlds-normalised", 100, signal.SIGTERM, 96),
         ("a2c_own-3-worlds-beta", 100, signal.SIGINT, 96),  # rollouts of 16 steps x 3 worlds
-        ("ppo_own-4-worlds-overlap", 100, signal.SIGTERM, 96),
-        ("a2c_own-3-worlds-beta-overlap", 100, signal.SIGINT, 96),
         ("dueling_ddqn-3-worlds", 77, signal.SIGTERM, 75),  # safe points every 3 steps
         ("rlad", 47, signal.SIGTERM, 46),  # mid-episode, the replay half full
         ("drq", 47, signal.SIGINT, 46),
@@ -212,17 +201,6 @@ def test_resume_after_a_kill_cuts_the_logs_back_to_the_checkpoint(tmp_path, monk
     assert calls == [200]
     _assert_same_run(reference, run_dir, config)
     assert list(pd.read_csv(run_dir / "evaluations.csv")["step"]) == [50, 100, 150, 200, 250, 300]
-
-
-def test_a_killed_overlapping_run_resumes_from_its_checkpoint_with_the_pending_rollout(tmp_path, monkeypatch):
-    """With ``overlap`` a periodic checkpoint holds a rollout collected but not yet learned from;
-    resuming from it (the run killed after it) ends exactly as the finished run did."""
-    config = _config("ppo_own-4-worlds-overlap", "run")
-    run_dir, reference = train_then_kill_back_to(monkeypatch, tmp_path, config, 128)
-    with np.load(run_dir / "checkpoints/resume-128.npz") as arrays:
-        assert arrays["pending.returns"].shape == (32,)  # 8 steps x 4 worlds
-    run_module.resume(run_dir)
-    _assert_same_run(reference, run_dir, config)
 
 
 def _files(run_dir) -> dict:

@@ -87,14 +87,14 @@ def _world_kernel(parallel: bool):
 _SERIAL, _PARALLEL = _world_kernel(False), _world_kernel(True)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def apply_meta_map_worlds(v, count, ego, lanes, start, stop, actions, speeds) -> None:
     """``meta_action`` of each world's ego on its map's lane rows."""
     for k in range(v.shape[0]):
         meta_action(v[k, : count[k]], ego[k], lanes[start[k] : stop[k]], actions[k], speeds)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def export_map_worlds(
     v, count, ego, lanes, start, stop, in_junction, dead_end, solid, floats, ints, flags, vehicles, valid
 ) -> None:
@@ -116,7 +116,7 @@ def export_map_worlds(
             flags[k, EX_ON_ROAD] = False
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def clear_dead_ends(v, count, ego, lanes, start, stop, dead_end) -> None:
     """Drop, in every world, the traffic vehicles within a vehicle length of the end of a lane that
     leads nowhere (they leave the map; MetaDrive recycles them too); the kept rows close up in

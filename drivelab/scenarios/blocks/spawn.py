@@ -362,7 +362,7 @@ def _continuations(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return start, np.nonzero(continues)[1].astype(np.int64)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _traffic_rows(
     lanes, lane, s, delta, walk, successor_start, successors, speed: float, length: float, width: float,
     lane_change_delay: float, rows
@@ -397,7 +397,7 @@ def _traffic_rows(
         row[T.ROUTED], row[T.ROUTE_START], row[T.ROUTE_END] = 1.0, 0.0, end
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _spaced(rows: np.ndarray, along_m: float, across_m: float) -> np.ndarray:
     """(M,) bool: each vehicle row kept unless within ``along_m`` along and ``across_m`` across
     the heading of a kept vehicle before it (sequential: whether a vehicle stays depends on those

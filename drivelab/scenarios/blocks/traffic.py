@@ -37,7 +37,7 @@ from drivelab.sim.junctions.traffic import stop_ahead, town_acceleration
 _NO_PEDESTRIANS = np.zeros((0, PEDESTRIAN_COLUMNS))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def route_feasible(
     v: np.ndarray, lanes: np.ndarray, successor_start: np.ndarray, successors: np.ndarray, i: int,
     lane: int, first: int,
@@ -73,7 +73,7 @@ def route_feasible(
             depth -= 1
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def _after_road(v: np.ndarray, lanes: np.ndarray, i: int, lane: int) -> int:
     """The first of vehicle i's route entries after the road of ``lane`` (a route's first entry
     is the road the vehicle is on until it is left)."""
@@ -83,7 +83,7 @@ def _after_road(v: np.ndarray, lanes: np.ndarray, i: int, lane: int) -> int:
     return start
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def blocks_follow_road(
     v: np.ndarray, lanes: np.ndarray, successor_start: np.ndarray, successors: np.ndarray, i: int
 ) -> None:
@@ -124,7 +124,7 @@ def blocks_follow_road(
     v[i, T.TARGET_LANE] = choice
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def rear_across(
     v: np.ndarray, lanes: np.ndarray, coords: np.ndarray, done: np.ndarray, i: int, lane: int,
     successor_start: np.ndarray, successors: np.ndarray,
@@ -153,7 +153,7 @@ def rear_across(
     return rear
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def blocks_mobil(
     v: np.ndarray, lanes: np.ndarray, p: np.ndarray, coords: np.ndarray, done: np.ndarray,
     trig: np.ndarray, i: int, lane: int, successor_start: np.ndarray, successors: np.ndarray,
@@ -187,7 +187,7 @@ def blocks_mobil(
     return jerk >= p[T.MIN_ACC_GAIN]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def merge_safe(
     v: np.ndarray, lanes: np.ndarray, p: np.ndarray, coords: np.ndarray, done: np.ndarray,
     trig: np.ndarray, i: int, lane: int, successor_start: np.ndarray, successors: np.ndarray,
@@ -206,7 +206,7 @@ def merge_safe(
     return not self_pred_a < -p[T.MAX_BRAKING_IMPOSED]
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def _side_lane(v: np.ndarray, lanes: np.ndarray, i: int, lane: int, side: int, changeable: np.ndarray) -> int:
     """The lane beside ``lane`` on ``side`` (-1 left, +1 right) when vehicle i may change to it
     (changeable and reachable), else -1."""
@@ -219,7 +219,7 @@ def _side_lane(v: np.ndarray, lanes: np.ndarray, i: int, lane: int, side: int, c
     return candidate
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def _route_goes_on(
     v: np.ndarray, lanes: np.ndarray, i: int, lane: int, successor_start: np.ndarray, successors: np.ndarray
 ) -> bool:
@@ -228,7 +228,7 @@ def _route_goes_on(
     return route_feasible(v, lanes, successor_start, successors, i, lane, first)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def blocks_change_lane_policy(
     v: np.ndarray, lanes: np.ndarray, p: np.ndarray, coords: np.ndarray, done: np.ndarray,
     trig: np.ndarray, i: int, changeable: np.ndarray, ending: np.ndarray, successor_start: np.ndarray,
@@ -271,7 +271,7 @@ def blocks_change_lane_policy(
             v[i, T.TARGET_LANE] = candidate
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def blocks_act(
     v, lanes, p, coords, done, trig, junction, from_arm, to_arm, turn, end_junction, end_arm, light,
     changeable, ending, successor_start, successors, light_states,
@@ -322,7 +322,7 @@ def blocks_act(
         v[i, T.ACCEL] = T._clip(acceleration, -p[T.ACC_MAX], p[T.ACC_MAX])
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def blocks_simulate(
     v, lanes, p, frames, dt, regulation, release_cap_mps, junction, from_arm, to_arm, turn,
     end_junction, end_arm, light, changeable, ending, successor_start, successors, light_states,

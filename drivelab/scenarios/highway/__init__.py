@@ -19,7 +19,7 @@ from drivelab.sim.core.spawn import DELTA_RANGE
 from drivelab.world.scenario import Scenario
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _create_random(
     rng, lanes, to_roads, to_count, decay, speed: float, lane_id: int, spacing: float, front_x: float, row
 ) -> None:  # fmt: skip
@@ -45,7 +45,7 @@ def _create_random(
     row[T.LEN], row[T.WID] = T.CAR_LENGTH, T.CAR_WIDTH
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _spawn_worlds(
     states, v, lanes, to_roads, to_count, decay, ego_lane_id: int, ego_spacing: float, vehicles: int,
     spacing: float, target_speeds

@@ -45,7 +45,7 @@ from drivelab.sim.route import RouteTracker
 from drivelab.world.batch import COLLISION_NONE, COLLISION_PEDESTRIAN, COLLISION_VEHICLE, WorldBatch
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _simulate_town(
     v, count, ego, peds, pcount, lanes, p, coords, done, trig, junction, from_arm, to_arm, turn,
     end_junction, end_arm, light, street_lanes, routes, route_length, search, search_offset, search_size,
@@ -97,7 +97,7 @@ def _town_kernel(parallel: bool):
 _SERIAL, _PARALLEL = _town_kernel(False), _town_kernel(True)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def export_pedestrians(peds, pcount, pedestrians, pedestrian_valid, hit_ego) -> None:
     """The pedestrians not crashed (spawn order) of K worlds into zeroed ``pedestrians`` (K, P, 6)
     (x, y, heading, speed, length, width) with ``pedestrian_valid``; ``hit_ego`` (K,): one of them

@@ -233,7 +233,7 @@ TRACKER_CACHE_SIZE = 4096  # routes whose trackers a set-up keeps (a retargeted 
 _NO_FIXED = np.zeros((0, 2), dtype=np.int64)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _place(row, lanes, x, y, heading, speed, idm_delta) -> bool:
     """``vehicle_row``'s common part: pose, speed, the closest lane (compiled distances; True when
     another lane is within 1e-6 of it, for numpy's distances to decide), DELTA, collisions."""
@@ -249,7 +249,7 @@ def _place(row, lanes, x, y, heading, speed, idm_delta) -> bool:
     return near > 1
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _write_route_rows(row, route, n) -> None:
     """A planned route into a vehicle row: roads (one lane each: the road row is the lane row),
     lane id 0, ROUTED."""
@@ -260,7 +260,7 @@ def _write_route_rows(row, route, n) -> None:
         row[T.ROUTE + 2 * k], row[T.ROUTE + 2 * k + 1] = route[k], 0.0
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _town_rows(
     words, lanes, streets, fixed, routes, route_length, crossings, across, cycle_s, kind, ego_speed,
     ego_target_speed, ego_length, ego_width, npc_length, npc_width, delay, idm_delta,

@@ -146,32 +146,32 @@ TWO_PI = 2 * np.pi
 # The trigonometric functions with their zero written out (IEEE 754 fixes sin, tan, arcsin and
 # arctan of a signed zero to that zero and cos of it to 1: the library's own bits, without its
 # call). A vehicle driving straight along a lane's centre has heading, steering and offset 0.
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def sin0(x: float) -> float:
     return x if x == 0.0 else np.sin(x)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def cos0(x: float) -> float:
     return 1.0 if x == 0.0 else np.cos(x)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def tan0(x: float) -> float:
     return x if x == 0.0 else np.tan(x)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def arctan0(x: float) -> float:
     return x if x == 0.0 else np.arctan(x)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def arcsin0(x: float) -> float:
     return x if x == 0.0 else np.arcsin(x)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def wrap_to_pi(angle: float) -> float:
     """highway-env's ``((angle + pi) % (2 pi)) - pi``, bit for bit. Python's float ``%`` is
     ``fmod`` plus a sign fix; ``fmod`` (a slow library call) is exact and returns its argument
@@ -186,7 +186,7 @@ def wrap_to_pi(angle: float) -> float:
     return (x % TWO_PI) - np.pi
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def local_coordinates(lanes: np.ndarray, lane: int, x: float, y: float) -> tuple[float, float]:
     """(longitudinal, lateral) of the world point (x, y) in ``lane``."""
     row = lanes[lane]
@@ -204,7 +204,7 @@ def local_coordinates(lanes: np.ndarray, lane: int, x: float, y: float) -> tuple
     return longitudinal, lateral
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def circle_lateral(lanes: np.ndarray, lane: int, x: float, y: float) -> float:
     """A circular lane's lateral coordinate of (x, y) as ``local_coordinates`` computes it (the
     same operations, so the same bits) without its arctan2: a cheap exact test that a point is
@@ -214,7 +214,7 @@ def circle_lateral(lanes: np.ndarray, lane: int, x: float, y: float) -> float:
     return row[SENSE] * (row[RADIUS] - np.sqrt(dx * dx + dy * dy))
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def heading_at(lanes: np.ndarray, lane: int, longitudinal: float) -> float:
     row = lanes[lane]
     if row[KIND] == CIRCLE:
@@ -226,7 +226,7 @@ def heading_at(lanes: np.ndarray, lane: int, longitudinal: float) -> float:
     return row[HEADING]
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def on_lane(lanes: np.ndarray, lane: int, longitudinal: float, lateral: float, margin: float) -> bool:
     row = lanes[lane]
     return (
@@ -236,7 +236,7 @@ def on_lane(lanes: np.ndarray, lane: int, longitudinal: float, lateral: float, m
     )
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def distance(lanes: np.ndarray, lane: int, x: float, y: float) -> float:
     """AbstractLane.distance: lateral offset plus how far the point lies beyond either end."""
     (lanes,) = borrowed((lanes,))
@@ -244,7 +244,7 @@ def distance(lanes: np.ndarray, lane: int, x: float, y: float) -> float:
     return np.abs(r) + max(s - lanes[lane, LENGTH], 0.0) + max(0.0 - s, 0.0)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def is_reachable_from(lanes: np.ndarray, lane: int, x: float, y: float) -> bool:
     row = lanes[lane]
     if row[FORBIDDEN] > 0:
@@ -257,7 +257,7 @@ def is_reachable_from(lanes: np.ndarray, lane: int, x: float, y: float) -> bool:
     )
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def closest_lane(lanes: np.ndarray, x: float, y: float, heading: float, hint: int = -1) -> int:
     """highway-env's get_closest_lane_index: L1 distance plus heading misalignment, first minimum.
 
@@ -293,7 +293,7 @@ def closest_lane(lanes: np.ndarray, x: float, y: float, heading: float, hint: in
     return best
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def position(lanes: np.ndarray, lane: int, longitudinal: float, lateral: float) -> tuple[float, float]:
     """World point at (longitudinal, lateral) of ``lane``."""
     (lanes,) = borrowed((lanes,))

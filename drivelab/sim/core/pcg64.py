@@ -37,7 +37,7 @@ INIT_A, MULT_A, INIT_B, MULT_B = 0x43B0D7E5, 0x931E8875, 0x8B51F9DD, 0x58F38DED
 MIX_MULT_L, MIX_MULT_R, XSHIFT = 0xCA01F9DD, 0x4973F715, 16
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _seed_words(seed: int) -> np.ndarray:
     """SeedSequence's entropy words of a non-negative int: its 32-bit chunks, low first ([0] for 0)."""
     words = np.zeros(2, dtype=np.uint64)
@@ -51,7 +51,7 @@ def _seed_words(seed: int) -> np.ndarray:
             return words[:count]
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _hashmix(value: np.uint64, hash_const: np.ndarray, mult: int = MULT_A) -> np.uint64:
     value = (value ^ hash_const[0]) & _MASK32
     hash_const[0] = (hash_const[0] * np.uint64(mult)) & _MASK32
@@ -59,13 +59,13 @@ def _hashmix(value: np.uint64, hash_const: np.ndarray, mult: int = MULT_A) -> np
     return value ^ (value >> np.uint64(XSHIFT))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _mix(x: np.uint64, y: np.uint64) -> np.uint64:
     result = (np.uint64(MIX_MULT_L) * x - np.uint64(MIX_MULT_R) * y) & _MASK32
     return result ^ (result >> np.uint64(XSHIFT))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _seed_sequence_state(seed: int) -> np.ndarray:
     """``SeedSequence(seed).generate_state(4, np.uint64)``: the entropy mixed into the pool, then
     8 hashed 32-bit words paired low-first into 4 uint64."""
@@ -91,7 +91,7 @@ def _seed_sequence_state(seed: int) -> np.ndarray:
     return out
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _seeded_states(seeds: np.ndarray) -> np.ndarray:
     states = np.zeros((seeds.size, 6), dtype=np.uint64)
     for m in range(seeds.size):
@@ -100,7 +100,7 @@ def _seeded_states(seeds: np.ndarray) -> np.ndarray:
     return states
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def _mul_64(a: np.uint64, b: np.uint64) -> tuple[np.uint64, np.uint64]:
     """The 128-bit product of two uint64 as (high, low)."""
     a_lo, a_hi = a & _MASK32, a >> _32
@@ -115,7 +115,7 @@ def _mul_64(a: np.uint64, b: np.uint64) -> tuple[np.uint64, np.uint64]:
     return high, low
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def _step(state: np.ndarray) -> None:
     """state = state * MULT + inc (mod 2**128)."""
     high, low = _mul_64(state[STATE_LO], MULT_LO)
@@ -126,7 +126,7 @@ def _step(state: np.ndarray) -> None:
     state[STATE_LO] = low_sum
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _set_seed(state: np.ndarray, seed_hi, seed_lo, inc_hi, inc_lo) -> None:
     """pcg64_set_seed: inc = (initseq << 1) | 1; step; state += initstate; step."""
     state[INC_HI] = (np.uint64(inc_hi) << _ONE) | (np.uint64(inc_lo) >> _63)
@@ -141,7 +141,7 @@ def _set_seed(state: np.ndarray, seed_hi, seed_lo, inc_hi, inc_lo) -> None:
     state[HAS_UINT32], state[UINTEGER] = _ZERO, _ZERO
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def next_uint64(state: np.ndarray) -> np.uint64:
     """The next 64-bit output (``random_raw``): step, then XSL-RR of the new state."""
     _step(state)
@@ -150,7 +150,7 @@ def next_uint64(state: np.ndarray) -> np.uint64:
     return (xored >> rotation) | (xored << ((_64_MINUS - rotation) & _63))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def next_uint32(state: np.ndarray) -> np.uint64:
     """numpy's buffered 32-bit draw: the low half of a 64-bit output, its high half next time."""
     if state[HAS_UINT32] != _ZERO:
@@ -161,7 +161,7 @@ def next_uint32(state: np.ndarray) -> np.uint64:
     return value & _MASK32
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def bounded_int(state: np.ndarray, n: int) -> int:
     """``Generator.integers(0, n)`` for 1 <= n <= 2**32 - 1 (Lemire's method, 32-bit draws)."""
     if n == 1:
@@ -178,7 +178,7 @@ def bounded_int(state: np.ndarray, n: int) -> int:
     return np.int64(m >> _32)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def uniform(state: np.ndarray, low: float, high: float) -> float:
     """``Generator.uniform(low, high)``: low + (high - low) * a 53-bit double."""
     return low + (high - low) * (float(next_uint64(state) >> np.uint64(11)) * _DOUBLE_UNIT)
@@ -210,7 +210,7 @@ def set_state(generator: np.random.Generator, words: np.ndarray) -> None:
     }
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def standard_exponential_inv(state: np.ndarray) -> float:
     """``Generator.standard_exponential(method="inv")``: ``-log1p(-U)`` of the next 53-bit double U
     (numpy 2's ``random_standard_exponential_inv_fill``; ``-log(1 - U)``, numpy 1's form, differs in

@@ -308,7 +308,7 @@ def _describe_road(scenario: Scenario, traffic: str, control: str, overrides: di
 # --- compiled kernels over K worlds ---------------------------------------------------------------
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def meta_action(w: np.ndarray, e: int, lanes: np.ndarray, action: int, speeds: np.ndarray) -> None:
     """MDPVehicle.act for the ego (row ``e``) of one world's vehicles ``w`` (N, VEHICLE_COLUMNS):
     FASTER / SLOWER step the target speed, the lane changes retarget when reachable."""
@@ -326,14 +326,14 @@ def meta_action(w: np.ndarray, e: int, lanes: np.ndarray, action: int, speeds: n
             w[e, T.TARGET_LANE] = candidate
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def apply_meta(v, count, ego, lanes, actions, speeds) -> None:
     """``meta_action`` of each world's ego ``actions[k]`` (the controls follow in the kernel)."""
     for k in range(v.shape[0]):
         meta_action(v[k, : count[k]], ego[k], lanes, actions[k], speeds)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def exited(lanes: np.ndarray, exit_lane: np.ndarray, row: np.ndarray, distance_m: float) -> bool:
     """IntersectionEnv.has_arrived for one vehicle row: on an exit lane, ``distance_m`` along it."""
     lane = int(row[T.LANE])
@@ -343,7 +343,7 @@ def exited(lanes: np.ndarray, exit_lane: np.ndarray, row: np.ndarray, distance_m
     return s >= distance_m
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def clear_departed(
     v: np.ndarray, count: np.ndarray, ego: np.ndarray, lanes: np.ndarray, exit_lane: np.ndarray
 ) -> None:
@@ -398,7 +398,7 @@ def _command(control, low, span, constants):
 assert (COLLISION_NONE, COLLISION_VEHICLE) == (0, 1)  # a crashed flag as int8 is its collision kind
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def set_ego_controls(vehicles, ego, controls, low, span, constants) -> None:
     """Each world's ego row gets the command of its normalised control (K, 2) (``ContinuousAction``'s
     clip and linear map, ``_command``): acceleration (also the pedal of a pedal ego, the circuits')
@@ -410,7 +410,7 @@ def set_ego_controls(vehicles, ego, controls, low, span, constants) -> None:
         vehicles[k, ego[k], T.STEER] = _command(controls[k, 1], low[1], span[1], constants)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def project_routes(
     vehicles, ego, route, starts, segments, lengths2, segment_m, stations, point_count, closed, fresh, update,
     progress
@@ -508,7 +508,7 @@ def _span(stations, low, high, count):
     return first, max(last + 1, first)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def export_world(
     w, e: int, lanes, in_junction, exit_lane, arrival: int, arrival_threshold: float, out, ints, flags,
     vehicles, valid
@@ -550,7 +550,7 @@ def export_world(
         n += 1
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def export_worlds(
     v, count, ego, lanes, in_junction, exit_lane, arrival: int, arrival_threshold: float, floats, ints, flags,
     vehicles, valid
@@ -564,7 +564,7 @@ def export_worlds(
         )  # fmt: skip
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def advance_worlds(
     v, count, ego, lanes, idm, frames, dt, regulation, time_s, dt_policy, route, starts, segments,
     lengths2, segment_m, stations, point_count, closed, progress, in_junction, exit_lane, arrival,

@@ -115,7 +115,7 @@ def _wrap_to_pi(x: float) -> float:
     return ((x + np.pi) % (2 * np.pi)) - np.pi
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def lane_distances(lanes: np.ndarray, x: float, y: float, heading: float) -> np.ndarray:
     """(L,) every lane's distance_with_heading to (x, y, heading), compiled: it shortlists the closest
     lanes; where two are within 1e-6, numpy's distances decide (``LaneGeometry.closest_lane``)."""

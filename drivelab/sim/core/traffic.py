@@ -63,19 +63,19 @@ MAX_SPEED, MIN_SPEED = 40.0, -40.0
 PEDAL_DRAG_PER_S = 5.0 * 0.35 / (30.0 / 3.6)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def not_zero(value: float) -> float:
     if np.abs(value) > 1e-2:
         return value
     return 1e-2 if value >= 0 else -1e-2
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def _clip(value: float, low: float, high: float) -> float:
     return min(max(value, low), high)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def speed_index(speed: float, speeds: np.ndarray) -> int:
     """MDPVehicle.speed_to_index: the index of the allowed speed nearest ``speed``."""
     top = speeds.size - 1
@@ -83,7 +83,7 @@ def speed_index(speed: float, speeds: np.ndarray) -> int:
     return int(min(max(np.rint(ratio * top), 0.0), float(top)))  # np.round: half to even
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def steering_control(v: np.ndarray, lanes: np.ndarray, i: int, target: int) -> float:
     """ControlledVehicle.steering_control: lateral P → heading reference → heading P → steering."""
     s, r = L.local_coordinates(lanes, target, v[i, X], v[i, Y])
@@ -97,7 +97,7 @@ def steering_control(v: np.ndarray, lanes: np.ndarray, i: int, target: int) -> f
     return _clip(steering, -MAX_STEERING_ANGLE, MAX_STEERING_ANGLE)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def frame_cache(v: np.ndarray, lanes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Scratch arrays for one simulation frame's ``act``, each value computed once per frame (the
     same bits). ``coords`` (L, N, 4): per lane, every vehicle's (longitudinal, lateral, on the lane
@@ -108,7 +108,7 @@ def frame_cache(v: np.ndarray, lanes: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return coords, np.full(lanes.shape[0], -1, dtype=np.int64), np.empty((v.shape[0], 2))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def start_frame(v: np.ndarray, done: np.ndarray, trig: np.ndarray) -> None:
     v, done, trig = borrowed((v, done, trig))
     done[:] = -1
@@ -116,7 +116,7 @@ def start_frame(v: np.ndarray, done: np.ndarray, trig: np.ndarray) -> None:
         trig[j, 0], trig[j, 1] = L.cos0(v[j, HEADING]), L.sin0(v[j, HEADING])
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def lane_coordinates(
     v: np.ndarray, lanes: np.ndarray, coords: np.ndarray, done: np.ndarray, lane: int
 ) -> None:
@@ -126,7 +126,7 @@ def lane_coordinates(
         fill_lane_coordinates(v, lanes, coords, done, lane)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def fill_lane_coordinates(
     v: np.ndarray, lanes: np.ndarray, coords: np.ndarray, done: np.ndarray, lane: int
 ) -> None:
@@ -150,7 +150,7 @@ def fill_lane_coordinates(
     done[lane] = count
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def cached_neighbours(
     v: np.ndarray, lanes: np.ndarray, coords: np.ndarray, done: np.ndarray, i: int, lane: int
 ) -> tuple[int, int]:
@@ -191,13 +191,13 @@ def cached_neighbours(
     return front, rear
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def cached_desired_gap(v: np.ndarray, p: np.ndarray, trig: np.ndarray, ego: int, front: int) -> float:
     """IDMVehicle.desired_gap, projected on the ego's direction (``trig``: headings' cos, sin)."""
     return desired_gap_to(v, p, trig, ego, front, v[front, SPEED])
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def desired_gap_to(v, p, trig, ego: int, front: int, front_speed: float) -> float:
     """``cached_desired_gap`` to a front object at ``front_speed`` whose heading is ``trig[front]``."""
     ab = -p[COMFORT_ACC_MAX] * p[COMFORT_ACC_MIN]
@@ -208,7 +208,7 @@ def desired_gap_to(v, p, trig, ego: int, front: int, front_speed: float) -> floa
     return p[DISTANCE_WANTED] + v[ego, SPEED] * p[TIME_WANTED] + v[ego, SPEED] * dv / (2 * np.sqrt(ab))
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def idm_free_road(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, me: int, ego: int) -> float:
     """The free-road term of IDMVehicle.acceleration as computed by vehicle ``me`` (its DELTA)
     for ``ego``: what ``ego`` would do with no one ahead (0 for no vehicle or an obstacle)."""
@@ -222,7 +222,7 @@ def idm_free_road(v: np.ndarray, lanes: np.ndarray, p: np.ndarray, me: int, ego:
     return p[COMFORT_ACC_MAX] * (1 - ratio ** v[me, DELTA])
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def idm_behind(v, lanes, p, coords, done, trig, free_road: float, ego: int, front: int) -> float:
     """IDMVehicle.acceleration from its free-road term (``idm_free_road``, computed once for the
     several fronts MOBIL asks about): less the interaction with ``front`` (none: -1)."""
@@ -238,7 +238,7 @@ def idm_behind(v, lanes, p, coords, done, trig, free_road: float, ego: int, fron
     return acceleration
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def cached_idm_acceleration(v, lanes, p, coords, done, trig, me: int, ego: int, front: int) -> float:
     """IDMVehicle.acceleration as computed by vehicle ``me`` (its DELTA) for ``ego`` behind ``front``."""
     free_road = idm_free_road(v, lanes, p, me, ego)
@@ -250,7 +250,7 @@ def cached_idm_acceleration(v, lanes, p, coords, done, trig, me: int, ego: int, 
 OWN_FREE, OWN_A, OWN_FRONT, OWN_REAR, OWN_REAR_A, OWN_REAR_PRED_A, OWN_REAR_FILLED, OWN_SIZE = range(8)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def own_lane(v, lanes, p, coords, done, trig, i: int, own) -> None:
     """Fill ``own`` for vehicle i: its front and rear on its lane, its free-road term and its
     acceleration behind that front (IDMVehicle.acceleration(self, front))."""
@@ -260,7 +260,7 @@ def own_lane(v, lanes, p, coords, done, trig, i: int, own) -> None:
     own[OWN_FRONT], own[OWN_REAR], own[OWN_REAR_FILLED] = front, rear, 0.0
 
 
-@njit(cache=True, nogil=True)  # not inlined: inlined, its body made numba compile ``act`` for long
+@njit(cache=True)  # not inlined: inlined, its body made numba compile ``act`` for long
 def mobil_side(v, lanes, p, coords, done, trig, i: int, lane: int, own) -> bool:
     """IDMVehicle.mobil: is a change to ``lane`` safe for the new follower, and worth it?
     (``own``: vehicle i's row of ``own_lane``; highway-env's arithmetic, each value computed once.)"""
@@ -298,7 +298,7 @@ def mobil_side(v, lanes, p, coords, done, trig, i: int, lane: int, own) -> bool:
     return jerk >= p[MIN_ACC_GAIN]
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def abort_change(v, lanes, p, coords, done, trig, i: int, lane: int, target: int) -> None:
     """IDMVehicle.change_lane_policy's abort: vehicle i, changing from ``lane`` to ``target`` on
     the same road, goes back when another vehicle entering ``target`` is within its desired gap."""
@@ -317,7 +317,7 @@ def abort_change(v, lanes, p, coords, done, trig, i: int, lane: int, target: int
                 return
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def change_lane_policy(v, lanes, p, coords, done, trig, i: int, own) -> None:
     """IDMVehicle.change_lane_policy: abort a change into a lane someone else is entering; else,
     every LANE_CHANGE_DELAY seconds, ask MOBIL about each side lane (the right one last).
@@ -345,7 +345,7 @@ def change_lane_policy(v, lanes, p, coords, done, trig, i: int, own) -> None:
             v[i, TARGET_LANE] = candidate
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def lane_on_next_road(
     lanes: np.ndarray, lane: int, next_road: int, next_id: int, x: float, y: float
 ) -> tuple[int, float]:
@@ -365,7 +365,7 @@ def lane_on_next_road(
     return next_road + next_id, distance(lanes, next_road + next_id, x, y)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def next_lane(v: np.ndarray, lanes: np.ndarray, i: int) -> int:
     """RoadNetwork.next_lane for vehicle i's target lane: the route's next road when it starts
     where this one ends (dropping a finished route step), else the successor road whose lane is
@@ -395,7 +395,7 @@ def next_lane(v: np.ndarray, lanes: np.ndarray, i: int) -> int:
     return best_lane
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def follow_road(v: np.ndarray, lanes: np.ndarray, i: int) -> None:
     """ControlledVehicle.follow_road: at the end of the target lane, target the next one."""
     target = int(v[i, TARGET_LANE])
@@ -404,7 +404,7 @@ def follow_road(v: np.ndarray, lanes: np.ndarray, i: int) -> None:
         v[i, TARGET_LANE] = next_lane(v, lanes, i)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def act(v, lanes, p, coords, done, trig, own) -> None:
     """Road.act: every vehicle decides its controls, in list order (``frame_cache`` arrays;
     ``own`` (OWN_SIZE,) scratch, the caller's, so that it is borrowed here as well)."""
@@ -432,7 +432,7 @@ def act(v, lanes, p, coords, done, trig, own) -> None:
         v[i, ACCEL] = _clip(acceleration, -p[ACC_MAX], p[ACC_MAX])
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def step_vehicle(v: np.ndarray, lanes: np.ndarray, i: int, dt: float) -> None:
     """Vehicle.step: clip the actions, integrate the kinematic bicycle, find the lane. A pedal
     vehicle's acceleration is first its pedal minus the drag (the circuits' PedalVehicle.step)."""
@@ -460,7 +460,7 @@ def step_vehicle(v: np.ndarray, lanes: np.ndarray, i: int, dt: float) -> None:
     v[i, LANE] = L.closest_lane(lanes, v[i, X], v[i, Y], v[i, HEADING], int(v[i, LANE]))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _polygon(v: np.ndarray, i: int) -> np.ndarray:
     """Vehicle i's rectangle: its 4 corners and the first again, (5, 2)."""
     corners = np.empty((5, 2))
@@ -468,7 +468,7 @@ def _polygon(v: np.ndarray, i: int) -> np.ndarray:
     return corners
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def _polygon_into(v: np.ndarray, i: int, corners: np.ndarray) -> None:
     c, s = L.cos0(v[i, HEADING]), L.sin0(v[i, HEADING])
     half_l, half_w = v[i, LEN] / 2, v[i, WID] / 2
@@ -480,7 +480,7 @@ def _polygon_into(v: np.ndarray, i: int, corners: np.ndarray) -> None:
     corners[4, 0], corners[4, 1] = corners[0, 0], corners[0, 1]  # element-wise: cheaper to compile
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _project(polygon: np.ndarray, nx: float, ny: float) -> tuple[float, float]:
     low, high = np.inf, -np.inf
     for k in range(polygon.shape[0]):
@@ -489,12 +489,12 @@ def _project(polygon: np.ndarray, nx: float, ny: float) -> tuple[float, float]:
     return low, high
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _interval_distance(min_a: float, max_a: float, min_b: float, max_b: float) -> float:
     return min_b - max_a if min_a < min_b else min_a - max_b
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def polygons_intersecting(a, b, dax, day, dbx, dby):
     """utils.are_polygons_intersecting: (intersecting, will intersect, translation x, y)."""
     intersecting, will_intersect = True, True
@@ -527,7 +527,7 @@ def polygons_intersecting(a, b, dax, day, dbx, dby):
     return intersecting, will_intersect, min_distance * axis_x, min_distance * axis_y
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def handle_collisions(v: np.ndarray, dt: float) -> None:
     """Road.step's collision pass: each vehicle against the vehicles after it, then the obstacles
     (which sit after every vehicle), as RoadObject.handle_collisions."""
@@ -565,7 +565,7 @@ def handle_collisions(v: np.ndarray, dt: float) -> None:
                 v[i, CRASHED], v[j, CRASHED] = 1.0, 1.0
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def predicted_pose(v: np.ndarray, lanes: np.ndarray, i: int, t: float) -> tuple[float, float, float]:
     """ControlledVehicle.predict_trajectory_constant_speed at time t: (x, y, heading) along its
     route (RoadNetwork.position_heading_along_route; a route step without a lane id keeps the
@@ -587,7 +587,7 @@ def predicted_pose(v: np.ndarray, lanes: np.ndarray, i: int, t: float) -> tuple[
         return L.position(lanes, row, s, 0.0) + (L.heading_at(lanes, row, s),)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _corner_inside(x1, y1, length1, width1, angle1, x2, y2, length2, width2, angle2) -> bool:
     """utils.has_corner_inside: a corner, edge midpoint or the centre of rectangle 1 in rectangle 2."""
     c1, s1 = np.cos(angle1), np.sin(angle1)
@@ -606,7 +606,7 @@ def _corner_inside(x1, y1, length1, width1, angle1, x2, y2, length2, width2, ang
     return False
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def conflict_possible(v: np.ndarray, lanes: np.ndarray, i: int, j: int) -> bool:
     """RegulatedRoad.is_conflict_possible: do i and j, driving on at constant speed along their
     routes, come within a (1.5 length x 0.9 width) box of each other in the next 3 s?"""
@@ -624,13 +624,13 @@ def conflict_possible(v: np.ndarray, lanes: np.ndarray, i: int, j: int) -> bool:
     return False
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def front_distance(v: np.ndarray, i: int, j: int) -> float:
     """RoadObject.front_distance_to: how far j is ahead of i along i's heading."""
     return np.cos(v[i, HEADING]) * (v[j, X] - v[i, X]) + np.sin(v[i, HEADING]) * (v[j, Y] - v[i, Y])
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def enforce_road_rules(
     v: np.ndarray, lanes: np.ndarray, release_cap_mps: float = np.inf, prioritised_only: bool = False
 ) -> None:
@@ -669,7 +669,7 @@ def enforce_road_rules(
                 v[yielding, YIELDING] = 1.0
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def simulate(v, lanes, p, frames: int, dt: float, regulation) -> None:
     """AbstractEnv._simulate for ``frames`` simulation steps of ``dt`` seconds.
 
@@ -691,14 +691,14 @@ def simulate(v, lanes, p, frames: int, dt: float, regulation) -> None:
         handle_collisions(v, dt)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _simulate_worlds_serial(v, count, lanes, p, frames, dt, regulation, active) -> None:
     for k in range(v.shape[0]):
         if active[k]:
             simulate(v[k, : count[k]], lanes, p, frames, dt, regulation[k])
 
 
-@njit(cache=True, nogil=True, parallel=True)
+@njit(cache=True, parallel=True)
 def _simulate_worlds_parallel(v, count, lanes, p, frames, dt, regulation, active) -> None:
     for k in prange(v.shape[0]):
         if active[k]:

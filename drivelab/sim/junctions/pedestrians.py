@@ -34,7 +34,7 @@ from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW
 PEDESTRIAN_DIAGONAL_M = np.sqrt(PEDESTRIAN_SIZE_M**2 + PEDESTRIAN_SIZE_M**2)  # RoadObject.diagonal
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def light_states(
     light_junction, light_arm, offsets, green_s: float, yellow_s: float, all_red_s: float, time_s: float, out
 ) -> None:  # fmt: skip
@@ -56,7 +56,7 @@ def light_states(
             out[m] = LIGHT_RED
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def light_states_worlds(light_junction, light_arm, start, stop, offsets, timings, time_s, active, out):
     """``light_states`` of world k's lights (rows ``start[k]:stop[k]`` of ``light_junction`` /
     ``light_arm``) with its offsets ``offsets[k]`` (K, J) at ``time_s[k]``, into ``out[k]`` (K, M),
@@ -70,7 +70,7 @@ def light_states_worlds(light_junction, light_arm, start, stop, offsets, timings
             )  # fmt: skip
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def gap_clear(peds: np.ndarray, i: int, v: np.ndarray, count: int) -> bool:
     """``Pedestrian._gap_clear`` of pedestrian ``i`` over vehicle rows 0..count-1 (ego included):
     no vehicle within CROSSING_CLEAR_M of the crossing's centre, none facing it within
@@ -90,7 +90,7 @@ def gap_clear(peds: np.ndarray, i: int, v: np.ndarray, count: int) -> bool:
     return True
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def walk_pedestrians(
     peds: np.ndarray, pcount: int, v: np.ndarray, count: int, dt: float, rng_words: np.ndarray
 ) -> None:
@@ -119,7 +119,7 @@ def walk_pedestrians(
             peds[i, R.P_WAIT_S] = MEAN_WAIT_S * standard_exponential_inv(rng_words)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _pedestrian_polygon(peds: np.ndarray, i: int) -> np.ndarray:
     """RoadObject.polygon of a pedestrian: its PEDESTRIAN_SIZE_M square, closed (5, 2)."""
     c, s = np.cos(peds[i, R.P_HEADING]), np.sin(peds[i, R.P_HEADING])
@@ -134,7 +134,7 @@ def _pedestrian_polygon(peds: np.ndarray, i: int) -> np.ndarray:
     return corners
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def hit_pedestrians(peds: np.ndarray, pcount: int, v: np.ndarray, count: int, ego: int) -> None:
     """``TownRoad._hit_pedestrians``: every pair (pedestrian not crashed, vehicle faster than
     MOVING_MPS), pedestrian-major, closer than (pedestrian diagonal + the largest moving diagonal)/2
@@ -167,7 +167,7 @@ def hit_pedestrians(peds: np.ndarray, pcount: int, v: np.ndarray, count: int, eg
                 peds[i, R.P_HIT_EGO] = 1.0 if j == ego else 0.0
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def clear_wrecks(v: np.ndarray, count: int, ego: int, dt: float) -> tuple[int, int]:
     """``TownRoad._clear_wrecks``: every crashed row but the ego's adds ``dt`` to WRECKED_S (the
     reference's float sum) and is removed once WRECKED_S >= WRECK_CLEARED_S; kept rows close up in

@@ -51,7 +51,7 @@ from drivelab.world.state import LIGHT_GREEN, LIGHT_RED, LIGHT_YELLOW
 NO_STOP = -1.0  # stop_line_ahead's None (a distance to stop at is never negative)
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def py_square(x: float) -> float:
     """``x ** 2`` as Python (and numpy's scalar power) computes it for a float: libm's
     ``pow(x, 2.0)``, which is not always ``x * x`` (glibc's differs by an ULP for about 1 in 1 500
@@ -80,7 +80,7 @@ def road_arrays_tuple(arrays, lanes: np.ndarray) -> tuple:
     )
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def planned_next(v: np.ndarray, lanes: np.ndarray, i: int) -> int:
     """TownVehicle.next_lane: the lane row of the first route entry that starts where vehicle i's
     current lane ends, else -1 (a route entry without a lane id names the road's lane 0)."""
@@ -92,7 +92,7 @@ def planned_next(v: np.ndarray, lanes: np.ndarray, i: int) -> int:
     return -1
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def random_goal(
     lanes: np.ndarray, start: int, street_lanes: np.ndarray, route_length: np.ndarray, rng_words: np.ndarray
 ) -> int:
@@ -122,7 +122,7 @@ def random_goal(
     return -1
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def random_route(v, lanes, i: int, start: int, street_lanes, routes, route_length, rng_words) -> None:
     """town_env.random_route from lane row ``start`` into vehicle i's route entries: the route to
     ``random_goal``'s street, else ``start`` alone."""
@@ -143,7 +143,7 @@ def random_route(v, lanes, i: int, start: int, street_lanes, routes, route_lengt
     v[i, T.ROUTE_START], v[i, T.ROUTE_END], v[i, T.ROUTED] = 0.0, 1.0, 1.0
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def object_xy(v: np.ndarray, peds: np.ndarray, j: int) -> tuple[float, float]:
     """Position of vehicle j, or of pedestrian j - count."""
     if j < v.shape[0]:
@@ -151,7 +151,7 @@ def object_xy(v: np.ndarray, peds: np.ndarray, j: int) -> tuple[float, float]:
     return peds[j - v.shape[0], P_X], peds[j - v.shape[0], P_Y]
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def lane_s(v, peds, lanes, coords, seen, lane: int, j: int) -> float:
     """Object j's longitudinal coordinate in ``lane`` (computed once per frame: the same bits);
     ``seen[lane, j]`` becomes 1 if it is on the lane (``on_lane``, 1 m margin), else 0."""
@@ -208,7 +208,7 @@ def connected_lanes(lanes: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
     return search, offset, size, discs
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def lane_objects(v, peds, lanes, coords, seen, discs, near, near_count, lane: int) -> None:
     """``near[lane, :near_count[lane]]``: the objects on ``lane`` (``on_lane``, 1 m margin) in
     scan order (vehicles, then pedestrians not crashed), listed once per frame: only those inside
@@ -235,7 +235,7 @@ def lane_objects(v, peds, lanes, coords, seen, discs, near, near_count, lane: in
     near_count[lane] = n
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def connected_front(
     v, peds, lanes, coords, seen, near, near_count, search, search_offset, search_size, discs, i: int,
     lane: int
@@ -271,7 +271,7 @@ def connected_front(
     return front
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def left_turn_must_wait(
     v, lanes, i: int, turn_lane: int, junction, from_arm, to_arm, turn, end_junction, end_arm
 ) -> bool:  # fmt: skip
@@ -297,7 +297,7 @@ def left_turn_must_wait(
     return False
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def stop_line_ahead(
     v, lanes, p, i: int, junction, from_arm, to_arm, turn, end_junction, end_arm, light, light_states
 ) -> float:  # fmt: skip
@@ -325,7 +325,7 @@ def stop_line_ahead(
     return ahead_m
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def town_acceleration(
     v, peds, lanes, p, coords, done, trig, seen, i: int, front: int, junction, from_arm, to_arm, turn,
     end_junction, end_arm, light, light_states
@@ -360,7 +360,7 @@ def town_acceleration(
     return min(acceleration, stop_ahead(v, p, i, ahead_m))
 
 
-@njit(cache=True, nogil=True, inline="always")
+@njit(cache=True, inline="always")
 def stop_ahead(v, p, i: int, ahead_m: float) -> float:
     """IDM's acceleration of vehicle i behind a stopped virtual leader ``ahead_m`` metres beyond
     its front bumper, to stand STOP_MARGIN_M short of it (TownVehicle.acceleration's stop line)."""
@@ -373,7 +373,7 @@ def stop_ahead(v, p, i: int, ahead_m: float) -> float:
     return stop - p[T.COMFORT_ACC_MAX] * py_square(desired_gap / T.not_zero(gap_m))
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def town_act(
     v, count: int, peds, pcount: int, lanes, p, coords, done, trig, junction, from_arm, to_arm, turn,
     end_junction, end_arm, light, street_lanes, routes, route_length, search, search_offset, search_size,
@@ -395,7 +395,7 @@ def town_act(
     )  # fmt: skip
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def _act_rows(
     v, count: int, peds, pcount: int, lanes, p, coords, done, trig, junction, from_arm, to_arm, turn,
     end_junction, end_arm, light, street_lanes, routes, route_length, search, search_offset, search_size,
@@ -468,7 +468,7 @@ def _act_rows(
         w[i, T.ACCEL] = T._clip(acceleration, -p[T.ACC_MAX], p[T.ACC_MAX])
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def town_step(v: np.ndarray, count: int, lanes: np.ndarray, dt: float) -> None:
     """Road.step's vehicle loop for rows ``0..count-1``: Vehicle.step (``traffic.step_vehicle``);
     a TOWN row first adds ``dt`` to its IDM timer and after the step does not reverse
