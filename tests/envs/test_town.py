@@ -381,3 +381,29 @@ def test_hitting_a_pedestrian_is_a_pedestrian_collision():
             break
     assert terminated and env.world.events.collision_with == "pedestrian"
     assert info["episode_metrics"]["pedestrian_collisions"] == 1
+
+
+@pytest.mark.parametrize("backend", ["fast", "highway"])
+def test_an_episode_without_retarget_has_nocrash_time_limit_on_a_random_route_too(backend):
+    """Evaluation (no retarget: the episode ends on arrival) gives a random route the time limit
+    NoCrash gives its fixed routes, the route at 10 km/h plus 10 s, so that the evaluation set and
+    NoCrash judge success alike; training (retarget) keeps the scenario's 60 s; a given duration
+    still caps the route's limit."""
+    from drivelab.sim.reference.highway import ROUTE_TIMEOUT_MPS
+
+    def limits(duration_s=None, **options):
+        env = DriveEnv("town", obs="kinematics", traffic="empty", backend=backend, backend_options=options,
+                       **({} if duration_s is None else {"duration_s": duration_s}))  # fmt: skip
+        found = []
+        for seed in range(4):
+            env.reset(seed=seed)
+            route = env.world.route
+            found.append((env.time_limit_s, (route.length_m - route.progress_m) / ROUTE_TIMEOUT_MPS + 10.0))
+        return found
+
+    evaluation = limits(retarget=False)
+    for limit, route in evaluation:
+        assert limit == pytest.approx(route, rel=1e-12)
+    assert len({round(limit, 6) for limit, _ in evaluation}) > 1  # one per route, not one for all
+    assert all(limit == 60.0 for limit, _ in limits(retarget=True))
+    assert all(limit == min(route, 50.0) for limit, route in limits(50.0, retarget=False))

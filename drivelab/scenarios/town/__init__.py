@@ -52,8 +52,12 @@ OPTIONS = (
         expected="a mapping of phases to seconds", check=check_light_timings,
     ),
     Option("ego_start_speed", float, 0.0, "the ego's speed at the start, m/s", minimum=0),
-    Option("retarget", bool, True, "a new random target each time one is reached (evaluation: false)"),
-    Option("fixed_routes", bool, False, "the 25 NoCrash evaluation routes with their time limits"),
+    Option(
+        "retarget", bool, True,
+        "a new random target each time one is reached; false (evaluation): the episode ends on arrival "
+        "and its time limit is NoCrash's, the route at 10 km/h plus 10 s",
+    ),
+    Option("fixed_routes", bool, False, "the 25 NoCrash evaluation routes (one route an episode)"),
     *timing_options(10, 5, 5),
 )  # fmt: skip
 

@@ -82,6 +82,8 @@ class TownSetup:
     :param vehicles_count, pedestrians_count: the traffic level's NPCs and pedestrians.
     :param cycle_s: the lights' cycle; ``ego_start_speed``: the ego's initial speed.
     :param fixed_routes: NoCrash's fixed routes (else a random start and route).
+    :param timed_routes: each episode drives one route (``fixed_routes``, or no ``retarget``) and
+        has NoCrash's time limit: the route at 10 km/h, plus 10 s.
     """
 
     road: object
@@ -91,6 +93,7 @@ class TownSetup:
     cycle_s: float
     ego_start_speed: float
     fixed_routes: bool
+    timed_routes: bool
 
     def __post_init__(self) -> None:
         self.geometry: LaneGeometry = self.road.geometry
@@ -127,6 +130,7 @@ class TownSetup:
                 cycle_s=LightTimings(**config["light_timings"]).cycle_s,
                 ego_start_speed=float(config["ego_start_speed"]),
                 fixed_routes=bool(config["fixed_routes"]),
+                timed_routes=bool(config["fixed_routes"]) or not config["retarget"],
             )
         return setup
 
@@ -217,7 +221,7 @@ def town_episode(seed: int, setup: TownSetup, control: str) -> TownEpisode:
     ego_route = ego_route[:route_size].copy()
 
     limit = np.inf
-    if setup.fixed_routes:  # HighwayBackend.reset: (route length - progress) at 10 km/h, + 10 s
+    if setup.timed_routes:  # HighwayBackend.reset: (route length - progress) at 10 km/h, + 10 s
         from drivelab.sim.reference.highway import ROUTE_TIMEOUT_MPS
 
         route = route_tracker(setup, ego_route)

@@ -194,7 +194,9 @@ class HighwayBackend:
             self.road_map = dataclasses.replace(self.road_map, guide_lines=(self.route.polyline,))
         self.progress_m = self.route.project(self.env.vehicle.position)
         self.route_time_limit_s = None
-        if self.env.config.get("fixed_routes"):  # NoCrash: the CoRL 2017 timeout, 10 km/h + 10 s
+        config = self.env.config
+        if config.get("fixed_routes") or config.get("retarget") is False:  # one route: NoCrash's
+            # time limit (the CoRL 2017 timeout), the route at 10 km/h + 10 s
             self.route_time_limit_s = (self.route.length_m - self.progress_m) / ROUTE_TIMEOUT_MPS + 10.0
         self.world = self._export(Events())
         return self.world
