@@ -1,29 +1,32 @@
-"""What is reachable on the intersection: a search-based planner that uses drivelab's own simulator
-as its model, on the 100 evaluation episodes.
+"""What is reachable: a search-based planner that uses drivelab's own simulator as its model, on
+the 100 evaluation episodes of the intersection and the highway.
 
     nice -n 10 env OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1 \\
-        .venv/bin/python benchmarks/planner_probe.py [--episodes 100] [--horizons 3,5]
+        .venv/bin/python benchmarks/planner_probe.py [--scenario intersection|highway]
+        [--episodes 100] [--horizons 3,5]
 
 It plans as rl-agents' deterministic planners do on highway-env, with a copy of the environment as
-the model. Before each decision it plays every sequence of the next H actions, each in its own
+the model. Before each decision it plays every sequence of the next H meta-actions, each in its own
 world of one ``VectorDriveEnv``. Every world starts from the episode's seed and replays the actions
 taken so far, so each one reaches the state the episode is in. The planner then takes the first
 action of the best sequence. The worlds share the episode's seed, so the model is exact: the
-planner knows what the other vehicles will do, and only the horizon limits it. It is an
-oracle with a limited horizon. What it reaches shows that a good policy exists for that share of
-the episodes; where it fails, no sequence of H actions from there avoids the failure. Each
-episode's actions are then played again in one ``DriveEnv``, as ``drivelab evaluate`` plays the
-evaluation episodes, and must give the same outcome.
+planner knows what the other vehicles will do, and only the horizon limits it. It is an oracle
+with a limited horizon: what it reaches shows that a good policy exists for that share of the
+episodes. Each episode's actions are then played again in one ``DriveEnv``, as ``drivelab
+evaluate`` plays the evaluation episodes, and must give the same outcome.
 
 A sequence's score:
-- a collision: −10⁶ plus the step it came at (the later, the better);
-- an arrival without one: +10⁶ less the step (the sooner, the better);
-- otherwise, the route progress at its end (a time-limit end included).
+- **a collision**: −10⁶ plus the step it came at (the later, the better);
+- **intersection**: an arrival without a collision scores +10⁶ less the step (the sooner, the
+  better); otherwise, the route progress at the sequence's end, a time-limit end included;
+- **highway**: the ego's summed speed over the sequence, the leaderboard's mean speed, to be as high
+  as no collision allows; with ``--speed-cap V`` a speed counts up to V m/s only, so that the
+  planner keeps its margins instead of driving faster than V.
 
-Action space: highway-env's intersection meta-actions without lane changes (slower, idle, faster;
-one decision a second, 13 s episodes), regular traffic, as ``intersection_probe.py``. Success and
-crash are the leaderboard's: arrival without a collision, and any collision. Writes
-``benchmarks/results/planner_probe.{json,md}``.
+Action spaces: the intersection's meta-actions without lane changes (slower, idle, faster), as
+``intersection_probe.py``; the highway's five, with lane changes. One decision a second, regular
+traffic. Writes ``benchmarks/results/planner_probe.{json,md}``. A scenario run again replaces its
+section.
 """
 
 from __future__ import annotations
@@ -42,19 +45,24 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from intersection_probe import header, wilson_text  # noqa: E402
+from intersection_probe import wilson_text  # noqa: E402
 from provenance import Parser, command_line, cpu_isa, whole, wholes  # noqa: E402
 
 from drivelab.training.seeds import evaluation_seeds  # noqa: E402
+from drivelab.training.stats import bootstrap_ci  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results"
-SCENARIO = {"scenario": "intersection", "obs": "kinematics", "action": "meta", "traffic": "regular",
-            "action_options": {"lateral": False}}  # fmt: skip
+SCENARIOS = {  # name: the environment's keywords
+    "intersection": {"obs": "kinematics", "action": "meta", "traffic": "regular",
+                     "action_options": {"lateral": False}},
+    "highway": {"obs": "kinematics", "action": "meta", "traffic": "regular"},
+}  # fmt: skip
 ARRIVAL, COLLISION = 1e6, -1e6
 
 
-def plan_episode(env, seed: int, horizon: int) -> dict:
-    """Play evaluation episode ``seed`` with the planner of horizon ``horizon``: its outcome."""
+def plan_episode(env, scenario: str, seed: int, horizon: int, speed_cap: float = np.inf) -> dict:
+    """Play evaluation episode ``seed`` with the planner of horizon ``horizon``: its outcome. On the
+    highway a speed counts up to ``speed_cap`` (m/s) in a sequence's score."""
     actions = env.single_action_space.n
     sequences = np.array(list(itertools.product(range(actions), repeat=horizon)))
     count = len(sequences)
@@ -63,33 +71,38 @@ def plan_episode(env, seed: int, horizon: int) -> dict:
         env.reset(options={"episode_seeds": np.full(count, seed)})
         for action in taken:  # every world in the episode's state
             env.step(np.full(count, action))
-        ended, score = np.zeros(count, dtype=bool), np.zeros(count)
+        ended, collided, score = np.zeros(count, dtype=bool), np.zeros(count, dtype=bool), np.zeros(count)
         first: dict[str, np.ndarray] = {}
         for j in range(horizon):
             _, _, terminated, truncated, _ = env.step(sequences[:, j])
             live, events = ~ended, env.batch.events
-            collided, arrived = live & events.collided, live & events.arrived & ~events.collided
-            score[collided] = COLLISION + j
-            score[arrived] = ARRIVAL - j
-            going = live & ~collided & ~arrived
-            score[going] = env.batch.route.progress_m[going]
+            crashed, arrived = live & events.collided, live & events.arrived & ~events.collided
+            collided |= crashed
+            score[crashed] = COLLISION + j
+            going = live & ~crashed
+            if scenario == "intersection":
+                score[arrived] = ARRIVAL - j
+                going &= ~arrived
+                score[going] = env.batch.route.progress_m[going]
+            else:
+                score[going] += np.minimum(env.batch.ego.speed_mps[going], speed_cap)
             if j == 0:
-                first = {"ended": (terminated | truncated).copy(), "collided": collided, "arrived": arrived}
+                first = {"ended": (terminated | truncated).copy(), "collided": crashed, "arrived": arrived}
             ended |= terminated | truncated
         best = int(np.argmax(score))
         taken.append(int(sequences[best, 0]))
         if first["ended"][best]:
-            return {"actions": taken, "success": bool(first["arrived"][best]),
-                    "crash": bool(first["collided"][best])}  # fmt: skip
+            return replayed(
+                scenario, seed, taken, bool(first["collided"][best]), bool(first["arrived"][best])
+            )
 
 
-def replayed(seed: int, actions: list[int]) -> dict:
-    """The outcome of ``actions`` played in evaluation episode ``seed`` as ``drivelab evaluate``
-    plays it (one ``DriveEnv``): the planner's outcome, checked."""
+def replayed(scenario: str, seed: int, actions: list[int], crash: bool, arrived: bool) -> dict:
+    """The metrics of ``actions`` played in evaluation episode ``seed`` as ``drivelab evaluate``
+    plays it (one ``DriveEnv``), checked against the planner's ending (``crash``, ``arrived``)."""
     import drivelab
 
-    options = dict(SCENARIO)
-    env = drivelab.make(options.pop("scenario"), **options)
+    env = drivelab.make(scenario, **SCENARIOS[scenario])
     env.reset(options={"episode_seed": seed})
     for t, action in enumerate(actions):
         _, _, terminated, truncated, info = env.step(action)
@@ -98,80 +111,129 @@ def replayed(seed: int, actions: list[int]) -> dict:
                 f"episode {seed}: the replay ends at step {t + 1}, the plan at {len(actions)}"
             )
     metrics = info["episode_metrics"]
-    return {"actions": actions, "success": metrics["success"] > 0, "crash": metrics["collisions"] > 0}
+    outcome = {"actions": actions, "success": metrics["success"] > 0, "crash": metrics["collisions"] > 0,
+               "mean_speed_mps": metrics["mean_speed_mps"]}  # fmt: skip
+    if outcome["crash"] != crash or (scenario == "intersection" and outcome["success"] != arrived):
+        raise AssertionError(f"episode {seed}: the plan's outcome is not the replay's")
+    return outcome
 
 
-def play(horizon: int, episodes: int) -> dict:
+def play(scenario: str, horizon: int, episodes: int, speed_cap: float = np.inf) -> dict:
     from drivelab.envs.vector import VectorDriveEnv
 
-    options = dict(SCENARIO)
-    scenario = options.pop("scenario")
-    env = VectorDriveEnv(3**horizon, scenario, **options)
-    assert env.single_action_space.n == 3, env.single_action_space
+    actions = 3 if scenario == "intersection" else 5
+    env = VectorDriveEnv(actions**horizon, scenario, **SCENARIOS[scenario])
+    assert env.single_action_space.n == actions, env.single_action_space
     start = time.perf_counter()
-    outcomes = []
-    for seed in evaluation_seeds(episodes):
-        planned = plan_episode(env, int(seed), horizon)
-        if replayed(int(seed), planned["actions"]) != planned:
-            raise AssertionError(f"episode {seed}: the plan's outcome is not the replay's")
-        outcomes.append(planned)
+    seeds = evaluation_seeds(episodes)
+    outcomes = [plan_episode(env, scenario, int(seed), horizon, speed_cap) for seed in seeds]
+    speeds = [o["mean_speed_mps"] for o in outcomes]
+    low, high = bootstrap_ci(speeds)
     return {
         "horizon": horizon,
+        "speed_cap_mps": None if np.isinf(speed_cap) else speed_cap,
+        "sequences": actions**horizon,
         "episodes": episodes,
         "success": sum(o["success"] for o in outcomes),
         "crash": sum(o["crash"] for o in outcomes),
+        "mean_speed_mps": float(np.mean(speeds)),
+        "mean_speed_interval": [low, high],
         "wall_s": round(time.perf_counter() - start, 1),
         "outcomes": outcomes,
     }
 
 
+INTRODUCTION = (
+    "Before each decision the planner plays every sequence of the next H meta-actions (one a second) in "
+    "its own world, from the episode's seed and the actions taken so far, and takes the first action of "
+    "the best. The model is exact (the worlds share the episode's seed), so this is an oracle whose only "
+    "limit is H: what it reaches shows that a good policy exists for that share of the episodes. Each "
+    "episode's actions, played again as `drivelab evaluate` plays the episode, gave the planner's "
+    "outcome. Rates in %, with their 90 % Wilson interval; speed: the mean over episodes of each "
+    "episode's mean speed, with its 90 % bootstrap interval."
+)
+SECTIONS = {
+    "intersection": (
+        "Intersection",
+        "Meta-actions without lane changes (slower, idle, faster), 13 s episodes, regular traffic. "
+        "The best sequence: no collision first, then the earliest arrival, then the most route "
+        "progress. Success: arrival without a collision. Fixed plans: `intersection_probe.md`; the "
+        "learners: `leaderboard.md`.",
+    ),
+    "highway": (
+        "Highway",
+        "The five meta-actions (lane changes, idle, faster, slower), 30 s episodes, regular traffic. "
+        "The best sequence: no collision first, then the highest summed speed. A hand-written "
+        "privileged driver: `highway_probe.md`; the learners: `leaderboard.md`.",
+    ),
+}
+
+
+def cap_text(cap: float | None) -> str:
+    return "—" if cap is None else f"{cap:g} m/s"
+
+
 def markdown(result: dict) -> str:
-    lines = [
-        *header(
-            "Intersection: a planner with the simulator as its model, on the evaluation episodes", result
-        ),
-        "Before each decision the planner plays every sequence of the next H meta-actions (slower, idle, "
-        "faster; one a second) in its own world, from the episode's seed and the actions taken so far, "
-        "and takes the first action of the best: no collision first, then the earliest arrival, then "
-        "the most route progress. The model is exact (the worlds share the episode's seed), so this "
-        "is an oracle whose only limit is H. What it reaches shows that a good policy exists for "
-        "that share of the episodes. 13 s episodes, regular traffic; rates in %, with their 90 % "
-        "Wilson interval. Each episode's actions, played again as `drivelab evaluate` plays the "
-        "episode, gave the planner's outcome. For comparison: fixed plans in `intersection_probe.md`, "
-        "the learners in `leaderboard.md`.",
-        "",
-        "| horizon H (decisions) | sequences per decision | success % | crash % | wall s |",
-        "|---|---|---|---|---|",
-    ]
-    for row in result["rows"]:
-        n = row["episodes"]
-        lines.append(
-            f"| {row['horizon']} | {3 ** row['horizon']} | {wilson_text(row['success'], n)} | "
-            f"{wilson_text(row['crash'], n)} | {row['wall_s']:.0f} |"
-        )
+    lines = ["# What is reachable: a planner with the simulator as its model, on the evaluation episodes",
+             "", INTRODUCTION]  # fmt: skip
+    for scenario, section in result["scenarios"].items():
+        title, text = SECTIONS[scenario]
+        lines += [
+            "",
+            f"## {title}",
+            "",
+            "Commands: "
+            + ", ".join(f"`{c}`" for c in dict.fromkeys(row["command"] for row in section["rows"])),
+            "",
+            f"Machine: {section['machine']}; {section['date']}.",
+            "",
+            text,
+            "",
+            "| horizon H (decisions) | speed counted up to | sequences per decision | success % | crash % | "
+            "mean speed m/s | wall s |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for row in section["rows"]:
+            n = row["episodes"]
+            low, high = row["mean_speed_interval"]
+            lines.append(
+                f"| {row['horizon']} | {cap_text(row.get('speed_cap_mps'))} | {row['sequences']} | "
+                f"{wilson_text(row['success'], n)} | "
+                f"{wilson_text(row['crash'], n)} | {row['mean_speed_mps']:.1f} [{low:.1f}, {high:.1f}] | "
+                f"{row['wall_s']:.0f} |"
+            )
     return "\n".join(lines) + "\n"
 
 
 def main() -> None:
     parser = Parser(description=__doc__.splitlines()[0])
+    parser.add_argument("--scenario", choices=list(SCENARIOS), default="intersection")
     parser.add_argument("--episodes", type=whole(), default=100)
     parser.add_argument("--horizons", type=wholes(1), default=[3, 5], help="comma-separated, e.g. 3,5")
+    parser.add_argument("--speed-cap", type=whole(), default=None, help="highway: m/s a speed counts up to")
     args = parser.parse_args()
-    if max(args.horizons) > 7:
-        parser.error("--horizons above 7 play more than 3**7 worlds per decision")
+    if args.speed_cap is not None and args.scenario != "highway":
+        parser.error("--speed-cap is the highway's")
+    speed_cap = np.inf if args.speed_cap is None else float(args.speed_cap)
+    actions = 3 if args.scenario == "intersection" else 5
+    if actions ** max(args.horizons) > 3**7:
+        parser.error(f"--horizons: {actions}**{max(args.horizons)} worlds per decision is more than 3**7")
     rows = []
     for horizon in args.horizons:
-        rows.append(play(horizon, args.episodes))
+        rows.append({"command": command_line(), **play(args.scenario, horizon, args.episodes, speed_cap)})
         print({k: v for k, v in rows[-1].items() if k != "outcomes"}, flush=True)
-    result = {
-        "command": command_line(),
+    path = RESULTS / "planner_probe.json"
+    result = json.loads(path.read_text()) if path.exists() else {"scenarios": {}}
+    kept = result["scenarios"].get(args.scenario, {}).get("rows", [])
+    run = {(row["horizon"], row.get("speed_cap_mps")) for row in rows}  # a row run again is replaced
+    result["scenarios"][args.scenario] = {
         "machine": f"{cpu_isa()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
-        "scenario": SCENARIO,
-        "rows": rows,
+        "environment": SCENARIOS[args.scenario],
+        "rows": [row for row in kept if (row["horizon"], row.get("speed_cap_mps")) not in run] + rows,
     }
     RESULTS.mkdir(exist_ok=True)
-    (RESULTS / "planner_probe.json").write_text(json.dumps(result, indent=1))
+    path.write_text(json.dumps(result, indent=1))
     (RESULTS / "planner_probe.md").write_text(markdown(result))
     print(markdown(result))
 

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 SCRIPT = Path(__file__).parents[1] / "benchmarks" / "planner_probe.py"
 
@@ -19,13 +20,14 @@ def _probe():
     return module
 
 
-def test_the_planners_outcomes_are_those_of_its_actions_played_again():
+@pytest.mark.parametrize(("scenario", "actions", "decisions"), [("intersection", 3, 13), ("highway", 5, 30)])
+def test_the_planners_outcomes_are_those_of_its_actions_played_again(scenario, actions, decisions):
     probe = _probe()
-    row = probe.play(2, 3)
-    assert row["episodes"] == 3 and len(row["outcomes"]) == 3
+    row = probe.play(scenario, 1 if scenario == "highway" else 2, 2)
+    assert row["episodes"] == 2 and len(row["outcomes"]) == 2
     for outcome in row["outcomes"]:
         assert not (outcome["success"] and outcome["crash"])
-        assert 1 <= len(outcome["actions"]) <= 13 and set(outcome["actions"]) <= {0, 1, 2}
+        assert 1 <= len(outcome["actions"]) <= decisions and set(outcome["actions"]) <= set(range(actions))
     assert row["success"] == sum(o["success"] for o in row["outcomes"])
 
 
@@ -33,8 +35,7 @@ def test_worlds_given_one_episode_seed_and_the_same_actions_stay_one_state():
     from drivelab.envs.vector import VectorDriveEnv
 
     probe = _probe()
-    options = dict(probe.SCENARIO)
-    env = VectorDriveEnv(3, options.pop("scenario"), **options)
+    env = VectorDriveEnv(3, "intersection", **probe.SCENARIOS["intersection"])
     env.reset(options={"episode_seeds": np.full(3, 12345)})
     for action in (2, 2, 0, 1):
         env.step(np.full(3, action))
