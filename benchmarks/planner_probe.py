@@ -163,8 +163,10 @@ SECTIONS = {
     "highway": (
         "Highway",
         "The five meta-actions (lane changes, idle, faster, slower), 30 s episodes, regular traffic. "
-        "The best sequence: no collision first, then the highest summed speed. A hand-written "
-        "privileged driver: `highway_probe.md`; the learners: `leaderboard.md`.",
+        "The best sequence: no collision first, then the highest summed speed, each speed counted up "
+        "to the row's cap. The meta-actions' target speeds are 20, 25 and 30 m/s, so a cap between 25 "
+        "and 30 m/s still makes 30 the best. A hand-written privileged driver: `highway_probe.md`; "
+        "the learners: `leaderboard.md`.",
     ),
 }
 
