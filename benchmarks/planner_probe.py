@@ -99,7 +99,8 @@ def plan_episode(env, scenario: str, seed: int, horizon: int, speed_cap: float =
 
 def replayed(scenario: str, seed: int, actions: list[int], crash: bool, arrived: bool) -> dict:
     """The metrics of ``actions`` played in evaluation episode ``seed`` as ``drivelab evaluate``
-    plays it (one ``DriveEnv``), checked against the planner's ending (``crash``, ``arrived``)."""
+    plays it (one ``DriveEnv``), checked against the planner's ending (``crash``, ``arrived``); the
+    actions kept as a string of their digits."""
     import drivelab
 
     env = drivelab.make(scenario, **SCENARIOS[scenario])
@@ -111,8 +112,8 @@ def replayed(scenario: str, seed: int, actions: list[int], crash: bool, arrived:
                 f"episode {seed}: the replay ends at step {t + 1}, the plan at {len(actions)}"
             )
     metrics = info["episode_metrics"]
-    outcome = {"actions": actions, "success": metrics["success"] > 0, "crash": metrics["collisions"] > 0,
-               "mean_speed_mps": metrics["mean_speed_mps"]}  # fmt: skip
+    outcome = {"actions": "".join(map(str, actions)), "success": metrics["success"] > 0,
+               "crash": metrics["collisions"] > 0, "mean_speed_mps": metrics["mean_speed_mps"]}  # fmt: skip
     if outcome["crash"] != crash or (scenario == "intersection" and outcome["success"] != arrived):
         raise AssertionError(f"episode {seed}: the plan's outcome is not the replay's")
     return outcome

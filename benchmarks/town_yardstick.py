@@ -58,7 +58,7 @@ def measure(name: str, episodes: int) -> dict:
         kwargs["backend_options"] = {**(kwargs.get("backend_options") or {}), **options}
         env = DriveEnv(**kwargs)
         limits = []
-        if seed is None:  # the route limits of the evaluation episodes
+        if seed is None and not keywords:  # the route limits of the evaluation set's episodes
             from drivelab.training.seeds import evaluation_seeds
 
             for episode_seed in evaluation_seeds(episodes, 0):
@@ -69,7 +69,7 @@ def measure(name: str, episodes: int) -> dict:
         summary = aggregate(results)
         timed_out = sum(1 for r in results if not r["success"] and not r["crashed"]) / episodes
         rows[row] = {**summary, "neither_success_nor_crash": timed_out, "wall_s": time.perf_counter() - start}
-        if limits and not keywords:
+        if limits:
             rows[row]["routes_over_60_s"] = sum(limit > 60.0 for limit in limits) / episodes
         print(name, row, {k: round(v, 3) for k, v in rows[row].items() if isinstance(v, float)}, flush=True)
     return rows

@@ -27,7 +27,8 @@ def test_the_planners_outcomes_are_those_of_its_actions_played_again(scenario, a
     assert row["episodes"] == 2 and len(row["outcomes"]) == 2
     for outcome in row["outcomes"]:
         assert not (outcome["success"] and outcome["crash"])
-        assert 1 <= len(outcome["actions"]) <= decisions and set(outcome["actions"]) <= set(range(actions))
+        assert 1 <= len(outcome["actions"]) <= decisions
+        assert set(map(int, outcome["actions"])) <= set(range(actions))
     assert row["success"] == sum(o["success"] for o in row["outcomes"])
 
 
