@@ -47,6 +47,11 @@ class OnPolicyConfig:
     :param log_std_init: initial log σ of the tanh-Gaussian.
     :param linear_lr: anneal the learning rate linearly to 0.
     :param linear_entropy: anneal the entropy coefficient linearly to 0.
+    :param bootstrap_time_limits: a time-limit end continues with γ·V(final observation), as SB3
+        does (right when the limit only cuts a task that goes on); false: it ends the return like a
+        crash, as CleanRL's PPO does (right when beating the clock is part of the task, e.g. the
+        intersection's arrival within 13 s; Pardo et al. 2018, "Time Limits in Reinforcement
+        Learning").
     """
 
     learning_rate: float = 3e-4
@@ -65,6 +70,7 @@ class OnPolicyConfig:
     log_std_init: float = 0.0
     linear_lr: bool = False
     linear_entropy: bool = False
+    bootstrap_time_limits: bool = True
 
     def check(self, algo: str) -> None:
         if self.n_steps < 1 or not 0 < self.gamma <= 1 or not 0 <= self.gae_lambda <= 1:
@@ -260,7 +266,7 @@ class OnPolicyAgent(OwnAgent):
             storage.values[t] = value
             storage.rewards[t] = reward
             storage.ends[t] = terminated | truncated
-            if np.count_nonzero(truncated):  # a time limit: the value goes on from where it stopped
+            if config.bootstrap_time_limits and np.count_nonzero(truncated):  # the value goes on
                 storage.bootstrap[t] = np.where(truncated, config.gamma * self._values(final_obs), 0.0)
             else:
                 storage.bootstrap[t] = 0.0

@@ -14,6 +14,7 @@ from drivelab.perception.affordances import Affordances
 from drivelab.perception.base import Sensor
 from drivelab.perception.birdeye import BirdEye
 from drivelab.perception.camera import Camera
+from drivelab.perception.clock import Clock
 from drivelab.perception.ego_state import EgoState
 from drivelab.perception.kinematics import Kinematics
 from drivelab.perception.lane import LaneState
@@ -30,7 +31,7 @@ from drivelab.yaml_io import YamlLoader
 SENSORS: dict[str, type[Sensor]] = {
     cls.name: cls
     for cls in (Kinematics, Lidar, TopDown, BirdEye, EgoState, Waypoints, Measurements, Camera, LineState)
-    + (LaneState, TTCGrid, Affordances)
+    + (LaneState, TTCGrid, Affordances, Clock)
 }
 SENSOR_HELP = {name: cls.help for name, cls in SENSORS.items()}  # one line each, from the class
 
@@ -61,6 +62,7 @@ VALUE_RANGES = {
     # fov_deg and pitch_deg: the pinhole model's own ranges (world/pinhole.py)
     "camera": {"height_m": (0.1, 100.0), "forward_m": (-100.0, 100.0), "max_range_m": (1.0, 1000.0)},
     "affordances": {"range_m": (1.0, 1000.0)},
+    "clock": {"horizon_s": (0.1, 86400.0)},  # a tenth of a second to a day
 }
 
 

@@ -92,6 +92,23 @@ def test_gae_bootstraps_a_time_limit_from_the_final_observation_and_ends_a_termi
     np.testing.assert_allclose(rollout.returns.numpy(), expected + v, rtol=1e-6)
 
 
+def test_without_time_limit_bootstrapping_a_cut_episode_ends_like_a_termination():
+    """bootstrap_time_limits=false (CleanRL's rule): world 0's cut step gets no γ·V(final)."""
+    gamma, lam, v = 0.9, 0.8, 0.5
+    env = ScriptedWorlds([(2, "truncated"), (2, "terminated")])
+    agent = OwnA2C(env.observation_space, env.action_space, 0,
+                   {"n_steps": 4, "gamma": gamma, "gae_lambda": lam, "bootstrap_time_limits": False},
+                   env)  # fmt: skip
+    with torch.no_grad():
+        agent.policy.value.weight.zero_()
+        agent.policy.value.bias.fill_(v)
+    rollout = _captured_rollout(agent, 8)
+    delta_on, delta_end = 1 + gamma * v - v, 1 - v
+    world = [delta_on + gamma * lam * delta_end, delta_end] * 2  # two episodes of 2 steps each
+    expected = np.array([world, world]).T.reshape(-1)  # both worlds alike: a cut is an end
+    np.testing.assert_allclose(rollout.advantages.numpy(), expected, rtol=1e-6)
+
+
 class Bandit(VecEnv):
     """One-step episodes in K worlds: the observation's first number x ~ U(−1, 1) says which action
     pays; Discrete: action 1 when x > 0 (reward 1, else 0); Box: reward 1 − (a₀ − 0.5·sign x)²."""

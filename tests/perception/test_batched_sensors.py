@@ -33,6 +33,7 @@ SPECS = (
     "affordances",
     "waypoints:stack=3",
     "lidar:beams=16:stack=3",
+    "clock:horizon_s=4",
 )
 
 

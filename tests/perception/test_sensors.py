@@ -1,3 +1,5 @@
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -36,3 +38,16 @@ def test_frame_stack_order_and_fill():
 def test_unknown_sensor_option():
     with pytest.raises(UsageError, match=r"unknown option 'colour' for sensor 'lidar' \(known: beams, "):
         make_sensor("lidar:colour=red")
+
+
+def test_clock_reads_elapsed_time_over_its_horizon_clipped():
+    sensor = make_sensor("clock:horizon_s=13")
+    readings = [sensor.observe(dataclasses.replace(world(), time_s=t)) for t in (0.0, 6.5, 13.0, 20.0)]
+    np.testing.assert_allclose(np.concatenate(readings), [0.0, 0.5, 1.0, 1.0])
+    assert readings[0].shape == sensor.space.shape == (1,) and readings[0].dtype == np.float32
+
+
+@pytest.mark.parametrize("horizon", ["0", "-1", "1e9"])
+def test_clock_refuses_a_horizon_outside_its_range(horizon):
+    with pytest.raises(UsageError, match="horizon_s"):
+        make_sensor(f"clock:horizon_s={horizon}")
