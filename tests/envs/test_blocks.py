@@ -211,6 +211,25 @@ def _place_ego(simulator, k: int, lane: int, s: float, lateral: float, speed: fl
     simulator._project(fresh=mask, update=mask)
 
 
+def test_routes_met_one_at_a_time_fill_spare_rows_as_padding_them_all_again_would():
+    """Each map brings new routes; ``_route`` writes a new one into a spare row of the padded
+    arrays instead of padding every route again. The rows equal a whole padding of the routes."""
+    simulator = _simulator(2, num_scenarios=12)
+    tables = []  # the padded arrays' buffers seen (kept alive): fewer than the routes, most found room
+    for seed in range(0, 24, 2):
+        simulator.reset_where(np.ones(2, dtype=bool), np.array([seed, seed + 1]))
+        if not any(table is simulator.r_polyline for table in tables):
+            tables.append(simulator.r_polyline)
+    names = ("r_polyline", "r_stations", "r_starts", "r_segments", "r_lengths2", "r_segment_m", "r_count",
+             "r_length", "r_closed")  # fmt: skip
+    routes = len(simulator._trackers)
+    assert routes >= 12 and len(tables) < 6
+    grown = {name: getattr(simulator, name).copy() for name in names}
+    simulator._pad_routes()  # every route, exactly as many rows
+    for name in names:
+        np.testing.assert_array_equal(grown[name][:routes], getattr(simulator, name), err_msg=name)
+
+
 def test_arrival_within_five_metres_of_the_destination_road_end():
     simulator = _simulator(2, traffic="empty")
     simulator.reset_where(np.ones(2, dtype=bool), np.array([0, 1]))

@@ -733,24 +733,34 @@ class FastSimulator:
         if key not in self._route_of:
             if tracker is None:
                 raise NotImplementedError(f"no ego route from {where}")
-            self._route_of[key] = len(self._trackers)
+            row = self._route_of[key] = len(self._trackers)
             self._trackers.append(tracker)
-            self._pad_routes()
+            if row and row < len(self.r_count) and len(tracker.polyline) <= self.r_polyline.shape[1]:
+                self._pad_route(row)  # room for it: one new row, not every route again
+                if self.scenario.guide_line:
+                    self._guide_roads()
+            else:
+                self._pad_routes(spare_rows=row)  # room for as many again (procedural maps add many)
         return self._route_of[key]
 
-    def _pad_routes(self) -> None:
-        """The routes in use as padded arrays (R routes, S segments at most), last point repeated."""
+    def _pad_routes(self, spare_rows: int = 0) -> None:
+        """The routes in use as padded arrays (R routes, S segments at most), last point repeated,
+        with ``spare_rows`` unused rows after them for routes to come (``_route``)."""
         trackers = self._trackers
-        count, points = len(trackers), max(len(t.polyline) for t in trackers)
+        count, points = len(trackers) + spare_rows, max(len(t.polyline) for t in trackers)
         self.r_polyline, self.r_stations = np.zeros((count, points, 2)), np.zeros((count, points))
         self.r_starts, self.r_segments = np.zeros((count, points - 1, 2)), np.zeros((count, points - 1, 2))
         self.r_lengths2, self.r_segment_m = np.zeros((count, points - 1)), np.zeros((count, points - 1))
         self.r_count, self.r_length = np.zeros(count, dtype=np.int64), np.zeros(count)
         self.r_closed = np.zeros(count, dtype=bool)
-        for row in range(count):
+        for row in range(len(trackers)):
             self._pad_route(row)
-        if self.scenario.guide_line:  # painted along the route: one whole lap, a road map per route
-            self.roads = tuple(dataclasses.replace(self.road, guide_lines=(t.polyline,)) for t in trackers)
+        if self.scenario.guide_line:
+            self._guide_roads()
+
+    def _guide_roads(self) -> None:
+        """A road map per route, with the route painted along it as one whole lap."""
+        self.roads = tuple(dataclasses.replace(self.road, guide_lines=(t.polyline,)) for t in self._trackers)
 
     def _pad_route(self, row: int) -> None:
         """Row ``row`` of the padded route arrays from its tracker, the last point repeated to the
