@@ -91,7 +91,29 @@ class Lidar(Sensor):
         # A part this close to the ego is tested against every beam: nearer, the float32 rounding
         # of the part (~1e-7 · range) could move its ends by more than the one-beam margin below.
         self.close_m = 1e-4 * self.range_m / min(self.beam_step, 1.0)
+        self._pairs: tuple | None = None  # (key, _world_edge_pairs) of the last batch on several roads
         self._space = spaces.Box(0.0, 1.0, shape=(self.beams,), dtype=np.float32)
+
+    def _edges_within(self, batch: WorldBatch, reach_m: float) -> tuple[np.ndarray, np.ndarray]:
+        """(worlds (W,), edges (W, 2, 2)): every road edge whose bounding box lies within
+        ``reach_m`` of its world's ego along x and along y, with that world."""
+        position = batch.ego.position
+        if len(batch.roads) == 1:
+            derived = batch.roads[0].derived(EdgeBoxes, EdgeBoxes)
+            centre_x, centre_y, half_x, half_y = derived.boxes  # (E,) each
+            near = np.abs(centre_x - position[:, 0, None]) <= half_x + reach_m  # (K, E)
+            near &= np.abs(centre_y - position[:, 1, None]) <= half_y + reach_m
+            world, edge = np.nonzero(near)
+            return world, derived.edges[edge]
+        # worlds on many maps (procedural maps: often one world per map): every world's (world,
+        # edge) pairs with its own map, made when the maps change, then one pass over all of them
+        key = (batch.roads, batch.road_index.tobytes())
+        if self._pairs is None or self._pairs[0][0] is not key[0] or self._pairs[0][1] != key[1]:
+            self._pairs = (key, _world_edge_pairs(batch))
+        world, boxes, edges = self._pairs[1]
+        near = np.abs(boxes[0] - position[world, 0]) <= boxes[2] + reach_m
+        near &= np.abs(boxes[1] - position[world, 1]) <= boxes[3] + reach_m
+        return world[near], edges[near]
 
     def _segments(self, batch: WorldBatch) -> tuple[np.ndarray, ...]:
         """Everything the beams can hit, as flat (M,) arrays: start x, start y, end x, end y in
@@ -100,7 +122,7 @@ class Lidar(Sensor):
         cos_h, sin_h = np.cos(ego.heading)[:, None], np.sin(ego.heading)[:, None]  # (K, 1)
         position_x, position_y = ego.position[:, 0, None], ego.position[:, 1, None]
         # road edges whose bounding box comes within range, as (world, edge) pairs (W,) in ego frames
-        edge_world, chosen = _edges_within(batch, self.range_m + 1.0)  # a metre over rounding
+        edge_world, chosen = self._edges_within(batch, self.range_m + 1.0)  # a metre over rounding
         delta_x = chosen[..., 0] - position_x[edge_world]
         delta_y = chosen[..., 1] - position_y[edge_world]
         edge_x = delta_x * cos_h[edge_world] + delta_y * sin_h[edge_world]  # (W, 2)
@@ -156,25 +178,22 @@ class Lidar(Sensor):
 
 
 class EdgeBoxes:
-    """A road's edges' bounding boxes as (4, E): centre x, centre y, half width, half height."""
+    """A road's edges (E, 2, 2) and their bounding boxes as (4, E): centre x, centre y, half
+    width, half height."""
 
     def __init__(self, road) -> None:
-        edges = np.asarray(road.edges, dtype=float).reshape(-1, 2, 2)
+        self.edges = edges = np.asarray(road.edges, dtype=float).reshape(-1, 2, 2)
         low, high = edges.min(axis=1), edges.max(axis=1)  # (E, 2)
         self.boxes = np.concatenate([(low + high) / 2, (high - low) / 2], axis=1).T.copy()
 
 
-def _edges_within(batch: WorldBatch, reach_m: float) -> tuple[np.ndarray, np.ndarray]:
-    """(worlds (W,), edges (W, 2, 2)): every road edge whose bounding box lies within ``reach_m``
-    of its world's ego along x and along y, with that world, one map at a time (not one world)."""
-    position = batch.ego.position
-    worlds, chosen = [], []
-    for row, road in enumerate(batch.roads):
-        on_map = np.flatnonzero(batch.road_index == row) if len(batch.roads) > 1 else np.arange(len(position))
-        centre_x, centre_y, half_x, half_y = road.derived(EdgeBoxes, EdgeBoxes).boxes  # (E,) each
-        near = np.abs(centre_x - position[on_map, 0, None]) <= half_x + reach_m  # (K_map, E)
-        near &= np.abs(centre_y - position[on_map, 1, None]) <= half_y + reach_m
-        world, edge = np.nonzero(near)
-        worlds.append(on_map[world])
-        chosen.append(np.asarray(road.edges, dtype=float).reshape(-1, 2, 2)[edge])
-    return np.concatenate(worlds), np.concatenate(chosen)
+def _world_edge_pairs(batch: WorldBatch) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every (world, edge of its road) pair of a batch on several roads: the worlds (P,), the
+    edges' boxes (4, P) as EdgeBoxes and the edges (P, 2, 2), world by world."""
+    worlds, boxes, edges = [], [], []
+    for k in range(batch.num_worlds):
+        derived = batch.roads[int(batch.road_index[k])].derived(EdgeBoxes, EdgeBoxes)
+        worlds.append(np.full(derived.boxes.shape[1], k))
+        boxes.append(derived.boxes)
+        edges.append(derived.edges)
+    return np.concatenate(worlds), np.concatenate(boxes, axis=1), np.concatenate(edges)

@@ -366,6 +366,23 @@ def test_vector_sensors_on_different_maps_equal_one_world_sensors():
         np.testing.assert_array_equal(got, expected, err_msg=spec)
 
 
+def test_lidar_keeps_its_world_edge_pairs_only_while_the_worlds_keep_their_maps():
+    """LiDAR pairs each world with its own map's edges once per change of maps; worlds that start
+    episodes on other maps read what a fresh sensor reads."""
+    env = VectorDriveEnv(4, scenario="blocks", obs="lidar", backend_options=MAPS)
+    rng, made = np.random.default_rng(0), []
+    for t in range(9):
+        if t % 3 == 0:  # new episodes, each world on another map of the set
+            observation, _ = env.reset(seed=t)
+        else:
+            observation, *_ = env.step(rng.uniform([0.2, -0.1], [1.0, 0.1], size=(4, 2)))
+        if not any(pairs is env.sensors[0]._pairs for pairs in made):
+            made.append(env.sensors[0]._pairs)
+        fresh = make_sensor("lidar")
+        np.testing.assert_array_equal(observation, fresh.observe(env.simulator.batch, fresh.empty(4)))
+    assert len(made) == 3  # one pairing per start of episodes
+
+
 @pytest.mark.parametrize("spec", ["topdown", "birdeye", "camera"])
 def test_raster_sensors_on_different_maps_equal_one_world_sensors(spec):
     sequence = _sequence(steps=4)
