@@ -137,6 +137,15 @@ RACETRACK_EXPERT = (
     "--env racetrack --traffic regular --action target_speed --config benchmarks/racetrack_20mps.yaml"
 )
 RACETRACK_RULES = {"cruise_speed_mps": 15, "lateral_accel_mps2": 6}
+# RL on the racetrack (issue 49): the target_speed action capped at 12 m/s (a clean lap needs 6.4 m/s on
+# average), route progress paid per metre, crashes and leaving the road -10. The same recipe with the
+# continuous action (acceleration, steering) sped up to 17-24 m/s and crashed in 22-34 % of episodes.
+RACETRACK_PPO_OWN = (
+    "--algo ppo_own --env racetrack --obs lidar,ego_state:features=10,waypoints --action target_speed "
+    "--config benchmarks/racetrack_12mps.yaml --reward collision=-10,off_road=-10,progress_lateral=0.1 "
+    "--traffic regular --n-envs 64 --steps 1000000 --eval-every 500000 --eval-episodes 10 -H gamma=0.99 "
+    "-H n_steps=64 -H batch_size=1024 -H n_epochs=10 -H learning_rate=0.0003 -H normalize_observations=true"
+)
 # DAgger of that expert onto the learners' LiDAR + ego state, the town recipe's rounds (one seed
 # screened at 50 k steps: 97, 95, 91 % clean laps for seeds 0, 1, 2; seed 2 at 100 k: 97 %)
 RACETRACK_DAGGER = (
@@ -310,6 +319,15 @@ ENTRIES: tuple[Entry, ...] = (
         "DAgger of that expert onto LiDAR + the 10-number ego state, target speeds up to 20 m/s, rounds of "
         "5 k steps (3 epochs, beta 0.5^i), 100 k steps on 8 worlds",
         _args(RACETRACK_DAGGER),
+    ),
+    Entry(
+        "racetrack",
+        "ppo_own",
+        "drivelab's PPO on the fast on-policy trainer, LiDAR + 10-number ego state + waypoints (normalised), "
+        "target speeds up to 12 m/s and steering, reward collision -10, off road -10 and 0.1 per metre of "
+        "centred route progress, gamma 0.99, rollouts of 64 steps x 64 worlds, minibatch 1024, 10 epochs, "
+        "1 M steps on 64 worlds",
+        _args(RACETRACK_PPO_OWN),
     ),
     Entry(
         "racetrack",
@@ -645,13 +663,15 @@ def _verdict(rate: dict | None, target: float) -> str:
     return "not met" if rate["high"] < target else "undecided"
 
 
-# issue 19's competence targets per table: metric -> (at most / at least, value)
+# the competence targets per table: metric -> (at most / at least, value); issue 19's, with issue 49's
+# for the highway (19's 5 % at 25 m/s is beyond the privileged planner, highway_probe.md) and the
+# intersection
 JUNCTION_TARGETS = {"crash_rate": ("<=", 0.05), "success_rate": (">=", 0.90)}
 TARGETS = {
-    "highway": {"crash_rate": ("<=", 0.05), "mean_speed_mps": (">=", 25.0)},
+    "highway": {"crash_rate": ("<=", 0.03), "mean_speed_mps": (">=", 24.0)},
     "merge": JUNCTION_TARGETS,
     "roundabout": JUNCTION_TARGETS,
-    "intersection": JUNCTION_TARGETS,
+    "intersection": {"crash_rate": ("<=", 0.10), "success_rate": (">=", 0.80)},
     "racetrack": {"lap_rate": (">=", 0.90)},
     "blocks-unseen": {"success_rate": (">=", 0.80)},
 }
@@ -727,14 +747,20 @@ def markdown(result: dict) -> str:
     by_scenario: dict[str, list[dict]] = {}
     for record in result["entries"]:
         by_scenario.setdefault(record["scenario"], []).append(record)
-    junction = (
-        "the 100 fixed evaluation episodes; success is arriving; target crash <= 5 % and success >= 90 %"
-    )
+    def junction(scenario: str) -> str:
+        crash, success = (TARGETS[scenario][key][1] for key in ("crash_rate", "success_rate"))
+        return (
+            "the 100 fixed evaluation episodes; success is arriving; target crash <= "
+            f"{crash:.0%} and success >= {success:.0%}"
+        ).replace("%", " %")
+
+    highway = TARGETS["highway"]
     titles = {
-        "highway": "Highway, regular traffic: fixed evaluation episodes, target crash <= 5 % at >= 25 m/s",
-        "merge": f"Merge: {junction}",
-        "roundabout": f"Roundabout: {junction}",
-        "intersection": f"Intersection: {junction}",
+        "highway": "Highway, regular traffic: fixed evaluation episodes, target crash <= "
+        f"{highway['crash_rate'][1]:.0%} at >= {highway['mean_speed_mps'][1]:g} m/s".replace("%", " %"),
+        "merge": f"Merge: {junction('merge')}",
+        "roundabout": f"Roundabout: {junction('roundabout')}",
+        "intersection": f"Intersection: {junction('intersection')}",
         "racetrack": "Racetrack: fixed evaluation episodes, success is a whole episode without a crash "
         f"or leaving the road; target: >= 1 lap clean (success and >= {LAP_M:.0f} m) in >= 90 % of "
         "episodes",

@@ -126,7 +126,7 @@ def test_target_verdict_reads_each_metrics_side(board):
     assert board._target_verdict(straddling, board.JUNCTION_TARGETS) == "undecided"
     missed = {**straddling, "success_rate": {"low": 0.40, "high": 0.60}}
     assert board._target_verdict(missed, board.JUNCTION_TARGETS) == "not met"
-    fast = {"crash_rate": met["crash_rate"], "mean_speed_mps": {"mean": 24.0, "low": 23.0, "high": 24.5}}
+    fast = {"crash_rate": met["crash_rate"], "mean_speed_mps": {"mean": 23.0, "low": 22.0, "high": 23.5}}
     assert board._target_verdict(fast, board.TARGETS["highway"]) == "not met"
     assert board._target_verdict(met, {}) == "–"
 
