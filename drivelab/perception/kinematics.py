@@ -29,6 +29,10 @@ class Kinematics(Sensor):
     :param normalize: divide positions and velocities by the scales above; false: raw metres and
         m/s, unclipped.
     :param clip: clip the normalised values to [-1, 1] (highway-env's ``clip``).
+    :param absolute: every row, the ego's included, in the world frame: position, velocity and
+        heading as they are on the map (highway-env's ``absolute``, its intersection's default),
+        which tells where on a fixed map each vehicle is and where it heads. The nearest
+        vehicles are chosen as in the ego frame.
     """
 
     name = "kinematics"
@@ -44,6 +48,7 @@ class Kinematics(Sensor):
         flatten: bool = True,
         normalize: bool = True,
         clip: bool = True,
+        absolute: bool = False,
     ) -> None:
         if vehicles_count < 1 or perception_distance_m <= 0 or speed_scale_mps <= 0:
             raise ValueError("kinematics needs vehicles_count >= 1 and positive distance and speed scales")
@@ -54,10 +59,11 @@ class Kinematics(Sensor):
         self.columns = np.array([FEATURES.index(name) for name in self.features], dtype=np.int64)
         self.flatten, self.normalize = bool(flatten), bool(normalize)
         self.clip = bool(clip) and self.normalize  # highway-env clips only what it normalises
+        self.absolute = bool(absolute)
         # every feature in FEATURES' order: the rows are written straight into the observation
         self._all_columns = self.features == FEATURES
         # the default layout (every feature, flat, normalised and clipped), which fused steps write
-        self.plain = self._all_columns and self.flatten and self.clip
+        self.plain = self._all_columns and self.flatten and self.clip and not self.absolute
         shape = (self.vehicles_count, len(self.features))
         bound = 1.0 if self.clip else np.inf
         self._space = spaces.Box(
@@ -81,6 +87,20 @@ class Kinematics(Sensor):
             )  # fmt: skip
             cos_other, sin_other = np.cos(heading), np.sin(heading)
             motion_rows(others, chosen, ego.speed_mps, cos_other, sin_other, speed_scale, rows)
+            if self.absolute:
+                _world_rows(others, chosen, position_scale, speed_scale, rows)
+        if self.absolute:  # the ego's row too: its place and heading on the map
+            cos_h, sin_h = np.cos(ego.heading), np.sin(ego.heading)
+            rows[:, 0, 1:3] = ego.position / position_scale
+            rows[:, 0, 0] = 1.0
+            rows[:, 0, 3], rows[:, 0, 4] = (
+                ego.speed_mps * cos_h / speed_scale,
+                ego.speed_mps * sin_h / speed_scale,
+            )
+            rows[:, 0, 5], rows[:, 0, 6] = cos_h, sin_h
+            every = np.clip(rows, -1.0, 1.0) if self.clip else rows
+            out[...] = every[:, :, self.columns].reshape(out.shape)
+            return
         cos_relative, sin_relative = np.cos(relative_heading), np.sin(relative_heading)
         in_place = self._all_columns and out.flags.c_contiguous  # the rows written into out's flat view
         flat = (batch.num_worlds, self.vehicles_count * len(FEATURES))
@@ -182,3 +202,23 @@ def motion_rows(vehicles, chosen, speed_mps, cos_other, sin_other, speed_scale, 
             row[3] = (speed * cos_other[k, r] - speed_mps[k]) / speed_scale
             row[4] = speed * sin_other[k, r] / speed_scale
             row[5], row[6] = cos_other[k, r], sin_other[k, r]
+
+
+def _world_rows(vehicles, chosen, position_scale, speed_scale, rows) -> None:
+    """Rows 1… of ``nearest_rows``' chosen vehicles (K, rows - 1) rewritten in the world frame:
+    position, velocity and the cosine and sine of the heading."""
+    present = chosen >= 0
+    picked = np.take_along_axis(vehicles, np.where(present, chosen, 0)[..., None], axis=1)
+    cos_h, sin_h = np.cos(picked[..., 2]), np.sin(picked[..., 2])
+    world = np.stack(
+        [
+            picked[..., 0] / position_scale,
+            picked[..., 1] / position_scale,
+            picked[..., 3] * cos_h / speed_scale,
+            picked[..., 3] * sin_h / speed_scale,
+            cos_h,
+            sin_h,
+        ],
+        axis=-1,
+    )
+    rows[:, 1:, 1:] = np.where(present[..., None], world, 0.0)

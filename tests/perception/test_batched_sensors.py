@@ -23,6 +23,7 @@ from tests.worlds import world
 
 SPECS = (
     "kinematics",
+    "kinematics:absolute=true:vehicles_count=4",
     "lidar",  # 240 beams
     "lidar:beams=7:range_m=20.3:noise_std=0.05",
     "waypoints",

@@ -46,6 +46,20 @@ def test_ego_heading_is_relative_to_its_lane():
     np.testing.assert_allclose(rows[0], [1, 0, 0, 0.5, 0, np.cos(0.2), np.sin(0.2)], atol=1e-7)
 
 
+def test_absolute_rows_are_in_the_world_frame_like_highway_envs():
+    w = world(
+        position=np.array([10.0, 5.0]), heading=np.pi / 2, lane_heading=0.0, speed_mps=10.0,
+        vehicles=[[10.0, 25.0, np.pi, 16.0, 5, 2], [10.0, 300.0, 0.0, 10.0, 5, 2]],  # the 2nd: unseen
+    )  # fmt: skip
+    rows = _observe(Kinematics(vehicles_count=3, absolute=True), w)
+    # presence, x / 100 m, y / 100 m, vx / 80 m/s, vy / 80 m/s, cos, sin of the heading on the map
+    np.testing.assert_allclose(rows[0], [1, 0.1, 0.05, 0, 0.125, 0, 1], atol=1e-7)
+    np.testing.assert_allclose(rows[1], [1, 0.1, 0.25, -0.2, 0, -1, 0], atol=1e-7)
+    assert np.all(rows[2] == 0)
+    relative = _observe(Kinematics(vehicles_count=3), w)
+    np.testing.assert_array_equal(relative[:, 0], rows[:, 0])  # the same vehicles are chosen
+
+
 def test_values_are_clipped():
     w = world(speed_mps=0.0, vehicles=[[60.0, -90.0, 0.0, 200.0, 5, 2]])
     rows = _observe(Kinematics(vehicles_count=2, perception_distance_m=110.0, speed_scale_mps=100.0), w)
