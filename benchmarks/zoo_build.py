@@ -51,7 +51,14 @@ CAMERA_CHECK_DURATION_S = 20
 PINNED_ISA_TEXT = "drivelab.isa.PINNED_ISA (AVX2 code paths, one thread)"
 
 sys.path.insert(0, str(Path(__file__).parent))
-from leaderboard import BLOCKS_DAGGER, HIGHWAY_DQN, RACETRACK_DAGGER, UNSEEN_MAPS, UNTUNED_PPO  # noqa: E402
+from leaderboard import (  # noqa: E402
+    BLOCKS_DAGGER,
+    HIGHWAY_DQN,
+    RACETRACK_DAGGER,
+    RACETRACK_PPO_OWN,
+    UNSEEN_MAPS,
+    UNTUNED_PPO,
+)
 from provenance import Parser, agent_defaults, check_reuse, command_line, cpu_isa, stop, training_command  # noqa: E402
 from town_competence import recipe as town_recipe  # noqa: E402
 
@@ -156,6 +163,16 @@ AGENTS: dict[str, dict] = {
             "--steps", "100000", "--eval-every", "50000", "--eval-episodes", "5", "--seed", "0", *UNTUNED,
             "-H", "gamma=0.9",
         ],
+        "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+    },
+    "racetrack-ppo_own": {
+        "description": (
+            "drivelab's PPO (the fast on-policy trainer) on racetrack, learned by RL alone: LiDAR, the "
+            "10-number ego state and the route's waypoints (normalised), target speeds up to 12 m/s and "
+            "steering, reward collision -10, off road -10 and 0.1 per metre of centred progress, an "
+            "entropy bonus; 1 M steps on 64 worlds; the leaderboard's racetrack ppo_own recipe, seed 0"
+        ),
+        "train": [*shlex.split(RACETRACK_PPO_OWN), "--seed", "0"],
         "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
     },
     "racetrack-dagger": {
