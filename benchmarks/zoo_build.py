@@ -76,6 +76,14 @@ TOWN_MEASURE = [
 ]
 
 
+EVALUATION_SET = [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])]
+
+
+def seed_0(recipe: str) -> list[str]:
+    """A recipe's ``drivelab train`` arguments for seed 0, the seed every shipped recipe agent is."""
+    return [*shlex.split(recipe), "--seed", "0"]
+
+
 AGENTS: dict[str, dict] = {
     "town-dagger": {
         "description": (
@@ -83,7 +91,7 @@ AGENTS: dict[str, dict] = {
             "image with the lights, route waypoints, measurements); seed 0 of "
             "benchmarks/results/town_competence.md"
         ),
-        "train": [*shlex.split(town_recipe("image")), "--seed", "0"],
+        "train": seed_0(town_recipe("image")),
         "measure": TOWN_MEASURE,
     },
     "town-dagger-privileged": {
@@ -92,7 +100,7 @@ AGENTS: dict[str, dict] = {
             "itself reads (route waypoints, measurements, affordances: the light, the leader, pedestrians); "
             "seed 0 of benchmarks/results/town_competence.md"
         ),
-        "train": [*shlex.split(town_recipe("privileged")), "--seed", "0"],
+        "train": seed_0(town_recipe("privileged")),
         "measure": TOWN_MEASURE,
     },
     "highway-ppo": {
@@ -106,7 +114,7 @@ AGENTS: dict[str, dict] = {
             "--reward", "highway_fast", "--traffic", "regular", "--n-envs", "16", "--steps", "500000",
             "-H", "gamma=0.95", "--eval-every", "250000", "--eval-episodes", "10", "--seed", "0", *UNTUNED,
         ],
-        "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+        "measure": EVALUATION_SET,
     },
     **{
         f"{scenario}-ppo": {
@@ -119,7 +127,7 @@ AGENTS: dict[str, dict] = {
                 "--reward", "highway", "--traffic", "regular", "--n-envs", "16", "--steps", "100000",
                 "--eval-every", "50000", "--eval-episodes", "10", "--seed", "0", *UNTUNED, "-H", "gamma=0.8",
             ],
-            "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+            "measure": EVALUATION_SET,
         }
         for scenario in ("merge", "roundabout", "intersection")
     },
@@ -131,7 +139,7 @@ AGENTS: dict[str, dict] = {
         ),
         "train": [*shlex.split(HIGHWAY_DQN.format(env="merge", reward="highway", steps=100_000)),
                   "--seed", "0"],
-        "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+        "measure": EVALUATION_SET,
     },
     "intersection-ppo-arrival": {
         "description": (
@@ -147,7 +155,7 @@ AGENTS: dict[str, dict] = {
             "--steps", "100000", "--eval-every", "50000", "--eval-episodes", "10", "--seed", "0", *UNTUNED,
             "-H", "gamma=0.8",
         ],
-        "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+        "measure": EVALUATION_SET,
     },
     "racetrack-ppo": {
         "description": (
@@ -163,7 +171,7 @@ AGENTS: dict[str, dict] = {
             "--steps", "100000", "--eval-every", "50000", "--eval-episodes", "5", "--seed", "0", *UNTUNED,
             "-H", "gamma=0.9",
         ],
-        "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+        "measure": EVALUATION_SET,
     },
     "racetrack-ppo_own": {
         "description": (
@@ -172,8 +180,8 @@ AGENTS: dict[str, dict] = {
             "steering, reward collision -10, off road -10 and 0.1 per metre of centred progress, an "
             "entropy bonus; 1 M steps on 64 worlds; the leaderboard's racetrack ppo_own recipe, seed 0"
         ),
-        "train": [*shlex.split(RACETRACK_PPO_OWN), "--seed", "0"],
-        "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+        "train": seed_0(RACETRACK_PPO_OWN),
+        "measure": EVALUATION_SET,
     },
     "racetrack-dagger": {
         "description": (
@@ -182,8 +190,8 @@ AGENTS: dict[str, dict] = {
             "affordances) onto LiDAR and the 10-number ego state; target-speed actions up to 20 m/s; "
             "regular traffic (one other car); the leaderboard's racetrack dagger recipe, seed 0"
         ),
-        "train": [*shlex.split(RACETRACK_DAGGER), "--seed", "0"],
-        "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+        "train": seed_0(RACETRACK_DAGGER),
+        "measure": EVALUATION_SET,
     },
     **{
         f"follow-{kind}-qlearning": {
@@ -196,7 +204,7 @@ AGENTS: dict[str, dict] = {
                 "--reward", f"{kind}_follow", "--steps", "20000", "--eval-every", "20000", "--eval-episodes",
                 "2", "--seed", "0",
             ],
-            "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+            "measure": EVALUATION_SET,
             "check_duration_s": CAMERA_CHECK_DURATION_S,
         }
         for kind, state in (
@@ -210,7 +218,7 @@ AGENTS: dict[str, dict] = {
             "affordances) onto LiDAR + measurements + waypoints; target-speed actions up to 20 m/s; "
             "1000 training maps, regular traffic; the leaderboard's blocks-unseen dagger recipe, seed 0"
         ),
-        "train": [*shlex.split(BLOCKS_DAGGER), "--seed", "0"],
+        "train": seed_0(BLOCKS_DAGGER),
         # its evaluation set is its --eval-maps: the 100 unseen maps, one episode each
         "measure": [("100 unseen maps", ["evaluate", "{name}", "--maps", UNSEEN_MAPS, "--episodes", "100"])],
     },
@@ -226,7 +234,7 @@ AGENTS: dict[str, dict] = {
             "--config", "benchmarks/seed003_osx.yaml", "--steps", "5000", "--seed", "1",
             "--eval-every", "5000", "--eval-episodes", "1", "--checkpoint-every", "1666",
         ],
-        "measure": [("evaluation set", ["evaluate", "{name}", "--episodes", "100"])],
+        "measure": EVALUATION_SET,
     },
 }  # fmt: skip
 
