@@ -753,13 +753,13 @@ def markdown(result: dict) -> str:
         crash, success = (TARGETS[scenario][key][1] for key in ("crash_rate", "success_rate"))
         return (
             "the 100 fixed evaluation episodes; success is arriving; target crash <= "
-            f"{crash:.0%} and success >= {success:.0%}"
-        ).replace("%", " %")
+            f"{crash * 100:g} % and success >= {success * 100:g} %"
+        )
 
     highway = TARGETS["highway"]
     titles = {
         "highway": "Highway, regular traffic: fixed evaluation episodes, target crash <= "
-        f"{highway['crash_rate'][1]:.0%} at >= {highway['mean_speed_mps'][1]:g} m/s".replace("%", " %"),
+        f"{highway['crash_rate'][1] * 100:g} % at >= {highway['mean_speed_mps'][1]:g} m/s",
         "merge": f"Merge: {junction('merge')}",
         "roundabout": f"Roundabout: {junction('roundabout')}",
         "intersection": f"Intersection: {junction('intersection')}",

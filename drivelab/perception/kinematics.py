@@ -85,19 +85,19 @@ class Kinematics(Sensor):
                 others, batch.vehicle_valid, ego.position, ego.heading, cos_h, sin_h,
                 self.perception_distance_m, position_scale, rows,
             )  # fmt: skip
-            cos_other, sin_other = np.cos(heading), np.sin(heading)
-            motion_rows(others, chosen, ego.speed_mps, cos_other, sin_other, speed_scale, rows)
-            if self.absolute:
-                _world_rows(others, chosen, position_scale, speed_scale, rows)
+            if self.absolute:  # the chosen vehicles' rows in the world frame instead
+                present = chosen >= 0
+                picked = np.take_along_axis(others, np.where(present, chosen, 0)[..., None], axis=1)
+                world = _world_frame(picked[..., 0], picked[..., 1], picked[..., 2], picked[..., 3],
+                                     position_scale, speed_scale)  # fmt: skip
+                rows[:, 1:, 1:] = np.where(present[..., None], world, 0.0)
+            else:
+                cos_other, sin_other = np.cos(heading), np.sin(heading)
+                motion_rows(others, chosen, ego.speed_mps, cos_other, sin_other, speed_scale, rows)
         if self.absolute:  # the ego's row too: its place and heading on the map
-            cos_h, sin_h = np.cos(ego.heading), np.sin(ego.heading)
-            rows[:, 0, 1:3] = ego.position / position_scale
             rows[:, 0, 0] = 1.0
-            rows[:, 0, 3], rows[:, 0, 4] = (
-                ego.speed_mps * cos_h / speed_scale,
-                ego.speed_mps * sin_h / speed_scale,
-            )
-            rows[:, 0, 5], rows[:, 0, 6] = cos_h, sin_h
+            rows[:, 0, 1:] = _world_frame(ego.position[:, 0], ego.position[:, 1], ego.heading, ego.speed_mps,
+                                          position_scale, speed_scale)  # fmt: skip
             every = np.clip(rows, -1.0, 1.0) if self.clip else rows
             out[...] = every[:, :, self.columns].reshape(out.shape)
             return
@@ -204,21 +204,12 @@ def motion_rows(vehicles, chosen, speed_mps, cos_other, sin_other, speed_scale, 
             row[5], row[6] = cos_other[k, r], sin_other[k, r]
 
 
-def _world_rows(vehicles, chosen, position_scale, speed_scale, rows) -> None:
-    """Rows 1… of ``nearest_rows``' chosen vehicles (K, rows - 1) rewritten in the world frame:
-    position, velocity and the cosine and sine of the heading."""
-    present = chosen >= 0
-    picked = np.take_along_axis(vehicles, np.where(present, chosen, 0)[..., None], axis=1)
-    cos_h, sin_h = np.cos(picked[..., 2]), np.sin(picked[..., 2])
-    world = np.stack(
-        [
-            picked[..., 0] / position_scale,
-            picked[..., 1] / position_scale,
-            picked[..., 3] * cos_h / speed_scale,
-            picked[..., 3] * sin_h / speed_scale,
-            cos_h,
-            sin_h,
-        ],
+def _world_frame(x, y, heading, speed, position_scale, speed_scale) -> np.ndarray:
+    """Vehicles' (…, 6) columns x, y, vx, vy, cos h, sin h in the world frame, positions divided by
+    ``position_scale`` and velocities by ``speed_scale``."""
+    cos_h, sin_h = np.cos(heading), np.sin(heading)
+    return np.stack(
+        [x / position_scale, y / position_scale, speed * cos_h / speed_scale, speed * sin_h / speed_scale,
+         cos_h, sin_h],
         axis=-1,
-    )
-    rows[:, 1:, 1:] = np.where(present[..., None], world, 0.0)
+    )  # fmt: skip
