@@ -133,7 +133,8 @@ def envs() -> None:
 
 # train's options that are run fields
 RUN_OPTIONS = ("algo", "env", "obs", "action", "reward", "steps", "seed", "traffic", "backend", "name",
-               "eval_every", "eval_episodes", "checkpoint_every", "n_envs", "eval_maps")  # fmt: skip
+               "eval_every", "eval_episodes", "checkpoint_every", "n_envs", "eval_maps",
+               "init_from")  # fmt: skip
 
 
 def _rlad_switches(given: dict) -> dict:
@@ -194,6 +195,8 @@ def run_default(field: str) -> str:
         return "ALGO-ENV-sSEED-DATE-TIME"
     if field == "eval_maps":
         return "the training maps"
+    if field == "init_from":
+        return "random weights"
     value = FIELDS[field].default
     return ",".join(value) if isinstance(value, tuple) else str(value)
 
@@ -232,6 +235,9 @@ def train(
     ),
     n_envs: int | None = _run_option("n_envs", "worlds stepped together (SB3 and own agents)"),
     eval_maps: str | None = _run_option("eval_maps", "blocks: evaluate on maps START:COUNT (unseen maps)"),
+    init_from: str | None = _run_option(
+        "init_from", "ppo_own, a2c_own: start from this run's or shipped agent's policy (e.g. a dagger run)"
+    ),
     hyperparams: list[str] = typer.Option(
         [],
         "--hyperparams",

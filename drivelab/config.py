@@ -38,6 +38,8 @@ class RunConfig:
     :param n_envs: worlds stepped together while training.
     :param eval_maps: procedural maps only (``blocks``): ``"START:COUNT"``, evaluation on the maps
         of seeds START … START + COUNT − 1 instead of the training set (e.g. ``"1000:100"``).
+    :param init_from: a run directory or shipped agent whose policy weights start this run (an
+        imitation policy fine-tuned by PPO or A2C); a resume starts from the run's own checkpoint.
     """
 
     algo: str
@@ -58,6 +60,7 @@ class RunConfig:
     env_options: dict = field(default_factory=dict)
     n_envs: int = 1
     eval_maps: str | None = None
+    init_from: str | None = None
 
     def env_kwargs(self) -> dict:
         """Keyword arguments of DriveEnv for this run: its environment fields (``ENV_FIELDS``), then
@@ -85,8 +88,9 @@ class RunConfig:
         data = {k: v for k, v in self.to_dict().items() if k not in ("steps", "name")}
         if data["n_envs"] == 1:  # runs made before the field existed keep their identity
             del data["n_envs"]
-        if data["eval_maps"] is None:
-            del data["eval_maps"]
+        for optional in ("eval_maps", "init_from"):  # runs made before the fields keep their identity
+            if data[optional] is None:
+                del data[optional]
         return hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
     @property
@@ -133,7 +137,7 @@ def parse_maps(value: str) -> tuple[int, int]:
 
 def _check_type(name: str, value):
     """Coerce/validate one field; the error names the field."""
-    if value is None and name in ("name", "eval_maps"):
+    if value is None and name in ("name", "eval_maps", "init_from"):
         return None
     if name == "eval_maps":
         parse_maps(value)

@@ -71,5 +71,9 @@ class OwnA2C(OnPolicyAgent):
         loss, metrics = a2c_loss(
             log_probs, advantages, values, rollout.returns, entropy, config.value_coef, self.entropy_coef
         )
+        prior_kl = self.prior_kl(rollout.observations, out)
+        if prior_kl is not None:
+            loss = loss + config.prior_kl_coef * prior_kl
+            metrics["prior_kl"] = prior_kl.item()
         gradient_step(self.optimizer, loss, policy.parameters(), config.max_grad_norm)
         return {**metrics, "explained_variance": explained_variance(rollout.values, rollout.returns)}

@@ -161,14 +161,21 @@ class ActorCritic(nn.Module):
         """(the head's output, V) for a batch of stored observations."""
         obs = self.norm(obs)
         features = self.actor_encoder(obs)
-        shared = self.critic_encoder is self.actor_encoder
-        value = self.value(features if shared else self.critic_encoder(obs)).squeeze(-1)
+        value = self.value(features if self.shared else self.critic_encoder(obs)).squeeze(-1)
         return self.head(features), value
 
-    def values(self, obs) -> torch.Tensor:
-        """V alone (the critic's encoder only, when it has its own)."""
+    def values(self, obs, freeze_shared: bool = False) -> torch.Tensor:
+        """V alone (the critic's encoder only, when it has its own); ``freeze_shared``: an encoder
+        shared with the actor gets no gradient from it (the critic's warm-up)."""
         obs = self.norm(obs)
-        return self.value(self.critic_encoder(obs)).squeeze(-1)
+        with torch.set_grad_enabled(torch.is_grad_enabled() and not (freeze_shared and self.shared)):
+            features = self.critic_encoder(obs)
+        return self.value(features).squeeze(-1)
+
+    @property
+    def shared(self) -> bool:
+        """Actor and critic read one encoder."""
+        return self.critic_encoder is self.actor_encoder
 
     # --- the distributions ----------------------------------------------------------------------
     def _beta(self, out: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -195,6 +202,21 @@ class ActorCritic(nn.Module):
         else:
             x = torch.from_numpy(rng.beta(alpha.double().numpy(), beta.double().numpy())).float()
         return x.clamp(BETA_EPSILON, 1.0 - BETA_EPSILON)
+
+    def distribution(self, out: torch.Tensor) -> torch.distributions.Distribution:
+        """π(·|s) for a batch of head outputs: the Gaussian before the tanh, the Beta, or the
+        categorical."""
+        if self.kind == "categorical":
+            return torch.distributions.Categorical(logits=out)
+        if self.kind == "tanh_gaussian":
+            return torch.distributions.Normal(out, self.log_std.exp().expand_as(out))
+        return torch.distributions.Beta(*self._beta(out))
+
+    def kl_to(self, out: torch.Tensor, other: ActorCritic, other_out: torch.Tensor) -> torch.Tensor:
+        """KL(π ‖ π_other) per row, from each one's head outputs for the same observations (the
+        tanh is a bijection, so the Gaussians' KL before it is the policies')."""
+        kl = torch.distributions.kl_divergence(self.distribution(out), other.distribution(other_out))
+        return kl if self.kind == "categorical" else kl.sum(-1)
 
     def log_prob_entropy(
         self, out: torch.Tensor, stored: torch.Tensor, entropy: bool = True

@@ -9,17 +9,20 @@ observation. Every running statistic changes only between rollouts, the safe poi
 
 from __future__ import annotations
 
+import copy
 from collections import deque
 from dataclasses import dataclass
+from operator import itemgetter
 from typing import Any
 
 import numpy as np
 import torch
 from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
+from torch import nn
 
 from drivelab.agents.actor_critic import DISTRIBUTIONS, NORM_CLIP, NORM_EPSILON, ActorCritic, merge_moments
-from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent
+from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent, gradient_step
 from drivelab.agents.buffer_memory import check_buffer_memory, observation_bytes
 from drivelab.agents.worlds import Worlds, batch_of_one, map_obs
 from drivelab.errors import UsageError
@@ -44,7 +47,8 @@ class OnPolicyConfig:
         "tanh_gaussian" or "beta".
     :param net_arch: widths of the MLP's tanh layers for vector observations, e.g. "256,256".
     :param shared_encoder: actor and critic share the encoder.
-    :param log_std_init: initial log σ of the tanh-Gaussian.
+    :param log_std_init: initial log σ of the tanh-Gaussian (given with ``init_from``, it replaces
+        the source policy's).
     :param linear_lr: anneal the learning rate linearly to 0.
     :param linear_entropy: anneal the entropy coefficient linearly to 0.
     :param bootstrap_time_limits: a time-limit end continues with γ·V(final observation), as SB3
@@ -52,6 +56,13 @@ class OnPolicyConfig:
         crash, as CleanRL's PPO does (right when beating the clock is part of the task, e.g. the
         intersection's arrival within 13 s; Pardo et al. 2018, "Time Limits in Reinforcement
         Learning").
+    :param critic_warmup_steps: rollouts that end within this many steps train the critic alone
+        (the actor, and an encoder it shares with the critic, keep their weights): a policy started
+        from imitation (``--init-from``) then meets a critic that knows its returns before the
+        policy gradient moves it (Roach's and CaRL's fine-tuning lineage pre-trains the critic).
+    :param prior_kl_coef: weight of KL(π ‖ π_prior) in the loss, π_prior a frozen copy of the
+        policy the run started from (the ``--init-from`` policy, else the random initial one): a
+        fine-tuning that improves on an imitation policy stays near it (0: no such term).
     """
 
     learning_rate: float = 3e-4
@@ -71,6 +82,8 @@ class OnPolicyConfig:
     linear_lr: bool = False
     linear_entropy: bool = False
     bootstrap_time_limits: bool = True
+    critic_warmup_steps: int = 0
+    prior_kl_coef: float = 0.0
 
     def check(self, algo: str) -> None:
         if self.n_steps < 1 or not 0 < self.gamma <= 1 or not 0 <= self.gae_lambda <= 1:
@@ -79,8 +92,10 @@ class OnPolicyConfig:
             raise UsageError(
                 f"{algo!r} needs 0 < learning_rate <= {MAX_LEARNING_RATE:g} and max_grad_norm > 0"
             )
-        if self.entropy_coef < 0 or self.value_coef < 0:
-            raise UsageError(f"{algo!r} needs entropy_coef >= 0 and value_coef >= 0")
+        if min(self.entropy_coef, self.value_coef, self.critic_warmup_steps, self.prior_kl_coef) < 0:
+            raise UsageError(
+                f"{algo!r} needs entropy_coef, value_coef, critic_warmup_steps and prior_kl_coef >= 0"
+            )
         if self.distribution not in DISTRIBUTIONS:
             raise UsageError(f"{algo!r} distribution must be one of {', '.join(DISTRIBUTIONS)}")
         self.hidden(algo)
@@ -199,6 +214,7 @@ class OnPolicyAgent(OwnAgent):
         self.optimizer = torch.optim.Adam(
             self.policy.parameters(), lr=config.learning_rate, eps=1e-5, foreach=True
         )
+        self.prior = self._frozen_copy() if config.prior_kl_coef > 0 else None
         # the reward scale: running mean/var of the discounted return, and each world's return so far
         self.return_stats = torch.tensor([0.0, 1.0, 0.0], dtype=torch.float64)  # mean, var, count
         self.running_returns = torch.zeros(worlds, dtype=torch.float64)
@@ -207,7 +223,26 @@ class OnPolicyAgent(OwnAgent):
         self.episode_returns: deque[float] = deque(maxlen=100)
 
     def _modules(self) -> dict[str, Any]:
-        return {"policy": self.policy, "optimizer": self.optimizer}
+        prior = {} if self.prior is None else {"prior": self.prior}
+        return {"policy": self.policy, "optimizer": self.optimizer, **prior}
+
+    def _frozen_copy(self) -> ActorCritic:
+        return copy.deepcopy(self.policy).requires_grad_(False)
+
+    def start_from(self, weights: dict[str, torch.Tensor]) -> None:
+        """Load another policy's weights (``--init-from``); the prior of ``prior_kl_coef`` becomes them."""
+        self.policy.load_state_dict(weights)
+        if self.prior is not None:
+            self.prior = self._frozen_copy()
+
+    def prior_kl(self, obs: Any, out: torch.Tensor) -> torch.Tensor | None:
+        """mean KL(π ‖ π_prior) over a minibatch (its observations and π's head outputs); None
+        without a prior."""
+        if self.prior is None:
+            return None
+        with torch.no_grad():
+            prior_out, _ = self.prior(obs)
+        return self.policy.kl_to(out, self.prior, prior_out).mean()
 
     def _state(self) -> dict[str, Any]:
         return {
@@ -310,6 +345,21 @@ class OnPolicyAgent(OwnAgent):
         """One policy update from a rollout; returns the metrics to log (``train/...``)."""
         raise NotImplementedError
 
+    def update_critic(self, rollout: Rollout) -> dict[str, float]:
+        """The critic's regression on the rollout's returns alone (``critic_warmup_steps``), in the
+        algorithm's epochs and minibatches (PPO's ``n_epochs`` × ``batch_size``; A2C: one step)."""
+        config, policy = self.config, self.policy
+        size = len(rollout.returns)
+        batch, losses = getattr(config, "batch_size", size), []
+        for _ in range(getattr(config, "n_epochs", 1)):
+            for indices in torch.randperm(size, generator=self.generator).split(batch):
+                values = policy.values(map_obs(itemgetter(indices), rollout.observations), freeze_shared=True)
+                loss = nn.functional.mse_loss(values, rollout.returns[indices])
+                gradient_step(self.optimizer, loss, policy.parameters(), config.max_grad_norm)
+                losses.append(loss.item())
+        explained = explained_variance(rollout.values, rollout.returns)
+        return {"value_loss": float(np.mean(losses)), "explained_variance": explained, "critic_warmup": 1.0}
+
     # --- the loop -------------------------------------------------------------------------------
     def _start_worlds(self, worlds: Worlds) -> None:
         if worlds.count != len(self.running_returns):
@@ -333,7 +383,10 @@ class OnPolicyAgent(OwnAgent):
             self.entropy_coef = config.entropy_coef * (fraction_left if config.linear_entropy else 1.0)
             for group in self.optimizer.param_groups:
                 group["lr"] = self.learning_rate
-            metrics = self.update(rollout)
+            if self.num_timesteps <= config.critic_warmup_steps:
+                metrics = self.update_critic(rollout)
+            else:
+                metrics = self.update(rollout)
             self.policy.norm.update(rollout.observations)
             metrics.update(learning_rate=self.learning_rate, entropy_coef=self.entropy_coef)
             if self.policy.kind == "tanh_gaussian":

@@ -81,13 +81,15 @@ class OwnPPO(OnPolicyAgent):
         history: dict[str, list[float]] = {
             "policy_loss": [], "value_loss": [], "entropy": [], "clip_fraction": [], "approx_kl": []
         }  # fmt: skip
+        prior_kls: list[float] = []  # KL(π ‖ π_prior) with prior_kl_coef
         for _ in range(config.n_epochs):
             stop = False
             for indices in torch.randperm(size, generator=self.generator).split(config.batch_size):
                 advantages = rollout.advantages[indices]
                 if config.normalize_advantages and len(indices) > 1:
                     advantages = (advantages - advantages.mean()) / (advantages.std() + 1e-8)
-                out, values = policy(map_obs(itemgetter(indices), rollout.observations))
+                observations = map_obs(itemgetter(indices), rollout.observations)
+                out, values = policy(observations)
                 log_probs, entropy = policy.log_prob_entropy(out, rollout.actions[indices])
                 old_log_probs = rollout.log_probs[indices]
                 policy_loss, clip_fraction = clipped_policy_loss(
@@ -98,6 +100,9 @@ class OwnPPO(OnPolicyAgent):
                 )
                 entropy = entropy.mean()
                 loss = policy_loss + config.value_coef * critic_loss - self.entropy_coef * entropy
+                prior_kl = self.prior_kl(observations, out)
+                if prior_kl is not None:
+                    loss = loss + config.prior_kl_coef * prior_kl
                 with torch.no_grad():  # KL(old‖new) ≈ mean((r − 1) − log r) (Schulman's k3 estimator)
                     log_ratio = log_probs - old_log_probs
                     approx_kl = float(((log_ratio.exp() - 1) - log_ratio).mean())
@@ -109,7 +114,11 @@ class OwnPPO(OnPolicyAgent):
                     history, (policy_loss, critic_loss, entropy, clip_fraction, approx_kl), strict=True
                 ):
                     history[key].append(value.item() if torch.is_tensor(value) else value)
+                if prior_kl is not None:
+                    prior_kls.append(prior_kl.item())
             if stop:
                 break
         metrics = {key: float(np.mean(values)) for key, values in history.items() if values}
+        if prior_kls:
+            metrics["prior_kl"] = float(np.mean(prior_kls))
         return {**metrics, "explained_variance": explained_variance(rollout.values, rollout.returns)}

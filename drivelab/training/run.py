@@ -81,6 +81,7 @@ from drivelab.training.safe_files import (
     write_failure,
     write_file,
 )
+from drivelab.training.warm_start import initial_policy, load_initial_policy
 from drivelab.yaml_io import dump_yaml
 
 
@@ -258,9 +259,13 @@ def new_run_dir(config: RunConfig, runs_root: Path) -> Path:
 
 def _check_model(spec, config: RunConfig, probe) -> None:
     """Build the agent once on the probe environment and throw it away, so that hyper-parameters the
-    algorithm rejects fail before any folder exists. The real build re-seeds everything."""
+    algorithm rejects, or an ``init_from`` policy that does not fit, fail before any folder exists.
+    The real build re-seeds everything."""
+    weights = None if config.init_from is None else initial_policy(config)
     try:
-        spec.build(config.algo, probe, config.seed, dict(config.hyperparams), None)
+        agent = spec.build(config.algo, probe, config.seed, dict(config.hyperparams), None)
+        if weights is not None:
+            load_initial_policy(agent, weights, config.init_from)
     except UsageError:
         raise
     except (TypeError, ValueError, AssertionError, RuntimeError) as exc:  # torch: RuntimeError
@@ -361,6 +366,8 @@ def train(
             write_file(run_dir / "config.yaml", dump_yaml(config.to_dict()))
             train_env, eval_env, worlds = _make_envs(config, run_dir, resume=False)
             model = spec.build(config.algo, train_env, config.seed, dict(config.hyperparams), run_dir)
+            if config.init_from is not None:
+                load_initial_policy(model, initial_policy(config), config.init_from)
         except BaseException as exc:  # Ctrl-C too: a folder of a config alone could not be resumed
             _remove_created(created)  # bad hyperparameters, too little memory: leave nothing behind
             if isinstance(exc, MemoryError):

@@ -254,3 +254,55 @@ def test_weights_saved_by_the_tanh_gaussian_networks_load():
     new.load_state_dict(old.state_dict())
     obs = torch.rand(5, 4)
     torch.testing.assert_close(new(obs)[0], old(obs)[0])
+
+
+@pytest.mark.parametrize("kind", ["categorical", "tanh_gaussian", "beta"])
+def test_the_kl_between_two_policies_is_their_distributions(kind):
+    """``kl_to`` is KL(π ‖ π_other) per row: Gaussians before the tanh and categoricals against their
+    closed forms, the Beta's zero against itself and positive against another."""
+    action_space = spaces.Discrete(3) if kind == "categorical" else spaces.Box(-1, 1, (2,), np.float32)
+    space = spaces.Box(-1, 1, (4,), np.float32)
+    torch.manual_seed(0)
+    policy, other = (ActorCritic(space, action_space, kind, log_std_init=s) for s in (-1.0, -0.5))
+    obs = torch.randn(5, 4)
+    out, other_out = policy(obs)[0] + 0.3 * torch.randn(5, 1), other(obs)[0]
+    kl = policy.kl_to(out, other, other_out)
+    assert kl.shape == (5,)
+    if kind == "categorical":
+        p, q = out.softmax(-1), other_out.softmax(-1)
+        torch.testing.assert_close(kl, (p * (p / q).log()).sum(-1))
+    elif kind == "tanh_gaussian":
+        s, s0 = np.exp(-1.0), np.exp(-0.5)
+        expected = np.log(s0 / s) + (s**2 + (out - other_out) ** 2) / (2 * s0**2) - 0.5
+        torch.testing.assert_close(kl, expected.sum(-1).float())
+    else:
+        torch.testing.assert_close(policy.kl_to(out, policy, out), torch.zeros(5), atol=1e-6, rtol=0)
+        assert torch.all(kl > 0)
+
+
+def test_a_prior_kl_keeps_the_policy_near_the_one_it_started_from():
+    """With a large ``prior_kl_coef`` PPO barely leaves its initial policy on the bandit it otherwise
+    learns; the prior itself never changes, and the KL is logged."""
+    env = Bandit(spaces.Discrete(2), False)
+    probe = Bandit(spaces.Discrete(2), False, count=200, seed=1).reset()
+
+    def trained(coef: float):
+        hyperparams = {"n_steps": 4, "learning_rate": 3e-3, "gamma": 0.9, "batch_size": 32, "n_epochs": 4,
+                       "prior_kl_coef": coef}  # fmt: skip
+        agent = OwnPPO(env.observation_space, env.action_space, 0, hyperparams, env)
+        with torch.no_grad():
+            start = agent.policy(torch.as_tensor(probe))[0].softmax(-1)
+        prior = {key: value.clone() for key, value in (agent.prior.state_dict() if coef else {}).items()}
+        logged = []
+        agent._log_progress = lambda metrics: logged.append(metrics)
+        agent.learn(2000)
+        with torch.no_grad():
+            end = agent.policy(torch.as_tensor(probe))[0].softmax(-1)
+        for key, value in prior.items():
+            assert torch.equal(agent.prior.state_dict()[key], value), key
+        return float((end - start).abs().max()), logged
+
+    free, free_log = trained(0.0)
+    held, held_log = trained(100.0)
+    assert free > 0.3 and held < 0.1 * free
+    assert "prior_kl" in held_log[-1] and "prior_kl" not in free_log[-1]
