@@ -182,7 +182,7 @@ BLOCKS_DAGGER = (  # one seed screened: 89 % success on the 100 unseen maps
 # PPO fine-tuning of that DAgger policy (the "dagger" row's run of the same seed, --init-from): the
 # critic trained alone for 300 k steps, a KL term to the DAgger policy, crashes and leaving the road
 # at -300 (MetaDrive's -5 let PPO trade safety for speed: 92 % -> 48-64 %). Screened on seed 0:
-# benchmarks/results/blocks_finetune.notes.md.
+# benchmarks/results/finetune.notes.md.
 BLOCKS_FINETUNE = (
     f"--algo ppo_own {BLOCKS_EXPERT} --obs lidar,measurements,waypoints "
     "--reward metadrive,metadrive_crash=-300,metadrive_out_of_road=-300 --n-envs 64 --steps 1000000 "
@@ -192,7 +192,8 @@ BLOCKS_FINETUNE = (
 )
 # PPO fine-tuning of the town's privileged DAgger policy, as BLOCKS_FINETUNE with Roach's reward
 # (screened on seed 0 from the shipped town-dagger-privileged: NoCrash 96 / 88 / 80 % against its
-# 92 / 76 / 76 % on the same 25 routes per level)
+# 92 / 76 / 76 % on the same 25 routes per level, a gain that 3 seeds x 100 routes do not confirm:
+# benchmarks/results/finetune.notes.md)
 TOWN_FINETUNE = (
     "--algo ppo_own --env town --action target_speed --traffic dense "
     "--obs waypoints,measurements,affordances --reward roach --n-envs 64 --steps 1000000 "

@@ -53,6 +53,7 @@ PINNED_ISA_TEXT = "drivelab.isa.PINNED_ISA (AVX2 code paths, one thread)"
 sys.path.insert(0, str(Path(__file__).parent))
 from leaderboard import (  # noqa: E402
     BLOCKS_DAGGER,
+    BLOCKS_FINETUNE,
     HIGHWAY_DQN,
     RACETRACK_DAGGER,
     RACETRACK_PPO_OWN,
@@ -220,6 +221,16 @@ AGENTS: dict[str, dict] = {
         ),
         "train": seed_0(BLOCKS_DAGGER),
         # its evaluation set is its --eval-maps: the 100 unseen maps, one episode each
+        "measure": [("100 unseen maps", ["evaluate", "{name}", "--maps", UNSEEN_MAPS, "--episodes", "100"])],
+    },
+    "blocks-dagger-ppo_own": {
+        "description": (
+            "PPO fine-tuning (drivelab's ppo_own) of the shipped blocks-dagger policy on the 1000 training "
+            "maps: imitation, then RL; crashes and leaving the road at -300, gamma 0.995, the critic trained "
+            "alone for 300 k steps, a KL term to the DAgger policy, 1 M steps on 64 worlds; the "
+            "leaderboard's blocks-unseen dagger+ppo_own recipe, seed 0, started from blocks-dagger"
+        ),
+        "train": [*seed_0(BLOCKS_FINETUNE), "--init-from", "blocks-dagger"],
         "measure": [("100 unseen maps", ["evaluate", "{name}", "--maps", UNSEEN_MAPS, "--episodes", "100"])],
     },
     "blocks-ppo": {
