@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import json
 import os
-import platform
 import shutil
 import sys
 import time
@@ -30,7 +29,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import leaderboard  # noqa: E402
-from provenance import Parser, cpu_isa, stop, whole  # noqa: E402
+from provenance import Parser, provenance, stop, whole  # noqa: E402
 
 ROOT = leaderboard.ROOT
 RUNS = ROOT / "benchmarks" / "runs" / "curves"
@@ -166,13 +165,8 @@ def main() -> None:
     args = parser.parse_args()
     entries = [entry_of(row) for row in args.rows.split(",")]
     curves = [curve(entry, args.points, args.episodes) for entry in entries]
-    result = {
-        "command": ("python benchmarks/competence_curves.py " + " ".join(sys.argv[1:])).strip(),
-        "machine": f"{cpu_isa()}, {os.cpu_count()} cores, Python {platform.python_version()}",
-        "date": time.strftime("%Y-%m-%d"),
-        "episodes": args.episodes,
-        "curves": curves,
-    }
+    command = ("python benchmarks/competence_curves.py " + " ".join(sys.argv[1:])).strip()
+    result = {**provenance(command), "episodes": args.episodes, "curves": curves}
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "competence_curves.json").write_text(json.dumps(result, indent=1))
     plot(curves, RESULTS / "competence_curves.png")

@@ -29,6 +29,14 @@ def cpu_isa() -> str:
     return f"{platform.machine()} (numpy {paths['numpy']}, torch {paths['torch']}, numba {paths['numba']})"
 
 
+def provenance(command: str) -> dict[str, str]:
+    """The head of a results file: the command that made it, the machine and the date."""
+    import time
+
+    machine = f"{cpu_isa()}, {os.cpu_count()} cores, Python {platform.python_version()}"
+    return {"command": command, "machine": machine, "date": time.strftime("%Y-%m-%d")}
+
+
 def command_line(argv: list[str] | None = None) -> str:
     """``[OMP_NUM_THREADS=N] [NUMBA_NUM_THREADS=N] python SCRIPT ARGS…`` of this process."""
     settings = [f"{name}={os.environ[name]}" for name in THREAD_VARIABLES if name in os.environ]
