@@ -198,7 +198,22 @@ TRAIN_CASES = {
     "ppo_own entropy_coef=-1": (
         ["--algo", "ppo_own", "--action", "continuous", "--obs", "kinematics", "-H", "entropy_coef=-1"],
         {},
-        "'ppo_own' needs entropy_coef >= 0 and value_coef >= 0",
+        "'ppo_own' needs entropy_coef, value_coef, critic_warmup_steps and prior_kl_coef >= 0",
+    ),
+    "ppo_own prior_kl_coef=-1": (
+        ["--algo", "ppo_own", "--action", "continuous", "--obs", "kinematics", "-H", "prior_kl_coef=-1"],
+        {},
+        "'ppo_own' needs entropy_coef, value_coef, critic_warmup_steps and prior_kl_coef >= 0",
+    ),
+    "a2c_own critic_warmup_steps=-5": (
+        ["--algo", "a2c_own", "--action", "meta", "--obs", "kinematics", "-H", "critic_warmup_steps=-5"],
+        {},
+        "'a2c_own' needs entropy_coef, value_coef, critic_warmup_steps and prior_kl_coef >= 0",
+    ),
+    "dqn init_from": (
+        ["--algo", "dqn", "--obs", "kinematics", "--init-from", "merge-dqn"],
+        {},
+        "init_from starts ppo_own or a2c_own runs, not 'dqn'",
     ),
     "ppo_own target_kl=-1": (
         ["--algo", "ppo_own", "--action", "meta", "--obs", "kinematics", "-H", "target_kl=-1"],
