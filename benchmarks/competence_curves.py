@@ -73,8 +73,7 @@ def curve(entry: leaderboard.Entry, points: int, episodes: int) -> dict:
     if run_dir.exists():
         shutil.rmtree(run_dir)
     os.chdir(ROOT)  # the recipe's --config paths are the repository's
-    arguments = [a for a in entry.command(0)[1:]]
-    config = train_config(arguments)
+    config = train_config(entry.command(0)[1:])
     total = config.steps
     rollout, _ = steps_per_update(config.algo, config.hyperparams, config.n_envs)
     chunks = chunk_steps(total, rollout, points)

@@ -88,6 +88,11 @@ class Entry:
             return None
         return next(e for e in ENTRIES if (e.scenario, e.name) == (self.scenario, self.init_from))
 
+    def stages(self) -> list[Entry]:
+        """The entries whose runs make this one's: its source first (``init_from``), then itself."""
+        source = self.source()
+        return [self] if source is None else [source, self]
+
     def command(self, seed: int | str) -> list[str]:
         run, source = self.run_dir(seed), self.source()
         start = [] if source is None else ["--init-from", str(source.run_dir(seed).relative_to(ROOT))]
@@ -610,8 +615,7 @@ def measure(entry: Entry, seeds: list[int], episodes: int, train: bool, evaluate
               "seeds": {}, "missing": []}  # fmt: skip
     for seed in seeds:
         run = entry.run_dir(seed)
-        source = entry.source()
-        if not all(_trained(stage, seed, train, stage is source) for stage in (source, entry) if stage):
+        if not all(_trained(stage, seed, train, stage is not entry) for stage in entry.stages()):
             record["missing"].append(seed)
             continue
         report = _report(entry, seed, episodes, make=evaluate)
@@ -647,10 +651,10 @@ def _trained(entry: Entry, seed: int, train: bool, source: bool = False) -> bool
 
 def _total_time(entry: Entry, seed: int) -> dict[str, float] | None:
     """The training time of ``entry``'s run of ``seed``, with that of the run it started from."""
-    times = [_training_time(stage.run_dir(seed)) for stage in (entry.source(), entry) if stage is not None]
-    if any(time is None for time in times):
+    timings = [_training_time(stage.run_dir(seed)) for stage in entry.stages()]
+    if None in timings:
         return None
-    return {key: sum(time[key] for time in times) for key in ("wall_s", "cpu_s")}
+    return {key: sum(timing[key] for timing in timings) for key in ("wall_s", "cpu_s")}
 
 
 def _previous_records() -> dict[tuple[str, str], dict]:
