@@ -225,6 +225,16 @@ TRAIN_CASES = {
         {},
         "'a2c_own': discrete actions take the categorical distribution, not 'beta'",
     ),
+    "ppo_own encoder=transformer": (
+        ["--algo", "ppo_own", "--action", "meta", "--obs", "kinematics", "-H", "encoder=transformer"],
+        {},
+        "'ppo_own' encoder must be one of auto, attention, got 'transformer'",
+    ),
+    "ppo_own attention on flat kinematics": (
+        ["--algo", "ppo_own", "--action", "meta", "--obs", "kinematics", "-H", "encoder=attention"],
+        {},
+        "encoder attention needs the vehicles as rows: kinematics with flatten=false",
+    ),
     "ppo_own net_arch=0": (
         ["--algo", "ppo_own", "--action", "meta", "--obs", "kinematics", "-H", "net_arch=0,64"],
         {},

@@ -11,7 +11,7 @@ import torch
 from gymnasium import spaces
 from torch import nn
 
-from drivelab.agents.networks import make_encoder, squashed_log_prob
+from drivelab.agents.networks import EgoAttentionEncoder, make_encoder, squashed_log_prob
 
 DISTRIBUTIONS = ("auto", "categorical", "tanh_gaussian", "beta")
 BETA_EPSILON = 1e-6  # a Beta sample is kept inside (ε, 1 − ε), where its log-density is finite
@@ -98,6 +98,11 @@ def merge_moments(mean, var, count, batch_mean, batch_var, batch_count):
     return mean + delta * batch_count / total, merged_var
 
 
+def _encode(encoder: nn.Module, normed, raw) -> torch.Tensor:
+    """An encoder's features; the attention encoder also reads the raw rows for its mask."""
+    return encoder(normed, raw) if isinstance(encoder, EgoAttentionEncoder) else encoder(normed)
+
+
 def _name(kind: str, key: str) -> str:
     return f"{kind}_{key}" if key else kind
 
@@ -110,7 +115,10 @@ class ActorCritic(nn.Module):
     :param distribution: "auto", "categorical", "tanh_gaussian" or "beta" (``distribution_of``).
     :param shared_encoder: one encoder for actor and critic, or one each.
     :param log_std_init: initial log σ of the tanh-Gaussian.
-    :param hidden: widths of the MLP encoder's layers (vector observations).
+    :param hidden: widths of the MLP encoder's layers (vector observations), or of the attention
+        encoder's embeddings.
+    :param encoder: "auto" (the observation's encoder: ``networks.make_encoder``) or "attention"
+        (``networks.EgoAttentionEncoder`` over the kinematics rows).
     :param normalize_observations: keep running statistics of the float observations and
         normalise with them.
     """
@@ -124,12 +132,13 @@ class ActorCritic(nn.Module):
         log_std_init: float = 0.0,
         hidden: tuple[int, ...] = (64, 64),
         normalize_observations: bool = False,
+        encoder: str = "auto",
     ) -> None:
         super().__init__()
         self.kind = distribution_of(action_space, distribution)
         self.norm = RunningNorm(space, normalize_observations)
-        self.actor_encoder = make_encoder(space, hidden)
-        self.critic_encoder = self.actor_encoder if shared_encoder else make_encoder(space, hidden)
+        self.actor_encoder = make_encoder(space, hidden, encoder)
+        self.critic_encoder = self.actor_encoder if shared_encoder else make_encoder(space, hidden, encoder)
         if self.kind == "categorical":
             outputs = int(action_space.n)
         else:
@@ -159,17 +168,17 @@ class ActorCritic(nn.Module):
 
     def forward(self, obs) -> tuple[torch.Tensor, torch.Tensor]:
         """(the head's output, V) for a batch of stored observations."""
-        obs = self.norm(obs)
-        features = self.actor_encoder(obs)
-        value = self.value(features if self.shared else self.critic_encoder(obs)).squeeze(-1)
-        return self.head(features), value
+        normed = self.norm(obs)
+        features = _encode(self.actor_encoder, normed, obs)
+        value = self.value(features if self.shared else _encode(self.critic_encoder, normed, obs))
+        return self.head(features), value.squeeze(-1)
 
     def values(self, obs, freeze_shared: bool = False) -> torch.Tensor:
         """V alone (the critic's encoder only, when it has its own); ``freeze_shared``: an encoder
         shared with the actor gets no gradient from it (the critic's warm-up)."""
-        obs = self.norm(obs)
+        normed = self.norm(obs)
         with torch.set_grad_enabled(torch.is_grad_enabled() and not (freeze_shared and self.shared)):
-            features = self.critic_encoder(obs)
+            features = _encode(self.critic_encoder, normed, obs)
         return self.value(features).squeeze(-1)
 
     @property

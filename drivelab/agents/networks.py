@@ -1,5 +1,6 @@
-"""The MetaDrive study's encoders (CNN and fusion), the tanh-Gaussian actor-critic, and SB3
-features extractors of both (``-H features_extractor=seed``)."""
+"""The MetaDrive study's encoders (CNN and fusion), the MLP, an ego-attention encoder for sets of
+vehicles, the tanh-Gaussian actor-critic, and SB3 features extractors of the study's encoders
+(``-H features_extractor=seed``)."""
 
 from __future__ import annotations
 
@@ -114,9 +115,78 @@ class MlpEncoder(nn.Module):
         return self.net(obs.flatten(1))
 
 
-def make_encoder(space: spaces.Space, hidden: tuple[int, ...] = (64, 64)) -> nn.Module:
+ENCODERS = ("auto", "attention")
+ENTITY_KEY = "kinematics"  # a Dict's vehicle set: the kinematics sensor's (rows, features) array
+
+
+def _mlp(size: int, hidden: tuple[int, ...]) -> nn.Sequential:
+    layers = []
+    for width in hidden:
+        layers += [nn.Linear(size, width), nn.ReLU()]
+        size = width
+    return nn.Sequential(*layers)
+
+
+class EgoAttentionEncoder(nn.Module):
+    """Ego-attention over a set of vehicles (Leurent & Mercat 2019, "Social Attention for
+    Autonomous Decision-Making in Dense Traffic", rl-agents' ``EgoAttentionNetwork``).
+
+    The vehicle set is a ``(rows, features)`` array whose row 0 is the ego (``kinematics`` with
+    ``flatten=false``): the observation itself, or its ``kinematics`` entry in a Dict. Each row is
+    embedded (ReLU layers ``hidden``; one embedding for the ego, one shared by the others), the ego's
+    embedding queries every row's with multi-head attention, and the result plus the ego's
+    embedding is the set's feature vector: invariant to the others' order and to their number.
+    Rows that are all zero (kinematics' absent vehicles) are masked out, as rl-agents masks rows
+    without presence; the mask is read from the observation before normalisation (``raw``). A
+    Dict's other entries are concatenated through an MlpEncoder (tanh layers ``hidden``) and joined
+    to the set's features.
+    """
+
+    def __init__(self, space: spaces.Space, hidden: tuple[int, ...] = (64, 64), heads: int = 2) -> None:
+        super().__init__()
+        if isinstance(space, spaces.Dict):
+            self.key = ENTITY_KEY if ENTITY_KEY in space.spaces else None
+            entities = space.spaces.get(ENTITY_KEY)
+            rest = {key: sub for key, sub in space.spaces.items() if key != ENTITY_KEY}
+        else:
+            self.key, entities, rest = "", space, {}
+        if self.key is None or not (isinstance(entities, spaces.Box) and len(entities.shape) == 2):
+            raise ValueError(
+                "encoder attention needs the vehicles as rows: kinematics with flatten=false "
+                f"(a (rows, features) array), got {space}"
+            )
+        width = hidden[-1]
+        if width % heads:
+            raise ValueError(f"encoder attention needs net_arch's last width divisible by {heads} heads")
+        features = entities.shape[1]
+        self.ego = _mlp(features, hidden)
+        self.others = _mlp(features, hidden)
+        self.attention = nn.MultiheadAttention(width, heads, batch_first=True)
+        self.rest = MlpEncoder(spaces.Dict(rest), hidden) if rest else None
+        self.features = width + (self.rest.features if self.rest else 0)
+
+    def forward(self, obs, raw=None) -> torch.Tensor:
+        """Features of a batch of (normalised) observations; ``raw``: the same before
+        normalisation, which marks the absent rows (default: ``obs``)."""
+        raw = obs if raw is None else raw
+        rows = obs[self.key] if self.key else obs
+        raw_rows = raw[self.key] if self.key else raw
+        ego = self.ego(rows[:, :1])  # (B, 1, width)
+        embedded = torch.cat([ego, self.others(rows[:, 1:])], dim=1)  # (B, rows, width)
+        absent = (raw_rows == 0).all(-1)
+        absent[:, 0] = False  # the ego always attends to itself
+        attended, _ = self.attention(ego, embedded, embedded, key_padding_mask=absent, need_weights=False)
+        features = (attended + ego).squeeze(1)
+        if self.rest is None:
+            return features
+        return torch.cat([features, self.rest({k: obs[k] for k in self.rest.keys})], dim=1)
+
+
+def make_encoder(space: spaces.Space, hidden: tuple[int, ...] = (64, 64), kind: str = "auto") -> nn.Module:
     """SeedCnn for an image, FusionEncoder for image + vectors, MlpEncoder (layers ``hidden``) for
-    vectors."""
+    vectors; with ``kind`` "attention", an EgoAttentionEncoder over the vehicles."""
+    if kind == "attention":
+        return EgoAttentionEncoder(space, hidden)
     kind = observation_kind(space)
     if kind == "image":
         return SeedCnn(space)

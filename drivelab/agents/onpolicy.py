@@ -24,6 +24,7 @@ from torch import nn
 from drivelab.agents.actor_critic import DISTRIBUTIONS, NORM_CLIP, NORM_EPSILON, ActorCritic, merge_moments
 from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent, gradient_step
 from drivelab.agents.buffer_memory import check_buffer_memory, observation_bytes
+from drivelab.agents.networks import ENCODERS
 from drivelab.agents.worlds import Worlds, batch_of_one, map_obs
 from drivelab.errors import UsageError
 
@@ -47,6 +48,9 @@ class OnPolicyConfig:
         "tanh_gaussian" or "beta".
     :param net_arch: widths of the MLP's tanh layers for vector observations, e.g. "256,256".
     :param shared_encoder: actor and critic share the encoder.
+    :param encoder: "auto" (the MLP, CNN or fusion encoder the observation takes) or "attention":
+        ego-attention over the vehicles of ``kinematics:flatten=false`` (Leurent & Mercat 2019, the
+        encoder rl-agents learns highway-env's intersection with), its embeddings ``net_arch`` wide.
     :param log_std_init: initial log σ of the tanh-Gaussian (given with ``init_from``, it replaces
         the source policy's).
     :param linear_lr: anneal the learning rate linearly to 0.
@@ -78,6 +82,7 @@ class OnPolicyConfig:
     distribution: str = "auto"
     net_arch: str = "64,64"
     shared_encoder: bool = True
+    encoder: str = "auto"
     log_std_init: float = 0.0
     linear_lr: bool = False
     linear_entropy: bool = False
@@ -98,6 +103,8 @@ class OnPolicyConfig:
             )
         if self.distribution not in DISTRIBUTIONS:
             raise UsageError(f"{algo!r} distribution must be one of {', '.join(DISTRIBUTIONS)}")
+        if self.encoder not in ENCODERS:
+            raise UsageError(f"{algo!r} encoder must be one of {', '.join(ENCODERS)}, got {self.encoder!r}")
         self.hidden(algo)
 
     def hidden(self, algo: str) -> tuple[int, ...]:
@@ -208,6 +215,7 @@ class OnPolicyAgent(OwnAgent):
                 log_std_init=config.log_std_init,
                 hidden=config.hidden(self.algo),
                 normalize_observations=config.normalize_observations,
+                encoder=config.encoder,
             )
         except ValueError as exc:
             raise UsageError(f"{self.algo!r}: {exc}") from None
