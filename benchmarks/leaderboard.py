@@ -223,6 +223,18 @@ TOWN_FINETUNE = (
     "-H shared_encoder=false -H critic_warmup_steps=250000 -H prior_kl_coef=1.0"
 )
 
+# RL from scratch in the town (issue 49): the fine-tuning's reward (Roach's, its terminal penalty x10)
+# and discount, with Roach's Beta actions and an entropy bonus, observations and rewards normalised,
+# 8 M steps on 64 worlds. Screened on seed 0 (20 evaluation episodes every 2 M steps): 30 % success at
+# 2 and 4 M steps, 50 % at 6 and 8 M, where SB3 PPO (1 M steps, Roach's reward) crept at 0.3 m/s.
+TOWN_PPO_OWN = (
+    "--algo ppo_own --env town --action target_speed --traffic dense "
+    "--obs waypoints,measurements,affordances --reward roach,roach_terminal=10 --n-envs 64 --steps 8000000 "
+    "--eval-every 2000000 --eval-episodes 5 -H gamma=0.995 -H n_steps=64 -H batch_size=1024 -H n_epochs=4 "
+    "-H learning_rate=0.0003 -H normalize_rewards=true -H normalize_observations=true "
+    "-H shared_encoder=false -H distribution=beta -H entropy_coef=0.01"
+)
+
 JUNCTIONS = (  # scenario, training reward, what it is
     ("merge", "highway", "the highway reward"),
     ("roundabout", "highway", "the highway reward"),
@@ -452,6 +464,17 @@ ENTRIES: tuple[Entry, ...] = (
         _args(TOWN_FINETUNE),
         judge="nocrash",
         init_from="dagger (privileged)",
+        targets={"nocrash": TOWN_TARGETS["privileged"]},
+    ),
+    Entry(
+        "town",
+        "ppo_own (privileged)",
+        "drivelab's PPO on the fast on-policy trainer from scratch (no imitation) on waypoints + "
+        "measurements + affordances, Roach's reward with its terminal penalty x10, Beta actions, entropy "
+        "coefficient 0.01, dense traffic, gamma 0.995, observations and rewards normalised, separate 64x64 "
+        "actor and critic, 8 M steps on 64 worlds",
+        _args(TOWN_PPO_OWN),
+        judge="nocrash",
         targets={"nocrash": TOWN_TARGETS["privileged"]},
     ),
     Entry(
