@@ -96,18 +96,23 @@ class FusionEncoder(nn.Module):
         return self.fusion(torch.cat(parts, dim=1))
 
 
+def _layers(size: int, hidden: tuple[int, ...], activation: type[nn.Module]) -> nn.Sequential:
+    """Linear layers of widths ``hidden`` from ``size`` inputs, each followed by ``activation``."""
+    layers = []
+    for width in hidden:
+        layers += [nn.Linear(size, width), activation()]
+        size = width
+    return nn.Sequential(*layers)
+
+
 class MlpEncoder(nn.Module):
     """Tanh layers (two of 64 by default, SB3's MLP) for vector observations, Dicts concatenated."""
 
     def __init__(self, space: spaces.Space, hidden: tuple[int, ...] = (64, 64)) -> None:
         super().__init__()
         self.keys = list(space.spaces) if isinstance(space, spaces.Dict) else None
-        layers, size = [], spaces.flatdim(space)
-        for width in hidden:
-            layers += [nn.Linear(size, width), nn.Tanh()]
-            size = width
-        self.net = nn.Sequential(*layers)
-        self.features = size
+        self.net = _layers(spaces.flatdim(space), hidden, nn.Tanh)
+        self.features = hidden[-1] if hidden else spaces.flatdim(space)
 
     def forward(self, obs) -> torch.Tensor:
         if self.keys is not None:
@@ -117,14 +122,6 @@ class MlpEncoder(nn.Module):
 
 ENCODERS = ("auto", "attention")
 ENTITY_KEY = "kinematics"  # a Dict's vehicle set: the kinematics sensor's (rows, features) array
-
-
-def _mlp(size: int, hidden: tuple[int, ...]) -> nn.Sequential:
-    layers = []
-    for width in hidden:
-        layers += [nn.Linear(size, width), nn.ReLU()]
-        size = width
-    return nn.Sequential(*layers)
 
 
 class EgoAttentionEncoder(nn.Module):
@@ -159,8 +156,8 @@ class EgoAttentionEncoder(nn.Module):
         if width % heads:
             raise ValueError(f"encoder attention needs net_arch's last width divisible by {heads} heads")
         features = entities.shape[1]
-        self.ego = _mlp(features, hidden)
-        self.others = _mlp(features, hidden)
+        self.ego = _layers(features, hidden, nn.ReLU)
+        self.others = _layers(features, hidden, nn.ReLU)
         self.attention = nn.MultiheadAttention(width, heads, batch_first=True)
         self.rest = MlpEncoder(spaces.Dict(rest), hidden) if rest else None
         self.features = width + (self.rest.features if self.rest else 0)
