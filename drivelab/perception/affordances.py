@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 from gymnasium import spaces
+from numba import njit
 
 from drivelab.perception.base import Sensor, ego_frame
 from drivelab.world.batch import EgoBatch, WorldBatch
@@ -109,10 +110,8 @@ def _nearest_on_route(
     count, size = bodies.shape[:2]
     if size == 0:
         return np.zeros(count, dtype=bool), np.zeros(count), np.zeros((count, 6))
-    gaps = np.linalg.norm(bodies[:, :, None, :2] - path[:, None], axis=3)  # (K, N, S)
-    nearest = gaps.argmin(axis=2)  # (K, N) the route point nearest each body
-    worlds, rows = np.arange(count)[:, None], np.arange(size)
-    gap = gaps[worlds, rows, nearest]
+    gap, nearest = _route_gaps(bodies, path)  # (K, N) each body's nearest route point
+    worlds = np.arange(count)[:, None]
     velocity = bodies[..., 3:4] * np.stack([np.cos(bodies[..., 2]), np.sin(bodies[..., 2])], axis=-1)
     to_route = path[worlds, nearest] - bodies[..., :2]
     towards = velocity[..., 0] * to_route[..., 0] + velocity[..., 1] * to_route[..., 1] > 0
@@ -122,6 +121,28 @@ def _nearest_on_route(
     best = np.argmin(along, axis=1)  # the first of the nearest, as a search of one world's rows
     found = on.any(axis=1)
     return found, along[worlds[:, 0], best], bodies[worlds[:, 0], best]
+
+
+@njit(cache=True)
+def _route_gaps(bodies, path):
+    """(K, N) the distance from each body to the nearest of its world's route points ``path``
+    (K, S, 2) and that point's index, the first on ties (a nan distance wins, as argmin has it).
+    Each distance is numpy's norm of the difference, sqrt(dx·dx + dy·dy), without the (K, N, S)
+    array of them all."""
+    count, size, points = bodies.shape[0], bodies.shape[1], path.shape[1]
+    gap, nearest = np.empty((count, size)), np.zeros((count, size), dtype=np.int64)
+    for k in range(count):
+        for n in range(size):
+            best, index = np.inf, 0
+            for s in range(points):
+                dx, dy = bodies[k, n, 0] - path[k, s, 0], bodies[k, n, 1] - path[k, s, 1]
+                distance = np.sqrt(dx * dx + dy * dy)
+                if distance < best or distance != distance:
+                    best, index = distance, s
+                    if distance != distance:
+                        break
+            gap[k, n], nearest[k, n] = best, index
+    return gap, nearest
 
 
 def _turns_left_after(batch: WorldBatch, distance_m: np.ndarray) -> np.ndarray:

@@ -78,3 +78,22 @@ def test_town_affordances_stay_in_their_space():
     for seed in (192, 223, 227):
         obs, _ = env.reset(seed=seed)
         assert obs in env.observation_space
+
+
+def test_route_gaps_equal_numpys_norm_and_argmin():
+    """The compiled nearest-route-point search gives numpy's values bit for bit: the norm of the
+    difference and argmin's first index on ties, a nan winning as argmin has it."""
+    from drivelab.perception.affordances import _route_gaps
+
+    rng = np.random.default_rng(5)
+    bodies = rng.uniform(-30, 30, (7, 11, 6))
+    path = np.round(rng.uniform(-30, 30, (7, 9, 2)))  # rounded: some equal distances
+    path[:, 4] = path[:, 1]  # exact ties: the first index wins
+    bodies[2, 3, :2] = path[2, 6]  # a body on a route point
+    path[5, 3] = np.nan
+    gaps = np.linalg.norm(bodies[:, :, None, :2] - path[:, None], axis=3)
+    nearest = gaps.argmin(axis=2)
+    gap, index = _route_gaps(bodies, path)
+    np.testing.assert_array_equal(index, nearest)
+    np.testing.assert_array_equal(gap, np.take_along_axis(gaps, nearest[..., None], axis=2)[..., 0])
+    assert gap[2, 3] == 0.0 and (index[5] == 3).all()
