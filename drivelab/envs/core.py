@@ -92,6 +92,9 @@ class DriveEnv(gym.Env):
 
     @property
     def time_limit_s(self) -> float:
+        """This episode's time limit (s); a route's own limit where the scenario sets one."""
+        if not self.vector.started:
+            raise RuntimeError("the time limit is set by reset(): call reset() before reading time_limit_s")
         return float(self.vector.rules.time_limit_s[0])
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):

@@ -1,7 +1,7 @@
 """Issue 47: what the environments refuse from their Python users (the CLI's one-line errors are
 ``tests/test_bad_input.py``): actions that are NaN, infinite or not an integer of a discrete space,
-a step after the episode ended without ``reset``, ``reset`` options that are not a dict, and
-episode seeds an int64 cannot hold."""
+a step after the episode ended without ``reset``, its time limit read before one, ``reset``
+options that are not a dict, and episode seeds an int64 cannot hold."""
 
 from __future__ import annotations
 
@@ -89,6 +89,16 @@ def test_a_step_after_the_episode_ended_needs_a_reset(scenario):
     env.reset()
     _, _, _, _, info = env.step(env.action_space.sample())
     assert "episode_metrics" not in info
+
+
+def test_the_time_limit_is_read_after_reset():
+    """The time limit is the episode's (a town or block route has its own): before the first
+    reset there is none to read, and the error says so instead of an IndexError."""
+    env = DriveEnv("highway", traffic="empty", duration_s=7)
+    with pytest.raises(RuntimeError, match=r"call reset\(\) before reading time_limit_s"):
+        _ = env.time_limit_s
+    env.reset(seed=0)
+    assert env.time_limit_s == 7
 
 
 def test_the_vector_env_steps_through_episode_ends_by_itself():
