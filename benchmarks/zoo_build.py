@@ -58,6 +58,7 @@ from leaderboard import (  # noqa: E402
     INTERSECTION_PPO_OWN,
     RACETRACK_DAGGER,
     RACETRACK_PPO_OWN,
+    TOWN_PPO_OWN,
     UNSEEN_MAPS,
     UNTUNED_PPO,
 )
@@ -103,6 +104,17 @@ AGENTS: dict[str, dict] = {
             "seed 0 of benchmarks/results/town_competence.md"
         ),
         "train": seed_0(town_recipe("privileged")),
+        "measure": TOWN_MEASURE,
+    },
+    "town-ppo_own": {
+        "description": (
+            "drivelab's PPO (the fast on-policy trainer) in the town, learned by RL alone (no imitation): "
+            "route waypoints, measurements and affordances (privileged: the light, the leader, "
+            "pedestrians), Roach's reward with its terminal penalty x10, Beta actions, an entropy bonus, "
+            "gamma 0.995, 12 M steps on 64 worlds in dense traffic; the leaderboard's town ppo_own "
+            "(privileged) recipe, seed 0 (it does not meet NoCrash's target of 90 / 75 / 60 %)"
+        ),
+        "train": seed_0(TOWN_PPO_OWN),
         "measure": TOWN_MEASURE,
     },
     "highway-ppo": {
