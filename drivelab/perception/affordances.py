@@ -137,10 +137,11 @@ def _route_gaps(bodies, path):
             for s in range(points):
                 dx, dy = bodies[k, n, 0] - path[k, s, 0], bodies[k, n, 1] - path[k, s, 1]
                 distance = np.sqrt(dx * dx + dy * dy)
-                if distance < best or distance != distance:
+                if distance != distance:  # nan: argmin's pick, whatever follows
                     best, index = distance, s
-                    if distance != distance:
-                        break
+                    break
+                if distance < best:
+                    best, index = distance, s
             gap[k, n], nearest[k, n] = best, index
     return gap, nearest
 
