@@ -63,6 +63,7 @@ from drivelab.sim.core.simulator import (
     FastSimulator,
     advance_worlds,
     command_ranges,
+    export_vehicle_buffers,
     float_controls,
     set_ego_controls,
 )
@@ -95,7 +96,8 @@ def _circuit_step(
     command, v, count, ego, lanes, idm, regulation, time_s, route, starts, segments, lengths2, segment_m,
     stations, point_count, closed, progress, in_junction, exit_lane, start_lane_id, route_length,
     route_polyline, truncate_at_s, params, codes, weights, road_index, guide_starts, guide_ends, cameras,
-    vehicles, valid, metric_floats, metric_ints, metric_flags, last_position, last_progress, last_length,
+    vehicles, valid, destinations, metric_floats, metric_ints, metric_flags, last_position, last_progress,
+    last_length,
 ) -> None:  # fmt: skip
     """One policy step of K circuit worlds (none restarting), as ``VectorDriveEnv.step`` runs it
     through the pipeline: the controls (``FastSimulator.apply_controls``; ``command`` the rows of
@@ -118,7 +120,7 @@ def _circuit_step(
     advance_worlds(
         v, count, ego, lanes, idm, frames, params[P_DT], regulation, time_s, dt_policy, route, starts,
         segments, lengths2, segment_m, stations, point_count, closed, progress, in_junction, exit_lane,
-        arrival, threshold, floats, ints, flags, vehicles, valid,
+        arrival, threshold, floats, ints, flags, vehicles, valid, destinations,
     )  # fmt: skip
     position = floats[:, EX_X : EX_Y + 1]
     speed, collided = floats[:, EX_SPEED], flags[:, EX_CRASHED]
@@ -192,8 +194,8 @@ _HELD = (
     "segments", "lengths2", "segment_m", "stations", "point_count", "closed", "progress",
     "in_junction", "exit_lane", "start_lane_id", "route_length", "route_polyline", "truncate_at_s",
     "params", "codes", "weights", "road_index", "guide_starts", "guide_ends", "cameras", "vehicles",
-    "valid", "metric_floats", "metric_ints", "metric_flags", "last_position", "last_progress",
-    "last_length",
+    "valid", "destinations", "metric_floats", "metric_ints", "metric_flags", "last_position",
+    "last_progress", "last_length",
 )  # fmt: skip
 
 
@@ -219,8 +221,8 @@ def circuit_step(controls, out, out_flags, ints, observations, held) -> None:
         held.lengths2, held.segment_m, held.stations, held.point_count, held.closed, held.progress,
         held.in_junction, held.exit_lane, held.start_lane_id, held.route_length, held.route_polyline,
         held.truncate_at_s, held.params, held.codes, held.weights, held.road_index, held.guide_starts,
-        held.guide_ends, held.cameras, held.vehicles, held.valid, held.metric_floats, held.metric_ints,
-        held.metric_flags, held.last_position, held.last_progress, held.last_length,
+        held.guide_ends, held.cameras, held.vehicles, held.valid, held.destinations, held.metric_floats,
+        held.metric_ints, held.metric_flags, held.last_position, held.last_progress, held.last_length,
     )  # fmt: skip
 
 
@@ -315,7 +317,7 @@ class CircuitStep:
             sim.r_segment_m, sim.r_stations, sim.r_count, sim.r_closed, sim.progress_m, sim.in_junction,
             sim.exit_lane, sim.start_lane_id, sim.r_length, sim.r_polyline, rules.truncate_at_s,
             self.params, self.codes, self.weights, road_index, *self._guide_segments(), self.cameras,
-            np.zeros((k, slots, 6)), np.zeros((k, slots), dtype=bool), *metrics.accumulators,
+            *export_vehicle_buffers(k, slots), *metrics.accumulators,
             metrics.last_position, metrics.last_progress_m, metrics.last_route_length_m,
         )  # fmt: skip
         self._arrays, self._held_object = arrays, _Held(*arrays)
@@ -340,8 +342,8 @@ class CircuitStep:
         out_flags, observations = np.zeros((8, k), dtype=bool), np.empty(self._observation_shape, np.float32)
         held = self._held()
         circuit_step(controls, out, out_flags, ints.T, observations, self._held_object)
-        vehicles, valid = held[-8], held[-7]  # empty: shared by every batch
-        self.simulator.defer_batch(functools.partial(_export_parts, out, ints, out_flags, vehicles, valid))
+        vehicles = held[-9:-6]  # (vehicles, valid, destinations) empty: shared by every batch
+        self.simulator.defer_batch(functools.partial(_export_parts, out, ints, out_flags, vehicles))
         return observations, out, out_flags
 
     def ends(self, out_flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -381,8 +383,9 @@ def _command_rows(dtype: np.dtype) -> np.ndarray:
     return np.stack(command_ranges(dtype))
 
 
-def _export_parts(out, ints, out_flags, vehicles, valid) -> tuple:
-    """``FastSimulator._export_arrays``' arguments from ``circuit_step``'s outputs."""
+def _export_parts(out, ints, out_flags, vehicles) -> tuple:
+    """``FastSimulator._export_arrays``' arguments from ``circuit_step``'s outputs (``vehicles``:
+    the export's vehicles, valid and destinations)."""
     state = out[-3:]
     route_index = state[2].astype(np.int64)
-    return out[:EX_FLOATS].T, ints.T, out_flags[:4].T, vehicles, valid, (state[0], state[1], route_index)
+    return out[:EX_FLOATS].T, ints.T, out_flags[:4].T, *vehicles, (state[0], state[1], route_index)

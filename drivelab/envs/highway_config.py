@@ -9,8 +9,9 @@ drivelab has the same thing under another name, and refused where drivelab diffe
   ``presence, x, y, vx, vy`` unless ``features`` names others; ``vehicles_count``, ``features``,
   ``normalize``, ``clip``, ``flatten`` map to its options, a symmetric ``features_range``
   ``x, y: [-d, d]``, ``vx, vy: [-s, s]`` to ``perception_distance_m=d``, ``speed_scale_mps=s``;
-  ``order: sorted``, ``absolute: False``, ``see_behind: True``, ``observe_intentions: False`` and
-  ``include_obstacles`` say what drivelab does. ``LidarObservation`` → ``lidar`` (``cells`` beams,
+  ``order: sorted``, ``absolute: False``, ``see_behind: True`` and ``include_obstacles`` say what
+  drivelab does; features ``cos_d``, ``sin_d`` need ``observe_intentions: true`` (highway-env's are
+  zeros without it). ``LidarObservation`` → ``lidar`` (``cells`` beams,
   ``maximum_range``), ``TimeToCollision`` → ``ttc_grid``;
 - ``action`` → ``DiscreteMetaAction`` → ``meta`` (its ``lateral`` and ``longitudinal`` options;
   ``target_speeds`` equal to the scenario's), ``ContinuousAction`` → ``continuous``,
@@ -39,7 +40,7 @@ import dataclasses
 from typing import Any
 
 from drivelab.errors import UsageError
-from drivelab.perception.kinematics import FEATURES
+from drivelab.perception.kinematics import ALL_FEATURES, INTENTION_FEATURES
 from drivelab.rewards.shapers import PRESETS
 from drivelab.scenarios import get_scenario
 from drivelab.scenarios.options import unknown_options_message
@@ -61,7 +62,6 @@ KINEMATICS_SAME = {
     ),
     "order": ("sorted", "drivelab's kinematics lists the vehicles nearest first ('sorted')"),
     "see_behind": (True, "drivelab's kinematics sees the vehicles behind the ego too (see_behind: True)"),
-    "observe_intentions": (False, "drivelab's kinematics has no destination features"),
 }
 ACTIONS = {"DiscreteMetaAction": "meta", "ContinuousAction": "continuous", "DiscreteAction": "grid"}
 HIGHWAY_ENV_TARGET_SPEEDS = (20.0, 25.0, 30.0)  # MDPVehicle.DEFAULT_TARGET_SPEEDS
@@ -230,10 +230,19 @@ def _kinematics(spec: dict, problems: list[str]) -> str:
     """drivelab's kinematics spec of highway-env's Kinematics options (see the module docstring)."""
     options = {key: spec[key] for key in ("vehicles_count",) if key in spec}
     features = spec.get("features", KINEMATICS_FEATURES)
-    others = [name for name in features if name not in FEATURES] if isinstance(features, (list, tuple)) else 0
+    listed = isinstance(features, (list, tuple))
+    others = [name for name in features if name not in ALL_FEATURES] if listed else 0
+    intentions = spec.get("observe_intentions", False)
+    if not isinstance(intentions, bool):
+        problems.append(f"Kinematics 'observe_intentions' must be true or false, got {intentions!r}")
+    elif listed and not intentions and set(features) & set(INTENTION_FEATURES):
+        problems.append(
+            "Kinematics features cos_d, sin_d without observe_intentions: highway-env writes zeros there, "
+            "drivelab's are each vehicle's destination: set observe_intentions: true"
+        )
     if others != []:
         problems.append(
-            f"Kinematics features {features!r}: drivelab's kinematics has {', '.join(FEATURES)}"
+            f"Kinematics features {features!r}: drivelab's kinematics has {', '.join(ALL_FEATURES)}"
             + (f", not {', '.join(map(repr, others))}" if others else "")
         )
     else:
@@ -249,7 +258,8 @@ def _kinematics(spec: dict, problems: list[str]) -> str:
     for key, (value, why) in KINEMATICS_SAME.items():
         if key in spec and spec[key] != value:
             problems.append(f"Kinematics {key!r} {spec[key]!r}: {why}")
-    known = {"type", "features", "normalize", "clip", "flatten", "features_range", "include_obstacles"}
+    known = {"type", "features", "normalize", "clip", "flatten", "features_range", "include_obstacles",
+             "observe_intentions"}  # fmt: skip
     for key in spec:
         if key not in known | set(KINEMATICS_SAME) | {"vehicles_count"}:
             problems.append(f"Kinematics option {key!r}: no such option in drivelab's kinematics")

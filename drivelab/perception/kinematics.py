@@ -11,6 +11,9 @@ from drivelab.perception.base import Sensor
 from drivelab.world.batch import WorldBatch
 
 FEATURES = ("presence", "x", "y", "vx", "vy", "cos_h", "sin_h")
+# highway-env's ``observe_intentions``: the direction to where each vehicle is headed (not by default)
+INTENTION_FEATURES = ("cos_d", "sin_d")
+ALL_FEATURES = FEATURES + INTENTION_FEATURES
 
 
 class Kinematics(Sensor):
@@ -23,8 +26,12 @@ class Kinematics(Sensor):
     :param vehicles_count: rows, the ego included.
     :param perception_distance_m: vehicles farther than this are not seen; also the position scale.
     :param speed_scale_mps: velocity normalisation; highway-env's 2 × its 40 m/s maximum speed.
-    :param features: names of ``FEATURES`` joined by ``+`` (e.g. highway-env's default
-        ``"presence+x+y+vx+vy"``), or a sequence of names.
+    :param features: names of ``ALL_FEATURES`` joined by ``+`` (e.g. highway-env's default
+        ``"presence+x+y+vx+vy"``), or a sequence of names; default every one of ``FEATURES``.
+        ``cos_d`` and ``sin_d`` (highway-env's ``observe_intentions``) are the unit direction from
+        a vehicle to its destination, the end of its planned route (zeros where it has none), in
+        the ego frame (the world frame with ``absolute``); the ego's points to its route's end
+        (zeros on a closed circuit).
     :param flatten: one flat vector; false: highway-env's ``(vehicles_count, features)`` array.
     :param normalize: divide positions and velocities by the scales above; false: raw metres and
         m/s, unclipped.
@@ -56,7 +63,8 @@ class Kinematics(Sensor):
         self.perception_distance_m = float(perception_distance_m)
         self.speed_scale_mps = float(speed_scale_mps)
         self.features = feature_names(features)
-        self.columns = np.array([FEATURES.index(name) for name in self.features], dtype=np.int64)
+        self.columns = np.array([ALL_FEATURES.index(name) for name in self.features], dtype=np.int64)
+        self.intentions = any(name in INTENTION_FEATURES for name in self.features)
         self.flatten, self.normalize = bool(flatten), bool(normalize)
         self.clip = bool(clip) and self.normalize  # highway-env clips only what it normalises
         self.absolute = bool(absolute)
@@ -77,6 +85,7 @@ class Kinematics(Sensor):
         position_scale = self.perception_distance_m if self.normalize else 1.0
         speed_scale = self.speed_scale_mps if self.normalize else 1.0
         others = batch.vehicles  # (K, N, 6)
+        chosen = None  # the other vehicles' slots, row by row (-1: none)
         if others.shape[1] and self.vehicles_count > 1:
             # the selection compiled, the transcendental functions in numpy (its rounding
             # everywhere) on the selected vehicles' headings only
@@ -99,7 +108,7 @@ class Kinematics(Sensor):
             rows[:, 0, 1:] = _world_frame(ego.position[:, 0], ego.position[:, 1], ego.heading, ego.speed_mps,
                                           position_scale, speed_scale)  # fmt: skip
             every = np.clip(rows, -1.0, 1.0) if self.clip else rows
-            out[...] = every[:, :, self.columns].reshape(out.shape)
+            out[...] = self._with_intentions(every, batch, chosen)[:, :, self.columns].reshape(out.shape)
             return
         cos_relative, sin_relative = np.cos(relative_heading), np.sin(relative_heading)
         in_place = self._all_columns and out.flags.c_contiguous  # the rows written into out's flat view
@@ -107,7 +116,39 @@ class Kinematics(Sensor):
         every = out.reshape(flat) if in_place else np.empty(flat)
         ego_rows_into(rows, ego.speed_mps, cos_relative, sin_relative, speed_scale, self.clip, every)
         if not in_place:
-            out[...] = every.reshape(rows.shape)[:, :, self.columns].reshape(out.shape)
+            every = self._with_intentions(every.reshape(rows.shape), batch, chosen)
+            out[...] = every[:, :, self.columns].reshape(out.shape)
+
+    def _with_intentions(self, rows: np.ndarray, batch: WorldBatch, chosen: np.ndarray | None) -> np.ndarray:
+        """``rows`` (K, rows, 7), with the columns cos_d and sin_d after them when they are asked for."""
+        if not self.intentions:
+            return rows
+        intentions = intention_rows(batch, chosen, self.vehicles_count, self.absolute)
+        return np.concatenate([rows, intentions], axis=2)
+
+
+def intention_rows(batch: WorldBatch, chosen: np.ndarray | None, count: int, absolute: bool) -> np.ndarray:
+    """(K, count, 2) the unit direction from each row's vehicle to its destination (highway-env's
+    ``destination_direction``; zeros where they coincide or the row is empty), in the ego frame
+    unless ``absolute``. Row 0, the ego's: to the last point of its route (zeros on a circuit);
+    rows 1… the vehicles ``chosen`` (K, count - 1) slots, -1 for none (None: no vehicle)."""
+    num_worlds = batch.num_worlds
+    vectors = np.zeros((num_worlds, count, 2))
+    route = batch.route
+    vectors[:, 0] = np.where(route.closed[:, None], 0.0, route.polyline[:, -1] - batch.ego.position)
+    if chosen is not None:
+        present = chosen >= 0
+        slot = np.where(present, chosen, 0)[..., None]
+        destination = np.take_along_axis(batch.vehicle_destinations, slot, axis=1)
+        position = np.take_along_axis(batch.vehicles[..., :2], slot, axis=1)
+        vectors[:, 1 : 1 + chosen.shape[1]] = np.where(present[..., None], destination - position, 0.0)
+    norm = np.hypot(vectors[..., 0], vectors[..., 1])[..., None]
+    unit = np.divide(vectors, norm, out=np.zeros_like(vectors), where=norm > 0)
+    if absolute:
+        return unit
+    cos_h, sin_h = (part[:, None] for part in batch.heading_cos_sin())
+    x, y = unit[..., 0], unit[..., 1]
+    return np.stack([x * cos_h + y * sin_h, -x * sin_h + y * cos_h], axis=-1)
 
 
 def feature_names(features) -> tuple[str, ...]:
@@ -115,11 +156,11 @@ def feature_names(features) -> tuple[str, ...]:
     of ``FEATURES`` and none twice; a UsageError otherwise."""
     names = features.split("+") if isinstance(features, str) else list(features)
     names = [str(name).strip() for name in names]
-    unknown = [name for name in names if name not in FEATURES]
+    unknown = [name for name in names if name not in ALL_FEATURES]
     if unknown or not names or len(set(names)) != len(names):
         what = f"unknown {unknown}" if unknown else "each at most once"
         raise UsageError(
-            f"kinematics features must be names of {', '.join(FEATURES)} joined by '+', {what}: "
+            f"kinematics features must be names of {', '.join(ALL_FEATURES)} joined by '+', {what}: "
             f"got {features!r}"
         )
     return tuple(names)

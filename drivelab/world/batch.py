@@ -4,8 +4,9 @@ Shapes (K worlds, N vehicle slots, P pedestrian slots, L light slots, R route po
 :class:`EgoBatch` of ``(K,)`` arrays; ``vehicles`` ``(K, N, 6)`` with ``vehicle_valid`` ``(K, N)``,
 ``pedestrians`` ``(K, P, 6)`` and ``traffic_lights`` ``(K, L, 4)`` likewise (rows past a world's
 count are zeros); ``route`` a :class:`RouteBatch` of polylines ``(K, R, 2)`` padded by repeating
-the last point; ``events`` an :class:`EventsBatch`; the distinct :class:`RoadMap` objects in
-``roads`` and each world's in ``road_index`` ``(K,)``.
+the last point; ``events`` an :class:`EventsBatch`; ``vehicle_destinations`` ``(K, N, 2)`` where
+each vehicle is headed (the end of its planned route; its own position when it has none); the
+distinct :class:`RoadMap` objects in ``roads`` and each world's in ``road_index`` ``(K,)``.
 
 A WorldBatch is a value: simulators hand out a new one per step and nothing mutates it.
 ``batch[k]`` is world k as a :class:`~drivelab.world.state.WorldState`, and
@@ -241,6 +242,7 @@ class WorldBatch:
     ego: EgoBatch
     vehicles: np.ndarray
     vehicle_valid: np.ndarray
+    vehicle_destinations: np.ndarray
     roads: tuple[RoadMap, ...]
     road_index: np.ndarray
     route: RouteBatch
@@ -281,6 +283,7 @@ class WorldBatch:
         roads: list[RoadMap] = []
         road_index = [_road_slot(roads, world.road) for world in worlds]
         vehicles, vehicle_valid = _stack_rows([w.vehicles for w in worlds], 6)
+        destinations, _ = _stack_rows([w.destinations() for w in worlds], 2)
         pedestrians, pedestrian_valid = _stack_rows([w.pedestrians for w in worlds], 6)
         lights, light_valid = _stack_rows([w.traffic_lights for w in worlds], 4)
         return WorldBatch(
@@ -289,6 +292,7 @@ class WorldBatch:
             ego=EgoBatch.stack([w.ego for w in worlds]),
             vehicles=vehicles,
             vehicle_valid=vehicle_valid,
+            vehicle_destinations=destinations,
             roads=tuple(roads),
             road_index=np.array(road_index, dtype=np.int64),
             route=RouteBatch.stack([w.route for w in worlds]),
@@ -315,6 +319,7 @@ class WorldBatch:
             pedestrians=self.pedestrians[k, self.pedestrian_valid[k]],
             max_speed_mps=float(self.max_speed_mps[k]),
             speed_limit_mps=float(self.speed_limit_mps[k]),
+            vehicle_destinations=self.vehicle_destinations[k, self.vehicle_valid[k]],
         )
 
     def select(self, indices: np.ndarray) -> WorldBatch:
@@ -413,8 +418,10 @@ _FIELDS_EGO = dataclasses.fields(EgoBatch)
 _FIELDS_EVENTS = dataclasses.fields(EventsBatch)
 _FIELDS_ROUTE = [f for f in dataclasses.fields(RouteBatch) if f.init]
 # WorldBatch's (K, ...) arrays besides ego, route, events and road_index
-_WORLD_ARRAYS = ("time_s", "vehicles", "vehicle_valid", "traffic_lights", "light_valid", "pedestrians",
-                 "pedestrian_valid", "max_speed_mps", "speed_limit_mps")  # fmt: skip
+_WORLD_ARRAYS = (
+    "time_s", "vehicles", "vehicle_valid", "vehicle_destinations", "traffic_lights", "light_valid",
+    "pedestrians", "pedestrian_valid", "max_speed_mps", "speed_limit_mps",
+)  # fmt: skip
 _EDGE_PADDED = ("polyline", "stations_m")  # RouteBatch's arrays padded by repeating their last point
 # per batch class: its init fields' names, and the defaults of those that have one
 _INIT_NAMES = {

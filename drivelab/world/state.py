@@ -155,6 +155,15 @@ class WorldState:
     pedestrians: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)))
     max_speed_mps: float = 40.0
     speed_limit_mps: float = 30.0
+    # (N, 2) where each of ``vehicles`` is headed: the end of its planned route (highway-env's
+    # ``Vehicle.destination``), its own position when it has none; None: no vehicle's is known
+    vehicle_destinations: np.ndarray | None = None
+
+    def destinations(self) -> np.ndarray:
+        """(N, 2) ``vehicle_destinations``, the vehicles' own positions where it is None."""
+        if self.vehicle_destinations is None:
+            return np.asarray(self.vehicles, dtype=float).reshape(-1, 6)[:, :2].copy()
+        return np.asarray(self.vehicle_destinations, dtype=float).reshape(-1, 2)
 
     def road_users(self) -> np.ndarray:
         """(N + P, 6) every body on the road besides the ego: vehicles, then pedestrians."""

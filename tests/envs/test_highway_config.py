@@ -61,6 +61,11 @@ def test_keyword_arguments_beside_the_config_win():
         ),
         ({"observation": {"type": "Kinematics", "see_behind": False}}, "'see_behind' False"),
         ({"observation": {"type": "Kinematics", "features": ["x", "heading"]}}, "not 'heading'"),
+        (
+            {"observation": {"type": "Kinematics", "features": ["x", "cos_d", "sin_d"]}},
+            "cos_d, sin_d without observe_intentions: .*set observe_intentions: true",
+        ),
+        ({"observation": {"type": "Kinematics", "observe_intentions": "yes"}}, "'observe_intentions' must"),
         ({"observation": {"type": "Kinematics", "features_range": {"x": [-50, 100]}}}, "features_range"),
         (
             {"observation": {"type": "Kinematics", "features_range": {"x": [-9, 9], "y": [-9, 9]}}},
@@ -141,6 +146,17 @@ def test_the_world_of_the_highway_has_the_speed_limit_the_reward_range_assumes()
 
     env = drivelab.make("highway", seed=0)
     assert env.world.speed_limit_mps == HIGHWAY_SPEED_LIMIT_MPS
+
+
+def test_observed_intentions_are_the_kinematics_destination_features():
+    features = ["presence", "x", "cos_d", "sin_d"]
+    config = {"type": "Kinematics", "features": features, "observe_intentions": True}
+    env = drivelab.make("intersection", config={"observation": config})
+    assert env.sensors[0].features == ("presence", "x", "cos_d", "sin_d")
+    obs, _ = env.reset(seed=0)
+    seen = obs[:, 0] == 1
+    assert obs.shape == (5, 4) and seen[1:].any()
+    np.testing.assert_allclose(np.hypot(obs[seen, 2], obs[seen, 3]), 1.0, atol=1e-6)  # unit directions
 
 
 def test_kinematics_options_map_to_the_sensor():

@@ -1,9 +1,11 @@
 """Kinematics rows: ordering, ego-frame values and normalisation with known answers."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
-from drivelab.perception.kinematics import FEATURES, Kinematics
+from drivelab.perception.kinematics import ALL_FEATURES, FEATURES, Kinematics
 from tests.worlds import world
 
 
@@ -117,3 +119,44 @@ def test_without_clipping_normalised_values_may_leave_the_unit_range():
     sensor = Kinematics(vehicles_count=2, perception_distance_m=110.0, speed_scale_mps=100.0, clip=False)
     rows = _observe(sensor, w)
     np.testing.assert_allclose(rows[1], [1, 60 / 110, -90 / 110, 2.0, 0, 1, 0], atol=1e-7)
+
+
+def test_intentions_point_to_each_vehicles_destination_in_the_ego_frame():
+    """cos_d, sin_d: the unit direction to a vehicle's destination (none: zeros), the ego's to
+    its route's end; rotated into the ego frame, or left on the map with ``absolute``."""
+    w = world(
+        heading=np.pi / 2, lane_heading=np.pi / 2, speed_mps=10.0,
+        vehicles=[[0.0, 20.0, np.pi, 10.0, 5, 2], [0.0, -30.0, 0.0, 10.0, 5, 2]],
+    )  # fmt: skip
+    # the first turns off to -x, 50 m away; the second has no destination (its own position)
+    w = dataclasses.replace(w, vehicle_destinations=np.array([[-50.0, 20.0], [0.0, -30.0]]))
+    features = "presence+x+cos_d+sin_d"
+    rows = Kinematics(vehicles_count=4, features=features, flatten=False)
+    rows.reset(w, np.random.default_rng(0))
+    observed = rows.observe(w)
+    assert observed.shape == (4, 4)
+    # rotated as positions are: the ego heads +y, so +x on the map (its route's end, (1000, 0)) is
+    # (0, -1) in its frame and -x (where the first vehicle heads) is (0, 1)
+    np.testing.assert_allclose(observed[0], [1, 0, 0, -1], atol=1e-7)
+    np.testing.assert_allclose(observed[1], [1, 0.2, 0, 1], atol=1e-7)
+    np.testing.assert_allclose(observed[2], [1, -0.3, 0, 0], atol=1e-7)
+    assert np.all(observed[3] == 0)
+    absolute = Kinematics(vehicles_count=4, features=features, flatten=False, absolute=True)
+    absolute.reset(w, np.random.default_rng(0))
+    np.testing.assert_allclose(absolute.observe(w)[:3, 2:], [[1, 0], [-1, 0], [0, 0]], atol=1e-7)
+    # destinations not known: every other vehicle's intention is zeros
+    unknown = dataclasses.replace(w, vehicle_destinations=None)
+    rows.reset(unknown, np.random.default_rng(0))
+    assert np.all(rows.observe(unknown)[1:, 2:] == 0)
+
+
+def test_intention_features_leave_the_other_columns_as_they_were():
+    w = world(speed_mps=20.0, vehicles=[[30.0, 4.0, 0.3, 25.0, 5, 2], [-8.0, 0.0, 0.0, 15.0, 5, 2]])
+    w = dataclasses.replace(w, vehicle_destinations=np.array([[60.0, 40.0], [-8.0, 0.0]]))
+    plain = _observe(Kinematics(), w)
+    both = Kinematics(features="+".join(ALL_FEATURES))
+    both.reset(w, np.random.default_rng(0))
+    rows = both.observe(w).reshape(5, len(ALL_FEATURES))
+    np.testing.assert_array_equal(rows[:, : len(FEATURES)], plain)
+    direction = np.array([30.0, 36.0]) / np.hypot(30.0, 36.0)
+    np.testing.assert_allclose(rows[2, len(FEATURES) :], direction, atol=1e-7)  # the farther one

@@ -96,8 +96,9 @@ def apply_meta_map_worlds(v, count, ego, lanes, start, stop, actions, speeds) ->
 
 @njit(cache=True)
 def export_map_worlds(
-    v, count, ego, lanes, start, stop, in_junction, dead_end, solid, floats, ints, flags, vehicles, valid
-) -> None:
+    v, count, ego, lanes, start, stop, in_junction, dead_end, solid, floats, ints, flags, vehicles, valid,
+    destinations,
+) -> None:  # fmt: skip
     """``export_world`` of each world on its map's lane rows (arrival is judged on the route),
     then MetaDrive's out of road: off every lane, or the ego's body across a solid line of its
     lane (``solid`` (L_total, 2): left, right; lateral offsets grow to the right)."""
@@ -105,7 +106,7 @@ def export_map_worlds(
         a, b = start[k], stop[k]
         export_world(
             v[k, : count[k]], ego[k], lanes[a:b], in_junction[a:b], dead_end[a:b], ARRIVE_NEVER, 0.0,
-            floats[k], ints[k], flags[k], vehicles[k], valid[k],
+            floats[k], ints[k], flags[k], vehicles[k], valid[k], destinations[k],
         )  # fmt: skip
         lane = a + int(v[k, ego[k], T.LANE])
         half_body, half_lane = floats[k, EX_WID] / 2, floats[k, EX_LANE_WIDTH] / 2
@@ -304,10 +305,10 @@ class BlocksSimulator(FastSimulator):
 
     # --- export ---------------------------------------------------------------------------------
     def _export(self) -> WorldBatch:
-        floats, ints, flags, vehicles, valid = self._export_buffers()
+        buffers = self._export_buffers()
         export_map_worlds(
             self.vehicles, self.count, self.ego, self.lanes, self.lane_start, self.lane_stop,
-            self.in_junction, self.dead_end, self.solid, floats, ints, flags, vehicles, valid,
+            self.in_junction, self.dead_end, self.solid, *buffers,
         )  # fmt: skip
         if self._maps_of is None or not np.array_equal(self._maps_of, self.world_map):
             used, index = np.unique(self.world_map, return_inverse=True)
@@ -321,7 +322,7 @@ class BlocksSimulator(FastSimulator):
             light_valid.setflags(write=False)
             self._maps_of = self.world_map.copy()
         self._empty = {**self._empty, "road_index": self._road_index}
-        batch = self._export_arrays(floats, ints, flags, vehicles, valid)
+        batch = self._export_arrays(*buffers)
         if not self.light_state.shape[1]:
             return batch  # no map of the set has lights
         rows, light_valid = self._light_gather

@@ -511,12 +511,12 @@ def _span(stations, low, high, count):
 @njit(cache=True, inline="always")
 def export_world(
     w, e: int, lanes, in_junction, exit_lane, arrival: int, arrival_threshold: float, out, ints, flags,
-    vehicles, valid
+    vehicles, valid, destinations
 ) -> None:  # fmt: skip
     """What WorldBatch needs of one world (vehicles ``w`` (N, VEHICLE_COLUMNS), ego row ``e``),
     into zeroed outputs: the ego's ``out`` (EX_FLOATS,), ``ints`` (3,) and ``flags`` (4,)
     (columns EX_*), and the other vehicles, obstacles left out as highway-env exports them, in
-    ``vehicles`` (N - 1, 6) with ``valid`` (N - 1,)."""
+    ``vehicles`` (N - 1, 6) with ``valid`` (N - 1,) and their ``destination``s (N - 1, 2)."""
     row = w[e]
     lane = int(row[T.LANE])
     s, lateral = L.local_coordinates(lanes, lane, row[T.X], row[T.Y])
@@ -547,20 +547,33 @@ def export_world(
         for c in range(EXPORTED_COLUMNS.size):
             vehicles[n, c] = w[j, EXPORTED_COLUMNS[c]]
         valid[n] = True
+        destinations[n, 0], destinations[n, 1] = destination(lanes, w[j])
         n += 1
+
+
+@njit(cache=True, inline="always")
+def destination(lanes, row) -> tuple[float, float]:
+    """highway-env's ``Vehicle.destination`` of a vehicle row: the end of the last lane of its
+    planned route still to be driven (lane 0 of that road where the route leaves the lane open),
+    its own position where it has no route or has driven all of it."""
+    start, stop = int(row[T.ROUTE_START]), int(row[T.ROUTE_END])
+    if row[T.ROUTED] == 0 or start >= stop:
+        return row[T.X], row[T.Y]
+    lane = int(row[T.ROUTE + 2 * (stop - 1)]) + max(int(row[T.ROUTE + 2 * (stop - 1) + 1]), 0)
+    return L.position(lanes, lane, lanes[lane, L.LENGTH], 0.0)
 
 
 @njit(cache=True)
 def export_worlds(
     v, count, ego, lanes, in_junction, exit_lane, arrival: int, arrival_threshold: float, floats, ints, flags,
-    vehicles, valid
+    vehicles, valid, destinations
 ) -> None:  # fmt: skip
     """``export_world`` of K worlds on one road: ``floats`` (K, EX_FLOATS), ``ints`` (K, 3),
-    ``flags`` (K, 4), ``vehicles`` (K, N, 6), ``valid`` (K, N)."""
+    ``flags`` (K, 4), ``vehicles`` (K, N, 6), ``valid`` (K, N), ``destinations`` (K, N, 2)."""
     for k in range(v.shape[0]):
         export_world(
             v[k, : count[k]], ego[k], lanes, in_junction, exit_lane, arrival, arrival_threshold,
-            floats[k], ints[k], flags[k], vehicles[k], valid[k],
+            floats[k], ints[k], flags[k], vehicles[k], valid[k], destinations[k],
         )  # fmt: skip
 
 
@@ -568,7 +581,7 @@ def export_worlds(
 def advance_worlds(
     v, count, ego, lanes, idm, frames, dt, regulation, time_s, dt_policy, route, starts, segments,
     lengths2, segment_m, stations, point_count, closed, progress, in_junction, exit_lane, arrival,
-    arrival_threshold, floats, ints, flags, vehicles, valid,
+    arrival_threshold, floats, ints, flags, vehicles, valid, destinations,
 ) -> None:  # fmt: skip
     """A policy step of all K worlds (none restarting) after their controls are set, in one
     compiled call: the kernels ``FastSimulator.step`` otherwise calls one by one, in its order
@@ -583,8 +596,14 @@ def advance_worlds(
     )  # fmt: skip
     export_worlds(
         v, count, ego, lanes, in_junction, exit_lane, arrival, arrival_threshold, floats, ints, flags,
-        vehicles, valid,
+        vehicles, valid, destinations,
     )  # fmt: skip
+
+
+def export_vehicle_buffers(num_worlds: int, slots: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Zeroed (vehicles (K, slots, 6), valid (K, slots), destinations (K, slots, 2)) for the export."""
+    shape = (num_worlds, slots)
+    return np.zeros((*shape, 6)), np.zeros(shape, dtype=bool), np.zeros((*shape, 2))
 
 
 # --- the simulator ------------------------------------------------------------------------------
@@ -898,15 +917,15 @@ class FastSimulator:
 
     def _advance(self) -> WorldBatch:
         """``advance_worlds`` then the WorldBatch of its export (see ``step``)."""
-        floats, ints, flags, vehicles, valid = self._export_buffers()
+        buffers = self._export_buffers()
         advance_worlds(
             self.vehicles, self.count, self.ego, self.lanes, self.idm, self.frames, self.dt_s,
             self.regulation, self.time_s, self.dt_policy_s, self.route_index, self.r_starts,
             self.r_segments, self.r_lengths2, self.r_segment_m, self.r_stations, self.r_count,
             self.r_closed, self.progress_m, self.in_junction, self.exit_lane, self.arrival,
-            self.arrival_threshold, floats, ints, flags, vehicles, valid,
+            self.arrival_threshold, *buffers,
         )  # fmt: skip
-        return self._export_arrays(floats, ints, flags, vehicles, valid)
+        return self._export_arrays(*buffers)
 
     def run_frames(self, simulate: Callable[[int], None]) -> None:
         """The step's simulation frames: one compiled call ``simulate(frames)``; while recording
@@ -946,20 +965,20 @@ class FastSimulator:
         )  # fmt: skip
 
     def _export_buffers(self) -> tuple[np.ndarray, ...]:
-        """Zeroed (floats, ints, flags, vehicles, valid) arrays the export kernels fill; the first
-        three column-major, so that each column (one WorldBatch field) is contiguous."""
+        """Zeroed (floats, ints, flags, vehicles, valid, destinations) arrays the export kernels
+        fill; the first three column-major, so that each column (one WorldBatch field) is contiguous."""
         k, slots = self.num_worlds, max(self.vehicles.shape[1] - 1, 0)
         floats, ints = np.zeros((EX_FLOATS, k)).T, np.zeros((3, k), dtype=np.int64).T
         flags = np.zeros((4, k), dtype=bool).T
-        return floats, ints, flags, np.zeros((k, slots, 6)), np.zeros((k, slots), dtype=bool)
+        return floats, ints, flags, *export_vehicle_buffers(k, slots)
 
     def _export(self) -> WorldBatch:
-        floats, ints, flags, vehicles, valid = self._export_buffers()
+        buffers = self._export_buffers()
         export_worlds(
             self.vehicles, self.count, self.ego, self.lanes, self.in_junction, self.exit_lane,
-            self.arrival, self.arrival_threshold, floats, ints, flags, vehicles, valid,
+            self.arrival, self.arrival_threshold, *buffers,
         )  # fmt: skip
-        return self._export_arrays(floats, ints, flags, vehicles, valid)
+        return self._export_arrays(*buffers)
 
     def _export_arrays(
         self,
@@ -968,6 +987,7 @@ class FastSimulator:
         flags: np.ndarray,
         vehicles: np.ndarray,
         valid: np.ndarray,
+        destinations: np.ndarray,
         state: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     ) -> WorldBatch:
         """The WorldBatch of ``export_worlds``' outputs (``_export_buffers``' column-major arrays;
@@ -1015,7 +1035,8 @@ class FastSimulator:
         )
         return assemble(
             WorldBatch, time_s=time_s, dt_s=self.dt_policy_s, ego=ego, vehicles=vehicles, vehicle_valid=valid,
-            roads=self.roads, route=route, events=events, speed_limit_mps=speed_limit, **extra,
+            vehicle_destinations=destinations, roads=self.roads, route=route, events=events,
+            speed_limit_mps=speed_limit, **extra,
         )  # fmt: skip
 
     def _route_ended(

@@ -316,7 +316,8 @@ class HighwayBackend:
         heading_back, heading_ahead = lane.heading_at(s - 1.0), lane.heading_at(s + 1.0)
         curvature = float(np.angle(np.exp(1j * (heading_ahead - heading_back)))) / 2.0
         target = getattr(ego, "target_lane_index", lane_index)
-        vehicles = _object_rows([v for v in env.road.vehicles if v is not ego])
+        others = [v for v in env.road.vehicles if v is not ego]
+        vehicles = _object_rows(others)
         pedestrians = _object_rows([p for p in self._pedestrians() if not p.crashed])
         ego_state = Ego(
             position=np.array(ego.position, dtype=float), heading=float(ego.heading),
@@ -334,4 +335,5 @@ class HighwayBackend:
             pedestrians=pedestrians, road=self.road_map, route=self.route.at(self.progress_m), events=events,
             traffic_lights=lights, max_speed_mps=float(ego.MAX_SPEED),
             speed_limit_mps=float(lane.speed_limit or 30.0),
+            vehicle_destinations=np.array([v.destination for v in others], dtype=float).reshape(-1, 2),
         )  # fmt: skip
