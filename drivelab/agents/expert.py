@@ -109,6 +109,11 @@ def check_expert_env(vector, max_speed_mps: float, algo: str) -> None:
             f"{algo}: the target_speed action's max_speed_mps is {adapter_max:g} but the expert's is "
             f"{max_speed_mps:g}; set both alike (-H max_speed_mps, env_options.action_options)"
         )
+    if getattr(vector.adapter, "stop_below", 0.0):
+        raise UsageError(
+            f"{algo}: the expert's speeds are fractions of max_speed_mps from 0; drive it without the "
+            "target_speed action's stop_below"
+        )
 
 
 class RuleBasedExpert(OwnAgent):

@@ -15,7 +15,7 @@ from numba import njit
 
 from drivelab.errors import UsageError
 from drivelab.world.batch import WorldBatch
-from drivelab.world.geometry import ROACH_MAX_SPEED_MPS
+from drivelab.world.geometry import FULL_ACCELERATION_MPS2, ROACH_MAX_SPEED_MPS
 from drivelab.world.scenario import META_ACTIONS
 from drivelab.world.state import WorldState
 
@@ -199,16 +199,26 @@ class TargetSpeedAction(ActionAdapter):
     (highway-env's ±5 m/s²) where CARLA has throttle (> 0) and brake (< 0).
 
     :param max_speed_mps: the target speed at action 1 (RLAD / Roach: 6 m/s).
+    :param stop_below: a stop zone: a speed action below this fraction stops the ego and holds it
+        still (the command brakes just hard enough to stop within the step, never reverses, and
+        the PID's memory is cleared), and [stop_below, 1] spans the speeds 0 to ``max_speed_mps``.
+        Roach's acceleration action brakes on the lower half of its range; a policy whose actions
+        are a Beta distribution's mean cannot reach the range's end, so without a zone it can only
+        creep (0, the default: no zone, the PID's target is ``action · max_speed_mps``).
     """
 
     name, control = "target_speed", "continuous"
 
     def __init__(
-        self, max_speed_mps: float = ROACH_MAX_SPEED_MPS, kp: float = 1.0, ki: float = 0.2, kd: float = 0.001
-    ) -> None:
+        self, max_speed_mps: float = ROACH_MAX_SPEED_MPS, kp: float = 1.0, ki: float = 0.2, kd: float = 0.001,
+        stop_below: float = 0.0,
+    ) -> None:  # fmt: skip
         if max_speed_mps <= 0:
             raise UsageError("target_speed needs max_speed_mps > 0")
+        if not 0.0 <= stop_below < 1.0:
+            raise UsageError(f"target_speed needs 0 <= stop_below < 1, got {stop_below!r}")
         self.max_speed_mps, self.kp, self.ki, self.kd = float(max_speed_mps), kp, ki, kd
+        self.stop_below = float(stop_below)
         self.space = spaces.Box(np.array([0.0, -1.0], np.float32), np.array([1.0, 1.0], np.float32))
         self.reset()
 
@@ -236,14 +246,26 @@ class TargetSpeedAction(ActionAdapter):
         if not _all_finite(rows):
             raise _non_finite(rows)
         rows = np.clip(rows, [0.0, -1.0], 1.0)
-        accel = self.pid(rows[:, 0].astype(float) * self.max_speed_mps, batch.ego.speed_mps, batch.dt_s)
-        return np.stack([accel, rows[:, 1]], axis=1).astype(np.float32)  # highway-env's order
+        fraction = rows[:, 0].astype(float)
+        if not self.stop_below:
+            accel = self.pid(fraction * self.max_speed_mps, batch.ego.speed_mps, batch.dt_s)
+            return np.stack([accel, rows[:, 1]], axis=1).astype(np.float32)  # highway-env's order
+        stop = fraction < self.stop_below
+        target = np.maximum(fraction - self.stop_below, 0.0) / (1.0 - self.stop_below) * self.max_speed_mps
+        speed = np.atleast_1d(batch.ego.speed_mps)
+        accel = self.pid(target, speed, batch.dt_s)
+        if stop.any():  # to a standstill within the step, and held there
+            self.integral[stop], self.previous_error[stop] = 0.0, np.nan
+            accel[stop] = np.clip(-speed[stop] / (FULL_ACCELERATION_MPS2 * batch.dt_s), -1.0, 1.0)
+        return np.stack([accel, rows[:, 1]], axis=1).astype(np.float32)
 
     def to_controls(self, actions) -> np.ndarray:
         raise UsageError("target_speed actions need the world's speed: call control_for(action, world)")
 
     def describe(self) -> str:
-        return f"[target speed 0..{self.max_speed_mps:g} m/s through a PID, steering] in [0, 1] x [-1, 1]"
+        zone = f", below {self.stop_below:g}: stop" if self.stop_below else ""
+        speeds = f"target speed 0..{self.max_speed_mps:g} m/s through a PID{zone}"
+        return f"[{speeds}, steering] in [0, 1] x [-1, 1]"
 
 
 # the CARLA study's action tables, rows (throttle, steering) in CARLA's normalised units

@@ -10,6 +10,7 @@ import numpy as np
 
 FULL_LOCK_RAD = np.pi / 4  # highway-env's ContinuousAction: normalised steering 1 is 45° at the wheels
 FULL_LOCK_DEG = 45.0
+FULL_ACCELERATION_MPS2 = 5.0  # highway-env's ContinuousAction: normalised acceleration 1 is 5 m/s²
 ROACH_MAX_SPEED_MPS = 6.0  # Roach's / RLAD's v_max in the town: target_speed's 1, the reward's v*
 
 

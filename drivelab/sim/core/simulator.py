@@ -46,12 +46,13 @@ from drivelab.world.batch import (
     WorldBatch,
     assemble,
 )
-from drivelab.world.geometry import FULL_LOCK_RAD
+from drivelab.world.geometry import FULL_ACCELERATION_MPS2, FULL_LOCK_RAD
 from drivelab.world.scenario import Scenario
 from drivelab.world.state import RoadMap
 
 LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER = range(5)
-ACCELERATION_RANGE, STEERING_RANGE = (-5.0, 5.0), (-FULL_LOCK_RAD, FULL_LOCK_RAD)  # ContinuousAction's
+ACCELERATION_RANGE = (-FULL_ACCELERATION_MPS2, FULL_ACCELERATION_MPS2)  # ContinuousAction's
+STEERING_RANGE = (-FULL_LOCK_RAD, FULL_LOCK_RAD)
 
 # ``Scenario.arrival`` → (rule, threshold). ARRIVE_PAST_X: the ego's x beyond ``Scenario.arrival_x_m``
 # (the merge's end); ARRIVE_EXIT: on an exit lane at least the threshold along it
