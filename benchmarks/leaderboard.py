@@ -629,12 +629,31 @@ def _report(entry: Entry, seed: int, episodes: int, make: bool = True) -> dict |
         arguments = ["evaluate", rel, "--episodes", str(episodes), "--out", str(out.relative_to(ROOT))]
         size = "episodes"
     report = json.loads(path.read_text()) if path.exists() else None
-    if report is not None and report[size] >= episodes:
+    if report is not None and report[size] >= episodes and _of_this_model(report, path, _model_file(run)):
         return report
     if not make:
         return None
     _run(arguments)
     return json.loads(path.read_text())
+
+
+def _model_file(run: Path) -> Path:
+    """The model file a report of ``run`` evaluates."""
+    from drivelab.training.checkpoints import model_path
+    from drivelab.training.evaluate import load_run_config
+
+    return model_path(run, load_run_config(run))
+
+
+def _of_this_model(report: dict, path: Path, model: Path) -> bool:
+    """The report at ``path`` evaluated ``model`` as it is now (a run trained again makes the reports
+    of its old model stale): the model's SHA-256 it records, or for a report from before reports
+    recorded it, written after the model was."""
+    from drivelab.training.checkpoints import file_sha256
+
+    if "model_sha256" in report:
+        return report["model_sha256"] == file_sha256(model)
+    return path.stat().st_mtime >= model.stat().st_mtime
 
 
 def _metrics(report: dict) -> dict:

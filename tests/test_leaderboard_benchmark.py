@@ -194,3 +194,22 @@ def test_rows_of_runs_another_benchmark_trains_show_that_benchmarks_command(boar
         assert _options(entry.command(0)) == _options(trainer), (entry.scenario, entry.name)
         checked.add(entry.reused_by)
     assert len(checked) == 5
+
+
+def test_a_report_of_an_older_model_is_not_reused(board, tmp_path):
+    """A row's evaluation is made again when its run was trained again: the report records the
+    model's SHA-256 (older reports: written after the model)."""
+    import hashlib
+    import os
+
+    model, path = tmp_path / "model.zip", tmp_path / "eval.json"
+    model.write_bytes(b"weights")
+    path.write_text("{}")
+    digest = hashlib.sha256(b"weights").hexdigest()
+    assert board._of_this_model({"model_sha256": digest}, path, model)
+    model.write_bytes(b"weights trained again")
+    assert not board._of_this_model({"model_sha256": digest}, path, model)
+    os.utime(path, (1_000, 1_000))  # an old report without a digest: older than the model
+    assert not board._of_this_model({}, path, model)
+    os.utime(model, (500, 500))
+    assert board._of_this_model({}, path, model)

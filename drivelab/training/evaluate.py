@@ -190,7 +190,7 @@ def evaluate_run(
     :param progress: show a progress bar of the episodes (on stderr)."""
     from drivelab.envs.core import DriveEnv
     from drivelab.envs.video import video_fps
-    from drivelab.training.checkpoints import check_trained_config, load_agent
+    from drivelab.training.checkpoints import check_trained_config, file_sha256, load_agent, model_path
 
     if episodes < 1:
         raise UsageError("--episodes must be >= 1")
@@ -221,6 +221,7 @@ def evaluate_run(
             )  # fmt: skip
         report = {"run": str(run_dir), "algo": config.algo, "env": config.env, **aggregate(results)}
         report["model_steps"] = int(agent.num_timesteps)  # compare: an eval.json of this model only
+        report["model_sha256"] = file_sha256(model_path(run_dir, trained))  # the model it evaluated
         if first:
             report["first_episode"] = first
         if maps is not None:

@@ -9,6 +9,7 @@ one ``error:`` line (exit 2) and nothing changes (``agents/counters.py``,
 ``checkpoints.check_trained_config``); compare takes no eval.json of an earlier model.
 """
 
+import hashlib
 import json
 import shutil
 import zipfile
@@ -132,6 +133,7 @@ def test_an_evaluation_records_the_step_of_its_model_and_compare_takes_only_the_
     assert result.exit_code == 0, result.output
     report = json.loads((run_dir / "eval.json").read_text())
     assert report["model_steps"] == 128 and load_run(run_dir).source == "eval.json"
+    assert report["model_sha256"] == hashlib.sha256((run_dir / "model.zip").read_bytes()).hexdigest()
     report["model_steps"] = 64  # as an evaluation of the checkpoint at 64, made while it trained
     (run_dir / "eval.json").write_text(json.dumps(report))
     with pytest.raises(UsageError, match="evaluated the model of step 64, not the run's final one of 128"):
