@@ -111,8 +111,9 @@ AGENTS: dict[str, dict] = {
             "drivelab's PPO (the fast on-policy trainer) in the town, learned by RL alone (no imitation): "
             "route waypoints, measurements and affordances (privileged: the light, the leader, "
             "pedestrians), Roach's reward with its terminal penalty x10, Beta actions, an entropy bonus, "
-            "gamma 0.995, 12 M steps on 64 worlds in dense traffic; the leaderboard's town ppo_own "
-            "(privileged) recipe, seed 0 (it does not meet NoCrash's target of 90 / 75 / 60 %)"
+            "gamma 0.995, the learning rate annealed to 0 over 12 M steps on 64 worlds in dense traffic; "
+            "the leaderboard's town ppo_own (privileged) recipe, seed 0 (it does not meet NoCrash's "
+            "target of 90 / 75 / 60 %)"
         ),
         "train": seed_0(TOWN_PPO_OWN),
         "measure": TOWN_MEASURE,
@@ -190,7 +191,8 @@ AGENTS: dict[str, dict] = {
     "intersection-ppo_own": {
         "description": (
             "drivelab's PPO (the fast on-policy trainer) on intersection, learned by RL alone: the 15 "
-            "nearest vehicles read as a set by ego-attention, the route's waypoints and the clock, "
+            "nearest vehicles and where each is headed, read as a set by ego-attention, the route's "
+            "waypoints and the clock, "
             "highway-env's three longitudinal actions, reward arrival +10, collision -10 and 0.2 per metre "
             "of route progress; 2 M steps on 64 worlds; the leaderboard's intersection ppo_own recipe, "
             "seed 0 (it does not meet the target of 80 % success with at most 10 % crashes)"
