@@ -408,7 +408,7 @@ def enjoy(
         it has one."""
     from drivelab.envs.core import DriveEnv
     from drivelab.envs.video import video_fps
-    from drivelab.training.checkpoints import load_agent
+    from drivelab.training.checkpoints import file_sha256, load_agent, model_path
     from drivelab.training.evaluate import aggregate, check_spaces, load_run_config, run_episodes
 
     if episodes < 1:
@@ -442,6 +442,7 @@ def enjoy(
         raise
     report = {"agent": name or str(run_dir), "algo": config.algo, "env": config.env, **aggregate(results)}
     report["model_steps"] = int(agent.num_timesteps)  # as evaluate's report
+    report["model_sha256"] = file_sha256(model_path(run_dir, config))
     report["seed"] = seed
     if writer is not None:
         report["video"] = str(writer.close())
