@@ -7,7 +7,7 @@ from gymnasium import spaces
 from numba import njit
 
 from drivelab.errors import UsageError
-from drivelab.perception.base import Sensor
+from drivelab.perception.base import Sensor, ego_frame
 from drivelab.world.batch import WorldBatch
 
 FEATURES = ("presence", "x", "y", "vx", "vy", "cos_h", "sin_h")
@@ -144,16 +144,12 @@ def intention_rows(batch: WorldBatch, chosen: np.ndarray | None, count: int, abs
         vectors[:, 1 : 1 + chosen.shape[1]] = np.where(present[..., None], destination - position, 0.0)
     norm = np.hypot(vectors[..., 0], vectors[..., 1])[..., None]
     unit = np.divide(vectors, norm, out=np.zeros_like(vectors), where=norm > 0)
-    if absolute:
-        return unit
-    cos_h, sin_h = (part[:, None] for part in batch.heading_cos_sin())
-    x, y = unit[..., 0], unit[..., 1]
-    return np.stack([x * cos_h + y * sin_h, -x * sin_h + y * cos_h], axis=-1)
+    return unit if absolute else ego_frame(unit, 0.0, batch.ego.heading[:, None])
 
 
 def feature_names(features) -> tuple[str, ...]:
     """The feature names of ``features`` (names joined by ``+``, or a sequence of names), each one
-    of ``FEATURES`` and none twice; a UsageError otherwise."""
+    of ``ALL_FEATURES`` and none twice; a UsageError otherwise."""
     names = features.split("+") if isinstance(features, str) else list(features)
     names = [str(name).strip() for name in names]
     unknown = [name for name in names if name not in ALL_FEATURES]
