@@ -3,9 +3,11 @@ level, with what the ego and the body it touched were doing.
 
     nice -n 10 env OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1 \\
         .venv/bin/python benchmarks/town_collisions.py RUN [RUN ...] [--level dense] [--episodes 100]
+        [--beta-actions mode,mean]
 
 Each run drives the test town's fixed routes of ``drivelab benchmark nocrash`` (the same episodes,
-its deterministic actions). At every collision: its kind (vehicle or pedestrian), the ego's speed
+its deterministic actions; a Beta policy once for each of ``--beta-actions``, read at its mode or
+its mean). At every collision: its kind (vehicle or pedestrian), the ego's speed
 then and a second earlier, where the nearest other body is in the ego frame (ahead within 45°,
 behind, or beside) with its speed and heading relative to the ego's, whether the ego is in a
 junction and the state of a light ahead within 30 m. The collisions are grouped as: creeping into
@@ -29,6 +31,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from drivelab.agents.actor_critic import BETA_ACTIONS  # noqa: E402
 from drivelab.envs.core import DriveEnv  # noqa: E402
 from drivelab.training.checkpoints import load_agent  # noqa: E402
 from drivelab.training.evaluate import load_run_config  # noqa: E402
@@ -81,10 +84,19 @@ def group(row: dict) -> str:
     return GROUPS[1]
 
 
-def collisions(run: Path, level: str, episodes: int) -> list[dict]:
-    """Every collision of ``run`` on the NoCrash routes of ``level`` (test town)."""
+def beta_policy(agent):
+    """The agent's Beta actor-critic, or None."""
+    policy = getattr(agent, "policy", None)
+    return policy if getattr(policy, "kind", None) == "beta" else None
+
+
+def collisions(run: Path, level: str, episodes: int, beta_action: str | None = None) -> list[dict]:
+    """Every collision of ``run`` on the NoCrash routes of ``level`` (test town); a Beta policy acts
+    at ``beta_action`` (its mode or mean; None: as the run says)."""
     config = load_run_config(run)
     agent = load_agent(run, config)
+    if beta_action is not None:
+        beta_policy(agent).beta_action = beta_action
     kwargs = {**config.eval_env_kwargs(), "traffic": level}
     options = kwargs.get("backend_options") or {}
     kwargs["backend_options"] = {**options, "layout": "test", "fixed_routes": True}
@@ -108,7 +120,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--level", default="dense", choices=LEVELS)
     parser.add_argument("--episodes", type=whole(), default=100)
     parser.add_argument("--out", type=Path, default=RESULTS / "town_collisions")
+    parser.add_argument(
+        "--beta-actions", default="mode", type=lambda text: text.split(","),
+        help="a Beta policy's deterministic actions to drive with, comma-separated: mode, mean",
+    )  # fmt: skip
     args = parser.parse_args(argv)
+    if not args.beta_actions or set(args.beta_actions) - set(BETA_ACTIONS):
+        stop(f"--beta-actions takes {' and '.join(BETA_ACTIONS)}, got {','.join(args.beta_actions)!r}")
     for run in args.runs:  # every run checked before any is driven
         if not (run / "config.yaml").is_file():
             stop(f"{str(run)!r} is not a run directory (no config.yaml)")
@@ -119,25 +137,27 @@ def main(argv: list[str] | None = None) -> None:
         "# Where the town's NoCrash collisions happen",
         "",
         f"Command: `python benchmarks/town_collisions.py {shlex.join(str(r) for r in args.runs)} --level "
-        f"{args.level} --episodes {args.episodes}`  ",
+        f"{args.level} --episodes {args.episodes} --beta-actions {','.join(args.beta_actions)}`  ",
         f"Machine: {platform.machine()}, Python {platform.python_version()}; {date.today().isoformat()}.",
         "",
         f"The {args.episodes} NoCrash routes of {args.level} traffic on the test town (the episodes of "
         "`drivelab benchmark nocrash`), each collision grouped by what the ego and the nearest other body "
         "were doing (see the script's docstring).",
         "",
-        "| run | collisions | " + " | ".join(GROUPS) + " | in a junction |",
-        "|---|---|" + "---|" * (len(GROUPS) + 1),
+        "| run | Beta read at | collisions | " + " | ".join(GROUPS) + " | in a junction |",
+        "|---|---|---|" + "---|" * (len(GROUPS) + 1),
     ]
     for run in args.runs:
-        rows = collisions(run, args.level, args.episodes)
-        report["runs"][str(run)] = rows
-        counts = Counter(group(row) for row in rows)
-        junction = sum(row["in_junction"] for row in rows)
-        cells = " | ".join(str(counts[name]) for name in GROUPS)
-        label = run.resolve().relative_to(ROOT) if run.resolve().is_relative_to(ROOT) else run
-        lines.append(f"| `{label}` | {len(rows)} | {cells} | {junction} |")
-        print(lines[-1], flush=True)
+        beta = beta_policy(load_agent(run, load_run_config(run))) is not None
+        for readout in args.beta_actions if beta else [None]:
+            rows = collisions(run, args.level, args.episodes, readout)
+            report["runs"][str(run) if readout is None else f"{run} ({readout})"] = rows
+            counts = Counter(group(row) for row in rows)
+            junction = sum(row["in_junction"] for row in rows)
+            cells = " | ".join(str(counts[name]) for name in GROUPS)
+            label = run.resolve().relative_to(ROOT) if run.resolve().is_relative_to(ROOT) else run
+            lines.append(f"| `{label}` | {readout or '—'} | {len(rows)} | {cells} | {junction} |")
+            print(lines[-1], flush=True)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.with_suffix(".json").write_text(json.dumps(report, indent=1) + "\n")
     args.out.with_suffix(".md").write_text("\n".join(lines) + "\n")

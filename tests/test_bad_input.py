@@ -225,6 +225,11 @@ TRAIN_CASES = {
         {},
         "'a2c_own': discrete actions take the categorical distribution, not 'beta'",
     ),
+    "ppo_own beta_action=median": (
+        ["--algo", "ppo_own", "--action", "continuous", "--obs", "kinematics", "-H", "beta_action=median"],
+        {},
+        "'ppo_own' beta_action must be one of mode, mean, got 'median'",
+    ),
     "ppo_own encoder=transformer": (
         ["--algo", "ppo_own", "--action", "meta", "--obs", "kinematics", "-H", "encoder=transformer"],
         {},

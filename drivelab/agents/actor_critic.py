@@ -14,9 +14,17 @@ from torch import nn
 from drivelab.agents.networks import EgoAttentionEncoder, make_encoder, squashed_log_prob
 
 DISTRIBUTIONS = ("auto", "categorical", "tanh_gaussian", "beta")
+BETA_ACTIONS = ("mode", "mean")  # a Beta policy's deterministic action
 BETA_EPSILON = 1e-6  # a Beta sample is kept inside (ε, 1 − ε), where its log-density is finite
 NORM_CLIP = 10.0  # normalised observations and rewards are clipped to ±this (SB3 VecNormalize's)
 NORM_EPSILON = 1e-8
+
+
+def beta_mode(alpha: torch.Tensor, beta: torch.Tensor) -> torch.Tensor:
+    """The most likely x of Beta(α, β) for α, β ≥ 1 (the head's ``1 + softplus``): (α − 1) / (α + β − 2),
+    which reaches 0 and 1 where α or β is 1, unlike the mean α / (α + β); ½ for the uniform α = β = 1."""
+    excess = alpha + beta - 2.0
+    return torch.where(excess > 0, (alpha - 1.0) / excess.clamp(min=torch.finfo(excess.dtype).tiny), 0.5)
 
 
 def distribution_of(action_space: spaces.Space, distribution: str) -> str:
@@ -121,6 +129,8 @@ class ActorCritic(nn.Module):
         (``networks.EgoAttentionEncoder`` over the kinematics rows).
     :param normalize_observations: keep running statistics of the float observations and
         normalise with them.
+    :param beta_action: a Beta policy's deterministic action: its "mode" (Roach's, which reaches
+        the ends of the range) or its "mean" (inside the range, and steadier while the Beta is wide).
     """
 
     def __init__(
@@ -133,9 +143,13 @@ class ActorCritic(nn.Module):
         hidden: tuple[int, ...] = (64, 64),
         normalize_observations: bool = False,
         encoder: str = "auto",
+        beta_action: str = "mode",
     ) -> None:
         super().__init__()
+        if beta_action not in BETA_ACTIONS:
+            raise ValueError(f"beta_action must be one of {', '.join(BETA_ACTIONS)}, got {beta_action!r}")
         self.kind = distribution_of(action_space, distribution)
+        self.beta_action = beta_action
         self.norm = RunningNorm(space, normalize_observations)
         self.actor_encoder = make_encoder(space, hidden, encoder)
         self.critic_encoder = self.actor_encoder if shared_encoder else make_encoder(space, hidden, encoder)
@@ -195,7 +209,7 @@ class ActorCritic(nn.Module):
     ) -> torch.Tensor:
         """The distribution's variable for a batch of head outputs: drawn (from ``generator``, or
         ``rng`` for the Beta, which torch samples without a generator), or the mode (categorical),
-        μ (Gaussian) or the mean (Beta) when ``deterministic``: nothing is drawn then."""
+        μ (Gaussian) or the Beta's ``beta_action`` when ``deterministic``: nothing is drawn then."""
         if self.kind == "categorical":
             if deterministic:
                 return out.argmax(-1)
@@ -207,7 +221,7 @@ class ActorCritic(nn.Module):
             return out + self.log_std.exp() * torch.randn(out.shape, generator=generator)
         alpha, beta = self._beta(out)
         if deterministic:
-            x = alpha / (alpha + beta)
+            x = beta_mode(alpha, beta) if self.beta_action == "mode" else alpha / (alpha + beta)
         else:
             x = torch.from_numpy(rng.beta(alpha.double().numpy(), beta.double().numpy())).float()
         return x.clamp(BETA_EPSILON, 1.0 - BETA_EPSILON)

@@ -21,7 +21,14 @@ from gymnasium import spaces
 from stable_baselines3.common.callbacks import BaseCallback
 from torch import nn
 
-from drivelab.agents.actor_critic import DISTRIBUTIONS, NORM_CLIP, NORM_EPSILON, ActorCritic, merge_moments
+from drivelab.agents.actor_critic import (
+    BETA_ACTIONS,
+    DISTRIBUTIONS,
+    NORM_CLIP,
+    NORM_EPSILON,
+    ActorCritic,
+    merge_moments,
+)
 from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent, gradient_step
 from drivelab.agents.buffer_memory import check_buffer_memory, observation_bytes
 from drivelab.agents.networks import ENCODERS
@@ -46,6 +53,8 @@ class OnPolicyConfig:
         ``VecNormalize(norm_reward=True)``), clipped to ±10.
     :param distribution: "auto" (categorical for discrete actions, tanh_gaussian for continuous),
         "tanh_gaussian" or "beta".
+    :param beta_action: a Beta policy's deterministic action (evaluation, ``drivelab evaluate``):
+        "mode", as Roach acts, which reaches the ends of the range (a full stop), or "mean".
     :param net_arch: widths of the MLP's tanh layers for vector observations, e.g. "256,256".
     :param shared_encoder: actor and critic share the encoder.
     :param encoder: "auto" (the MLP, CNN or fusion encoder the observation takes) or "attention":
@@ -80,6 +89,7 @@ class OnPolicyConfig:
     normalize_observations: bool = False
     normalize_rewards: bool = False
     distribution: str = "auto"
+    beta_action: str = "mode"
     net_arch: str = "64,64"
     shared_encoder: bool = True
     encoder: str = "auto"
@@ -103,6 +113,10 @@ class OnPolicyConfig:
             )
         if self.distribution not in DISTRIBUTIONS:
             raise UsageError(f"{algo!r} distribution must be one of {', '.join(DISTRIBUTIONS)}")
+        if self.beta_action not in BETA_ACTIONS:
+            raise UsageError(
+                f"{algo!r} beta_action must be one of {', '.join(BETA_ACTIONS)}, got {self.beta_action!r}"
+            )
         if self.encoder not in ENCODERS:
             raise UsageError(f"{algo!r} encoder must be one of {', '.join(ENCODERS)}, got {self.encoder!r}")
         self.hidden(algo)
@@ -216,6 +230,7 @@ class OnPolicyAgent(OwnAgent):
                 hidden=config.hidden(self.algo),
                 normalize_observations=config.normalize_observations,
                 encoder=config.encoder,
+                beta_action=config.beta_action,
             )
         except ValueError as exc:
             raise UsageError(f"{self.algo!r}: {exc}") from None

@@ -202,9 +202,8 @@ class TargetSpeedAction(ActionAdapter):
     :param stop_below: a stop zone: a speed action below this fraction stops the ego and holds it
         still (the command brakes just hard enough to stop within the step, never reverses, and
         the PID's memory is cleared), and [stop_below, 1] spans the speeds 0 to ``max_speed_mps``.
-        Roach's acceleration action brakes on the lower half of its range; a policy whose actions
-        are a Beta distribution's mean cannot reach the range's end, so without a zone it can only
-        creep (0, the default: no zone, the PID's target is ``action · max_speed_mps``).
+        Roach's acceleration action brakes on the lower half of its range (0, the default: no
+        zone, the PID's target is ``action · max_speed_mps``).
     """
 
     name, control = "target_speed", "continuous"

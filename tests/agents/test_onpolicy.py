@@ -9,7 +9,7 @@ from gymnasium import spaces
 from stable_baselines3.common.vec_env import VecEnv
 
 from drivelab.agents.a2c import OwnA2C
-from drivelab.agents.actor_critic import ActorCritic
+from drivelab.agents.actor_critic import BETA_EPSILON, ActorCritic, beta_mode
 from drivelab.agents.onpolicy import Rollout
 from drivelab.agents.ppo import OwnPPO
 from drivelab.agents.worlds import Worlds
@@ -166,8 +166,12 @@ def _row(obs, k):
 def test_every_distribution_and_a_dict_observation_learn_a_tiny_task(
     algo, action_space, distribution, dict_obs
 ):
+    """A2C's Beta is still wide after these steps: its mean, not its mode, is then the best action
+    for the bandit's quadratic reward (PPO's, narrower, is read by the default mode)."""
     env = Bandit(action_space, dict_obs)
     hyperparams = {"n_steps": 4, "learning_rate": 3e-3, "distribution": distribution, "gamma": 0.9}
+    if algo is OwnA2C and distribution == "beta":
+        hyperparams["beta_action"] = "mean"
     if algo is OwnPPO:
         hyperparams.update(batch_size=32, n_epochs=4)
     agent = algo(env.observation_space, env.action_space, 0, hyperparams, env)
@@ -306,3 +310,18 @@ def test_a_prior_kl_keeps_the_policy_near_the_one_it_started_from():
     held, held_log = trained(100.0)
     assert free > 0.3 and held < 0.1 * free
     assert "prior_kl" in held_log[-1] and "prior_kl" not in free_log[-1]
+
+
+def test_a_deterministic_beta_action_is_its_mode_and_reaches_the_ends_of_the_range():
+    """Read deterministically, a Beta acts at its mode (α − 1) / (α + β − 2), as Roach does: at α = 1
+    that is the range's bottom exactly, where the mean α / (α + β) stays inside; uniform gives ½."""
+    policy = ActorCritic(spaces.Box(-1, 1, (4,), np.float32), spaces.Box(0, 1, (2,), np.float32), "beta")
+    # head outputs whose 1 + softplus are α = (3, 1) and β = (5, 20): one Beta inside the range, one
+    # with α at its floor
+    out = torch.log(torch.expm1(torch.tensor([[2.0, 1.0, 4.0, 19.0]])))
+    out[0, 1] = -50.0
+    x = policy.sample(out, True, torch.Generator(), np.random.default_rng(0))
+    torch.testing.assert_close(x, torch.tensor([[2.0 / 6.0, BETA_EPSILON]]))
+    assert policy.to_env(x)[0, 1] < 1e-5  # the mean would be 1 / 21
+    torch.testing.assert_close(beta_mode(torch.ones(3), torch.ones(3)), torch.full((3,), 0.5))
+    torch.testing.assert_close(beta_mode(torch.tensor([4.0]), torch.tensor([1.0])), torch.tensor([1.0]))
