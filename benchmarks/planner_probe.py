@@ -60,21 +60,35 @@ SCENARIOS = {  # name: the environment's keywords
 ARRIVAL, COLLISION = 1e6, -1e6
 
 
-def plan_episode(env, scenario: str, seed: int, horizon: int, speed_cap: float = np.inf) -> dict:
+def plan_episode(
+    env, scenario: str, seed: int, horizon: int, speed_cap: float = np.inf, futures: int = 0
+) -> dict:
     """Play evaluation episode ``seed`` with the planner of horizon ``horizon``: its outcome. On the
-    highway a speed counts up to ``speed_cap`` (m/s) in a sequence's score."""
+    highway a speed counts up to ``speed_cap`` (m/s) in a sequence's score. With ``futures`` M > 0
+    (the intersection) the model knows the state now but not the vehicles still to arrive: every
+    sequence is played in M worlds whose arrival generators are reseeded after the replay (the same
+    M seeds for every sequence), and the best sequence collides in the fewest of them, then has the
+    highest mean score over the others."""
     actions = env.single_action_space.n
     sequences = np.array(list(itertools.product(range(actions), repeat=horizon)))
     count = len(sequences)
+    plans = np.tile(sequences, (max(futures, 1), 1))  # world m · count + i plays sequence i
+    worlds = len(plans)
     taken: list[int] = []
     while True:
-        env.reset(options={"episode_seeds": np.full(count, seed)})
+        env.reset(options={"episode_seeds": np.full(worlds, seed)})
         for action in taken:  # every world in the episode's state
-            env.step(np.full(count, action))
-        ended, collided, score = np.zeros(count, dtype=bool), np.zeros(count, dtype=bool), np.zeros(count)
-        first: dict[str, np.ndarray] = {}
+            _, _, terminated, truncated, _ = env.step(np.full(worlds, action))
+        if taken and (terminated[0] or truncated[0]):  # the last action taken ended the episode
+            events = env.batch.events
+            crash, arrived = bool(events.collided[0]), bool(events.arrived[0] and not events.collided[0])
+            return replayed(scenario, seed, taken, crash, arrived)
+        for m in range(futures):  # arrivals from here on drawn afresh: the same M futures per sequence
+            for world in range(m * count, (m + 1) * count):
+                env.simulator.rngs[world] = np.random.default_rng([seed, len(taken), m])
+        ended, collided, score = np.zeros(worlds, dtype=bool), np.zeros(worlds, dtype=bool), np.zeros(worlds)
         for j in range(horizon):
-            _, _, terminated, truncated, _ = env.step(sequences[:, j])
+            _, _, terminated, truncated, _ = env.step(plans[:, j])
             live, events = ~ended, env.batch.events
             crashed, arrived = live & events.collided, live & events.arrived & ~events.collided
             collided |= crashed
@@ -86,15 +100,16 @@ def plan_episode(env, scenario: str, seed: int, horizon: int, speed_cap: float =
                 score[going] = env.batch.route.progress_m[going]
             else:
                 score[going] += np.minimum(env.batch.ego.speed_mps[going], speed_cap)
-            if j == 0:
-                first = {"ended": (terminated | truncated).copy(), "collided": crashed, "arrived": arrived}
             ended |= terminated | truncated
-        best = int(np.argmax(score))
-        taken.append(int(sequences[best, 0]))
-        if first["ended"][best]:
-            return replayed(
-                scenario, seed, taken, bool(first["collided"][best]), bool(first["arrived"][best])
+        if futures:
+            crashes = collided.reshape(futures, count).sum(0)
+            others = np.where(collided, 0.0, score).reshape(futures, count).sum(0) / np.maximum(
+                futures - crashes, 1
             )
+            best = int(np.lexsort((-others, crashes))[0])
+        else:
+            best = int(np.argmax(score))
+        taken.append(int(sequences[best, 0]))
 
 
 def replayed(scenario: str, seed: int, actions: list[int], crash: bool, arrived: bool) -> dict:
@@ -119,22 +134,24 @@ def replayed(scenario: str, seed: int, actions: list[int], crash: bool, arrived:
     return outcome
 
 
-def play(scenario: str, horizon: int, episodes: int, speed_cap: float = np.inf) -> dict:
+def play(scenario: str, horizon: int, episodes: int, speed_cap: float = np.inf, futures: int = 0) -> dict:
     from drivelab.envs.vector import VectorDriveEnv
 
     actions = 3 if scenario == "intersection" else 5
-    env = VectorDriveEnv(actions**horizon, scenario, **SCENARIOS[scenario])
+    env = VectorDriveEnv(actions**horizon * max(futures, 1), scenario, **SCENARIOS[scenario])
     assert env.single_action_space.n == actions, env.single_action_space
     start = time.perf_counter()
     seeds = evaluation_seeds(episodes)
-    outcomes = [plan_episode(env, scenario, int(seed), horizon, speed_cap) for seed in seeds]
+    outcomes = [plan_episode(env, scenario, int(seed), horizon, speed_cap, futures) for seed in seeds]
     speeds = [o["mean_speed_mps"] for o in outcomes]
     low, high = bootstrap_ci(speeds)
     return {
         "horizon": horizon,
         "speed_cap_mps": None if np.isinf(speed_cap) else speed_cap,
         "sequences": actions**horizon,
+        "futures": futures,
         "episodes": episodes,
+        "date": time.strftime("%Y-%m-%d"),
         "success": sum(o["success"] for o in outcomes),
         "crash": sum(o["crash"] for o in outcomes),
         "mean_speed_mps": float(np.mean(speeds)),
@@ -148,7 +165,10 @@ INTRODUCTION = (
     "Before each decision the planner plays every sequence of the next H meta-actions (one a second) in "
     "its own world, from the episode's seed and the actions taken so far, and takes the first action of "
     "the best. The model is exact (the worlds share the episode's seed), so this is an oracle whose only "
-    "limit is H: what it reaches shows that a good policy exists for that share of the episodes. Each "
+    "limit is H: what it reaches shows that a good policy exists for that share of the episodes. On the "
+    "intersection, where vehicles keep arriving at random, a row with sampled futures knows the state now "
+    "(every vehicle, its route and how it drives) but not the arrivals to come: each sequence is played "
+    "in M worlds whose arrivals are drawn afresh after the replay, and the best collides in the fewest. Each "
     "episode's actions, played again as `drivelab evaluate` plays the episode, gave the planner's "
     "outcome. Rates in %, with their 90 % Wilson interval; speed: the mean over episodes of each "
     "episode's mean speed, with its 90 % bootstrap interval."
@@ -176,6 +196,13 @@ def cap_text(cap: float | None) -> str:
     return "—" if cap is None else f"{cap:g} m/s"
 
 
+def futures_text(scenario: str, row: dict) -> str:
+    futures = row.get("futures", 0)
+    if scenario != "intersection":
+        return "—"
+    return "known (the episode's own)" if not futures else f"unknown: {futures} futures sampled"
+
+
 def markdown(result: dict) -> str:
     lines = ["# What is reachable: a planner with the simulator as its model, on the evaluation episodes",
              "", INTRODUCTION]  # fmt: skip
@@ -188,19 +215,22 @@ def markdown(result: dict) -> str:
             "Commands: "
             + ", ".join(f"`{c}`" for c in dict.fromkeys(row["command"] for row in section["rows"])),
             "",
-            f"Machine: {section['machine']}; {section['date']}.",
+            f"Machine: {section['machine']}; "
+            + ", ".join(dict.fromkeys(row.get("date", section["date"]) for row in section["rows"]))
+            + ".",
             "",
             text,
             "",
-            "| horizon H (decisions) | speed counted up to | sequences per decision | success % | crash % | "
-            "mean speed m/s | wall s |",
-            "|---|---|---|---|---|---|---|",
+            "| horizon H (decisions) | speed counted up to | arrivals to come | sequences per decision | "
+            "success % | crash % | mean speed m/s | wall s |",
+            "|---|---|---|---|---|---|---|---|",
         ]
         for row in section["rows"]:
             n = row["episodes"]
             low, high = row["mean_speed_interval"]
             lines.append(
-                f"| {row['horizon']} | {cap_text(row.get('speed_cap_mps'))} | {row['sequences']} | "
+                f"| {row['horizon']} | {cap_text(row.get('speed_cap_mps'))} | "
+                f"{futures_text(scenario, row)} | {row['sequences']} | "
                 f"{wilson_text(row['success'], n)} | "
                 f"{wilson_text(row['crash'], n)} | {row['mean_speed_mps']:.1f} [{low:.1f}, {high:.1f}] | "
                 f"{row['wall_s']:.0f} |"
@@ -214,26 +244,42 @@ def main() -> None:
     parser.add_argument("--episodes", type=whole(), default=100)
     parser.add_argument("--horizons", type=wholes(1), default=[3, 5], help="comma-separated, e.g. 3,5")
     parser.add_argument("--speed-cap", type=whole(), default=None, help="highway: m/s a speed counts up to")
+    parser.add_argument(
+        "--futures", type=whole(0), default=0,
+        help="intersection: plan over this many sampled futures of the arrivals to come (0: the exact model)",
+    )  # fmt: skip
     args = parser.parse_args()
     if args.speed_cap is not None and args.scenario != "highway":
         parser.error("--speed-cap is the highway's")
+    if args.futures and args.scenario != "intersection":
+        parser.error("--futures is the intersection's (its arrivals are the model's only randomness)")
     speed_cap = np.inf if args.speed_cap is None else float(args.speed_cap)
     actions = 3 if args.scenario == "intersection" else 5
-    if actions ** max(args.horizons) > 3**7:
-        parser.error(f"--horizons: {actions}**{max(args.horizons)} worlds per decision is more than 3**7")
+    if actions ** max(args.horizons) * max(args.futures, 1) > 3**7:
+        parser.error("--horizons, --futures: more than 3**7 worlds per decision")
     rows = []
     for horizon in args.horizons:
-        rows.append({"command": command_line(), **play(args.scenario, horizon, args.episodes, speed_cap)})
+        rows.append(
+            {
+                "command": command_line(),
+                **play(args.scenario, horizon, args.episodes, speed_cap, args.futures),
+            }
+        )
         print({k: v for k, v in rows[-1].items() if k != "outcomes"}, flush=True)
     path = RESULTS / "planner_probe.json"
     result = json.loads(path.read_text()) if path.exists() else {"scenarios": {}}
-    kept = result["scenarios"].get(args.scenario, {}).get("rows", [])
-    run = {(row["horizon"], row.get("speed_cap_mps")) for row in rows}  # a row run again is replaced
+    section = result["scenarios"].get(args.scenario, {})
+    kept = [{"date": section.get("date"), **row} for row in section.get("rows", [])]
+
+    def key(row: dict) -> tuple:
+        return row["horizon"], row.get("speed_cap_mps"), row.get("futures", 0)
+
+    run = {key(row) for row in rows}  # a row run again is replaced
     result["scenarios"][args.scenario] = {
         "machine": f"{cpu_isa()}, {os.cpu_count()} cores, Python {platform.python_version()}",
         "date": time.strftime("%Y-%m-%d"),
         "environment": SCENARIOS[args.scenario],
-        "rows": [row for row in kept if (row["horizon"], row.get("speed_cap_mps")) not in run] + rows,
+        "rows": [row for row in kept if key(row) not in run] + rows,
     }
     RESULTS.mkdir(exist_ok=True)
     path.write_text(json.dumps(result, indent=1))
