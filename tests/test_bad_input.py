@@ -230,6 +230,26 @@ TRAIN_CASES = {
         {},
         "'ppo_own' beta_action must be one of mode, mean, got 'median'",
     ),
+    "ppo_own attention_output without attention": (
+        ["--algo", "ppo_own", "--action", "meta", "--obs", "kinematics", "-H", "attention_output=64,64"],
+        {},
+        "'ppo_own' attention_output needs encoder=attention",
+    ),
+    "ppo_own attention_output=0": (
+        [
+            "--algo",
+            "ppo_own",
+            "--obs",
+            "kinematics:flatten=false",
+            "-H",
+            "encoder=attention",
+            "-H",
+            "attention_output=64,0",
+        ],
+        {},
+        "'ppo_own' attention_output must be layer widths between 1 and 65536 separated by commas "
+        "(e.g. 256,256), got '64,0'",
+    ),
     "ppo_own encoder=transformer": (
         ["--algo", "ppo_own", "--action", "meta", "--obs", "kinematics", "-H", "encoder=transformer"],
         {},

@@ -129,6 +129,8 @@ class ActorCritic(nn.Module):
         (``networks.EgoAttentionEncoder`` over the kinematics rows).
     :param normalize_observations: keep running statistics of the float observations and
         normalise with them.
+    :param attention_output: widths of the ReLU layers after the attention encoder's features
+        (rl-agents' output layer; empty: none).
     :param beta_action: a Beta policy's deterministic action: its "mode" (Roach's, which reaches
         the ends of the range) or its "mean" (inside the range, and steadier while the Beta is wide).
     """
@@ -144,6 +146,7 @@ class ActorCritic(nn.Module):
         normalize_observations: bool = False,
         encoder: str = "auto",
         beta_action: str = "mode",
+        attention_output: tuple[int, ...] = (),
     ) -> None:
         super().__init__()
         if beta_action not in BETA_ACTIONS:
@@ -151,8 +154,12 @@ class ActorCritic(nn.Module):
         self.kind = distribution_of(action_space, distribution)
         self.beta_action = beta_action
         self.norm = RunningNorm(space, normalize_observations)
-        self.actor_encoder = make_encoder(space, hidden, encoder)
-        self.critic_encoder = self.actor_encoder if shared_encoder else make_encoder(space, hidden, encoder)
+        if attention_output and encoder != "attention":
+            raise ValueError("attention_output needs encoder attention")
+        self.actor_encoder = make_encoder(space, hidden, encoder, attention_output)
+        self.critic_encoder = (
+            self.actor_encoder if shared_encoder else make_encoder(space, hidden, encoder, attention_output)
+        )
         if self.kind == "categorical":
             outputs = int(action_space.n)
         else:

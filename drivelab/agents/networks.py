@@ -136,10 +136,17 @@ class EgoAttentionEncoder(nn.Module):
     Rows that are all zero (kinematics' absent vehicles) are masked out, as rl-agents masks rows
     without presence; the mask is read from the observation before normalisation (``raw``). A
     Dict's other entries are concatenated through an MlpEncoder (tanh layers ``hidden``) and joined
-    to the set's features.
+    to the set's features. ``output``: ReLU layers over the joined features, rl-agents' output layer
+    (none: the features go to the policy's linear heads as they are).
     """
 
-    def __init__(self, space: spaces.Space, hidden: tuple[int, ...] = (64, 64), heads: int = 2) -> None:
+    def __init__(
+        self,
+        space: spaces.Space,
+        hidden: tuple[int, ...] = (64, 64),
+        heads: int = 2,
+        output: tuple[int, ...] = (),
+    ) -> None:
         super().__init__()
         if isinstance(space, spaces.Dict):
             self.key = ENTITY_KEY if ENTITY_KEY in space.spaces else None
@@ -160,7 +167,9 @@ class EgoAttentionEncoder(nn.Module):
         self.others = _layers(features, hidden, nn.ReLU)
         self.attention = nn.MultiheadAttention(width, heads, batch_first=True)
         self.rest = MlpEncoder(spaces.Dict(rest), hidden) if rest else None
-        self.features = width + (self.rest.features if self.rest else 0)
+        joined = width + (self.rest.features if self.rest else 0)
+        self.output = _layers(joined, output, nn.ReLU) if output else None
+        self.features = output[-1] if output else joined
 
     def forward(self, obs, raw=None) -> torch.Tensor:
         """Features of a batch of (normalised) observations; ``raw``: the same before
@@ -174,16 +183,19 @@ class EgoAttentionEncoder(nn.Module):
         absent[:, 0] = False  # the ego always attends to itself
         attended, _ = self.attention(ego, embedded, embedded, key_padding_mask=absent, need_weights=False)
         features = (attended + ego).squeeze(1)
-        if self.rest is None:
-            return features
-        return torch.cat([features, self.rest({k: obs[k] for k in self.rest.keys})], dim=1)
+        if self.rest is not None:
+            features = torch.cat([features, self.rest({k: obs[k] for k in self.rest.keys})], dim=1)
+        return features if self.output is None else self.output(features)
 
 
-def make_encoder(space: spaces.Space, hidden: tuple[int, ...] = (64, 64), kind: str = "auto") -> nn.Module:
+def make_encoder(
+    space: spaces.Space, hidden: tuple[int, ...] = (64, 64), kind: str = "auto", output: tuple[int, ...] = ()
+) -> nn.Module:
     """SeedCnn for an image, FusionEncoder for image + vectors, MlpEncoder (layers ``hidden``) for
-    vectors; with ``kind`` "attention", an EgoAttentionEncoder over the vehicles."""
+    vectors; with ``kind`` "attention", an EgoAttentionEncoder over the vehicles (``output``: its
+    output layers)."""
     if kind == "attention":
-        return EgoAttentionEncoder(space, hidden)
+        return EgoAttentionEncoder(space, hidden, output=output)
     kind = observation_kind(space)
     if kind == "image":
         return SeedCnn(space)
@@ -255,6 +267,20 @@ class SeedCnnExtractor(BaseFeaturesExtractor):
     def __init__(self, observation_space: spaces.Space) -> None:
         super().__init__(observation_space, features_dim=256)
         self.encoder = self.encoder_class(observation_space)
+
+    def forward(self, observations) -> torch.Tensor:
+        return self.encoder(observations)
+
+
+class AttentionExtractor(BaseFeaturesExtractor):
+    """``EgoAttentionEncoder`` (64-wide embeddings, two heads) as an SB3 features extractor: the
+    vehicles of ``kinematics:flatten=false`` read as a set, as rl-agents' DQN reads highway-env's
+    intersection; SB3's ``net_arch`` layers after it play rl-agents' output layer."""
+
+    def __init__(self, observation_space: spaces.Space) -> None:
+        encoder = EgoAttentionEncoder(observation_space)
+        super().__init__(observation_space, features_dim=encoder.features)
+        self.encoder = encoder
 
     def forward(self, observations) -> torch.Tensor:
         return self.encoder(observations)

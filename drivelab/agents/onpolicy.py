@@ -60,6 +60,9 @@ class OnPolicyConfig:
     :param encoder: "auto" (the MLP, CNN or fusion encoder the observation takes) or "attention":
         ego-attention over the vehicles of ``kinematics:flatten=false`` (Leurent & Mercat 2019, the
         encoder rl-agents learns highway-env's intersection with), its embeddings ``net_arch`` wide.
+    :param attention_output: widths of ReLU layers after the attention encoder, e.g. "64,64" (rl-agents'
+        EgoAttentionNetwork ends in such an output layer; empty, the default: the encoder's features
+        go straight to the linear policy and value heads).
     :param log_std_init: initial log σ of the tanh-Gaussian (given with ``init_from``, it replaces
         the source policy's).
     :param linear_lr: anneal the learning rate linearly to 0.
@@ -93,6 +96,7 @@ class OnPolicyConfig:
     net_arch: str = "64,64"
     shared_encoder: bool = True
     encoder: str = "auto"
+    attention_output: str = ""
     log_std_init: float = 0.0
     linear_lr: bool = False
     linear_entropy: bool = False
@@ -120,19 +124,31 @@ class OnPolicyConfig:
         if self.encoder not in ENCODERS:
             raise UsageError(f"{algo!r} encoder must be one of {', '.join(ENCODERS)}, got {self.encoder!r}")
         self.hidden(algo)
+        if self.attention_output and self.encoder != "attention":
+            raise UsageError(f"{algo!r} attention_output needs encoder=attention")
+        self.output_layers(algo)
 
     def hidden(self, algo: str) -> tuple[int, ...]:
         """``net_arch`` as layer widths."""
-        try:
-            widths = tuple(int(part) for part in str(self.net_arch).split(","))
-        except ValueError:
-            widths = ()
-        if not widths or min(widths) < 1 or max(widths) > 65536:
-            raise UsageError(
-                f"{algo!r} net_arch must be layer widths between 1 and 65536 separated by commas "
-                f"(e.g. 256,256), got {self.net_arch!r}"
-            )
-        return widths
+        return _widths(algo, "net_arch", self.net_arch)
+
+    def output_layers(self, algo: str) -> tuple[int, ...]:
+        """``attention_output`` as layer widths (none when empty)."""
+        return _widths(algo, "attention_output", self.attention_output) if self.attention_output else ()
+
+
+def _widths(algo: str, key: str, text) -> tuple[int, ...]:
+    """Comma-separated layer widths, or one ``error:`` naming ``key``."""
+    try:
+        widths = tuple(int(part) for part in str(text).split(","))
+    except ValueError:
+        widths = ()
+    if not widths or min(widths) < 1 or max(widths) > 65536:
+        raise UsageError(
+            f"{algo!r} {key} must be layer widths between 1 and 65536 separated by commas "
+            f"(e.g. 256,256), got {text!r}"
+        )
+    return widths
 
 
 def compute_gae(
@@ -231,6 +247,7 @@ class OnPolicyAgent(OwnAgent):
                 normalize_observations=config.normalize_observations,
                 encoder=config.encoder,
                 beta_action=config.beta_action,
+                attention_output=config.output_layers(self.algo),
             )
         except ValueError as exc:
             raise UsageError(f"{self.algo!r}: {exc}") from None

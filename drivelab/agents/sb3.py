@@ -185,9 +185,21 @@ def seed_network_kwargs(algo: str, space: spaces.Space) -> dict:
     }
 
 
+def attention_network_kwargs(space: spaces.Space) -> dict:
+    """policy_kwargs that read the vehicles as a set with ego-attention (``AttentionExtractor``)."""
+    from drivelab.agents.networks import AttentionExtractor, EgoAttentionEncoder
+
+    try:
+        EgoAttentionEncoder(space)
+    except ValueError as exc:
+        raise UsageError(f"features_extractor=attention: {exc}") from None
+    return {"features_extractor_class": AttentionExtractor}
+
+
 def build_sb3(algo: str, env: gym.Env, seed: int, hyperparams: dict, log_dir: Path | None) -> BaseAlgorithm:
-    """A fresh SB3 model for ``env``. ``features_extractor``: "sb3" (SB3's own networks, default)
-    or "seed" (the MetaDrive study's CNN / fusion network, ``seed_network_kwargs``). ``device``: "cpu" (the
+    """A fresh SB3 model for ``env``. ``features_extractor``: "sb3" (SB3's own networks, default),
+    "seed" (the MetaDrive study's CNN / fusion network, ``seed_network_kwargs``) or "attention"
+    (ego-attention over the vehicles, ``attention_network_kwargs``). ``device``: "cpu" (the
     default), "cuda" or "auto". Keys ``hyperparams`` leaves out take the ``default`` entry of
     ``drivelab/hyperparams/<algo>.yaml`` (highway-env's documented SB3 examples, else SB3's own).
     Every value is checked first (``sb3_params``)."""
@@ -200,8 +212,11 @@ def build_sb3(algo: str, env: gym.Env, seed: int, hyperparams: dict, log_dir: Pa
     if extractor == "seed":
         kwargs["policy_kwargs"] = {**seed_network_kwargs(algo, env.observation_space),
                                    **hyperparams.get("policy_kwargs", {})}  # fmt: skip
+    elif extractor == "attention":
+        kwargs["policy_kwargs"] = {**attention_network_kwargs(env.observation_space),
+                                   **kwargs.get("policy_kwargs", {})}  # fmt: skip
     elif extractor != "sb3":
-        raise UsageError(f"features_extractor must be 'sb3' or 'seed', got {extractor!r}")
+        raise UsageError(f"features_extractor must be 'sb3', 'seed' or 'attention', got {extractor!r}")
     model = get_algo(algo).agent_class()(
         policy_for(env.observation_space), env, seed=seed, verbose=0, **kwargs
     )

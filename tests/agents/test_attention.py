@@ -58,6 +58,28 @@ def test_a_dict_observation_joins_the_other_entries_and_a_flat_set_is_refused():
         ActorCritic(ROWS, spaces.Discrete(3), hidden=(15,), encoder="attention")
 
 
+def test_output_layers_mix_the_set_with_the_other_entries():
+    """``attention_output``: ReLU layers over the joined features of the set and the other entries
+    (rl-agents' output layer), whose last width the heads read; refused for any other encoder."""
+    space = spaces.Dict({"kinematics": ROWS, "clock": spaces.Box(0, 1, (1,), np.float32)})
+    torch.manual_seed(0)
+    policy = ActorCritic(
+        space, spaces.Discrete(3), hidden=(16, 16), encoder="attention", attention_output=(24, 8)
+    )
+    encoder = policy.actor_encoder
+    assert encoder.features == 8
+    obs = {"kinematics": _rows(4, present=2), "clock": torch.rand(4, 1)}
+    output, encoder.output = encoder.output, None
+    joined = encoder(obs)  # the set's 16 features and the clock's 16
+    encoder.output = output
+    assert joined.shape == (4, 32)
+    expected = torch.relu(output[2](torch.relu(output[0](joined))))
+    torch.testing.assert_close(encoder(obs), expected)
+    assert policy(obs)[0].shape == (4, 3)
+    with pytest.raises(ValueError, match="attention_output needs encoder attention"):
+        ActorCritic(spaces.Box(-1, 1, (18,), np.float32), spaces.Discrete(3), attention_output=(8,))
+
+
 class AnyAhead(VecEnv):
     """One-step episodes: 1 to 5 other vehicles in random rows; action 1 pays when any of them
     has its second feature above 0.5, action 0 when none has: a question about the whole set."""

@@ -178,6 +178,26 @@ def test_sb3_runs_the_seed_networks():
         check_combination("dueling_ddqn", "continuous")
 
 
+def test_sb3_reads_the_vehicles_as_a_set_with_attention():
+    """``features_extractor=attention``: SB3's DQN on the ego-attention encoder (its Q layers after
+    it), acting and learning on kinematics rows + the clock; a flat observation is refused."""
+    env = DriveEnv("intersection", obs="kinematics:flatten=false,clock", action="meta", backend="fast")
+    model = build_sb3(
+        "dqn", env, 0, {"features_extractor": "attention", "learning_starts": 8, "batch_size": 8}, None
+    )
+    extractor = model.policy.q_net.features_extractor
+    assert type(extractor).__name__ == "AttentionExtractor" and extractor.features_dim == 128
+    obs, _ = env.reset(seed=0)
+    shuffled = {**obs, "kinematics": obs["kinematics"][[0, 2, 1, *range(3, len(obs["kinematics"]))]]}
+    assert model.predict(shuffled, deterministic=True)[0] == model.predict(obs, deterministic=True)[0]
+    model.learn(32)
+    with pytest.raises(
+        UsageError, match="features_extractor=attention: encoder attention needs the vehicles"
+    ):
+        build_sb3("dqn", DriveEnv("highway", obs="kinematics", backend="fast"), 0,
+                  {"features_extractor": "attention"}, None)  # fmt: skip
+
+
 def test_sb3_dqn_on_a_dict_observation_checkpoints_its_replay(tmp_path):
     # the seed's DDQN input given to SB3's DQN (a DictReplayBuffer) must checkpoint like ours
     config = _config("dueling_ddqn", algo="dqn", name="dqn", hyperparams={"learning_starts": 20})
