@@ -168,11 +168,13 @@ RACETRACK_PPO_OWN = (
 # 500 k steps up to 3 M): 55-63 % success with 18-24 % crashes from 1 M steps, where the same set-up
 # with the MLP on the flattened rows drove through at full speed (55-58 / 41-43). Collisions at -20 or
 # -30 moved along the same line (41-59 % success, 7-21 % crashes). Each vehicle's destination (cos_d,
-# sin_d: highway-env's observe_intentions) took seed 0 from 55 / 18 to 64 / 14 at 2 M steps:
-# benchmarks/results/intersection_ppo_own.notes.md.
+# sin_d: highway-env's observe_intentions) took seed 0 from 55 / 18 to 64 / 14 at 2 M steps, and
+# the rows on the map's axes (absolute=true, as rl-agents' intersection configuration reads them)
+# to 66 / 7: benchmarks/results/intersection_ppo_own.notes.md.
 INTERSECTION_PPO_OWN = (
     "--algo ppo_own --env intersection --config benchmarks/intersection_longitudinal.yaml "
-    "--obs kinematics:vehicles_count=15:flatten=false:features=presence+x+y+vx+vy+cos_h+sin_h+cos_d+sin_d,"
+    "--obs kinematics:vehicles_count=15:flatten=false:absolute=true:"
+    "features=presence+x+y+vx+vy+cos_h+sin_h+cos_d+sin_d,"
     "waypoints,clock:horizon_s=13 --action meta "
     "--reward collision=-10,progress_lateral=0.2,arrival=10 --traffic regular --n-envs 64 --steps 2000000 "
     "--eval-every 1000000 --eval-episodes 10 -H encoder=attention -H normalize_observations=true "
@@ -374,9 +376,9 @@ ENTRIES: tuple[Entry, ...] = (
     Entry(
         "intersection",
         "ppo_own",
-        "drivelab's PPO on the fast on-policy trainer, the 15 nearest vehicles with where each is headed "
-        "(highway-env's intentions) read by ego-attention + the route's waypoints + the clock (observations "
-        "normalised), the three longitudinal meta-actions, "
+        "drivelab's PPO on the fast on-policy trainer, the 15 nearest vehicles on the map's axes with where "
+        "each is headed (highway-env's intentions) read by ego-attention + the route's waypoints + the clock "
+        "(observations normalised), the three longitudinal meta-actions, "
         "reward arrival +10, collision -10 and 0.2 per metre of route progress, a time-limit end not "
         "bootstrapped, gamma 0.99, rollouts of 64 steps x 64 worlds, minibatch 512, 4 epochs, 2 M steps "
         "on 64 worlds",

@@ -191,8 +191,8 @@ AGENTS: dict[str, dict] = {
     "intersection-ppo_own": {
         "description": (
             "drivelab's PPO (the fast on-policy trainer) on intersection, learned by RL alone: the 15 "
-            "nearest vehicles and where each is headed, read as a set by ego-attention, the route's "
-            "waypoints and the clock, "
+            "nearest vehicles on the map's axes and where each is headed, read as a set by ego-attention, "
+            "the route's waypoints and the clock, "
             "highway-env's three longitudinal actions, reward arrival +10, collision -10 and 0.2 per metre "
             "of route progress; 2 M steps on 64 worlds; the leaderboard's intersection ppo_own recipe, "
             "seed 0 (it does not meet the target of 80 % success with at most 10 % crashes)"
