@@ -84,19 +84,13 @@ def group(row: dict) -> str:
     return GROUPS[1]
 
 
-def beta_policy(agent):
-    """The agent's Beta actor-critic, or None."""
-    policy = getattr(agent, "policy", None)
-    return policy if getattr(policy, "kind", None) == "beta" else None
-
-
 def collisions(run: Path, level: str, episodes: int, beta_action: str | None = None) -> list[dict]:
     """Every collision of ``run`` on the NoCrash routes of ``level`` (test town); a Beta policy acts
     at ``beta_action`` (its mode or mean; None: as the run says)."""
     config = load_run_config(run)
     agent = load_agent(run, config)
     if beta_action is not None:
-        beta_policy(agent).beta_action = beta_action
+        agent.policy.beta_action = beta_action
     kwargs = {**config.eval_env_kwargs(), "traffic": level}
     options = kwargs.get("backend_options") or {}
     kwargs["backend_options"] = {**options, "layout": "test", "fixed_routes": True}
@@ -148,7 +142,7 @@ def main(argv: list[str] | None = None) -> None:
         "|---|---|---|" + "---|" * (len(GROUPS) + 1),
     ]
     for run in args.runs:
-        beta = beta_policy(load_agent(run, load_run_config(run))) is not None
+        beta = load_run_config(run).hyperparams.get("distribution") == "beta"  # ppo_own / a2c_own's Beta
         for readout in args.beta_actions if beta else [None]:
             rows = collisions(run, args.level, args.episodes, readout)
             report["runs"][str(run) if readout is None else f"{run} ({readout})"] = rows
