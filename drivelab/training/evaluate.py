@@ -205,7 +205,7 @@ def evaluate_run(
             out_dir = run_dir
             check_writable(out_dir, name, video)
         env = DriveEnv(**config.eval_env_kwargs())
-        agent = load_agent(run_dir, config)
+        agent = load_agent(run_dir, trained)  # a checkpoint matches the run's config, not the maps'
         check_spaces(agent, env, run_dir)
         check_trained_config(run_dir, trained)  # edits that leave the spaces as they were: traffic, n_envs
         if out_dir is not run_dir:  # created only once the model has loaded

@@ -64,6 +64,15 @@ def test_maps_plays_each_map_of_the_set_once(run_dir, monkeypatch):
     assert not (run_dir / "eval.json").exists()
 
 
+def test_maps_evaluate_the_latest_checkpoint_of_an_unfinished_run(run_dir, monkeypatch):
+    (run_dir / "model.zip").unlink()  # stopped before its end: its latest checkpoint is evaluated
+    seeds = played_maps(monkeypatch)
+    result = runner.invoke(app, ["evaluate", str(run_dir), "--episodes", "2", "--maps", "0:2"])
+    assert result.exit_code == 0, result.output
+    assert sorted(seeds) == [0, 1]
+    assert json.loads((run_dir / "eval-maps-0-2.json").read_text())["episodes"] == 2
+
+
 def test_without_maps_the_runs_eval_maps_are_played(run_dir, monkeypatch):
     seeds = played_maps(monkeypatch)
     result = runner.invoke(app, ["evaluate", str(run_dir), "--episodes", "2"])
