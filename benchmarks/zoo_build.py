@@ -54,6 +54,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from leaderboard import (  # noqa: E402
     BLOCKS_DAGGER,
     BLOCKS_FINETUNE,
+    BLOCKS_PPO_OWN,
     HIGHWAY_DQN,
     INTERSECTION_PPO_OWN,
     RACETRACK_DAGGER,
@@ -257,6 +258,18 @@ AGENTS: dict[str, dict] = {
             "leaderboard's blocks-unseen dagger+ppo_own recipe, seed 0, started from blocks-dagger"
         ),
         "train": [*seed_0(BLOCKS_FINETUNE), "--init-from", "blocks-dagger"],
+        "measure": [("100 unseen maps", ["evaluate", "{name}", "--maps", UNSEEN_MAPS, "--episodes", "100"])],
+    },
+    "blocks-ppo_own": {
+        "description": (
+            "drivelab's PPO (the fast on-policy trainer) on the 1000 training block maps, learned by RL "
+            "alone (no imitation): LiDAR, measurements, waypoints and affordances (privileged: the leader's "
+            "distance and speed), MetaDrive's reward with crashes and leaving the road at -300, Beta target "
+            "speeds up to 15 m/s and steering, gamma 0.995, the learning rate annealed to 0 over 6 M steps "
+            "on 64 worlds; "
+            "the leaderboard's blocks-unseen ppo_own (privileged) recipe, seed 0"
+        ),
+        "train": seed_0(BLOCKS_PPO_OWN),
         "measure": [("100 unseen maps", ["evaluate", "{name}", "--maps", UNSEEN_MAPS, "--episodes", "100"])],
     },
     "blocks-ppo": {
