@@ -4,15 +4,20 @@ seed 0, judged at points along training on the scenario's fixed evaluation episo
     .venv/bin/python benchmarks/competence_curves.py [--rows roundabout/ppo_own,racetrack/ppo_own]
         [--points 8] [--episodes 50]
 
-Each recipe (its ``benchmarks/leaderboard.py`` command, seed 0) is trained in ``--points`` chunks in
-this process: ``train`` to the first point, then ``resume`` to each next one. A resumed run equals
-the uninterrupted one (drivelab's resume guarantee, ``tests/training/test_resume.py``), and none of
-these recipes schedules anything over its budget, so the chunks are the recipe's own run. After each
-chunk the model is evaluated (``evaluate_run``, ``--episodes`` fixed evaluation episodes) and the
-time counted is the training calls' wall time alone, one thread, evaluations excluded. A point
-"meets" the target when its rates on those episodes are on the target's side (a point estimate;
-the leaderboard's verdict pools 3 seeds × 100 episodes). Writes ``benchmarks/results/
-competence_curves.{json,md,png}``; runs go to ``benchmarks/runs/curves/``.
+Each recipe (its ``benchmarks/leaderboard.py`` command, seed 0) is trained once, with its own
+budget, in this process, and stopped after each of ``--points`` periodic evaluations (one episode,
+``on_evaluation``): ``train``, then ``resume`` up to the next stop. A stopped and resumed run equals
+the uninterrupted one (drivelab's resume guarantee, ``tests/training/test_resume.py``), schedules
+over the budget (``linear_lr``) included, and periodic evaluations do not change training, so the
+chunks are the recipe's own run (checked for the roundabout's: the final model equals the recipe's
+uninterrupted run value for value). At each stop the checkpoint is evaluated (``evaluate_run``:
+``--episodes`` fixed evaluation episodes; the 100 unseen maps, each once, for a row judged on them)
+and the time counted is the training calls' wall time alone, one thread, the points' evaluations
+excluded; a stop puts the run back to the start of the rollout its evaluation fell in, so each stop
+adds one rollout's training played twice. A point "meets" the target when its rates on those
+episodes are on the target's side (a point estimate; the leaderboard's verdict pools 3 seeds × 100
+episodes). Writes ``benchmarks/results/competence_curves.{json,md,png}``; runs go to
+``benchmarks/runs/curves/``.
 """
 
 from __future__ import annotations
@@ -66,8 +71,8 @@ def chunk_steps(total: int, rollout: int, points: int) -> list[int]:
 def curve(entry: leaderboard.Entry, points: int, episodes: int) -> dict:
     from drivelab.cli import train_config
     from drivelab.config import build_config, steps_per_update
-    from drivelab.training.evaluate import evaluate_run
-    from drivelab.training.run import resume, train
+    from drivelab.training.evaluate import evaluate_run, report_name
+    from drivelab.training.run import StoppedByEvaluation, resume, train
 
     run_dir = RUNS / f"{entry.scenario}-{entry.name}-s0"
     if run_dir.exists():
@@ -76,23 +81,41 @@ def curve(entry: leaderboard.Entry, points: int, episodes: int) -> dict:
     config = train_config(entry.command(0)[1:])
     total = config.steps
     rollout, _ = steps_per_update(config.algo, config.hyperparams, config.n_envs)
-    chunks = chunk_steps(total, rollout, points)
-    first = build_config(
-        {**config.to_dict(), "steps": chunks[0], "eval_every": chunks[0], "eval_episodes": 1}
-    )
+    every = chunk_steps(total, rollout, points)[0]
+    staged = build_config({**config.to_dict(), "eval_every": every, "eval_episodes": 1, "eval_maps": None})
+    maps = leaderboard.UNSEEN_MAPS if entry.judge == "maps" else None
+    if maps is not None:
+        episodes = int(maps.split(":")[1])  # each unseen map once, as the leaderboard judges
     key, label = RATE.get(entry.scenario, ("success_rate", "success"))
     targets = leaderboard.TARGETS.get(entry.scenario, {})
-    rows, wall = [], 0.0
-    for index, steps in enumerate(chunks):
+    rows, wall, steps = [], 0.0, 0
+    stopped_at = [0]  # the periodic evaluation the run last stopped after
+
+    def stop_at_new(step: int, summary: dict) -> bool:
+        """Stop after an evaluation not stopped at before: a stop puts the run back to its rollout's
+        start, so the resumed run plays that rollout, and its evaluation, again."""
+        if step <= stopped_at[0]:
+            return True
+        stopped_at[0] = step
+        return False
+
+    while steps < total:
         start = time.perf_counter()
-        if index == 0:
-            train(first, RUNS)
-        else:
-            resume(run_dir, steps)
+        try:
+            if steps == 0:
+                train(staged, RUNS, on_evaluation=stop_at_new)
+            else:
+                resume(run_dir, on_evaluation=stop_at_new)
+            reached = total
+        except StoppedByEvaluation as stopped:
+            reached = stopped.steps
         wall += time.perf_counter() - start
+        if reached <= steps:
+            stop(f"{run_dir}: resuming at step {steps:,} stopped again there")
+        steps = reached
         out = RUNS / "eval" / f"{run_dir.name}-{steps}"
-        evaluate_run(run_dir, episodes=episodes, out_dir=out)
-        metrics = leaderboard._metrics(json.loads((out / "eval.json").read_text()))
+        evaluate_run(run_dir, episodes=episodes, out_dir=out, maps=maps)
+        metrics = leaderboard._metrics(json.loads((out / report_name(maps)).read_text()))
         point = {
             "steps": steps,
             "train_wall_s": wall,
@@ -105,10 +128,10 @@ def curve(entry: leaderboard.Entry, points: int, episodes: int) -> dict:
             f"{100 * metrics[key]:.0f} %, crash {100 * metrics['crash_rate']:.0f} %",
             flush=True,
         )
-    reached = next((row["train_wall_s"] for row in rows if row["meets_target"]), None)
+    first = next((row["train_wall_s"] for row in rows if row["meets_target"]), None)
     return {"row": f"{entry.scenario}/{entry.name}", "command": "drivelab " + " ".join(entry.command(0)),
-            "rate": label, "targets": targets, "episodes": episodes, "points": rows,
-            "first_point_meeting_target_s": reached}  # fmt: skip
+            "rate": label, "rate_key": key, "targets": targets, "episodes": episodes, "points": rows,
+            "first_point_meeting_target_s": first}  # fmt: skip
 
 
 def plot(curves: list[dict], path: Path) -> None:
@@ -122,7 +145,9 @@ def plot(curves: list[dict], path: Path) -> None:
         minutes = [p["train_wall_s"] / 60 for p in record["points"]]
         rates = [100 * p["rate"] for p in record["points"]]
         axis.plot(minutes, rates, "o-", label=f"{record['row']} ({record['rate']})")
-    axis.axhline(90, color="gray", ls="--", lw=1, label="target 90 %")
+    lines = sorted({100 * r["targets"][r["rate_key"]][1] for r in curves if r["rate_key"] in r["targets"]})
+    for value in lines:
+        axis.axhline(value, color="gray", ls="--", lw=1, label=f"target {value:.0f} %")
     axis.set_xlabel("training wall minutes, one thread (evaluations excluded)")
     axis.set_ylabel("% of evaluation episodes")
     axis.set_ylim(-3, 103)
@@ -137,7 +162,9 @@ def markdown(result: dict) -> str:
         "## Competence against wall time: the RL recipes that meet their target",
         "",
         f"`{result['command']}` on {result['machine']}, {result['date']}. Seed 0 of each leaderboard recipe,",
-        f"trained in chunks and evaluated after each on {result['episodes']} fixed evaluation episodes; the",
+        "trained once and stopped after periodic evaluations; each stop's checkpoint evaluated on "
+        f"{result['episodes']} fixed",
+        "evaluation episodes (a row judged on the 100 unseen block maps: each map once); the",
         "minutes are the training calls' wall time, one thread, evaluations excluded. The leaderboard's",
         "verdict (3 seeds x 100 episodes) is the yardstick; a curve's point is one seed's estimate.",
         "",
