@@ -2,6 +2,7 @@
 so its last point is the recipe's own uninterrupted run, value for value."""
 
 import importlib.util
+import os
 import sys
 from pathlib import Path
 
@@ -12,6 +13,8 @@ BENCHMARKS = Path(__file__).parents[1] / "benchmarks"
 
 @pytest.fixture(scope="module")
 def curves():
+    """The script as a module; the thread counts it sets for its own process are put back."""
+    saved = {key: os.environ.get(key) for key in ("OMP_NUM_THREADS", "NUMBA_NUM_THREADS")}
     sys.path.insert(0, str(BENCHMARKS))
     try:
         spec = importlib.util.spec_from_file_location(
@@ -19,9 +22,14 @@ def curves():
         )
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
-        yield module
     finally:
         sys.path.remove(str(BENCHMARKS))
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
+    return module
 
 
 def test_chunks_are_whole_rollouts_ending_at_the_budget(curves):
