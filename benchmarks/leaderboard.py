@@ -262,6 +262,17 @@ TOWN_PPO_OWN = (
     "-H shared_encoder=false -H distribution=beta -H entropy_coef=0.01"
 )
 
+# The same recipe from the bird's-eye view instead of the affordances: the top-down image with the
+# lights' stop bars at 48 x 48 pixels of 1 m (seed 003's CNN, one encoder for actor and critic) +
+# waypoints + measurements, 3 M steps (seed 0 screened: benchmarks/results/town_ppo_own.notes.md).
+TOWN_PPO_OWN_IMAGE = (
+    "--algo ppo_own --env town --action target_speed --traffic dense "
+    "--obs topdown:size=48:pixels_per_meter=1.0:lights=true,waypoints,measurements "
+    "--reward roach,roach_terminal=10 --n-envs 64 --steps 3000000 --eval-every 1000000 --eval-episodes 5 "
+    "-H gamma=0.995 -H n_steps=64 -H batch_size=1024 -H n_epochs=4 -H learning_rate=0.0003 -H linear_lr=true "
+    "-H normalize_rewards=true -H normalize_observations=true -H distribution=beta -H entropy_coef=0.01"
+)
+
 JUNCTIONS = (  # scenario, training reward, what it is
     ("merge", "highway", "the highway reward"),
     ("roundabout", "highway", "the highway reward"),
@@ -504,6 +515,18 @@ ENTRIES: tuple[Entry, ...] = (
         _args(TOWN_PPO_OWN),
         judge="nocrash",
         targets={"nocrash": TOWN_TARGETS["privileged"]},
+    ),
+    Entry(
+        "town",
+        "ppo_own (image)",
+        "drivelab's PPO on the fast on-policy trainer from scratch (no imitation) on the bird's-eye view: "
+        "top-down image with lights (48x48, 1 m a pixel) + waypoints + measurements, seed 003's CNN shared "
+        "by actor and critic; otherwise the privileged row's recipe (Roach's reward with its terminal "
+        "penalty x10, Beta actions, entropy 0.01, dense traffic, gamma 0.995, normalised, learning rate "
+        "annealed), 3 M steps on 64 worlds",
+        _args(TOWN_PPO_OWN_IMAGE),
+        judge="nocrash",
+        targets={"nocrash": TOWN_TARGETS["image"]},
     ),
     Entry(
         "town",

@@ -60,6 +60,7 @@ from leaderboard import (  # noqa: E402
     RACETRACK_DAGGER,
     RACETRACK_PPO_OWN,
     TOWN_PPO_OWN,
+    TOWN_PPO_OWN_IMAGE,
     UNSEEN_MAPS,
     UNTUNED_PPO,
 )
@@ -117,6 +118,18 @@ AGENTS: dict[str, dict] = {
             "target of 90 / 75 / 60 %)"
         ),
         "train": seed_0(TOWN_PPO_OWN),
+        "measure": TOWN_MEASURE,
+    },
+    "town-ppo_own-image": {
+        "description": (
+            "drivelab's PPO (the fast on-policy trainer) in the town, learned by RL alone (no imitation) "
+            "from the bird's-eye view: the top-down image with the lights (48x48 pixels, 1 m each), route "
+            "waypoints and measurements, seed 003's CNN; otherwise town-ppo_own's recipe (Roach's reward "
+            "with its terminal penalty x10, Beta actions, an entropy bonus, gamma 0.995, the learning "
+            "rate annealed to 0) over 3 M steps on 64 worlds in dense traffic; the leaderboard's town "
+            "ppo_own (image) recipe, seed 0"
+        ),
+        "train": seed_0(TOWN_PPO_OWN_IMAGE),
         "measure": TOWN_MEASURE,
     },
     "highway-ppo": {
