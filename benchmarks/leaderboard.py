@@ -254,23 +254,31 @@ TOWN_FINETUNE = (
 # 8 M steps seeds 1 and 2 stayed far behind seed 0 on NoCrash; 12 M steps brought them most of the way,
 # and annealing the learning rate linearly to 0 made the three seeds agree within 5 points
 # (benchmarks/results/town_ppo_own.notes.md).
-TOWN_PPO_OWN = (
-    "--algo ppo_own --env town --action target_speed --traffic dense "
-    "--obs waypoints,measurements,affordances --reward roach,roach_terminal=10 --n-envs 64 --steps 12000000 "
-    "--eval-every 2000000 --eval-episodes 5 -H gamma=0.995 -H n_steps=64 -H batch_size=1024 -H n_epochs=4 "
-    "-H learning_rate=0.0003 -H linear_lr=true -H normalize_rewards=true -H normalize_observations=true "
-    "-H shared_encoder=false -H distribution=beta -H entropy_coef=0.01"
-)
+def _town_ppo_own(obs: str, steps: int, eval_every: int, *, shared_encoder: bool) -> str:
+    """The town's from-scratch PPO recipe on the observation ``obs`` for ``steps`` steps (the two town
+    ``ppo_own`` rows differ in nothing else)."""
+    encoder = "" if shared_encoder else "-H shared_encoder=false "
+    return (
+        f"--algo ppo_own --env town --action target_speed --traffic dense --obs {obs} "
+        f"--reward roach,roach_terminal=10 --n-envs 64 --steps {steps} --eval-every {eval_every} "
+        "--eval-episodes 5 -H gamma=0.995 -H n_steps=64 -H batch_size=1024 -H n_epochs=4 "
+        "-H learning_rate=0.0003 -H linear_lr=true -H normalize_rewards=true -H normalize_observations=true "
+        f"{encoder}-H distribution=beta -H entropy_coef=0.01"
+    )
 
+
+TOWN_PPO_OWN = _town_ppo_own(
+    "waypoints,measurements,affordances", 12_000_000, 2_000_000, shared_encoder=False
+)
 # The same recipe from the bird's-eye view instead of the affordances: the top-down image with the
-# lights' stop bars at 48 x 48 pixels of 1 m (seed 003's CNN, one encoder for actor and critic) +
-# waypoints + measurements, 3 M steps (seed 0 screened: benchmarks/results/town_ppo_own.notes.md).
-TOWN_PPO_OWN_IMAGE = (
-    "--algo ppo_own --env town --action target_speed --traffic dense "
-    "--obs topdown:size=48:pixels_per_meter=1.0:lights=true,waypoints,measurements "
-    "--reward roach,roach_terminal=10 --n-envs 64 --steps 3000000 --eval-every 1000000 --eval-episodes 5 "
-    "-H gamma=0.995 -H n_steps=64 -H batch_size=1024 -H n_epochs=4 -H learning_rate=0.0003 -H linear_lr=true "
-    "-H normalize_rewards=true -H normalize_observations=true -H distribution=beta -H entropy_coef=0.01"
+# lights' stop bars at 48 x 48 pixels of 1 m (seed 003's CNN, one encoder for actor and critic, since
+# the CNN is what costs) + waypoints + measurements, 3 M steps (seed 0 screened:
+# benchmarks/results/town_ppo_own.notes.md).
+TOWN_PPO_OWN_IMAGE = _town_ppo_own(
+    "topdown:size=48:pixels_per_meter=1.0:lights=true,waypoints,measurements",
+    3_000_000,
+    1_000_000,
+    shared_encoder=True,
 )
 
 JUNCTIONS = (  # scenario, training reward, what it is
