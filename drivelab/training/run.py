@@ -38,6 +38,7 @@ from tqdm import tqdm
 from drivelab.agents.registry import check_combination, get_algo
 from drivelab.config import RunConfig, build_config, check_steps
 from drivelab.errors import UsageError
+from drivelab.training.allocator import keep_freed_memory
 from drivelab.training.checkpoints import load_agent, load_replay, save_checkpoint, verify_checkpoint
 from drivelab.training.divergence import (
     CHECK_EVERY_STEPS,
@@ -602,6 +603,7 @@ def _learn(model, run_dir: Path, config: RunConfig, eval_env, worlds: TrainingWo
     SIGINT/SIGTERM stop at the next step: the run is put back to the last safe point's snapshot and
     checkpointed there (``TrainingInterrupted``). A second signal stops at once, without a
     checkpoint."""
+    keep_freed_memory()  # a third of a CNN's update went to mapping and unmapping its blocks
     model.set_logger(run_logger(run_dir, model.num_timesteps or None))  # a resume continues the logs
     if hasattr(model, "log_over"):  # rows by the step, about ten in a short run (SB3's on-policy, DDQN)
         model.log_over(config.steps)
