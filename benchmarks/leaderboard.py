@@ -142,7 +142,8 @@ HIGHWAY_FAST = (
 # The highway with the town's recipe elements (issue 49): ego-attention over the 10 nearest vehicles,
 # rewards normalised, gamma 0.99, the learning rate annealed, entropy 0.01. Screened on seed 0 (100
 # evaluation episodes): 3 % crashes at 21.0 m/s with highway_fast, 4 % at 22.6 with its speed term
-# doubled (3 M steps), 4 % at 23.1 over 6 M steps; a speed term of 3 or 4 crashed in 16-23 %
+# doubled (3 M steps), 4 % at 23.1 over 6 M steps; a speed term of 3 or 4 crashed in 16-23 %. Over
+# 3 seeds the 6 M-step recipe crashed in 4, 13 and 17 % at 23.1-23.4 m/s: seed 0 was the lucky draw
 # (benchmarks/results/highway_competence.notes.md).
 HIGHWAY_PPO_OWN_ATTENTION = (
     "--env highway --algo ppo_own --obs kinematics:vehicles_count=10:flatten=false --action meta "
