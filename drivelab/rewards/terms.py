@@ -66,6 +66,15 @@ def high_speed(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
 
 
 @term
+def cruise_speed(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
+    """Forward speed mapped linearly from [2/3, 5/6]·speed limit to [0, 1], clipped: ``high_speed``
+    with nothing more paid past 5/6 of the limit (25 m/s on highway), so a policy gains by holding
+    that speed (passing slower traffic) and nothing by pressing on to the limit."""
+    low, high = batch.speed_limit_mps * 2 / 3, batch.speed_limit_mps * 5 / 6
+    return np.clip((batch.ego.forward_speed_mps - low) / (high - low), 0.0, 1.0)
+
+
+@term
 def on_road(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """1 while the ego is on a lane."""
     return _flag(batch.ego.on_road)

@@ -56,6 +56,13 @@ def high_speed(prev: WorldState, world: WorldState, control) -> float:
 
 
 @term
+def cruise_speed(prev: WorldState, world: WorldState, control) -> float:
+    """Forward speed mapped linearly from [2/3, 5/6]·speed limit to [0, 1], clipped."""
+    low, high = world.speed_limit_mps * 2 / 3, world.speed_limit_mps * 5 / 6
+    return float(np.clip((world.ego.forward_speed_mps - low) / (high - low), 0.0, 1.0))
+
+
+@term
 def on_road(prev: WorldState, world: WorldState, control) -> float:
     """1 while the ego is on a lane."""
     return float(world.ego.on_road)

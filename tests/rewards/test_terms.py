@@ -38,6 +38,15 @@ def test_highway_terms():
     assert one(terms.on_road, now, world(on_road=False), None) == 0.0
 
 
+def test_cruise_speed_pays_up_to_five_sixths_of_the_limit():
+    # highway's limit is 30 m/s: 0 at 20, 0.5 at 22.5, 1 from 25 m/s on
+    speeds = {20.0: 0.0, 22.5: 0.5, 25.0: 1.0, 30.0: 1.0, 15.0: 0.0}
+    for speed, value in speeds.items():
+        now = world(speed_mps=speed)
+        assert one(terms.cruise_speed, now, now, None) == pytest.approx(value), speed
+    assert one(terms.high_speed, world(speed_mps=30.0), world(speed_mps=30.0), None) == 1.0
+
+
 def test_lane_change_is_one_for_the_lane_change_meta_actions():
     now = world()
     # META_ACTIONS: LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER
