@@ -61,8 +61,7 @@ def high_speed(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
 
     On highway (limit 30 m/s) this is highway-env's ``reward_speed_range`` [20, 30].
     """
-    low, high = batch.speed_limit_mps * 2 / 3, batch.speed_limit_mps
-    return np.clip((batch.ego.forward_speed_mps - low) / (high - low), 0.0, 1.0)
+    return _speed_fraction(batch, top=1.0)
 
 
 @term
@@ -70,7 +69,12 @@ def cruise_speed(prev: WorldBatch, batch: WorldBatch, control) -> np.ndarray:
     """Forward speed mapped linearly from [2/3, 5/6]·speed limit to [0, 1], clipped: ``high_speed``
     with nothing more paid past 5/6 of the limit (25 m/s on highway), so a policy gains by holding
     that speed (passing slower traffic) and nothing by pressing on to the limit."""
-    low, high = batch.speed_limit_mps * 2 / 3, batch.speed_limit_mps * 5 / 6
+    return _speed_fraction(batch, top=5 / 6)
+
+
+def _speed_fraction(batch: WorldBatch, top: float) -> np.ndarray:
+    """(K,) forward speed mapped linearly from [2/3, top]·speed limit to [0, 1], clipped."""
+    low, high = batch.speed_limit_mps * 2 / 3, batch.speed_limit_mps * top
     return np.clip((batch.ego.forward_speed_mps - low) / (high - low), 0.0, 1.0)
 
 

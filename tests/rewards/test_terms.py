@@ -44,7 +44,8 @@ def test_cruise_speed_pays_up_to_five_sixths_of_the_limit():
     for speed, value in speeds.items():
         now = world(speed_mps=speed)
         assert one(terms.cruise_speed, now, now, None) == pytest.approx(value), speed
-    assert one(terms.high_speed, world(speed_mps=30.0), world(speed_mps=30.0), None) == 1.0
+    cruising = world(speed_mps=25.0)  # where high_speed pays half, cruise_speed pays all
+    assert one(terms.high_speed, cruising, cruising, None) == pytest.approx(0.5)
 
 
 def test_lane_change_is_one_for_the_lane_change_meta_actions():
