@@ -96,8 +96,8 @@ def _circuit_step(
     command, v, count, ego, lanes, idm, regulation, time_s, route, starts, segments, lengths2, segment_m,
     stations, point_count, closed, progress, in_junction, exit_lane, start_lane_id, route_length,
     route_polyline, truncate_at_s, params, codes, weights, road_index, guide_starts, guide_ends, cameras,
-    vehicles, valid, destinations, metric_floats, metric_ints, metric_flags, last_position, last_progress,
-    last_length,
+    vehicles, valid, destinations, accelerations, metric_floats, metric_ints, metric_flags, last_position,
+    last_progress, last_length,
 ) -> None:  # fmt: skip
     """One policy step of K circuit worlds (none restarting), as ``VectorDriveEnv.step`` runs it
     through the pipeline: the controls (``FastSimulator.apply_controls``; ``command`` the rows of
@@ -120,7 +120,7 @@ def _circuit_step(
     advance_worlds(
         v, count, ego, lanes, idm, frames, params[P_DT], regulation, time_s, dt_policy, route, starts,
         segments, lengths2, segment_m, stations, point_count, closed, progress, in_junction, exit_lane,
-        arrival, threshold, floats, ints, flags, vehicles, valid, destinations,
+        arrival, threshold, floats, ints, flags, vehicles, valid, destinations, accelerations,
     )  # fmt: skip
     position = floats[:, EX_X : EX_Y + 1]
     speed, collided = floats[:, EX_SPEED], flags[:, EX_CRASHED]
@@ -188,14 +188,14 @@ def _circuit_step(
 
 
 # what circuit_step reads and updates in place besides its per-step arrays: one object, so that a
-# call passes a handful of arguments (numba's dispatch costs ~50 ns per argument, and there are 38)
+# call passes a handful of arguments (numba's dispatch costs ~50 ns per argument, and there are 40)
 _HELD = (
     "command", "v", "count", "ego", "lanes", "idm", "regulation", "time_s", "route", "starts",
     "segments", "lengths2", "segment_m", "stations", "point_count", "closed", "progress",
     "in_junction", "exit_lane", "start_lane_id", "route_length", "route_polyline", "truncate_at_s",
     "params", "codes", "weights", "road_index", "guide_starts", "guide_ends", "cameras", "vehicles",
-    "valid", "destinations", "metric_floats", "metric_ints", "metric_flags", "last_position",
-    "last_progress", "last_length",
+    "valid", "destinations", "accelerations", "metric_floats", "metric_ints", "metric_flags",
+    "last_position", "last_progress", "last_length",
 )  # fmt: skip
 
 
@@ -221,8 +221,9 @@ def circuit_step(controls, out, out_flags, ints, observations, held) -> None:
         held.lengths2, held.segment_m, held.stations, held.point_count, held.closed, held.progress,
         held.in_junction, held.exit_lane, held.start_lane_id, held.route_length, held.route_polyline,
         held.truncate_at_s, held.params, held.codes, held.weights, held.road_index, held.guide_starts,
-        held.guide_ends, held.cameras, held.vehicles, held.valid, held.destinations, held.metric_floats,
-        held.metric_ints, held.metric_flags, held.last_position, held.last_progress, held.last_length,
+        held.guide_ends, held.cameras, held.vehicles, held.valid, held.destinations, held.accelerations,
+        held.metric_floats, held.metric_ints, held.metric_flags, held.last_position, held.last_progress,
+        held.last_length,
     )  # fmt: skip
 
 
@@ -342,7 +343,7 @@ class CircuitStep:
         out_flags, observations = np.zeros((8, k), dtype=bool), np.empty(self._observation_shape, np.float32)
         held = self._held()
         circuit_step(controls, out, out_flags, ints.T, observations, self._held_object)
-        vehicles = held[-9:-6]  # (vehicles, valid, destinations) empty: shared by every batch
+        vehicles = held[-10:-6]  # vehicles, valid, destinations, accelerations: shared by every batch
         self.simulator.defer_batch(functools.partial(_export_parts, out, ints, out_flags, vehicles))
         return observations, out, out_flags
 
@@ -385,7 +386,7 @@ def _command_rows(dtype: np.dtype) -> np.ndarray:
 
 def _export_parts(out, ints, out_flags, vehicles) -> tuple:
     """``FastSimulator._export_arrays``' arguments from ``circuit_step``'s outputs (``vehicles``:
-    the export's vehicles, valid and destinations)."""
+    the export's vehicles, valid, destinations and accelerations)."""
     state = out[-3:]
     route_index = state[2].astype(np.int64)
     return out[:EX_FLOATS].T, ints.T, out_flags[:4].T, *vehicles, (state[0], state[1], route_index)

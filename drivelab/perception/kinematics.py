@@ -13,7 +13,10 @@ from drivelab.world.batch import WorldBatch
 FEATURES = ("presence", "x", "y", "vx", "vy", "cos_h", "sin_h")
 # highway-env's ``observe_intentions``: the direction to where each vehicle is headed (not by default)
 INTENTION_FEATURES = ("cos_d", "sin_d")
-ALL_FEATURES = FEATURES + INTENTION_FEATURES
+# how hard each vehicle speeds up or brakes (not in highway-env's kinematics; not by default)
+ACCELERATION_FEATURES = ("accel",)
+EXTRA_FEATURES = INTENTION_FEATURES + ACCELERATION_FEATURES
+ALL_FEATURES = FEATURES + EXTRA_FEATURES
 
 
 class Kinematics(Sensor):
@@ -31,11 +34,15 @@ class Kinematics(Sensor):
         ``cos_d`` and ``sin_d`` (highway-env's ``observe_intentions``) are the unit direction from
         a vehicle to its destination, the end of its planned route (zeros where it has none), in
         the ego frame (the world frame with ``absolute``); the ego's points to its route's end
-        (zeros on a closed circuit).
+        (zeros on a closed circuit). ``accel`` is a vehicle's acceleration along its heading in the
+        last simulation frame (braking negative), divided by ``accel_scale_mps2``; the same in
+        either frame, and 0 where the simulator exports none.
     :param flatten: one flat vector; false: highway-env's ``(vehicles_count, features)`` array.
     :param normalize: divide positions and velocities by the scales above; false: raw metres and
         m/s, unclipped.
     :param clip: clip the normalised values to [-1, 1] (highway-env's ``clip``).
+    :param accel_scale_mps2: acceleration normalisation; highway-env's IDM limit (``ACC_MAX``),
+        so that traffic's accelerations fill [-1, 1].
     :param absolute: every row, the ego's included, in the world frame: position, velocity and
         heading as they are on the map (highway-env's ``absolute``, its intersection's default),
         which tells where on a fixed map each vehicle is and where it heads. The nearest
@@ -56,15 +63,20 @@ class Kinematics(Sensor):
         normalize: bool = True,
         clip: bool = True,
         absolute: bool = False,
+        accel_scale_mps2: float = 6.0,
     ) -> None:
-        if vehicles_count < 1 or perception_distance_m <= 0 or speed_scale_mps <= 0:
-            raise ValueError("kinematics needs vehicles_count >= 1 and positive distance and speed scales")
+        if vehicles_count < 1 or perception_distance_m <= 0 or speed_scale_mps <= 0 or accel_scale_mps2 <= 0:
+            raise ValueError(
+                "kinematics needs vehicles_count >= 1 and positive distance, speed and acceleration scales"
+            )
         self.vehicles_count = int(vehicles_count)
         self.perception_distance_m = float(perception_distance_m)
         self.speed_scale_mps = float(speed_scale_mps)
+        self.accel_scale_mps2 = float(accel_scale_mps2)
         self.features = feature_names(features)
         self.columns = np.array([ALL_FEATURES.index(name) for name in self.features], dtype=np.int64)
         self.intentions = any(name in INTENTION_FEATURES for name in self.features)
+        self.accelerations = any(name in ACCELERATION_FEATURES for name in self.features)
         self.flatten, self.normalize = bool(flatten), bool(normalize)
         self.clip = bool(clip) and self.normalize  # highway-env clips only what it normalises
         self.absolute = bool(absolute)
@@ -108,7 +120,7 @@ class Kinematics(Sensor):
             rows[:, 0, 1:] = _world_frame(ego.position[:, 0], ego.position[:, 1], ego.heading, ego.speed_mps,
                                           position_scale, speed_scale)  # fmt: skip
             every = np.clip(rows, -1.0, 1.0) if self.clip else rows
-            out[...] = self._with_intentions(every, batch, chosen)[:, :, self.columns].reshape(out.shape)
+            out[...] = self._with_extras(every, batch, chosen)[:, :, self.columns].reshape(out.shape)
             return
         cos_relative, sin_relative = np.cos(relative_heading), np.sin(relative_heading)
         in_place = self._all_columns and out.flags.c_contiguous  # the rows written into out's flat view
@@ -116,15 +128,22 @@ class Kinematics(Sensor):
         every = out.reshape(flat) if in_place else np.empty(flat)
         ego_rows_into(rows, ego.speed_mps, cos_relative, sin_relative, speed_scale, self.clip, every)
         if not in_place:
-            every = self._with_intentions(every.reshape(rows.shape), batch, chosen)
+            every = self._with_extras(every.reshape(rows.shape), batch, chosen)
             out[...] = every[:, :, self.columns].reshape(out.shape)
 
-    def _with_intentions(self, rows: np.ndarray, batch: WorldBatch, chosen: np.ndarray | None) -> np.ndarray:
-        """``rows`` (K, rows, 7), with the columns cos_d and sin_d after them when they are asked for."""
-        if not self.intentions:
+    def _with_extras(self, rows: np.ndarray, batch: WorldBatch, chosen: np.ndarray | None) -> np.ndarray:
+        """``rows`` (K, rows, 7), with the columns of ``EXTRA_FEATURES`` after them when any is asked
+        for (those not asked for left zero)."""
+        if not (self.intentions or self.accelerations):
             return rows
-        intentions = intention_rows(batch, chosen, self.vehicles_count, self.absolute)
-        return np.concatenate([rows, intentions], axis=2)
+        extra = np.zeros((*rows.shape[:2], len(EXTRA_FEATURES)))
+        if self.intentions:
+            extra[..., :2] = intention_rows(batch, chosen, self.vehicles_count, self.absolute)
+        if self.accelerations:
+            scale = self.accel_scale_mps2 if self.normalize else 1.0
+            accel = acceleration_rows(batch, chosen, self.vehicles_count) / scale
+            extra[..., 2] = np.clip(accel, -1.0, 1.0) if self.clip else accel
+        return np.concatenate([rows, extra], axis=2)
 
 
 def intention_rows(batch: WorldBatch, chosen: np.ndarray | None, count: int, absolute: bool) -> np.ndarray:
@@ -145,6 +164,18 @@ def intention_rows(batch: WorldBatch, chosen: np.ndarray | None, count: int, abs
     norm = np.hypot(vectors[..., 0], vectors[..., 1])[..., None]
     unit = np.divide(vectors, norm, out=np.zeros_like(vectors), where=norm > 0)
     return unit if absolute else ego_frame(unit, 0.0, batch.ego.heading[:, None])
+
+
+def acceleration_rows(batch: WorldBatch, chosen: np.ndarray | None, count: int) -> np.ndarray:
+    """(K, count) each row's vehicle's acceleration (m/s²): row 0 the ego's, rows 1… those of the
+    vehicles ``chosen`` (K, count - 1) slots, -1 for none (zeros; None: no vehicle)."""
+    accelerations = np.zeros((batch.num_worlds, count))
+    accelerations[:, 0] = batch.ego.acceleration_mps2
+    if chosen is not None:
+        present = chosen >= 0
+        picked = np.take_along_axis(batch.vehicle_accelerations, np.where(present, chosen, 0), axis=1)
+        accelerations[:, 1 : 1 + chosen.shape[1]] = np.where(present, picked, 0.0)
+    return accelerations
 
 
 def feature_names(features) -> tuple[str, ...]:

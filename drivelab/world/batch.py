@@ -5,7 +5,8 @@ Shapes (K worlds, N vehicle slots, P pedestrian slots, L light slots, R route po
 ``pedestrians`` ``(K, P, 6)`` and ``traffic_lights`` ``(K, L, 4)`` likewise (rows past a world's
 count are zeros); ``route`` a :class:`RouteBatch` of polylines ``(K, R, 2)`` padded by repeating
 the last point; ``events`` an :class:`EventsBatch`; ``vehicle_destinations`` ``(K, N, 2)`` where
-each vehicle is headed (the end of its planned route; its own position when it has none); the
+each vehicle is headed (the end of its planned route; its own position when it has none) and
+``vehicle_accelerations`` ``(K, N)`` its acceleration in the last simulation frame (m/s²); the
 distinct :class:`RoadMap` objects in ``roads`` and each world's in ``road_index`` ``(K,)``.
 
 A WorldBatch is a value: simulators hand out a new one per step and nothing mutates it.
@@ -243,6 +244,7 @@ class WorldBatch:
     vehicles: np.ndarray
     vehicle_valid: np.ndarray
     vehicle_destinations: np.ndarray
+    vehicle_accelerations: np.ndarray
     roads: tuple[RoadMap, ...]
     road_index: np.ndarray
     route: RouteBatch
@@ -284,6 +286,7 @@ class WorldBatch:
         road_index = [_road_slot(roads, world.road) for world in worlds]
         vehicles, vehicle_valid = _stack_rows([w.vehicles for w in worlds], 6)
         destinations, _ = _stack_rows([w.destinations() for w in worlds], 2)
+        accelerations = _stack_rows([w.accelerations() for w in worlds], 1)[0][..., 0]
         pedestrians, pedestrian_valid = _stack_rows([w.pedestrians for w in worlds], 6)
         lights, light_valid = _stack_rows([w.traffic_lights for w in worlds], 4)
         return WorldBatch(
@@ -293,6 +296,7 @@ class WorldBatch:
             vehicles=vehicles,
             vehicle_valid=vehicle_valid,
             vehicle_destinations=destinations,
+            vehicle_accelerations=accelerations,
             roads=tuple(roads),
             road_index=np.array(road_index, dtype=np.int64),
             route=RouteBatch.stack([w.route for w in worlds]),
@@ -320,6 +324,7 @@ class WorldBatch:
             max_speed_mps=float(self.max_speed_mps[k]),
             speed_limit_mps=float(self.speed_limit_mps[k]),
             vehicle_destinations=self.vehicle_destinations[k, self.vehicle_valid[k]],
+            vehicle_accelerations=self.vehicle_accelerations[k, self.vehicle_valid[k]],
         )
 
     def select(self, indices: np.ndarray) -> WorldBatch:
@@ -419,8 +424,8 @@ _FIELDS_EVENTS = dataclasses.fields(EventsBatch)
 _FIELDS_ROUTE = [f for f in dataclasses.fields(RouteBatch) if f.init]
 # WorldBatch's (K, ...) arrays besides ego, route, events and road_index
 _WORLD_ARRAYS = (
-    "time_s", "vehicles", "vehicle_valid", "vehicle_destinations", "traffic_lights", "light_valid",
-    "pedestrians", "pedestrian_valid", "max_speed_mps", "speed_limit_mps",
+    "time_s", "vehicles", "vehicle_valid", "vehicle_destinations", "vehicle_accelerations", "traffic_lights",
+    "light_valid", "pedestrians", "pedestrian_valid", "max_speed_mps", "speed_limit_mps",
 )  # fmt: skip
 _EDGE_PADDED = ("polyline", "stations_m")  # RouteBatch's arrays padded by repeating their last point
 # per batch class: its init fields' names, and the defaults of those that have one

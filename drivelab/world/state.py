@@ -158,12 +158,21 @@ class WorldState:
     # (N, 2) where each of ``vehicles`` is headed: the end of its planned route (highway-env's
     # ``Vehicle.destination``), its own position when it has none; None: no vehicle's is known
     vehicle_destinations: np.ndarray | None = None
+    # (N,) each of ``vehicles``' acceleration along its heading in the last simulation frame (m/s²,
+    # highway-env's ``Vehicle.action["acceleration"]`` after its limits); None: none is known
+    vehicle_accelerations: np.ndarray | None = None
 
     def destinations(self) -> np.ndarray:
         """(N, 2) ``vehicle_destinations``, the vehicles' own positions where it is None."""
         if self.vehicle_destinations is None:
             return np.asarray(self.vehicles, dtype=float).reshape(-1, 6)[:, :2].copy()
         return np.asarray(self.vehicle_destinations, dtype=float).reshape(-1, 2)
+
+    def accelerations(self) -> np.ndarray:
+        """(N,) ``vehicle_accelerations``, zeros where it is None."""
+        if self.vehicle_accelerations is None:
+            return np.zeros(np.asarray(self.vehicles).reshape(-1, 6).shape[0])
+        return np.asarray(self.vehicle_accelerations, dtype=float).reshape(-1)
 
     def road_users(self) -> np.ndarray:
         """(N + P, 6) every body on the road besides the ego: vehicles, then pedestrians."""

@@ -39,7 +39,7 @@ def _row(observations, k):
         ("highway", "fast", "same_step", "kinematics"),
         ("highway", "fast", "next_step", "kinematics,lidar:beams=32:stack=2"),
         ("roundabout", "fast", "same_step", "kinematics"),
-        ("intersection", "fast", "next_step", "kinematics:features=presence+x+y+vx+vy+cos_d+sin_d"),
+        ("intersection", "fast", "next_step", "kinematics:features=presence+x+y+vx+vy+cos_d+sin_d+accel"),
         ("merge", "highway", "same_step", "kinematics"),
     ],
 )

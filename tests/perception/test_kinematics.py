@@ -5,7 +5,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from drivelab.perception.kinematics import ALL_FEATURES, FEATURES, Kinematics
+from drivelab.perception.kinematics import ALL_FEATURES, FEATURES, INTENTION_FEATURES, Kinematics
 from tests.worlds import world
 
 
@@ -154,9 +154,52 @@ def test_intention_features_leave_the_other_columns_as_they_were():
     w = world(speed_mps=20.0, vehicles=[[30.0, 4.0, 0.3, 25.0, 5, 2], [-8.0, 0.0, 0.0, 15.0, 5, 2]])
     w = dataclasses.replace(w, vehicle_destinations=np.array([[60.0, 40.0], [-8.0, 0.0]]))
     plain = _observe(Kinematics(), w)
-    both = Kinematics(features="+".join(ALL_FEATURES))
+    both = Kinematics(features="+".join(FEATURES + INTENTION_FEATURES))
     both.reset(w, np.random.default_rng(0))
-    rows = both.observe(w).reshape(5, len(ALL_FEATURES))
+    rows = both.observe(w).reshape(5, len(FEATURES) + 2)
     np.testing.assert_array_equal(rows[:, : len(FEATURES)], plain)
     direction = np.array([30.0, 36.0]) / np.hypot(30.0, 36.0)
     np.testing.assert_allclose(rows[2, len(FEATURES) :], direction, atol=1e-7)  # the farther one
+
+
+def test_accel_is_each_rows_acceleration_scaled_and_clipped_in_either_frame():
+    """accel: the row's vehicle's acceleration over ``accel_scale_mps2`` (6 m/s², IDM's limit),
+    clipped to [-1, 1]; the ego's own in row 0; raw m/s² unnormalised; zeros where unknown."""
+    w = world(
+        heading=np.pi / 2, speed_mps=10.0, acceleration_mps2=-1.5,
+        vehicles=[[0.0, 20.0, np.pi, 10.0, 5, 2], [0.0, -30.0, 0.0, 10.0, 5, 2], [0.0, 50.0, 0.0, 5.0, 5, 2]],
+    )  # fmt: skip
+    w = dataclasses.replace(w, vehicle_accelerations=np.array([3.0, -9.0, 0.0]))
+    sensor = Kinematics(vehicles_count=5, features="presence+x+accel", flatten=False)
+    sensor.reset(w, np.random.default_rng(0))
+    observed = sensor.observe(w)
+    assert observed.shape == (5, 3)
+    # nearest first: the one 20 m ahead (+3), 30 m behind (-9: clipped), 50 m ahead (0), then none
+    np.testing.assert_allclose(observed[:, 2], [-0.25, 0.5, -1.0, 0.0, 0.0], atol=1e-7)
+    absolute = Kinematics(vehicles_count=5, features="presence+x+accel", flatten=False, absolute=True)
+    absolute.reset(w, np.random.default_rng(0))
+    np.testing.assert_array_equal(absolute.observe(w)[:, 2], observed[:, 2])
+    raw = Kinematics(vehicles_count=5, features="accel", flatten=False, normalize=False)
+    raw.reset(w, np.random.default_rng(0))
+    np.testing.assert_allclose(raw.observe(w)[:, 0], [-1.5, 3.0, -9.0, 0.0, 0.0], atol=1e-6)
+    unknown = dataclasses.replace(w, vehicle_accelerations=None)
+    sensor.reset(unknown, np.random.default_rng(0))
+    np.testing.assert_allclose(sensor.observe(unknown)[:, 2], [-0.25, 0, 0, 0, 0], atol=1e-7)
+
+
+def test_accel_and_intentions_together_keep_each_features_values():
+    w = world(speed_mps=20.0, vehicles=[[30.0, 4.0, 0.3, 25.0, 5, 2], [-8.0, 0.0, 0.0, 15.0, 5, 2]])
+    destinations, accelerations = np.array([[60.0, 40.0], [-8.0, 0.0]]), np.array([1.2, -3.0])
+    w = dataclasses.replace(w, vehicle_destinations=destinations, vehicle_accelerations=accelerations)
+    every = Kinematics(features="+".join(ALL_FEATURES))
+    every.reset(w, np.random.default_rng(0))
+    rows = every.observe(w).reshape(5, len(ALL_FEATURES))
+    intentions = Kinematics(features="+".join(FEATURES + INTENTION_FEATURES))
+    intentions.reset(w, np.random.default_rng(0))
+    np.testing.assert_array_equal(rows[:, :-1], intentions.observe(w).reshape(5, -1))
+    np.testing.assert_allclose(rows[:3, -1], [0.0, -0.5, 0.2], atol=1e-7)  # ego 0; nearest: -8 m behind
+
+
+def test_accel_scale_must_be_positive():
+    with pytest.raises(ValueError, match="acceleration scales"):
+        Kinematics(accel_scale_mps2=0.0)

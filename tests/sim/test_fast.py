@@ -292,6 +292,7 @@ def compare_episodes(scenario: str, traffic: str, seeds, atol: float, steps: int
             differences = (
                 np.abs(a.vehicles - b.vehicles).max(initial=0.0),
                 np.abs(a.destinations() - b.destinations()).max(initial=0.0),
+                np.abs(a.accelerations() - b.accelerations()).max(initial=0.0),
                 np.abs(a.ego.position - b.ego.position).max(),
                 abs(a.ego.heading - b.ego.heading),
                 abs(a.ego.speed_mps - b.ego.speed_mps),
@@ -306,8 +307,8 @@ def compare_episodes(scenario: str, traffic: str, seeds, atol: float, steps: int
 
 @pytest.mark.parametrize("scenario, traffic, seeds", WHOLE_TRAFFIC_CASES)
 def test_whole_traffic_matches_highway_env(scenario, traffic, seeds):
-    """Every vehicle of every step agrees with highway-env's, routes, destinations, obstacles and
-    crashes included.
+    """Every vehicle of every step agrees with highway-env's, routes, destinations, accelerations,
+    obstacles and crashes included.
 
     Discrete outcomes (events, lanes, crashes, vehicle counts) must be identical; positions,
     headings and speeds agree within ``ROUNDING_ATOL`` = 1e-3. The fast backend does highway-env's

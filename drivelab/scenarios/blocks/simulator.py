@@ -97,7 +97,7 @@ def apply_meta_map_worlds(v, count, ego, lanes, start, stop, actions, speeds) ->
 @njit(cache=True)
 def export_map_worlds(
     v, count, ego, lanes, start, stop, in_junction, dead_end, solid, floats, ints, flags, vehicles, valid,
-    destinations,
+    destinations, accelerations,
 ) -> None:  # fmt: skip
     """``export_world`` of each world on its map's lane rows (arrival is judged on the route),
     then MetaDrive's out of road: off every lane, or the ego's body across a solid line of its
@@ -106,7 +106,7 @@ def export_map_worlds(
         a, b = start[k], stop[k]
         export_world(
             v[k, : count[k]], ego[k], lanes[a:b], in_junction[a:b], dead_end[a:b], ARRIVE_NEVER, 0.0,
-            floats[k], ints[k], flags[k], vehicles[k], valid[k], destinations[k],
+            floats[k], ints[k], flags[k], vehicles[k], valid[k], destinations[k], accelerations[k],
         )  # fmt: skip
         lane = a + int(v[k, ego[k], T.LANE])
         half_body, half_lane = floats[k, EX_WID] / 2, floats[k, EX_LANE_WIDTH] / 2

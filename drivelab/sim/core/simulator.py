@@ -512,12 +512,13 @@ def _span(stations, low, high, count):
 @njit(cache=True, inline="always")
 def export_world(
     w, e: int, lanes, in_junction, exit_lane, arrival: int, arrival_threshold: float, out, ints, flags,
-    vehicles, valid, destinations
+    vehicles, valid, destinations, accelerations
 ) -> None:  # fmt: skip
     """What WorldBatch needs of one world (vehicles ``w`` (N, VEHICLE_COLUMNS), ego row ``e``),
     into zeroed outputs: the ego's ``out`` (EX_FLOATS,), ``ints`` (3,) and ``flags`` (4,)
     (columns EX_*), and the other vehicles, obstacles left out as highway-env exports them, in
-    ``vehicles`` (N - 1, 6) with ``valid`` (N - 1,) and their ``destination``s (N - 1, 2)."""
+    ``vehicles`` (N - 1, 6) with ``valid`` (N - 1,), their ``destination``s (N - 1, 2) and
+    ``accelerations`` (N - 1,)."""
     row = w[e]
     lane = int(row[T.LANE])
     s, lateral = L.local_coordinates(lanes, lane, row[T.X], row[T.Y])
@@ -549,6 +550,7 @@ def export_world(
             vehicles[n, c] = w[j, EXPORTED_COLUMNS[c]]
         valid[n] = True
         destinations[n, 0], destinations[n, 1] = destination(lanes, w[j])
+        accelerations[n] = w[j, T.ACCEL]
         n += 1
 
 
@@ -567,14 +569,15 @@ def destination(lanes, row) -> tuple[float, float]:
 @njit(cache=True)
 def export_worlds(
     v, count, ego, lanes, in_junction, exit_lane, arrival: int, arrival_threshold: float, floats, ints, flags,
-    vehicles, valid, destinations
+    vehicles, valid, destinations, accelerations
 ) -> None:  # fmt: skip
     """``export_world`` of K worlds on one road: ``floats`` (K, EX_FLOATS), ``ints`` (K, 3),
-    ``flags`` (K, 4), ``vehicles`` (K, N, 6), ``valid`` (K, N), ``destinations`` (K, N, 2)."""
+    ``flags`` (K, 4), ``vehicles`` (K, N, 6), ``valid`` (K, N), ``destinations`` (K, N, 2),
+    ``accelerations`` (K, N)."""
     for k in range(v.shape[0]):
         export_world(
             v[k, : count[k]], ego[k], lanes, in_junction, exit_lane, arrival, arrival_threshold,
-            floats[k], ints[k], flags[k], vehicles[k], valid[k], destinations[k],
+            floats[k], ints[k], flags[k], vehicles[k], valid[k], destinations[k], accelerations[k],
         )  # fmt: skip
 
 
@@ -582,7 +585,7 @@ def export_worlds(
 def advance_worlds(
     v, count, ego, lanes, idm, frames, dt, regulation, time_s, dt_policy, route, starts, segments,
     lengths2, segment_m, stations, point_count, closed, progress, in_junction, exit_lane, arrival,
-    arrival_threshold, floats, ints, flags, vehicles, valid, destinations,
+    arrival_threshold, floats, ints, flags, vehicles, valid, destinations, accelerations,
 ) -> None:  # fmt: skip
     """A policy step of all K worlds (none restarting) after their controls are set, in one
     compiled call: the kernels ``FastSimulator.step`` otherwise calls one by one, in its order
@@ -597,14 +600,15 @@ def advance_worlds(
     )  # fmt: skip
     export_worlds(
         v, count, ego, lanes, in_junction, exit_lane, arrival, arrival_threshold, floats, ints, flags,
-        vehicles, valid, destinations,
+        vehicles, valid, destinations, accelerations,
     )  # fmt: skip
 
 
-def export_vehicle_buffers(num_worlds: int, slots: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Zeroed (vehicles (K, slots, 6), valid (K, slots), destinations (K, slots, 2)) for the export."""
+def export_vehicle_buffers(num_worlds: int, slots: int) -> tuple[np.ndarray, ...]:
+    """Zeroed (vehicles (K, slots, 6), valid (K, slots), destinations (K, slots, 2), accelerations
+    (K, slots)) for the export."""
     shape = (num_worlds, slots)
-    return np.zeros((*shape, 6)), np.zeros(shape, dtype=bool), np.zeros((*shape, 2))
+    return np.zeros((*shape, 6)), np.zeros(shape, dtype=bool), np.zeros((*shape, 2)), np.zeros(shape)
 
 
 # --- the simulator ------------------------------------------------------------------------------
@@ -966,8 +970,9 @@ class FastSimulator:
         )  # fmt: skip
 
     def _export_buffers(self) -> tuple[np.ndarray, ...]:
-        """Zeroed (floats, ints, flags, vehicles, valid, destinations) arrays the export kernels
-        fill; the first three column-major, so that each column (one WorldBatch field) is contiguous."""
+        """Zeroed (floats, ints, flags, vehicles, valid, destinations, accelerations) arrays the
+        export kernels fill; the first three column-major, so that each column (one WorldBatch
+        field) is contiguous."""
         k, slots = self.num_worlds, max(self.vehicles.shape[1] - 1, 0)
         floats, ints = np.zeros((EX_FLOATS, k)).T, np.zeros((3, k), dtype=np.int64).T
         flags = np.zeros((4, k), dtype=bool).T
@@ -989,6 +994,7 @@ class FastSimulator:
         vehicles: np.ndarray,
         valid: np.ndarray,
         destinations: np.ndarray,
+        accelerations: np.ndarray,
         state: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
     ) -> WorldBatch:
         """The WorldBatch of ``export_worlds``' outputs (``_export_buffers``' column-major arrays;
@@ -1036,8 +1042,8 @@ class FastSimulator:
         )
         return assemble(
             WorldBatch, time_s=time_s, dt_s=self.dt_policy_s, ego=ego, vehicles=vehicles, vehicle_valid=valid,
-            vehicle_destinations=destinations, roads=self.roads, route=route, events=events,
-            speed_limit_mps=speed_limit, **extra,
+            vehicle_destinations=destinations, vehicle_accelerations=accelerations, roads=self.roads,
+            route=route, events=events, speed_limit_mps=speed_limit, **extra,
         )  # fmt: skip
 
     def _route_ended(

@@ -336,4 +336,5 @@ class HighwayBackend:
             traffic_lights=lights, max_speed_mps=float(ego.MAX_SPEED),
             speed_limit_mps=float(lane.speed_limit or 30.0),
             vehicle_destinations=np.array([v.destination for v in others], dtype=float).reshape(-1, 2),
+            vehicle_accelerations=np.array([v.action.get("acceleration", 0.0) for v in others], dtype=float),
         )  # fmt: skip
