@@ -11,8 +11,8 @@ drivelab has the same thing under another name, and refused where drivelab diffe
   ``x, y: [-d, d]``, ``vx, vy: [-s, s]`` to ``perception_distance_m=d``, ``speed_scale_mps=s``;
   ``order: sorted``, ``absolute: False``, ``see_behind: True`` and ``include_obstacles`` say what
   drivelab does; features ``cos_d``, ``sin_d`` need ``observe_intentions: true`` (highway-env's are
-  zeros without it). ``LidarObservation`` → ``lidar`` (``cells`` beams,
-  ``maximum_range``), ``TimeToCollision`` → ``ttc_grid``;
+  zeros without it), and drivelab's own ``accel``, which highway-env lacks, is refused.
+  ``LidarObservation`` → ``lidar`` (``cells`` beams, ``maximum_range``), ``TimeToCollision`` → ``ttc_grid``;
 - ``action`` → ``DiscreteMetaAction`` → ``meta`` (its ``lateral`` and ``longitudinal`` options;
   ``target_speeds`` equal to the scenario's), ``ContinuousAction`` → ``continuous``,
   ``DiscreteAction`` → ``grid``;
@@ -40,7 +40,7 @@ import dataclasses
 from typing import Any
 
 from drivelab.errors import UsageError
-from drivelab.perception.kinematics import ALL_FEATURES, INTENTION_FEATURES
+from drivelab.perception.kinematics import FEATURES, INTENTION_FEATURES
 from drivelab.rewards.shapers import PRESETS
 from drivelab.scenarios import get_scenario
 from drivelab.scenarios.options import unknown_options_message
@@ -226,12 +226,17 @@ def _observation(spec: Any, problems: list[str]) -> str | None:
     return ":".join([sensor, *options])
 
 
+# the features of highway-env's Kinematics that drivelab reads, which a highway-env config may name
+# (drivelab's kinematics has these and its own ``accel``)
+HIGHWAY_ENV_FEATURES = FEATURES + INTENTION_FEATURES
+
+
 def _kinematics(spec: dict, problems: list[str]) -> str:
     """drivelab's kinematics spec of highway-env's Kinematics options (see the module docstring)."""
     options = {key: spec[key] for key in ("vehicles_count",) if key in spec}
     features = spec.get("features", KINEMATICS_FEATURES)
     listed = isinstance(features, (list, tuple))
-    others = [name for name in features if name not in ALL_FEATURES] if listed else 0
+    others = [name for name in features if name not in HIGHWAY_ENV_FEATURES] if listed else 0
     intentions = spec.get("observe_intentions", False)
     if not isinstance(intentions, bool):
         problems.append(f"Kinematics 'observe_intentions' must be true or false, got {intentions!r}")
@@ -241,9 +246,12 @@ def _kinematics(spec: dict, problems: list[str]) -> str:
             "drivelab's are each vehicle's destination: set observe_intentions: true"
         )
     if others != []:
+        own = " (accel is drivelab's own: name it in the sensor spec)" if "accel" in (others or []) else ""
         problems.append(
-            f"Kinematics features {features!r}: drivelab's kinematics has {', '.join(ALL_FEATURES)}"
+            f"Kinematics features {features!r}: drivelab reads highway-env's "
+            f"{', '.join(HIGHWAY_ENV_FEATURES)}"
             + (f", not {', '.join(map(repr, others))}" if others else "")
+            + own
         )
     else:
         options["features"] = "+".join(features)

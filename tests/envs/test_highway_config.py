@@ -61,6 +61,7 @@ def test_keyword_arguments_beside_the_config_win():
         ),
         ({"observation": {"type": "Kinematics", "see_behind": False}}, "'see_behind' False"),
         ({"observation": {"type": "Kinematics", "features": ["x", "heading"]}}, "not 'heading'"),
+        ({"observation": {"type": "Kinematics", "features": ["x", "accel"]}}, "'accel' .accel is drivelab"),
         (
             {"observation": {"type": "Kinematics", "features": ["x", "cos_d", "sin_d"]}},
             "cos_d, sin_d without observe_intentions: .*set observe_intentions: true",
