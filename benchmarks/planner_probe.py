@@ -60,56 +60,79 @@ SCENARIOS = {  # name: the environment's keywords
 ARRIVAL, COLLISION = 1e6, -1e6
 
 
-def plan_episode(
-    env, scenario: str, seed: int, horizon: int, speed_cap: float = np.inf, futures: int = 0
-) -> dict:
-    """Play evaluation episode ``seed`` with the planner of horizon ``horizon``: its outcome. On the
-    highway a speed counts up to ``speed_cap`` (m/s) in a sequence's score. With ``futures`` M > 0
-    (the intersection) the model knows the state now but not the vehicles still to arrive: every
-    sequence is played in M worlds whose arrival generators are reseeded after the replay (the same
-    M seeds for every sequence), and the best sequence collides in the fewest of them, then has the
-    highest mean score over the others."""
+def sequence_scores(
+    env, scenario: str, seed: int, taken: list[int], horizon: int, speed_cap: float = np.inf, futures: int = 0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Every sequence of the next ``horizon`` actions played from episode ``seed``'s state after the
+    actions ``taken``: (the sequences (S, H), whether each collides (M, S), each one's score (M, S)),
+    over the M = ``futures`` sampled futures of the arrivals (M = 1 with ``futures`` 0: the exact
+    model); None when the actions taken ended the episode (world 0's ``env.batch.events`` then holds
+    the ending). On the highway a speed counts up to ``speed_cap`` (m/s) in a sequence's score."""
     actions = env.single_action_space.n
     sequences = np.array(list(itertools.product(range(actions), repeat=horizon)))
     count = len(sequences)
     plans = np.tile(sequences, (max(futures, 1), 1))  # world m · count + i plays sequence i
     worlds = len(plans)
-    taken: list[int] = []
-    while True:
-        env.reset(options={"episode_seeds": np.full(worlds, seed)})
-        for action in taken:  # every world in the episode's state
-            _, _, terminated, truncated, _ = env.step(np.full(worlds, action))
-        if taken and (terminated[0] or truncated[0]):  # the last action taken ended the episode
-            events = env.batch.events
-            crash, arrived = bool(events.collided[0]), bool(events.arrived[0] and not events.collided[0])
-            return replayed(scenario, seed, taken, crash, arrived)
-        for m in range(futures):  # arrivals from here on drawn afresh: the same M futures per sequence
-            for world in range(m * count, (m + 1) * count):
-                env.simulator.rngs[world] = np.random.default_rng([seed, len(taken), m])
-        ended, collided, score = np.zeros(worlds, dtype=bool), np.zeros(worlds, dtype=bool), np.zeros(worlds)
-        for j in range(horizon):
-            _, _, terminated, truncated, _ = env.step(plans[:, j])
-            live, events = ~ended, env.batch.events
-            crashed, arrived = live & events.collided, live & events.arrived & ~events.collided
-            collided |= crashed
-            score[crashed] = COLLISION + j
-            going = live & ~crashed
-            if scenario == "intersection":
-                score[arrived] = ARRIVAL - j
-                going &= ~arrived
-                score[going] = env.batch.route.progress_m[going]
-            else:
-                score[going] += np.minimum(env.batch.ego.speed_mps[going], speed_cap)
-            ended |= terminated | truncated
-        if futures:
-            crashes = collided.reshape(futures, count).sum(0)
-            others = np.where(collided, 0.0, score).reshape(futures, count).sum(0) / np.maximum(
-                futures - crashes, 1
-            )
-            best = int(np.lexsort((-others, crashes))[0])
+    env.reset(options={"episode_seeds": np.full(worlds, seed)})
+    for action in taken:  # every world in the episode's state
+        _, _, terminated, truncated, _ = env.step(np.full(worlds, action))
+    if taken and (terminated[0] or truncated[0]):  # the last action taken ended the episode
+        return None
+    for m in range(futures):  # arrivals from here on drawn afresh: the same M futures per sequence
+        for world in range(m * count, (m + 1) * count):
+            env.simulator.rngs[world] = np.random.default_rng([seed, len(taken), m])
+    ended, collided, score = np.zeros(worlds, dtype=bool), np.zeros(worlds, dtype=bool), np.zeros(worlds)
+    for j in range(horizon):
+        _, _, terminated, truncated, _ = env.step(plans[:, j])
+        live, events = ~ended, env.batch.events
+        crashed, arrived = live & events.collided, live & events.arrived & ~events.collided
+        collided |= crashed
+        score[crashed] = COLLISION + j
+        going = live & ~crashed
+        if scenario == "intersection":
+            score[arrived] = ARRIVAL - j
+            going &= ~arrived
+            score[going] = env.batch.route.progress_m[going]
         else:
-            best = int(np.argmax(score))
-        taken.append(int(sequences[best, 0]))
+            score[going] += np.minimum(env.batch.ego.speed_mps[going], speed_cap)
+        ended |= terminated | truncated
+    shape = (max(futures, 1), count)
+    return sequences, collided.reshape(shape), score.reshape(shape)
+
+
+def plan_action(
+    env, scenario: str, seed: int, taken: list[int], horizon: int, speed_cap: float = np.inf, futures: int = 0
+) -> int | None:
+    """The planner's next action in episode ``seed`` after the actions ``taken`` (the first of the
+    best sequence of ``sequence_scores``), or None when they ended the episode. With the exact model
+    the best sequence scores highest; with ``futures`` M > 0 (the intersection: the model knows the
+    state now but not the vehicles still to arrive, whose arrival generators are reseeded after the
+    replay, the same M seeds for every sequence) it collides in the fewest futures, then has the
+    highest mean score over the others."""
+    scored = sequence_scores(env, scenario, seed, taken, horizon, speed_cap, futures)
+    if scored is None:
+        return None
+    sequences, collided, score = scored
+    if futures:
+        crashes = collided.sum(0)
+        others = np.where(collided, 0.0, score).sum(0) / np.maximum(futures - crashes, 1)
+        best = int(np.lexsort((-others, crashes))[0])
+    else:
+        best = int(np.argmax(score[0]))
+    return int(sequences[best, 0])
+
+
+def plan_episode(
+    env, scenario: str, seed: int, horizon: int, speed_cap: float = np.inf, futures: int = 0
+) -> dict:
+    """Play evaluation episode ``seed`` with the planner of horizon ``horizon`` (``plan_action``):
+    its outcome."""
+    taken: list[int] = []
+    while (action := plan_action(env, scenario, seed, taken, horizon, speed_cap, futures)) is not None:
+        taken.append(action)
+    events = env.batch.events
+    crash, arrived = bool(events.collided[0]), bool(events.arrived[0] and not events.collided[0])
+    return replayed(scenario, seed, taken, crash, arrived)
 
 
 def replayed(scenario: str, seed: int, actions: list[int], crash: bool, arrived: bool) -> dict:
