@@ -41,7 +41,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from intersection_probe import wilson_text  # noqa: E402
 from planner_probe import COLLISION, SCENARIOS, sequence_scores  # noqa: E402
-from provenance import Parser, command_line, cpu_isa, whole  # noqa: E402
+from provenance import Parser, command_line, cpu_isa, stop, whole  # noqa: E402
 
 RESULTS = ROOT / "benchmarks" / "results"
 FIRST_SEED = 5_000
@@ -58,16 +58,29 @@ def action_scores(planner_env, seed: int, taken: list[int], horizon: int) -> np.
     return np.array([score[0][sequences[:, 0] == a].max() for a in range(3)])
 
 
-def judge(target: str, episodes: int, horizon: int) -> dict:
-    from drivelab.envs.vector import VectorDriveEnv
+def load_policy(target: str):
+    """The ``Trained`` policy of ``target`` (``zoo.load_trained``); one ``error:`` line and exit 2
+    when it cannot be loaded or is not an intersection policy with the three longitudinal actions."""
+    from gymnasium import spaces
+
+    from drivelab.errors import UsageError
     from drivelab.training.zoo import load_trained
 
-    trained = load_trained(target)
+    try:
+        trained = load_trained(target)
+    except UsageError as exc:
+        stop(str(exc))
+    space = trained.env.action_space
+    if trained.config.env != "intersection" or not (isinstance(space, spaces.Discrete) and space.n == 3):
+        stop(f"{target!r} is not an intersection policy with the three longitudinal actions")
+    return trained
+
+
+def judge(target: str, trained, episodes: int, horizon: int) -> dict:
+    """The decisions of ``trained`` (``load_policy``) over ``episodes`` training episodes, counted."""
+    from drivelab.envs.vector import VectorDriveEnv
+
     env, agent = trained.env, trained.agent
-    if trained.config.env != "intersection" or env.action_space.n != 3:
-        raise SystemExit(
-            f"error: {target!r} is not an intersection policy with the three longitudinal actions"
-        )
     planner_env = VectorDriveEnv(3**horizon, "intersection", **SCENARIOS["intersection"])
     counts = dict.fromkeys(("decisions", "best", "critical", "unsafe", "slower_than_needed"), 0)
     outcomes = {"episodes": episodes, "success": 0, "crash": 0}
@@ -94,15 +107,17 @@ def judge(target: str, episodes: int, horizon: int) -> dict:
                 outcomes["success"] += metrics["success"] > 0
                 outcomes["crash"] += metrics["collisions"] > 0
                 break
-    return {"agent": str(target), "algo": trained.config.algo, "model_steps": int(agent.num_timesteps),
-            **outcomes, **counts, "wall_s": round(time.perf_counter() - start, 1)}  # fmt: skip
+    return {"agent": str(target), "command": command_line(), "algo": trained.config.algo,
+            "model_steps": int(agent.num_timesteps), **outcomes, **counts,
+            "wall_s": round(time.perf_counter() - start, 1)}  # fmt: skip
 
 
 def markdown(result: dict) -> str:
+    commands = dict.fromkeys(row["command"] for row in result["rows"])
     lines = [
         "# How the intersection's policies choose where the choice matters",
         "",
-        f"Command: `{result['command']}`  ",
+        "Commands: " + ", ".join(f"`{command}`" for command in commands) + "  ",
         f"Machine: {result['machine']}; " + ", ".join(dict.fromkeys(r["date"] for r in result["rows"])) + ".",
         "",
         "Each policy plays training episodes greedily (seeds 5,000 on); before each of its decisions the "
@@ -138,18 +153,10 @@ def main() -> None:
     args = parser.parse_args()
     if args.horizon > 7:
         parser.error("--horizon: more than 3**7 worlds per decision")
-    from drivelab.errors import UsageError
-    from drivelab.training.zoo import resolve
-
-    for agent in args.agents:  # every name checked before any is played
-        try:
-            resolve(agent)
-        except UsageError as exc:
-            parser.error(str(exc))
+    policies = [load_policy(agent) for agent in args.agents]  # every one checked before any is played
     rows = []
-    for agent in args.agents:
-        rows.append({"date": time.strftime("%Y-%m-%d"), "episodes_setting": args.episodes,
-                     **judge(agent, args.episodes, args.horizon)})  # fmt: skip
+    for agent, trained in zip(args.agents, policies, strict=True):
+        rows.append({"date": time.strftime("%Y-%m-%d"), **judge(agent, trained, args.episodes, args.horizon)})
         print(json.dumps(rows[-1]), flush=True)
     path = RESULTS / "intersection_choice_probe.json"
     result = json.loads(path.read_text()) if path.exists() else {"rows": []}
@@ -157,7 +164,7 @@ def main() -> None:
         result["rows"] = []  # another horizon: another measure
     measured = {row["agent"] for row in rows}
     machine = f"{cpu_isa()}, {os.cpu_count()} cores, Python {platform.python_version()}"
-    result.update(command=command_line(), horizon=args.horizon, machine=machine)
+    result.update(horizon=args.horizon, machine=machine)
     result["rows"] = [row for row in result["rows"] if row["agent"] not in measured] + rows
     RESULTS.mkdir(exist_ok=True)
     path.write_text(json.dumps(result, indent=1))

@@ -16,7 +16,8 @@ the row's command for one rollout (8,192 steps) gives its shapes and config, and
 replaced.
 
 Round 0 clones the planner's own episodes (``--episodes`` training episodes, seeds 0, 1, …); each
-DAgger round plays ``--dagger-episodes`` fresh training episodes with the current student (greedy,
+DAgger round plays the next ``--dagger-episodes`` training episodes from seed 1,000 on (the same
+episodes the planner drove where ``--episodes`` exceeds 1,000) with the current student (greedy,
 as ``drivelab evaluate`` plays), has the planner label every state the student visited (the planner
 replays the episode's seed and the student's actions, so it plans from that state), adds them to
 the data and trains a fresh network on all of it. After each round the student plays the 100
@@ -59,7 +60,7 @@ from provenance import Parser, command_line, cpu_isa, positive, whole  # noqa: E
 RESULTS = ROOT / "benchmarks" / "results"
 RUNS = ROOT / "benchmarks" / "runs" / "intersection-imitation-probe"
 BASE_STEPS = 8192  # one rollout of the row (128 steps x 64 worlds): its network's shapes and config
-DAGGER_SEED_START = 1_000  # DAgger rounds' episodes: training seeds after the planner's own
+DAGGER_SEED_START = 1_000  # the first DAgger round's first episode seed
 VALIDATION_SHARE = 0.1  # of the episodes, held out for the accuracy
 
 
@@ -264,8 +265,8 @@ def markdown(result: dict) -> str:
         "and observation of the leaderboard's intersection `ppo_own` row (its command run for one "
         "rollout gives the shapes), trained by cross-entropy on the planner's actions, the epoch "
         "with the best accuracy on held-out episodes kept. Round 0 clones the planner's own "
-        "episodes; each DAgger round adds the states the student visits (greedy) in fresh "
-        "training episodes, labelled by the planner, and trains a fresh network on all of it. "
+        "episodes; each DAgger round adds the states the student visits (greedy) in training "
+        "episodes, labelled by the planner, and trains a fresh network on all of it. "
         "Evaluation: the 100 evaluation episodes of the leaderboard (`drivelab evaluate RUN "
         "--episodes 100`), greedy; rates with their 90 % Wilson interval.",
     ]
@@ -286,7 +287,8 @@ def probe_table(probe: dict) -> list[str]:
         f"Machine: {probe['machine']}; {probe['date']}.  ",
         f"Teacher: the planner with a horizon of {s['horizon']} decisions and {teacher}. Round 0: "
         f"the planner's episodes of training seeds 0 to {s['episodes'] - 1}; DAgger rounds of "
-        f"{s['dagger_episodes']} episodes; {s['epochs']} epochs, minibatch {s['batch_size']}, Adam "
+        f"{s['dagger_episodes']} episodes each, from seed {DAGGER_SEED_START:,} on; "
+        f"{s['epochs']} epochs, minibatch {s['batch_size']}, Adam "
         f"{s['learning_rate']:g}. The student's run: `drivelab {probe['base_run']}`.",
         "",
         "| round | episodes played (by) | their success / crash | labelled states | "

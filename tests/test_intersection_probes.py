@@ -9,6 +9,7 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 BENCHMARKS = Path(__file__).parents[1] / "benchmarks"
 
@@ -82,9 +83,20 @@ def test_each_action_scores_as_the_best_sequence_that_starts_with_it():
 
 def test_the_choice_probes_counts_of_a_shipped_policy_hold_together():
     choice = _probe("intersection_choice_probe")
-    row = choice.judge("intersection-ppo_own", episodes=2, horizon=1)
+    row = choice.judge(
+        "intersection-ppo_own", choice.load_policy("intersection-ppo_own"), episodes=2, horizon=1
+    )
     assert row["episodes"] == 2 and row["success"] + row["crash"] <= 2
     assert 2 <= row["decisions"] <= 26
     assert 0 <= row["best"] <= row["decisions"]
     assert 0 <= row["unsafe"] <= row["critical"] <= row["decisions"]
     assert row["best"] + row["slower_than_needed"] <= row["decisions"]
+
+
+def test_a_policy_of_another_scenario_or_none_is_one_error_line_and_exit_2(capsys, tmp_path):
+    choice = _probe("intersection_choice_probe")
+    for target in ("highway-ppo_own", str(tmp_path / "no-such-run")):
+        with pytest.raises(SystemExit) as stop:
+            choice.load_policy(target)
+        error = capsys.readouterr().err
+        assert stop.value.code == 2 and error.startswith("error: ") and len(error.splitlines()) == 1
