@@ -100,7 +100,7 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--sil-value-coef", type=positive, default=SETTINGS["value_coef"])
     split = argv.index("--") if "--" in argv else len(argv)
     args, train = parser.parse_args(argv[:split]), argv[split + 1 :]
-    joined = " ".join(train)
+    joined = " ".join(train).lower()  # -H values are YAML: True and true alike
     if "--algo ppo_own" not in joined and "--algo=ppo_own" not in joined:
         stop("the arguments after -- must train ppo_own (--algo ppo_own)")
     if "--resume" in train or "normalize_rewards=true" in joined:

@@ -79,6 +79,7 @@ def test_self_imitation_raises_only_actions_that_beat_the_critic(screen, monkeyp
         ["--", "--algo", "dqn", "--env", "highway"],
         ["--", "--algo", "ppo_own", "--resume", "RUN"],
         ["--", "--algo", "ppo_own", "-H", "normalize_rewards=true"],
+        ["--", "--algo", "ppo_own", "-H", "normalize_rewards=True"],
     ],
 )
 def test_bad_settings_are_one_error_line_and_exit_2(screen, argv, capsys, tmp_path, monkeypatch):
