@@ -19,8 +19,9 @@ derive from ``OwnAgent``, which implements everything but the learning loop):
 - ``predict(obs, deterministic=True)`` → ``(action, None)`` for one unbatched observation.
 - ``save(path)`` writes one zip file of tensors and JSON (``agents/storage.py``: nothing in it is
   unpickled); the registry's ``load(algo, path, env or None, hyperparams, seed)`` reads it back.
-- Off-policy agents whose ``AlgoSpec.sb3_replay`` is set also offer ``replay_buffer.observations``
-  (a numpy array, for the size check), ``save_replay_buffer(path)`` and ``load_replay_buffer(path)``
+- Agents whose ``AlgoSpec.sb3_replay`` is set (the off-policy ones, and the on-policy ones for
+  their self-imitation replay, ``None`` when unused) also offer ``replay_buffer.observations`` (a
+  numpy array, for the size check), ``save_replay_buffer(path)`` and ``load_replay_buffer(path)``
   (an ``.npz`` file; own buffers provide ``state_arrays()`` / ``load_state_arrays(arrays)``).
 """
 

@@ -3,8 +3,10 @@
 Each iteration fills preallocated ``(n_steps, K, ...)`` tensors from the worlds' batched arrays
 (``worlds.Worlds``), computes GAE over the block, then hands the flattened batch to the
 algorithm's ``update`` (``ppo.py``, ``a2c.py``). A time-limit end bootstraps from the final
-observation. Every running statistic changes only between rollouts, the safe points where
-``drivelab train`` checkpoints, so that a resumed run equals an uninterrupted one.
+observation. With ``sil_updates`` each update ends with self-imitation steps on a replay of the
+recent transitions (``self_imitation.py``). Every running statistic, and that replay, changes only
+between rollouts, the safe points where ``drivelab train`` checkpoints, so that a resumed run
+equals an uninterrupted one.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from drivelab.agents.actor_critic import (
 from drivelab.agents.base import MAX_LEARNING_RATE, OwnAgent, gradient_step
 from drivelab.agents.buffer_memory import check_buffer_memory, observation_bytes
 from drivelab.agents.networks import ENCODERS
+from drivelab.agents.self_imitation import SelfImitationReplay, self_imitation_loss
 from drivelab.agents.worlds import Worlds, batch_of_one, map_obs
 from drivelab.errors import UsageError
 
@@ -79,6 +82,13 @@ class OnPolicyConfig:
     :param prior_kl_coef: weight of KL(π ‖ π_prior) in the loss, π_prior a frozen copy of the
         policy the run started from (the ``--init-from`` policy, else the random initial one): a
         fine-tuning that improves on an imitation policy stays near it (0: no such term).
+    :param sil_updates: self-imitation steps after each update (Oh et al. 2018,
+        ``self_imitation.py``): minibatches of the last ``sil_capacity`` transitions, imitating the
+        actions whose return beat the critic (0: none).
+    :param sil_batch_size: transitions per self-imitation step.
+    :param sil_capacity: transitions the self-imitation replay keeps.
+    :param sil_value_coef: weight of the self-imitation value term (the critic pulled up towards
+        the returns it underestimated).
     """
 
     learning_rate: float = 3e-4
@@ -103,6 +113,10 @@ class OnPolicyConfig:
     bootstrap_time_limits: bool = True
     critic_warmup_steps: int = 0
     prior_kl_coef: float = 0.0
+    sil_updates: int = 0
+    sil_batch_size: int = 512
+    sil_capacity: int = 100_000
+    sil_value_coef: float = 0.01
 
     def check(self, algo: str) -> None:
         if self.n_steps < 1 or not 0 < self.gamma <= 1 or not 0 <= self.gae_lambda <= 1:
@@ -114,6 +128,11 @@ class OnPolicyConfig:
         if min(self.entropy_coef, self.value_coef, self.critic_warmup_steps, self.prior_kl_coef) < 0:
             raise UsageError(
                 f"{algo!r} needs entropy_coef, value_coef, critic_warmup_steps and prior_kl_coef >= 0"
+            )
+        if self.sil_updates < 0 or min(self.sil_batch_size, self.sil_capacity) < 1 or self.sil_value_coef < 0:
+            raise UsageError(
+                f"{algo!r} needs sil_updates >= 0, sil_batch_size and sil_capacity >= 1 and "
+                "sil_value_coef >= 0"
             )
         if self.distribution not in DISTRIBUTIONS:
             raise UsageError(f"{algo!r} distribution must be one of {', '.join(DISTRIBUTIONS)}")
@@ -255,6 +274,15 @@ class OnPolicyAgent(OwnAgent):
             self.policy.parameters(), lr=config.learning_rate, eps=1e-5, foreach=True
         )
         self.prior = self._frozen_copy() if config.prior_kl_coef > 0 else None
+        self.replay_buffer: SelfImitationReplay | None = None  # the checkpoint keeps it (replay.npz)
+        if config.sil_updates > 0:
+            check_buffer_memory(
+                self.algo, "sil_capacity", config.sil_capacity, observation, "self-imitation replay"
+            )
+            self.replay_buffer = SelfImitationReplay(
+                self.observation_space, config.sil_capacity, self.policy.stored_shape(),
+                self.policy.kind == "categorical",
+            )  # fmt: skip
         # the reward scale: running mean/var of the discounted return, and each world's return so far
         self.return_stats = torch.tensor([0.0, 1.0, 0.0], dtype=torch.float64)  # mean, var, count
         self.running_returns = torch.zeros(worlds, dtype=torch.float64)
@@ -350,12 +378,11 @@ class OnPolicyAgent(OwnAgent):
             callback.update_locals(locals())
             if not callback.on_step():
                 return None
-        rewards = self._scaled_rewards(storage.rewards[:steps], storage.ends[:steps])
-        advantages, returns = compute_gae(
-            rewards + storage.bootstrap[:steps], storage.values[:steps].double().numpy(),
-            storage.ends[:steps], self._values(obs), config.gamma, config.gae_lambda,
-        )  # fmt: skip
-        return Rollout(
+        ends = storage.ends[:steps]
+        rewards = self._scaled_rewards(storage.rewards[:steps], ends) + storage.bootstrap[:steps]
+        values, last_values = storage.values[:steps].double().numpy(), self._values(obs)
+        advantages, returns = compute_gae(rewards, values, ends, last_values, config.gamma, config.gae_lambda)
+        rollout = Rollout(
             map_obs(lambda block: block[:steps].flatten(0, 1), storage.obs),
             storage.actions[:steps].flatten(0, 1),
             storage.log_probs[:steps].flatten(),
@@ -363,6 +390,10 @@ class OnPolicyAgent(OwnAgent):
             torch.from_numpy(advantages.reshape(-1)),
             torch.from_numpy(returns.reshape(-1)),
         )
+        if self.replay_buffer is not None:  # the Monte-Carlo returns of the rewards the critic learns
+            _, discounted = compute_gae(rewards, values, ends, last_values, config.gamma, 1.0)
+            self.replay_buffer.add(rollout.observations, rollout.actions, discounted.reshape(-1))
+        return rollout
 
     def _scaled_rewards(self, rewards: np.ndarray, ends: np.ndarray) -> np.ndarray:
         """The rollout's rewards (T, K), divided by the running std of the discounted return when
@@ -384,6 +415,19 @@ class OnPolicyAgent(OwnAgent):
     def update(self, rollout: Rollout) -> dict[str, float]:
         """One policy update from a rollout; returns the metrics to log (``train/...``)."""
         raise NotImplementedError
+
+    def self_imitate(self) -> dict[str, float]:
+        """``sil_updates`` self-imitation steps on minibatches of the replay (``self_imitation.py``);
+        the mean fraction of each minibatch whose return beat the critic."""
+        config, replay, fractions = self.config, self.replay_buffer, []
+        for _ in range(config.sil_updates if len(replay) else 0):  # (empty after a resume that had no room)
+            observations, actions, returns = replay.sample(config.sil_batch_size, self.generator)
+            out, values = self.policy(observations)
+            log_probs, _ = self.policy.log_prob_entropy(out, actions, entropy=False)
+            loss, count = self_imitation_loss(log_probs, values, returns, config.sil_value_coef)
+            gradient_step(self.optimizer, loss, self.policy.parameters(), config.max_grad_norm)
+            fractions.append(count / config.sil_batch_size)
+        return {"sil_fraction": float(np.mean(fractions))} if fractions else {}
 
     def update_critic(self, rollout: Rollout) -> dict[str, float]:
         """The critic's regression on the rollout's returns alone (``critic_warmup_steps``), in the
@@ -427,6 +471,8 @@ class OnPolicyAgent(OwnAgent):
                 metrics = self.update_critic(rollout)
             else:
                 metrics = self.update(rollout)
+                if self.replay_buffer is not None:
+                    metrics.update(self.self_imitate())
             self.policy.norm.update(rollout.observations)
             metrics.update(learning_rate=self.learning_rate, entropy_coef=self.entropy_coef)
             if self.policy.kind == "tanh_gaussian":

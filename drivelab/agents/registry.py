@@ -33,8 +33,9 @@ class AlgoSpec:
         log_dir) and loader (algo, path, env or None, hyperparams=None, seed=None) make its agents
         (``FAMILIES``); loaders unpickle nothing.
     :param action_kinds: action adapters it accepts.
-    :param sb3_replay: the agent has a replay buffer worth checkpointing (``replay_buffer.observations``,
-        ``save_replay_buffer``, ``load_replay_buffer``, as SB3's off-policy models).
+    :param sb3_replay: the agent may have a replay buffer worth checkpointing (``replay_buffer.observations``,
+        ``save_replay_buffer``, ``load_replay_buffer``, as SB3's off-policy models; the on-policy
+        agents' self-imitation replay, ``None`` without ``sil_updates``).
     :param observation_kinds: observation kinds it can read (``networks.observation_kind``):
         "vector", "image" (channels-first uint8), "image+vector" (a Dict of both), "other".
     :param multi_env: it trains on a vector env of several worlds (``n_envs`` > 1).
@@ -105,12 +106,12 @@ ALGORITHMS: dict[str, AlgoSpec] = {
                  observation_kinds=("vector",), multi_env=True),
         AlgoSpec("a2c_own", "drivelab's A2C on the fast on-policy trainer (categorical, tanh-Gaussian or "
                  "Beta; MLP, the MetaDrive study's CNN / fusion network)", _DISCRETE + _CONTINUOUS,
-                 "drivelab.agents.a2c:OwnA2C", "own", observation_kinds=_READABLE, multi_env=True,
-                 on_policy=True),
+                 "drivelab.agents.a2c:OwnA2C", "own", sb3_replay=True, observation_kinds=_READABLE,
+                 multi_env=True, on_policy=True),
         AlgoSpec("ppo_own", "drivelab's PPO on the fast on-policy trainer (categorical, tanh-Gaussian or "
                  "Beta; MLP, the MetaDrive study's CNN / fusion network)", _DISCRETE + _CONTINUOUS,
-                 "drivelab.agents.ppo:OwnPPO", "own", observation_kinds=_READABLE, multi_env=True,
-                 on_policy=True),
+                 "drivelab.agents.ppo:OwnPPO", "own", sb3_replay=True, observation_kinds=_READABLE,
+                 multi_env=True, on_policy=True),
         AlgoSpec("rlad", "drivelab's RLAD: SAC from pixels, A-LIX, DrQ shifts, WayConv1D, traffic-light loss "
                  "(the RLAD paper)", _CONTINUOUS, "drivelab.agents.rlad.sac:RLAD", "own", sb3_replay=True,
                  observation_check=_RLAD_CHECK),

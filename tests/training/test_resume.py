@@ -46,6 +46,11 @@ SETUPS = {
                                     "hyperparams": {"n_steps": 8, "batch_size": 16, "n_epochs": 2,
                                                     "normalize_observations": True,
                                                     "normalize_rewards": True}},
+    # self-imitation: its replay (40 transitions, wrapped by the third rollout) is in the checkpoint
+    "ppo_own-4-worlds-self-imitation": {"algo": "ppo_own", "action": "meta", "steps": 256, "n_envs": 4,
+                                        "hyperparams": {"n_steps": 8, "batch_size": 16, "n_epochs": 2,
+                                                        "normalize_rewards": True, "sil_updates": 2,
+                                                        "sil_batch_size": 8, "sil_capacity": 40}},
     "a2c_own-3-worlds-beta": {"algo": "a2c_own", "action": "continuous", "steps": 240, "n_envs": 3,
                               "hyperparams": {"n_steps": 16, "distribution": "beta",
                                               "normalize_observations": True}},
@@ -144,6 +149,7 @@ def _assert_same_run(reference, resumed, config) -> None:
         ("a2c_own", 75, signal.SIGTERM, 64),
         ("ppo_own-4-worlds", 100, signal.SIGINT, 96),  # rollouts of 8 steps x 4 worlds
         ("ppo_own-4-worlds-normalised", 100, signal.SIGTERM, 96),
+        ("ppo_own-4-worlds-self-imitation", 100, signal.SIGINT, 96),
         ("a2c_own-3-worlds-beta", 100, signal.SIGINT, 96),  # rollouts of 16 steps x 3 worlds
         ("dueling_ddqn-3-worlds", 77, signal.SIGTERM, 75),  # safe points every 3 steps
         ("rlad", 47, signal.SIGTERM, 46),  # mid-episode, the replay half full
