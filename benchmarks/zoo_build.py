@@ -57,7 +57,7 @@ from leaderboard import (  # noqa: E402
     BLOCKS_PPO_OWN,
     HIGHWAY_DQN,
     HIGHWAY_PPO_OWN_ATTENTION,
-    INTERSECTION_PPO_OWN,
+    INTERSECTION_PPO_OWN_SIL,
     RACETRACK_DAGGER,
     RACETRACK_PPO_OWN,
     TOWN_PPO_OWN,
@@ -221,10 +221,12 @@ AGENTS: dict[str, dict] = {
             "nearest vehicles on the map's axes and where each is headed, read as a set by ego-attention, "
             "the route's waypoints and the clock, "
             "highway-env's three longitudinal actions, reward arrival +10, collision -10 and 0.2 per metre "
-            "of route progress; 2 M steps on 64 worlds; the leaderboard's intersection ppo_own recipe, "
-            "seed 0 (it does not meet the target of 80 % success with at most 10 % crashes)"
+            "of route progress, self-imitation of its own best actions after each update, the learning "
+            "rate annealed; 4 M steps on 64 worlds; the leaderboard's intersection 'ppo_own "
+            "(self-imitation)' recipe, seed 0 (it does not meet the target of 80 % success with at most "
+            "10 % crashes)"
         ),
-        "train": seed_0(INTERSECTION_PPO_OWN),
+        "train": seed_0(INTERSECTION_PPO_OWN_SIL),
         "measure": EVALUATION_SET,
     },
     "racetrack-ppo_own": {
