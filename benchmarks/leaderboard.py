@@ -203,8 +203,9 @@ INTERSECTION_PPO_OWN = (
 )
 # The same with self-imitation (-H sil_updates=4: after each update, 4 steps on minibatches of 512 of
 # the last 100,000 transitions, imitating the actions whose return beat the critic; Oh et al. 2018),
-# the learning rate annealed to 0 and twice the steps: screened on seeds 0-2 at 4 M steps, 77 / 7,
-# 74 / 6 and 71 / 11 % (benchmarks/results/intersection_ppo_own.notes.md).
+# the learning rate annealed to 0 and twice the steps. Screened on seeds 0-2 with a script whose
+# replay had a fault (74 / 8 % pooled); this row, with the trainer's option, 77 / 7, 78 / 4 and 77 / 7 %
+# (benchmarks/results/intersection_ppo_own.notes.md).
 INTERSECTION_PPO_OWN_SIL = (
     INTERSECTION_PPO_OWN.replace("--steps 2000000", "--steps 4000000")
     + " -H linear_lr=true -H sil_updates=4"
