@@ -65,7 +65,7 @@ class IntersectionTraffic:
         """
         if rng.uniform() > spawn_probability:
             return None
-        route = rng.choice(range(4), size=2, replace=False)
+        route = rng.choice(4, size=2, replace=False)  # the draws of choice(range(4), ...)
         route[1] = (route[0] + 2) % 4 if go_straight else route[1]
         row = make_on_lane(
             self.road,
@@ -91,9 +91,9 @@ def spawn_intersection(
     rng, _ = seeding.np_random(int(seed))
     geometry, traffic = road.geometry, IntersectionTraffic.of(road)
     count = config["initial_vehicle_count"]
-    vehicles = []
+    vehicles, spacing = [], np.linspace(0, 80, count)
     for t in range(count - 1):
-        row = traffic.spawn(vehicles, rng, longitudinal=np.linspace(0, 80, count)[t])
+        row = traffic.spawn(vehicles, rng, longitudinal=spacing[t])
         if row is not None:
             vehicles.append(row)
     rows = np.array(vehicles).reshape(-1, T.VEHICLE_COLUMNS)

@@ -102,10 +102,12 @@ class LaneGeometry:
         """RoadNetwork.get_closest_lane_index: the first lane of least distance_with_heading. The
         compiled distances pick the candidates (within 1e-6 of the least: they differ from
         numpy's by ULPs at most), numpy's decide among them, as highway-env would."""
-        distances = lane_distances(self.lanes, float(position[0]), float(position[1]), float(heading))
+        x, y, heading = float(position[0]), float(position[1]), float(heading)
+        best, ties = nearest_lane(self.lanes, x, y, heading)
+        if not ties:
+            return best
+        distances = lane_distances(self.lanes, x, y, heading)
         near = np.flatnonzero(distances <= distances.min() + 1e-6)
-        if near.size == 1:
-            return int(near[0])
         exact = [self.distance_with_heading(int(lane), position, heading) for lane in near]
         return int(near[int(np.argmin(exact))])
 
@@ -125,6 +127,16 @@ def lane_distances(lanes: np.ndarray, x: float, y: float, heading: float) -> np.
         angle = np.abs(L.wrap_to_pi(heading - L.heading_at(lanes, lane, s)))
         out[lane] = np.abs(r) + max(s - lanes[lane, L.LENGTH], 0.0) + max(0.0 - s, 0.0) + angle
     return out
+
+
+@njit(cache=True)
+def nearest_lane(lanes: np.ndarray, x: float, y: float, heading: float) -> tuple[int, bool]:
+    """``lane_distances``' first least lane, and whether another lies within 1e-6 of it (then
+    ``LaneGeometry.closest_lane`` lets numpy's distances decide)."""
+    distances = lane_distances(lanes, x, y, heading)
+    best = int(np.argmin(distances))
+    ties = np.count_nonzero(distances <= distances[best] + 1e-6) > 1
+    return best, ties
 
 
 # --- routes -------------------------------------------------------------------------------------
@@ -259,11 +271,26 @@ def too_close(rows, row: np.ndarray, distance_m: float) -> bool:
         return False
     points = np.asarray(rows).reshape(-1, T.VEHICLE_COLUMNS)[:, T.X : T.Y + 1]
     position = row[T.X : T.Y + 1]
+    verdict = _nearer_than(points, float(position[0]), float(position[1]), distance_m)
+    if verdict >= 0:
+        return bool(verdict)
     distances = np.sqrt(((points - position) ** 2).sum(axis=1))
-    if (distances < distance_m - 1e-9).any():
-        return True
     borderline = points[np.abs(distances - distance_m) <= 1e-9]
     return any(np.linalg.norm(point - position) < distance_m for point in borderline)
+
+
+@njit(cache=True)
+def _nearer_than(points: np.ndarray, x: float, y: float, distance_m: float) -> int:
+    """``too_close``'s vectorised test, compiled: 1 when a point is nearer than ``distance_m`` by
+    more than 1e-9 m, 0 when none is within 1e-9 m of it either, -1 when only numpy's norms can
+    decide (a point on the threshold's ULP band)."""
+    borderline = False
+    for k in range(points.shape[0]):
+        distance = np.sqrt((points[k, 0] - x) ** 2 + (points[k, 1] - y) ** 2)
+        if distance < distance_m - 1e-9:
+            return 1
+        borderline |= abs(distance - distance_m) <= 1e-9
+    return -1 if borderline else 0
 
 
 def arrange_traffic(road, vehicles: list[np.ndarray], ego: int, rng: np.random.Generator) -> tuple[list, int]:
