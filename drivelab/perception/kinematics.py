@@ -15,7 +15,9 @@ FEATURES = ("presence", "x", "y", "vx", "vy", "cos_h", "sin_h")
 INTENTION_FEATURES = ("cos_d", "sin_d")
 # how hard each vehicle speeds up or brakes (not in highway-env's kinematics; not by default)
 ACCELERATION_FEATURES = ("accel",)
-EXTRA_FEATURES = INTENTION_FEATURES + ACCELERATION_FEATURES
+# where each vehicle's straight path crosses the ego's route ahead, and when (not by default)
+CROSSING_FEATURES = ("t_cross", "s_cross")
+EXTRA_FEATURES = INTENTION_FEATURES + ACCELERATION_FEATURES + CROSSING_FEATURES
 ALL_FEATURES = FEATURES + EXTRA_FEATURES
 
 
@@ -36,13 +38,20 @@ class Kinematics(Sensor):
         the ego frame (the world frame with ``absolute``); the ego's points to its route's end
         (zeros on a closed circuit). ``accel`` is a vehicle's acceleration along its heading in the
         last simulation frame (braking negative), divided by ``accel_scale_mps2``; the same in
-        either frame, and 0 where the simulator exports none.
+        either frame, and 0 where the simulator exports none. ``t_cross`` and ``s_cross`` say
+        where a vehicle driving on at its speed and heading would cross the ego's route ahead
+        (within ``perception_distance_m`` of route): ``t_cross`` the seconds it needs to get there
+        over ``crossing_horizon_s``, ``s_cross`` the ego's distance along its route to that point
+        over ``perception_distance_m``; both 1 where it would not cross within the horizon (or is
+        not moving towards the route), both 0 in the ego's row. The conflict a gap decision turns
+        on, which a network reads poorly from positions and velocities (a quotient of them).
     :param flatten: one flat vector; false: highway-env's ``(vehicles_count, features)`` array.
     :param normalize: divide positions and velocities by the scales above; false: raw metres and
         m/s, unclipped.
     :param clip: clip the normalised values to [-1, 1] (highway-env's ``clip``).
     :param accel_scale_mps2: acceleration normalisation; highway-env's IDM limit (``ACC_MAX``),
         so that traffic's accelerations fill [-1, 1].
+    :param crossing_horizon_s: how far ahead ``t_cross`` looks, and its scale.
     :param absolute: every row, the ego's included, in the world frame: position, velocity and
         heading as they are on the map (highway-env's ``absolute``, its intersection's default),
         which tells where on a fixed map each vehicle is and where it heads. The nearest
@@ -64,19 +73,24 @@ class Kinematics(Sensor):
         clip: bool = True,
         absolute: bool = False,
         accel_scale_mps2: float = 6.0,
+        crossing_horizon_s: float = 8.0,
     ) -> None:
-        if vehicles_count < 1 or perception_distance_m <= 0 or speed_scale_mps <= 0 or accel_scale_mps2 <= 0:
+        scales = (perception_distance_m, speed_scale_mps, accel_scale_mps2, crossing_horizon_s)
+        if vehicles_count < 1 or min(scales) <= 0:
             raise ValueError(
-                "kinematics needs vehicles_count >= 1 and positive distance, speed and acceleration scales"
+                "kinematics needs vehicles_count >= 1 and positive distance, speed, acceleration and "
+                "crossing-horizon scales"
             )
         self.vehicles_count = int(vehicles_count)
         self.perception_distance_m = float(perception_distance_m)
         self.speed_scale_mps = float(speed_scale_mps)
         self.accel_scale_mps2 = float(accel_scale_mps2)
+        self.crossing_horizon_s = float(crossing_horizon_s)
         self.features = feature_names(features)
         self.columns = np.array([ALL_FEATURES.index(name) for name in self.features], dtype=np.int64)
         self.intentions = any(name in INTENTION_FEATURES for name in self.features)
         self.accelerations = any(name in ACCELERATION_FEATURES for name in self.features)
+        self.crossings = any(name in CROSSING_FEATURES for name in self.features)
         self.flatten, self.normalize = bool(flatten), bool(normalize)
         self.clip = bool(clip) and self.normalize  # highway-env clips only what it normalises
         self.absolute = bool(absolute)
@@ -134,7 +148,7 @@ class Kinematics(Sensor):
     def _with_extras(self, rows: np.ndarray, batch: WorldBatch, chosen: np.ndarray | None) -> np.ndarray:
         """``rows`` (K, rows, 7), with the columns of ``EXTRA_FEATURES`` after them when any is asked
         for (those not asked for left zero)."""
-        if not (self.intentions or self.accelerations):
+        if not (self.intentions or self.accelerations or self.crossings):
             return rows
         extra = np.zeros((*rows.shape[:2], len(EXTRA_FEATURES)))
         if self.intentions:
@@ -143,6 +157,15 @@ class Kinematics(Sensor):
             scale = self.accel_scale_mps2 if self.normalize else 1.0
             accel = acceleration_rows(batch, chosen, self.vehicles_count) / scale
             extra[..., 2] = np.clip(accel, -1.0, 1.0) if self.clip else accel
+        if self.crossings and chosen is not None:
+            route = batch.route
+            crossing_rows(
+                batch.vehicles, chosen, route.polyline, route.stations_m, route.count, route.progress_m,
+                self.crossing_horizon_s, self.perception_distance_m, extra[:, 1:, 3:5],
+            )  # fmt: skip
+            if self.normalize:
+                extra[..., 3] /= self.crossing_horizon_s
+                extra[..., 4] /= self.perception_distance_m
         return np.concatenate([rows, extra], axis=2)
 
 
@@ -176,6 +199,46 @@ def acceleration_rows(batch: WorldBatch, chosen: np.ndarray | None, count: int) 
         picked = np.take_along_axis(batch.vehicle_accelerations, np.where(present, chosen, 0), axis=1)
         accelerations[:, 1 : 1 + chosen.shape[1]] = np.where(present, picked, 0.0)
     return accelerations
+
+
+@njit(cache=True)
+def crossing_rows(vehicles, chosen, polyline, stations, count, progress, horizon_s, window_m, out):
+    """Into ``out`` (K, count - 1, 2), for each vehicle ``chosen`` (-1: none, left 0): the seconds
+    until its straight path at its speed meets the ego's route between ``progress`` and ``window_m``
+    of route further, and the ego's distance along the route to that point; the first crossing
+    along its path. ``horizon_s`` and ``window_m`` where it meets none within ``horizon_s``."""
+    for k in range(chosen.shape[0]):
+        for r in range(chosen.shape[1]):
+            j = chosen[k, r]
+            if j < 0:
+                break
+            px, py = vehicles[k, j, 0], vehicles[k, j, 1]
+            ux, uy = np.cos(vehicles[k, j, 2]), np.sin(vehicles[k, j, 2])
+            speed = max(vehicles[k, j, 3], 0.0)
+            reach = speed * horizon_s
+            best, where = np.inf, window_m
+            for i in range(count[k] - 1):
+                start, end = stations[k, i], stations[k, i + 1]
+                if end < progress[k] or start > progress[k] + window_m or end <= start:
+                    continue
+                ax, ay = polyline[k, i, 0], polyline[k, i, 1]
+                ex, ey = polyline[k, i + 1, 0] - ax, polyline[k, i + 1, 1] - ay
+                denominator = ux * ey - uy * ex
+                if abs(denominator) < 1e-12:
+                    continue  # parallel to this segment
+                wx, wy = ax - px, ay - py
+                along = (wx * ey - wy * ex) / denominator  # metres along the vehicle's heading
+                fraction = (wx * uy - wy * ux) / denominator  # of the segment
+                station = start + fraction * (end - start)
+                if not (0.0 <= fraction <= 1.0 and 0.0 <= along <= reach and along < best):
+                    continue
+                if progress[k] <= station <= progress[k] + window_m:
+                    best, where = along, station - progress[k]
+            if best == np.inf:
+                out[k, r, 0], out[k, r, 1] = horizon_s, window_m
+            else:
+                out[k, r, 0] = best / speed if best > 0.0 else 0.0
+                out[k, r, 1] = where
 
 
 def feature_names(features) -> tuple[str, ...]:

@@ -196,10 +196,50 @@ def test_accel_and_intentions_together_keep_each_features_values():
     rows = every.observe(w).reshape(5, len(ALL_FEATURES))
     intentions = Kinematics(features="+".join(FEATURES + INTENTION_FEATURES))
     intentions.reset(w, np.random.default_rng(0))
-    np.testing.assert_array_equal(rows[:, :-1], intentions.observe(w).reshape(5, -1))
-    np.testing.assert_allclose(rows[:3, -1], [0.0, -0.5, 0.2], atol=1e-7)  # ego 0; nearest: -8 m behind
+    accel = ALL_FEATURES.index("accel")
+    np.testing.assert_array_equal(rows[:, :accel], intentions.observe(w).reshape(5, -1))
+    np.testing.assert_allclose(rows[:3, accel], [0.0, -0.5, 0.2], atol=1e-7)  # ego 0; nearest: -8 m behind
 
 
 def test_accel_scale_must_be_positive():
-    with pytest.raises(ValueError, match="acceleration scales"):
+    with pytest.raises(ValueError, match="acceleration"):
         Kinematics(accel_scale_mps2=0.0)
+
+
+def test_crossing_features_say_when_and_where_each_vehicle_meets_the_route_ahead():
+    """t_cross, s_cross: a vehicle driving on straight at its speed meets the ego's route (the x
+    axis from the origin) ahead: seconds to get there over 8 s, the ego's distance to that point
+    over 100 m; 1 and 1 where it meets none within 8 s ahead of the ego, 0 in the ego's row and in
+    absent rows."""
+    w = world(
+        vehicles=[
+            [30.0, -20.0, np.pi / 2, 10.0, 5, 2],  # meets the route 30 m ahead in 2 s
+            [40.0, 20.0, np.pi / 2, 10.0, 5, 2],  # drives away from it
+            [-10.0, -5.0, np.pi / 2, 10.0, 5, 2],  # meets the road behind the ego
+            [20.0, -70.0, np.pi / 2, 5.0, 5, 2],  # 70 m away at 5 m/s: not within 8 s
+        ]
+    )
+    features = "presence+x+t_cross+s_cross"
+    sensor = Kinematics(vehicles_count=6, features=features, flatten=False)
+    sensor.reset(w, np.random.default_rng(0))
+    observed = sensor.observe(w)
+    # nearest first: behind (11 m), 30 m ahead (36 m), away (45 m), slow (73 m), then none
+    np.testing.assert_allclose(observed[:, 2], [0.0, 1.0, 0.25, 1.0, 1.0, 0.0], atol=1e-7)
+    np.testing.assert_allclose(observed[:, 3], [0.0, 1.0, 0.3, 1.0, 1.0, 0.0], atol=1e-7)
+    absolute = Kinematics(vehicles_count=6, features=features, flatten=False, absolute=True)
+    absolute.reset(w, np.random.default_rng(0))
+    np.testing.assert_array_equal(absolute.observe(w)[:, 2:], observed[:, 2:])
+    raw = Kinematics(vehicles_count=6, features="t_cross+s_cross", flatten=False, normalize=False)
+    raw.reset(w, np.random.default_rng(0))
+    np.testing.assert_allclose(raw.observe(w)[:3], [[0, 0], [8, 100], [2, 30]], atol=1e-5)
+    passed = world(vehicles=w.vehicles, progress_m=35.0)  # the crossing 30 m along is behind now
+    sensor.reset(passed, np.random.default_rng(0))
+    np.testing.assert_allclose(sensor.observe(passed)[2, 2:], [1.0, 1.0], atol=1e-7)
+    longer = Kinematics(vehicles_count=6, features=features, flatten=False, crossing_horizon_s=16.0)
+    longer.reset(w, np.random.default_rng(0))
+    np.testing.assert_allclose(longer.observe(w)[4, 2:], [14.0 / 16.0, 0.2], atol=1e-7)  # 70 m at 5 m/s
+
+
+def test_crossing_horizon_must_be_positive():
+    with pytest.raises(ValueError, match="crossing-horizon"):
+        Kinematics(crossing_horizon_s=0.0)
