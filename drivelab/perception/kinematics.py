@@ -43,8 +43,7 @@ class Kinematics(Sensor):
         (within ``perception_distance_m`` of route): ``t_cross`` the seconds it needs to get there
         over ``crossing_horizon_s``, ``s_cross`` the ego's distance along its route to that point
         over ``perception_distance_m``; both 1 where it would not cross within the horizon (or is
-        not moving towards the route), both 0 in the ego's row. The conflict a gap decision turns
-        on, which a network reads poorly from positions and velocities (a quotient of them).
+        not moving towards the route), both 0 in the ego's row.
     :param flatten: one flat vector; false: highway-env's ``(vehicles_count, features)`` array.
     :param normalize: divide positions and velocities by the scales above; false: raw metres and
         m/s, unclipped.
