@@ -205,7 +205,8 @@ def crossing_rows(vehicles, chosen, polyline, stations, count, progress, horizon
     """Into ``out`` (K, count - 1, 2), for each vehicle ``chosen`` (-1: none, left 0): the seconds
     until its straight path at its speed meets the ego's route between ``progress`` and ``window_m``
     of route further, and the ego's distance along the route to that point; the first crossing
-    along its path. ``horizon_s`` and ``window_m`` where it meets none within ``horizon_s``."""
+    along its path. ``horizon_s`` and ``window_m`` where it meets none within ``horizon_s``. The
+    window does not wrap past a circuit's lap end."""
     for k in range(chosen.shape[0]):
         for r in range(chosen.shape[1]):
             j = chosen[k, r]

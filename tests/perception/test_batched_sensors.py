@@ -24,6 +24,7 @@ from tests.worlds import world
 SPECS = (
     "kinematics",
     "kinematics:absolute=true:vehicles_count=4",
+    "kinematics:vehicles_count=6:features=presence+x+cos_d+sin_d+accel+t_cross+s_cross",  # the extras
     "lidar",  # 240 beams
     "lidar:beams=7:range_m=20.3:noise_std=0.05",
     "waypoints",
