@@ -21,19 +21,18 @@ import json
 import os
 import platform
 import shlex
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from nocrash_town import agents as nocrash_agents  # noqa: E402
-from provenance import Parser, check_reuse, cpu_isa, training_command, whole  # noqa: E402
+from nocrash_town import train_and_nocrash  # noqa: E402
+from provenance import Parser, cpu_isa, whole  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 RUNS = ROOT / "benchmarks" / "runs"
 RESULTS = ROOT / "benchmarks" / "results"
-DRIVELAB = [sys.executable, "-m", "drivelab.cli"]
 COMMON = ["--env", "town", "--action", "target_speed", "--seed", "0", "--runs-dir", "benchmarks/runs"]
 LEARNER_OBS = "topdown:lights=true,waypoints,measurements"
 
@@ -48,16 +47,6 @@ def agents(steps: int, n_envs: int) -> dict[str, list[str]]:
         "bc-town": ["--algo", "bc", *imitation],
         "dagger-town": ["--algo", "dagger", *imitation, "-H", "beta_decay=0.5"],
     }  # fmt: skip
-
-
-def run(arguments: list[str]) -> tuple[float, float]:
-    """Run a drivelab command (OMP_NUM_THREADS=1); its (wall, CPU) seconds."""
-    print("$ drivelab " + shlex.join(arguments), flush=True)
-    before, start = os.times(), time.perf_counter()
-    subprocess.run(DRIVELAB + arguments, check=True, env={**os.environ, "OMP_NUM_THREADS": "1"}, cwd=ROOT)
-    after = os.times()
-    cpu = (after.children_user - before.children_user) + (after.children_system - before.children_system)
-    return time.perf_counter() - start, cpu
 
 
 def imitation_metrics(run_dir: Path) -> dict | None:
@@ -86,20 +75,9 @@ def main() -> None:
         evaluate = ["benchmark", "nocrash", str(run_dir.relative_to(ROOT)), "--town", "test",
                     "--episodes", str(args.episodes)]  # fmt: skip
         commands[name] = ["drivelab " + shlex.join(train), "drivelab " + shlex.join(evaluate)]
-        if (run_dir / "config.yaml").is_file():
-            check_reuse(run_dir, train, ROOT)
-        if not (run_dir / "model.zip").is_file():
-            command, resumed = training_command(run_dir, train, ROOT)
-            wall, cpu = run(command)
-            if not resumed:  # a resumed run's time is its last part's only
-                timings[name] = {"train_wall_s": wall, "train_cpu_s": cpu}
-                (run_dir / "train_timing.json").write_text(json.dumps(timings[name]))
-        elif (run_dir / "train_timing.json").is_file():
-            timings[name] = json.loads((run_dir / "train_timing.json").read_text())
-        saved = run_dir / "nocrash.json"
-        if not saved.is_file() or json.loads(saved.read_text())["episodes_per_level"] != args.episodes:
-            run(evaluate)
-        reports[name] = json.loads(saved.read_text())
+        reports[name], timing = train_and_nocrash(run_dir, train, evaluate, args.episodes)
+        if timing is not None:
+            timings[name] = timing
         imitation[name] = imitation_metrics(run_dir)
 
     result = {

@@ -67,6 +67,29 @@ def run(arguments: list[str]) -> tuple[float, float]:
     return time.perf_counter() - start, cpu
 
 
+def train_and_nocrash(run_dir: Path, train: list[str], evaluate: list[str], episodes: int):
+    """Bring the run in ``run_dir`` to its end with ``drivelab TRAIN`` (a finished run of the same
+    config is reused; one a kill left is resumed), then its NoCrash report with ``drivelab
+    EVALUATE`` unless ``nocrash.json`` already holds ``episodes`` per level. Returns (the report,
+    the training's wall and CPU seconds, or None when unknown: a reused run without them, a resumed
+    one)."""
+    timing = None
+    if (run_dir / "config.yaml").is_file():
+        check_reuse(run_dir, train, ROOT)
+    if not (run_dir / "model.zip").is_file():
+        command, resumed = training_command(run_dir, train, ROOT)
+        wall, cpu = run(command)
+        if not resumed:  # a resumed run's time is its last part's only
+            timing = {"train_wall_s": wall, "train_cpu_s": cpu}
+            (run_dir / "train_timing.json").write_text(json.dumps(timing))
+    elif (run_dir / "train_timing.json").is_file():
+        timing = json.loads((run_dir / "train_timing.json").read_text())
+    saved = run_dir / "nocrash.json"
+    if not saved.is_file() or json.loads(saved.read_text())["episodes_per_level"] != episodes:
+        run(evaluate)
+    return json.loads(saved.read_text()), timing
+
+
 def main() -> None:
     formatter = argparse.RawDescriptionHelpFormatter
     parser = Parser(description=__doc__, formatter_class=formatter)
@@ -88,20 +111,9 @@ def main() -> None:
         evaluate = ["benchmark", "nocrash", str(run_dir.relative_to(ROOT)), "--town", "test",
                     "--episodes", str(args.episodes), "--level", args.level]  # fmt: skip
         commands[name] = ["drivelab " + shlex.join(train), "drivelab " + shlex.join(evaluate)]
-        if (run_dir / "config.yaml").is_file():
-            check_reuse(run_dir, train, ROOT)
-        if not (run_dir / "model.zip").is_file():
-            command, resumed = training_command(run_dir, train, ROOT)
-            wall, cpu = run(command)
-            if not resumed:  # a resumed run's time is its last part's only
-                timings[name] = {"train_wall_s": wall, "train_cpu_s": cpu}
-                (run_dir / "train_timing.json").write_text(json.dumps(timings[name]))
-        elif (run_dir / "train_timing.json").is_file():
-            timings[name] = json.loads((run_dir / "train_timing.json").read_text())
-        saved = run_dir / "nocrash.json"
-        if not saved.is_file() or json.loads(saved.read_text())["episodes_per_level"] != args.episodes:
-            run(evaluate)
-        reports[name] = json.loads(saved.read_text())
+        reports[name], timing = train_and_nocrash(run_dir, train, evaluate, args.episodes)
+        if timing is not None:
+            timings[name] = timing
 
     result = {
         "script": "python benchmarks/nocrash_town.py " + shlex.join(sys.argv[1:]),
