@@ -23,6 +23,7 @@ import os
 import statistics
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -39,8 +40,6 @@ CASES += (("racetrack", "continuous"), ("town", "meta"))
 
 def setup_ms(scenario: str, control: str, seeds: int) -> float:
     """Mean milliseconds of one episode set-up of ``scenario`` (regular traffic)."""
-    import time
-
     from drivelab.scenarios import SCENARIOS
     from drivelab.sim.core.backend import fast_simulator
 
@@ -126,13 +125,13 @@ def main() -> None:
         print(f"{row['scenario']:12s} {row['ms_per_setup']:.3f} ms per set-up{against}")
     if args.no_save:
         return
-    head = provenance(command)
+    head, this_commit = provenance(command), commit_of(ROOT)
     reference = None
     if args.against:
         reference = f"the drivelab tree at commit {commit_of(args.against)} (`--against`)"
     RESULTS.mkdir(exist_ok=True)
     (RESULTS / "setup_speed.json").write_text(
-        json.dumps({**head, "this_commit": commit_of(ROOT), "reference": reference, "rows": rows}, indent=2)
+        json.dumps({**head, "this_commit": this_commit, "reference": reference, "rows": rows}, indent=2)
         + "\n"
     )
     columns = "| scenario | control | ms per set-up |"
@@ -144,7 +143,7 @@ def main() -> None:
         "# Episode set-up speed (one world, regular traffic)",
         "",
         f"Command: `{head['command']}`  ",
-        f"Machine: {head['machine']}; date {head['date']}; this tree: commit {commit_of(ROOT)}"
+        f"Machine: {head['machine']}; date {head['date']}; this tree: commit {this_commit}"
         + (f"; reference: {reference}" if reference else "")
         + ".",
         "",
